@@ -1,0 +1,115 @@
+"""Aerodynamic data reduction: Eq. 1 coefficients and Eq. 2 regressors. numpy only.
+
+Inside this module everything is in aircraft body axes (x forward, y right, z down) and SI.
+ROS interfaces use the REP-103 body frame (x forward, y left, z up); the conversion happens
+in one place, :func:`rep103_to_aircraft`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .config import AircraftConfig, ModelConfig
+
+__all__ = [
+    "rep103_to_aircraft",
+    "FlightState",
+    "coefficients",
+    "regressors",
+    "regressor_matrix",
+    "physics_rejection",
+]
+
+
+def rep103_to_aircraft(vec):
+    """REP-103 body frame (x fwd, y left, z up) to aircraft body axes (x fwd, y right, z down).
+
+    A rotation of pi about x: ``(x, y, z) -> (x, -y, -z)``. Applies to vectors (specific
+    force, angular rate, airspeed) given as ``(..., 3)`` arrays.
+    """
+    v = np.asarray(vec, dtype=float)
+    return v * np.array([1.0, -1.0, -1.0])
+
+
+@dataclass
+class FlightState:
+    """Measured motion of one sample (or arrays of samples), aircraft body axes, SI.
+
+    ``ax, ay, az``: specific force (m/s^2, about -9.81 on z in level flight);
+    ``p, q, r``: body rates (rad/s); ``p_dot, q_dot, r_dot``: angular accelerations (rad/s^2);
+    ``V`` true airspeed (m/s); ``alpha, beta`` (rad); ``qbar`` dynamic pressure (Pa);
+    ``delta_e, delta_a, delta_r`` (rad, Eq. 23 conventions); ``thrust`` along body x (N).
+    """
+
+    ax: np.ndarray
+    ay: np.ndarray
+    az: np.ndarray
+    p: np.ndarray
+    q: np.ndarray
+    r: np.ndarray
+    p_dot: np.ndarray
+    q_dot: np.ndarray
+    r_dot: np.ndarray
+    V: np.ndarray
+    alpha: np.ndarray
+    beta: np.ndarray
+    qbar: np.ndarray
+    delta_e: np.ndarray = 0.0
+    delta_a: np.ndarray = 0.0
+    delta_r: np.ndarray = 0.0
+    thrust: np.ndarray = 0.0
+
+
+def physics_rejection(state: FlightState) -> str | None:
+    """Reason a (scalar) sample cannot be reduced, or ``None``: non-finite values, or zero or
+    negative dynamic pressure or airspeed (Eq. 1 and the rate normalisations divide by them)."""
+    for name, value in vars(state).items():
+        if not np.all(np.isfinite(value)):
+            return f"non_finite_{name}"
+    if not np.all(np.asarray(state.qbar) > 0):
+        return "nonpositive_dynamic_pressure"
+    if not np.all(np.asarray(state.V) > 0):
+        return "nonpositive_airspeed"
+    return None
+
+
+def coefficients(s: FlightState, ac: AircraftConfig) -> dict[str, np.ndarray]:
+    """Body-axis force and moment coefficients, Eq. 1a-f."""
+    qS = np.asarray(s.qbar, dtype=float) * ac.S
+    return {
+        "CX": (ac.mass * s.ax - s.thrust) / qS,  # Eq. 1a
+        "CY": ac.mass * s.ay / qS,  # Eq. 1b
+        "CZ": ac.mass * s.az / qS,  # Eq. 1c
+        "Cl": (ac.Ixx * s.p_dot - ac.Ixz * (s.r_dot + s.p * s.q) + (ac.Izz - ac.Iyy) * s.q * s.r)
+        / (qS * ac.b),  # Eq. 1d
+        "Cm": (ac.Iyy * s.q_dot + (ac.Ixx - ac.Izz) * s.p * s.r + ac.Ixz * (s.p**2 - s.r**2))
+        / (qS * ac.cbar),  # Eq. 1e
+        "Cn": (ac.Izz * s.r_dot - ac.Ixz * (s.p_dot - s.q * s.r) + (ac.Iyy - ac.Ixx) * s.p * s.q)
+        / (qS * ac.b),  # Eq. 1f
+    }
+
+
+def regressors(s: FlightState, ac: AircraftConfig) -> dict[str, np.ndarray]:
+    """Every regressor of Eq. 2 by name: bias, flow angles, controls and the nondimensional
+    rates ``p b/2V``, ``q cbar/2V``, ``r b/2V``. Absolute angles are used; the bias terms
+    absorb the trim values (Eq. 2's perturbations differ from them by constants)."""
+    V2 = 2.0 * np.asarray(s.V, dtype=float)
+    one = np.ones_like(V2)
+    return {
+        "1": one,
+        "alpha": s.alpha * one,
+        "beta": s.beta * one,
+        "delta_e": s.delta_e * one,
+        "delta_a": s.delta_a * one,
+        "delta_r": s.delta_r * one,
+        "p_hat": s.p * ac.b / V2,
+        "q_hat": s.q * ac.cbar / V2,
+        "r_hat": s.r * ac.b / V2,
+    }
+
+
+def regressor_matrix(model: ModelConfig, values: dict[str, np.ndarray]) -> np.ndarray:
+    """Columns of ``model.regressors`` stacked: ``(N, n)`` for arrays, ``(n,)`` for a sample."""
+    return np.stack([np.asarray(values[r], dtype=float) for r in model.regressors], axis=-1)

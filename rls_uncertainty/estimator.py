@@ -1,0 +1,758 @@
+"""Recursive least squares with a colored-residual parameter covariance.
+
+Grauer & Morelli, "Parameter Uncertainty for Aircraft Aerodynamic Modeling using Recursive
+Least Squares" (AIAA SciTech 2016), Eqs. 6-22. This module imports numpy only.
+
+Notation (paper): regressor row ``x_k`` (n), measured output ``z_k``, estimate ``theta_k``,
+dispersion ``D_k = (X'X)^-1``, residual ``v_k``, residual autocorrelation ``R_k(i)`` and lag
+products ``Lambda_k(i)``.
+
+Design notes
+------------
+* **One implementation.** :class:`EstimatorBank` runs ``M`` independent models (the six
+  coefficient models of Eq. 2 have 3-6 parameters) with one set of vectorised numpy
+  operations per sample; :class:`RecursiveEstimator` is a bank of one.
+* **Residual for Eqs. 16-17.** The default is the *a posteriori* residual
+  ``v_k = z_k - x_k' theta_k`` (after the Eq. 15c update). It is the residual the batch
+  formula (Eq. 7) uses once the estimate has converged, it equals the a priori innovation
+  ``e_k = z_k - x_k' theta_{k-1}`` scaled by ``f / (f + x_k' D_{k-1} x_k)``, and it is not
+  inflated by the early, poorly determined estimates, so the autocorrelation is not biased
+  upward at the start of a maneuver. ``residual="a_priori"`` uses ``e_k`` instead.
+* **Exact initialization** (default). Until the weighted ``X'X`` of the first samples is
+  well conditioned (after column scaling, condition number below ``init_condition``), a model
+  only accumulates normal equations and lagged moments. At that sample ``k0`` it takes the
+  batch solution (Eq. 6), defines the residuals of samples ``1..k0`` with it, and continues
+  with Eq. 15; recursive and batch estimates then agree for every ``k >= k0`` whatever the
+  regressor scales. ``p0`` selects the customary prior ``D_0 = p0 I`` instead (SIDPAC uses
+  ``1e6``); that prior biases parameters whose regressors are small, such as ``q cbar/2V``.
+* **Column scaling.** Internally each model works on regressors divided by the column norms
+  found at initialization, which keeps ``D`` well conditioned when the regressors span six
+  orders of magnitude; results are scaled back on output.
+* **Lag products.** ``U_k(i) = sum_j w x_{j-i} x_j'`` is stored one-sided, so that
+  ``Lambda_k(i) = U_k(i) + U_k(i)'`` (Eq. 21); the symmetrisation happens once per covariance
+  evaluation on an ``n x n`` matrix instead of once per lag and sample.
+* **Windows.** ``window="truncated"`` is Eq. 22 (uniform weights up to ``n_lags``).
+  ``window="bartlett"`` uses ``1 - i/(n_lags+1)``: its Toeplitz kernel is positive
+  semi-definite, and by the Schur product theorem so is the covariance; the uniform truncation
+  can make the covariance indefinite. A covariance with a negative diagonal is replaced by the
+  nearest positive semi-definite matrix (eigenvalues clipped at zero) and counted in
+  :attr:`EstimatorBank.repairs`.
+* **Forgetting** ``f < 1``: exponentially weighted RLS. ``D_k = (sum f^(k-j) x_j x_j')^-1``;
+  ``Lambda_k(i) = f^2 Lambda_{k-1}(i) + f^i (x_k x_{k-i}' + x_{k-i} x_k')``, the weighting
+  of the sandwich ``D X'W E[vv'] W X D``; ``R_k(i) = sum_j f^(k-j) v_j v_{j-i} / sum_j f^(k-j)``
+  and the conventional covariance is ``R_k(0) D Lambda_k(0) D``. ``f = 1`` is exactly the paper.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Sequence
+
+import numpy as np
+
+__all__ = [
+    "EstimatorBank",
+    "RecursiveEstimator",
+    "EstimatorNotReady",
+    "NonFiniteInput",
+    "batch_estimate",
+    "lag_weights",
+    "WINDOWS",
+    "RESIDUALS",
+    "COVARIANCE_KINDS",
+]
+
+WINDOWS = ("truncated", "bartlett")
+RESIDUALS = ("a_posteriori", "a_priori")
+COVARIANCE_KINDS = ("corrected", "conventional")
+
+_GROWTH_START = 64  # initial lag capacity when all lags are kept (n_lags=None)
+
+
+class EstimatorNotReady(RuntimeError):
+    """Raised when an estimate is asked of a model that is not initialized yet."""
+
+
+class NonFiniteInput(ValueError):
+    """Raised when a regressor or measured output is NaN or infinite (state is unchanged)."""
+
+
+def lag_weights(n_lags: int, window: str, count: int | None = None) -> np.ndarray:
+    """Weights of lags ``0..count-1`` for Eq. 22 (``truncated``) or the Bartlett window.
+
+    ``n_lags`` is the largest retained lag. For ``bartlett`` the weight of lag ``i`` is
+    ``1 - i/(n_lags+1)``.
+    """
+    _check_window(window)
+    count = n_lags + 1 if count is None else count
+    i = np.arange(count, dtype=float)
+    if window == "truncated":
+        w = np.ones(count)
+    else:
+        w = 1.0 - i / (n_lags + 1.0)
+    w[i > n_lags] = 0.0
+    return w
+
+
+def _check_window(window: str) -> None:
+    if window not in WINDOWS:
+        raise ValueError(f"window must be one of {WINDOWS}, got {window!r}")
+
+
+def _check_kind(kind: str) -> None:
+    if kind not in COVARIANCE_KINDS:
+        raise ValueError(f"kind must be one of {COVARIANCE_KINDS}, got {kind!r}")
+
+
+def nearest_psd(cov: np.ndarray) -> np.ndarray:
+    """Nearest (Frobenius) symmetric positive semi-definite matrix: eigenvalues clipped at 0."""
+    sym = 0.5 * (cov + cov.T)
+    vals, vecs = np.linalg.eigh(sym)
+    return (vecs * np.clip(vals, 0.0, None)) @ vecs.T
+
+
+class EstimatorBank:
+    """``M`` independent recursive least-squares models updated together (Eqs. 15-22).
+
+    Parameters
+    ----------
+    sizes:
+        Number of parameters of each model, e.g. ``(3, 4, 3, 6, 4, 4)`` for Eq. 2a-f.
+    n_lags:
+        Largest residual-autocorrelation lag kept (Eq. 22); ``None`` keeps all lags (Eq. 20,
+        memory and time grow with the number of samples). ``0`` gives the conventional
+        covariance.
+    window:
+        ``"truncated"`` (Eq. 22, uniform) or ``"bartlett"`` (positive semi-definite).
+    forgetting:
+        Exponential forgetting factor ``0 < f <= 1``; ``1`` is the paper.
+    residual:
+        ``"a_posteriori"`` (default, ``z_k - x_k' theta_k``) or ``"a_priori"``.
+    p0:
+        ``None`` for exact initialization; a positive scalar or per-parameter sequence for the
+        prior ``D_0 = diag(p0)``, ``theta_0 = 0`` (applied to every model).
+    init_condition:
+        Exact initialization waits until the column-scaled ``X'X`` has a condition number
+        below this value.
+    """
+
+    def __init__(
+        self,
+        sizes: Sequence[int],
+        n_lags: int | None = None,
+        window: str = "truncated",
+        forgetting: float = 1.0,
+        *,
+        residual: str = "a_posteriori",
+        p0: float | Sequence[float] | None = None,
+        init_condition: float = 1e8,
+    ) -> None:
+        sizes = tuple(int(s) for s in sizes)
+        if not sizes or min(sizes) < 1:
+            raise ValueError(f"every model needs at least one parameter, got sizes={sizes}")
+        if n_lags is not None and (isinstance(n_lags, bool) or int(n_lags) != n_lags or n_lags < 0):
+            raise ValueError(f"n_lags must be None or an integer >= 0, got {n_lags!r}")
+        _check_window(window)
+        if not (0.0 < float(forgetting) <= 1.0):
+            raise ValueError(f"forgetting must be in (0, 1], got {forgetting!r}")
+        if residual not in RESIDUALS:
+            raise ValueError(f"residual must be one of {RESIDUALS}, got {residual!r}")
+        if not float(init_condition) > 1.0:
+            raise ValueError(f"init_condition must be > 1, got {init_condition!r}")
+
+        self.sizes = sizes
+        self.n_models = m = len(sizes)
+        self.n_max = n = max(sizes)
+        self.n_lags = None if n_lags is None else int(n_lags)
+        self.window = window
+        self.forgetting = float(forgetting)
+        self.residual = residual
+        self.init_condition = float(init_condition)
+
+        self._mask = np.zeros((m, n), dtype=bool)
+        for j, s in enumerate(sizes):
+            self._mask[j, :s] = True
+
+        self.k = 0
+        self.n_eff = 0.0  # sum_j f^(k-j); equals k when f = 1
+        self._ptr = 0
+        # _aug[:, :n] is the scaled dispersion S D S, _aug[:, n] the scaled estimate S theta:
+        # one matmul gives both D x and theta' x.
+        self._aug = np.zeros((m, n + 1, n))
+        self._inv_s = self._mask.astype(float)  # 1/s on real parameters, 0 on padding
+        self._inv_s2 = self._inv_s * self._inv_s
+        self._ready = np.zeros(m, dtype=bool)
+        self._ready_at = np.zeros(m, dtype=np.int64)
+        self._A = np.zeros((m, n, n))  # weighted X'X before initialization (unscaled)
+        self._b = np.zeros((m, n))  # weighted X'z before initialization (unscaled)
+        self.repairs = np.zeros(m, dtype=np.int64)
+        # Lag capacity: a ring of W = n_lags + 1 slots; all lags grow on demand.
+        self._cap = _GROWTH_START if self.n_lags is None else self.n_lags + 1
+        self._alloc_lag_arrays(self._cap)
+        self._cache: dict = {}
+        self._weights_key = None
+        self._all_ready = False
+        self._weights_cached = None
+
+        if p0 is not None:
+            p = np.asarray(p0, dtype=float)
+            p = np.full(n, float(p)) if p.ndim == 0 else p.reshape(-1)
+            if p.shape != (n,):
+                raise ValueError(f"p0 must be a scalar or have {n} entries, got {p.shape}")
+            if not np.all(np.isfinite(p)) or np.any(p <= 0):
+                raise ValueError(f"p0 must be positive and finite, got {p0!r}")
+            self._aug[:, :n] = np.eye(n) * p * self._mask[:, :, None] * self._mask[:, None, :]
+            self._ready[:] = True
+            self._all_ready = True
+
+    # ------------------------------------------------------------------ storage
+    @property
+    def _D(self) -> np.ndarray:
+        return self._aug[:, : self.n_max]
+
+    @property
+    def _theta(self) -> np.ndarray:
+        return self._aug[:, self.n_max]
+
+    def _ring(self) -> bool:
+        return self.n_lags is not None
+
+    def _alloc_lag_arrays(self, cap: int) -> None:
+        m, n = self.n_models, self.n_max
+        slots = 2 * cap if self._ring() else cap
+        self._xbuf = np.zeros((m, slots, n))  # scaled regressors; ring read newest first
+        self._vbuf = np.zeros((m, slots))  # residuals
+        self._zbuf = np.zeros((m, slots))  # outputs (needed until initialization)
+        self._R = np.zeros((m, cap))  # Eq. 17
+        # One-sided Eq. 21, stored transposed for speed: _U[m, b, i, a] = sum x_{j-i}[a] x_j[b].
+        self._U = np.zeros((m, n, cap, n))
+        self._tmp = np.zeros((m, n, cap, n))
+        # Lagged moments before initialization (weight f per sample).
+        self._Pzz = np.zeros((m, cap))
+        self._Pxz = np.zeros((m, cap, n))
+        self._Pzx = np.zeros((m, cap, n))
+        self._Pxx = np.zeros((m, cap, n, n))
+        self._lag_pow = self.forgetting ** np.arange(cap, dtype=float)
+
+    _LAG_ARRAYS = ("_xbuf", "_vbuf", "_zbuf", "_R", "_U", "_Pzz", "_Pxz", "_Pzx", "_Pxx")
+
+    def _grow(self) -> None:
+        """Double the lag capacity (all-lags mode only)."""
+        old = self._cap
+        keep = {name: getattr(self, name) for name in self._LAG_ARRAYS}
+        self._cap = 2 * old
+        self._alloc_lag_arrays(self._cap)
+        for name, arr in keep.items():
+            if name == "_U":
+                self._U[:, :, :old] = arr
+            else:
+                getattr(self, name)[:, :old] = arr
+
+    def _recent(self, buf: np.ndarray) -> np.ndarray:
+        """View of the last ``min(k, W)`` entries of a lag buffer, newest first."""
+        if self._ring():
+            return buf[:, self._ptr : self._ptr + min(self.k, self._cap)]
+        return buf[:, self.k - 1 :: -1]
+
+    def _push(self, buf: np.ndarray, value: np.ndarray) -> None:
+        if self._ring():
+            buf[:, self._ptr] = value
+            buf[:, self._ptr + self._cap] = value
+        else:
+            buf[:, self.k - 1] = value
+
+    @property
+    def n_window(self) -> int:
+        """Number of lags currently held: ``min(k, n_lags + 1)``, or ``k`` for all lags."""
+        return min(self.k, self._cap)
+
+    # ------------------------------------------------------------------ update
+    def update(self, X, z) -> None:
+        """Process one sample for every model.
+
+        ``X`` is ``(M, n_max)`` (row ``j`` holds model ``j``'s regressors first; the padding
+        is ignored) or a sequence of ``M`` regressor vectors; ``z`` holds the ``M`` measured
+        outputs. Non-finite input raises :class:`NonFiniteInput` and leaves the state unchanged.
+        """
+        x = self._as_regressors(X)
+        if not (isinstance(z, np.ndarray) and z.shape == (self.n_models,) and z.dtype == float):
+            z = np.asarray(z, dtype=float).reshape(-1)
+        if z.shape != (self.n_models,):
+            raise ValueError(f"expected {self.n_models} measured outputs, got shape {z.shape}")
+        xs = x * self._inv_s  # scaled regressors; zero on padding
+        if not math.isfinite(float(xs.sum()) + float(z.sum())):
+            # NaN or Inf somewhere, or only an overflow of the sum: check exactly.
+            bad = [
+                j for j in range(self.n_models)
+                if not (np.isfinite(x[j, : self.sizes[j]]).all() and np.isfinite(z[j]))
+            ]
+            if bad:
+                raise NonFiniteInput(
+                    f"non-finite regressor or output for model(s) {bad}; sample ignored"
+                )
+            xs = np.where(self._mask, xs, 0.0)  # non-finite padding is ignored
+
+        f = self.forgetting
+        n = self.n_max
+        self.k += 1
+        self.n_eff = f * self.n_eff + 1.0
+        ring = self.n_lags is not None
+        if ring:
+            self._ptr = (self._cap - 1) - ((self.k - 1) % self._cap)
+        elif self.k > self._cap:
+            self._grow()
+
+        # Eq. 15 in covariance form (with forgetting, D is divided by f).
+        g = np.matmul(self._aug, xs[:, :, None])[:, :, 0]
+        Dx = g[:, :n]
+        d = f + (xs * Dx).sum(axis=1)
+        e = z - g[:, n]  # a priori innovation z_k - x_k' theta_{k-1}
+        gain = e / d
+        self._aug[:, n] += Dx * gain[:, None]  # Eq. 15c
+        # Eq. 15b as D - (Dx)(Dx)'/d: exactly symmetric in floating point. The algebraically
+        # equal (I - K x') D is not, and under forgetting its antisymmetric rounding error
+        # grows like f^-k until the estimator diverges.
+        D = self._aug[:, :n]
+        D -= (Dx[:, :, None] * Dx[:, None, :]) / d[:, None, None]
+        if f != 1.0:
+            D /= f
+        v = gain * f if self.residual == "a_posteriori" else e  # e f/d = z_k - x_k' theta_k
+
+        self._push(self._xbuf, xs)
+        self._push(self._vbuf, v)
+        all_ready = self._all_ready
+        if not all_ready:
+            self._push(self._zbuf, z)
+        w = self.n_window
+        xl = self._recent(self._xbuf)  # (M, w, n): x_k, x_{k-1}, ...
+        # Eq. 17: R_k(i) = (1 - 1/n_k) R_{k-1}(i) + v_k v_{k-i} / n_k  (n_k = k when f = 1).
+        R = self._R[:, :w]
+        R *= 1.0 - 1.0 / self.n_eff
+        R += self._recent(self._vbuf) * (v * (1.0 / self.n_eff))[:, None]
+        # Eq. 21 (one-sided): U_k(i) = f^2 U_{k-1}(i) + f^i x_{k-i} x_k'.
+        U = self._U[:, :, :w]
+        tmp = self._tmp[:, :, :w]
+        lagged = xl if f == 1.0 else xl * self._lag_pow[None, :w, None]
+        if f != 1.0:
+            U *= f * f
+        np.multiply(xs[:, :, None, None], lagged[:, None, :, :], out=tmp)
+        U += tmp
+
+        if not all_ready:
+            self._accumulate_before_init(x, z, xl, w, f)
+        self._cache.clear()
+
+    def _as_regressors(self, X) -> np.ndarray:
+        if isinstance(X, np.ndarray) and X.shape == (self.n_models, self.n_max):
+            return X if X.dtype == float else X.astype(float)
+        rows = [X] if isinstance(X, np.ndarray) and X.ndim == 1 else list(X)
+        if len(rows) != self.n_models:
+            raise ValueError(f"expected regressors for {self.n_models} models, got {len(rows)}")
+        x = np.zeros((self.n_models, self.n_max))
+        for j, (row, s) in enumerate(zip(rows, self.sizes)):
+            row = np.asarray(row, dtype=float).reshape(-1)
+            if row.shape != (s,):
+                raise ValueError(f"model {j} has {s} parameters, got {row.shape[0]} regressors")
+            x[j, :s] = row
+        return x
+
+    def _accumulate_before_init(self, x, z, xl, w, f) -> None:
+        """Normal equations and lagged moments of the models not initialized yet."""
+        todo = ~self._ready
+        xr = x * self._mask
+        zl = self._recent(self._zbuf)
+        # Before initialization inv_s is 1 on real parameters, so xl is unscaled for them.
+        if f != 1.0:
+            for arr in (self._A, self._b, self._Pzz, self._Pxz, self._Pzx, self._Pxx):
+                arr[todo] *= f
+        self._A[todo] += xr[todo, :, None] * xr[todo, None, :]
+        self._b[todo] += xr[todo] * z[todo, None]
+        self._Pzz[todo, :w] += zl[todo] * z[todo, None]
+        self._Pxz[todo, :w] += xr[todo, None, :] * zl[todo, :, None]
+        self._Pzx[todo, :w] += xl[todo] * z[todo, None, None]
+        self._Pxx[todo, :w] += xr[todo, None, :, None] * xl[todo, :, None, :]
+        for j in np.flatnonzero(todo):
+            self._try_initialize(int(j), w)
+
+    def _try_initialize(self, j: int, w: int) -> None:
+        """Exact initialization of model ``j`` at the current sample, if X'X allows it."""
+        s_n = self.sizes[j]
+        if self.k < s_n:
+            return
+        A = self._A[j, :s_n, :s_n]
+        s = np.sqrt(np.diag(A))
+        if not np.all(s > 0):
+            return
+        C = A / np.outer(s, s)
+        if not np.linalg.cond(C) < self.init_condition:
+            return
+        Cinv = np.linalg.inv(C)
+        Cinv = 0.5 * (Cinv + Cinv.T)  # scaled D = S (X'X)^-1 S
+        theta_scaled = Cinv @ (self._b[j, :s_n] / s)  # Eq. 6
+        n = self.n_max
+        self._aug[j, :s_n, :s_n] = Cinv
+        self._aug[j, n, :s_n] = theta_scaled
+        self._inv_s[j, :s_n] = 1.0 / s
+        self._inv_s2 = self._inv_s * self._inv_s
+        # Residuals of samples 1..k0 with the batch solution; R(i) from the lagged moments:
+        # sum v_j v_{j-i} = Pzz - t'Pxz - t'Pzx + t'Pxx t.
+        t = np.zeros(n)
+        t[:s_n] = theta_scaled / s
+        nR = (
+            self._Pzz[j, :w]
+            - self._Pxz[j, :w] @ t
+            - self._Pzx[j, :w] @ t
+            + np.einsum("i,wij,j->w", t, self._Pxx[j, :w], t)
+        )
+        self._R[j, :w] = nR / self.n_eff
+        inv = self._inv_s[j]
+        self._U[j] *= inv[:, None, None] * inv[None, None, :]
+        self._xbuf[j] *= inv[None, :]
+        self._vbuf[j] = self._zbuf[j] - self._xbuf[j] @ self._aug[j, n]
+        self._ready[j] = True
+        self._ready_at[j] = self.k
+        self._all_ready = bool(self._ready.all())
+
+    # ------------------------------------------------------------------ results
+    @property
+    def ready(self) -> np.ndarray:
+        """Boolean per model: initialized, so estimates and covariances exist."""
+        return self._ready.copy()
+
+    @property
+    def ready_at(self) -> np.ndarray:
+        """Sample count at which each model was initialized (0 while not ready)."""
+        return np.where(self._ready, self._ready_at, 0)
+
+    @property
+    def n_samples(self) -> int:
+        return self.k
+
+    def _require(self, j: int) -> None:
+        if not self._ready[j]:
+            raise EstimatorNotReady(
+                f"model {j} is not initialized after {self.k} samples: its regressors "
+                "have not yet made X'X well conditioned"
+            )
+
+    def theta(self, j: int) -> np.ndarray:
+        """Parameter estimate ``theta_k`` of model ``j`` (Eq. 15c)."""
+        self._require(j)
+        s_n = self.sizes[j]
+        return self._aug[j, self.n_max, :s_n] * self._inv_s[j, :s_n]
+
+    def residual_variance(self, j: int) -> float:
+        """Fit-error variance (Eq. 16), i.e. ``R_k(0)``."""
+        self._require(j)
+        return float(self._R[j, 0])
+
+    def autocorrelation(self, j: int) -> np.ndarray:
+        """Residual autocorrelation ``R_k(i)``, ``i = 0..n_window-1`` (Eq. 17)."""
+        self._require(j)
+        return self._R[j, : self.n_window].copy()
+
+    def residuals(self, j: int) -> np.ndarray:
+        """Stored residuals, oldest first: the whole history with ``n_lags=None``, otherwise
+        the last ``n_lags + 1``."""
+        self._require(j)
+        return self._recent(self._vbuf)[j, ::-1].copy()
+
+    def _weights(self, w: int) -> np.ndarray:
+        """Lag weights of Eq. 22 / Bartlett for ``w`` lags, halved at lag 0 (U(0) + U(0)')."""
+        largest = self.k - 1 if self.n_lags is None else self.n_lags
+        if self._weights_key != (largest, w):
+            weights = lag_weights(largest, self.window, w)
+            weights[0] *= 0.5
+            self._weights_cached, self._weights_key = weights, (largest, w)
+        return self._weights_cached
+
+    def _middle_one_sided(self) -> np.ndarray:
+        """``N`` with ``N + N' = sum_i c_i R_k(i) Lambda_k(i)`` (Eqs. 20, 22); ``(M, n, n)``."""
+        if "N" not in self._cache:
+            w = self.n_window
+            cR = self._R[:, :w] * self._weights(w)
+            # N'[b, a] = sum_i cR_i U[b, i, a]
+            self._cache["N"] = np.matmul(cR[:, None, None, :], self._U[:, :, :w])[:, :, 0, :]
+        return self._cache["N"]
+
+    def _variances(self, kind: str) -> np.ndarray:
+        """Diagonals of all covariances, ``(M, n_max)``; corrected ones repaired if negative.
+
+        Rows of models that are not ready are zero: callers check readiness first.
+        """
+        key = ("var", kind)
+        var = self._cache.get(key)
+        if var is not None:
+            return var
+        D = self._aug[:, : self.n_max]
+        if kind == "conventional" and self.forgetting == 1.0:
+            var_s = self._R[:, :1] * np.diagonal(D, axis1=1, axis2=2)  # Eq. 13 with Eq. 16
+        else:
+            if kind == "conventional":
+                Nm = (0.5 * self._R[:, 0, None, None]) * self._U[:, :, 0, :]
+            else:
+                Nm = self._middle_one_sided()
+            # diag(D (N + N') D) = 2 diag(D N D) because D is symmetric.
+            var_s = 2.0 * (D * np.matmul(Nm, D).swapaxes(1, 2)).sum(axis=2)
+        var = var_s * self._inv_s2
+        if kind == "corrected" and var.min() < 0.0:
+            for j in np.flatnonzero(self._ready & (var < 0.0).any(axis=1)):
+                var[j, : self.sizes[j]] = np.diag(self._covariances(kind)[j])
+        self._cache[key] = var
+        return var
+
+    def standard_errors_all(self, kind: str = "corrected") -> np.ndarray:
+        """Standard errors of every model as an ``(M, n_max)`` array (one vectorised pass).
+
+        Padding and the rows of models that are not :attr:`ready` are NaN.
+        """
+        key = ("se", kind)
+        se = self._cache.get(key)
+        if se is None:
+            _check_kind(kind)
+            se = np.sqrt(np.maximum(self._variances(kind), 0.0))
+            se[~(self._mask & self._ready[:, None])] = np.nan
+            self._cache[key] = se
+        return se
+
+    def theta_all(self) -> np.ndarray:
+        """Estimates of every model as an ``(M, n_max)`` array; padding and models that are
+        not :attr:`ready` are NaN."""
+        th = self._aug[:, self.n_max] * self._inv_s
+        th[~(self._mask & self._ready[:, None])] = np.nan
+        return th
+
+    def _covariances(self, kind: str) -> dict:
+        """Full covariances of the ready models, repaired where a diagonal is negative."""
+        key = ("cov", kind)
+        if key in self._cache:
+            return self._cache[key]
+        out: dict[int, np.ndarray] = {}
+        raw = self._raw_covariances(kind)
+        for j, cov in raw.items():
+            if kind == "corrected" and np.any(np.diag(cov) < 0.0):
+                cov = nearest_psd(cov)
+                self.repairs[j] += 1
+            out[j] = cov
+        self._cache[key] = out
+        return out
+
+    def _raw_covariances(self, kind: str) -> dict:
+        key = ("raw", kind)
+        if key in self._cache:
+            return self._cache[key]
+        n = self.n_max
+        D = self._aug[:, :n]
+        R0 = self._R[:, 0, None, None]
+        if kind == "conventional" and self.forgetting == 1.0:
+            cov_s = R0 * D  # Eq. 13 with Eq. 16
+        elif kind == "conventional":
+            cov_s = R0 * (D @ self._U[:, :, 0, :] @ D)
+        else:
+            N = self._middle_one_sided()
+            cov_s = D @ (N + N.swapaxes(1, 2)) @ D  # Eq. 20 / 22
+        cov_all = cov_s * self._inv_s[:, :, None] * self._inv_s[:, None, :]
+        out = {
+            int(j): cov_all[j, : self.sizes[j], : self.sizes[j]] for j in np.flatnonzero(self._ready)
+        }
+        self._cache[key] = out
+        return out
+
+    def covariance(self, j: int, kind: str = "corrected", *, repair: bool = True) -> np.ndarray:
+        """Parameter covariance of model ``j``.
+
+        ``kind="corrected"``: Eq. 20 (all lags) or Eq. 22 (``n_lags``) with the chosen window.
+        ``kind="conventional"``: Eq. 13 with the fit-error variance of Eq. 16.
+        With ``repair`` (default) a corrected covariance with a negative diagonal is replaced
+        by the nearest positive semi-definite matrix and counted in :attr:`repairs` (once per
+        sample).
+        """
+        _check_kind(kind)
+        self._require(j)
+        src = self._covariances(kind) if repair else self._raw_covariances(kind)
+        return src[j].copy()
+
+    def standard_errors(self, j: int, kind: str = "corrected") -> np.ndarray:
+        """Square roots of the covariance diagonal (never NaN: see :meth:`covariance`)."""
+        _check_kind(kind)
+        self._require(j)
+        return self.standard_errors_all(kind)[j, : self.sizes[j]].copy()
+
+    # ------------------------------------------------------------------ snapshot
+    _STATE_ARRAYS = (
+        "_aug", "_inv_s", "_ready", "_ready_at", "_A", "_b", "repairs",
+        "_xbuf", "_vbuf", "_zbuf", "_R", "_U", "_Pzz", "_Pxz", "_Pzx", "_Pxx",
+    )
+
+    def state(self) -> dict:
+        """A deep copy of the complete state; :meth:`from_state` continues bit-identically."""
+        config = {
+            "sizes": list(self.sizes),
+            "n_lags": self.n_lags,
+            "window": self.window,
+            "forgetting": self.forgetting,
+            "residual": self.residual,
+            "init_condition": self.init_condition,
+        }
+        counters = {"k": self.k, "n_eff": self.n_eff, "ptr": self._ptr, "cap": self._cap}
+        arrays = {name.lstrip("_"): getattr(self, name).copy() for name in self._STATE_ARRAYS}
+        return {"format": 1, "config": config, "counters": counters, "arrays": arrays}
+
+    @classmethod
+    def from_state(cls, state: dict) -> "EstimatorBank":
+        """Rebuild an estimator bank from :meth:`state` (also after a save to disk)."""
+        if state.get("format") != 1:
+            raise ValueError(f"unknown estimator state format {state.get('format')!r}")
+        cfg = dict(state["config"])
+        bank = cls(
+            cfg.pop("sizes"), cfg.pop("n_lags"), cfg.pop("window"), cfg.pop("forgetting"), **cfg
+        )
+        c = state["counters"]
+        bank.k, bank.n_eff = int(c["k"]), float(c["n_eff"])
+        bank._ptr, cap = int(c["ptr"]), int(c["cap"])
+        if cap != bank._cap:
+            bank._cap = cap
+            bank._alloc_lag_arrays(cap)
+        for name in cls._STATE_ARRAYS:
+            arr = np.array(state["arrays"][name.lstrip("_")], copy=True)
+            if arr.shape != getattr(bank, name).shape:
+                raise ValueError(f"estimator state field {name!r} has shape {arr.shape}")
+            setattr(bank, name, arr)
+        bank._inv_s2 = bank._inv_s * bank._inv_s
+        bank._all_ready = bool(bank._ready.all())
+        return bank
+
+
+class RecursiveEstimator:
+    """Recursive least squares for one model, with corrected and conventional covariances.
+
+    ``RecursiveEstimator(n_params, n_lags=None, window="truncated", forgetting=1.0)``;
+    keyword options as for :class:`EstimatorBank`. ``update(x, z)`` processes one sample.
+    """
+
+    def __init__(
+        self,
+        n_params: int,
+        n_lags: int | None = None,
+        window: str = "truncated",
+        forgetting: float = 1.0,
+        **options,
+    ) -> None:
+        self._bank = EstimatorBank((int(n_params),), n_lags, window, forgetting, **options)
+
+    @classmethod
+    def _wrap(cls, bank: EstimatorBank) -> "RecursiveEstimator":
+        est = cls.__new__(cls)
+        est._bank = bank
+        return est
+
+    def update(self, x, z) -> None:
+        """Eq. 15-17, 21 for one sample; non-finite input raises :class:`NonFiniteInput`."""
+        x = np.asarray(x, dtype=float).reshape(1, -1)
+        if x.shape[1] != self._bank.n_max:
+            raise ValueError(f"expected {self._bank.n_max} regressors, got {x.shape[1]}")
+        self._bank.update(x, np.asarray([z], dtype=float).reshape(1))
+
+    @property
+    def n_params(self) -> int:
+        return self._bank.n_max
+
+    @property
+    def n_lags(self):
+        return self._bank.n_lags
+
+    @property
+    def n_samples(self) -> int:
+        return self._bank.k
+
+    @property
+    def is_ready(self) -> bool:
+        return bool(self._bank.ready[0])
+
+    @property
+    def theta(self) -> np.ndarray:
+        return self._bank.theta(0)
+
+    @property
+    def repairs(self) -> int:
+        """How many evaluated corrected covariances needed a positive semi-definite repair."""
+        return int(self._bank.repairs[0])
+
+    @property
+    def residual_variance(self) -> float:
+        return self._bank.residual_variance(0)
+
+    def autocorrelation(self) -> np.ndarray:
+        return self._bank.autocorrelation(0)
+
+    def residuals(self) -> np.ndarray:
+        return self._bank.residuals(0)
+
+    def covariance(self, kind: str = "corrected", *, repair: bool = True) -> np.ndarray:
+        return self._bank.covariance(0, kind, repair=repair)
+
+    def standard_errors(self, kind: str = "corrected") -> np.ndarray:
+        return self._bank.standard_errors(0, kind)
+
+    def state(self) -> dict:
+        return self._bank.state()
+
+    @classmethod
+    def from_state(cls, state: dict) -> "RecursiveEstimator":
+        if len(state["config"]["sizes"]) != 1:
+            raise ValueError("state holds several models: use EstimatorBank.from_state")
+        return cls._wrap(EstimatorBank.from_state(state))
+
+
+def batch_estimate(
+    X: np.ndarray,
+    z: np.ndarray,
+    n_lags: int | None = None,
+    window: str = "truncated",
+    residuals: np.ndarray | None = None,
+    *,
+    forgetting: float = 1.0,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Batch least squares with conventional and colored-residual covariances.
+
+    Returns ``(theta, cov_conventional, cov_corrected)``: Eq. 6 for ``theta``, Eq. 13-14 for
+    the conventional covariance and Eq. 8-11 (the Toeplitz form of Eq. 9 with the sample
+    autocorrelation of Eq. 10, lags beyond ``n_lags`` dropped or Bartlett-weighted) for the
+    corrected one. ``residuals`` replaces ``z - X theta`` in Eq. 10 (for instance the residual
+    history of a recursive estimator). ``forgetting < 1`` gives the exponentially weighted
+    formulas that :class:`EstimatorBank` implements recursively.
+    """
+    X = np.asarray(X, dtype=float)
+    z = np.asarray(z, dtype=float).reshape(-1)
+    if X.ndim != 2 or X.shape[0] != z.shape[0]:
+        raise ValueError(f"X must be (N, n) with N = len(z); got {X.shape} and {z.shape}")
+    _check_window(window)
+    N, n = X.shape
+    wts = forgetting ** np.arange(N - 1, -1, -1, dtype=float)
+    sw = np.sqrt(wts)
+    theta = np.linalg.lstsq(X * sw[:, None], z * sw, rcond=None)[0]
+    A = X.T @ (X * wts[:, None])
+    D = np.linalg.inv(A)
+    v = z - X @ theta if residuals is None else np.asarray(residuals, dtype=float).reshape(-1)
+    if v.shape != (N,):
+        raise ValueError(f"residuals must have {N} entries, got {v.shape}")
+    L = N - 1 if n_lags is None else min(int(n_lags), N - 1)
+    # Eq. 10 (weighted): R(i) = sum_{j>i} w_j v_j v_{j-i} / sum_j w_j
+    R = np.array([np.dot(wts[i:] * v[i:], v[: N - i]) for i in range(L + 1)]) / wts.sum()
+    kernel = R * lag_weights(L if n_lags is None else int(n_lags), window, L + 1)
+    Xw = X * wts[:, None]
+    if forgetting == 1.0:
+        cov_conv = R[0] * D  # Eq. 13
+    else:
+        cov_conv = R[0] * D @ (Xw.T @ Xw) @ D
+    # Eq. 11: D [sum_j sum_l x_j R(j-l) x_l'] D, in row blocks to bound memory.
+    middle = np.zeros((n, n))
+    cols = np.arange(N)
+    block = max(1, min(N, 2_000_000 // max(N, 1)))
+    for start in range(0, N, block):
+        rows = np.arange(start, min(N, start + block))
+        lag = np.abs(rows[:, None] - cols[None, :])
+        T = np.where(lag <= L, kernel[np.minimum(lag, L)], 0.0)
+        middle += Xw[rows].T @ (T @ Xw)
+    cov_corr = D @ middle @ D
+    return theta, cov_conv, cov_corr

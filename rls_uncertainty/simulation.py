@@ -1,0 +1,187 @@
+"""T-2 short-period simulation of Section IV.A (Eq. 25) with the paper's noise model.
+
+134 ft/s, 1370 ft standard atmosphere, 4.8 deg trim angle of attack, Table 1 properties,
+Table 3 true values, Table 2 elevator multisine from 0.5 s, 12 s record sampled at 50 Hz.
+The continuous dynamics are integrated on a 1 kHz grid (the multisine is smooth: a zero-order
+hold at 50 Hz visibly biases C_m_q) and then sampled. Noise: wide-band white noise at the
+signal-to-noise ratios 40, 12, 30, 40 (elevator, alpha, q, a_z; RMS signal variation over RMS
+noise) plus band-limited noise (white noise through a fifth-order Chebyshev low-pass at 2 Hz)
+scaled to a fraction of each signal's RMS variation. Seeded and deterministic.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy import signal
+
+from .aero import FlightState, coefficients, regressor_matrix, regressors
+from .config import AircraftConfig, ModelConfig, load_aircraft
+from .differentiation import DifferentiatorConfig, differentiate
+from .multisine import T2_TABLE2, Multisine
+
+__all__ = [
+    "G0",
+    "T2_TRUE",
+    "T2_MODELS",
+    "SimulationConfig",
+    "ShortPeriodRecord",
+    "standard_atmosphere_density",
+    "simulate_short_period",
+    "add_noise",
+    "reduce_short_period",
+]
+
+G0 = 9.80665
+FT = 0.3048
+
+# Table 3 true values.
+T2_TRUE = {"CZ_alpha": -3.911, "CZ_delta_e": 0.215, "Cm_alpha": -1.481, "Cm_q": -53.25, "Cm_delta_e": -1.830}
+T2_MODELS = (
+    ModelConfig("CZ", ("1", "alpha", "delta_e")),
+    ModelConfig("Cm", ("1", "alpha", "q_hat", "delta_e")),
+)
+SIGNALS = ("delta_e", "alpha", "q", "az")
+
+
+def standard_atmosphere_density(altitude_m: float) -> float:
+    """ISA troposphere density (kg/m^3)."""
+    T = 288.15 - 0.0065 * altitude_m
+    return 1.225 * (T / 288.15) ** (G0 / (287.05287 * 0.0065) - 1.0)
+
+
+@dataclass(frozen=True)
+class SimulationConfig:
+    airspeed: float = 134.0 * FT  # m/s
+    altitude: float = 1370.0 * FT  # m
+    alpha_trim: float = np.deg2rad(4.8)
+    delta_e_trim: float = 0.0
+    rate: float = 50.0  # Hz, measurements
+    duration: float = 12.0  # s
+    input_start: float = 0.5  # s
+    fine_rate: float = 1000.0  # Hz, integration grid
+    snr: dict = field(default_factory=lambda: {"delta_e": 40.0, "alpha": 12.0, "q": 30.0, "az": 40.0})
+    band_limit_hz: float = 2.0
+    chebyshev_ripple_db: float = 0.5
+    true: dict = field(default_factory=lambda: dict(T2_TRUE))
+
+    @property
+    def density(self) -> float:
+        return standard_atmosphere_density(self.altitude)
+
+    @property
+    def qbar(self) -> float:
+        return 0.5 * self.density * self.airspeed**2
+
+
+@dataclass
+class ShortPeriodRecord:
+    """Sampled signals (aircraft body axes, SI): time, elevator, alpha, q, a_z; constants V and
+    qbar; ``noise_free`` holds the same signals without noise."""
+
+    t: np.ndarray
+    delta_e: np.ndarray
+    alpha: np.ndarray
+    q: np.ndarray
+    az: np.ndarray
+    V: float
+    qbar: float
+    aircraft: AircraftConfig
+    config: SimulationConfig
+    noise_free: dict = field(default_factory=dict)
+
+    def signals(self) -> dict[str, np.ndarray]:
+        return {name: getattr(self, name) for name in SIGNALS}
+
+
+def _state_space(cfg: SimulationConfig, ac: AircraftConfig):
+    """Eq. 25a-b: states (d alpha, d q), input d delta_e, outputs (d alpha, d q, d a_z m/s^2)."""
+    tv = cfg.true
+    V, qS = cfg.airspeed, cfg.qbar * ac.S
+    za = qS / (ac.mass * V)
+    mq = qS * ac.cbar / ac.Iyy
+    A = np.array([[za * tv["CZ_alpha"], 1.0], [mq * tv["Cm_alpha"], mq * ac.cbar / (2 * V) * tv["Cm_q"]]])
+    B = np.array([[za * tv["CZ_delta_e"]], [mq * tv["Cm_delta_e"]]])
+    # Eq. 25b gives a_z in g; times g: a_z = qbar S / m (CZ_alpha alpha + CZ_de de) in m/s^2.
+    C = np.array([[1.0, 0.0], [0.0, 1.0], [qS / ac.mass * tv["CZ_alpha"], 0.0]])
+    Dm = np.array([[0.0], [0.0], [qS / ac.mass * tv["CZ_delta_e"]]])
+    return A, B, C, Dm
+
+
+def simulate_short_period(
+    cfg: SimulationConfig = SimulationConfig(),
+    aircraft: AircraftConfig | None = None,
+    elevator: Multisine = T2_TABLE2["elevator"],
+) -> ShortPeriodRecord:
+    """Noise-free T-2 short-period response to the elevator multisine, sampled at ``cfg.rate``."""
+    ac = aircraft or load_aircraft("t2")
+    A, B, C, Dm = _state_space(cfg, ac)
+    n_fine = int(round(cfg.duration * cfg.fine_rate))
+    t_fine = np.arange(n_fine) / cfg.fine_rate
+    tau = t_fine - cfg.input_start
+    on = (tau >= 0) & (tau <= elevator.period)
+    u = np.where(on, elevator(np.clip(tau, 0, elevator.period)), 0.0)
+    _, y, _ = signal.lsim((A, B, C, Dm), u, t_fine)
+    step = int(round(cfg.fine_rate / cfg.rate))
+    idx = np.arange(0, n_fine, step)
+    ct = np.cos(cfg.alpha_trim)
+    # Trim: level flight, so the body-z specific force balances gravity (a_z = -g cos(theta),
+    # with theta = alpha in level flight) plus the perturbation of Eq. 25b.
+    clean = {
+        "delta_e": cfg.delta_e_trim + u[idx],
+        "alpha": cfg.alpha_trim + y[idx, 0],
+        "q": y[idx, 1],
+        "az": -G0 * ct + y[idx, 2],
+    }
+    return ShortPeriodRecord(
+        t=t_fine[idx], V=cfg.airspeed, qbar=cfg.qbar, aircraft=ac, config=cfg,
+        noise_free={k: v.copy() for k, v in clean.items()}, **clean,
+    )
+
+
+def add_noise(record: ShortPeriodRecord, band_level: float, rng: np.random.Generator) -> ShortPeriodRecord:
+    """A copy of ``record`` with wide-band noise at the configured SNRs and band-limited noise
+    at ``band_level`` (fraction, e.g. 0.2) of each signal's RMS variation."""
+    cfg = record.config
+    n = record.t.size
+    b, a = signal.cheby1(5, cfg.chebyshev_ripple_db, cfg.band_limit_hz, fs=cfg.rate)
+    warm = 10 * int(cfg.rate)  # let the filter reach its stationary state
+    noisy = {}
+    for name in SIGNALS:
+        clean = record.noise_free[name]
+        rms = np.sqrt(np.mean((clean - clean.mean()) ** 2))
+        wide = rng.standard_normal(n) * rms / cfg.snr[name]
+        colored = signal.lfilter(b, a, rng.standard_normal(n + warm))[warm:]
+        colored *= band_level * rms / np.sqrt(np.mean(colored**2))
+        noisy[name] = clean + wide + colored
+    return ShortPeriodRecord(
+        t=record.t, V=record.V, qbar=record.qbar, aircraft=record.aircraft, config=cfg,
+        noise_free=record.noise_free, **noisy,
+    )
+
+
+def reduce_short_period(
+    record: ShortPeriodRecord, diff: DifferentiatorConfig = DifferentiatorConfig()
+) -> tuple[np.ndarray, dict[str, tuple[np.ndarray, np.ndarray]]]:
+    """Eq. 1 and Eq. 2 for the two short-period models, through the same aero reduction and
+    fixed-lag differentiator the node uses.
+
+    Returns ``(t, {"CZ": (X, z), "Cm": (X, z)})`` on the samples where the differentiated
+    pitch rate exists (the first ``window-1-lag`` and last ``lag`` samples are dropped, all
+    signals aligned).
+    """
+    dt = 1.0 / record.config.rate
+    q_dot = differentiate(record.q, dt, diff)
+    keep = np.isfinite(q_dot)
+    zeros = np.zeros(int(keep.sum()))
+    state = FlightState(
+        ax=zeros, ay=zeros, az=record.az[keep], p=zeros, q=record.q[keep], r=zeros,
+        p_dot=zeros, q_dot=q_dot[keep], r_dot=zeros, V=np.full(zeros.shape, record.V),
+        alpha=record.alpha[keep], beta=zeros, qbar=np.full(zeros.shape, record.qbar),
+        delta_e=record.delta_e[keep],
+    )
+    coef = coefficients(state, record.aircraft)
+    values = regressors(state, record.aircraft)
+    out = {m.output: (regressor_matrix(m, values), coef[m.output]) for m in T2_MODELS}
+    return record.t[keep], out

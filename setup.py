@@ -1,0 +1,34 @@
+"""ament_python package: rls_uncertainty."""
+
+from glob import glob
+
+from setuptools import find_packages, setup
+
+PACKAGE = "rls_uncertainty"
+
+setup(
+    name=PACKAGE,
+    version="0.1.0",
+    packages=find_packages(exclude=["test", "test.*"]),
+    data_files=[
+        ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
+        (f"share/{PACKAGE}", ["package.xml"]),
+        (f"share/{PACKAGE}/config", glob("config/*.yaml")),
+        (f"share/{PACKAGE}/config/aircraft", glob("config/aircraft/*.yaml")),
+        (f"share/{PACKAGE}/launch", glob("launch/*.py")),
+        (f"share/{PACKAGE}/msg_schemas", glob("msg_schemas/**/*.msg", recursive=True)),
+    ],
+    package_data={PACKAGE: ["data/*"]},
+    install_requires=["setuptools", "numpy", "scipy", "pyyaml"],
+    zip_safe=True,
+    maintainer="rls_uncertainty developers",
+    maintainer_email="dev@rls-uncertainty.local",
+    description="Recursive least squares with colored-residual parameter uncertainty.",
+    license="Apache-2.0",
+    tests_require=["pytest"],
+    entry_points={
+        "console_scripts": [
+            "rls-uncertainty = rls_uncertainty.cli:main",
+        ],
+    },
+)
