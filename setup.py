@@ -16,7 +16,8 @@ setup(
         (f"share/{PACKAGE}/config", glob("config/*.yaml")),
         (f"share/{PACKAGE}/config/aircraft", glob("config/aircraft/*.yaml")),
         (f"share/{PACKAGE}/launch", glob("launch/*.py")),
-        (f"share/{PACKAGE}/msg_schemas", glob("msg_schemas/**/*.msg", recursive=True)),
+        (f"share/{PACKAGE}/msg_schemas/fti_msgs", glob("msg_schemas/fti_msgs/*.yaml")),
+        (f"share/{PACKAGE}/msg_schemas/fti_msgs/msg", glob("msg_schemas/fti_msgs/msg/*.msg")),
     ],
     package_data={PACKAGE: ["data/*"]},
     install_requires=["setuptools", "numpy", "scipy", "pyyaml"],
@@ -29,6 +30,7 @@ setup(
     entry_points={
         "console_scripts": [
             "rls-uncertainty = rls_uncertainty.cli:main",
+            "estimator_node = rls_uncertainty.node:main",
         ],
     },
 )

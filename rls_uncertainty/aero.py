@@ -7,6 +7,7 @@ in one place, :func:`rep103_to_aircraft`.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -66,11 +67,15 @@ def physics_rejection(state: FlightState) -> str | None:
     """Reason a (scalar) sample cannot be reduced, or ``None``: non-finite values, or zero or
     negative dynamic pressure or airspeed (Eq. 1 and the rate normalisations divide by them)."""
     for name, value in vars(state).items():
-        if not np.all(np.isfinite(value)):
+        if isinstance(value, float):  # the per-sample path: plain floats
+            if not math.isfinite(value):
+                return f"non_finite_{name}"
+        elif not np.all(np.isfinite(value)):
             return f"non_finite_{name}"
-    if not np.all(np.asarray(state.qbar) > 0):
+    qbar, V = state.qbar, state.V
+    if not (qbar > 0 if isinstance(qbar, float) else np.all(np.asarray(qbar) > 0)):
         return "nonpositive_dynamic_pressure"
-    if not np.all(np.asarray(state.V) > 0):
+    if not (V > 0 if isinstance(V, float) else np.all(np.asarray(V) > 0)):
         return "nonpositive_airspeed"
     return None
 

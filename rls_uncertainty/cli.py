@@ -64,6 +64,94 @@ def _montecarlo(args: argparse.Namespace) -> int:
     return 0
 
 
+def _multisine(args: argparse.Namespace) -> int:
+    """Design orthogonal phase-optimized multisines and write their input table (CSV)."""
+    from pathlib import Path
+
+    from .multisine import design_multisines, relative_peak_factor
+
+    names = tuple(args.names) if args.names else tuple(f"input{i + 1}" for i in range(args.inputs))
+    if len(names) != args.inputs:
+        raise ValueError(f"--names gives {len(names)} names for {args.inputs} inputs")
+    designs = design_multisines(args.period, (args.band[0], args.band[1]), args.inputs, names=names,
+                                amplitude=args.amplitude)
+    out = Path(args.out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    with open(out, "w") as fh:
+        fh.write("input,harmonic,frequency_hz,relative_amplitude,phase_rad\n")
+        for ms in designs:
+            for k, a, ph in zip(ms.harmonics, ms.rel_amplitudes, ms.phases):
+                fh.write(f"{ms.name},{k},{k / ms.period:.6g},{a:.6g},{ph:.9g}\n")
+    t = np.linspace(0.0, args.period, 4096, endpoint=False)
+    for ms in designs:
+        freqs = ", ".join(f"{f:.3g}" for f in ms.frequencies)
+        print(f"{ms.name}: {len(ms.harmonics)} harmonics ({freqs} Hz), relative peak factor "
+              f"{relative_peak_factor(ms(t)):.3f}")
+    print(f"wrote {out}  (Eq. 24: u(t) = a * sum_k A_k sin(2 pi k t / T + phi_k), amplitude {args.amplitude:g})")
+    return 0
+
+
+def _make_bag(args: argparse.Namespace) -> int:
+    """Write the seeded T-2 maneuver on the node's standard input topics."""
+    from .bags import write_t2_bag
+
+    path = write_t2_bag(args.out, args.noise / 100.0, args.seed)
+    size = sum(f.stat().st_size for f in path.iterdir())
+    print(f"wrote {path} ({size / 1e6:.2f} MB): T-2 maneuver, {args.noise:g}% band-limited noise, seed {args.seed}")
+    return 0
+
+
+def _convert(args: argparse.Namespace) -> int:
+    from .bags import convert
+
+    counts = convert(args.bag, args.mapping, args.out, schemas=args.schemas)
+    for topic, n in counts.items():
+        print(f"{topic:<20}{n:>8} messages")
+    print(f"wrote {args.out}")
+    return 0
+
+
+def _replay_params(args: argparse.Namespace) -> dict:
+    from .config import load_parameters_file
+
+    params = load_parameters_file(args.config) if args.config else {}
+    if args.lags is not None:
+        params["estimator.lags"] = -1 if args.lags == "all" else int(args.lags)
+    if args.window:
+        params["estimator.window"] = args.window
+    if args.forgetting is not None:
+        params["estimator.forgetting"] = args.forgetting
+    if args.models:
+        params["models.enabled"] = list(args.models)
+    return params
+
+
+def _replay(args: argparse.Namespace) -> int:
+    from .replay import replay, summary_table
+
+    params = _replay_params(args)
+    result = replay(args.bag, params, args.out, start=args.start, end=args.end, strict=not args.lenient,
+                    progress=not args.quiet, plots=not args.no_plots)
+    pipe = result.pipeline
+    c = pipe.counters()
+    print(summary_table(pipe, result.outputs))
+    rejected = ", ".join(f"{k} {v}" for k, v in sorted(c["samples_rejected"].items())) or "none"
+    print(f"\n{c['samples_formed']} samples formed, {c['samples_used']} used; rejected: {rejected}")
+    for name, s in c["streams"].items():
+        if s["rejected"] or s["expired"]:
+            print(f"  {name}: {s['received']} received, rejected {s['rejected']}, expired {s['expired']}")
+    print(f"{result.n_messages} messages, {result.data_seconds:.1f} s of data in {result.wall_seconds:.2f} s "
+          f"({result.speed:.0f}x real time); wrote {args.out}")
+    return 0
+
+
+def _play(args: argparse.Namespace) -> int:
+    from .player import play
+
+    return play(args.bag, rate=args.rate, clock=not args.no_clock, reliable=not args.best_effort,
+                wait_for_subscribers=args.wait, start_delay=args.delay)
+
+
 def _lags(value: str):
     if value in ("all", "none", "None"):
         return None
@@ -95,6 +183,53 @@ def build_parser() -> argparse.ArgumentParser:
     mc.add_argument("--jobs", type=int, default=None, help="processes (default: every core)")
     mc.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
     mc.set_defaults(func=_montecarlo)
+
+    ms = sub.add_parser("multisine", help="design orthogonal phase-optimized multisine inputs (Eq. 24)")
+    ms.add_argument("--period", type=float, required=True, help="record length T, s")
+    ms.add_argument("--band", type=float, nargs=2, required=True, metavar=("LOW", "HIGH"), help="band, Hz")
+    ms.add_argument("--inputs", type=int, required=True, help="number of inputs")
+    ms.add_argument("--names", nargs="+", help="input names (default input1, input2, ...)")
+    ms.add_argument("--amplitude", type=float, default=1.0, help="aggregate amplitude a (default 1)")
+    ms.add_argument("--out", required=True, help="CSV file for the input table")
+    ms.set_defaults(func=_multisine)
+
+    mb = sub.add_parser("make-bag", help="write the seeded T-2 maneuver as a bag on the standard input topics")
+    mb.add_argument("--out", default="bags/t2_maneuver", help="bag directory (default bags/t2_maneuver)")
+    mb.add_argument("--noise", type=float, default=20.0, help="band-limited noise, percent (default 20)")
+    mb.add_argument("--seed", type=int, default=250)
+    mb.set_defaults(func=_make_bag)
+
+    cv = sub.add_parser("convert", help="recorded bag + mapping file -> replay bag on the standard topics")
+    cv.add_argument("bag", help="ROS 2 bag (MCAP or sqlite3; directory or file) or ROS 1 bag")
+    cv.add_argument("--mapping", required=True, help="mapping YAML (e.g. msg_schemas/fti_msgs/mapping.yaml)")
+    cv.add_argument("--out", required=True, help="output bag directory")
+    cv.add_argument("--schemas", action="append", help="extra .msg directory (PKG/msg/NAME.msg); repeatable")
+    cv.set_defaults(func=_convert)
+
+    rp = sub.add_parser("replay", help="run a replay bag through the node's pipeline offline")
+    rp.add_argument("bag", help="replay bag on the standard topics")
+    rp.add_argument("--config", help="ROS parameter file, e.g. config/t2.yaml (default: node defaults)")
+    rp.add_argument("--out", required=True, help="output directory")
+    rp.add_argument("--lags", help="override estimator.lags (integer or 'all')")
+    rp.add_argument("--window", choices=("truncated", "bartlett"), help="override estimator.window")
+    rp.add_argument("--forgetting", type=float, help="override estimator.forgetting")
+    rp.add_argument("--models", nargs="+", help="override models.enabled (e.g. CZ Cm)")
+    rp.add_argument("--start", type=float, help="start, s from the bag start")
+    rp.add_argument("--end", type=float, help="end, s from the bag start")
+    rp.add_argument("--lenient", action="store_true",
+                    help="pass out-of-order and duplicate stamps to the pipeline (counted like the node does)")
+    rp.add_argument("--no-plots", action="store_true")
+    rp.add_argument("--quiet", action="store_true", help="no progress bar")
+    rp.set_defaults(func=_replay)
+
+    pl = sub.add_parser("play", help="publish a replay bag over DDS with /clock")
+    pl.add_argument("bag")
+    pl.add_argument("--rate", type=float, default=1.0, help="rate factor (default 1 = real time)")
+    pl.add_argument("--no-clock", action="store_true", help="do not publish /clock")
+    pl.add_argument("--best-effort", action="store_true", help="best-effort QoS (default reliable)")
+    pl.add_argument("--wait", type=int, default=0, help="wait for this many subscribers on each topic")
+    pl.add_argument("--delay", type=float, default=0.5, help="seconds between discovery and the first message")
+    pl.set_defaults(func=_play)
     return parser
 
 
@@ -103,7 +238,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     try:
         return int(args.func(args) or 0)
-    except (ValueError, OSError) as exc:
+    except (ValueError, OSError, RuntimeError) as exc:
         print(f"rls-uncertainty {args.command}: error: {exc}", file=sys.stderr)
         return 2
 

@@ -9,6 +9,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field, fields
 from pathlib import Path
+from typing import Any
 
 import yaml
 
@@ -22,6 +23,15 @@ __all__ = [
     "load_aircraft",
     "load_models",
     "config_dir",
+    "ParamSpec",
+    "PARAMETERS",
+    "SurfaceMixing",
+    "PipelineConfig",
+    "NodeConfig",
+    "parameter_defaults",
+    "pipeline_config",
+    "node_config",
+    "load_parameters_file",
 ]
 
 
@@ -173,3 +183,292 @@ def load_models(spec) -> tuple[ModelConfig, ...]:
     if not isinstance(spec, dict) or not spec:
         raise ConfigError("models must be a non-empty mapping of output -> list of regressors")
     return tuple(ModelConfig(str(k), tuple(str(r) for r in v)) for k, v in spec.items())
+
+
+# ---------------------------------------------------------------------------------------------
+# Pipeline and node settings: one table of parameters shared by the ROS node (declared ROS
+# parameters with descriptions and ranges), the offline replay (``--config``, the same ROS
+# parameter YAML) and the tests.
+
+
+@dataclass(frozen=True)
+class ParamSpec:
+    """A setting: dotted name, default, description and the allowed values."""
+
+    name: str
+    default: Any
+    description: str
+    low: float | None = None
+    high: float | None = None
+    choices: tuple[str, ...] | None = None
+
+
+_EQ2 = {m.output: list(m.regressors) for m in DEFAULT_MODELS}
+
+PARAMETERS: tuple[ParamSpec, ...] = (
+    ParamSpec("rate", 50.0, "estimator sample rate, Hz; input streams are interpolated to it", 1.0, 1000.0),
+    ParamSpec("aircraft", "t2", "aircraft properties: a name in config/aircraft/ (t2, twin_otter_f1_017, ...) or a YAML path"),
+    ParamSpec("models.enabled", list(OUTPUTS), "models to estimate, a subset of CX, CY, CZ, Cl, Cm, Cn"),
+    *(
+        ParamSpec(f"models.{out}", _EQ2[out], f"regressors of the {out} model (Eq. 2); names: " + ", ".join(REGRESSORS))
+        for out in OUTPUTS
+    ),
+    ParamSpec("estimator.lags", 50, "residual autocorrelation lags kept (Eq. 22); -1 keeps all lags (Eq. 20), 0 is the conventional covariance", -1, 100000),
+    ParamSpec("estimator.window", "truncated", "lag window: truncated (Eq. 22) or bartlett (always positive semi-definite)", choices=("truncated", "bartlett")),
+    ParamSpec("estimator.forgetting", 1.0, "exponential forgetting factor; 1 is the paper's growing-memory estimator", 0.5, 1.0),
+    ParamSpec("estimator.residual", "a_posteriori", "residual used in Eq. 17: a_posteriori (z - x'theta_k) or a_priori", choices=("a_posteriori", "a_priori")),
+    ParamSpec("differentiator.window", 9, "angular-acceleration differentiator window, samples", 3, 201),
+    ParamSpec("differentiator.order", 3, "local polynomial order of the differentiator", 1, 10),
+    ParamSpec("differentiator.lag", 4, "differentiator fixed lag, samples (0 = causal); every signal is delayed by it", 0, 200),
+    ParamSpec("inputs.use_dynamic_pressure", True, "use the dynamic_pressure topic; false computes 0.5 rho V^2 with inputs.air_density"),
+    ParamSpec("inputs.air_density", 1.225, "air density for 0.5 rho V^2 when the dynamic pressure topic is not used, kg/m^3", 0.01, 2.0),
+    ParamSpec("inputs.use_thrust", True, "use the thrust topic (force.x, N) in Eq. 1a; false sets thrust to 0"),
+    ParamSpec("inputs.max_gap", 0.25, "largest gap between two messages of one stream that is interpolated across, s", 0.001, 10.0),
+    ParamSpec("inputs.buffer_duration", 2.0, "how far a stream may run ahead of the slowest one before its old messages expire, s", 0.1, 60.0),
+    ParamSpec("surfaces.elevator", ["elevator"], "JointState names averaged into the elevator deflection (Eq. 23)"),
+    ParamSpec("surfaces.aileron_right", ["aileron_right"], "JointState names of right ailerons; delta_a = (right - left)/2 (Eq. 23)"),
+    ParamSpec("surfaces.aileron_left", ["aileron_left"], "JointState names of left ailerons"),
+    ParamSpec("surfaces.aileron_combined", "", "JointState name that already holds (right - left)/2; when set, aileron_right/left are ignored"),
+    ParamSpec("surfaces.rudder", ["rudder"], "JointState names averaged into the rudder deflection (Eq. 23)"),
+    ParamSpec("topics.imu", "imu", "sensor_msgs/Imu topic, REP-103 body frame"),
+    ParamSpec("topics.airspeed", "airspeed", "geometry_msgs/Vector3Stamped true-airspeed vector topic, REP-103 body frame, m/s"),
+    ParamSpec("topics.dynamic_pressure", "dynamic_pressure", "sensor_msgs/FluidPressure dynamic pressure topic, Pa"),
+    ParamSpec("topics.control_surfaces", "control_surfaces", "sensor_msgs/JointState surface deflection topic, rad"),
+    ParamSpec("topics.thrust", "thrust", "geometry_msgs/WrenchStamped thrust topic (force.x, N)"),
+    ParamSpec("qos.reliable", False, "reliable QoS for the inputs instead of sensor-data (best effort)"),
+    ParamSpec("qos.depth", 100, "input and output queue depth", 1, 100000),
+    ParamSpec("enabled", True, "estimate from start-up; the ~/enable service gates estimation to maneuvers"),
+    ParamSpec("state_file", "", "estimator state file: loaded at start-up when it exists and matches, saved on shutdown, disable and periodically"),
+    ParamSpec("state_save_period", 10.0, "seconds between periodic state saves (0 = only on shutdown and disable)", 0.0, 3600.0),
+    ParamSpec("diagnostics_period", 1.0, "seconds between /diagnostics messages", 0.05, 60.0),
+    ParamSpec("frame_id", "base_link", "frame_id of the ~/sample_stamp header"),
+)
+PARAMETER_NAMES = {p.name: p for p in PARAMETERS}
+
+
+def parameter_defaults() -> dict[str, Any]:
+    return {p.name: (list(p.default) if isinstance(p.default, list) else p.default) for p in PARAMETERS}
+
+
+def _check_value(spec: ParamSpec, value: Any) -> Any:
+    """The value converted to the spec's type, or a :class:`ConfigError` saying why not."""
+    d = spec.default
+    where = f"parameter {spec.name!r}"
+    if isinstance(d, bool):
+        if not isinstance(value, bool):
+            raise ConfigError(f"{where} must be true or false, got {value!r}")
+    elif isinstance(d, int):
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise ConfigError(f"{where} must be an integer, got {value!r}")
+    elif isinstance(d, float):
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+            raise ConfigError(f"{where} must be a finite number, got {value!r}")
+        value = float(value)
+    elif isinstance(d, str):
+        if not isinstance(value, str):
+            raise ConfigError(f"{where} must be a string, got {value!r}")
+    elif isinstance(d, list):
+        if value is None:
+            value = []
+        if not isinstance(value, (list, tuple)) or not all(isinstance(v, str) for v in value):
+            raise ConfigError(f"{where} must be a list of strings, got {value!r}")
+        value = [v for v in value if v != ""]
+    if spec.low is not None and not spec.low <= value <= spec.high:
+        raise ConfigError(f"{where} must be in [{spec.low:g}, {spec.high:g}], got {value!r}")
+    if spec.choices is not None and value not in spec.choices:
+        raise ConfigError(f"{where} must be one of {list(spec.choices)}, got {value!r}")
+    return value
+
+
+def _validated(params: dict[str, Any]) -> dict[str, Any]:
+    unknown = sorted(set(params) - set(PARAMETER_NAMES) - {"use_sim_time"})
+    if unknown:
+        raise ConfigError(f"unknown parameter(s) {unknown}")
+    values = parameter_defaults()
+    for name, value in params.items():
+        if name in PARAMETER_NAMES:
+            values[name] = _check_value(PARAMETER_NAMES[name], value)
+    return values
+
+
+@dataclass(frozen=True)
+class SurfaceMixing:
+    """JointState names -> Eq. 23 deflections: elevator and rudder are averages of their
+    surfaces, the aileron is (right - left)/2 unless one joint already holds it."""
+
+    elevator: tuple[str, ...] = ("elevator",)
+    aileron_right: tuple[str, ...] = ("aileron_right",)
+    aileron_left: tuple[str, ...] = ("aileron_left",)
+    aileron_combined: str = ""
+    rudder: tuple[str, ...] = ("rudder",)
+
+    def names(self, surface: str) -> tuple[str, ...]:
+        """The joints a deflection needs (empty: not measured)."""
+        if surface == "delta_e":
+            return self.elevator
+        if surface == "delta_r":
+            return self.rudder
+        if self.aileron_combined:
+            return (self.aileron_combined,)
+        if self.aileron_right and self.aileron_left:
+            return self.aileron_right + self.aileron_left
+        return ()
+
+
+@dataclass(frozen=True)
+class PipelineConfig:
+    """Everything that decides the numbers: rate, aircraft, models, estimator, differentiator,
+    input handling and surface mixing. The node and the offline replay build it the same way."""
+
+    aircraft: AircraftConfig
+    models: tuple[ModelConfig, ...] = DEFAULT_MODELS
+    rate: float = 50.0
+    n_lags: int | None = 50
+    window: str = "truncated"
+    forgetting: float = 1.0
+    residual: str = "a_posteriori"
+    diff_window: int = 9
+    diff_order: int = 3
+    diff_lag: int = 4
+    use_dynamic_pressure: bool = True
+    air_density: float = 1.225
+    use_thrust: bool = True
+    max_gap: float = 0.25
+    buffer_duration: float = 2.0
+    mixing: SurfaceMixing = SurfaceMixing()
+
+    def __post_init__(self) -> None:
+        if not self.models:
+            raise ConfigError("at least one model must be enabled")
+        outputs = [m.output for m in self.models]
+        if len(set(outputs)) != len(outputs):
+            raise ConfigError(f"a model is enabled twice: {outputs}")
+        if not 0 <= self.diff_lag < self.diff_window:
+            raise ConfigError(
+                f"differentiator.lag must be in [0, differentiator.window - 1 = {self.diff_window - 1}], got {self.diff_lag}"
+            )
+        if not 1 <= self.diff_order < self.diff_window:
+            raise ConfigError(
+                f"differentiator.order must be in [1, differentiator.window - 1 = {self.diff_window - 1}], got {self.diff_order}"
+            )
+        for m in self.models:
+            for surface in ("delta_e", "delta_a", "delta_r"):
+                if surface in m.regressors and not self.mixing.names(surface):
+                    raise ConfigError(
+                        f"model {m.output} uses {surface} but no control surface is mapped to it (surfaces.* parameters)"
+                    )
+        if self.max_gap * self.rate < 1.0:
+            raise ConfigError(
+                f"inputs.max_gap ({self.max_gap} s) is shorter than one estimator sample (1/rate = {1 / self.rate:g} s)"
+            )
+
+    @property
+    def period_ns(self) -> int:
+        return int(round(1e9 / self.rate))
+
+    def fingerprint(self) -> dict:
+        """What a saved estimator state must match to be resumed."""
+        return {
+            "aircraft": [getattr(self.aircraft, f.name) for f in fields(AircraftConfig)],
+            "models": [[m.output, *m.regressors] for m in self.models],
+            "rate": self.rate,
+            "n_lags": self.n_lags,
+            "window": self.window,
+            "forgetting": self.forgetting,
+            "residual": self.residual,
+        }
+
+
+@dataclass(frozen=True)
+class NodeConfig:
+    """ROS-only settings: topics, QoS, services' start state, state file, diagnostics."""
+
+    topics: dict
+    reliable: bool = False
+    depth: int = 100
+    enabled: bool = True
+    state_file: str = ""
+    state_save_period: float = 10.0
+    diagnostics_period: float = 1.0
+    frame_id: str = "base_link"
+
+
+def pipeline_config(params: dict[str, Any] | None = None) -> PipelineConfig:
+    """A :class:`PipelineConfig` from dotted parameters (ROS parameters or a flattened YAML);
+    missing ones take their defaults. Raises :class:`ConfigError` naming the bad setting."""
+    v = _validated(params or {})
+    enabled = v["models.enabled"]
+    bad = [m for m in enabled if m not in OUTPUTS]
+    if bad:
+        raise ConfigError(f"parameter 'models.enabled': unknown model(s) {bad}; known: {list(OUTPUTS)}")
+    models = tuple(ModelConfig(out, tuple(v[f"models.{out}"])) for out in enabled)
+    lags = v["estimator.lags"]
+    if not v["estimator.forgetting"] > 0:
+        raise ConfigError("parameter 'estimator.forgetting' must be in (0, 1]")
+    return PipelineConfig(
+        aircraft=load_aircraft(v["aircraft"]),
+        models=models,
+        rate=v["rate"],
+        n_lags=None if lags < 0 else lags,
+        window=v["estimator.window"],
+        forgetting=v["estimator.forgetting"],
+        residual=v["estimator.residual"],
+        diff_window=v["differentiator.window"],
+        diff_order=v["differentiator.order"],
+        diff_lag=v["differentiator.lag"],
+        use_dynamic_pressure=v["inputs.use_dynamic_pressure"],
+        air_density=v["inputs.air_density"],
+        use_thrust=v["inputs.use_thrust"],
+        max_gap=v["inputs.max_gap"],
+        buffer_duration=v["inputs.buffer_duration"],
+        mixing=SurfaceMixing(
+            elevator=tuple(v["surfaces.elevator"]),
+            aileron_right=tuple(v["surfaces.aileron_right"]),
+            aileron_left=tuple(v["surfaces.aileron_left"]),
+            aileron_combined=v["surfaces.aileron_combined"],
+            rudder=tuple(v["surfaces.rudder"]),
+        ),
+    )
+
+
+def node_config(params: dict[str, Any] | None = None) -> NodeConfig:
+    v = _validated(params or {})
+    return NodeConfig(
+        topics={k.split(".", 1)[1]: v[k] for k in v if k.startswith("topics.")},
+        reliable=v["qos.reliable"],
+        depth=v["qos.depth"],
+        enabled=v["enabled"],
+        state_file=v["state_file"],
+        state_save_period=v["state_save_period"],
+        diagnostics_period=v["diagnostics_period"],
+        frame_id=v["frame_id"],
+    )
+
+
+def _flatten(tree: dict, prefix: str = "") -> dict[str, Any]:
+    out: dict[str, Any] = {}
+    for key, value in tree.items():
+        name = f"{prefix}{key}"
+        if isinstance(value, dict):
+            out.update(_flatten(value, name + "."))
+        else:
+            out[name] = value
+    return out
+
+
+def load_parameters_file(path_or_name: str | Path) -> dict[str, Any]:
+    """Dotted parameters from a ROS 2 parameter file (``NODE: ros__parameters: ...``, the
+    file the node takes with ``--params-file``), or by name from ``config/NAME.yaml``."""
+    path = Path(path_or_name)
+    if not path.suffix:
+        path = config_dir() / f"{path_or_name}.yaml"
+    data = _read_yaml(path)
+    sections = [v["ros__parameters"] for v in data.values() if isinstance(v, dict) and "ros__parameters" in v]
+    if len(sections) != 1:
+        raise ConfigError(f"{path}: expected one 'NODE: ros__parameters:' section, found {len(sections)}")
+    params = _flatten(sections[0])
+    try:
+        _validated(params)
+    except ConfigError as exc:
+        raise ConfigError(f"{path}: {exc}") from exc
+    return params

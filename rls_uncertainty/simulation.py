@@ -31,6 +31,8 @@ __all__ = [
     "simulate_short_period",
     "add_noise",
     "reduce_short_period",
+    "SensorStreams",
+    "simulate_sensor_streams",
 ]
 
 G0 = 9.80665
@@ -60,6 +62,7 @@ class SimulationConfig:
     rate: float = 50.0  # Hz, measurements
     duration: float = 12.0  # s
     input_start: float = 0.5  # s
+    sample_offset: float = 0.0  # s, first measurement time (a multiple of 1/fine_rate)
     fine_rate: float = 1000.0  # Hz, integration grid
     snr: dict = field(default_factory=lambda: {"delta_e": 40.0, "alpha": 12.0, "q": 30.0, "az": 40.0})
     band_limit_hz: float = 2.0
@@ -124,7 +127,7 @@ def simulate_short_period(
     u = np.where(on, elevator(np.clip(tau, 0, elevator.period)), 0.0)
     _, y, _ = signal.lsim((A, B, C, Dm), u, t_fine)
     step = int(round(cfg.fine_rate / cfg.rate))
-    idx = np.arange(0, n_fine, step)
+    idx = np.arange(int(round(cfg.sample_offset * cfg.fine_rate)), n_fine, step)
     ct = np.cos(cfg.alpha_trim)
     # Trim: level flight, so the body-z specific force balances gravity (a_z = -g cos(theta),
     # with theta = alpha in level flight) plus the perturbation of Eq. 25b.
@@ -185,3 +188,75 @@ def reduce_short_period(
     values = regressors(state, record.aircraft)
     out = {m.output: (regressor_matrix(m, values), coef[m.output]) for m in T2_MODELS}
     return record.t[keep], out
+
+
+@dataclass(frozen=True)
+class SensorStreams:
+    """The T-2 maneuver as the node's input streams (REP-103 body frame, SI): per stream,
+    integer-nanosecond stamps and a value array. ``surface_names`` label the surface columns."""
+
+    start_ns: int
+    imu: tuple  # (stamps, (N, 6): angular velocity xyz, specific force xyz)
+    airspeed: tuple  # (stamps, (N, 3))
+    dynamic_pressure: tuple  # (stamps, (N,))
+    control_surfaces: tuple  # (stamps, (N, 5))
+    thrust: tuple  # (stamps, (N,))
+    surface_names: tuple = ("elevator_left", "elevator_right", "aileron_left", "aileron_right", "rudder")
+
+
+def simulate_sensor_streams(
+    band_level: float = 0.2,
+    seed: int = 250,
+    *,
+    imu_rate: float = 200.0,
+    air_data_rate: float = 50.0,
+    surface_rate: float = 100.0,
+    thrust_rate: float = 10.0,
+    air_data_offset: float = 0.004,
+    surface_offset: float = 0.002,
+    start_ns: int = 1_767_225_600 * 10**9,
+    cfg: SimulationConfig = SimulationConfig(),
+) -> SensorStreams:
+    """One seeded T-2 maneuver (Section IV.A, Eq. 25) at realistic sensor rates.
+
+    Each stream is sampled from the same 1 kHz simulation at its own rate and offset and
+    gets the paper's noise (wide-band at the Section IV.A SNRs plus band-limited noise at
+    ``band_level``) generated at that rate: the IMU carries q and a_z, the air data alpha
+    (as the airspeed vector), the surfaces the elevator (both halves equal, Eq. 23).
+    Trim is level flight: specific force (g sin alpha, 0, -g cos alpha) in aircraft axes.
+    """
+    from dataclasses import replace  # noqa: PLC0415
+
+    rng = np.random.default_rng(seed)
+    ac = load_aircraft("t2")
+
+    def stream(rate, offset):
+        rec = simulate_short_period(replace(cfg, rate=rate, sample_offset=offset), ac)
+        noisy = add_noise(rec, band_level, rng)
+        stamps = start_ns + np.round(rec.t * 1e9).astype(np.int64)
+        return stamps, noisy
+
+    t_imu, imu = stream(imu_rate, 0.0)
+    n = t_imu.size
+    ax = G0 * np.sin(cfg.alpha_trim)
+    # REP-103 = aircraft axes with y and z negated.
+    gyro = np.column_stack([np.zeros(n), -imu.q, np.zeros(n)])
+    accel = np.column_stack([np.full(n, ax), np.zeros(n), -imu.az])
+    t_air, air = stream(air_data_rate, air_data_offset)
+    V = cfg.airspeed
+    vel = np.column_stack([V * np.cos(air.alpha), np.zeros(t_air.size), -V * np.sin(air.alpha)])
+    qbar = np.full(t_air.size, cfg.qbar)
+    t_srf, srf = stream(surface_rate, surface_offset)
+    zeros = np.zeros(t_srf.size)
+    surfaces = np.column_stack([srf.delta_e, srf.delta_e, zeros, zeros, zeros])
+    t_thr = start_ns + np.round(np.arange(0.0, cfg.duration, 1.0 / thrust_rate) * 1e9).astype(np.int64)
+    # Thrust balancing a drag coefficient of 0.03 at trim (CX only; the T-2 model has no CX).
+    thrust = np.full(t_thr.size, ac.mass * ax + 0.03 * cfg.qbar * ac.S)
+    return SensorStreams(
+        start_ns=start_ns,
+        imu=(t_imu, np.column_stack([gyro, accel])),
+        airspeed=(t_air, vel),
+        dynamic_pressure=(t_air, qbar),
+        control_surfaces=(t_srf, surfaces),
+        thrust=(t_thr, thrust),
+    )

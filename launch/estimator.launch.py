@@ -1,0 +1,25 @@
+"""Start the estimator node: ``ros2 launch rls_uncertainty estimator.launch.py
+params_file:=/path/to/config.yaml`` (default: the package's config/t2.yaml)."""
+
+import os
+
+from ament_index_python.packages import get_package_share_directory
+from launch import LaunchDescription
+from launch.actions import DeclareLaunchArgument
+from launch.substitutions import LaunchConfiguration
+from launch_ros.actions import Node
+
+
+def generate_launch_description():
+    default = os.path.join(get_package_share_directory("rls_uncertainty"), "config", "t2.yaml")
+    return LaunchDescription([
+        DeclareLaunchArgument("params_file", default_value=default, description="ROS parameter file"),
+        DeclareLaunchArgument("use_sim_time", default_value="false", description="follow /clock (bag replay)"),
+        Node(
+            package="rls_uncertainty",
+            executable="estimator_node",
+            name="rls_estimator",
+            output="screen",
+            parameters=[LaunchConfiguration("params_file"), {"use_sim_time": LaunchConfiguration("use_sim_time")}],
+        ),
+    ])

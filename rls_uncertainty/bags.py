@@ -1,0 +1,452 @@
+"""Bag I/O with ``rosbags``: read any recording, map its fields onto the node's standard
+inputs, write deterministic ROS 2 MCAP replays.
+
+* :func:`typestore` - the Jazzy types plus the project's ``msg_schemas/`` (``fti_msgs``) and
+  any ``--schemas`` directory; schemas embedded in a bag take part automatically.
+* :func:`convert` - a recording plus a mapping file (``msg_schemas/fti_msgs/mapping.yaml``
+  is the one for the shared Twin Otter recordings) to a replay on the standard topics.
+* :func:`write_t2_bag` - the bundled seeded T-2 maneuver on the standard topics.
+* :func:`read_inputs` - the standard-topic messages of a replay, for the offline replay and
+  the DDS player.
+
+Replays are ROS 2 bags (storage version 9, MCAP), every message logged at its header stamp,
+ordered by stamp with a stable tie-break (topic, then recorded order): converting the same
+input twice gives byte-identical files. Output is written to a temporary directory that is
+renamed only when complete. Every problem raises :class:`BagError` naming the file, the
+topic and what is wrong.
+"""
+
+from __future__ import annotations
+
+import math
+import shutil
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Iterator
+
+import numpy as np
+import yaml
+
+from .aero import rep103_to_aircraft
+from .messages import INPUTS, MESSAGE_TYPES, stamp_ns
+
+__all__ = [
+    "BagError",
+    "typestore",
+    "convert",
+    "write_replay",
+    "write_t2_bag",
+    "read_inputs",
+    "load_mapping",
+    "schema_dir",
+    "UNITS",
+]
+
+
+class BagError(RuntimeError):
+    """A bag, schema or mapping problem; the message names the file, topic and problem."""
+
+
+def schema_dir() -> Path:
+    """The project's ``msg_schemas/`` directory (source tree or ROS install share)."""
+    here = Path(__file__).resolve().parent
+    for candidate in (here.parent / "msg_schemas", here / "msg_schemas"):
+        if candidate.is_dir():
+            return candidate
+    try:
+        from ament_index_python.packages import get_package_share_directory  # noqa: PLC0415
+
+        return Path(get_package_share_directory("rls_uncertainty")) / "msg_schemas"
+    except Exception as exc:  # pragma: no cover - depends on the install
+        raise BagError("cannot find the rls_uncertainty msg_schemas directory") from exc
+
+
+def typestore(extra_schemas: list[Path] | None = None):
+    """Jazzy typestore with the ``.msg`` files of ``msg_schemas/`` and ``extra_schemas``
+    (directories laid out as ``PKG/msg/NAME.msg``)."""
+    from rosbags.typesys import Stores, get_typestore, get_types_from_msg  # noqa: PLC0415
+
+    store = get_typestore(Stores.ROS2_JAZZY)
+    dirs = [schema_dir(), *(Path(d) for d in (extra_schemas or []))]
+    types = {}
+    for d in dirs:
+        if not d.is_dir():
+            raise BagError(f"{d}: schema directory does not exist")
+        for msg in sorted(d.rglob("*.msg")):
+            name = f"{msg.parent.parent.name}/msg/{msg.stem}"
+            try:
+                types.update(get_types_from_msg(msg.read_text(), name))
+            except Exception as exc:  # noqa: BLE001
+                raise BagError(f"{msg}: cannot parse message schema: {exc}") from exc
+    store.register(types)
+    return store
+
+
+def _open_reader(path: Path, store):
+    from rosbags.highlevel import AnyReader  # noqa: PLC0415
+
+    if not path.exists():
+        raise BagError(f"{path}: no such bag")
+    try:
+        reader = AnyReader([path], default_typestore=store)
+        reader.open()
+    except Exception as exc:  # noqa: BLE001 - rosbags raises several types for corrupt files
+        raise BagError(f"{path}: cannot open bag: {exc}") from exc
+    return reader
+
+
+def _iter_messages(path: Path, reader, connections) -> Iterator:
+    """Messages of ``connections`` in log order, deserialized; corruption names the file."""
+    it = reader.messages(connections=connections)
+    while True:
+        try:
+            conn, t, raw = next(it)
+        except StopIteration:
+            return
+        except Exception as exc:  # noqa: BLE001
+            raise BagError(f"{path}: corrupt or truncated bag: {exc}") from exc
+        try:
+            msg = reader.deserialize(raw, conn.msgtype)
+        except Exception as exc:  # noqa: BLE001
+            raise BagError(
+                f"{path}: topic {conn.topic}: cannot decode {conn.msgtype} (no schema in the bag or in "
+                f"msg_schemas/?): {exc}"
+            ) from exc
+        yield conn, t, msg
+
+
+# ------------------------------------------------------------------------------ writing
+_TOPIC_RANK = {kind: i for i, kind in enumerate(INPUTS)}
+
+
+@dataclass(frozen=True)
+class _Record:
+    stamp: int
+    topic: str
+    msgtype: str
+    seq: int
+    msg: object
+
+
+def _mk(store):
+    T = store.types
+
+    def header(stamp, frame="base_link"):
+        return T["std_msgs/msg/Header"](
+            stamp=T["builtin_interfaces/msg/Time"](sec=int(stamp // 10**9), nanosec=int(stamp % 10**9)),
+            frame_id=frame,
+        )
+
+    def vec(x, y, z):
+        return T["geometry_msgs/msg/Vector3"](x=float(x), y=float(y), z=float(z))
+
+    return T, header, vec
+
+
+def _standard_message(store, kind: str, stamp: int, values, names=None):
+    """A standard input message from plain values (REP-103, SI)."""
+    T, header, vec = _mk(store)
+    if kind == "imu":
+        cov = np.zeros(9)
+        unknown = np.zeros(9)
+        unknown[0] = -1.0  # orientation not provided
+        return T["sensor_msgs/msg/Imu"](
+            header=header(stamp),
+            orientation=T["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=0.0, w=1.0),
+            orientation_covariance=unknown,
+            angular_velocity=vec(*values[:3]),
+            angular_velocity_covariance=cov,
+            linear_acceleration=vec(*values[3:6]),
+            linear_acceleration_covariance=cov.copy(),
+        )
+    if kind == "airspeed":
+        return T["geometry_msgs/msg/Vector3Stamped"](header=header(stamp), vector=vec(*values))
+    if kind == "dynamic_pressure":
+        return T["sensor_msgs/msg/FluidPressure"](header=header(stamp), fluid_pressure=float(values), variance=0.0)
+    if kind == "control_surfaces":
+        return T["sensor_msgs/msg/JointState"](
+            header=header(stamp),
+            name=list(names),
+            position=np.asarray(values, dtype=float),
+            velocity=np.zeros(0),
+            effort=np.zeros(0),
+        )
+    if kind == "thrust":
+        return T["geometry_msgs/msg/WrenchStamped"](
+            header=header(stamp),
+            wrench=T["geometry_msgs/msg/Wrench"](force=vec(float(values), 0.0, 0.0), torque=vec(0.0, 0.0, 0.0)),
+        )
+    raise ValueError(kind)
+
+
+def write_replay(path: str | Path, records: list, store=None) -> Path:
+    """Write ``records`` (``(stamp_ns, topic, msgtype, msg)``) as a ROS 2 MCAP bag at ``path``
+    (a directory), log time = stamp, ordered by stamp with a stable tie-break. Atomic: the
+    bag appears under ``path`` only when complete."""
+    from rosbags.rosbag2 import StoragePlugin, Writer  # noqa: PLC0415
+
+    store = store or typestore()
+    path = Path(path)
+    recs = [
+        _Record(int(stamp), topic, msgtype, i, msg) for i, (stamp, topic, msgtype, msg) in enumerate(records)
+    ]
+    if not recs:
+        raise BagError(f"{path}: nothing to write (no messages)")
+    rank = {}
+    for r in recs:
+        rank.setdefault(r.topic, _TOPIC_RANK.get(r.topic.strip("/"), len(_TOPIC_RANK)))
+    recs.sort(key=lambda r: (r.stamp, rank[r.topic], r.topic, r.seq))
+    tmp = path.with_name(path.name + ".partial")
+    if tmp.exists():
+        shutil.rmtree(tmp)
+    tmp.parent.mkdir(parents=True, exist_ok=True)
+    with Writer(tmp, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
+        conns = {}
+        for topic in sorted({r.topic for r in recs}, key=lambda t: (rank[t], t)):
+            msgtype = next(r.msgtype for r in recs if r.topic == topic)
+            conns[topic] = writer.add_connection(topic, msgtype, typestore=store)
+        for r in recs:
+            writer.write(conns[r.topic], r.stamp, store.serialize_cdr(r.msg, r.msgtype))
+    # rosbags names the MCAP file after the directory: give it the final name.
+    (tmp / f"{tmp.name}.mcap").rename(tmp / f"{path.name}.mcap")
+    meta = tmp / "metadata.yaml"
+    meta.write_text(meta.read_text().replace(f"{tmp.name}.mcap", f"{path.name}.mcap"))
+    if path.exists():
+        shutil.rmtree(path)
+    tmp.rename(path)
+    return path
+
+
+def write_t2_bag(path: str | Path, band_level: float = 0.2, seed: int = 250) -> Path:
+    """The bundled bag: one seeded T-2 maneuver (Section IV.A) on the standard topics, IMU at
+    200 Hz, air data at 50 Hz, surfaces at 100 Hz, thrust at 10 Hz
+    (:func:`.simulation.simulate_sensor_streams`)."""
+    from .simulation import simulate_sensor_streams  # noqa: PLC0415
+
+    store = typestore()
+    s = simulate_sensor_streams(band_level, seed)
+    records = []
+    for kind in INPUTS:
+        stamps, values = getattr(s, kind)
+        for k in range(stamps.size):
+            msg = _standard_message(store, kind, int(stamps[k]), values[k], s.surface_names)
+            records.append((int(stamps[k]), f"/{kind}", MESSAGE_TYPES[kind], msg))
+    return write_replay(path, records, store)
+
+
+# ------------------------------------------------------------------------------ reading
+def input_topics(topics: dict[str, str] | None = None) -> dict[str, str]:
+    """Bag topic of each standard input: ``topics.*`` parameters, absolute (``/imu``...)."""
+    topics = topics or {}
+    out = {}
+    for kind in INPUTS:
+        name = topics.get(kind, kind)
+        out[kind] = name if name.startswith("/") else f"/{name}"
+    return out
+
+
+def read_inputs(path: str | Path, topics: dict[str, str] | None = None, *, strict: bool = True,
+                start: float | None = None, end: float | None = None):
+    """Standard-input messages of a replay bag in log order: a list of ``(kind, stamp_ns,
+    msg)`` and the bag's start time. ``strict`` refuses a topic whose header stamps do not
+    increase or differ from the log time; ``start``/``end`` (s from the bag start) cut the
+    span."""
+    path = Path(path)
+    store = typestore()
+    wanted = input_topics(topics)
+    by_topic = {v: k for k, v in wanted.items()}
+    reader = _open_reader(path, store)
+    try:
+        conns = [c for c in reader.connections if c.topic in by_topic]
+        if not conns:
+            raise BagError(
+                f"{path}: none of the input topics {sorted(by_topic)} is in the bag "
+                f"(it has {sorted({c.topic for c in reader.connections}) or 'no topics'})"
+            )
+        for c in conns:
+            expected = MESSAGE_TYPES[by_topic[c.topic]]
+            if c.msgtype != expected:
+                raise BagError(f"{path}: topic {c.topic} has type {c.msgtype}, expected {expected}")
+        t0 = reader.start_time
+        lo = None if start is None else t0 + int(round(start * 1e9))
+        hi = None if end is None else t0 + int(round(end * 1e9))
+        last: dict[str, int] = {}
+        out = []
+        for conn, _t, msg in _iter_messages(path, reader, conns):
+            stamp = stamp_ns(msg)
+            if strict:
+                prev = last.get(conn.topic)
+                if prev is not None and stamp <= prev:
+                    what = "duplicate" if stamp == prev else "non-monotonic"
+                    raise BagError(f"{path}: topic {conn.topic}: {what} header stamps ({prev} then {stamp} ns)")
+                last[conn.topic] = stamp
+            if (lo is not None and stamp < lo) or (hi is not None and stamp > hi):
+                continue
+            out.append((by_topic[conn.topic], stamp, msg))
+    finally:
+        reader.close()
+    if not out:
+        raise BagError(f"{path}: no input messages (empty bag or empty time span)")
+    return out, t0
+
+
+# ------------------------------------------------------------------------------ convert
+# Unit names accepted in mapping files and their factors to SI.
+UNITS = {
+    "rad/s": 1.0, "deg/s": math.pi / 180.0,
+    "m/s^2": 1.0, "g": 9.80665, "ft/s^2": 0.3048,
+    "m/s": 1.0, "ft/s": 0.3048, "kt": 1852.0 / 3600.0, "km/h": 1.0 / 3.6,
+    "rad": 1.0, "deg": math.pi / 180.0,
+    "Pa": 1.0, "hPa": 100.0, "psf": 47.88025898, "psi": 6894.757293,
+    "N": 1.0, "lbf": 4.448221615, "kN": 1000.0,
+}
+FRAMES = ("rep103", "aircraft")
+
+
+def _unit(spec: dict, key: str, default: str, where: str) -> float:
+    name = spec.get(key, default)
+    if name not in UNITS:
+        raise BagError(f"{where}: unknown unit {name!r}; known: {sorted(UNITS)}")
+    return UNITS[name]
+
+
+def load_mapping(path: str | Path) -> dict:
+    """A mapping file: for each standard input, the recorded topic, fields, units and frame."""
+    path = Path(path)
+    try:
+        data = yaml.safe_load(path.read_text())
+    except FileNotFoundError as exc:
+        raise BagError(f"{path}: no such mapping file") from exc
+    except yaml.YAMLError as exc:
+        raise BagError(f"{path}: not valid YAML: {exc}") from exc
+    if not isinstance(data, dict):
+        raise BagError(f"{path}: expected a mapping of standard inputs")
+    unknown = sorted(set(data) - set(INPUTS))
+    if unknown:
+        raise BagError(f"{path}: unknown input(s) {unknown}; known: {list(INPUTS)}")
+    for kind in ("imu", "airspeed"):
+        if kind not in data:
+            raise BagError(f"{path}: the mapping must give {kind!r}")
+    for kind, spec in data.items():
+        if not isinstance(spec, dict) or "topic" not in spec:
+            raise BagError(f"{path}: input {kind!r} needs a 'topic'")
+        if spec.get("frame", "rep103") not in FRAMES:
+            raise BagError(f"{path}: input {kind!r}: frame must be one of {FRAMES}")
+    return data
+
+
+def _field(msg, dotted: str, where: str):
+    value = msg
+    for part in dotted.split("."):
+        if not hasattr(value, part):
+            raise BagError(f"{where}: message has no field {dotted!r}")
+        value = getattr(value, part)
+    return value
+
+
+def _scalar(msg, spec, where: str) -> float:
+    """A field with an optional leading '-' (sign flip); arrays reduce by sum or mean."""
+    name = spec if isinstance(spec, str) else spec["field"]
+    sign = -1.0 if name.startswith("-") else 1.0
+    value = _field(msg, name.lstrip("-"), where)
+    if isinstance(value, (list, tuple, np.ndarray)):
+        reduce = "sum" if isinstance(spec, str) else spec.get("reduce", "sum")
+        value = float(np.sum(value)) if reduce == "sum" else float(np.mean(value))
+    try:
+        return sign * float(value)
+    except (TypeError, ValueError) as exc:
+        raise BagError(f"{where}: field {name!r} is not a number") from exc
+
+
+def _to_rep103(vec, frame: str):
+    # The aircraft-to-REP-103 rotation (pi about x) is its own inverse.
+    return tuple(float(x) for x in rep103_to_aircraft(vec)) if frame == "aircraft" else tuple(vec)
+
+
+def _mapped_values(kind: str, spec: dict, msg, where: str):
+    """Plain REP-103 SI values of one standard input from a recorded message."""
+    frame = spec.get("frame", "rep103")
+    if kind == "imu":
+        w = [_scalar(msg, f, where) * _unit(spec, "angular_velocity_units", "rad/s", where)
+             for f in spec.get("angular_velocity", ["angular_velocity.x", "angular_velocity.y", "angular_velocity.z"])]
+        a = [_scalar(msg, f, where) * _unit(spec, "linear_acceleration_units", "m/s^2", where)
+             for f in spec.get("linear_acceleration",
+                               ["linear_acceleration.x", "linear_acceleration.y", "linear_acceleration.z"])]
+        if len(w) != 3 or len(a) != 3:
+            raise BagError(f"{where}: angular_velocity and linear_acceleration need three fields each")
+        return _to_rep103(w, frame) + _to_rep103(a, frame)
+    if kind == "airspeed":
+        if "polar" in spec:
+            p = spec["polar"]
+            V = _scalar(msg, p["speed"], where) * _unit(spec, "speed_units", "m/s", where)
+            ang = _unit(spec, "angle_units", "rad", where)
+            alpha = _scalar(msg, p["alpha"], where) * ang
+            beta = _scalar(msg, p["beta"], where) * ang if "beta" in p else 0.0
+            # Aircraft body axes: u = V cos a cos b, v = V sin b, w = V sin a cos b.
+            vec = (V * math.cos(alpha) * math.cos(beta), V * math.sin(beta), V * math.sin(alpha) * math.cos(beta))
+            return _to_rep103(vec, "aircraft") if frame == "aircraft" else vec
+        fields_ = spec.get("vector", ["vector.x", "vector.y", "vector.z"])
+        v = [_scalar(msg, f, where) * _unit(spec, "units", "m/s", where) for f in fields_]
+        return _to_rep103(v, frame)
+    if kind == "dynamic_pressure":
+        return _scalar(msg, spec.get("field", "fluid_pressure"), where) * _unit(spec, "units", "Pa", where)
+    if kind == "thrust":
+        return _scalar(msg, spec.get("field", "wrench.force.x"), where) * _unit(spec, "units", "N", where)
+    if kind == "control_surfaces":
+        joints = spec.get("joints")
+        if not isinstance(joints, dict) or not joints:
+            raise BagError(f"{where}: control_surfaces needs 'joints: {{joint_name: field}}'")
+        scale = _unit(spec, "units", "rad", where)
+        return [_scalar(msg, f, where) * scale for f in joints.values()]
+    raise ValueError(kind)
+
+
+def convert(src: str | Path, mapping: str | Path, out: str | Path, schemas: list[Path] | None = None) -> dict:
+    """Recording + mapping file -> replay bag on the standard topics. Returns message counts
+    per standard topic. Raises :class:`BagError` on any problem, leaving no output."""
+    src, out = Path(src), Path(out)
+    spec = load_mapping(mapping)
+    store = typestore(schemas)
+    reader = _open_reader(src, store)
+    records = []
+    try:
+        topics = {c.topic: c for c in reader.connections}
+        for kind, s in spec.items():
+            if s["topic"] not in topics:
+                raise BagError(
+                    f"{src}: topic {s['topic']} (mapped to {kind} in {mapping}) is not in the bag; it has {sorted(topics)}"
+                )
+        wanted = sorted({s["topic"] for s in spec.values()})
+        conns = [c for c in reader.connections if c.topic in wanted]
+        for c in conns:
+            if c.msgtype not in store.types:
+                raise BagError(f"{src}: topic {c.topic}: type {c.msgtype} has no schema (not embedded in the bag, "
+                               "not in msg_schemas/ or --schemas)")
+        kinds_of = {t: [k for k, s in spec.items() if s["topic"] == t] for t in wanted}
+        last: dict[str, int] = {}
+        for conn, _t, msg in _iter_messages(src, reader, conns):
+            try:
+                stamp = stamp_ns(msg)
+            except AttributeError as exc:
+                raise BagError(f"{src}: topic {conn.topic}: message has no header stamp") from exc
+            prev = last.get(conn.topic)
+            if prev is not None and stamp <= prev:
+                what = "duplicate" if stamp == prev else "non-monotonic"
+                raise BagError(f"{src}: topic {conn.topic}: {what} header stamps ({prev} then {stamp} ns)")
+            last[conn.topic] = stamp
+            for kind in kinds_of[conn.topic]:
+                where = f"{src}: topic {conn.topic} ({kind})"
+                values = _mapped_values(kind, spec[kind], msg, where)
+                names = list(spec[kind]["joints"]) if kind == "control_surfaces" else None
+                records.append(
+                    (stamp, f"/{kind}", MESSAGE_TYPES[kind], _standard_message(store, kind, stamp, values, names))
+                )
+    finally:
+        reader.close()
+    if not records:
+        raise BagError(f"{src}: the mapped topics hold no messages (empty bag)")
+    write_replay(out, records, store)
+    counts: dict[str, int] = {}
+    for _s, topic, _m, _msg in records:
+        counts[topic] = counts.get(topic, 0) + 1
+    return counts

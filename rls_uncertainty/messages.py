@@ -1,0 +1,62 @@
+"""Standard input messages -> plain stamped numbers for the :class:`.pipeline.Pipeline`.
+
+One function per input topic, duck-typed on the ROS message fields, so the live node (rclpy
+messages) and the offline replay (rosbags messages) run exactly the same code. No arithmetic
+happens here beyond reading fields and the header stamp; no ROS import.
+"""
+
+from __future__ import annotations
+
+__all__ = ["INPUTS", "MESSAGE_TYPES", "stamp_ns", "feed"]
+
+# Standard input topics (relative names; a replay bag uses them under "/") and their types.
+MESSAGE_TYPES = {
+    "imu": "sensor_msgs/msg/Imu",
+    "airspeed": "geometry_msgs/msg/Vector3Stamped",
+    "dynamic_pressure": "sensor_msgs/msg/FluidPressure",
+    "control_surfaces": "sensor_msgs/msg/JointState",
+    "thrust": "geometry_msgs/msg/WrenchStamped",
+}
+INPUTS = tuple(MESSAGE_TYPES)
+
+
+def stamp_ns(msg) -> int:
+    """``header.stamp`` in integer nanoseconds."""
+    s = msg.header.stamp
+    return int(s.sec) * 1_000_000_000 + int(s.nanosec)
+
+
+def _imu(p, m):
+    w, a = m.angular_velocity, m.linear_acceleration
+    return p.add_imu(stamp_ns(m), (w.x, w.y, w.z), (a.x, a.y, a.z))
+
+
+def _airspeed(p, m):
+    v = m.vector
+    return p.add_airspeed(stamp_ns(m), (v.x, v.y, v.z))
+
+
+def _dynamic_pressure(p, m):
+    return p.add_dynamic_pressure(stamp_ns(m), m.fluid_pressure)
+
+
+def _surfaces(p, m):
+    return p.add_surfaces(stamp_ns(m), m.name, m.position)
+
+
+def _thrust(p, m):
+    return p.add_thrust(stamp_ns(m), m.wrench.force.x)
+
+
+_FEED = {
+    "imu": _imu,
+    "airspeed": _airspeed,
+    "dynamic_pressure": _dynamic_pressure,
+    "control_surfaces": _surfaces,
+    "thrust": _thrust,
+}
+
+
+def feed(pipeline, kind: str, msg) -> list:
+    """Hand one message of input ``kind`` to ``pipeline``; returns the samples it completed."""
+    return _FEED[kind](pipeline, msg)

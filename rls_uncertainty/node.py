@@ -1,0 +1,349 @@
+"""``estimator_node``: the live ROS 2 adapter over :class:`.pipeline.Pipeline`.
+
+The node only converts, schedules and publishes: messages go through
+:func:`.messages.feed` (the code the offline replay runs), and every completed sample is
+published as ``~/M/estimates``, ``~/M/standard_errors`` (corrected, Eqs. 20/22) and
+``~/M/standard_errors_conventional`` (Eq. 13) for each ready model M, each a
+``std_msgs/Float64MultiArray`` whose ``layout.dim[0].label`` names the parameters, preceded
+by ``~/sample_stamp`` (``std_msgs/Header``) carrying the sample's time. ``/diagnostics``
+reports input rates and ages, the fate of every message and sample, model fit and latency.
+
+Parameters (declared with descriptions and ranges; see :data:`.config.PARAMETERS`), the
+``~/reset`` and ``~/enable`` services, an optional state file, ``use_sim_time`` and
+backwards time jumps are handled here.
+"""
+
+from __future__ import annotations
+
+import array
+import os
+import sys
+import time
+from collections import Counter
+
+import rclpy
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from geometry_msgs.msg import Vector3Stamped, WrenchStamped
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult
+from rclpy.clock import JumpThreshold
+from rclpy.duration import Duration
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rclpy.qos import QoSHistoryPolicy, QoSProfile, QoSReliabilityPolicy, qos_profile_sensor_data
+from sensor_msgs.msg import FluidPressure, Imu, JointState
+from std_msgs.msg import Float64MultiArray, Header, MultiArrayDimension, MultiArrayLayout
+from std_srvs.srv import SetBool, Trigger
+
+from .config import PARAMETERS, ConfigError, node_config, pipeline_config
+from .messages import INPUTS, feed
+from .pipeline import Pipeline, StateFileError
+
+__all__ = ["EstimatorNode", "main", "NODE_NAME"]
+
+NODE_NAME = "rls_estimator"
+_TYPES = {
+    "imu": Imu,
+    "airspeed": Vector3Stamped,
+    "dynamic_pressure": FluidPressure,
+    "control_surfaces": JointState,
+    "thrust": WrenchStamped,
+}
+# Settings that change subscriptions or QoS: read-only, they need a restart.
+_READ_ONLY_PREFIXES = ("topics.", "qos.")
+
+
+def _descriptor(spec) -> ParameterDescriptor:
+    d = ParameterDescriptor(description=spec.description)
+    if spec.choices:
+        d.additional_constraints = "one of: " + ", ".join(spec.choices)
+    if spec.low is not None:
+        if isinstance(spec.default, float):
+            d.floating_point_range = [FloatingPointRange(from_value=float(spec.low), to_value=float(spec.high), step=0.0)]
+        else:
+            d.integer_range = [IntegerRange(from_value=int(spec.low), to_value=int(spec.high), step=1)]
+    d.read_only = spec.name.startswith(_READ_ONLY_PREFIXES)
+    return d
+
+
+class EstimatorNode(Node):
+    """Recursive estimation of stability and control derivatives with honest uncertainty."""
+
+    def __init__(self, **kwargs) -> None:
+        super().__init__(NODE_NAME, **kwargs)
+        for spec in PARAMETERS:
+            self.declare_parameter(spec.name, spec.default, _descriptor(spec))
+        params = self._parameter_values()
+        # Invalid settings at start-up: ConfigError propagates to main(), which says why.
+        self.config = pipeline_config(params)
+        self.node_cfg = node_config(params)
+        self.pipeline = Pipeline(self.config, enabled=self.node_cfg.enabled)
+        self.resets: Counter = Counter()
+        self.state_status = "no state file"
+        self._load_state()
+
+        out_qos = QoSProfile(depth=self.node_cfg.depth, reliability=QoSReliabilityPolicy.RELIABLE,
+                             history=QoSHistoryPolicy.KEEP_LAST)
+        self._out_qos = out_qos
+        self._stamp_pub = self.create_publisher(Header, "~/sample_stamp", out_qos)
+        self._model_pubs: dict = {}
+        self._make_model_publishers()
+        self._diag_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
+
+        if self.node_cfg.reliable:
+            in_qos = QoSProfile(depth=self.node_cfg.depth, reliability=QoSReliabilityPolicy.RELIABLE,
+                                history=QoSHistoryPolicy.KEEP_LAST)
+        else:
+            in_qos = QoSProfile(depth=max(self.node_cfg.depth, 5), reliability=qos_profile_sensor_data.reliability,
+                                history=QoSHistoryPolicy.KEEP_LAST, durability=qos_profile_sensor_data.durability)
+        self._subs = [
+            self.create_subscription(_TYPES[kind], self.node_cfg.topics[kind], self._callback(kind), in_qos)
+            for kind in INPUTS
+        ]
+        self.create_service(Trigger, "~/reset", self._on_reset)
+        self.create_service(SetBool, "~/enable", self._on_enable)
+        self.add_on_set_parameters_callback(self._validate_parameters)
+        self.add_post_set_parameters_callback(self._apply_parameters)
+        self._jump_handle = self.get_clock().create_jump_callback(
+            JumpThreshold(min_forward=None, min_backward=Duration(nanoseconds=-1), on_clock_change=True),
+            post_callback=self._on_time_jump,
+        )
+        self._latencies: list[float] = []
+        self._last_counts = {k: 0 for k in INPUTS}
+        self._last_diag = time.monotonic()
+        self.create_timer(self.node_cfg.diagnostics_period, self._publish_diagnostics)
+        if self.node_cfg.state_file and self.node_cfg.state_save_period > 0:
+            self.create_timer(self.node_cfg.state_save_period, self.save_state)
+        models = ", ".join(f"{m.output}({len(m.regressors)})" for m in self.config.models)
+        lags = "all" if self.config.n_lags is None else self.config.n_lags
+        self.get_logger().info(
+            f"estimating {models} at {self.config.rate:g} Hz, {lags} lags, aircraft {self.config.aircraft.name}; "
+            f"inputs {', '.join(self.node_cfg.topics[k] for k in INPUTS)}; {self.state_status}"
+        )
+
+    # ------------------------------------------------------------------ parameters
+    def _parameter_values(self, overrides=None) -> dict:
+        values = {spec.name: self.get_parameter(spec.name).value for spec in PARAMETERS}
+        for p in overrides or []:
+            values[p.name] = p.value
+        return values
+
+    def _validate_parameters(self, params) -> SetParametersResult:
+        """Refuse any change that makes an invalid configuration, saying why."""
+        names = {p.name for p in params}
+        if not names & {s.name for s in PARAMETERS}:
+            return SetParametersResult(successful=True)
+        try:
+            pipeline_config(self._parameter_values(params))
+            node_config(self._parameter_values(params))
+        except ConfigError as exc:
+            return SetParametersResult(successful=False, reason=str(exc))
+        return SetParametersResult(successful=True)
+
+    def _apply_parameters(self, params) -> None:
+        values = self._parameter_values()
+        new = pipeline_config(values)
+        self.node_cfg = node_config(values)
+        self.pipeline.enabled = self.node_cfg.enabled
+        if new != self.config:
+            changed = ", ".join(sorted(p.name for p in params))
+            old_fp, new_fp = self.config.fingerprint(), new.fingerprint()
+            what = "estimator reset" if old_fp != new_fp else "pipeline restarted"
+            self.get_logger().warning(f"parameters changed ({changed}): {what}")
+            self.resets["parameters_changed"] += 1
+            self.config = new
+            self.pipeline = Pipeline(new, enabled=self.node_cfg.enabled)
+            self._make_model_publishers()
+
+    def _make_model_publishers(self) -> None:
+        wanted = {m.output for m in self.config.models}
+        for name in list(self._model_pubs):
+            if name not in wanted:
+                for pub in self._model_pubs.pop(name):
+                    self.destroy_publisher(pub)
+        self._layouts = {}
+        for m, label, n in zip(self.config.models, self.pipeline.labels, self.pipeline.sizes):
+            if m.output not in self._model_pubs:
+                self._model_pubs[m.output] = tuple(
+                    self.create_publisher(Float64MultiArray, f"~/{m.output}/{suffix}", self._out_qos)
+                    for suffix in ("estimates", "standard_errors", "standard_errors_conventional")
+                )
+            self._layouts[m.output] = MultiArrayLayout(
+                dim=[MultiArrayDimension(label=label, size=n, stride=n)], data_offset=0
+            )
+
+    # ------------------------------------------------------------------ data path
+    def _callback(self, kind: str):
+        def on_message(msg) -> None:
+            t0 = time.perf_counter()
+            try:
+                outputs = feed(self.pipeline, kind, msg)
+            except Exception as exc:  # noqa: BLE001 - a bad message must never stop the node
+                self.pipeline.streams[kind].received += 1
+                self.pipeline.streams[kind].rejected[f"malformed: {type(exc).__name__}"] += 1
+                return
+            if outputs:
+                for out in outputs:
+                    self._publish(out)
+                self._latencies.append(time.perf_counter() - t0)
+
+        return on_message
+
+    def _publish(self, out) -> None:
+        header = Header(frame_id=self.node_cfg.frame_id)
+        header.stamp.sec, header.stamp.nanosec = divmod(out.stamp_ns, 1_000_000_000)
+        self._stamp_pub.publish(header)
+        for name, _label, theta, se, se_conv in self.pipeline.published(out):
+            layout = self._layouts[name]
+            for pub, values in zip(self._model_pubs[name], (theta, se, se_conv)):
+                msg = Float64MultiArray(layout=layout)
+                data = array.array("d")
+                data.frombytes(values.tobytes())
+                msg.data = data
+                pub.publish(msg)
+
+    # ------------------------------------------------------------------ services, time
+    def _on_reset(self, request, response):
+        self.pipeline.reset("service")
+        self.resets["service"] += 1
+        response.success = True
+        response.message = "estimator reset: estimates restart from the next samples"
+        self.get_logger().info(response.message)
+        return response
+
+    def _on_enable(self, request, response):
+        enabled = bool(request.data)
+        self.pipeline.enabled = enabled
+        if not enabled:
+            self.save_state()
+        response.success = True
+        response.message = "estimation enabled" if enabled else "estimation disabled (samples counted, not used)"
+        self.get_logger().info(response.message)
+        return response
+
+    def _on_time_jump(self, jump) -> None:
+        if jump.clock_change != 0 or jump.delta.nanoseconds < 0:
+            reason = "clock_changed" if jump.clock_change != 0 else "time_jumped_backwards"
+            self.get_logger().warning(f"{reason} ({jump.delta.nanoseconds * 1e-9:+.3f} s): estimator and buffers reset")
+            self.pipeline.reset(reason, clear_inputs=True)
+            self.resets[reason] += 1
+
+    # ------------------------------------------------------------------ state file
+    def _load_state(self) -> None:
+        path = self.node_cfg.state_file
+        if not path:
+            return
+        if not os.path.exists(path):
+            self.state_status = f"state file {path} not found: starting fresh"
+            return
+        try:
+            self.pipeline.load_state(path)
+            self.state_status = f"resumed from {path} ({self.pipeline.bank.k} samples)"
+        except StateFileError as exc:
+            self.state_status = f"state file ignored: {exc}"
+            self.get_logger().warning(self.state_status)
+
+    def save_state(self) -> None:
+        path = self.node_cfg.state_file
+        if path:
+            try:
+                self.pipeline.save_state(path)
+            except OSError as exc:
+                self.get_logger().error(f"cannot save state to {path}: {exc}")
+
+    # ------------------------------------------------------------------ diagnostics
+    def _publish_diagnostics(self) -> None:
+        now_ns = self.get_clock().now().nanoseconds
+        wall = time.monotonic()
+        period = max(wall - self._last_diag, 1e-9)
+        self._last_diag = wall
+        c = self.pipeline.counters()
+        arr = DiagnosticArray()
+        arr.header.stamp = self.get_clock().now().to_msg()
+
+        def status(name, level, message, values):
+            s = DiagnosticStatus(level=level, name=f"{NODE_NAME}: {name}", message=message, hardware_id=NODE_NAME)
+            s.values = [KeyValue(key=k, value=str(v)) for k, v in values.items()]
+            return s
+
+        kv, problems = {}, []
+        for kind, s in c["streams"].items():
+            needed = kind in self.pipeline.required
+            rate = (s["received"] - self._last_counts[kind]) / period
+            self._last_counts[kind] = s["received"]
+            newest = s["newest_stamp_ns"]
+            age = (now_ns - newest) * 1e-9 if newest is not None else None
+            kv[f"{kind}.required"] = needed
+            kv[f"{kind}.rate_hz"] = f"{rate:.1f}"
+            kv[f"{kind}.age_s"] = "never received" if age is None else f"{age:.3f}"
+            kv[f"{kind}.received"] = s["received"]
+            kv[f"{kind}.accepted"] = s["accepted"]
+            kv[f"{kind}.expired"] = s["expired"]
+            for reason, n in sorted(s["rejected"].items()):
+                kv[f"{kind}.rejected.{reason}"] = n
+            if needed and (age is None or age > max(1.0, 2 * self.config.max_gap)):
+                problems.append(f"{kind} {'silent' if age is None else f'stale ({age:.1f} s)'}")
+            if s["rejected"]:
+                problems.append(f"{kind} rejected {sum(s['rejected'].values())}")
+        level = DiagnosticStatus.WARN if problems else DiagnosticStatus.OK
+        arr.status.append(status("inputs", level, "; ".join(problems) or "all inputs fresh", kv))
+
+        lat = sorted(self._latencies)
+        self._latencies = []
+        kv = {
+            "enabled": self.pipeline.enabled,
+            "samples_formed": c["samples_formed"],
+            "samples_used": c["samples_used"],
+            "samples_pending": c["samples_pending"],
+        }
+        for reason, n in sorted(c["samples_rejected"].items()):
+            kv[f"samples_rejected.{reason}"] = n
+        for reason, n in sorted((Counter(c["resets"]) + self.resets).items()):
+            kv[f"resets.{reason}"] = n
+        for joint, n in sorted(c["unknown_joints"].items()):
+            kv[f"unknown_joint.{joint}"] = n
+        if lat:
+            kv["latency_ms.p50"] = f"{1e3 * lat[len(lat) // 2]:.3f}"
+            kv["latency_ms.p99"] = f"{1e3 * lat[min(len(lat) - 1, int(0.99 * len(lat)))]:.3f}"
+            kv["latency_ms.max"] = f"{1e3 * lat[-1]:.3f}"
+        kv["state_file"] = self.state_status
+        msg = f"{c['samples_used']} of {c['samples_formed']} samples used"
+        if not self.pipeline.enabled:
+            msg += "; estimation disabled"
+        arr.status.append(status("samples", DiagnosticStatus.OK, msg, kv))
+
+        for j, m in enumerate(self.config.models):
+            fit = self.pipeline.model_fit(j)
+            if fit["ready"]:
+                text = f"R^2 {fit['r_squared']:.3f}, residual lag-1 correlation {fit['residual_rho1']:.2f}"
+                level = DiagnosticStatus.OK
+            else:
+                text = "initializing: regressors not yet informative"
+                level = DiagnosticStatus.OK if c["samples_used"] == 0 else DiagnosticStatus.WARN
+            arr.status.append(status(f"model {m.output}", level, text, fit))
+        self._diag_pub.publish(arr)
+
+
+def main(args=None) -> int:
+    """Console script ``estimator_node`` (``ros2 run rls_uncertainty estimator_node``)."""
+    os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    rclpy.init(args=args)
+    node = None
+    code = 0
+    try:
+        node = EstimatorNode()
+        rclpy.spin(node)
+    except ConfigError as exc:
+        print(f"{NODE_NAME}: invalid configuration: {exc}", file=sys.stderr)
+        code = 2
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        if node is not None:
+            node.save_state()
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return code
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

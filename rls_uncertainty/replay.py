@@ -1,0 +1,219 @@
+"""Offline replay: a replay bag through the node's own pipeline, no DDS, as fast as the CPU
+allows (``rls-uncertainty replay BAG --config CFG --out DIR``).
+
+The messages go through :func:`.messages.feed` into one :class:`.pipeline.Pipeline`, exactly
+as in the live node, so the node and the replay give the same numbers. Outputs (written to a
+temporary directory renamed to ``DIR`` only when complete):
+
+* ``estimates.csv``: ``time,model,parameter,estimate,std_error,std_error_conventional``, one
+  row per sample and parameter of every ready model (time in s, the sample's stamp);
+* ``estimates.mcap``: the node's output topics (``/rls_estimator/M/estimates``,
+  ``.../standard_errors``, ``.../standard_errors_conventional``, ``/rls_estimator/sample_stamp``);
+* ``M_PARAM.png``-style plots: each parameter's history with corrected and conventional
+  2-sigma envelopes, and each model's residual autocorrelation.
+Two runs give bit-identical CSV and MCAP files.
+"""
+
+from __future__ import annotations
+
+import shutil
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from .bags import BagError, read_inputs, typestore, write_replay
+from .config import PipelineConfig, node_config, pipeline_config
+from .messages import feed
+from .pipeline import Pipeline
+
+__all__ = ["ReplayResult", "run_pipeline", "replay", "output_records", "NODE_NAME"]
+
+NODE_NAME = "rls_estimator"
+
+
+@dataclass
+class ReplayResult:
+    """The pipeline after the run, every published sample and timing."""
+
+    pipeline: Pipeline
+    outputs: list = field(default_factory=list)
+    n_messages: int = 0
+    wall_seconds: float = 0.0
+    data_seconds: float = 0.0
+
+    @property
+    def speed(self) -> float:
+        """Multiples of real time."""
+        return self.data_seconds / self.wall_seconds if self.wall_seconds > 0 else float("inf")
+
+
+def _progress(done: int, total: int, width: int = 40) -> None:
+    filled = int(width * done / total)
+    sys.stderr.write(f"\r[{'#' * filled}{'.' * (width - filled)}] {100 * done // total:3d}%")
+    if done == total:
+        sys.stderr.write("\n")
+    sys.stderr.flush()
+
+
+def run_pipeline(messages, config: PipelineConfig, *, record: bool = True, progress: bool = False) -> ReplayResult:
+    """Feed ``(kind, stamp, msg)`` messages through a fresh pipeline; keep every output."""
+    pipe = Pipeline(config, record=record)
+    result = ReplayResult(pipe, n_messages=len(messages))
+    total = len(messages)
+    step = max(1, total // 50)
+    t0 = time.perf_counter()
+    outs = result.outputs
+    for i, (kind, _stamp, msg) in enumerate(messages):
+        produced = feed(pipe, kind, msg)
+        if produced:
+            outs.extend(produced)
+        if progress and (i % step == 0):
+            _progress(i, total)
+    pipe.finish()
+    result.wall_seconds = time.perf_counter() - t0
+    if progress:
+        _progress(total, total)
+    if messages:
+        result.data_seconds = (messages[-1][1] - messages[0][1]) * 1e-9
+    return result
+
+
+def output_records(pipe: Pipeline, outputs, store, frame_id: str = "base_link", node: str = NODE_NAME) -> list:
+    """The node's output messages for every sample, as bag records."""
+    T = store.types
+    Dim, Layout, Arr = (T[f"std_msgs/msg/{n}"] for n in ("MultiArrayDimension", "MultiArrayLayout", "Float64MultiArray"))
+    Header, Time = T["std_msgs/msg/Header"], T["builtin_interfaces/msg/Time"]
+    records = []
+    for out in outputs:
+        stamp = out.stamp_ns
+        hdr = Header(stamp=Time(sec=stamp // 10**9, nanosec=stamp % 10**9), frame_id=frame_id)
+        records.append((stamp, f"/{node}/sample_stamp", "std_msgs/msg/Header", hdr))
+        for name, label, theta, se, se_conv in pipe.published(out):
+            n = theta.size
+            for suffix, data in (("estimates", theta), ("standard_errors", se), ("standard_errors_conventional", se_conv)):
+                msg = Arr(layout=Layout(dim=[Dim(label=label, size=n, stride=n)], data_offset=0),
+                          data=np.array(data, dtype=float))
+                records.append((stamp, f"/{node}/{name}/{suffix}", "std_msgs/msg/Float64MultiArray", msg))
+    return records
+
+
+def _write_csv(path: Path, pipe: Pipeline, outputs) -> None:
+    with open(path, "w") as fh:
+        fh.write("time,model,parameter,estimate,std_error,std_error_conventional\n")
+        for out in outputs:
+            t = f"{out.stamp_ns // 10**9}.{out.stamp_ns % 10**9:09d}"
+            for (name, _label, theta, se, se_conv), names in zip(pipe.published(out), _names_of(pipe, out)):
+                for p, a, b, c in zip(names, theta, se, se_conv):
+                    fh.write(f"{t},{name},{p},{float(a)!r},{float(b)!r},{float(c)!r}\n")
+
+
+def _names_of(pipe: Pipeline, out):
+    return [pipe.parameter_names[j] for j in range(len(pipe.sizes)) if out.ready[j]]
+
+
+def summary_table(pipe: Pipeline, outputs) -> str:
+    if not outputs:
+        return "no estimates: no model became ready (check the excitation and the configuration)"
+    last = outputs[-1]
+    lines = [f"{'parameter':<14}{'estimate':>13}{'SE corr.':>12}{'SE conv.':>12}{'corr/conv':>11}"]
+    lines.append("-" * len(lines[0]))
+    for (name, _l, theta, se, sc), names in zip(pipe.published(last), _names_of(pipe, last)):
+        for p, a, b, c in zip(names, theta, se, sc):
+            ratio = b / c if c > 0 else float("nan")
+            lines.append(f"{p:<14}{a:13.5g}{b:12.4g}{c:12.4g}{ratio:11.2f}")
+    return "\n".join(lines)
+
+
+def _plots(out_dir: Path, pipe: Pipeline, outputs) -> list[Path]:
+    import matplotlib  # noqa: PLC0415
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt  # noqa: PLC0415
+
+    written = []
+    if not outputs:
+        return written
+    t0 = outputs[0].stamp_ns
+    t = np.array([(o.stamp_ns - t0) * 1e-9 for o in outputs])
+    for j, m in enumerate(pipe.models):
+        names = pipe.parameter_names[j]
+        th = np.array([o.theta[j, : len(names)] for o in outputs])
+        se = np.array([o.se[j, : len(names)] for o in outputs])
+        sc = np.array([o.se_conventional[j, : len(names)] for o in outputs])
+        if np.all(np.isnan(th)):
+            continue
+        fig, axes = plt.subplots(len(names), 1, figsize=(7, 1.9 * len(names)), sharex=True, squeeze=False)
+        for i, ax in enumerate(axes[:, 0]):
+            ax.plot(t, th[:, i], "k", lw=1, label="estimate")
+            ax.fill_between(t, th[:, i] - 2 * se[:, i], th[:, i] + 2 * se[:, i], color="tab:blue", alpha=0.25,
+                            label="2 sigma corrected")
+            ax.plot(t, th[:, i] - 2 * sc[:, i], "r--", lw=0.8, label="2 sigma conventional")
+            ax.plot(t, th[:, i] + 2 * sc[:, i], "r--", lw=0.8)
+            ax.set_ylabel(names[i])
+            fin = np.isfinite(th[:, i])
+            if fin.sum() > 10:  # ignore the first estimates right after initialization
+                k0 = int(np.flatnonzero(fin)[0]) + (int(fin.sum()) // 10)
+                lo = np.nanmin(th[k0:, i] - 3 * se[k0:, i])
+                hi = np.nanmax(th[k0:, i] + 3 * se[k0:, i])
+                if np.isfinite(lo) and np.isfinite(hi) and hi > lo:
+                    ax.set_ylim(lo, hi)
+        axes[0, 0].legend(loc="upper right", fontsize=7)
+        axes[-1, 0].set_xlabel("time from first estimate, s")
+        fig.suptitle(f"{m.output}: estimates with 2-sigma bounds")
+        fig.tight_layout()
+        path = out_dir / f"{m.output}_estimates.png"
+        fig.savefig(path, dpi=90, metadata={"Software": None})
+        plt.close(fig)
+        written.append(path)
+        if pipe.bank.ready[j]:
+            R = pipe.bank.autocorrelation(j)
+            n = pipe.bank.k
+            fig, ax = plt.subplots(figsize=(6, 3))
+            ax.stem(np.arange(R.size), R / R[0], basefmt=" ")
+            bound = 2 / np.sqrt(n)
+            ax.axhline(bound, color="r", ls="--", lw=0.8)
+            ax.axhline(-bound, color="r", ls="--", lw=0.8, label="2 sigma white-noise bound")
+            ax.set_xlabel("lag, samples")
+            ax.set_ylabel("R(i) / R(0)")
+            ax.set_title(f"{m.output}: residual autocorrelation (Eq. 17) after {n} samples")
+            ax.legend(fontsize=7)
+            fig.tight_layout()
+            path = out_dir / f"{m.output}_autocorrelation.png"
+            fig.savefig(path, dpi=90, metadata={"Software": None})
+            plt.close(fig)
+            written.append(path)
+    return written
+
+
+def replay(bag: str | Path, params: dict, out: str | Path, *, start=None, end=None, strict: bool = True,
+           progress: bool = True, plots: bool = True) -> ReplayResult:
+    """Run a replay bag through the pipeline and write the outputs to ``out``."""
+    config = pipeline_config(params)
+    topics = node_config(params).topics
+    messages, _t0 = read_inputs(bag, topics, strict=strict, start=start, end=end)
+    result = run_pipeline(messages, config, progress=progress)
+    out = Path(out)
+    tmp = out.with_name(out.name + ".partial")
+    if tmp.exists():
+        shutil.rmtree(tmp)
+    tmp.mkdir(parents=True)
+    try:
+        _write_csv(tmp / "estimates.csv", result.pipeline, result.outputs)
+        store = typestore()
+        records = output_records(result.pipeline, result.outputs, store, node_config(params).frame_id)
+        if records:
+            write_replay(tmp / "estimates", records, store)
+            shutil.move(str(tmp / "estimates" / "estimates.mcap"), str(tmp / "estimates.mcap"))
+            shutil.rmtree(tmp / "estimates")
+        if plots:
+            _plots(tmp, result.pipeline, result.outputs)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    if out.exists():
+        shutil.rmtree(out)
+    tmp.rename(out)
+    return result
