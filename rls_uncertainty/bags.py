@@ -82,11 +82,36 @@ def typestore(extra_schemas: list[Path] | None = None):
     return store
 
 
+def check_mcap_integrity(path: Path) -> None:
+    """Read every record of an MCAP file with the ``mcap`` library (chunk CRCs checked when
+    present) and compare the message count with the file's summary: a corrupt chunk that a
+    reader would silently cut short is an error naming the file."""
+    from mcap.reader import make_reader  # noqa: PLC0415
+
+    try:
+        with open(path, "rb") as fh:
+            reader = make_reader(fh, validate_crcs=True)
+            summary = reader.get_summary()
+            if summary is None or summary.statistics is None:
+                raise BagError(f"{path}: MCAP file has no summary (truncated or still being written)")
+            count = sum(1 for _ in reader.iter_messages())
+    except BagError:
+        raise
+    except Exception as exc:  # noqa: BLE001 - the mcap library raises many types
+        raise BagError(f"{path}: corrupt or truncated MCAP: {exc}") from exc
+    expected = summary.statistics.message_count
+    if count != expected:
+        raise BagError(f"{path}: corrupt MCAP: read {count} of the {expected} messages its summary lists")
+
+
 def _open_reader(path: Path, store):
     from rosbags.highlevel import AnyReader  # noqa: PLC0415
 
     if not path.exists():
         raise BagError(f"{path}: no such bag")
+    mcaps = [path] if path.suffix == ".mcap" else sorted(path.glob("*.mcap")) if path.is_dir() else []
+    for f in mcaps:
+        check_mcap_integrity(f)
     try:
         reader = AnyReader([path], default_typestore=store)
         reader.open()
@@ -95,7 +120,17 @@ def _open_reader(path: Path, store):
     return reader
 
 
-def _iter_messages(path: Path, reader, connections) -> Iterator:
+def _has_schema(msgtype: str, store, reader) -> bool:
+    """A definition with fields, from msg_schemas/ / --schemas or embedded in the bag."""
+    if msgtype in store.fielddefs:
+        return True
+    fields_ = getattr(reader, "typestore", store).fielddefs.get(msgtype)
+    return bool(fields_) and not (
+        len(fields_[1]) == 1 and fields_[1][0][0] == "structure_needs_at_least_one_member"
+    )
+
+
+def _iter_messages(path: Path, reader, connections, store=None) -> Iterator:
     """Messages of ``connections`` in log order, deserialized; corruption names the file."""
     it = reader.messages(connections=connections)
     while True:
@@ -108,6 +143,13 @@ def _iter_messages(path: Path, reader, connections) -> Iterator:
         try:
             msg = reader.deserialize(raw, conn.msgtype)
         except Exception as exc:  # noqa: BLE001
+            # An empty or broken embedded schema: the msg_schemas/ or --schemas type decides.
+            if store is not None and conn.msgtype in store.types:
+                try:
+                    yield conn, t, store.deserialize_cdr(raw, conn.msgtype)
+                    continue
+                except Exception:  # noqa: BLE001, S110
+                    pass
             raise BagError(
                 f"{path}: topic {conn.topic}: cannot decode {conn.msgtype} (no schema in the bag or in "
                 f"msg_schemas/?): {exc}"
@@ -272,7 +314,7 @@ def read_inputs(path: str | Path, topics: dict[str, str] | None = None, *, stric
         hi = None if end is None else t0 + int(round(end * 1e9))
         last: dict[str, int] = {}
         out = []
-        for conn, _t, msg in _iter_messages(path, reader, conns):
+        for conn, _t, msg in _iter_messages(path, reader, conns, store):
             stamp = stamp_ns(msg)
             if strict:
                 prev = last.get(conn.topic)
@@ -419,12 +461,12 @@ def convert(src: str | Path, mapping: str | Path, out: str | Path, schemas: list
         wanted = sorted({s["topic"] for s in spec.values()})
         conns = [c for c in reader.connections if c.topic in wanted]
         for c in conns:
-            if c.msgtype not in store.types:
+            if not _has_schema(c.msgtype, store, reader):
                 raise BagError(f"{src}: topic {c.topic}: type {c.msgtype} has no schema (not embedded in the bag, "
                                "not in msg_schemas/ or --schemas)")
         kinds_of = {t: [k for k, s in spec.items() if s["topic"] == t] for t in wanted}
         last: dict[str, int] = {}
-        for conn, _t, msg in _iter_messages(src, reader, conns):
+        for conn, _t, msg in _iter_messages(src, reader, conns, store):
             try:
                 stamp = stamp_ns(msg)
             except AttributeError as exc:

@@ -392,13 +392,15 @@ class Pipeline:
 
     # ------------------------------------------------------------------ control
     def reset(self, reason: str, *, clear_inputs: bool = False) -> None:
-        """Start the estimator afresh (``~/reset``, a model change, a time jump). With
-        ``clear_inputs`` the buffered messages are dropped too (counted as expired)."""
+        """Start the estimator afresh (``~/reset``, a time jump). The sample stream goes on:
+        samples in the differentiator's delay line reach the new estimator. With
+        ``clear_inputs`` (time jumped) the buffered messages and the delay line are dropped
+        too, counted as expired messages and ``reset_<reason>`` samples."""
         self.resets[reason] += 1
-        self._flush(f"reset_{reason}")
         self._new_estimator()
         self.regression.clear()
         if clear_inputs:
+            self._flush(f"reset_{reason}")
             for s in self.streams.values():
                 s.expired += len(s.stamps)
                 s.stamps.clear()

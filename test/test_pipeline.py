@@ -1,0 +1,351 @@
+"""The pipeline that the node and the replay share: sample formation against an independent
+interpolation, alignment of the differentiator's lag, estimates against batch least squares,
+and the bookkeeping of every bad input. No ROS."""
+
+import math
+import sys
+
+import numpy as np
+import pytest
+
+from rls_uncertainty.config import ConfigError, load_aircraft, load_parameters_file, pipeline_config
+from rls_uncertainty.differentiation import DifferentiatorConfig, differentiate
+from rls_uncertainty.pipeline import Pipeline, StateFileError
+from rls_uncertainty.simulation import simulate_sensor_streams
+
+T2 = load_aircraft("t2")
+T2_PARAMS = {"models.enabled": ["CZ", "Cm"], "surfaces.elevator": ["elevator_left", "elevator_right"]}
+MS = 1_000_000
+
+
+def feed_streams(pipe, st):
+    """Every message of a SensorStreams set, in stamp order (stable by stream)."""
+    events = []
+    for rank, kind in enumerate(("imu", "airspeed", "dynamic_pressure", "control_surfaces", "thrust")):
+        stamps, values = getattr(st, kind)
+        events += [(int(stamps[k]), rank, kind, values[k]) for k in range(stamps.size)]
+    events.sort(key=lambda e: (e[0], e[1]))
+    outs = []
+    for stamp, _r, kind, v in events:
+        if kind == "imu":
+            outs += pipe.add_imu(stamp, v[:3], v[3:])
+        elif kind == "airspeed":
+            outs += pipe.add_airspeed(stamp, v)
+        elif kind == "dynamic_pressure":
+            outs += pipe.add_dynamic_pressure(stamp, float(v))
+        elif kind == "control_surfaces":
+            outs += pipe.add_surfaces(stamp, st.surface_names, v)
+        else:
+            outs += pipe.add_thrust(stamp, float(v))
+    return outs
+
+
+@pytest.fixture(scope="module")
+def t2_run():
+    st = simulate_sensor_streams(0.2, 250)
+    pipe = Pipeline(pipeline_config(T2_PARAMS), record=True)
+    outs = feed_streams(pipe, st)
+    pipe.finish()
+    return st, pipe, outs
+
+
+def test_samples_equal_an_independent_interpolation_and_reduction(t2_run):
+    st, pipe, _ = t2_run
+    P = 20 * MS
+    t_imu, imu = st.imu
+    t_air, vel = st.airspeed
+    t_srf, srf = st.control_surfaces
+    first = max(t_imu[0], t_air[0], t_srf[0])
+    last = min(t_imu[-1], t_air[-1], t_srf[-1])
+    grid = np.arange(-(-first // P) * P, last + 1, P)
+    rel = lambda t: (t - st.start_ns) * 1e-9  # noqa: E731
+    # IMU stamps fall on the grid; air data and surfaces are interpolated linearly.
+    i = np.searchsorted(t_imu, grid)
+    assert np.all(t_imu[i] == grid)
+    q = -imu[i, 1]
+    az = -imu[i, 5]
+    u = np.interp(rel(grid), rel(t_air), vel[:, 0])
+    w = -np.interp(rel(grid), rel(t_air), vel[:, 2])
+    alpha = np.arctan2(w, u)
+    V = np.hypot(u, w)
+    de = np.interp(rel(grid), rel(t_srf), 0.5 * (srf[:, 0] + srf[:, 1]))
+    qbar = st.dynamic_pressure[1][0]
+    q_dot = differentiate(q, 0.02, DifferentiatorConfig())
+    keep = np.isfinite(q_dot)
+    CZ = T2.mass * az / (qbar * T2.S)
+    Cm = T2.Iyy * q_dot / (qbar * T2.S * T2.cbar)
+    q_hat = q * T2.cbar / (2 * V)
+
+    t_rec = np.array([r[0] for r in pipe.regression])
+    X = np.array([r[1] for r in pipe.regression])
+    z = np.array([r[2] for r in pipe.regression])
+    assert np.array_equal(t_rec, grid[keep])
+    np.testing.assert_allclose(X[:, 0, :3], np.column_stack([np.ones(keep.sum()), alpha[keep], de[keep]]), rtol=1e-12, atol=1e-15)
+    np.testing.assert_allclose(X[:, 1, :4], np.column_stack([np.ones(keep.sum()), alpha[keep], q_hat[keep], de[keep]]), rtol=1e-12, atol=1e-15)
+    np.testing.assert_allclose(z[:, 0], CZ[keep], rtol=1e-12)
+    np.testing.assert_allclose(z[:, 1], Cm[keep], rtol=1e-9, atol=1e-12)
+
+
+def test_final_estimates_equal_batch_least_squares(t2_run):
+    _st, pipe, outs = t2_run
+    X = np.array([r[1] for r in pipe.regression])
+    z = np.array([r[2] for r in pipe.regression])
+    for j, n in enumerate(pipe.sizes):
+        ols = np.linalg.lstsq(X[:, j, :n], z[:, j], rcond=None)[0]
+        np.testing.assert_allclose(outs[-1].theta[j, :n], ols, rtol=1e-8)
+    # Corrected standard errors exceed the conventional ones for this colored-noise maneuver.
+    assert np.all(outs[-1].se[:, :3] > 2 * outs[-1].se_conventional[:, :3])
+
+
+def test_every_sample_and_message_is_accounted_for(t2_run):
+    st, pipe, outs = t2_run
+    c = pipe.counters()
+    assert c["samples_formed"] == c["samples_used"] + sum(c["samples_rejected"].values()) + c["samples_pending"]
+    assert c["samples_rejected"] == {"differentiator_warmup": 4, "end_of_data": 4}
+    for kind, s in c["streams"].items():
+        assert s["received"] == getattr(st, kind)[0].size
+        assert s["accepted"] == s["received"]
+    assert len(outs) == c["samples_used"]
+    for out in outs:
+        for _name, _label, th, se, sc in pipe.published(out):
+            assert np.all(np.isfinite(th)) and np.all(np.isfinite(se)) and np.all(np.isfinite(sc))
+
+
+# ----------------------------------------------------------------------------- synthetic input
+class Synthetic:
+    """Clean signals on every stream: q = A sin(w t) (so q_dot is known), constant airspeed."""
+
+    V = 40.0
+    A = 0.1
+    W = 2 * math.pi * 1.0
+
+    def __init__(self, pipe, t0=10**18):
+        self.pipe, self.t0, self.outs = pipe, t0, []
+
+    def q(self, t):
+        return self.A * math.sin(self.W * (t - self.t0) * 1e-9)
+
+    def imu(self, t, **kw):
+        self.outs += self.pipe.add_imu(t, kw.get("gyro", (0.0, -self.q(t), 0.0)), kw.get("accel", (0.1, 0.0, 9.8)))
+
+    def air(self, t, vec=None):
+        self.outs += self.pipe.add_airspeed(t, vec or (self.V, 0.0, -0.05 * self.V))
+        self.outs += self.pipe.add_dynamic_pressure(t, 0.5 * 1.2 * self.V**2)
+
+    def surfaces(self, t, names=None, positions=None):
+        names = names or ["elevator", "aileron_left", "aileron_right", "rudder"]
+        positions = positions or [0.01 * math.cos(3 * (t - self.t0) * 1e-9), -0.02, 0.04, 0.0]
+        self.outs += self.pipe.add_surfaces(t, names, positions)
+
+    def run(self, start_ms, end_ms, imu_ms=5, air_ms=20, srf_ms=10, skip_air=None):
+        for ms in range(start_ms, end_ms):
+            t = self.t0 + ms * MS
+            if ms % imu_ms == 0:
+                self.imu(t)
+            if ms % air_ms == 3 and not (skip_air and skip_air[0] <= ms < skip_air[1]):
+                self.air(t)
+            if ms % srf_ms == 1:
+                self.surfaces(t)
+
+
+def pitch_pipeline(**params):
+    base = {"models.enabled": ["Cm"], "models.Cm": ["1", "q_hat", "delta_e"], "aircraft": "t2"}
+    base.update(params)
+    return Pipeline(pipeline_config(base), record=True)
+
+
+@pytest.mark.parametrize("window,lag", [(9, 4), (9, 0), (17, 8), (7, 2)])
+def test_differentiator_lag_keeps_every_signal_aligned(window, lag):
+    pipe = pitch_pipeline(**{"differentiator.window": window, "differentiator.lag": lag})
+    syn = Synthetic(pipe)
+    syn.run(0, 3000)
+    t = np.array([(r[0] - syn.t0) * 1e-9 for r in pipe.regression])
+    X = np.array([r[1][0] for r in pipe.regression])
+    z = np.array([r[2][0] for r in pipe.regression])
+    qbar = 0.5 * 1.2 * syn.V**2
+    V = math.hypot(syn.V, 0.05 * syn.V)
+    # q_hat at the sample's own stamp, exactly.
+    np.testing.assert_allclose(X[:, 1] * 2 * V / T2.cbar, syn.A * np.sin(syn.W * t), atol=1e-12)
+    # Cm carries q_dot of the same stamp (p = r = 0): a one-sample misalignment would be an
+    # error of about A w^2 dt = 0.08; the differentiator's own error is 10x smaller (it is
+    # largest for the causal lag 0, about 1% of the amplitude).
+    q_dot = z * qbar * T2.S * T2.cbar / T2.Iyy
+    err = np.max(np.abs(q_dot - syn.A * syn.W * np.cos(syn.W * t)))
+    misaligned = np.max(np.abs(q_dot[1:] - syn.A * syn.W * np.cos(syn.W * t[:-1])))
+    assert err < 0.1 * syn.A * syn.W**2 * 0.02
+    assert misaligned > 0.5 * syn.A * syn.W**2 * 0.02
+    # The Eq. 23 elevator: the first joint (sampled at 1, 11, 21 ... ms, interpolated).
+    np.testing.assert_allclose(X[:, 2], 0.01 * np.cos(3 * t), atol=2e-6)
+
+
+def test_aileron_mixing_is_eq_23():
+    pipe = Pipeline(pipeline_config({"models.enabled": ["Cl"], "surfaces.aileron_right": ["ar1", "ar2"],
+                                     "surfaces.aileron_left": ["al"], "surfaces.rudder": ["r1", "r2"]}))
+    pipe.add_surfaces(5, ["ar1", "ar2", "al", "r1", "r2", "elevator"], [0.1, 0.3, -0.2, 0.01, 0.03, 0.0])
+    de, da, dr = pipe.streams["control_surfaces"].values[-1]
+    assert da == pytest.approx(0.5 * (0.2 - (-0.2)))
+    assert dr == pytest.approx(0.02)
+    combined = Pipeline(pipeline_config({"models.enabled": ["Cl"], "surfaces.aileron_combined": "ail"}))
+    combined.add_surfaces(5, ["ail", "rudder", "elevator"], [0.07, 0.0, 0.0])
+    assert combined.streams["control_surfaces"].values[-1][1] == 0.07
+
+
+def test_bad_messages_are_counted_and_never_reach_the_outputs():
+    pipe = pitch_pipeline()
+    syn = Synthetic(pipe)
+    syn.run(0, 1000)
+    t = syn.t0 + 1000 * MS
+    syn.imu(t, gyro=(float("nan"), 0.0, 0.0))  # NaN field
+    syn.imu(t + 1 * MS, gyro=(0.0, float("inf"), 0.0))  # Inf field
+    syn.imu(syn.t0 + 995 * MS)  # duplicate stamp
+    for k in range(30):  # a burst of old messages
+        syn.imu(syn.t0 + (500 + k) * MS)
+    syn.surfaces(t, names=["elevator", "rudder"], positions=[0.0])  # mismatched arrays
+    syn.surfaces(t, names=["rudder", "aileron_left", "aileron_right"], positions=[0.0, 0.0, 0.0])  # no elevator
+    syn.surfaces(t + 2 * MS, names=["elevator", "aileron_left", "aileron_right", "rudder", "flap"],
+                 positions=[0.0, 0.0, 0.0, 0.0, 0.3])  # unknown joint: counted, message used
+    syn.air(t + 3 * MS, vec=(float("nan"), 0.0, 0.0))
+    syn.run(1004, 2000)
+    pipe.finish()
+    c = pipe.counters()
+    assert c["streams"]["imu"]["rejected"] == {"non_finite": 2, "duplicate": 1, "out_of_order": 30}
+    assert c["streams"]["control_surfaces"]["rejected"] == {"mismatched_arrays": 1, "missing_joint": 1}
+    assert c["streams"]["airspeed"]["rejected"] == {"non_finite": 1}
+    assert c["unknown_joints"] == {"flap": 1}
+    for s in c["streams"].values():
+        assert s["received"] == s["accepted"] + sum(s["rejected"].values())
+    assert c["samples_formed"] == c["samples_used"] + sum(c["samples_rejected"].values())
+    assert c["samples_rejected"] == {"differentiator_warmup": 4, "end_of_data": 4}
+    for out in syn.outs:
+        for _n, _l, th, se, sc in pipe.published(out):
+            assert np.isfinite(th).all() and np.isfinite(se).all() and np.isfinite(sc).all()
+
+
+def test_zero_airspeed_rejects_exactly_the_samples_that_have_it():
+    pipe = pitch_pipeline()
+    syn = Synthetic(pipe)
+    syn.run(0, 1000)
+    zero_at = [syn.t0 + ms * MS for ms in range(1003, 1400, 20)]
+    for ms in range(1000, 2000):
+        t = syn.t0 + ms * MS
+        if ms % 5 == 0:
+            syn.imu(t)
+        if ms % 20 == 3:
+            syn.air(t, vec=(0.0, 0.0, 0.0) if t in zero_at else None)
+        if ms % 10 == 1:
+            syn.surfaces(t)
+    syn.run(2000, 3000)
+    pipe.finish()
+    # Grid samples whose both interpolation neighbours are zero: 1020 ... 1380 ms.
+    expected = sum(1 for g in range(1000, 1400, 20) if 1003 <= g - 17 and g + 3 <= 1383)
+    assert pipe.samples_rejected["nonpositive_airspeed"] == expected
+    assert all(np.isfinite(o.theta[0, :3]).all() for o in syn.outs if o.ready[0])
+
+
+def test_a_stream_that_stops_skips_its_gap_and_restarts_the_differentiator():
+    pipe = pitch_pipeline(**{"inputs.max_gap": 0.25})
+    syn = Synthetic(pipe)
+    syn.run(0, 6000, skip_air=(2000, 4000))
+    pipe.finish()
+    c = pipe.counters()
+    # Air data at 1983 ms then 4003 ms: grid points 2000 ... 4000 ms lie in the gap.
+    assert c["samples_rejected"]["gap_airspeed"] == len(range(2000, 4001, 20))
+    # The 4 samples waiting for the differentiator are dropped, and it warms up again.
+    assert c["samples_rejected"]["discontinuity"] == 4
+    assert c["samples_rejected"]["differentiator_warmup"] == 8
+    assert c["samples_formed"] == c["samples_used"] + sum(c["samples_rejected"].values())
+    t = np.array([(r[0] - syn.t0) // MS for r in pipe.regression])
+    assert not np.any((t >= 1983) & (t <= 4003 + 4 * 20))
+
+
+def test_a_lagging_stream_is_never_extrapolated_and_buffers_stay_bounded():
+    pipe = pitch_pipeline(**{"inputs.buffer_duration": 1.0})
+    syn = Synthetic(pipe)
+    syn.run(0, 1000)
+    newest_air = pipe.streams["airspeed"].last
+    for ms in range(1000, 6000, 5):  # IMU and surfaces keep coming, air data stops
+        syn.imu(syn.t0 + ms * MS)
+        if ms % 10 == 0:
+            syn.surfaces(syn.t0 + ms * MS + MS)
+        assert len(pipe.streams["imu"].stamps) <= 1.0 * 200 + 2
+    assert pipe.regression[-1][0] <= newest_air
+    assert pipe.streams["imu"].expired > 0
+    syn.run(6000, 8000)  # air data returns: the gap is skipped, estimation resumes
+    pipe.finish()
+    c = pipe.counters()
+    assert c["samples_rejected"]["expired_imu"] + c["samples_rejected"]["gap_airspeed"] > 0
+    assert c["samples_formed"] == c["samples_used"] + sum(c["samples_rejected"].values())
+    assert pipe.regression[-1][0] > syn.t0 + 7000 * MS
+
+
+def test_disable_counts_samples_and_reset_restarts():
+    pipe = pitch_pipeline()
+    syn = Synthetic(pipe)
+    syn.run(0, 1000)
+    k = pipe.bank.k
+    pipe.enabled = False
+    syn.run(1000, 2000)
+    assert pipe.bank.k == k
+    assert pipe.samples_rejected["estimation_disabled"] == 50
+    pipe.enabled = True
+    pipe.reset("service")
+    assert pipe.bank.k == 0 and pipe.resets["service"] == 1
+    syn.run(2000, 3000)
+    assert pipe.bank.k == 50
+
+
+def test_state_file_resumes_and_refuses_other_configurations(tmp_path):
+    pipe = pitch_pipeline()
+    syn = Synthetic(pipe)
+    syn.run(0, 2000)
+    path = tmp_path / "state.npz"
+    pipe.save_state(path)
+    resumed = pitch_pipeline()
+    resumed.load_state(path)
+    np.testing.assert_array_equal(resumed.bank.theta_all(), pipe.bank.theta_all())
+    np.testing.assert_array_equal(resumed.bank.standard_errors_all(), pipe.bank.standard_errors_all())
+    row = np.array([[1.0, 0.01, 0.02]])
+    pipe.bank.update(row, [0.3])
+    resumed.bank.update(row, [0.3])
+    np.testing.assert_array_equal(resumed.bank.theta_all(), pipe.bank.theta_all())
+    other = pitch_pipeline(**{"estimator.lags": 10})
+    with pytest.raises(StateFileError, match="another"):
+        other.load_state(path)
+    bad = tmp_path / "bad.npz"
+    bad.write_bytes(b"not a state file")
+    with pytest.raises(StateFileError, match="not a readable"):
+        resumed.load_state(bad)
+    with pytest.raises(StateFileError, match="no such"):
+        resumed.load_state(tmp_path / "missing.npz")
+
+
+@pytest.mark.parametrize("params,match", [
+    ({"estimator.window": "hann"}, "estimator.window"),
+    ({"estimator.lags": -2}, "estimator.lags"),
+    ({"rate": 0.0}, "rate"),
+    ({"rate": "fast"}, "rate"),
+    ({"models.enabled": ["CQ"]}, "unknown model"),
+    ({"models.Cm": ["1", "gamma"]}, "unknown regressor"),
+    ({"models.enabled": ["Cl"], "surfaces.aileron_right": []}, "no control surface"),
+    ({"differentiator.lag": 9}, "differentiator.lag"),
+    ({"inputs.max_gap": 0.001}, "max_gap"),
+    ({"colour": "red"}, "unknown parameter"),
+    ({"aircraft": "concorde"}, "no such file"),
+])
+def test_invalid_settings_are_refused_with_the_reason(params, match):
+    with pytest.raises(ConfigError, match=match):
+        pipeline_config(params)
+
+
+@pytest.mark.parametrize("name", ["t2", "twin_otter_lateral", "twin_otter_longitudinal"])
+def test_shipped_parameter_files_are_valid(name):
+    cfg = pipeline_config(load_parameters_file(name))
+    assert cfg.models
+
+
+def test_pipeline_imports_no_ros():
+    import subprocess
+
+    code = "import sys, rls_uncertainty.pipeline, rls_uncertainty.messages; " \
+           "sys.exit(any(m.split('.')[0] in ('rclpy', 'rosbags') for m in sys.modules))"
+    assert subprocess.run([sys.executable, "-c", code]).returncode == 0
