@@ -25,7 +25,7 @@ import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import Vector3Stamped, WrenchStamped
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult
-from rclpy.clock import JumpThreshold
+from rclpy.clock import Clock, ClockChange, ClockType, JumpThreshold
 from rclpy.duration import Duration
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
@@ -110,9 +110,12 @@ class EstimatorNode(Node):
         self._latencies: list[float] = []
         self._last_counts = {k: 0 for k in INPUTS}
         self._last_diag = time.monotonic()
-        self.create_timer(self.node_cfg.diagnostics_period, self._publish_diagnostics)
+        # Health reporting and state saving run on the steady clock: they go on when /clock
+        # pauses or jumps (use_sim_time).
+        steady = Clock(clock_type=ClockType.STEADY_TIME)
+        self.create_timer(self.node_cfg.diagnostics_period, self._publish_diagnostics, clock=steady)
         if self.node_cfg.state_file and self.node_cfg.state_save_period > 0:
-            self.create_timer(self.node_cfg.state_save_period, self.save_state)
+            self.create_timer(self.node_cfg.state_save_period, self.save_state, clock=steady)
         models = ", ".join(f"{m.output}({len(m.regressors)})" for m in self.config.models)
         lags = "all" if self.config.n_lags is None else self.config.n_lags
         self.get_logger().info(
@@ -204,7 +207,6 @@ class EstimatorNode(Node):
     # ------------------------------------------------------------------ services, time
     def _on_reset(self, request, response):
         self.pipeline.reset("service")
-        self.resets["service"] += 1
         response.success = True
         response.message = "estimator reset: estimates restart from the next samples"
         self.get_logger().info(response.message)
@@ -221,11 +223,14 @@ class EstimatorNode(Node):
         return response
 
     def _on_time_jump(self, jump) -> None:
-        if jump.clock_change != 0 or jump.delta.nanoseconds < 0:
-            reason = "clock_changed" if jump.clock_change != 0 else "time_jumped_backwards"
-            self.get_logger().warning(f"{reason} ({jump.delta.nanoseconds * 1e-9:+.3f} s): estimator and buffers reset")
+        """A backwards jump (a bag replay restarted, /clock reset) makes buffered stamps
+        meaningless: estimator, buffers and delay line restart, reported in diagnostics."""
+        if jump.clock_change in (ClockChange.ROS_TIME_ACTIVATED, ClockChange.ROS_TIME_DEACTIVATED):
+            self.get_logger().info(f"clock source changed ({jump.clock_change.name})")
+        if jump.delta.nanoseconds < 0:
+            reason = "time_jumped_backwards"
+            self.get_logger().warning(f"time jumped {jump.delta.nanoseconds * 1e-9:+.3f} s: estimator and buffers reset")
             self.pipeline.reset(reason, clear_inputs=True)
-            self.resets[reason] += 1
 
     # ------------------------------------------------------------------ state file
     def _load_state(self) -> None:

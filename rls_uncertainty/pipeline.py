@@ -421,7 +421,7 @@ class Pipeline:
         bank = self.bank
         if not bank.ready[j]:
             return {"ready": False, "samples": bank.k}
-        n = self.samples_used
+        n = bank.k  # samples since the estimator (re)started
         mean = self._zsum[j] / n
         var_z = self._zsq[j] / n - mean * mean
         R = bank.autocorrelation(j)

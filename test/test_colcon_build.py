@@ -4,8 +4,10 @@ from __future__ import annotations
 
 import os
 import shutil
+import signal
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import pytest
@@ -46,6 +48,24 @@ def test_colcon_build_installs_a_runnable_executable(tmp_path):
     )
     assert run.returncode == 0, run.stderr
     assert "Cm_q" in run.stdout and "SE corr." in run.stdout
+    # The node's console script: starts from the installed parameter file, stops on SIGINT.
+    node_exe = install / "lib" / "rls_uncertainty" / "estimator_node"
+    assert node_exe.is_file()
+    assert (share / "config" / "t2.yaml").is_file() and (share / "launch" / "estimator.launch.py").is_file()
+    assert (share / "msg_schemas" / "fti_msgs" / "msg" / "AirData.msg").is_file()
+    log = tmp_path / "node.log"
+    with open(log, "w") as fh:
+        node = subprocess.Popen(
+            ["bash", "-c", f"source {tmp_path}/install/setup.bash && exec {node_exe} --ros-args "
+                           f"--params-file {share}/config/t2.yaml"],
+            cwd=tmp_path, env=env, stdout=fh, stderr=subprocess.STDOUT,
+        )
+        deadline = time.monotonic() + 60
+        while "estimating CZ(3), Cm(4)" not in log.read_text() and time.monotonic() < deadline and node.poll() is None:
+            time.sleep(0.2)
+        node.send_signal(signal.SIGINT)
+        assert node.wait(30) == 0, log.read_text()
+    assert "aircraft T-2" in log.read_text()
     where = subprocess.run(
         ["bash", "-c", f"source {tmp_path}/install/setup.bash && python -c 'import rls_uncertainty; print(rls_uncertainty.__file__)'"],
         cwd=tmp_path, env=env, capture_output=True, text=True, timeout=60,

@@ -1,0 +1,154 @@
+"""Helpers for the DDS tests: the estimator node in its own process, and a test-side rclpy
+node that publishes inputs and records every output of the estimator node."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import rclpy
+from diagnostic_msgs.msg import DiagnosticArray
+from geometry_msgs.msg import Vector3Stamped, WrenchStamped
+from rclpy.qos import QoSHistoryPolicy, QoSProfile, QoSReliabilityPolicy
+from sensor_msgs.msg import FluidPressure, Imu, JointState
+from std_msgs.msg import Float64MultiArray, Header
+
+ROOT = Path(__file__).resolve().parents[1]
+NODE = "rls_estimator"
+TYPES = {
+    "imu": Imu,
+    "airspeed": Vector3Stamped,
+    "dynamic_pressure": FluidPressure,
+    "control_surfaces": JointState,
+    "thrust": WrenchStamped,
+}
+RELIABLE = QoSProfile(depth=5000, reliability=QoSReliabilityPolicy.RELIABLE, history=QoSHistoryPolicy.KEEP_LAST)
+
+
+class NodeProcess:
+    """``python -m rls_uncertainty.node --ros-args ...`` with its output in a log file."""
+
+    def __init__(self, tmp_path: Path, *ros_args: str, name: str = "node") -> None:
+        self.log = tmp_path / f"{name}.log"
+        self._fh = open(self.log, "w")
+        self.proc = subprocess.Popen(
+            [sys.executable, "-m", "rls_uncertainty.node", "--ros-args", *ros_args],
+            stdout=self._fh, stderr=subprocess.STDOUT, cwd=ROOT, env=dict(os.environ),
+        )
+
+    def text(self) -> str:
+        return self.log.read_text()
+
+    def stop(self, timeout: float = 15.0) -> int:
+        if self.proc.poll() is None:
+            self.proc.send_signal(signal.SIGINT)
+            try:
+                self.proc.wait(timeout)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait()
+        self._fh.close()
+        return self.proc.returncode
+
+
+def stamp_of(msg) -> int:
+    return msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
+
+
+class RosTester:
+    """Publishes the standard inputs and records the estimator node's outputs."""
+
+    def __init__(self, models=("CZ", "Cm"), name: str = "tester") -> None:
+        self.node = rclpy.create_node(name)
+        self.pubs = {k: self.node.create_publisher(t, f"/{k}", RELIABLE) for k, t in TYPES.items()}
+        self.outputs: dict[str, list] = {}
+        self.diagnostics: list = []
+        self.subs = []
+        for m in models:
+            for suffix in ("estimates", "standard_errors", "standard_errors_conventional"):
+                self._record(Float64MultiArray, f"/{NODE}/{m}/{suffix}")
+        self._record(Header, f"/{NODE}/sample_stamp")
+        self.subs.append(self.node.create_subscription(DiagnosticArray, "/diagnostics", self.diagnostics.append, 50))
+
+    def _record(self, msg_type, topic):
+        store = self.outputs.setdefault(topic, [])
+        self.subs.append(self.node.create_subscription(msg_type, topic, store.append, RELIABLE))
+
+    def spin_until(self, condition, timeout: float = 20.0) -> bool:
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            rclpy.spin_once(self.node, timeout_sec=0.05)
+            if condition():
+                return True
+        return False
+
+    def wait_connected(self, timeout: float = 20.0, outputs: bool = True) -> None:
+        def ready():
+            ins = all(p.get_subscription_count() >= 1 for p in self.pubs.values())
+            outs = not outputs or all(s.get_publisher_count() >= 1 for s in self.subs[:-1])
+            return ins and outs
+
+        assert self.spin_until(ready, timeout), "estimator node not discovered"
+        self.spin_until(lambda: False, 0.3)
+
+    def publish(self, kind: str, msg) -> None:
+        self.pubs[kind].publish(msg)
+
+    def publish_all(self, messages, pace: float = 2000.0) -> None:
+        """``(kind, msg)`` pairs, paced to about ``pace`` messages per second."""
+        t0 = time.monotonic()
+        for i, (kind, msg) in enumerate(messages):
+            self.pubs[kind].publish(msg)
+            if i % 20 == 19:
+                delay = t0 + (i + 1) / pace - time.monotonic()
+                if delay > 0:
+                    time.sleep(delay)
+                rclpy.spin_once(self.node, timeout_sec=0)
+
+    def latest_diagnostics(self, after: float | None = None) -> dict[str, dict[str, str]]:
+        """The newest DiagnosticArray as ``{status name: {key: value}}`` plus ``message``."""
+        if not self.diagnostics:
+            return {}
+        out = {}
+        for s in self.diagnostics[-1].status:
+            out[s.name] = {kv.key: kv.value for kv in s.values}
+            out[s.name]["message"] = s.message
+            out[s.name]["level"] = int.from_bytes(s.level, "little") if isinstance(s.level, bytes) else int(s.level)
+        return out
+
+    def wait_diagnostics(self, predicate, timeout: float = 10.0) -> dict:
+        self.diagnostics.clear()
+        ok = self.spin_until(lambda: bool(self.diagnostics) and predicate(self.latest_diagnostics()), timeout)
+        diag = self.latest_diagnostics()
+        assert ok, f"diagnostics never satisfied the condition; last: {diag}"
+        return diag
+
+    def close(self) -> None:
+        self.node.destroy_node()
+
+
+def to_rclpy(kind: str, rb_msg):
+    """A rosbags message of a standard input type as the rclpy message."""
+    msg = TYPES[kind]()
+    msg.header.stamp.sec = rb_msg.header.stamp.sec
+    msg.header.stamp.nanosec = rb_msg.header.stamp.nanosec
+    msg.header.frame_id = rb_msg.header.frame_id
+    if kind == "imu":
+        for f in ("angular_velocity", "linear_acceleration"):
+            src, dst = getattr(rb_msg, f), getattr(msg, f)
+            dst.x, dst.y, dst.z = src.x, src.y, src.z
+        msg.orientation_covariance[0] = -1.0
+    elif kind == "airspeed":
+        msg.vector.x, msg.vector.y, msg.vector.z = rb_msg.vector.x, rb_msg.vector.y, rb_msg.vector.z
+    elif kind == "dynamic_pressure":
+        msg.fluid_pressure = rb_msg.fluid_pressure
+    elif kind == "control_surfaces":
+        msg.name = list(rb_msg.name)
+        msg.position = [float(x) for x in rb_msg.position]
+    elif kind == "thrust":
+        msg.wrench.force.x = rb_msg.wrench.force.x
+    return msg

@@ -1,0 +1,354 @@
+"""The estimator node in its own process, talking real DDS on loopback to this test process:
+outputs equal the offline replay, labels, diagnostics, bad input, parameters, services,
+state file, simulated time."""
+
+from __future__ import annotations
+
+import math
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+import rclpy
+from rcl_interfaces.msg import Parameter as ParameterMsg
+from rcl_interfaces.msg import ParameterType, ParameterValue
+from rcl_interfaces.srv import SetParameters
+from rosgraph_msgs.msg import Clock
+from std_srvs.srv import SetBool, Trigger
+
+from ros_harness import NODE, ROOT, NodeProcess, RosTester, to_rclpy
+from rls_uncertainty.bags import read_inputs
+from rls_uncertainty.config import load_parameters_file, pipeline_config
+from rls_uncertainty.messages import feed
+from rls_uncertainty.pipeline import Pipeline
+from rls_uncertainty.replay import run_pipeline
+
+BUNDLED = ROOT / "bags" / "t2_maneuver"
+T2 = str(ROOT / "config" / "t2.yaml")
+
+
+@pytest.fixture(scope="module", autouse=True)
+def ros():
+    rclpy.init()
+    yield
+    rclpy.try_shutdown()
+
+
+@pytest.fixture(scope="module")
+def bag():
+    messages, _ = read_inputs(BUNDLED)
+    return messages
+
+
+@pytest.fixture
+def tester():
+    t = RosTester()
+    yield t
+    t.close()
+
+
+def _node(tmp_path, *args, name="node"):
+    return NodeProcess(tmp_path, "--params-file", T2, "-p", "qos.reliable:=true", "-p", "diagnostics_period:=0.2",
+                       *args, name=name)
+
+
+def _arrays(tester, model, suffix):
+    return tester.outputs[f"/{NODE}/{model}/{suffix}"]
+
+
+def test_live_node_reproduces_the_offline_replay(tmp_path, tester, bag):
+    node = _node(tmp_path)
+    try:
+        tester.wait_connected()
+        offline = run_pipeline(bag, pipeline_config(load_parameters_file("t2")))
+        n_out = len(offline.outputs)
+        tester.publish_all([(k, to_rclpy(k, m)) for k, _s, m in bag])
+        stamps = tester.outputs[f"/{NODE}/sample_stamp"]
+        assert tester.spin_until(lambda: len(stamps) >= n_out and len(_arrays(tester, "Cm", "standard_errors_conventional"))
+                                 >= sum(o.ready[1] for o in offline.outputs), 30), node.text()
+        assert len(stamps) == n_out
+        last = offline.outputs[-1]
+        assert stamps[-1].stamp.sec * 10**9 + stamps[-1].stamp.nanosec == last.stamp_ns
+        for j, (model, label) in enumerate((("CZ", "CZ_0,CZ_alpha,CZ_delta_e"), ("Cm", "Cm_0,Cm_alpha,Cm_q,Cm_delta_e"))):
+            n = len(label.split(","))
+            for suffix, want in (("estimates", last.theta), ("standard_errors", last.se),
+                                 ("standard_errors_conventional", last.se_conventional)):
+                msgs = _arrays(tester, model, suffix)
+                assert len(msgs) == sum(o.ready[j] for o in offline.outputs)
+                dim = msgs[-1].layout.dim[0]
+                assert (dim.label, dim.size, dim.stride) == (label, n, n)
+                np.testing.assert_allclose(np.array(msgs[-1].data), want[j, :n], rtol=1e-9, atol=0)
+                assert all(np.isfinite(m.data).all() for m in msgs)
+        diag = tester.wait_diagnostics(lambda d: f"{NODE}: samples" in d)
+        assert diag[f"{NODE}: samples"]["samples_used"] == str(offline.pipeline.samples_used)
+        assert diag[f"{NODE}: inputs"]["imu.received"] == "2400"
+        assert float(diag[f"{NODE}: model CZ"]["r_squared"]) > 0.8
+        assert "latency_ms.p99" in diag[f"{NODE}: samples"] or len(tester.diagnostics) >= 1
+    finally:
+        assert node.stop() == 0, node.text()
+
+
+def _excitation(t):
+    """Inputs that make CZ and Cm identifiable: independent sines on q, alpha and elevator."""
+    return 0.1 * math.sin(2 * math.pi * 0.7 * t), 0.08 + 0.03 * math.sin(2 * math.pi * 1.3 * t), \
+        0.05 * math.sin(2 * math.pi * 0.4 * t + 1.0)
+
+
+def _synthetic(t0_ns, seconds, *, gap=None, zero_air=None, bad=True):
+    """A message sequence with every kind of bad input mixed into good data."""
+    from geometry_msgs.msg import Vector3Stamped
+    from sensor_msgs.msg import FluidPressure, Imu, JointState
+
+    def hdr(msg, ns):
+        msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(ns, 10**9)
+        return msg
+
+    out = []
+    for ms in range(0, int(seconds * 1000)):
+        ns = t0_ns + ms * 10**6
+        t = ms * 1e-3
+        q, alpha, de = _excitation(t)
+        if ms % 5 == 0:
+            m = hdr(Imu(), ns)
+            m.angular_velocity.y = -q
+            m.linear_acceleration.z = 9.8 + 5 * alpha + 2 * de
+            out.append(("imu", m))
+        if ms % 20 == 3 and not (gap and gap[0] <= t < gap[1]):
+            m = hdr(Vector3Stamped(), ns)
+            V = 0.0 if zero_air and zero_air[0] <= t < zero_air[1] else 40.0
+            m.vector.x, m.vector.z = V * math.cos(alpha), -V * math.sin(alpha)
+            out.append(("airspeed", m))
+            p = hdr(FluidPressure(), ns)
+            p.fluid_pressure = 980.0
+            out.append(("dynamic_pressure", p))
+        if ms % 20 == 7:
+            m = hdr(JointState(), ns)
+            m.name = ["elevator_left", "elevator_right", "aileron_left", "aileron_right", "rudder"]
+            m.position = [de, de, 0.0, 0.0, 0.0]
+            out.append(("control_surfaces", m))
+        if bad and ms == 2000:
+            m = hdr(Imu(), ns + 10**5)
+            m.angular_velocity.x = float("nan")
+            out.append(("imu", m))
+            m = hdr(Imu(), ns + 2 * 10**5)
+            m.linear_acceleration.z = float("inf")
+            out.append(("imu", m))
+            m = hdr(Imu(), ns)  # duplicate of the previous IMU stamp
+            out.append(("imu", m))
+            for k in range(20):  # a burst of old messages
+                out.append(("imu", hdr(Imu(), ns - (500 + k) * 10**6)))
+            m = hdr(JointState(), ns + 3 * 10**5)
+            m.name = ["elevator_left", "elevator_right"]
+            m.position = [0.0]
+            out.append(("control_surfaces", m))
+            m = hdr(JointState(), ns + 4 * 10**5)
+            m.name = ["elevator_left", "elevator_right", "aileron_left", "aileron_right", "rudder", "flap"]
+            m.position = [de, de, 0.0, 0.0, 0.0, 0.2]
+            out.append(("control_surfaces", m))
+    return out
+
+
+def test_bad_input_is_counted_in_diagnostics_and_never_published(tmp_path, tester):
+    node = _node(tmp_path)
+    try:
+        tester.wait_connected()
+        seq = _synthetic(10**18, 8.0, gap=(4.0, 5.0), zero_air=(6.0, 6.5))
+        expected = Pipeline(pipeline_config(load_parameters_file("t2")))
+        for kind, msg in seq:
+            feed(expected, kind, msg)
+        c = expected.counters()
+        tester.publish_all(seq)
+        d = tester.wait_diagnostics(lambda d: d.get(f"{NODE}: samples", {}).get("samples_formed") == str(c["samples_formed"]))
+        inputs, samples = d[f"{NODE}: inputs"], d[f"{NODE}: samples"]
+        assert inputs["imu.rejected.non_finite"] == "2"
+        assert inputs["imu.rejected.duplicate"] == "1"
+        assert inputs["imu.rejected.out_of_order"] == "20"
+        assert inputs["control_surfaces.rejected.mismatched_arrays"] == "1"
+        assert samples["unknown_joint.flap"] == "1"
+        # The 1 s air-data gap: grid points 4.00 ... 4.98 s skip (last message 3.983 s).
+        assert samples["samples_rejected.gap_airspeed"] == str(len(range(4000, 5001, 20)))
+        assert int(samples["samples_rejected.nonpositive_airspeed"]) > 0
+        for key, value in c["samples_rejected"].items():
+            assert samples[f"samples_rejected.{key}"] == str(value)
+        assert inputs["message"] != "all inputs fresh" and d[f"{NODE}: inputs"]["level"] == 1
+        for topic, msgs in tester.outputs.items():
+            if "standard_errors" in topic or "estimates" in topic:
+                assert msgs and all(np.isfinite(m.data).all() for m in msgs), topic
+        # A stream that stops is reported as stale.
+        d = tester.wait_diagnostics(lambda d: "airspeed stale" in d.get(f"{NODE}: inputs", {}).get("message", ""))
+    finally:
+        assert node.stop() == 0, node.text()
+
+
+def _set_parameters(tester, **values):
+    client = tester.node.create_client(SetParameters, f"/{NODE}/set_parameters")
+    assert client.wait_for_service(10)
+    req = SetParameters.Request()
+    for name, value in values.items():
+        v = ParameterValue()
+        if isinstance(value, str):
+            v.type, v.string_value = ParameterType.PARAMETER_STRING, value
+        elif isinstance(value, int):
+            v.type, v.integer_value = ParameterType.PARAMETER_INTEGER, value
+        else:
+            v.type, v.double_value = ParameterType.PARAMETER_DOUBLE, value
+        req.parameters.append(ParameterMsg(name=name, value=v))
+    future = client.call_async(req)
+    assert tester.spin_until(future.done, 10)
+    return future.result().results
+
+
+def _call(tester, srv_type, name, request):
+    client = tester.node.create_client(srv_type, f"/{NODE}/{name}")
+    assert client.wait_for_service(10)
+    future = client.call_async(request)
+    assert tester.spin_until(future.done, 10)
+    return future.result()
+
+
+def test_parameters_are_refused_with_reasons_and_changes_reset(tmp_path, tester):
+    node = _node(tmp_path)
+    try:
+        tester.wait_connected()
+        (r,) = _set_parameters(tester, **{"estimator.window": "hann"})
+        assert not r.successful and "estimator.window" in r.reason
+        (r,) = _set_parameters(tester, **{"estimator.lags": -5})
+        assert not r.successful
+        (r,) = _set_parameters(tester, **{"estimator.forgetting": 1.5})
+        assert not r.successful
+        (r,) = _set_parameters(tester, **{"topics.imu": "other_imu"})
+        assert not r.successful and "read-only" in r.reason.lower()
+        (r,) = _set_parameters(tester, **{"differentiator.lag": 12})
+        assert not r.successful and "differentiator.lag" in r.reason
+        (r,) = _set_parameters(tester, **{"estimator.lags": 20})
+        assert r.successful
+        d = tester.wait_diagnostics(lambda d: "resets.parameters_changed" in d.get(f"{NODE}: samples", {}))
+        assert d[f"{NODE}: samples"]["resets.parameters_changed"] == "1"
+        assert "parameters changed (estimator.lags): estimator reset" in node.text()
+    finally:
+        assert node.stop() == 0
+
+
+@pytest.mark.parametrize("arg,needle", [
+    ("estimator.window:=hann", "estimator.window"),
+    ("models.enabled:=[CZ,CQ]", "CQ"),
+    ("aircraft:=concorde", "concorde"),
+])
+def test_invalid_start_up_parameters_stop_the_node_with_the_reason(tmp_path, arg, needle):
+    node = NodeProcess(tmp_path, "--params-file", T2, "-p", arg)
+    code = node.proc.wait(30)
+    node.stop()
+    assert code == 2
+    assert needle in node.text() and "invalid configuration" in node.text()
+
+
+def test_reset_and_enable_services(tmp_path, tester):
+    node = _node(tmp_path)
+    try:
+        tester.wait_connected()
+        seq = _synthetic(10**18, 3.0, bad=False)
+        tester.publish_all(seq)
+        est = _arrays(tester, "CZ", "estimates")
+        assert tester.spin_until(lambda: len(est) > 50)
+        tester.spin_until(lambda: False, 1.0)  # let the first maneuver's outputs arrive
+        r = _call(tester, SetBool, "enable", SetBool.Request(data=False))
+        assert r.success and "disabled" in r.message
+        n_before = len(est)
+        tester.publish_all(_synthetic(10**18 + 3 * 10**9, 2.0, bad=False))
+        d = tester.wait_diagnostics(lambda d: int(d.get(f"{NODE}: samples", {}).get("samples_rejected.estimation_disabled", 0)) >= 95)
+        assert d[f"{NODE}: samples"]["enabled"] == "False"
+        tester.spin_until(lambda: False, 0.3)
+        assert len(est) == n_before  # nothing is estimated while disabled
+        r = _call(tester, Trigger, "reset", Trigger.Request())
+        assert r.success
+        assert _call(tester, SetBool, "enable", SetBool.Request(data=True)).success
+        before = len(est)
+        tester.publish_all(_synthetic(10**18 + 5 * 10**9, 2.0, bad=False))
+        d = tester.wait_diagnostics(lambda d: d.get(f"{NODE}: samples", {}).get("resets.service") == "1")
+        assert tester.spin_until(lambda: len(est) > before + 50)
+        # After the reset the estimator restarted: it re-initialized on the new samples only.
+        assert int(d[f"{NODE}: model CZ"]["samples"]) < 120
+    finally:
+        assert node.stop() == 0
+
+
+def test_state_file_saves_on_shutdown_and_resumes(tmp_path, tester, bag):
+    state = tmp_path / "state.npz"
+    half = len(bag) // 2
+    node = _node(tmp_path, "-p", f"state_file:={state}", name="first")
+    try:
+        tester.wait_connected()
+        tester.publish_all([(k, to_rclpy(k, m)) for k, _s, m in bag[:half]])
+        stamps = tester.outputs[f"/{NODE}/sample_stamp"]
+        first = Pipeline(pipeline_config(load_parameters_file("t2")))
+        n1 = sum(len(feed(first, k, m)) for k, _s, m in bag[:half])
+        assert tester.spin_until(lambda: len(stamps) >= n1)
+    finally:
+        assert node.stop() == 0
+    assert state.exists()
+    # Offline expectation: the saved estimator continues on the second half.
+    first.save_state(tmp_path / "expected.npz")
+    resumed = Pipeline(pipeline_config(load_parameters_file("t2")))
+    resumed.load_state(tmp_path / "expected.npz")
+    outs = [o for k, _s, m in bag[half:] for o in feed(resumed, k, m)]
+
+    for lst in tester.outputs.values():
+        lst.clear()
+    node = _node(tmp_path, "-p", f"state_file:={state}", name="second")
+    try:
+        tester.wait_connected()
+        d = tester.wait_diagnostics(lambda d: f"{NODE}: samples" in d)
+        assert d[f"{NODE}: samples"]["state_file"].startswith(f"resumed from {state}")
+        tester.publish_all([(k, to_rclpy(k, m)) for k, _s, m in bag[half:]])
+        est = _arrays(tester, "Cm", "standard_errors")
+        assert tester.spin_until(lambda: len(est) >= len(outs))
+        np.testing.assert_allclose(np.array(est[-1].data), outs[-1].se[1, :4], rtol=1e-9)
+        np.testing.assert_allclose(np.array(_arrays(tester, "CZ", "estimates")[-1].data), outs[-1].theta[0, :3], rtol=1e-9)
+    finally:
+        assert node.stop() == 0
+    # Another configuration ignores the file and says so.
+    node = _node(tmp_path, "-p", f"state_file:={state}", "-p", "estimator.lags:=7", name="third")
+    try:
+        tester.wait_connected(outputs=False)
+        d = tester.wait_diagnostics(lambda d: f"{NODE}: samples" in d)
+        assert "ignored" in d[f"{NODE}: samples"]["state_file"]
+    finally:
+        node.stop()
+
+
+def test_sim_time_backwards_jump_resets(tmp_path, tester):
+    node = _node(tmp_path, "-p", "use_sim_time:=true")
+    clock = tester.node.create_publisher(Clock, "/clock", 10)
+    try:
+        tester.wait_connected()
+        assert tester.spin_until(lambda: clock.get_subscription_count() >= 1)
+
+        def tick(sec):
+            m = Clock()
+            m.clock.sec = sec
+            clock.publish(m)
+
+        for s in range(100, 103):
+            tick(s)
+            tester.spin_until(lambda: False, 0.2)
+        seq = _synthetic(100 * 10**9, 2.0, bad=False)
+        tester.publish_all(seq)
+        tick(103)
+        tick(50)  # the bag restarted: time jumps back
+        d = tester.wait_diagnostics(lambda d: "resets.time_jumped_backwards" in d.get(f"{NODE}: samples", {}))
+        assert d[f"{NODE}: samples"]["resets.time_jumped_backwards"] == "1"
+        # After the reset, old-stamped data is accepted again (buffers were cleared).
+        tick(51)
+        tester.publish_all(_synthetic(50 * 10**9, 1.0, bad=False))
+        d = tester.wait_diagnostics(lambda d: int(d.get(f"{NODE}: samples", {}).get("samples_formed", 0)) > 0
+                                    and d[f"{NODE}: inputs"].get("imu.rejected.out_of_order") is None)
+    finally:
+        assert node.stop() == 0
+
+
+def test_node_module_is_the_console_script():
+    out = subprocess.run([sys.executable, "-c", "import importlib.metadata as m; "
+                          "print([e.value for e in m.entry_points(group='console_scripts') if e.name == 'estimator_node'])"],
+                         capture_output=True, text=True)
+    assert "rls_uncertainty.node:main" in out.stdout
