@@ -1,0 +1,257 @@
+"""Drive the live estimator node over DDS and print latency, CPU use and dropped samples.
+
+Three processes on loopback: the node (six models of Eq. 2, 50 lags), a publisher that
+sends a synthetic six-degree-of-freedom maneuver in real time (IMU at --imu-rate, air data,
+dynamic pressure and surfaces at --air-rate), and this process, which subscribes to every
+output. Latency is input to output: from the publication of the message that completes a
+sample (the last stream to pass the sample time, ``lag`` samples later because of the
+differentiator) to the reception of that sample's last output array.
+
+    .venv/bin/python benchmarks/node_benchmark.py                      # 1 kHz IMU, 100 Hz air data
+    .venv/bin/python benchmarks/node_benchmark.py --imu-rate 200 --air-rate 50
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+os.environ.setdefault("ROS_DOMAIN_ID", str(1 + os.getpid() % 100))
+
+import numpy as np  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
+T0 = 1_800_000_000 * 10**9
+MODELS = ("CX", "CY", "CZ", "Cl", "Cm", "Cn")
+
+
+def signals(t: float):
+    """Smooth, independent excitation of every regressor of Eq. 2."""
+    s = math.sin
+    return {
+        "p": 0.2 * s(2.1 * t), "q": 0.1 * s(3.3 * t + 1), "r": 0.08 * s(1.7 * t + 2),
+        "alpha": 0.08 + 0.03 * s(2.7 * t), "beta": 0.04 * s(1.9 * t + 0.5),
+        "de": 0.05 * s(4.1 * t + 0.3), "da": 0.04 * s(3.7 * t + 1.1), "dr": 0.03 * s(2.3 * t + 2.2),
+    }
+
+
+def publisher(args) -> None:
+    """Publish the maneuver in real time; write (monotonic time, kind, stamp) to a file."""
+    import rclpy
+    from geometry_msgs.msg import Vector3Stamped, WrenchStamped
+    from rclpy.qos import QoSHistoryPolicy, QoSProfile, QoSReliabilityPolicy
+    from sensor_msgs.msg import FluidPressure, Imu, JointState
+
+    rclpy.init()
+    node = rclpy.create_node("bench_publisher")
+    qos = QoSProfile(depth=1000, reliability=QoSReliabilityPolicy.RELIABLE, history=QoSHistoryPolicy.KEEP_LAST)
+    types = {"imu": Imu, "airspeed": Vector3Stamped, "dynamic_pressure": FluidPressure,
+             "control_surfaces": JointState, "thrust": WrenchStamped}
+    pubs = {k: node.create_publisher(t, k, qos) for k, t in types.items()}
+    while any(p.get_subscription_count() < 1 for p in pubs.values()):
+        time.sleep(0.05)
+    time.sleep(1.0)
+    kinds = {"imu": 0, "airspeed": 1, "dynamic_pressure": 2, "control_surfaces": 3, "thrust": 4}
+    # Event list: (stamp_ns, kind); IMU at imu_rate, the rest at air_rate (offset 1 ms).
+    events = []
+    n_imu = int(args.duration * args.imu_rate)
+    events += [(T0 + int(round(k * 1e9 / args.imu_rate)), "imu") for k in range(n_imu)]
+    n_air = int(args.duration * args.air_rate)
+    for k in range(n_air):
+        s = T0 + int(round(k * 1e9 / args.air_rate)) + 10**6
+        # Thrust is needed by CX (Eq. 1a): at the air-data rate, since a slower stream would
+        # hold every sample back until its next message (the node never extrapolates).
+        events += [(s, "airspeed"), (s, "dynamic_pressure"), (s, "control_surfaces"), (s, "thrust")]
+    events.sort()
+    log = np.zeros((len(events), 3))
+    start = time.monotonic()
+    for i, (stamp, kind) in enumerate(events):
+        due = start + (stamp - T0) * 1e-9
+        left = due - time.monotonic()
+        if left > 0:
+            time.sleep(left)  # no busy wait: the publisher must not steal the node's core
+        t = (stamp - T0) * 1e-9
+        x = signals(t)
+        if kind == "imu":
+            m = Imu()
+            m.angular_velocity.x, m.angular_velocity.y, m.angular_velocity.z = x["p"], -x["q"], -x["r"]
+            m.linear_acceleration.x = 0.5 + 3 * x["alpha"]
+            m.linear_acceleration.y = -(2 * x["beta"] + x["dr"])
+            m.linear_acceleration.z = 9.8 + 20 * x["alpha"] + 3 * x["de"]
+        elif kind == "airspeed":
+            m = Vector3Stamped()
+            V = 60.0
+            a, b = x["alpha"], x["beta"]
+            m.vector.x, m.vector.y, m.vector.z = V * math.cos(a) * math.cos(b), -V * math.sin(b), -V * math.sin(a) * math.cos(b)
+        elif kind == "dynamic_pressure":
+            m = FluidPressure()
+            m.fluid_pressure = 0.5 * 1.1 * 60.0**2
+        elif kind == "control_surfaces":
+            m = JointState()
+            m.name = ["elevator", "aileron_left", "aileron_right", "rudder"]
+            m.position = [x["de"], -x["da"], x["da"], x["dr"]]
+        else:
+            m = WrenchStamped()
+            m.wrench.force.x = 4000.0
+        m.header.stamp.sec, m.header.stamp.nanosec = divmod(stamp, 10**9)
+        pubs[kind].publish(m)
+        log[i] = (time.monotonic(), kinds[kind], stamp - T0)
+    np.save(args.log, log)
+    time.sleep(1.0)
+    node.destroy_node()
+    rclpy.try_shutdown()
+
+
+def cpu_seconds(pid: int) -> float:
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+def completing_times(log: np.ndarray, rate: float, lag: int, required=(0, 1, 2, 3, 4)) -> dict[int, float]:
+    """For each output sample stamp: when the input that completed sample (stamp + lag) was
+    published (the pipeline's frontier rule, replayed on the publication log)."""
+    P = int(round(1e9 / rate))
+    newest = {k: -1 for k in required}
+    out = {}
+    t_next = None
+    for wall, kind, stamp in log:
+        kind, stamp = int(kind), int(stamp)
+        if kind not in newest:
+            continue
+        newest[kind] = stamp
+        if min(newest.values()) < 0:
+            continue
+        if t_next is None:
+            t_next = -(-max(newest.values()) // P) * P
+        frontier = min(newest.values())
+        while t_next <= frontier:
+            out[t_next - lag * P] = wall
+            t_next += P
+    return out
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--imu-rate", type=float, default=1000.0)
+    ap.add_argument("--air-rate", type=float, default=100.0)
+    ap.add_argument("--rate", type=float, default=50.0, help="estimator rate, Hz")
+    ap.add_argument("--duration", type=float, default=20.0)
+    ap.add_argument("--lags", type=int, default=50)
+    ap.add_argument("--publisher", action="store_true", help=argparse.SUPPRESS)
+    ap.add_argument("--log", default=None, help=argparse.SUPPRESS)
+    args = ap.parse_args()
+    if args.publisher:
+        publisher(args)
+        return 0
+
+    import rclpy
+    from diagnostic_msgs.msg import DiagnosticArray
+    from rclpy.qos import QoSHistoryPolicy, QoSProfile, QoSReliabilityPolicy
+    from std_msgs.msg import Float64MultiArray, Header
+
+    tmp = Path(os.environ.get("TMPDIR", "/tmp")) / f"rls_bench_{os.getpid()}"
+    tmp.mkdir(parents=True, exist_ok=True)
+    node = subprocess.Popen(
+        [sys.executable, "-m", "rls_uncertainty.node", "--ros-args", "-p", "qos.reliable:=true",
+         "-p", f"rate:={args.rate}", "-p", f"estimator.lags:={args.lags}", "-p", "surfaces.elevator:=[elevator]",
+         "-p", "qos.depth:=1000"],
+        stdout=open(tmp / "node.log", "w"), stderr=subprocess.STDOUT, cwd=ROOT,
+    )
+    rclpy.init()
+    sub = rclpy.create_node("bench_subscriber")
+    qos = QoSProfile(depth=1000, reliability=QoSReliabilityPolicy.RELIABLE, history=QoSHistoryPolicy.KEEP_LAST)
+    received: dict[int, float] = {}
+    count = {"arrays": 0, "stamps": 0, "nonfinite": 0}
+    last_topic = "/rls_estimator/Cn/standard_errors_conventional"
+    stamps_seen: list[int] = []
+
+    def on_stamp(msg):
+        stamps_seen.append(msg.stamp.sec * 10**9 + msg.stamp.nanosec - T0)
+        count["stamps"] += 1
+
+    def on_array(topic):
+        def cb(msg):
+            count["arrays"] += 1
+            if not np.isfinite(np.asarray(msg.data)).all():
+                count["nonfinite"] += 1
+            if topic == last_topic and stamps_seen:
+                received[stamps_seen[-1]] = time.monotonic()
+        return cb
+
+    # The stamp (published first for a sample) and the last array of a sample (published
+    # last): a subscriber on all 19 topics would itself become the bottleneck in Python.
+    subs = [sub.create_subscription(Header, "/rls_estimator/sample_stamp", on_stamp, qos),
+            sub.create_subscription(Float64MultiArray, last_topic, on_array(last_topic), qos)]
+    diags = []
+    subs.append(sub.create_subscription(DiagnosticArray, "/diagnostics", diags.append, 10))
+    deadline = time.monotonic() + 30
+    while any(s.get_publisher_count() < 1 for s in subs[:-1]) and time.monotonic() < deadline:
+        rclpy.spin_once(sub, timeout_sec=0.05)
+    log_path = tmp / "publish_log.npy"
+    pub = subprocess.Popen([sys.executable, __file__, "--publisher", "--log", str(log_path),
+                            "--imu-rate", str(args.imu_rate), "--air-rate", str(args.air_rate),
+                            "--duration", str(args.duration)], cwd=ROOT)
+    # Measure the node's CPU over the streaming part only.
+    while pub.poll() is None and not stamps_seen:
+        rclpy.spin_once(sub, timeout_sec=0.01)
+    cpu0, wall0 = cpu_seconds(node.pid), time.monotonic()
+    while pub.poll() is None:
+        rclpy.spin_once(sub, timeout_sec=0.01)
+    cpu1, wall1 = cpu_seconds(node.pid), time.monotonic()
+    end = time.monotonic() + 2
+    while time.monotonic() < end:
+        rclpy.spin_once(sub, timeout_sec=0.05)
+    diag, proc_p99 = {}, []
+    for d in diags:
+        for s in d.status:
+            diag[s.name] = {kv.key: kv.value for kv in s.values}
+            if "latency_ms.p99" in diag[s.name]:
+                proc_p99.append((float(diag[s.name]["latency_ms.p99"]), float(diag[s.name]["processing_cpu_ms.p99"]),
+                                 float(diag[s.name]["processing_cpu_ms.p50"])))
+    node.send_signal(2)
+    node.wait(20)
+
+    log = np.load(log_path)
+    lag = 4
+    done = completing_times(log, args.rate, lag)
+    lat = np.array([received[s] - done[s] for s in received if s in done]) * 1e3
+    # The first output: after the first formed sample and the differentiator warm-up (window 9).
+    first = min(k for k in done) + 8 * int(round(1e9 / args.rate))
+    expected = sum(1 for s in done if s >= first)
+    n_in = log.shape[0]
+    samples = diag.get("rls_estimator: samples", {})
+    print(f"node benchmark: IMU {args.imu_rate:g} Hz, air data and surfaces {args.air_rate:g} Hz, estimates "
+          f"{args.rate:g} Hz, six models, {args.lags} lags, {args.duration:g} s")
+    print(f"  input messages published        {n_in}")
+    print(f"  samples completed by the inputs  {expected}")
+    print(f"  sample stamps received           {count['stamps']}  (dropped: {expected - count['stamps']}; "
+          f"the last {lag} wait for the differentiator)")
+    print(f"  last-model arrays received       {count['arrays']}  (non-finite: {count['nonfinite']})")
+    if lat.size:
+        print(f"  input-to-output latency, ms      p50 {np.percentile(lat, 50):.3f}  p99 {np.percentile(lat, 99):.3f}  "
+              f"max {lat.max():.3f}")
+    print(f"  node CPU                         {100 * (cpu1 - cpu0) / (wall1 - wall0):.1f} % of one core")
+    if samples:
+        rejected = {k: v for k, v in samples.items() if k.startswith("samples_rejected")}
+        print(f"  node diagnostics                 used {samples.get('samples_used')}, rejected {rejected}, "
+              f"in-node wall p99 (worst second) {max((p[0] for p in proc_p99), default=float('nan')):.3f} ms")
+        print(f"  in-node CPU per output sample    p50 {np.median([p[2] for p in proc_p99]):.3f} ms, "
+              f"p99 (worst second) {max((p[1] for p in proc_p99), default=float('nan')):.3f} ms")
+    json.dump({"p50_ms": float(np.percentile(lat, 50)) if lat.size else None,
+               "p99_ms": float(np.percentile(lat, 99)) if lat.size else None,
+               "cpu_percent": 100 * (cpu1 - cpu0) / (wall1 - wall0),
+               "dropped": expected - count["stamps"]}, open(tmp / "result.json", "w"))
+    sub.destroy_node()
+    rclpy.try_shutdown()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
