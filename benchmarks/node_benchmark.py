@@ -159,7 +159,7 @@ def main() -> int:
     tmp = Path(os.environ.get("TMPDIR", "/tmp")) / f"rls_bench_{os.getpid()}"
     tmp.mkdir(parents=True, exist_ok=True)
     node = subprocess.Popen(
-        [sys.executable, "-m", "rls_uncertainty.node", "--ros-args", "-p", "qos.reliable:=true",
+        [sys.executable, *os.environ.get("RLS_BENCH_PYFLAGS", "").split(), "-m", "rls_uncertainty.node", "--ros-args", "-p", "qos.reliable:=true",
          "-p", f"rate:={args.rate}", "-p", f"estimator.lags:={args.lags}", "-p", "surfaces.elevator:=[elevator]",
          "-p", "qos.depth:=1000"],
         stdout=open(tmp / "node.log", "w"), stderr=subprocess.STDOUT, cwd=ROOT,

@@ -28,6 +28,7 @@ from geometry_msgs.msg import Vector3Stamped, WrenchStamped
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult
 from rclpy.clock import Clock, ClockChange, ClockType, JumpThreshold
 from rclpy.duration import Duration
+from rclpy.event_handler import PublisherEventCallbacks
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import QoSHistoryPolicy, QoSProfile, QoSReliabilityPolicy, qos_profile_sensor_data
@@ -49,6 +50,10 @@ _TYPES = {
     "control_surfaces": JointState,
     "thrust": WrenchStamped,
 }
+# The 19 output publishers carry no QoS-event handlers: rclpy's executor walks every
+# handler on every wait, which cost more CPU than the estimation itself. The input
+# subscriptions keep theirs (incompatible-QoS warnings are how a QoS mismatch shows).
+_NO_EVENTS = PublisherEventCallbacks(use_default_callbacks=False)
 # Settings that change subscriptions or QoS: read-only, they need a restart.
 _READ_ONLY_PREFIXES = ("topics.", "qos.")
 
@@ -85,10 +90,10 @@ class EstimatorNode(Node):
         out_qos = QoSProfile(depth=self.node_cfg.depth, reliability=QoSReliabilityPolicy.RELIABLE,
                              history=QoSHistoryPolicy.KEEP_LAST)
         self._out_qos = out_qos
-        self._stamp_pub = self.create_publisher(Header, "~/sample_stamp", out_qos)
+        self._stamp_pub = self.create_publisher(Header, "~/sample_stamp", out_qos, event_callbacks=_NO_EVENTS)
         self._model_pubs: dict = {}
         self._make_model_publishers()
-        self._diag_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
+        self._diag_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10, event_callbacks=_NO_EVENTS)
 
         if self.node_cfg.reliable:
             in_qos = QoSProfile(depth=self.node_cfg.depth, reliability=QoSReliabilityPolicy.RELIABLE,
@@ -169,7 +174,8 @@ class EstimatorNode(Node):
         for m, label, n in zip(self.config.models, self.pipeline.labels, self.pipeline.sizes):
             if m.output not in self._model_pubs:
                 self._model_pubs[m.output] = tuple(
-                    self.create_publisher(Float64MultiArray, f"~/{m.output}/{suffix}", self._out_qos)
+                    self.create_publisher(Float64MultiArray, f"~/{m.output}/{suffix}", self._out_qos,
+                                          event_callbacks=_NO_EVENTS)
                     for suffix in ("estimates", "standard_errors", "standard_errors_conventional")
                 )
             self._layouts[m.output] = MultiArrayLayout(

@@ -1,0 +1,64 @@
+"""Offline replay throughput, as multiples of real time (target: at least 200x).
+
+* the 20 s Twin Otter lateral maneuver totter_f1_017 (converted with the fti_msgs mapping),
+  CY, Cl and Cn, 50 lags;
+* the bundled T-2 bag (12 s, IMU at 200 Hz), the paper's two models (config/t2.yaml) and all
+  six models of Eq. 2 (the lateral ones never become identifiable on this longitudinal
+  maneuver, so they stay in exact-initialization accumulation for the whole run).
+
+Bag reading and output writing are timed separately from the pipeline.
+
+    .venv/bin/python benchmarks/replay_benchmark.py [--flight-data ../shared/flight_data]
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import tempfile
+import time
+from pathlib import Path
+
+from rls_uncertainty.bags import convert, read_inputs
+from rls_uncertainty.config import load_parameters_file, pipeline_config
+from rls_uncertainty.replay import replay, run_pipeline
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def measure(label: str, bag: Path, params: dict, repeats: int = 5) -> None:
+    t = time.perf_counter()
+    messages, _ = read_inputs(bag)
+    t_read = time.perf_counter() - t
+    cfg = pipeline_config(params)
+    runs = [run_pipeline(messages, cfg, record=False) for _ in range(repeats)]
+    wall = statistics.median(r.wall_seconds for r in runs)
+    data = runs[0].data_seconds
+    with tempfile.TemporaryDirectory() as tmp:
+        t = time.perf_counter()
+        replay(bag, params, Path(tmp) / "out", progress=False, plots=False)
+        t_cmd = time.perf_counter() - t
+    print(f"{label:<44} {len(messages):>6} msgs {data:5.1f} s data | pipeline {wall * 1e3:7.1f} ms = "
+          f"{data / wall:6.0f}x real time | read {t_read * 1e3:6.0f} ms | whole replay command "
+          f"(no plots) {data / t_cmd:5.0f}x")
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--flight-data", default=str(ROOT.parent / "shared" / "flight_data"))
+    args = ap.parse_args()
+    with tempfile.TemporaryDirectory() as tmp:
+        f17 = Path(tmp) / "totter_f1_017"
+        convert(Path(args.flight_data) / "totter_f1_017", ROOT / "msg_schemas" / "fti_msgs" / "mapping.yaml", f17)
+        measure("Twin Otter f1_017, CY Cl Cn, 50 lags", f17, load_parameters_file("twin_otter_lateral"))
+    bundled = ROOT / "bags" / "t2_maneuver"
+    t2 = load_parameters_file("t2")
+    measure("bundled T-2 bag, CZ Cm, 50 lags", bundled, t2)
+    six = dict(t2)
+    six.pop("models.enabled")
+    measure("bundled T-2 bag, six models, 50 lags", bundled, six)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
