@@ -66,12 +66,15 @@ class FlightState:
 def physics_rejection(state: FlightState) -> str | None:
     """Reason a (scalar) sample cannot be reduced, or ``None``: non-finite values, or zero or
     negative dynamic pressure or airspeed (Eq. 1 and the rate normalisations divide by them)."""
-    for name, value in vars(state).items():
-        if isinstance(value, float):  # the per-sample path: plain floats
-            if not math.isfinite(value):
+    values = vars(state)
+    try:  # the per-sample path: plain floats, one check when all are finite
+        all_finite = math.isfinite(math.fsum(values.values()))
+    except (TypeError, OverflowError):
+        all_finite = False
+    if not all_finite:
+        for name, value in values.items():
+            if not np.all(np.isfinite(value)):
                 return f"non_finite_{name}"
-        elif not np.all(np.isfinite(value)):
-            return f"non_finite_{name}"
     qbar, V = state.qbar, state.V
     if not (qbar > 0 if isinstance(qbar, float) else np.all(np.asarray(qbar) > 0)):
         return "nonpositive_dynamic_pressure"
@@ -100,8 +103,11 @@ def regressors(s: FlightState, ac: AircraftConfig) -> dict[str, np.ndarray]:
     """Every regressor of Eq. 2 by name: bias, flow angles, controls and the nondimensional
     rates ``p b/2V``, ``q cbar/2V``, ``r b/2V``. Absolute angles are used; the bias terms
     absorb the trim values (Eq. 2's perturbations differ from them by constants)."""
-    V2 = 2.0 * np.asarray(s.V, dtype=float)
-    one = np.ones_like(V2)
+    if isinstance(s.V, float):  # one sample
+        V2, one = 2.0 * s.V, 1.0
+    else:
+        V2 = 2.0 * np.asarray(s.V, dtype=float)
+        one = np.ones_like(V2)
     return {
         "1": one,
         "alpha": s.alpha * one,

@@ -362,15 +362,17 @@ class EstimatorBank:
         xr = x * self._mask
         zl = self._recent(self._zbuf)
         # Before initialization inv_s is 1 on real parameters, so xl is unscaled for them.
+        # Every model accumulates (contiguous whole-array operations are cheaper than
+        # gathering the waiting ones); only the waiting models' sums are ever read.
         if f != 1.0:
             for arr in (self._A, self._b, self._Pzz, self._Pxz, self._Pzx, self._Pxx):
-                arr[todo] *= f
-        self._A[todo] += xr[todo, :, None] * xr[todo, None, :]
-        self._b[todo] += xr[todo] * z[todo, None]
-        self._Pzz[todo, :w] += zl[todo] * z[todo, None]
-        self._Pxz[todo, :w] += xr[todo, None, :] * zl[todo, :, None]
-        self._Pzx[todo, :w] += xl[todo] * z[todo, None, None]
-        self._Pxx[todo, :w] += xr[todo, None, :, None] * xl[todo, :, None, :]
+                arr *= f
+        self._A += xr[:, :, None] * xr[:, None, :]
+        self._b += xr * z[:, None]
+        self._Pzz[:, :w] += zl * z[:, None]
+        self._Pxz[:, :w] += xr[:, None, :] * zl[:, :, None]
+        self._Pzx[:, :w] += xl * z[:, None, None]
+        self._Pxx[:, :w] += xr[:, None, :, None] * xl[:, :, None, :]
         for j in np.flatnonzero(todo):
             self._try_initialize(int(j), w)
 
