@@ -11,6 +11,13 @@ __all__ = ["main"]
 
 
 def _demo(args: argparse.Namespace) -> int:
+    """The live node on the bundled bag over DDS, beside the offline replay."""
+    from .player import demo
+
+    return demo(rate=args.rate)
+
+
+def _simulate(args: argparse.Namespace) -> int:
     """Estimator on a seeded simulated T-2 maneuver (Section IV.A), one sample at a time."""
     from .estimator import EstimatorBank
     from .simulation import T2_MODELS, T2_TRUE, add_noise, reduce_short_period, simulate_short_period
@@ -167,13 +174,17 @@ def build_parser() -> argparse.ArgumentParser:
         description="Recursive least squares with colored-residual parameter uncertainty.",
     )
     sub = parser.add_subparsers(dest="command", required=True)
-    demo = sub.add_parser("demo", help="estimate the T-2 derivatives of a simulated maneuver")
-    demo.add_argument("--noise", type=float, default=20.0, help="band-limited noise, percent (default 20)")
-    demo.add_argument("--seed", type=int, default=250, help="noise seed (default 250)")
-    demo.add_argument("--lags", type=_lags, default=50, help="retained lags, or 'all' (default 50)")
-    demo.add_argument("--window", choices=("truncated", "bartlett"), default="truncated")
-    demo.add_argument("--forgetting", type=float, default=1.0)
+    demo = sub.add_parser("demo", help="the live estimator node on the bundled T-2 bag over DDS")
+    demo.add_argument("--rate", type=float, default=4.0, help="playback speed factor (default 4)")
     demo.set_defaults(func=_demo)
+
+    sim = sub.add_parser("simulate", help="estimate the T-2 derivatives of a simulated maneuver (no ROS)")
+    sim.add_argument("--noise", type=float, default=20.0, help="band-limited noise, percent (default 20)")
+    sim.add_argument("--seed", type=int, default=250, help="noise seed (default 250)")
+    sim.add_argument("--lags", type=_lags, default=50, help="retained lags, or 'all' (default 50)")
+    sim.add_argument("--window", choices=("truncated", "bartlett"), default="truncated")
+    sim.add_argument("--forgetting", type=float, default=1.0)
+    sim.set_defaults(func=_simulate)
 
     mc = sub.add_parser("montecarlo", help="reproduce Table 3 and Figs. 5-7 of the paper")
     mc.add_argument("--runs", type=int, default=250, help="runs per noise level (default 250)")

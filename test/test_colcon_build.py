@@ -43,7 +43,7 @@ def test_colcon_build_installs_a_runnable_executable(tmp_path):
     ).exists()
     # Start the installed executable from a sourced workspace, outside the source tree.
     run = subprocess.run(
-        ["bash", "-c", f"source {tmp_path}/install/setup.bash && {exe} demo --noise 5 --lags 11"],
+        ["bash", "-c", f"source {tmp_path}/install/setup.bash && {exe} simulate --noise 5 --lags 11"],
         cwd=tmp_path, env=env, capture_output=True, text=True, timeout=300,
     )
     assert run.returncode == 0, run.stderr
