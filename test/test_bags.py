@@ -299,3 +299,14 @@ def test_no_partial_output_when_the_replay_fails(tmp_path, capsys):
     out = tmp_path / "out"
     _fails(capsys, ["replay", str(tmp_path / "missing"), "--out", str(out), "--quiet"], "missing", "no such bag")
     assert not out.exists()
+
+
+def test_readme_documents_every_parameter_and_output():
+    from rls_uncertainty.config import PARAMETERS
+
+    text = (ROOT / "README.md").read_text()
+    missing = [p.name for p in PARAMETERS if f"`{p.name}`" not in text]
+    assert not missing, f"parameters not in the README: {missing}"
+    for topic in ("~/sample_stamp", "~/M/estimates", "~/M/standard_errors", "~/M/standard_errors_conventional",
+                  "/diagnostics", "~/reset", "~/enable"):
+        assert topic in text

@@ -352,3 +352,32 @@ def test_node_module_is_the_console_script():
                           "print([e.value for e in m.entry_points(group='console_scripts') if e.name == 'estimator_node'])"],
                          capture_output=True, text=True)
     assert "rls_uncertainty.node:main" in out.stdout
+
+
+def test_play_command_drives_the_live_node_to_the_replay_numbers(tmp_path, tester, bag):
+    """`rls-uncertainty play` (with /clock, the node on use_sim_time) reproduces `replay`."""
+    node = _node(tmp_path, "-p", "use_sim_time:=true")
+    try:
+        tester.wait_connected()
+        offline = run_pipeline(bag, pipeline_config(load_parameters_file("t2")))
+        player = subprocess.run(
+            [sys.executable, "-m", "rls_uncertainty.cli", "play", str(BUNDLED), "--rate", "4", "--wait", "1"],
+            capture_output=True, text=True, timeout=120, cwd=ROOT,
+        )
+        assert player.returncode == 0, player.stderr
+        assert "published 4920 messages" in player.stderr
+        stamps = tester.outputs[f"/{NODE}/sample_stamp"]
+        assert tester.spin_until(lambda: len(stamps) >= len(offline.outputs), 20)
+        last = offline.outputs[-1]
+        np.testing.assert_allclose(np.array(_arrays(tester, "Cm", "estimates")[-1].data), last.theta[1, :4], rtol=1e-9)
+        np.testing.assert_allclose(np.array(_arrays(tester, "CZ", "standard_errors")[-1].data), last.se[0, :3], rtol=1e-9)
+    finally:
+        assert node.stop() == 0, node.text()
+
+
+def test_readme_demo_command_matches_the_offline_replay():
+    run = subprocess.run([sys.executable, "-m", "rls_uncertainty.cli", "demo"], capture_output=True, text=True,
+                         timeout=180, cwd=ROOT)
+    assert run.returncode == 0, run.stdout + run.stderr
+    assert "difference between the live node and the offline replay: 0.0e+00" in run.stdout
+    assert "Cm_q" in run.stdout
