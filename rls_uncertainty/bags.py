@@ -25,9 +25,9 @@ from pathlib import Path
 from typing import Iterator
 
 import numpy as np
-import yaml
 
 from .aero import rep103_to_aircraft
+from .config import ConfigError, package_path, read_yaml
 from .messages import INPUTS, MESSAGE_TYPES, stamp_ns
 
 __all__ = [
@@ -49,16 +49,7 @@ class BagError(RuntimeError):
 
 def schema_dir() -> Path:
     """The project's ``msg_schemas/`` directory (source tree or ROS install share)."""
-    here = Path(__file__).resolve().parent
-    for candidate in (here.parent / "msg_schemas", here / "msg_schemas"):
-        if candidate.is_dir():
-            return candidate
-    try:
-        from ament_index_python.packages import get_package_share_directory  # noqa: PLC0415
-
-        return Path(get_package_share_directory("rls_uncertainty")) / "msg_schemas"
-    except Exception as exc:  # pragma: no cover - depends on the install
-        raise BagError("cannot find the rls_uncertainty msg_schemas directory") from exc
+    return package_path("msg_schemas")
 
 
 def typestore(extra_schemas: list[Path] | None = None):
@@ -356,13 +347,9 @@ def load_mapping(path: str | Path) -> dict:
     """A mapping file: for each standard input, the recorded topic, fields, units and frame."""
     path = Path(path)
     try:
-        data = yaml.safe_load(path.read_text())
-    except FileNotFoundError as exc:
-        raise BagError(f"{path}: no such mapping file") from exc
-    except yaml.YAMLError as exc:
-        raise BagError(f"{path}: not valid YAML: {exc}") from exc
-    if not isinstance(data, dict):
-        raise BagError(f"{path}: expected a mapping of standard inputs")
+        data = read_yaml(path)
+    except ConfigError as exc:
+        raise BagError(f"mapping file {exc}") from exc
     unknown = sorted(set(data) - set(INPUTS))
     if unknown:
         raise BagError(f"{path}: unknown input(s) {unknown}; known: {list(INPUTS)}")

@@ -23,6 +23,7 @@ __all__ = [
     "load_aircraft",
     "load_models",
     "config_dir",
+    "package_path",
     "ParamSpec",
     "PARAMETERS",
     "SurfaceMixing",
@@ -132,21 +133,29 @@ class EstimatorConfig:
     models: tuple[ModelConfig, ...] = field(default=DEFAULT_MODELS)
 
 
-def config_dir() -> Path:
-    """The package's ``config/`` directory (source tree or ROS install share)."""
+def package_path(*parts: str) -> Path:
+    """A data directory of the package (``config``, ``msg_schemas``, ``bags/...``): from the
+    source tree, or from the ROS install's share directory."""
     here = Path(__file__).resolve().parent
-    for candidate in (here.parent / "config", here / "config"):
-        if candidate.is_dir():
+    for base in (here.parent, here):
+        candidate = base.joinpath(*parts)
+        if candidate.exists():
             return candidate
     try:  # installed ROS package
         from ament_index_python.packages import get_package_share_directory  # noqa: PLC0415
 
-        return Path(get_package_share_directory("rls_uncertainty")) / "config"
+        return Path(get_package_share_directory("rls_uncertainty")).joinpath(*parts)
     except Exception as exc:  # pragma: no cover - depends on the install
-        raise ConfigError("cannot find the rls_uncertainty config directory") from exc
+        raise ConfigError(f"cannot find the rls_uncertainty directory {'/'.join(parts)}") from exc
 
 
-def _read_yaml(path: Path) -> dict:
+def config_dir() -> Path:
+    """The package's ``config/`` directory (source tree or ROS install share)."""
+    return package_path("config")
+
+
+def read_yaml(path: Path) -> dict:
+    """A YAML file whose top level is a mapping; problems are :class:`ConfigError` naming the file."""
     try:
         data = yaml.safe_load(Path(path).read_text())
     except FileNotFoundError as exc:
@@ -163,7 +172,7 @@ def load_aircraft(path_or_name: str | Path) -> AircraftConfig:
     path = Path(path_or_name)
     if not path.suffix:
         path = config_dir() / "aircraft" / f"{path_or_name}.yaml"
-    data = _read_yaml(path)
+    data = read_yaml(path)
     section = data.get("aircraft", data)
     required = [f.name for f in fields(AircraftConfig)]
     missing = [k for k in required if k not in section]
@@ -462,7 +471,7 @@ def load_parameters_file(path_or_name: str | Path) -> dict[str, Any]:
     path = Path(path_or_name)
     if not path.suffix:
         path = config_dir() / f"{path_or_name}.yaml"
-    data = _read_yaml(path)
+    data = read_yaml(path)
     sections = [v["ros__parameters"] for v in data.values() if isinstance(v, dict) and "ros__parameters" in v]
     if len(sections) != 1:
         raise ConfigError(f"{path}: expected one 'NODE: ros__parameters:' section, found {len(sections)}")

@@ -120,13 +120,9 @@ def play(bag: str | Path, *, rate: float = 1.0, clock: bool = True, reliable: bo
 
 def bundled_bag() -> Path:
     """``bags/t2_maneuver`` in the source tree or the ROS install's share directory."""
-    here = Path(__file__).resolve().parent
-    for candidate in (here.parent / "bags" / "t2_maneuver", here / "bags" / "t2_maneuver"):
-        if candidate.is_dir():
-            return candidate
-    from ament_index_python.packages import get_package_share_directory  # noqa: PLC0415
+    from .config import package_path  # noqa: PLC0415
 
-    return Path(get_package_share_directory("rls_uncertainty")) / "bags" / "t2_maneuver"
+    return package_path("bags", "t2_maneuver")
 
 
 def demo(rate: float = 4.0, params_file: str = "t2") -> int:
