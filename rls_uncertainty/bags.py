@@ -20,12 +20,14 @@ from __future__ import annotations
 
 import math
 import shutil
+import struct
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Iterator
 
 import numpy as np
 
+from . import cdr
 from .aero import rep103_to_aircraft
 from .config import ConfigError, package_path, read_yaml
 from .messages import INPUTS, MESSAGE_TYPES, stamp_ns
@@ -85,7 +87,7 @@ def check_mcap_integrity(path: Path) -> None:
             summary = reader.get_summary()
             if summary is None or summary.statistics is None:
                 raise BagError(f"{path}: MCAP file has no summary (truncated or still being written)")
-            count = sum(1 for _ in reader.iter_messages())
+            count = sum(1 for _ in reader.iter_messages(log_time_order=False))
     except BagError:
         raise
     except Exception as exc:  # noqa: BLE001 - the mcap library raises many types
@@ -121,9 +123,11 @@ def _has_schema(msgtype: str, store, reader) -> bool:
     )
 
 
-def _iter_messages(path: Path, reader, connections, store=None) -> Iterator:
-    """Messages of ``connections`` in log order, deserialized; corruption names the file."""
+def _iter_messages(path: Path, reader, connections, store=None, fast: bool = False) -> Iterator:
+    """Messages of ``connections`` in log order, deserialized; corruption names the file.
+    ``fast`` decodes the standard input types of a ROS 2 bag with :mod:`.cdr`."""
     it = reader.messages(connections=connections)
+    fast = fast and getattr(reader, "is2", False)
     while True:
         try:
             conn, t, raw = next(it)
@@ -131,6 +135,14 @@ def _iter_messages(path: Path, reader, connections, store=None) -> Iterator:
             return
         except Exception as exc:  # noqa: BLE001
             raise BagError(f"{path}: corrupt or truncated bag: {exc}") from exc
+        if fast and conn.msgtype in cdr.DECODABLE:
+            try:
+                msg = cdr.decode(conn.msgtype, raw)
+            except (struct.error, UnicodeDecodeError, IndexError) as exc:
+                raise BagError(f"{path}: topic {conn.topic}: cannot decode {conn.msgtype}: {exc}") from exc
+            if msg is not None:
+                yield conn, t, msg
+                continue
         try:
             msg = reader.deserialize(raw, conn.msgtype)
         except Exception as exc:  # noqa: BLE001
@@ -213,7 +225,8 @@ def _standard_message(store, kind: str, stamp: int, values, names=None):
 
 
 def write_replay(path: str | Path, records: list, store=None) -> Path:
-    """Write ``records`` (``(stamp_ns, topic, msgtype, msg)``) as a ROS 2 MCAP bag at ``path``
+    """Write ``records`` (``(stamp_ns, topic, msgtype, msg)``, ``msg`` a message or its CDR
+    bytes) as a ROS 2 MCAP bag at ``path``
     (a directory), log time = stamp, ordered by stamp with a stable tie-break. Atomic: the
     bag appears under ``path`` only when complete."""
     from rosbags.rosbag2 import StoragePlugin, Writer  # noqa: PLC0415
@@ -239,7 +252,8 @@ def write_replay(path: str | Path, records: list, store=None) -> Path:
             msgtype = next(r.msgtype for r in recs if r.topic == topic)
             conns[topic] = writer.add_connection(topic, msgtype, typestore=store)
         for r in recs:
-            writer.write(conns[r.topic], r.stamp, store.serialize_cdr(r.msg, r.msgtype))
+            raw = r.msg if isinstance(r.msg, bytes) else store.serialize_cdr(r.msg, r.msgtype)
+            writer.write(conns[r.topic], r.stamp, raw)
     # rosbags names the MCAP file after the directory: give it the final name.
     (tmp / f"{tmp.name}.mcap").rename(tmp / f"{path.name}.mcap")
     meta = tmp / "metadata.yaml"
@@ -305,7 +319,7 @@ def read_inputs(path: str | Path, topics: dict[str, str] | None = None, *, stric
         hi = None if end is None else t0 + int(round(end * 1e9))
         last: dict[str, int] = {}
         out = []
-        for conn, _t, msg in _iter_messages(path, reader, conns, store):
+        for conn, _t, msg in _iter_messages(path, reader, conns, store, fast=True):
             stamp = stamp_ns(msg)
             if strict:
                 prev = last.get(conn.topic)

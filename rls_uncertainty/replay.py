@@ -25,6 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from .bags import BagError, read_inputs, typestore, write_replay
+from .cdr import encode_float64_multiarray, encode_header
 from .config import PipelineConfig, node_config, pipeline_config
 from .messages import feed
 from .pipeline import Pipeline
@@ -81,22 +82,18 @@ def run_pipeline(messages, config: PipelineConfig, *, record: bool = True, progr
     return result
 
 
-def output_records(pipe: Pipeline, outputs, store, frame_id: str = "base_link", node: str = NODE_NAME) -> list:
-    """The node's output messages for every sample, as bag records."""
-    T = store.types
-    Dim, Layout, Arr = (T[f"std_msgs/msg/{n}"] for n in ("MultiArrayDimension", "MultiArrayLayout", "Float64MultiArray"))
-    Header, Time = T["std_msgs/msg/Header"], T["builtin_interfaces/msg/Time"]
+def output_records(pipe: Pipeline, outputs, frame_id: str = "base_link", node: str = NODE_NAME) -> list:
+    """The node's output messages for every sample, as bag records of CDR bytes
+    (:mod:`.cdr`; the same bytes rclpy publishes)."""
     records = []
     for out in outputs:
         stamp = out.stamp_ns
-        hdr = Header(stamp=Time(sec=stamp // 10**9, nanosec=stamp % 10**9), frame_id=frame_id)
-        records.append((stamp, f"/{node}/sample_stamp", "std_msgs/msg/Header", hdr))
+        header = encode_header(stamp // 10**9, stamp % 10**9, frame_id)
+        records.append((stamp, f"/{node}/sample_stamp", "std_msgs/msg/Header", header))
         for name, label, theta, se, se_conv in pipe.published(out):
-            n = theta.size
             for suffix, data in (("estimates", theta), ("standard_errors", se), ("standard_errors_conventional", se_conv)):
-                msg = Arr(layout=Layout(dim=[Dim(label=label, size=n, stride=n)], data_offset=0),
-                          data=np.array(data, dtype=float))
-                records.append((stamp, f"/{node}/{name}/{suffix}", "std_msgs/msg/Float64MultiArray", msg))
+                records.append((stamp, f"/{node}/{name}/{suffix}", "std_msgs/msg/Float64MultiArray",
+                                encode_float64_multiarray(label, data.tolist())))
     return records
 
 
@@ -203,7 +200,7 @@ def replay(bag: str | Path, params: dict, out: str | Path, *, start=None, end=No
     try:
         _write_csv(tmp / "estimates.csv", result.pipeline, result.outputs)
         store = typestore()
-        records = output_records(result.pipeline, result.outputs, store, node_config(params).frame_id)
+        records = output_records(result.pipeline, result.outputs, node_config(params).frame_id)
         if records:
             write_replay(tmp / "estimates", records, store)
             shutil.move(str(tmp / "estimates" / "estimates.mcap"), str(tmp / "estimates.mcap"))

@@ -391,3 +391,47 @@ def test_launch_file_is_valid_python():
     import py_compile
 
     py_compile.compile(str(ROOT / "launch" / "estimator.launch.py"), doraise=True)
+
+
+def test_fast_cdr_codecs_equal_rosbags():
+    from rosbags.highlevel import AnyReader
+
+    from rls_uncertainty import cdr
+
+    store = typestore()
+    seen = set()
+    for bag in (BUNDLED,):
+        with AnyReader([bag], default_typestore=store) as reader:
+            for conn, _t, raw in reader.messages():
+                ref = reader.deserialize(raw, conn.msgtype)
+                fast = cdr.decode(conn.msgtype, raw)
+                seen.add(conn.msgtype)
+                assert (fast.header.stamp.sec, fast.header.stamp.nanosec, fast.header.frame_id) == (
+                    ref.header.stamp.sec, ref.header.stamp.nanosec, ref.header.frame_id)
+                if conn.msgtype.endswith("Imu"):
+                    for f in ("angular_velocity", "linear_acceleration"):
+                        a, b = getattr(fast, f), getattr(ref, f)
+                        assert (a.x, a.y, a.z) == (b.x, b.y, b.z)
+                    assert list(fast.orientation_covariance) == list(ref.orientation_covariance)
+                elif conn.msgtype.endswith("Vector3Stamped"):
+                    assert (fast.vector.x, fast.vector.y, fast.vector.z) == (ref.vector.x, ref.vector.y, ref.vector.z)
+                elif conn.msgtype.endswith("FluidPressure"):
+                    assert fast.fluid_pressure == ref.fluid_pressure
+                elif conn.msgtype.endswith("JointState"):
+                    assert fast.name == list(ref.name) and list(fast.position) == list(ref.position)
+                    assert len(fast.velocity) == len(ref.velocity) and len(fast.effort) == len(ref.effort)
+                else:
+                    assert fast.wrench.force.x == ref.wrench.force.x
+    assert seen == set(cdr.DECODABLE)
+    T = store.types
+    for label, data in (("CZ_0,CZ_alpha,CZ_delta_e", [1.5, -2.25, 1e-300]), ("x", []), ("ab", [3.0])):
+        ref = T["std_msgs/msg/Float64MultiArray"](
+            layout=T["std_msgs/msg/MultiArrayLayout"](
+                dim=[T["std_msgs/msg/MultiArrayDimension"](label=label, size=len(data), stride=len(data))],
+                data_offset=0),
+            data=np.array(data, dtype=float))
+        assert cdr.encode_float64_multiarray(label, data) == bytes(store.serialize_cdr(ref, "std_msgs/msg/Float64MultiArray"))
+    for frame in ("base_link", "", "abc"):
+        ref = T["std_msgs/msg/Header"](stamp=T["builtin_interfaces/msg/Time"](sec=17, nanosec=99), frame_id=frame)
+        assert cdr.encode_header(17, 99, frame) == bytes(store.serialize_cdr(ref, "std_msgs/msg/Header"))
+    assert cdr.decode("std_msgs/msg/String", b"\x00\x01\x00\x00") is None
