@@ -130,13 +130,17 @@ def encode_header(sec: int, nanosec: int, frame_id: str) -> bytes:
     return _LE_HEADER + bytes(out)
 
 
-def encode_float64_multiarray(label: str, data) -> bytes:
-    """CDR of a one-dimensional ``std_msgs/Float64MultiArray`` (size = stride = len(data))."""
+def encode_float64_multiarray(label: str, data, second: str | None = None) -> bytes:
+    """CDR of a ``std_msgs/Float64MultiArray`` with ``dim[0] = (label, n, n)`` and, when
+    ``second`` is given, ``dim[1] = (second, 1, 1)``."""
     n = len(data)
-    out = bytearray(_U32.pack(1))  # one dimension
-    _string(out, label)
-    out += b"\x00" * (_align(len(out), 4) - len(out))
-    out += _U32.pack(n) + _U32.pack(n) + _U32.pack(0)  # size, stride, data_offset
+    dims = [(label, n, n)] + ([(second, 1, 1)] if second is not None else [])
+    out = bytearray(_U32.pack(len(dims)))
+    for text, size, stride in dims:
+        _string(out, text)
+        out += b"\x00" * (_align(len(out), 4) - len(out))
+        out += _U32.pack(size) + _U32.pack(stride)
+    out += _U32.pack(0)  # data_offset
     out += _U32.pack(n)
     if n:
         out += b"\x00" * (_align(len(out), 8) - len(out))

@@ -7,7 +7,7 @@ happens here beyond reading fields and the header stamp; no ROS import.
 
 from __future__ import annotations
 
-__all__ = ["INPUTS", "MESSAGE_TYPES", "stamp_ns", "feed"]
+__all__ = ["INPUTS", "MESSAGE_TYPES", "stamp_ns", "feed", "stamp_label", "parse_stamp_label"]
 
 # Standard input topics (relative names; a replay bag uses them under "/") and their types.
 MESSAGE_TYPES = {
@@ -24,6 +24,21 @@ def stamp_ns(msg) -> int:
     """``header.stamp`` in integer nanoseconds."""
     s = msg.header.stamp
     return int(s.sec) * 1_000_000_000 + int(s.nanosec)
+
+
+def stamp_label(stamp: int) -> str:
+    """``layout.dim[1].label`` of every output array: the sample's time, so each array can be
+    paired with its sample without a second topic (``stamp:SEC.NANOSEC``)."""
+    sec, nanosec = divmod(int(stamp), 1_000_000_000)
+    return f"stamp:{sec}.{nanosec:09d}"
+
+
+def parse_stamp_label(label: str) -> int:
+    """The sample time in nanoseconds from :func:`stamp_label`'s text."""
+    if not label.startswith("stamp:"):
+        raise ValueError(f"not a stamp label: {label!r}")
+    sec, _, nanosec = label[6:].partition(".")
+    return int(sec) * 1_000_000_000 + int(nanosec)
 
 
 def _imu(p, m):

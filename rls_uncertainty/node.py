@@ -37,7 +37,7 @@ from std_msgs.msg import Float64MultiArray, Header, MultiArrayDimension, MultiAr
 from std_srvs.srv import SetBool, Trigger
 
 from .config import PARAMETERS, ConfigError, node_config, pipeline_config
-from .messages import INPUTS, feed
+from .messages import INPUTS, feed, stamp_label
 from .pipeline import Pipeline, StateFileError
 
 __all__ = ["EstimatorNode", "main", "NODE_NAME"]
@@ -178,9 +178,7 @@ class EstimatorNode(Node):
                                           event_callbacks=_NO_EVENTS)
                     for suffix in ("estimates", "standard_errors", "standard_errors_conventional")
                 )
-            self._layouts[m.output] = MultiArrayLayout(
-                dim=[MultiArrayDimension(label=label, size=n, stride=n)], data_offset=0
-            )
+            self._layouts[m.output] = MultiArrayDimension(label=label, size=n, stride=n)
 
     # ------------------------------------------------------------------ data path
     def _callback(self, kind: str):
@@ -205,8 +203,9 @@ class EstimatorNode(Node):
         header = Header(frame_id=self.node_cfg.frame_id)
         header.stamp.sec, header.stamp.nanosec = divmod(out.stamp_ns, 1_000_000_000)
         self._stamp_pub.publish(header)
+        when = MultiArrayDimension(label=stamp_label(out.stamp_ns), size=1, stride=1)
         for name, _label, theta, se, se_conv in self.pipeline.published(out):
-            layout = self._layouts[name]
+            layout = MultiArrayLayout(dim=[self._layouts[name], when], data_offset=0)
             for pub, values in zip(self._model_pubs[name], (theta, se, se_conv)):
                 msg = Float64MultiArray(layout=layout)
                 data = array.array("d")

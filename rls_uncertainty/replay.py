@@ -27,7 +27,7 @@ import numpy as np
 from .bags import BagError, read_inputs, typestore, write_replay
 from .cdr import encode_float64_multiarray, encode_header
 from .config import PipelineConfig, node_config, pipeline_config
-from .messages import feed
+from .messages import feed, stamp_label
 from .pipeline import Pipeline
 
 __all__ = ["ReplayResult", "run_pipeline", "replay", "output_records", "NODE_NAME"]
@@ -90,10 +90,11 @@ def output_records(pipe: Pipeline, outputs, frame_id: str = "base_link", node: s
         stamp = out.stamp_ns
         header = encode_header(stamp // 10**9, stamp % 10**9, frame_id)
         records.append((stamp, f"/{node}/sample_stamp", "std_msgs/msg/Header", header))
+        when = stamp_label(stamp)
         for name, label, theta, se, se_conv in pipe.published(out):
             for suffix, data in (("estimates", theta), ("standard_errors", se), ("standard_errors_conventional", se_conv)):
                 records.append((stamp, f"/{node}/{name}/{suffix}", "std_msgs/msg/Float64MultiArray",
-                                encode_float64_multiarray(label, data.tolist())))
+                                encode_float64_multiarray(label, data.tolist(), when)))
     return records
 
 

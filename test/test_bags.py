@@ -279,6 +279,10 @@ def test_replay_writes_identical_outputs_twice_and_matches_the_pipeline(tmp_path
     topics = _read_all(tmp_path / "r1" / "estimates.mcap")
     est = topics["/rls_estimator/CZ/estimates"]
     assert est[-1][1].layout.dim[0].label == "CZ_0,CZ_alpha,CZ_delta_e"
+    from rls_uncertainty.messages import parse_stamp_label
+
+    for t, msg in est:  # every array carries its sample time; log time is the same
+        assert parse_stamp_label(msg.layout.dim[1].label) == t
     assert list(est[-1][1].data) == list(last.theta[0, :3])
     assert len(topics["/rls_estimator/sample_stamp"]) == len(again.outputs)
 
@@ -424,13 +428,14 @@ def test_fast_cdr_codecs_equal_rosbags():
                     assert fast.wrench.force.x == ref.wrench.force.x
     assert seen == set(cdr.DECODABLE)
     T = store.types
-    for label, data in (("CZ_0,CZ_alpha,CZ_delta_e", [1.5, -2.25, 1e-300]), ("x", []), ("ab", [3.0])):
+    Dim = T["std_msgs/msg/MultiArrayDimension"]
+    for label, data, second in (("CZ_0,CZ_alpha,CZ_delta_e", [1.5, -2.25, 1e-300], "stamp:1767225600.140000000"),
+                                ("x", [], None), ("ab", [3.0], "s"), ("abc", [1.0, 2.0], None)):
+        dims = [Dim(label=label, size=len(data), stride=len(data))] + ([Dim(label=second, size=1, stride=1)] if second else [])
         ref = T["std_msgs/msg/Float64MultiArray"](
-            layout=T["std_msgs/msg/MultiArrayLayout"](
-                dim=[T["std_msgs/msg/MultiArrayDimension"](label=label, size=len(data), stride=len(data))],
-                data_offset=0),
-            data=np.array(data, dtype=float))
-        assert cdr.encode_float64_multiarray(label, data) == bytes(store.serialize_cdr(ref, "std_msgs/msg/Float64MultiArray"))
+            layout=T["std_msgs/msg/MultiArrayLayout"](dim=dims, data_offset=0), data=np.array(data, dtype=float))
+        want = bytes(store.serialize_cdr(ref, "std_msgs/msg/Float64MultiArray"))
+        assert cdr.encode_float64_multiarray(label, data, second) == want
     for frame in ("base_link", "", "abc"):
         ref = T["std_msgs/msg/Header"](stamp=T["builtin_interfaces/msg/Time"](sec=17, nanosec=99), frame_id=frame)
         assert cdr.encode_header(17, 99, frame) == bytes(store.serialize_cdr(ref, "std_msgs/msg/Header"))

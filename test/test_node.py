@@ -20,7 +20,7 @@ from std_srvs.srv import SetBool, Trigger
 from ros_harness import NODE, ROOT, NodeProcess, RosTester, to_rclpy
 from rls_uncertainty.bags import read_inputs
 from rls_uncertainty.config import load_parameters_file, pipeline_config
-from rls_uncertainty.messages import feed
+from rls_uncertainty.messages import feed, parse_stamp_label
 from rls_uncertainty.pipeline import Pipeline
 from rls_uncertainty.replay import run_pipeline
 
@@ -78,6 +78,8 @@ def test_live_node_reproduces_the_offline_replay(tmp_path, tester, bag):
                 assert len(msgs) == sum(o.ready[j] for o in offline.outputs)
                 dim = msgs[-1].layout.dim[0]
                 assert (dim.label, dim.size, dim.stride) == (label, n, n)
+                assert parse_stamp_label(msgs[-1].layout.dim[1].label) == last.stamp_ns
+                assert (msgs[-1].layout.dim[1].size, msgs[-1].layout.dim[1].stride) == (1, 1)
                 np.testing.assert_allclose(np.array(msgs[-1].data), want[j, :n], rtol=1e-9, atol=0)
                 assert all(np.isfinite(m.data).all() for m in msgs)
         diag = tester.wait_diagnostics(lambda d: f"{NODE}: samples" in d)
