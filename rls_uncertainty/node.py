@@ -154,6 +154,7 @@ class EstimatorNode(Node):
         new = pipeline_config(values)
         self.node_cfg = node_config(values)
         self.pipeline.enabled = self.node_cfg.enabled
+        self._header.frame_id = self.node_cfg.frame_id
         if new != self.config:
             changed = ", ".join(sorted(p.name for p in params))
             old_fp, new_fp = self.config.fingerprint(), new.fingerprint()
@@ -170,7 +171,8 @@ class EstimatorNode(Node):
             if name not in wanted:
                 for pub in self._model_pubs.pop(name):
                     self.destroy_publisher(pub)
-        self._layouts = {}
+        self._messages = {}
+        self._header = Header(frame_id=self.node_cfg.frame_id)
         for m, label, n in zip(self.config.models, self.pipeline.labels, self.pipeline.sizes):
             if m.output not in self._model_pubs:
                 self._model_pubs[m.output] = tuple(
@@ -178,7 +180,13 @@ class EstimatorNode(Node):
                                           event_callbacks=_NO_EVENTS)
                     for suffix in ("estimates", "standard_errors", "standard_errors_conventional")
                 )
-            self._layouts[m.output] = MultiArrayDimension(label=label, size=n, stride=n)
+            self._messages[m.output] = [
+                Float64MultiArray(layout=MultiArrayLayout(
+                    dim=[MultiArrayDimension(label=label, size=n, stride=n), MultiArrayDimension(size=1, stride=1)],
+                    data_offset=0,
+                ))
+                for _ in range(3)
+            ]
 
     # ------------------------------------------------------------------ data path
     def _callback(self, kind: str):
@@ -200,14 +208,15 @@ class EstimatorNode(Node):
         return on_message
 
     def _publish(self, out) -> None:
-        header = Header(frame_id=self.node_cfg.frame_id)
+        # The message objects are reused (publish serializes them at once): building 19 new
+        # rclpy messages per sample costs more than the estimation.
+        header = self._header
         header.stamp.sec, header.stamp.nanosec = divmod(out.stamp_ns, 1_000_000_000)
         self._stamp_pub.publish(header)
-        when = MultiArrayDimension(label=stamp_label(out.stamp_ns), size=1, stride=1)
+        when = stamp_label(out.stamp_ns)
         for name, _label, theta, se, se_conv in self.pipeline.published(out):
-            layout = MultiArrayLayout(dim=[self._layouts[name], when], data_offset=0)
-            for pub, values in zip(self._model_pubs[name], (theta, se, se_conv)):
-                msg = Float64MultiArray(layout=layout)
+            for pub, msg, values in zip(self._model_pubs[name], self._messages[name], (theta, se, se_conv)):
+                msg.layout.dim[1].label = when
                 data = array.array("d")
                 data.frombytes(values.tobytes())
                 msg.data = data
