@@ -186,6 +186,7 @@ class EstimatorBank:
         self._A = np.zeros((m, n, n))  # weighted X'X before initialization (unscaled)
         self._b = np.zeros((m, n))  # weighted X'z before initialization (unscaled)
         self.repairs = np.zeros(m, dtype=np.int64)
+        self._zz = np.zeros(m)  # sum f^(k-j) z_j^2, the scale of an exact fit
         # Lag capacity: a ring of W = n_lags + 1 slots; all lags grow on demand.
         self._cap = _GROWTH_START if self.n_lags is None else self.n_lags + 1
         self._alloc_lag_arrays(self._cap)
@@ -318,6 +319,8 @@ class EstimatorBank:
             D /= f
         v = gain * f if self.residual == "a_posteriori" else e  # e f/d = z_k - x_k' theta_k
 
+        self._zz *= f
+        self._zz += z * z
         self._push(self._xbuf, xs)
         self._push(self._vbuf, v)
         all_ready = self._all_ready
@@ -498,10 +501,17 @@ class EstimatorBank:
             var_s = 2.0 * (D * np.matmul(Nm, D).swapaxes(1, 2)).sum(axis=2)
         var = var_s * self._inv_s2
         if kind == "corrected" and var.min() < 0.0:
+            var = np.where(self._exact_fit()[:, None], 0.0, var)
             for j in np.flatnonzero(self._ready & (var < 0.0).any(axis=1)):
                 var[j, : self.sizes[j]] = np.diag(self._covariances(kind)[j])
         self._cache[key] = var
         return var
+
+    def _exact_fit(self) -> np.ndarray:
+        """Models whose residual variance is below 1e-12 of the output's mean square: an
+        exact fit (no noise), whose covariances are zero. Their corrected variances come out
+        as tiny numbers of either sign from rounding; they are set to zero, not repaired."""
+        return self._R[:, 0] <= 1e-12 * self._zz / max(self.n_eff, 1.0)
 
     def standard_errors_all(self, kind: str = "corrected") -> np.ndarray:
         """Standard errors of every model as an ``(M, n_max)`` array (one vectorised pass).
@@ -531,10 +541,15 @@ class EstimatorBank:
             return self._cache[key]
         out: dict[int, np.ndarray] = {}
         raw = self._raw_covariances(kind)
+        exact = None
         for j, cov in raw.items():
             if kind == "corrected" and np.any(np.diag(cov) < 0.0):
-                cov = nearest_psd(cov)
-                self.repairs[j] += 1
+                exact = self._exact_fit() if exact is None else exact
+                if exact[j]:
+                    cov = np.zeros_like(cov)  # rounding of an exact fit, not indefiniteness
+                else:
+                    cov = nearest_psd(cov)
+                    self.repairs[j] += 1
             out[j] = cov
         self._cache[key] = out
         return out
@@ -582,7 +597,7 @@ class EstimatorBank:
 
     # ------------------------------------------------------------------ snapshot
     _STATE_ARRAYS = (
-        "_aug", "_inv_s", "_ready", "_ready_at", "_A", "_b", "repairs",
+        "_aug", "_inv_s", "_ready", "_ready_at", "_A", "_b", "repairs", "_zz",
         "_xbuf", "_vbuf", "_zbuf", "_R", "_U", "_Pzz", "_Pxz", "_Pzx", "_Pxx",
     )
 

@@ -384,3 +384,25 @@ def test_numerical_core_imports_numpy_only():
         capture_output=True, text=True, check=True,
     )
     assert out.stdout.strip() == "False"
+
+
+def test_an_exactly_fitted_model_has_zero_corrected_errors_without_repairs():
+    rng = np.random.default_rng(5)
+    X = np.column_stack([np.ones(300), rng.standard_normal(300), rng.standard_normal(300)])
+    z = X @ np.array([0.3, -1.2, 0.7])  # no noise: residuals are rounding only
+    bank = EstimatorBank([3], 50)
+    for k in range(300):
+        bank.update(X[k : k + 1], z[k : k + 1])
+    se = bank.standard_errors(0, "corrected")
+    cov = bank.covariance(0, "corrected")
+    assert np.all(np.isfinite(se)) and np.all(se < 1e-8)  # rounding-level, never NaN
+    assert np.all(np.abs(cov) < 1e-16)
+    assert bank.repairs[0] == 0
+    # A constant output fitted exactly by its bias (the T-2 bag's CX): rounding makes the
+    # corrected variances slightly negative; they are zero, not a repair.
+    const = EstimatorBank([3], 50)
+    for k in range(300):
+        const.update(X[k : k + 1], [-0.03])
+    assert np.all(const.standard_errors(0, "corrected") == 0.0) or np.all(const.standard_errors(0, "corrected") < 1e-8)
+    const.covariance(0, "corrected")
+    assert const.repairs[0] == 0
