@@ -383,3 +383,28 @@ def test_readme_demo_command_matches_the_offline_replay():
     assert run.returncode == 0, run.stdout + run.stderr
     assert "difference between the live node and the offline replay: 0.0e+00" in run.stdout
     assert "Cm_q" in run.stdout
+
+
+def test_default_sensor_qos_receives_and_a_qos_mismatch_is_diagnosed(tmp_path, tester, bag):
+    from rclpy.qos import qos_profile_sensor_data
+    from sensor_msgs.msg import Imu
+
+    # Default QoS (best effort): a reliable publisher is compatible, estimates arrive.
+    node = NodeProcess(tmp_path, "--params-file", T2, "-p", "diagnostics_period:=0.2", name="default_qos")
+    try:
+        tester.wait_connected()
+        tester.publish_all([(k, to_rclpy(k, m)) for k, _s, m in bag[:2000]])
+        est = _arrays(tester, "CZ", "estimates")
+        assert tester.spin_until(lambda: len(est) > 100), node.text()
+    finally:
+        assert node.stop() == 0
+    # Reliable inputs and a best-effort IMU publisher: incompatible, reported in diagnostics.
+    node = _node(tmp_path, "-p", "topics.imu:=imu_best_effort", name="mismatch")
+    best_effort = tester.node.create_publisher(Imu, "/imu_best_effort", qos_profile_sensor_data)
+    try:
+        d = tester.wait_diagnostics(lambda d: f"{NODE}: inputs" in d, timeout=20)
+        assert d[f"{NODE}: inputs"]["imu.publishers"] == "0"
+        assert "incompatible QoS" in d[f"{NODE}: inputs"]["message"]
+        assert best_effort.get_subscription_count() == 0
+    finally:
+        assert node.stop() == 0
