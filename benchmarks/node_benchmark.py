@@ -109,6 +109,56 @@ def publisher(args) -> None:
     rclpy.try_shutdown()
 
 
+def echo_node() -> None:
+    """The baseline's middle process: republish every Header at once (no work at all)."""
+    import rclpy
+    from rclpy.qos import QoSProfile, QoSReliabilityPolicy
+    from std_msgs.msg import Header
+
+    rclpy.init()
+    node = rclpy.create_node("bench_echo")
+    qos = QoSProfile(depth=1000, reliability=QoSReliabilityPolicy.RELIABLE)
+    pub = node.create_publisher(Header, "bench_echo_out", qos)
+    node.create_subscription(Header, "bench_echo_in", pub.publish, qos)
+    try:
+        rclpy.spin(node)
+    except KeyboardInterrupt:
+        pass
+
+
+def echo_baseline(samples: int = 1000) -> np.ndarray:
+    """Round trip through a Python node that does nothing: the floor under any rclpy node's
+    input-to-output latency on this machine (same two DDS hops, same 50 Hz)."""
+    import rclpy
+    from rclpy.qos import QoSProfile, QoSReliabilityPolicy
+    from std_msgs.msg import Header
+
+    echo = subprocess.Popen([sys.executable, __file__, "--echo"])
+    node = rclpy.create_node("bench_echo_client")
+    qos = QoSProfile(depth=1000, reliability=QoSReliabilityPolicy.RELIABLE)
+    sent, lat = {}, []
+    node.create_subscription(Header, "bench_echo_out",
+                             lambda m: lat.append(time.monotonic() - sent[m.stamp.nanosec]), qos)
+    pub = node.create_publisher(Header, "bench_echo_in", qos)
+    while pub.get_subscription_count() < 1:
+        rclpy.spin_once(node, timeout_sec=0.05)
+    end = time.monotonic() + 1.0
+    while time.monotonic() < end:
+        rclpy.spin_once(node, timeout_sec=0.05)
+    for k in range(samples):
+        msg = Header()
+        msg.stamp.nanosec = k
+        sent[k] = time.monotonic()
+        pub.publish(msg)
+        t_next = sent[k] + 0.02
+        while time.monotonic() < t_next:
+            rclpy.spin_once(node, timeout_sec=max(0.0, t_next - time.monotonic()))
+    echo.send_signal(2)
+    echo.wait(20)
+    node.destroy_node()
+    return np.array(lat) * 1e3
+
+
 def cpu_seconds(pid: int) -> float:
     fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
     return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
@@ -144,11 +194,16 @@ def main() -> int:
     ap.add_argument("--rate", type=float, default=50.0, help="estimator rate, Hz")
     ap.add_argument("--duration", type=float, default=20.0)
     ap.add_argument("--lags", type=int, default=50)
+    ap.add_argument("--no-baseline", action="store_true", help="skip the echo-node latency baseline")
     ap.add_argument("--publisher", action="store_true", help=argparse.SUPPRESS)
+    ap.add_argument("--echo", action="store_true", help=argparse.SUPPRESS)
     ap.add_argument("--log", default=None, help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.publisher:
         publisher(args)
+        return 0
+    if args.echo:
+        echo_node()
         return 0
 
     import rclpy
@@ -249,6 +304,10 @@ def main() -> int:
                "cpu_percent": 100 * (cpu1 - cpu0) / (wall1 - wall0),
                "dropped": expected - count["stamps"]}, open(tmp / "result.json", "w"))
     sub.destroy_node()
+    if not args.no_baseline:
+        base = echo_baseline()
+        print(f"  baseline: round trip through a Python node that only republishes (two DDS hops, 50 Hz): "
+              f"p50 {np.percentile(base, 50):.3f} ms, p99 {np.percentile(base, 99):.3f} ms")
     rclpy.try_shutdown()
     return 0
 
