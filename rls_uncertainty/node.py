@@ -19,7 +19,6 @@ import gc
 import os
 import sys
 import time
-from collections import Counter
 
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
@@ -85,7 +84,6 @@ class EstimatorNode(Node):
         self.config = pipeline_config(params)
         self.node_cfg = node_config(params)
         self.pipeline = Pipeline(self.config, enabled=self.node_cfg.enabled)
-        self.resets: Counter = Counter()
         self.state_status = "no state file"
         self._load_state()
 
@@ -162,9 +160,8 @@ class EstimatorNode(Node):
             old_fp, new_fp = self.config.fingerprint(), new.fingerprint()
             what = "estimator reset" if old_fp != new_fp else "pipeline restarted"
             self.get_logger().warning(f"parameters changed ({changed}): {what}")
-            self.resets["parameters_changed"] += 1
             self.config = new
-            self.pipeline = Pipeline(new, enabled=self.node_cfg.enabled)
+            self.pipeline = self.pipeline.reconfigured(new)
             self._make_model_publishers()
 
     def _make_model_publishers(self) -> None:
@@ -326,7 +323,7 @@ class EstimatorNode(Node):
         }
         for reason, n in sorted(c["samples_rejected"].items()):
             kv[f"samples_rejected.{reason}"] = n
-        for reason, n in sorted((Counter(c["resets"]) + self.resets).items()):
+        for reason, n in sorted(c["resets"].items()):
             kv[f"resets.{reason}"] = n
         for joint, n in sorted(c["unknown_joints"].items()):
             kv[f"unknown_joint.{joint}"] = n

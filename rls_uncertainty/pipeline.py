@@ -122,6 +122,7 @@ class Pipeline:
         self._joints = {s: config.mixing.names(s) for s in _SURFACES}
         self.samples_formed = 0
         self.samples_used = 0
+        self._used_before = 0  # samples used before a reconfiguration (see reconfigured())
         self.samples_rejected: Counter = Counter()
         self.resets: Counter = Counter()
         self.unknown_joints: Counter = Counter()
@@ -409,6 +410,26 @@ class Pipeline:
             self._next_t = None
             self._frontier_stream = None
 
+    def reconfigured(self, config: PipelineConfig, reason: str = "parameters_changed") -> "Pipeline":
+        """A pipeline with a new configuration that keeps this one's bookkeeping: buffered
+        messages are counted as expired, samples waiting in the delay line as
+        ``reset_<reason>``, and every counter carries over, so nothing disappears from the
+        diagnostics. The estimator starts afresh."""
+        new = Pipeline(config, record=self.record, enabled=self.enabled)
+        self._flush(f"reset_{reason}")
+        for name, s in self.streams.items():
+            t = new.streams[name]
+            t.received, t.rejected, t.last = s.received, Counter(s.rejected), s.last
+            t.expired = s.expired + len(s.stamps)
+        new.samples_formed = self.samples_formed
+        new.samples_used = 0
+        new._used_before = self.samples_used + self._used_before
+        new.samples_rejected = Counter(self.samples_rejected)
+        new.resets = Counter(self.resets)
+        new.resets[reason] += 1
+        new.unknown_joints = Counter(self.unknown_joints)
+        return new
+
     def finish(self) -> None:
         """End of data: the last ``lag`` samples never get a centred derivative."""
         self._flush("end_of_data")
@@ -451,7 +472,7 @@ class Pipeline:
         return {
             "streams": streams,
             "samples_formed": self.samples_formed,
-            "samples_used": self.samples_used,
+            "samples_used": self.samples_used + self._used_before,
             "samples_rejected": dict(self.samples_rejected),
             "samples_pending": len(self._pending),
             "resets": dict(self.resets),

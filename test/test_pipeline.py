@@ -349,3 +349,28 @@ def test_pipeline_imports_no_ros():
     code = "import sys, rls_uncertainty.pipeline, rls_uncertainty.messages; " \
            "sys.exit(any(m.split('.')[0] in ('rclpy', 'rosbags') for m in sys.modules))"
     assert subprocess.run([sys.executable, "-c", code]).returncode == 0
+
+
+def test_reconfiguration_keeps_every_count():
+    pipe = pitch_pipeline()
+    syn = Synthetic(pipe)
+    syn.run(0, 1003)
+    before = pipe.counters()
+    buffered = sum(len(s.stamps) for s in pipe.streams.values())
+    pending = before["samples_pending"]
+    assert buffered > 0 and pending > 0
+    new_cfg = pipeline_config({"models.enabled": ["Cm"], "models.Cm": ["1", "q_hat", "delta_e"], "estimator.lags": 10})
+    pipe = pipe.reconfigured(new_cfg)
+    syn.pipe = pipe
+    after = pipe.counters()
+    assert pipe.bank.k == 0 and pipe.config.n_lags == 10
+    assert after["resets"] == {"parameters_changed": 1}
+    assert after["samples_rejected"]["reset_parameters_changed"] == pending
+    assert sum(s["expired"] for s in after["streams"].values()) == buffered
+    for name, s in after["streams"].items():
+        assert s["received"] == before["streams"][name]["received"]
+    syn.run(1003, 3000)
+    pipe.finish()
+    c = pipe.counters()
+    assert c["samples_formed"] == c["samples_used"] + sum(c["samples_rejected"].values())
+    assert pipe.bank.k > 0
