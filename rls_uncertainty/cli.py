@@ -145,8 +145,9 @@ def _replay(args: argparse.Namespace) -> int:
     rejected = ", ".join(f"{k} {v}" for k, v in sorted(c["samples_rejected"].items())) or "none"
     print(f"\n{c['samples_formed']} samples formed, {c['samples_used']} used; rejected: {rejected}")
     for name, s in c["streams"].items():
-        if s["rejected"] or s["expired"]:
-            print(f"  {name}: {s['received']} received, rejected {s['rejected']}, expired {s['expired']}")
+        if s["rejected"] or s["expired"] or s["missing"]:
+            print(f"  {name}: {s['received']} received, rejected {s['rejected']}, expired {s['expired']}, "
+                  f"missing (stamp gaps) {s['missing']}")
     print(f"{result.n_messages} messages, {result.data_seconds:.1f} s of data in {result.wall_seconds:.2f} s "
           f"({result.speed:.0f}x real time); wrote {args.out}")
     return 0

@@ -300,6 +300,7 @@ class EstimatorNode(Node):
             kv[f"{kind}.received"] = s["received"]
             kv[f"{kind}.accepted"] = s["accepted"]
             kv[f"{kind}.expired"] = s["expired"]
+            kv[f"{kind}.missing"] = s["missing"]
             for reason, n in sorted(s["rejected"].items()):
                 kv[f"{kind}.rejected.{reason}"] = n
             if needed and (age is None or age > max(1.0, 2 * self.config.max_gap)):
@@ -309,6 +310,8 @@ class EstimatorNode(Node):
                                     f"(none running, or incompatible QoS: qos.reliable={self.node_cfg.reliable})")
             if s["rejected"]:
                 problems.append(f"{kind} rejected {sum(s['rejected'].values())}")
+            if s["missing"]:
+                problems.append(f"{kind} missing about {s['missing']} (stamp gaps: lost in transport?)")
         level = DiagnosticStatus.WARN if problems else DiagnosticStatus.OK
         arr.status.append(status("inputs", level, "; ".join(problems) or "all inputs fresh", kv))
 

@@ -73,7 +73,7 @@ class SampleOutput:
 class _Stream:
     """Time-ordered buffer of one input: integer-nanosecond stamps and value vectors."""
 
-    __slots__ = ("name", "stamps", "values", "received", "rejected", "expired", "last")
+    __slots__ = ("name", "stamps", "values", "received", "rejected", "expired", "last", "interval", "missing")
 
     def __init__(self, name: str) -> None:
         self.name = name
@@ -83,6 +83,8 @@ class _Stream:
         self.rejected: Counter = Counter()
         self.expired = 0
         self.last = None
+        self.interval = 0.0  # running estimate of the stream's stamp interval, ns
+        self.missing = 0  # messages presumed lost in transport (stamp gaps), see _accept
 
 
 # The sample vector, aircraft body axes: specific force, rates, air-relative velocity,
@@ -162,6 +164,17 @@ class Pipeline:
         if newest is not None and stamp <= newest:
             stream.rejected["duplicate" if stamp == newest else "out_of_order"] += 1
             return []
+        if newest is not None:
+            # Messages lost before they reached us (a best-effort DDS drop, a recorder gap)
+            # leave a hole in the stamps: count the missing ones against the stream's usual
+            # interval (exponential average) so that they show in diagnostics.
+            dt = stamp - newest
+            if stream.interval == 0.0:
+                stream.interval = float(dt)
+            elif dt > 1.5 * stream.interval:
+                stream.missing += int(round(dt / stream.interval)) - 1
+            else:
+                stream.interval += 0.05 * (dt - stream.interval)
         stream.stamps.append(stamp)
         stream.values.append(values)
         stream.last = stamp
@@ -420,6 +433,7 @@ class Pipeline:
         for name, s in self.streams.items():
             t = new.streams[name]
             t.received, t.rejected, t.last = s.received, Counter(s.rejected), s.last
+            t.interval, t.missing = s.interval, s.missing
             t.expired = s.expired + len(s.stamps)
         new.samples_formed = self.samples_formed
         new.samples_used = 0
@@ -467,6 +481,7 @@ class Pipeline:
                 "accepted": s.received - sum(s.rejected.values()),
                 "rejected": dict(s.rejected),
                 "expired": s.expired,
+                "missing": s.missing,
                 "newest_stamp_ns": s.last,
             }
         return {

@@ -374,3 +374,20 @@ def test_reconfiguration_keeps_every_count():
     c = pipe.counters()
     assert c["samples_formed"] == c["samples_used"] + sum(c["samples_rejected"].values())
     assert pipe.bank.k > 0
+
+
+def test_messages_lost_in_transport_are_counted_from_stamp_gaps():
+    pipe = pitch_pipeline()
+    syn = Synthetic(pipe)
+    dropped = {1200, 1205, 1210, 1500}  # IMU messages (5 ms) that never arrive
+    for ms in range(0, 3000):
+        t = syn.t0 + ms * MS
+        if ms % 5 == 0 and ms not in dropped:
+            syn.imu(t)
+        if ms % 20 == 3:
+            syn.air(t)
+        if ms % 10 == 1:
+            syn.surfaces(t)
+    c = pipe.counters()["streams"]
+    assert c["imu"]["missing"] == len(dropped)
+    assert c["airspeed"]["missing"] == 0 and c["control_surfaces"]["missing"] == 0
