@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .bags import BagError, read_inputs, typestore, write_replay
+from .bags import read_inputs, typestore, write_replay
 from .cdr import encode_float64_multiarray, encode_header
 from .config import PipelineConfig, node_config, pipeline_config
 from .messages import feed, stamp_label

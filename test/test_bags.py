@@ -4,7 +4,6 @@
 import csv
 import filecmp
 import math
-import shutil
 import struct
 from pathlib import Path
 
@@ -13,7 +12,7 @@ import pytest
 import yaml
 
 from rls_uncertainty import cli
-from rls_uncertainty.bags import BagError, _standard_message, convert, read_inputs, typestore, write_replay, write_t2_bag
+from rls_uncertainty.bags import _standard_message, convert, read_inputs, typestore, write_replay
 from rls_uncertainty.config import load_parameters_file, pipeline_config
 from rls_uncertainty.replay import replay, run_pipeline
 

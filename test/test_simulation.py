@@ -7,7 +7,6 @@ import pytest
 from scipy import signal
 
 from rls_uncertainty.cli import main
-from rls_uncertainty.estimator import batch_estimate
 from rls_uncertainty.montecarlo import PAPER_TABLE3
 from rls_uncertainty.simulation import (
     T2_TRUE,
