@@ -129,7 +129,7 @@ class EstimatorConfig:
     n_lags: int | None = 50
     window: str = "truncated"
     forgetting: float = 1.0
-    residual: str = "a_posteriori"
+    residual: str = "standardized"
     models: tuple[ModelConfig, ...] = field(default=DEFAULT_MODELS)
 
 
@@ -225,7 +225,7 @@ PARAMETERS: tuple[ParamSpec, ...] = (
     ParamSpec("estimator.lags", 50, "residual autocorrelation lags kept (Eq. 22); -1 keeps all lags (Eq. 20), 0 is the conventional covariance", -1, 100000),
     ParamSpec("estimator.window", "truncated", "lag window: truncated (Eq. 22) or bartlett (always positive semi-definite)", choices=("truncated", "bartlett")),
     ParamSpec("estimator.forgetting", 1.0, "exponential forgetting factor; 1 is the paper's growing-memory estimator", 0.5, 1.0),
-    ParamSpec("estimator.residual", "a_posteriori", "residual used in Eq. 17: a_posteriori (z - x'theta_k) or a_priori", choices=("a_posteriori", "a_priori")),
+    ParamSpec("estimator.residual", "standardized", "residual used in Eqs. 16-17: standardized (innovation / sqrt(1 + x'Dx), makes Eq. 16 equal the batch Eq. 14), a_posteriori (z - x'theta_k) or a_priori (z - x'theta_k-1)", choices=("standardized", "a_posteriori", "a_priori")),
     ParamSpec("differentiator.window", 9, "angular-acceleration differentiator window, samples", 3, 201),
     ParamSpec("differentiator.order", 3, "local polynomial order of the differentiator", 1, 10),
     ParamSpec("differentiator.lag", 4, "differentiator fixed lag, samples (0 = causal); every signal is delayed by it", 0, 200),
@@ -335,7 +335,7 @@ class PipelineConfig:
     n_lags: int | None = 50
     window: str = "truncated"
     forgetting: float = 1.0
-    residual: str = "a_posteriori"
+    residual: str = "standardized"
     diff_window: int = 9
     diff_order: int = 3
     diff_lag: int = 4

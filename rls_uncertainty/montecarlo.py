@@ -67,6 +67,7 @@ class LevelResult:
     se_conventional: np.ndarray  # (runs, 5)
     se_corrected: np.ndarray  # (runs, 5), n_lags lags
     se_corrected_all: np.ndarray  # (runs, 5), all lags
+    se_batch: np.ndarray  # (runs, 5), batch formula (Eqs. 8-11), n_lags lags, batch residuals
     se_batch_all: np.ndarray  # (runs, 5), batch formula, all lags, batch residuals
     time: np.ndarray  # sample times
     history_mean: np.ndarray  # (N, 3): mean CZ_alpha, mean conventional SE, mean corrected SE
@@ -82,6 +83,7 @@ class LevelResult:
                 "se_conventional": float(self.se_conventional[:, i].mean()),
                 "se_corrected": float(self.se_corrected[:, i].mean()),
                 "se_corrected_all": float(self.se_corrected_all[:, i].mean()),
+                "se_batch": float(self.se_batch[:, i].mean()),
                 "se_batch_all": float(self.se_batch_all[:, i].mean()),
                 "scatter": float(self.estimates[:, i].std(ddof=1)),
             }
@@ -133,10 +135,11 @@ def run_level(level: float, runs: int, *, n_lags: int = 50, seed: int = 2016) ->
             rows.append(_pick(per))
         return np.array(rows)
 
-    batch = []
+    batch = {n_lags: [], None: []}
     for r, data in enumerate(reductions):
-        per = [np.sqrt(np.diag(batch_estimate(*data[m.output], n_lags=None)[2])) for m in T2_MODELS]
-        batch.append(_pick(per))
+        for lags, rows in batch.items():
+            per = [np.sqrt(np.diag(batch_estimate(*data[m.output], n_lags=lags)[2])) for m in T2_MODELS]
+            rows.append(_pick(per))
     # Figs. 5 and 7 for the last run: recursive vs batch autocorrelation of the C_Z residual,
     # and corrected SE of C_Z_alpha against the number of retained lags.
     j = (runs - 1) * n_models
@@ -153,7 +156,8 @@ def run_level(level: float, runs: int, *, n_lags: int = 50, seed: int = 2016) ->
         se_conventional=collect(bank, "conventional"),
         se_corrected=collect(bank, "corrected"),
         se_corrected_all=collect(bank_all, "corrected"),
-        se_batch_all=np.array(batch),
+        se_batch=np.array(batch[n_lags]),
+        se_batch_all=np.array(batch[None]),
         time=t, history_mean=history, history_scatter=scatter, last_run=last,
     )
 
@@ -208,6 +212,21 @@ def write_outputs(results: list[LevelResult], out: Path, *, figures: bool = True
                 f"{row['se_conventional']:.3f} / {p[1]:.3f} | {row['se_corrected']:.3f} / {p[2]:.3f} | "
                 f"{row['scatter']:.3f} / {p[3]:.3f} | {row['se_corrected'] / row['scatter']:.2f} | "
                 f"{row['se_conventional'] / row['scatter']:.2f} |"
+            )
+    lines += [
+        "",
+        "## Recursive against batch corrected standard errors (end of maneuver, means over runs)",
+        "",
+        "Recursive: Eqs. 17-22 as the node runs them. Batch: Eqs. 8-11 with the final batch residuals.",
+        "",
+        "| level | parameter | recursive / batch, retained lags | recursive / batch, all lags | retained / all lags (recursive) |",
+        "| --- | --- | --- | --- | --- |",
+    ]
+    for res in results:
+        for name, row in res.summary().items():
+            lines.append(
+                f"| {res.level * 100:.0f}% | {name} | {row['se_corrected'] / row['se_batch']:.3f} | "
+                f"{row['se_corrected_all'] / row['se_batch_all']:.3f} | {row['se_corrected'] / row['se_corrected_all']:.3f} |"
             )
     paths["md"].write_text("\n".join(lines) + "\n")
     if figures:

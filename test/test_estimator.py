@@ -288,22 +288,51 @@ def test_prior_initialization_is_ridge_regression():
     assert abs(est.theta[1] - ols[1]) / abs(ols[1]) > 1e-3
 
 
-def test_a_priori_residual_option():
+def test_residual_options_are_the_innovation_the_a_posteriori_residual_and_their_geometric_mean():
     X, z = wide_scale_problem()
-    post = RecursiveEstimator(4)
-    prior = RecursiveEstimator(4, residual="a_priori")
+    est = {r: RecursiveEstimator(4, residual=r) for r in ("a_posteriori", "a_priori", "standardized")}
     thetas = []
     for k in range(len(z)):
-        post.update(X[k], z[k])
-        prior.update(X[k], z[k])
-        thetas.append(post.theta if post.is_ready else None)
+        for e in est.values():
+            e.update(X[k], z[k])
+        thetas.append(est["standardized"].theta if est["standardized"].is_ready else None)
     k0 = next(i for i, t in enumerate(thetas) if t is not None)
-    v_post = post.residuals()
-    v_prior = prior.residuals()
+    v = {r: e.residuals() for r, e in est.items()}
     for k in range(k0 + 1, len(z)):
-        assert v_post[k] == pytest.approx(z[k] - X[k] @ thetas[k], rel=1e-6, abs=1e-9)
-        assert v_prior[k] == pytest.approx(z[k] - X[k] @ thetas[k - 1], rel=1e-6, abs=1e-9)
-    np.testing.assert_array_equal(post.theta, prior.theta)
+        post = z[k] - X[k] @ thetas[k]
+        prior = z[k] - X[k] @ thetas[k - 1]
+        assert v["a_posteriori"][k] == pytest.approx(post, rel=1e-6, abs=1e-9)
+        assert v["a_priori"][k] == pytest.approx(prior, rel=1e-6, abs=1e-9)
+        assert v["standardized"][k] == pytest.approx(np.sign(prior) * np.sqrt(post * prior), rel=1e-6, abs=1e-9)
+    np.testing.assert_array_equal(est["a_posteriori"].theta, est["a_priori"].theta)
+    np.testing.assert_array_equal(est["a_posteriori"].theta, est["standardized"].theta)
+
+
+@pytest.mark.parametrize("forgetting", [1.0, 0.98])
+def test_standardized_residual_makes_eq16_the_batch_fit_error_variance_at_every_sample(forgetting):
+    """RSS_k = f RSS_(k-1) + e_k^2 f / d_k: with the default residual, R_k(0) (Eq. 16) equals
+    the weighted batch fit-error variance (Eq. 14) of samples 1..k with theta_k, and the
+    conventional standard errors equal the batch ones; the a posteriori residual falls short."""
+    rng = np.random.default_rng(11)
+    n = 400
+    X = np.column_stack([np.ones(n), rng.standard_normal((n, 2))])
+    colored = np.convolve(rng.standard_normal(n + 9), np.ones(10) / 3.0, "valid")
+    z = X @ [0.5, -2.0, 1.0] + colored
+    est = RecursiveEstimator(3, 20, forgetting=forgetting)
+    post = RecursiveEstimator(3, 20, forgetting=forgetting, residual="a_posteriori")
+    short = []
+    for k in range(n):
+        est.update(X[k], z[k])
+        post.update(X[k], z[k])
+        if not est.is_ready:
+            continue
+        w = forgetting ** np.arange(k, -1, -1)
+        theta, cov_conv, _ = batch_estimate(X[: k + 1], z[: k + 1], 20, forgetting=forgetting)
+        v = z[: k + 1] - X[: k + 1] @ theta
+        assert est.residual_variance == pytest.approx((w * v * v).sum() / w.sum(), rel=1e-9)
+        np.testing.assert_allclose(est.covariance("conventional"), cov_conv, rtol=1e-8, atol=1e-12)
+        short.append(1.0 - post.residual_variance / est.residual_variance)
+    assert np.mean(short) > 0.005  # the a posteriori residual is biased low
 
 
 def test_forgetting_tracks_a_parameter_change():
