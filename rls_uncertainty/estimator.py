@@ -189,8 +189,6 @@ class EstimatorBank:
         self._inv_s2 = self._inv_s * self._inv_s
         self._ready = np.zeros(m, dtype=bool)
         self._ready_at = np.zeros(m, dtype=np.int64)
-        self._A = np.zeros((m, n, n))  # weighted X'X before initialization (unscaled)
-        self._b = np.zeros((m, n))  # weighted X'z before initialization (unscaled)
         self.repairs = np.zeros(m, dtype=np.int64)
         self._zz = np.zeros(m)  # sum f^(k-j) z_j^2, the scale of an exact fit
         # Lag capacity: a ring of W = n_lags + 1 slots; all lags grow on demand.
@@ -227,21 +225,38 @@ class EstimatorBank:
     def _alloc_lag_arrays(self, cap: int) -> None:
         m, n = self.n_models, self.n_max
         slots = 2 * cap if self._ring() else cap
-        self._xbuf = np.zeros((m, slots, n))  # scaled regressors; ring read newest first
+        # y_k = (scaled regressors, output); ring read newest first. The outputs are needed
+        # until initialization.
+        self._ybuf = np.zeros((m, slots, n + 1))
+        self._y = np.zeros((m, n + 1))
         self._vbuf = np.zeros((m, slots))  # residuals
-        self._zbuf = np.zeros((m, slots))  # outputs (needed until initialization)
         self._R = np.zeros((m, cap))  # Eq. 17
-        # One-sided Eq. 21, stored transposed for speed: _U[m, b, i, a] = sum x_{j-i}[a] x_j[b].
-        self._U = np.zeros((m, n, cap, n))
-        self._tmp = np.zeros((m, n, cap, n))
-        # Lagged moments before initialization (weight f per sample).
-        self._Pzz = np.zeros((m, cap))
-        self._Pxz = np.zeros((m, cap, n))
-        self._Pzx = np.zeros((m, cap, n))
-        self._Pxx = np.zeros((m, cap, n, n))
+        # Lag products of y = (x, z), one-sided Eq. 21 on the x block:
+        # _Q[m, a, i, b] = sum_j f^(2(k-j)) f^i y_j[a] y_(j-i)[b], so that the x block
+        # _Q[m, :n, i, :n] is U_k(i)' with Lambda_k(i) = U_k(i) + U_k(i)'. The z row and column
+        # are the lagged moments X'z, z'z that exact initialization needs (with f = 1; under
+        # forgetting those are kept in _P with weight f per sample). The layout keeps each
+        # (m, a) block contiguous, so one outer product per sample updates every lag.
+        n1 = n + 1
+        self._Q = np.zeros((m, n1, cap, n1))
+        self._tmp = np.zeros((m, n1, cap, n1))
+        self._P = np.zeros((m, n1, cap, n1)) if self.forgetting != 1.0 else None
         self._lag_pow = self.forgetting ** np.arange(cap, dtype=float)
 
-    _LAG_ARRAYS = ("_xbuf", "_vbuf", "_zbuf", "_R", "_U", "_Pzz", "_Pxz", "_Pzx", "_Pxx")
+    _LAG_ARRAYS = ("_ybuf", "_vbuf", "_R", "_Q", "_P")
+
+    @property
+    def _U(self) -> np.ndarray:
+        """One-sided Eq. 21, transposed: ``_U[m, b, i, a] = sum x_(j-i)[a] x_j[b]``."""
+        return self._Q[:, : self.n_max, :, : self.n_max]
+
+    @property
+    def _xbuf(self) -> np.ndarray:
+        return self._ybuf[:, :, : self.n_max]
+
+    @property
+    def _zbuf(self) -> np.ndarray:
+        return self._ybuf[:, :, self.n_max]
 
     def _grow(self) -> None:
         """Double the lag capacity (all-lags mode only)."""
@@ -250,8 +265,10 @@ class EstimatorBank:
         self._cap = 2 * old
         self._alloc_lag_arrays(self._cap)
         for name, arr in keep.items():
-            if name == "_U":
-                self._U[:, :, :old] = arr
+            if arr is None:
+                continue
+            if name in ("_Q", "_P"):
+                getattr(self, name)[:, :, :old] = arr
             else:
                 getattr(self, name)[:, :old] = arr
 
@@ -332,28 +349,38 @@ class EstimatorBank:
 
         self._zz *= f
         self._zz += z * z
-        self._push(self._xbuf, xs)
+        y = self._y
+        y[:, :n] = xs
+        y[:, n] = z
+        self._push(self._ybuf, y)
         self._push(self._vbuf, v)
         all_ready = self._all_ready
-        if not all_ready:
-            self._push(self._zbuf, z)
         w = self.n_window
-        xl = self._recent(self._xbuf)  # (M, w, n): x_k, x_{k-1}, ...
+        yl = self._recent(self._ybuf)  # (M, w, n + 1): y_k, y_{k-1}, ...
         # Eq. 17: R_k(i) = (1 - 1/n_k) R_{k-1}(i) + v_k v_{k-i} / n_k  (n_k = k when f = 1).
         R = self._R[:, :w]
         R *= 1.0 - 1.0 / self.n_eff
         R += self._recent(self._vbuf) * (v * (1.0 / self.n_eff))[:, None]
-        # Eq. 21 (one-sided): U_k(i) = f^2 U_{k-1}(i) + f^i x_{k-i} x_k'.
-        U = self._U[:, :, :w]
-        tmp = self._tmp[:, :, :w]
-        lagged = xl if f == 1.0 else xl * self._lag_pow[None, :w, None]
-        if f != 1.0:
-            U *= f * f
-        np.multiply(xs[:, :, None, None], lagged[:, None, :, :], out=tmp)
-        U += tmp
-
+        # Eq. 21 (one-sided): U_k(i) = f^2 U_{k-1}(i) + f^i x_{k-i} x_k', for y = (x, z).
+        # Views as (M, n+1, w (n+1)) make the inner loops contiguous.
+        m, n1 = self.n_models, n + 1
+        Q = self._Q[:, :, :w].reshape(m, n1, w * n1)
+        tmp = self._tmp[:, :, :w].reshape(m, n1, w * n1)
+        if f == 1.0:
+            np.multiply(y[:, :, None], yl.reshape(m, 1, w * n1), out=tmp)
+            Q += tmp
+        else:
+            lagged = yl * self._lag_pow[None, :w, None]
+            np.multiply(y[:, :, None], lagged.reshape(m, 1, w * n1), out=tmp)
+            self._Q *= f * f
+            Q += tmp
+            if not all_ready:  # the moments for exact initialization: weight f per sample
+                P = self._P[:, :, :w].reshape(m, n1, w * n1)
+                np.multiply(y[:, :, None], yl.reshape(m, 1, w * n1), out=tmp)
+                self._P *= f
+                P += tmp
         if not all_ready:
-            self._accumulate_before_init(x, z, xl, w, f)
+            self._check_initialization(w)
         self._cache.clear()
 
     def _as_regressors(self, X) -> np.ndarray:
@@ -370,24 +397,17 @@ class EstimatorBank:
             x[j, :s] = row
         return x
 
-    def _accumulate_before_init(self, x, z, xl, w, f) -> None:
-        """Normal equations and lagged moments of the models not initialized yet."""
+    def _check_initialization(self, w: int) -> None:
+        """Exact initialization of the models still waiting, where their X'X allows it."""
         todo = ~self._ready
-        xr = x * self._mask
-        zl = self._recent(self._zbuf)
-        # Before initialization inv_s is 1 on real parameters, so xl is unscaled for them.
-        # Every model accumulates (contiguous whole-array operations are cheaper than
-        # gathering the waiting ones); only the waiting models' sums are ever read.
-        if f != 1.0:
-            for arr in (self._A, self._b, self._Pzz, self._Pxz, self._Pzx, self._Pxx):
-                arr *= f
-        self._A += xr[:, :, None] * xr[:, None, :]
-        self._b += xr * z[:, None]
-        self._Pzz[:, :w] += zl * z[:, None]
-        self._Pxz[:, :w] += xr[:, None, :] * zl[:, :, None]
-        self._Pzx[:, :w] += xl * z[:, None, None]
-        self._Pxx[:, :w] += xr[:, None, :, None] * xl[:, :, None, :]
-        for j in np.flatnonzero(todo):
+        if not todo.any():
+            return
+        # Only a model whose X'X has a positive diagonal can be well conditioned.
+        n = self.n_max
+        P = self._Q if self._P is None else self._P
+        diag = np.diagonal(P[:, :n, 0, :n], axis1=1, axis2=2)
+        candidates = todo & ((diag > 0.0) | ~self._mask).all(axis=1)
+        for j in np.flatnonzero(candidates):
             self._try_initialize(int(j), w)
 
     def _try_initialize(self, j: int, w: int) -> None:
@@ -395,7 +415,10 @@ class EstimatorBank:
         s_n = self.sizes[j]
         if self.k < s_n:
             return
-        A = self._A[j, :s_n, :s_n]
+        # Before initialization inv_s is 1 on real parameters, so the moments are unscaled.
+        Pj = self._Q[j] if self._P is None else self._P[j]  # (n+1, cap, n+1)
+        P0 = Pj[:, 0, :]
+        A = P0[:s_n, :s_n]
         s = np.sqrt(np.diag(A))
         if not np.all(s > 0):
             return
@@ -404,27 +427,25 @@ class EstimatorBank:
             return
         Cinv = np.linalg.inv(C)
         Cinv = 0.5 * (Cinv + Cinv.T)  # scaled D = S (X'X)^-1 S
-        theta_scaled = Cinv @ (self._b[j, :s_n] / s)  # Eq. 6
+        theta_scaled = Cinv @ (P0[:s_n, self.n_max] / s)  # Eq. 6
         n = self.n_max
         self._aug[j, :s_n, :s_n] = Cinv
         self._aug[j, n, :s_n] = theta_scaled
         self._inv_s[j, :s_n] = 1.0 / s
         self._inv_s2 = self._inv_s * self._inv_s
         # Residuals of samples 1..k0 with the batch solution; R(i) from the lagged moments:
-        # sum v_j v_{j-i} = Pzz - t'Pxz - t'Pzx + t'Pxx t.
-        t = np.zeros(n)
-        t[:s_n] = theta_scaled / s
-        nR = (
-            self._Pzz[j, :w]
-            - self._Pxz[j, :w] @ t
-            - self._Pzx[j, :w] @ t
-            + np.einsum("i,wij,j->w", t, self._Pxx[j, :w], t)
-        )
+        # v_j = ta' y_j with ta = (-theta, 1), so sum v_j v_{j-i} = ta' P(i) ta.
+        ta = np.zeros(n + 1)
+        ta[:s_n] = -theta_scaled / s
+        ta[n] = 1.0
+        nR = np.einsum("a,aib,b->i", ta, Pj[:, :w, :], ta)
         self._R[j, :w] = nR / self.n_eff
         inv = self._inv_s[j]
-        self._U[j] *= inv[:, None, None] * inv[None, None, :]
-        self._xbuf[j] *= inv[None, :]
-        self._vbuf[j] = self._zbuf[j] - self._xbuf[j] @ self._aug[j, n]
+        self._Q[j, :n] *= inv[:, None, None]  # x rows and columns to scaled units
+        self._Q[j, :, :, :n] *= inv[None, None, :]
+        xb = self._ybuf[j, :, :n]
+        xb *= inv[None, :]
+        self._vbuf[j] = self._ybuf[j, :, n] - xb @ self._aug[j, n]
         self._ready[j] = True
         self._ready_at[j] = self.k
         self._all_ready = bool(self._ready.all())
@@ -488,7 +509,8 @@ class EstimatorBank:
             w = self.n_window
             cR = self._R[:, :w] * self._weights(w)
             # N'[b, a] = sum_i cR_i U[b, i, a]
-            self._cache["N"] = np.matmul(cR[:, None, None, :], self._U[:, :, :w])[:, :, 0, :]
+            n = self.n_max
+            self._cache["N"] = np.matmul(cR[:, None, None, :], self._Q[:, :, :w])[:, :n, 0, :n]
         return self._cache["N"]
 
     def _variances(self, kind: str) -> np.ndarray:
@@ -607,9 +629,10 @@ class EstimatorBank:
         return self.standard_errors_all(kind)[j, : self.sizes[j]].copy()
 
     # ------------------------------------------------------------------ snapshot
+    STATE_FORMAT = 2  # 2: lagged moments as one array of y = (x, z) products
     _STATE_ARRAYS = (
-        "_aug", "_inv_s", "_ready", "_ready_at", "_A", "_b", "repairs", "_zz",
-        "_xbuf", "_vbuf", "_zbuf", "_R", "_U", "_Pzz", "_Pxz", "_Pzx", "_Pxx",
+        "_aug", "_inv_s", "_ready", "_ready_at", "repairs", "_zz",
+        "_ybuf", "_vbuf", "_R", "_Q", "_P",
     )
 
     def state(self) -> dict:
@@ -623,14 +646,21 @@ class EstimatorBank:
             "init_condition": self.init_condition,
         }
         counters = {"k": self.k, "n_eff": self.n_eff, "ptr": self._ptr, "cap": self._cap}
-        arrays = {name.lstrip("_"): getattr(self, name).copy() for name in self._STATE_ARRAYS}
-        return {"format": 1, "config": config, "counters": counters, "arrays": arrays}
+        arrays = {
+            name.lstrip("_"): getattr(self, name).copy()
+            for name in self._STATE_ARRAYS
+            if getattr(self, name) is not None
+        }
+        return {"format": self.STATE_FORMAT, "config": config, "counters": counters, "arrays": arrays}
 
     @classmethod
     def from_state(cls, state: dict) -> "EstimatorBank":
         """Rebuild an estimator bank from :meth:`state` (also after a save to disk)."""
-        if state.get("format") != 1:
-            raise ValueError(f"unknown estimator state format {state.get('format')!r}")
+        if state.get("format") != cls.STATE_FORMAT:
+            raise ValueError(
+                f"unknown estimator state format {state.get('format')!r} "
+                f"(this version reads format {cls.STATE_FORMAT})"
+            )
         cfg = dict(state["config"])
         bank = cls(
             cfg.pop("sizes"), cfg.pop("n_lags"), cfg.pop("window"), cfg.pop("forgetting"), **cfg
@@ -642,6 +672,8 @@ class EstimatorBank:
             bank._cap = cap
             bank._alloc_lag_arrays(cap)
         for name in cls._STATE_ARRAYS:
+            if getattr(bank, name) is None:
+                continue
             arr = np.array(state["arrays"][name.lstrip("_")], copy=True)
             if arr.shape != getattr(bank, name).shape:
                 raise ValueError(f"estimator state field {name!r} has shape {arr.shape}")

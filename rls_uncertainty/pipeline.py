@@ -500,7 +500,7 @@ class Pipeline:
         path = Path(path)
         state = self.bank.state()
         meta = {
-            "format": 1,
+            "format": EstimatorBank.STATE_FORMAT,
             "fingerprint": self.config.fingerprint(),
             "bank_config": state["config"],
             "bank_counters": state["counters"],
@@ -525,14 +525,17 @@ class Pipeline:
             raise StateFileError(f"{path}: no such state file") from exc
         except Exception as exc:  # noqa: BLE001 - any corruption is reported the same way
             raise StateFileError(f"{path}: not a readable state file ({exc})") from exc
-        if meta.get("format") != 1:
-            raise StateFileError(f"{path}: unknown state format {meta.get('format')!r}")
+        if meta.get("format") != EstimatorBank.STATE_FORMAT:
+            raise StateFileError(
+                f"{path}: state format {meta.get('format')!r}, this version reads "
+                f"{EstimatorBank.STATE_FORMAT} (saved by another version; delete it to start afresh)"
+            )
         want = json.loads(json.dumps(self.config.fingerprint()))
         if meta["fingerprint"] != want:
             raise StateFileError(f"{path}: saved with another aircraft, model or estimator configuration")
         try:
             bank = EstimatorBank.from_state(
-                {"format": 1, "config": meta["bank_config"], "counters": meta["bank_counters"], "arrays": arrays}
+                {"format": EstimatorBank.STATE_FORMAT, "config": meta["bank_config"], "counters": meta["bank_counters"], "arrays": arrays}
             )
         except (KeyError, ValueError) as exc:
             raise StateFileError(f"{path}: inconsistent estimator state ({exc})") from exc
