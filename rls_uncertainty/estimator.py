@@ -242,6 +242,7 @@ class EstimatorBank:
         self._tmp = np.zeros((m, n1, cap, n1))
         self._P = np.zeros((m, n1, cap, n1)) if self.forgetting != 1.0 else None
         self._lag_pow = self.forgetting ** np.arange(cap, dtype=float)
+        self._waiting = None  # see _check_initialization
 
     _LAG_ARRAYS = ("_ybuf", "_vbuf", "_R", "_Q", "_P")
 
@@ -399,16 +400,25 @@ class EstimatorBank:
 
     def _check_initialization(self, w: int) -> None:
         """Exact initialization of the models still waiting, where their X'X allows it."""
-        todo = ~self._ready
-        if not todo.any():
+        waiting = self._waiting
+        if waiting is None:
+            # Flat indices of the lag-0 X'X diagonals of the waiting models, and the offsets
+            # of each model's run of them (rebuilt whenever a model initializes).
+            todo = [j for j in range(self.n_models) if not self._ready[j]]
+            n1, cap = self.n_max + 1, self._cap
+            idx = [((j * n1 + a) * cap) * n1 + a for j in todo for a in range(self.sizes[j])]
+            offsets = np.cumsum([0] + [self.sizes[j] for j in todo[:-1]])
+            waiting = self._waiting = (todo, np.array(idx, dtype=np.intp), offsets)
+        todo, idx, offsets = waiting
+        if not todo:
             return
         # Only a model whose X'X has a positive diagonal can be well conditioned.
-        n = self.n_max
         P = self._Q if self._P is None else self._P
-        diag = np.diagonal(P[:, :n, 0, :n], axis1=1, axis2=2)
-        candidates = todo & ((diag > 0.0) | ~self._mask).all(axis=1)
-        for j in np.flatnonzero(candidates):
-            self._try_initialize(int(j), w)
+        positive = np.logical_and.reduceat(P.reshape(-1).take(idx) > 0.0, offsets)
+        if positive.any():
+            for j, ok in zip(todo, positive.tolist()):
+                if ok:
+                    self._try_initialize(j, w)
 
     def _try_initialize(self, j: int, w: int) -> None:
         """Exact initialization of model ``j`` at the current sample, if X'X allows it."""
@@ -448,6 +458,7 @@ class EstimatorBank:
         self._vbuf[j] = self._ybuf[j, :, n] - xb @ self._aug[j, n]
         self._ready[j] = True
         self._ready_at[j] = self.k
+        self._waiting = None
         self._all_ready = bool(self._ready.all())
 
     # ------------------------------------------------------------------ results
@@ -680,6 +691,7 @@ class EstimatorBank:
             setattr(bank, name, arr)
         bank._inv_s2 = bank._inv_s * bank._inv_s
         bank._all_ready = bool(bank._ready.all())
+        bank._waiting = None
         return bank
 
 
