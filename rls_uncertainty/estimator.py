@@ -243,6 +243,7 @@ class EstimatorBank:
         self._P = np.zeros((m, n1, cap, n1)) if self.forgetting != 1.0 else None
         self._lag_pow = self.forgetting ** np.arange(cap, dtype=float)
         self._waiting = None  # see _check_initialization
+        self._invalid_mask = None  # see _invalid
 
     _LAG_ARRAYS = ("_ybuf", "_vbuf", "_R", "_Q", "_P")
 
@@ -459,6 +460,7 @@ class EstimatorBank:
         self._ready[j] = True
         self._ready_at[j] = self.k
         self._waiting = None
+        self._invalid_mask = None
         self._all_ready = bool(self._ready.all())
 
     # ------------------------------------------------------------------ results
@@ -545,9 +547,10 @@ class EstimatorBank:
             var_s = 2.0 * (D * np.matmul(Nm, D).swapaxes(1, 2)).sum(axis=2)
         var = var_s * self._inv_s2
         if kind == "corrected" and var.min() < 0.0:
-            var = np.where(self._exact_fit()[:, None], 0.0, var)
-            for j in np.flatnonzero(self._ready & (var < 0.0).any(axis=1)):
-                var[j, : self.sizes[j]] = np.diag(self._covariances(kind)[j])
+            var[self._exact_fit()] = 0.0
+            if var.min() < 0.0:
+                for j in np.flatnonzero(self._ready & (var < 0.0).any(axis=1)):
+                    var[j, : self.sizes[j]] = np.diag(self._covariances(kind)[j])
         self._cache[key] = var
         return var
 
@@ -567,7 +570,7 @@ class EstimatorBank:
         if se is None:
             _check_kind(kind)
             se = np.sqrt(np.maximum(self._variances(kind), 0.0))
-            se[~(self._mask & self._ready[:, None])] = np.nan
+            se[self._invalid()] = np.nan
             self._cache[key] = se
         return se
 
@@ -575,8 +578,14 @@ class EstimatorBank:
         """Estimates of every model as an ``(M, n_max)`` array; padding and models that are
         not :attr:`ready` are NaN."""
         th = self._aug[:, self.n_max] * self._inv_s
-        th[~(self._mask & self._ready[:, None])] = np.nan
+        th[self._invalid()] = np.nan
         return th
+
+    def _invalid(self) -> np.ndarray:
+        """``(M, n_max)`` mask of the padding and the models not ready (NaN in outputs)."""
+        if self._invalid_mask is None:
+            self._invalid_mask = ~(self._mask & self._ready[:, None])
+        return self._invalid_mask
 
     def _covariances(self, kind: str) -> dict:
         """Full covariances of the ready models, repaired where a diagonal is negative."""
@@ -692,6 +701,7 @@ class EstimatorBank:
         bank._inv_s2 = bank._inv_s * bank._inv_s
         bank._all_ready = bool(bank._ready.all())
         bank._waiting = None
+        bank._invalid_mask = None
         return bank
 
 

@@ -140,6 +140,12 @@ class Pipeline:
         self._pending: deque = deque()
         self._rows = [tuple(m.regressors) for m in config.models]
         self._outputs = [m.output for m in config.models]
+        # Where each model's regressors go in the (M, n_max) regression matrix, flattened.
+        n_max = self.bank.n_max
+        self._x_names = [name for names in self._rows for name in names]
+        self._x_index = np.array(
+            [j * n_max + i for j, names in enumerate(self._rows) for i in range(len(names))], dtype=np.intp
+        )
 
     # ------------------------------------------------------------------ estimator
     def _new_estimator(self) -> None:
@@ -371,10 +377,8 @@ class Pipeline:
         coef = coefficients(state, ac)
         reg = regressors(state, ac)
         X, z = self._X, self._z
-        for j, names in enumerate(self._rows):
-            for i, name in enumerate(names):
-                X[j, i] = reg[name]
-            z[j] = coef[self._outputs[j]]
+        X.flat[self._x_index] = [reg[name] for name in self._x_names]
+        z[:] = [coef[name] for name in self._outputs]
         try:
             self.bank.update(X, z)
         except NonFiniteInput:  # pragma: no cover - inputs are checked above
