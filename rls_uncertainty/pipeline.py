@@ -122,6 +122,7 @@ class Pipeline:
         self.streams = {name: _Stream(name) for name in STREAMS}
         self._needed = [self.streams[name] for name in self.required]
         self._joints = {s: config.mixing.names(s) for s in _SURFACES}
+        self._joint_layouts: dict = {}
         self.samples_formed = 0
         self.samples_used = 0
         self._used_before = 0  # samples used before a reconfiguration (see reconfigured())
@@ -210,37 +211,56 @@ class Pipeline:
     def add_surfaces(self, stamp_ns: int, names, positions) -> list[SampleOutput]:
         """``sensor_msgs/JointState`` names and positions (rad), mixed by Eq. 23."""
         stream = self.streams["control_surfaces"]
-        names = list(names)
-        positions = list(positions)
-        if len(names) != len(positions) or len(set(names)) != len(names):
+        names = tuple(names)
+        layout = "mismatched_arrays" if len(positions) != len(names) else self._joint_layouts.get(names)
+        if layout is None:
+            layout = self._joint_layout(names)
+        if isinstance(layout, str):
             stream.received += 1
-            stream.rejected["mismatched_arrays"] += 1
+            stream.rejected[layout] += 1
             return []
-        table = dict(zip(names, positions))
-        mix = self.config.mixing
-        missing = [n for s in _SURFACES for n in self._joints[s] if n not in table]
-        if missing:
-            stream.received += 1
-            stream.rejected["missing_joint"] += 1
-            return []
-        known = set(mix.elevator) | set(mix.rudder) | set(self._joints["delta_a"])
-        for n in names:
-            if n not in known:
-                self.unknown_joints[n] += 1
+        elevator, right, left, combined, rudder, unknown = layout
+        for n in unknown:
+            self.unknown_joints[n] += 1
 
-        def mean(keys):
-            return sum(table[k] for k in keys) / len(keys) if keys else 0.0
+        def mean(index):
+            return sum(positions[i] for i in index) / len(index) if index else 0.0
 
-        de = mean(mix.elevator)
-        if mix.aileron_combined:
-            da = table[mix.aileron_combined]
-        elif self._joints["delta_a"]:
-            da = 0.5 * (mean(mix.aileron_right) - mean(mix.aileron_left))  # Eq. 23
+        de = mean(elevator)
+        if combined is not None:
+            da = positions[combined]
+        elif right or left:
+            da = 0.5 * (mean(right) - mean(left))  # Eq. 23
         else:
             da = 0.0
-        dr = mean(mix.rudder)
+        dr = mean(rudder)
         values = (de, da, dr)
         return self._accept(stream, int(stamp_ns), values, math.isfinite(de + da + dr))
+
+    def _joint_layout(self, names: tuple):
+        """Where each mixed joint sits in a JointState's arrays (cached per name list), or the
+        rejection reason of the name list."""
+        if len(self._joint_layouts) >= 16:  # name lists normally never change; stay bounded
+            self._joint_layouts.clear()
+        if len(set(names)) != len(names):
+            layout = "mismatched_arrays"
+        elif any(n not in names for s in _SURFACES for n in self._joints[s]):
+            layout = "missing_joint"
+        else:
+            mix = self.config.mixing
+            where = {n: i for i, n in enumerate(names)}
+            known = set(mix.elevator) | set(mix.rudder) | set(self._joints["delta_a"])
+            split = bool(self._joints["delta_a"]) and not mix.aileron_combined
+            layout = (
+                [where[n] for n in mix.elevator],
+                [where[n] for n in mix.aileron_right] if split else [],
+                [where[n] for n in mix.aileron_left] if split else [],
+                where[mix.aileron_combined] if mix.aileron_combined else None,
+                [where[n] for n in mix.rudder],
+                [n for n in names if n not in known],
+            )
+        self._joint_layouts[names] = layout
+        return layout
 
     # ------------------------------------------------------------------ sample formation
     def _expire(self, stream: _Stream, newest: int) -> None:

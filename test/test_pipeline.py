@@ -185,9 +185,19 @@ def test_aileron_mixing_is_eq_23():
     de, da, dr = pipe.streams["control_surfaces"].values[-1]
     assert da == pytest.approx(0.5 * (0.2 - (-0.2)))
     assert dr == pytest.approx(0.02)
+    # The joint order may change from message to message: the mixing follows the names.
+    pipe.add_surfaces(6, ["elevator", "r2", "r1", "al", "ar2", "ar1"], [0.0, 0.03, 0.01, -0.2, 0.3, 0.1])
+    assert pipe.streams["control_surfaces"].values[-1] == (de, da, dr)
+    pipe.add_surfaces(7, ["ar1", "ar2", "al", "r1", "r2", "elevator"], [0.1, 0.5, -0.2, 0.01, 0.03, 0.0])
+    assert pipe.streams["control_surfaces"].values[-1][1] == pytest.approx(0.5 * (0.3 - (-0.2)))
     combined = Pipeline(pipeline_config({"models.enabled": ["Cl"], "surfaces.aileron_combined": "ail"}))
     combined.add_surfaces(5, ["ail", "rudder", "elevator"], [0.07, 0.0, 0.0])
     assert combined.streams["control_surfaces"].values[-1][1] == 0.07
+    # Only one aileron side configured: no aileron deflection is formed (and none required).
+    one_side = Pipeline(pipeline_config({"models.enabled": ["Cm"], "surfaces.aileron_left": []}))
+    one_side.add_surfaces(5, ["aileron_right", "rudder", "elevator"], [0.07, 0.0, 0.01])
+    one_side.add_surfaces(6, ["rudder", "elevator"], [0.0, 0.01])
+    assert [v[1] for v in one_side.streams["control_surfaces"].values] == [0.0, 0.0]
 
 
 def test_bad_messages_are_counted_and_never_reach_the_outputs():
