@@ -187,6 +187,9 @@ class Pipeline:
         stream.last = stamp
         if stamp - stream.stamps[0] > self.buffer_ns:
             self._expire(stream, stamp)
+        frontier = self._frontier_stream
+        if frontier is not None and frontier.stamps[-1] < self._next_t:
+            return []  # the stream holding the grid back has still not reached it (see _advance)
         return self._advance()
 
     def add_imu(self, stamp_ns: int, angular_velocity, linear_acceleration) -> list[SampleOutput]:
