@@ -28,8 +28,12 @@ def rep103_to_aircraft(vec):
     """REP-103 body frame (x fwd, y left, z up) to aircraft body axes (x fwd, y right, z down).
 
     A rotation of pi about x: ``(x, y, z) -> (x, -y, -z)``. Applies to vectors (specific
-    force, angular rate, airspeed) given as ``(..., 3)`` arrays.
+    force, angular rate, airspeed) given as ``(..., 3)`` arrays; one vector given as a tuple
+    of three numbers (the per-sample path) comes back as a tuple of floats.
     """
+    if type(vec) is tuple and len(vec) == 3:
+        x, y, z = vec
+        return (float(x), -float(y), -float(z))
     v = np.asarray(vec, dtype=float)
     return v * np.array([1.0, -1.0, -1.0])
 
@@ -85,7 +89,7 @@ def physics_rejection(state: FlightState) -> str | None:
 
 def coefficients(s: FlightState, ac: AircraftConfig) -> dict[str, np.ndarray]:
     """Body-axis force and moment coefficients, Eq. 1a-f."""
-    qS = np.asarray(s.qbar, dtype=float) * ac.S
+    qS = s.qbar * ac.S if isinstance(s.qbar, float) else np.asarray(s.qbar, dtype=float) * ac.S
     return {
         "CX": (ac.mass * s.ax - s.thrust) / qS,  # Eq. 1a
         "CY": ac.mass * s.ay / qS,  # Eq. 1b

@@ -333,13 +333,15 @@ class Pipeline:
             a, b = s.values[i - 1], s.values[i]
             vals[s.name] = tuple(x + w * (y - x) for x, y in zip(a, b))
         imu = vals["imu"]
-        # One conversion to aircraft body axes: rows specific force, rates, velocity.
-        body = rep103_to_aircraft(np.array((imu[3:], imu[:3], vals["airspeed"]))).ravel()
-        raw = np.empty(14)
-        raw[:9] = body
-        raw[_QBAR] = vals["dynamic_pressure"][0] if "dynamic_pressure" in vals else np.nan
-        raw[_DE:_DR + 1] = vals.get("control_surfaces", (0.0, 0.0, 0.0))
-        raw[_T] = vals["thrust"][0] if "thrust" in vals else 0.0
+        # The conversion to aircraft body axes: specific force, rates, velocity.
+        raw = [
+            *rep103_to_aircraft(imu[3:]),
+            *rep103_to_aircraft(imu[:3]),
+            *rep103_to_aircraft(vals["airspeed"]),
+            vals["dynamic_pressure"][0] if "dynamic_pressure" in vals else math.nan,
+            *vals.get("control_surfaces", (0.0, 0.0, 0.0)),
+            vals["thrust"][0] if "thrust" in vals else 0.0,
+        ]
         return raw, None, None
 
     def _trim(self, t_next: int) -> None:
@@ -358,7 +360,7 @@ class Pipeline:
             self._pending.clear()
         self._diff.reset()
 
-    def _process(self, t: int, raw: np.ndarray) -> SampleOutput | None:
+    def _process(self, t: int, raw: list) -> SampleOutput | None:
         self._pending.append((t, raw))
         rate_dot = self._diff.push(raw[_P:_R + 1])
         if rate_dot is None:
@@ -369,17 +371,17 @@ class Pipeline:
         t, raw = self._pending.popleft()  # the sample diff_lag samples back, aligned
         return self._estimate(t, raw, rate_dot)
 
-    def flight_state(self, raw: np.ndarray, rate_dot) -> FlightState | str:
+    def flight_state(self, raw: list, rate_dot) -> FlightState | str:
         """The aligned sample as a :class:`FlightState`, or the reason it cannot be used."""
-        u, v, w = raw[_U:_W + 1].tolist()
+        u, v, w = raw[_U:_W + 1]
         V = math.sqrt(u * u + v * v + w * w)
         if not V > 0.0:
             return "nonpositive_airspeed"
         qbar = raw[_QBAR]
         if math.isnan(qbar):
             qbar = 0.5 * self.config.air_density * V * V
-        ax, ay, az, p, q, r = raw[:6].tolist()
-        de, da, dr, thrust = raw[_DE:].tolist()
+        ax, ay, az, p, q, r = raw[:6]
+        de, da, dr, thrust = raw[_DE:]
         p_dot, q_dot, r_dot = rate_dot.tolist()
         state = FlightState(
             ax=ax, ay=ay, az=az, p=p, q=q, r=r, p_dot=p_dot, q_dot=q_dot, r_dot=r_dot,
@@ -388,7 +390,7 @@ class Pipeline:
         )
         return physics_rejection(state) or state
 
-    def _estimate(self, t: int, raw: np.ndarray, rate_dot) -> SampleOutput | None:
+    def _estimate(self, t: int, raw: list, rate_dot) -> SampleOutput | None:
         state = self.flight_state(raw, rate_dot)
         if isinstance(state, str):
             self.samples_rejected[state] += 1
