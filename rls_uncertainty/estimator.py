@@ -305,8 +305,12 @@ class EstimatorBank:
             z = np.asarray(z, dtype=float).reshape(-1)
         if z.shape != (self.n_models,):
             raise ValueError(f"expected {self.n_models} measured outputs, got shape {z.shape}")
-        xs = x * self._inv_s  # scaled regressors; zero on padding
-        if not math.isfinite(float(xs.sum()) + float(z.sum())):
+        n = self.n_max
+        y = self._y  # y_k = (scaled regressors, output); zero on padding
+        xs = y[:, :n]
+        np.multiply(x, self._inv_s, out=xs)
+        y[:, n] = z
+        if not math.isfinite(float(y.sum())):
             # NaN or Inf somewhere, or only an overflow of the sum: check exactly.
             bad = [
                 j for j in range(self.n_models)
@@ -316,10 +320,9 @@ class EstimatorBank:
                 raise NonFiniteInput(
                     f"non-finite regressor or output for model(s) {bad}; sample ignored"
                 )
-            xs = np.where(self._mask, xs, 0.0)  # non-finite padding is ignored
+            xs[...] = np.where(self._mask, xs, 0.0)  # non-finite padding is ignored
 
         f = self.forgetting
-        n = self.n_max
         self.k += 1
         self.n_eff = f * self.n_eff + 1.0
         ring = self.n_lags is not None
@@ -345,15 +348,13 @@ class EstimatorBank:
         if self.residual == "a_posteriori":
             v = gain * f  # e f/d = z_k - x_k' theta_k
         elif self.residual == "standardized":
-            v = e * np.sqrt(f / d)
+            v = e / np.sqrt(d) if f == 1.0 else e * np.sqrt(f / d)
         else:
             v = e
 
-        self._zz *= f
-        self._zz += z * z
-        y = self._y
-        y[:, :n] = xs
-        y[:, n] = z
+        if f != 1.0:  # with f = 1 the sum of z^2 is the lag-0 z z entry of _Q
+            self._zz *= f
+            self._zz += z * z
         self._push(self._ybuf, y)
         self._push(self._vbuf, v)
         all_ready = self._all_ready
@@ -558,7 +559,8 @@ class EstimatorBank:
         """Models whose residual variance is below 1e-12 of the output's mean square: an
         exact fit (no noise), whose covariances are zero. Their corrected variances come out
         as tiny numbers of either sign from rounding; they are set to zero, not repaired."""
-        return self._R[:, 0] <= 1e-12 * self._zz / max(self.n_eff, 1.0)
+        zz = self._Q[:, self.n_max, 0, self.n_max] if self.forgetting == 1.0 else self._zz
+        return self._R[:, 0] <= 1e-12 * zz / max(self.n_eff, 1.0)
 
     def standard_errors_all(self, kind: str = "corrected") -> np.ndarray:
         """Standard errors of every model as an ``(M, n_max)`` array (one vectorised pass).
