@@ -35,7 +35,9 @@ Design notes
   orders of magnitude; results are scaled back on output.
 * **Lag products.** ``U_k(i) = sum_j w x_{j-i} x_j'`` is stored one-sided, so that
   ``Lambda_k(i) = U_k(i) + U_k(i)'`` (Eq. 21); the symmetrisation happens once per covariance
-  evaluation on an ``n x n`` matrix instead of once per lag and sample.
+  evaluation on an ``n x n`` matrix instead of once per lag and sample. The products are kept
+  for ``y = (x, z)``: the ``x`` block is Eq. 21 and the ``z`` row and column are the lagged
+  moments exact initialization needs, so one outer product per sample updates both.
 * **Windows.** ``window="truncated"`` is Eq. 22 (uniform weights up to ``n_lags``).
   ``window="bartlett"`` uses ``1 - i/(n_lags+1)``: its Toeplitz kernel is positive
   semi-definite, and by the Schur product theorem so is the covariance; the uniform truncation
