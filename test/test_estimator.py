@@ -226,6 +226,31 @@ def test_snapshot_restore_continues_bit_identically():
         np.testing.assert_array_equal(a.standard_errors("conventional"), b.standard_errors("conventional"))
 
 
+@pytest.mark.parametrize("forgetting", [1.0, 0.99])
+def test_snapshot_while_a_model_waits_for_initialization_continues_bit_identically(forgetting):
+    """Restore while one model still accumulates its lagged moments (its third regressor is
+    not excited until sample 200): it initializes at the same sample with the same numbers."""
+    rng = np.random.default_rng(5)
+    n = 500
+    X = np.zeros((n, 2, 3))
+    X[:, 0, :2] = np.column_stack([np.ones(n), rng.standard_normal(n)])
+    X[:, 1] = np.column_stack([np.ones(n), rng.standard_normal(n), np.where(np.arange(n) < 200, 0.0, rng.standard_normal(n))])
+    Z = np.einsum("kmi,mi->km", X, [[1.0, 2.0, 0.0], [0.5, -1.0, 3.0]]) + 0.1 * rng.standard_normal((n, 2))
+    for n_lags in (None, 20):
+        a = EstimatorBank((2, 3), n_lags, forgetting=forgetting)
+        for k in range(100):
+            a.update(X[k], Z[k])
+        assert list(a.ready) == [True, False]
+        b = EstimatorBank.from_state(a.state())
+        for k in range(100, n):
+            a.update(X[k], Z[k])
+            b.update(X[k], Z[k])
+        assert list(b.ready_at) == list(a.ready_at) and a.ready_at[1] > 200
+        np.testing.assert_array_equal(a.theta_all(), b.theta_all())
+        np.testing.assert_array_equal(a.standard_errors_all(), b.standard_errors_all())
+        np.testing.assert_array_equal(a.standard_errors_all("conventional"), b.standard_errors_all("conventional"))
+
+
 def test_snapshot_is_a_copy():
     X, z = wide_scale_problem()
     a = run(RecursiveEstimator(4, n_lags=5), X, z, stop=100)

@@ -2,6 +2,7 @@
 interpolation, alignment of the differentiator's lag, estimates against batch least squares,
 and the bookkeeping of every bad input. No ROS."""
 
+import json
 import math
 import sys
 
@@ -327,6 +328,15 @@ def test_state_file_resumes_and_refuses_other_configurations(tmp_path):
         resumed.load_state(bad)
     with pytest.raises(StateFileError, match="no such"):
         resumed.load_state(tmp_path / "missing.npz")
+    # A file written by another version of the state layout is refused by name, not misread.
+    with np.load(path) as data:
+        arrays = {k: data[k] for k in data.files}
+    meta = json.loads(str(arrays.pop("meta")))
+    meta["format"] = 1
+    old = tmp_path / "old.npz"
+    np.savez(old, meta=np.array(json.dumps(meta)), **arrays)
+    with pytest.raises(StateFileError, match="state format 1"):
+        resumed.load_state(old)
 
 
 @pytest.mark.parametrize("params,match", [
