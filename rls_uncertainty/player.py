@@ -125,6 +125,11 @@ def bundled_bag() -> Path:
     return package_path("bags", "t2_maneuver")
 
 
+# Input queue depth for the node in a reliable replay: deeper than any topic of the bundled
+# bag, so a node that falls behind (a busy machine) delays messages instead of overwriting them.
+_REPLAY_DEPTH = 10_000
+
+
 def demo(rate: float = 4.0, params_file: str = "t2") -> int:
     """The live node on the bundled bag: estimates over DDS beside the offline replay."""
     _loopback_default()
@@ -148,7 +153,7 @@ def demo(rate: float = 4.0, params_file: str = "t2") -> int:
     node_log = tempfile.NamedTemporaryFile("w+", prefix="rls_demo_node_", suffix=".log", delete=False)
     node_proc = subprocess.Popen(
         [sys.executable, "-m", "rls_uncertainty.node", "--ros-args", "--params-file", params_path,
-         "-p", "qos.reliable:=true"], stdout=node_log, stderr=subprocess.STDOUT, text=True,
+         "-p", "qos.reliable:=true", "-p", f"qos.depth:={_REPLAY_DEPTH}"], stdout=node_log, stderr=subprocess.STDOUT, text=True,
     )
     rclpy.init()
     node = rclpy.create_node("rls_demo")

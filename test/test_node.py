@@ -49,8 +49,10 @@ def tester():
 
 
 def _node(tmp_path, *args, name="node"):
-    return NodeProcess(tmp_path, "--params-file", T2, "-p", "qos.reliable:=true", "-p", "diagnostics_period:=0.2",
-                       *args, name=name)
+    # Reliable inputs with a queue deeper than any test's topic: a node slowed down by a busy
+    # machine then delays messages instead of losing them (KEEP_LAST overwrites when full).
+    return NodeProcess(tmp_path, "--params-file", T2, "-p", "qos.reliable:=true", "-p", "qos.depth:=10000",
+                       "-p", "diagnostics_period:=0.2", *args, name=name)
 
 
 def _arrays(tester, model, suffix):
