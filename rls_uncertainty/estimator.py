@@ -75,6 +75,13 @@ COVARIANCE_KINDS = ("corrected", "conventional")
 
 _GROWTH_START = 64  # initial lag capacity when all lags are kept (n_lags=None)
 
+if hasattr(np, "vecdot"):  # numpy >= 2.0
+    _vecdot = np.vecdot
+else:  # pragma: no cover - numpy 1.26
+
+    def _vecdot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        return np.einsum("...i,...i->...", a, b)
+
 
 class EstimatorNotReady(RuntimeError):
     """Raised when an estimate is asked of a model that is not initialized yet."""
@@ -183,7 +190,6 @@ class EstimatorBank:
 
         self.k = 0
         self.n_eff = 0.0  # sum_j f^(k-j); equals k when f = 1
-        self._ptr = 0
         # _aug[:, :n] is the scaled dispersion S D S, _aug[:, n] the scaled estimate S theta:
         # one matmul gives both D x and theta' x.
         self._aug = np.zeros((m, n + 1, n))
@@ -221,33 +227,47 @@ class EstimatorBank:
     def _theta(self) -> np.ndarray:
         return self._aug[:, self.n_max]
 
-    def _ring(self) -> bool:
-        return self.n_lags is not None
-
     def _alloc_lag_arrays(self, cap: int) -> None:
         m, n = self.n_models, self.n_max
-        slots = 2 * cap if self._ring() else cap
-        # y_k = (scaled regressors, output); ring read newest first. The outputs are needed
-        # until initialization.
-        self._ybuf = np.zeros((m, slots, n + 1))
-        self._y = np.zeros((m, n + 1))
-        self._vbuf = np.zeros((m, slots))  # residuals
-        self._R = np.zeros((m, cap))  # Eq. 17
+        n1 = n + 1
+        # History of y_k = (scaled regressors, output) and of the residuals, newest first:
+        # the last min(k, cap) samples are the contiguous slice [_ptr, _ptr + w). Each sample
+        # is written once, at _ptr - 1; when it lands on slot 0 the window is copied back to
+        # the end (once every 3 cap samples). The outputs are needed until initialization.
+        length = 4 * cap
+        self._ybuf = np.zeros((m, length, n1))
+        self._vbuf = np.zeros((m, length))
+        self._ptr = length
+        # Eq. 17 as sums: _S[:, i] = sum_j f^(k-j) v_j v_(j-i), so that R_k(i) = _S[:, i] / n_eff.
+        self._S = np.zeros((m, cap))
         # Lag products of y = (x, z), one-sided Eq. 21 on the x block:
         # _Q[m, a, i, b] = sum_j f^(2(k-j)) f^i y_j[a] y_(j-i)[b], so that the x block
         # _Q[m, :n, i, :n] is U_k(i)' with Lambda_k(i) = U_k(i) + U_k(i)'. The z row and column
         # are the lagged moments X'z, z'z that exact initialization needs (with f = 1; under
         # forgetting those are kept in _P with weight f per sample). The layout keeps each
         # (m, a) block contiguous, so one outer product per sample updates every lag.
-        n1 = n + 1
         self._Q = np.zeros((m, n1, cap, n1))
         self._tmp = np.zeros((m, n1, cap, n1))
         self._P = np.zeros((m, n1, cap, n1)) if self.forgetting != 1.0 else None
         self._lag_pow = self.forgetting ** np.arange(cap, dtype=float)
+        self._bind_views()
+
+    def _bind_views(self) -> None:
+        """Views and scratch arrays the per-sample update reuses (rebuilt with the arrays)."""
+        m, n, cap = self.n_models, self.n_max, self._cap
+        n1 = n + 1
+        self._Q_flat = self._Q.reshape(m, n1, cap * n1)
+        self._tmp_flat = self._tmp.reshape(m, n1, cap * n1)
+        self._g = np.zeros((m, n1, 1))  # (D x, theta' x) as a column
+        self._g2 = self._g[:, :, 0]
+        self._Dx = self._g2[:, :n]
+        self._Dx_row = self._g[:, None, :n, 0]
+        self._gz = self._g2[:, n]
+        self._outer = np.zeros((m, n1, n))
         self._waiting = None  # see _check_initialization
         self._invalid_mask = None  # see _invalid
 
-    _LAG_ARRAYS = ("_ybuf", "_vbuf", "_R", "_Q", "_P")
+    _LAG_ARRAYS = ("_ybuf", "_vbuf", "_S", "_Q", "_P")
 
     @property
     def _U(self) -> np.ndarray:
@@ -255,16 +275,13 @@ class EstimatorBank:
         return self._Q[:, : self.n_max, :, : self.n_max]
 
     @property
-    def _xbuf(self) -> np.ndarray:
-        return self._ybuf[:, :, : self.n_max]
-
-    @property
-    def _zbuf(self) -> np.ndarray:
-        return self._ybuf[:, :, self.n_max]
+    def _R(self) -> np.ndarray:
+        """Eq. 17, ``R_k(i)`` for ``i = 0..cap-1`` (zero beyond the lags held)."""
+        return self._S / max(self.n_eff, 1.0)
 
     def _grow(self) -> None:
         """Double the lag capacity (all-lags mode only)."""
-        old = self._cap
+        old, w, p = self._cap, self.n_window, self._ptr
         keep = {name: getattr(self, name) for name in self._LAG_ARRAYS}
         self._cap = 2 * old
         self._alloc_lag_arrays(self._cap)
@@ -273,21 +290,24 @@ class EstimatorBank:
                 continue
             if name in ("_Q", "_P"):
                 getattr(self, name)[:, :, :old] = arr
+            elif name == "_S":
+                self._S[:, :old] = arr
             else:
-                getattr(self, name)[:, :old] = arr
+                getattr(self, name)[:, self._ptr - w :] = arr[:, p : p + w]
+        self._ptr -= w
+
+    def _relocate(self) -> None:
+        """Move the history window from the buffer's front back to its end, making room for
+        the next samples (called when the newest sample was written at slot 0)."""
+        w = self.n_window
+        length = self._vbuf.shape[1]
+        self._ybuf[:, length - w :] = self._ybuf[:, :w]
+        self._vbuf[:, length - w :] = self._vbuf[:, :w]
+        self._ptr = length - w
 
     def _recent(self, buf: np.ndarray) -> np.ndarray:
-        """View of the last ``min(k, W)`` entries of a lag buffer, newest first."""
-        if self._ring():
-            return buf[:, self._ptr : self._ptr + min(self.k, self._cap)]
-        return buf[:, self.k - 1 :: -1]
-
-    def _push(self, buf: np.ndarray, value: np.ndarray) -> None:
-        if self._ring():
-            buf[:, self._ptr] = value
-            buf[:, self._ptr + self._cap] = value
-        else:
-            buf[:, self.k - 1] = value
+        """View of the last ``min(k, W)`` entries of a history buffer, newest first."""
+        return buf[:, self._ptr : self._ptr + self.n_window]
 
     @property
     def n_window(self) -> int:
@@ -305,17 +325,23 @@ class EstimatorBank:
         x = self._as_regressors(X)
         if not (isinstance(z, np.ndarray) and z.shape == (self.n_models,) and z.dtype == float):
             z = np.asarray(z, dtype=float).reshape(-1)
-        if z.shape != (self.n_models,):
-            raise ValueError(f"expected {self.n_models} measured outputs, got shape {z.shape}")
-        n = self.n_max
-        y = self._y  # y_k = (scaled regressors, output); zero on padding
+            if z.shape != (self.n_models,):
+                raise ValueError(f"expected {self.n_models} measured outputs, got shape {z.shape}")
+        n, f, m = self.n_max, self.forgetting, self.n_models
+        k = self.k + 1
+        if k > self._cap and self.n_lags is None:
+            self._grow()
+        # y_k = (scaled regressors, output), written straight into its history slot (outside
+        # the current window, so a rejected sample leaves the state unchanged).
+        p = self._ptr - 1  # >= 0: see _relocate
+        y = self._ybuf[:, p]
         xs = y[:, :n]
         np.multiply(x, self._inv_s, out=xs)
         y[:, n] = z
         if not math.isfinite(float(y.sum())):
             # NaN or Inf somewhere, or only an overflow of the sum: check exactly.
             bad = [
-                j for j in range(self.n_models)
+                j for j in range(m)
                 if not (np.isfinite(x[j, : self.sizes[j]]).all() and np.isfinite(z[j]))
             ]
             if bad:
@@ -323,69 +349,68 @@ class EstimatorBank:
                     f"non-finite regressor or output for model(s) {bad}; sample ignored"
                 )
             xs[...] = np.where(self._mask, xs, 0.0)  # non-finite padding is ignored
-
-        f = self.forgetting
-        self.k += 1
+        self.k = k
+        self._ptr = p
         self.n_eff = f * self.n_eff + 1.0
-        ring = self.n_lags is not None
-        if ring:
-            self._ptr = (self._cap - 1) - ((self.k - 1) % self._cap)
-        elif self.k > self._cap:
-            self._grow()
 
-        # Eq. 15 in covariance form (with forgetting, D is divided by f).
-        g = np.matmul(self._aug, xs[:, :, None])[:, :, 0]
-        Dx = g[:, :n]
-        d = f + (xs * Dx).sum(axis=1)
-        e = z - g[:, n]  # a priori innovation z_k - x_k' theta_{k-1}
-        gain = e / d
-        self._aug[:, n] += Dx * gain[:, None]  # Eq. 15c
-        # Eq. 15b as D - (Dx)(Dx)'/d: exactly symmetric in floating point. The algebraically
-        # equal (I - K x') D is not, and under forgetting its antisymmetric rounding error
-        # grows like f^-k until the estimator diverges.
-        D = self._aug[:, :n]
-        D -= (Dx[:, :, None] * Dx[:, None, :]) / d[:, None, None]
+        # Eq. 15 in covariance form (with forgetting, D is divided by f). One matmul gives
+        # g = (D x, theta' x); with u = (D x, theta' x - z) = (D x, -e), the rank-one update
+        # _aug -= u (D x)' / d is Eq. 15b on the D rows and Eq. 15c (theta += D x e / d) on
+        # the theta row. D - (Dx)(Dx)'/d is exactly symmetric in floating point; the
+        # algebraically equal (I - K x') D is not, and under forgetting its antisymmetric
+        # rounding error grows like f^-k until the estimator diverges.
+        np.matmul(self._aug, xs[:, :, None], out=self._g)
+        d = _vecdot(xs, self._Dx)
+        d += f
+        e = z - self._gz  # a priori innovation z_k - x_k' theta_{k-1}
+        np.negative(e, out=self._gz)
+        outer = np.multiply(self._g, self._Dx_row, out=self._outer)
+        outer /= d[:, None, None]
+        self._aug -= outer
         if f != 1.0:
-            D /= f
-        if self.residual == "a_posteriori":
-            v = gain * f  # e f/d = z_k - x_k' theta_k
-        elif self.residual == "standardized":
+            self._aug[:, :n] /= f
+        if self.residual == "standardized":
             v = e / np.sqrt(d) if f == 1.0 else e * np.sqrt(f / d)
+        elif self.residual == "a_posteriori":
+            v = (e / d) * f  # e f/d = z_k - x_k' theta_k
         else:
             v = e
+        self._vbuf[:, p] = v
 
-        if f != 1.0:  # with f = 1 the sum of z^2 is the lag-0 z z entry of _Q
-            self._zz *= f
+        w = k if k < self._cap else self._cap  # lags held
+        # Eq. 17 as sums: S_k(i) = f S_(k-1)(i) + v_k v_(k-i).
+        S = self._S[:, :w]
+        if f != 1.0:
+            S *= f
+            self._zz *= f  # with f = 1 the sum of z^2 is the lag-0 z z entry of _Q
             self._zz += z * z
-        self._push(self._ybuf, y)
-        self._push(self._vbuf, v)
-        all_ready = self._all_ready
-        w = self.n_window
-        yl = self._recent(self._ybuf)  # (M, w, n + 1): y_k, y_{k-1}, ...
-        # Eq. 17: R_k(i) = (1 - 1/n_k) R_{k-1}(i) + v_k v_{k-i} / n_k  (n_k = k when f = 1).
-        R = self._R[:, :w]
-        R *= 1.0 - 1.0 / self.n_eff
-        R += self._recent(self._vbuf) * (v * (1.0 / self.n_eff))[:, None]
+        S += self._vbuf[:, p : p + w] * v[:, None]
         # Eq. 21 (one-sided): U_k(i) = f^2 U_{k-1}(i) + f^i x_{k-i} x_k', for y = (x, z).
         # Views as (M, n+1, w (n+1)) make the inner loops contiguous.
-        m, n1 = self.n_models, n + 1
-        Q = self._Q[:, :, :w].reshape(m, n1, w * n1)
-        tmp = self._tmp[:, :, :w].reshape(m, n1, w * n1)
+        n1 = n + 1
+        yl = self._ybuf[:, p : p + w].reshape(m, 1, w * n1)  # y_k, y_(k-1), ... (a view)
+        if w == self._cap:
+            Q, tmp = self._Q_flat, self._tmp_flat
+        else:
+            Q = self._Q[:, :, :w].reshape(m, n1, w * n1)
+            tmp = self._tmp[:, :, :w].reshape(m, n1, w * n1)
         if f == 1.0:
-            np.multiply(y[:, :, None], yl.reshape(m, 1, w * n1), out=tmp)
+            np.multiply(y[:, :, None], yl, out=tmp)
             Q += tmp
         else:
-            lagged = yl * self._lag_pow[None, :w, None]
+            lagged = yl.reshape(m, w, n1) * self._lag_pow[None, :w, None]
             np.multiply(y[:, :, None], lagged.reshape(m, 1, w * n1), out=tmp)
             self._Q *= f * f
             Q += tmp
-            if not all_ready:  # the moments for exact initialization: weight f per sample
+            if not self._all_ready:  # the moments for exact initialization: weight f per sample
                 P = self._P[:, :, :w].reshape(m, n1, w * n1)
-                np.multiply(y[:, :, None], yl.reshape(m, 1, w * n1), out=tmp)
+                np.multiply(y[:, :, None], yl, out=tmp)
                 self._P *= f
                 P += tmp
-        if not all_ready:
+        if not self._all_ready:
             self._check_initialization(w)
+        if p == 0:
+            self._relocate()
         self._cache.clear()
 
     def _as_regressors(self, X) -> np.ndarray:
@@ -403,42 +428,50 @@ class EstimatorBank:
         return x
 
     def _check_initialization(self, w: int) -> None:
-        """Exact initialization of the models still waiting, where their X'X allows it."""
+        """Exact initialization of the models still waiting, where their X'X allows it.
+
+        Only a model whose ``X'X`` has a positive diagonal can be well conditioned. A zero
+        diagonal entry (a regressor that has been exactly zero so far, such as a surface
+        that never moved) is remembered as the model's blocker, and only that one number is
+        looked at until it becomes positive.
+        """
         waiting = self._waiting
         if waiting is None:
-            # Flat indices of the lag-0 X'X diagonals of the waiting models, and the offsets
-            # of each model's run of them (rebuilt whenever a model initializes).
-            todo = [j for j in range(self.n_models) if not self._ready[j]]
+            # Flat indices of each waiting model's lag-0 X'X diagonal (rebuilt whenever a
+            # model initializes or the arrays are reallocated), and its blocker.
             n1, cap = self.n_max + 1, self._cap
-            idx = [((j * n1 + a) * cap) * n1 + a for j in todo for a in range(self.sizes[j])]
-            offsets = np.cumsum([0] + [self.sizes[j] for j in todo[:-1]])
-            waiting = self._waiting = (todo, np.array(idx, dtype=np.intp), offsets)
-        todo, idx, offsets = waiting
-        if not todo:
-            return
-        # Only a model whose X'X has a positive diagonal can be well conditioned.
-        P = self._Q if self._P is None else self._P
-        positive = np.logical_and.reduceat(P.reshape(-1).take(idx) > 0.0, offsets)
-        if positive.any():
-            for j, ok in zip(todo, positive.tolist()):
-                if ok:
-                    self._try_initialize(j, w)
+            waiting = self._waiting = [
+                [j, np.array([((j * n1 + a) * cap) * n1 + a for a in range(self.sizes[j])], dtype=np.intp), None]
+                for j in range(self.n_models) if not self._ready[j]
+            ]
+        flat = (self._Q if self._P is None else self._P).reshape(-1)
+        for entry in waiting:
+            blocker = entry[2]
+            if blocker is not None and not flat[blocker] > 0.0:
+                continue
+            diag = flat.take(entry[1])
+            zero = np.flatnonzero(~(diag > 0.0))
+            if zero.size:
+                entry[2] = int(entry[1][zero[0]])
+                continue
+            entry[2] = None
+            self._try_initialize(entry[0], w)  # rebuilds the waiting list on success
 
-    def _try_initialize(self, j: int, w: int) -> None:
+    def _try_initialize(self, j: int, w: int) -> bool:
         """Exact initialization of model ``j`` at the current sample, if X'X allows it."""
         s_n = self.sizes[j]
         if self.k < s_n:
-            return
+            return False
         # Before initialization inv_s is 1 on real parameters, so the moments are unscaled.
         Pj = self._Q[j] if self._P is None else self._P[j]  # (n+1, cap, n+1)
         P0 = Pj[:, 0, :]
         A = P0[:s_n, :s_n]
         s = np.sqrt(np.diag(A))
         if not np.all(s > 0):
-            return
+            return False
         C = A / np.outer(s, s)
         if not np.linalg.cond(C) < self.init_condition:
-            return
+            return False
         Cinv = np.linalg.inv(C)
         Cinv = 0.5 * (Cinv + Cinv.T)  # scaled D = S (X'X)^-1 S
         theta_scaled = Cinv @ (P0[:s_n, self.n_max] / s)  # Eq. 6
@@ -453,7 +486,7 @@ class EstimatorBank:
         ta[:s_n] = -theta_scaled / s
         ta[n] = 1.0
         nR = np.einsum("a,aib,b->i", ta, Pj[:, :w, :], ta)
-        self._R[j, :w] = nR / self.n_eff
+        self._S[j, :w] = nR
         inv = self._inv_s[j]
         self._Q[j, :n] *= inv[:, None, None]  # x rows and columns to scaled units
         self._Q[j, :, :, :n] *= inv[None, None, :]
@@ -465,6 +498,7 @@ class EstimatorBank:
         self._waiting = None
         self._invalid_mask = None
         self._all_ready = bool(self._ready.all())
+        return True
 
     # ------------------------------------------------------------------ results
     @property
@@ -497,12 +531,12 @@ class EstimatorBank:
     def residual_variance(self, j: int) -> float:
         """Fit-error variance (Eq. 16), i.e. ``R_k(0)``."""
         self._require(j)
-        return float(self._R[j, 0])
+        return float(self._S[j, 0] / self.n_eff)
 
     def autocorrelation(self, j: int) -> np.ndarray:
         """Residual autocorrelation ``R_k(i)``, ``i = 0..n_window-1`` (Eq. 17)."""
         self._require(j)
-        return self._R[j, : self.n_window].copy()
+        return self._S[j, : self.n_window] / self.n_eff
 
     def residuals(self, j: int) -> np.ndarray:
         """Stored residuals, oldest first: the whole history with ``n_lags=None``, otherwise
@@ -523,10 +557,9 @@ class EstimatorBank:
         """``N`` with ``N + N' = sum_i c_i R_k(i) Lambda_k(i)`` (Eqs. 20, 22); ``(M, n, n)``."""
         if "N" not in self._cache:
             w = self.n_window
-            cR = self._R[:, :w] * self._weights(w)
+            cR = self._S[:, :w] * (self._weights(w) * (1.0 / self.n_eff))  # c_i R_k(i)
             # N'[b, a] = sum_i cR_i U[b, i, a]
-            n = self.n_max
-            self._cache["N"] = np.matmul(cR[:, None, None, :], self._Q[:, :, :w])[:, :n, 0, :n]
+            self._cache["N"] = np.matmul(cR[:, None, None, :], self._U[:, :, :w])[:, :, 0, :]
         return self._cache["N"]
 
     def _variances(self, kind: str) -> np.ndarray:
@@ -540,15 +573,15 @@ class EstimatorBank:
             return var
         D = self._aug[:, : self.n_max]
         if kind == "conventional" and self.forgetting == 1.0:
-            var_s = self._R[:, :1] * np.diagonal(D, axis1=1, axis2=2)  # Eq. 13 with Eq. 16
+            R0 = self._S[:, :1] * (1.0 / self.n_eff)
+            var = R0 * np.diagonal(D, axis1=1, axis2=2) * self._inv_s2  # Eq. 13 with Eq. 16
         else:
             if kind == "conventional":
-                Nm = (0.5 * self._R[:, 0, None, None]) * self._U[:, :, 0, :]
+                Nm = (0.5 / self.n_eff * self._S[:, 0, None, None]) * self._U[:, :, 0, :]
             else:
                 Nm = self._middle_one_sided()
             # diag(D (N + N') D) = 2 diag(D N D) because D is symmetric.
-            var_s = 2.0 * (D * np.matmul(Nm, D).swapaxes(1, 2)).sum(axis=2)
-        var = var_s * self._inv_s2
+            var = _vecdot(D, np.matmul(Nm, D).swapaxes(1, 2)) * (2.0 * self._inv_s2)
         if kind == "corrected" and var.min() < 0.0:
             var[self._exact_fit()] = 0.0
             if var.min() < 0.0:
@@ -562,7 +595,7 @@ class EstimatorBank:
         exact fit (no noise), whose covariances are zero. Their corrected variances come out
         as tiny numbers of either sign from rounding; they are set to zero, not repaired."""
         zz = self._Q[:, self.n_max, 0, self.n_max] if self.forgetting == 1.0 else self._zz
-        return self._R[:, 0] <= 1e-12 * zz / max(self.n_eff, 1.0)
+        return self._S[:, 0] <= 1e-12 * zz
 
     def standard_errors_all(self, kind: str = "corrected") -> np.ndarray:
         """Standard errors of every model as an ``(M, n_max)`` array (one vectorised pass).
@@ -617,7 +650,7 @@ class EstimatorBank:
             return self._cache[key]
         n = self.n_max
         D = self._aug[:, :n]
-        R0 = self._R[:, 0, None, None]
+        R0 = self._S[:, 0, None, None] / self.n_eff
         if kind == "conventional" and self.forgetting == 1.0:
             cov_s = R0 * D  # Eq. 13 with Eq. 16
         elif kind == "conventional":
@@ -653,10 +686,10 @@ class EstimatorBank:
         return self.standard_errors_all(kind)[j, : self.sizes[j]].copy()
 
     # ------------------------------------------------------------------ snapshot
-    STATE_FORMAT = 2  # 2: lagged moments as one array of y = (x, z) products
+    STATE_FORMAT = 3  # 2: lagged moments as one array of y = (x, z) products; 3: Eq. 17 as sums
     _STATE_ARRAYS = (
         "_aug", "_inv_s", "_ready", "_ready_at", "repairs", "_zz",
-        "_ybuf", "_vbuf", "_R", "_Q", "_P",
+        "_ybuf", "_vbuf", "_S", "_Q", "_P",
     )
 
     def state(self) -> dict:
@@ -669,12 +702,16 @@ class EstimatorBank:
             "residual": self.residual,
             "init_condition": self.init_condition,
         }
-        counters = {"k": self.k, "n_eff": self.n_eff, "ptr": self._ptr, "cap": self._cap}
+        counters = {"k": self.k, "n_eff": self.n_eff, "cap": self._cap}
         arrays = {
             name.lstrip("_"): getattr(self, name).copy()
             for name in self._STATE_ARRAYS
             if getattr(self, name) is not None
         }
+        # The histories as their windows, newest first (where they sit in the buffer is not
+        # part of the state).
+        arrays["ybuf"] = self._recent(self._ybuf).copy()
+        arrays["vbuf"] = self._recent(self._vbuf).copy()
         return {"format": self.STATE_FORMAT, "config": config, "counters": counters, "arrays": arrays}
 
     @classmethod
@@ -691,21 +728,28 @@ class EstimatorBank:
         )
         c = state["counters"]
         bank.k, bank.n_eff = int(c["k"]), float(c["n_eff"])
-        bank._ptr, cap = int(c["ptr"]), int(c["cap"])
+        cap = int(c["cap"])
         if cap != bank._cap:
             bank._cap = cap
             bank._alloc_lag_arrays(cap)
+        w = bank.n_window
+        bank._ptr -= w
         for name in cls._STATE_ARRAYS:
             if getattr(bank, name) is None:
                 continue
             arr = np.array(state["arrays"][name.lstrip("_")], copy=True)
+            if name in ("_ybuf", "_vbuf"):
+                target = bank._recent(getattr(bank, name))
+                if arr.shape != target.shape:
+                    raise ValueError(f"estimator state field {name!r} has shape {arr.shape}")
+                target[...] = arr
+                continue
             if arr.shape != getattr(bank, name).shape:
                 raise ValueError(f"estimator state field {name!r} has shape {arr.shape}")
             setattr(bank, name, arr)
         bank._inv_s2 = bank._inv_s * bank._inv_s
         bank._all_ready = bool(bank._ready.all())
-        bank._waiting = None
-        bank._invalid_mask = None
+        bank._bind_views()
         return bank
 
 
