@@ -194,7 +194,6 @@ class EstimatorBank:
         # one matmul gives both D x and theta' x.
         self._aug = np.zeros((m, n + 1, n))
         self._inv_s = self._mask.astype(float)  # 1/s on real parameters, 0 on padding
-        self._inv_s2 = self._inv_s * self._inv_s
         self._ready = np.zeros(m, dtype=bool)
         self._ready_at = np.zeros(m, dtype=np.int64)
         self.repairs = np.zeros(m, dtype=np.int64)
@@ -217,6 +216,7 @@ class EstimatorBank:
             self._aug[:, :n] = np.eye(n) * p * self._mask[:, :, None] * self._mask[:, None, :]
             self._ready[:] = True
             self._all_ready = True
+        self._set_scale()
 
     # ------------------------------------------------------------------ storage
     @property
@@ -257,6 +257,9 @@ class EstimatorBank:
         m, n, cap = self.n_models, self.n_max, self._cap
         n1 = n + 1
         self._Q_flat = self._Q.reshape(m, n1, cap * n1)
+        self._U_full = self._Q[:, :n, :, :n]
+        self._D_view = self._aug[:, :n]
+        self._D_diag = np.diagonal(self._D_view, axis1=1, axis2=2)
         self._tmp_flat = self._tmp.reshape(m, n1, cap * n1)
         self._g = np.zeros((m, n1, 1))  # (D x, theta' x) as a column
         self._g2 = self._g[:, :, 0]
@@ -479,7 +482,6 @@ class EstimatorBank:
         self._aug[j, :s_n, :s_n] = Cinv
         self._aug[j, n, :s_n] = theta_scaled
         self._inv_s[j, :s_n] = 1.0 / s
-        self._inv_s2 = self._inv_s * self._inv_s
         # Residuals of samples 1..k0 with the batch solution; R(i) from the lagged moments:
         # v_j = ta' y_j with ta = (-theta, 1), so sum v_j v_{j-i} = ta' P(i) ta.
         ta = np.zeros(n + 1)
@@ -497,6 +499,7 @@ class EstimatorBank:
         self._ready_at[j] = self.k
         self._waiting = None
         self._invalid_mask = None
+        self._set_scale()
         self._all_ready = bool(self._ready.all())
         return True
 
@@ -554,40 +557,41 @@ class EstimatorBank:
         return self._weights_cached
 
     def _middle_one_sided(self) -> np.ndarray:
-        """``N`` with ``N + N' = sum_i c_i R_k(i) Lambda_k(i)`` (Eqs. 20, 22); ``(M, n, n)``."""
-        if "N" not in self._cache:
+        """``N`` with ``N + N' = n_eff sum_i c_i R_k(i) Lambda_k(i)`` (Eqs. 20, 22), i.e. with
+        the lag sums of :attr:`_S` in place of ``R_k(i)``; ``(M, n, n)``."""
+        N = self._cache.get("N")
+        if N is None:
             w = self.n_window
-            cR = self._S[:, :w] * (self._weights(w) * (1.0 / self.n_eff))  # c_i R_k(i)
-            # N'[b, a] = sum_i cR_i U[b, i, a]
-            self._cache["N"] = np.matmul(cR[:, None, None, :], self._U[:, :, :w])[:, :, 0, :]
-        return self._cache["N"]
+            cS = self._S[:, :w] * self._weights(w)
+            # N'[b, a] = sum_i cS_i U[b, i, a]
+            U = self._U_full if w == self._cap else self._U[:, :, :w]
+            N = self._cache["N"] = np.matmul(cS[:, None, None, :], U)[:, :, 0, :]
+        return N
 
-    def _variances(self, kind: str) -> np.ndarray:
-        """Diagonals of all covariances, ``(M, n_max)``; corrected ones repaired if negative.
-
-        Rows of models that are not ready are zero: callers check readiness first.
-        """
-        key = ("var", kind)
-        var = self._cache.get(key)
-        if var is not None:
-            return var
-        D = self._aug[:, : self.n_max]
-        if kind == "conventional" and self.forgetting == 1.0:
-            R0 = self._S[:, :1] * (1.0 / self.n_eff)
-            var = R0 * np.diagonal(D, axis1=1, axis2=2) * self._inv_s2  # Eq. 13 with Eq. 16
+    def _variance_pair(self) -> np.ndarray:
+        """Diagonals of the corrected (``[0]``, Eq. 20/22) and conventional (``[1]``, Eq. 13)
+        covariances of all models, ``(2, M, n_max)``, in one pass; negative corrected ones
+        are repaired (see :meth:`_covariances`). Padding and models that are not ready are
+        NaN."""
+        D = self._D_view
+        var = np.empty((2,) + D.shape[:2])
+        # diag(D (N + N') D) = 2 diag(D N D) = 2 sum_c (D N)_ac D_ac because D is symmetric
+        # (the 2 is in _var_scale).
+        _vecdot(np.matmul(D, self._middle_one_sided()), D, out=var[0])
+        if self.forgetting == 1.0:
+            np.multiply(self._S[:, :1], self._D_diag, out=var[1])  # Eq. 13 with Eq. 16
         else:
-            if kind == "conventional":
-                Nm = (0.5 / self.n_eff * self._S[:, 0, None, None]) * self._U[:, :, 0, :]
-            else:
-                Nm = self._middle_one_sided()
-            # diag(D (N + N') D) = 2 diag(D N D) because D is symmetric.
-            var = _vecdot(D, np.matmul(Nm, D).swapaxes(1, 2)) * (2.0 * self._inv_s2)
-        if kind == "corrected" and var.min() < 0.0:
-            var[self._exact_fit()] = 0.0
-            if var.min() < 0.0:
-                for j in np.flatnonzero(self._ready & (var < 0.0).any(axis=1)):
-                    var[j, : self.sizes[j]] = np.diag(self._covariances(kind)[j])
-        self._cache[key] = var
+            Nc = (0.5 * self._S[:, 0, None, None]) * self._U[:, :, 0, :]
+            _vecdot(np.matmul(D, Nc), D, out=var[1])
+        corrected = var[0]
+        repair = corrected.min() < 0.0  # the scale below is positive (NaN where invalid)
+        if repair:
+            corrected *= ~self._exact_fit()[:, None]
+            repair = corrected.min() < 0.0
+        var *= self._var_scale * (1.0 / self.n_eff)  # lag sums to R_k(i), scaled units back
+        if repair:
+            for j in np.flatnonzero(self._ready & (corrected < 0.0).any(axis=1)):
+                corrected[j, : self.sizes[j]] = np.diag(self._covariances("corrected")[j])
         return var
 
     def _exact_fit(self) -> np.ndarray:
@@ -598,18 +602,26 @@ class EstimatorBank:
         return self._S[:, 0] <= 1e-12 * zz
 
     def standard_errors_all(self, kind: str = "corrected") -> np.ndarray:
-        """Standard errors of every model as an ``(M, n_max)`` array (one vectorised pass).
+        """Standard errors of every model as an ``(M, n_max)`` array (one vectorised pass
+        computes both kinds).
 
         Padding and the rows of models that are not :attr:`ready` are NaN.
         """
-        key = ("se", kind)
-        se = self._cache.get(key)
+        _check_kind(kind)
+        se = self._cache.get("se")
         if se is None:
-            _check_kind(kind)
-            se = np.sqrt(np.maximum(self._variances(kind), 0.0))
-            se[self._invalid()] = np.nan
-            self._cache[key] = se
-        return se
+            se = self._variance_pair()
+            np.maximum(se, 0.0, out=se)
+            np.sqrt(se, out=se)
+            self._cache["se"] = se
+        return se[0] if kind == "corrected" else se[1]
+
+    def _set_scale(self) -> None:
+        """Column scaling of the variances: ``2/s^2`` for the one-sided products, ``1/s^2``
+        for Eq. 13 (two-sided under forgetting); NaN on the padding and the models not ready,
+        so that their standard errors come out NaN."""
+        inv_s2 = np.where(self._invalid(), np.nan, self._inv_s * self._inv_s)
+        self._var_scale = np.stack([2.0 * inv_s2, inv_s2 if self.forgetting == 1.0 else 2.0 * inv_s2])
 
     def theta_all(self) -> np.ndarray:
         """Estimates of every model as an ``(M, n_max)`` array; padding and models that are
@@ -657,7 +669,7 @@ class EstimatorBank:
             cov_s = R0 * (D @ self._U[:, :, 0, :] @ D)
         else:
             N = self._middle_one_sided()
-            cov_s = D @ (N + N.swapaxes(1, 2)) @ D  # Eq. 20 / 22
+            cov_s = D @ (N + N.swapaxes(1, 2)) @ D * (1.0 / self.n_eff)  # Eq. 20 / 22
         cov_all = cov_s * self._inv_s[:, :, None] * self._inv_s[:, None, :]
         out = {
             int(j): cov_all[j, : self.sizes[j], : self.sizes[j]] for j in np.flatnonzero(self._ready)
@@ -747,9 +759,9 @@ class EstimatorBank:
             if arr.shape != getattr(bank, name).shape:
                 raise ValueError(f"estimator state field {name!r} has shape {arr.shape}")
             setattr(bank, name, arr)
-        bank._inv_s2 = bank._inv_s * bank._inv_s
         bank._all_ready = bool(bank._ready.all())
         bank._bind_views()
+        bank._set_scale()
         return bank
 
 
