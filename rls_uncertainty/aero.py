@@ -29,9 +29,9 @@ def rep103_to_aircraft(vec):
 
     A rotation of pi about x: ``(x, y, z) -> (x, -y, -z)``. Applies to vectors (specific
     force, angular rate, airspeed) given as ``(..., 3)`` arrays; one vector given as a tuple
-    of three numbers (the per-sample path) comes back as a tuple of floats.
+    or list of three numbers (the per-sample path) comes back as a tuple of floats.
     """
-    if type(vec) is tuple and len(vec) == 3:
+    if (type(vec) is tuple or type(vec) is list) and len(vec) == 3:
         x, y, z = vec
         return (float(x), -float(y), -float(z))
     v = np.asarray(vec, dtype=float)

@@ -236,6 +236,8 @@ class EstimatorBank:
         # the end (once every 3 cap samples). The outputs are needed until initialization.
         length = 4 * cap
         self._ybuf = np.zeros((m, length, n1))
+        # The residuals are stored with the opposite sign, -v_k = x_k' theta - z_k: the
+        # products v_k v_(k-i) of Eq. 17 do not see it, and the update saves a negation.
         self._vbuf = np.zeros((m, length))
         self._ptr = length
         # Eq. 17 as sums: _S[:, i] = sum_j f^(k-j) v_j v_(j-i), so that R_k(i) = _S[:, i] / n_eff.
@@ -365,20 +367,19 @@ class EstimatorBank:
         np.matmul(self._aug, xs[:, :, None], out=self._g)
         d = _vecdot(xs, self._Dx)
         d += f
-        e = z - self._gz  # a priori innovation z_k - x_k' theta_{k-1}
-        np.negative(e, out=self._gz)
+        neg_e = np.subtract(self._gz, z, out=self._gz)  # -(z_k - x_k' theta_{k-1}), a priori
         outer = np.multiply(self._g, self._Dx_row, out=self._outer)
         outer /= d[:, None, None]
         self._aug -= outer
         if f != 1.0:
             self._aug[:, :n] /= f
+        v = self._vbuf[:, p]  # -v_k (see _alloc_lag_arrays)
         if self.residual == "standardized":
-            v = e / np.sqrt(d) if f == 1.0 else e * np.sqrt(f / d)
+            np.divide(neg_e, np.sqrt(d) if f == 1.0 else np.sqrt(d / f), out=v)
         elif self.residual == "a_posteriori":
-            v = (e / d) * f  # e f/d = z_k - x_k' theta_k
+            np.multiply(neg_e / d, f, out=v)  # e f/d = z_k - x_k' theta_k
         else:
-            v = e
-        self._vbuf[:, p] = v
+            v[...] = neg_e
 
         w = k if k < self._cap else self._cap  # lags held
         # Eq. 17 as sums: S_k(i) = f S_(k-1)(i) + v_k v_(k-i).
@@ -494,7 +495,7 @@ class EstimatorBank:
         self._Q[j, :, :, :n] *= inv[None, None, :]
         xb = self._ybuf[j, :, :n]
         xb *= inv[None, :]
-        self._vbuf[j] = self._ybuf[j, :, n] - xb @ self._aug[j, n]
+        self._vbuf[j] = xb @ self._aug[j, n] - self._ybuf[j, :, n]  # -v_j
         self._ready[j] = True
         self._ready_at[j] = self.k
         self._waiting = None
@@ -545,7 +546,7 @@ class EstimatorBank:
         """Stored residuals, oldest first: the whole history with ``n_lags=None``, otherwise
         the last ``n_lags + 1``."""
         self._require(j)
-        return self._recent(self._vbuf)[j, ::-1].copy()
+        return -self._recent(self._vbuf)[j, ::-1]
 
     def _weights(self, w: int) -> np.ndarray:
         """Lag weights of Eq. 22 / Bartlett for ``w`` lags, halved at lag 0 (U(0) + U(0)')."""
@@ -723,7 +724,7 @@ class EstimatorBank:
         # The histories as their windows, newest first (where they sit in the buffer is not
         # part of the state).
         arrays["ybuf"] = self._recent(self._ybuf).copy()
-        arrays["vbuf"] = self._recent(self._vbuf).copy()
+        arrays["vbuf"] = -self._recent(self._vbuf)  # the residuals v_k
         return {"format": self.STATE_FORMAT, "config": config, "counters": counters, "arrays": arrays}
 
     @classmethod
@@ -754,7 +755,7 @@ class EstimatorBank:
                 target = bank._recent(getattr(bank, name))
                 if arr.shape != target.shape:
                     raise ValueError(f"estimator state field {name!r} has shape {arr.shape}")
-                target[...] = arr
+                target[...] = -arr if name == "_vbuf" else arr
                 continue
             if arr.shape != getattr(bank, name).shape:
                 raise ValueError(f"estimator state field {name!r} has shape {arr.shape}")

@@ -30,6 +30,7 @@ import os
 from bisect import bisect_left, bisect_right
 from collections import Counter, deque
 from dataclasses import dataclass
+from operator import attrgetter
 from pathlib import Path
 
 import numpy as np
@@ -90,6 +91,14 @@ class _Stream:
 # The sample vector, aircraft body axes: specific force, rates, air-relative velocity,
 # dynamic pressure (NaN when computed from density), surfaces, thrust.
 _AX, _AY, _AZ, _P, _Q, _R, _U, _V, _W, _QBAR, _DE, _DA, _DR, _T = range(14)
+_NEWEST = attrgetter("last")
+
+
+def _mean(values, index) -> float:
+    """Mean of ``values`` at ``index`` (0 when there is none): Eq. 23's surface averages."""
+    if len(index) == 1:
+        return values[index[0]]
+    return sum([values[i] for i in index]) / len(index) if index else 0.0
 
 
 class Pipeline:
@@ -121,6 +130,11 @@ class Pipeline:
             self.required.append("thrust")
         self.streams = {name: _Stream(name) for name in STREAMS}
         self._needed = [self.streams[name] for name in self.required]
+        self._stream_list = list(self.streams.values())
+        self._imu = self.streams["imu"]
+        self._surfaces = self.streams["control_surfaces"]
+        self._joint_names: list | None = None  # the last JointState name list and its layout
+        self._joint_layout_last = None
         self._joints = {s: config.mixing.names(s) for s in _SURFACES}
         self._joint_layouts: dict = {}
         self.samples_formed = 0
@@ -167,28 +181,30 @@ class Pipeline:
         if not finite:
             stream.rejected["non_finite"] += 1
             return []
-        newest = stream.stamps[-1] if stream.stamps else stream.last
-        if newest is not None and stamp <= newest:
-            stream.rejected["duplicate" if stamp == newest else "out_of_order"] += 1
-            return []
+        newest = stream.last  # the newest accepted stamp (stamps[-1] while any is buffered)
         if newest is not None:
+            dt = stamp - newest
+            if dt <= 0:
+                stream.rejected["duplicate" if dt == 0 else "out_of_order"] += 1
+                return []
             # Messages lost before they reached us (a best-effort DDS drop, a recorder gap)
             # leave a hole in the stamps: count the missing ones against the stream's usual
             # interval (exponential average) so that they show in diagnostics.
-            dt = stamp - newest
-            if stream.interval == 0.0:
+            interval = stream.interval
+            if interval == 0.0:
                 stream.interval = float(dt)
-            elif dt > 1.5 * stream.interval:
-                stream.missing += int(round(dt / stream.interval)) - 1
+            elif dt > 1.5 * interval:
+                stream.missing += int(round(dt / interval)) - 1
             else:
-                stream.interval += 0.05 * (dt - stream.interval)
-        stream.stamps.append(stamp)
+                stream.interval = interval + 0.05 * (dt - interval)
+        stamps = stream.stamps
+        stamps.append(stamp)
         stream.values.append(values)
         stream.last = stamp
-        if stamp - stream.stamps[0] > self.buffer_ns:
+        if stamp - stamps[0] > self.buffer_ns:
             self._expire(stream, stamp)
         frontier = self._frontier_stream
-        if frontier is not None and frontier.stamps[-1] < self._next_t:
+        if frontier is not None and frontier.last < self._next_t:
             return []  # the stream holding the grid back has still not reached it (see _advance)
         return self._advance()
 
@@ -196,8 +212,8 @@ class Pipeline:
         """``sensor_msgs/Imu`` in the REP-103 body frame: rad/s and specific force m/s^2."""
         wx, wy, wz = angular_velocity
         fx, fy, fz = linear_acceleration
-        values = (wx, wy, wz, fx, fy, fz)
-        return self._accept(self.streams["imu"], int(stamp_ns), values, math.isfinite(sum(values)))
+        finite = math.isfinite(wx + wy + wz + fx + fy + fz)
+        return self._accept(self._imu, int(stamp_ns), (wx, wy, wz, fx, fy, fz), finite)
 
     def add_airspeed(self, stamp_ns: int, velocity) -> list[SampleOutput]:
         """True-airspeed vector in the REP-103 body frame, m/s."""
@@ -213,11 +229,17 @@ class Pipeline:
 
     def add_surfaces(self, stamp_ns: int, names, positions) -> list[SampleOutput]:
         """``sensor_msgs/JointState`` names and positions (rad), mixed by Eq. 23."""
-        stream = self.streams["control_surfaces"]
-        names = tuple(names)
-        layout = "mismatched_arrays" if len(positions) != len(names) else self._joint_layouts.get(names)
-        if layout is None:
-            layout = self._joint_layout(names)
+        stream = self._surfaces
+        if names == self._joint_names:  # the usual case: every message has the same name list
+            layout = self._joint_layout_last
+        else:
+            key = tuple(names)
+            layout = self._joint_layouts.get(key)
+            if layout is None:
+                layout = self._joint_layout(key)
+            self._joint_names, self._joint_layout_last = list(key), layout
+        if len(positions) != len(names):
+            layout = "mismatched_arrays"
         if isinstance(layout, str):
             stream.received += 1
             stream.rejected[layout] += 1
@@ -225,20 +247,15 @@ class Pipeline:
         elevator, right, left, combined, rudder, unknown = layout
         for n in unknown:
             self.unknown_joints[n] += 1
-
-        def mean(index):
-            return sum(positions[i] for i in index) / len(index) if index else 0.0
-
-        de = mean(elevator)
+        de = _mean(positions, elevator)
         if combined is not None:
             da = positions[combined]
         elif right or left:
-            da = 0.5 * (mean(right) - mean(left))  # Eq. 23
+            da = 0.5 * (_mean(positions, right) - _mean(positions, left))  # Eq. 23
         else:
             da = 0.0
-        dr = mean(rudder)
-        values = (de, da, dr)
-        return self._accept(stream, int(stamp_ns), values, math.isfinite(de + da + dr))
+        dr = _mean(positions, rudder)
+        return self._accept(stream, int(stamp_ns), (de, da, dr), math.isfinite(de + da + dr))
 
     def _joint_layout(self, names: tuple):
         """Where each mixed joint sits in a JointState's arrays (cached per name list), or the
@@ -284,7 +301,7 @@ class Pipeline:
         t = self._next_t
         if t is not None and self._frontier_stream is not None:
             # Fast path: the stream that held the grid back has still not reached t.
-            if self._frontier_stream.stamps[-1] < t:
+            if self._frontier_stream.last < t:
                 return out
         for s in needed:
             if not s.stamps:
@@ -292,9 +309,10 @@ class Pipeline:
         if t is None:
             start = max(s.stamps[0] for s in needed)
             t = -(-start // P) * P
+        t_start = t
         while True:
-            lagging = min(needed, key=lambda s: s.stamps[-1])
-            if lagging.stamps[-1] < t:
+            lagging = min(needed, key=_NEWEST)  # every needed stream holds a message here
+            if lagging.last < t:
                 self._frontier_stream = lagging
                 break
             raw, reason, skip_to = self._interpolate(t)
@@ -311,6 +329,7 @@ class Pipeline:
                 if result is not None:
                     out.append(result)
                 t += P
+        if t != t_start:
             self._trim(t)
         self._next_t = t
         return out
@@ -318,20 +337,21 @@ class Pipeline:
     def _interpolate(self, t: int):
         """Stream values at ``t`` (aircraft axes), or ``(None, reason, skip_to)``."""
         vals = {}
+        max_gap = self.max_gap_ns
         for s in self._needed:
             stamps = s.stamps
             i = bisect_left(stamps, t)
-            if stamps[i] == t:
+            t1 = stamps[i]
+            if t1 == t:
                 vals[s.name] = s.values[i]
                 continue
             if i == 0:
                 return None, f"expired_{s.name}", stamps[0]
-            t0, t1 = stamps[i - 1], stamps[i]
-            if t1 - t0 > self.max_gap_ns:
+            t0 = stamps[i - 1]
+            if t1 - t0 > max_gap:
                 return None, f"gap_{s.name}", t1
             w = (t - t0) / (t1 - t0)
-            a, b = s.values[i - 1], s.values[i]
-            vals[s.name] = tuple(x + w * (y - x) for x, y in zip(a, b))
+            vals[s.name] = [x + w * (y - x) for x, y in zip(s.values[i - 1], s.values[i])]
         imu = vals["imu"]
         # The conversion to aircraft body axes: specific force, rates, velocity.
         raw = [
@@ -346,10 +366,11 @@ class Pipeline:
 
     def _trim(self, t_next: int) -> None:
         """Drop messages no later sample can need (keep the last one at or before ``t_next``)."""
-        for s in self.streams.values():
-            i = bisect_right(s.stamps, t_next) - 1
-            if i > 0:
-                del s.stamps[:i]
+        for s in self._stream_list:
+            stamps = s.stamps
+            if len(stamps) > 1 and stamps[1] <= t_next:
+                i = bisect_right(stamps, t_next) - 1
+                del stamps[:i]
                 del s.values[:i]
 
     # ------------------------------------------------------------------ per sample
