@@ -72,8 +72,8 @@ def physics_rejection(state: FlightState) -> str | None:
     negative dynamic pressure or airspeed (Eq. 1 and the rate normalisations divide by them)."""
     values = vars(state)
     try:  # the per-sample path: plain floats, one check when all are finite
-        all_finite = math.isfinite(math.fsum(values.values()))
-    except (TypeError, OverflowError):
+        all_finite = math.isfinite(sum(values.values()))
+    except (TypeError, ValueError):
         all_finite = False
     if not all_finite:
         for name, value in values.items():

@@ -75,6 +75,8 @@ COVARIANCE_KINDS = ("corrected", "conventional")
 
 _GROWTH_START = 64  # initial lag capacity when all lags are kept (n_lags=None)
 
+_F64 = np.dtype(np.float64)
+
 if hasattr(np, "vecdot"):  # numpy >= 2.0
     _vecdot = np.vecdot
 else:  # pragma: no cover - numpy 1.26
@@ -184,6 +186,7 @@ class EstimatorBank:
         self.residual = residual
         self.init_condition = float(init_condition)
 
+        self._x_shape, self._z_shape = (m, n), (m,)
         self._mask = np.zeros((m, n), dtype=bool)
         for j, s in enumerate(sizes):
             self._mask[j, :s] = True
@@ -327,8 +330,11 @@ class EstimatorBank:
         is ignored) or a sequence of ``M`` regressor vectors; ``z`` holds the ``M`` measured
         outputs. Non-finite input raises :class:`NonFiniteInput` and leaves the state unchanged.
         """
-        x = self._as_regressors(X)
-        if not (isinstance(z, np.ndarray) and z.shape == (self.n_models,) and z.dtype == float):
+        if type(X) is np.ndarray and X.shape == self._x_shape and X.dtype == _F64:
+            x = X
+        else:
+            x = self._as_regressors(X)
+        if not (type(z) is np.ndarray and z.shape == self._z_shape and z.dtype == _F64):
             z = np.asarray(z, dtype=float).reshape(-1)
             if z.shape != (self.n_models,):
                 raise ValueError(f"expected {self.n_models} measured outputs, got shape {z.shape}")
@@ -621,15 +627,14 @@ class EstimatorBank:
         """Column scaling of the variances: ``2/s^2`` for the one-sided products, ``1/s^2``
         for Eq. 13 (two-sided under forgetting); NaN on the padding and the models not ready,
         so that their standard errors come out NaN."""
-        inv_s2 = np.where(self._invalid(), np.nan, self._inv_s * self._inv_s)
+        self._theta_scale = np.where(self._invalid(), np.nan, self._inv_s)
+        inv_s2 = self._theta_scale * self._theta_scale
         self._var_scale = np.stack([2.0 * inv_s2, inv_s2 if self.forgetting == 1.0 else 2.0 * inv_s2])
 
     def theta_all(self) -> np.ndarray:
         """Estimates of every model as an ``(M, n_max)`` array; padding and models that are
         not :attr:`ready` are NaN."""
-        th = self._aug[:, self.n_max] * self._inv_s
-        th[self._invalid()] = np.nan
-        return th
+        return self._aug[:, self.n_max] * self._theta_scale
 
     def _invalid(self) -> np.ndarray:
         """``(M, n_max)`` mask of the padding and the models not ready (NaN in outputs)."""

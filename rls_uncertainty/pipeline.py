@@ -29,8 +29,8 @@ import math
 import os
 from bisect import bisect_left, bisect_right
 from collections import Counter, deque
-from dataclasses import dataclass
 from operator import attrgetter
+from typing import NamedTuple
 from pathlib import Path
 
 import numpy as np
@@ -50,8 +50,7 @@ class StateFileError(ValueError):
     """A saved estimator state cannot be loaded (missing, corrupt or another configuration)."""
 
 
-@dataclass(frozen=True)
-class SampleOutput:
+class SampleOutput(NamedTuple):
     """What one estimator sample produced.
 
     ``theta``, ``se`` (corrected, Eqs. 20/22) and ``se_conventional`` (Eq. 13) are
