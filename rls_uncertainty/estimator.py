@@ -263,6 +263,7 @@ class EstimatorBank:
         n1 = n + 1
         self._Q_flat = self._Q.reshape(m, n1, cap * n1)
         self._U_full = self._Q[:, :n, :, :n]
+        self._zz_view = self._Q[:, n, 0, n]  # sum of z^2 (f = 1)
         self._D_view = self._aug[:, :n]
         self._D_diag = np.diagonal(self._D_view, axis1=1, axis2=2)
         self._tmp_flat = self._tmp.reshape(m, n1, cap * n1)
@@ -593,7 +594,7 @@ class EstimatorBank:
         corrected = var[0]
         repair = corrected.min() < 0.0  # the scale below is positive (NaN where invalid)
         if repair:
-            corrected *= ~self._exact_fit()[:, None]
+            np.copyto(corrected, 0.0, where=self._exact_fit()[:, None])
             repair = corrected.min() < 0.0
         var *= self._var_scale * (1.0 / self.n_eff)  # lag sums to R_k(i), scaled units back
         if repair:
@@ -605,7 +606,7 @@ class EstimatorBank:
         """Models whose residual variance is below 1e-12 of the output's mean square: an
         exact fit (no noise), whose covariances are zero. Their corrected variances come out
         as tiny numbers of either sign from rounding; they are set to zero, not repaired."""
-        zz = self._Q[:, self.n_max, 0, self.n_max] if self.forgetting == 1.0 else self._zz
+        zz = self._zz_view if self.forgetting == 1.0 else self._zz
         return self._S[:, 0] <= 1e-12 * zz
 
     def standard_errors_all(self, kind: str = "corrected") -> np.ndarray:
