@@ -6,7 +6,7 @@
   six models of Eq. 2 (the lateral ones never become identifiable on this longitudinal
   maneuver, so they stay in exact-initialization accumulation for the whole run).
 
-Bag reading and output writing are timed separately from the pipeline.
+Bag reading and output writing are timed separately from the pipeline (median of five runs).
 
     .venv/bin/python benchmarks/replay_benchmark.py [--flight-data ../shared/flight_data]
 """

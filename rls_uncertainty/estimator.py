@@ -38,6 +38,12 @@ Design notes
   evaluation on an ``n x n`` matrix instead of once per lag and sample. The products are kept
   for ``y = (x, z)``: the ``x`` block is Eq. 21 and the ``z`` row and column are the lagged
   moments exact initialization needs, so one outer product per sample updates both.
+* **Per-sample cost.** Eq. 17 is kept as lag sums ``S_k(i) = f S_(k-1)(i) + v_k v_(k-i)``
+  (``R_k(i) = S_k(i) / n_k``, the division done when a covariance is evaluated), the sample
+  histories are written once into a newest-first buffer whose window is contiguous, and Eqs.
+  15b-c are one rank-one update of ``(D, theta)``: about 20 numpy calls per sample for any
+  number of models, the lag-product update (Eq. 21) being the only one whose cost grows with
+  the lags.
 * **Windows.** ``window="truncated"`` is Eq. 22 (uniform weights up to ``n_lags``).
   ``window="bartlett"`` uses ``1 - i/(n_lags+1)``: its Toeplitz kernel is positive
   semi-definite, and by the Schur product theorem so is the covariance; the uniform truncation
@@ -201,7 +207,7 @@ class EstimatorBank:
         self._ready_at = np.zeros(m, dtype=np.int64)
         self.repairs = np.zeros(m, dtype=np.int64)
         self._zz = np.zeros(m)  # sum f^(k-j) z_j^2, the scale of an exact fit
-        # Lag capacity: a ring of W = n_lags + 1 slots; all lags grow on demand.
+        # Lag capacity: W = n_lags + 1 lags; all lags (n_lags=None) grow on demand.
         self._cap = _GROWTH_START if self.n_lags is None else self.n_lags + 1
         self._alloc_lag_arrays(self._cap)
         self._cache: dict = {}
