@@ -228,14 +228,6 @@ class EstimatorBank:
         self._set_scale()
 
     # ------------------------------------------------------------------ storage
-    @property
-    def _D(self) -> np.ndarray:
-        return self._aug[:, : self.n_max]
-
-    @property
-    def _theta(self) -> np.ndarray:
-        return self._aug[:, self.n_max]
-
     def _alloc_lag_arrays(self, cap: int) -> None:
         m, n = self.n_models, self.n_max
         n1 = n + 1
@@ -288,11 +280,6 @@ class EstimatorBank:
     def _U(self) -> np.ndarray:
         """One-sided Eq. 21, transposed: ``_U[m, b, i, a] = sum x_(j-i)[a] x_j[b]``."""
         return self._Q[:, : self.n_max, :, : self.n_max]
-
-    @property
-    def _R(self) -> np.ndarray:
-        """Eq. 17, ``R_k(i)`` for ``i = 0..cap-1`` (zero beyond the lags held)."""
-        return self._S / max(self.n_eff, 1.0)
 
     def _grow(self) -> None:
         """Double the lag capacity (all-lags mode only)."""
