@@ -234,8 +234,10 @@ class EstimatorBank:
         # History of y_k = (scaled regressors, output) and of the residuals, newest first:
         # the last min(k, cap) samples are the contiguous slice [_ptr, _ptr + w). Each sample
         # is written once, at _ptr - 1; when it lands on slot 0 the window is copied back to
-        # the end (once every 3 cap samples). The outputs are needed until initialization.
-        length = 4 * cap
+        # the end (once every 3 cap samples). With all lags the buffer is exactly the capacity
+        # and fills up when the capacity is reached, just before it grows (_grow). The outputs
+        # are needed until initialization.
+        length = 4 * cap if self.n_lags is not None else cap
         self._ybuf = np.zeros((m, length, n1))
         # The residuals are stored with the opposite sign, -v_k = x_k' theta - z_k: the
         # products v_k v_(k-i) of Eq. 17 do not see it, and the update saves a negation.
@@ -413,7 +415,7 @@ class EstimatorBank:
                 P += tmp
         if not self._all_ready:
             self._check_initialization(w)
-        if p == 0:
+        if p == 0 and self.n_lags is not None:
             self._relocate()
         self._cache.clear()
 
