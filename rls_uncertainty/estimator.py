@@ -87,8 +87,8 @@ if hasattr(np, "vecdot"):  # numpy >= 2.0
     _vecdot = np.vecdot
 else:  # pragma: no cover - numpy 1.26
 
-    def _vecdot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-        return np.einsum("...i,...i->...", a, b)
+    def _vecdot(a: np.ndarray, b: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+        return np.einsum("...i,...i->...", a, b, out=out)
 
 
 class EstimatorNotReady(RuntimeError):
