@@ -83,12 +83,13 @@ _GROWTH_START = 64  # initial lag capacity when all lags are kept (n_lags=None)
 
 _F64 = np.dtype(np.float64)
 
-if hasattr(np, "vecdot"):  # numpy >= 2.0
-    _vecdot = np.vecdot
-else:  # pragma: no cover - numpy 1.26
 
-    def _vecdot(a: np.ndarray, b: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
-        return np.einsum("...i,...i->...", a, b, out=out)
+def _einsum_vecdot(a: np.ndarray, b: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+    """``np.vecdot`` (numpy >= 2.0) for numpy 1.26: dot products over the last axis."""
+    return np.einsum("...i,...i->...", a, b, out=out)
+
+
+_vecdot = getattr(np, "vecdot", _einsum_vecdot)
 
 
 class EstimatorNotReady(RuntimeError):

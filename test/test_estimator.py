@@ -460,3 +460,16 @@ def test_an_exactly_fitted_model_has_zero_corrected_errors_without_repairs():
     assert np.all(const.standard_errors(0, "corrected") == 0.0) or np.all(const.standard_errors(0, "corrected") < 1e-8)
     const.covariance(0, "corrected")
     assert const.repairs[0] == 0
+
+
+def test_numpy_126_vecdot_fallback_gives_the_same_standard_errors(monkeypatch):
+    """numpy < 2.0 has no vecdot; the einsum fallback must give the same covariances."""
+    from rls_uncertainty import estimator as est_module
+
+    X, z = wide_scale_problem()
+    ref = run(RecursiveEstimator(4, n_lags=20, forgetting=0.99), X, z)
+    monkeypatch.setattr(est_module, "_vecdot", est_module._einsum_vecdot)
+    alt = run(RecursiveEstimator(4, n_lags=20, forgetting=0.99), X, z)
+    np.testing.assert_allclose(alt.standard_errors(), ref.standard_errors(), rtol=1e-12)
+    np.testing.assert_allclose(alt.standard_errors("conventional"), ref.standard_errors("conventional"), rtol=1e-12)
+    np.testing.assert_allclose(alt.theta, ref.theta, rtol=1e-12)
