@@ -19,7 +19,6 @@ topic and what is wrong.
 from __future__ import annotations
 
 import math
-import shutil
 import struct
 from dataclasses import dataclass
 from pathlib import Path
@@ -29,7 +28,9 @@ import numpy as np
 
 from . import cdr
 from .aero import rep103_to_aircraft
-from .config import ConfigError, package_path, read_yaml
+from .config import package_path, read_yaml
+from .errors import BagError, ConfigError
+from .files import output_directory
 from .messages import INPUTS, MESSAGE_TYPES, stamp_ns
 
 __all__ = [
@@ -43,10 +44,6 @@ __all__ = [
     "schema_dir",
     "UNITS",
 ]
-
-
-class BagError(RuntimeError):
-    """A bag, schema or mapping problem; the message names the file, topic and problem."""
 
 
 def schema_dir() -> Path:
@@ -241,11 +238,13 @@ def _standard_message(store, kind: str, stamp: int, values, names=None):
     raise ValueError(kind)
 
 
-def write_replay(path: str | Path, records: list, store=None) -> Path:
+def write_replay(path: str | Path, records: list, store=None, *, force: bool = False,
+                 inputs: tuple = ()) -> Path:
     """Write ``records`` (``(stamp_ns, topic, msgtype, msg)``, ``msg`` a message or its CDR
-    bytes) as a ROS 2 MCAP bag at ``path``
-    (a directory), log time = stamp, ordered by stamp with a stable tie-break. Atomic: the
-    bag appears under ``path`` only when complete."""
+    bytes) as a ROS 2 MCAP bag at ``path`` (a directory), log time = stamp, ordered by stamp
+    with a stable tie-break. Atomic (:func:`.files.output_directory`): the bag appears under
+    ``path`` only when complete; an existing non-empty ``path`` is refused unless ``force``,
+    and ``inputs`` are never overwritten."""
     from rosbags.rosbag2 import StoragePlugin, Writer  # noqa: PLC0415
 
     store = store or typestore()
@@ -259,29 +258,24 @@ def write_replay(path: str | Path, records: list, store=None) -> Path:
     for r in recs:
         rank.setdefault(r.topic, _TOPIC_RANK.get(r.topic.strip("/"), len(_TOPIC_RANK)))
     recs.sort(key=lambda r: (r.stamp, rank[r.topic], r.topic, r.seq))
-    tmp = path.with_name(path.name + ".partial")
-    if tmp.exists():
-        shutil.rmtree(tmp)
-    tmp.parent.mkdir(parents=True, exist_ok=True)
-    with Writer(tmp, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
-        conns = {}
-        for topic in sorted({r.topic for r in recs}, key=lambda t: (rank[t], t)):
-            msgtype = next(r.msgtype for r in recs if r.topic == topic)
-            conns[topic] = writer.add_connection(topic, msgtype, typestore=store)
-        for r in recs:
-            raw = r.msg if isinstance(r.msg, bytes) else store.serialize_cdr(r.msg, r.msgtype)
-            writer.write(conns[r.topic], r.stamp, raw)
-    # rosbags names the MCAP file after the directory: give it the final name.
-    (tmp / f"{tmp.name}.mcap").rename(tmp / f"{path.name}.mcap")
-    meta = tmp / "metadata.yaml"
-    meta.write_text(meta.read_text().replace(f"{tmp.name}.mcap", f"{path.name}.mcap"))
-    if path.exists():
-        shutil.rmtree(path)
-    tmp.rename(path)
+    with output_directory(path, force=force, inputs=inputs) as tmp:
+        name = path.resolve().name
+        bag = tmp / name  # rosbags creates the bag directory itself
+        with Writer(bag, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
+            conns = {}
+            for topic in sorted({r.topic for r in recs}, key=lambda t: (rank[t], t)):
+                msgtype = next(r.msgtype for r in recs if r.topic == topic)
+                conns[topic] = writer.add_connection(topic, msgtype, typestore=store)
+            for r in recs:
+                raw = r.msg if isinstance(r.msg, bytes) else store.serialize_cdr(r.msg, r.msgtype)
+                writer.write(conns[r.topic], r.stamp, raw)
+        for item in bag.iterdir():
+            item.rename(tmp / item.name)
+        bag.rmdir()
     return path
 
 
-def write_t2_bag(path: str | Path, band_level: float = 0.2, seed: int = 250) -> Path:
+def write_t2_bag(path: str | Path, band_level: float = 0.2, seed: int = 250, *, force: bool = False) -> Path:
     """The bundled bag: one seeded T-2 maneuver (Section IV.A) on the standard topics, IMU at
     200 Hz, air data at 50 Hz, surfaces at 100 Hz, thrust at 10 Hz
     (:func:`.simulation.simulate_sensor_streams`)."""
@@ -295,7 +289,7 @@ def write_t2_bag(path: str | Path, band_level: float = 0.2, seed: int = 250) -> 
         for k in range(stamps.size):
             msg = _standard_message(store, kind, int(stamps[k]), values[k], s.surface_names)
             records.append((int(stamps[k]), f"/{kind}", MESSAGE_TYPES[kind], msg))
-    return write_replay(path, records, store)
+    return write_replay(path, records, store, force=force)
 
 
 # ------------------------------------------------------------------------------ reading
@@ -461,7 +455,8 @@ def _mapped_values(kind: str, spec: dict, msg, where: str):
     raise ValueError(kind)
 
 
-def convert(src: str | Path, mapping: str | Path, out: str | Path, schemas: list[Path] | None = None) -> dict:
+def convert(src: str | Path, mapping: str | Path, out: str | Path, schemas: list[Path] | None = None, *,
+            force: bool = False) -> dict:
     """Recording + mapping file -> replay bag on the standard topics. Returns message counts
     per standard topic. Raises :class:`BagError` on any problem, leaving no output."""
     src, out = Path(src), Path(out)
@@ -505,7 +500,7 @@ def convert(src: str | Path, mapping: str | Path, out: str | Path, schemas: list
         reader.close()
     if not records:
         raise BagError(f"{src}: the mapped topics hold no messages (empty bag)")
-    write_replay(out, records, store)
+    write_replay(out, records, store, force=force, inputs=(src, mapping))
     counts: dict[str, int] = {}
     for _s, topic, _m, _msg in records:
         counts[topic] = counts.get(topic, 0) + 1

@@ -7,6 +7,8 @@ import sys
 
 import numpy as np
 
+from .errors import ConfigError, RlsUncertaintyError
+
 __all__ = ["main"]
 
 
@@ -79,7 +81,7 @@ def _multisine(args: argparse.Namespace) -> int:
 
     names = tuple(args.names) if args.names else tuple(f"input{i + 1}" for i in range(args.inputs))
     if len(names) != args.inputs:
-        raise ValueError(f"--names gives {len(names)} names for {args.inputs} inputs")
+        raise ConfigError(f"--names gives {len(names)} names for {args.inputs} inputs")
     designs = design_multisines(args.period, (args.band[0], args.band[1]), args.inputs, names=names,
                                 amplitude=args.amplitude)
     out = Path(args.out)
@@ -102,7 +104,7 @@ def _make_bag(args: argparse.Namespace) -> int:
     """Write the seeded T-2 maneuver on the node's standard input topics."""
     from .bags import write_t2_bag
 
-    path = write_t2_bag(args.out, args.noise / 100.0, args.seed)
+    path = write_t2_bag(args.out, args.noise / 100.0, args.seed, force=args.force)
     size = sum(f.stat().st_size for f in path.iterdir())
     print(f"wrote {path} ({size / 1e6:.2f} MB): T-2 maneuver, {args.noise:g}% band-limited noise, seed {args.seed}")
     return 0
@@ -111,7 +113,7 @@ def _make_bag(args: argparse.Namespace) -> int:
 def _convert(args: argparse.Namespace) -> int:
     from .bags import convert
 
-    counts = convert(args.bag, args.mapping, args.out, schemas=args.schemas)
+    counts = convert(args.bag, args.mapping, args.out, schemas=args.schemas, force=args.force)
     for topic, n in counts.items():
         print(f"{topic:<20}{n:>8} messages")
     print(f"wrote {args.out}")
@@ -138,7 +140,7 @@ def _replay(args: argparse.Namespace) -> int:
 
     params = _replay_params(args)
     result = replay(args.bag, params, args.out, start=args.start, end=args.end, strict=not args.lenient,
-                    progress=not args.quiet, plots=not args.no_plots)
+                    progress=not args.quiet, plots=not args.no_plots, force=args.force)
     pipe = result.pipeline
     c = pipe.counters()
     print(summary_table(pipe, result.outputs))
@@ -167,6 +169,9 @@ def _lags(value: str):
     if n < 0:
         raise argparse.ArgumentTypeError("lags must be >= 0 or 'all'")
     return n
+
+
+_FORCE_HELP = "replace an existing non-empty output directory (never the input)"
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -209,6 +214,7 @@ def build_parser() -> argparse.ArgumentParser:
     mb.add_argument("--out", default="bags/t2_maneuver", help="bag directory (default bags/t2_maneuver)")
     mb.add_argument("--noise", type=float, default=20.0, help="band-limited noise, percent (default 20)")
     mb.add_argument("--seed", type=int, default=250)
+    mb.add_argument("--force", action="store_true", help=_FORCE_HELP)
     mb.set_defaults(func=_make_bag)
 
     cv = sub.add_parser("convert", help="recorded bag + mapping file -> replay bag on the standard topics")
@@ -216,6 +222,7 @@ def build_parser() -> argparse.ArgumentParser:
     cv.add_argument("--mapping", required=True, help="mapping YAML (e.g. msg_schemas/fti_msgs/mapping.yaml)")
     cv.add_argument("--out", required=True, help="output bag directory")
     cv.add_argument("--schemas", action="append", help="extra .msg directory (PKG/msg/NAME.msg); repeatable")
+    cv.add_argument("--force", action="store_true", help=_FORCE_HELP)
     cv.set_defaults(func=_convert)
 
     rp = sub.add_parser("replay", help="run a replay bag through the node's pipeline offline")
@@ -232,6 +239,7 @@ def build_parser() -> argparse.ArgumentParser:
                     help="pass out-of-order and duplicate stamps to the pipeline (counted like the node does)")
     rp.add_argument("--no-plots", action="store_true")
     rp.add_argument("--quiet", action="store_true", help="no progress bar")
+    rp.add_argument("--force", action="store_true", help=_FORCE_HELP)
     rp.set_defaults(func=_replay)
 
     pl = sub.add_parser("play", help="publish a replay bag over DDS with /clock")
@@ -250,7 +258,9 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     try:
         return int(args.func(args) or 0)
-    except (ValueError, OSError, RuntimeError) as exc:
+    except (RlsUncertaintyError, OSError) as exc:
+        # The package's own errors and file-system problems are the user's to fix; anything
+        # else is a bug and shows its traceback.
         print(f"rls-uncertainty {args.command}: error: {exc}", file=sys.stderr)
         return 2
 

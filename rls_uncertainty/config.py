@@ -13,6 +13,8 @@ from typing import Any
 
 import yaml
 
+from .errors import ConfigError
+
 __all__ = [
     "AircraftConfig",
     "ModelConfig",
@@ -34,10 +36,6 @@ __all__ = [
     "node_config",
     "load_parameters_file",
 ]
-
-
-class ConfigError(ValueError):
-    """A configuration value is missing or invalid; the message says which and why."""
 
 
 @dataclass(frozen=True)

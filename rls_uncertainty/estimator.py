@@ -59,9 +59,11 @@ Design notes
 from __future__ import annotations
 
 import math
-from typing import Sequence
+from typing import Literal, Sequence, get_args
 
 import numpy as np
+
+from .errors import EstimatorNotReady, NonFiniteInput
 
 __all__ = [
     "EstimatorBank",
@@ -71,13 +73,21 @@ __all__ = [
     "batch_estimate",
     "lag_weights",
     "WINDOWS",
+    "Window",
+    "Residual",
+    "CovarianceKind",
     "RESIDUALS",
     "COVARIANCE_KINDS",
 ]
 
-WINDOWS = ("truncated", "bartlett")
-RESIDUALS = ("a_posteriori", "a_priori", "standardized")
-COVARIANCE_KINDS = ("corrected", "conventional")
+# The estimator's choices, defined once: configuration, parameters and the command line read
+# them from here.
+Window = Literal["truncated", "bartlett"]
+Residual = Literal["standardized", "a_posteriori", "a_priori"]
+CovarianceKind = Literal["corrected", "conventional"]
+WINDOWS: tuple[Window, ...] = get_args(Window)
+RESIDUALS: tuple[Residual, ...] = get_args(Residual)
+COVARIANCE_KINDS: tuple[CovarianceKind, ...] = get_args(CovarianceKind)
 
 _GROWTH_START = 64  # initial lag capacity when all lags are kept (n_lags=None)
 
@@ -90,14 +100,6 @@ def _einsum_vecdot(a: np.ndarray, b: np.ndarray, out: np.ndarray | None = None) 
 
 
 _vecdot = getattr(np, "vecdot", _einsum_vecdot)
-
-
-class EstimatorNotReady(RuntimeError):
-    """Raised when an estimate is asked of a model that is not initialized yet."""
-
-
-class NonFiniteInput(ValueError):
-    """Raised when a regressor or measured output is NaN or infinite (state is unchanged)."""
 
 
 def lag_weights(n_lags: int, window: str, count: int | None = None) -> np.ndarray:

@@ -7,7 +7,22 @@ happens here beyond reading fields and the header stamp; no ROS import.
 
 from __future__ import annotations
 
-__all__ = ["INPUTS", "MESSAGE_TYPES", "stamp_ns", "feed", "stamp_label", "parse_stamp_label"]
+import importlib
+
+__all__ = [
+    "NODE_NAME",
+    "INPUTS",
+    "MESSAGE_TYPES",
+    "ARRAY_OUTPUTS",
+    "message_class",
+    "stamp_ns",
+    "feed",
+    "stamp_label",
+    "parse_stamp_label",
+]
+
+# The node's name: its private topics are /rls_estimator/..., its diagnostics "rls_estimator: ...".
+NODE_NAME = "rls_estimator"
 
 # Standard input topics (relative names; a replay bag uses them under "/") and their types.
 MESSAGE_TYPES = {
@@ -18,6 +33,15 @@ MESSAGE_TYPES = {
     "thrust": "geometry_msgs/msg/WrenchStamped",
 }
 INPUTS = tuple(MESSAGE_TYPES)
+# The arrays published per model M as ~/M/<suffix> (std_msgs/Float64MultiArray), in order.
+ARRAY_OUTPUTS = ("estimates", "standard_errors", "standard_errors_conventional")
+
+
+def message_class(msgtype: str) -> type:
+    """The generated ROS message class of a type name such as ``sensor_msgs/msg/Imu`` (imported
+    on demand: this module itself imports no ROS package)."""
+    pkg, _msg, name = msgtype.split("/")
+    return getattr(importlib.import_module(f"{pkg}.msg"), name)
 
 
 def stamp_ns(msg) -> int:

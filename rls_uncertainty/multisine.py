@@ -13,6 +13,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .errors import ConfigError
+
 __all__ = [
     "Multisine",
     "T2_TABLE2",
@@ -38,9 +40,9 @@ class Multisine:
     def __post_init__(self) -> None:
         n = len(self.harmonics)
         if n == 0 or len(self.rel_amplitudes) != n or len(self.phases) != n:
-            raise ValueError(f"multisine {self.name!r}: harmonics, amplitudes and phases must match")
+            raise ConfigError(f"multisine {self.name!r}: harmonics, amplitudes and phases must match")
         if self.period <= 0:
-            raise ValueError(f"multisine {self.name!r}: period must be positive")
+            raise ConfigError(f"multisine {self.name!r}: period must be positive")
 
     @property
     def frequencies(self) -> np.ndarray:
@@ -94,7 +96,7 @@ def relative_peak_factor(u: np.ndarray) -> float:
     u = np.asarray(u, dtype=float)
     rms = np.sqrt(np.mean((u - u.mean()) ** 2))
     if rms == 0.0:
-        raise ValueError("relative peak factor of a constant signal is undefined")
+        raise ConfigError("relative peak factor of a constant signal is undefined")
     return float((u.max() - u.min()) / (2.0 * np.sqrt(2.0) * rms))
 
 
@@ -126,16 +128,16 @@ def design_multisines(
     """
     lo, hi = band
     if period <= 0 or not (0 <= lo < hi) or n_inputs < 1:
-        raise ValueError("need period > 0, 0 <= band[0] < band[1] and n_inputs >= 1")
+        raise ConfigError("need period > 0, 0 <= band[0] < band[1] and n_inputs >= 1")
     ks = [k for k in range(max(2, int(np.ceil(lo * period))), int(np.floor(hi * period)) + 1)]
     if len(ks) < n_inputs:
-        raise ValueError(
+        raise ConfigError(
             f"band {band} Hz with T = {period} s holds {len(ks)} harmonics; "
             f"{n_inputs} inputs need at least one each"
         )
     names = names or tuple(f"input{i + 1}" for i in range(n_inputs))
     if len(names) != n_inputs:
-        raise ValueError("one name per input is needed")
+        raise ConfigError("one name per input is needed")
     rng = np.random.default_rng(seed)
     t = np.arange(grid) * period / grid
     designs = []

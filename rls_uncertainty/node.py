@@ -22,7 +22,6 @@ import time
 
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from geometry_msgs.msg import Vector3Stamped, WrenchStamped
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult
 from rclpy.clock import Clock, ClockChange, ClockType, JumpThreshold
 from rclpy.duration import Duration
@@ -31,25 +30,17 @@ from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.serialization import deserialize_message
 from rclpy.qos import QoSHistoryPolicy, QoSProfile, QoSReliabilityPolicy, qos_profile_sensor_data
-from sensor_msgs.msg import FluidPressure, Imu, JointState
 from std_msgs.msg import Float64MultiArray, Header
 from std_srvs.srv import SetBool, Trigger
 
 from .cdr import decode, encode_float64_multiarray, encode_header
 from .config import PARAMETERS, ConfigError, node_config, pipeline_config
-from .messages import INPUTS, MESSAGE_TYPES, feed, stamp_label
+from .messages import ARRAY_OUTPUTS, INPUTS, MESSAGE_TYPES, NODE_NAME, feed, message_class, stamp_label
 from .pipeline import Pipeline, StateFileError
 
 __all__ = ["EstimatorNode", "main", "NODE_NAME"]
 
-NODE_NAME = "rls_estimator"
-_TYPES = {
-    "imu": Imu,
-    "airspeed": Vector3Stamped,
-    "dynamic_pressure": FluidPressure,
-    "control_surfaces": JointState,
-    "thrust": WrenchStamped,
-}
+_TYPES = {kind: message_class(MESSAGE_TYPES[kind]) for kind in INPUTS}
 # No QoS-event handlers: rclpy's executor walks every handler on every wait, which cost more
 # CPU than the estimation itself. A QoS mismatch on an input shows in /diagnostics instead
 # (``<stream>.publishers`` is 0 and the stream is reported silent).
@@ -175,7 +166,7 @@ class EstimatorNode(Node):
                 self._model_pubs[m.output] = tuple(
                     self.create_publisher(Float64MultiArray, f"~/{m.output}/{suffix}", self._out_qos,
                                           event_callbacks=_NO_EVENTS)
-                    for suffix in ("estimates", "standard_errors", "standard_errors_conventional")
+                    for suffix in ARRAY_OUTPUTS
                 )
 
     # ------------------------------------------------------------------ data path

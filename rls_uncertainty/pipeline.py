@@ -26,7 +26,6 @@ from __future__ import annotations
 
 import json
 import math
-import os
 from bisect import bisect_left, bisect_right
 from collections import Counter, deque
 from operator import attrgetter
@@ -38,16 +37,15 @@ import numpy as np
 from .aero import FlightState, coefficients, physics_rejection, regressors, rep103_to_aircraft
 from .config import PipelineConfig
 from .differentiation import DifferentiatorConfig, FixedLagDifferentiator
-from .estimator import EstimatorBank, NonFiniteInput
+from .errors import NonFiniteInput, StateFileError
+from .files import atomic_file
+from .estimator import EstimatorBank
+from .messages import INPUTS
 
 __all__ = ["Pipeline", "SampleOutput", "STREAMS", "StateFileError"]
 
-STREAMS = ("imu", "airspeed", "dynamic_pressure", "control_surfaces", "thrust")
+STREAMS = INPUTS
 _SURFACES = ("delta_e", "delta_a", "delta_r")
-
-
-class StateFileError(ValueError):
-    """A saved estimator state cannot be loaded (missing, corrupt or another configuration)."""
 
 
 class SampleOutput(NamedTuple):
@@ -557,10 +555,8 @@ class Pipeline:
             "zsum": self._zsum.tolist(),
             "zsq": self._zsq.tolist(),
         }
-        tmp = path.with_name(path.name + ".tmp")
-        with open(tmp, "wb") as fh:
+        with atomic_file(path) as fh:
             np.savez(fh, meta=np.array(json.dumps(meta)), **state["arrays"])
-        os.replace(tmp, path)
 
     def load_state(self, path: str | Path) -> None:
         """Continue from :meth:`save_state`. Raises :class:`StateFileError` when the file is

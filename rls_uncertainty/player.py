@@ -12,19 +12,16 @@ offline replay of the same bag.
 
 from __future__ import annotations
 
-import importlib
 import os
 import subprocess
 import sys
 import time
 from pathlib import Path
 
+from .errors import ConfigError
+from .messages import message_class
+
 __all__ = ["play", "demo", "bundled_bag"]
-
-
-def _message_class(msgtype: str):
-    pkg, _msg, name = msgtype.split("/")
-    return getattr(importlib.import_module(f"{pkg}.msg"), name)
 
 
 def _loopback_default() -> None:
@@ -48,7 +45,7 @@ class _Publisher:
         self.pubs = {}
         for conn in self.reader.connections:
             try:
-                cls = _message_class(conn.msgtype)
+                cls = message_class(conn.msgtype)
             except (ImportError, AttributeError, ValueError) as exc:
                 self.reader.close()
                 raise BagError(f"{self.path}: topic {conn.topic}: type {conn.msgtype} is not available in this "
@@ -95,7 +92,7 @@ def play(bag: str | Path, *, rate: float = 1.0, clock: bool = True, reliable: bo
     """Publish ``bag``; ``rate`` is the speed factor (0 = as fast as possible). Waits for
     ``wait_for_subscribers`` subscribers on every topic first. Returns a process exit code."""
     if rate < 0:
-        raise ValueError(f"rate must be >= 0, got {rate}")
+        raise ConfigError(f"rate must be >= 0, got {rate}")
     _loopback_default()
     import rclpy  # noqa: PLC0415
 

@@ -17,7 +17,6 @@ Two runs give bit-identical CSV and MCAP files.
 from __future__ import annotations
 
 import gc
-import shutil
 import sys
 import time
 from dataclasses import dataclass, field
@@ -28,12 +27,11 @@ import numpy as np
 from .bags import read_inputs, typestore, write_replay
 from .cdr import encode_float64_multiarray, encode_header
 from .config import PipelineConfig, node_config, pipeline_config
-from .messages import feed, stamp_label
+from .files import output_directory
+from .messages import ARRAY_OUTPUTS, NODE_NAME, feed, stamp_label
 from .pipeline import Pipeline
 
 __all__ = ["ReplayResult", "run_pipeline", "replay", "output_records", "NODE_NAME"]
-
-NODE_NAME = "rls_estimator"
 
 
 @dataclass
@@ -101,7 +99,7 @@ def output_records(pipe: Pipeline, outputs, frame_id: str = "base_link", node: s
         records.append((stamp, f"/{node}/sample_stamp", "std_msgs/msg/Header", header))
         when = stamp_label(stamp)
         for name, label, theta, se, se_conv in pipe.published(out):
-            for suffix, data in (("estimates", theta), ("standard_errors", se), ("standard_errors_conventional", se_conv)):
+            for suffix, data in zip(ARRAY_OUTPUTS, (theta, se, se_conv)):
                 records.append((stamp, f"/{node}/{name}/{suffix}", "std_msgs/msg/Float64MultiArray",
                                 encode_float64_multiarray(label, data.tolist(), when)))
     return records
@@ -196,31 +194,23 @@ def _plots(out_dir: Path, pipe: Pipeline, outputs) -> list[Path]:
 
 
 def replay(bag: str | Path, params: dict, out: str | Path, *, start=None, end=None, strict: bool = True,
-           progress: bool = True, plots: bool = True) -> ReplayResult:
-    """Run a replay bag through the pipeline and write the outputs to ``out``."""
+           progress: bool = True, plots: bool = True, force: bool = False) -> ReplayResult:
+    """Run a replay bag through the pipeline and write the outputs to ``out``
+    (:func:`.files.output_directory`: complete or absent; an existing non-empty ``out`` only
+    with ``force``; never over the input bag)."""
     config = pipeline_config(params)
     topics = node_config(params).topics
-    messages, _t0 = read_inputs(bag, topics, strict=strict, start=start, end=end)
-    result = run_pipeline(messages, config, progress=progress)
-    out = Path(out)
-    tmp = out.with_name(out.name + ".partial")
-    if tmp.exists():
-        shutil.rmtree(tmp)
-    tmp.mkdir(parents=True)
-    try:
+    with output_directory(out, force=force, inputs=(bag,)) as tmp:
+        messages, _t0 = read_inputs(bag, topics, strict=strict, start=start, end=end)
+        result = run_pipeline(messages, config, progress=progress)
         _write_csv(tmp / "estimates.csv", result.pipeline, result.outputs)
         store = typestore()
         records = output_records(result.pipeline, result.outputs, node_config(params).frame_id)
         if records:
             write_replay(tmp / "estimates", records, store)
-            shutil.move(str(tmp / "estimates" / "estimates.mcap"), str(tmp / "estimates.mcap"))
-            shutil.rmtree(tmp / "estimates")
+            (tmp / "estimates" / "estimates.mcap").rename(tmp / "estimates.mcap")
+            (tmp / "estimates" / "metadata.yaml").unlink()
+            (tmp / "estimates").rmdir()
         if plots:
             _plots(tmp, result.pipeline, result.outputs)
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
-    if out.exists():
-        shutil.rmtree(out)
-    tmp.rename(out)
     return result

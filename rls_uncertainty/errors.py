@@ -1,0 +1,50 @@
+"""Every error the package raises on purpose, in one module.
+
+Each class derives from :class:`RlsUncertaintyError` and from the built-in exception that
+matches its meaning, so callers may catch either: ``except RlsUncertaintyError`` catches the
+package's own errors (bad input, bad configuration, a bad file) and nothing else, while a
+programming error (a numpy shape ``ValueError``, a ``KeyError``) is not caught by it and
+shows its traceback. The command line catches only these and :class:`OSError`.
+"""
+
+from __future__ import annotations
+
+__all__ = [
+    "RlsUncertaintyError",
+    "ConfigError",
+    "StateFileError",
+    "BagError",
+    "OutputPathError",
+    "EstimatorNotReady",
+    "NonFiniteInput",
+]
+
+
+class RlsUncertaintyError(Exception):
+    """Base class of the package's errors: a problem with the user's input, not a bug."""
+
+
+class ConfigError(RlsUncertaintyError, ValueError):
+    """A configuration value is missing or invalid; the message says which and why."""
+
+
+class StateFileError(RlsUncertaintyError, ValueError):
+    """A saved estimator state cannot be loaded (missing, corrupt or another configuration)."""
+
+
+class BagError(RlsUncertaintyError, RuntimeError):
+    """A bag, schema or mapping problem; the message names the file, topic and problem."""
+
+
+class OutputPathError(RlsUncertaintyError, ValueError):
+    """An output path that a command refuses to write (it would delete or overwrite data the
+    command did not create)."""
+
+
+class EstimatorNotReady(RlsUncertaintyError, RuntimeError):
+    """An estimate was asked of a model that is not initialized yet."""
+
+
+class NonFiniteInput(RlsUncertaintyError, ValueError):
+    """A regressor or measured output is NaN or infinite, or the update would make the
+    estimator state non-finite (the state is unchanged)."""

@@ -1,0 +1,125 @@
+"""Writing outputs without ever losing data: the one write-then-rename helper of the package.
+
+* :func:`atomic_file` writes one file: a new temporary file is created exclusively in the
+  target's directory (a fresh random name, so a planted file or symlink is never opened or
+  written through), flushed and fsync'ed, then renamed over the target, and the directory is
+  fsync'ed. On any failure the temporary file is removed and the target is untouched.
+* :func:`output_directory` builds an output directory (a bag, a replay's results) in a new
+  temporary directory beside it and renames it into place only when complete. It refuses an
+  output that would destroy data the command did not create: an existing file, a non-empty
+  directory (unless ``force``), and, even with ``force``, a path that is, contains or lies
+  inside one of the command's inputs. Paths are resolved (symlinks, ``..``) before they are
+  compared. On any failure everything the command created is removed, and nothing else.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import tempfile
+from collections.abc import Iterable, Iterator
+from contextlib import contextmanager, suppress
+from pathlib import Path
+from typing import IO
+
+from .errors import OutputPathError
+
+__all__ = ["atomic_file", "output_directory"]
+
+
+def _fsync_directory(directory: Path) -> None:
+    with suppress(OSError):  # not every file system lets a directory be opened or synced
+        fd = os.open(directory, os.O_RDONLY)
+        try:
+            os.fsync(fd)
+        finally:
+            os.close(fd)
+
+
+@contextmanager
+def atomic_file(path: str | os.PathLike[str]) -> Iterator[IO[bytes]]:
+    """Yield a binary file whose content replaces ``path`` atomically when the block ends."""
+    target = Path(path)
+    directory = target.parent if str(target.parent) else Path(".")
+    fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=directory)
+    try:
+        with os.fdopen(fd, "wb") as fh:
+            yield fh
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, target)  # renames over a symlink itself, never through it
+    except BaseException:
+        with suppress(FileNotFoundError):
+            os.unlink(tmp)
+        raise
+    _fsync_directory(directory)
+
+
+def _inside(path: Path, other: Path) -> bool:
+    return path == other or other in path.parents
+
+
+def _first_missing_ancestor(path: Path) -> Path | None:
+    missing = None
+    for p in (path, *path.parents):
+        if p.exists():
+            break
+        missing = p
+    return missing
+
+
+@contextmanager
+def output_directory(
+    path: str | os.PathLike[str], *, force: bool = False, inputs: Iterable[str | os.PathLike[str]] = ()
+) -> Iterator[Path]:
+    """Yield a new empty directory that becomes ``path`` when the block succeeds.
+
+    Raises :class:`~rls_uncertainty.errors.OutputPathError` before anything is written when
+    ``path`` is an existing file, an existing non-empty directory (allowed with ``force``: it
+    is replaced, after the new output is complete), or is, contains or lies inside one of
+    ``inputs`` (never allowed).
+    """
+    given = Path(path)
+    final = given.resolve()
+    if final == final.parent:
+        raise OutputPathError(f"{given}: cannot write an output over the file system root")
+    for item in inputs:
+        source = Path(item).resolve()
+        if _inside(final, source) or _inside(source, final):
+            raise OutputPathError(
+                f"{given}: the output would overwrite the input {item} (it is, contains or lies inside it)"
+            )
+    replace = False
+    if final.is_symlink() or (final.exists() and not final.is_dir()):
+        raise OutputPathError(f"{given}: exists and is not a directory; choose another output directory")
+    if final.is_dir() and any(final.iterdir()):
+        if not force:
+            raise OutputPathError(
+                f"{given}: output directory exists and is not empty (use --force to replace it)"
+            )
+        replace = True
+    created_parent = _first_missing_ancestor(final.parent)
+    final.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{final.name}.", suffix=".partial", dir=final.parent))
+    try:
+        yield tmp
+        if replace:
+            old = Path(tempfile.mkdtemp(prefix=f".{final.name}.", suffix=".old", dir=final.parent))
+            os.rename(final, old / final.name)
+            os.rename(tmp, final)
+            shutil.rmtree(old)
+        else:
+            if final.is_dir():
+                final.rmdir()  # empty: nothing is lost
+            os.rename(tmp, final)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        if created_parent is not None:
+            with suppress(OSError):
+                # Only directories this call made, and only while they are empty.
+                for p in (final.parent, *final.parent.parents):
+                    p.rmdir()
+                    if p == created_parent:
+                        break
+        raise
+    _fsync_directory(final.parent)
