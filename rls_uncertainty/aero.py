@@ -2,20 +2,29 @@
 
 Inside this module everything is in aircraft body axes (x forward, y right, z down) and SI.
 ROS interfaces use the REP-103 body frame (x forward, y left, z up); the conversion happens
-in one place, :func:`rep103_to_aircraft`.
+in one place, :func:`rep103_to_aircraft`, which :func:`aircraft_sample` applies to the
+interpolated measurements of one sample. :func:`flight_state` derives airspeed, flow angles
+and dynamic pressure from such a sample; :func:`coefficients` and :func:`regressors` reduce
+it. The control-surface mixing of Eq. 23 is in :mod:`.surface_mixing`.
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .config import AircraftConfig, ModelConfig
+if TYPE_CHECKING:  # annotations only: this module imports numpy alone
+    from .config import AircraftConfig, ModelConfig
 
 __all__ = [
     "rep103_to_aircraft",
+    "SAMPLE_FIELDS",
+    "RATES",
+    "aircraft_sample",
+    "flight_state",
     "FlightState",
     "coefficients",
     "regressors",
@@ -65,6 +74,51 @@ class FlightState:
     delta_a: np.ndarray = 0.0
     delta_r: np.ndarray = 0.0
     thrust: np.ndarray = 0.0
+
+
+# One measured sample, aircraft body axes: specific force (m/s^2), rates (rad/s), air-relative
+# velocity (m/s), dynamic pressure (Pa; NaN when it is computed from the air density), the
+# Eq. 23 deflections (rad) and thrust (N).
+SAMPLE_FIELDS = ("ax", "ay", "az", "p", "q", "r", "u", "v", "w", "qbar", "delta_e", "delta_a", "delta_r", "thrust")
+_U, _W, _QBAR, _DE = 6, 8, 9, 10
+RATES = slice(3, 6)  # p, q, r: the signals the differentiator turns into p_dot, q_dot, r_dot
+_NO_SURFACES = (0.0, 0.0, 0.0)
+
+
+def aircraft_sample(imu, velocity, qbar: float = math.nan, surfaces=_NO_SURFACES, thrust: float = 0.0) -> list:
+    """The :data:`SAMPLE_FIELDS` vector of one sample from REP-103 measurements: ``imu`` is
+    ``(wx, wy, wz, fx, fy, fz)`` (rates, then specific force), ``velocity`` the air-relative
+    velocity; ``qbar`` NaN means "compute it from the air density" (:func:`flight_state`)."""
+    return [
+        *rep103_to_aircraft(imu[3:]),
+        *rep103_to_aircraft(imu[:3]),
+        *rep103_to_aircraft(velocity),
+        qbar,
+        *surfaces,
+        thrust,
+    ]
+
+
+def flight_state(sample: list, rate_dot, air_density: float) -> FlightState | str:
+    """A :data:`SAMPLE_FIELDS` vector and its angular accelerations as a :class:`FlightState`
+    (``V``, ``alpha = atan2(w, u)``, ``beta = asin(v / V)``; ``qbar = rho V^2 / 2`` when not
+    measured), or the reason it cannot be reduced (:func:`physics_rejection`)."""
+    u, v, w = sample[_U:_W + 1]
+    V = math.sqrt(u * u + v * v + w * w)
+    if not V > 0.0:
+        return "nonpositive_airspeed"
+    qbar = sample[_QBAR]
+    if math.isnan(qbar):
+        qbar = 0.5 * air_density * V * V
+    ax, ay, az, p, q, r = sample[:6]
+    de, da, dr, thrust = sample[_DE:]
+    p_dot, q_dot, r_dot = rate_dot.tolist()
+    state = FlightState(
+        ax=ax, ay=ay, az=az, p=p, q=q, r=r, p_dot=p_dot, q_dot=q_dot, r_dot=r_dot,
+        V=V, alpha=math.atan2(w, u), beta=math.asin(max(-1.0, min(1.0, v / V))), qbar=float(qbar),
+        delta_e=de, delta_a=da, delta_r=dr, thrust=thrust,
+    )
+    return physics_rejection(state) or state
 
 
 def physics_rejection(state: FlightState) -> str | None:

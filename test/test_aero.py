@@ -1,17 +1,24 @@
-"""Eq. 1 coefficients, Eq. 2 regressors, frames, aircraft configuration."""
+"""Eq. 1 coefficients, Eq. 2 regressors, frames, the flight state of a sample and the Eq. 23
+surface mixing."""
+
+import math
 
 import numpy as np
 import pytest
 
 from rls_uncertainty.aero import (
+    SAMPLE_FIELDS,
     FlightState,
+    aircraft_sample,
     coefficients,
+    flight_state,
     physics_rejection,
     regressor_matrix,
     regressors,
     rep103_to_aircraft,
 )
-from rls_uncertainty.config import DEFAULT_MODELS, ConfigError, ModelConfig, load_aircraft, load_models
+from rls_uncertainty.config import DEFAULT_MODELS, load_aircraft
+from rls_uncertainty.surface_mixing import JointLayout, SurfaceMixer, SurfaceMixing
 
 T2 = load_aircraft("t2")
 
@@ -21,15 +28,6 @@ def state(**kw):
                 V=40.0, alpha=0.08, beta=0.01, qbar=980.0, delta_e=-0.02, delta_a=0.01, delta_r=0.005, thrust=20.0)
     base.update(kw)
     return FlightState(**base)
-
-
-def test_table1_converted_to_si():
-    assert T2.b == pytest.approx(6.849 * 0.3048, rel=1e-8)
-    assert T2.S == pytest.approx(5.902 * 0.3048**2, rel=1e-6)
-    assert T2.mass == pytest.approx(1.585 * 14.59390294, rel=1e-8)
-    assert T2.Iyy == pytest.approx(4.520 * 14.59390294 * 0.3048**2, rel=1e-8)
-    otter = load_aircraft("twin_otter_f1_017")
-    assert (otter.mass, otter.Ixz, otter.S) == (4952.28, 1528.0, 39.25)
 
 
 def test_eq1_against_rigid_body_moment_equations():
@@ -61,15 +59,6 @@ def test_regressors_and_default_models_of_eq2():
     np.testing.assert_allclose(regressor_matrix(cm, values), [1.0, s.alpha, values["q_hat"], s.delta_e])
 
 
-def test_models_are_configuration():
-    models = load_models({"CZ": ["1", "alpha", "q_hat", "delta_e"]})
-    assert models[0].parameter_names == ("CZ_0", "CZ_alpha", "CZ_q", "CZ_delta_e")
-    with pytest.raises(ConfigError, match="unknown regressor"):
-        ModelConfig("CZ", ("1", "alpha_dot"))
-    with pytest.raises(ConfigError, match="output"):
-        ModelConfig("CL", ("1",))
-
-
 def test_rep103_to_aircraft_axes():
     # Level flight: the IMU's specific force is +g on REP-103 z (up), -g on aircraft z (down);
     # a nose-up pitch rate is -wy in REP-103 (y left) and +q in aircraft axes.
@@ -89,13 +78,81 @@ def test_bad_physics_input_is_a_rejection_reason(kw, reason):
     assert physics_rejection(state()) is None
 
 
-def test_aircraft_file_errors_are_clear(tmp_path):
-    bad = tmp_path / "bad.yaml"
-    bad.write_text("aircraft: {name: x, mass: -1, Ixx: 1, Iyy: 1, Izz: 1, Ixz: 0, S: 1, b: 1, cbar: 1}\n")
-    with pytest.raises(ConfigError, match="mass must be positive"):
-        load_aircraft(bad)
-    bad.write_text("aircraft: {name: x}\n")
-    with pytest.raises(ConfigError, match="needs"):
-        load_aircraft(bad)
-    with pytest.raises(ConfigError, match="no such file"):
-        load_aircraft(tmp_path / "missing.yaml")
+def test_a_rep103_sample_becomes_aircraft_axes_and_a_flight_state():
+    """Level flight, nose up 0.1 rad/s, air from the right and from below: independent of the
+    conversion code, REP-103 y (left) and z (up) flip sign in aircraft axes."""
+    imu = (0.01, -0.1, 0.02, 0.3, 0.2, 9.8)  # wx wy wz (rad/s), fx fy fz (m/s^2), REP-103
+    velocity = (40.0, -2.0, -3.0)  # REP-103: u, v to the left, w up
+    sample = aircraft_sample(imu, velocity, 950.0, (0.01, -0.02, 0.03), 120.0)
+    expected = dict(ax=0.3, ay=-0.2, az=-9.8, p=0.01, q=0.1, r=-0.02, u=40.0, v=2.0, w=3.0, qbar=950.0,
+                    delta_e=0.01, delta_a=-0.02, delta_r=0.03, thrust=120.0)
+    assert dict(zip(SAMPLE_FIELDS, sample)) == expected
+    s = flight_state(sample, np.array([0.5, -0.6, 0.7]), air_density=1.225)
+    V = math.sqrt(40.0**2 + 2.0**2 + 3.0**2)
+    assert s.V == pytest.approx(V, rel=1e-15)
+    assert s.alpha == pytest.approx(math.atan(3.0 / 40.0), rel=1e-14)  # w down: nose above the flow
+    assert s.beta == pytest.approx(math.asin(2.0 / V), rel=1e-14)  # v right: air from the right
+    assert (s.q, s.q_dot, s.qbar, s.delta_a, s.thrust) == (0.1, -0.6, 950.0, -0.02, 120.0)
+    # Without a measured dynamic pressure (NaN) it is rho V^2 / 2.
+    s = flight_state(aircraft_sample(imu, velocity), np.zeros(3), air_density=1.1)
+    assert s.qbar == pytest.approx(0.5 * 1.1 * V * V, rel=1e-15)
+    assert (s.delta_e, s.delta_a, s.delta_r, s.thrust) == (0.0, 0.0, 0.0, 0.0)
+
+
+@pytest.mark.parametrize("velocity, qbar, reason", [
+    ((0.0, 0.0, 0.0), 900.0, "nonpositive_airspeed"),
+    ((40.0, 0.0, 0.0), 0.0, "nonpositive_dynamic_pressure"),
+    ((40.0, 0.0, 0.0), math.inf, "non_finite_qbar"),
+])
+def test_a_sample_that_cannot_be_reduced_gives_its_reason(velocity, qbar, reason):
+    sample = aircraft_sample((0.0,) * 6, velocity, qbar)
+    assert flight_state(sample, np.zeros(3), 1.225) == reason
+
+
+def test_aileron_mixing_is_eq_23():
+    mixer = SurfaceMixer(SurfaceMixing(aileron_right=("ar1", "ar2"), aileron_left=("al",), rudder=("r1", "r2")))
+    names = ["ar1", "ar2", "al", "r1", "r2", "elevator"]
+    de, da, dr = mixer.layout(names).deflections([0.1, 0.3, -0.2, 0.01, 0.03, 0.0])
+    assert da == pytest.approx(0.5 * (0.2 - (-0.2)))  # (mean right - mean left) / 2
+    assert dr == pytest.approx(0.02)
+    # The joint order may change from message to message: the mixing follows the names.
+    reordered = ["elevator", "r2", "r1", "al", "ar2", "ar1"]
+    assert mixer.layout(reordered).deflections([0.0, 0.03, 0.01, -0.2, 0.3, 0.1]) == (de, da, dr)
+    assert mixer.layout(names).deflections([0.1, 0.5, -0.2, 0.01, 0.03, 0.0])[1] == pytest.approx(0.5 * (0.3 - (-0.2)))
+    combined = SurfaceMixer(SurfaceMixing(aileron_combined="ail"))
+    assert combined.layout(["ail", "rudder", "elevator"]).deflections([0.07, 0.0, 0.0])[1] == 0.07
+    # Only one aileron side configured: no aileron deflection is formed (and none required).
+    one_side = SurfaceMixer(SurfaceMixing(aileron_left=()))
+    assert one_side.layout(["aileron_right", "rudder", "elevator"]).deflections([0.07, 0.0, 0.01])[1] == 0.0
+    assert one_side.layout(["rudder", "elevator"]).deflections([0.0, 0.01]) == (0.01, 0.0, 0.0)
+
+
+def test_elevator_and_rudder_are_averages_and_other_joints_are_reported():
+    mixing = SurfaceMixing(elevator=("el", "er"), rudder=("ru", "rl"))
+    names = ("flap", "el", "aileron_left", "er", "ru", "aileron_right", "rl", "gear")
+    layout = mixing.layout(names)
+    assert isinstance(layout, JointLayout)
+    assert layout.unknown == ("flap", "gear")
+    positions = [9.0, 0.02, -0.1, 0.04, 0.3, 0.1, 0.1, 9.0]
+    assert layout.deflections(positions) == pytest.approx((0.03, 0.1, 0.2), rel=1e-15)
+
+
+def test_joint_lists_that_cannot_be_mixed_give_their_reason():
+    mixing = SurfaceMixing()
+    assert mixing.layout(("elevator", "rudder", "aileron_left")) == "missing_joint"
+    assert mixing.layout(("elevator", "rudder", "aileron_left", "aileron_right", "rudder")) == "mismatched_arrays"
+    # A deflection that no model needs may be unmapped: nothing is missing then.
+    assert isinstance(SurfaceMixing(rudder=()).layout(("elevator", "aileron_left", "aileron_right")), JointLayout)
+
+
+def test_the_mixer_follows_name_lists_that_change_or_are_reused():
+    mixer = SurfaceMixer(SurfaceMixing())
+    names = ["elevator", "aileron_left", "aileron_right", "rudder"]
+    assert mixer.layout(names).deflections([0.1, 0.2, 0.4, 0.3]) == (0.1, pytest.approx(0.1), 0.3)
+    names.reverse()  # the caller reuses its list object with other contents
+    assert mixer.layout(names).deflections([0.3, 0.4, 0.2, 0.1]) == (0.1, pytest.approx(0.1), 0.3)
+    for k in range(40):  # many different lists: the cache stays bounded and right
+        extra = [f"j{k}", "rudder", "elevator", "aileron_right", "aileron_left"]
+        assert mixer.layout(extra).deflections([5.0, 0.3, 0.1, 0.4, 0.2]) == (0.1, pytest.approx(0.1), 0.3)
+        assert mixer.layout(extra).unknown == (f"j{k}",)
+    assert len(mixer._layouts) <= SurfaceMixer._CACHE_SIZE

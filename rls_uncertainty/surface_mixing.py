@@ -1,0 +1,121 @@
+"""Eq. 23: control-surface joints -> the deflections of Eq. 2 (pure Python, no numpy needed).
+
+A ``sensor_msgs/JointState`` message carries named joint positions (rad). The aerodynamic
+model wants three deflections: the elevator ``delta_e`` and the rudder ``delta_r`` are the
+averages of their surfaces, the aileron is ``delta_a = (right - left) / 2`` (Eq. 23), unless
+one joint already holds that combination. :class:`SurfaceMixing` says which joints are
+which (the ``surfaces.*`` parameters); :class:`SurfaceMixer` applies it to messages, with the
+joints' positions in a message found once per name list (:class:`JointLayout`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Literal, NamedTuple, get_args
+
+__all__ = ["Surface", "SURFACES", "SurfaceMixing", "JointLayout", "SurfaceMixer"]
+
+# The deflections of Eq. 2, in the order the mixing produces them.
+Surface = Literal["delta_e", "delta_a", "delta_r"]
+SURFACES: tuple[Surface, ...] = get_args(Surface)
+
+
+@dataclass(frozen=True)
+class SurfaceMixing:
+    """JointState names -> Eq. 23 deflections: elevator and rudder are averages of their
+    surfaces, the aileron is (right - left)/2 unless one joint already holds it."""
+
+    elevator: tuple[str, ...] = ("elevator",)
+    aileron_right: tuple[str, ...] = ("aileron_right",)
+    aileron_left: tuple[str, ...] = ("aileron_left",)
+    aileron_combined: str = ""
+    rudder: tuple[str, ...] = ("rudder",)
+
+    def names(self, surface: Surface) -> tuple[str, ...]:
+        """The joints a deflection needs (empty: not measured)."""
+        if surface == "delta_e":
+            return self.elevator
+        if surface == "delta_r":
+            return self.rudder
+        if self.aileron_combined:
+            return (self.aileron_combined,)
+        if self.aileron_right and self.aileron_left:
+            return self.aileron_right + self.aileron_left
+        return ()
+
+    def layout(self, names: tuple[str, ...]) -> JointLayout | str:
+        """Where each mixed joint sits in a message with these joint ``names``, or why such a
+        message cannot be used: ``mismatched_arrays`` (a name twice) or ``missing_joint``."""
+        if len(set(names)) != len(names):
+            return "mismatched_arrays"
+        if any(n not in names for s in SURFACES for n in self.names(s)):
+            return "missing_joint"
+        where = {n: i for i, n in enumerate(names)}
+        aileron = self.names("delta_a")
+        split = bool(aileron) and not self.aileron_combined
+        known = set(self.elevator) | set(self.rudder) | set(aileron)
+        return JointLayout(
+            elevator=tuple(where[n] for n in self.elevator),
+            aileron_right=tuple(where[n] for n in self.aileron_right) if split else (),
+            aileron_left=tuple(where[n] for n in self.aileron_left) if split else (),
+            aileron_combined=where[self.aileron_combined] if self.aileron_combined else None,
+            rudder=tuple(where[n] for n in self.rudder),
+            unknown=tuple(n for n in names if n not in known),
+        )
+
+
+def _mean(values, index: tuple[int, ...]) -> float:
+    """Mean of ``values`` at ``index`` (0 when there is none): Eq. 23's surface averages."""
+    if len(index) == 1:
+        return values[index[0]]
+    return sum([values[i] for i in index]) / len(index) if index else 0.0
+
+
+class JointLayout(NamedTuple):
+    """Positions of the mixed joints in one JointState name list; ``unknown`` are the joints
+    the mixing does not use (reported, not an error)."""
+
+    elevator: tuple[int, ...]
+    aileron_right: tuple[int, ...]
+    aileron_left: tuple[int, ...]
+    aileron_combined: int | None
+    rudder: tuple[int, ...]
+    unknown: tuple[str, ...]
+
+    def deflections(self, positions) -> tuple[float, float, float]:
+        """``(delta_e, delta_a, delta_r)`` of Eq. 23 from the message's positions (rad)."""
+        de = _mean(positions, self.elevator)
+        if self.aileron_combined is not None:
+            da = positions[self.aileron_combined]
+        elif self.aileron_right or self.aileron_left:
+            da = 0.5 * (_mean(positions, self.aileron_right) - _mean(positions, self.aileron_left))  # Eq. 23
+        else:
+            da = 0.0
+        return de, da, _mean(positions, self.rudder)
+
+
+class SurfaceMixer:
+    """:meth:`SurfaceMixing.layout` for a stream of messages: the layout of the last name list
+    is kept (every message normally has the same list) and a few others are cached."""
+
+    _CACHE_SIZE = 16  # name lists normally never change; stay bounded when they do
+
+    def __init__(self, mixing: SurfaceMixing) -> None:
+        self.mixing = mixing
+        self._last_names: list | None = None
+        self._last_layout: JointLayout | str | None = None
+        self._layouts: dict[tuple[str, ...], JointLayout | str] = {}
+
+    def layout(self, names) -> JointLayout | str:
+        """The layout of a message's joint ``names`` (a sequence of str), or the reason the
+        message cannot be used."""
+        if names == self._last_names:  # the usual case
+            return self._last_layout
+        key = tuple(names)
+        layout = self._layouts.get(key)
+        if layout is None:
+            if len(self._layouts) >= self._CACHE_SIZE:
+                self._layouts.clear()
+            layout = self._layouts[key] = self.mixing.layout(key)
+        self._last_names, self._last_layout = list(key), layout
+        return layout
