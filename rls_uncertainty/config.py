@@ -1,24 +1,34 @@
-"""Typed configuration: aircraft properties, model structures, estimator settings.
+"""Typed configuration: aircraft properties, model structures, and the nested settings of the
+pipeline (estimator, differentiator, input handling, Eq. 23 surface mixing).
 
 Everything is SI. YAML files live in ``config/``; :func:`load_aircraft` and
-:func:`load_models` validate them with messages that name the file and the field.
+:func:`load_models` validate them with messages that name the file and the field. One table,
+:data:`PARAMETERS`, defines every setting the node declares as a ROS parameter and the
+replay reads from the same parameter files; :func:`pipeline_config` turns those dotted
+parameters into a :class:`PipelineConfig`. Each dataclass validates its own fields when it is
+built, so a configuration that exists is a valid one.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, fields
+from numbers import Integral
 from pathlib import Path
 from typing import Any
 
 import yaml
 
+from .differentiation import DifferentiatorConfig
 from .errors import ConfigError
+from .estimator import RESIDUALS, WINDOWS, Residual, Window
+from .surface_mixing import SURFACES, SurfaceMixing
 
 __all__ = [
     "AircraftConfig",
     "ModelConfig",
     "EstimatorConfig",
+    "InputConfig",
     "ConfigError",
     "DEFAULT_MODELS",
     "REGRESSORS",
@@ -28,7 +38,6 @@ __all__ = [
     "package_path",
     "ParamSpec",
     "PARAMETERS",
-    "SurfaceMixing",
     "PipelineConfig",
     "NodeConfig",
     "parameter_defaults",
@@ -101,10 +110,6 @@ class ModelConfig:
             raise ConfigError(f"model {self.output}: a regressor is listed twice")
 
     @property
-    def name(self) -> str:
-        return self.output
-
-    @property
     def parameter_names(self) -> tuple[str, ...]:
         """``CZ_0, CZ_alpha, CZ_delta_e``: the output, then the regressor (bias as ``0``)."""
         return tuple(f"{self.output}_{_PARAM_SUFFIX.get(r, r)}" for r in self.regressors)
@@ -118,17 +123,6 @@ DEFAULT_MODELS = (
     ModelConfig("Cm", ("1", "alpha", "q_hat", "delta_e")),  # Eq. 2e
     ModelConfig("Cn", ("1", "beta", "r_hat", "delta_r")),  # Eq. 2f
 )
-
-
-@dataclass(frozen=True)
-class EstimatorConfig:
-    """Settings of the recursive estimator (see :class:`rls_uncertainty.estimator.EstimatorBank`)."""
-
-    n_lags: int | None = 50
-    window: str = "truncated"
-    forgetting: float = 1.0
-    residual: str = "standardized"
-    models: tuple[ModelConfig, ...] = field(default=DEFAULT_MODELS)
 
 
 def package_path(*parts: str) -> Path:
@@ -221,9 +215,9 @@ PARAMETERS: tuple[ParamSpec, ...] = (
         for out in OUTPUTS
     ),
     ParamSpec("estimator.lags", 50, "residual autocorrelation lags kept (Eq. 22); -1 keeps all lags (Eq. 20), 0 is the conventional covariance", -1, 100000),
-    ParamSpec("estimator.window", "truncated", "lag window: truncated (Eq. 22) or bartlett (always positive semi-definite)", choices=("truncated", "bartlett")),
+    ParamSpec("estimator.window", "truncated", "lag window: truncated (Eq. 22) or bartlett (always positive semi-definite)", choices=WINDOWS),
     ParamSpec("estimator.forgetting", 1.0, "exponential forgetting factor; 1 is the paper's growing-memory estimator", 0.5, 1.0),
-    ParamSpec("estimator.residual", "standardized", "residual used in Eqs. 16-17: standardized (innovation / sqrt(1 + x'Dx), makes Eq. 16 equal the batch Eq. 14), a_posteriori (z - x'theta_k) or a_priori (z - x'theta_k-1)", choices=("standardized", "a_posteriori", "a_priori")),
+    ParamSpec("estimator.residual", "standardized", "residual used in Eqs. 16-17: standardized (innovation / sqrt(1 + x'Dx), makes Eq. 16 equal the batch Eq. 14), a_posteriori (z - x'theta_k) or a_priori (z - x'theta_k-1)", choices=RESIDUALS),
     ParamSpec("differentiator.window", 9, "angular-acceleration differentiator window, samples", 3, 201),
     ParamSpec("differentiator.order", 3, "local polynomial order of the differentiator", 1, 10),
     ParamSpec("differentiator.lag", 4, "differentiator fixed lag, samples (0 = causal); every signal is delayed by it", 0, 200),
@@ -298,75 +292,92 @@ def _validated(params: dict[str, Any]) -> dict[str, Any]:
     return values
 
 
-@dataclass(frozen=True)
-class SurfaceMixing:
-    """JointState names -> Eq. 23 deflections: elevator and rudder are averages of their
-    surfaces, the aileron is (right - left)/2 unless one joint already holds it."""
-
-    elevator: tuple[str, ...] = ("elevator",)
-    aileron_right: tuple[str, ...] = ("aileron_right",)
-    aileron_left: tuple[str, ...] = ("aileron_left",)
-    aileron_combined: str = ""
-    rudder: tuple[str, ...] = ("rudder",)
-
-    def names(self, surface: str) -> tuple[str, ...]:
-        """The joints a deflection needs (empty: not measured)."""
-        if surface == "delta_e":
-            return self.elevator
-        if surface == "delta_r":
-            return self.rudder
-        if self.aileron_combined:
-            return (self.aileron_combined,)
-        if self.aileron_right and self.aileron_left:
-            return self.aileron_right + self.aileron_left
-        return ()
+def _finite(value: Any) -> bool:
+    return not isinstance(value, bool) and isinstance(value, (int, float)) and math.isfinite(value)
 
 
 @dataclass(frozen=True)
-class PipelineConfig:
-    """Everything that decides the numbers: rate, aircraft, models, estimator, differentiator,
-    input handling and surface mixing. The node and the offline replay build it the same way."""
+class EstimatorConfig:
+    """Settings of the :class:`.estimator.EstimatorBank` (``estimator.*`` parameters):
+    ``n_lags`` residual autocorrelation lags of Eq. 22 (``None``: all lags, Eq. 20; 0: the
+    conventional covariance, Eq. 13), the lag ``window``, the exponential ``forgetting``
+    factor (1 is the paper) and the ``residual`` used in Eqs. 16-17."""
 
-    aircraft: AircraftConfig
-    models: tuple[ModelConfig, ...] = DEFAULT_MODELS
-    rate: float = 50.0
     n_lags: int | None = 50
-    window: str = "truncated"
+    window: Window = "truncated"
     forgetting: float = 1.0
-    residual: str = "standardized"
-    diff_window: int = 9
-    diff_order: int = 3
-    diff_lag: int = 4
+    residual: Residual = "standardized"
+
+    def __post_init__(self) -> None:
+        lags = self.n_lags
+        if lags is not None and (isinstance(lags, bool) or not isinstance(lags, Integral) or lags < 0):
+            raise ConfigError(f"estimator.lags must be all (-1) or an integer >= 0, got {lags!r}")
+        if self.window not in WINDOWS:
+            raise ConfigError(f"estimator.window must be one of {list(WINDOWS)}, got {self.window!r}")
+        if not (_finite(self.forgetting) and 0.0 < self.forgetting <= 1.0):
+            raise ConfigError(f"estimator.forgetting must be in (0, 1], got {self.forgetting!r}")
+        if self.residual not in RESIDUALS:
+            raise ConfigError(f"estimator.residual must be one of {list(RESIDUALS)}, got {self.residual!r}")
+
+
+@dataclass(frozen=True)
+class InputConfig:
+    """How the input streams are used (``inputs.*`` parameters): the dynamic-pressure topic or
+    ``0.5 air_density V^2`` (kg/m^3), the thrust topic or zero thrust, the longest gap
+    interpolated across and how far a stream may run ahead before its old messages expire (s)."""
+
     use_dynamic_pressure: bool = True
     air_density: float = 1.225
     use_thrust: bool = True
     max_gap: float = 0.25
     buffer_duration: float = 2.0
-    mixing: SurfaceMixing = SurfaceMixing()
 
     def __post_init__(self) -> None:
+        for name in ("air_density", "max_gap", "buffer_duration"):
+            value = getattr(self, name)
+            if not (_finite(value) and value > 0):
+                raise ConfigError(f"inputs.{name} must be a positive number, got {value!r}")
+
+    @property
+    def max_gap_ns(self) -> int:
+        return int(round(self.max_gap * 1e9))
+
+    @property
+    def buffer_ns(self) -> int:
+        return int(round(self.buffer_duration * 1e9))
+
+
+@dataclass(frozen=True)
+class PipelineConfig:
+    """Everything that decides the numbers: sample rate (Hz), aircraft, models, and the nested
+    estimator, differentiator, input and surface-mixing settings. The node and the offline
+    replay build it the same way (:func:`pipeline_config`)."""
+
+    aircraft: AircraftConfig
+    models: tuple[ModelConfig, ...] = DEFAULT_MODELS
+    rate: float = 50.0
+    estimator: EstimatorConfig = EstimatorConfig()
+    differentiator: DifferentiatorConfig = DifferentiatorConfig()
+    inputs: InputConfig = InputConfig()
+    surfaces: SurfaceMixing = SurfaceMixing()
+
+    def __post_init__(self) -> None:
+        if not (_finite(self.rate) and self.rate > 0):
+            raise ConfigError(f"rate must be a positive number, got {self.rate!r}")
         if not self.models:
             raise ConfigError("at least one model must be enabled")
         outputs = [m.output for m in self.models]
         if len(set(outputs)) != len(outputs):
             raise ConfigError(f"a model is enabled twice: {outputs}")
-        if not 0 <= self.diff_lag < self.diff_window:
-            raise ConfigError(
-                f"differentiator.lag must be in [0, differentiator.window - 1 = {self.diff_window - 1}], got {self.diff_lag}"
-            )
-        if not 1 <= self.diff_order < self.diff_window:
-            raise ConfigError(
-                f"differentiator.order must be in [1, differentiator.window - 1 = {self.diff_window - 1}], got {self.diff_order}"
-            )
         for m in self.models:
-            for surface in ("delta_e", "delta_a", "delta_r"):
-                if surface in m.regressors and not self.mixing.names(surface):
+            for surface in SURFACES:
+                if surface in m.regressors and not self.surfaces.names(surface):
                     raise ConfigError(
                         f"model {m.output} uses {surface} but no control surface is mapped to it (surfaces.* parameters)"
                     )
-        if self.max_gap * self.rate < 1.0:
+        if self.inputs.max_gap * self.rate < 1.0:
             raise ConfigError(
-                f"inputs.max_gap ({self.max_gap} s) is shorter than one estimator sample (1/rate = {1 / self.rate:g} s)"
+                f"inputs.max_gap ({self.inputs.max_gap} s) is shorter than one estimator sample (1/rate = {1 / self.rate:g} s)"
             )
 
     @property
@@ -375,14 +386,15 @@ class PipelineConfig:
 
     def fingerprint(self) -> dict:
         """What a saved estimator state must match to be resumed."""
+        e = self.estimator
         return {
             "aircraft": [getattr(self.aircraft, f.name) for f in fields(AircraftConfig)],
             "models": [[m.output, *m.regressors] for m in self.models],
             "rate": self.rate,
-            "n_lags": self.n_lags,
-            "window": self.window,
-            "forgetting": self.forgetting,
-            "residual": self.residual,
+            "n_lags": e.n_lags,
+            "window": e.window,
+            "forgetting": e.forgetting,
+            "residual": e.residual,
         }
 
 
@@ -410,32 +422,25 @@ def pipeline_config(params: dict[str, Any] | None = None) -> PipelineConfig:
         raise ConfigError(f"parameter 'models.enabled': unknown model(s) {bad}; known: {list(OUTPUTS)}")
     models = tuple(ModelConfig(out, tuple(v[f"models.{out}"])) for out in enabled)
     lags = v["estimator.lags"]
-    if not v["estimator.forgetting"] > 0:
-        raise ConfigError("parameter 'estimator.forgetting' must be in (0, 1]")
     return PipelineConfig(
         aircraft=load_aircraft(v["aircraft"]),
         models=models,
         rate=v["rate"],
-        n_lags=None if lags < 0 else lags,
-        window=v["estimator.window"],
-        forgetting=v["estimator.forgetting"],
-        residual=v["estimator.residual"],
-        diff_window=v["differentiator.window"],
-        diff_order=v["differentiator.order"],
-        diff_lag=v["differentiator.lag"],
-        use_dynamic_pressure=v["inputs.use_dynamic_pressure"],
-        air_density=v["inputs.air_density"],
-        use_thrust=v["inputs.use_thrust"],
-        max_gap=v["inputs.max_gap"],
-        buffer_duration=v["inputs.buffer_duration"],
-        mixing=SurfaceMixing(
-            elevator=tuple(v["surfaces.elevator"]),
-            aileron_right=tuple(v["surfaces.aileron_right"]),
-            aileron_left=tuple(v["surfaces.aileron_left"]),
-            aileron_combined=v["surfaces.aileron_combined"],
-            rudder=tuple(v["surfaces.rudder"]),
+        estimator=EstimatorConfig(
+            n_lags=None if lags < 0 else lags,
+            window=v["estimator.window"],
+            forgetting=v["estimator.forgetting"],
+            residual=v["estimator.residual"],
         ),
+        differentiator=DifferentiatorConfig(**_section(v, "differentiator")),
+        inputs=InputConfig(**_section(v, "inputs")),
+        surfaces=SurfaceMixing(**{k: tuple(x) if isinstance(x, list) else x for k, x in _section(v, "surfaces").items()}),
     )
+
+
+def _section(values: dict[str, Any], prefix: str) -> dict[str, Any]:
+    """The ``prefix.*`` parameters by their name in the section (the dataclass field names)."""
+    return {k.split(".", 1)[1]: x for k, x in values.items() if k.startswith(prefix + ".")}
 
 
 def node_config(params: dict[str, Any] | None = None) -> NodeConfig:

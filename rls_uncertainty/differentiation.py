@@ -6,34 +6,46 @@ evaluated ``lag`` samples before the newest one: ``lag = 0`` is fully causal, ``
 (window-1)/2`` is the centred (Savitzky-Golay) derivative. The result for sample ``k - lag``
 is available at sample ``k``, so every other signal of that sample must be delayed by the same
 ``lag`` (the pipeline does this). numpy only.
+
+Invalid settings raise :class:`.errors.ConfigError` (a ``ValueError``).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from numbers import Integral
 
 import numpy as np
+
+from .errors import ConfigError
 
 __all__ = ["DifferentiatorConfig", "FixedLagDifferentiator", "derivative_weights", "differentiate"]
 
 
 @dataclass(frozen=True)
 class DifferentiatorConfig:
-    """Window length (samples), polynomial order and fixed lag (samples, 0 = causal)."""
+    """Window length (samples), polynomial order and fixed lag (samples, 0 = causal): the
+    ``differentiator.*`` parameters, validated here and nowhere else."""
 
     window: int = 9
     order: int = 3
     lag: int = 4
 
     def __post_init__(self) -> None:
+        for name in ("window", "order", "lag"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, Integral):
+                raise ConfigError(f"differentiator.{name} must be an integer, got {value!r}")
         if self.window < 2:
-            raise ValueError(f"differentiator window must be >= 2 samples, got {self.window}")
+            raise ConfigError(f"differentiator.window must be >= 2 samples, got {self.window}")
         if not 1 <= self.order < self.window:
-            raise ValueError(
-                f"differentiator order must be between 1 and window-1 = {self.window - 1}, got {self.order}"
+            raise ConfigError(
+                f"differentiator.order must be in [1, differentiator.window - 1 = {self.window - 1}], got {self.order}"
             )
         if not 0 <= self.lag < self.window:
-            raise ValueError(f"differentiator lag must be in [0, {self.window - 1}], got {self.lag}")
+            raise ConfigError(
+                f"differentiator.lag must be in [0, differentiator.window - 1 = {self.window - 1}], got {self.lag}"
+            )
 
 
 def derivative_weights(config: DifferentiatorConfig, dt: float) -> np.ndarray:

@@ -116,7 +116,7 @@ class EstimatorNode(Node):
         if self.node_cfg.state_file and self.node_cfg.state_save_period > 0:
             self.create_timer(self.node_cfg.state_save_period, self.save_state, clock=steady)
         models = ", ".join(f"{m.output}({len(m.regressors)})" for m in self.config.models)
-        lags = "all" if self.config.n_lags is None else self.config.n_lags
+        lags = "all" if self.config.estimator.n_lags is None else self.config.estimator.n_lags
         self.get_logger().info(
             f"estimating {models} at {self.config.rate:g} Hz, {lags} lags, aircraft {self.config.aircraft.name}; "
             f"inputs {', '.join(self.node_cfg.topics[k] for k in INPUTS)}; {self.state_status}"
@@ -187,8 +187,7 @@ class EstimatorNode(Node):
                     msg = deserialize_message(raw, cls)
                 outputs = feed(self.pipeline, kind, msg)
             except Exception as exc:  # noqa: BLE001 - a bad message must never stop the node
-                self.pipeline.streams[kind].received += 1
-                self.pipeline.streams[kind].rejected[f"malformed: {type(exc).__name__}"] += 1
+                self.pipeline.reject(kind, f"malformed: {type(exc).__name__}")
                 return
             if outputs:
                 for out in outputs:
@@ -294,7 +293,7 @@ class EstimatorNode(Node):
             kv[f"{kind}.missing"] = s["missing"]
             for reason, n in sorted(s["rejected"].items()):
                 kv[f"{kind}.rejected.{reason}"] = n
-            if needed and (age is None or age > max(1.0, 2 * self.config.max_gap)):
+            if needed and (age is None or age > max(1.0, 2 * self.config.inputs.max_gap)):
                 problems.append(f"{kind} {'silent' if age is None else f'stale ({age:.1f} s)'}")
                 if publishers == 0:
                     problems.append(f"no publisher matched on {self._subs[kind].topic_name} "

@@ -1,51 +1,49 @@
 """The single data path from stamped sensor messages to estimates (numpy only).
 
-The ROS node, the offline replay and the tests all drive one :class:`Pipeline`:
+The ROS node, the offline replay and the tests all drive one :class:`Pipeline`, which
+coordinates the modules that do the work:
 
 1. ``add_imu``, ``add_airspeed``, ``add_dynamic_pressure``, ``add_surfaces``, ``add_thrust``
    take plain stamped numbers in the REP-103 body frame (x forward, y left, z up) and SI.
-   Each message is accepted into its stream buffer or rejected with a reason
-   (``non_finite``, ``duplicate``, ``out_of_order``, ``mismatched_arrays``, ``missing_joint``).
-2. Samples are formed on a fixed grid ``t_k = k / rate`` (integer nanoseconds, so the grid
-   does not depend on when the pipeline started) as soon as every needed stream has a
-   message at or after ``t_k``: each stream is linearly interpolated between the two
-   messages around ``t_k``, never extrapolated. A stream silent for longer than
-   ``max_gap`` around ``t_k`` rejects the sample (``gap_<stream>``).
+   JointState surfaces are mixed into Eq. 23's deflections first (:mod:`.surface_mixing`).
+2. :mod:`.sampling` buffers the streams, counts every message (accepted, or rejected with a
+   reason), and forms samples on the grid ``t_k = k / rate`` by linear interpolation, never
+   extrapolating; the pipeline names the streams a sample needs.
 3. Rates go through the fixed-lag differentiator (:mod:`.differentiation`); every other
    signal waits in a delay line of the same lag, so a sample reaches the aerodynamics
    ``lag`` samples late but time-aligned.
-4. :func:`.aero.rep103_to_aircraft` converts to aircraft body axes, then Eq. 1 coefficients
-   and Eq. 2 regressors feed one :class:`.estimator.EstimatorBank` (Eqs. 15-22).
+4. :mod:`.aero` converts the sample to aircraft body axes (:func:`.aero.aircraft_sample`),
+   then Eq. 1 coefficients and Eq. 2 regressors feed one :class:`.estimator.EstimatorBank`
+   (Eqs. 15-22), and each used sample yields a :class:`SampleOutput`.
 
 Every formed sample ends as used or as rejected with a reason, and every message as accepted
-or rejected: :meth:`Pipeline.counters` holds the bookkeeping the node reports in
-``/diagnostics``.
+or rejected: :class:`Bookkeeping` holds every counter, :meth:`Pipeline.counters` reports them
+(the node's ``/diagnostics``), and a reconfigured pipeline takes over the same object.
 """
 
 from __future__ import annotations
 
-import json
 import math
-from bisect import bisect_left, bisect_right
 from collections import Counter, deque
-from operator import attrgetter
-from typing import NamedTuple
+from dataclasses import dataclass, field
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 
-from .aero import FlightState, coefficients, physics_rejection, regressors, rep103_to_aircraft
+from .aero import RATES, aircraft_sample, coefficients, flight_state, regressors
 from .config import PipelineConfig
-from .differentiation import DifferentiatorConfig, FixedLagDifferentiator
+from .differentiation import FixedLagDifferentiator
 from .errors import NonFiniteInput, StateFileError
-from .files import atomic_file
 from .estimator import EstimatorBank
 from .messages import INPUTS
+from .sampling import Sample, Sampler, StreamCounts
+from .state_file import EstimatorState, load_state, save_state
+from .surface_mixing import SURFACES, SurfaceMixer
 
-__all__ = ["Pipeline", "SampleOutput", "STREAMS", "StateFileError"]
+__all__ = ["Pipeline", "SampleOutput", "Bookkeeping", "STREAMS", "StateFileError"]
 
 STREAMS = INPUTS
-_SURFACES = ("delta_e", "delta_a", "delta_r")
 
 
 class SampleOutput(NamedTuple):
@@ -68,353 +66,209 @@ class SampleOutput(NamedTuple):
         return self.stamp_ns * 1e-9
 
 
-class _Stream:
-    """Time-ordered buffer of one input: integer-nanosecond stamps and value vectors."""
-
-    __slots__ = ("name", "stamps", "values", "received", "rejected", "expired", "last", "interval", "missing")
-
-    def __init__(self, name: str) -> None:
-        self.name = name
-        self.stamps: list[int] = []
-        self.values: list[tuple] = []
-        self.received = 0
-        self.rejected: Counter = Counter()
-        self.expired = 0
-        self.last = None
-        self.interval = 0.0  # running estimate of the stream's stamp interval, ns
-        self.missing = 0  # messages presumed lost in transport (stamp gaps), see _accept
+def _new_stream_counts() -> dict[str, StreamCounts]:
+    return {name: StreamCounts() for name in STREAMS}
 
 
-# The sample vector, aircraft body axes: specific force, rates, air-relative velocity,
-# dynamic pressure (NaN when computed from density), surfaces, thrust.
-_AX, _AY, _AZ, _P, _Q, _R, _U, _V, _W, _QBAR, _DE, _DA, _DR, _T = range(14)
-_NEWEST = attrgetter("last")
+@dataclass
+class Bookkeeping:
+    """Every counter of a pipeline, kept across reconfigurations: the messages of each input
+    stream, samples formed, used and rejected (by reason), estimator resets (by reason) and
+    JointState joints that no surface uses (by name)."""
 
-
-def _mean(values, index) -> float:
-    """Mean of ``values`` at ``index`` (0 when there is none): Eq. 23's surface averages."""
-    if len(index) == 1:
-        return values[index[0]]
-    return sum([values[i] for i in index]) / len(index) if index else 0.0
+    streams: dict[str, StreamCounts] = field(default_factory=_new_stream_counts)
+    samples_formed: int = 0
+    samples_used: int = 0
+    samples_rejected: Counter = field(default_factory=Counter)
+    resets: Counter = field(default_factory=Counter)
+    unknown_joints: Counter = field(default_factory=Counter)
 
 
 class Pipeline:
     """Sample formation, differentiation, aero reduction and estimation for one configuration.
 
     ``record=True`` keeps every regression row and output handed to the estimator
-    (``self.regression``), for batch comparisons and the replay's plots.
+    (``self.regression``), for batch comparisons and the replay's plots. ``bookkeeping``
+    continues the counters of an earlier pipeline (:meth:`reconfigured`).
     """
 
-    def __init__(self, config: PipelineConfig, *, record: bool = False, enabled: bool = True) -> None:
+    def __init__(
+        self,
+        config: PipelineConfig,
+        *,
+        record: bool = False,
+        enabled: bool = True,
+        bookkeeping: Bookkeeping | None = None,
+    ) -> None:
         self.config = config
         self.models = config.models
         self.parameter_names = [m.parameter_names for m in config.models]
         self.labels = [",".join(names) for names in self.parameter_names]
         self.sizes = [len(m.regressors) for m in config.models]
-        self.period_ns = config.period_ns
-        self.max_gap_ns = int(round(config.max_gap * 1e9))
-        self.buffer_ns = int(round(config.buffer_duration * 1e9))
         self.enabled = enabled
         self.record = record
         self.regression: list[tuple[int, np.ndarray, np.ndarray]] = []
-        uses = {r for m in config.models for r in m.regressors}
-        self.required = ["imu", "airspeed"]
-        if uses & set(_SURFACES):
-            self.required.append("control_surfaces")
-        if config.use_dynamic_pressure:
-            self.required.append("dynamic_pressure")
-        if config.use_thrust and any(m.output == "CX" for m in config.models):
-            self.required.append("thrust")
-        self.streams = {name: _Stream(name) for name in STREAMS}
-        self._needed = [self.streams[name] for name in self.required]
-        self._stream_list = list(self.streams.values())
-        self._imu = self.streams["imu"]
-        self._surfaces = self.streams["control_surfaces"]
-        self._joint_names: list | None = None  # the last JointState name list and its layout
-        self._joint_layout_last = None
-        self._joints = {s: config.mixing.names(s) for s in _SURFACES}
-        self._joint_layouts: dict = {}
-        self.samples_formed = 0
-        self.samples_used = 0
-        self._used_before = 0  # samples used before a reconfiguration (see reconfigured())
-        self.samples_rejected: Counter = Counter()
-        self.resets: Counter = Counter()
-        self.unknown_joints: Counter = Counter()
-        self._next_t: int | None = None
-        self._frontier_stream: _Stream | None = None
+        self.bookkeeping = book = bookkeeping if bookkeeping is not None else Bookkeeping()
+        self.required = self._required_streams(config)
+        self.sampler = Sampler(
+            STREAMS,
+            self.required,
+            period_ns=config.period_ns,
+            max_gap_ns=config.inputs.max_gap_ns,
+            buffer_ns=config.inputs.buffer_ns,
+            counts=book.streams,
+        )
+        streams = self.sampler.streams
+        self._imu, self._airspeed, self._surfaces = streams["imu"], streams["airspeed"], streams["control_surfaces"]
+        self._qbar, self._thrust = streams["dynamic_pressure"], streams["thrust"]
+        # Where the optional streams sit in a sample's values (None: not required).
+        where = {name: i for i, name in enumerate(self.required)}
+        self._i_qbar = where.get("dynamic_pressure")
+        self._i_surfaces = where.get("control_surfaces")
+        self._i_thrust = where.get("thrust")
+        self._mixer = SurfaceMixer(config.surfaces)
         self._index = 0
         self._new_estimator()
-        self._diff = FixedLagDifferentiator(
-            DifferentiatorConfig(config.diff_window, config.diff_order, config.diff_lag),
-            1.0 / config.rate,
-            width=3,
-        )
-        self._pending: deque = deque()
-        self._rows = [tuple(m.regressors) for m in config.models]
+        self._diff = FixedLagDifferentiator(config.differentiator, 1.0 / config.rate, width=3)
+        self._lag = config.differentiator.lag
+        self._pending: deque = deque()  # the delay line: (stamp, sample) awaiting rate_dot
         self._outputs = [m.output for m in config.models]
         # Where each model's regressors go in the (M, n_max) regression matrix, flattened.
         n_max = self.bank.n_max
-        self._x_names = [name for names in self._rows for name in names]
-        self._x_index = np.array(
-            [j * n_max + i for j, names in enumerate(self._rows) for i in range(len(names))], dtype=np.intp
-        )
+        rows = [m.regressors for m in config.models]
+        self._x_names = [name for names in rows for name in names]
+        self._x_index = np.array([j * n_max + i for j, names in enumerate(rows) for i in range(len(names))], dtype=np.intp)
 
-    # ------------------------------------------------------------------ estimator
+    @staticmethod
+    def _required_streams(config: PipelineConfig) -> tuple[str, ...]:
+        """The streams every sample needs: IMU and air data always, the others when the
+        configuration uses them (the order is the order of the rejection checks)."""
+        uses = {r for m in config.models for r in m.regressors}
+        required = ["imu", "airspeed"]
+        if uses & set(SURFACES):
+            required.append("control_surfaces")
+        if config.inputs.use_dynamic_pressure:
+            required.append("dynamic_pressure")
+        if config.inputs.use_thrust and any(m.output == "CX" for m in config.models):
+            required.append("thrust")
+        return tuple(required)
+
     def _new_estimator(self) -> None:
-        c = self.config
+        c = self.config.estimator
         self.bank = EstimatorBank(self.sizes, c.n_lags, c.window, c.forgetting, residual=c.residual)
         self._X = np.zeros((len(self.sizes), self.bank.n_max))
         self._z = np.zeros(len(self.sizes))
-        self._zsum = np.zeros(len(self.sizes))
+        self._zsum = np.zeros(len(self.sizes))  # sums of z and z^2 since the estimator started
         self._zsq = np.zeros(len(self.sizes))
 
     @property
-    def ready(self) -> np.ndarray:
-        return self.bank.ready
+    def samples_used(self) -> int:
+        """Samples that reached an estimator, over the pipeline's life (reconfigurations too)."""
+        return self.bookkeeping.samples_used
 
     # ------------------------------------------------------------------ inputs
-    def _accept(self, stream: _Stream, stamp: int, values: tuple, finite: bool) -> list[SampleOutput]:
-        stream.received += 1
-        if not finite:
-            stream.rejected["non_finite"] += 1
-            return []
-        newest = stream.last  # the newest accepted stamp (stamps[-1] while any is buffered)
-        if newest is not None:
-            dt = stamp - newest
-            if dt <= 0:
-                stream.rejected["duplicate" if dt == 0 else "out_of_order"] += 1
-                return []
-            # Messages lost before they reached us (a best-effort DDS drop, a recorder gap)
-            # leave a hole in the stamps: count the missing ones against the stream's usual
-            # interval (exponential average) so that they show in diagnostics.
-            interval = stream.interval
-            if interval == 0.0:
-                stream.interval = float(dt)
-            elif dt > 1.5 * interval:
-                stream.missing += int(round(dt / interval)) - 1
-            else:
-                stream.interval = interval + 0.05 * (dt - interval)
-        stamps = stream.stamps
-        stamps.append(stamp)
-        stream.values.append(values)
-        stream.last = stamp
-        if stamp - stamps[0] > self.buffer_ns:
-            self._expire(stream, stamp)
-        frontier = self._frontier_stream
-        if frontier is not None and frontier.last < self._next_t:
-            return []  # the stream holding the grid back has still not reached it (see _advance)
-        return self._advance()
-
     def add_imu(self, stamp_ns: int, angular_velocity, linear_acceleration) -> list[SampleOutput]:
         """``sensor_msgs/Imu`` in the REP-103 body frame: rad/s and specific force m/s^2."""
         wx, wy, wz = angular_velocity
         fx, fy, fz = linear_acceleration
         finite = math.isfinite(wx + wy + wz + fx + fy + fz)
-        return self._accept(self._imu, int(stamp_ns), (wx, wy, wz, fx, fy, fz), finite)
+        if self.sampler.add(self._imu, int(stamp_ns), (wx, wy, wz, fx, fy, fz), finite):
+            return self._advance()
+        return []
 
     def add_airspeed(self, stamp_ns: int, velocity) -> list[SampleOutput]:
         """True-airspeed vector in the REP-103 body frame, m/s."""
         vx, vy, vz = velocity
-        values = (vx, vy, vz)
-        return self._accept(self.streams["airspeed"], int(stamp_ns), values, math.isfinite(vx + vy + vz))
+        if self.sampler.add(self._airspeed, int(stamp_ns), (vx, vy, vz), math.isfinite(vx + vy + vz)):
+            return self._advance()
+        return []
 
     def add_dynamic_pressure(self, stamp_ns: int, pascal: float) -> list[SampleOutput]:
-        return self._accept(self.streams["dynamic_pressure"], int(stamp_ns), (pascal,), math.isfinite(pascal))
+        if self.sampler.add(self._qbar, int(stamp_ns), (pascal,), math.isfinite(pascal)):
+            return self._advance()
+        return []
 
     def add_thrust(self, stamp_ns: int, force_x: float) -> list[SampleOutput]:
-        return self._accept(self.streams["thrust"], int(stamp_ns), (force_x,), math.isfinite(force_x))
+        if self.sampler.add(self._thrust, int(stamp_ns), (force_x,), math.isfinite(force_x)):
+            return self._advance()
+        return []
 
     def add_surfaces(self, stamp_ns: int, names, positions) -> list[SampleOutput]:
         """``sensor_msgs/JointState`` names and positions (rad), mixed by Eq. 23."""
-        stream = self._surfaces
-        if names == self._joint_names:  # the usual case: every message has the same name list
-            layout = self._joint_layout_last
-        else:
-            key = tuple(names)
-            layout = self._joint_layouts.get(key)
-            if layout is None:
-                layout = self._joint_layout(key)
-            self._joint_names, self._joint_layout_last = list(key), layout
+        layout = self._mixer.layout(names)
         if len(positions) != len(names):
             layout = "mismatched_arrays"
-        if isinstance(layout, str):
-            stream.received += 1
-            stream.rejected[layout] += 1
+        if type(layout) is str:
+            self.sampler.reject(self._surfaces, layout)
             return []
-        elevator, right, left, combined, rudder, unknown = layout
-        for n in unknown:
-            self.unknown_joints[n] += 1
-        de = _mean(positions, elevator)
-        if combined is not None:
-            da = positions[combined]
-        elif right or left:
-            da = 0.5 * (_mean(positions, right) - _mean(positions, left))  # Eq. 23
-        else:
-            da = 0.0
-        dr = _mean(positions, rudder)
-        return self._accept(stream, int(stamp_ns), (de, da, dr), math.isfinite(de + da + dr))
+        for n in layout.unknown:
+            self.bookkeeping.unknown_joints[n] += 1
+        de, da, dr = layout.deflections(positions)
+        if self.sampler.add(self._surfaces, int(stamp_ns), (de, da, dr), math.isfinite(de + da + dr)):
+            return self._advance()
+        return []
 
-    def _joint_layout(self, names: tuple):
-        """Where each mixed joint sits in a JointState's arrays (cached per name list), or the
-        rejection reason of the name list."""
-        if len(self._joint_layouts) >= 16:  # name lists normally never change; stay bounded
-            self._joint_layouts.clear()
-        if len(set(names)) != len(names):
-            layout = "mismatched_arrays"
-        elif any(n not in names for s in _SURFACES for n in self._joints[s]):
-            layout = "missing_joint"
-        else:
-            mix = self.config.mixing
-            where = {n: i for i, n in enumerate(names)}
-            known = set(mix.elevator) | set(mix.rudder) | set(self._joints["delta_a"])
-            split = bool(self._joints["delta_a"]) and not mix.aileron_combined
-            layout = (
-                [where[n] for n in mix.elevator],
-                [where[n] for n in mix.aileron_right] if split else [],
-                [where[n] for n in mix.aileron_left] if split else [],
-                where[mix.aileron_combined] if mix.aileron_combined else None,
-                [where[n] for n in mix.rudder],
-                [n for n in names if n not in known],
-            )
-        self._joint_layouts[names] = layout
-        return layout
-
-    # ------------------------------------------------------------------ sample formation
-    def _expire(self, stream: _Stream, newest: int) -> None:
-        """Drop messages older than ``buffer_duration`` while another stream holds the grid
-        back; they are counted as expired (never used)."""
-        cut = bisect_left(stream.stamps, newest - self.buffer_ns)
-        # Keep the message just before the cut: it may still bracket a later sample.
-        cut -= 1
-        if cut > 0:
-            del stream.stamps[:cut]
-            del stream.values[:cut]
-            stream.expired += cut
-
-    def _advance(self) -> list[SampleOutput]:
-        out: list[SampleOutput] = []
-        needed = self._needed
-        P = self.period_ns
-        t = self._next_t
-        if t is not None and self._frontier_stream is not None:
-            # Fast path: the stream that held the grid back has still not reached t.
-            if self._frontier_stream.last < t:
-                return out
-        for s in needed:
-            if not s.stamps:
-                return out
-        if t is None:
-            start = max(s.stamps[0] for s in needed)
-            t = -(-start // P) * P
-        t_start = t
-        while True:
-            lagging = min(needed, key=_NEWEST)  # every needed stream holds a message here
-            if lagging.last < t:
-                self._frontier_stream = lagging
-                break
-            raw, reason, skip_to = self._interpolate(t)
-            if raw is None:
-                # Every grid point up to skip_to shares the problem: count them all at once.
-                n_skip = max(1, -(-(skip_to - t) // P))
-                self.samples_formed += n_skip
-                self.samples_rejected[reason] += n_skip
-                self._flush("discontinuity")
-                t += n_skip * P
-            else:
-                self.samples_formed += 1
-                result = self._process(t, raw)
-                if result is not None:
-                    out.append(result)
-                t += P
-        if t != t_start:
-            self._trim(t)
-        self._next_t = t
-        return out
-
-    def _interpolate(self, t: int):
-        """Stream values at ``t`` (aircraft axes), or ``(None, reason, skip_to)``."""
-        vals = {}
-        max_gap = self.max_gap_ns
-        for s in self._needed:
-            stamps = s.stamps
-            i = bisect_left(stamps, t)
-            t1 = stamps[i]
-            if t1 == t:
-                vals[s.name] = s.values[i]
-                continue
-            if i == 0:
-                return None, f"expired_{s.name}", stamps[0]
-            t0 = stamps[i - 1]
-            if t1 - t0 > max_gap:
-                return None, f"gap_{s.name}", t1
-            w = (t - t0) / (t1 - t0)
-            vals[s.name] = [x + w * (y - x) for x, y in zip(s.values[i - 1], s.values[i])]
-        imu = vals["imu"]
-        # The conversion to aircraft body axes: specific force, rates, velocity.
-        raw = [
-            *rep103_to_aircraft(imu[3:]),
-            *rep103_to_aircraft(imu[:3]),
-            *rep103_to_aircraft(vals["airspeed"]),
-            vals["dynamic_pressure"][0] if "dynamic_pressure" in vals else math.nan,
-            *vals.get("control_surfaces", (0.0, 0.0, 0.0)),
-            vals["thrust"][0] if "thrust" in vals else 0.0,
-        ]
-        return raw, None, None
-
-    def _trim(self, t_next: int) -> None:
-        """Drop messages no later sample can need (keep the last one at or before ``t_next``)."""
-        for s in self._stream_list:
-            stamps = s.stamps
-            if len(stamps) > 1 and stamps[1] <= t_next:
-                i = bisect_right(stamps, t_next) - 1
-                del stamps[:i]
-                del s.values[:i]
+    def reject(self, stream: str, reason: str) -> None:
+        """Count a message of input ``stream`` that never reached the pipeline's ``add_*``
+        (the node could not decode it)."""
+        self.sampler.reject(self.sampler.streams[stream], reason)
 
     # ------------------------------------------------------------------ per sample
+    def _advance(self) -> list[SampleOutput]:
+        out: list[SampleOutput] = []
+        book = self.bookkeeping
+        for item in self.sampler.due():
+            if type(item) is Sample:
+                book.samples_formed += 1
+                result = self._process(item.stamp_ns, self._sample_vector(item.values))
+                if result is not None:
+                    out.append(result)
+            else:  # Skipped grid points: the differentiator restarts after them
+                book.samples_formed += item.count
+                book.samples_rejected[item.reason] += item.count
+                self._flush("discontinuity")
+        return out
+
+    def _sample_vector(self, values: list) -> list:
+        """The sampled streams (in ``required`` order) as one :data:`.aero.SAMPLE_FIELDS`
+        vector in aircraft body axes; streams not used take their stand-ins."""
+        i_qbar, i_surfaces, i_thrust = self._i_qbar, self._i_surfaces, self._i_thrust
+        return aircraft_sample(
+            values[0],
+            values[1],
+            math.nan if i_qbar is None else values[i_qbar][0],
+            (0.0, 0.0, 0.0) if i_surfaces is None else values[i_surfaces],
+            0.0 if i_thrust is None else values[i_thrust][0],
+        )
+
     def _flush(self, reason: str) -> None:
         """Drop the samples waiting in the delay line and restart the differentiator."""
         if self._pending:
-            self.samples_rejected[reason] += len(self._pending)
+            self.bookkeeping.samples_rejected[reason] += len(self._pending)
             self._pending.clear()
         self._diff.reset()
 
-    def _process(self, t: int, raw: list) -> SampleOutput | None:
-        self._pending.append((t, raw))
-        rate_dot = self._diff.push(raw[_P:_R + 1])
+    def _process(self, t: int, sample: list) -> SampleOutput | None:
+        """The delay line: the rates enter the differentiator now, the sample leaves ``lag``
+        samples later together with its angular accelerations."""
+        self._pending.append((t, sample))
+        rate_dot = self._diff.push(sample[RATES])
         if rate_dot is None:
-            if len(self._pending) > self.config.diff_lag:
+            if len(self._pending) > self._lag:
                 self._pending.popleft()
-                self.samples_rejected["differentiator_warmup"] += 1
+                self.bookkeeping.samples_rejected["differentiator_warmup"] += 1
             return None
-        t, raw = self._pending.popleft()  # the sample diff_lag samples back, aligned
-        return self._estimate(t, raw, rate_dot)
+        t, sample = self._pending.popleft()  # the sample `lag` samples back, aligned
+        return self._estimate(t, sample, rate_dot)
 
-    def flight_state(self, raw: list, rate_dot) -> FlightState | str:
-        """The aligned sample as a :class:`FlightState`, or the reason it cannot be used."""
-        u, v, w = raw[_U:_W + 1]
-        V = math.sqrt(u * u + v * v + w * w)
-        if not V > 0.0:
-            return "nonpositive_airspeed"
-        qbar = raw[_QBAR]
-        if math.isnan(qbar):
-            qbar = 0.5 * self.config.air_density * V * V
-        ax, ay, az, p, q, r = raw[:6]
-        de, da, dr, thrust = raw[_DE:]
-        p_dot, q_dot, r_dot = rate_dot.tolist()
-        state = FlightState(
-            ax=ax, ay=ay, az=az, p=p, q=q, r=r, p_dot=p_dot, q_dot=q_dot, r_dot=r_dot,
-            V=V, alpha=math.atan2(w, u), beta=math.asin(max(-1.0, min(1.0, v / V))), qbar=float(qbar),
-            delta_e=de, delta_a=da, delta_r=dr, thrust=thrust,
-        )
-        return physics_rejection(state) or state
-
-    def _estimate(self, t: int, raw: list, rate_dot) -> SampleOutput | None:
-        state = self.flight_state(raw, rate_dot)
-        if isinstance(state, str):
-            self.samples_rejected[state] += 1
+    def _estimate(self, t: int, sample: list, rate_dot) -> SampleOutput | None:
+        book = self.bookkeeping
+        state = flight_state(sample, rate_dot, self.config.inputs.air_density)
+        if type(state) is str:
+            book.samples_rejected[state] += 1
             return None
         if not self.enabled:
-            self.samples_rejected["estimation_disabled"] += 1
+            book.samples_rejected["estimation_disabled"] += 1
             return None
         ac = self.config.aircraft
         coef = coefficients(state, ac)
@@ -425,9 +279,9 @@ class Pipeline:
         try:
             self.bank.update(X, z)
         except NonFiniteInput:  # pragma: no cover - inputs are checked above
-            self.samples_rejected["non_finite_regression"] += 1
+            book.samples_rejected["non_finite_regression"] += 1
             return None
-        self.samples_used += 1
+        book.samples_used += 1
         self._zsum += z
         self._zsq += z * z
         if self.record:
@@ -451,45 +305,28 @@ class Pipeline:
             if out.ready[j]:
                 yield name, label, out.theta[j, :n], out.se[j, :n], out.se_conventional[j, :n]
 
-    # ------------------------------------------------------------------ control
+    # ------------------------------------------------------------------ lifecycle
     def reset(self, reason: str, *, clear_inputs: bool = False) -> None:
         """Start the estimator afresh (``~/reset``, a time jump). The sample stream goes on:
         samples in the differentiator's delay line reach the new estimator. With
         ``clear_inputs`` (time jumped) the buffered messages and the delay line are dropped
         too, counted as expired messages and ``reset_<reason>`` samples."""
-        self.resets[reason] += 1
+        self.bookkeeping.resets[reason] += 1
         self._new_estimator()
         self.regression.clear()
         if clear_inputs:
             self._flush(f"reset_{reason}")
-            for s in self.streams.values():
-                s.expired += len(s.stamps)
-                s.stamps.clear()
-                s.values.clear()
-                s.last = None
-            self._next_t = None
-            self._frontier_stream = None
+            self.sampler.clear(forget_newest=True)
 
-    def reconfigured(self, config: PipelineConfig, reason: str = "parameters_changed") -> "Pipeline":
-        """A pipeline with a new configuration that keeps this one's bookkeeping: buffered
-        messages are counted as expired, samples waiting in the delay line as
-        ``reset_<reason>``, and every counter carries over, so nothing disappears from the
-        diagnostics. The estimator starts afresh."""
-        new = Pipeline(config, record=self.record, enabled=self.enabled)
+    def reconfigured(self, config: PipelineConfig, reason: str = "parameters_changed") -> Pipeline:
+        """A pipeline with a new configuration that takes over this one's bookkeeping:
+        buffered messages are counted as expired, samples waiting in the delay line as
+        ``reset_<reason>``, so nothing disappears from the diagnostics. The estimator starts
+        afresh; this pipeline must not be used afterwards."""
         self._flush(f"reset_{reason}")
-        for name, s in self.streams.items():
-            t = new.streams[name]
-            t.received, t.rejected, t.last = s.received, Counter(s.rejected), s.last
-            t.interval, t.missing = s.interval, s.missing
-            t.expired = s.expired + len(s.stamps)
-        new.samples_formed = self.samples_formed
-        new.samples_used = 0
-        new._used_before = self.samples_used + self._used_before
-        new.samples_rejected = Counter(self.samples_rejected)
-        new.resets = Counter(self.resets)
-        new.resets[reason] += 1
-        new.unknown_joints = Counter(self.unknown_joints)
-        return new
+        self.sampler.clear(forget_newest=False)
+        self.bookkeeping.resets[reason] += 1
+        return Pipeline(config, record=self.record, enabled=self.enabled, bookkeeping=self.bookkeeping)
 
     def finish(self) -> None:
         """End of data: the last ``lag`` samples never get a centred derivative."""
@@ -521,70 +358,28 @@ class Pipeline:
 
     def counters(self) -> dict:
         """Bookkeeping for diagnostics: messages per stream and samples, with reasons."""
-        streams = {}
-        for name, s in self.streams.items():
-            streams[name] = {
-                "received": s.received,
-                "accepted": s.received - sum(s.rejected.values()),
-                "rejected": dict(s.rejected),
-                "expired": s.expired,
-                "missing": s.missing,
-                "newest_stamp_ns": s.last,
-            }
+        book = self.bookkeeping
         return {
-            "streams": streams,
-            "samples_formed": self.samples_formed,
-            "samples_used": self.samples_used + self._used_before,
-            "samples_rejected": dict(self.samples_rejected),
+            "streams": {name: counts.report() for name, counts in book.streams.items()},
+            "samples_formed": book.samples_formed,
+            "samples_used": book.samples_used,
+            "samples_rejected": dict(book.samples_rejected),
             "samples_pending": len(self._pending),
-            "resets": dict(self.resets),
-            "unknown_joints": dict(self.unknown_joints),
+            "resets": dict(book.resets),
+            "unknown_joints": dict(book.unknown_joints),
         }
 
     # ------------------------------------------------------------------ persistence
     def save_state(self, path: str | Path) -> None:
-        """Write the estimator state (atomically, no pickle) so a restarted node resumes."""
-        path = Path(path)
-        state = self.bank.state()
-        meta = {
-            "format": EstimatorBank.STATE_FORMAT,
-            "fingerprint": self.config.fingerprint(),
-            "bank_config": state["config"],
-            "bank_counters": state["counters"],
-            "samples_used": self.samples_used,
-            "zsum": self._zsum.tolist(),
-            "zsq": self._zsq.tolist(),
-        }
-        with atomic_file(path) as fh:
-            np.savez(fh, meta=np.array(json.dumps(meta)), **state["arrays"])
+        """Write the estimator state (:mod:`.state_file`) so a restarted node resumes."""
+        state = EstimatorState(self.bank, self.bookkeeping.samples_used, self._zsum, self._zsq)
+        save_state(path, state, self.config.fingerprint())
 
     def load_state(self, path: str | Path) -> None:
         """Continue from :meth:`save_state`. Raises :class:`StateFileError` when the file is
         unreadable or was written with another configuration."""
-        path = Path(path)
-        try:
-            with np.load(path, allow_pickle=False) as data:
-                meta = json.loads(str(data["meta"]))
-                arrays = {k: data[k] for k in data.files if k != "meta"}
-        except FileNotFoundError as exc:
-            raise StateFileError(f"{path}: no such state file") from exc
-        except Exception as exc:  # noqa: BLE001 - any corruption is reported the same way
-            raise StateFileError(f"{path}: not a readable state file ({exc})") from exc
-        if meta.get("format") != EstimatorBank.STATE_FORMAT:
-            raise StateFileError(
-                f"{path}: state format {meta.get('format')!r}, this version reads "
-                f"{EstimatorBank.STATE_FORMAT} (saved by another version; delete it to start afresh)"
-            )
-        want = json.loads(json.dumps(self.config.fingerprint()))
-        if meta["fingerprint"] != want:
-            raise StateFileError(f"{path}: saved with another aircraft, model or estimator configuration")
-        try:
-            bank = EstimatorBank.from_state(
-                {"format": EstimatorBank.STATE_FORMAT, "config": meta["bank_config"], "counters": meta["bank_counters"], "arrays": arrays}
-            )
-        except (KeyError, ValueError) as exc:
-            raise StateFileError(f"{path}: inconsistent estimator state ({exc})") from exc
-        self.bank = bank
-        self.samples_used = int(meta["samples_used"])
-        self._zsum = np.array(meta["zsum"], dtype=float)
-        self._zsq = np.array(meta["zsq"], dtype=float)
+        state = load_state(path, self.config.fingerprint())
+        self.bank = state.bank
+        self.bookkeeping.samples_used = state.samples_used
+        self._zsum = state.output_sum
+        self._zsq = state.output_sum_squares

@@ -9,6 +9,7 @@ from rls_uncertainty.differentiation import (
     derivative_weights,
     differentiate,
 )
+from rls_uncertainty.errors import ConfigError
 
 DT = 0.02
 
@@ -72,9 +73,21 @@ def test_streaming_equals_batch_and_waits_for_a_full_window():
         np.testing.assert_allclose(outs[k], batch[k - cfg.lag], rtol=1e-12)
 
 
-@pytest.mark.parametrize("kw", [dict(window=1), dict(order=0), dict(window=5, order=5), dict(window=5, lag=5), dict(lag=-1)])
-def test_invalid_configuration(kw):
+@pytest.mark.parametrize("kw, field", [
+    (dict(window=1), "window"),
+    (dict(order=0), "order"),
+    (dict(window=5, order=5), "order"),
+    (dict(window=5, lag=5), "lag"),
+    (dict(lag=-1), "lag"),
+    (dict(window=9.5), "window"),
+])
+def test_invalid_configuration(kw, field):
+    """Validated here and only here (the parameters reach it unchanged): a ConfigError, which
+    is a ValueError, naming the parameter."""
+    with pytest.raises(ConfigError, match=f"differentiator.{field}"):
+        DifferentiatorConfig(**kw)
     with pytest.raises(ValueError):
         DifferentiatorConfig(**kw)
     with pytest.raises(ValueError):
         derivative_weights(DifferentiatorConfig(), 0.0)
+    assert DifferentiatorConfig(np.int64(7), np.int64(2), np.int64(3)).window == 7

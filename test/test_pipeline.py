@@ -1,18 +1,20 @@
-"""The pipeline that the node and the replay share: sample formation against an independent
-interpolation, alignment of the differentiator's lag, estimates against batch least squares,
-and the bookkeeping of every bad input. No ROS."""
+"""The pipeline that the node and the replay share, end to end: samples against an
+independent interpolation and reduction, alignment of the differentiator's lag, estimates
+against batch least squares, the bookkeeping of every bad input, and the lifecycle (disable,
+reset, reconfigure, state file). The parts have their own tests (test_sampling, test_aero,
+test_state_file, test_config, test_differentiation). No ROS."""
 
-import json
 import math
 import sys
 
 import numpy as np
 import pytest
 
-from rls_uncertainty.config import ConfigError, load_aircraft, load_parameters_file, pipeline_config
+from rls_uncertainty.config import load_aircraft, pipeline_config
 from rls_uncertainty.differentiation import DifferentiatorConfig, differentiate
 from rls_uncertainty.pipeline import Pipeline, StateFileError
 from rls_uncertainty.simulation import simulate_sensor_streams
+from rls_uncertainty.surface_mixing import SurfaceMixing
 
 T2 = load_aircraft("t2")
 T2_PARAMS = {"models.enabled": ["CZ", "Cm"], "surfaces.elevator": ["elevator_left", "elevator_right"]}
@@ -179,26 +181,20 @@ def test_differentiator_lag_keeps_every_signal_aligned(window, lag):
     np.testing.assert_allclose(X[:, 2], 0.01 * np.cos(3 * t), atol=2e-6)
 
 
-def test_aileron_mixing_is_eq_23():
-    pipe = Pipeline(pipeline_config({"models.enabled": ["Cl"], "surfaces.aileron_right": ["ar1", "ar2"],
-                                     "surfaces.aileron_left": ["al"], "surfaces.rudder": ["r1", "r2"]}))
-    pipe.add_surfaces(5, ["ar1", "ar2", "al", "r1", "r2", "elevator"], [0.1, 0.3, -0.2, 0.01, 0.03, 0.0])
-    de, da, dr = pipe.streams["control_surfaces"].values[-1]
-    assert da == pytest.approx(0.5 * (0.2 - (-0.2)))
-    assert dr == pytest.approx(0.02)
-    # The joint order may change from message to message: the mixing follows the names.
-    pipe.add_surfaces(6, ["elevator", "r2", "r1", "al", "ar2", "ar1"], [0.0, 0.03, 0.01, -0.2, 0.3, 0.1])
-    assert pipe.streams["control_surfaces"].values[-1] == (de, da, dr)
-    pipe.add_surfaces(7, ["ar1", "ar2", "al", "r1", "r2", "elevator"], [0.1, 0.5, -0.2, 0.01, 0.03, 0.0])
-    assert pipe.streams["control_surfaces"].values[-1][1] == pytest.approx(0.5 * (0.3 - (-0.2)))
-    combined = Pipeline(pipeline_config({"models.enabled": ["Cl"], "surfaces.aileron_combined": "ail"}))
-    combined.add_surfaces(5, ["ail", "rudder", "elevator"], [0.07, 0.0, 0.0])
-    assert combined.streams["control_surfaces"].values[-1][1] == 0.07
-    # Only one aileron side configured: no aileron deflection is formed (and none required).
-    one_side = Pipeline(pipeline_config({"models.enabled": ["Cm"], "surfaces.aileron_left": []}))
-    one_side.add_surfaces(5, ["aileron_right", "rudder", "elevator"], [0.07, 0.0, 0.01])
-    one_side.add_surfaces(6, ["rudder", "elevator"], [0.0, 0.01])
-    assert [v[1] for v in one_side.streams["control_surfaces"].values] == [0.0, 0.0]
+def test_surfaces_are_mixed_by_the_configured_eq_23_before_sampling():
+    """The mixing itself is tested in test_aero; here: the pipeline buffers exactly what the
+    configured SurfaceMixing gives for the message."""
+    params = {"models.enabled": ["Cl"], "surfaces.aileron_right": ["ar1", "ar2"],
+              "surfaces.aileron_left": ["al"], "surfaces.rudder": ["r1", "r2"]}
+    pipe = Pipeline(pipeline_config(params))
+    names, positions = ["ar1", "ar2", "al", "r1", "r2", "elevator"], [0.1, 0.3, -0.2, 0.01, 0.03, 0.0]
+    pipe.add_surfaces(5, names, positions)
+    expected = SurfaceMixing(elevator=("elevator",), aileron_right=("ar1", "ar2"), aileron_left=("al",),
+                             rudder=("r1", "r2")).layout(tuple(names)).deflections(positions)
+    assert pipe.sampler.streams["control_surfaces"].values == [expected]
+    assert expected[1] == pytest.approx(0.2)
+    assert "control_surfaces" in pipe.required
+    assert "control_surfaces" not in Pipeline(pipeline_config({"models.enabled": ["CZ"], "models.CZ": ["1", "alpha"]})).required
 
 
 def test_bad_messages_are_counted_and_never_reach_the_outputs():
@@ -216,12 +212,14 @@ def test_bad_messages_are_counted_and_never_reach_the_outputs():
     syn.surfaces(t + 2 * MS, names=["elevator", "aileron_left", "aileron_right", "rudder", "flap"],
                  positions=[0.0, 0.0, 0.0, 0.0, 0.3])  # unknown joint: counted, message used
     syn.air(t + 3 * MS, vec=(float("nan"), 0.0, 0.0))
+    pipe.reject("thrust", "malformed: ValueError")  # the node could not decode a message
     syn.run(1004, 2000)
     pipe.finish()
     c = pipe.counters()
     assert c["streams"]["imu"]["rejected"] == {"non_finite": 2, "duplicate": 1, "out_of_order": 30}
     assert c["streams"]["control_surfaces"]["rejected"] == {"mismatched_arrays": 1, "missing_joint": 1}
     assert c["streams"]["airspeed"]["rejected"] == {"non_finite": 1}
+    assert c["streams"]["thrust"]["rejected"] == {"malformed: ValueError": 1}
     assert c["unknown_joints"] == {"flap": 1}
     for s in c["streams"].values():
         assert s["received"] == s["accepted"] + sum(s["rejected"].values())
@@ -249,7 +247,7 @@ def test_zero_airspeed_rejects_exactly_the_samples_that_have_it():
     pipe.finish()
     # Grid samples whose both interpolation neighbours are zero: 1020 ... 1380 ms.
     expected = sum(1 for g in range(1000, 1400, 20) if 1003 <= g - 17 and g + 3 <= 1383)
-    assert pipe.samples_rejected["nonpositive_airspeed"] == expected
+    assert pipe.bookkeeping.samples_rejected["nonpositive_airspeed"] == expected
     assert all(np.isfinite(o.theta[0, :3]).all() for o in syn.outs if o.ready[0])
 
 
@@ -273,14 +271,14 @@ def test_a_lagging_stream_is_never_extrapolated_and_buffers_stay_bounded():
     pipe = pitch_pipeline(**{"inputs.buffer_duration": 1.0})
     syn = Synthetic(pipe)
     syn.run(0, 1000)
-    newest_air = pipe.streams["airspeed"].last
+    newest_air = pipe.sampler.streams["airspeed"].last
     for ms in range(1000, 6000, 5):  # IMU and surfaces keep coming, air data stops
         syn.imu(syn.t0 + ms * MS)
         if ms % 10 == 0:
             syn.surfaces(syn.t0 + ms * MS + MS)
-        assert len(pipe.streams["imu"].stamps) <= 1.0 * 200 + 2
+        assert len(pipe.sampler.streams["imu"].stamps) <= 1.0 * 200 + 2
     assert pipe.regression[-1][0] <= newest_air
-    assert pipe.streams["imu"].expired > 0
+    assert pipe.bookkeeping.streams["imu"].expired > 0
     syn.run(6000, 8000)  # air data returns: the gap is skipped, estimation resumes
     pipe.finish()
     c = pipe.counters()
@@ -297,15 +295,17 @@ def test_disable_counts_samples_and_reset_restarts():
     pipe.enabled = False
     syn.run(1000, 2000)
     assert pipe.bank.k == k
-    assert pipe.samples_rejected["estimation_disabled"] == 50
+    assert pipe.bookkeeping.samples_rejected["estimation_disabled"] == 50
     pipe.enabled = True
     pipe.reset("service")
-    assert pipe.bank.k == 0 and pipe.resets["service"] == 1
+    assert pipe.bank.k == 0 and pipe.bookkeeping.resets["service"] == 1
     syn.run(2000, 3000)
     assert pipe.bank.k == 50
 
 
 def test_state_file_resumes_and_refuses_other_configurations(tmp_path):
+    """The file format is tested in test_state_file; here: a pipeline resumes another's
+    estimator, samples-used count and model fit, and refuses a state of another configuration."""
     pipe = pitch_pipeline()
     syn = Synthetic(pipe)
     syn.run(0, 2000)
@@ -315,6 +315,8 @@ def test_state_file_resumes_and_refuses_other_configurations(tmp_path):
     resumed.load_state(path)
     np.testing.assert_array_equal(resumed.bank.theta_all(), pipe.bank.theta_all())
     np.testing.assert_array_equal(resumed.bank.standard_errors_all(), pipe.bank.standard_errors_all())
+    assert resumed.counters()["samples_used"] == pipe.counters()["samples_used"] == pipe.bank.k
+    assert resumed.model_fit(0) == pipe.model_fit(0)
     row = np.array([[1.0, 0.01, 0.02]])
     pipe.bank.update(row, [0.3])
     resumed.bank.update(row, [0.3])
@@ -322,45 +324,6 @@ def test_state_file_resumes_and_refuses_other_configurations(tmp_path):
     other = pitch_pipeline(**{"estimator.lags": 10})
     with pytest.raises(StateFileError, match="another"):
         other.load_state(path)
-    bad = tmp_path / "bad.npz"
-    bad.write_bytes(b"not a state file")
-    with pytest.raises(StateFileError, match="not a readable"):
-        resumed.load_state(bad)
-    with pytest.raises(StateFileError, match="no such"):
-        resumed.load_state(tmp_path / "missing.npz")
-    # A file written by another version of the state layout is refused by name, not misread.
-    with np.load(path) as data:
-        arrays = {k: data[k] for k in data.files}
-    meta = json.loads(str(arrays.pop("meta")))
-    meta["format"] = 1
-    old = tmp_path / "old.npz"
-    np.savez(old, meta=np.array(json.dumps(meta)), **arrays)
-    with pytest.raises(StateFileError, match="state format 1"):
-        resumed.load_state(old)
-
-
-@pytest.mark.parametrize("params,match", [
-    ({"estimator.window": "hann"}, "estimator.window"),
-    ({"estimator.lags": -2}, "estimator.lags"),
-    ({"rate": 0.0}, "rate"),
-    ({"rate": "fast"}, "rate"),
-    ({"models.enabled": ["CQ"]}, "unknown model"),
-    ({"models.Cm": ["1", "gamma"]}, "unknown regressor"),
-    ({"models.enabled": ["Cl"], "surfaces.aileron_right": []}, "no control surface"),
-    ({"differentiator.lag": 9}, "differentiator.lag"),
-    ({"inputs.max_gap": 0.001}, "max_gap"),
-    ({"colour": "red"}, "unknown parameter"),
-    ({"aircraft": "concorde"}, "no such file"),
-])
-def test_invalid_settings_are_refused_with_the_reason(params, match):
-    with pytest.raises(ConfigError, match=match):
-        pipeline_config(params)
-
-
-@pytest.mark.parametrize("name", ["t2", "twin_otter_lateral", "twin_otter_longitudinal"])
-def test_shipped_parameter_files_are_valid(name):
-    cfg = pipeline_config(load_parameters_file(name))
-    assert cfg.models
 
 
 def test_pipeline_imports_no_ros():
@@ -371,19 +334,31 @@ def test_pipeline_imports_no_ros():
     assert subprocess.run([sys.executable, "-c", code]).returncode == 0
 
 
+@pytest.mark.parametrize("module", ["sampling", "surface_mixing", "aero", "differentiation", "state_file"])
+def test_the_numerical_core_imports_numpy_only(module):
+    import subprocess
+
+    code = f"import sys, rls_uncertainty.{module}; " \
+           "print(sorted({m.split('.')[0] for m in sys.modules} & {'rclpy', 'rosbags', 'yaml', 'scipy', 'mcap'}))"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "[]"
+
+
 def test_reconfiguration_keeps_every_count():
     pipe = pitch_pipeline()
     syn = Synthetic(pipe)
     syn.run(0, 1003)
     before = pipe.counters()
-    buffered = sum(len(s.stamps) for s in pipe.streams.values())
+    buffered = sum(len(s.stamps) for s in pipe.sampler.streams.values())
     pending = before["samples_pending"]
     assert buffered > 0 and pending > 0
     new_cfg = pipeline_config({"models.enabled": ["Cm"], "models.Cm": ["1", "q_hat", "delta_e"], "estimator.lags": 10})
+    book = pipe.bookkeeping
     pipe = pipe.reconfigured(new_cfg)
+    assert pipe.bookkeeping is book and pipe.sampler.counts == book.streams
     syn.pipe = pipe
     after = pipe.counters()
-    assert pipe.bank.k == 0 and pipe.config.n_lags == 10
+    assert pipe.bank.k == 0 and pipe.config.estimator.n_lags == 10
     assert after["resets"] == {"parameters_changed": 1}
     assert after["samples_rejected"]["reset_parameters_changed"] == pending
     assert sum(s["expired"] for s in after["streams"].values()) == buffered

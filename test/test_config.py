@@ -1,0 +1,178 @@
+"""Typed configuration: aircraft and model files, the parameter table, the nested
+PipelineConfig built from dotted parameters, and every validation with its reason."""
+
+import dataclasses
+
+import pytest
+
+from rls_uncertainty.config import (
+    PARAMETERS,
+    ConfigError,
+    EstimatorConfig,
+    InputConfig,
+    ModelConfig,
+    PipelineConfig,
+    load_aircraft,
+    load_models,
+    load_parameters_file,
+    parameter_defaults,
+    pipeline_config,
+)
+from rls_uncertainty.differentiation import DifferentiatorConfig
+from rls_uncertainty.estimator import RESIDUALS, WINDOWS
+from rls_uncertainty.surface_mixing import SurfaceMixing
+
+T2 = load_aircraft("t2")
+
+
+def test_table1_converted_to_si():
+    assert T2.b == pytest.approx(6.849 * 0.3048, rel=1e-8)
+    assert T2.S == pytest.approx(5.902 * 0.3048**2, rel=1e-6)
+    assert T2.mass == pytest.approx(1.585 * 14.59390294, rel=1e-8)
+    assert T2.Iyy == pytest.approx(4.520 * 14.59390294 * 0.3048**2, rel=1e-8)
+    otter = load_aircraft("twin_otter_f1_017")
+    assert (otter.mass, otter.Ixz, otter.S) == (4952.28, 1528.0, 39.25)
+
+
+def test_aircraft_file_errors_are_clear(tmp_path):
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("aircraft: {name: x, mass: -1, Ixx: 1, Iyy: 1, Izz: 1, Ixz: 0, S: 1, b: 1, cbar: 1}\n")
+    with pytest.raises(ConfigError, match="mass must be positive"):
+        load_aircraft(bad)
+    bad.write_text("aircraft: {name: x}\n")
+    with pytest.raises(ConfigError, match="needs"):
+        load_aircraft(bad)
+    with pytest.raises(ConfigError, match="no such file"):
+        load_aircraft(tmp_path / "missing.yaml")
+
+
+def test_models_are_configuration():
+    models = load_models({"CZ": ["1", "alpha", "q_hat", "delta_e"]})
+    assert models[0].parameter_names == ("CZ_0", "CZ_alpha", "CZ_q", "CZ_delta_e")
+    with pytest.raises(ConfigError, match="unknown regressor"):
+        ModelConfig("CZ", ("1", "alpha_dot"))
+    with pytest.raises(ConfigError, match="output"):
+        ModelConfig("CL", ("1",))
+
+
+@pytest.mark.parametrize("params,match", [
+    ({"estimator.window": "hann"}, "estimator.window"),
+    ({"estimator.lags": -2}, "estimator.lags"),
+    ({"rate": 0.0}, "rate"),
+    ({"rate": "fast"}, "rate"),
+    ({"models.enabled": ["CQ"]}, "unknown model"),
+    ({"models.Cm": ["1", "gamma"]}, "unknown regressor"),
+    ({"models.enabled": ["Cl"], "surfaces.aileron_right": []}, "no control surface"),
+    ({"differentiator.lag": 9}, "differentiator.lag"),
+    ({"differentiator.order": 9}, "differentiator.order"),
+    ({"inputs.max_gap": 0.001}, "max_gap"),
+    ({"colour": "red"}, "unknown parameter"),
+    ({"aircraft": "concorde"}, "no such file"),
+])
+def test_invalid_settings_are_refused_with_the_reason(params, match):
+    with pytest.raises(ConfigError, match=match):
+        pipeline_config(params)
+
+
+@pytest.mark.parametrize("name", ["t2", "twin_otter_lateral", "twin_otter_longitudinal"])
+def test_shipped_parameter_files_are_valid(name):
+    cfg = pipeline_config(load_parameters_file(name))
+    assert cfg.models
+
+
+def test_every_parameter_reaches_its_nested_field():
+    """Each pipeline parameter, set to a non-default value, changes exactly the field of the
+    same name in its section (``estimator.lags`` is ``n_lags``, -1 meaning all lags)."""
+    changed = {
+        "rate": ("rate", 100.0),
+        "estimator.lags": (("estimator", "n_lags"), 11),
+        "estimator.window": (("estimator", "window"), "bartlett"),
+        "estimator.forgetting": (("estimator", "forgetting"), 0.99),
+        "estimator.residual": (("estimator", "residual"), "a_priori"),
+        "differentiator.window": (("differentiator", "window"), 11),
+        "differentiator.order": (("differentiator", "order"), 2),
+        "differentiator.lag": (("differentiator", "lag"), 5),
+        "inputs.use_dynamic_pressure": (("inputs", "use_dynamic_pressure"), False),
+        "inputs.air_density": (("inputs", "air_density"), 1.0),
+        "inputs.use_thrust": (("inputs", "use_thrust"), False),
+        "inputs.max_gap": (("inputs", "max_gap"), 0.5),
+        "inputs.buffer_duration": (("inputs", "buffer_duration"), 3.0),
+        "surfaces.elevator": (("surfaces", "elevator"), ["e1", "e2"]),
+        "surfaces.aileron_right": (("surfaces", "aileron_right"), ["ar"]),
+        "surfaces.aileron_left": (("surfaces", "aileron_left"), ["al"]),
+        "surfaces.aileron_combined": (("surfaces", "aileron_combined"), "ail"),
+        "surfaces.rudder": (("surfaces", "rudder"), ["r1"]),
+    }
+    sections = {"rate", "estimator", "differentiator", "inputs", "surfaces"}
+    pipeline_params = [p.name for p in PARAMETERS if p.name.split(".")[0] in sections]
+    assert sorted(changed) == sorted(pipeline_params)
+    default = pipeline_config({})
+    for name, (where, value) in changed.items():
+        cfg = pipeline_config({name: value})
+        if isinstance(where, str):
+            assert getattr(cfg, where) == value
+            assert dataclasses.replace(cfg, **{where: getattr(default, where)}) == default
+            continue
+        section, attr = where
+        got = getattr(getattr(cfg, section), attr)
+        assert got == (tuple(value) if isinstance(value, list) else value), name
+        # Nothing else changed.
+        restored = dataclasses.replace(getattr(cfg, section), **{attr: getattr(getattr(default, section), attr)})
+        assert dataclasses.replace(cfg, **{section: restored}) == default, name
+    assert pipeline_config({"estimator.lags": -1}).estimator.n_lags is None
+
+
+def test_defaults_of_the_table_and_the_dataclasses_agree():
+    cfg = pipeline_config({})
+    d = parameter_defaults()
+    assert cfg.estimator == EstimatorConfig() and cfg.estimator.n_lags == d["estimator.lags"]
+    assert cfg.differentiator == DifferentiatorConfig()
+    assert cfg.inputs == InputConfig()
+    assert cfg.surfaces == SurfaceMixing()
+    assert cfg.rate == d["rate"] == PipelineConfig(T2).rate
+
+
+def test_estimator_choices_are_the_estimators_own():
+    spec = {p.name: p for p in PARAMETERS}
+    assert spec["estimator.window"].choices == WINDOWS
+    assert spec["estimator.residual"].choices == RESIDUALS
+    for window in WINDOWS:
+        assert pipeline_config({"estimator.window": window}).estimator.window == window
+    for residual in RESIDUALS:
+        assert pipeline_config({"estimator.residual": residual}).estimator.residual == residual
+
+
+@pytest.mark.parametrize("build,match", [
+    (lambda: EstimatorConfig(n_lags=-1), "estimator.lags"),
+    (lambda: EstimatorConfig(n_lags=2.5), "estimator.lags"),
+    (lambda: EstimatorConfig(window="hann"), "estimator.window"),
+    (lambda: EstimatorConfig(forgetting=0.0), "estimator.forgetting"),
+    (lambda: EstimatorConfig(forgetting=1.5), "estimator.forgetting"),
+    (lambda: EstimatorConfig(residual="raw"), "estimator.residual"),
+    (lambda: InputConfig(max_gap=0.0), "inputs.max_gap"),
+    (lambda: InputConfig(air_density=float("nan")), "inputs.air_density"),
+    (lambda: InputConfig(buffer_duration=-1.0), "inputs.buffer_duration"),
+    (lambda: PipelineConfig(T2, rate=0.0), "rate"),
+    (lambda: PipelineConfig(T2, models=()), "at least one model"),
+    (lambda: PipelineConfig(T2, models=(ModelConfig("CZ", ("1",)), ModelConfig("CZ", ("alpha",)))), "twice"),
+    (lambda: PipelineConfig(T2, rate=50.0, inputs=InputConfig(max_gap=0.01)), "max_gap"),
+    (lambda: PipelineConfig(T2, surfaces=SurfaceMixing(rudder=())), "delta_r"),
+])
+def test_the_dataclasses_refuse_invalid_values_when_built_directly(build, match):
+    with pytest.raises(ConfigError, match=match):
+        build()
+
+
+def test_fingerprint_is_what_a_state_file_stores():
+    """The state file compares this dict as saved: its keys and layout must stay."""
+    cfg = pipeline_config({"models.enabled": ["Cm"], "models.Cm": ["1", "q_hat"], "estimator.lags": 7})
+    assert cfg.fingerprint() == {
+        "aircraft": [getattr(T2, f.name) for f in dataclasses.fields(T2)],
+        "models": [["Cm", "1", "q_hat"]],
+        "rate": 50.0,
+        "n_lags": 7,
+        "window": "truncated",
+        "forgetting": 1.0,
+        "residual": "standardized",
+    }
+    assert pipeline_config({"inputs.max_gap": 0.5}).fingerprint() == pipeline_config({}).fingerprint()
