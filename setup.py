@@ -20,7 +20,6 @@ setup(
         (f"share/{PACKAGE}/msg_schemas/fti_msgs", glob("msg_schemas/fti_msgs/*.yaml")),
         (f"share/{PACKAGE}/msg_schemas/fti_msgs/msg", glob("msg_schemas/fti_msgs/msg/*.msg")),
     ],
-    package_data={PACKAGE: ["data/*"]},
     install_requires=["setuptools", "numpy", "scipy", "pyyaml"],
     zip_safe=True,
     maintainer="rls_uncertainty developers",
