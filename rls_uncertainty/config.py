@@ -446,7 +446,7 @@ def _section(values: dict[str, Any], prefix: str) -> dict[str, Any]:
 def node_config(params: dict[str, Any] | None = None) -> NodeConfig:
     v = _validated(params or {})
     return NodeConfig(
-        topics={k.split(".", 1)[1]: v[k] for k in v if k.startswith("topics.")},
+        topics=_section(v, "topics"),
         reliable=v["qos.reliable"],
         depth=v["qos.depth"],
         enabled=v["enabled"],
