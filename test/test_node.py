@@ -1,6 +1,6 @@
 """The estimator node in its own process, talking real DDS on loopback to this test process:
-outputs equal the offline replay, labels, diagnostics, bad input, parameters, services,
-state file, simulated time."""
+outputs equal the offline replay, labels, diagnostics, bad and malformed input, parameters,
+services, state file, simulated time."""
 
 from __future__ import annotations
 
@@ -20,7 +20,7 @@ from std_srvs.srv import SetBool, Trigger
 from ros_harness import NODE, ROOT, NodeProcess, RosTester, to_rclpy
 from rls_uncertainty.bags import read_inputs
 from rls_uncertainty.config import load_parameters_file, pipeline_config
-from rls_uncertainty.messages import feed, parse_stamp_label
+from rls_uncertainty.messages import MESSAGE_TYPES, feed, parse_stamp_label
 from rls_uncertainty.pipeline import Pipeline
 from rls_uncertainty.replay import run_pipeline
 
@@ -183,6 +183,45 @@ def test_bad_input_is_counted_in_diagnostics_and_never_published(tmp_path, teste
         d = tester.wait_diagnostics(lambda d: "airspeed stale" in d.get(f"{NODE}: inputs", {}).get("message", ""))
     finally:
         assert node.stop() == 0, node.text()
+
+
+def test_malformed_messages_are_counted_and_the_first_of_each_input_logged(tmp_path, tester):
+    """Raw payloads: two truncated IMU messages and one garbage JointState are counted as
+    malformed and logged once per input; a big-endian IMU message is decoded and accepted."""
+    from rosbags.typesys import Stores, get_typestore
+
+    store = get_typestore(Stores.ROS2_JAZZY)
+    T = store.types
+    imu = T["sensor_msgs/msg/Imu"](
+        header=T["std_msgs/msg/Header"](stamp=T["builtin_interfaces/msg/Time"](sec=5, nanosec=0), frame_id="imu"),
+        orientation=T["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=0.0, w=1.0),
+        orientation_covariance=np.zeros(9), angular_velocity=T["geometry_msgs/msg/Vector3"](x=0.0, y=0.1, z=0.0),
+        angular_velocity_covariance=np.zeros(9), linear_acceleration=T["geometry_msgs/msg/Vector3"](x=0.0, y=0.0, z=9.8),
+        linear_acceleration_covariance=np.zeros(9))
+    good = bytes(store.serialize_cdr(imu, "sensor_msgs/msg/Imu"))
+    big_endian = bytes(store.serialize_cdr(imu, "sensor_msgs/msg/Imu", little_endian=False))
+    node = _node(tmp_path)
+    try:
+        tester.wait_connected()
+        tester.publish("imu", good[:40])
+        tester.publish("imu", good[:-8])
+        tester.publish("control_surfaces", b"\x00\x01\x00\x00" + bytes(range(200, 240)))
+        tester.publish("imu", big_endian)
+        d = tester.wait_diagnostics(lambda d: d.get(f"{NODE}: inputs", {}).get("imu.received") == "3"
+                                    and d[f"{NODE}: inputs"].get("control_surfaces.received") == "1")
+        inputs = d[f"{NODE}: inputs"]
+        assert (inputs["imu.rejected.malformed: error"], inputs["imu.accepted"]) == ("2", "1")
+        assert inputs["control_surfaces.rejected.malformed: error"] == "1"
+        assert "imu rejected 2" in inputs["message"] and inputs["level"] == 1
+    finally:
+        assert node.stop() == 0, node.text()
+    lines = node.text().splitlines()
+    imu_lines = [line for line in lines if "malformed message on /imu" in line]
+    assert len(imu_lines) == 1, node.text()
+    assert "WARN" in imu_lines[0]
+    assert f"error: {MESSAGE_TYPES['imu']}: malformed 40-byte payload" in imu_lines[0]  # the first, type and text
+    surfaces = [line for line in lines if "malformed message on /control_surfaces" in line]
+    assert len(surfaces) == 1 and MESSAGE_TYPES["control_surfaces"] in surfaces[0]
 
 
 def _set_parameters(tester, **values):
