@@ -300,8 +300,10 @@ class EstimatorNode(Node):
 
 
 def main(args=None) -> int:
-    """Console script ``estimator_node`` (``ros2 run rls_uncertainty estimator_node``)."""
-    os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    """Console script ``estimator_node`` (``ros2 run rls_uncertainty estimator_node``).
+
+    DDS discovery follows the environment (``ROS_AUTOMATIC_DISCOVERY_RANGE``, ROS's default
+    otherwise): a control room spans machines."""
     rclpy.init(args=args)
     node = None
     code = 0

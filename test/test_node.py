@@ -1,10 +1,11 @@
 """The estimator node in its own process, talking real DDS on loopback to this test process:
 outputs equal the offline replay, labels, diagnostics, bad and malformed input, parameters,
-services, state file, simulated time."""
+services, state file, simulated time; and main() leaves DDS discovery to the environment."""
 
 from __future__ import annotations
 
 import math
+import os
 import subprocess
 import sys
 
@@ -222,6 +223,32 @@ def test_malformed_messages_are_counted_and_the_first_of_each_input_logged(tmp_p
     assert f"error: {MESSAGE_TYPES['imu']}: malformed 40-byte payload" in imu_lines[0]  # the first, type and text
     surfaces = [line for line in lines if "malformed message on /control_surfaces" in line]
     assert len(surfaces) == 1 and MESSAGE_TYPES["control_surfaces"] in surfaces[0]
+
+
+def test_main_leaves_dds_discovery_to_the_environment(monkeypatch):
+    """No DDS here: rclpy.init is replaced by a probe that records the discovery range main()
+    starts rclpy with, then stops main()."""
+    from rls_uncertainty import node as node_module
+
+    seen = []
+
+    class Probe(Exception):
+        pass
+
+    def probe_init(*args, **kwargs):
+        seen.append(os.environ.get("ROS_AUTOMATIC_DISCOVERY_RANGE", "<unset>"))
+        raise Probe
+
+    monkeypatch.setattr(node_module.rclpy, "init", probe_init)
+    monkeypatch.setattr(node_module.rclpy, "try_shutdown", lambda *a, **k: None)
+    monkeypatch.delenv("ROS_AUTOMATIC_DISCOVERY_RANGE", raising=False)
+    with pytest.raises(Probe):
+        node_module.main([])
+    assert "ROS_AUTOMATIC_DISCOVERY_RANGE" not in os.environ
+    monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "SUBNET")
+    with pytest.raises(Probe):
+        node_module.main([])
+    assert seen == ["<unset>", "SUBNET"]
 
 
 def _set_parameters(tester, **values):
