@@ -12,20 +12,14 @@ from pathlib import Path
 
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
-from geometry_msgs.msg import Vector3Stamped, WrenchStamped
 from rclpy.qos import QoSHistoryPolicy, QoSProfile, QoSReliabilityPolicy
-from sensor_msgs.msg import FluidPressure, Imu, JointState
 from std_msgs.msg import Float64MultiArray, Header
 
+from rls_uncertainty.messages import ARRAY_OUTPUTS, INPUTS, MESSAGE_TYPES, NODE_NAME, message_class
+
 ROOT = Path(__file__).resolve().parents[1]
-NODE = "rls_estimator"
-TYPES = {
-    "imu": Imu,
-    "airspeed": Vector3Stamped,
-    "dynamic_pressure": FluidPressure,
-    "control_surfaces": JointState,
-    "thrust": WrenchStamped,
-}
+NODE = NODE_NAME
+TYPES = {kind: message_class(MESSAGE_TYPES[kind]) for kind in INPUTS}
 RELIABLE = QoSProfile(depth=5000, reliability=QoSReliabilityPolicy.RELIABLE, history=QoSHistoryPolicy.KEEP_LAST)
 
 
@@ -69,7 +63,7 @@ class RosTester:
         self.diagnostics: list = []
         self.subs = []
         for m in models:
-            for suffix in ("estimates", "standard_errors", "standard_errors_conventional"):
+            for suffix in ARRAY_OUTPUTS:
                 self._record(Float64MultiArray, f"/{NODE}/{m}/{suffix}")
         self._record(Header, f"/{NODE}/sample_stamp")
         self.subs.append(self.node.create_subscription(DiagnosticArray, "/diagnostics", self.diagnostics.append, 50))

@@ -18,10 +18,11 @@ from rcl_interfaces.srv import SetParameters
 from rosgraph_msgs.msg import Clock
 from std_srvs.srv import SetBool, Trigger
 
-from ros_harness import NODE, ROOT, NodeProcess, RosTester, to_rclpy
+from ros_harness import ROOT, NodeProcess, RosTester, to_rclpy
 from rls_uncertainty.bags import read_inputs
 from rls_uncertainty.config import load_parameters_file, pipeline_config
 from rls_uncertainty.messages import MESSAGE_TYPES, feed, parse_stamp_label
+from rls_uncertainty.messages import NODE_NAME as NODE
 from rls_uncertainty.pipeline import Pipeline
 from rls_uncertainty.replay import run_pipeline
 
