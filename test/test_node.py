@@ -50,6 +50,21 @@ def tester():
     t.close()
 
 
+# DDS keeps each topic's order but not the interleaving across topics: a node that falls
+# behind (a busy machine) takes about one message per topic per executor round, so a slow stream's
+# backlog drains ahead of the IMU's and with the default 2 s buffer its messages expire. With a
+# buffer longer than any test's sequence, the outcome does not depend on the interleaving.
+NO_EXPIRY = {"inputs.buffer_duration": 60.0}
+
+
+def _t2_config(overrides=None):
+    return pipeline_config({**load_parameters_file("t2"), **(overrides or {})})
+
+
+def _ros_params(values):
+    return [arg for name, value in values.items() for arg in ("-p", f"{name}:={value}")]
+
+
 def _node(tmp_path, *args, name="node"):
     # Reliable inputs with a queue deeper than any test's topic: a node slowed down by a busy
     # machine then delays messages instead of losing them (KEEP_LAST overwrites when full).
@@ -62,10 +77,10 @@ def _arrays(tester, model, suffix):
 
 
 def test_live_node_reproduces_the_offline_replay(tmp_path, tester, bag):
-    node = _node(tmp_path)
+    node = _node(tmp_path, *_ros_params(NO_EXPIRY))
     try:
         tester.wait_connected()
-        offline = run_pipeline(bag, pipeline_config(load_parameters_file("t2")))
+        offline = run_pipeline(bag, _t2_config(NO_EXPIRY))
         n_out = len(offline.outputs)
         tester.publish_all([(k, to_rclpy(k, m)) for k, _s, m in bag])
         stamps = tester.outputs[f"/{NODE}/sample_stamp"]
@@ -156,11 +171,11 @@ def _synthetic(t0_ns, seconds, *, gap=None, zero_air=None, bad=True):
 
 
 def test_bad_input_is_counted_in_diagnostics_and_never_published(tmp_path, tester):
-    node = _node(tmp_path)
+    node = _node(tmp_path, *_ros_params(NO_EXPIRY))
     try:
         tester.wait_connected()
         seq = _synthetic(10**18, 8.0, gap=(4.0, 5.0), zero_air=(6.0, 6.5))
-        expected = Pipeline(pipeline_config(load_parameters_file("t2")))
+        expected = Pipeline(_t2_config(NO_EXPIRY))
         for kind, msg in seq:
             feed(expected, kind, msg)
         c = expected.counters()
