@@ -30,9 +30,6 @@ __all__ = ["decode", "encode_header", "encode_float64_multiarray", "DECODABLE"]
 _LE_HEADER = b"\x00\x01\x00\x00"
 _TIME = struct.Struct("<iI")
 _U32 = struct.Struct("<I")
-# CDR encapsulation identifiers (the first two bytes) and their byte order; the two option
-# bytes after them are ignored, as rosbags and the DDS implementations do.
-_BYTE_ORDERS = {b"\x00\x01": "<", b"\x00\x00": ">"}
 
 
 # Light message objects with the ROS field names. Slotted, they are smaller than a
@@ -67,70 +64,86 @@ def _vec(values, i):
 
 def _decoders(order: str) -> dict:
     """The decoders of one byte order (``"<"`` or ``">"``). Each takes the payload after the
-    4-byte encapsulation header and returns the message."""
+    4-byte encapsulation header and returns the message. Offsets are aligned inline (they
+    run for every input message)."""
     time_ = struct.Struct(order + "iI")
     u32 = struct.Struct(order + "I")
     d2, d3, d6, d37 = (struct.Struct(f"{order}{n}d") for n in (2, 3, 6, 37))
 
-    def string(buf, o):
-        # o is 4-aligned. A CDR string is its length including the terminating NUL, then
-        # the bytes: at least 1, and the last one is NUL.
-        (n,) = u32.unpack_from(buf, o)
-        end = o + 4 + n
-        if n == 0 or end > len(buf):
-            raise struct.error(f"string at offset {o} declares {n} bytes with NUL, {len(buf) - o - 4} left")
-        if buf[end - 1]:
-            raise struct.error(f"string at offset {o} is not NUL-terminated")
-        try:
-            return buf[o + 4 : end - 1].decode(), end
-        except UnicodeDecodeError as exc:
-            raise struct.error(f"string at offset {o} is not UTF-8 ({exc.reason} at byte {exc.start})") from None
+    def bad_string(buf, o, n):
+        if n == 0 or o + 4 + n > len(buf):
+            return struct.error(f"string at offset {o} declares {n} bytes with NUL, {len(buf) - o - 4} left")
+        return struct.error(f"string at offset {o} is not NUL-terminated")
 
+    def not_utf8(o, exc):
+        return struct.error(f"string at offset {o} is not UTF-8 ({exc.reason} at byte {exc.start})")
+
+    # A CDR string at a 4-aligned offset o: its length n including the terminating NUL, then
+    # the bytes; n >= 1 and the last byte is NUL.
     def header(buf):
         sec, nanosec = time_.unpack_from(buf, 0)
-        frame, o = string(buf, 8)
-        return Header(Time(sec, nanosec), frame), o
+        (n,) = u32.unpack_from(buf, 8)
+        end = 12 + n
+        if n == 0 or end > len(buf) or buf[end - 1]:
+            raise bad_string(buf, 8, n)
+        try:
+            frame = buf[12 : end - 1].decode()
+        except UnicodeDecodeError as exc:
+            raise not_utf8(8, exc) from None
+        return Header(Time(sec, nanosec), frame), end
 
     def imu(buf):
         h, o = header(buf)
-        v = d37.unpack_from(buf, _align(o, 8))
+        v = d37.unpack_from(buf, (o + 7) & ~7)
         return Imu(h, Quaternion(v[0], v[1], v[2], v[3]), v[4:13], _vec(v, 13), v[16:25], _vec(v, 25), v[28:37])
 
     def vector3_stamped(buf):
         h, o = header(buf)
-        return Vector3Stamped(h, _vec(d3.unpack_from(buf, _align(o, 8)), 0))
+        return Vector3Stamped(h, _vec(d3.unpack_from(buf, (o + 7) & ~7), 0))
 
     def fluid_pressure(buf):
         h, o = header(buf)
-        p, var = d2.unpack_from(buf, _align(o, 8))
+        p, var = d2.unpack_from(buf, (o + 7) & ~7)
         return FluidPressure(h, p, var)
 
     def wrench_stamped(buf):
         h, o = header(buf)
-        v = d6.unpack_from(buf, _align(o, 8))
+        v = d6.unpack_from(buf, (o + 7) & ~7)
         return WrenchStamped(h, Wrench(_vec(v, 0), _vec(v, 3)))
 
-    def count(buf, o, item_bytes, what):
-        # o is 4-aligned; refuses counts the rest of the payload cannot hold.
-        (n,) = u32.unpack_from(buf, o)
-        if n * item_bytes > len(buf) - o - 4:
-            raise struct.error(f"{what} at offset {o} declares {n} elements, {len(buf) - o - 4} bytes left")
-        return n, o + 4
+    def too_long(buf, o, n, what):
+        return struct.error(f"{what} at offset {o} declares {n} elements, {len(buf) - o - 4} bytes left")
 
     def doubles(buf, o, what):
-        n, o = count(buf, _align(o, 4), 8, what)
+        o = (o + 3) & ~3
+        (n,) = u32.unpack_from(buf, o)
         if n == 0:
-            return (), o
-        o = _align(o, 8)
-        return struct.unpack_from(f"{order}{n}d", buf, o), o + 8 * n
+            return (), o + 4
+        if 8 * n > len(buf) - o - 4:
+            raise too_long(buf, o, n, what)
+        start = (o + 11) & ~7
+        return struct.unpack_from(f"{order}{n}d", buf, start), start + 8 * n
 
     def joint_state(buf):
         h, o = header(buf)
-        n, o = count(buf, _align(o, 4), 5, "name")
+        o = (o + 3) & ~3
+        (count,) = u32.unpack_from(buf, o)
+        size = len(buf)
+        if 5 * count > size - o - 4:  # each name takes at least 5 bytes
+            raise too_long(buf, o, count, "name")
+        o += 4
         names = []
-        for _ in range(n):
-            name, o = string(buf, _align(o, 4))
-            names.append(name)
+        for _ in range(count):
+            o = (o + 3) & ~3
+            (n,) = u32.unpack_from(buf, o)
+            end = o + 4 + n
+            if n == 0 or end > size or buf[end - 1]:
+                raise bad_string(buf, o, n)
+            try:
+                names.append(buf[o + 4 : end - 1].decode())
+            except UnicodeDecodeError as exc:
+                raise not_utf8(o, exc) from None
+            o = end
         position, o = doubles(buf, o, "position")
         velocity, o = doubles(buf, o, "velocity")
         effort, _ = doubles(buf, o, "effort")
@@ -145,8 +158,9 @@ def _decoders(order: str) -> dict:
     }
 
 
-_DECODERS = {order: _decoders(order) for order in ("<", ">")}
-DECODABLE = frozenset(_DECODERS["<"])
+_LITTLE = _decoders("<")
+_BIG = _decoders(">")
+DECODABLE = frozenset(_LITTLE)
 
 
 def decode(msgtype: str, raw: bytes):
@@ -154,13 +168,22 @@ def decode(msgtype: str, raw: bytes):
     4-byte encapsulation header), or ``None`` when this module does not handle ``msgtype``.
     Raises :class:`struct.error` naming the type and the problem when the payload does not
     hold one valid message."""
-    order = _BYTE_ORDERS.get(bytes(raw[:2]))
-    fn = _DECODERS[order or "<"].get(msgtype)
+    head = raw[:2]  # the encapsulation; the two option bytes after it are ignored (as DDS does)
+    if head == b"\x00\x01":
+        fn = _LITTLE.get(msgtype)
+    elif head == b"\x00\x00":
+        fn = _BIG.get(msgtype)
+    elif msgtype in DECODABLE:
+        raise struct.error(f"{msgtype}: not a CDR payload (encapsulation {bytes(raw[:4]).hex() or 'missing'})")
+    else:
+        return None
     if fn is None:
         return None
-    if order is None or len(raw) < 4:
-        raise struct.error(f"{msgtype}: not a CDR payload (encapsulation {bytes(raw[:4]).hex() or 'missing'})")
-    buf = bytes(raw[4:])
+    if len(raw) < 4:
+        raise struct.error(f"{msgtype}: not a CDR payload (encapsulation {bytes(raw).hex()})")
+    buf = raw[4:]
+    if type(buf) is not bytes:
+        buf = bytes(buf)
     try:
         return fn(buf)
     except struct.error as exc:
