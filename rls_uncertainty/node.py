@@ -207,8 +207,8 @@ class EstimatorNode(Node):
     def _publish(self, out) -> None:
         """``~/sample_stamp``, then each ready model's three arrays. The messages are
         serialized by :mod:`.cdr` (byte-identical to rosbags' serialization and read back by
-        rclpy, checked in test_cdr.py) and published raw: converting 19 Python messages per sample cost more CPU and
-        latency than the estimation."""
+        rclpy, checked in test_cdr.py) and published raw: converting 19 Python messages per
+        sample cost more CPU and latency than the estimation."""
         sec, nanosec = divmod(out.stamp_ns, 1_000_000_000)
         self._stamp_pub.publish(encode_header(sec, nanosec, self.node_cfg.frame_id))
         when = stamp_label(out.stamp_ns)
