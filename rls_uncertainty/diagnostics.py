@@ -25,8 +25,8 @@ computed over a recent window can be added beside the cumulative counters.
 
 from __future__ import annotations
 
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Mapping, Sequence
 
 from .messages import NODE_NAME
 

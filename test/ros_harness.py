@@ -18,7 +18,6 @@ from std_msgs.msg import Float64MultiArray, Header
 from rls_uncertainty.messages import ARRAY_OUTPUTS, INPUTS, MESSAGE_TYPES, NODE_NAME, message_class
 
 ROOT = Path(__file__).resolve().parents[1]
-NODE = NODE_NAME
 TYPES = {kind: message_class(MESSAGE_TYPES[kind]) for kind in INPUTS}
 RELIABLE = QoSProfile(depth=5000, reliability=QoSReliabilityPolicy.RELIABLE, history=QoSHistoryPolicy.KEEP_LAST)
 
@@ -64,8 +63,8 @@ class RosTester:
         self.subs = []
         for m in models:
             for suffix in ARRAY_OUTPUTS:
-                self._record(Float64MultiArray, f"/{NODE}/{m}/{suffix}")
-        self._record(Header, f"/{NODE}/sample_stamp")
+                self._record(Float64MultiArray, f"/{NODE_NAME}/{m}/{suffix}")
+        self._record(Header, f"/{NODE_NAME}/sample_stamp")
         self.subs.append(self.node.create_subscription(DiagnosticArray, "/diagnostics", self.diagnostics.append, 50))
 
     def _record(self, msg_type, topic):
