@@ -113,7 +113,7 @@ class RosTester:
             out[s.name]["level"] = int.from_bytes(s.level, "little") if isinstance(s.level, bytes) else int(s.level)
         return out
 
-    def wait_diagnostics(self, predicate, timeout: float = 10.0) -> dict:
+    def wait_diagnostics(self, predicate, timeout: float = 30.0) -> dict:
         self.diagnostics.clear()
         ok = self.spin_until(lambda: bool(self.diagnostics) and predicate(self.latest_diagnostics()), timeout)
         diag = self.latest_diagnostics()

@@ -267,6 +267,13 @@ def test_main_leaves_dds_discovery_to_the_environment(monkeypatch):
     assert seen == ["<unset>", "SUBNET"]
 
 
+def _wait_received(tester, seq, timeout=60.0):
+    """Until the node's diagnostics count every message of ``seq`` (its first messages) as received."""
+    want = {kind: str(sum(k == kind for k, _ in seq)) for kind, _ in seq}
+    tester.wait_diagnostics(lambda d: all(d.get(f"{NODE}: inputs", {}).get(f"{kind}.received") == n
+                                          for kind, n in want.items()), timeout)
+
+
 def _set_parameters(tester, **values):
     client = tester.node.create_client(SetParameters, f"/{NODE}/set_parameters")
     assert client.wait_for_service(10)
@@ -362,12 +369,12 @@ def test_reset_and_enable_services(tmp_path, tester):
 def test_state_file_saves_on_shutdown_and_resumes(tmp_path, tester, bag):
     state = tmp_path / "state.npz"
     half = len(bag) // 2
-    node = _node(tmp_path, "-p", f"state_file:={state}", name="first")
+    node = _node(tmp_path, "-p", f"state_file:={state}", *_ros_params(NO_EXPIRY), name="first")
     try:
         tester.wait_connected()
         tester.publish_all([(k, to_rclpy(k, m)) for k, _s, m in bag[:half]])
         stamps = tester.outputs[f"/{NODE}/sample_stamp"]
-        first = Pipeline(pipeline_config(load_parameters_file("t2")))
+        first = Pipeline(_t2_config(NO_EXPIRY))
         n1 = sum(len(feed(first, k, m)) for k, _s, m in bag[:half])
         assert tester.spin_until(lambda: len(stamps) >= n1)
     finally:
@@ -375,13 +382,13 @@ def test_state_file_saves_on_shutdown_and_resumes(tmp_path, tester, bag):
     assert state.exists()
     # Offline expectation: the saved estimator continues on the second half.
     first.save_state(tmp_path / "expected.npz")
-    resumed = Pipeline(pipeline_config(load_parameters_file("t2")))
+    resumed = Pipeline(_t2_config(NO_EXPIRY))
     resumed.load_state(tmp_path / "expected.npz")
     outs = [o for k, _s, m in bag[half:] for o in feed(resumed, k, m)]
 
     for lst in tester.outputs.values():
         lst.clear()
-    node = _node(tmp_path, "-p", f"state_file:={state}", name="second")
+    node = _node(tmp_path, "-p", f"state_file:={state}", *_ros_params(NO_EXPIRY), name="second")
     try:
         tester.wait_connected()
         d = tester.wait_diagnostics(lambda d: f"{NODE}: samples" in d)
@@ -420,6 +427,9 @@ def test_sim_time_backwards_jump_resets(tmp_path, tester):
             tester.spin_until(lambda: False, 0.2)
         seq = _synthetic(100 * 10**9, 2.0, bad=False)
         tester.publish_all(seq)
+        # The node takes /clock and each input from its own queue: let it take every message
+        # before time jumps back, or the rest would be stamped after the jump.
+        _wait_received(tester, seq)
         tick(103)
         tick(50)  # the bag restarted: time jumps back
         d = tester.wait_diagnostics(lambda d: "resets.time_jumped_backwards" in d.get(f"{NODE}: samples", {}))
