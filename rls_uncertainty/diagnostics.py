@@ -58,13 +58,6 @@ class Status:
     values: tuple[tuple[str, str], ...]
     hardware_id: str = NODE_NAME
 
-    def value(self, key: str) -> str:
-        """The text of ``key`` (``KeyError`` when absent)."""
-        for k, v in self.values:
-            if k == key:
-                return v
-        raise KeyError(key)
-
 
 @dataclass(frozen=True)
 class Snapshot:

@@ -4,6 +4,9 @@ snapshots (and from a real pipeline's counters), checked against values worked o
 from __future__ import annotations
 
 import random
+import subprocess
+import sys
+from pathlib import Path
 
 import pytest
 
@@ -55,6 +58,14 @@ def test_levels_are_the_diagnostic_msgs_levels():
     assert [dg.OK, dg.WARN, dg.ERROR, dg.STALE] == [
         int.from_bytes(v, "little") for v in (DiagnosticStatus.OK, DiagnosticStatus.WARN, DiagnosticStatus.ERROR,
                                              DiagnosticStatus.STALE)]
+
+
+def test_the_module_imports_no_ros_package():
+    code = ("import sys, rls_uncertainty.diagnostics; "
+            "print(sorted(m for m in sys.modules if m.split('.')[0] in ('rclpy', 'diagnostic_msgs', 'rosbags')))")
+    root = Path(__file__).resolve().parents[1]
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=root)
+    assert out.stdout.strip() == "[]"
 
 
 def test_statuses_are_inputs_samples_then_one_per_model_named_after_the_node():
