@@ -1,12 +1,13 @@
 """``estimator_node``: the live ROS 2 adapter over :class:`.pipeline.Pipeline`.
 
-The node only converts, schedules and publishes: messages go through
-:func:`.messages.feed` (the code the offline replay runs), and every completed sample is
+The node only converts, schedules and publishes: messages are decoded by :mod:`.cdr` and go
+through :func:`.messages.feed` (the code the offline replay runs), and every completed sample is
 published as ``~/M/estimates``, ``~/M/standard_errors`` (corrected, Eqs. 20/22) and
 ``~/M/standard_errors_conventional`` (Eq. 13) for each ready model M, each a
 ``std_msgs/Float64MultiArray`` whose ``layout.dim[0].label`` names the parameters, preceded
 by ``~/sample_stamp`` (``std_msgs/Header``) carrying the sample's time. ``/diagnostics``
-reports input rates and ages, the fate of every message and sample, model fit and latency.
+reports input rates and ages, the fate of every message and sample, model fit and latency:
+the statuses are computed by :mod:`.diagnostics` from a snapshot the node takes each period.
 
 Parameters (declared with descriptions and ranges; see :data:`.config.PARAMETERS`), the
 ``~/reset`` and ``~/enable`` services, an optional state file, ``use_sim_time`` and
@@ -28,13 +29,13 @@ from rclpy.duration import Duration
 from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallbacks
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
-from rclpy.serialization import deserialize_message
 from rclpy.qos import QoSHistoryPolicy, QoSProfile, QoSReliabilityPolicy, qos_profile_sensor_data
 from std_msgs.msg import Float64MultiArray, Header
 from std_srvs.srv import SetBool, Trigger
 
 from .cdr import decode, encode_float64_multiarray, encode_header
 from .config import PARAMETERS, ConfigError, node_config, pipeline_config
+from .diagnostics import DiagnosticsPolicy, Snapshot, malformed_reason, malformed_warning
 from .messages import ARRAY_OUTPUTS, INPUTS, MESSAGE_TYPES, NODE_NAME, feed, message_class, stamp_label
 from .pipeline import Pipeline, StateFileError
 
@@ -63,6 +64,14 @@ def _descriptor(spec) -> ParameterDescriptor:
     return d
 
 
+def _input_qos(reliable: bool, depth: int) -> QoSProfile:
+    """Reliable inputs (``qos.reliable``) or sensor-data QoS (best effort, volatile)."""
+    if reliable:
+        return QoSProfile(depth=depth, reliability=QoSReliabilityPolicy.RELIABLE, history=QoSHistoryPolicy.KEEP_LAST)
+    return QoSProfile(depth=max(depth, 5), reliability=qos_profile_sensor_data.reliability,
+                      history=QoSHistoryPolicy.KEEP_LAST, durability=qos_profile_sensor_data.durability)
+
+
 class EstimatorNode(Node):
     """Recursive estimation of stability and control derivatives with honest uncertainty."""
 
@@ -77,21 +86,19 @@ class EstimatorNode(Node):
         self.pipeline = Pipeline(self.config, enabled=self.node_cfg.enabled)
         self.state_status = "no state file"
         self._load_state()
+        self._latencies: list[float] = []  # wall time from message to last publish
+        self._cpu_times: list[float] = []  # CPU time of the same (without preemption)
+        self._malformed_logged: set[str] = set()  # inputs whose first malformed message was logged
+        self._diagnostics = DiagnosticsPolicy(NODE_NAME)
+        self._last_diag = time.monotonic()
 
-        out_qos = QoSProfile(depth=self.node_cfg.depth, reliability=QoSReliabilityPolicy.RELIABLE,
-                             history=QoSHistoryPolicy.KEEP_LAST)
-        self._out_qos = out_qos
-        self._stamp_pub = self.create_publisher(Header, "~/sample_stamp", out_qos, event_callbacks=_NO_EVENTS)
+        self._out_qos = QoSProfile(depth=self.node_cfg.depth, reliability=QoSReliabilityPolicy.RELIABLE,
+                                   history=QoSHistoryPolicy.KEEP_LAST)
+        self._stamp_pub = self.create_publisher(Header, "~/sample_stamp", self._out_qos, event_callbacks=_NO_EVENTS)
         self._model_pubs: dict = {}
         self._make_model_publishers()
         self._diag_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10, event_callbacks=_NO_EVENTS)
-
-        if self.node_cfg.reliable:
-            in_qos = QoSProfile(depth=self.node_cfg.depth, reliability=QoSReliabilityPolicy.RELIABLE,
-                                history=QoSHistoryPolicy.KEEP_LAST)
-        else:
-            in_qos = QoSProfile(depth=max(self.node_cfg.depth, 5), reliability=qos_profile_sensor_data.reliability,
-                                history=QoSHistoryPolicy.KEEP_LAST, durability=qos_profile_sensor_data.durability)
+        in_qos = _input_qos(self.node_cfg.reliable, self.node_cfg.depth)
         self._subs = {
             kind: self.create_subscription(_TYPES[kind], self.node_cfg.topics[kind], self._callback(kind), in_qos, raw=True,
                                            event_callbacks=_NO_SUB_EVENTS)
@@ -105,10 +112,6 @@ class EstimatorNode(Node):
             JumpThreshold(min_forward=None, min_backward=Duration(nanoseconds=-1), on_clock_change=True),
             post_callback=self._on_time_jump,
         )
-        self._latencies: list[float] = []  # wall time from message to last publish
-        self._cpu_times: list[float] = []  # CPU time of the same (without preemption)
-        self._last_counts = {k: 0 for k in INPUTS}
-        self._last_diag = time.monotonic()
         # Health reporting and state saving run on the steady clock: they go on when /clock
         # pauses or jumps (use_sim_time).
         steady = Clock(clock_type=ClockType.STEADY_TIME)
@@ -171,23 +174,18 @@ class EstimatorNode(Node):
 
     # ------------------------------------------------------------------ data path
     def _callback(self, kind: str):
-        """Inputs arrive serialized (``raw=True``) and are decoded by :mod:`.cdr` into light
-        objects with the message's field names: building rclpy's Python messages (numpy
-        covariance arrays and all) cost more than the pipeline itself. Payloads ``cdr`` does
-        not handle (big-endian) go through rclpy's deserializer."""
+        """Inputs arrive serialized (``raw=True``) and are decoded by :mod:`.cdr` (either byte
+        order) into light objects with the message's field names: building rclpy's Python
+        messages (numpy covariance arrays and all) cost more than the pipeline itself."""
         msgtype = MESSAGE_TYPES[kind]
-        cls = _TYPES[kind]
 
         def on_message(raw: bytes) -> None:
             t0 = time.perf_counter()
             c0 = time.thread_time()
             try:
-                msg = decode(msgtype, raw)
-                if msg is None:
-                    msg = deserialize_message(raw, cls)
-                outputs = feed(self.pipeline, kind, msg)
+                outputs = feed(self.pipeline, kind, decode(msgtype, raw))
             except Exception as exc:  # noqa: BLE001 - a bad message must never stop the node
-                self.pipeline.reject(kind, f"malformed: {type(exc).__name__}")
+                self._malformed(kind, exc)
                 return
             if outputs:
                 for out in outputs:
@@ -197,11 +195,18 @@ class EstimatorNode(Node):
 
         return on_message
 
+    def _malformed(self, kind: str, exc: Exception) -> None:
+        """Count a message that could not be decoded or fed; log the first one per input."""
+        self.pipeline.reject(kind, malformed_reason(exc))
+        if kind not in self._malformed_logged:
+            self._malformed_logged.add(kind)
+            self.get_logger().warning(malformed_warning(self._subs[kind].topic_name, exc))
+
     def _publish(self, out) -> None:
         """``~/sample_stamp``, then each ready model's three arrays. The messages are
-        serialized by :mod:`.cdr` (byte-identical to rclpy's serialization, checked in the
-        tests) and published raw: converting 19 Python messages per sample cost more CPU and
-        latency than the estimation."""
+        serialized by :mod:`.cdr` (byte-identical to rosbags' serialization and read back by
+        rclpy, checked in test_cdr.py) and published raw: converting 19 Python messages per
+        sample cost more CPU and latency than the estimation."""
         sec, nanosec = divmod(out.stamp_ns, 1_000_000_000)
         self._stamp_pub.publish(encode_header(sec, nanosec, self.node_cfg.frame_id))
         when = stamp_label(out.stamp_ns)
@@ -262,91 +267,41 @@ class EstimatorNode(Node):
 
     # ------------------------------------------------------------------ diagnostics
     def _publish_diagnostics(self) -> None:
+        """One :class:`.diagnostics.Snapshot` per period in, one ``DiagnosticArray`` out."""
         now_ns = self.get_clock().now().nanoseconds
         wall = time.monotonic()
-        period = max(wall - self._last_diag, 1e-9)
+        snapshot = Snapshot(
+            counters=self.pipeline.counters(),
+            models=[(m.output, self.pipeline.model_fit(j)) for j, m in enumerate(self.config.models)],
+            required=tuple(self.pipeline.required),
+            max_gap=self.config.inputs.max_gap,
+            now_ns=now_ns,
+            elapsed_s=wall - self._last_diag,
+            publishers={kind: sub.get_publisher_count() for kind, sub in self._subs.items()},
+            topics={kind: sub.topic_name for kind, sub in self._subs.items()},
+            reliable=self.node_cfg.reliable,
+            enabled=self.pipeline.enabled,
+            state_file=self.state_status,
+            latencies_s=self._latencies,
+            cpu_times_s=self._cpu_times,
+        )
         self._last_diag = wall
-        c = self.pipeline.counters()
+        self._latencies, self._cpu_times = [], []
         arr = DiagnosticArray()
         arr.header.stamp = self.get_clock().now().to_msg()
-
-        def status(name, level, message, values):
-            s = DiagnosticStatus(level=level, name=f"{NODE_NAME}: {name}", message=message, hardware_id=NODE_NAME)
-            s.values = [KeyValue(key=k, value=str(v)) for k, v in values.items()]
-            return s
-
-        kv, problems = {}, []
-        for kind, s in c["streams"].items():
-            needed = kind in self.pipeline.required
-            rate = (s["received"] - self._last_counts[kind]) / period
-            self._last_counts[kind] = s["received"]
-            newest = s["newest_stamp_ns"]
-            age = (now_ns - newest) * 1e-9 if newest is not None else None
-            kv[f"{kind}.required"] = needed
-            publishers = self._subs[kind].get_publisher_count()
-            kv[f"{kind}.publishers"] = publishers
-            kv[f"{kind}.rate_hz"] = f"{rate:.1f}"
-            kv[f"{kind}.age_s"] = "never received" if age is None else f"{age:.3f}"
-            kv[f"{kind}.received"] = s["received"]
-            kv[f"{kind}.accepted"] = s["accepted"]
-            kv[f"{kind}.expired"] = s["expired"]
-            kv[f"{kind}.missing"] = s["missing"]
-            for reason, n in sorted(s["rejected"].items()):
-                kv[f"{kind}.rejected.{reason}"] = n
-            if needed and (age is None or age > max(1.0, 2 * self.config.inputs.max_gap)):
-                problems.append(f"{kind} {'silent' if age is None else f'stale ({age:.1f} s)'}")
-                if publishers == 0:
-                    problems.append(f"no publisher matched on {self._subs[kind].topic_name} "
-                                    f"(none running, or incompatible QoS: qos.reliable={self.node_cfg.reliable})")
-            if s["rejected"]:
-                problems.append(f"{kind} rejected {sum(s['rejected'].values())}")
-            if s["missing"]:
-                problems.append(f"{kind} missing about {s['missing']} (stamp gaps: lost in transport?)")
-        level = DiagnosticStatus.WARN if problems else DiagnosticStatus.OK
-        arr.status.append(status("inputs", level, "; ".join(problems) or "all inputs fresh", kv))
-
-        lat = sorted(self._latencies)
-        cpu = sorted(self._cpu_times)
-        self._latencies, self._cpu_times = [], []
-        kv = {
-            "enabled": self.pipeline.enabled,
-            "samples_formed": c["samples_formed"],
-            "samples_used": c["samples_used"],
-            "samples_pending": c["samples_pending"],
-        }
-        for reason, n in sorted(c["samples_rejected"].items()):
-            kv[f"samples_rejected.{reason}"] = n
-        for reason, n in sorted(c["resets"].items()):
-            kv[f"resets.{reason}"] = n
-        for joint, n in sorted(c["unknown_joints"].items()):
-            kv[f"unknown_joint.{joint}"] = n
-        if lat:
-            kv["latency_ms.p50"] = f"{1e3 * lat[len(lat) // 2]:.3f}"
-            kv["latency_ms.p99"] = f"{1e3 * lat[min(len(lat) - 1, int(0.99 * len(lat)))]:.3f}"
-            kv["latency_ms.max"] = f"{1e3 * lat[-1]:.3f}"
-            kv["processing_cpu_ms.p50"] = f"{1e3 * cpu[len(cpu) // 2]:.3f}"
-            kv["processing_cpu_ms.p99"] = f"{1e3 * cpu[min(len(cpu) - 1, int(0.99 * len(cpu)))]:.3f}"
-        kv["state_file"] = self.state_status
-        msg = f"{c['samples_used']} of {c['samples_formed']} samples used"
-        if not self.pipeline.enabled:
-            msg += "; estimation disabled"
-        arr.status.append(status("samples", DiagnosticStatus.OK, msg, kv))
-
-        for j, m in enumerate(self.config.models):
-            fit = self.pipeline.model_fit(j)
-            if fit["ready"]:
-                text = f"R^2 {fit['r_squared']:.3f}, residual lag-1 correlation {fit['residual_rho1']:.2f}"
-                level = DiagnosticStatus.OK
-            else:
-                text = "initializing: regressors not yet informative"
-                level = DiagnosticStatus.OK if c["samples_used"] == 0 else DiagnosticStatus.WARN
-            arr.status.append(status(f"model {m.output}", level, text, fit))
+        arr.status = [
+            DiagnosticStatus(level=bytes((s.level,)), name=s.name, message=s.message, hardware_id=s.hardware_id,
+                             values=[KeyValue(key=k, value=v) for k, v in s.values])
+            for s in self._diagnostics.update(snapshot)
+        ]
         self._diag_pub.publish(arr)
 
 
 def main(args=None) -> int:
-    """Console script ``estimator_node`` (``ros2 run rls_uncertainty estimator_node``)."""
-    os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    """Console script ``estimator_node`` (``ros2 run rls_uncertainty estimator_node``).
+
+    DDS discovery follows the environment (``ROS_AUTOMATIC_DISCOVERY_RANGE``, ROS's default
+    otherwise): a control room spans machines."""
     rclpy.init(args=args)
     node = None
     code = 0

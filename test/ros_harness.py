@@ -12,20 +12,13 @@ from pathlib import Path
 
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
-from geometry_msgs.msg import Vector3Stamped, WrenchStamped
 from rclpy.qos import QoSHistoryPolicy, QoSProfile, QoSReliabilityPolicy
-from sensor_msgs.msg import FluidPressure, Imu, JointState
 from std_msgs.msg import Float64MultiArray, Header
 
+from rls_uncertainty.messages import ARRAY_OUTPUTS, INPUTS, MESSAGE_TYPES, NODE_NAME, message_class
+
 ROOT = Path(__file__).resolve().parents[1]
-NODE = "rls_estimator"
-TYPES = {
-    "imu": Imu,
-    "airspeed": Vector3Stamped,
-    "dynamic_pressure": FluidPressure,
-    "control_surfaces": JointState,
-    "thrust": WrenchStamped,
-}
+TYPES = {kind: message_class(MESSAGE_TYPES[kind]) for kind in INPUTS}
 RELIABLE = QoSProfile(depth=5000, reliability=QoSReliabilityPolicy.RELIABLE, history=QoSHistoryPolicy.KEEP_LAST)
 
 
@@ -69,9 +62,9 @@ class RosTester:
         self.diagnostics: list = []
         self.subs = []
         for m in models:
-            for suffix in ("estimates", "standard_errors", "standard_errors_conventional"):
-                self._record(Float64MultiArray, f"/{NODE}/{m}/{suffix}")
-        self._record(Header, f"/{NODE}/sample_stamp")
+            for suffix in ARRAY_OUTPUTS:
+                self._record(Float64MultiArray, f"/{NODE_NAME}/{m}/{suffix}")
+        self._record(Header, f"/{NODE_NAME}/sample_stamp")
         self.subs.append(self.node.create_subscription(DiagnosticArray, "/diagnostics", self.diagnostics.append, 50))
 
     def _record(self, msg_type, topic):
@@ -120,7 +113,7 @@ class RosTester:
             out[s.name]["level"] = int.from_bytes(s.level, "little") if isinstance(s.level, bytes) else int(s.level)
         return out
 
-    def wait_diagnostics(self, predicate, timeout: float = 10.0) -> dict:
+    def wait_diagnostics(self, predicate, timeout: float = 30.0) -> dict:
         self.diagnostics.clear()
         ok = self.spin_until(lambda: bool(self.diagnostics) and predicate(self.latest_diagnostics()), timeout)
         diag = self.latest_diagnostics()

@@ -1,10 +1,11 @@
 """The estimator node in its own process, talking real DDS on loopback to this test process:
-outputs equal the offline replay, labels, diagnostics, bad input, parameters, services,
-state file, simulated time."""
+outputs equal the offline replay, labels, diagnostics, bad and malformed input, parameters,
+services, state file, simulated time; and main() leaves DDS discovery to the environment."""
 
 from __future__ import annotations
 
 import math
+import os
 import subprocess
 import sys
 
@@ -17,10 +18,11 @@ from rcl_interfaces.srv import SetParameters
 from rosgraph_msgs.msg import Clock
 from std_srvs.srv import SetBool, Trigger
 
-from ros_harness import NODE, ROOT, NodeProcess, RosTester, to_rclpy
+from ros_harness import ROOT, NodeProcess, RosTester, to_rclpy
 from rls_uncertainty.bags import read_inputs
 from rls_uncertainty.config import load_parameters_file, pipeline_config
-from rls_uncertainty.messages import feed, parse_stamp_label
+from rls_uncertainty.messages import MESSAGE_TYPES, feed, parse_stamp_label
+from rls_uncertainty.messages import NODE_NAME as NODE
 from rls_uncertainty.pipeline import Pipeline
 from rls_uncertainty.replay import run_pipeline
 
@@ -48,6 +50,21 @@ def tester():
     t.close()
 
 
+# DDS keeps each topic's order but not the interleaving across topics: a node that falls
+# behind (a busy machine) takes about one message per topic per executor round, so a slow stream's
+# backlog drains ahead of the IMU's and with the default 2 s buffer its messages expire. With a
+# buffer longer than any test's sequence, the outcome does not depend on the interleaving.
+NO_EXPIRY = {"inputs.buffer_duration": 60.0}
+
+
+def _t2_config(overrides=None):
+    return pipeline_config({**load_parameters_file("t2"), **(overrides or {})})
+
+
+def _ros_params(values):
+    return [arg for name, value in values.items() for arg in ("-p", f"{name}:={value}")]
+
+
 def _node(tmp_path, *args, name="node"):
     # Reliable inputs with a queue deeper than any test's topic: a node slowed down by a busy
     # machine then delays messages instead of losing them (KEEP_LAST overwrites when full).
@@ -60,10 +77,10 @@ def _arrays(tester, model, suffix):
 
 
 def test_live_node_reproduces_the_offline_replay(tmp_path, tester, bag):
-    node = _node(tmp_path)
+    node = _node(tmp_path, *_ros_params(NO_EXPIRY))
     try:
         tester.wait_connected()
-        offline = run_pipeline(bag, pipeline_config(load_parameters_file("t2")))
+        offline = run_pipeline(bag, _t2_config(NO_EXPIRY))
         n_out = len(offline.outputs)
         tester.publish_all([(k, to_rclpy(k, m)) for k, _s, m in bag])
         stamps = tester.outputs[f"/{NODE}/sample_stamp"]
@@ -154,11 +171,11 @@ def _synthetic(t0_ns, seconds, *, gap=None, zero_air=None, bad=True):
 
 
 def test_bad_input_is_counted_in_diagnostics_and_never_published(tmp_path, tester):
-    node = _node(tmp_path)
+    node = _node(tmp_path, *_ros_params(NO_EXPIRY))
     try:
         tester.wait_connected()
         seq = _synthetic(10**18, 8.0, gap=(4.0, 5.0), zero_air=(6.0, 6.5))
-        expected = Pipeline(pipeline_config(load_parameters_file("t2")))
+        expected = Pipeline(_t2_config(NO_EXPIRY))
         for kind, msg in seq:
             feed(expected, kind, msg)
         c = expected.counters()
@@ -183,6 +200,78 @@ def test_bad_input_is_counted_in_diagnostics_and_never_published(tmp_path, teste
         d = tester.wait_diagnostics(lambda d: "airspeed stale" in d.get(f"{NODE}: inputs", {}).get("message", ""))
     finally:
         assert node.stop() == 0, node.text()
+
+
+def test_malformed_messages_are_counted_and_the_first_of_each_input_logged(tmp_path, tester):
+    """Raw payloads: two truncated IMU messages and one garbage JointState are counted as
+    malformed and logged once per input; a big-endian IMU message is decoded and accepted."""
+    from rosbags.typesys import Stores, get_typestore
+
+    store = get_typestore(Stores.ROS2_JAZZY)
+    T = store.types
+    imu = T["sensor_msgs/msg/Imu"](
+        header=T["std_msgs/msg/Header"](stamp=T["builtin_interfaces/msg/Time"](sec=5, nanosec=0), frame_id="imu"),
+        orientation=T["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=0.0, w=1.0),
+        orientation_covariance=np.zeros(9), angular_velocity=T["geometry_msgs/msg/Vector3"](x=0.0, y=0.1, z=0.0),
+        angular_velocity_covariance=np.zeros(9), linear_acceleration=T["geometry_msgs/msg/Vector3"](x=0.0, y=0.0, z=9.8),
+        linear_acceleration_covariance=np.zeros(9))
+    good = bytes(store.serialize_cdr(imu, "sensor_msgs/msg/Imu"))
+    big_endian = bytes(store.serialize_cdr(imu, "sensor_msgs/msg/Imu", little_endian=False))
+    node = _node(tmp_path)
+    try:
+        tester.wait_connected()
+        tester.publish("imu", good[:40])
+        tester.publish("imu", good[:-8])
+        tester.publish("control_surfaces", b"\x00\x01\x00\x00" + bytes(range(200, 240)))
+        tester.publish("imu", big_endian)
+        d = tester.wait_diagnostics(lambda d: d.get(f"{NODE}: inputs", {}).get("imu.received") == "3"
+                                    and d[f"{NODE}: inputs"].get("control_surfaces.received") == "1")
+        inputs = d[f"{NODE}: inputs"]
+        assert (inputs["imu.rejected.malformed: error"], inputs["imu.accepted"]) == ("2", "1")
+        assert inputs["control_surfaces.rejected.malformed: error"] == "1"
+        assert "imu rejected 2" in inputs["message"] and inputs["level"] == 1
+    finally:
+        assert node.stop() == 0, node.text()
+    lines = node.text().splitlines()
+    imu_lines = [line for line in lines if "malformed message on /imu" in line]
+    assert len(imu_lines) == 1, node.text()
+    assert "WARN" in imu_lines[0]
+    assert f"error: {MESSAGE_TYPES['imu']}: malformed 40-byte payload" in imu_lines[0]  # the first, type and text
+    surfaces = [line for line in lines if "malformed message on /control_surfaces" in line]
+    assert len(surfaces) == 1 and MESSAGE_TYPES["control_surfaces"] in surfaces[0]
+
+
+def test_main_leaves_dds_discovery_to_the_environment(monkeypatch):
+    """No DDS here: rclpy.init is replaced by a probe that records the discovery range main()
+    starts rclpy with, then stops main()."""
+    from rls_uncertainty import node as node_module
+
+    seen = []
+
+    class Probe(Exception):
+        pass
+
+    def probe_init(*args, **kwargs):
+        seen.append(os.environ.get("ROS_AUTOMATIC_DISCOVERY_RANGE", "<unset>"))
+        raise Probe
+
+    monkeypatch.setattr(node_module.rclpy, "init", probe_init)
+    monkeypatch.setattr(node_module.rclpy, "try_shutdown", lambda *a, **k: None)
+    monkeypatch.delenv("ROS_AUTOMATIC_DISCOVERY_RANGE", raising=False)
+    with pytest.raises(Probe):
+        node_module.main([])
+    assert "ROS_AUTOMATIC_DISCOVERY_RANGE" not in os.environ
+    monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "SUBNET")
+    with pytest.raises(Probe):
+        node_module.main([])
+    assert seen == ["<unset>", "SUBNET"]
+
+
+def _wait_received(tester, seq, timeout=60.0):
+    """Until the node's diagnostics count every message of ``seq`` (its first messages) as received."""
+    want = {kind: str(sum(k == kind for k, _ in seq)) for kind, _ in seq}
+    tester.wait_diagnostics(lambda d: all(d.get(f"{NODE}: inputs", {}).get(f"{kind}.received") == n
+                                          for kind, n in want.items()), timeout)
 
 
 def _set_parameters(tester, **values):
@@ -280,12 +369,12 @@ def test_reset_and_enable_services(tmp_path, tester):
 def test_state_file_saves_on_shutdown_and_resumes(tmp_path, tester, bag):
     state = tmp_path / "state.npz"
     half = len(bag) // 2
-    node = _node(tmp_path, "-p", f"state_file:={state}", name="first")
+    node = _node(tmp_path, "-p", f"state_file:={state}", *_ros_params(NO_EXPIRY), name="first")
     try:
         tester.wait_connected()
         tester.publish_all([(k, to_rclpy(k, m)) for k, _s, m in bag[:half]])
         stamps = tester.outputs[f"/{NODE}/sample_stamp"]
-        first = Pipeline(pipeline_config(load_parameters_file("t2")))
+        first = Pipeline(_t2_config(NO_EXPIRY))
         n1 = sum(len(feed(first, k, m)) for k, _s, m in bag[:half])
         assert tester.spin_until(lambda: len(stamps) >= n1)
     finally:
@@ -293,13 +382,13 @@ def test_state_file_saves_on_shutdown_and_resumes(tmp_path, tester, bag):
     assert state.exists()
     # Offline expectation: the saved estimator continues on the second half.
     first.save_state(tmp_path / "expected.npz")
-    resumed = Pipeline(pipeline_config(load_parameters_file("t2")))
+    resumed = Pipeline(_t2_config(NO_EXPIRY))
     resumed.load_state(tmp_path / "expected.npz")
     outs = [o for k, _s, m in bag[half:] for o in feed(resumed, k, m)]
 
     for lst in tester.outputs.values():
         lst.clear()
-    node = _node(tmp_path, "-p", f"state_file:={state}", name="second")
+    node = _node(tmp_path, "-p", f"state_file:={state}", *_ros_params(NO_EXPIRY), name="second")
     try:
         tester.wait_connected()
         d = tester.wait_diagnostics(lambda d: f"{NODE}: samples" in d)
@@ -338,6 +427,9 @@ def test_sim_time_backwards_jump_resets(tmp_path, tester):
             tester.spin_until(lambda: False, 0.2)
         seq = _synthetic(100 * 10**9, 2.0, bad=False)
         tester.publish_all(seq)
+        # The node takes /clock and each input from its own queue: let it take every message
+        # before time jumps back, or the rest would be stamped after the jump.
+        _wait_received(tester, seq)
         tick(103)
         tick(50)  # the bag restarted: time jumps back
         d = tester.wait_diagnostics(lambda d: "resets.time_jumped_backwards" in d.get(f"{NODE}: samples", {}))

@@ -1,0 +1,280 @@
+"""The /diagnostics policy without DDS: levels, messages and key-values from hand-made
+snapshots (and from a real pipeline's counters), checked against values worked out here."""
+
+from __future__ import annotations
+
+import random
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from rls_uncertainty import diagnostics as dg
+from rls_uncertainty.diagnostics import OK, WARN, DiagnosticsPolicy, Snapshot
+from rls_uncertainty.messages import INPUTS, NODE_NAME
+
+SEC = 1_000_000_000
+NOW = 1_700_000_000 * SEC
+REQUIRED = ("imu", "airspeed", "control_surfaces", "dynamic_pressure", "thrust")
+STREAM_KEYS = ("required", "publishers", "rate_hz", "age_s", "received", "accepted", "expired", "missing")
+
+
+def stream(received=0, rejected=None, expired=0, missing=0, newest=NOW):
+    rejected = dict(rejected or {})
+    return {"received": received, "accepted": received - sum(rejected.values()), "rejected": rejected,
+            "expired": expired, "missing": missing, "newest_stamp_ns": newest if received else None}
+
+
+def counters(streams=None, formed=0, used=0, pending=0, samples_rejected=None, resets=None, unknown=None):
+    all_streams = {k: stream(received=10) for k in INPUTS}
+    all_streams.update(streams or {})
+    return {"streams": all_streams, "samples_formed": formed, "samples_used": used,
+            "samples_rejected": dict(samples_rejected or {}), "samples_pending": pending,
+            "resets": dict(resets or {}), "unknown_joints": dict(unknown or {})}
+
+
+def snapshot(c=None, *, models=(), required=REQUIRED, max_gap=0.25, now=NOW, elapsed=1.0, publishers=None,
+             reliable=False, enabled=True, state="no state file", latencies=(), cpu=()):
+    return Snapshot(counters=c or counters(), models=list(models), required=required, max_gap=max_gap, now_ns=now,
+                    elapsed_s=elapsed, publishers={k: 1 for k in INPUTS} | dict(publishers or {}),
+                    topics={k: f"/{k}" for k in INPUTS}, reliable=reliable, enabled=enabled, state_file=state,
+                    latencies_s=list(latencies), cpu_times_s=list(cpu))
+
+
+def statuses(snap, policy=None):
+    out = (policy or DiagnosticsPolicy()).update(snap)
+    return {s.name.removeprefix(f"{NODE_NAME}: "): s for s in out}
+
+
+def values(status):
+    return dict(status.values)
+
+
+# ------------------------------------------------------------------ structure
+def test_levels_are_the_diagnostic_msgs_levels():
+    from diagnostic_msgs.msg import DiagnosticStatus
+
+    assert [dg.OK, dg.WARN, dg.ERROR, dg.STALE] == [
+        int.from_bytes(v, "little") for v in (DiagnosticStatus.OK, DiagnosticStatus.WARN, DiagnosticStatus.ERROR,
+                                             DiagnosticStatus.STALE)]
+
+
+def test_the_module_imports_no_ros_package():
+    code = ("import sys, rls_uncertainty.diagnostics; "
+            "print(sorted(m for m in sys.modules if m.split('.')[0] in ('rclpy', 'diagnostic_msgs', 'rosbags')))")
+    root = Path(__file__).resolve().parents[1]
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=root)
+    assert out.stdout.strip() == "[]"
+
+
+def test_statuses_are_inputs_samples_then_one_per_model_named_after_the_node():
+    fit = {"ready": False, "samples": 0}
+    out = DiagnosticsPolicy().update(snapshot(models=[("CZ", fit), ("Cm", fit)]))
+    assert [s.name for s in out] == [f"{NODE_NAME}: {n}" for n in ("inputs", "samples", "model CZ", "model Cm")]
+    assert {s.hardware_id for s in out} == {NODE_NAME}
+    for s in out:  # every value is text, keys unique
+        assert all(isinstance(k, str) and isinstance(v, str) for k, v in s.values)
+        assert len({k for k, _ in s.values}) == len(s.values)
+
+
+def test_input_keys_per_stream_in_order_with_rejections_sorted():
+    c = counters({"imu": stream(received=7, rejected={"out_of_order": 2, "duplicate": 1}, expired=1, missing=0,
+                                newest=NOW - 20_000_000)})
+    s = statuses(snapshot(c, elapsed=0.5))["inputs"]
+    imu = [(k, v) for k, v in s.values if k.startswith("imu.")]
+    assert imu == [("imu.required", "True"), ("imu.publishers", "1"), ("imu.rate_hz", "14.0"),
+                   ("imu.age_s", "0.020"), ("imu.received", "7"), ("imu.accepted", "4"), ("imu.expired", "1"),
+                   ("imu.missing", "0"), ("imu.rejected.duplicate", "1"), ("imu.rejected.out_of_order", "2")]
+    # Streams in the counters' order, each block starting with its required flag.
+    firsts = [k.split(".")[0] for k, _ in s.values if k.endswith(".required")]
+    assert firsts == list(INPUTS)
+
+
+def test_all_fresh_is_ok():
+    s = statuses(snapshot())["inputs"]
+    assert (s.level, s.message) == (OK, "all inputs fresh")
+
+
+# ------------------------------------------------------------------ stale and silent streams
+@pytest.mark.parametrize("max_gap,age_s,stale", [
+    (0.25, 1.0, False), (0.25, 1.001, True),  # at least one second
+    (2.0, 3.9, False), (2.0, 4.01, True),  # twice max_gap when that is longer
+    (0.25, -0.5, False),  # stamps ahead of the node clock are not stale
+])
+def test_a_required_stream_older_than_the_limit_is_stale(max_gap, age_s, stale):
+    assert dg.stale_after(max_gap) == max(1.0, 2 * max_gap)
+    c = counters({"airspeed": stream(received=5, newest=NOW - round(age_s * SEC))})
+    s = statuses(snapshot(c, max_gap=max_gap))["inputs"]
+    assert values(s)["airspeed.age_s"] == f"{age_s:.3f}"
+    if stale:
+        assert (s.level, s.message) == (WARN, f"airspeed stale ({age_s:.1f} s)")
+    else:
+        assert (s.level, s.message) == (OK, "all inputs fresh")
+
+
+def test_a_silent_required_stream_warns_and_hints_when_no_publisher_matched():
+    c = counters({"imu": stream(received=0)})
+    s = statuses(snapshot(c, publishers={"imu": 1}))["inputs"]
+    assert (s.level, s.message) == (WARN, "imu silent")
+    assert values(s)["imu.age_s"] == "never received"
+    for reliable in (False, True):
+        s = statuses(snapshot(c, publishers={"imu": 0}, reliable=reliable))["inputs"]
+        assert s.message == ("imu silent; no publisher matched on /imu (none running, or incompatible QoS: "
+                             f"qos.reliable={reliable})")
+        assert values(s)["imu.publishers"] == "0"
+
+
+def test_optional_streams_may_be_silent():
+    c = counters({"thrust": stream(received=0), "dynamic_pressure": stream(received=3, newest=NOW - 60 * SEC)})
+    s = statuses(snapshot(c, required=("imu", "airspeed", "control_surfaces"), publishers={"thrust": 0}))["inputs"]
+    assert (s.level, s.message) == (OK, "all inputs fresh")
+    assert values(s)["thrust.required"] == "False" and values(s)["dynamic_pressure.age_s"] == "60.000"
+
+
+# ------------------------------------------------------------------ rejected and missing
+def test_rejected_and_missing_messages_warn_with_totals_in_stream_order():
+    c = counters({"imu": stream(received=30, rejected={"non_finite": 2, "malformed: error": 1}),
+                  "airspeed": stream(received=9, missing=4),
+                  "control_surfaces": stream(received=8, rejected={"mismatched_arrays": 1})})
+    s = statuses(snapshot(c))["inputs"]
+    assert s.level == WARN
+    assert s.message == ("imu rejected 3; airspeed missing about 4 (stamp gaps: lost in transport?); "
+                         "control_surfaces rejected 1")
+    v = values(s)
+    assert (v["imu.rejected.malformed: error"], v["imu.rejected.non_finite"], v["imu.accepted"]) == ("1", "2", "27")
+    assert v["airspeed.missing"] == "4"
+
+
+def test_problems_of_one_stream_are_listed_together():
+    c = counters({"airspeed": stream(received=4, rejected={"duplicate": 1}, missing=2, newest=NOW - 5 * SEC)})
+    s = statuses(snapshot(c, publishers={"airspeed": 0}))["inputs"]
+    assert s.message == ("airspeed stale (5.0 s); no publisher matched on /airspeed (none running, or incompatible "
+                         "QoS: qos.reliable=False); airspeed rejected 1; airspeed missing about 2 (stamp gaps: lost in "
+                         "transport?)")
+
+
+# ------------------------------------------------------------------ rates
+def test_rates_are_received_differences_over_the_elapsed_period():
+    policy = DiagnosticsPolicy()
+    received = [(0, 1.0), (200, 1.0), (700, 2.5), (700, 0.2), (703, 0.0)]
+    want = ["0.0", "200.0", "200.0", "0.0", "3000000000.0"]  # a zero period is taken as 1 ns
+    got = []
+    for (n, elapsed) in received:
+        s = statuses(snapshot(counters({"imu": stream(received=n)}), elapsed=elapsed), policy)["inputs"]
+        got.append(values(s)["imu.rate_hz"])
+    assert got == want
+    assert policy.previous.counters["streams"]["imu"]["received"] == 703
+
+
+def test_the_first_period_counts_from_zero():
+    s = statuses(snapshot(counters({"imu": stream(received=123)}), elapsed=2.0))["inputs"]
+    assert values(s)["imu.rate_hz"] == "61.5"
+
+
+# ------------------------------------------------------------------ samples, latency
+def test_sample_keys_in_order_and_sorted_reasons():
+    c = counters(formed=120, used=100, pending=4, samples_rejected={"gap_airspeed": 15, "differentiator_warmup": 5},
+                 resets={"service": 1, "parameters_changed": 2}, unknown={"flap": 3, "canard": 1})
+    s = statuses(snapshot(c, state="resumed from /tmp/s.npz (5 samples)"))["samples"]
+    assert (s.level, s.message) == (OK, "100 of 120 samples used")
+    assert s.values == (("enabled", "True"), ("samples_formed", "120"), ("samples_used", "100"),
+                        ("samples_pending", "4"), ("samples_rejected.differentiator_warmup", "5"),
+                        ("samples_rejected.gap_airspeed", "15"), ("resets.parameters_changed", "2"),
+                        ("resets.service", "1"), ("unknown_joint.canard", "1"), ("unknown_joint.flap", "3"),
+                        ("state_file", "resumed from /tmp/s.npz (5 samples)"))
+
+
+def test_disabled_estimation_is_said_and_stays_ok():
+    s = statuses(snapshot(counters(formed=10, used=0), enabled=False))["samples"]
+    assert (s.level, s.message, values(s)["enabled"]) == (OK, "0 of 10 samples used; estimation disabled", "False")
+
+
+def test_latency_percentiles_are_observed_values():
+    lat = [i * 1e-3 for i in range(1, 101)]  # 1 ... 100 ms
+    cpu = [i * 1e-4 for i in range(1, 101)]
+    random.Random(0).shuffle(lat)
+    random.Random(1).shuffle(cpu)
+    v = values(statuses(snapshot(latencies=lat, cpu=cpu))["samples"])
+    # p50 is the 51st smallest of 100 (index 50), p99 the 100th (index 99).
+    assert (v["latency_ms.p50"], v["latency_ms.p99"], v["latency_ms.max"]) == ("51.000", "100.000", "100.000")
+    assert (v["processing_cpu_ms.p50"], v["processing_cpu_ms.p99"]) == ("5.100", "10.000")
+    keys = [k for k, _ in statuses(snapshot(latencies=lat, cpu=cpu))["samples"].values]
+    assert keys[-6:] == ["latency_ms.p50", "latency_ms.p99", "latency_ms.max", "processing_cpu_ms.p50",
+                         "processing_cpu_ms.p99", "state_file"]
+
+
+@pytest.mark.parametrize("lat,p50,p99", [
+    ([0.002], 0.002, 0.002),
+    ([0.003, 0.001, 0.002], 0.002, 0.003),  # indices 1 and min(2, int(2.97)) = 2
+    ([0.001] * 99 + [0.5], 0.001, 0.5),  # 100 values: p99 is index 99, the outlier
+    ([0.001] * 100 + [0.5], 0.001, 0.001),  # 101 values: index int(99.99) = 99; max shows it
+])
+def test_percentiles_are_the_element_at_index_q_n(lat, p50, p99):
+    assert (dg.percentile(sorted(lat), 0.5), dg.percentile(sorted(lat), 0.99)) == (p50, p99)
+    v = values(statuses(snapshot(latencies=lat, cpu=lat))["samples"])
+    assert (v["latency_ms.p50"], v["latency_ms.p99"], v["latency_ms.max"]) == (
+        f"{1e3 * p50:.3f}", f"{1e3 * p99:.3f}", f"{1e3 * max(lat):.3f}")
+
+
+def test_no_latency_keys_in_a_period_without_outputs():
+    keys = {k for k, _ in statuses(snapshot())["samples"].values}
+    assert not {k for k in keys if k.startswith(("latency_ms", "processing_cpu_ms"))}
+    with pytest.raises(ValueError):
+        dg.percentile([], 0.5)
+
+
+# ------------------------------------------------------------------ models
+FIT = {"ready": True, "samples": 512, "r_squared": 0.91234, "residual_rho1": 0.1234, "lags_outside_2sigma": 0.04,
+       "repairs": 0}
+
+
+def test_a_ready_model_reports_its_fit():
+    s = statuses(snapshot(counters(used=512), models=[("CZ", FIT)]))["model CZ"]
+    assert (s.level, s.message) == (OK, "R^2 0.912, residual lag-1 correlation 0.12")
+    assert s.values == (("ready", "True"), ("samples", "512"), ("r_squared", "0.91234"), ("residual_rho1", "0.1234"),
+                        ("lags_outside_2sigma", "0.04"), ("repairs", "0"))
+
+
+def test_an_initializing_model_is_ok_before_any_sample_is_used_and_warns_after():
+    fit = {"ready": False, "samples": 0}
+    s = statuses(snapshot(counters(formed=3, used=0), models=[("Cm", fit)]))["model Cm"]
+    assert (s.level, s.message) == (OK, "initializing: regressors not yet informative")
+    assert s.values == (("ready", "False"), ("samples", "0"))
+    s = statuses(snapshot(counters(formed=50, used=40), models=[("Cm", {"ready": False, "samples": 40})]))["model Cm"]
+    assert (s.level, s.message) == (WARN, "initializing: regressors not yet informative")
+
+
+# ------------------------------------------------------------------ malformed messages
+def test_malformed_reason_and_warning_name_topic_type_and_text():
+    exc = ValueError("sensor_msgs/msg/Imu: malformed 7-byte payload: too short")
+    assert dg.malformed_reason(exc) == "malformed: ValueError"
+    text = dg.malformed_warning("/imu", exc)
+    assert text.startswith("malformed message on /imu: ValueError: sensor_msgs/msg/Imu: malformed 7-byte payload")
+    assert "rejected.malformed: ValueError" in text
+
+
+# ------------------------------------------------------------------ with a real pipeline
+def test_statuses_from_a_real_pipeline():
+    from rls_uncertainty.config import load_parameters_file, pipeline_config
+    from rls_uncertainty.pipeline import Pipeline
+
+    config = pipeline_config(load_parameters_file("t2"))
+    p = Pipeline(config)
+    t0 = 100 * SEC
+    for i in range(5):
+        p.add_imu(t0 + i * 5_000_000, (0.0, 0.01, 0.0), (0.0, 0.0, 9.8))
+    p.add_imu(t0 + 30_000_000, (float("nan"), 0.0, 0.0), (0.0, 0.0, 9.8))
+    p.add_imu(t0 + 20_000_000, (0.0, 0.0, 0.0), (0.0, 0.0, 9.8))  # the newest stamp again
+    snap = snapshot(p.counters(), models=[(m.output, p.model_fit(j)) for j, m in enumerate(config.models)],
+                    required=tuple(p.required), now=t0 + 20_000_000, elapsed=0.5)
+    out = statuses(snap)
+    v = values(out["inputs"])
+    assert (v["imu.received"], v["imu.accepted"], v["imu.rejected.non_finite"]) == ("7", "5", "1")
+    assert v["imu.rejected.duplicate"] == "1" and v["imu.rate_hz"] == "14.0" and v["imu.age_s"] == "0.000"
+    assert v["airspeed.age_s"] == "never received"
+    assert out["inputs"].level == WARN
+    assert out["inputs"].message.startswith("imu rejected 2; airspeed silent")
+    assert out["samples"].message == "0 of 0 samples used"
+    assert [n for n in out if n.startswith("model")] == [f"model {m.output}" for m in config.models]
+    assert all(s.level == OK for n, s in out.items() if n.startswith("model"))
