@@ -2,7 +2,7 @@
 shared flight recordings are read from ../shared/flight_data (or $RLS_FLIGHT_DATA).
 
 Flight-data policy. A test needs the recordings if it carries ``@pytest.mark.flight_data``,
-or if its own code names ``FLIGHT_DATA`` (those are marked automatically). When the
+or if its code or a fixture it uses names ``FLIGHT_DATA`` (those are marked automatically). When the
 directory is absent such a test is skipped, with the path it looked for as the reason: a
 copy without ../shared (a colcon workspace, a tarball) still tests everything else. Under
 ``RLS_REQUIRE_FLIGHT_DATA=1`` (set by .ci/run) the same situation is a failure instead, so CI
@@ -55,11 +55,17 @@ def pytest_configure(config: pytest.Config) -> None:
     )
 
 
+def _uses_flight_data(item: pytest.Item) -> bool:
+    functions = [getattr(item, "function", None)]
+    fixtures = getattr(getattr(item, "_fixtureinfo", None), "name2fixturedefs", {})
+    functions += [defs[-1].func for defs in fixtures.values() if defs]
+    codes = [getattr(f, "__code__", None) for f in functions]
+    return any(code is not None and _names_flight_data(code) for code in codes)
+
+
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
     for item in items:
-        function = getattr(item, "function", None)
-        code = getattr(function, "__code__", None)
-        if code is not None and _names_flight_data(code):
+        if _uses_flight_data(item):
             item.add_marker(pytest.mark.flight_data)
 
 

@@ -111,10 +111,15 @@ def test_f1_017_estimates_predict_f1_014(runs):
 
 
 # The skip policy of conftest.py, on a generated test directory with a copy of conftest.py:
-# one test marked, one that names FLIGHT_DATA (marked automatically), one that needs nothing.
+# one test marked, one that names FLIGHT_DATA and one whose fixture does (both marked
+# automatically), and one that needs nothing.
 _POLICY_TESTS = """
 import pytest
 from conftest import FLIGHT_DATA
+
+@pytest.fixture(scope="module")
+def recording():
+    return sorted(FLIGHT_DATA.iterdir())
 
 @pytest.mark.flight_data
 def test_marked():
@@ -122,6 +127,9 @@ def test_marked():
 
 def test_names_it():
     assert (FLIGHT_DATA / "x").parent.is_dir()
+
+def test_through_a_fixture(recording):
+    assert recording == []
 
 def test_plain():
     pass
@@ -148,7 +156,7 @@ def test_missing_recordings_skip_with_the_path_as_reason(tmp_path):
     missing = tmp_path / "no_such_dir"
     run = _run_policy(tmp_path, missing, require=False)
     assert run.returncode == 0, run.stdout + run.stderr
-    assert "1 passed, 2 skipped" in run.stdout, run.stdout
+    assert "1 passed, 3 skipped" in run.stdout, run.stdout
     assert f"flight recordings not found at {missing}" in run.stdout, run.stdout
 
 
@@ -156,7 +164,7 @@ def test_missing_recordings_fail_when_required(tmp_path):
     missing = tmp_path / "no_such_dir"
     run = _run_policy(tmp_path, missing, require=True)
     assert run.returncode == 1, run.stdout + run.stderr
-    assert "1 passed, 2 errors" in run.stdout, run.stdout
+    assert "1 passed, 3 errors" in run.stdout, run.stdout
     assert "skipped" not in run.stdout, run.stdout
     assert "RLS_REQUIRE_FLIGHT_DATA is set" in run.stdout, run.stdout
 
@@ -166,4 +174,4 @@ def test_present_recordings_run_the_marked_tests(tmp_path):
     present.mkdir()
     run = _run_policy(tmp_path, present, require=True)
     assert run.returncode == 0, run.stdout + run.stderr
-    assert "3 passed" in run.stdout, run.stdout
+    assert "4 passed" in run.stdout, run.stdout
