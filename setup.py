@@ -20,6 +20,8 @@ setup(
         (f"share/{PACKAGE}/msg_schemas/fti_msgs", glob("msg_schemas/fti_msgs/*.yaml")),
         (f"share/{PACKAGE}/msg_schemas/fti_msgs/msg", glob("msg_schemas/fti_msgs/msg/*.msg")),
     ],
+    # py.typed: the package ships its annotations (PEP 561) to mypy users of rls_uncertainty.
+    package_data={PACKAGE: ["py.typed"]},
     install_requires=["setuptools", "numpy", "scipy", "pyyaml"],
     zip_safe=True,
     maintainer="rls_uncertainty developers",

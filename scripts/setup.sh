@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Create (or refresh) the project's virtual environment in .venv and install everything:
-# the ROS 2 Jazzy stack from the package index, the numerical and bag libraries, test tools,
-# and this package itself (editable). Idempotent; safe to run before every command.
+# the ROS 2 Jazzy stack from the package index, the numerical and bag libraries, test, lint and
+# type-check tools, and this package itself (editable). Idempotent; safe to run before every
+# command. Needs no git checkout: it works the same in a copied or unpacked tree.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -22,14 +23,14 @@ if [ ! -x .venv/bin/python ]; then
   "$py" -m venv .venv
 fi
 stamp=.venv/.installed
-want=$(cat requirements.txt requirements-dev.txt setup.py | sha256sum | cut -d' ' -f1)
+want=$(cat requirements.txt requirements-dev.txt setup.py setup.cfg | sha256sum | cut -d' ' -f1)
 if [ ! -f "$stamp" ] || [ "$(cat "$stamp")" != "$want" ]; then
   echo "setup: installing dependencies into .venv" >&2
   .venv/bin/python -m pip install --quiet --disable-pip-version-check -r requirements-dev.txt 2>&1 \
     | grep -v "is ignored: it is neither a file nor a directory" >&2 || true
   .venv/bin/python -m pip install --quiet --disable-pip-version-check --no-deps -e . 2>&1 \
     | grep -v "is ignored: it is neither a file nor a directory" >&2 || true
-  .venv/bin/python -c "import numpy, scipy, yaml, rosbags, mcap, rclpy" \
+  .venv/bin/python -c "import numpy, scipy, yaml, rosbags, mcap, rclpy, pytest, ruff, mypy" \
     || { echo "setup: installation incomplete" >&2; exit 1; }
   echo "$want" > "$stamp"
 fi

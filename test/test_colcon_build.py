@@ -1,4 +1,6 @@
-"""The package builds with colcon as a ROS 2 ament_python package and its executable runs."""
+"""The package builds with colcon as a ROS 2 ament_python package from a plain copy of the
+source tree (no .git: a tarball, a `cp -r` into a workspace), its executables run from the
+sourced workspace, and `colcon test` works there."""
 
 from __future__ import annotations
 
@@ -8,25 +10,45 @@ import signal
 import subprocess
 import sys
 import time
+import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 COLCON = Path(sys.executable).with_name("colcon")
+# Never part of a source copy, whatever .gitignore says: version control, virtual
+# environments, and the output of colcon, setuptools, pytest, ruff and mypy.
+NOT_SOURCE = {".git", ".venv", "venv", "build", "install", "log", "__pycache__", ".pytest_cache", ".mypy_cache",
+              ".ruff_cache", "*.egg-info", "*.pyc"}
+# Run by `colcon test` in the copy: the manifest check and the flight-data tests, which must
+# be skipped there (the copy has no ../shared), plus the skip policy's own tests.
+COLCON_TESTS = ["test/test_package_xml.py", "test/test_flight_data.py"]
+
+
+def copy_source(dest: Path) -> None:
+    """Copy the checkout as a user would copy it, without .git and ignored files."""
+    ignored = set(NOT_SOURCE)
+    gitignore = ROOT / ".gitignore"
+    if gitignore.is_file():
+        for raw in gitignore.read_text().splitlines():
+            pattern = raw.strip()
+            if pattern and not pattern.startswith(("#", "!")):
+                ignored.add(pattern.strip("/"))
+    shutil.copytree(ROOT, dest, ignore=shutil.ignore_patterns(*ignored), symlinks=True)
 
 
 @pytest.mark.skipif(not COLCON.exists(), reason="colcon is installed by scripts/setup.sh")
-def test_colcon_build_installs_a_runnable_executable(tmp_path):
+def test_colcon_build_and_test_from_a_copy_without_git(tmp_path):
     src = tmp_path / "src" / "rls_uncertainty"
-    files = subprocess.run(
-        ["git", "ls-files", "-co", "--exclude-standard"], cwd=ROOT, capture_output=True, text=True, check=True
-    ).stdout.split()
-    for rel in files:
-        if (ROOT / rel).is_file():
-            (src / rel).parent.mkdir(parents=True, exist_ok=True)
-            shutil.copy2(ROOT / rel, src / rel)
-    env = dict(os.environ, PATH=f"{COLCON.parent}{os.pathsep}{os.environ['PATH']}")
+    copy_source(src)
+    assert (src / "package.xml").is_file() and (src / "rls_uncertainty").is_dir()
+    assert not (src / ".git").exists() and not (src / ".venv").exists()
+    # Nothing of the outer run may leak into the workspace's: no flight-data requirement (the
+    # copy has no ../shared, so those tests must skip), no pytest options of an outer colcon.
+    outer = ("RLS_REQUIRE_FLIGHT_DATA", "RLS_FLIGHT_DATA", "PYTEST_ADDOPTS")
+    env = {k: v for k, v in os.environ.items() if k not in outer}
+    env["PATH"] = f"{COLCON.parent}{os.pathsep}{os.environ['PATH']}"
     build = subprocess.run(
         [str(COLCON), "build", "--event-handlers", "console_direct-"],
         cwd=tmp_path, env=env, capture_output=True, text=True, timeout=300,
@@ -38,9 +60,10 @@ def test_colcon_build_installs_a_runnable_executable(tmp_path):
     share = install / "share" / "rls_uncertainty"
     assert (share / "package.xml").is_file()
     assert (share / "config" / "aircraft" / "t2.yaml").is_file()
-    assert (tmp_path / "install" / "share" / "ament_index" / "resource_index" / "packages" / "rls_uncertainty").exists() or (
-        install / "share" / "ament_index" / "resource_index" / "packages" / "rls_uncertainty"
-    ).exists()
+    index = Path("share") / "ament_index" / "resource_index" / "packages" / "rls_uncertainty"
+    assert (tmp_path / "install" / index).exists() or (install / index).exists()
+    site = list(install.glob("lib/python3*/site-packages/rls_uncertainty"))
+    assert len(site) == 1 and (site[0] / "py.typed").is_file(), site
     # Start the installed executable from a sourced workspace, outside the source tree.
     run = subprocess.run(
         ["bash", "-c", f"source {tmp_path}/install/setup.bash && {exe} simulate --noise 5 --lags 11"],
@@ -67,7 +90,26 @@ def test_colcon_build_installs_a_runnable_executable(tmp_path):
         assert node.wait(30) == 0, log.read_text()
     assert "aircraft T-2" in log.read_text()
     where = subprocess.run(
-        ["bash", "-c", f"source {tmp_path}/install/setup.bash && python -c 'import rls_uncertainty; print(rls_uncertainty.__file__)'"],
+        ["bash", "-c", f"source {tmp_path}/install/setup.bash && "
+                       "python -c 'import rls_uncertainty; print(rls_uncertainty.__file__)'"],
         cwd=tmp_path, env=env, capture_output=True, text=True, timeout=60,
     )
     assert str(install) in where.stdout, where.stdout + where.stderr
+    # `colcon test` in the workspace: pytest runs in the copied source directory.
+    test = subprocess.run(
+        [str(COLCON), "test", "--packages-select", "rls_uncertainty", "--return-code-on-test-failure",
+         "--event-handlers", "console_direct-", "--pytest-args", *COLCON_TESTS],
+        cwd=tmp_path, env=env, capture_output=True, text=True, timeout=300,
+    )
+    result = tmp_path / "build" / "rls_uncertainty" / "pytest.xml"
+    report = result.read_text() if result.is_file() else "(no pytest.xml)"
+    assert test.returncode == 0, test.stdout + test.stderr + report
+    suite = ET.parse(result).getroot()
+    suite = suite if suite.tag == "testsuite" else suite.find("testsuite")
+    assert suite is not None, report
+    counts = {k: int(suite.get(k, "0")) for k in ("tests", "failures", "errors", "skipped")}
+    assert counts["failures"] == counts["errors"] == 0, report
+    skips = [s.get("message", "") for s in suite.iter("skipped")]
+    missing = src.parent / "shared" / "flight_data"
+    assert len(skips) >= 6 and all(f"flight recordings not found at {missing}" in s for s in skips), skips
+    assert counts["tests"] - counts["skipped"] >= 8, counts
