@@ -94,8 +94,13 @@ def _pick(per_model: list[np.ndarray]) -> np.ndarray:
     return np.array([per_model[m][c] for m, c in (_WHERE[p] for p in PARAMETERS)])
 
 
-def run_level(level: float, runs: int, *, n_lags: int = 50, seed: int = 2016) -> LevelResult:
-    """All runs of one band-limited noise level (fraction, e.g. 0.2)."""
+def level_inputs(level: float, runs: int, *, seed: int = 2016):
+    """Regressors and outputs of every run of one noise level, as the bank takes them.
+
+    Returns ``(t, reductions, sizes, X, Z)``: sample times (N,), each run's reduced data
+    (``{"CZ": (X, z), "Cm": (X, z)}``), the model sizes (run ``r``'s C_Z model is bank row
+    ``2 r``, its C_m model row ``2 r + 1``), regressors (N, 2 runs, n_max) and outputs (N, 2 runs).
+    """
     clean = simulate_short_period()
     reductions = []
     for run in range(runs):
@@ -113,6 +118,14 @@ def run_level(level: float, runs: int, *, n_lags: int = 50, seed: int = 2016) ->
             Xm, zm = data[model.output]
             X[:, r * n_models + m, : Xm.shape[1]] = Xm
             Z[:, r * n_models + m] = zm
+    return t, reductions, sizes, X, Z
+
+
+def run_level(level: float, runs: int, *, n_lags: int = 50, seed: int = 2016) -> LevelResult:
+    """All runs of one band-limited noise level (fraction, e.g. 0.2)."""
+    t, reductions, sizes, X, Z = level_inputs(level, runs, seed=seed)
+    n_models = len(T2_MODELS)
+    N = t.size
     bank = EstimatorBank(sizes, n_lags)
     bank_all = EstimatorBank(sizes, None)
     history = np.full((N, 3), np.nan)

@@ -1,0 +1,278 @@
+"""When can a recursive estimate be trusted? A per-parameter convergence flag (issue 14).
+
+Grauer and Morelli judge convergence by eye: in Fig. 6 of the paper, "by 6 s ... the
+corrected parameter uncertainty envelope enclosed the observed scatter". Across-run scatter
+is not available in flight, so the flag uses what one run has: the estimate and its corrected
+standard error (Eq. 22) over the last ``T`` seconds. A parameter is *converged* at the
+sample of stamp ``t`` when, over the window that reaches back to ``t - T``,
+
+1. **the estimate has settled** -- every estimate in the window lies within ``k``
+   corrected standard errors of the current one:
+   ``max_{s in W} |theta_s - theta_t| <= k se_t``;
+2. **its uncertainty has settled** -- the corrected standard error changed by at most a
+   fraction ``r`` per second, either way:
+   ``|ln se_t - ln se_a| <= r (t - t_a)``, with ``a`` the window's first sample;
+3. **the history is whole** -- every sample in the window was valid for that parameter
+   (model ready, finite estimate, finite positive standard error).
+
+A model is converged when all its parameters are. The window ``W`` runs from the *anchor*
+``a`` -- the newest retained sample stamped at or before ``t - T`` -- to the current sample,
+inclusive; without an anchor (less than ``T`` seconds of history since the start, a reset, a
+stamp that went backwards, or more samples in ``T`` seconds than the buffer holds) nothing is
+flagged.
+
+Why these two tests. For least squares with white residuals the estimate after ``t - T`` and
+the one at ``t`` differ by a zero-mean error of variance ``se_{t-T}^2 - se_t^2``, and a
+standard error that falls like ``1/sqrt(time)`` falls at ``1/(2 t)`` per second: both tests
+are therefore passed only once the information gathered in the last ``T`` seconds is small
+against all the information so far (test 2 with ``r`` alone asks for about ``1/(2 r)``
+seconds of useful data), and test 1 also catches a parameter that moves (a failure, a new
+flight condition), whatever the reason. Test 2, two-sided, also holds the flag down while the
+corrected standard error is still *growing*: early in a maneuver the residual
+autocorrelation (Eq. 17) has not yet seen the coloring, and the corrected error is too small
+(Table 3 validation: at 20% band-limited noise the mean corrected error is about half the
+observed scatter at 1 s). This is the "stabilization of the estimates and of their
+uncertainties" used informally in real-time aircraft system identification (e.g. E. A.
+Morelli, "Real-Time Parameter Estimation in the Frequency Domain", AIAA-99-4043, 1999,
+judges convergence from the time histories of estimates and error bounds); the thresholds
+here are ours, chosen on the Table 3 Monte Carlo (``rls_uncertainty.montecarlo``, which
+tabulates the flag times and false-convergence rates).
+
+Cost and memory: :meth:`ConvergenceMonitor.update` is vectorised over models and
+parameters (a dozen numpy calls); the history is a buffer of at most
+``min(ceil(T * rate_hz) + 2, max_samples)`` samples of ``theta`` and ``ln se``, whatever
+arrives. Samples faster than ``rate_hz`` shorten the span the buffer holds, and when it no
+longer reaches back ``T`` seconds nothing is flagged (fail safe).
+
+numpy only.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Sequence
+
+import numpy as np
+
+from .errors import ConfigError
+
+__all__ = ["ConvergenceConfig", "ConvergenceMonitor"]
+
+_STAMP_LIMIT = 2**62  # |stamp_ns| below this (146 years): stamp - T stays inside int64
+_BIG = 1e300  # cap of the standard error in the band k se (no overflow)
+_MAX_LOG_GAIN = 30.0  # cap of r (t - t_a) (no overflow in g se)
+
+
+@dataclass(frozen=True)
+class ConvergenceConfig:
+    """Parameters of the convergence criterion (see the module docstring).
+
+    window:
+        ``T``, seconds of history the criterion looks back over.
+    band:
+        ``k``: every estimate in the window within ``k`` corrected standard errors of the
+        current estimate.
+    max_se_rate:
+        ``r``, 1/s: largest change of ``ln se`` per second over the window, either way.
+    rate_hz:
+        Highest sample rate the buffer is sized for: it holds ``ceil(window * rate_hz) + 2``
+        samples (the window plus its anchor and one sample of jitter), at most
+        ``max_samples``.
+    max_samples:
+        Hard cap of the buffer, samples.
+    """
+
+    window: float = 2.0
+    band: float = 1.0
+    max_se_rate: float = 0.15
+    rate_hz: float = 200.0
+    max_samples: int = 4096
+
+    def __post_init__(self) -> None:
+        for name in ("window", "band", "max_se_rate", "rate_hz"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, (int, float)):
+                raise ConfigError(f"convergence {name} must be a number, got {value!r}")
+            if not (math.isfinite(value) and value > 0):
+                raise ConfigError(f"convergence {name} must be positive and finite, got {value!r}")
+        if isinstance(self.max_samples, bool) or not isinstance(self.max_samples, (int, np.integer)):
+            raise ConfigError(f"convergence max_samples must be an integer, got {self.max_samples!r}")
+        if self.max_samples < 2:
+            raise ConfigError(f"convergence max_samples must be >= 2, got {self.max_samples!r}")
+        if self.window * 1e9 >= 2.0**61:
+            raise ConfigError(f"convergence window is too long: {self.window!r} s")
+        if self.band > 1e6:
+            raise ConfigError(f"convergence band must be at most 1e6 standard errors, got {self.band!r}")
+
+    @property
+    def capacity(self) -> int:
+        """Samples the buffer holds: ``min(ceil(window * rate_hz) + 2, max_samples)``."""
+        return int(min(math.ceil(self.window * self.rate_hz) + 2, self.max_samples))
+
+
+class ConvergenceMonitor:
+    """Per-parameter and per-model convergence flags of ``M`` models, updated once per sample.
+
+    ``sizes`` are the models' parameter counts (as for
+    :class:`~rls_uncertainty.estimator.EstimatorBank`); arrays are ``(M, n_max)`` with padding
+    after each model's parameters. Padding is never flagged and does not count for the model
+    flag.
+    """
+
+    def __init__(self, sizes: Sequence[int], config: ConvergenceConfig = ConvergenceConfig()) -> None:
+        sizes = tuple(int(s) for s in sizes)
+        if not sizes or min(sizes) < 1:
+            raise ValueError(f"every model needs at least one parameter, got sizes={sizes}")
+        if not isinstance(config, ConvergenceConfig):
+            raise TypeError(f"config must be a ConvergenceConfig, got {type(config).__name__}")
+        self.config = config
+        self.sizes = sizes
+        m, n = len(sizes), max(sizes)
+        self.shape = (m, n)
+        self._mask = np.zeros((m, n), dtype=bool)
+        for j, s in enumerate(sizes):
+            self._mask[j, :s] = True
+        # The flags are computed into rows padded to whole 64-bit words, so that a model's
+        # flag is one comparison of words with the pattern of its real parameters.
+        self._words = w = -(-n // 8)
+        pattern = np.zeros((m, 8 * w), dtype=bool)
+        pattern[:, :n] = self._mask
+        self._pattern = pattern.view(np.uint64)
+        self.capacity = cap = config.capacity
+        self._window_ns = int(round(config.window * 1e9))
+        self._band = float(config.band)
+        self._rate = float(config.max_se_rate) * 1e-9  # per nanosecond
+        # History rows [theta, se, -theta, -se] in a sliding buffer of 2 * capacity rows:
+        # rows [lo, hi) are held (at most capacity); when hi reaches the end, the rows from
+        # the anchor on (the only ones still needed) move to the front (amortised O(1)).
+        # se is floored at 0, and NaN off the ready models' parameters.
+        self._stamps = np.zeros(2 * cap, dtype=np.int64)
+        self._rows = np.zeros((2 * cap, 4, m, n))
+        # Window maxima by a two-stack queue: rows [anchor, front) are the front stack, with
+        # suffix maxima in _suffix; rows [front, hi) the back stack, with running maximum
+        # _back; the maximum over the window is max(_suffix[anchor], _back).
+        self._suffix = np.zeros((2 * cap, 4, m, n))
+        self._back = np.full((4, m, n), -np.inf)
+        self._wmax = np.zeros((4, m, n))
+        self._lim = np.zeros((m, n))  # k se
+        self._dt = None  # t - t_a of the gains [g, 1/g]
+        self._rhs = np.zeros((4, m, n))
+        self._ok = np.zeros((4, m, n), dtype=bool)
+        self._lower = np.full((m, n), np.nan)  # 0 on the ready models' parameters, else NaN
+        self._ready_key = None
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget the history: nothing is flagged until ``window`` seconds have arrived again."""
+        self._lo = self._hi = self._front = 0
+        self._anchor = -1
+        self._last = None
+        self._back.fill(-np.inf)
+        self._dt = None
+
+    @property
+    def n_held(self) -> int:
+        """Samples currently in the buffer (at most :attr:`capacity`)."""
+        return self._hi - self._lo
+
+    def _none(self) -> tuple[np.ndarray, np.ndarray]:
+        return np.zeros(self.shape, dtype=bool), np.zeros(self.shape[0], dtype=bool)
+
+    def update(self, stamp_ns: int, theta, se, ready) -> tuple[np.ndarray, np.ndarray]:
+        """Add one sample; return ``(flags (M, n_max) bool, model_flags (M,) bool)``.
+
+        ``stamp_ns``: sample time, integer nanoseconds (any epoch; irregular spacing is
+        fine). A stamp that is not after the previous one, or not an integer, resets the
+        history first (time went backwards: the old samples no longer belong to this
+        window). ``theta`` and ``se``: estimates and corrected standard errors, ``(M,
+        n_max)``, NaN where not available; ``ready``: ``(M,)`` bool. An entry is *valid* when
+        its model is ready, it is not padding, its estimate is finite and its standard error
+        finite and positive; a parameter is not flagged while an invalid entry of it is in
+        the window.
+        """
+        m, n = self.shape
+        theta = np.asarray(theta, dtype=float)
+        se = np.asarray(se, dtype=float)
+        ready = np.asarray(ready, dtype=bool)
+        if theta.shape != self.shape or se.shape != self.shape or ready.shape != (m,):
+            raise ValueError(
+                f"expected theta and se of shape {self.shape} and ready of shape {(m,)}, "
+                f"got {theta.shape}, {se.shape}, {ready.shape}"
+            )
+        try:
+            stamp = int(stamp_ns)
+        except (TypeError, ValueError, OverflowError):
+            stamp = None
+        if stamp is None or not -_STAMP_LIMIT < stamp < _STAMP_LIMIT:
+            self.reset()
+            return self._none()
+        if self._last is not None and stamp <= self._last:
+            self.reset()
+        self._last = stamp
+        key = ready.tobytes()
+        if key != self._ready_key:
+            self._ready_key = key
+            self._lower = np.where(self._mask & ready[:, None], 0.0, np.nan)
+
+        # Append [theta, se, -theta, -se], se floored at 0 (so the arithmetic below cannot
+        # warn), NaN off the ready models' parameters.
+        cap = self.capacity
+        if self._hi == 2 * cap:  # move the rows still needed (from the anchor on) to the front
+            shift = max(self._anchor, self._lo)
+            keep = self._hi - shift
+            self._stamps[:keep] = self._stamps[shift : self._hi]
+            self._rows[:keep] = self._rows[shift : self._hi]
+            self._suffix[:keep] = self._suffix[shift : self._hi]
+            self._anchor -= shift
+            self._front = max(self._front - shift, 0)
+            self._lo, self._hi = 0, keep
+        i = self._hi
+        row = self._rows[i]
+        self._stamps[i] = stamp
+        row[0] = theta
+        np.maximum(se, self._lower, out=row[1])
+        np.negative(row[:2], out=row[2:])
+        np.maximum(self._back, row, out=self._back)
+        self._hi = hi = i + 1
+        if hi - self._lo > cap:
+            self._lo = hi - cap
+
+        # Anchor: the newest held sample stamped at or before stamp - T.
+        cut = stamp - self._window_ns
+        a = max(self._anchor, self._lo - 1)
+        stamps = self._stamps
+        while a + 1 < hi and stamps[a + 1] <= cut:
+            a += 1
+        self._anchor = a
+        if a < self._lo:
+            return self._none()
+        if a >= self._front:  # front stack empty: rebuild it from rows [a, hi)
+            np.maximum.accumulate(self._rows[a:hi][::-1], axis=0, out=self._suffix[a:hi][::-1])
+            self._front = hi
+            self._back.fill(-np.inf)
+        wmax = np.maximum(self._suffix[a], self._back, out=self._wmax)
+
+        # Every sample s of the window strictly inside the band around the current one:
+        #   theta_s < theta_t + k se_t,   -theta_s < -theta_t + k se_t,
+        #   se_s < g se_t,                -se_s < -se_t / g,        g = exp(r (t - t_a)),
+        # with se_t capped at 1e300 in k se_t. Strict inequalities fail on NaN, on an infinite
+        # estimate, and on a standard error that is zero, negative or infinite.
+        dt = stamp - int(stamps[a])
+        if dt != self._dt:
+            self._dt = dt
+            g = math.exp(min(self._rate * dt, _MAX_LOG_GAIN))
+            self._gain = np.array([g, 1.0 / g]).reshape(2, 1, 1)
+        rhs = self._rhs
+        lim = np.minimum(row[1], _BIG, out=self._lim)
+        lim *= self._band
+        np.add(row[0::2], lim, out=rhs[0::2])
+        np.multiply(row[1::2], self._gain, out=rhs[1::2])
+        ok = np.less(wmax, rhs, out=self._ok)
+        padded = np.zeros((m, 8 * self._words), dtype=bool)
+        flags = np.logical_and(ok[0], ok[1], out=padded[:, :n])
+        flags &= ok[2]
+        flags &= ok[3]
+        model = padded.view(np.uint64) == self._pattern
+        model = model.all(axis=1) if self._words > 1 else model[:, 0]
+        return flags, model
