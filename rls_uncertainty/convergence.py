@@ -46,12 +46,15 @@ k = 1; r = 0.25/s) were chosen on a Table 3 Monte Carlo with seeds other than th
 one; ``rls_uncertainty.montecarlo`` tabulates flag times against the time the corrected
 envelope covers the observed scatter, and the false-convergence rates.
 
-Cost and memory: :meth:`ConvergenceMonitor.update` is a fixed number (about 15) of numpy
-calls whatever the number of models and parameters: the window maxima come from a two-stack
-queue (amortised O(1) per sample). The history is a buffer of ``2 * capacity`` samples with
-``capacity = min(ceil(T * rate_hz) + 2, max_samples)``, whatever arrives: samples faster
-than ``rate_hz`` shorten the span it holds, and when that no longer reaches back ``T``
-seconds nothing is flagged (fail safe).
+Cost and memory: :meth:`ConvergenceMonitor.update` is a fixed sequence of about twenty small
+numpy calls whatever the number of models and parameters (the window maxima come from a
+two-stack queue, amortised O(1) per sample, with a rebuild of the front stack once per
+window); for 6 models x 6 parameters that is about 15 us on the development machine, where
+one call of ``np.add`` on 6 x 6 arrays costs 0.5 us (``validation/convergence/bench.py``).
+The history is a buffer of ``2 * capacity`` samples, ``capacity = min(ceil(T * rate_hz) + 2,
+max_samples)``, whatever arrives (with its suffix maxima, ``2 * capacity * 4 * M * 8 *
+ceil(n_max / 8) * 16`` bytes): samples faster than ``rate_hz`` shorten the span it holds,
+and when that no longer reaches back ``T`` seconds nothing is flagged (fail safe).
 
 numpy only.
 """
@@ -70,6 +73,7 @@ __all__ = ["ConvergenceConfig", "ConvergenceMonitor"]
 
 _STAMP_LIMIT = 2**62  # |stamp_ns| below this (146 years): stamp - T stays inside int64
 _BIG = 1e300  # cap of the standard error in the band k se (no overflow)
+_F64, _BOOL = np.dtype(np.float64), np.dtype(np.bool_)
 _MAX_LOG_GAIN = 30.0  # cap of r (t - t_a) (no overflow in g se)
 
 
@@ -127,7 +131,7 @@ class ConvergenceMonitor:
     ``sizes`` are the models' parameter counts (as for
     :class:`~rls_uncertainty.estimator.EstimatorBank`); arrays are ``(M, n_max)`` with padding
     after each model's parameters. Padding is never flagged and does not count for the model
-    flag.
+    flag. ``update(stamp_ns, theta, se, ready)`` returns ``(flags, model_flags)``.
     """
 
     def __init__(self, sizes: Sequence[int], config: ConvergenceConfig = ConvergenceConfig()) -> None:
@@ -140,35 +144,44 @@ class ConvergenceMonitor:
         self.sizes = sizes
         m, n = len(sizes), max(sizes)
         self.shape = (m, n)
-        self._mask = np.zeros((m, n), dtype=bool)
+        # Internally the parameter axis is padded to whole 64-bit words of flags (8 per word):
+        # the four tests of a model combine as words, and a model's flag is one comparison of
+        # its words with those of its real parameters.
+        self._words = w = -(-n // 8)
+        self._npad = npad = 8 * w
+        self._mask = np.zeros((m, npad), dtype=bool)
         for j, s in enumerate(sizes):
             self._mask[j, :s] = True
-        # The flags are computed into rows padded to whole 64-bit words, so that a model's
-        # flag is one comparison of words with the pattern of its real parameters.
-        self._words = w = -(-n // 8)
-        pattern = np.zeros((m, 8 * w), dtype=bool)
-        pattern[:, :n] = self._mask
-        self._pattern = pattern.view(np.uint64)
+        self._pattern = self._mask.view(np.uint64)  # (m, w)
         self.capacity = cap = config.capacity
         self._window_ns = int(round(config.window * 1e9))
-        self._band = float(config.band)
+        self._band = np.array(float(config.band))  # 0-d arrays: cheaper ufunc operands
+        self._big = np.array(_BIG)
         self._rate = float(config.max_se_rate) * 1e-9  # per nanosecond
         # History rows [theta, se, -theta, -se] in a sliding buffer of 2 * capacity rows:
         # rows [lo, hi) are held (at most capacity); when hi reaches the end, the rows from
         # the anchor on (the only ones still needed) move to the front (amortised O(1)).
-        # se is floored at 0, and NaN off the ready models' parameters.
-        self._stamps = np.zeros(2 * cap, dtype=np.int64)
-        self._rows = np.zeros((2 * cap, 4, m, n))
+        # se is floored at 0, and NaN off the ready models' parameters and in the padding.
+        self._stamps = [0] * (2 * cap)  # Python ints: the anchor search reads them one by one
+        self._rows = np.full((2 * cap, 4, m, npad), np.nan)
         # Window maxima by a two-stack queue: rows [anchor, front) are the front stack, with
         # suffix maxima in _suffix; rows [front, hi) the back stack, with running maximum
         # _back; the maximum over the window is max(_suffix[anchor], _back).
-        self._suffix = np.zeros((2 * cap, 4, m, n))
-        self._back = np.full((4, m, n), -np.inf)
-        self._wmax = np.zeros((4, m, n))
-        self._lim = np.zeros((m, n))  # k se
-        self._dt = None  # t - t_a of the gains [g, 1/g]
-        self._rhs = np.zeros((4, m, n))
-        self._ok = np.zeros((4, m, n), dtype=bool)
+        self._suffix = np.zeros((2 * cap, 4, m, npad))
+        self._back = np.full((4, m, npad), -np.inf)
+        self._wmax = np.zeros((4, m, npad))
+        # rhs = cur * gain + lim with gain rows [1, g, 1, 1/g] and lim rows [c, 0, c, 0]
+        self._gain = np.ones((4, m, npad))
+        self._lim = np.zeros((4, m, npad))
+        self._rhs = np.zeros((4, m, npad))
+        self._ok = np.zeros((4, m, npad), dtype=bool)
+        self._ok_words = tuple(self._ok.view(np.uint64))  # 4 x (m, w)
+        # The current sample is assembled in _cur (views made once: a view costs as much as
+        # a small numpy operation), then copied into the buffer.
+        self._cur = np.full((4, m, npad), np.nan)
+        c = self._cur
+        self._cur_views = (c[0, :, :n], c[1, :, :n], c[:2], c[2:], c[1])
+        self._lim_views = (self._lim[0], self._lim[2])
         self._lower = np.full((m, n), np.nan)  # 0 on the ready models' parameters, else NaN
         self._ready_key = None
         self.reset()
@@ -178,8 +191,8 @@ class ConvergenceMonitor:
         self._lo = self._hi = self._front = 0
         self._anchor = -1
         self._last = None
+        self._dt = None  # t - t_a of the gains g, 1/g
         self._back.fill(-np.inf)
-        self._dt = None
 
     @property
     def n_held(self) -> int:
@@ -192,19 +205,22 @@ class ConvergenceMonitor:
     def update(self, stamp_ns: int, theta, se, ready) -> tuple[np.ndarray, np.ndarray]:
         """Add one sample; return ``(flags (M, n_max) bool, model_flags (M,) bool)``.
 
-        ``stamp_ns``: sample time, integer nanoseconds (any epoch; irregular spacing is
-        fine). A stamp that is not after the previous one, or not an integer, resets the
-        history first (time went backwards: the old samples no longer belong to this
-        window). ``theta`` and ``se``: estimates and corrected standard errors, ``(M,
-        n_max)``, NaN where not available; ``ready``: ``(M,)`` bool. An entry is *valid* when
-        its model is ready, it is not padding, its estimate is finite and its standard error
-        finite and positive; a parameter is not flagged while an invalid entry of it is in
-        the window.
+        ``stamp_ns``: sample time, integer nanoseconds (any epoch, ``|stamp| < 2**62``;
+        irregular spacing is fine). A stamp that is not after the previous one restarts the
+        history (time went backwards: the old samples no longer belong to this window); one
+        that is not an integer, or out of range, also returns no flags. ``theta`` and ``se``:
+        estimates and corrected standard errors, ``(M, n_max)``, NaN where not available;
+        ``ready``: ``(M,)`` bool. A parameter is not flagged while its model was not ready, its
+        estimate was not finite or its standard error not finite and positive at any sample
+        of the window. The returned arrays are new on every call.
         """
         m, n = self.shape
-        theta = np.asarray(theta, dtype=float)
-        se = np.asarray(se, dtype=float)
-        ready = np.asarray(ready, dtype=bool)
+        if type(theta) is not np.ndarray or theta.dtype is not _F64:
+            theta = np.asarray(theta, dtype=float)
+        if type(se) is not np.ndarray or se.dtype is not _F64:
+            se = np.asarray(se, dtype=float)
+        if type(ready) is not np.ndarray or ready.dtype is not _BOOL:
+            ready = np.asarray(ready, dtype=bool)
         if theta.shape != self.shape or se.shape != self.shape or ready.shape != (m,):
             raise ValueError(
                 f"expected theta and se of shape {self.shape} and ready of shape {(m,)}, "
@@ -223,7 +239,7 @@ class ConvergenceMonitor:
         key = ready.tobytes()
         if key != self._ready_key:
             self._ready_key = key
-            self._lower = np.where(self._mask & ready[:, None], 0.0, np.nan)
+            self._lower = np.where(self._mask[:, :n] & ready[:, None], 0.0, np.nan)
 
         # Append [theta, se, -theta, -se], se floored at 0 (so the arithmetic below cannot
         # warn), NaN off the ready models' parameters.
@@ -231,19 +247,21 @@ class ConvergenceMonitor:
         if self._hi == 2 * cap:  # move the rows still needed (from the anchor on) to the front
             shift = max(self._anchor, self._lo)
             keep = self._hi - shift
-            self._stamps[:keep] = self._stamps[shift : self._hi]
+            self._stamps[:keep] = self._stamps[shift : self._hi]  # list: same length
             self._rows[:keep] = self._rows[shift : self._hi]
             self._suffix[:keep] = self._suffix[shift : self._hi]
             self._anchor -= shift
             self._front = max(self._front - shift, 0)
             self._lo, self._hi = 0, keep
         i = self._hi
-        row = self._rows[i]
+        cur = self._cur
+        th_n, s_n, pos, neg, s = self._cur_views
+        th_n[...] = theta
+        np.maximum(se, self._lower, out=s_n)
+        np.negative(pos, out=neg)
+        self._rows[i] = cur
         self._stamps[i] = stamp
-        row[0] = theta
-        np.maximum(se, self._lower, out=row[1])
-        np.negative(row[:2], out=row[2:])
-        np.maximum(self._back, row, out=self._back)
+        np.maximum(self._back, cur, out=self._back)
         self._hi = hi = i + 1
         if hi - self._lo > cap:
             self._lo = hi - cap
@@ -263,26 +281,28 @@ class ConvergenceMonitor:
             self._back.fill(-np.inf)
         wmax = np.maximum(self._suffix[a], self._back, out=self._wmax)
 
-        # Every sample s of the window strictly inside the band around the current one:
-        #   theta_s < theta_t + k se_t,   -theta_s < -theta_t + k se_t,
-        #   se_s < g se_t,                -se_s < -se_t / g,        g = exp(r (t - t_a)),
-        # with se_t capped at 1e300 in k se_t. Strict inequalities fail on NaN, on an infinite
-        # estimate, and on a standard error that is zero, negative or infinite.
-        dt = stamp - int(stamps[a])
+        # Every sample x of the window strictly inside the band around the current one:
+        #   theta_x < theta_t + c,   -theta_x < -theta_t + c,   c = k min(se_t, 1e300),
+        #   se_x < g se_t,           -se_x < -se_t (1 / g),     g = exp(r (t - t_a)).
+        # NaN, an infinite estimate and a zero, negative or infinite se all fail.
+        dt = stamp - stamps[a]
         if dt != self._dt:
             self._dt = dt
             g = math.exp(min(self._rate * dt, _MAX_LOG_GAIN))
-            self._gain = np.array([g, 1.0 / g]).reshape(2, 1, 1)
-        rhs = self._rhs
-        lim = np.minimum(row[1], _BIG, out=self._lim)
-        lim *= self._band
-        np.add(row[0::2], lim, out=rhs[0::2])
-        np.multiply(row[1::2], self._gain, out=rhs[1::2])
-        ok = np.less(wmax, rhs, out=self._ok)
-        padded = np.zeros((m, 8 * self._words), dtype=bool)
-        flags = np.logical_and(ok[0], ok[1], out=padded[:, :n])
-        flags &= ok[2]
-        flags &= ok[3]
-        model = padded.view(np.uint64) == self._pattern
-        model = model.all(axis=1) if self._words > 1 else model[:, 0]
-        return flags, model
+            self._gain[1] = g
+            self._gain[3] = 1.0 / g
+        c, c2 = self._lim_views
+        np.minimum(s, self._big, out=c)
+        np.multiply(c, self._band, out=c)
+        c2[...] = c
+        rhs = np.multiply(cur, self._gain, out=self._rhs)
+        np.add(rhs, self._lim, out=rhs)
+        np.less(wmax, rhs, out=self._ok)
+        # AND of the four tests, eight parameters per 64-bit word.
+        ok0, ok1, ok2, ok3 = self._ok_words
+        words = ok0 & ok1
+        words &= ok2
+        words &= ok3
+        model = words == self._pattern
+        model = model[:, 0] if self._words == 1 else model.all(axis=1)
+        return words.view(np.bool_)[:, :n], model
