@@ -123,6 +123,7 @@ def test_monte_carlo_convergence_outputs_against_an_independent_recomputation(tm
     rates of a small 20% Monte Carlo, recomputed from the estimator histories."""
     from rls_uncertainty.estimator import EstimatorBank
     from rls_uncertainty.montecarlo import (
+        BEST_FROM,
         MONTE_CARLO_CONVERGENCE,
         PARAMETERS,
         convergence_summary,
@@ -182,13 +183,21 @@ def test_monte_carlo_convergence_outputs_against_an_independent_recomputation(tm
         off_mean = [abs(x[first[r, i], r] - x[first[r, i]].mean()) > 2 * s[first[r, i], r] for r in hit]
         assert row["false_vs_mean"] == pytest.approx(np.mean(off_mean))
         assert row["truth_outside_end"] == pytest.approx(np.mean(np.abs(x[-1] - truth[i]) > 2 * s[-1]))
+        late = t >= BEST_FROM
+        assert row["truth_outside_min"] == pytest.approx(np.min(np.mean(np.abs(x[late] - truth[i]) > 2 * s[late], axis=1)))
+    column = [c for _, c in where.values()]
     for m, model in enumerate(("CZ model", "Cm model")):
-        cols = [i for i, (mm, _) in enumerate(where.values()) if mm == m]
+        params = [i for i, (mm, _) in enumerate(where.values()) if mm == m]
+
+        def any_outside(k, r):
+            j = 2 * r + m
+            return any(abs(theta[k, j, column[i]] - truth[i]) > 2 * se[k, j, column[i]] for i in params)
+
         hit = [r for r in range(runs) if np.isfinite(model_first[r, m])]
-        ks = [int(np.searchsorted(t, model_first[r, m])) for r in hit]
-        outside = [any(abs(theta[k, 2 * r + m, list(where.values())[i][1]] - truth[i])
-                       > 2 * se[k, 2 * r + m, list(where.values())[i][1]] for i in cols) for r, k in zip(hit, ks)]
+        outside = [any_outside(int(np.searchsorted(t, model_first[r, m])), r) for r in hit]
         assert rows[model]["false_convergence"] == pytest.approx(np.mean(outside))
+        best = min(np.mean([any_outside(k, r) for r in range(runs)]) for k in np.flatnonzero(t >= BEST_FROM))
+        assert rows[model]["truth_outside_min"] == pytest.approx(best)
         assert rows[model]["flag_time_median"] == np.median(model_first[:, m])
     paths = write_outputs([res], tmp_path, figures=False)
     written = list(csv.DictReader(open(paths["convergence"])))
