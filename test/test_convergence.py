@@ -161,7 +161,7 @@ def _converging(n, rate_hz=50.0, seed=0, jump_at=None, jump=0.0):
 def test_flag_comes_up_on_a_converging_estimate_and_goes_down_on_a_jump():
     cfg = ConvergenceConfig(window=2.0, band=1.0, max_se_rate=0.2, rate_hz=50.0)
     n, jump_at = 1500, 1000  # 30 s at 50 Hz; the estimate jumps by 2 SE at 20 s
-    stamps, theta, se = _converging(n)
+    stamps, _, se = _converging(n)
     _, theta_j, _ = _converging(n, jump_at=jump_at, jump=2.0 * se[jump_at])
     mon = ConvergenceMonitor([2], cfg)
     flags = []
@@ -226,8 +226,9 @@ def test_memory_stays_bounded_under_a_flood():
     for k in range(100_000):  # 1 MHz for 0.1 s: far more samples than the buffer holds
         flags, model = mon.update(k * 1000, th, se, ready)
         assert mon.n_held <= mon.capacity
-        assert not flags.any()  # the buffer never reaches back 2 s: fail safe
+        assert not flags.any() and not model.any()  # the buffer never reaches back 2 s: fail safe
     assert {k: v.nbytes for k, v in vars(mon).items() if isinstance(v, np.ndarray)} == arrays
+    assert len(mon._stamps) == 2 * mon.capacity
     # at a rate the buffer can hold, the flags come up once 2 s have passed
     t0 = 100_000 * 1000
     got = [mon.update(t0 + (k + 1) * 40_000_000, th, se, ready)[1].all() for k in range(60)]

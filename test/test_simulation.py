@@ -189,7 +189,7 @@ def test_monte_carlo_convergence_outputs_against_an_independent_recomputation(tm
     for m, model in enumerate(("CZ model", "Cm model")):
         params = [i for i, (mm, _) in enumerate(where.values()) if mm == m]
 
-        def any_outside(k, r):
+        def any_outside(k, r, m=m, params=params):
             j = 2 * r + m
             return any(abs(theta[k, j, column[i]] - truth[i]) > 2 * se[k, j, column[i]] for i in params)
 
@@ -200,7 +200,8 @@ def test_monte_carlo_convergence_outputs_against_an_independent_recomputation(tm
         assert rows[model]["truth_outside_min"] == pytest.approx(best)
         assert rows[model]["flag_time_median"] == np.median(model_first[:, m])
     paths = write_outputs([res], tmp_path, figures=False)
-    written = list(csv.DictReader(open(paths["convergence"])))
+    with open(paths["convergence"]) as fh:
+        written = list(csv.DictReader(fh))
     assert [r["parameter"] for r in written] == list(PARAMETERS) + ["CZ model", "Cm model"]
     for r in written[:5]:
         assert float(r["flag_time_median"]) == pytest.approx(rows[r["parameter"]]["flag_time_median"], rel=1e-5)

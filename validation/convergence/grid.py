@@ -5,9 +5,9 @@ import sys
 import numpy as np
 
 sys.path.insert(0, "validation/convergence")
-from tune import evaluate, load  # noqa: E402
+from tune import evaluate, load
 
-from rls_uncertainty.convergence import ConvergenceConfig  # noqa: E402
+from rls_uncertainty.convergence import ConvergenceConfig
 
 data = load(sys.argv[1])
 grid = [float(x) for x in sys.argv[2].split(",")], [float(x) for x in sys.argv[3].split(",")], [float(x) for x in sys.argv[4].split(",")]
