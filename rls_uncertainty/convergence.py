@@ -27,24 +27,25 @@ infinite estimate, and on a standard error that is zero, negative or infinite, s
 separate validity test is needed; a standard error below the floating-point resolution of
 its estimate (``theta + k se == theta``) is never flagged.
 
-Why these tests. For least squares the estimates at ``t - T`` and ``t`` differ by an error
-of variance ``se_{t-T}^2 - se_t^2``, and a standard error falling like ``1/sqrt(time)``
-falls at ``1/(2 time)`` per second, so test 2 passes once the data since the start of the
-excitation span more than ``T / (1 - exp(-2 r T))`` (3.2 s with the defaults) and test 1
-once the last ``T`` seconds no longer move the estimate by ``k`` standard errors; test 1
-also drops the flag at once when a parameter moves (a failure, a new flight condition), and
-test 2, two-sided, holds it down while the corrected standard error is still *growing*
-early in a maneuver, when the residual autocorrelation (Eq. 17) has not yet seen the
-coloring and the corrected error is too small (at 20% band-limited noise the mean corrected
-SE is 0.5 to 0.65 of the observed scatter at 1 s, 0.85 to 1 at 3 s). Stabilisation of the
-estimates and of their error bounds is how real-time aircraft parameter estimation has
-judged convergence (e.g. E. A. Morelli, "Real-Time Parameter Estimation in the Frequency
-Domain", AIAA-99-4043, 1999, whose estimates "converged in less than 1 cycle of the dominant
-dynamic mode" -- judged from time histories, without a stated rule); the rule and the
-thresholds here are ours. Defaults (T = 2 s, about two periods of the T-2 short-period mode;
-k = 1; r = 0.25/s) were chosen on a Table 3 Monte Carlo with seeds other than the reported
-one; ``rls_uncertainty.montecarlo`` tabulates flag times against the time the corrected
-envelope covers the observed scatter, and the false-convergence rates.
+Why these tests. For least squares with white residuals the estimates at ``t - T`` and ``t``
+differ by an error of variance ``se_{t-T}^2 - se_t^2``, and a standard error falling like
+``1/sqrt(time)`` falls at ``1/(2 time)`` per second, so test 2 passes once the data since
+the start of the excitation span more than ``T / (1 - exp(-2 r T))`` (3.2 s with the
+defaults) and test 1 once the last ``T`` seconds no longer move the estimate by ``k``
+standard errors; test 1 also drops the flag at once when a parameter moves (a failure, a new
+flight condition), and test 2, two-sided, holds it down while the corrected standard error
+is still *growing* early in a maneuver, when the residual autocorrelation (Eq. 17) has not
+yet seen the coloring and the corrected error is too small (at 20% band-limited noise the
+mean corrected SE is 0.5 to 0.65 of the observed scatter at 1 s, 0.85 to 1 at 3 s).
+Stabilisation of the estimates and of their error bounds is how real-time aircraft
+parameter estimation judges convergence (E. A. Morelli, "Real-Time Parameter Estimation in
+the Frequency Domain", AIAA-99-4043, 1999: "Parameter estimates converged in less than 1
+cycle of the dominant dynamic mode natural frequencies"), but no published quantitative rule
+was found: the rule and the thresholds here are ours. Defaults (T = 2 s, about two periods
+of the T-2 short-period mode; k = 1; r = 0.25/s) were chosen on a Table 3 Monte Carlo with
+another seed (7) than the reported one (2016); ``rls_uncertainty.montecarlo`` tabulates
+flag times against the time the corrected envelope covers the observed scatter, and the
+false-convergence rates.
 
 Cost and memory: :meth:`ConvergenceMonitor.update` is a fixed sequence of about twenty small
 numpy calls whatever the number of models and parameters (the window maxima come from a
