@@ -11,19 +11,33 @@ the final estimates) are compared with the paper's Table 3.
 from __future__ import annotations
 
 import csv
+import math
 import os
 import time
 from concurrent.futures import ProcessPoolExecutor, as_completed
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 
+from .convergence import ConvergenceConfig, ConvergenceMonitor
 from .differentiation import DifferentiatorConfig
 from .estimator import EstimatorBank, batch_estimate
-from .simulation import T2_MODELS, T2_TRUE, add_noise, reduce_short_period, simulate_short_period
+from .simulation import T2_MODELS, T2_TRUE, SimulationConfig, add_noise, reduce_short_period, simulate_short_period
 
-__all__ = ["LEVELS", "PAPER_TABLE3", "PAPER_DIFFERENTIATOR", "LevelResult", "run_level", "run_table3", "write_outputs"]
+__all__ = [
+    "LEVELS",
+    "PAPER_TABLE3",
+    "PAPER_DIFFERENTIATOR",
+    "MONTE_CARLO_CONVERGENCE",
+    "BEST_FROM",
+    "LevelResult",
+    "level_inputs",
+    "run_level",
+    "run_table3",
+    "convergence_summary",
+    "write_outputs",
+]
 
 # The paper does not give its real-time differentiator, only that it amplifies the C_m residual
 # near 10 Hz (Section IV.A). A 5-point cubic fit with a 2-sample lag does that and reproduces
@@ -57,6 +71,9 @@ _WHERE = {
     "CZ_alpha": (0, 1), "CZ_delta_e": (0, 2), "Cm_alpha": (1, 1), "Cm_q": (1, 2), "Cm_delta_e": (1, 3),
 }
 LAG_SWEEP = (0, 1, 2, 3, 5, 8, 11, 15, 20, 30, 50, 75, 100, 150, 200, 300, 400, 591)
+# The node's convergence criterion with its buffer sized for the simulation's 50 Hz.
+MONTE_CARLO_CONVERGENCE = replace(ConvergenceConfig(), rate_hz=SimulationConfig().rate)
+BEST_FROM = SimulationConfig().input_start + 0.5  # s: from here on, the floor of false convergence
 
 
 @dataclass
@@ -73,6 +90,19 @@ class LevelResult:
     history_mean: np.ndarray  # (N, 3): mean CZ_alpha, mean conventional SE, mean corrected SE
     history_scatter: np.ndarray  # (N,): scatter of CZ_alpha over runs
     last_run: dict  # residual autocorrelations and lag sweep of the last run (Figs. 5, 7)
+    # Convergence flags (issue 14), PARAMETERS order; times in s, inf where never flagged.
+    convergence: ConvergenceConfig = field(default_factory=ConvergenceConfig)
+    flag_time: np.ndarray = None  # (runs, 5) first time each parameter is flagged
+    flag_theta: np.ndarray = None  # (runs, 5) estimate at that time (NaN if never)
+    flag_se: np.ndarray = None  # (runs, 5) corrected SE at that time
+    model_flag_time: np.ndarray = None  # (runs, 2) first time C_Z / C_m has every parameter flagged
+    model_flag_theta: np.ndarray = None  # (runs, 5) estimates at their model's flag time
+    model_flag_se: np.ndarray = None  # (runs, 5)
+    ensemble_mean: np.ndarray = None  # (N, 5) mean estimate over runs, each sample
+    ensemble_se: np.ndarray = None  # (N, 5) mean corrected SE over runs
+    ensemble_scatter: np.ndarray = None  # (N, 5) standard deviation of the estimates over runs
+    truth_outside: np.ndarray = None  # (N, 7) fraction of runs with the true value outside +-2 SE
+    # (5 parameters, then any parameter of the C_Z / C_m model), each sample
 
     def summary(self) -> dict[str, dict[str, float]]:
         out = {}
@@ -94,8 +124,13 @@ def _pick(per_model: list[np.ndarray]) -> np.ndarray:
     return np.array([per_model[m][c] for m, c in (_WHERE[p] for p in PARAMETERS)])
 
 
-def run_level(level: float, runs: int, *, n_lags: int = 50, seed: int = 2016) -> LevelResult:
-    """All runs of one band-limited noise level (fraction, e.g. 0.2)."""
+def level_inputs(level: float, runs: int, *, seed: int = 2016):
+    """Regressors and outputs of every run of one noise level, as the bank takes them.
+
+    Returns ``(t, reductions, sizes, X, Z)``: sample times (N,), each run's reduced data
+    (``{"CZ": (X, z), "Cm": (X, z)}``), the model sizes (run ``r``'s C_Z model is bank row
+    ``2 r``, its C_m model row ``2 r + 1``), regressors (N, 2 runs, n_max) and outputs (N, 2 runs).
+    """
     clean = simulate_short_period()
     reductions = []
     for run in range(runs):
@@ -113,11 +148,47 @@ def run_level(level: float, runs: int, *, n_lags: int = 50, seed: int = 2016) ->
             Xm, zm = data[model.output]
             X[:, r * n_models + m, : Xm.shape[1]] = Xm
             Z[:, r * n_models + m] = zm
+    return t, reductions, sizes, X, Z
+
+
+def run_level(
+    level: float,
+    runs: int,
+    *,
+    n_lags: int = 50,
+    seed: int = 2016,
+    convergence: ConvergenceConfig = MONTE_CARLO_CONVERGENCE,
+) -> LevelResult:
+    """All runs of one band-limited noise level (fraction, e.g. 0.2).
+
+    Besides the end-of-maneuver results, one :class:`~rls_uncertainty.convergence.
+    ConvergenceMonitor` over every run's models records when each parameter (and each model)
+    is first flagged converged, with the estimate and corrected SE at that moment, and the
+    ensemble mean, mean corrected SE and scatter of every Table 3 parameter at every sample.
+    """
+    t, reductions, sizes, X, Z = level_inputs(level, runs, seed=seed)
+    n_models = len(T2_MODELS)
+    N = t.size
     bank = EstimatorBank(sizes, n_lags)
     bank_all = EstimatorBank(sizes, None)
     history = np.full((N, 3), np.nan)
     scatter = np.full(N, np.nan)
     cz = np.arange(runs) * n_models  # CZ model of each run
+    # Convergence flags of every run's models, advanced with the bank.
+    monitor = ConvergenceMonitor(sizes, convergence)
+    stamps = np.round(t * 1e9).astype(np.int64)
+    model_of = np.array([_WHERE[p][0] for p in PARAMETERS])
+    p_row = np.arange(runs)[:, None] * n_models + model_of  # (runs, 5) bank row of each parameter
+    p_col = np.broadcast_to([_WHERE[p][1] for p in PARAMETERS], p_row.shape)
+    flag_k = np.full((runs, len(PARAMETERS)), -1)
+    flag_theta = np.full((runs, len(PARAMETERS)), np.nan)
+    flag_se = np.full((runs, len(PARAMETERS)), np.nan)
+    model_k = np.full((runs, n_models), -1)
+    model_theta = np.full((runs, len(PARAMETERS)), np.nan)
+    model_se = np.full((runs, len(PARAMETERS)), np.nan)
+    ens = np.full((3, N, len(PARAMETERS)), np.nan)  # mean estimate, mean SE, scatter
+    truth = np.array([T2_TRUE[p] for p in PARAMETERS])
+    outside = np.full((N, len(PARAMETERS) + n_models), np.nan)
     for k in range(N):
         bank.update(X[k], Z[k])
         bank_all.update(X[k], Z[k])
@@ -126,6 +197,21 @@ def run_level(level: float, runs: int, *, n_lags: int = 50, seed: int = 2016) ->
             history[k] = (th.mean(), bank.standard_errors_all("conventional")[cz, 1].mean(),
                           bank.standard_errors_all("corrected")[cz, 1].mean())
             scatter[k] = th.std(ddof=1) if runs > 1 else 0.0
+        theta_k, se_k, ready_k = bank.theta_all(), bank.standard_errors_all("corrected"), bank.ready
+        flags, model_flags = monitor.update(int(stamps[k]), theta_k, se_k, ready_k)
+        th_p, se_p = theta_k[p_row, p_col], se_k[p_row, p_col]
+        new = flags[p_row, p_col] & (flag_k < 0)
+        flag_k[new], flag_theta[new], flag_se[new] = k, th_p[new], se_p[new]
+        new_model = model_flags.reshape(runs, n_models) & (model_k < 0)
+        model_k[new_model] = k
+        new = new_model[:, model_of]
+        model_theta[new], model_se[new] = th_p[new], se_p[new]
+        if ready_k.all():
+            ens[0, k], ens[1, k] = th_p.mean(axis=0), se_p.mean(axis=0)
+            ens[2, k] = th_p.std(axis=0, ddof=1) if runs > 1 else 0.0
+            out = np.abs(th_p - truth) > 2 * se_p
+            outside[k, : len(PARAMETERS)] = out.mean(axis=0)
+            outside[k, len(PARAMETERS):] = [out[:, model_of == m].any(axis=1).mean() for m in range(n_models)]
 
     def collect(b: EstimatorBank, kind: str, what: str = "se") -> np.ndarray:
         rows = []
@@ -159,21 +245,35 @@ def run_level(level: float, runs: int, *, n_lags: int = 50, seed: int = 2016) ->
         se_batch=np.array(batch[n_lags]),
         se_batch_all=np.array(batch[None]),
         time=t, history_mean=history, history_scatter=scatter, last_run=last,
+        convergence=convergence,
+        flag_time=np.where(flag_k >= 0, t[flag_k], np.inf),
+        flag_theta=flag_theta, flag_se=flag_se,
+        model_flag_time=np.where(model_k >= 0, t[model_k], np.inf),
+        model_flag_theta=model_theta, model_flag_se=model_se,
+        ensemble_mean=ens[0], ensemble_se=ens[1], ensemble_scatter=ens[2], truth_outside=outside,
     )
 
 
-def run_table3(runs: int, levels=LEVELS, *, n_lags: int = 50, jobs: int | None = None, progress=print) -> list[LevelResult]:
+def run_table3(
+    runs: int,
+    levels=LEVELS,
+    *,
+    n_lags: int = 50,
+    jobs: int | None = None,
+    progress=print,
+    convergence: ConvergenceConfig = MONTE_CARLO_CONVERGENCE,
+) -> list[LevelResult]:
     """Run every level, in parallel over ``jobs`` processes (default: every core)."""
     jobs = jobs or os.cpu_count() or 1
     results: dict[float, LevelResult] = {}
     t0 = time.perf_counter()
     if jobs == 1 or len(levels) == 1:
         for lv in levels:
-            results[lv] = run_level(lv, runs, n_lags=n_lags)
+            results[lv] = run_level(lv, runs, n_lags=n_lags, convergence=convergence)
             progress(f"  level {lv * 100:4.0f}%: {runs} runs done ({time.perf_counter() - t0:5.1f} s)")
     else:
         with ProcessPoolExecutor(max_workers=jobs) as pool:
-            futures = {pool.submit(run_level, lv, runs, n_lags=n_lags): lv for lv in levels}
+            futures = {pool.submit(run_level, lv, runs, n_lags=n_lags, convergence=convergence): lv for lv in levels}
             for i, fut in enumerate(as_completed(futures), 1):
                 lv = futures[fut]
                 results[lv] = fut.result()
@@ -182,11 +282,152 @@ def run_table3(runs: int, levels=LEVELS, *, n_lags: int = 50, jobs: int | None =
     return [results[lv] for lv in levels]
 
 
+def _cover_time(t: np.ndarray, ratio: np.ndarray, threshold: float) -> float:
+    """First time from which on ``ratio >= threshold`` (NaN counts as below); inf if the last
+    sample is below."""
+    below = np.flatnonzero(~(ratio >= threshold))
+    if below.size == 0:
+        return float(t[0])
+    return float(t[below[-1] + 1]) if below[-1] + 1 < t.size else math.inf
+
+
+def convergence_summary(res: LevelResult) -> list[dict]:
+    """Convergence flags of one level against the observed scatter and the true values.
+
+    Per Table 3 parameter (and per model, ``"CZ model"``, ``"Cm model"``):
+
+    - ``flagged``: fraction of runs flagged at some time; ``flag_time_median``: median over
+      runs of the first flag time (never-flagged runs count as infinite);
+    - ``cover_time``: the time at which the corrected 2-sigma envelope covers the observed
+      scatter: the first time from which on the mean corrected SE over runs is at least
+      ``(1 - d)`` times the standard deviation of the estimates over runs, with
+      ``d = 2 / sqrt(2 (runs - 1))`` the two-sigma sampling error of a standard deviation
+      from ``runs`` samples (9% for 250 runs); ``cover_time_strict``: the same with ``d = 0``;
+      infinite if the end of the maneuver is below;
+    - ``false_convergence``: fraction of the flagged runs whose true value lies outside
+      ``theta +- 2 se`` (corrected) at the first flag time; ``false_vs_mean``: the same
+      with the ensemble mean at that time in place of the true value (calibration alone,
+      without the estimator's bias); ``truth_outside_end``: fraction of all runs with the
+      true value outside ``+- 2 se`` at the end of the maneuver; ``truth_outside_min``: the
+      smallest such fraction at any sample from ``BEST_FROM`` (1 s, half a second into the
+      elevator input) on -- the false-convergence rate of the best time to flag every run
+      at once, chosen in hindsight: a floor for any flag; ``bias_at_flag_se``: (mean estimate at the flag - true value) / mean SE at the
+      flag; ``se_over_scatter_at_flag``: mean SE / scatter at the median flag time.
+
+    For a model the flag time is the first time all its parameters are flagged, and a false
+    convergence is any of its Table 3 parameters outside.
+    """
+    t, runs = res.time, res.runs
+    d = 2.0 / math.sqrt(2.0 * (runs - 1)) if runs > 1 else 0.0
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ratio = res.ensemble_se / res.ensemble_scatter
+    truth = np.array([T2_TRUE[p] for p in PARAMETERS])
+
+    def rates(ft, theta, se, cols):
+        hit = np.isfinite(ft)
+        k = np.searchsorted(t, np.where(hit, ft, t[0]))
+        mean = res.ensemble_mean[k][:, cols]
+        th, s = theta[:, cols], se[:, cols]
+        out_truth = (np.abs(th - truth[cols]) > 2 * s).any(axis=1)
+        out_mean = (np.abs(th - mean) > 2 * s).any(axis=1)
+        if not hit.any():
+            return hit, math.nan, math.nan
+        return hit, float(out_truth[hit].mean()), float(out_mean[hit].mean())
+
+    rows = []
+    for i, name in enumerate(PARAMETERS):
+        ft = res.flag_time[:, i]
+        hit, false_truth, false_mean = rates(ft, res.flag_theta, res.flag_se, [i])
+        median = float(np.median(ft))
+        cover = _cover_time(t, ratio[:, i], 1.0 - d)
+        at = np.searchsorted(t, median) if math.isfinite(median) else None
+        rows.append({
+            "level": res.level, "parameter": name, "flagged": float(hit.mean()),
+            "flag_time_median": median, "cover_time": cover,
+            "cover_time_strict": _cover_time(t, ratio[:, i], 1.0),
+            "flag_minus_cover": median - cover,
+            "false_convergence": false_truth, "false_vs_mean": false_mean,
+            "truth_outside_end": float(np.mean(np.abs(res.estimates[:, i] - truth[i]) > 2 * res.se_corrected[:, i])),
+            "truth_outside_min": float(np.nanmin(res.truth_outside[t >= BEST_FROM, i])),
+            "bias_at_flag_se": float((res.flag_theta[hit, i].mean() - truth[i]) / res.flag_se[hit, i].mean())
+            if hit.any() else math.nan,
+            "se_over_scatter_at_flag": float(ratio[at, i]) if at is not None else math.nan,
+        })
+    for m, model in enumerate(T2_MODELS):
+        cols = [i for i, p in enumerate(PARAMETERS) if _WHERE[p][0] == m]
+        ft = res.model_flag_time[:, m]
+        hit, false_truth, false_mean = rates(ft, res.model_flag_theta, res.model_flag_se, cols)
+        median = float(np.median(ft))
+        outside = (np.abs(res.estimates[:, cols] - truth[cols]) > 2 * res.se_corrected[:, cols]).any(axis=1)
+        rows.append({
+            "level": res.level, "parameter": f"{model.output} model", "flagged": float(hit.mean()),
+            "flag_time_median": median, "cover_time": math.nan, "cover_time_strict": math.nan,
+            "flag_minus_cover": math.nan, "false_convergence": false_truth, "false_vs_mean": false_mean,
+            "truth_outside_end": float(outside.mean()),
+            "truth_outside_min": float(np.nanmin(res.truth_outside[t >= BEST_FROM, len(PARAMETERS) + m])),
+            "bias_at_flag_se": math.nan,
+            "se_over_scatter_at_flag": math.nan,
+        })
+    return rows
+
+
+CONVERGENCE_COLUMNS = (
+    "level", "parameter", "flagged", "flag_time_median", "cover_time", "cover_time_strict", "flag_minus_cover",
+    "false_convergence", "false_vs_mean", "truth_outside_end", "truth_outside_min", "bias_at_flag_se",
+    "se_over_scatter_at_flag",
+)
+
+
+def _convergence_lines(results: list[LevelResult]) -> list[str]:
+    cfg, runs = results[0].convergence, results[0].runs
+    d = 2.0 / math.sqrt(2.0 * (runs - 1)) if runs > 1 else 0.0
+
+    def sec(x):
+        return "never" if not math.isfinite(x) else f"{x:.2f}"
+
+    def pct(x):
+        return "-" if not math.isfinite(x) else f"{100 * x:.0f}%"
+
+    lines = [
+        "",
+        "## Convergence flags (issue 14)",
+        "",
+        f"Criterion (`rls_uncertainty.convergence`): window T = {cfg.window:g} s, band k = {cfg.band:g} "
+        f"corrected SE, SE rate r = {cfg.max_se_rate:g}/s. Flag: median over runs of the first time the "
+        "parameter (model: all its parameters) is flagged. Cover: first time from which on the mean corrected "
+        f"SE over runs is at least (1 - {d:.3f}) x the scatter ({d:.3f} = 2/sqrt(2(runs-1)), the two-sigma "
+        "sampling error of the scatter); strict: at least the scatter. False: flagged runs with the true value "
+        "outside +-2 corrected SE at the flag time; vs mean: the same against the ensemble mean at that time "
+        "(calibration alone, no estimator bias). Outside at end: all runs, truth outside +-2 SE at the end of the "
+        f"maneuver; best: the least such fraction at any time from {BEST_FROM:g} s on (flagging every run at the "
+        "best time, chosen in hindsight: a floor for any flag). Bias: (mean estimate - true) / mean SE at the flag.",
+        "",
+        "| level | parameter | flagged | flag, s | cover, s (strict) | flag - cover, s | false | false vs mean "
+        "| truth outside: end / best | bias at flag, SE | SE/scatter at flag |",
+        "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |",
+    ]
+    for res in results:
+        for row in convergence_summary(res):
+            model = row["parameter"].endswith("model")
+            lines.append(
+                f"| {res.level * 100:.0f}% | {row['parameter']} | {pct(row['flagged'])} | {sec(row['flag_time_median'])} | "
+                + ("- | - | " if model else
+                   f"{sec(row['cover_time'])} ({sec(row['cover_time_strict'])}) | "
+                   f"{'-' if not math.isfinite(row['flag_minus_cover']) else format(row['flag_minus_cover'], '+.2f')} | ")
+                + f"{pct(row['false_convergence'])} | {pct(row['false_vs_mean'])} | "
+                + f"{pct(row['truth_outside_end'])} / {pct(row['truth_outside_min'])} | "
+                + ("- | - |" if model else
+                   f"{row['bias_at_flag_se']:+.2f} | {row['se_over_scatter_at_flag']:.2f} |")
+            )
+    return lines
+
+
 def write_outputs(results: list[LevelResult], out: Path, *, figures: bool = True) -> dict[str, Path]:
-    """``table3.csv``, ``table3.md`` (beside the paper's values) and Figs. 5-7 as PNG."""
+    """``table3.csv``, ``table3.md`` (beside the paper's values, then the convergence flags),
+    ``convergence.csv`` (:func:`convergence_summary` of every level) and Figs. 5-7 as PNG."""
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    paths = {"csv": out / "table3.csv", "md": out / "table3.md"}
+    paths = {"csv": out / "table3.csv", "md": out / "table3.md", "convergence": out / "convergence.csv"}
     with open(paths["csv"], "w", newline="") as fh:
         w = csv.writer(fh)
         w.writerow(["level", "parameter", "true", "mean", "se_conventional", "se_corrected", "scatter"])
@@ -228,7 +469,15 @@ def write_outputs(results: list[LevelResult], out: Path, *, figures: bool = True
                 f"| {res.level * 100:.0f}% | {name} | {row['se_corrected'] / row['se_batch']:.3f} | "
                 f"{row['se_corrected_all'] / row['se_batch_all']:.3f} | {row['se_corrected'] / row['se_corrected_all']:.3f} |"
             )
+    lines += _convergence_lines(results)
     paths["md"].write_text("\n".join(lines) + "\n")
+    with open(paths["convergence"], "w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(CONVERGENCE_COLUMNS)
+        for res in results:
+            for row in convergence_summary(res):
+                w.writerow([f"{row['level']:.2f}", row["parameter"]]
+                           + [f"{row[c]:.6g}" for c in CONVERGENCE_COLUMNS[2:]])
     if figures:
         paths.update(_figures(results, out))
     return paths

@@ -1,6 +1,7 @@
 """T-2 simulation (Eq. 25) and a reduced Table 3 Monte Carlo."""
 
 import csv
+import math
 
 import numpy as np
 import pytest
@@ -71,6 +72,12 @@ def test_reduced_monte_carlo_command(tmp_path):
     for name in ("fig5_autocorrelation.png", "fig6_czalpha_history.png", "fig7_lags.png"):
         assert (tmp_path / name).stat().st_size > 10_000
     assert "| 20% | Cm_q |" in (tmp_path / "table3.md").read_text()
+    # Convergence flags: every parameter and model flagged in most runs, within the maneuver.
+    conv = list(csv.DictReader(open(tmp_path / "convergence.csv")))
+    assert [r["parameter"] for r in conv] == list(PAPER_TABLE3[0.2]) + ["CZ model", "Cm model"]
+    for r in conv:
+        assert float(r["flagged"]) > 0.9 and 2.0 < float(r["flag_time_median"]) < 12.0, r
+    assert "## Convergence flags (issue 14)" in (tmp_path / "table3.md").read_text()
 
 
 def test_recursive_and_batch_corrected_errors_agree_at_the_end():
@@ -87,3 +94,115 @@ def test_recursive_and_batch_corrected_errors_agree_at_the_end():
         assert row["se_corrected"] == pytest.approx(row["se_batch"], rel=0.02), name
         assert row["se_corrected_all"] == pytest.approx(row["se_batch_all"], rel=0.06), name
         assert row["se_corrected"] == pytest.approx(row["se_corrected_all"], rel=0.15), name
+
+
+def _reference_flags(t, theta, se, ready, config):
+    """The convergence criterion evaluated from scratch at every sample over the whole
+    history (no buffer, no running maxima): window = samples from the newest one stamped at
+    or before t - T up to now."""
+    stamps = np.round(t * 1e9).astype(np.int64)
+    s = np.where(ready[:, :, None], np.maximum(se, 0.0), np.nan)
+    flags = np.zeros(theta.shape, bool)
+    for k in range(len(t)):
+        before = np.flatnonzero(stamps[: k + 1] <= stamps[k] - round(config.window * 1e9))
+        if before.size == 0:
+            continue
+        a = before[-1]
+        assert k - a + 1 <= config.capacity  # the monitor's buffer holds the window
+        g = math.exp(min(config.max_se_rate * 1e-9 * (stamps[k] - stamps[a]), 30.0))
+        c = np.minimum(s[k], 1e300) * config.band
+        w_th, w_s = theta[a : k + 1], s[a : k + 1]
+        flags[k] = (
+            (w_th < theta[k] + c) & (-w_th < -theta[k] + c) & (w_s < s[k] * g) & (-w_s < -s[k] * (1.0 / g))
+        ).all(axis=0)
+    return flags
+
+
+def test_monte_carlo_convergence_outputs_against_an_independent_recomputation(tmp_path):
+    """Flag times, estimates at the flag, model flag times, cover times and false-convergence
+    rates of a small 20% Monte Carlo, recomputed from the estimator histories."""
+    from rls_uncertainty.estimator import EstimatorBank
+    from rls_uncertainty.montecarlo import (
+        BEST_FROM,
+        MONTE_CARLO_CONVERGENCE,
+        PARAMETERS,
+        convergence_summary,
+        level_inputs,
+        run_level,
+        write_outputs,
+    )
+
+    runs = 6
+    res = run_level(0.2, runs)
+    t, _, sizes, X, Z = level_inputs(0.2, runs)
+    bank = EstimatorBank(sizes, 50)
+    hist = []
+    for k in range(len(t)):
+        bank.update(X[k], Z[k])
+        hist.append((bank.theta_all(), bank.standard_errors_all("corrected"), bank.ready))
+    theta, se, ready = (np.array(x) for x in zip(*hist))
+    flags = _reference_flags(t, theta, se, ready, MONTE_CARLO_CONVERGENCE)
+    where = {"CZ_alpha": (0, 1), "CZ_delta_e": (0, 2), "Cm_alpha": (1, 1), "Cm_q": (1, 2), "Cm_delta_e": (1, 3)}
+    assert list(where) == list(PARAMETERS)
+    truth = np.array([T2_TRUE[p] for p in PARAMETERS])
+    first = np.full((runs, 5), -1)
+    for r in range(runs):
+        for i, (m, c) in enumerate(where.values()):
+            hit = np.flatnonzero(flags[:, 2 * r + m, c])
+            first[r, i] = hit[0] if hit.size else -1
+    assert (first > 0).mean() > 0.9  # the comparison below is about real flags
+    np.testing.assert_array_equal(res.flag_time, np.where(first >= 0, t[first], np.inf))
+    for r in range(runs):
+        for i, (m, c) in enumerate(where.values()):
+            if first[r, i] >= 0:
+                assert res.flag_theta[r, i] == theta[first[r, i], 2 * r + m, c]
+                assert res.flag_se[r, i] == se[first[r, i], 2 * r + m, c]
+    model_first = np.full((runs, 2), np.inf)
+    for r in range(runs):
+        for m, size in enumerate((3, 4)):
+            hit = np.flatnonzero(flags[:, 2 * r + m, :size].all(axis=1))
+            model_first[r, m] = t[hit[0]] if hit.size else np.inf
+    np.testing.assert_array_equal(res.model_flag_time, model_first)
+
+    # Summary: cover time = first time from which on mean SE >= (1 - d) scatter, etc.
+    rows = {row["parameter"]: row for row in convergence_summary(res)}
+    d = 2 / math.sqrt(2 * (runs - 1))
+    for i, (name, (m, c)) in enumerate(where.items()):
+        x, s = theta[:, m::2, c], se[:, m::2, c]
+        ratio = s.mean(axis=1) / x.std(axis=1, ddof=1)
+        ok = ratio >= 1 - d  # NaN (not ready) is not ok
+        k0 = next((k for k in range(len(t)) if ok[k:].all()), None)
+        row = rows[name]
+        assert row["cover_time"] == (t[k0] if k0 is not None else math.inf)
+        ft = res.flag_time[:, i]
+        assert row["flag_time_median"] == np.median(ft)
+        assert row["flagged"] == np.isfinite(ft).mean()
+        hit = [r for r in range(runs) if first[r, i] >= 0]
+        outside = [abs(x[first[r, i], r] - truth[i]) > 2 * s[first[r, i], r] for r in hit]
+        assert row["false_convergence"] == pytest.approx(np.mean(outside))
+        off_mean = [abs(x[first[r, i], r] - x[first[r, i]].mean()) > 2 * s[first[r, i], r] for r in hit]
+        assert row["false_vs_mean"] == pytest.approx(np.mean(off_mean))
+        assert row["truth_outside_end"] == pytest.approx(np.mean(np.abs(x[-1] - truth[i]) > 2 * s[-1]))
+        late = t >= BEST_FROM
+        assert row["truth_outside_min"] == pytest.approx(np.min(np.mean(np.abs(x[late] - truth[i]) > 2 * s[late], axis=1)))
+    column = [c for _, c in where.values()]
+    for m, model in enumerate(("CZ model", "Cm model")):
+        params = [i for i, (mm, _) in enumerate(where.values()) if mm == m]
+
+        def any_outside(k, r, m=m, params=params):
+            j = 2 * r + m
+            return any(abs(theta[k, j, column[i]] - truth[i]) > 2 * se[k, j, column[i]] for i in params)
+
+        hit = [r for r in range(runs) if np.isfinite(model_first[r, m])]
+        outside = [any_outside(int(np.searchsorted(t, model_first[r, m])), r) for r in hit]
+        assert rows[model]["false_convergence"] == pytest.approx(np.mean(outside))
+        best = min(np.mean([any_outside(k, r) for r in range(runs)]) for k in np.flatnonzero(t >= BEST_FROM))
+        assert rows[model]["truth_outside_min"] == pytest.approx(best)
+        assert rows[model]["flag_time_median"] == np.median(model_first[:, m])
+    paths = write_outputs([res], tmp_path, figures=False)
+    with open(paths["convergence"]) as fh:
+        written = list(csv.DictReader(fh))
+    assert [r["parameter"] for r in written] == list(PARAMETERS) + ["CZ model", "Cm model"]
+    for r in written[:5]:
+        assert float(r["flag_time_median"]) == pytest.approx(rows[r["parameter"]]["flag_time_median"], rel=1e-5)
+        assert float(r["false_convergence"]) == pytest.approx(rows[r["parameter"]]["false_convergence"], abs=1e-6)
