@@ -146,10 +146,9 @@ def _limits(W: int, n: float, cap: int | None, min_lags: int) -> tuple[int, int]
 
 def _finish(per_series: np.ndarray, usable: np.ndarray, lo: int, hi: int) -> np.ndarray:
     """Model lag = max over its usable series, clipped to ``[lo, hi]``; ``lo`` where none."""
-    per_series = np.where(usable, per_series, -1)
-    L = per_series.max(axis=-1)
-    L = np.where(L < 0, lo, L)
-    return np.clip(L, lo, hi).astype(np.int64)
+    L = np.where(usable, per_series, -1).max(axis=-1)
+    L = np.where(L < 0, lo, np.minimum(L, hi))
+    return np.maximum(L, lo).astype(np.int64)
 
 
 def _usable(rho: np.ndarray) -> np.ndarray:
@@ -160,32 +159,40 @@ def flat_top_lags(R, n_samples: float, *, cap: int | None = None, lambda_diag=No
                   c: float = 2.0, K: int | None = None, min_lags: int = 0,
                   factor: int = 2) -> np.ndarray:
     """Politis (2003) / Politis & White (2004) flat-top rule: ``L = factor * m_hat``
-    (``factor = 2`` is their ``M = 2 m_hat``); see the module docstring."""
+    (``factor = 2`` is their ``M = 2 m_hat``); see the module docstring.
+
+    Written for a per-sample call (about 15 numpy operations on ``(M, W)`` arrays whatever
+    ``M``): a lag ``i`` is significant where ``|R(i)| >= threshold R(0)``.
+    """
     R = np.asarray(R, dtype=float)
     W = R.shape[-1]
     n = float(n_samples)
     hi, lo = _limits(W, n, cap, min_lags)
-    rho = correlations(R, lambda_diag)
-    usable = _usable(rho)
     if n < 2 or W < 2:
         return np.full(R.shape[:-1], lo, dtype=np.int64)
     if K is None:
         K = max(5, math.ceil(math.sqrt(math.log10(n))))
     thr = politis_threshold(n, c)
-    insig = np.abs(np.nan_to_num(rho[..., 1:], nan=0.0)) < thr  # lags 1..W-1
-    # run[m] = lags m+1..m+K all insignificant, m = 0..W-1-K
-    count = W - K
-    if count <= 0:
-        m_hat = np.full(rho.shape[:-1], hi, dtype=np.int64)
-        found = np.zeros(rho.shape[:-1], dtype=bool)
+    # Usable models: R(0) > 0 and every R finite (a sum is NaN or Inf otherwise).
+    ok = (R[..., 0] > 0.0) & np.isfinite(R.sum(axis=-1))
+    if lambda_diag is None:
+        sig = np.abs(R[..., 1:]) >= thr * R[..., :1]  # (..., W-1): lags 1..W-1
     else:
-        csum = np.concatenate([np.zeros(insig.shape[:-1] + (1,), dtype=np.int64),
-                               np.cumsum(insig, axis=-1)], axis=-1)
-        run = (csum[..., K : K + count] - csum[..., :count]) == K
-        found = run.any(axis=-1)
-        m_hat = np.argmax(run, axis=-1)
-    L = np.where(found, factor * m_hat, np.iinfo(np.int64).max // 4)
-    return _finish(np.minimum(L, hi), usable, lo, hi)
+        rho = correlations(R, lambda_diag)  # (..., P, W); NaN compares False (ignored)
+        sig = np.abs(rho[..., 1:]) >= thr
+    if W - 1 < K:  # no room for a run of K lags: the correlation may go on
+        L = np.full(sig.shape[:-1], hi, dtype=np.int64)
+    else:
+        # counts[m] = significant lags among m+1..m+K, m = 0..W-1-K
+        csum = np.cumsum(sig, axis=-1)
+        counts = csum[..., K - 1 :].copy()
+        counts[..., 1:] -= csum[..., : W - 1 - K]
+        run = counts == 0
+        L = np.where(run.any(axis=-1), factor * run.argmax(axis=-1), hi)
+    if lambda_diag is not None:
+        L = L.max(axis=-1)  # the model's L protects each of its parameters
+    L = np.where(ok, np.minimum(L, hi), lo)
+    return np.maximum(L, lo).astype(np.int64)
 
 
 def andrews_lags(R, n_samples: float, *, cap: int | None = None, lambda_diag=None,
