@@ -26,6 +26,7 @@ DEPENDENCY = {
     "yaml": "python3-yaml",
     "matplotlib": "python3-matplotlib",
     "pytest": "python3-pytest",
+    "statsmodels": "python3-statsmodels",
     "rclpy": "rclpy",
     "rcl_interfaces": "rcl_interfaces",
     "builtin_interfaces": "builtin_interfaces",
