@@ -22,6 +22,7 @@ def _demo(args: argparse.Namespace) -> int:
 def _simulate(args: argparse.Namespace) -> int:
     """Estimator on a seeded simulated T-2 maneuver (Section IV.A), one sample at a time."""
     from .estimator import EstimatorBank
+    from .report import results_table, rows_from_arrays
     from .simulation import T2_MODELS, T2_TRUE, add_noise, reduce_short_period, simulate_short_period
 
     record = add_noise(simulate_short_period(), args.noise / 100.0, np.random.default_rng(args.seed))
@@ -39,17 +40,11 @@ def _simulate(args: argparse.Namespace) -> int:
         f"T-2 short-period maneuver, {args.noise:g}% band-limited noise (seed {args.seed}), "
         f"{t.size} samples at 50 Hz, {lags} lags, {args.window} window\n"
     )
-    header = f"{'parameter':<12}{'true':>10}{'estimate':>11}{'SE conv.':>11}{'SE corr.':>11}{'corr/conv':>11}"
-    print(header)
-    print("-" * len(header))
+    rows = []
     for j, m in enumerate(models):
-        theta = bank.theta(j)
-        se_conv = bank.standard_errors(j, "conventional")
-        se_corr = bank.standard_errors(j, "corrected")
-        for name, th, sv, sc in zip(m.parameter_names, theta, se_conv, se_corr):
-            true = T2_TRUE.get(name)
-            true_s = f"{true:10.3f}" if true is not None else f"{'-':>10}"
-            print(f"{name:<12}{true_s}{th:11.4f}{sv:11.4f}{sc:11.4f}{sc / sv:11.2f}")
+        rows += rows_from_arrays(m.parameter_names, bank.theta(j), bank.standard_errors(j, "conventional"),
+                                 bank.standard_errors(j, "corrected"), T2_TRUE)
+    print(results_table(rows))
     print(
         "\nConventional standard errors assume white residuals (Eq. 13); corrected ones use the "
         "recursive residual autocorrelation (Eqs. 17-22)."

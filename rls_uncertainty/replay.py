@@ -30,6 +30,7 @@ from .config import PipelineConfig, node_config, pipeline_config
 from .files import output_directory
 from .messages import ARRAY_OUTPUTS, NODE_NAME, feed, stamp_label
 from .pipeline import Pipeline
+from .report import results_table, rows_from_arrays
 
 __all__ = ["ReplayResult", "run_pipeline", "replay", "output_records", "NODE_NAME"]
 
@@ -120,16 +121,14 @@ def _names_of(pipe: Pipeline, out):
 
 
 def summary_table(pipe: Pipeline, outputs) -> str:
+    """The last sample's estimates of every ready model (:func:`.report.results_table`)."""
     if not outputs:
         return "no estimates: no model became ready (check the excitation and the configuration)"
     last = outputs[-1]
-    lines = [f"{'parameter':<14}{'estimate':>13}{'SE corr.':>12}{'SE conv.':>12}{'corr/conv':>11}"]
-    lines.append("-" * len(lines[0]))
-    for (name, _l, theta, se, sc), names in zip(pipe.published(last), _names_of(pipe, last)):
-        for p, a, b, c in zip(names, theta, se, sc):
-            ratio = b / c if c > 0 else float("nan")
-            lines.append(f"{p:<14}{a:13.5g}{b:12.4g}{c:12.4g}{ratio:11.2f}")
-    return "\n".join(lines)
+    rows = []
+    for (_name, _l, theta, se, sc), names in zip(pipe.published(last), _names_of(pipe, last)):
+        rows += rows_from_arrays(names, theta, sc, se)
+    return results_table(rows)
 
 
 def _plots(out_dir: Path, pipe: Pipeline, outputs) -> list[Path]:
