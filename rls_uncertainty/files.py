@@ -75,11 +75,17 @@ def output_directory(
     """Yield a new empty directory that becomes ``path`` when the block succeeds.
 
     Raises :class:`~rls_uncertainty.errors.OutputPathError` before anything is written when
-    ``path`` is an existing file, an existing non-empty directory (allowed with ``force``: it
-    is replaced, after the new output is complete), or is, contains or lies inside one of
-    ``inputs`` (never allowed).
+    ``path`` is an existing file, a symbolic link, an existing non-empty directory (allowed
+    with ``force``: it is replaced, after the new output is complete; should that final swap
+    fail, the old directory is put back), or is, contains or lies inside one of ``inputs``
+    (never allowed).
     """
     given = Path(path)
+    if given.is_symlink():
+        # Resolving it would put the output wherever the link points (even where it dangles).
+        raise OutputPathError(
+            f"{given}: is a symbolic link (to {os.readlink(given)}); give the directory itself"
+        )
     final = given.resolve()
     if final == final.parent:
         raise OutputPathError(f"{given}: cannot write an output over the file system root")
@@ -90,7 +96,7 @@ def output_directory(
                 f"{given}: the output would overwrite the input {item} (it is, contains or lies inside it)"
             )
     replace = False
-    if final.is_symlink() or (final.exists() and not final.is_dir()):
+    if final.exists() and not final.is_dir():
         raise OutputPathError(f"{given}: exists and is not a directory; choose another output directory")
     if final.is_dir() and any(final.iterdir()):
         if not force:
@@ -99,21 +105,32 @@ def output_directory(
             )
         replace = True
     created_parent = _first_missing_ancestor(final.parent)
-    final.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{final.name}.", suffix=".partial", dir=final.parent))
+    tmp = None
     try:
+        final.parent.mkdir(parents=True, exist_ok=True)
+        tmp = Path(tempfile.mkdtemp(prefix=f".{final.name}.", suffix=".partial", dir=final.parent))
         yield tmp
         if replace:
             old = Path(tempfile.mkdtemp(prefix=f".{final.name}.", suffix=".old", dir=final.parent))
-            os.rename(final, old / final.name)
-            os.rename(tmp, final)
+            try:
+                os.rename(final, old / final.name)
+            except BaseException:
+                old.rmdir()
+                raise
+            try:
+                os.rename(tmp, final)
+            except BaseException:
+                os.rename(old / final.name, final)  # the old output goes back where it was
+                old.rmdir()
+                raise
             shutil.rmtree(old)
         else:
             if final.is_dir():
                 final.rmdir()  # empty: nothing is lost
             os.rename(tmp, final)
     except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
+        if tmp is not None:
+            shutil.rmtree(tmp, ignore_errors=True)
         if created_parent is not None:
             with suppress(OSError):
                 # Only directories this call made, and only while they are empty.
