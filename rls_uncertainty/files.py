@@ -2,8 +2,9 @@
 
 * :func:`atomic_file` writes one file: a new temporary file is created exclusively in the
   target's directory (a fresh random name, so a planted file or symlink is never opened or
-  written through), flushed and fsync'ed, then renamed over the target, and the directory is
-  fsync'ed. On any failure the temporary file is removed and the target is untouched.
+  written through), given the replaced file's permissions (a new file those of ``open``),
+  flushed and fsync'ed, then renamed over the target, and the directory is fsync'ed. On any
+  failure the temporary file is removed and the target is untouched.
 * :func:`output_directory` builds an output directory (a bag, a replay's results) in a new
   temporary directory beside it and renames it into place only when complete. It refuses an
   output that would destroy data the command did not create: an existing file, a non-empty
@@ -16,6 +17,7 @@ from __future__ import annotations
 
 import os
 import shutil
+import stat
 import tempfile
 from collections.abc import Iterable, Iterator
 from contextlib import contextmanager, suppress
@@ -36,6 +38,28 @@ def _fsync_directory(directory: Path) -> None:
             os.close(fd)
 
 
+def _umask() -> int:
+    """The process's umask, read without changing it where the system tells (Linux)."""
+    with suppress(OSError, ValueError):
+        with open("/proc/self/status") as fh:
+            for line in fh:
+                if line.startswith("Umask:"):
+                    return int(line.split()[1], 8)
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
+
+
+def _new_file_mode(target: Path) -> int:
+    """The permissions the file gets: those of the regular file it replaces, else what
+    ``open(path, "w")`` would give (0666 less the umask), not mkstemp's private 0600."""
+    with suppress(OSError):
+        st = os.lstat(target)
+        if stat.S_ISREG(st.st_mode):
+            return stat.S_IMODE(st.st_mode)
+    return 0o666 & ~_umask()
+
+
 @contextmanager
 def atomic_file(path: str | os.PathLike[str]) -> Iterator[IO[bytes]]:
     """Yield a binary file whose content replaces ``path`` atomically when the block ends."""
@@ -44,6 +68,7 @@ def atomic_file(path: str | os.PathLike[str]) -> Iterator[IO[bytes]]:
     fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=directory)
     try:
         with os.fdopen(fd, "wb") as fh:
+            os.fchmod(fh.fileno(), _new_file_mode(target))
             yield fh
             fh.flush()
             os.fsync(fh.fileno())

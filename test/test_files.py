@@ -299,3 +299,18 @@ def test_a_failed_atomic_write_leaves_the_old_file_and_no_temporary_file(tmp_pat
                 raise ValueError("the writer failed")
     assert path.read_bytes() == b"old state"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["STATE"]
+
+
+def test_atomic_file_gives_the_permissions_of_a_normal_write_or_of_the_replaced_file(tmp_path):
+    old_mask = os.umask(0o027)
+    try:
+        with atomic_file(tmp_path / "new.csv") as fh:
+            fh.write(b"a")
+        (tmp_path / "kept.npz").write_bytes(b"old")
+        os.chmod(tmp_path / "kept.npz", 0o604)
+        with atomic_file(tmp_path / "kept.npz") as fh:
+            fh.write(b"b")
+    finally:
+        os.umask(old_mask)
+    assert oct(os.stat(tmp_path / "new.csv").st_mode & 0o777) == oct(0o640)  # not mkstemp's 0600
+    assert oct(os.stat(tmp_path / "kept.npz").st_mode & 0o777) == oct(0o604)
