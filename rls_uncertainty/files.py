@@ -134,6 +134,8 @@ def output_directory(
     try:
         final.parent.mkdir(parents=True, exist_ok=True)
         tmp = Path(tempfile.mkdtemp(prefix=f".{final.name}.", suffix=".partial", dir=final.parent))
+        # mkdtemp's private 0700 would reach the output: give it what mkdir would.
+        os.chmod(tmp, 0o777 & ~_umask())
         yield tmp
         if replace:
             old = Path(tempfile.mkdtemp(prefix=f".{final.name}.", suffix=".old", dir=final.parent))

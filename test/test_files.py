@@ -314,3 +314,13 @@ def test_atomic_file_gives_the_permissions_of_a_normal_write_or_of_the_replaced_
         os.umask(old_mask)
     assert oct(os.stat(tmp_path / "new.csv").st_mode & 0o777) == oct(0o640)  # not mkstemp's 0600
     assert oct(os.stat(tmp_path / "kept.npz").st_mode & 0o777) == oct(0o604)
+
+
+def test_the_output_directory_gets_the_permissions_of_mkdir(tmp_path):
+    old_mask = os.umask(0o022)
+    try:
+        with output_directory(tmp_path / "out") as tmp:
+            _write(tmp)
+    finally:
+        os.umask(old_mask)
+    assert oct(os.stat(tmp_path / "out").st_mode & 0o777) == oct(0o755)  # not mkdtemp's 0700
