@@ -1,5 +1,7 @@
-"""Small bags and mapping files for the bag-tool tests, and the CLI's one-line-error check."""
+"""Small bags and mapping files for the bag-tool tests, the CLI's one-line-error check and a
+directory snapshot."""
 
+import os
 from pathlib import Path
 
 import yaml
@@ -65,11 +67,33 @@ def write_mapping(tmp_path, spec=None):
 
 
 def fails(capsys, args, *needles):
-    code = cli.main(args)
-    err = capsys.readouterr().err
-    assert code != 0
+    """Run the command: it must end with exit status 2 and one line on stderr, the command's
+    own error line (no traceback, no usage text), containing every needle."""
+    try:
+        code = cli.main(args)
+    except SystemExit as exc:  # argparse's usage errors
+        code = exc.code
+    captured = capsys.readouterr()
+    lines = captured.err.splitlines()
+    assert code == 2, captured
+    assert len(lines) == 1 and lines[0].startswith(f"rls-uncertainty {args[0]}: error: "), captured.err
     for needle in needles:
-        assert needle in err, err
-    return err
+        assert needle in lines[0], lines[0]
+    return lines[0]
 
 
+def tree(root: Path) -> dict:
+    """Every entry under ``root``, not following symlinks: relative path -> file bytes,
+    ``"dir"`` or ``("link", target)``; compares a directory before and after a command."""
+    out = {}
+    for dirpath, dirnames, filenames in os.walk(root):
+        for name in dirnames + filenames:
+            p = Path(dirpath) / name
+            rel = str(p.relative_to(root))
+            if p.is_symlink():
+                out[rel] = ("link", os.readlink(p))
+            elif p.is_dir():
+                out[rel] = "dir"
+            else:
+                out[rel] = p.read_bytes()
+    return out

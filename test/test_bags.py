@@ -9,11 +9,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from bag_samples import SMALL_MAPPING, fails, fti_bag, read_all, write_mapping
+import yaml
+from bag_samples import SMALL_MAPPING, fails, fti_bag, read_all, tree, write_mapping
 from conftest import FLIGHT_DATA
 
 from rls_uncertainty import cli
 from rls_uncertainty.bags import _standard_message, convert, read_inputs, typestore, write_replay
+from rls_uncertainty.errors import BagError, ConfigError
 
 ROOT = Path(__file__).resolve().parents[1]
 BUNDLED = ROOT / "bags" / "t2_maneuver"
@@ -241,3 +243,144 @@ def test_convert_reads_sqlite3_and_ros1_bags(tmp_path):
         alphas = [math.atan2(-m.vector.z, m.vector.x) for _t, m in r["/airspeed"]]
         np.testing.assert_allclose(alphas, 0.001 * np.arange(60), atol=1e-12)
         assert [m.angular_velocity.y for _t, m in r["/imu"]] == [0.01 * k for k in range(60)]
+
+
+# ----------------------------------------------------------------------------- bad mapping files
+GOOD_AIRSPEED = SMALL_MAPPING["airspeed"]
+BAD_MAPPINGS = [
+    ("a number for an input", "imu: 5\nairspeed: {topic: /fcc/air_data}\n", "input 'imu': expected a mapping"),
+    ("a list for a unit", {"imu": {"topic": "/fcc/imu", "angular_velocity_units": ["rad/s"]}},
+     "angular_velocity_units: unknown unit ['rad/s']"),
+    ("an unknown key", {"imu": {"topic": "/fcc/imu", "angular_velocity_unit": "deg/s"}},
+     "unknown key(s) ['angular_velocity_unit']"),
+    ("an unknown input", {"gps": {"topic": "/fcc/gps"}}, "unknown input(s) ['gps']"),
+    ("a number as input name", "1: {topic: /a}\nimu: {topic: /fcc/imu}\n", "unknown input(s) ['1']"),
+    ("no airspeed", "imu: {topic: /fcc/imu}\n", "must give 'airspeed'"),
+    ("no topic", {"imu": {"frame": "rep103"}}, "input 'imu': needs a 'topic'"),
+    ("a list as topic", {"imu": {"topic": ["/fcc/imu"]}}, "topic: expected a topic name"),
+    ("an unknown frame", {"imu": {"topic": "/fcc/imu", "frame": "body"}}, "frame: must be one of"),
+    ("a frame for a scalar", {"thrust": {"topic": "/fcc/imu", "frame": "aircraft"}}, "unknown key(s) ['frame']"),
+    ("two fields for a vector", {"imu": {"topic": "/fcc/imu", "angular_velocity": ["a.x", "a.y"]}},
+     "angular_velocity: expected a list of three fields"),
+    ("a number as field", {"dynamic_pressure": {"topic": "/fcc/air_data", "field": 5}},
+     "field: expected a field name"),
+    ("a field spec without field", {"thrust": {"topic": "/fcc/air_data", "field": {"reduce": "sum"}}},
+     "needs 'field: PATH'"),
+    ("an unknown reduction", {"thrust": {"topic": "/fcc/air_data", "field": {"field": "mach", "reduce": "max"}}},
+     "reduce must be one of ['sum', 'mean']"),
+    ("a unit of another quantity", {"dynamic_pressure": {"topic": "/fcc/air_data", "units": "m/s"}},
+     "'m/s' is not a unit of pressure"),
+    ("a polar number", {"airspeed": {"topic": "/fcc/air_data", "polar": 5}}, "polar: expected {speed"),
+    ("a polar without alpha", {"airspeed": {"topic": "/fcc/air_data", "polar": {"speed": "true_airspeed"}}},
+     "polar: needs ['alpha']"),
+    ("a polar with units", {"airspeed": dict(GOOD_AIRSPEED, units="kt")}, "either as 'vector'"),
+    ("joints as a list", {"control_surfaces": {"topic": "/fcc/air_data", "joints": ["elevator"]}},
+     "joints: expected {joint_name: field"),
+    ("no joints", {"control_surfaces": {"topic": "/fcc/air_data"}}, "input 'control_surfaces': needs 'joints"),
+    ("a list at the top", "- imu\n- airspeed\n", "expected a mapping at the top level"),
+    ("an empty file", "", "expected a mapping at the top level"),
+    ("a YAML syntax error", "imu:\n\t- topic\n", "not valid YAML: found character '\\t' that cannot start any token "
+                                               "(line 2, column 1)"),
+    ("not UTF-8", b"imu: {topic: /fcc/imu}\n\xff\xfe\n", "not UTF-8 text (byte 23)"),
+]
+
+
+@pytest.mark.parametrize("spec,needle", [c[1:] for c in BAD_MAPPINGS], ids=[c[0] for c in BAD_MAPPINGS])
+def test_a_malformed_mapping_file_is_one_line_naming_the_file(tmp_path, capsys, spec, needle):
+    src = fti_bag(tmp_path, "rec")
+    mapping = tmp_path / "mapping.yaml"
+    if isinstance(spec, dict):
+        spec = {"imu": SMALL_MAPPING["imu"], "airspeed": GOOD_AIRSPEED, **spec}
+        mapping.write_text(yaml.safe_dump(spec))
+    else:
+        mapping.write_bytes(spec if isinstance(spec, bytes) else spec.encode())
+    fails(capsys, ["convert", str(src), "--mapping", str(mapping), "--out", str(tmp_path / "o")],
+          str(mapping), needle)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["mapping.yaml", "rec"]
+
+
+def test_every_accepted_mapping_form_converts(tmp_path):
+    """The forms the checks must let through: vector airspeed with units, sign flips, field
+    specs with reduce, aircraft frames, every unit quantity."""
+    spec = {
+        "imu": {"topic": "/fcc/imu", "frame": "aircraft", "angular_velocity_units": "deg/s",
+                "angular_velocity": ["angular_velocity.x", "-angular_velocity.y", "angular_velocity.z"],
+                "linear_acceleration": ["linear_acceleration.x", "linear_acceleration.y",
+                                        {"field": "linear_acceleration.z", "reduce": "mean"}],
+                "linear_acceleration_units": "g"},
+        "airspeed": {"topic": "/fcc/imu", "vector": ["linear_acceleration.z", "angular_velocity.x",
+                                                     "angular_velocity.y"], "units": "kt"},
+        "dynamic_pressure": {"topic": "/fcc/air_data", "field": "dynamic_pressure", "units": "hPa"},
+        "thrust": {"topic": "/fcc/air_data", "field": {"field": "mach"}, "units": "lbf"},
+        "control_surfaces": {"topic": "/fcc/air_data", "joints": {"elevator": "-angle_of_attack"},
+                             "units": "deg"},
+    }
+    out = tmp_path / "out"
+    counts = convert(fti_bag(tmp_path, "rec"), write_mapping(tmp_path, spec), out)
+    assert counts == {t: 50 for t in ("/imu", "/airspeed", "/dynamic_pressure", "/control_surfaces", "/thrust")}
+    got = read_all(out)
+    k = 7
+    imu = got["/imu"][k][1]
+    # Recorded (REP-103) IMU: (0, 0.01 k, 0) rad/s and (0, 0, 9.8) m/s^2, read as aircraft
+    # axes in deg/s and g with the y rate flipped; back to REP-103 (x, -y, -z) in SI.
+    d, g = math.pi / 180.0, 9.80665
+    assert (imu.angular_velocity.x, imu.angular_velocity.y, imu.angular_velocity.z) == pytest.approx(
+        (0.0, 0.01 * k * d, 0.0), abs=1e-15)
+    assert imu.linear_acceleration.z == pytest.approx(-9.8 * g)
+    v = got["/airspeed"][k][1].vector
+    assert (v.x, v.y, v.z) == pytest.approx((9.8 * 1852 / 3600, 0.0, 0.01 * k * 1852 / 3600))
+    assert got["/dynamic_pressure"][k][1].fluid_pressure == pytest.approx(150000.0)
+    assert got["/thrust"][k][1].wrench.force.x == pytest.approx(0.15 * 4.448221615)
+    assert list(got["/control_surfaces"][k][1].position) == pytest.approx([-0.05 * d])
+
+
+# ----------------------------------------------------------------------------- negative stamps
+def test_a_negative_header_stamp_is_one_line_and_leaves_nothing(tmp_path, capsys):
+    src = fti_bag(tmp_path, "rec", imu_stamps_ns=[-5 * 10**9 + k * 10**7 for k in range(10)])
+    mapping = write_mapping(tmp_path)
+    before = tree(tmp_path)
+    fails(capsys, ["convert", str(src), "--mapping", str(mapping), "--out", str(tmp_path / "out")],
+          str(src), "/fcc/imu", "negative header stamp (-5000000000 ns")
+    assert tree(tmp_path) == before  # neither out nor out.partial nor a hidden temporary
+    # The same stamps in a replay bag (log times are unsigned; header stamps are not).
+    store = typestore()
+    bad = tmp_path / "replay"
+    from rosbags.rosbag2 import StoragePlugin, Writer
+
+    with Writer(bad, version=9, storage_plugin=StoragePlugin.MCAP) as w:
+        conn = w.add_connection("/imu", "sensor_msgs/msg/Imu", typestore=store)
+        for k in range(10):
+            msg = _standard_message(store, "imu", -5 * 10**9 + k * 10**7, (0, 0, 0, 0, 0, 9.8))
+            w.write(conn, 10**9 + k * 10**7, store.serialize_cdr(msg, "sensor_msgs/msg/Imu"))
+    before = tree(tmp_path)
+    fails(capsys, ["replay", str(bad), "--out", str(tmp_path / "r"), "--quiet"], str(bad), "/imu",
+          "negative header stamp")
+    assert tree(tmp_path) == before
+
+
+def test_write_replay_refuses_a_stamp_that_cannot_be_a_log_time(tmp_path):
+    store = typestore()
+    msg = _standard_message(store, "imu", 0, (0, 0, 0, 0, 0, 9.8))
+    for stamp in (-1, 2**64):
+        with pytest.raises(BagError, match=f"stamp {stamp} ns"):
+            write_replay(tmp_path / "o", [(stamp, "/imu", "sensor_msgs/msg/Imu", msg)], store)
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("start,end,needle", [
+    (math.inf, None, "start must be"), (math.nan, None, "start must be"), (-0.5, None, "start must be"),
+    (None, math.nan, "end must be"), (None, -1, "end must be"), ("1", None, "start must be"),
+    (True, None, "start must be"), (5.0, 2.0, "end (2 s) must be after start (5 s)"), (3, 3, "after start"),
+])
+def test_read_inputs_refuses_a_bad_span(start, end, needle):
+    with pytest.raises(ConfigError) as exc:
+        read_inputs(BUNDLED, start=start, end=end)
+    assert needle in str(exc.value)
+
+
+def test_read_inputs_cuts_the_span_it_is_given():
+    t0 = read_inputs(BUNDLED)[1]
+    messages, _ = read_inputs(BUNDLED, start=2, end=np.float64(3.5))
+    stamps = np.array([s for _k, s, _m in messages])
+    assert stamps.min() >= t0 + 2 * 10**9 and stamps.max() <= t0 + 3.5 * 10**9
+    assert len(messages) == pytest.approx(4920 * 1.5 / 12, rel=0.02)

@@ -6,27 +6,11 @@ import tempfile
 from pathlib import Path
 
 import pytest
+from bag_samples import tree as _tree
 
 from rls_uncertainty import files
 from rls_uncertainty.errors import OutputPathError
 from rls_uncertainty.files import atomic_file, output_directory
-
-
-def _tree(root: Path) -> dict:
-    """Every entry under ``root`` (not following symlinks): relative path -> file bytes,
-    ``"dir"`` or ``("link", target)``."""
-    out = {}
-    for dirpath, dirnames, filenames in os.walk(root):
-        for name in dirnames + filenames:
-            p = Path(dirpath) / name
-            rel = str(p.relative_to(root))
-            if p.is_symlink():
-                out[rel] = ("link", os.readlink(p))
-            elif p.is_dir():
-                out[rel] = "dir"
-            else:
-                out[rel] = p.read_bytes()
-    return out
 
 
 def _write(out: Path, name="result.txt", data=b"new"):
