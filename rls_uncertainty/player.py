@@ -12,6 +12,7 @@ offline replay of the same bag.
 
 from __future__ import annotations
 
+import math
 import os
 import subprocess
 import sys
@@ -85,12 +86,21 @@ class _Publisher:
         self.reader.close()
 
 
+def _check_rate(rate: float) -> None:
+    if not (math.isfinite(rate) and rate >= 0):
+        raise ConfigError(f"rate must be a finite number >= 0 (0 = as fast as possible), got {rate!r}")
+
+
 def play(bag: str | Path, *, rate: float = 1.0, clock: bool = True, reliable: bool = True,
          wait_for_subscribers: int = 0, start_delay: float = 0.5, wait_timeout: float = 30.0) -> int:
     """Publish ``bag``; ``rate`` is the speed factor (0 = as fast as possible). Waits for
     ``wait_for_subscribers`` subscribers on every topic first. Returns a process exit code."""
-    if rate < 0:
-        raise ConfigError(f"rate must be >= 0, got {rate}")
+    _check_rate(rate)
+    if not (isinstance(wait_for_subscribers, int) and wait_for_subscribers >= 0):
+        raise ConfigError(f"the number of subscribers to wait for must be an integer >= 0, got {wait_for_subscribers!r}")
+    for name, value in (("start delay", start_delay), ("wait timeout", wait_timeout)):
+        if not (math.isfinite(value) and value >= 0):
+            raise ConfigError(f"{name} must be a finite number of seconds >= 0, got {value!r}")
     _loopback_default()
     import rclpy  # noqa: PLC0415
 
@@ -127,6 +137,7 @@ _REPLAY_DEPTH = 10_000
 
 def demo(rate: float = 4.0, params_file: str = "t2") -> int:
     """The live node on the bundled bag: estimates over DDS beside the offline replay."""
+    _check_rate(rate)
     _loopback_default()
     import numpy as np  # noqa: PLC0415
     import rclpy  # noqa: PLC0415

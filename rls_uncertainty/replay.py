@@ -193,13 +193,14 @@ def _plots(out_dir: Path, pipe: Pipeline, outputs) -> list[Path]:
 
 
 def replay(bag: str | Path, params: dict, out: str | Path, *, start=None, end=None, strict: bool = True,
-           progress: bool = True, plots: bool = True, force: bool = False) -> ReplayResult:
+           progress: bool = True, plots: bool = True, force: bool = False, inputs=()) -> ReplayResult:
     """Run a replay bag through the pipeline and write the outputs to ``out``
     (:func:`.files.output_directory`: complete or absent; an existing non-empty ``out`` only
-    with ``force``; never over the input bag)."""
+    with ``force``; never over the input bag or the other ``inputs``, such as the parameter
+    file)."""
     config = pipeline_config(params)
     topics = node_config(params).topics
-    with output_directory(out, force=force, inputs=(bag,)) as tmp:
+    with output_directory(out, force=force, inputs=(bag, *inputs)) as tmp:
         messages, _t0 = read_inputs(bag, topics, strict=strict, start=start, end=end)
         result = run_pipeline(messages, config, progress=progress)
         _write_csv(tmp / "estimates.csv", result.pipeline, result.outputs)

@@ -67,3 +67,23 @@ def test_no_partial_output_when_the_replay_fails(tmp_path, capsys):
     out = tmp_path / "out"
     fails(capsys, ["replay", str(tmp_path / "missing"), "--out", str(out), "--quiet"], "missing", "no such bag")
     assert not out.exists()
+
+
+def test_the_printed_summary_is_the_last_sample_of_every_ready_model(tmp_path, capsys):
+    assert cli.main(["replay", str(BUNDLED), "--config", "t2", "--out", str(tmp_path / "o"), "--no-plots",
+                     "--quiet"]) == 0
+    out = capsys.readouterr().out.splitlines()
+    assert out[0].split() == ["parameter", "estimate", "SE", "conv.", "SE", "corr.", "corr/conv"]
+    assert set(out[1]) == {"-"}
+    params = load_parameters_file("t2")
+    again = run_pipeline(read_inputs(BUNDLED)[0], pipeline_config(params))
+    last = again.outputs[-1]
+    expected = [(name, last.theta[j, i], last.se_conventional[j, i], last.se[j, i])
+                for j, names in enumerate(again.pipeline.parameter_names) for i, name in enumerate(names)]
+    rows = [line.split() for line in out[2:2 + len(expected)]]
+    assert [r[0] for r in rows] == [e[0] for e in expected] == [
+        "CZ_0", "CZ_alpha", "CZ_delta_e", "Cm_0", "Cm_alpha", "Cm_q", "Cm_delta_e"]
+    for row, (_name, est, se_conv, se_corr) in zip(rows, expected):
+        # Four decimals: these standard errors are all above 0.001.
+        assert row[1:] == [f"{est:.4f}", f"{se_conv:.4f}", f"{se_corr:.4f}", f"{se_corr / se_conv:.2f}"]
+    assert out[2 + len(expected)] == ""
