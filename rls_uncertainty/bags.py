@@ -425,8 +425,7 @@ def _check_field(value, where: str) -> None:
             raise BagError(f"{where}: needs 'field: PATH'")
         if value.get("reduce", "sum") not in _REDUCTIONS:
             raise BagError(f"{where}: reduce must be one of {list(_REDUCTIONS)}, got {value['reduce']!r}")
-        _check_field(value["field"], where)
-        return
+        value = value["field"]
     if not isinstance(value, str) or not value.lstrip("-"):
         raise BagError(f"{where}: expected a field name (a dotted path such as vector.x), got {value!r}")
 

@@ -266,6 +266,8 @@ BAD_MAPPINGS = [
      "field: expected a field name"),
     ("a field spec without field", {"thrust": {"topic": "/fcc/air_data", "field": {"reduce": "sum"}}},
      "needs 'field: PATH'"),
+    ("a field spec inside a field spec", {"thrust": {"topic": "/fcc/air_data", "field": {"field": {"field": "m"}}}},
+     "field: expected a field name"),
     ("an unknown reduction", {"thrust": {"topic": "/fcc/air_data", "field": {"field": "mach", "reduce": "max"}}},
      "reduce must be one of ['sum', 'mean']"),
     ("a unit of another quantity", {"dynamic_pressure": {"topic": "/fcc/air_data", "units": "m/s"}},
