@@ -542,10 +542,10 @@ def _scalar(msg, spec, where: str) -> float:
     name = spec if isinstance(spec, str) else spec["field"]
     sign = -1.0 if name.startswith("-") else 1.0
     value = _field(msg, name.lstrip("-"), where)
-    if isinstance(value, (list, tuple, np.ndarray)):
-        reduce = "sum" if isinstance(spec, str) else spec.get("reduce", "sum")
-        value = float(np.sum(value)) if reduce == "sum" else float(np.mean(value))
     try:
+        if isinstance(value, (list, tuple, np.ndarray)):
+            reduce = "sum" if isinstance(spec, str) else spec.get("reduce", "sum")
+            value = np.sum(value) if reduce == "sum" else np.mean(value)
         return sign * float(value)
     except (TypeError, ValueError) as exc:
         raise BagError(f"{where}: field {name!r} is not a number") from exc

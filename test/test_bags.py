@@ -135,6 +135,11 @@ def test_mapping_with_missing_topic_or_field(tmp_path, capsys):
     spec = dict(SMALL_MAPPING, dynamic_pressure={"topic": "/fcc/air_data", "field": "qbar"})
     fails(capsys, ["convert", str(src), "--mapping", str(write_mapping(tmp_path, spec)), "--out", str(tmp_path / "o")],
            str(src), "/fcc/air_data", "'qbar'")
+    # Fields that are not numbers: a message, an array of text (JointState names).
+    for field in ("header", "header.frame_id"):
+        spec = dict(SMALL_MAPPING, dynamic_pressure={"topic": "/fcc/air_data", "field": field})
+        fails(capsys, ["convert", str(src), "--mapping", str(write_mapping(tmp_path, spec)), "--out",
+                       str(tmp_path / "o")], str(src), f"field {field!r} is not a number")
     spec = dict(SMALL_MAPPING, dynamic_pressure={"topic": "/fcc/air_data", "field": "dynamic_pressure", "units": "bar"})
     fails(capsys, ["convert", str(src), "--mapping", str(write_mapping(tmp_path, spec)), "--out", str(tmp_path / "o")],
            "unknown unit 'bar'")
@@ -386,3 +391,29 @@ def test_read_inputs_cuts_the_span_it_is_given():
     stamps = np.array([s for _k, s, _m in messages])
     assert stamps.min() >= t0 + 2 * 10**9 and stamps.max() <= t0 + 3.5 * 10**9
     assert len(messages) == pytest.approx(4920 * 1.5 / 12, rel=0.02)
+
+
+def test_an_array_of_text_as_field_is_one_line(tmp_path, capsys):
+    from rosbags.rosbag2 import StoragePlugin, Writer
+
+    store = typestore()
+    src = tmp_path / "rec"
+    with Writer(src, version=9, storage_plugin=StoragePlugin.MCAP) as w:
+        conns = {t: w.add_connection(t, m, typestore=store) for t, m in (
+            ("/imu", "sensor_msgs/msg/Imu"), ("/air", "geometry_msgs/msg/Vector3Stamped"),
+            ("/js", "sensor_msgs/msg/JointState"))}
+        for k in range(5):
+            s = 10**18 + k * 10**7
+            for topic, kind, values, names in (("/imu", "imu", (0, 0, 0, 0, 0, 9.8), None),
+                                               ("/air", "airspeed", (50, 0, 1), None),
+                                               ("/js", "control_surfaces", [0.1, 0.2], ["l", "r"])):
+                msg = _standard_message(store, kind, s, values, names)
+                w.write(conns[topic], s, store.serialize_cdr(msg, conns[topic].msgtype))
+    spec = {"imu": {"topic": "/imu"}, "airspeed": {"topic": "/air"},
+            "control_surfaces": {"topic": "/js", "joints": {"elevator": "name"}}}
+    fails(capsys, ["convert", str(src), "--mapping", str(write_mapping(tmp_path, spec)), "--out", str(tmp_path / "o")],
+          "/js", "field 'name' is not a number")
+    # The numeric array of the same message is summed (the mapping's default reduction).
+    spec["control_surfaces"]["joints"] = {"elevator": "position"}
+    convert(src, write_mapping(tmp_path, spec), tmp_path / "o")
+    assert [list(m.position) for _t, m in read_all(tmp_path / "o")["/control_surfaces"]] == [[pytest.approx(0.3)]] * 5
