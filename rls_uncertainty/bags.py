@@ -19,6 +19,7 @@ topic and what is wrong.
 from __future__ import annotations
 
 import math
+import numbers
 import struct
 from dataclasses import dataclass
 from pathlib import Path
@@ -28,7 +29,7 @@ import numpy as np
 
 from . import cdr
 from .aero import rep103_to_aircraft
-from .config import package_path, read_yaml
+from .config import package_path
 from .errors import BagError, ConfigError
 from .files import output_directory
 from .messages import INPUTS, MESSAGE_TYPES, stamp_ns
@@ -254,6 +255,9 @@ def write_replay(path: str | Path, records: list, store=None, *, force: bool = F
     ]
     if not recs:
         raise BagError(f"{path}: nothing to write (no messages)")
+    bad = next((r for r in recs if not 0 <= r.stamp < 2**64), None)
+    if bad is not None:
+        raise BagError(f"{path}: topic {bad.topic}: stamp {bad.stamp} ns cannot be a log time (0 to 2^64 - 1 ns)")
     rank = {}
     for r in recs:
         rank.setdefault(r.topic, _TOPIC_RANK.get(r.topic.strip("/"), len(_TOPIC_RANK)))
@@ -308,8 +312,9 @@ def read_inputs(path: str | Path, topics: dict[str, str] | None = None, *, stric
     """Standard-input messages of a replay bag in log order: a list of ``(kind, stamp_ns,
     msg)`` and the bag's start time. ``strict`` refuses a topic whose header stamps do not
     increase or differ from the log time; ``start``/``end`` (s from the bag start) cut the
-    span."""
+    span (finite, at least 0, ``end`` after ``start``; else :class:`ConfigError`)."""
     path = Path(path)
+    _check_span(start, end)
     store = typestore()
     wanted = input_topics(topics)
     by_topic = {v: k for k, v in wanted.items()}
@@ -330,8 +335,12 @@ def read_inputs(path: str | Path, topics: dict[str, str] | None = None, *, stric
         hi = None if end is None else t0 + int(round(end * 1e9))
         last: dict[str, int] = {}
         out = []
+        seen = 0
         for conn, _t, msg in _iter_messages(path, reader, conns, store, fast=True):
+            seen += 1
             stamp = stamp_ns(msg)
+            if stamp < 0:
+                raise BagError(f"{path}: topic {conn.topic}: negative header stamp ({stamp} ns, before 1970)")
             if strict:
                 prev = last.get(conn.topic)
                 if prev is not None and stamp <= prev:
@@ -341,11 +350,26 @@ def read_inputs(path: str | Path, topics: dict[str, str] | None = None, *, stric
             if (lo is not None and stamp < lo) or (hi is not None and stamp > hi):
                 continue
             out.append((by_topic[conn.topic], stamp, msg))
+        duration = (reader.end_time - t0) * 1e-9
     finally:
         reader.close()
     if not out:
-        raise BagError(f"{path}: no input messages (empty bag or empty time span)")
+        if seen:
+            raise BagError(f"{path}: no input messages from {start or 0:g} s to "
+                           f"{'the end' if end is None else f'{end:g} s'} (the bag holds {duration:.1f} s)")
+        raise BagError(f"{path}: no input messages (empty bag)")
     return out, t0
+
+
+def _check_span(start, end) -> None:
+    """``start`` and ``end``: None or finite seconds >= 0 from the bag start, end after start."""
+    for name, value in (("start", start), ("end", end)):
+        if value is None:
+            continue
+        if isinstance(value, bool) or not isinstance(value, numbers.Real) or not math.isfinite(value) or value < 0:
+            raise ConfigError(f"{name} must be a finite number of seconds >= 0 from the bag start, got {value!r}")
+    if start is not None and end is not None and end <= start:
+        raise ConfigError(f"end ({end:g} s) must be after start ({start:g} s)")
 
 
 # ------------------------------------------------------------------------------ convert
@@ -359,6 +383,29 @@ UNITS = {
     "N": 1.0, "lbf": 4.448221615, "kN": 1000.0,
 }
 FRAMES = ("rep103", "aircraft")
+_QUANTITY_UNITS = {
+    "angular rate": ("rad/s", "deg/s"),
+    "acceleration": ("m/s^2", "g", "ft/s^2"),
+    "speed": ("m/s", "ft/s", "kt", "km/h"),
+    "angle": ("rad", "deg"),
+    "pressure": ("Pa", "hPa", "psf", "psi"),
+    "force": ("N", "lbf", "kN"),
+}
+# Per standard input, every key a mapping may give: what it holds (a field list of three,
+# one field, a unit of a quantity, ...). Anything else is refused, so a misspelt key is an
+# error instead of a silently ignored setting.
+_MAPPING_KEYS = {
+    "imu": {"topic": "topic", "frame": "frame",
+            "angular_velocity": "fields3", "angular_velocity_units": "angular rate",
+            "linear_acceleration": "fields3", "linear_acceleration_units": "acceleration"},
+    "airspeed": {"topic": "topic", "frame": "frame", "vector": "fields3", "units": "speed",
+                 "polar": "polar", "speed_units": "speed", "angle_units": "angle"},
+    "dynamic_pressure": {"topic": "topic", "field": "field", "units": "pressure"},
+    "control_surfaces": {"topic": "topic", "joints": "joints", "units": "angle"},
+    "thrust": {"topic": "topic", "field": "field", "units": "force"},
+}
+_POLAR_KEYS = ("speed", "alpha", "beta")
+_REDUCTIONS = ("sum", "mean")
 
 
 def _unit(spec: dict, key: str, default: str, where: str) -> float:
@@ -368,24 +415,116 @@ def _unit(spec: dict, key: str, default: str, where: str) -> float:
     return UNITS[name]
 
 
-def load_mapping(path: str | Path) -> dict:
-    """A mapping file: for each standard input, the recorded topic, fields, units and frame."""
-    path = Path(path)
+def _check_field(value, where: str) -> None:
+    """A field: a dotted path (``-`` prefix flips the sign), or ``{field: PATH, reduce: sum|mean}``."""
+    if isinstance(value, dict):
+        extra = sorted(map(str, set(value) - {"field", "reduce"}))
+        if extra:
+            raise BagError(f"{where}: unknown key(s) {extra}; a field is PATH or {{field: PATH, reduce: sum|mean}}")
+        if "field" not in value:
+            raise BagError(f"{where}: needs 'field: PATH'")
+        if value.get("reduce", "sum") not in _REDUCTIONS:
+            raise BagError(f"{where}: reduce must be one of {list(_REDUCTIONS)}, got {value['reduce']!r}")
+        value = value["field"]
+    if not isinstance(value, str) or not value.lstrip("-"):
+        raise BagError(f"{where}: expected a field name (a dotted path such as vector.x), got {value!r}")
+
+
+def _check_input(kind: str, spec, where: str) -> None:
+    keys = _MAPPING_KEYS[kind]
+    if not isinstance(spec, dict):
+        raise BagError(f"{where}: expected a mapping with at least 'topic', got {spec!r}")
+    extra = sorted(map(str, set(spec) - set(keys)))
+    if extra:
+        raise BagError(f"{where}: unknown key(s) {extra}; known: {list(keys)}")
+    if "topic" not in spec:
+        raise BagError(f"{where}: needs a 'topic'")
+    if kind == "control_surfaces" and "joints" not in spec:
+        raise BagError(f"{where}: needs 'joints: {{joint_name: field, ...}}'")
+    if kind == "airspeed":
+        given = "polar" if "polar" in spec else "vector"
+        other = ("vector", "units") if given == "polar" else ("polar", "speed_units", "angle_units")
+        clash = [k for k in other if k in spec]
+        if clash:
+            raise BagError(f"{where}: {clash} do not go with the {given} form; give the airspeed either as "
+                           "'vector' (with 'units') or as 'polar' (with 'speed_units', 'angle_units')")
+    for key, value in spec.items():
+        what, at = keys[key], f"{where}: {key}"
+        if what == "topic":
+            if not isinstance(value, str) or not value:
+                raise BagError(f"{at}: expected a topic name, got {value!r}")
+        elif what == "frame":
+            if not isinstance(value, str) or value not in FRAMES:
+                raise BagError(f"{at}: must be one of {list(FRAMES)}, got {value!r}")
+        elif what == "fields3":
+            if not isinstance(value, list) or len(value) != 3:
+                raise BagError(f"{at}: expected a list of three fields (x, y, z), got {value!r}")
+            for i, f in enumerate(value):
+                _check_field(f, f"{at}[{i}]")
+        elif what == "field":
+            _check_field(value, at)
+        elif what == "polar":
+            if not isinstance(value, dict):
+                raise BagError(f"{at}: expected {{speed: FIELD, alpha: FIELD, beta: FIELD}}, got {value!r}")
+            extra = sorted(map(str, set(value) - set(_POLAR_KEYS)))
+            missing = [k for k in ("speed", "alpha") if k not in value]
+            if extra or missing:
+                raise BagError(f"{at}: " + (f"unknown key(s) {extra}" if extra else f"needs {missing}")
+                               + f"; known: {list(_POLAR_KEYS)} (beta optional)")
+            for k, f in value.items():
+                _check_field(f, f"{at}.{k}")
+        elif what == "joints":
+            if not isinstance(value, dict) or not value:
+                raise BagError(f"{at}: expected {{joint_name: field, ...}}, got {value!r}")
+            for name, f in value.items():
+                if not isinstance(name, str) or not name:
+                    raise BagError(f"{at}: joint names must be text, got {name!r}")
+                _check_field(f, f"{at}.{name}")
+        else:  # a unit of the quantity ``what``
+            allowed = _QUANTITY_UNITS[what]
+            if not isinstance(value, str) or value not in UNITS:
+                raise BagError(f"{at}: unknown unit {value!r}; {what} units: {list(allowed)}")
+            if value not in allowed:
+                raise BagError(f"{at}: {value!r} is not a unit of {what}; {what} units: {list(allowed)}")
+
+
+def _read_mapping_yaml(path: Path) -> dict:
+    """The mapping file's YAML; every problem is a one-line :class:`BagError`."""
+    import yaml  # noqa: PLC0415
+
     try:
-        data = read_yaml(path)
-    except ConfigError as exc:
-        raise BagError(f"mapping file {exc}") from exc
-    unknown = sorted(set(data) - set(INPUTS))
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError as exc:
+        raise BagError(f"mapping file {path}: no such file") from exc
+    except UnicodeDecodeError as exc:
+        raise BagError(f"mapping file {path}: not UTF-8 text (byte {exc.start})") from exc
+    try:
+        data = yaml.safe_load(text)
+    except yaml.MarkedYAMLError as exc:
+        where = exc.problem_mark or exc.context_mark
+        at = f" (line {where.line + 1}, column {where.column + 1})" if where is not None else ""
+        raise BagError(f"mapping file {path}: not valid YAML: {exc.problem or exc.context}{at}") from exc
+    except yaml.YAMLError as exc:
+        raise BagError(f"mapping file {path}: not valid YAML: {' '.join(str(exc).split())}") from exc
+    if not isinstance(data, dict):
+        raise BagError(f"mapping file {path}: expected a mapping at the top level")
+    return data
+
+
+def load_mapping(path: str | Path) -> dict:
+    """A mapping file: for each standard input, the recorded topic, fields, units and frame.
+    Every key and value is checked here, before any bag is read: a problem is a
+    :class:`BagError` naming the file, the input and the key."""
+    path = Path(path)
+    data = _read_mapping_yaml(path)
+    unknown = sorted(map(str, set(data) - set(INPUTS)))
     if unknown:
         raise BagError(f"{path}: unknown input(s) {unknown}; known: {list(INPUTS)}")
     for kind in ("imu", "airspeed"):
         if kind not in data:
             raise BagError(f"{path}: the mapping must give {kind!r}")
     for kind, spec in data.items():
-        if not isinstance(spec, dict) or "topic" not in spec:
-            raise BagError(f"{path}: input {kind!r} needs a 'topic'")
-        if spec.get("frame", "rep103") not in FRAMES:
-            raise BagError(f"{path}: input {kind!r}: frame must be one of {FRAMES}")
+        _check_input(kind, spec, f"{path}: input {kind!r}")
     return data
 
 
@@ -403,10 +542,10 @@ def _scalar(msg, spec, where: str) -> float:
     name = spec if isinstance(spec, str) else spec["field"]
     sign = -1.0 if name.startswith("-") else 1.0
     value = _field(msg, name.lstrip("-"), where)
-    if isinstance(value, (list, tuple, np.ndarray)):
-        reduce = "sum" if isinstance(spec, str) else spec.get("reduce", "sum")
-        value = float(np.sum(value)) if reduce == "sum" else float(np.mean(value))
     try:
+        if isinstance(value, (list, tuple, np.ndarray)):
+            reduce = "sum" if isinstance(spec, str) else spec.get("reduce", "sum")
+            value = np.sum(value) if reduce == "sum" else np.mean(value)
         return sign * float(value)
     except (TypeError, ValueError) as exc:
         raise BagError(f"{where}: field {name!r} is not a number") from exc
@@ -484,6 +623,9 @@ def convert(src: str | Path, mapping: str | Path, out: str | Path, schemas: list
                 stamp = stamp_ns(msg)
             except AttributeError as exc:
                 raise BagError(f"{src}: topic {conn.topic}: message has no header stamp") from exc
+            if stamp < 0:
+                raise BagError(f"{src}: topic {conn.topic}: negative header stamp ({stamp} ns, before 1970); "
+                               "a replay bag logs every message at its stamp")
             prev = last.get(conn.topic)
             if prev is not None and stamp <= prev:
                 what = "duplicate" if stamp == prev else "non-monotonic"

@@ -12,14 +12,15 @@ offline replay of the same bag.
 
 from __future__ import annotations
 
+import math
 import os
 import subprocess
 import sys
 import time
 from pathlib import Path
 
-from .errors import ConfigError
-from .messages import message_class
+from .errors import BagError, ConfigError
+from .messages import ARRAY_OUTPUTS, NODE_NAME, message_class
 
 __all__ = ["play", "demo", "bundled_bag"]
 
@@ -34,9 +35,8 @@ class _Publisher:
 
     def __init__(self, node, bag: Path, *, clock: bool, reliable: bool, depth: int = 1000) -> None:
         from rclpy.qos import QoSHistoryPolicy, QoSProfile, QoSReliabilityPolicy  # noqa: PLC0415
-        from rosgraph_msgs.msg import Clock  # noqa: PLC0415
 
-        from .bags import BagError, _open_reader, typestore  # noqa: PLC0415
+        from .bags import _open_reader, typestore  # noqa: PLC0415
 
         self.path = Path(bag)
         self.reader = _open_reader(self.path, typestore())
@@ -51,12 +51,11 @@ class _Publisher:
                 raise BagError(f"{self.path}: topic {conn.topic}: type {conn.msgtype} is not available in this "
                                "ROS install") from exc
             self.pubs[conn.topic] = node.create_publisher(cls, conn.topic, qos)
-        self.clock_pub = node.create_publisher(Clock, "/clock", 10) if clock else None
-        self._clock = Clock()
+        clock_type = message_class("rosgraph_msgs/msg/Clock")
+        self.clock_pub = node.create_publisher(clock_type, "/clock", 10) if clock else None
+        self._clock = clock_type()
 
     def wait_for_subscribers(self, n: int, timeout: float, spin=None) -> None:
-        from .bags import BagError  # noqa: PLC0415
-
         deadline = time.monotonic() + timeout
         while n and any(p.get_subscription_count() < n for p in self.pubs.values()):
             if time.monotonic() > deadline:
@@ -87,12 +86,21 @@ class _Publisher:
         self.reader.close()
 
 
+def _check_rate(rate: float) -> None:
+    if not (math.isfinite(rate) and rate >= 0):
+        raise ConfigError(f"rate must be a finite number >= 0 (0 = as fast as possible), got {rate!r}")
+
+
 def play(bag: str | Path, *, rate: float = 1.0, clock: bool = True, reliable: bool = True,
          wait_for_subscribers: int = 0, start_delay: float = 0.5, wait_timeout: float = 30.0) -> int:
     """Publish ``bag``; ``rate`` is the speed factor (0 = as fast as possible). Waits for
     ``wait_for_subscribers`` subscribers on every topic first. Returns a process exit code."""
-    if rate < 0:
-        raise ConfigError(f"rate must be >= 0, got {rate}")
+    _check_rate(rate)
+    if not (isinstance(wait_for_subscribers, int) and wait_for_subscribers >= 0):
+        raise ConfigError(f"the number of subscribers to wait for must be an integer >= 0, got {wait_for_subscribers!r}")
+    for name, value in (("start delay", start_delay), ("wait timeout", wait_timeout)):
+        if not (math.isfinite(value) and value >= 0):
+            raise ConfigError(f"{name} must be a finite number of seconds >= 0, got {value!r}")
     _loopback_default()
     import rclpy  # noqa: PLC0415
 
@@ -129,15 +137,16 @@ _REPLAY_DEPTH = 10_000
 
 def demo(rate: float = 4.0, params_file: str = "t2") -> int:
     """The live node on the bundled bag: estimates over DDS beside the offline replay."""
+    _check_rate(rate)
     _loopback_default()
     import numpy as np  # noqa: PLC0415
     import rclpy  # noqa: PLC0415
     from rclpy.qos import QoSHistoryPolicy, QoSProfile, QoSReliabilityPolicy  # noqa: PLC0415
-    from std_msgs.msg import Float64MultiArray, Header  # noqa: PLC0415
 
     from .bags import read_inputs  # noqa: PLC0415
     from .config import config_dir, load_parameters_file, pipeline_config  # noqa: PLC0415
     from .replay import run_pipeline  # noqa: PLC0415
+    from .report import results_table, rows_from_arrays  # noqa: PLC0415
     from .simulation import T2_TRUE  # noqa: PLC0415
 
     bag = bundled_bag()
@@ -157,12 +166,13 @@ def demo(rate: float = 4.0, params_file: str = "t2") -> int:
     latest: dict[str, object] = {}
     counts = {"samples": 0}
     qos = QoSProfile(depth=1000, reliability=QoSReliabilityPolicy.RELIABLE, history=QoSHistoryPolicy.KEEP_LAST)
-    subs = [node.create_subscription(Header, "/rls_estimator/sample_stamp",
+    subs = [node.create_subscription(message_class("std_msgs/msg/Header"), f"/{NODE_NAME}/sample_stamp",
                                      lambda m: counts.__setitem__("samples", counts["samples"] + 1), qos)]
+    array_type = message_class("std_msgs/msg/Float64MultiArray")
     for m in config.models:
-        for suffix in ("estimates", "standard_errors", "standard_errors_conventional"):
-            topic = f"/rls_estimator/{m.output}/{suffix}"
-            subs.append(node.create_subscription(Float64MultiArray, topic,
+        for suffix in ARRAY_OUTPUTS:
+            topic = f"/{NODE_NAME}/{m.output}/{suffix}"
+            subs.append(node.create_subscription(array_type, topic,
                                                  lambda msg, t=topic: latest.__setitem__(t, msg), qos))
     player = None
     try:
@@ -196,24 +206,20 @@ def demo(rate: float = 4.0, params_file: str = "t2") -> int:
             node_proc.kill()
     last = offline.outputs[-1]
     print(f"\nlive node: {counts['samples']} samples published (offline replay: {want})\n")
-    header = f"{'parameter':<12}{'true':>9}{'estimate':>11}{'SE conv.':>10}{'SE corr.':>10}{'corr/conv':>10}"
-    print(header)
-    print("-" * len(header))
+    rows = []
     worst = 0.0
     for j, m in enumerate(config.models):
-        get = lambda s: latest.get(f"/rls_estimator/{m.output}/{s}")  # noqa: E731
-        est, se, sc = get("estimates"), get("standard_errors"), get("standard_errors_conventional")
-        if est is None:
+        get = lambda s: latest.get(f"/{NODE_NAME}/{m.output}/{s}")  # noqa: E731
+        est, se, sc = (get(suffix) for suffix in ARRAY_OUTPUTS)
+        if est is None or se is None or sc is None:
             print(f"{m.output}: no estimate received from the node; its log: {node_log.name}")
             return 1
         names = est.layout.dim[0].label.split(",")
-        for i, name in enumerate(names):
-            true = T2_TRUE.get(name)
-            t = f"{true:9.3f}" if true is not None else f"{'-':>9}"
-            print(f"{name:<12}{t}{est.data[i]:11.4f}{sc.data[i]:10.4f}{se.data[i]:10.4f}{se.data[i] / sc.data[i]:10.2f}")
+        rows += rows_from_arrays(names, est.data, sc.data, se.data, T2_TRUE)
         n = len(names)
         for live, off in ((est.data, last.theta[j, :n]), (se.data, last.se[j, :n]), (sc.data, last.se_conventional[j, :n])):
             worst = max(worst, float(np.max(np.abs(np.array(live) - off) / np.abs(off))))
+    print(results_table(rows))
     print(f"\nlargest relative difference between the live node and the offline replay: {worst:.1e}")
     os.unlink(node_log.name)
     print("Conventional standard errors assume white residuals (Eq. 13); the corrected ones use the recursive\n"

@@ -30,6 +30,7 @@ from .config import PipelineConfig, node_config, pipeline_config
 from .files import output_directory
 from .messages import ARRAY_OUTPUTS, NODE_NAME, feed, stamp_label
 from .pipeline import Pipeline
+from .report import results_table, rows_from_arrays
 
 __all__ = ["ReplayResult", "run_pipeline", "replay", "output_records", "NODE_NAME"]
 
@@ -120,16 +121,14 @@ def _names_of(pipe: Pipeline, out):
 
 
 def summary_table(pipe: Pipeline, outputs) -> str:
+    """The last sample's estimates of every ready model (:func:`.report.results_table`)."""
     if not outputs:
         return "no estimates: no model became ready (check the excitation and the configuration)"
     last = outputs[-1]
-    lines = [f"{'parameter':<14}{'estimate':>13}{'SE corr.':>12}{'SE conv.':>12}{'corr/conv':>11}"]
-    lines.append("-" * len(lines[0]))
-    for (name, _l, theta, se, sc), names in zip(pipe.published(last), _names_of(pipe, last)):
-        for p, a, b, c in zip(names, theta, se, sc):
-            ratio = b / c if c > 0 else float("nan")
-            lines.append(f"{p:<14}{a:13.5g}{b:12.4g}{c:12.4g}{ratio:11.2f}")
-    return "\n".join(lines)
+    rows = []
+    for (_name, _l, theta, se, sc), names in zip(pipe.published(last), _names_of(pipe, last)):
+        rows += rows_from_arrays(names, theta, sc, se)
+    return results_table(rows)
 
 
 def _plots(out_dir: Path, pipe: Pipeline, outputs) -> list[Path]:
@@ -194,13 +193,14 @@ def _plots(out_dir: Path, pipe: Pipeline, outputs) -> list[Path]:
 
 
 def replay(bag: str | Path, params: dict, out: str | Path, *, start=None, end=None, strict: bool = True,
-           progress: bool = True, plots: bool = True, force: bool = False) -> ReplayResult:
+           progress: bool = True, plots: bool = True, force: bool = False, inputs=()) -> ReplayResult:
     """Run a replay bag through the pipeline and write the outputs to ``out``
     (:func:`.files.output_directory`: complete or absent; an existing non-empty ``out`` only
-    with ``force``; never over the input bag)."""
+    with ``force``; never over the input bag or the other ``inputs``, such as the parameter
+    file)."""
     config = pipeline_config(params)
     topics = node_config(params).topics
-    with output_directory(out, force=force, inputs=(bag,)) as tmp:
+    with output_directory(out, force=force, inputs=(bag, *inputs)) as tmp:
         messages, _t0 = read_inputs(bag, topics, strict=strict, start=start, end=end)
         result = run_pipeline(messages, config, progress=progress)
         _write_csv(tmp / "estimates.csv", result.pipeline, result.outputs)
