@@ -39,7 +39,7 @@ from . import covariance, state
 from .initialization import ExactInitialization
 from .lag_storage import GROWTH_START, LagStorage
 from .lag_window import lag_weights
-from .options import COVARIANCE_KINDS, check_kind, check_options, prior_diagonal
+from .options import check_kind, check_options, prior_diagonal
 
 __all__ = ["EstimatorBank", "vecdot"]
 
@@ -47,6 +47,7 @@ _F64 = np.dtype(np.float64)
 
 # A sample whose quantities are all at most this in magnitude is applied without checks.
 _SAFE_SQUARED = 1e200
+_KIND_INDEX = {"corrected": 0, "conventional": 1}  # COVARIANCE_KINDS
 
 
 def _einsum_vecdot(a: np.ndarray, b: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
@@ -120,11 +121,11 @@ class EstimatorBank:
         self.n_eff = 0.0  # n_k = sum_j f^(k-j); equals k when f = 1
         # [D; theta'] in column-scaled units: _aug[:, :n] = S D S, _aug[:, n] = S theta.
         self._aug = np.zeros((m, n + 1, n))
+        self._D = self._aug[:, :n]
         self._inv_s = self._mask.astype(float)  # 1/s on real parameters, 0 on padding
         self._ready = np.zeros(m, dtype=bool)
         self._ready_at = np.zeros(m, dtype=np.int64)
         self.repairs = np.zeros(m, dtype=np.int64)
-        self._zz = np.zeros(m)  # sum_j f^(k-j) z_j^2, the scale of an exact fit
         cap = GROWTH_START if self.n_lags is None else self.n_lags + 1
         self._lags = LagStorage(m, n, cap, all_lags=self.n_lags is None, forgetting=self.forgetting)
         self._init = ExactInitialization(self)
@@ -139,7 +140,13 @@ class EstimatorBank:
         self._neg_e = self._g[:, n, 0]
         self._y_flat = self._y.reshape(-1)
         self._g_flat = self._g.reshape(-1)
+        self._xs_col = self._xs[:, :, None]
+        self._z_col = self._z_slot[:, None, None]
+        self._d = np.zeros(m)  # d_k = f + x' D x
+        self._d_col = self._d[:, None, None]
+        self._root = np.zeros(m)  # sqrt(d_k / f)
         self._outer = np.zeros((m, n + 1, n))
+        self._evaluator = covariance.CovarianceEvaluator(m, n, eq13=self.forgetting == 1.0)
         self._covariances = None  # covariance.Covariances of the current sample
         self._window_key = None
 
@@ -156,6 +163,7 @@ class EstimatorBank:
         invalid = ~(self._mask & self._ready[:, None])  # padding and models not ready: NaN
         self._theta_scale = np.where(invalid, np.nan, self._inv_s)
         self._cov_scale = self._theta_scale[:, :, None] * self._theta_scale[:, None, :]
+        self._se_scale = 2.0 * self._cov_scale.diagonal(0, 1, 2)  # see covariance.Covariances
         self._init.reset()
         self._covariances = None
 
@@ -195,16 +203,15 @@ class EstimatorBank:
         self._z_slot[...] = z
         if not np.dot(self._y_flat, self._y_flat) <= _SAFE_SQUARED:
             return False
-        np.matmul(self._aug, self._xs[:, :, None], out=self._g)  # (D x, theta' x)
-        self._d = d = vecdot(self._xs, self._Dx)
+        np.matmul(self._aug, self._xs_col, out=self._g)  # (D x, theta' x)
+        d = vecdot(self._xs, self._Dx, out=self._d)
         d += self.forgetting  # d_k = f + x' D x: the denominator of Eq. 15a
         np.subtract(self._neg_e, z, out=self._neg_e)  # -e_k = x' theta_(k-1) - z_k
         return np.dot(self._g_flat, self._g_flat) <= _SAFE_SQUARED
 
     def _apply(self, z: np.ndarray) -> None:
         """Add the prepared sample to the state (Eqs. 15-17, 21)."""
-        n, f = self.n_max, self.forgetting
-        lags = self._lags
+        f, lags = self.forgetting, self._lags
         k = self.k + 1
         if k > lags.cap and self.n_lags is None:
             lags.grow(self.n_window)
@@ -212,74 +219,61 @@ class EstimatorBank:
         w = k if k < lags.cap else lags.cap  # lags held after this sample
         p = lags.ptr - 1  # >= 0: see LagStorage.relocate
         lags.x[:, p] = self._xs
-        lags.z[:, p] = z
+        waiting = not self._all_ready
+        if waiting:  # (x, z) is needed until initialization
+            lags.y[:, p] = self._y
         self.k = k
         lags.ptr = p
         self.n_eff = f * self.n_eff + 1.0  # n_k
 
         # Eqs. 15a-c: [D; theta'] -= u (D x)' / d with u = (D x, -e).
-        d = self._d
         outer = np.multiply(self._g, self._Dx_row, out=self._outer)
-        outer /= d[:, None, None]
+        outer /= self._d_col
         self._aug -= outer  # Eq. 15b (D rows), Eq. 15c (theta row)
         if f != 1.0:
-            self._aug[:, :n] /= f  # Eq. 15b with forgetting
+            self._D /= f  # Eq. 15b with forgetting
         v = lags.v[:, p]
-        neg_e = self._neg_e
-        if self.residual == "standardized":
-            np.divide(neg_e, -np.sqrt(d if f == 1.0 else d / f), out=v)  # v_k = e_k sqrt(f/d_k)
+        neg_e, d = self._neg_e, self._d
+        if self.residual == "standardized":  # v_k = e_k sqrt(f/d_k)
+            root = np.sqrt(d if f == 1.0 else np.divide(d, f, out=self._root), out=self._root)
+            np.divide(neg_e, np.negative(root, out=root), out=v)
         elif self.residual == "a_posteriori":
             np.multiply(neg_e / d, -f, out=v)  # v_k = e_k f/d_k = z_k - x_k' theta_k (Eq. 7)
         else:
             np.negative(neg_e, out=v)  # v_k = e_k
 
+        sums, sums_tmp, products, products_tmp, mxz, xz_tmp, mzy, zy_tmp = lags.by_lag(w)
         # Eq. 17 as sums: n_k R_k(i) = f n_(k-1) R_(k-1)(i) + v_k v_(k-i).
-        lag_sums = lags.lag_sums[:, :w]
         if f != 1.0:
-            lag_sums *= f
-            self._zz *= f
-        lag_sums += lags.window(lags.v, w) * v[:, None]
-        self._zz += z * z
+            sums *= f
+        v_window = lags.v[:, p : p + w]  # v_k, v_(k-1), ...
+        sums += np.multiply(v_window, v_window[:, :1], out=sums_tmp)
 
         # Eq. 21, one-sided: Lambda+_k(i) = f^2 Lambda+_(k-1)(i) + f^i x_k x_(k-i)'.
-        m = self.n_models
-        xs = lags.x[:, p]
-        x_window = lags.window(lags.x, w).reshape(m, 1, w * n)  # x_k, x_(k-1), ... (a view)
-        if w == lags.cap:
-            products = lags.lag_products.reshape(m, n, w * n)
-            scratch = lags.products_scratch
-        else:
-            products = lags.lag_products[:, :, :w].reshape(m, n, w * n)
-            scratch = lags.products_scratch[:, :, : w * n]
+        m, n = self.n_models, self.n_max
+        x_k = self._xs_col
+        x_window = lags.x[:, p : p + w].reshape(m, 1, w * n)  # x_k, x_(k-1), ... (a view)
         if f == 1.0:
-            np.multiply(xs[:, :, None], x_window, out=scratch)
+            products += np.multiply(x_k, x_window, out=products_tmp)
         else:
             weighted = (x_window.reshape(m, w, n) * lags.lag_powers[None, :w, None]).reshape(m, 1, w * n)
-            np.multiply(xs[:, :, None], weighted, out=scratch)
             lags.lag_products *= f * f
-        products += scratch
+            products += np.multiply(x_k, weighted, out=products_tmp)
 
-        if not self._all_ready:
-            self._accumulate_moments(xs, z, x_window, w, scratch)
+        if waiting:
+            # The lagged moments exact initialization needs (see .lag_storage).
+            y_window = lags.y[:, p : p + w]  # y_k, y_(k-1), ...
+            if f != 1.0:
+                lags.moment_xx *= f
+                lags.moment_xx[:, :, :w].reshape(m, n, w * n)[...] += np.multiply(x_k, x_window, out=products_tmp)
+                lags.moment_xz *= f
+                lags.moment_zy *= f
+            mxz += np.multiply(x_k, y_window[:, None, :, n], out=xz_tmp)
+            mzy += np.multiply(self._z_col, y_window, out=zy_tmp)
             self._init.check(w)
         if p == 0 and self.n_lags is not None:
             lags.relocate(w)
         self._covariances = None
-
-    def _accumulate_moments(self, xs, z, x_window, w: int, scratch) -> None:
-        """The lagged moments exact initialization needs (see :mod:`.lag_storage`)."""
-        lags, f, m, n = self._lags, self.forgetting, self.n_models, self.n_max
-        z_window = lags.window(lags.z, w)
-        if f != 1.0:
-            np.multiply(xs[:, :, None], x_window, out=scratch)
-            lags.moment_xx *= f
-            lags.moment_xx[:, :, :w].reshape(m, n, w * n)[...] += scratch
-            lags.moment_xz *= f
-            lags.moment_zx *= f
-            lags.moment_zz *= f
-        lags.moment_xz[:, :, :w] += xs[:, :, None] * z_window[:, None, :]
-        lags.moment_zx[:, :w] += z[:, None, None] * x_window.reshape(m, w, n)
-        lags.moment_zz[:, :w] += z[:, None] * z_window
 
     def _apply_checked(self, x: np.ndarray, z: np.ndarray) -> None:
         """Apply a sample on which :meth:`_prepare` found NaN, infinity or a large number:
@@ -379,27 +373,39 @@ class EstimatorBank:
         """Both covariances of every model at this sample, computed once."""
         cov = self._covariances
         if cov is None:
-            lags, w, n = self._lags, self.n_window, self.n_max
-            R = lags.lag_sums[:, :w] * (1.0 / self.n_eff)  # R_k(i), Eq. 17
-            products = lags.lag_products if w == lags.cap else lags.lag_products[:, :, :w]
-            cov, repaired = covariance.evaluate(
-                self._aug[:, :n], R, self._half_window(w), products, self.forgetting == 1.0,
-                self._cov_scale, self._exact_fit, self.sizes,
+            lags = self._lags
+            if self.k < lags.cap:
+                w = self.k
+                sums, products = lags.lag_sums[:, :w], lags.lag_products[:, :, :w]
+            else:
+                w = lags.cap
+                sums, products = lags.lag_sums, lags.lag_products
+            cov, repaired = self._evaluator(
+                self._D, sums, self._half_window(w) * (1.0 / self.n_eff), products,
+                self._cov_scale, self._se_scale, self._exact_fit, self.sizes,
             )
-            self.repairs[repaired] += 1
+            if repaired:
+                self.repairs[repaired] += 1
             self._covariances = cov
         return cov
 
     def _exact_fit(self) -> np.ndarray:
-        """Models whose residual variance is below 1e-12 of the output's mean square."""
-        return self._lags.lag_sums[:, 0] <= covariance.EXACT_FIT * self._zz
+        """Models whose residual variance ``R_k(0)`` is at most 1e-12 of the mean square of
+        their output ``x_j' theta_k`` (``theta' Lambda_k(0) theta / sum_j f^(2(k-j))``)."""
+        n, f, k = self.n_max, self.forgetting, self.k
+        theta = self._aug[:, n]
+        output_square = vecdot(theta, np.matmul(self._lags.lag_products[:, :, 0, :], theta[:, :, None])[:, :, 0])
+        n_square = k if f == 1.0 else (1.0 - f ** (2 * k)) / (1.0 - f * f)
+        return self._lags.lag_sums[:, 0] / self.n_eff <= covariance.EXACT_FIT * output_square / n_square
 
     def standard_errors_all(self, kind: str = "corrected") -> np.ndarray:
         """Standard errors of every model as an ``(M, n_max)`` array: the square roots of the
         diagonals of :meth:`covariance`. Padding and models that are not :attr:`ready` are NaN.
         """
-        check_kind(kind)
-        return self._evaluate().standard_errors[COVARIANCE_KINDS.index(kind)]
+        index = _KIND_INDEX.get(kind)
+        if index is None:
+            check_kind(kind)
+        return self._evaluate().standard_errors[index]
 
     def covariance(self, j: int, kind: str = "corrected", *, repair: bool = True) -> np.ndarray:
         """Parameter covariance of model ``j``.
@@ -412,11 +418,7 @@ class EstimatorBank:
         """
         check_kind(kind)
         self._require(j)
-        cov = self._evaluate()
-        index = COVARIANCE_KINDS.index(kind)
-        if repair:
-            return cov.published(index, j, self.sizes[j])
-        return cov.matrices[index, j, : self.sizes[j], : self.sizes[j]].copy()
+        return self._evaluate().matrix(_KIND_INDEX[kind], j, self.sizes[j], repair=repair)
 
     def standard_errors(self, j: int, kind: str = "corrected") -> np.ndarray:
         """Square roots of the covariance diagonal (never NaN: see :meth:`covariance`)."""

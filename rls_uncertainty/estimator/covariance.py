@@ -1,30 +1,34 @@
 """Parameter covariances of every model of a bank, from one computation (Eqs. 13, 16, 20, 22).
 
-The two-sided lag sum, in one place. The bank stores the one-sided lag products
-``Lambda+_k(i) = sum_j x_j x_(j-i)'`` (newer sample on the left, weighted as in Eq. 21), so
-that ``Lambda_k(i) = Lambda+_k(i) + Lambda+_k(i)'`` for ``i > 0`` (Eq. 19) and
-``Lambda_k(0) = Lambda+_k(0)``. The bracket of Eqs. 20 and 22 is therefore
+**The two-sided lag sum, in one place.** The bank stores the one-sided lag products
+``Lambda+_k(i) = sum_j x_j x_(j-i)'`` (newer sample on the left, weighted as Eq. 21), so that
+``Lambda_k(i) = Lambda+_k(i) + Lambda+_k(i)'`` for ``i > 0`` (Eq. 19) and
+``Lambda_k(0) = Lambda+_k(0) = (Lambda+_k(0) + Lambda+_k(0)') / 2``. Hence every covariance
+of Eqs. 20 and 22 is
 
-    sum_i c_i R_k(i) Lambda_k(i) = N + N',   N = sum_i h_i R_k(i) Lambda+_k(i),
+    cov = D [sum_i c_i R_k(i) Lambda_k(i)] D = P + P',    P = D N D,
+    N = sum_i h_i R_k(i) Lambda+_k(i),    h_0 = c_0 / 2, h_i = c_i   (half_window).
 
-with the half window ``h_0 = c_0 / 2``, ``h_i = c_i`` (:func:`half_window`, :func:`bracket`).
-Nothing else in the package deals with the factor 2 of the two-sided sum.
+The conventional covariance is Eq. 22 with ``n_tau = 0``: ``N = R_k(0) Lambda_k(0) / 2``;
+with ``f = 1``, ``D Lambda_k(0) D = D`` and Eq. 13 reads ``P = R_k(0) D / 2``. Nothing else
+in the package deals with the factor 2 of the two-sided sum.
 
-:func:`evaluate` gives the full covariance matrices of both kinds for all models, in the
-units of the regressors; the published standard errors are the square roots of their
-diagonals, so ``standard_errors_all``, ``standard_errors(j)`` and ``covariance(j)`` of the
-bank are the same numbers. A corrected covariance with a negative diagonal is replaced by
-:func:`nearest_psd` (counted as a repair), or by zero when the model fits exactly.
+:class:`CovarianceEvaluator` computes the full matrices of both kinds for all models in one
+vectorised pass; the published standard errors are the square roots of their diagonals, so
+``standard_errors_all``, ``standard_errors(j)`` and ``covariance(j)`` of the bank are the
+same numbers. A corrected covariance with a negative diagonal entry is replaced by
+:func:`nearest_psd` (a repair), or by zero when the model fits exactly (:data:`EXACT_FIT`).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["EXACT_FIT", "nearest_psd", "half_window", "bracket", "Covariances", "evaluate"]
+__all__ = ["EXACT_FIT", "nearest_psd", "half_window", "CovarianceEvaluator", "Covariances"]
 
-# An exact fit: R_k(0) at most this fraction of the weighted mean square of z. Its corrected
-# variances are rounding of either sign and are published as zero, not repaired.
+# An exact fit: R_k(0) at most this fraction of the mean square of the model output
+# x_j' theta_k (weighted as Lambda_k(0)). Its corrected variances are rounding of either
+# sign and are published as zero, not repaired.
 EXACT_FIT = 1e-12
 
 
@@ -36,91 +40,103 @@ def nearest_psd(cov: np.ndarray) -> np.ndarray:
 
 
 def half_window(c: np.ndarray) -> np.ndarray:
-    """``h`` with ``h_0 = c_0 / 2`` and ``h_i = c_i``: the weights of the one-sided products
-    whose sum ``N`` gives the bracket of Eqs. 20/22 as ``N + N'``."""
+    """``h`` with ``h_0 = c_0 / 2`` and ``h_i = c_i``: the weights of the one-sided products in
+    ``N`` (module docstring)."""
     h = np.array(c, dtype=float)
     h[0] *= 0.5
     return h
 
 
-def bracket(hR: np.ndarray, lag_products: np.ndarray) -> np.ndarray:
-    """``sum_i c_i R_k(i) Lambda_k(i)`` (Eqs. 20, 22) for every model, ``(M, n, n)``.
-
-    ``hR[m, i] = h_i R_k(i)`` (:func:`half_window`); ``lag_products[m, a, i, b] =
-    Lambda+_k(i)[a, b]`` for the same lags.
-    """
-    N = np.matmul(hR[:, None, None, :], lag_products)[:, :, 0, :]  # sum_i h_i R(i) Lambda+(i)
-    return N + N.swapaxes(1, 2)  # Eq. 19: Lambda(i) = Lambda+(i) + Lambda+(i)'
-
-
 class Covariances:
-    """Both covariances of every model at one sample.
+    """Both covariances of every model at one sample, as ``P`` (module docstring).
 
-    ``matrices[0]`` is the corrected (Eq. 20/22), ``matrices[1]`` the conventional (Eq. 13)
-    covariance, ``(2, M, n_max, n_max)``, unrepaired, NaN outside the ready models' blocks.
-    ``standard_errors`` ``(2, M, n_max)`` are the published ones; ``repaired`` maps a model to
-    its published corrected covariance where that differs from the unrepaired one.
+    ``matrices()`` are the corrected (``[0]``, Eq. 20/22) and conventional (``[1]``, Eq. 13)
+    covariances ``(P + P') * scale``, ``(2, M, n_max, n_max)`` in the regressors' units,
+    unrepaired, NaN outside the ready models' blocks; they are formed on first use.
+    ``standard_errors`` ``(2, M, n_max)`` are the published ones: the square roots of those
+    diagonals, computed as ``2 diag(P) * diag(scale)``, which is the same floating-point
+    number (doubling is exact). The published corrected covariance differs where a diagonal
+    entry is negative: ``repaired`` maps such a model to its nearest positive semi-definite
+    matrix, ``exact`` marks the exact fits, published as zero.
     """
 
-    __slots__ = ("matrices", "standard_errors", "repaired")
+    __slots__ = ("P", "scale", "standard_errors", "repaired", "exact", "_matrices")
 
-    def __init__(self, matrices: np.ndarray, standard_errors: np.ndarray, repaired: dict) -> None:
-        self.matrices = matrices
-        self.standard_errors = standard_errors
-        self.repaired = repaired
+    def __init__(self, P: np.ndarray, scale: np.ndarray, diagonal_scale: np.ndarray) -> None:
+        self.P, self.scale = P, scale
+        self.repaired: dict[int, np.ndarray] = {}
+        self.exact = None
+        self._matrices = None
+        se = P.diagonal(0, 2, 3) * diagonal_scale  # diag(P + P') * scale = diag(P) * 2 diag(scale)
+        np.maximum(se, 0.0, out=se)
+        self.standard_errors = np.sqrt(se, out=se)
 
-    def published(self, kind_index: int, j: int, size: int) -> np.ndarray:
-        if kind_index == 0 and j in self.repaired:
-            return self.repaired[j].copy()
-        return self.matrices[kind_index, j, :size, :size].copy()
+    def matrices(self) -> np.ndarray:
+        if self._matrices is None:
+            self._matrices = (self.P + self.P.swapaxes(2, 3)) * self.scale  # cov = P + P'
+        return self._matrices
+
+    def matrix(self, kind_index: int, j: int, size: int, *, repair: bool = True) -> np.ndarray:
+        """Model ``j``'s covariance (a copy), published (``repair``) or unrepaired."""
+        if repair and kind_index == 0:
+            if j in self.repaired:
+                return self.repaired[j].copy()
+            if self.exact is not None and self.exact[j]:
+                return np.zeros((size, size))
+        return self.matrices()[kind_index, j, :size, :size].copy()
 
 
-def evaluate(
-    D: np.ndarray,
-    R: np.ndarray,
-    h: np.ndarray,
-    lag_products: np.ndarray,
-    eq13: bool,
-    scale: np.ndarray,
-    exact_fit,
-    sizes: tuple,
-) -> tuple[Covariances, list]:
-    """Both covariances of every model, and the models whose corrected one was repaired.
+class CovarianceEvaluator:
+    """Evaluates :class:`Covariances` for a bank whose conventional covariance is Eq. 13
+    (``eq13``, ``f = 1``) or ``R_k(0) D Lambda_k(0) D`` (``f < 1``)."""
 
-    ``D`` ``(M, n, n)`` and ``lag_products`` ``(M, n, w, n)`` are in the bank's column-scaled
-    units; ``R`` ``(M, w)`` is ``R_k(i)`` (Eq. 17) for the ``w`` lags held and ``h`` their
-    half window; ``eq13`` selects ``R_k(0) D`` (Eq. 13, ``f = 1``) for the conventional
-    covariance instead of ``R_k(0) D Lambda_k(0) D``; ``scale`` ``(M, n, n)`` takes scaled
-    units back to the regressors' (NaN outside the ready models' blocks); ``exact_fit()``
-    returns the models that fit exactly.
-    """
-    cov = np.empty((2,) + D.shape)
-    middle = bracket(R * h, lag_products)
-    np.matmul(np.matmul(D, middle), D, out=cov[0])  # Eq. 20 / 22
-    if eq13:
-        np.multiply(D, R[:, 0, None, None], out=cov[1])  # Eq. 13 with sigma^2 = R_k(0) (Eq. 16)
-    else:
-        # Eq. 22 with n_tau = 0: R_k(0) D Lambda_k(0) D
-        np.matmul(np.matmul(D, bracket(R[:, :1] * 0.5, lag_products[:, :, :1])), D, out=cov[1])
-    corrected_diag = np.diagonal(cov[0], axis1=1, axis2=2)
-    negative = None  # before scaling, where models that are not ready are 0, not NaN
-    if corrected_diag.min() < 0.0:
-        negative = np.flatnonzero((corrected_diag < 0.0).any(axis=1))
-    cov *= scale
-    se = np.maximum(np.diagonal(cov, axis1=2, axis2=3), 0.0)
-    np.sqrt(se, out=se)
-    repaired: dict[int, np.ndarray] = {}
-    counted: list[int] = []
-    if negative is not None:
-        exact = exact_fit()
-        for j in negative:
-            j = int(j)
-            s = sizes[j]
-            if exact[j]:
-                fixed = np.zeros((s, s))  # rounding of an exact fit, not indefiniteness
-            else:
-                fixed = nearest_psd(cov[0, j, :s, :s])
+    def __init__(self, m: int, n: int, eq13: bool) -> None:
+        self.eq13 = eq13
+        # P of the latest evaluation; the bank asks for one evaluation per sample and drops it
+        # at the next update, so the workspace is reused (what callers get is always fresh).
+        self._P = np.empty((2, m, n, n))
+
+    def __call__(
+        self,
+        D: np.ndarray,
+        lag_sums: np.ndarray,
+        h_over_n: np.ndarray,
+        lag_products: np.ndarray,
+        scale: np.ndarray,
+        diagonal_scale: np.ndarray,
+        exact_fit,
+        sizes: tuple,
+    ) -> tuple[Covariances, list]:
+        """Both covariances of every model, and the models whose corrected one was repaired.
+
+        ``D`` ``(M, n, n)`` and ``lag_products`` ``(M, n, w, n)`` (``Lambda+_k(i)``) are in
+        column-scaled units; ``lag_sums`` ``(M, w)`` is ``n_k R_k(i)`` and ``h_over_n`` the
+        half window divided by ``n_k``, for the ``w`` lags held; ``scale`` ``(M, n, n)``
+        takes scaled units back to the regressors' (NaN outside the ready models' blocks) and
+        ``diagonal_scale`` is ``2 diag(scale)`` ``(M, n)``; ``exact_fit()`` returns the models that fit exactly.
+        """
+        P = self._P
+        hR = lag_sums * h_over_n  # h_i R_k(i)
+        N = np.matmul(hR[:, None, None, :], lag_products)[:, :, 0, :]  # sum_i h_i R(i) Lambda+(i)
+        np.matmul(np.matmul(D, N), D, out=P[0])  # Eq. 20 / 22: corrected
+        if self.eq13:
+            np.multiply(D, hR[:, :1, None], out=P[1])  # Eq. 13 with sigma^2 = R_k(0) (Eq. 16)
+        else:
+            N0 = np.matmul(hR[:, None, None, :1], lag_products[:, :, :1])[:, :, 0, :]
+            np.matmul(np.matmul(D, N0), D, out=P[1])  # Eq. 22 with n_tau = 0
+        cov = Covariances(P, scale, diagonal_scale)
+        counted: list[int] = []
+        corrected_diag = P[0].diagonal(0, 1, 2)  # models not ready are 0 here, not NaN
+        if np.minimum.reduce(corrected_diag, axis=None) < 0.0:
+            negative = (corrected_diag < 0.0).any(axis=1)
+            exact = negative & exact_fit()
+            if exact.any():  # rounding of an exact fit, not indefiniteness: zero
+                cov.exact = exact
+                cov.standard_errors[0][exact] = np.where(np.isnan(scale.diagonal(0, 1, 2)[exact]), np.nan, 0.0)
+            for j in np.flatnonzero(negative & ~exact):
+                j = int(j)
+                s = sizes[j]
+                fixed = cov.repaired[j] = nearest_psd(cov.matrices()[0, j, :s, :s])
                 counted.append(j)
-            repaired[j] = fixed
-            se[0, j, :s] = np.sqrt(np.maximum(np.diag(fixed), 0.0))
-    return Covariances(cov, se, repaired), counted
+                cov.standard_errors[0, j, :s] = np.sqrt(np.maximum(np.diag(fixed), 0.0))
+        return cov, counted

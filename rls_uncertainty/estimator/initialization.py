@@ -84,8 +84,7 @@ class ExactInitialization:
         P = np.zeros((n + 1, lags.cap, n + 1))
         P[:n, :, :n] = self.normal_matrices()[j]
         P[:n, :, n] = lags.moment_xz[j]
-        P[n, :, :n] = lags.moment_zx[j]
-        P[n, :, n] = lags.moment_zz[j]
+        P[n] = lags.moment_zy[j]
         ta = np.zeros(n + 1)
         ta[:s_n] = -theta_scaled / s
         ta[n] = 1.0
@@ -93,7 +92,7 @@ class ExactInitialization:
         inv = np.zeros(n)
         inv[:s_n] = 1.0 / s
         x_scaled = lags.x[j] * inv[None, :]
-        residuals = lags.z[j] - x_scaled @ np.concatenate([theta_scaled, np.zeros(n - s_n)])  # Eq. 7
+        residuals = lags.y[j, :, n] - x_scaled @ np.concatenate([theta_scaled, np.zeros(n - s_n)])  # Eq. 7
         if not (np.isfinite(theta_scaled).all() and np.isfinite(lag_sums).all()
                 and np.isfinite(residuals[lags.ptr : lags.ptr + w]).all()):
             return False  # absurd (finite) data so far: the state would not stay finite

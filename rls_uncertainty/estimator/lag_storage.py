@@ -3,9 +3,10 @@
 For ``M`` models of at most ``n`` parameters and a lag capacity ``cap`` (``n_lags + 1``,
 or growing by doubling when all lags are kept):
 
-* **History**, newest first: ``x`` (column-scaled regressors), ``z`` (outputs) and ``v``
-  (residuals of Eqs. 16-17) of the last ``min(k, cap)`` samples. :meth:`LagStorage.window`
-  of a buffer is ``[:, 0]`` = sample ``k``, ``[:, i]`` = sample ``k - i``. Each sample is
+* **History**, newest first: ``x`` (column-scaled regressors) and ``v`` (residuals of
+  Eqs. 16-17) of the last ``min(k, cap)`` samples, and while a model waits for
+  initialization ``y = (x, z)`` with the outputs. :meth:`LagStorage.window` of a buffer is
+  ``[:, 0]`` = sample ``k``, ``[:, i]`` = sample ``k - i``. Each sample is
   written once, in front of the window; the window of ``x`` is contiguous, so one outer
   product updates every lag of Eq. 21. When a sample lands on slot 0 the window is copied
   back to the end of the buffer (every ``3 cap`` samples; the buffer holds ``4 cap``). With
@@ -17,8 +18,8 @@ or growing by doubling when all lags are kept):
   ``Lambda_k(i)`` is formed in :mod:`.covariance`. The lag axis sits between the matrix axes
   so that each model's row ``a`` is one contiguous block.
 * **Lagged moments** for exact initialization (:mod:`.initialization`), weighted
-  ``w_j = f^(k-j)``: ``moment_xz[m, a, i] = sum w_j x_j[a] z_(j-i)``, ``moment_zx[m, i, b]
-  = sum w_j z_j x_(j-i)[b]``, ``moment_zz[m, i] = sum w_j z_j z_(j-i)`` and, under
+  ``w_j = f^(k-j)``: ``moment_xz[m, a, i] = sum w_j x_j[a] z_(j-i)``, ``moment_zy[m, i, b]
+  = sum w_j z_j y_(j-i)[b]`` (``z x'`` and ``z z`` products) and, under
   forgetting, ``moment_xx[m, a, i, b] = sum w_j x_j[a] x_(j-i)[b]`` (with ``f = 1`` that is
   ``lag_products``). They are updated only while a model waits for initialization.
 """
@@ -31,9 +32,9 @@ __all__ = ["LagStorage", "GROWTH_START"]
 
 GROWTH_START = 64  # initial lag capacity when all lags are kept (n_lags=None)
 
-_HISTORY = ("x", "z", "v")
-_BY_LAG = ("lag_sums", "lag_products", "moment_xz", "moment_zx", "moment_zz", "moment_xx")
-_LAG_AXIS = {"lag_sums": 1, "lag_products": 2, "moment_xz": 2, "moment_zx": 1, "moment_zz": 1, "moment_xx": 2}
+_HISTORY = ("x", "y", "v")
+_BY_LAG = ("lag_sums", "lag_products", "moment_xz", "moment_zy", "moment_xx")
+_LAG_AXIS = {"lag_sums": 1, "lag_products": 2, "moment_xz": 2, "moment_zy": 1, "moment_xx": 2}
 
 
 class LagStorage:
@@ -51,17 +52,36 @@ class LagStorage:
         self.cap = cap
         length = cap if self.all_lags else 4 * cap
         self.x = np.zeros((m, length, n))
-        self.z = np.zeros((m, length))
+        self.y = np.zeros((m, length, n + 1))
         self.v = np.zeros((m, length))
         self.ptr = length  # the window is [ptr, ptr + w)
         self.lag_sums = np.zeros((m, cap))
         self.lag_products = np.zeros((m, n, cap, n))
         self.moment_xz = np.zeros((m, n, cap))
-        self.moment_zx = np.zeros((m, cap, n))
-        self.moment_zz = np.zeros((m, cap))
+        self.moment_zy = np.zeros((m, cap, n + 1))
         self.moment_xx = np.zeros((m, n, cap, n)) if self.forgetting != 1.0 else None
         self.lag_powers = self.forgetting ** np.arange(cap, dtype=float)  # f^i of Eq. 21
-        self.products_scratch = np.zeros((m, n, cap * n))  # x_k x_(k-i)' of one sample
+        self.products_flat = self.lag_products.reshape(m, n, cap * n)  # row a of every lag
+        # The products of one sample, before they are added.
+        self.products_scratch = np.zeros((m, n, cap * n))
+        self.sums_scratch = np.zeros((m, cap))
+        self.xz_scratch = np.zeros((m, n, cap))
+        self.zy_scratch = np.zeros((m, cap, n + 1))
+        self._full = self._restricted(cap)
+
+    def _restricted(self, w: int) -> tuple:
+        m, n = self.m, self.n
+        return (
+            self.lag_sums[:, :w], self.sums_scratch[:, :w],
+            self.lag_products[:, :, :w].reshape(m, n, w * n), self.products_scratch[:, :, : w * n],
+            self.moment_xz[:, :, :w], self.xz_scratch[:, :, :w],
+            self.moment_zy[:, :w], self.zy_scratch[:, :w],
+        )
+
+    def by_lag(self, w: int) -> tuple:
+        """Views of the first ``w`` lags, each with the scratch its update uses:
+        ``(lag_sums, ., lag_products as (M, n, w n), ., moment_xz, ., moment_zy, .)``."""
+        return self._full if w == self.cap else self._restricted(w)
 
     def window(self, buf: np.ndarray, w: int) -> np.ndarray:
         """The last ``w`` entries of a history buffer, newest first (a view)."""
@@ -71,7 +91,7 @@ class LagStorage:
         """Move the history window from the buffer's front back to its end (called when the
         newest sample was written at slot 0)."""
         length = self.v.shape[1]
-        for buf in (self.x, self.z, self.v):
+        for buf in (self.x, self.y, self.v):
             buf[:, length - w :] = buf[:, :w]
         self.ptr = length - w
 

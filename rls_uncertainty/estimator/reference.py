@@ -39,8 +39,8 @@ What the paper leaves open is defined here, and the fast bank follows it:
   (``n_tau = k - 1`` with all lags).
 * **Published covariance.** A corrected covariance with a negative diagonal entry is
   replaced by the nearest positive semi-definite matrix (:func:`.covariance.nearest_psd`),
-  unless the model fits exactly (``R_k(0) <= 1e-12`` times the weighted mean of ``z^2``),
-  when it is zero. Standard errors are the square roots of the published diagonal.
+  unless the model fits exactly (``R_k(0) <= 1e-12`` times the mean square of the model
+  output ``x_j' theta_k``, weighted as ``Lambda_k(0)``), when it is zero. Standard errors are the square roots of the published diagonal.
 """
 
 from __future__ import annotations
@@ -123,7 +123,6 @@ class RecursiveReference:
         self.v: list[float] = []  # residuals v_1..v_k once initialized
         self.R: dict[int, float] = {}  # R_k(i)
         self.Lam: dict[int, np.ndarray] = {}  # Lambda_k(i)
-        self.zz = 0.0  # sum_j w_j z_j^2 (the scale of an exact fit)
         self.A = np.zeros((n, n))  # X'WX before initialization
         self.b = np.zeros(n)  # X'Wz before initialization
         self.ready = p0 is not None
@@ -148,7 +147,6 @@ class RecursiveReference:
         self.x.append(x)
         self.z.append(z)
         n_prev, self.n_k = self.n_k, f * self.n_k + 1.0
-        self.zz = f * self.zz + z * z
         for i in range(self.largest_lag() + 1):  # Eq. 21 (weighted)
             if i == 0:
                 self.Lam[0] = f**2 * self.Lam.get(0, 0.0) + np.outer(x, x)
@@ -221,7 +219,9 @@ class RecursiveReference:
         """The covariance the estimator publishes: repaired where a diagonal is negative."""
         cov = self.covariance(kind)
         if kind == "corrected" and np.any(np.diag(cov) < 0.0):
-            if self.R[0] * self.n_k <= EXACT_FIT * self.zz:
+            output_square = self.theta @ self.Lam[0] @ self.theta  # sum_j f^(2(k-j)) (x_j' theta)^2
+            n_square = sum(self.f ** (2 * (self.k - j)) for j in range(1, self.k + 1))
+            if self.R[0] <= EXACT_FIT * output_square / n_square:
                 return np.zeros_like(cov)  # an exact fit: rounding, not indefiniteness
             return nearest_psd(cov)
         return cov

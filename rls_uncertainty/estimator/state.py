@@ -17,7 +17,7 @@ __all__ = ["STATE_FORMAT", "capture", "restore"]
 # sign, D and theta as separate arrays.
 STATE_FORMAT = 4
 
-_BANK_ARRAYS = ("_inv_s", "_ready", "_ready_at", "repairs", "_zz")
+_BANK_ARRAYS = ("_inv_s", "_ready", "_ready_at", "repairs")
 
 
 def capture(bank) -> dict:
