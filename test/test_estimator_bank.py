@@ -1,14 +1,17 @@
-"""Recursive estimator (Eqs. 15-22) against batch formulas, closed forms and Monte Carlo."""
+"""The fast bank (:class:`EstimatorBank`, :class:`RecursiveEstimator`): the reference's numbers
+for every option, estimates against batch least squares, options, input checks (Eqs. 15-22)."""
 
 from __future__ import annotations
 
 import ast
+import itertools
 import pathlib
 import subprocess
 import sys
 
 import numpy as np
 import pytest
+from estimator_cases import RATE, ar1, indefinite_problem, rel_close, run, wide_scale_problem
 
 from rls_uncertainty.estimator import (
     EstimatorBank,
@@ -17,47 +20,7 @@ from rls_uncertainty.estimator import (
     RecursiveEstimator,
     batch_estimate,
 )
-
-RATE = 50.0
-
-
-def ar1(rng, rho, shape):
-    """AR(1) noise with unit innovation variance along the last axis, stationary start."""
-    e = rng.standard_normal(shape)
-    v = np.empty_like(e)
-    v[..., 0] = e[..., 0] / np.sqrt(1.0 - rho**2) if rho else e[..., 0]
-    for i in range(1, shape[-1]):
-        v[..., i] = rho * v[..., i - 1] + e[..., i]
-    return v
-
-
-def wide_scale_problem(n=600, seed=0):
-    """Four regressors whose scales range from 1e-4 to 1e2, colored equation error."""
-    rng = np.random.default_rng(seed)
-    t = np.arange(n) / RATE
-    X = np.column_stack(
-        [
-            np.ones(n),
-            1e-4 * np.sin(2 * np.pi * 0.7 * t) + 1e-5 * rng.standard_normal(n),
-            1e2 * np.sin(2 * np.pi * 0.3 * t + 1.0),
-            rng.standard_normal(n),
-        ]
-    )
-    theta = np.array([0.5, 300.0, -0.01, 2.0])
-    z = X @ theta + 0.05 * ar1(rng, 0.9, (n,))
-    return X, z
-
-
-def run(est, X, z, stop=None):
-    for k in range(len(z) if stop is None else stop):
-        est.update(X[k], z[k])
-    return est
-
-
-def rel_close(a, b, rtol):
-    """Elementwise closeness relative to the largest magnitude of the reference."""
-    scale = np.max(np.abs(b))
-    np.testing.assert_allclose(a, b, rtol=rtol, atol=rtol * scale)
+from rls_uncertainty.estimator.reference import RecursiveReference
 
 
 # --------------------------------------------------------------------------- estimates
@@ -68,7 +31,6 @@ def test_theta_equals_batch_ols_with_scales_from_1e_4_to_1e2():
     assert np.max(np.abs(est.theta - ols) / np.abs(ols)) < 1e-6
     assert est.n_samples == len(z)
 
-
 def test_exact_initialization_agrees_with_batch_from_the_first_well_conditioned_sample():
     X, z = wide_scale_problem()
     est = RecursiveEstimator(4)
@@ -77,205 +39,6 @@ def test_exact_initialization_agrees_with_batch_from_the_first_well_conditioned_
         if est.is_ready:
             ols = np.linalg.lstsq(X[: k + 1], z[: k + 1], rcond=None)[0]
             np.testing.assert_allclose(est.theta, ols, rtol=1e-6)
-
-
-# --------------------------------------------------------------------------- covariance
-CHECK_AT = (40, 200, 600)
-
-
-@pytest.mark.parametrize("forgetting", [1.0, 0.98])
-@pytest.mark.parametrize("window", ["truncated", "bartlett"])
-@pytest.mark.parametrize("n_lags", [None, 0, 1, 5, 50])
-def test_recursive_covariance_equals_batch_formula_on_recursive_residuals(n_lags, window, forgetting):
-    X, z = wide_scale_problem()
-    est = RecursiveEstimator(4, n_lags=n_lags, window=window, forgetting=forgetting)
-    full = RecursiveEstimator(4, forgetting=forgetting)  # keeps the whole residual history
-    for k in range(len(z)):
-        est.update(X[k], z[k])
-        full.update(X[k], z[k])
-        if k + 1 not in CHECK_AT:
-            continue
-        history = full.residuals()
-        assert len(history) == k + 1
-        # The ring of the truncated estimator holds the same residuals as the full history.
-        np.testing.assert_array_equal(est.residuals(), history[-len(est.residuals()) :])
-        theta, cov_conv, cov_corr = batch_estimate(
-            X[: k + 1], z[: k + 1], n_lags, window, residuals=history, forgetting=forgetting
-        )
-        rel_close(est.theta, theta, 1e-9)
-        rel_close(est.covariance("corrected", repair=False), cov_corr, 1e-9)
-        rel_close(est.covariance("conventional"), cov_conv, 1e-9)
-
-
-def test_batch_estimate_is_eq_11_double_sum():
-    rng = np.random.default_rng(3)
-    n = 60
-    X = np.column_stack([np.ones(n), np.cumsum(rng.standard_normal(n)), rng.standard_normal(n)])
-    z = X @ [1.0, 0.2, -0.5] + ar1(rng, 0.8, (n,))
-    theta, cov_conv, cov_corr = batch_estimate(X, z)
-    D = np.linalg.inv(X.T @ X)
-    v = z - X @ theta
-    R = np.array([np.sum(v[i:] * v[: n - i]) / n for i in range(n)])  # Eq. 10
-    middle = sum(
-        np.outer(X[i], X[j]) * R[abs(i - j)] for i in range(n) for j in range(n)
-    )  # Eq. 11
-    np.testing.assert_allclose(theta, np.linalg.solve(X.T @ X, X.T @ z), rtol=1e-10)
-    np.testing.assert_allclose(cov_corr, D @ middle @ D, rtol=1e-10)
-    np.testing.assert_allclose(cov_conv, (v @ v / n) * D, rtol=1e-12)  # Eqs. 13-14
-
-
-def test_zero_lags_gives_the_conventional_covariance():
-    X, z = wide_scale_problem()
-    est = run(RecursiveEstimator(4, n_lags=0), X, z)
-    rel_close(est.covariance("corrected"), est.covariance("conventional"), 1e-9)
-    np.testing.assert_allclose(
-        est.standard_errors("corrected"), est.standard_errors("conventional"), rtol=1e-9
-    )
-
-
-def test_corrected_standard_error_grows_with_colored_residuals():
-    X, z = wide_scale_problem()
-    est = run(RecursiveEstimator(4, n_lags=50), X, z)
-    ratio = est.standard_errors("corrected") / est.standard_errors("conventional")
-    # The constant and the 0.3 Hz regressor sit where the AR(1) spectrum is high; the
-    # white regressor averages the spectrum, which the conventional formula gets right.
-    assert ratio[0] > 2.0 and ratio[2] > 2.0
-    assert 0.5 < ratio[3] < 1.5
-
-
-# --------------------------------------------------------------------------- Monte Carlo
-@pytest.mark.parametrize("rho", [0.9, 0.0])
-def test_monte_carlo_standard_errors_match_observed_scatter(rho):
-    """400 runs as one bank: same regressors, independent AR(1) or white residuals."""
-    rng = np.random.default_rng(11)
-    n, runs = 1000, 400
-    t = np.arange(n) / RATE
-    X = np.column_stack([np.ones(n), np.sin(2 * np.pi * 0.4 * t), np.cos(2 * np.pi * 0.9 * t + 0.3)])
-    theta = np.array([1.0, 0.5, -0.3])
-    Z = (X @ theta)[:, None] + 0.1 * ar1(rng, rho, (runs, n)).T
-    bank = EstimatorBank([3] * runs, n_lags=50)
-    rows = np.ascontiguousarray(np.broadcast_to(X[:, None, :], (n, runs, 3)))
-    for k in range(n):
-        bank.update(rows[k], Z[k])
-    estimates = bank.theta_all()
-    scatter = estimates.std(axis=0, ddof=1)
-    corrected = bank.standard_errors_all("corrected").mean(axis=0) / scatter
-    conventional = bank.standard_errors_all("conventional").mean(axis=0) / scatter
-    assert np.all(np.abs(corrected - 1.0) < 0.15), corrected
-    if rho:
-        assert np.all(conventional < 0.5), conventional
-    else:
-        assert np.all(np.abs(conventional - 1.0) < 0.15), conventional
-    np.testing.assert_allclose(estimates.mean(axis=0), theta, atol=4 * scatter.max() / np.sqrt(runs))
-
-
-# --------------------------------------------------------------------------- windows
-def indefinite_problem(n=500):
-    """A slowly varying regressor and residuals that oscillate at a frequency where the
-    uniform lag window of n_lags = 5 has a negative spectral lobe."""
-    rng = np.random.default_rng(5)
-    k = np.arange(n)
-    X = np.column_stack([np.ones(n), k / n])
-    omega = 1.5 * np.pi / 5.5  # sin(5.5 w) = -1: the 5-lag Dirichlet kernel is negative
-    z = X @ [0.3, 1.0] + np.sin(omega * k) + 0.01 * rng.standard_normal(n)
-    return X, z
-
-
-def test_truncated_window_can_be_indefinite_and_is_repaired_and_counted():
-    X, z = indefinite_problem()
-    est = RecursiveEstimator(2, n_lags=5, window="truncated")
-    full = RecursiveEstimator(2)
-    for k in range(len(z)):
-        est.update(X[k], z[k])
-        full.update(X[k], z[k])
-        if est.is_ready:
-            se = est.standard_errors()
-            assert np.all(np.isfinite(se)) and np.all(se >= 0)
-    raw = est.covariance(repair=False)
-    batch_raw = batch_estimate(X, z, 5, "truncated", residuals=full.residuals())[2]
-    assert np.min(np.diag(batch_raw)) < 0  # independent confirmation that it is indefinite
-    rel_close(raw, batch_raw, 1e-9)
-    repaired = est.covariance()
-    assert np.min(np.linalg.eigvalsh(repaired)) > -1e-12 * np.max(np.abs(raw))
-    np.testing.assert_allclose(repaired, repaired.T)
-    assert est.repairs > 0
-
-
-def test_bartlett_window_stays_positive_semidefinite():
-    X, z = indefinite_problem()
-    est = RecursiveEstimator(2, n_lags=5, window="bartlett")
-    for k in range(len(z)):
-        est.update(X[k], z[k])
-        if est.is_ready and k % 25 == 0:
-            cov = est.covariance(repair=False)
-            assert np.min(np.linalg.eigvalsh(cov)) >= -1e-10 * np.max(np.abs(cov))
-    assert est.repairs == 0
-
-
-# --------------------------------------------------------------------------- robustness
-def test_snapshot_restore_continues_bit_identically():
-    X, z = wide_scale_problem()
-    for n_lags in (None, 50):
-        a = run(RecursiveEstimator(4, n_lags=n_lags, forgetting=0.995), X, z, stop=300)
-        b = RecursiveEstimator.from_state(a.state())
-        for k in range(300, len(z)):
-            a.update(X[k], z[k])
-            b.update(X[k], z[k])
-        np.testing.assert_array_equal(a.theta, b.theta)
-        np.testing.assert_array_equal(a.covariance(), b.covariance())
-        np.testing.assert_array_equal(a.standard_errors("conventional"), b.standard_errors("conventional"))
-
-
-@pytest.mark.parametrize("forgetting", [1.0, 0.99])
-def test_snapshot_while_a_model_waits_for_initialization_continues_bit_identically(forgetting):
-    """Restore while one model still accumulates its lagged moments (its third regressor is
-    not excited until sample 200): it initializes at the same sample with the same numbers."""
-    rng = np.random.default_rng(5)
-    n = 500
-    X = np.zeros((n, 2, 3))
-    X[:, 0, :2] = np.column_stack([np.ones(n), rng.standard_normal(n)])
-    X[:, 1] = np.column_stack([np.ones(n), rng.standard_normal(n), np.where(np.arange(n) < 200, 0.0, rng.standard_normal(n))])
-    Z = np.einsum("kmi,mi->km", X, [[1.0, 2.0, 0.0], [0.5, -1.0, 3.0]]) + 0.1 * rng.standard_normal((n, 2))
-    for n_lags in (None, 20):
-        a = EstimatorBank((2, 3), n_lags, forgetting=forgetting)
-        for k in range(100):
-            a.update(X[k], Z[k])
-        assert list(a.ready) == [True, False]
-        b = EstimatorBank.from_state(a.state())
-        for k in range(100, n):
-            a.update(X[k], Z[k])
-            b.update(X[k], Z[k])
-        assert list(b.ready_at) == list(a.ready_at) and a.ready_at[1] > 200
-        np.testing.assert_array_equal(a.theta_all(), b.theta_all())
-        np.testing.assert_array_equal(a.standard_errors_all(), b.standard_errors_all())
-        np.testing.assert_array_equal(a.standard_errors_all("conventional"), b.standard_errors_all("conventional"))
-
-
-def test_snapshot_is_a_copy():
-    X, z = wide_scale_problem()
-    a = run(RecursiveEstimator(4, n_lags=5), X, z, stop=100)
-    snap = a.state()
-    theta = a.theta.copy()
-    run(a, X[100:], z[100:])
-    assert np.array_equal(RecursiveEstimator.from_state(snap).theta, theta)
-
-
-@pytest.mark.parametrize("bad", [np.nan, np.inf, -np.inf])
-def test_non_finite_input_is_rejected_and_leaves_state_untouched(bad):
-    X, z = wide_scale_problem()
-    est = run(RecursiveEstimator(4, n_lags=5), X, z, stop=100)
-    before = est.state()
-    x_bad = X[100].copy()
-    x_bad[2] = bad
-    with pytest.raises(NonFiniteInput, match="model"):
-        est.update(x_bad, z[100])
-    with pytest.raises(NonFiniteInput):
-        est.update(X[100], bad)
-    after = est.state()
-    assert before["counters"] == after["counters"]
-    for name, arr in before["arrays"].items():
-        np.testing.assert_array_equal(arr, after["arrays"][name], err_msg=name)
-
 
 def test_rank_deficient_early_samples_wait_for_excitation():
     """Elevator still at trim for 150 samples: X'X is singular until the maneuver starts."""
@@ -300,7 +63,6 @@ def test_rank_deficient_early_samples_wait_for_excitation():
     batch = batch_estimate(X, z, 50, residuals=full.residuals())
     rel_close(est.covariance(repair=False), batch[2], 1e-9)
 
-
 def test_prior_initialization_is_ridge_regression():
     """With D0 = p0 I the recursion solves (X'X + I/p0) theta = X'z exactly."""
     X, z = wide_scale_problem()
@@ -311,7 +73,6 @@ def test_prior_initialization_is_ridge_regression():
     ols = np.linalg.lstsq(X, z, rcond=None)[0]
     # The prior visibly biases the small-scale regressor's parameter; exact init does not.
     assert abs(est.theta[1] - ols[1]) / abs(ols[1]) > 1e-3
-
 
 def test_residual_options_are_the_innovation_the_a_posteriori_residual_and_their_geometric_mean():
     X, z = wide_scale_problem()
@@ -331,7 +92,6 @@ def test_residual_options_are_the_innovation_the_a_posteriori_residual_and_their
         assert v["standardized"][k] == pytest.approx(np.sign(prior) * np.sqrt(post * prior), rel=1e-6, abs=1e-9)
     np.testing.assert_array_equal(est["a_posteriori"].theta, est["a_priori"].theta)
     np.testing.assert_array_equal(est["a_posteriori"].theta, est["standardized"].theta)
-
 
 @pytest.mark.parametrize("forgetting", [1.0, 0.98])
 def test_standardized_residual_makes_eq16_the_batch_fit_error_variance_at_every_sample(forgetting):
@@ -359,7 +119,6 @@ def test_standardized_residual_makes_eq16_the_batch_fit_error_variance_at_every_
         short.append(1.0 - post.residual_variance / est.residual_variance)
     assert np.mean(short) > 0.005  # the a posteriori residual is biased low
 
-
 def test_forgetting_tracks_a_parameter_change():
     rng = np.random.default_rng(4)
     n = 2000
@@ -371,7 +130,6 @@ def test_forgetting_tracks_a_parameter_change():
     plain = run(RecursiveEstimator(3, n_lags=11), X, z)
     assert tracking.theta[1] == pytest.approx(-3.0, abs=0.02)
     assert abs(plain.theta[1] + 3.0) > 0.3
-
 
 def test_bank_equals_independent_estimators():
     """The six models of Eq. 2 in one bank give what six separate estimators give."""
@@ -397,6 +155,172 @@ def test_bank_equals_independent_estimators():
     assert np.isnan(bank.theta_all()[0, 3:]).all()
 
 
+# --------------------------------------------------------------------------- bank = reference
+def equivalence_problem(n=90, seed=7):
+    """Two models of 3 and 2 parameters with colored errors; model 0's last regressor is zero
+    for the first 12 samples, so that it initializes late (after the 5-lag window filled)."""
+    rng = np.random.default_rng(seed)
+    k = np.arange(n)
+    x0 = np.column_stack([np.ones(n), np.sin(0.3 * k) + 0.3 * rng.standard_normal(n),
+                          np.where(k < 12, 0.0, np.cos(0.17 * k) + 0.3 * rng.standard_normal(n))])
+    x1 = np.column_stack([0.5 + 0.2 * rng.standard_normal(n), np.sin(0.11 * k + 1.0)])
+    X = np.zeros((n, 2, 3))
+    X[:, 0] = x0
+    X[:, 1, :2] = x1
+    Z = np.column_stack([x0 @ [0.4, -1.2, 2.0], x1 @ [1.5, 0.7]]) + 0.2 * ar1(rng, 0.7, (2, n)).T
+    return X, Z
+
+
+OPTIONS = list(itertools.product(
+    ["truncated", "bartlett"], [None, 0, 5], [1.0, 0.97], ["standardized", "a_posteriori", "a_priori"], [None, 100.0]
+))
+CHECK_K = (2, 5, 12, 13, 14, 30, 90)  # before initialization, at it, after the window fills
+
+
+def assert_bank_equals_reference(bank, refs, k, rtol=1e-8):
+    """Bank and reference agree to ``rtol`` of each quantity's largest entry, or to the
+    rounding floor where the quantity is itself rounding (the residuals of a model that has
+    just initialized on as many samples as parameters are zero): exact initialization forms
+    R_k(i) from lagged moments, ``sum z^2 - 2 theta' X'z + theta' X'X theta``, whose rounding
+    is ``eps sum z^2``; it reaches the covariance through ``D Lambda D``."""
+    sizes = bank.sizes
+    assert list(bank.ready) == [r.ready for r in refs], k
+    theta_all = bank.theta_all()
+    se = {kind: bank.standard_errors_all(kind) for kind in ("corrected", "conventional")}
+    for j, (ref, s) in enumerate(zip(refs, sizes)):
+        if not ref.ready:
+            assert np.isnan(theta_all[j]).all() and np.isnan(se["corrected"][j]).all()
+            with pytest.raises(EstimatorNotReady):
+                bank.covariance(j)
+            continue
+        assert bank.ready_at[j] == ref.ready_at
+        rel_close(theta_all[j, :s], ref.theta, 1e-9)
+        floor_R = 1e-12 * np.mean(np.square(ref.z))
+        R = [ref.R[i] for i in range(len(ref.R))]
+        np.testing.assert_allclose(bank.autocorrelation(j), R, rtol=0, atol=rtol * np.max(np.abs(R)) + floor_R)
+        floor_cov = floor_R * len(R) * np.max(np.abs(ref.D))
+        for kind in ("corrected", "conventional"):
+            for mine, theirs in ((bank.covariance(j, kind, repair=False), ref.covariance(kind)),
+                                 (bank.covariance(j, kind), ref.published_covariance(kind))):
+                np.testing.assert_allclose(mine, theirs, rtol=0, atol=rtol * np.max(np.abs(theirs)) + floor_cov)
+            theirs = ref.standard_errors(kind)
+            np.testing.assert_allclose(se[kind][j, :s], theirs, rtol=0, atol=rtol * np.max(theirs) + np.sqrt(floor_cov))
+
+
+@pytest.mark.parametrize("window, n_lags, forgetting, residual, p0", OPTIONS)
+def test_bank_equals_the_reference_for_every_option(window, n_lags, forgetting, residual, p0):
+    """Theta, both full covariances (unrepaired and published) and the published standard
+    errors of the bank equal the literal Eqs. 15-22 of reference.py, before and at exact
+    initialization, once the lag window is full, and at the end."""
+    X, Z = equivalence_problem()
+    options = dict(residual=residual, p0=p0)
+    bank = EstimatorBank((3, 2), n_lags, window, forgetting, **options)
+    refs = [RecursiveReference(s, n_lags, window, forgetting, **options) for s in (3, 2)]
+    for k in range(len(Z)):
+        bank.update(X[k], Z[k])
+        refs[0].update(X[k, 0], Z[k, 0])
+        refs[1].update(X[k, 1, :2], Z[k, 1])
+        if k + 1 in CHECK_K:
+            assert_bank_equals_reference(bank, refs, k + 1)
+    if p0 is None:
+        assert refs[0].ready_at > 12 and refs[1].ready_at <= 5
+
+
+@pytest.mark.parametrize("p0", [None, 100.0])
+def test_bank_equals_the_reference_where_the_truncated_window_is_repaired(p0):
+    """The published (repaired) covariance and standard errors where the uniform window makes
+    the covariance indefinite."""
+    X, z = indefinite_problem(240)
+    bank = EstimatorBank((2,), 5, p0=p0)
+    ref = RecursiveReference(2, 5, p0=p0)
+    repaired = 0
+    for k in range(len(z)):
+        bank.update(X[k : k + 1], z[k : k + 1])
+        ref.update(X[k], z[k])
+        if k % 20 == 19:
+            assert_bank_equals_reference(bank, [ref], k + 1)
+            repaired += np.min(np.diag(ref.covariance())) < 0
+    assert repaired >= 3 and bank.repairs[0] == repaired
+
+
+# --------------------------------------------------------------------------- issue 12
+@pytest.mark.parametrize("magnitude", [1e160, 1e200, 1e300, 1.7e308])
+@pytest.mark.parametrize("where", ["regressor", "output", "padding"])
+def test_finite_but_huge_input_is_refused_and_leaves_the_state_bit_identical(magnitude, where):
+    """A finite sample whose square overflows would make the state non-finite: refused with
+    NonFiniteInput, the state unchanged bit for bit, and the bank goes on as if it never came
+    (the padding, which is ignored, is accepted)."""
+    rng = np.random.default_rng(3)
+    n = 160
+    X = np.zeros((n, 2, 3))
+    X[:, :, 0] = 1.0
+    X[:, :, 1:] = rng.standard_normal((n, 2, 2))
+    X[:, 1, 2] = 0.0  # model 1 has two parameters
+    X[:60, 0, 2] = 0.0  # model 0 waits for initialization until sample 61
+    Z = X.sum(axis=2) + 0.1 * rng.standard_normal((n, 2))
+    for stop in (30, 120):  # while model 0 waits, and once both are ready
+        a = EstimatorBank((3, 2), 20)
+        b = EstimatorBank((3, 2), 20)
+        run(a, X, Z, stop)
+        run(b, X, Z, stop)
+        before = a.state()
+        se_before = a.standard_errors_all()
+        x_bad, z_bad = X[stop].copy(), Z[stop].copy()
+        if where == "regressor":
+            x_bad[0, 1] = magnitude
+        elif where == "output":
+            z_bad[1] = -magnitude
+        else:
+            x_bad[1, 2] = magnitude
+        if where == "padding":
+            a.update(x_bad, z_bad)
+            b.update(X[stop], Z[stop])
+        else:
+            with pytest.raises(NonFiniteInput, match="non-finite"):
+                a.update(x_bad, z_bad)
+            after = a.state()
+            assert after["counters"] == before["counters"]
+            assert after["arrays"].keys() == before["arrays"].keys()
+            for name, arr in before["arrays"].items():
+                assert arr.dtype == after["arrays"][name].dtype
+                assert arr.tobytes() == after["arrays"][name].tobytes(), name
+            assert a.standard_errors_all().tobytes() == se_before.tobytes()
+        for k in range(stop + 1, n):
+            a.update(X[k], Z[k])
+            b.update(X[k], Z[k])
+        np.testing.assert_array_equal(a.theta_all(), b.theta_all())
+        np.testing.assert_array_equal(a.standard_errors_all(), b.standard_errors_all())
+
+
+def test_large_input_that_keeps_the_state_finite_is_accepted():
+    """Above the bound where the update is checked (1e100) a sample is still applied when the
+    state stays finite: the check refuses only what would overflow."""
+    X, z = wide_scale_problem()
+    est = run(RecursiveEstimator(4, n_lags=5), X, z, stop=100)
+    x = X[100].copy()
+    x[3] = 1e120  # its square, 1e240, and every product with it stay finite
+    est.update(x, z[100])
+    assert est.n_samples == 101
+    assert all(np.isfinite(a).all() for a in est.state()["arrays"].values())
+
+
+# --------------------------------------------------------------------------- inputs and options
+@pytest.mark.parametrize("bad", [np.nan, np.inf, -np.inf])
+def test_non_finite_input_is_rejected_and_leaves_state_untouched(bad):
+    X, z = wide_scale_problem()
+    est = run(RecursiveEstimator(4, n_lags=5), X, z, stop=100)
+    before = est.state()
+    x_bad = X[100].copy()
+    x_bad[2] = bad
+    with pytest.raises(NonFiniteInput, match="model"):
+        est.update(x_bad, z[100])
+    with pytest.raises(NonFiniteInput):
+        est.update(X[100], bad)
+    after = est.state()
+    assert before["counters"] == after["counters"]
+    for name, arr in before["arrays"].items():
+        np.testing.assert_array_equal(arr, after["arrays"][name], err_msg=name)
+
 @pytest.mark.parametrize(
     "kwargs, match",
     [
@@ -413,7 +337,6 @@ def test_invalid_configuration_is_refused_clearly(kwargs, match):
     with pytest.raises(ValueError, match=match):
         RecursiveEstimator(3, **kwargs)
 
-
 def test_wrong_shapes_are_refused():
     est = RecursiveEstimator(3)
     with pytest.raises(ValueError, match="regressors"):
@@ -421,7 +344,6 @@ def test_wrong_shapes_are_refused():
     bank = EstimatorBank((2, 3))
     with pytest.raises(ValueError, match="model 1"):
         bank.update([[1.0, 2.0], [1.0]], [0.0, 0.0])
-
 
 def test_numerical_core_imports_numpy_only():
     """Every module of the estimator package imports numpy, the standard library's math and
@@ -446,29 +368,6 @@ def test_numerical_core_imports_numpy_only():
         capture_output=True, text=True, check=True,
     )
     assert out.stdout.strip() == "False"
-
-
-def test_an_exactly_fitted_model_has_zero_corrected_errors_without_repairs():
-    rng = np.random.default_rng(5)
-    X = np.column_stack([np.ones(300), rng.standard_normal(300), rng.standard_normal(300)])
-    z = X @ np.array([0.3, -1.2, 0.7])  # no noise: residuals are rounding only
-    bank = EstimatorBank([3], 50)
-    for k in range(300):
-        bank.update(X[k : k + 1], z[k : k + 1])
-    se = bank.standard_errors(0, "corrected")
-    cov = bank.covariance(0, "corrected")
-    assert np.all(np.isfinite(se)) and np.all(se < 1e-8)  # rounding-level, never NaN
-    assert np.all(np.abs(cov) < 1e-16)
-    assert bank.repairs[0] == 0
-    # A constant output fitted exactly by its bias (the T-2 bag's CX): rounding makes the
-    # corrected variances slightly negative; they are zero, not a repair.
-    const = EstimatorBank([3], 50)
-    for k in range(300):
-        const.update(X[k : k + 1], [-0.03])
-    assert np.all(const.standard_errors(0, "corrected") == 0.0) or np.all(const.standard_errors(0, "corrected") < 1e-8)
-    const.covariance(0, "corrected")
-    assert const.repairs[0] == 0
-
 
 def test_numpy_126_vecdot_fallback_gives_the_same_standard_errors(monkeypatch):
     """numpy < 2.0 has no vecdot; the einsum fallback must give the same covariances."""

@@ -46,7 +46,8 @@ __all__ = ["EstimatorBank", "vecdot"]
 _F64 = np.dtype(np.float64)
 
 # A sample whose quantities are all at most this in magnitude is applied without checks.
-_SAFE_SQUARED = 1e200
+_SAFE = 1e100
+_SAFE_SQUARED = _SAFE * _SAFE
 _KIND_INDEX = {"corrected": 0, "conventional": 1}  # COVARIANCE_KINDS
 
 
@@ -139,6 +140,7 @@ class EstimatorBank:
         self._Dx_row = self._g[:, None, :n, 0]
         self._neg_e = self._g[:, n, 0]
         self._y_flat = self._y.reshape(-1)
+        self._y_abs = np.zeros_like(self._y_flat)
         self._g_flat = self._g.reshape(-1)
         self._xs_col = self._xs[:, :, None]
         self._z_col = self._z_slot[:, None, None]
@@ -194,20 +196,21 @@ class EstimatorBank:
         else:
             self._apply_checked(x, z)
 
-    def _prepare(self, x: np.ndarray, z: np.ndarray) -> bool:
+    def _prepare(self, x: np.ndarray, z: np.ndarray, check: bool = True) -> bool:
         """Write the sample's ``y = (x / s, z)``, ``u = (D x, theta' x - z)`` and ``d`` to
         scratch (the state is not touched). True when every entry of ``y`` and ``u`` is at
-        most 1e100 in magnitude (then the update keeps a finite state finite); NaN, infinity
-        or a larger number stops it early and returns False."""
+        most 1e100 in magnitude (then the update keeps a finite state finite); with ``check``,
+        NaN, infinity or a larger number in ``y`` stops it early and returns False."""
         np.multiply(x, self._inv_s, out=self._xs)
         self._z_slot[...] = z
-        if not np.dot(self._y_flat, self._y_flat) <= _SAFE_SQUARED:
+        small = np.maximum.reduce(np.absolute(self._y_flat, out=self._y_abs)) <= _SAFE
+        if check and not small:
             return False
         np.matmul(self._aug, self._xs_col, out=self._g)  # (D x, theta' x)
         d = vecdot(self._xs, self._Dx, out=self._d)
         d += self.forgetting  # d_k = f + x' D x: the denominator of Eq. 15a
         np.subtract(self._neg_e, z, out=self._neg_e)  # -e_k = x' theta_(k-1) - z_k
-        return np.dot(self._g_flat, self._g_flat) <= _SAFE_SQUARED
+        return small and np.dot(self._g_flat, self._g_flat) <= _SAFE_SQUARED
 
     def _apply(self, z: np.ndarray) -> None:
         """Add the prepared sample to the state (Eqs. 15-17, 21)."""
@@ -287,7 +290,7 @@ class EstimatorBank:
         x = np.where(self._mask, x, 0.0)  # the padding is ignored
         before, outputs = self.state(), self._covariances
         with np.errstate(all="ignore"):  # overflow is what is being checked
-            self._prepare(x, z)
+            self._prepare(x, z, check=False)
             self._apply(z)
         finite = all(np.isfinite(a).all() for a in self.state()["arrays"].values())
         if not finite:
@@ -396,7 +399,7 @@ class EstimatorBank:
         theta = self._aug[:, n]
         output_square = vecdot(theta, np.matmul(self._lags.lag_products[:, :, 0, :], theta[:, :, None])[:, :, 0])
         n_square = k if f == 1.0 else (1.0 - f ** (2 * k)) / (1.0 - f * f)
-        return self._lags.lag_sums[:, 0] / self.n_eff <= covariance.EXACT_FIT * output_square / n_square
+        return self._lags.lag_sums[:, 0] * n_square <= (covariance.EXACT_FIT * self.n_eff) * output_square
 
     def standard_errors_all(self, kind: str = "corrected") -> np.ndarray:
         """Standard errors of every model as an ``(M, n_max)`` array: the square roots of the

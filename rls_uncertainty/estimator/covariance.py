@@ -57,7 +57,8 @@ class Covariances:
     diagonals, computed as ``2 diag(P) * diag(scale)``, which is the same floating-point
     number (doubling is exact). The published corrected covariance differs where a diagonal
     entry is negative: ``repaired`` maps such a model to its nearest positive semi-definite
-    matrix, ``exact`` marks the exact fits, published as zero.
+    matrix. When any is negative, ``exact`` marks the models that fit exactly: theirs are
+    rounding of either sign and are published as zero.
     """
 
     __slots__ = ("P", "scale", "standard_errors", "repaired", "exact", "_matrices")
@@ -128,15 +129,16 @@ class CovarianceEvaluator:
         counted: list[int] = []
         corrected_diag = P[0].diagonal(0, 1, 2)  # models not ready are 0 here, not NaN
         if np.minimum.reduce(corrected_diag, axis=None) < 0.0:
-            negative = (corrected_diag < 0.0).any(axis=1)
-            exact = negative & exact_fit()
-            if exact.any():  # rounding of an exact fit, not indefiniteness: zero
+            exact = exact_fit()
+            if exact.any():  # rounding of exact fits, not indefiniteness: zero
                 cov.exact = exact
-                cov.standard_errors[0][exact] = np.where(np.isnan(scale.diagonal(0, 1, 2)[exact]), np.nan, 0.0)
-            for j in np.flatnonzero(negative & ~exact):
-                j = int(j)
-                s = sizes[j]
-                fixed = cov.repaired[j] = nearest_psd(cov.matrices()[0, j, :s, :s])
-                counted.append(j)
-                cov.standard_errors[0, j, :s] = np.sqrt(np.maximum(np.diag(fixed), 0.0))
+                cov.standard_errors[0][exact] *= 0.0  # (NaN padding stays NaN)
+                corrected_diag = np.where(exact[:, None], 0.0, corrected_diag)
+            if np.minimum.reduce(corrected_diag, axis=None) < 0.0:
+                for j in np.flatnonzero((corrected_diag < 0.0).any(axis=1)):
+                    j = int(j)
+                    s = sizes[j]
+                    fixed = cov.repaired[j] = nearest_psd(cov.matrices()[0, j, :s, :s])
+                    counted.append(j)
+                    cov.standard_errors[0, j, :s] = np.sqrt(np.maximum(np.diag(fixed), 0.0))
         return cov, counted
