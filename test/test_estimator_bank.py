@@ -371,11 +371,12 @@ def test_numerical_core_imports_numpy_only():
 
 def test_numpy_126_vecdot_fallback_gives_the_same_standard_errors(monkeypatch):
     """numpy < 2.0 has no vecdot; the einsum fallback must give the same covariances."""
-    from rls_uncertainty.estimator import bank as bank_module
+    from rls_uncertainty.estimator import bank, covariance, numpy_compat
 
     X, z = wide_scale_problem()
     ref = run(RecursiveEstimator(4, n_lags=20, forgetting=0.99), X, z)
-    monkeypatch.setattr(bank_module, "vecdot", bank_module._einsum_vecdot)
+    for module in (bank, covariance):
+        monkeypatch.setattr(module, "vecdot", numpy_compat.einsum_vecdot)
     alt = run(RecursiveEstimator(4, n_lags=20, forgetting=0.99), X, z)
     np.testing.assert_allclose(alt.standard_errors(), ref.standard_errors(), rtol=1e-12)
     np.testing.assert_allclose(alt.standard_errors("conventional"), ref.standard_errors("conventional"), rtol=1e-12)

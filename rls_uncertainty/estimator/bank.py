@@ -21,15 +21,16 @@ How the hot path differs from the reference, and why (each measured in
 * Eq. 17 is kept as the lag sums ``n_k R_k(i)`` and Eq. 21 one-sided (see
   :mod:`.lag_storage`); the sample histories are written once into a newest-first buffer.
 * An update whose every quantity (scaled regressors, output, ``D x``, innovation) is at most
-  ``1e100`` in magnitude cannot make a finite state non-finite (products stay below
-  ``1e254``, which rounding absorbs even next to the largest double), so it is applied
-  directly; any other sample is applied to a checked copy of the state and refused with
-  :class:`NonFiniteInput` if the state would not stay finite.
+  ``1e100`` in magnitude cannot make a finite state non-finite (its products with anything
+  already in the state stay below ``1e254``, which rounding absorbs even next to the largest
+  double), so it is applied directly. Any other sample is applied after a copy of the state
+  is taken, and rolled back and refused with :class:`NonFiniteInput` if the state is not
+  finite after it. (What the guard does not cover: ``D`` growing without bound under
+  forgetting when a regressor stays zero for a very long time.)
 """
 
 from __future__ import annotations
 
-import math
 from typing import Sequence
 
 import numpy as np
@@ -39,9 +40,10 @@ from . import covariance, state
 from .initialization import ExactInitialization
 from .lag_storage import GROWTH_START, LagStorage
 from .lag_window import lag_weights
+from .numpy_compat import vecdot
 from .options import check_kind, check_options, prior_diagonal
 
-__all__ = ["EstimatorBank", "vecdot"]
+__all__ = ["EstimatorBank"]
 
 _F64 = np.dtype(np.float64)
 
@@ -49,14 +51,6 @@ _F64 = np.dtype(np.float64)
 _SAFE = 1e100
 _SAFE_SQUARED = _SAFE * _SAFE
 _KIND_INDEX = {"corrected": 0, "conventional": 1}  # COVARIANCE_KINDS
-
-
-def _einsum_vecdot(a: np.ndarray, b: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
-    """``np.vecdot`` (numpy >= 2.0) for numpy 1.26: dot products over the last axis."""
-    return np.einsum("...i,...i->...", a, b, out=out)
-
-
-vecdot = getattr(np, "vecdot", _einsum_vecdot)
 
 
 class EstimatorBank:
@@ -130,8 +124,8 @@ class EstimatorBank:
         cap = GROWTH_START if self.n_lags is None else self.n_lags + 1
         self._lags = LagStorage(m, n, cap, all_lags=self.n_lags is None, forgetting=self.forgetting)
         self._init = ExactInitialization(self)
-        # Per-sample scratch, each contiguous: y = (x / s, z) and u = (D x, theta' x - z). The
-        # sums of squares of both decide whether the sample can be applied unchecked.
+        # Per-sample scratch, each contiguous: y = (x / s, z) and u = (D x, theta' x - z). Their
+        # magnitudes decide whether the sample can be applied unchecked (_prepare).
         self._y = np.zeros((m, n + 1))
         self._xs = self._y[:, :n]
         self._z_slot = self._y[:, n]
@@ -148,7 +142,7 @@ class EstimatorBank:
         self._d_col = self._d[:, None, None]
         self._root = np.zeros(m)  # sqrt(d_k / f)
         self._outer = np.zeros((m, n + 1, n))
-        self._evaluator = covariance.CovarianceEvaluator(m, n, eq13=self.forgetting == 1.0)
+        self._evaluator = covariance.CovarianceEvaluator(eq13=self.forgetting == 1.0)
         self._covariances = None  # covariance.Covariances of the current sample
         self._window_key = None
 
@@ -384,7 +378,7 @@ class EstimatorBank:
                 w = lags.cap
                 sums, products = lags.lag_sums, lags.lag_products
             cov, repaired = self._evaluator(
-                self._D, sums, self._half_window(w) * (1.0 / self.n_eff), products,
+                self._D, sums, self._half_window(w), products, 1.0 / self.n_eff,
                 self._cov_scale, self._se_scale, self._exact_fit, self.sizes,
             )
             if repaired:

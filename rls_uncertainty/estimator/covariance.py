@@ -13,16 +13,19 @@ The conventional covariance is Eq. 22 with ``n_tau = 0``: ``N = R_k(0) Lambda_k(
 with ``f = 1``, ``D Lambda_k(0) D = D`` and Eq. 13 reads ``P = R_k(0) D / 2``. Nothing else
 in the package deals with the factor 2 of the two-sided sum.
 
-:class:`CovarianceEvaluator` computes the full matrices of both kinds for all models in one
-vectorised pass; the published standard errors are the square roots of their diagonals, so
+:class:`CovarianceEvaluator` computes both kinds for all models in one vectorised pass
+from ``D N``: the variances ``diag(P + P') = 2 diag(P)`` every sample, the full matrices when
+asked, with the same diagonals; the published standard errors are their square roots, so
 ``standard_errors_all``, ``standard_errors(j)`` and ``covariance(j)`` of the bank are the
-same numbers. A corrected covariance with a negative diagonal entry is replaced by
+same numbers. The ``1/n_k`` of ``R_k(i)`` and the column scaling are applied last. A corrected covariance with a negative diagonal entry is replaced by
 :func:`nearest_psd` (a repair), or by zero when the model fits exactly (:data:`EXACT_FIT`).
 """
 
 from __future__ import annotations
 
 import numpy as np
+
+from .numpy_compat import vecdot
 
 __all__ = ["EXACT_FIT", "nearest_psd", "half_window", "CovarianceEvaluator", "Covariances"]
 
@@ -48,33 +51,42 @@ def half_window(c: np.ndarray) -> np.ndarray:
 
 
 class Covariances:
-    """Both covariances of every model at one sample, as ``P`` (module docstring).
+    """Both covariances of every model at one sample.
 
-    ``matrices()`` are the corrected (``[0]``, Eq. 20/22) and conventional (``[1]``, Eq. 13)
-    covariances ``(P + P') * scale``, ``(2, M, n_max, n_max)`` in the regressors' units,
-    unrepaired, NaN outside the ready models' blocks; they are formed on first use.
-    ``standard_errors`` ``(2, M, n_max)`` are the published ones: the square roots of those
-    diagonals, computed as ``2 diag(P) * diag(scale)``, which is the same floating-point
-    number (doubling is exact). The published corrected covariance differs where a diagonal
-    entry is negative: ``repaired`` maps such a model to its nearest positive semi-definite
-    matrix. When any is negative, ``exact`` marks the models that fit exactly: theirs are
-    rounding of either sign and are published as zero.
+    ``variances`` ``(2, M, n_max)`` are the diagonals of the corrected (``[0]``, Eq. 20/22)
+    and conventional (``[1]``, Eq. 13) covariances in the regressors' units, published
+    (repaired), and ``standard_errors`` their square roots (negative rounding clipped at 0).
+    ``matrices()`` are the unrepaired covariances ``(2, M, n_max, n_max)``, formed on first use
+    from the same ``D N`` products as ``(P + P') * scale / n_k`` with ``P = D N D``, their
+    diagonals summed as the variances were, so that ``standard_errors`` are exactly
+    ``sqrt(diag(matrices))``. NaN outside the ready models' blocks. Where a corrected variance
+    is negative, ``repaired`` maps a model to its nearest positive semi-definite matrix, and
+    ``exact`` marks the models that fit exactly, whose covariance is published as zero.
     """
 
-    __slots__ = ("P", "scale", "standard_errors", "repaired", "exact", "_matrices")
+    __slots__ = ("standard_errors", "repaired", "exact", "_parts", "_matrices")
 
-    def __init__(self, P: np.ndarray, scale: np.ndarray, diagonal_scale: np.ndarray) -> None:
-        self.P, self.scale = P, scale
+    def __init__(self, standard_errors: np.ndarray, parts: tuple) -> None:
+        self.standard_errors = standard_errors
         self.repaired: dict[int, np.ndarray] = {}
         self.exact = None
+        self._parts = parts
         self._matrices = None
-        se = P.diagonal(0, 2, 3) * diagonal_scale  # diag(P + P') * scale = diag(P) * 2 diag(scale)
-        np.maximum(se, 0.0, out=se)
-        self.standard_errors = np.sqrt(se, out=se)
 
     def matrices(self) -> np.ndarray:
         if self._matrices is None:
-            self._matrices = (self.P + self.P.swapaxes(2, 3)) * self.scale  # cov = P + P'
+            D, DN, DN0, hS0, scale, diagonal_scale, inv_n = self._parts
+            P = np.empty((2,) + D.shape)
+            np.matmul(DN, D, out=P[0])
+            if DN0 is None:
+                np.multiply(D, hS0[:, :, None], out=P[1])
+            else:
+                np.matmul(DN0, D, out=P[1])
+            cov = P + P.swapaxes(2, 3)  # the two-sided sum
+            cov *= scale * inv_n
+            a = np.arange(D.shape[1])
+            cov[:, :, a, a] = _diagonals(D, DN, DN0, hS0) * (diagonal_scale * inv_n)  # as the variances
+            self._matrices = cov
         return self._matrices
 
     def matrix(self, kind_index: int, j: int, size: int, *, repair: bool = True) -> np.ndarray:
@@ -87,22 +99,31 @@ class Covariances:
         return self.matrices()[kind_index, j, :size, :size].copy()
 
 
+def _diagonals(D, DN, DN0, hS0, out=None) -> np.ndarray:
+    """``diag(P)`` of both kinds, ``(2, M, n)``: ``diag(D N D) = sum_c (D N)_ac D_ac``."""
+    out = np.empty((2,) + D.shape[:2]) if out is None else out
+    vecdot(DN, D, out=out[0])
+    if DN0 is None:
+        np.multiply(hS0, D.diagonal(0, 1, 2), out=out[1])  # Eq. 13: R_k(0) D / 2
+    else:
+        vecdot(DN0, D, out=out[1])
+    return out
+
+
 class CovarianceEvaluator:
     """Evaluates :class:`Covariances` for a bank whose conventional covariance is Eq. 13
     (``eq13``, ``f = 1``) or ``R_k(0) D Lambda_k(0) D`` (``f < 1``)."""
 
-    def __init__(self, m: int, n: int, eq13: bool) -> None:
+    def __init__(self, eq13: bool) -> None:
         self.eq13 = eq13
-        # P of the latest evaluation; the bank asks for one evaluation per sample and drops it
-        # at the next update, so the workspace is reused (what callers get is always fresh).
-        self._P = np.empty((2, m, n, n))
 
     def __call__(
         self,
         D: np.ndarray,
         lag_sums: np.ndarray,
-        h_over_n: np.ndarray,
+        h: np.ndarray,
         lag_products: np.ndarray,
+        inv_n: float,
         scale: np.ndarray,
         diagonal_scale: np.ndarray,
         exact_fit,
@@ -111,34 +132,38 @@ class CovarianceEvaluator:
         """Both covariances of every model, and the models whose corrected one was repaired.
 
         ``D`` ``(M, n, n)`` and ``lag_products`` ``(M, n, w, n)`` (``Lambda+_k(i)``) are in
-        column-scaled units; ``lag_sums`` ``(M, w)`` is ``n_k R_k(i)`` and ``h_over_n`` the
-        half window divided by ``n_k``, for the ``w`` lags held; ``scale`` ``(M, n, n)``
-        takes scaled units back to the regressors' (NaN outside the ready models' blocks) and
-        ``diagonal_scale`` is ``2 diag(scale)`` ``(M, n)``; ``exact_fit()`` returns the models that fit exactly.
+        column-scaled units; ``lag_sums`` ``(M, w)`` is ``n_k R_k(i)`` and ``h`` the half
+        window of the ``w`` lags held; ``inv_n = 1 / n_k``; ``scale`` ``(M, n, n)`` takes
+        scaled units back to the regressors' (NaN outside the ready models' blocks) and
+        ``diagonal_scale`` is ``2 diag(scale)`` ``(M, n)``; ``exact_fit()`` returns the models
+        that fit exactly.
         """
-        P = self._P
-        hR = lag_sums * h_over_n  # h_i R_k(i)
-        N = np.matmul(hR[:, None, None, :], lag_products)[:, :, 0, :]  # sum_i h_i R(i) Lambda+(i)
-        np.matmul(np.matmul(D, N), D, out=P[0])  # Eq. 20 / 22: corrected
+        hS = lag_sums * h  # n_k h_i R_k(i)
+        N = np.matmul(hS[:, None, None, :], lag_products)[:, :, 0, :]  # n_k sum_i h_i R(i) Lambda+(i)
+        DN = np.matmul(D, N)
         if self.eq13:
-            np.multiply(D, hR[:, :1, None], out=P[1])  # Eq. 13 with sigma^2 = R_k(0) (Eq. 16)
-        else:
-            N0 = np.matmul(hR[:, None, None, :1], lag_products[:, :, :1])[:, :, 0, :]
-            np.matmul(np.matmul(D, N0), D, out=P[1])  # Eq. 22 with n_tau = 0
-        cov = Covariances(P, scale, diagonal_scale)
+            DN0 = None  # Eq. 13: P = R_k(0) D / 2
+        else:  # Eq. 22 with n_tau = 0: N = R_k(0) Lambda_k(0) / 2
+            DN0 = np.matmul(D, np.matmul(hS[:, None, None, :1], lag_products[:, :, :1])[:, :, 0, :])
+        hS0 = hS[:, :1]
+        var = _diagonals(D, DN, DN0, hS0)  # diag(P), Eqs. 20/22 and 13
+        negative = np.minimum.reduce(var[0], axis=None) < 0.0  # models not ready are 0 here
+        var *= diagonal_scale * inv_n  # diag(P + P') * scale / n_k
+        cov = Covariances(var, (D, DN, DN0, hS0, scale, diagonal_scale, inv_n))
         counted: list[int] = []
-        corrected_diag = P[0].diagonal(0, 1, 2)  # models not ready are 0 here, not NaN
-        if np.minimum.reduce(corrected_diag, axis=None) < 0.0:
+        if negative:
             exact = exact_fit()
+            corrected = var[0]
             if exact.any():  # rounding of exact fits, not indefiniteness: zero
                 cov.exact = exact
-                cov.standard_errors[0][exact] *= 0.0  # (NaN padding stays NaN)
-                corrected_diag = np.where(exact[:, None], 0.0, corrected_diag)
-            if np.minimum.reduce(corrected_diag, axis=None) < 0.0:
-                for j in np.flatnonzero((corrected_diag < 0.0).any(axis=1)):
+                corrected[exact] *= 0.0  # (NaN padding stays NaN)
+            if np.fmin.reduce(corrected, axis=None) < 0.0:
+                for j in np.flatnonzero((corrected < 0.0).any(axis=1)):
                     j = int(j)
                     s = sizes[j]
                     fixed = cov.repaired[j] = nearest_psd(cov.matrices()[0, j, :s, :s])
                     counted.append(j)
-                    cov.standard_errors[0, j, :s] = np.sqrt(np.maximum(np.diag(fixed), 0.0))
+                    corrected[j, :s] = np.diag(fixed)
+        np.maximum(var, 0.0, out=var)
+        np.sqrt(var, out=var)  # the published standard errors
         return cov, counted
