@@ -45,13 +45,17 @@ def test_snapshot_while_a_model_waits_for_initialization_continues_bit_identical
         np.testing.assert_array_equal(a.standard_errors_all(), b.standard_errors_all())
         np.testing.assert_array_equal(a.standard_errors_all("conventional"), b.standard_errors_all("conventional"))
 
-def test_snapshot_is_a_copy():
+@pytest.mark.parametrize("n_lags", [5, None])
+def test_snapshot_is_a_copy(n_lags):
     X, z = wide_scale_problem()
-    a = run(RecursiveEstimator(4, n_lags=5), X, z, stop=100)
+    a = run(RecursiveEstimator(4, n_lags=n_lags), X, z, stop=100)
     snap = a.state()
     theta = a.theta.copy()
+    frozen = {name: arr.tobytes() for name, arr in snap["arrays"].items()}
     run(a, X[100:], z[100:])
     assert np.array_equal(RecursiveEstimator.from_state(snap).theta, theta)
+    # No array of the state is a view of the estimator's: continuing changed none of them.
+    assert {name: arr.tobytes() for name, arr in snap["arrays"].items()} == frozen
 
 
 def test_a_state_of_another_format_or_shape_is_refused_by_name():

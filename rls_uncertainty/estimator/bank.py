@@ -122,7 +122,9 @@ class EstimatorBank:
         self._ready_at = np.zeros(m, dtype=np.int64)
         self.repairs = np.zeros(m, dtype=np.int64)
         cap = GROWTH_START if self.n_lags is None else self.n_lags + 1
-        self._lags = LagStorage(m, n, cap, all_lags=self.n_lags is None, forgetting=self.forgetting)
+        self._lags = LagStorage(
+            m, n, cap, all_lags=self.n_lags is None, forgetting=self.forgetting, waiting=p0 is None
+        )
         self._init = ExactInitialization(self)
         # Per-sample scratch, each contiguous: y = (x / s, z) and u = (D x, theta' x - z). Their
         # magnitudes decide whether the sample can be applied unchecked (_prepare).
@@ -137,7 +139,7 @@ class EstimatorBank:
         self._y_abs = np.zeros_like(self._y_flat)
         self._g_flat = self._g.reshape(-1)
         self._xs_col = self._xs[:, :, None]
-        self._z_col = self._z_slot[:, None, None]
+        self._y_col = self._y[:, :, None]
         self._d = np.zeros(m)  # d_k = f + x' D x
         self._d_col = self._d[:, None, None]
         self._root = np.zeros(m)  # sqrt(d_k / f)
@@ -156,6 +158,8 @@ class EstimatorBank:
         """Recompute what depends on which models are ready (after an initialization or a
         restored state)."""
         self._all_ready = bool(self._ready.all())
+        if self._all_ready:
+            self._lags.all_initialized()
         invalid = ~(self._mask & self._ready[:, None])  # padding and models not ready: NaN
         self._theta_scale = np.where(invalid, np.nan, self._inv_s)
         self._cov_scale = self._theta_scale[:, :, None] * self._theta_scale[:, None, :]
@@ -215,10 +219,11 @@ class EstimatorBank:
             self._init.reset()  # its indices point into the old arrays
         w = k if k < lags.cap else lags.cap  # lags held after this sample
         p = lags.ptr - 1  # >= 0: see LagStorage.relocate
-        lags.x[:, p] = self._xs
-        waiting = not self._all_ready
+        waiting, merged = lags.waiting, lags.merged
         if waiting:  # (x, z) is needed until initialization
             lags.y[:, p] = self._y
+        if not merged:
+            lags.x[:, p] = self._xs
         self.k = k
         lags.ptr = p
         self.n_eff = f * self.n_eff + 1.0  # n_k
@@ -239,7 +244,7 @@ class EstimatorBank:
         else:
             np.negative(neg_e, out=v)  # v_k = e_k
 
-        sums, sums_tmp, products, products_tmp, mxz, xz_tmp, mzy, zy_tmp = lags.by_lag(w)
+        sums, sums_tmp, products, products_tmp = lags.by_lag(w)
         # Eq. 17 as sums: n_k R_k(i) = f n_(k-1) R_(k-1)(i) + v_k v_(k-i).
         if f != 1.0:
             sums *= f
@@ -248,25 +253,23 @@ class EstimatorBank:
 
         # Eq. 21, one-sided: Lambda+_k(i) = f^2 Lambda+_(k-1)(i) + f^i x_k x_(k-i)'.
         m, n = self.n_models, self.n_max
-        x_k = self._xs_col
-        x_window = lags.x[:, p : p + w].reshape(m, 1, w * n)  # x_k, x_(k-1), ... (a view)
-        if f == 1.0:
-            products += np.multiply(x_k, x_window, out=products_tmp)
+        if merged:  # of y = (x, z): Lambda+ and the lagged moments at once (see .lag_storage)
+            y_window = lags.y[:, p : p + w].reshape(m, 1, w * (n + 1))  # y_k, y_(k-1), ...
+            products += np.multiply(self._y_col, y_window, out=products_tmp)
         else:
-            weighted = (x_window.reshape(m, w, n) * lags.lag_powers[None, :w, None]).reshape(m, 1, w * n)
-            lags.lag_products *= f * f
-            products += np.multiply(x_k, weighted, out=products_tmp)
-
+            x_window = lags.x[:, p : p + w].reshape(m, 1, w * n)  # x_k, x_(k-1), ... (a view)
+            if f == 1.0:
+                products += np.multiply(self._xs_col, x_window, out=products_tmp)
+            else:
+                weighted = (x_window.reshape(m, w, n) * lags.lag_powers[None, :w, None]).reshape(m, 1, w * n)
+                lags.lag_products *= f * f
+                products += np.multiply(self._xs_col, weighted, out=products_tmp)
+            if waiting:  # the lagged moments, weighted f^(k-j)
+                moments, moments_tmp = lags.products_y_by_lag(w)
+                lags.products_y *= f
+                y_window = lags.y[:, p : p + w].reshape(m, 1, w * (n + 1))
+                moments += np.multiply(self._y_col, y_window, out=moments_tmp)
         if waiting:
-            # The lagged moments exact initialization needs (see .lag_storage).
-            y_window = lags.y[:, p : p + w]  # y_k, y_(k-1), ...
-            if f != 1.0:
-                lags.moment_xx *= f
-                lags.moment_xx[:, :, :w].reshape(m, n, w * n)[...] += np.multiply(x_k, x_window, out=products_tmp)
-                lags.moment_xz *= f
-                lags.moment_zy *= f
-            mxz += np.multiply(x_k, y_window[:, None, :, n], out=xz_tmp)
-            mzy += np.multiply(self._z_col, y_window, out=zy_tmp)
             self._init.check(w)
         if p == 0 and self.n_lags is not None:
             lags.relocate(w)

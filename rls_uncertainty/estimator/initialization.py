@@ -33,22 +33,18 @@ class ExactInitialization:
         """Forget the cached indices (after a model initialized or the arrays changed)."""
         self._waiting = None
 
-    def normal_matrices(self) -> np.ndarray:
-        """``A_k(i) = sum_j f^(k-j) x_j x_(j-i)'`` of every model, ``(M, n, cap, n)``."""
-        lags = self.bank._lags
-        return lags.lag_products if lags.moment_xx is None else lags.moment_xx
-
     def check(self, w: int) -> None:
         """Initialize the waiting models whose ``A_k`` allows it (``w`` lags held)."""
         bank = self.bank
         waiting = self._waiting
         if waiting is None:
-            n, cap = bank.n_max, bank._lags.cap
+            # Flat indices of each waiting model's diag(A_k) in products_y, and its blocker.
+            n1, cap = bank.n_max + 1, bank._lags.cap
             waiting = self._waiting = [
-                [j, np.array([((j * n + a) * cap) * n + a for a in range(bank.sizes[j])], dtype=np.intp), None]
+                [j, np.array([((j * n1 + a) * cap) * n1 + a for a in range(bank.sizes[j])], dtype=np.intp), None]
                 for j in range(bank.n_models) if not bank._ready[j]
             ]
-        flat = self.normal_matrices().reshape(-1)
+        flat = bank._lags.products_y.reshape(-1)
         for entry in waiting:
             blocker = entry[2]
             if blocker is not None and not flat[blocker] > 0.0:
@@ -69,7 +65,9 @@ class ExactInitialization:
         s_n, n = bank.sizes[j], bank.n_max
         if bank.k < s_n:
             return False
-        A = self.normal_matrices()[j, :s_n, 0, :s_n]
+        # P(i) = sum_j f^(k-j) y_j y_(j-i)' of y = (x, z): A_k = X'WX is its lag-0 x block.
+        P = lags.products_y[j]
+        A = P[:s_n, 0, :s_n]
         s = np.sqrt(np.diag(A))
         if not np.all(s > 0):
             return False
@@ -78,21 +76,18 @@ class ExactInitialization:
             return False
         D_scaled = np.linalg.inv(C)
         D_scaled = 0.5 * (D_scaled + D_scaled.T)  # S D S with S = diag(s)
-        theta_scaled = D_scaled @ (lags.moment_xz[j, :s_n, 0] / s)  # Eq. 6 (S theta)
-        # Eq. 10 from the lagged moments: v_j = ta' y_j with y = (x, z), ta = (-theta, 1),
-        # so sum_j w_j v_j v_(j-i) = ta' P(i) ta with P(i) = sum_j w_j y_j y_(j-i)'.
-        P = np.zeros((n + 1, lags.cap, n + 1))
-        P[:n, :, :n] = self.normal_matrices()[j]
-        P[:n, :, n] = lags.moment_xz[j]
-        P[n] = lags.moment_zy[j]
+        theta_scaled = D_scaled @ (P[:s_n, 0, n] / s)  # Eq. 6 (S theta), X'Wz the lag-0 x z moment
+        # Eq. 10 from the lagged moments: v_j = ta' y_j with ta = (-theta, 1), so
+        # sum_j w_j v_j v_(j-i) = ta' P(i) ta.
         ta = np.zeros(n + 1)
         ta[:s_n] = -theta_scaled / s
         ta[n] = 1.0
         lag_sums = np.einsum("a,aib,b->i", ta, P[:, :w, :], ta)
         inv = np.zeros(n)
         inv[:s_n] = 1.0 / s
-        x_scaled = lags.x[j] * inv[None, :]
-        residuals = lags.y[j, :, n] - x_scaled @ np.concatenate([theta_scaled, np.zeros(n - s_n)])  # Eq. 7
+        history = lags.y[j]
+        x_scaled = history[:, :n] * inv[None, :]
+        residuals = history[:, n] - x_scaled @ np.concatenate([theta_scaled, np.zeros(n - s_n)])  # Eq. 7
         if not (np.isfinite(theta_scaled).all() and np.isfinite(lag_sums).all()
                 and np.isfinite(residuals[lags.ptr : lags.ptr + w]).all()):
             return False  # absurd (finite) data so far: the state would not stay finite
@@ -103,6 +98,7 @@ class ExactInitialization:
         products = lags.lag_products[j]
         products *= inv[:, None, None]  # regressors to scaled units
         products *= inv[None, None, :]
+        history[:, :n] = x_scaled
         lags.x[j] = x_scaled
         lags.v[j] = residuals
         bank._ready[j] = True

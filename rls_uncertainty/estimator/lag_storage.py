@@ -6,11 +6,11 @@ or growing by doubling when all lags are kept):
 * **History**, newest first: ``x`` (column-scaled regressors) and ``v`` (residuals of
   Eqs. 16-17) of the last ``min(k, cap)`` samples, and while a model waits for
   initialization ``y = (x, z)`` with the outputs. :meth:`LagStorage.window` of a buffer is
-  ``[:, 0]`` = sample ``k``, ``[:, i]`` = sample ``k - i``. Each sample is
-  written once, in front of the window; the window of ``x`` is contiguous, so one outer
-  product updates every lag of Eq. 21. When a sample lands on slot 0 the window is copied
-  back to the end of the buffer (every ``3 cap`` samples; the buffer holds ``4 cap``). With
-  all lags the buffer is exactly the capacity and grows with it.
+  ``[:, 0]`` = sample ``k``, ``[:, i]`` = sample ``k - i``. Each sample is written once, in
+  front of the window, which stays contiguous, so one outer product updates every lag of
+  Eq. 21. When a sample lands on slot 0 the window is copied back to the end of the buffer
+  (every ``3 cap`` samples; the buffer holds ``4 cap``). With all lags the buffer is exactly
+  the capacity and grows with it.
 * **Eq. 17 as sums**: ``lag_sums[m, i] = n_k R_k(i) = sum_j w_j v_j v_(j-i)``, so that one
   multiply-add per sample updates it; ``R_k(i) = lag_sums[:, i] / n_k``.
 * **Eq. 21, one-sided**: ``lag_products[m, a, i, b] = Lambda+_k(i)[a, b]`` with
@@ -18,10 +18,16 @@ or growing by doubling when all lags are kept):
   ``Lambda_k(i)`` is formed in :mod:`.covariance`. The lag axis sits between the matrix axes
   so that each model's row ``a`` is one contiguous block.
 * **Lagged moments** for exact initialization (:mod:`.initialization`), weighted
-  ``w_j = f^(k-j)``: ``moment_xz[m, a, i] = sum w_j x_j[a] z_(j-i)``, ``moment_zy[m, i, b]
-  = sum w_j z_j y_(j-i)[b]`` (``z x'`` and ``z z`` products) and, under
-  forgetting, ``moment_xx[m, a, i, b] = sum w_j x_j[a] x_(j-i)[b]`` (with ``f = 1`` that is
-  ``lag_products``). They are updated only while a model waits for initialization.
+  ``w_j = f^(k-j)``: the products of ``y = (x, z)``, ``products_y[m, a, i, b] = sum_j w_j
+  y_j[a] y_(j-i)[b]``, kept only while a model waits. Their blocks are named views:
+  ``moment_xx`` (``x x'``), ``moment_xz`` (``x_j z_(j-i)``) and ``moment_zy``
+  (``z_j y_(j-i)``).
+
+**While a model waits and f = 1**, the weights of Eq. 21 and of the moments coincide, so
+``lag_products`` is the ``x`` block of ``products_y`` and one outer product of ``y`` per
+sample updates both (a separate product of ``x`` plus the moments costs the six-model T-2
+replay about 20%). When every model is initialized (:meth:`LagStorage.all_initialized`),
+``lag_products`` moves to an array of its own and the moments are dropped.
 """
 
 from __future__ import annotations
@@ -33,55 +39,89 @@ __all__ = ["LagStorage", "GROWTH_START"]
 GROWTH_START = 64  # initial lag capacity when all lags are kept (n_lags=None)
 
 _HISTORY = ("x", "y", "v")
-_BY_LAG = ("lag_sums", "lag_products", "moment_xz", "moment_zy", "moment_xx")
-_LAG_AXIS = {"lag_sums": 1, "lag_products": 2, "moment_xz": 2, "moment_zy": 1, "moment_xx": 2}
 
 
 class LagStorage:
     """The history buffers and lag-indexed sums of ``m`` models (see the module docstring)."""
 
-    def __init__(self, m: int, n: int, cap: int, *, all_lags: bool, forgetting: float) -> None:
+    def __init__(self, m: int, n: int, cap: int, *, all_lags: bool, forgetting: float, waiting: bool) -> None:
         self.m, self.n = m, n
         self.all_lags = all_lags
         self.forgetting = forgetting
+        self.waiting = waiting
         self.allocate(cap)
+
+    @property
+    def merged(self) -> bool:
+        """``lag_products`` is the ``x`` block of ``products_y`` (waiting, ``f = 1``)."""
+        return self.waiting and self.forgetting == 1.0
 
     def allocate(self, cap: int) -> None:
         """Fresh zero arrays for a lag capacity ``cap`` (an empty history)."""
         m, n = self.m, self.n
+        n1 = n + 1
         self.cap = cap
         length = cap if self.all_lags else 4 * cap
         self.x = np.zeros((m, length, n))
-        self.y = np.zeros((m, length, n + 1))
+        self.y = np.zeros((m, length, n1))
         self.v = np.zeros((m, length))
         self.ptr = length  # the window is [ptr, ptr + w)
         self.lag_sums = np.zeros((m, cap))
-        self.lag_products = np.zeros((m, n, cap, n))
-        self.moment_xz = np.zeros((m, n, cap))
-        self.moment_zy = np.zeros((m, cap, n + 1))
-        self.moment_xx = np.zeros((m, n, cap, n)) if self.forgetting != 1.0 else None
-        self.lag_powers = self.forgetting ** np.arange(cap, dtype=float)  # f^i of Eq. 21
-        self.products_flat = self.lag_products.reshape(m, n, cap * n)  # row a of every lag
-        # The products of one sample, before they are added.
-        self.products_scratch = np.zeros((m, n, cap * n))
         self.sums_scratch = np.zeros((m, cap))
-        self.xz_scratch = np.zeros((m, n, cap))
-        self.zy_scratch = np.zeros((m, cap, n + 1))
+        self.lag_powers = self.forgetting ** np.arange(cap, dtype=float)  # f^i of Eq. 21
+        self.products_y = self.products_y_scratch = None
+        self.moment_xx = self.moment_xz = self.moment_zy = None
+        if self.waiting:
+            self.products_y = np.zeros((m, n1, cap, n1))
+            self.products_y_scratch = np.zeros((m, n1, cap * n1))
+            self.moment_xx = self.products_y[:, :n, :, :n]
+            self.moment_xz = self.products_y[:, :n, :, n]
+            self.moment_zy = self.products_y[:, n]
+        if self.merged:
+            self.lag_products = self.moment_xx
+            self.products_scratch = None
+        else:
+            self.lag_products = np.zeros((m, n, cap, n))
+            self.products_scratch = np.zeros((m, n, cap * n))
         self._full = self._restricted(cap)
 
     def _restricted(self, w: int) -> tuple:
         m, n = self.m, self.n
-        return (
-            self.lag_sums[:, :w], self.sums_scratch[:, :w],
-            self.lag_products[:, :, :w].reshape(m, n, w * n), self.products_scratch[:, :, : w * n],
-            self.moment_xz[:, :, :w], self.xz_scratch[:, :, :w],
-            self.moment_zy[:, :w], self.zy_scratch[:, :w],
-        )
+        if self.merged:
+            products = self.products_y[:, :, :w].reshape(m, n + 1, w * (n + 1))
+            return self.lag_sums[:, :w], self.sums_scratch[:, :w], products, self.products_y_scratch[:, :, : w * (n + 1)]
+        products = self.lag_products[:, :, :w].reshape(m, n, w * n)
+        return self.lag_sums[:, :w], self.sums_scratch[:, :w], products, self.products_scratch[:, :, : w * n]
 
     def by_lag(self, w: int) -> tuple:
-        """Views of the first ``w`` lags, each with the scratch its update uses:
-        ``(lag_sums, ., lag_products as (M, n, w n), ., moment_xz, ., moment_zy, .)``."""
+        """Views of the first ``w`` lags with the scratch their updates use: ``(lag_sums, .,
+        products, .)``, the products flattened to ``(M, rows, w cols)``: ``lag_products``, or
+        ``products_y`` when merged."""
         return self._full if w == self.cap else self._restricted(w)
+
+    def products_y_by_lag(self, w: int) -> tuple:
+        """``products_y`` of the first ``w`` lags as ``(M, n+1, w (n+1))`` and its scratch."""
+        m, n1 = self.m, self.n + 1
+        return self.products_y[:, :, :w].reshape(m, n1, w * n1), self.products_y_scratch[:, :, : w * n1]
+
+    def all_initialized(self) -> None:
+        """Every model is initialized: ``lag_products`` gets an array of its own and the
+        moments are dropped."""
+        if not self.waiting:
+            return
+        if self.merged:
+            self.x[...] = self.y[:, :, : self.n]  # the x history was kept in y
+            lag_products = np.ascontiguousarray(self.lag_products)
+        else:
+            lag_products = self.lag_products
+        self.waiting = False
+        lag_sums, history = self.lag_sums, (self.x, self.y, self.v)
+        ptr = self.ptr
+        self.allocate(self.cap)
+        self.lag_sums, self.lag_products = lag_sums, lag_products
+        self.x, self.y, self.v = history
+        self.ptr = ptr
+        self._full = self._restricted(self.cap)
 
     def window(self, buf: np.ndarray, w: int) -> np.ndarray:
         """The last ``w`` entries of a history buffer, newest first (a view)."""
@@ -97,38 +137,44 @@ class LagStorage:
 
     def grow(self, w: int) -> None:
         """Double the lag capacity (all lags), keeping the ``w`` samples and lags held."""
-        old = {name: getattr(self, name) for name in _HISTORY + _BY_LAG}
+        old = {name: getattr(self, name) for name in _HISTORY + ("lag_sums", "lag_products", "products_y")}
         old_ptr, old_cap = self.ptr, self.cap
         self.allocate(2 * old_cap)
         self.ptr -= w
         for name in _HISTORY:
             getattr(self, name)[:, self.ptr :] = old[name][:, old_ptr : old_ptr + w]
-        for name in _BY_LAG:
-            if old[name] is not None:
-                index = (slice(None),) * _LAG_AXIS[name] + (slice(0, old_cap),)
-                getattr(self, name)[index] = old[name]
+        self.lag_sums[:, :old_cap] = old["lag_sums"]
+        if old["products_y"] is not None:
+            self.products_y[:, :, :old_cap] = old["products_y"]
+        if not self.merged:
+            self.lag_products[:, :, :old_cap] = old["lag_products"]
 
+    # ------------------------------------------------------------------ state
     def arrays(self, w: int) -> dict:
-        """Copies of the history windows (newest first) and the lag-indexed sums."""
+        """Copies of the history windows (newest first) and the lag-indexed sums (the moments
+        only while a model waits)."""
         out = {name: self.window(getattr(self, name), w).copy() for name in _HISTORY}
-        for name in _BY_LAG:
-            if getattr(self, name) is not None:
-                out[name] = getattr(self, name).copy()
+        out["lag_sums"] = self.lag_sums.copy()
+        out["lag_products"] = self.lag_products.copy()  # (a contiguous copy, also of the view)
+        if self.waiting:
+            out["products_y"] = self.products_y.copy()
         return out
 
     def load(self, arrays: dict, w: int) -> None:
         """Inverse of :meth:`arrays` (on freshly allocated storage of the same capacity)."""
         self.ptr -= w
         for name in _HISTORY:
-            target = self.window(getattr(self, name), w)
-            _assign(target, arrays[name], name)
-        for name in _BY_LAG:
-            if getattr(self, name) is not None:
-                _assign(getattr(self, name), arrays[name], name)
+            assign_checked(self.window(getattr(self, name), w), arrays[name], name)
+        assign_checked(self.lag_sums, arrays["lag_sums"], "lag_sums")
+        if self.waiting:
+            assign_checked(self.products_y, arrays["products_y"], "products_y")
+        if not self.merged:
+            assign_checked(self.lag_products, arrays["lag_products"], "lag_products")
 
 
-def _assign(target: np.ndarray, value, name: str) -> None:
-    value = np.asarray(value, dtype=target.dtype)
+def assign_checked(target: np.ndarray, value, name: str) -> None:
+    """``target[...] = value`` for a state field, refusing another shape by name."""
+    value = np.asarray(value)
     if value.shape != target.shape:
         raise ValueError(f"estimator state field {name!r} has shape {value.shape}, expected {target.shape}")
     target[...] = value

@@ -8,13 +8,14 @@ bank it was taken from. A state of another :data:`STATE_FORMAT` is refused by na
 
 from __future__ import annotations
 
-import numpy as np
+from .lag_storage import assign_checked
 
 __all__ = ["STATE_FORMAT", "capture", "restore"]
 
 # 2: lagged moments as one array of y = (x, z) products; 3: Eq. 17 as sums, history windows
-# only; 4: the package layout: Lambda+ of x alone, lagged moments apart, residuals with their
-# sign, D and theta as separate arrays.
+# only; 4: the package layout (lag_storage): Lambda+ of x alone once every model is
+# initialized, the y products only while one waits, residuals with their sign, D and theta
+# as separate arrays.
 STATE_FORMAT = 4
 
 _BANK_ARRAYS = ("_inv_s", "_ready", "_ready_at", "repairs")
@@ -52,18 +53,13 @@ def restore(bank, state: dict) -> None:
     c = state["counters"]
     arrays = state["arrays"]
     bank.k, bank.n_eff = int(c["k"]), float(c["n_eff"])
-    bank._lags.allocate(int(c["cap"]))
-    bank._lags.load(arrays, bank.n_window)
-    n = bank.n_max
-    _assign(bank._aug[:, :n], arrays["dispersion"], "dispersion")
-    _assign(bank._aug[:, n], arrays["theta"], "theta")
     for name in _BANK_ARRAYS:
-        _assign(getattr(bank, name), arrays[name.lstrip("_")], name.lstrip("_"))
+        assign_checked(getattr(bank, name), arrays[name.lstrip("_")], name.lstrip("_"))
+    n = bank.n_max
+    assign_checked(bank._aug[:, :n], arrays["dispersion"], "dispersion")
+    assign_checked(bank._aug[:, n], arrays["theta"], "theta")
+    lags = bank._lags
+    lags.waiting = not bool(bank._ready.all())
+    lags.allocate(int(c["cap"]))
+    lags.load(arrays, bank.n_window)
     bank._readiness_changed()
-
-
-def _assign(target: np.ndarray, value, name: str) -> None:
-    value = np.asarray(value)
-    if value.shape != target.shape:
-        raise ValueError(f"estimator state field {name!r} has shape {value.shape}, expected {target.shape}")
-    target[...] = value
