@@ -394,9 +394,9 @@ class EstimatorBank:
         their output ``x_j' theta_k`` (``theta' Lambda_k(0) theta / sum_j f^(2(k-j))``)."""
         n, f, k = self.n_max, self.forgetting, self.k
         theta = self._aug[:, n]
-        output_square = vecdot(theta, np.matmul(self._lags.lag_products[:, :, 0, :], theta[:, :, None])[:, :, 0])
+        output_square = vecdot(np.matmul(theta[:, None, :], self._lags.lag_products[:, :, 0, :])[:, 0], theta)
         n_square = k if f == 1.0 else (1.0 - f ** (2 * k)) / (1.0 - f * f)
-        return self._lags.lag_sums[:, 0] * n_square <= (covariance.EXACT_FIT * self.n_eff) * output_square
+        return self._lags.lag_sums[:, 0] <= (covariance.EXACT_FIT * self.n_eff / n_square) * output_square
 
     def standard_errors_all(self, kind: str = "corrected") -> np.ndarray:
         """Standard errors of every model as an ``(M, n_max)`` array: the square roots of the

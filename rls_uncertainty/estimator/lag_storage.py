@@ -51,16 +51,13 @@ class LagStorage:
         self.waiting = waiting
         self.allocate(cap)
 
-    @property
-    def merged(self) -> bool:
-        """``lag_products`` is the ``x`` block of ``products_y`` (waiting, ``f = 1``)."""
-        return self.waiting and self.forgetting == 1.0
-
     def allocate(self, cap: int) -> None:
         """Fresh zero arrays for a lag capacity ``cap`` (an empty history)."""
         m, n = self.m, self.n
         n1 = n + 1
         self.cap = cap
+        # lag_products is the x block of products_y (while a model waits, f = 1)
+        self.merged = self.waiting and self.forgetting == 1.0
         length = cap if self.all_lags else 4 * cap
         self.x = np.zeros((m, length, n))
         self.y = np.zeros((m, length, n1))
