@@ -117,6 +117,7 @@ class EstimatorBank:
         # [D; theta'] in column-scaled units: _aug[:, :n] = S D S, _aug[:, n] = S theta.
         self._aug = np.zeros((m, n + 1, n))
         self._D = self._aug[:, :n]
+        self._theta, self._theta_row = self._aug[:, n], self._aug[:, n, None, :]
         self._inv_s = self._mask.astype(float)  # 1/s on real parameters, 0 on padding
         self._ready = np.zeros(m, dtype=bool)
         self._ready_at = np.zeros(m, dtype=np.int64)
@@ -244,7 +245,7 @@ class EstimatorBank:
         else:
             np.negative(neg_e, out=v)  # v_k = e_k
 
-        sums, sums_tmp, products, products_tmp = lags.by_lag(w)
+        sums, sums_tmp, products, products_tmp = lags.full if w == lags.cap else lags.by_lag(w)
         # Eq. 17 as sums: n_k R_k(i) = f n_(k-1) R_(k-1)(i) + v_k v_(k-i).
         if f != 1.0:
             sums *= f
@@ -343,7 +344,7 @@ class EstimatorBank:
     def theta_all(self) -> np.ndarray:
         """Estimates of every model as an ``(M, n_max)`` array; padding and models that are
         not :attr:`ready` are NaN."""
-        return self._aug[:, self.n_max] * self._theta_scale
+        return self._theta * self._theta_scale
 
     def residual_variance(self, j: int) -> float:
         """Fit-error variance (Eq. 16), i.e. ``R_k(0)``."""
@@ -392,9 +393,8 @@ class EstimatorBank:
     def _exact_fit(self) -> np.ndarray:
         """Models whose residual variance ``R_k(0)`` is at most 1e-12 of the mean square of
         their output ``x_j' theta_k`` (``theta' Lambda_k(0) theta / sum_j f^(2(k-j))``)."""
-        n, f, k = self.n_max, self.forgetting, self.k
-        theta = self._aug[:, n]
-        output_square = vecdot(np.matmul(theta[:, None, :], self._lags.lag_products[:, :, 0, :])[:, 0], theta)
+        f, k = self.forgetting, self.k
+        output_square = vecdot(np.matmul(self._theta_row, self._lags.lag0)[:, 0], self._theta)
         n_square = k if f == 1.0 else (1.0 - f ** (2 * k)) / (1.0 - f * f)
         return self._lags.lag_sums[:, 0] <= (covariance.EXACT_FIT * self.n_eff / n_square) * output_square
 

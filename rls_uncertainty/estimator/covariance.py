@@ -17,8 +17,10 @@ in the package deals with the factor 2 of the two-sided sum.
 from ``D N``: the variances ``diag(P + P') = 2 diag(P)`` every sample, the full matrices when
 asked, with the same diagonals; the published standard errors are their square roots, so
 ``standard_errors_all``, ``standard_errors(j)`` and ``covariance(j)`` of the bank are the
-same numbers. The ``1/n_k`` of ``R_k(i)`` and the column scaling are applied last. A corrected covariance with a negative diagonal entry is replaced by
-:func:`nearest_psd` (a repair), or by zero when the model fits exactly (:data:`EXACT_FIT`).
+same numbers. The ``1/n_k`` of ``R_k(i)`` and the column scaling are applied last (the
+order the variances were always summed in). A corrected covariance with a negative diagonal
+entry is replaced by :func:`nearest_psd` (a repair), or by zero when the model fits exactly
+(:data:`EXACT_FIT`).
 """
 
 from __future__ import annotations

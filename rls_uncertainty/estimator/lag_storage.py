@@ -80,13 +80,15 @@ class LagStorage:
         else:
             self.lag_products = np.zeros((m, n, cap, n))
             self.products_scratch = np.zeros((m, n, cap * n))
-        self._full = self._restricted(cap)
+        self.full = self._restricted(cap)
+        self.lag0 = self.lag_products[:, :, 0, :]  # Lambda+_k(0)
 
     def _restricted(self, w: int) -> tuple:
         m, n = self.m, self.n
         if self.merged:
             products = self.products_y[:, :, :w].reshape(m, n + 1, w * (n + 1))
-            return self.lag_sums[:, :w], self.sums_scratch[:, :w], products, self.products_y_scratch[:, :, : w * (n + 1)]
+            scratch = self.products_y_scratch[:, :, : w * (n + 1)]
+            return self.lag_sums[:, :w], self.sums_scratch[:, :w], products, scratch
         products = self.lag_products[:, :, :w].reshape(m, n, w * n)
         return self.lag_sums[:, :w], self.sums_scratch[:, :w], products, self.products_scratch[:, :, : w * n]
 
@@ -94,7 +96,7 @@ class LagStorage:
         """Views of the first ``w`` lags with the scratch their updates use: ``(lag_sums, .,
         products, .)``, the products flattened to ``(M, rows, w cols)``: ``lag_products``, or
         ``products_y`` when merged."""
-        return self._full if w == self.cap else self._restricted(w)
+        return self.full if w == self.cap else self._restricted(w)
 
     def products_y_by_lag(self, w: int) -> tuple:
         """``products_y`` of the first ``w`` lags as ``(M, n+1, w (n+1))`` and its scratch."""
@@ -118,7 +120,8 @@ class LagStorage:
         self.lag_sums, self.lag_products = lag_sums, lag_products
         self.x, self.y, self.v = history
         self.ptr = ptr
-        self._full = self._restricted(self.cap)
+        self.full = self._restricted(self.cap)
+        self.lag0 = self.lag_products[:, :, 0, :]
 
     def window(self, buf: np.ndarray, w: int) -> np.ndarray:
         """The last ``w`` entries of a history buffer, newest first (a view)."""
@@ -128,7 +131,7 @@ class LagStorage:
         """Move the history window from the buffer's front back to its end (called when the
         newest sample was written at slot 0)."""
         length = self.v.shape[1]
-        for buf in (self.x, self.y, self.v):
+        for buf in (self.y, self.v) if self.merged else (self.x, self.y, self.v):
             buf[:, length - w :] = buf[:, :w]
         self.ptr = length - w
 

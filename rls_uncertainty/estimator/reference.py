@@ -40,7 +40,9 @@ What the paper leaves open is defined here, and the fast bank follows it:
 * **Published covariance.** A corrected covariance with a negative diagonal entry is
   replaced by the nearest positive semi-definite matrix (:func:`.covariance.nearest_psd`),
   unless the model fits exactly (``R_k(0) <= 1e-12`` times the mean square of the model
-  output ``x_j' theta_k``, weighted as ``Lambda_k(0)``), when it is zero. Standard errors are the square roots of the published diagonal.
+  output ``x_j' theta_k``, weighted as ``Lambda_k(0)``), when it is zero. Standard errors
+  are the square roots of the published diagonal. (In a bank, the exact fits are looked for
+  when any of its models has a negative corrected variance.)
 """
 
 from __future__ import annotations
