@@ -117,6 +117,7 @@ class EstimatorBank:
         # [D; theta'] in column-scaled units: _aug[:, :n] = S D S, _aug[:, n] = S theta.
         self._aug = np.zeros((m, n + 1, n))
         self._D = self._aug[:, :n]
+        self._D_diagonal = self._D.diagonal(0, 1, 2)
         self._theta, self._theta_row = self._aug[:, n], self._aug[:, n, None, :]
         self._inv_s = self._mask.astype(float)  # 1/s on real parameters, 0 on padding
         self._ready = np.zeros(m, dtype=bool)
@@ -362,12 +363,11 @@ class EstimatorBank:
         self._require(j)
         return self._lags.window(self._lags.v, self.n_window)[j, ::-1].copy()
 
-    def _half_window(self, w: int) -> np.ndarray:
-        """Half window ``h`` of the ``w`` lags held (:func:`.covariance.half_window`)."""
-        largest = self.k - 1 if self.n_lags is None else self.n_lags
-        if self._window_key != (largest, w):
-            self._window_h = covariance.half_window(lag_weights(largest, self.window, w))
-            self._window_key = (largest, w)
+    def _half_window(self, largest: int, w: int) -> np.ndarray:
+        """Half window ``h`` of the ``w`` lags held, ``largest`` the largest lag of the window
+        (:func:`.covariance.half_window`); kept while they stay the same."""
+        self._window_h = covariance.half_window(lag_weights(largest, self.window, w))
+        self._window_key = (largest, w)
         return self._window_h
 
     def _evaluate(self) -> covariance.Covariances:
@@ -381,8 +381,10 @@ class EstimatorBank:
             else:
                 w = lags.cap
                 sums, products = lags.lag_sums, lags.lag_products
+            largest = self.k - 1 if self.n_lags is None else self.n_lags
+            h = self._window_h if self._window_key == (largest, w) else self._half_window(largest, w)
             cov, repaired = self._evaluator(
-                self._D, sums, self._half_window(w), products, 1.0 / self.n_eff,
+                self._D, self._D_diagonal, sums, h, products, 1.0 / self.n_eff,
                 self._cov_scale, self._se_scale, self._exact_fit, self.sizes,
             )
             if repaired:

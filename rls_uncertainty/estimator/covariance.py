@@ -101,9 +101,9 @@ class Covariances:
         return self.matrices()[kind_index, j, :size, :size].copy()
 
 
-def _diagonals(D, DN, DN0, hS0, out=None) -> np.ndarray:
+def _diagonals(D, DN, DN0, hS0) -> np.ndarray:
     """``diag(P)`` of both kinds, ``(2, M, n)``: ``diag(D N D) = sum_c (D N)_ac D_ac``."""
-    out = np.empty((2,) + D.shape[:2]) if out is None else out
+    out = np.empty((2,) + D.shape[:2])
     vecdot(DN, D, out=out[0])
     if DN0 is None:
         np.multiply(hS0, D.diagonal(0, 1, 2), out=out[1])  # Eq. 13: R_k(0) D / 2
@@ -122,6 +122,7 @@ class CovarianceEvaluator:
     def __call__(
         self,
         D: np.ndarray,
+        D_diagonal: np.ndarray,
         lag_sums: np.ndarray,
         h: np.ndarray,
         lag_products: np.ndarray,
@@ -133,7 +134,7 @@ class CovarianceEvaluator:
     ) -> tuple[Covariances, list]:
         """Both covariances of every model, and the models whose corrected one was repaired.
 
-        ``D`` ``(M, n, n)`` and ``lag_products`` ``(M, n, w, n)`` (``Lambda+_k(i)``) are in
+        ``D`` ``(M, n, n)`` (``D_diagonal`` its diagonal) and ``lag_products`` ``(M, n, w, n)`` (``Lambda+_k(i)``) are in
         column-scaled units; ``lag_sums`` ``(M, w)`` is ``n_k R_k(i)`` and ``h`` the half
         window of the ``w`` lags held; ``inv_n = 1 / n_k``; ``scale`` ``(M, n, n)`` takes
         scaled units back to the regressors' (NaN outside the ready models' blocks) and
@@ -148,7 +149,12 @@ class CovarianceEvaluator:
         else:  # Eq. 22 with n_tau = 0: N = R_k(0) Lambda_k(0) / 2
             DN0 = np.matmul(D, np.matmul(hS[:, None, None, :1], lag_products[:, :, :1])[:, :, 0, :])
         hS0 = hS[:, :1]
-        var = _diagonals(D, DN, DN0, hS0)  # diag(P), Eqs. 20/22 and 13
+        var = np.empty((2,) + D.shape[:2])  # diag(P), as _diagonals
+        vecdot(DN, D, out=var[0])  # Eq. 20 / 22
+        if DN0 is None:
+            np.multiply(hS0, D_diagonal, out=var[1])  # Eq. 13: R_k(0) D / 2
+        else:
+            vecdot(DN0, D, out=var[1])  # Eq. 22 with n_tau = 0
         negative = np.minimum.reduce(var[0], axis=None) < 0.0  # models not ready are 0 here
         var *= diagonal_scale * inv_n  # diag(P + P') * scale / n_k
         cov = Covariances(var, (D, DN, DN0, hS0, scale, diagonal_scale, inv_n))
