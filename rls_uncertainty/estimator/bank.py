@@ -49,6 +49,7 @@ _F64 = np.dtype(np.float64)
 
 # A sample whose quantities are all at most this in magnitude is applied without checks.
 _SAFE = 1e100
+_SAFE_SQUARED = _SAFE * _SAFE
 _KIND_INDEX = {"corrected": 0, "conventional": 1}  # COVARIANCE_KINDS
 
 
@@ -127,15 +128,20 @@ class EstimatorBank:
             m, n, cap, all_lags=self.n_lags is None, forgetting=self.forgetting, waiting=p0 is None
         )
         self._init = ExactInitialization(self)
-        # Per-sample scratch: u = (D x, theta' x - z), contiguous, and the magnitudes of the
-        # sample written to its history slot. Both decide whether the sample can be applied
-        # unchecked (_prepare).
+        # Per-sample scratch, each contiguous: y = (x / s, z) and u = (D x, theta' x - z). Their
+        # magnitudes decide whether the sample can be applied unchecked (_prepare).
+        self._y = np.zeros((m, n + 1))
+        self._xs = self._y[:, :n]
+        self._z_slot = self._y[:, n]
         self._g = np.zeros((m, n + 1, 1))  # u as a column: the matmul's output
         self._Dx = self._g[:, :n, 0]
         self._Dx_row = self._g[:, None, :n, 0]
         self._neg_e = self._g[:, n, 0]
+        self._y_flat = self._y.reshape(-1)
+        self._y_abs = np.zeros_like(self._y_flat)
         self._g_flat = self._g.reshape(-1)
-        self._magnitudes = {n: np.zeros((m, n)), n + 1: np.zeros((m, n + 1)), "u": np.zeros(m * (n + 1))}
+        self._xs_col = self._xs[:, :, None]
+        self._y_col = self._y[:, :, None]
         self._d = np.zeros(m)  # d_k = f + x' D x
         self._d_col = self._d[:, None, None]
         self._root = np.zeros(m)  # sqrt(d_k / f)
@@ -191,38 +197,34 @@ class EstimatorBank:
             self._apply_checked(x, z)
 
     def _prepare(self, x: np.ndarray, z: np.ndarray, check: bool = True) -> bool:
-        """Write the sample to its history slot (in front of the window, so the state is not
-        touched yet): ``x / s``, and ``z`` while a model waits; and ``u = (D x, theta' x - z)``
-        and ``d`` to scratch. True when every entry of the slot and of ``u`` is at most 1e100
-        in magnitude (then the update keeps a finite state finite); with ``check``, NaN,
-        infinity or a larger number in the slot stops it early and returns False."""
-        lags, n = self._lags, self.n_max
-        p = lags.ptr - 1  # >= 0: see LagStorage.relocate and grow
-        if lags.waiting:
-            slot = lags.y[:, p]  # y_k = (x_k / s, z_k)
-            xs = slot[:, :n]
-            slot[:, n] = z
-        else:
-            slot = xs = lags.x[:, p]
-        np.multiply(x, self._inv_s, out=xs)
-        small = np.maximum.reduce(np.absolute(slot, out=self._magnitudes[slot.shape[1]]), axis=None) <= _SAFE
+        """Write the sample's ``y = (x / s, z)``, ``u = (D x, theta' x - z)`` and ``d`` to
+        scratch (the state is not touched). True when every entry of ``y`` and ``u`` is at
+        most 1e100 in magnitude (then the update keeps a finite state finite); with ``check``,
+        NaN, infinity or a larger number in ``y`` stops it early and returns False."""
+        np.multiply(x, self._inv_s, out=self._xs)
+        self._z_slot[...] = z
+        small = np.maximum.reduce(np.absolute(self._y_flat, out=self._y_abs)) <= _SAFE
         if check and not small:
             return False
-        self._xs, self._xs_col, self._slot_col = xs, xs[:, :, None], slot[:, :, None]
         np.matmul(self._aug, self._xs_col, out=self._g)  # (D x, theta' x)
-        d = vecdot(xs, self._Dx, out=self._d)
+        d = vecdot(self._xs, self._Dx, out=self._d)
         d += self.forgetting  # d_k = f + x' D x: the denominator of Eq. 15a
         np.subtract(self._neg_e, z, out=self._neg_e)  # -e_k = x' theta_(k-1) - z_k
-        return small and np.maximum.reduce(np.absolute(self._g_flat, out=self._magnitudes["u"])) <= _SAFE
+        return small and np.dot(self._g_flat, self._g_flat) <= _SAFE_SQUARED
 
     def _apply(self, z: np.ndarray) -> None:
         """Add the prepared sample to the state (Eqs. 15-17, 21)."""
         f, lags = self.forgetting, self._lags
         k = self.k + 1
+        if k > lags.cap and self.n_lags is None:
+            lags.grow(self.n_window)
+            self._init.reset()  # its indices point into the old arrays
         w = k if k < lags.cap else lags.cap  # lags held after this sample
-        p = lags.ptr - 1  # the slot _prepare wrote
+        p = lags.ptr - 1  # >= 0: see LagStorage.relocate
         waiting, merged = lags.waiting, lags.merged
-        if waiting and not merged:  # x is kept apart from y under forgetting
+        if waiting:  # (x, z) is needed until initialization
+            lags.y[:, p] = self._y
+        if not merged:
             lags.x[:, p] = self._xs
         self.k = k
         lags.ptr = p
@@ -255,7 +257,7 @@ class EstimatorBank:
         m, n = self.n_models, self.n_max
         if merged:  # of y = (x, z): Lambda+ and the lagged moments at once (see .lag_storage)
             y_window = lags.y[:, p : p + w].reshape(m, 1, w * (n + 1))  # y_k, y_(k-1), ...
-            products += np.multiply(self._slot_col, y_window, out=products_tmp)
+            products += np.multiply(self._y_col, y_window, out=products_tmp)
         else:
             x_window = lags.x[:, p : p + w].reshape(m, 1, w * n)  # x_k, x_(k-1), ... (a view)
             if f == 1.0:
@@ -268,15 +270,11 @@ class EstimatorBank:
                 moments, moments_tmp = lags.products_y_by_lag(w)
                 lags.products_y *= f
                 y_window = lags.y[:, p : p + w].reshape(m, 1, w * (n + 1))
-                moments += np.multiply(self._slot_col, y_window, out=moments_tmp)
+                moments += np.multiply(self._y_col, y_window, out=moments_tmp)
         if waiting:
             self._init.check(w)
-        if p == 0:  # keep a free slot in front of the window for the next sample
-            if self.n_lags is None:
-                lags.grow(w)
-                self._init.reset()  # its indices point into the old arrays
-            else:
-                lags.relocate(w)
+        if p == 0 and self.n_lags is not None:
+            lags.relocate(w)
         self._covariances = None
 
     def _apply_checked(self, x: np.ndarray, z: np.ndarray) -> None:
