@@ -160,11 +160,9 @@ class CovarianceEvaluator:
         cov = Covariances(var, (D, DN, DN0, hS0, scale, diagonal_scale, inv_n))
         counted: list[int] = []
         if negative:
-            exact = exact_fit()
+            exact = cov.exact = exact_fit()
             corrected = var[0]
-            if exact.any():  # rounding of exact fits, not indefiniteness: zero
-                cov.exact = exact
-                corrected[exact] *= 0.0  # (NaN padding stays NaN)
+            corrected *= ~exact[:, None]  # exact fits: rounding, not indefiniteness: zero (NaN stays)
             if np.fmin.reduce(corrected, axis=None) < 0.0:
                 for j in np.flatnonzero((corrected < 0.0).any(axis=1)):
                     j = int(j)
