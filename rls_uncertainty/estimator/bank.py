@@ -131,17 +131,14 @@ class EstimatorBank:
         # Per-sample scratch, each contiguous: y = (x / s, z) and u = (D x, theta' x - z). Their
         # magnitudes decide whether the sample can be applied unchecked (_prepare).
         self._y = np.zeros((m, n + 1))
-        self._xs = self._y[:, :n]
-        self._z_slot = self._y[:, n]
+        self._y_xs = self._xs = self._y[:, :n]
         self._g = np.zeros((m, n + 1, 1))  # u as a column: the matmul's output
         self._Dx = self._g[:, :n, 0]
         self._Dx_row = self._g[:, None, :n, 0]
         self._neg_e = self._g[:, n, 0]
-        self._y_flat = self._y.reshape(-1)
-        self._y_abs = np.zeros_like(self._y_flat)
+        self._y_abs = np.zeros_like(self._y)
         self._g_flat = self._g.reshape(-1)
-        self._xs_col = self._xs[:, :, None]
-        self._y_col = self._y[:, :, None]
+        self._y_xs_col = self._xs_col = self._xs[:, :, None]
         self._d = np.zeros(m)  # d_k = f + x' D x
         self._d_col = self._d[:, None, None]
         self._root = np.zeros(m)  # sqrt(d_k / f)
@@ -197,13 +194,19 @@ class EstimatorBank:
             self._apply_checked(x, z)
 
     def _prepare(self, x: np.ndarray, z: np.ndarray, check: bool = True) -> bool:
-        """Write the sample's ``y = (x / s, z)``, ``u = (D x, theta' x - z)`` and ``d`` to
-        scratch (the state is not touched). True when every entry of ``y`` and ``u`` is at
+        """Write the sample's ``y = (x / s, z)`` (to its history slot in front of the window
+        while a model waits, else to scratch), ``u = (D x, theta' x - z)`` and ``d`` to
+        scratch: the state is not touched. True when every entry of ``y`` and ``u`` is at
         most 1e100 in magnitude (then the update keeps a finite state finite); with ``check``,
         NaN, infinity or a larger number in ``y`` stops it early and returns False."""
+        if self._lags.waiting:
+            y = self._lags.y[:, self._lags.ptr - 1]
+            self._y_k, self._xs, self._xs_col = y, y[:, : self.n_max], y[:, : self.n_max, None]
+        else:
+            y, self._xs, self._xs_col = self._y, self._y_xs, self._y_xs_col
         np.multiply(x, self._inv_s, out=self._xs)
-        self._z_slot[...] = z
-        small = np.maximum.reduce(np.absolute(self._y_flat, out=self._y_abs)) <= _SAFE
+        y[:, self.n_max] = z
+        small = np.maximum.reduce(np.absolute(y, out=self._y_abs), axis=None) <= _SAFE
         if check and not small:
             return False
         np.matmul(self._aug, self._xs_col, out=self._g)  # (D x, theta' x)
@@ -216,16 +219,11 @@ class EstimatorBank:
         """Add the prepared sample to the state (Eqs. 15-17, 21)."""
         f, lags = self.forgetting, self._lags
         k = self.k + 1
-        if k > lags.cap and self.n_lags is None:
-            lags.grow(self.n_window)
-            self._init.reset()  # its indices point into the old arrays
         w = k if k < lags.cap else lags.cap  # lags held after this sample
-        p = lags.ptr - 1  # >= 0: see LagStorage.relocate
+        p = lags.ptr - 1  # the free slot in front of the window (see the end)
         waiting, merged = lags.waiting, lags.merged
-        if waiting:  # (x, z) is needed until initialization
-            lags.y[:, p] = self._y
         if not merged:
-            lags.x[:, p] = self._xs
+            lags.x[:, p] = self._xs  # (while a model waits, _prepare wrote y to its slot)
         self.k = k
         lags.ptr = p
         self.n_eff = f * self.n_eff + 1.0  # n_k
@@ -257,7 +255,7 @@ class EstimatorBank:
         m, n = self.n_models, self.n_max
         if merged:  # of y = (x, z): Lambda+ and the lagged moments at once (see .lag_storage)
             y_window = lags.y[:, p : p + w].reshape(m, 1, w * (n + 1))  # y_k, y_(k-1), ...
-            products += np.multiply(self._y_col, y_window, out=products_tmp)
+            products += np.multiply(self._y_k[:, :, None], y_window, out=products_tmp)
         else:
             x_window = lags.x[:, p : p + w].reshape(m, 1, w * n)  # x_k, x_(k-1), ... (a view)
             if f == 1.0:
@@ -270,11 +268,15 @@ class EstimatorBank:
                 moments, moments_tmp = lags.products_y_by_lag(w)
                 lags.products_y *= f
                 y_window = lags.y[:, p : p + w].reshape(m, 1, w * (n + 1))
-                moments += np.multiply(self._y_col, y_window, out=moments_tmp)
+                moments += np.multiply(self._y_k[:, :, None], y_window, out=moments_tmp)
         if waiting:
             self._init.check(w)
-        if p == 0 and self.n_lags is not None:
-            lags.relocate(w)
+        if p == 0:  # keep a free slot in front of the window for the next sample
+            if self.n_lags is None:
+                lags.grow(w)
+                self._init.reset()  # its indices point into the old arrays
+            else:
+                lags.relocate(w)
         self._covariances = None
 
     def _apply_checked(self, x: np.ndarray, z: np.ndarray) -> None:

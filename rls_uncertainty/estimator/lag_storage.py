@@ -10,7 +10,8 @@ or growing by doubling when all lags are kept):
   front of the window, which stays contiguous, so one outer product updates every lag of
   Eq. 21. When a sample lands on slot 0 the window is copied back to the end of the buffer
   (every ``3 cap`` samples; the buffer holds ``4 cap``). With all lags the buffer is exactly
-  the capacity and grows with it.
+  the capacity, and it grows when a sample fills it, so that a free slot is always in front
+  of the window.
 * **Eq. 17 as sums**: ``lag_sums[m, i] = n_k R_k(i) = sum_j w_j v_j v_(j-i)``, so that one
   multiply-add per sample updates it; ``R_k(i) = lag_sums[:, i] / n_k``.
 * **Eq. 21, one-sided**: ``lag_products[m, a, i, b] = Lambda+_k(i)[a, b]`` with

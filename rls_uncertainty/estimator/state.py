@@ -62,4 +62,6 @@ def restore(bank, state: dict) -> None:
     lags.waiting = not bool(bank._ready.all())
     lags.allocate(int(c["cap"]))
     lags.load(arrays, bank.n_window)
+    if lags.ptr == 0:  # a full buffer (all lags): the next sample needs a free slot
+        lags.grow(bank.n_window)
     bank._readiness_changed()
