@@ -38,7 +38,7 @@ from .errors import NonFiniteInput, StateFileError
 from .estimator import EstimatorBank
 from .messages import INPUTS
 from .sampling import Sample, Sampler, StreamCounts
-from .state_file import EstimatorState, load_state, save_state
+from .estimator.state_file import EstimatorState, load_state, save_state
 from .surface_mixing import SURFACES, SurfaceMixer
 
 __all__ = ["Pipeline", "SampleOutput", "Bookkeeping", "STREAMS", "StateFileError"]

@@ -9,7 +9,7 @@ import pytest
 
 from rls_uncertainty.errors import StateFileError
 from rls_uncertainty.estimator import EstimatorBank
-from rls_uncertainty.state_file import EstimatorState, load_state, save_state
+from rls_uncertainty.estimator.state_file import EstimatorState, load_state, save_state
 
 FINGERPRINT = {"aircraft": [1.0, 2.0], "models": [["CZ", "1", "alpha", "delta_e"], ["Cm", "1", "q_hat"]], "n_lags": 10}
 
@@ -96,9 +96,9 @@ def test_an_inconsistent_state_is_refused(tmp_path, damage):
         arrays = {k: data[k] for k in data.files}
     meta = json.loads(str(arrays.pop("meta")))
     if damage == "drop_array":
-        arrays.pop("S")
+        arrays.pop("dispersion")
     elif damage == "reshape_array":
-        arrays["S"] = arrays["S"][..., :-1]
+        arrays["dispersion"] = arrays["dispersion"][..., :-1]
     elif damage == "short_zsum":
         meta["zsum"] = meta["zsum"][:1]
     else:

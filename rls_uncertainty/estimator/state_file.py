@@ -1,16 +1,16 @@
 """The estimator state file: a restarted node resumes the estimation where it stopped.
 
-One ``.npz`` archive (numpy only, no pickle): the :meth:`.estimator.EstimatorBank.state`
+One ``.npz`` archive (numpy only, no pickle): the :meth:`.EstimatorBank.state`
 arrays, plus a ``meta`` entry holding one JSON text with
 
 * ``format``: :attr:`EstimatorBank.STATE_FORMAT` (a file of another layout is refused by name);
 * ``fingerprint``: what the state must match to be resumed (aircraft, models, rate and the
-  estimator settings; :meth:`.config.PipelineConfig.fingerprint`);
+  estimator settings; :meth:`rls_uncertainty.config.PipelineConfig.fingerprint`);
 * ``bank_config``, ``bank_counters``: the rest of the bank's state;
 * ``samples_used``, ``zsum``, ``zsq``: the samples behind the estimates and the running sums
   of each model's output and its square (the R^2 of the model fit).
 
-It is written with :func:`.files.atomic_file`, so a crash never leaves half a file.
+It is written with :func:`rls_uncertainty.files.atomic_file`, so a crash never leaves half a file.
 """
 
 from __future__ import annotations
@@ -21,9 +21,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import StateFileError
-from .estimator import EstimatorBank
-from .files import atomic_file
+from ..errors import StateFileError
+from ..files import atomic_file
+from .bank import EstimatorBank
 
 __all__ = ["EstimatorState", "save_state", "load_state", "StateFileError"]
 
