@@ -21,11 +21,13 @@ from __future__ import annotations
 import math
 import numbers
 import struct
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Iterator
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+import numpy.typing as npt
 
 from . import cdr
 from .aero import rep103_to_aircraft
@@ -33,6 +35,11 @@ from .config import package_path
 from .errors import BagError, ConfigError
 from .files import output_directory
 from .messages import INPUTS, MESSAGE_TYPES, stamp_ns
+
+if TYPE_CHECKING:  # annotations only: rosbags itself is imported where it is used
+    from rosbags.highlevel import AnyReader
+    from rosbags.interfaces import Connection
+    from rosbags.typesys.store import Typestore
 
 __all__ = [
     "BagError",
@@ -52,10 +59,10 @@ def schema_dir() -> Path:
     return package_path("msg_schemas")
 
 
-def typestore(extra_schemas: list[Path] | None = None):
+def typestore(extra_schemas: list[Path] | None = None) -> Typestore:
     """Jazzy typestore with the ``.msg`` files of ``msg_schemas/`` and ``extra_schemas``
     (directories laid out as ``PKG/msg/NAME.msg``)."""
-    from rosbags.typesys import Stores, get_typestore, get_types_from_msg  # noqa: PLC0415
+    from rosbags.typesys import Stores, get_types_from_msg, get_typestore  # noqa: PLC0415
 
     store = get_typestore(Stores.ROS2_JAZZY)
     dirs = [schema_dir(), *(Path(d) for d in (extra_schemas or []))]
@@ -67,7 +74,7 @@ def typestore(extra_schemas: list[Path] | None = None):
             name = f"{msg.parent.parent.name}/msg/{msg.stem}"
             try:
                 types.update(get_types_from_msg(msg.read_text(), name))
-            except Exception as exc:  # noqa: BLE001
+            except Exception as exc:  # the parser raises several types
                 raise BagError(f"{msg}: cannot parse message schema: {exc}") from exc
     store.register(types)
     return store
@@ -105,14 +112,14 @@ def check_mcap_integrity(path: Path) -> None:
                         count += opcode == message_opcode
     except BagError:
         raise
-    except Exception as exc:  # noqa: BLE001 - the mcap library raises many types
+    except Exception as exc:  # the mcap library raises many types
         raise BagError(f"{path}: corrupt or truncated MCAP: {exc}") from exc
     expected = summary.statistics.message_count
     if count != expected:
         raise BagError(f"{path}: corrupt MCAP: read {count} of the {expected} messages its summary lists")
 
 
-def _open_reader(path: Path, store):
+def _open_reader(path: Path, store: Typestore) -> AnyReader:
     from rosbags.highlevel import AnyReader  # noqa: PLC0415
 
     if not path.exists():
@@ -123,22 +130,24 @@ def _open_reader(path: Path, store):
     try:
         reader = AnyReader([path], default_typestore=store)
         reader.open()
-    except Exception as exc:  # noqa: BLE001 - rosbags raises several types for corrupt files
+    except Exception as exc:  # rosbags raises several types for corrupt files
         raise BagError(f"{path}: cannot open bag: {exc}") from exc
     return reader
 
 
-def _has_schema(msgtype: str, store, reader) -> bool:
+def _has_schema(msgtype: str, store: Typestore, reader: AnyReader) -> bool:
     """A definition with fields, from msg_schemas/ / --schemas or embedded in the bag."""
     if msgtype in store.fielddefs:
         return True
     fields_ = getattr(reader, "typestore", store).fielddefs.get(msgtype)
-    return bool(fields_) and not (
-        len(fields_[1]) == 1 and fields_[1][0][0] == "structure_needs_at_least_one_member"
-    )
+    if not fields_:
+        return False
+    return not (len(fields_[1]) == 1 and fields_[1][0][0] == "structure_needs_at_least_one_member")
 
 
-def _iter_messages(path: Path, reader, connections, store=None, fast: bool = False) -> Iterator:
+def _iter_messages(
+    path: Path, reader: AnyReader, connections: Sequence[Connection], store: Typestore | None = None, fast: bool = False
+) -> Iterator[tuple[Connection, int, object]]:
     """Messages of ``connections`` in log order, deserialized; corruption names the file.
     ``fast`` decodes the standard input types of a ROS 2 bag with :mod:`.cdr`."""
     it = reader.messages(connections=connections)
@@ -148,7 +157,7 @@ def _iter_messages(path: Path, reader, connections, store=None, fast: bool = Fal
             conn, t, raw = next(it)
         except StopIteration:
             return
-        except Exception as exc:  # noqa: BLE001
+        except Exception as exc:  # a corrupt bag raises many types
             raise BagError(f"{path}: corrupt or truncated bag: {exc}") from exc
         if fast and conn.msgtype in cdr.DECODABLE:
             try:
@@ -160,7 +169,7 @@ def _iter_messages(path: Path, reader, connections, store=None, fast: bool = Fal
                 continue
         try:
             msg = reader.deserialize(raw, conn.msgtype)
-        except Exception as exc:  # noqa: BLE001
+        except Exception as exc:  # re-raised as BagError unless the fallback below decodes it
             # An empty or broken embedded schema: the msg_schemas/ or --schemas type decides.
             if store is not None and conn.msgtype in store.types:
                 try:
@@ -188,24 +197,30 @@ class _Record:
     msg: object
 
 
-def _mk(store):
+def _mk(
+    store: Typestore,
+) -> tuple[Mapping[str, Callable[..., object]], Callable[[int], object], Callable[[float, float, float], object]]:
     T = store.types
 
-    def header(stamp, frame="base_link"):
+    def header(stamp: int, frame: str = "base_link") -> object:
         return T["std_msgs/msg/Header"](
             stamp=T["builtin_interfaces/msg/Time"](sec=int(stamp // 10**9), nanosec=int(stamp % 10**9)),
             frame_id=frame,
         )
 
-    def vec(x, y, z):
+    def vec(x: float, y: float, z: float) -> object:
         return T["geometry_msgs/msg/Vector3"](x=float(x), y=float(y), z=float(z))
 
     return T, header, vec
 
 
-def _standard_message(store, kind: str, stamp: int, values, names=None):
-    """A standard input message from plain values (REP-103, SI)."""
+def _standard_message(
+    store: Typestore, kind: str, stamp: int, values: npt.ArrayLike, names: Sequence[str] | None = None
+) -> object:
+    """A standard input message from plain values (REP-103, SI): a number (dynamic pressure,
+    thrust) or a sequence of them."""
     T, header, vec = _mk(store)
+    values = np.asarray(values, dtype=float)
     if kind == "imu":
         cov = np.zeros(9)
         unknown = np.zeros(9)
@@ -224,10 +239,12 @@ def _standard_message(store, kind: str, stamp: int, values, names=None):
     if kind == "dynamic_pressure":
         return T["sensor_msgs/msg/FluidPressure"](header=header(stamp), fluid_pressure=float(values), variance=0.0)
     if kind == "control_surfaces":
+        if names is None:
+            raise ValueError("control_surfaces needs the joint names")
         return T["sensor_msgs/msg/JointState"](
             header=header(stamp),
             name=list(names),
-            position=np.asarray(values, dtype=float),
+            position=values,
             velocity=np.zeros(0),
             effort=np.zeros(0),
         )
@@ -239,8 +256,8 @@ def _standard_message(store, kind: str, stamp: int, values, names=None):
     raise ValueError(kind)
 
 
-def write_replay(path: str | Path, records: list, store=None, *, force: bool = False,
-                 inputs: tuple = ()) -> Path:
+def write_replay(path: str | Path, records: Sequence[tuple[int, str, str, object]], store: Typestore | None = None,
+                 *, force: bool = False, inputs: tuple[str | Path, ...] = ()) -> Path:
     """Write ``records`` (``(stamp_ns, topic, msgtype, msg)``, ``msg`` a message or its CDR
     bytes) as a ROS 2 MCAP bag at ``path`` (a directory), log time = stamp, ordered by stamp
     with a stable tie-break. Atomic (:func:`.files.output_directory`): the bag appears under
@@ -258,7 +275,7 @@ def write_replay(path: str | Path, records: list, store=None, *, force: bool = F
     bad = next((r for r in recs if not 0 <= r.stamp < 2**64), None)
     if bad is not None:
         raise BagError(f"{path}: topic {bad.topic}: stamp {bad.stamp} ns cannot be a log time (0 to 2^64 - 1 ns)")
-    rank = {}
+    rank: dict[str, int] = {}
     for r in recs:
         rank.setdefault(r.topic, _TOPIC_RANK.get(r.topic.strip("/"), len(_TOPIC_RANK)))
     recs.sort(key=lambda r: (r.stamp, rank[r.topic], r.topic, r.seq))
@@ -308,7 +325,7 @@ def input_topics(topics: dict[str, str] | None = None) -> dict[str, str]:
 
 
 def read_inputs(path: str | Path, topics: dict[str, str] | None = None, *, strict: bool = True,
-                start: float | None = None, end: float | None = None):
+                start: float | None = None, end: float | None = None) -> tuple[list[tuple[str, int, object]], int]:
     """Standard-input messages of a replay bag in log order: a list of ``(kind, stamp_ns,
     msg)`` and the bag's start time. ``strict`` refuses a topic whose header stamps do not
     increase or differ from the log time; ``start``/``end`` (s from the bag start) cut the
@@ -361,9 +378,11 @@ def read_inputs(path: str | Path, topics: dict[str, str] | None = None, *, stric
     return out, t0
 
 
-def _check_span(start, end) -> None:
+def _check_span(start: float | None, end: float | None) -> None:
     """``start`` and ``end``: None or finite seconds >= 0 from the bag start, end after start."""
-    for name, value in (("start", start), ("end", end)):
+    # Checked as any object: callers pass what the command line or a script gave.
+    given: tuple[tuple[str, object], ...] = (("start", start), ("end", end))
+    for name, value in given:
         if value is None:
             continue
         if isinstance(value, bool) or not isinstance(value, numbers.Real) or not math.isfinite(value) or value < 0:
@@ -415,7 +434,7 @@ def _unit(spec: dict, key: str, default: str, where: str) -> float:
     return UNITS[name]
 
 
-def _check_field(value, where: str) -> None:
+def _check_field(value: object, where: str) -> None:
     """A field: a dotted path (``-`` prefix flips the sign), or ``{field: PATH, reduce: sum|mean}``."""
     if isinstance(value, dict):
         extra = sorted(map(str, set(value) - {"field", "reduce"}))
@@ -430,7 +449,7 @@ def _check_field(value, where: str) -> None:
         raise BagError(f"{where}: expected a field name (a dotted path such as vector.x), got {value!r}")
 
 
-def _check_input(kind: str, spec, where: str) -> None:
+def _check_input(kind: str, spec: object, where: str) -> None:
     keys = _MAPPING_KEYS[kind]
     if not isinstance(spec, dict):
         raise BagError(f"{where}: expected a mapping with at least 'topic', got {spec!r}")
@@ -528,7 +547,7 @@ def load_mapping(path: str | Path) -> dict:
     return data
 
 
-def _field(msg, dotted: str, where: str):
+def _field(msg: object, dotted: str, where: str) -> Any:  # a message field: any type
     value = msg
     for part in dotted.split("."):
         if not hasattr(value, part):
@@ -537,7 +556,7 @@ def _field(msg, dotted: str, where: str):
     return value
 
 
-def _scalar(msg, spec, where: str) -> float:
+def _scalar(msg: object, spec: str | Mapping[str, str], where: str) -> float:
     """A field with an optional leading '-' (sign flip); arrays reduce by sum or mean."""
     name = spec if isinstance(spec, str) else spec["field"]
     sign = -1.0 if name.startswith("-") else 1.0
@@ -551,12 +570,12 @@ def _scalar(msg, spec, where: str) -> float:
         raise BagError(f"{where}: field {name!r} is not a number") from exc
 
 
-def _to_rep103(vec, frame: str):
+def _to_rep103(vec: Sequence[float], frame: str) -> tuple[float, ...]:
     # The aircraft-to-REP-103 rotation (pi about x) is its own inverse.
     return tuple(float(x) for x in rep103_to_aircraft(vec)) if frame == "aircraft" else tuple(vec)
 
 
-def _mapped_values(kind: str, spec: dict, msg, where: str):
+def _mapped_values(kind: str, spec: dict, msg: object, where: str) -> float | Sequence[float]:
     """Plain REP-103 SI values of one standard input from a recorded message."""
     frame = spec.get("frame", "rep103")
     if kind == "imu":
@@ -608,7 +627,8 @@ def convert(src: str | Path, mapping: str | Path, out: str | Path, schemas: list
         for kind, s in spec.items():
             if s["topic"] not in topics:
                 raise BagError(
-                    f"{src}: topic {s['topic']} (mapped to {kind} in {mapping}) is not in the bag; it has {sorted(topics)}"
+                    f"{src}: topic {s['topic']} (mapped to {kind} in {mapping}) is not in the bag; "
+                    f"it has {sorted(topics)}"
                 )
         wanted = sorted({s["topic"] for s in spec.values()})
         conns = [c for c in reader.connections if c.topic in wanted]

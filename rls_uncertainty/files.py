@@ -40,11 +40,10 @@ def _fsync_directory(directory: Path) -> None:
 
 def _umask() -> int:
     """The process's umask, read without changing it where the system tells (Linux)."""
-    with suppress(OSError, ValueError):
-        with open("/proc/self/status") as fh:
-            for line in fh:
-                if line.startswith("Umask:"):
-                    return int(line.split()[1], 8)
+    with suppress(OSError, ValueError), open("/proc/self/status") as fh:
+        for line in fh:
+            if line.startswith("Umask:"):
+                return int(line.split()[1], 8)
     mask = os.umask(0o022)
     os.umask(mask)
     return mask

@@ -95,10 +95,12 @@ def results_table(rows: Iterable[ResultRow], *, show_true: bool | None = None) -
     # Minimum widths: the demo's look (README); wider when a value needs it.
     minimum = [12] + ([9] if show_true else []) + [11, 10, 10, 10]
     widths = [max([m, len(t) + 1] + [len(c[i]) + (2 if i == 0 else 1) for c in cells])
-              for i, (m, t) in enumerate(zip(minimum, titles))]
+              for i, (m, t) in enumerate(zip(minimum, titles, strict=True))]
 
     def fmt(line: list[str]) -> str:
-        return "".join(f"{v:<{w}}" if i == 0 else f"{v:>{w}}" for i, (v, w) in enumerate(zip(line, widths)))
+        return "".join(
+            f"{v:<{w}}" if i == 0 else f"{v:>{w}}" for i, (v, w) in enumerate(zip(line, widths, strict=True))
+        )
 
     header = fmt(titles)
     return "\n".join([header, "-" * len(header), *(fmt(c) for c in cells)])

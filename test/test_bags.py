@@ -11,11 +11,12 @@ import numpy as np
 import pytest
 import yaml
 from bag_samples import SMALL_MAPPING, fails, fti_bag, read_all, tree, write_mapping
-from conftest import FLIGHT_DATA
 
 from rls_uncertainty import cli
 from rls_uncertainty.bags import _standard_message, convert, read_inputs, typestore, write_replay
 from rls_uncertainty.errors import BagError, ConfigError
+
+from conftest import FLIGHT_DATA
 
 ROOT = Path(__file__).resolve().parents[1]
 BUNDLED = ROOT / "bags" / "t2_maneuver"
@@ -59,19 +60,19 @@ def test_convert_maps_the_fti_fields_and_is_byte_identical(tmp_path):
     air = original["/fcc/air_data"]
     vel = replayed["/airspeed"]
     assert len(vel) == len(air) == 1001
-    for (t0, m0), (t1, m1) in zip(air[::97], vel[::97]):
+    for (t0, m0), (t1, m1) in zip(air[::97], vel[::97], strict=True):
         v = m1.vector
         assert t0 == t1
         assert math.hypot(v.x, v.y, v.z) == pytest.approx(m0.true_airspeed, rel=1e-12)
         # REP-103 to aircraft axes: (x, -y, -z); alpha = atan2(w, u), beta = asin(v / V).
         assert math.atan2(-v.z, v.x) == pytest.approx(m0.angle_of_attack, abs=1e-12)
         assert math.asin(-v.y / m0.true_airspeed) == pytest.approx(m0.angle_of_sideslip, abs=1e-12)
-    for (_, m0), (_, m1) in zip(original["/fcc/thrust"][::101], replayed["/thrust"][::101]):
+    for (_, m0), (_, m1) in zip(original["/fcc/thrust"][::101], replayed["/thrust"][::101], strict=True):
         assert m1.wrench.force.x == pytest.approx(float(np.sum(m0.thrust)))
-    for (_, m0), (_, m1) in zip(original["/fcc/surfaces"][::101], replayed["/control_surfaces"][::101]):
+    for (_, m0), (_, m1) in zip(original["/fcc/surfaces"][::101], replayed["/control_surfaces"][::101], strict=True):
         assert list(m1.name) == ["elevator", "aileron", "rudder"]
         assert list(m1.position) == [m0.elevator, m0.aileron, m0.rudder]
-    for (_, m0), (_, m1) in zip(original["/fcc/imu"][::101], replayed["/imu"][::101]):
+    for (_, m0), (_, m1) in zip(original["/fcc/imu"][::101], replayed["/imu"][::101], strict=True):
         for f in ("angular_velocity", "linear_acceleration"):
             a0, a1 = getattr(m0, f), getattr(m1, f)
             assert (a1.x, a1.y, a1.z) == (a0.x, a0.y, a0.z)
@@ -163,8 +164,8 @@ def test_bad_stamps_are_refused_by_convert_and_replay(tmp_path, capsys, problem,
     with Writer(bad, version=9, storage_plugin=StoragePlugin.MCAP) as w:
         conn = w.add_connection("/imu", "sensor_msgs/msg/Imu", typestore=store)
         for k, s in enumerate(stamps):
-            w.write(conn, 10**18 + k * 10**6, store.serialize_cdr(_standard_message(store, "imu", s, (0, 0, 0, 0, 0, 9.8)),
-                                                 "sensor_msgs/msg/Imu"))
+            msg = _standard_message(store, "imu", s, (0, 0, 0, 0, 0, 9.8))
+            w.write(conn, 10**18 + k * 10**6, store.serialize_cdr(msg, "sensor_msgs/msg/Imu"))
     fails(capsys, ["replay", str(bad), "--out", str(tmp_path / "r"), "--quiet"], str(bad), "/imu", problem)
     assert not (tmp_path / "r").exists()
 
@@ -216,7 +217,7 @@ def _recorded_messages(store, n=60):
 def test_convert_reads_sqlite3_and_ros1_bags(tmp_path):
     from rosbags.rosbag1 import Writer as Writer1
     from rosbags.rosbag2 import StoragePlugin, Writer
-    from rosbags.typesys import Stores, get_typestore, get_types_from_msg
+    from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
     fti = (ROOT / "msg_schemas" / "fti_msgs" / "msg" / "AirData.msg").read_text()
     # ROS 2 sqlite3 storage.
@@ -324,7 +325,7 @@ def test_every_accepted_mapping_form_converts(tmp_path):
     }
     out = tmp_path / "out"
     counts = convert(fti_bag(tmp_path, "rec"), write_mapping(tmp_path, spec), out)
-    assert counts == {t: 50 for t in ("/imu", "/airspeed", "/dynamic_pressure", "/control_surfaces", "/thrust")}
+    assert counts == dict.fromkeys(("/imu", "/airspeed", "/dynamic_pressure", "/control_surfaces", "/thrust"), 50)
     got = read_all(out)
     k = 7
     imu = got["/imu"][k][1]

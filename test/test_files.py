@@ -51,9 +51,8 @@ def test_a_non_empty_output_is_refused_without_force_and_replaced_with_force(tmp
     (out / "sub").mkdir()
     (out / "sub" / "deep.txt").write_bytes(b"deep")
     before = _tree(tmp_path)
-    with pytest.raises(OutputPathError, match="not empty.*--force"):
-        with output_directory(out) as tmp:
-            pytest.fail(f"the block ran with {tmp}")
+    with pytest.raises(OutputPathError, match=r"not empty.*--force"), output_directory(out) as tmp:
+        pytest.fail(f"the block ran with {tmp}")
     assert _tree(tmp_path) == before
     with output_directory(out, force=True) as tmp:
         _write(tmp)
@@ -91,9 +90,8 @@ def test_an_input_is_never_removed_or_overwritten(tmp_path, bag, case, force):
     if case == "input given through a symlink":
         inputs = (link,)
     before = _tree(tmp_path)
-    with pytest.raises(OutputPathError, match="input"):
-        with output_directory(out, force=force, inputs=inputs) as tmp:
-            _write(tmp)
+    with pytest.raises(OutputPathError, match="input"), output_directory(out, force=force, inputs=inputs) as tmp:
+        _write(tmp)
     assert _tree(tmp_path) == before
 
 
@@ -102,9 +100,11 @@ def test_a_mapping_file_inside_the_output_is_an_input_too(tmp_path, bag):
     mapping.parent.mkdir()
     mapping.write_bytes(b"imu: {topic: /imu}\n")
     before = _tree(tmp_path)
-    with pytest.raises(OutputPathError, match="mapping.yaml"):
-        with output_directory(tmp_path / "out", force=True, inputs=(bag, mapping)):
-            pass
+    with (
+        pytest.raises(OutputPathError, match=r"mapping\.yaml"),
+        output_directory(tmp_path / "out", force=True, inputs=(bag, mapping)),
+    ):
+        pass
     assert _tree(tmp_path) == before
 
 
@@ -112,9 +112,8 @@ def test_a_mapping_file_inside_the_output_is_an_input_too(tmp_path, bag):
 def test_an_existing_file_is_refused_and_nothing_is_left_behind(tmp_path, force):
     (tmp_path / "out").write_bytes(b"precious")
     before = _tree(tmp_path)
-    with pytest.raises(OutputPathError, match="not a directory"):
-        with output_directory(tmp_path / "out", force=force):
-            pass
+    with pytest.raises(OutputPathError, match="not a directory"), output_directory(tmp_path / "out", force=force):
+        pass
     assert _tree(tmp_path) == before
 
 
@@ -123,9 +122,8 @@ def test_a_symlink_as_output_is_refused_and_nothing_is_written_where_it_points(t
     """A dangling link would otherwise make the output appear wherever it points."""
     (tmp_path / "out").symlink_to(tmp_path / "elsewhere" / "target")
     before = _tree(tmp_path)
-    with pytest.raises(OutputPathError, match="symbolic link"):
-        with output_directory(tmp_path / "out", force=force) as tmp:
-            _write(tmp)
+    with pytest.raises(OutputPathError, match="symbolic link"), output_directory(tmp_path / "out", force=force) as tmp:
+        _write(tmp)
     assert _tree(tmp_path) == before
 
 
@@ -134,13 +132,12 @@ def test_a_failure_removes_what_the_call_created_and_nothing_else(tmp_path):
     (tmp_path / "a" / "keep.txt").write_bytes(b"keep")
     before = _tree(tmp_path)
     # Three parent directories are created for the output; the failure removes them all.
-    with pytest.raises(KeyError):
-        with output_directory(tmp_path / "a" / "b" / "c" / "d" / "out") as tmp:
-            assert (tmp_path / "a" / "b" / "c" / "d").is_dir()
-            _write(tmp)
-            (tmp / "nested").mkdir()
-            _write(tmp / "nested")
-            raise KeyError("boom")
+    with pytest.raises(KeyError), output_directory(tmp_path / "a" / "b" / "c" / "d" / "out") as tmp:
+        assert (tmp_path / "a" / "b" / "c" / "d").is_dir()
+        _write(tmp)
+        (tmp / "nested").mkdir()
+        _write(tmp / "nested")
+        raise KeyError("boom")
     assert _tree(tmp_path) == before
 
 
@@ -149,9 +146,8 @@ def test_a_failure_to_create_the_temporary_directory_removes_the_created_parents
         raise OSError(28, "No space left on device")
 
     monkeypatch.setattr(files.tempfile, "mkdtemp", failing_mkdtemp)
-    with pytest.raises(OSError, match="No space"):
-        with output_directory(tmp_path / "a" / "b" / "out"):
-            pytest.fail("the block ran")
+    with pytest.raises(OSError, match="No space"), output_directory(tmp_path / "a" / "b" / "out"):
+        pytest.fail("the block ran")
     assert _tree(tmp_path) == {}
 
 
@@ -160,10 +156,9 @@ def test_a_failure_leaves_a_replaced_output_as_it_was(tmp_path):
     out.mkdir()
     (out / "old.txt").write_bytes(b"old")
     before = _tree(tmp_path)
-    with pytest.raises(RuntimeError):
-        with output_directory(out, force=True) as tmp:
-            _write(tmp)
-            raise RuntimeError("interrupted")
+    with pytest.raises(RuntimeError), output_directory(out, force=True) as tmp:
+        _write(tmp)
+        raise RuntimeError("interrupted")
     assert _tree(tmp_path) == before
 
 
@@ -182,9 +177,8 @@ def test_a_failure_while_swapping_in_a_forced_output_restores_the_old_one(tmp_pa
         rename(src, dst)
 
     monkeypatch.setattr(files.os, "rename", failing_rename)
-    with pytest.raises(OSError, match="No space"):
-        with output_directory(out, force=True) as tmp:
-            _write(tmp)
+    with pytest.raises(OSError, match="No space"), output_directory(out, force=True) as tmp:
+        _write(tmp)
     assert _tree(tmp_path) == before
 
 
@@ -276,11 +270,10 @@ def test_a_failed_atomic_write_leaves_the_old_file_and_no_temporary_file(tmp_pat
 
     if where == "in fsync":
         monkeypatch.setattr(files.os, "fsync", failing_fsync)
-    with pytest.raises(OSError if where == "in fsync" else ValueError):
-        with atomic_file(path) as fh:
-            fh.write(b"half")
-            if where == "in the block":
-                raise ValueError("the writer failed")
+    with pytest.raises(OSError if where == "in fsync" else ValueError), atomic_file(path) as fh:
+        fh.write(b"half")
+        if where == "in the block":
+            raise ValueError("the writer failed")
     assert path.read_bytes() == b"old state"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["STATE"]
 
