@@ -249,6 +249,10 @@ def play(bag: str | Path, *, rate: float = 1.0, clock: bool = True, reliable: bo
     try:
         player = _Publisher(node, Path(bag), clock=clock, reliable=reliable, window=window)
         player.wait_for_subscribers(wait_for_subscribers, wait_timeout)
+        player.count_subscribers()
+        lo, hi = (f(s.subscribers_max for s in player.stats.values()) for f in (min, max))
+        print(f"playing {bag}: {lo if lo == hi else f'{lo}-{hi}'} subscription(s) matched per topic; first message "
+              f"in {start_delay:g} s", file=sys.stderr, flush=True)
         time.sleep(start_delay)
         t0 = time.monotonic()
         failure = None
