@@ -38,4 +38,5 @@ def sample_messages(pipeline, out, frame_id: str) -> list[tuple[str, str, bytes]
 def output_topics(models) -> list[tuple[str, str]]:
     """``(relative topic, message type)`` of every per-sample output of the models named in
     ``models`` (e.g. ``["CZ", "Cm"]``), in publishing order."""
-    return [(SAMPLE_STAMP, HEADER)] + [(f"{m}/{suffix}", FLOAT64_MULTIARRAY) for m in models for suffix in ARRAY_OUTPUTS]
+    arrays = [(f"{m}/{suffix}", FLOAT64_MULTIARRAY) for m in models for suffix in ARRAY_OUTPUTS]
+    return [(SAMPLE_STAMP, HEADER), *arrays]

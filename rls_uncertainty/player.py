@@ -91,8 +91,8 @@ class _Publisher:
         self.reader = _open_reader(self.path, typestore())
         # The writer keeps `window` messages: flow control (run) never lets more than that
         # wait for acknowledgement, so keep-last never drops one that was not delivered.
-        self.qos = QoSProfile(depth=self.window, history=QoSHistoryPolicy.KEEP_LAST,
-                              reliability=QoSReliabilityPolicy.RELIABLE if reliable else QoSReliabilityPolicy.BEST_EFFORT)
+        reliability = QoSReliabilityPolicy.RELIABLE if reliable else QoSReliabilityPolicy.BEST_EFFORT
+        self.qos = QoSProfile(depth=self.window, history=QoSHistoryPolicy.KEEP_LAST, reliability=reliability)
         self.pubs = {}
         self.stats: dict[str, TopicStats] = {}
         for conn in self.reader.connections:
@@ -196,7 +196,8 @@ class _Publisher:
             for info in self.node.get_subscriptions_info_by_topic(topic):
                 name = f"{info.node_namespace.rstrip('/')}/{info.node_name}"
                 if name != me:
-                    kind = "reliable" if info.qos_profile.reliability == QoSReliabilityPolicy.RELIABLE else "best effort"
+                    reliable = info.qos_profile.reliability == QoSReliabilityPolicy.RELIABLE
+                    kind = "reliable" if reliable else "best effort"
                     subs.append(f"{name}: {kind}")
             if not self.reliable:
                 acked = "unknown (best effort)"

@@ -178,7 +178,8 @@ def plotjuggler_layout(config: str) -> str:
         for i, name in enumerate(names):
             upper, lower = bound_names(name)
             est, se = pj_series(model, "estimates", i), pj_series(model, "standard_errors", i)
-            snippets += [_snippet(f"{name} estimate", "return value", est), _snippet(upper, "return value + 2 * v1", est, se),
+            snippets += [_snippet(f"{name} estimate", "return value", est),
+                         _snippet(upper, "return value + 2 * v1", est, se),
                          _snippet(lower, "return value - 2 * v1", est, se)]
             curves = "\n".join(f"       <curve name={quoteattr(c)} color=\"{COLORS[k]}\"/>"
                                for c, k in ((f"{name} estimate", "estimate"), (upper, "bound"), (lower, "bound")))

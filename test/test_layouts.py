@@ -126,7 +126,7 @@ def test_the_foxglove_layout_plots_every_parameter_from_published_topics(config)
                 assert m.group(2) in models[model]
                 assert series["label"] == f"{m.group(2)} {'+' if m.group(3) == 'upper' else '-'}2sigma"
             else:
-                model, array, i = _element(value, models, rf"/{NODE_NAME}/(\w+)/(estimates)\.data\[(\d+)\]")
+                model, _array, i = _element(value, models, rf"/{NODE_NAME}/(\w+)/(estimates)\.data\[(\d+)\]")
                 assert series["label"] == models[model][i]
     wanted = [f"{p}{q}" for names in models.values() for p in names for q in ("", " +2sigma", " -2sigma")]
     assert sorted(labels) == sorted(wanted)

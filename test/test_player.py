@@ -13,12 +13,13 @@ import time
 import pytest
 import rclpy
 
-from ros_harness import RELIABLE, ROOT, NodeProcess
 from rls_uncertainty.bags import read_inputs
 from rls_uncertainty.config import load_parameters_file, node_config, pipeline_config
 from rls_uncertainty.messages import MESSAGE_TYPES, NODE_NAME, message_class
 from rls_uncertainty.outputs import output_topics, sample_messages
 from rls_uncertainty.replay import run_pipeline
+
+from ros_harness import RELIABLE, ROOT, NodeProcess
 
 BUNDLED = ROOT / "bags" / "t2_maneuver"
 T2 = str(ROOT / "config" / "t2.yaml")
