@@ -185,7 +185,8 @@ def _play(args: argparse.Namespace) -> int:
     from .player import play
 
     return play(args.bag, rate=args.rate, clock=not args.no_clock, reliable=not args.best_effort,
-                wait_for_subscribers=args.wait, start_delay=args.delay)
+                wait_for_subscribers=args.wait, start_delay=args.delay, loops=args.loop, window=args.window,
+                ack_timeout=args.ack_timeout, report=args.report)
 
 
 def _lags(value: str):
@@ -255,6 +256,8 @@ _FORCE_HELP = "replace an existing non-empty output directory (never the input)"
 
 
 def build_parser() -> argparse.ArgumentParser:
+    from .player import DEFAULT_WINDOW  # no ROS import at module level
+
     parser = _Parser(
         prog="rls-uncertainty",
         description="Recursive least squares with colored-residual parameter uncertainty.",
@@ -327,10 +330,22 @@ def build_parser() -> argparse.ArgumentParser:
     rp.add_argument("--force", action="store_true", help=_FORCE_HELP)
     rp.set_defaults(func=_replay)
 
-    pl = sub.add_parser("play", help="publish a replay bag over DDS with /clock")
+    pl = sub.add_parser("play", help="publish a replay bag over DDS with /clock",
+                        description="Publish a replay bag over DDS with /clock. Exit status 0 when every reliable "
+                                    "subscriber acknowledged every message, 1 when not (what was not delivered is "
+                                    "printed), 2 on bad input.")
     pl.add_argument("bag")
     pl.add_argument("--rate", type=_real(0.0), default=1.0,
-                    help="rate factor (default 1 = real time; 0 = as fast as possible)")
+                    help="rate factor (default 1 = real time; 0 = as fast as the acknowledgements allow)")
+    pl.add_argument("--loop", type=_integer(1), default=1, metavar="N",
+                    help="play the bag N times; stamps and /clock restart with every pass (default 1)")
+    pl.add_argument("--window", type=_integer(1), default=DEFAULT_WINDOW,
+                    help="messages per topic that may await acknowledgement; the publishers keep this many "
+                         f"(default {DEFAULT_WINDOW}, the node's default qos.depth)")
+    pl.add_argument("--ack-timeout", type=_real(0.0), default=30.0, metavar="SECONDS",
+                    help="how long to wait for the acknowledgements of a window and at the end (default 30)")
+    pl.add_argument("--report", action="store_true",
+                    help="print per topic the messages published, acknowledged, and the discovered subscriptions")
     pl.add_argument("--no-clock", action="store_true", help="do not publish /clock")
     pl.add_argument("--best-effort", action="store_true", help="best-effort QoS (default reliable)")
     pl.add_argument("--wait", type=_integer(0), default=0, help="wait for this many subscribers on each topic")

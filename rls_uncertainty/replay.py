@@ -7,11 +7,16 @@ temporary directory renamed to ``DIR`` only when complete):
 
 * ``estimates.csv``: ``time,model,parameter,estimate,std_error,std_error_conventional``, one
   row per sample and parameter of every ready model (time in s, the sample's stamp);
-* ``estimates.mcap``: the node's output topics (``/rls_estimator/M/estimates``,
-  ``.../standard_errors``, ``.../standard_errors_conventional``, ``/rls_estimator/sample_stamp``);
-* ``M_PARAM.png``-style plots: each parameter's history with corrected and conventional
-  2-sigma envelopes, and each model's residual autocorrelation.
-Two runs give bit-identical CSV and MCAP files.
+* ``estimates_wide.csv``: ``time`` and, per parameter P of every model, ``P``, ``P_se`` and
+  ``P_se_conventional``: one row per sample, cells empty while a model is not ready (for
+  PlotJuggler's CSV loader and spreadsheets);
+* ``estimates.mcap``: every topic the node publishes per sample, byte for byte
+  (:func:`.outputs.sample_messages`: ``/rls_estimator/sample_stamp``,
+  ``/rls_estimator/M/estimates``, ``.../standard_errors``, ``.../standard_errors_conventional``),
+  log time = the sample's stamp;
+* ``M_estimates.png``: each parameter's history with corrected and conventional 2-sigma
+  envelopes, and ``M_autocorrelation.png``: each model's residual autocorrelation.
+Two runs give bit-identical CSV and MCAP files. The progress bar is drawn only on a terminal.
 """
 
 from __future__ import annotations
@@ -25,10 +30,10 @@ from pathlib import Path
 import numpy as np
 
 from .bags import read_inputs, typestore, write_replay
-from .cdr import encode_float64_multiarray, encode_header
 from .config import PipelineConfig, node_config, pipeline_config
 from .files import output_directory
-from .messages import ARRAY_OUTPUTS, NODE_NAME, feed, stamp_label
+from .messages import NODE_NAME, feed
+from .outputs import sample_messages
 from .pipeline import Pipeline
 from .report import results_table, rows_from_arrays
 
@@ -51,6 +56,13 @@ class ReplayResult:
         return self.data_seconds / self.wall_seconds if self.wall_seconds > 0 else float("inf")
 
 
+def _is_terminal(stream) -> bool:
+    try:
+        return bool(stream.isatty())
+    except (AttributeError, ValueError):  # no isatty, or a closed stream
+        return False
+
+
 def _progress(done: int, total: int, width: int = 40) -> None:
     filled = int(width * done / total)
     sys.stderr.write(f"\r[{'#' * filled}{'.' * (width - filled)}] {100 * done // total:3d}%")
@@ -60,7 +72,10 @@ def _progress(done: int, total: int, width: int = 40) -> None:
 
 
 def run_pipeline(messages, config: PipelineConfig, *, record: bool = True, progress: bool = False) -> ReplayResult:
-    """Feed ``(kind, stamp, msg)`` messages through a fresh pipeline; keep every output."""
+    """Feed ``(kind, stamp, msg)`` messages through a fresh pipeline; keep every output.
+    ``progress`` draws a bar on stderr when stderr is a terminal (never carriage-return
+    frames into a log file or a pipe)."""
+    progress = progress and _is_terminal(sys.stderr)
     pipe = Pipeline(config, record=record)
     result = ReplayResult(pipe, n_messages=len(messages))
     total = len(messages)
@@ -91,19 +106,10 @@ def run_pipeline(messages, config: PipelineConfig, *, record: bool = True, progr
 
 
 def output_records(pipe: Pipeline, outputs, frame_id: str = "base_link", node: str = NODE_NAME) -> list:
-    """The node's output messages for every sample, as bag records of CDR bytes
-    (:mod:`.cdr`; the same bytes rclpy publishes)."""
-    records = []
-    for out in outputs:
-        stamp = out.stamp_ns
-        header = encode_header(stamp // 10**9, stamp % 10**9, frame_id)
-        records.append((stamp, f"/{node}/sample_stamp", "std_msgs/msg/Header", header))
-        when = stamp_label(stamp)
-        for name, label, theta, se, se_conv in pipe.published(out):
-            for suffix, data in zip(ARRAY_OUTPUTS, (theta, se, se_conv)):
-                records.append((stamp, f"/{node}/{name}/{suffix}", "std_msgs/msg/Float64MultiArray",
-                                encode_float64_multiarray(label, data.tolist(), when)))
-    return records
+    """The node's output messages for every sample, as bag records of CDR bytes: exactly what
+    the node publishes (:func:`.outputs.sample_messages`)."""
+    return [(out.stamp_ns, f"/{node}/{topic}", msgtype, data)
+            for out in outputs for topic, msgtype, data in sample_messages(pipe, out, frame_id)]
 
 
 def _write_csv(path: Path, pipe: Pipeline, outputs) -> None:
@@ -114,6 +120,33 @@ def _write_csv(path: Path, pipe: Pipeline, outputs) -> None:
             for (name, _label, theta, se, se_conv), names in zip(pipe.published(out), _names_of(pipe, out)):
                 for p, a, b, c in zip(names, theta, se, se_conv):
                     fh.write(f"{t},{name},{p},{float(a)!r},{float(b)!r},{float(c)!r}\n")
+
+
+# Columns of the wide CSV per parameter P: P (estimate), P_se (corrected), P_se_conventional.
+WIDE_QUANTITIES = (("", "theta"), ("_se", "se"), ("_se_conventional", "se_conventional"))
+
+
+def wide_columns(pipe: Pipeline) -> list[str]:
+    """The wide CSV's header: ``time`` then, per model and parameter, every quantity."""
+    return ["time"] + [f"{p}{suffix}" for names in pipe.parameter_names for p in names for suffix, _ in WIDE_QUANTITIES]
+
+
+def _write_wide_csv(path: Path, pipe: Pipeline, outputs) -> None:
+    """``estimates_wide.csv``: one row per sample, one column per parameter and quantity
+    (:func:`wide_columns`), empty where the model is not ready yet. Comma separated, a header
+    row and a numeric time column (s): what PlotJuggler's CSV loader reads as is."""
+    sizes = pipe.sizes
+    with open(path, "w") as fh:
+        fh.write(",".join(wide_columns(pipe)) + "\n")
+        for out in outputs:
+            cells = [f"{out.stamp_ns // 10**9}.{out.stamp_ns % 10**9:09d}"]
+            arrays = [getattr(out, field) for _, field in WIDE_QUANTITIES]
+            for j, n in enumerate(sizes):
+                if out.ready[j]:
+                    cells += [repr(float(a[j, i])) for i in range(n) for a in arrays]
+                else:
+                    cells += [""] * (n * len(arrays))
+            fh.write(",".join(cells) + "\n")
 
 
 def _names_of(pipe: Pipeline, out):
@@ -204,6 +237,7 @@ def replay(bag: str | Path, params: dict, out: str | Path, *, start=None, end=No
         messages, _t0 = read_inputs(bag, topics, strict=strict, start=start, end=end)
         result = run_pipeline(messages, config, progress=progress)
         _write_csv(tmp / "estimates.csv", result.pipeline, result.outputs)
+        _write_wide_csv(tmp / "estimates_wide.csv", result.pipeline, result.outputs)
         store = typestore()
         records = output_records(result.pipeline, result.outputs, node_config(params).frame_id)
         if records:

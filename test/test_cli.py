@@ -4,6 +4,7 @@ their traceback). No DDS."""
 
 import csv
 import math
+import os
 import shutil
 from pathlib import Path
 
@@ -49,7 +50,7 @@ def _setup(command, tmp_path):
 
 def _expected_outputs(command, out):
     if command == "replay":
-        return {"estimates.csv", "estimates.mcap"}
+        return {"estimates.csv", "estimates_wide.csv", "estimates.mcap"}
     return {f"{out.name}.mcap", "metadata.yaml"}
 
 
@@ -180,6 +181,11 @@ BAD_ARGUMENTS = [
     (["play", "{bag}", "--rate", "nan"], "--rate"),
     (["play", "{bag}", "--delay", "-1"], "--delay"),
     (["play", "{bag}", "--wait", "-1"], "--wait"),
+    (["play", "{bag}", "--loop", "0"], "--loop"),
+    (["play", "{bag}", "--loop", "1.5"], "--loop"),
+    (["play", "{bag}", "--window", "0"], "--window"),
+    (["play", "{bag}", "--ack-timeout", "-1"], "--ack-timeout"),
+    (["play", "{bag}", "--ack-timeout", "nan"], "--ack-timeout"),
     (["demo", "--rate", "inf"], "--rate"),
     (["nonsense"], "nonsense"),
 ]
@@ -219,11 +225,39 @@ def test_the_player_functions_refuse_bad_numbers_before_starting_dds():
     from rls_uncertainty import player
 
     for kwargs in ({"rate": math.nan}, {"rate": -1.0}, {"rate": math.inf}, {"start_delay": -0.5},
-                   {"wait_for_subscribers": -1}, {"wait_timeout": math.nan}):
+                   {"wait_for_subscribers": -1}, {"wait_timeout": math.nan}, {"loops": 0}, {"loops": True},
+                   {"window": 0}, {"ack_timeout": -1.0}, {"ack_timeout": math.inf}):
         with pytest.raises(ConfigError):
             player.play(BUNDLED, **kwargs)
     with pytest.raises(ConfigError, match="rate"):
         player.demo(rate=math.nan)
+
+
+def test_play_leaves_dds_discovery_to_the_environment(monkeypatch):
+    """The product never pins ROS_AUTOMATIC_DISCOVERY_RANGE (a control room spans machines):
+    `play` starts DDS with the caller's environment, whatever it is."""
+    import rclpy
+
+    from rls_uncertainty import player
+
+    class Started(Exception):
+        pass
+
+    seen = []
+
+    def init(*_args, **_kwargs):
+        seen.append(os.environ.get("ROS_AUTOMATIC_DISCOVERY_RANGE", "<unset>"))
+        raise Started
+
+    monkeypatch.setattr(rclpy, "init", init)
+    monkeypatch.delenv("ROS_AUTOMATIC_DISCOVERY_RANGE", raising=False)
+    with pytest.raises(Started):
+        player.play(BUNDLED)
+    assert seen == ["<unset>"] and "ROS_AUTOMATIC_DISCOVERY_RANGE" not in os.environ
+    monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "SUBNET")
+    with pytest.raises(Started):
+        player.play(BUNDLED)
+    assert seen[-1] == "SUBNET"
 
 
 # ------------------------------------------------------------------ programming errors

@@ -87,3 +87,76 @@ def test_the_printed_summary_is_the_last_sample_of_every_ready_model(tmp_path, c
         # Four decimals: these standard errors are all above 0.001.
         assert row[1:] == [f"{est:.4f}", f"{se_conv:.4f}", f"{se_corr:.4f}", f"{se_corr / se_conv:.2f}"]
     assert out[2 + len(expected)] == ""
+
+
+# ------------------------------------------------------------------ outputs a plotting tool can name
+def test_the_wide_csv_holds_the_long_csv_one_row_per_sample(tmp_path):
+    """estimates_wide.csv: a header row, a numeric time column, one column per parameter and
+    quantity, comma separated, empty cells while a model is not ready: what PlotJuggler's CSV
+    loader reads (it skips empty cells); every number equals estimates.csv's."""
+    result = replay(BUNDLED, load_parameters_file("t2"), tmp_path / "r", progress=False, plots=False)
+    lines = (tmp_path / "r" / "estimates_wide.csv").read_text().splitlines()
+    header = lines[0].split(",")
+    names = [p for names in result.pipeline.parameter_names for p in names]
+    assert header == ["time"] + [f"{p}{q}" for p in names for q in ("", "_se", "_se_conventional")]
+    assert len(header) == len(set(header))
+    rows = [line.split(",") for line in lines[1:]]
+    assert len(rows) == len(result.outputs)
+    assert all(len(r) == len(header) for r in rows)
+    times = [float(r[0]) for r in rows]  # numeric, increasing
+    assert all(b > a for a, b in zip(times, times[1:]))
+    wide = {(r[0], col): cell for r in rows for col, cell in zip(header[1:], r[1:])}
+    with open(tmp_path / "r" / "estimates.csv") as fh:
+        long = list(csv.DictReader(fh))
+    seen = set()
+    for r in long:
+        for q, field in (("", "estimate"), ("_se", "std_error"), ("_se_conventional", "std_error_conventional")):
+            key = (r["time"], r["parameter"] + q)
+            assert wide[key] == r[field]
+            seen.add(key)
+    # Every other cell is empty: exactly the samples where the model was not ready.
+    assert all(cell == "" for key, cell in wide.items() if key not in seen)
+    assert sum(cell == "" for cell in wide.values()) > 0
+    for out, r in zip(result.outputs, rows):
+        for j, cols in enumerate(result.pipeline.parameter_names):
+            cells = [dict(zip(header, r))[c] for c in cols]
+            assert all(c != "" for c in cells) if out.ready[j] else all(c == "" for c in cells)
+
+
+def test_the_replays_mcap_carries_every_topic_the_node_publishes_byte_for_byte(tmp_path):
+    from rls_uncertainty.outputs import output_topics, sample_messages
+
+    params = load_parameters_file("t2")
+    result = replay(BUNDLED, params, tmp_path / "r", progress=False, plots=False)
+    from mcap.reader import make_reader
+
+    with open(tmp_path / "r" / "estimates.mcap", "rb") as fh:
+        reader = make_reader(fh)
+        got = [(ch.topic, sch.name, msg.log_time, msg.data) for sch, ch, msg in reader.iter_messages(log_time_order=False)]
+    want_topics = {(f"/rls_estimator/{t}", m) for t, m in output_topics(["CZ", "Cm"])}
+    assert {(t, s) for t, s, _, _ in got} == want_topics
+    expected = [(f"/rls_estimator/{t}", m, out.stamp_ns, data)
+                for out in result.outputs for t, m, data in sample_messages(result.pipeline, out, "base_link")]
+    key = lambda r: (r[2], r[0])  # noqa: E731 - the bag is ordered by log time, then topic rank
+    assert sorted(got, key=key) == sorted(expected, key=key)
+
+
+def test_the_progress_bar_is_drawn_only_on_a_terminal(monkeypatch):
+    import io
+    import sys
+
+    messages, _ = read_inputs(BUNDLED)
+    config = pipeline_config(load_parameters_file("t2"))
+
+    class Terminal(io.StringIO):
+        def isatty(self):
+            return True
+
+    log, tty = io.StringIO(), Terminal()
+    monkeypatch.setattr(sys, "stderr", log)
+    run_pipeline(messages, config, progress=True)
+    assert log.getvalue() == ""  # a log file or pipe gets no carriage-return frames
+    monkeypatch.setattr(sys, "stderr", tty)
+    run_pipeline(messages, config, progress=True)
+    frames = tty.getvalue()
+    assert frames.count("\r") > 10 and frames.endswith("100%\n")
