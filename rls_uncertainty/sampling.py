@@ -83,6 +83,7 @@ __all__ = ["StreamCounts", "Stream", "Sample", "Skipped", "Restart", "Sampler", 
 
 # Where a stream stands with respect to the timelines.
 CURRENT, AHEAD, BEHIND = 0, 1, 2
+MAX_PENDING = 4  # timelines opened after the current one and not yet reached (bounds memory)
 _RING = 9  # stamp intervals in the median reference interval
 _NEVER = -(1 << 62)  # "no stamp yet" for the timeline's newest stamp (keeps the hot path int-only)
 
@@ -121,11 +122,12 @@ class StreamCounts:
 class Stream:
     """One stream: the time-ordered buffer of the current timeline (``stamps``, ``values``,
     oldest first; ``last`` the newest buffered stamp, ``None`` while empty; ``broken`` the
-    buffered stamps after which a hole lies), its timeline state (``mode``, held jump
-    candidates ``held``, the next timeline's buffer ``ahead``) and its interval statistics."""
+    buffered stamps after which a hole lies), its timeline state (``epoch``, the timeline of
+    its newest message; held jump candidates ``held``; ``segs``, its buffers of later
+    timelines by epoch) and its interval statistics."""
 
-    __slots__ = ("name", "stamps", "values", "last", "counts", "broken", "mode", "slow", "held", "ahead",
-                 "rewound", "ring", "ring_i", "band_lo", "band_hi", "hold_ns")
+    __slots__ = ("name", "stamps", "values", "last", "counts", "broken", "epoch", "slow", "held", "segs",
+                 "rewound", "left_at", "ring", "ring_i", "band_lo", "band_hi", "hold_ns")
 
     def __init__(self, name: str, counts: StreamCounts, hold_ns: int) -> None:
         self.name = name
@@ -134,10 +136,11 @@ class Stream:
         self.last: int | None = None
         self.counts = counts
         self.broken: list[int] = []
-        self.mode = CURRENT
+        self.epoch = 0
         self.slow = True  # the message path needs more than the in-order fast path
         self.held: list[tuple[int, tuple]] = []
-        self.ahead: tuple[list, list, list] | None = None
+        self.segs: dict[int, tuple[list, list, list]] = {}
+        self.left_at = 0  # behind: its newest stamp when the data left its timeline
         self.rewound = False
         known = int(counts.interval_ns)
         self.ring = [known] * _RING
@@ -229,10 +232,8 @@ class Sampler:
         # The current timeline's stamp range (lo None: nothing on it yet), the next one's.
         self.lo: int | None = None
         self.hi = _NEVER
-        self.next_lo = 0
-        self.next_hi = _NEVER
-        self._n_ahead = 0  # streams on the next timeline (0: there is none)
-        self._next_reason = ""
+        self.epoch = 0  # the current timeline
+        self.pending: dict[int, list] = {}  # later timelines by epoch: [lo, hi, restart reason]
         self.rewind_ns: int | None = None  # the clock time a /clock jump went back to
 
     @property
@@ -241,7 +242,12 @@ class Sampler:
 
     def buffered(self) -> int:
         """Messages in the buffers (both timelines) and held as jump candidates."""
-        return sum(len(s.stamps) + len(s.held) + (len(s.ahead[0]) if s.ahead else 0) for s in self._all)
+        return sum(len(s.stamps) + len(s.held) + sum(len(g[0]) for g in s.segs.values()) for s in self._all)
+
+    def mode(self, stream: Stream) -> int:
+        """:data:`CURRENT`, :data:`AHEAD` (on a later timeline) or :data:`BEHIND` (on an
+        earlier one: its next messages that continue its stamps are stragglers)."""
+        return CURRENT if stream.epoch == self.epoch else AHEAD if stream.epoch > self.epoch else BEHIND
 
     # ------------------------------------------------------------------ messages
     def reject(self, stream: Stream, reason: str) -> None:
@@ -341,43 +347,59 @@ class Sampler:
             counts.rejected["stamp_jump"] += n
 
     def _update_slow(self, s: Stream) -> None:
-        s.slow = s.mode != CURRENT or bool(s.held) or s.rewound or s.counts.newest_ns is None
+        s.slow = s.epoch != self.epoch or bool(s.held) or s.rewound or s.counts.newest_ns is None
 
-    def _near_cur(self, m: int) -> bool:
-        return self.lo is None or self.lo - self.max_jump_ns <= m <= self.hi + self.max_jump_ns
+    def _near(self, epoch: int, m: int) -> bool:
+        """Whether ``m`` lies within ``J`` of the stamps seen on timeline ``epoch``."""
+        J = self.max_jump_ns
+        if epoch == self.epoch:
+            return self.lo is None or self.lo - J <= m <= self.hi + J
+        lo, hi, _ = self.pending[epoch]
+        return lo - J <= m <= hi + J
 
-    def _near_next(self, m: int) -> bool:
-        return self._n_ahead > 0 and self.next_lo - self.max_jump_ns <= m <= self.next_hi + self.max_jump_ns
+    def _later(self, s: Stream, m: int) -> int | None:
+        """The first pending timeline after the stream's own that ``m`` lands near."""
+        J = self.max_jump_ns
+        for e, (lo, hi, _) in self.pending.items():
+            if e > s.epoch and lo - J <= m <= hi + J:
+                return e
+        return None
+
+    def _present(self, s: Stream) -> int:
+        return self.hi if s.epoch == self.epoch else self.pending[s.epoch][1]
 
     def _slow(self, s: Stream, m: int, values, reason: str) -> bool:
         """Every message that is not the in-order next one of a stream on the current
         timeline: first messages, holes (``values`` None, counted as ``reason``), jumps,
-        candidates, streams on the next or a previous timeline."""
+        candidates, streams on a later or an earlier timeline."""
         counts = s.counts
-        if s.mode == BEHIND:
+        if s.epoch < self.epoch:
             return self._behind(s, m, values, reason)
         own = counts.newest_ns
         J = self.max_jump_ns
-        if own is None:  # the stream's first message (start, ~/reset, a new timeline)
-            near_cur, near_next = self._near_cur(m), self._near_next(m)
-            if near_cur and near_next:  # the timelines overlap (a looped replay): the closer
-                near_cur = abs(m - self.hi) <= abs(m - self.next_hi)
+        if own is None:  # the stream's first message (start, ~/reset): on the current timeline
+            near_cur = self._near(self.epoch, m)
+            later = self._later(s, m) if self.pending else None
+            if near_cur and later is not None:  # the timelines overlap (a looped replay): the closer
+                near_cur = abs(m - self.hi) <= abs(m - self.pending[later][1])
             if near_cur:
                 return self._take(s, m, values, reason, None)
-            if near_next:
-                return self._join_next(s, [(m, values)], reason)
+            if later is not None:
+                return self._join(s, later, [(m, values)], reason)
             return self._candidate(s, m, values, reason)
         dt = m - own
-        if s.rewound and dt < 0 and abs(m - self.rewind_ns) <= J and (not self._n_ahead or self._near_next(m)):
+        if s.rewound and dt < 0 and abs(m - self.rewind_ns) <= J:  # type: ignore[operator]
             # The clock went back and this stream follows it: no confirmation needed.
-            rewind = self.rewind_ns
-            held = [h for h in s.held if abs(h[0] - rewind) <= J and h[0] < m]
-            if len(held) != len(s.held):
+            later = self._later(s, m)
+            if later is not None or not self.pending:
+                rewind = self.rewind_ns
+                held = [h for h in s.held if abs(h[0] - rewind) <= J and h[0] < m]  # type: ignore[operator]
                 self._drop_held(counts, len(s.held) - len(held))
-            s.held = []
-            return self._join_next(s, held + [(m, values)], reason, "time_jumped_backwards")
-        present = self.next_hi if s.mode == AHEAD else self.hi
-        if dt > 0 and (dt <= s.hold_ns or m <= present + self.max_gap_ns):
+                s.held = []
+                if later is not None:
+                    return self._join(s, later, held + [(m, values)], reason)
+                return self._open(s, held + [(m, values)], reason, "time_jumped_backwards")
+        if dt > 0 and (dt <= s.hold_ns or m <= self._present(s) + self.max_gap_ns):
             held = s.held
             if held:
                 s.held = []
@@ -393,17 +415,18 @@ class Sampler:
         if dt <= 0 and dt >= -J:
             counts.rejected["duplicate" if dt == 0 else "out_of_order"] += 1
             return False
-        if s.mode == CURRENT and self._near_next(m):
-            held = [h for h in s.held if self._near_next(h[0]) and h[0] < m]
+        later = self._later(s, m) if self.pending else None
+        if later is not None:  # another stream opened that timeline: join it at once
+            held = [h for h in s.held if self._near(later, h[0]) and h[0] < m]
             self._drop_held(counts, len(s.held) - len(held))
             s.held = []
-            return self._join_next(s, held + [(m, values)], reason)
+            return self._join(s, later, held + [(m, values)], reason)
         return self._candidate(s, m, values, reason)
 
     def _take(self, s: Stream, m: int, values, reason: str, dt: int | None) -> bool:
-        """Accept ``m`` on the stream's timeline (the current one, or the next one when the
-        stream is ahead); a hole (``values`` None) is counted as ``reason`` and marks the
-        interval after the newest buffered message. ``dt``: the interval, when it is one."""
+        """Accept ``m`` on the stream's timeline (the current one or a later one); a hole
+        (``values`` None) is counted as ``reason`` and marks the interval after the newest
+        buffered message. ``dt``: the interval from the stream's previous message, if one."""
         counts = s.counts
         if dt is not None:
             ring = s.ring
@@ -412,17 +435,18 @@ class Sampler:
             if dt > s.band_hi or dt < s.band_lo:
                 self._interval(s, dt)
         counts.newest_ns = m
-        if s.mode == AHEAD:
-            stamps, vals, broken = s.ahead  # type: ignore[misc]
-            self.next_lo = min(self.next_lo, m)
-            self.next_hi = max(self.next_hi, m)
-        else:
-            s.mode = CURRENT
+        current = s.epoch == self.epoch
+        if current:
             stamps, vals, broken = s.stamps, s.values, s.broken
             if self.lo is None or m < self.lo:
                 self.lo = m
             if m > self.hi:
                 self.hi = m
+        else:
+            stamps, vals, broken = s.segs[s.epoch]
+            r = self.pending[s.epoch]
+            r[0] = min(r[0], m)
+            r[1] = max(r[1], m)
         self._update_slow(s)
         if values is None:
             counts.rejected[reason] += 1
@@ -431,7 +455,7 @@ class Sampler:
             return False
         stamps.append(m)
         vals.append(values)
-        if s.mode != AHEAD:
+        if current:
             s.last = m
         if m - stamps[0] > self.buffer_ns or len(stamps) > self.max_buffered:
             self._expire(s, stamps, vals, broken, m)
@@ -464,74 +488,91 @@ class Sampler:
         held, s.held = s.held, []
         first = held[0][0]
         own = counts.newest_ns
-        present = self.next_hi if s.mode == AHEAD else self.hi
-        if s.mode != BEHIND and own is not None and first > own and (
-                first - own <= self.max_jump_ns or first <= present + self.max_jump_ns):
+        if s.epoch >= self.epoch and own is not None and first > own and (
+                first - own <= self.max_jump_ns or first <= self._present(s) + self.max_jump_ns):
             # A dropout on the stream's own timeline, not a jump: a gap.
             prev = own
             for m, v in held:
                 self._take(s, m, v, "", m - prev)
                 prev = m
             return True
-        if s.mode == AHEAD or (self._n_ahead and not self._near_next(first)):
-            self._drop_held(counts, len(held))  # one pending timeline at a time
+        later = self._later(s, first) if self.pending else None
+        if later is not None:
+            return self._join(s, later, held, "")
+        if len(self.pending) >= MAX_PENDING:
+            self._drop_held(counts, len(held))
             self._update_slow(s)
             return False
         ref = own if own is not None else (self.hi if self.lo is not None else None)
-        reason = "stamps_jumped_backwards" if ref is not None and first < ref else "stamps_jumped_forward"
-        return self._join_next(s, held, "", reason)
+        opens = "stamps_jumped_backwards" if ref is not None and first < ref else "stamps_jumped_forward"
+        return self._open(s, held, "", opens)
 
-    def _join_next(self, s: Stream, msgs: list, reason: str, opens: str = "stamps_jumped_backwards") -> bool:
-        """Stream ``s`` moves to the next timeline with ``msgs`` (increasing), opening it
-        (counted as ``opens`` at the restart) when there is none yet."""
-        if msgs[-1][1] is None:  # a hole (only ever the last): counted, it moves nothing
+    def _open(self, s: Stream, msgs: list, reason: str, opens: str) -> bool:
+        """Stream ``s`` opens a new timeline with ``msgs``; the restart that reaches it is
+        counted as ``opens``. Other streams' held candidates that land near it join it."""
+        if msgs[-1][1] is None:  # a hole (only ever the last) moves nothing
             s.counts.rejected[reason] += 1
             msgs = msgs[:-1]
-        if not msgs:
-            return False
-        opened = self._n_ahead == 0
-        if opened:
-            self.next_lo = self.next_hi = msgs[0][0]
-            self._next_reason = opens
-        self._n_ahead += 1
-        s.mode = AHEAD
-        s.ahead = ([], [], [])
+            if not msgs:
+                return False
+        e = (max(self.pending) if self.pending else self.epoch) + 1
+        self.pending[e] = [msgs[0][0], msgs[0][0], opens]
+        self._join(s, e, msgs, "")
+        for o in self._all:
+            if o is not s and o.held and o.epoch < e and self._near(e, o.held[0][0]):
+                self._join(o, e, o.held, "")
+        return True
+
+    def _join(self, s: Stream, e: int, msgs: list, reason: str) -> bool:
+        """Stream ``s`` moves on to timeline ``e`` with ``msgs`` (increasing)."""
+        if msgs[-1][1] is None:
+            s.counts.rejected[reason] += 1
+            msgs = msgs[:-1]
+            if not msgs:
+                return False
+        s.epoch = e
+        if e > self.epoch:
+            s.segs[e] = ([], [], [])
         s.held = []
         s.rewound = False
         prev = None
         for m, v in msgs:
             self._take(s, m, v, "", None if prev is None else m - prev)
             prev = m
-        if opened:  # candidates of other streams that land on it join it now
-            for o in self._all:
-                if o is not s and o.mode != AHEAD and o.held and self._near_next(o.held[0][0]):
-                    self._join_next(o, o.held, "")
         return True
 
     def _behind(self, s: Stream, m: int, values, reason: str) -> bool:
-        """A message of a stream whose timeline the data has left (``newest_ns`` is its last
-        stamp there)."""
+        """A message of a stream still on a timeline the data has left (``newest_ns`` is its
+        last stamp there)."""
         counts = s.counts
         old = counts.newest_ns
         J = self.max_jump_ns
         d = m - old  # type: ignore[operator]
-        if 0 < d <= J and not self._near_next(m):  # a straggler of the previous timeline
-            if s.held:
-                self._drop_held(counts, len(s.held))
-                s.held = []
+        if 0 < d <= J:  # it continues its stamps: a straggler of the earlier timeline...
+            self._drop_held(counts, len(s.held))
+            s.held = []
+            if m - s.left_at > J and len(self.pending) < MAX_PENDING:
+                # ...unless its timeline goes on for longer than J after the data left it: it
+                # is alive (the others left it after a confirmed burst of bad stamps).
+                later = self._later(s, m)
+                if later is not None:
+                    return self._join(s, later, [(m, values)], reason)
+                opens = "stamps_jumped_backwards" if m < self.hi else "stamps_jumped_forward"
+                return self._open(s, [(m, values)], reason, opens)
             counts.rejected["previous_timeline"] += 1
             counts.newest_ns = m
             return False
-        if d != 0 and self._near_cur(m) and not (0 < d <= J):
-            if s.held:
-                self._drop_held(counts, len(s.held))
-                s.held = []
-            return self._take(s, m, values, reason, None)  # joins the current timeline
-        if self._near_next(m):
-            held = [h for h in s.held if self._near_next(h[0]) and h[0] < m]
+        later = self._later(s, m) if self.pending else None
+        if d != 0 and not 0 < d <= J and self._near(self.epoch, m):  # joins the current timeline
+            self._drop_held(counts, len(s.held))
+            s.held = []
+            s.epoch = self.epoch
+            return self._take(s, m, values, reason, None)
+        if later is not None:
+            held = [h for h in s.held if self._near(later, h[0]) and h[0] < m]
             self._drop_held(counts, len(s.held) - len(held))
             s.held = []
-            return self._join_next(s, held + [(m, values)], reason)
+            return self._join(s, later, held + [(m, values)], reason)
         if -J <= d <= 0:
             counts.rejected["previous_timeline"] += 1
             return False
@@ -544,11 +585,11 @@ class Sampler:
         data yet, or the data already moved to a timeline nearer the new time than the old."""
         if self.lo is None:
             return False
-        if not self._n_ahead and abs(self.hi - new_ns) < abs(self.hi - old_ns):
+        if not self.pending and abs(self.hi - new_ns) < abs(self.hi - old_ns):
             return False
         self.rewind_ns = int(new_ns)
         for s in self._all:
-            if s.mode == CURRENT and s.counts.newest_ns is not None:
+            if s.epoch == self.epoch and s.counts.newest_ns is not None:
                 s.rewound = True
                 s.slow = True
         return True
@@ -560,9 +601,9 @@ class Sampler:
         out: list[Sample | Skipped | Restart] = []
         while True:
             self._form(out)
-            if not (self._n_ahead and self._timeline_over()):
+            if not (self.pending and self._timeline_over()):
                 return out
-            out.append(Restart(self._next_reason))
+            out.append(Restart(self.pending[self.epoch + 1][2]))
             self._next_timeline()
 
     def _form(self, out: list) -> None:
@@ -630,38 +671,42 @@ class Sampler:
                 _drop_front(stamps, s.values, s.broken, i)
 
     def _timeline_over(self) -> bool:
-        """With a next timeline open: can the current one form no further sample?"""
+        """With a later timeline open: can the current one form no further sample?"""
         cutoff = None
-        ahead = True
+        moved = True
         for s in self._needed:
-            if s.mode == AHEAD:
+            if s.epoch > self.epoch:
                 if s.last is not None and (cutoff is None or s.last < cutoff):
                     cutoff = s.last
             else:
-                ahead = False
-        if ahead:
+                moved = False
+        if moved:
             return True
         return cutoff is not None and self.next_ns is not None and self.next_ns > cutoff
 
     def _next_timeline(self) -> None:
         """The next timeline becomes current: its buffers replace the old ones (those still
-        buffered expire), streams that had not moved are behind, the grid restarts."""
+        buffered expire), streams still on the old one are behind, the grid restarts."""
+        new = self.epoch + 1
+        lo, hi, _ = self.pending.pop(new)
+        self.epoch = new
         for s in self._all:
             counts = s.counts
             counts.expired += len(s.stamps)
-            if s.mode == AHEAD:
-                s.stamps, s.values, s.broken = s.ahead  # type: ignore[misc]
-                s.ahead = None
-                s.mode = CURRENT
-                s.last = s.stamps[-1] if s.stamps else None
+            seg = s.segs.pop(new, None)
+            if seg is not None:
+                s.stamps, s.values, s.broken = seg
             else:
-                s.stamps, s.values, s.broken, s.last = [], [], [], None
-                if counts.newest_ns is not None:
-                    s.mode = BEHIND
+                s.stamps, s.values, s.broken = [], [], []
+            s.last = s.stamps[-1] if s.stamps else None
+            if s.epoch < new:
+                if counts.newest_ns is None:
+                    s.epoch = new  # it never had a message: simply on the new timeline
+                elif s.epoch == new - 1:
+                    s.left_at = counts.newest_ns
             s.rewound = False
             self._update_slow(s)
-        self.lo, self.hi = self.next_lo, self.next_hi
-        self.next_lo, self.next_hi, self._n_ahead = 0, _NEVER, 0
+        self.lo, self.hi = lo, hi
         self.rewind_ns = None
         self.next_ns = None
         self._frontier = None
@@ -671,16 +716,17 @@ class Sampler:
         """Drop every buffered and held message (counted as expired) and restart the grid and
         the timelines at the next messages. ``forget_newest`` (``~/reset``) also forgets the
         streams' newest stamps, so that older stamps are accepted again."""
+        self.epoch = 0
+        self.pending = {}
         for s in self._all:
             counts = s.counts
-            counts.expired += len(s.stamps) + len(s.held) + (len(s.ahead[0]) if s.ahead else 0)
+            counts.expired += len(s.stamps) + len(s.held) + sum(len(g[0]) for g in s.segs.values())
             s.stamps, s.values, s.broken, s.last = [], [], [], None
-            s.held, s.ahead, s.mode, s.rewound = [], None, CURRENT, False
+            s.held, s.segs, s.epoch, s.rewound = [], {}, 0, False
             if forget_newest:
                 counts.newest_ns = None
             self._update_slow(s)
         self.lo, self.hi = None, _NEVER
-        self.next_lo, self.next_hi, self._n_ahead = 0, _NEVER, 0
         self.rewind_ns = None
         self.next_ns = None
         self._frontier = None

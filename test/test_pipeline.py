@@ -483,7 +483,9 @@ def test_a_looped_bag_gives_each_run_the_numbers_of_a_fresh_pipeline(t2_streams,
     c = looped.counters()
     assert c["resets"] == {"stamps_jumped_backwards": 2}
     assert c["samples_formed"] == c["samples_used"] + sum(c["samples_rejected"].values())
-    assert not c["streams"]["imu"]["rejected"] and not c["streams"]["airspeed"]["rejected"]
+    # Only stragglers: messages of a run that arrived after its last sample was formed.
+    for name, stream in c["streams"].items():
+        assert set(stream["rejected"]) <= {"previous_timeline"}, name
 
 
 def test_a_stamp_years_ahead_or_first_stamps_of_zero_change_no_number(t2_streams):

@@ -530,3 +530,25 @@ def test_a_flood_on_one_stream_while_another_stalls_keeps_memory_bounded():
     assert smp.counts["a"].expired + len(a.stamps) == n and smp.counts["a"].received == n
     # Unbounded, the 900k later messages would hold about 130 MB (150 bytes each).
     assert grown < 10_000_000, grown
+
+
+def test_a_confirmed_burst_of_bad_stamps_costs_a_restart_not_the_stream():
+    """Six messages of a required stream an hour ahead (the candidate and 5 confirmations) are
+    taken as a jump; when the stream and the others go on with the real stamps, the data
+    returns to them: samples resume, nothing is wedged."""
+    rng = np.random.default_rng(12)
+    events = merged(*recording(rng, T0, 20.0))
+    i = next(k for k, e in enumerate(events) if e[0] > T0 + 3 * S)
+    burst = [(T0 + 3600 * S + k * 5 * MS, "a", (1.0, 1.0, 1.0)) for k in range(6)]
+    smp = sampler(confirm=5, max_jump_ns=5 * S)
+    out = feed(smp, events[:i] + burst + events[i:])
+    parts = split_at_restarts(out)
+    want = feed(sampler(), events)
+    late = [x for x in parts[-1] if type(x) is Sample]
+    # The last run of samples is the clean one's from some point on, and that point is
+    # within about max_stamp_jump of the burst (the others' stamps re-confirm the timeline).
+    assert late and late[-1] == want[-1]
+    assert late[0].stamp_ns < T0 + 3 * S + 5 * S + 2 * S
+    assert late == [x for x in want if type(x) is Sample and x.stamp_ns >= late[0].stamp_ns]
+    for c in smp.counts.values():
+        assert set(c.rejected) <= {"previous_timeline", "stamp_jump", "out_of_order"}
