@@ -44,21 +44,28 @@ another stream's order of arrival).
   ``max_gap_ns``, continues the stream. A stamp further ahead, or more than ``J`` behind, is a
   *jump candidate*: held, not used. If the stream then continues its previous stamps, the held
   candidates are rejected as ``stamp_jump`` and nothing changed: one message cannot move a
-  stream's notion of "now" by more than ``hold_ns``. If the next ``confirm`` messages continue
+  stream's notion of "now" further than ``hold_ns`` past its own newest stamp and
+  ``max_gap_ns`` past every stream's newest, so it can refuse no more valid data than that
+  (a message stamped years ahead, or 0, refuses none). If the next ``confirm`` messages continue
   the candidate's stamps (increasing, steps of at most ``J``), the candidates are confirmed:
   a forward step of at most ``J`` (or to within ``J`` of the timeline's newest stamp) is a
   dropout, taken as a gap; anything else is a *jump* to a new timeline.
-* The first stream that jumps opens the *next* timeline; its messages go to a separate buffer,
-  and every other stream whose stamps land near it (within ``J`` of its stamp range) joins it
-  at once, without confirmation. The current timeline goes on forming samples from the streams
-  still on it until no further sample is possible (every required stream has jumped, or the
-  grid passed the last stamp a jumped required stream had there), exactly the samples a fresh
-  sampler fed that timeline alone would form. Then :meth:`Sampler.due` returns a
-  :class:`Restart` and the next timeline becomes current, its buffered messages the first of it:
-  nothing of either timeline is lost whatever the interleaving of the streams.
-* A stream that had not jumped by then is *behind*: its messages that continue its own old
+* The first stream that jumps opens a *later* timeline (at most :data:`MAX_PENDING` are open
+  at once; a stream may run whole runs ahead of another when an executor drains a slow
+  topic's queue first). Its messages go to separate buffers, and every other stream whose
+  stamps then leave its own and land near that timeline (within ``J`` of its stamp range)
+  joins it at once, without confirmation. The current timeline goes on forming samples from
+  the streams still on it until no further sample is possible (every required stream moved
+  on, or the grid passed the last stamp a required stream that moved on had there): exactly
+  the samples a fresh sampler fed that timeline alone forms. Then :meth:`Sampler.due` returns
+  a :class:`Restart` and the next timeline becomes current, its buffered messages the first
+  of it: nothing of either timeline is lost, whatever the interleaving of the streams.
+* A stream that had not moved on by then is *behind*: its messages that continue its own
   stamps are stragglers, rejected as ``previous_timeline`` (they cannot wipe the new run); its
-  first message near the new timeline (a backward step, or far from its old stamps) joins it.
+  first message that leaves them for the current or a later timeline joins it. A behind
+  stream whose stamps go on for more than ``J`` past the switch shows that its timeline is
+  alive (the others left it after a confirmed burst of bad stamps): it opens (or joins) a
+  timeline again, so a burst of bad stamps costs a restart, never the stream.
 * :meth:`Sampler.time_jumped` (a backwards ``/clock`` jump) tells the streams still on the
   current timeline that a backward step of their stamps to within ``J`` of the new clock time
   needs no confirmation (so a replay looped by less than ``J`` restarts too); the restart
@@ -166,8 +173,11 @@ class Skipped(NamedTuple):
 
 
 class Restart(NamedTuple):
-    """The data moved to a new timeline (``stamps_jumped_backwards``, ``stamps_jumped_forward``,
-    ``time_jumped_backwards``): every sample of the previous timeline was returned before it."""
+    """The data moved to a new timeline, why: ``stamps_jumped_backwards`` (a stream's stamps
+    went back more than ``J``, confirmed: a looped replay), ``stamps_jumped_forward`` (ahead of
+    every stream by more than ``J``, confirmed: a clock set late, a long dropout of every
+    stream) or ``time_jumped_backwards`` (the stamps followed a backwards clock jump). Every
+    sample of the previous timeline was returned before it."""
 
     reason: str
 
@@ -368,7 +378,7 @@ class Sampler:
     def _present(self, s: Stream) -> int:
         return self.hi if s.epoch == self.epoch else self.pending[s.epoch][1]
 
-    def _slow(self, s: Stream, m: int, values, reason: str) -> bool:
+    def _slow(self, s: Stream, m: int, values: tuple | None, reason: str) -> bool:
         """Every message that is not the in-order next one of a stream on the current
         timeline: first messages, holes (``values`` None, counted as ``reason``), jumps,
         candidates, streams on a later or an earlier timeline."""
@@ -397,8 +407,8 @@ class Sampler:
                 self._drop_held(counts, len(s.held) - len(held))
                 s.held = []
                 if later is not None:
-                    return self._join(s, later, held + [(m, values)], reason)
-                return self._open(s, held + [(m, values)], reason, "time_jumped_backwards")
+                    return self._join(s, later, [*held, (m, values)], reason)
+                return self._open(s, [*held, (m, values)], reason, "time_jumped_backwards")
         if dt > 0 and (dt <= s.hold_ns or m <= self._present(s) + self.max_gap_ns):
             held = s.held
             if held:
@@ -420,10 +430,10 @@ class Sampler:
             held = [h for h in s.held if self._near(later, h[0]) and h[0] < m]
             self._drop_held(counts, len(s.held) - len(held))
             s.held = []
-            return self._join(s, later, held + [(m, values)], reason)
+            return self._join(s, later, [*held, (m, values)], reason)
         return self._candidate(s, m, values, reason)
 
-    def _take(self, s: Stream, m: int, values, reason: str, dt: int | None) -> bool:
+    def _take(self, s: Stream, m: int, values: tuple | None, reason: str, dt: int | None) -> bool:
         """Accept ``m`` on the stream's timeline (the current one or a later one); a hole
         (``values`` None) is counted as ``reason`` and marks the interval after the newest
         buffered message. ``dt``: the interval from the stream's previous message, if one."""
@@ -461,7 +471,7 @@ class Sampler:
             self._expire(s, stamps, vals, broken, m)
         return True
 
-    def _candidate(self, s: Stream, m: int, values, reason: str) -> bool:
+    def _candidate(self, s: Stream, m: int, values: tuple | None, reason: str) -> bool:
         """Hold ``m`` as a jump candidate, or continue the held ones; confirm when enough."""
         counts = s.counts
         if values is None:  # a message with bad values never starts or continues a jump
@@ -541,7 +551,7 @@ class Sampler:
             prev = m
         return True
 
-    def _behind(self, s: Stream, m: int, values, reason: str) -> bool:
+    def _behind(self, s: Stream, m: int, values: tuple | None, reason: str) -> bool:
         """A message of a stream still on a timeline the data has left (``newest_ns`` is its
         last stamp there)."""
         counts = s.counts
@@ -572,7 +582,7 @@ class Sampler:
             held = [h for h in s.held if self._near(later, h[0]) and h[0] < m]
             self._drop_held(counts, len(s.held) - len(held))
             s.held = []
-            return self._join(s, later, held + [(m, values)], reason)
+            return self._join(s, later, [*held, (m, values)], reason)
         if -J <= d <= 0:
             counts.rejected["previous_timeline"] += 1
             return False

@@ -535,7 +535,7 @@ def test_a_bag_played_twice_gives_the_offline_numbers_twice(tmp_path, tester, ba
         i = next(j for j, (k, _m) in enumerate(msgs) if k == "imu" and j > len(msgs) // 2)
         future = to_rclpy("imu", bag[i][2])
         future.header.stamp.sec += 3 * 365 * 86400
-        first_play = msgs[:i] + [("imu", future)] + msgs[i:]
+        first_play = [*msgs[:i], ("imu", future), *msgs[i:]]
 
         def tick(stamp):
             m = Clock()

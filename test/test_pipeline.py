@@ -457,7 +457,7 @@ def _interleave(rng, runs, weighted):
 
 def _same_outputs(a, b):
     assert [o.stamp_ns for o in a] == [o.stamp_ns for o in b]
-    for x, y in zip(a, b):
+    for x, y in zip(a, b, strict=True):
         for field in ("theta", "se", "se_conventional", "ready"):
             np.testing.assert_array_equal(getattr(x, field), getattr(y, field))
 
@@ -489,13 +489,13 @@ def test_a_looped_bag_gives_each_run_the_numbers_of_a_fresh_pipeline(t2_streams,
 
 
 def test_a_stamp_years_ahead_or_first_stamps_of_zero_change_no_number(t2_streams):
-    st, run = t2_streams
+    _st, run = t2_streams
     events = in_stamp_order(run)
     want = apply(Pipeline(pipeline_config(T2_PARAMS)), events)
     i = next(j for j in range(700, 800) if events[j][1] == "imu")
     future = (events[i][0] + 3 * 365 * 86400 * S, "imu", events[i][2])
     pipe = Pipeline(pipeline_config(T2_PARAMS))
-    _same_outputs(apply(pipe, events[:i] + [future] + events[i:]), want)
+    _same_outputs(apply(pipe, [*events[:i], future, *events[i:]]), want)
     c = pipe.counters()
     assert c["streams"]["imu"]["rejected"] == {"stamp_jump": 1}
     assert c["samples_formed"] == 599 and c["resets"] == {}
@@ -530,7 +530,7 @@ def test_a_zero_dynamic_pressure_message_is_a_hole_no_sample_is_formed_across(t2
     """What the physical-limit check does with a dynamic pressure <= 0 (``reject_invalid``):
     the grid points between the valid messages around it are rejected, none is formed from an
     interpolation with it, and the differentiator restarts as at a gap."""
-    st, run = t2_streams
+    _st, run = t2_streams
     qbar = list(run["dynamic_pressure"])
     k = 250
     t_bad = qbar[k][0]

@@ -209,12 +209,14 @@ def recording(rng, start, seconds, offset=0.0):
     t_a = np.arange(start, end, 5 * MS)
     t_b, _ = random_stream(rng, start, end, 17 * MS, 1)
     t_c = np.arange(start + 2 * MS, end, 9 * MS)
-    return [("a", t_a, rng.standard_normal((t_a.size, 3)) + offset), ("b", t_b, rng.standard_normal((t_b.size, 1)) + offset),
+    return [("a", t_a, rng.standard_normal((t_a.size, 3)) + offset),
+            ("b", t_b, rng.standard_normal((t_b.size, 1)) + offset),
             ("c", t_c, rng.standard_normal((t_c.size, 2)) + offset)]
 
 
 def per_stream(run):
-    return {name: [(int(t), name, tuple(v)) for t, v in zip(stamps, values)] for name, stamps, values in run}
+    return {name: [(int(t), name, tuple(v)) for t, v in zip(stamps, values, strict=True)]
+            for name, stamps, values in run}
 
 
 def interleave(rng, *runs, weighted=False):
@@ -226,7 +228,7 @@ def interleave(rng, *runs, weighted=False):
     for r, run in enumerate(runs):
         for name, events in per_stream(run).items():
             queues.setdefault(name, []).extend((e, r) for e in events)
-    pos = {name: 0 for name in queues}
+    pos = dict.fromkeys(queues, 0)
     out = []
     while True:
         left = [n for n in queues if pos[n] < len(queues[n])]
@@ -249,7 +251,7 @@ def split_at_restarts(items):
             current = []
         else:
             current.append(item)
-    return parts + [current]
+    return [*parts, current]
 
 
 @pytest.mark.parametrize("seed,weighted", [(1, False), (2, True), (3, False), (4, True)])
@@ -320,14 +322,14 @@ def test_a_single_stamp_years_ahead_or_zero_changes_nothing():
     i = len(events) // 2
     for bad in (T0 + 3 * 365 * 86400 * S, 0, T0 - 600 * S, T0 + 20 * S):
         smp = sampler()
-        out = feed(smp, events[:i] + [(bad, "a", (7.0, 7.0, 7.0))] + events[i:])
+        out = feed(smp, [*events[:i], (bad, "a", (7.0, 7.0, 7.0)), *events[i:]])
         assert out == want, bad
         assert smp.counts["a"].rejected == {"stamp_jump": 1}
         assert smp.counts["a"].newest_ns == events[-1][0] if events[-1][1] == "a" else True
     # A stream whose first message is stamped 0 (its clock was not set yet), the others running.
     smp = sampler()
     first_b = next(k for k, e in enumerate(events) if e[1] == "b")
-    out = feed(smp, events[:first_b] + [(0, "b", (7.0,))] + events[first_b:])
+    out = feed(smp, [*events[:first_b], (0, "b", (7.0,)), *events[first_b:]])
     assert out == want and smp.counts["b"].rejected == {"stamp_jump": 1}
 
 
@@ -434,7 +436,7 @@ def test_clear_forgets_every_input_state():
     smp = sampler(max_jump_ns=S)
     rng = np.random.default_rng(10)
     run = merged(*recording(rng, T0, 1.0))
-    feed(smp, run + [(T0 - 3 * S, "a", (0.0, 0.0, 0.0))])  # ends with a held jump candidate
+    feed(smp, [*run, (T0 - 3 * S, "a", (0.0, 0.0, 0.0))])  # ends with a held jump candidate
     assert smp.streams["a"].held
     received = {n: c.received for n, c in smp.counts.items()}
     smp.clear(forget_newest=True)
@@ -454,7 +456,7 @@ def test_no_sample_is_interpolated_across_an_invalid_message():
     a = [(t * MS, "a", (float(t),)) for t in range(0, 400, 5)]
     b = [(t * MS, "b", (float(t),)) for t in range(3, 400, 10)]
     events = sorted(a + b, key=lambda e: e[0])
-    bad = [i for i, e in enumerate(events) if e[0] == 153 * MS and e[1] == "b"][0]
+    bad = next(i for i, e in enumerate(events) if e[0] == 153 * MS and e[1] == "b")
     events[bad] = (153 * MS, "b", None)  # b's message at 153 ms: values rejected
     out = feed(smp, events)
     # b's valid neighbours are 143 and 163 ms: the grid point between them (160 ms) is not
@@ -471,8 +473,10 @@ def test_no_sample_is_interpolated_across_an_invalid_message():
     # Two holes in a row and a non-finite one: the grid points from the last valid message
     # before them (45 ms) to the first after (105 ms) are skipped together.
     smp = sampler(required=("a",))
-    out = feed(smp, [(t * MS, "a", (1.0,)) for t in range(5, 50, 10)] + [(55 * MS, "a", None), (65 * MS, "a", None),
-               (75 * MS, "a", (math.nan,)), (85 * MS, "a", None), (95 * MS, "a", None)] + [(t * MS, "a", (1.0,)) for t in (105, 115)])
+    holes = [(55 * MS, "a", None), (65 * MS, "a", None), (75 * MS, "a", (math.nan,)), (85 * MS, "a", None),
+             (95 * MS, "a", None)]
+    valid = [(t * MS, "a", (1.0,)) for t in (5, 15, 25, 35, 45, 105, 115)]
+    out = feed(smp, valid[:5] + holes + valid[5:])
     assert [x for x in out if type(x) is Skipped] == [Skipped(60 * MS, 3, "invalid_a")]
     assert smp.counts["a"].rejected == {"invalid": 4, "non_finite": 1}
 
