@@ -226,6 +226,12 @@ PARAMETERS: tuple[ParamSpec, ...] = (
     ParamSpec("inputs.use_thrust", True, "use the thrust topic (force.x, N) in Eq. 1a; false sets thrust to 0"),
     ParamSpec("inputs.max_gap", 0.25, "largest gap between two messages of one stream that is interpolated across, s", 0.001, 10.0),
     ParamSpec("inputs.buffer_duration", 2.0, "how far a stream may run ahead of the slowest one before its old messages expire, s", 0.1, 60.0),
+    # Stream timelines (issue 12 items 2 and 5, issue 13): jumps of a stream's stamps, the
+    # node's clock, and the count bound of the buffers (sampling.py's docstring has the policy).
+    ParamSpec("inputs.max_stamp_jump", 5.0, "a stamp this far behind a stream's newest, or this far ahead of it and of every stream, is a jump candidate: held until inputs.jump_confirmation more messages confirm a new timeline (a looped replay restarts), else rejected as stamp_jump, s", 0.01, 1.0e9),
+    ParamSpec("inputs.jump_confirmation", 5, "messages after a jump candidate that must continue its stamps before the jump is taken as real (0: at once)", 0, 1000),
+    ParamSpec("inputs.max_clock_offset", 0.0, "reject messages stamped farther than this from the node's clock as far_from_clock, s; 0 = off (replays played without /clock keep their recorded stamps)", 0.0, 1.0e9),
+    ParamSpec("inputs.max_buffered", 20000, "messages buffered per stream at most (2 s at 10 kHz); beyond it the oldest expire", 10, 10000000),
     ParamSpec("surfaces.elevator", ["elevator"], "JointState names averaged into the elevator deflection (Eq. 23)"),
     ParamSpec("surfaces.aileron_right", ["aileron_right"], "JointState names of right ailerons; delta_a = (right - left)/2 (Eq. 23)"),
     ParamSpec("surfaces.aileron_left", ["aileron_left"], "JointState names of left ailerons"),
@@ -324,19 +330,35 @@ class EstimatorConfig:
 class InputConfig:
     """How the input streams are used (``inputs.*`` parameters): the dynamic-pressure topic or
     ``0.5 air_density V^2`` (kg/m^3), the thrust topic or zero thrust, the longest gap
-    interpolated across and how far a stream may run ahead before its old messages expire (s)."""
+    interpolated across and how far a stream may run ahead before its old messages expire (s),
+    and the stream timelines (:mod:`.sampling`): the stamp jump (s) that needs
+    ``jump_confirmation`` messages to be taken as a new timeline, the largest offset from the
+    node's clock (s, 0 = not checked) and the most messages buffered per stream."""
 
     use_dynamic_pressure: bool = True
     air_density: float = 1.225
     use_thrust: bool = True
     max_gap: float = 0.25
     buffer_duration: float = 2.0
+    # Stream timelines: jump threshold (s), confirmations, clock check (s, 0 = off), count bound.
+    max_stamp_jump: float = 5.0
+    jump_confirmation: int = 5
+    max_clock_offset: float = 0.0
+    max_buffered: int = 20000
 
     def __post_init__(self) -> None:
-        for name in ("air_density", "max_gap", "buffer_duration"):
+        for name in ("air_density", "max_gap", "buffer_duration", "max_stamp_jump"):
             value = getattr(self, name)
             if not (_finite(value) and value > 0):
                 raise ConfigError(f"inputs.{name} must be a positive number, got {value!r}")
+        if not (_finite(self.max_clock_offset) and self.max_clock_offset >= 0):
+            raise ConfigError(f"inputs.max_clock_offset must be 0 (off) or positive, got {self.max_clock_offset!r}")
+        for name, low in (("jump_confirmation", 0), ("max_buffered", 10)):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, Integral) or value < low:
+                raise ConfigError(f"inputs.{name} must be an integer >= {low}, got {value!r}")
+        if self.max_stamp_jump < self.max_gap:
+            raise ConfigError(f"inputs.max_stamp_jump ({self.max_stamp_jump} s) must be at least inputs.max_gap ({self.max_gap} s)")
 
     @property
     def max_gap_ns(self) -> int:
@@ -345,6 +367,14 @@ class InputConfig:
     @property
     def buffer_ns(self) -> int:
         return int(round(self.buffer_duration * 1e9))
+
+    @property
+    def max_stamp_jump_ns(self) -> int:
+        return int(round(self.max_stamp_jump * 1e9))
+
+    @property
+    def max_clock_offset_ns(self) -> int:
+        return int(round(self.max_clock_offset * 1e9))
 
 
 @dataclass(frozen=True)

@@ -183,7 +183,10 @@ class EstimatorNode(Node):
             t0 = time.perf_counter()
             c0 = time.thread_time()
             try:
-                outputs = feed(self.pipeline, kind, decode(msgtype, raw))
+                pipeline = self.pipeline
+                if pipeline.needs_clock:  # inputs.max_clock_offset: stamps are checked against it
+                    pipeline.clock_ns = self.get_clock().now().nanoseconds
+                outputs = feed(pipeline, kind, decode(msgtype, raw))
             except Exception as exc:  # noqa: BLE001 - a bad message must never stop the node
                 self._malformed(kind, exc)
                 return
@@ -216,9 +219,9 @@ class EstimatorNode(Node):
 
     # ------------------------------------------------------------------ services, time
     def _on_reset(self, request, response):
-        self.pipeline.reset("service")
+        self.pipeline.reset("service")  # the estimator and every input state: older stamps are accepted again
         response.success = True
-        response.message = "estimator reset: estimates restart from the next samples"
+        response.message = "estimator and inputs reset: estimates restart from the next messages, whatever their stamps"
         self.get_logger().info(response.message)
         return response
 
@@ -233,14 +236,19 @@ class EstimatorNode(Node):
         return response
 
     def _on_time_jump(self, jump) -> None:
-        """A backwards jump (a bag replay restarted, /clock reset) makes buffered stamps
-        meaningless: estimator, buffers and delay line restart, reported in diagnostics."""
+        """A backwards jump (a bag replay restarted, /clock reset): the streams whose stamps
+        step back near the new time start a new timeline without confirmation, and the data
+        path and estimator restart once they do (``resets.time_jumped_backwards``), after the
+        samples of the messages sent before the jump: those cannot wipe the new run."""
         if jump.clock_change in (ClockChange.ROS_TIME_ACTIVATED, ClockChange.ROS_TIME_DEACTIVATED):
             self.get_logger().info(f"clock source changed ({jump.clock_change.name})")
-        if jump.delta.nanoseconds < 0:
-            reason = "time_jumped_backwards"
-            self.get_logger().warning(f"time jumped {jump.delta.nanoseconds * 1e-9:+.3f} s: estimator and buffers reset")
-            self.pipeline.reset(reason, clear_inputs=True)
+        delta = jump.delta.nanoseconds
+        if delta < 0:
+            now = self.get_clock().now().nanoseconds
+            if self.pipeline.time_jumped(now, now - delta):
+                self.get_logger().warning(f"time jumped {delta * 1e-9:+.3f} s: estimator and inputs restart when the stamps follow")
+            else:
+                self.get_logger().info(f"time jumped {delta * 1e-9:+.3f} s: the inputs are already near the new time")
 
     # ------------------------------------------------------------------ state file
     def _load_state(self) -> None:

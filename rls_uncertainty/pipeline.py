@@ -8,7 +8,9 @@ coordinates the modules that do the work:
    JointState surfaces are mixed into Eq. 23's deflections first (:mod:`.surface_mixing`).
 2. :mod:`.sampling` buffers the streams, counts every message (accepted, or rejected with a
    reason), and forms samples on the grid ``t_k = k / rate`` by linear interpolation, never
-   extrapolating; the pipeline names the streams a sample needs.
+   extrapolating; the pipeline names the streams a sample needs. When the stamps move to a new
+   timeline (a looped replay, a confirmed jump) the sampler says so between the samples of the
+   two timelines, and the pipeline restarts its data path there (:meth:`Pipeline._restart`).
 3. Rates go through the fixed-lag differentiator (:mod:`.differentiation`); every other
    signal waits in a delay line of the same lag, so a sample reaches the aerodynamics
    ``lag`` samples late but time-aligned.
@@ -37,8 +39,8 @@ from .differentiation import FixedLagDifferentiator
 from .errors import NonFiniteInput, StateFileError
 from .estimator import EstimatorBank
 from .messages import INPUTS
-from .sampling import Sample, Sampler, StreamCounts
 from .estimator.state_file import EstimatorState, load_state, save_state
+from .sampling import Sample, Sampler, Skipped, StreamCounts
 from .surface_mixing import SURFACES, SurfaceMixer
 
 __all__ = ["Pipeline", "SampleOutput", "Bookkeeping", "STREAMS", "StateFileError"]
@@ -116,8 +118,15 @@ class Pipeline:
             period_ns=config.period_ns,
             max_gap_ns=config.inputs.max_gap_ns,
             buffer_ns=config.inputs.buffer_ns,
+            max_jump_ns=config.inputs.max_stamp_jump_ns,
+            confirm=config.inputs.jump_confirmation,
+            max_buffered=config.inputs.max_buffered,
+            max_clock_ns=config.inputs.max_clock_offset_ns,
             counts=book.streams,
         )
+        # The caller's clock is compared with the stamps only when inputs.max_clock_offset > 0
+        # (the node then sets clock_ns before each message; the offline replay has no clock).
+        self.needs_clock = config.inputs.max_clock_offset_ns > 0
         streams = self.sampler.streams
         self._imu, self._airspeed, self._surfaces = streams["imu"], streams["airspeed"], streams["control_surfaces"]
         self._qbar, self._thrust = streams["dynamic_pressure"], streams["thrust"]
@@ -213,21 +222,51 @@ class Pipeline:
         (the node could not decode it)."""
         self.sampler.reject(self.sampler.streams[stream], reason)
 
+    def reject_invalid(self, stream: str, stamp_ns: int, reason: str) -> list[SampleOutput]:
+        """Count a message of input ``stream`` stamped ``stamp_ns`` whose values cannot be
+        used (``reason``): no sample is formed across it (:meth:`.sampling.Sampler.reject_invalid`)."""
+        if self.sampler.reject_invalid(self.sampler.streams[stream], int(stamp_ns), reason):
+            return self._advance()
+        return []
+
+    @property
+    def clock_ns(self) -> int | None:
+        """The caller's clock (ns) that stamps are checked against (``inputs.max_clock_offset``)."""
+        return self.sampler.clock_ns
+
+    @clock_ns.setter
+    def clock_ns(self, now: int | None) -> None:
+        self.sampler.clock_ns = now
+
     # ------------------------------------------------------------------ per sample
     def _advance(self) -> list[SampleOutput]:
         out: list[SampleOutput] = []
         book = self.bookkeeping
         for item in self.sampler.due():
-            if type(item) is Sample:
+            kind = type(item)
+            if kind is Sample:
                 book.samples_formed += 1
                 result = self._process(item.stamp_ns, self._sample_vector(item.values))
                 if result is not None:
                     out.append(result)
-            else:  # Skipped grid points: the differentiator restarts after them
+            elif kind is Skipped:  # grid points not formed: the differentiator restarts after them
                 book.samples_formed += item.count
                 book.samples_rejected[item.reason] += item.count
                 self._flush("discontinuity")
+            else:  # Restart: the stamps moved to a new timeline
+                self._restart(item.reason)
         return out
+
+    def _restart(self, reason: str) -> None:
+        """The data moved to a new timeline (every sample of the previous one was formed): the
+        delay line is dropped (``reset_<reason>``) and the differentiator restarts. After a
+        backward jump (a looped replay, ``/clock`` went back) the estimator restarts too; after a
+        forward jump it goes on, as after a dropout: the later data is the same flight."""
+        self.bookkeeping.resets[reason] += 1
+        self._flush(f"reset_{reason}")
+        if reason != "stamps_jumped_forward":
+            self._new_estimator()
+            self.regression.clear()
 
     def _sample_vector(self, values: list) -> list:
         """The sampled streams (in ``required`` order) as one :data:`.aero.SAMPLE_FIELDS`
@@ -306,17 +345,26 @@ class Pipeline:
                 yield name, label, out.theta[j, :n], out.se[j, :n], out.se_conventional[j, :n]
 
     # ------------------------------------------------------------------ lifecycle
-    def reset(self, reason: str, *, clear_inputs: bool = False) -> None:
-        """Start the estimator afresh (``~/reset``, a time jump). The sample stream goes on:
-        samples in the differentiator's delay line reach the new estimator. With
-        ``clear_inputs`` (time jumped) the buffered messages and the delay line are dropped
-        too, counted as expired messages and ``reset_<reason>`` samples."""
+    def reset(self, reason: str, *, clear_inputs: bool = True) -> None:
+        """Start afresh (``~/reset``): the estimator, and with ``clear_inputs`` all input
+        state too: buffered and held messages (counted as expired), the streams' newest stamps
+        (older stamps are accepted again), jump candidates, timelines, the grid and the delay
+        line (``reset_<reason>`` samples). ``clear_inputs=False`` restarts the estimator only:
+        samples in the delay line then reach the new estimator."""
         self.bookkeeping.resets[reason] += 1
         self._new_estimator()
         self.regression.clear()
         if clear_inputs:
             self._flush(f"reset_{reason}")
             self.sampler.clear(forget_newest=True)
+
+    def time_jumped(self, now_ns: int, before_ns: int) -> bool:
+        """The caller's clock went back from ``before_ns`` to ``now_ns`` (``/clock`` restarted):
+        streams whose stamps step back near ``now_ns`` start the new timeline without
+        confirmation, and the restart (``resets.time_jumped_backwards``) happens when they do,
+        after the samples of the messages sent before the jump. False when there is nothing
+        to restart (no data yet, or the stamps already moved near ``now_ns``)."""
+        return self.sampler.time_jumped(int(now_ns), int(before_ns))
 
     def reconfigured(self, config: PipelineConfig, reason: str = "parameters_changed") -> Pipeline:
         """A pipeline with a new configuration that takes over this one's bookkeeping:

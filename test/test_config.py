@@ -66,6 +66,7 @@ def test_models_are_configuration():
     ({"differentiator.lag": 9}, "differentiator.lag"),
     ({"differentiator.order": 9}, "differentiator.order"),
     ({"inputs.max_gap": 0.001}, "max_gap"),
+    ({"inputs.max_gap": 1.0, "inputs.max_stamp_jump": 0.5}, "max_stamp_jump"),
     ({"colour": "red"}, "unknown parameter"),
     ({"aircraft": "concorde"}, "no such file"),
 ])
@@ -97,6 +98,10 @@ def test_every_parameter_reaches_its_nested_field():
         "inputs.use_thrust": (("inputs", "use_thrust"), False),
         "inputs.max_gap": (("inputs", "max_gap"), 0.5),
         "inputs.buffer_duration": (("inputs", "buffer_duration"), 3.0),
+        "inputs.max_stamp_jump": (("inputs", "max_stamp_jump"), 7.5),
+        "inputs.jump_confirmation": (("inputs", "jump_confirmation"), 3),
+        "inputs.max_clock_offset": (("inputs", "max_clock_offset"), 60.0),
+        "inputs.max_buffered": (("inputs", "max_buffered"), 500),
         "surfaces.elevator": (("surfaces", "elevator"), ["e1", "e2"]),
         "surfaces.aileron_right": (("surfaces", "aileron_right"), ["ar"]),
         "surfaces.aileron_left": (("surfaces", "aileron_left"), ["al"]),

@@ -21,26 +21,48 @@ T2_PARAMS = {"models.enabled": ["CZ", "Cm"], "surfaces.elevator": ["elevator_lef
 MS = 1_000_000
 
 
-def feed_streams(pipe, st):
-    """Every message of a SensorStreams set, in stamp order (stable by stream)."""
-    events = []
-    for rank, kind in enumerate(("imu", "airspeed", "dynamic_pressure", "control_surfaces", "thrust")):
+KINDS = ("imu", "airspeed", "dynamic_pressure", "control_surfaces", "thrust")
+
+
+def stream_events(st, shift_ns=0):
+    """Each stream of a SensorStreams set as its own list of ``(stamp, kind, values)``."""
+    out = {}
+    for kind in KINDS:
         stamps, values = getattr(st, kind)
-        events += [(int(stamps[k]), rank, kind, values[k]) for k in range(stamps.size)]
-    events.sort(key=lambda e: (e[0], e[1]))
+        out[kind] = [(int(stamps[k]) + shift_ns, kind, values[k]) for k in range(stamps.size)]
+    return out
+
+
+def in_stamp_order(streams):
+    """Every message of ``{kind: events}`` in stamp order (stable by stream)."""
+    events = [(e[0], KINDS.index(kind), e) for kind, evs in streams.items() for e in evs]
+    events.sort(key=lambda x: (x[0], x[1]))
+    return [e for _t, _r, e in events]
+
+
+def apply(pipe, events, surface_names=("elevator_left", "elevator_right", "aileron_left", "aileron_right", "rudder")):
+    """Feed ``(stamp, kind, values)`` events (values None: a message rejected for its values,
+    as the physical-limit checks do); returns the outputs."""
     outs = []
-    for stamp, _r, kind, v in events:
-        if kind == "imu":
+    for stamp, kind, v in events:
+        if v is None:
+            outs += pipe.reject_invalid(kind, stamp, "invalid")
+        elif kind == "imu":
             outs += pipe.add_imu(stamp, v[:3], v[3:])
         elif kind == "airspeed":
             outs += pipe.add_airspeed(stamp, v)
         elif kind == "dynamic_pressure":
             outs += pipe.add_dynamic_pressure(stamp, float(v))
         elif kind == "control_surfaces":
-            outs += pipe.add_surfaces(stamp, st.surface_names, v)
+            outs += pipe.add_surfaces(stamp, list(surface_names), v)
         else:
             outs += pipe.add_thrust(stamp, float(v))
     return outs
+
+
+def feed_streams(pipe, st):
+    """Every message of a SensorStreams set, in stamp order (stable by stream)."""
+    return apply(pipe, in_stamp_order(stream_events(st)), st.surface_names)
 
 
 @pytest.fixture(scope="module")
@@ -204,7 +226,7 @@ def test_bad_messages_are_counted_and_never_reach_the_outputs():
     t = syn.t0 + 1000 * MS
     syn.imu(t, gyro=(float("nan"), 0.0, 0.0))  # NaN field
     syn.imu(t + 1 * MS, gyro=(0.0, float("inf"), 0.0))  # Inf field
-    syn.imu(syn.t0 + 995 * MS)  # duplicate stamp
+    syn.imu(t + 1 * MS)  # duplicate stamp (of the Inf message)
     for k in range(30):  # a burst of old messages
         syn.imu(syn.t0 + (500 + k) * MS)
     syn.surfaces(t, names=["elevator", "rudder"], positions=[0.0])  # mismatched arrays
@@ -224,7 +246,13 @@ def test_bad_messages_are_counted_and_never_reach_the_outputs():
     for s in c["streams"].values():
         assert s["received"] == s["accepted"] + sum(s["rejected"].values())
     assert c["samples_formed"] == c["samples_used"] + sum(c["samples_rejected"].values())
-    assert c["samples_rejected"] == {"differentiator_warmup": 4, "end_of_data": 4}
+    # No sample is interpolated across a non-finite message: IMU 995 ms, NaN 1000, Inf 1001,
+    # then 1005 ms skips the 1000 ms grid point; air data 983 ms, NaN 1003, then 1023 ms skips
+    # 1020 ms. The 4 samples in the delay line are dropped and the differentiator warms up again.
+    assert c["samples_rejected"] == {"differentiator_warmup": 8, "end_of_data": 4, "invalid_imu": 1,
+                                     "invalid_airspeed": 1, "discontinuity": 4}
+    t_used = {(r[0] - syn.t0) // MS for r in pipe.regression}
+    assert not t_used & {1000, 1020}
     for out in syn.outs:
         for _n, _l, th, se, sc in pipe.published(out):
             assert np.isfinite(th).all() and np.isfinite(se).all() and np.isfinite(sc).all()
@@ -299,8 +327,17 @@ def test_disable_counts_samples_and_reset_restarts():
     pipe.enabled = True
     pipe.reset("service")
     assert pipe.bank.k == 0 and pipe.bookkeeping.resets["service"] == 1
+    # Every input state went with it: the 4 samples waiting in the delay line, the buffers.
+    assert pipe.bookkeeping.samples_rejected["reset_service"] == 4 and pipe.sampler.buffered() == 0
     syn.run(2000, 3000)
-    assert pipe.bank.k == 50
+    # The grid restarts at the first point every stream covers (2020 ms, after air data at
+    # 2003 ms) up to 2980 ms: 49 samples, 4 of them warming the differentiator up and the last
+    # 4 still in its delay line.
+    assert pipe.bank.k == 49 - 4 - 4
+    # Older stamps are accepted again after a reset (a replay started over): 20 ... 980 ms.
+    pipe.reset("service")
+    syn.run(0, 1000)
+    assert pipe.bank.k == 49 - 4 - 4 and all(not s["rejected"] for s in pipe.counters()["streams"].values())
 
 
 def test_state_file_resumes_and_refuses_other_configurations(tmp_path):
@@ -386,3 +423,148 @@ def test_messages_lost_in_transport_are_counted_from_stamp_gaps():
     c = pipe.counters()["streams"]
     assert c["imu"]["missing"] == len(dropped)
     assert c["airspeed"]["missing"] == 0 and c["control_surfaces"]["missing"] == 0
+
+
+# ----------------------------------------------------------------------------- timelines
+S = 1_000_000_000
+
+
+@pytest.fixture(scope="module")
+def t2_streams():
+    """The bundled bag's maneuver (``make-bag`` writes these streams), stream by stream."""
+    st = simulate_sensor_streams(0.2, 250)
+    return st, stream_events(st)
+
+
+def _interleave(rng, runs, weighted):
+    """Each stream's messages of consecutive runs in order, the streams randomly interleaved;
+    returns ``(event, run)`` pairs."""
+    queues = {kind: [(e, r) for r, run in enumerate(runs) for e in run[kind]] for kind in KINDS}
+    pos = dict.fromkeys(KINDS, 0)
+    out = []
+    while True:
+        left = [k for k in KINDS if pos[k] < len(queues[k])]
+        if not left:
+            return out
+        if weighted:
+            w = np.array([len(queues[k]) - pos[k] for k in left], dtype=float)
+            kind = left[rng.choice(len(left), p=w / w.sum())]
+        else:
+            kind = left[rng.integers(len(left))]
+        out.append(queues[kind][pos[kind]])
+        pos[kind] += 1
+
+
+def _same_outputs(a, b):
+    assert [o.stamp_ns for o in a] == [o.stamp_ns for o in b]
+    for x, y in zip(a, b, strict=True):
+        for field in ("theta", "se", "se_conventional", "ready"):
+            np.testing.assert_array_equal(getattr(x, field), getattr(y, field))
+
+
+@pytest.mark.parametrize("seed,weighted,buffer", [(1, False, 60.0), (2, True, 2.0), (3, True, 60.0)])
+def test_a_looped_bag_gives_each_run_the_numbers_of_a_fresh_pipeline(t2_streams, seed, weighted, buffer):
+    """The bag played three times to one pipeline (stamps restart each time), its streams
+    randomly interleaved: each run's outputs are bit-identical to a fresh pipeline's on that
+    run alone (fed in the same order), each backward jump counted as one restart."""
+    _st, run = t2_streams
+    rng = np.random.default_rng(seed)
+    events = _interleave(rng, [run, run, run], weighted)
+    params = {**T2_PARAMS, "inputs.buffer_duration": buffer}
+    looped = Pipeline(pipeline_config(params))
+    outs = apply(looped, [e for e, _r in events])  # run after run: a run ends before the next starts
+    looped.finish()
+    fresh = []
+    for r in range(3):
+        pipe = Pipeline(pipeline_config(params))
+        fresh.append(apply(pipe, [e for e, rr in events if rr == r]))
+    _same_outputs(outs, fresh[0] + fresh[1] + fresh[2])
+    assert len(fresh[0]) > 500
+    c = looped.counters()
+    assert c["resets"] == {"stamps_jumped_backwards": 2}
+    assert c["samples_formed"] == c["samples_used"] + sum(c["samples_rejected"].values())
+    # Only stragglers: messages of a run that arrived after its last sample was formed.
+    for name, stream in c["streams"].items():
+        assert set(stream["rejected"]) <= {"previous_timeline"}, name
+
+
+def test_a_stamp_years_ahead_or_first_stamps_of_zero_change_no_number(t2_streams):
+    _st, run = t2_streams
+    events = in_stamp_order(run)
+    want = apply(Pipeline(pipeline_config(T2_PARAMS)), events)
+    i = next(j for j in range(700, 800) if events[j][1] == "imu")
+    future = (events[i][0] + 3 * 365 * 86400 * S, "imu", events[i][2])
+    pipe = Pipeline(pipeline_config(T2_PARAMS))
+    _same_outputs(apply(pipe, [*events[:i], future, *events[i:]]), want)
+    c = pipe.counters()
+    assert c["streams"]["imu"]["rejected"] == {"stamp_jump": 1}
+    assert c["samples_formed"] == 599 and c["resets"] == {}
+    # Every stream's first message stamped 0 (published before the clock was set): one
+    # forward restart, not 8.8e10 grid points counted as formed and skipped.
+    zeros = [(0, kind, run[kind][0][2]) for kind in KINDS]
+    pipe = Pipeline(pipeline_config(T2_PARAMS))
+    _same_outputs(apply(pipe, zeros + events), want)
+    c = pipe.counters()
+    assert c["resets"] == {"stamps_jumped_forward": 1}
+    assert c["samples_formed"] == 599 + 1  # the sample at stamp 0, dropped from the delay line
+    assert c["samples_rejected"]["reset_stamps_jumped_forward"] == 1
+
+
+def test_a_forward_jump_keeps_the_estimator_and_a_backward_one_restarts_it():
+    pipe = pitch_pipeline()
+    syn = Synthetic(pipe)
+    syn.run(0, 3000)
+    k = pipe.bank.k
+    syn.run(20000, 23000)  # every stream silent for 17 s (more than inputs.max_stamp_jump)
+    c = pipe.counters()
+    assert c["resets"] == {"stamps_jumped_forward": 1}
+    assert not any(r.startswith("gap_") for r in c["samples_rejected"])  # no 17 s of grid points
+    assert pipe.bank.k > k + 100  # the same flight: the estimator went on
+    k = pipe.bank.k
+    syn.run(0, 3000)  # the data starts over (a looped replay)
+    assert pipe.counters()["resets"] == {"stamps_jumped_forward": 1, "stamps_jumped_backwards": 1}
+    assert pipe.bank.k < k and pipe.bank.k == 149 - 4 - 4  # 20 ... 2980 ms, warm-up, delay line
+
+
+def test_a_zero_dynamic_pressure_message_is_a_hole_no_sample_is_formed_across(t2_streams):
+    """What the physical-limit check does with a dynamic pressure <= 0 (``reject_invalid``):
+    the grid points between the valid messages around it are rejected, none is formed from an
+    interpolation with it, and the differentiator restarts as at a gap."""
+    _st, run = t2_streams
+    qbar = list(run["dynamic_pressure"])
+    k = 250
+    t_bad = qbar[k][0]
+    qbar[k] = (t_bad, "dynamic_pressure", None)
+    params = {**T2_PARAMS, "inputs.use_dynamic_pressure": True}
+    pipe = Pipeline(pipeline_config(params), record=True)
+    apply(pipe, in_stamp_order({**run, "dynamic_pressure": qbar}))
+    pipe.finish()
+    before, after = qbar[k - 1][0], qbar[k + 1][0]
+    P = 20 * MS
+    inside = [t for t in range(-(-before // P) * P, after, P) if t > before]
+    assert len(inside) == 2  # 50 Hz air data, 4 ms after the grid: two grid points around it
+    c = pipe.counters()
+    assert c["samples_rejected"]["invalid_dynamic_pressure"] == 2
+    assert c["samples_rejected"]["discontinuity"] == 4
+    assert c["streams"]["dynamic_pressure"]["rejected"] == {"invalid": 1}
+    used = np.array([r[0] for r in pipe.regression])
+    assert not np.any((used > before) & (used < after))
+    # Every other sample is used as without the bad message.
+    plain = Pipeline(pipeline_config(params), record=True)
+    apply(plain, in_stamp_order(run))
+    plain.finish()
+    assert plain.counters()["samples_formed"] == c["samples_formed"]
+    assert c["samples_used"] == plain.counters()["samples_used"] - 2 - 4 - 4
+
+
+def test_messages_far_from_the_clock_are_rejected_when_a_clock_is_given():
+    pipe = pitch_pipeline(**{"inputs.max_clock_offset": 60.0})
+    assert pipe.needs_clock and not pitch_pipeline().needs_clock
+    syn = Synthetic(pipe)
+    pipe.clock_ns = syn.t0
+    syn.imu(syn.t0 - 61 * S)
+    syn.imu(0)
+    syn.run(0, 1000)
+    c = pipe.counters()["streams"]
+    assert c["imu"]["rejected"] == {"far_from_clock": 2}
+    assert c["airspeed"]["rejected"] == {} and pipe.bank.k > 0
