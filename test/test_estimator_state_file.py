@@ -1,4 +1,4 @@
-"""The estimator state file (rls_uncertainty.state_file): a saved bank continues bit for bit,
+"""The estimator state file (rls_uncertainty.estimator.state_file): a saved bank continues bit for bit,
 files of another configuration or format, corrupt or missing files are refused by name, no
 pickle is involved, and a failed save leaves the previous file as it was."""
 
