@@ -142,6 +142,16 @@ class Sampler:
         counts.received += 1
         counts.rejected[reason] += 1
 
+    def reject_invalid(self, stream: Stream, stamp: int, reason: str) -> None:
+        """Count a received message of ``stream`` stamped ``stamp`` whose values the caller
+        found unusable (implausible, another frame).
+
+        MINIMAL STUB (h-sanity): it only counts, like :meth:`reject`. The stream-timelines
+        work replaces it with a version that also keeps samples from being interpolated
+        across the invalid message; callers already pass the stamp for that."""
+        del stamp  # used by the full implementation
+        self.reject(stream, reason)
+
     def add(self, stream: Stream, stamp: int, values: tuple, finite: bool = True) -> bool:
         """Accept a message (``finite``: the caller found every value finite) or count why not.
         Returns whether samples may be due (:meth:`due`): false while the required stream the
