@@ -19,6 +19,10 @@ coordinates the modules that do the work:
 Every formed sample ends as used or as rejected with a reason, and every message as accepted
 or rejected: :class:`Bookkeeping` holds every counter, :meth:`Pipeline.counters` reports them
 (the node's ``/diagnostics``), and a reconfigured pipeline takes over the same object.
+
+Nothing implausible is used: a message with a value that is non-finite or beyond
+``limits.*`` (:class:`.aero.PlausibilityLimits`) is rejected with its reason; so is a sample
+that is implausible once formed, or that the estimator refuses (``non_finite_regression``).
 """
 
 from __future__ import annotations
@@ -37,7 +41,7 @@ from .differentiation import FixedLagDifferentiator
 from .errors import NonFiniteInput, StateFileError
 from .estimator import EstimatorBank
 from .messages import INPUTS
-from .sampling import Sample, Sampler, StreamCounts
+from .sampling import Sample, Sampler, Stream, StreamCounts
 from .state_file import EstimatorState, load_state, save_state
 from .surface_mixing import SURFACES, SurfaceMixer
 
@@ -127,6 +131,7 @@ class Pipeline:
         self._i_surfaces = where.get("control_surfaces")
         self._i_thrust = where.get("thrust")
         self._mixer = SurfaceMixer(config.surfaces)
+        self.limits = config.limits
         self._index = 0
         self._new_estimator()
         self._diff = FixedLagDifferentiator(config.differentiator, 1.0 / config.rate, width=3)
@@ -167,29 +172,44 @@ class Pipeline:
         return self.bookkeeping.samples_used
 
     # ------------------------------------------------------------------ inputs
+    # Each message is judged on its own first (:class:`.aero.PlausibilityLimits`): a non-finite
+    # value is counted by the sampler (``non_finite``), an implausible one is rejected as
+    # ``implausible_<field>`` through Sampler.reject_invalid, which knows its stamp.
     def add_imu(self, stamp_ns: int, angular_velocity, linear_acceleration) -> list[SampleOutput]:
         """``sensor_msgs/Imu`` in the REP-103 body frame: rad/s and specific force m/s^2."""
         wx, wy, wz = angular_velocity
         fx, fy, fz = linear_acceleration
-        finite = math.isfinite(wx + wy + wz + fx + fy + fz)
-        if self.sampler.add(self._imu, int(stamp_ns), (wx, wy, wz, fx, fy, fz), finite):
+        values = (wx, wy, wz, fx, fy, fz)
+        reason = self.limits.imu_rejection(angular_velocity, linear_acceleration)
+        if reason is not None:
+            return self._invalid(self._imu, stamp_ns, values, reason)
+        if self.sampler.add(self._imu, int(stamp_ns), values):
             return self._advance()
         return []
 
     def add_airspeed(self, stamp_ns: int, velocity) -> list[SampleOutput]:
         """True-airspeed vector in the REP-103 body frame, m/s."""
         vx, vy, vz = velocity
-        if self.sampler.add(self._airspeed, int(stamp_ns), (vx, vy, vz), math.isfinite(vx + vy + vz)):
+        reason = self.limits.airspeed_rejection(velocity)
+        if reason is not None:
+            return self._invalid(self._airspeed, stamp_ns, (vx, vy, vz), reason)
+        if self.sampler.add(self._airspeed, int(stamp_ns), (vx, vy, vz)):
             return self._advance()
         return []
 
     def add_dynamic_pressure(self, stamp_ns: int, pascal: float) -> list[SampleOutput]:
-        if self.sampler.add(self._qbar, int(stamp_ns), (pascal,), math.isfinite(pascal)):
+        reason = self.limits.dynamic_pressure_rejection(pascal)
+        if reason is not None:
+            return self._invalid(self._qbar, stamp_ns, (pascal,), reason)
+        if self.sampler.add(self._qbar, int(stamp_ns), (pascal,)):
             return self._advance()
         return []
 
     def add_thrust(self, stamp_ns: int, force_x: float) -> list[SampleOutput]:
-        if self.sampler.add(self._thrust, int(stamp_ns), (force_x,), math.isfinite(force_x)):
+        reason = self.limits.thrust_rejection(force_x)
+        if reason is not None:
+            return self._invalid(self._thrust, stamp_ns, (force_x,), reason)
+        if self.sampler.add(self._thrust, int(stamp_ns), (force_x,)):
             return self._advance()
         return []
 
@@ -201,11 +221,25 @@ class Pipeline:
         if type(layout) is str:
             self.sampler.reject(self._surfaces, layout)
             return []
+        unknown = self.bookkeeping.unknown_joints
         for n in layout.unknown:
-            self.bookkeeping.unknown_joints[n] += 1
+            unknown[n] += 1
+        used = [positions[i] for i in layout.used]
+        reason = self.limits.surface_rejection(used)
+        if reason is not None:
+            return self._invalid(self._surfaces, stamp_ns, tuple(used), reason)
         de, da, dr = layout.deflections(positions)
-        if self.sampler.add(self._surfaces, int(stamp_ns), (de, da, dr), math.isfinite(de + da + dr)):
+        if self.sampler.add(self._surfaces, int(stamp_ns), (de, da, dr)):
             return self._advance()
+        return []
+
+    def _invalid(self, stream: Stream, stamp_ns: int, values: tuple, reason: str) -> list[SampleOutput]:
+        """A message with a value the limits refuse: ``non_finite`` goes to the sampler as
+        before; ``implausible_<field>`` is rejected at its stamp."""
+        if reason == "non_finite":
+            self.sampler.add(stream, int(stamp_ns), values, False)
+        else:
+            self.sampler.reject_invalid(stream, int(stamp_ns), reason)
         return []
 
     def reject(self, stream: str, reason: str) -> None:
@@ -263,7 +297,7 @@ class Pipeline:
 
     def _estimate(self, t: int, sample: list, rate_dot) -> SampleOutput | None:
         book = self.bookkeeping
-        state = flight_state(sample, rate_dot, self.config.inputs.air_density)
+        state = flight_state(sample, rate_dot, self.config.inputs.air_density, self.limits)
         if type(state) is str:
             book.samples_rejected[state] += 1
             return None
@@ -278,7 +312,7 @@ class Pipeline:
         z[:] = [coef[name] for name in self._outputs]
         try:
             self.bank.update(X, z)
-        except NonFiniteInput:  # pragma: no cover - inputs are checked above
+        except NonFiniteInput:  # the row, or the state it would make, is not finite: unchanged
             book.samples_rejected["non_finite_regression"] += 1
             return None
         book.samples_used += 1

@@ -54,6 +54,7 @@ class SurfaceMixing:
         aileron = self.names("delta_a")
         split = bool(aileron) and not self.aileron_combined
         known = set(self.elevator) | set(self.rudder) | set(aileron)
+        used = sorted({where[n] for n in known})
         return JointLayout(
             elevator=tuple(where[n] for n in self.elevator),
             aileron_right=tuple(where[n] for n in self.aileron_right) if split else (),
@@ -61,6 +62,7 @@ class SurfaceMixing:
             aileron_combined=where[self.aileron_combined] if self.aileron_combined else None,
             rudder=tuple(where[n] for n in self.rudder),
             unknown=tuple(n for n in names if n not in known),
+            used=tuple(used),
         )
 
 
@@ -73,7 +75,8 @@ def _mean(values, index: tuple[int, ...]) -> float:
 
 class JointLayout(NamedTuple):
     """Positions of the mixed joints in one JointState name list; ``unknown`` are the joints
-    the mixing does not use (reported, not an error)."""
+    the mixing does not use (reported, not an error), ``used`` the positions of all the
+    others (the values a message's plausibility is judged on)."""
 
     elevator: tuple[int, ...]
     aileron_right: tuple[int, ...]
@@ -81,6 +84,7 @@ class JointLayout(NamedTuple):
     aileron_combined: int | None
     rudder: tuple[int, ...]
     unknown: tuple[str, ...]
+    used: tuple[int, ...] = ()
 
     def deflections(self, positions) -> tuple[float, float, float]:
         """``(delta_e, delta_a, delta_r)`` of Eq. 23 from the message's positions (rad)."""

@@ -1,24 +1,30 @@
 """The pipeline that the node and the replay share, end to end: samples against an
 independent interpolation and reduction, alignment of the differentiator's lag, estimates
 against batch least squares, the bookkeeping of every bad input, and the lifecycle (disable,
-reset, reconfigure, state file). The parts have their own tests (test_sampling, test_aero,
-test_state_file, test_config, test_differentiation). No ROS."""
+reset, reconfigure, state file). Input sanity: plausibility limits (and a corrupted bag
+replayed). The parts have
+their own tests (test_sampling, test_aero, test_state_file, test_config,
+test_differentiation). No ROS, no DDS (bags through rosbags)."""
 
+import csv
 import math
+import struct
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
 
 from rls_uncertainty.config import load_aircraft, pipeline_config
 from rls_uncertainty.differentiation import DifferentiatorConfig, differentiate
-from rls_uncertainty.pipeline import Pipeline, StateFileError
+from rls_uncertainty.pipeline import STREAMS, Pipeline, StateFileError
 from rls_uncertainty.simulation import simulate_sensor_streams
 from rls_uncertainty.surface_mixing import SurfaceMixing
 
 T2 = load_aircraft("t2")
 T2_PARAMS = {"models.enabled": ["CZ", "Cm"], "surfaces.elevator": ["elevator_left", "elevator_right"]}
 MS = 1_000_000
+BUNDLED = Path(__file__).resolve().parents[1] / "bags" / "t2_maneuver"
 
 
 def feed_streams(pipe, st):
@@ -122,22 +128,32 @@ class Synthetic:
     A = 0.1
     W = 2 * math.pi * 1.0
 
-    def __init__(self, pipe, t0=10**18):
+    def __init__(self, pipe, t0=10**18, bad=None):
+        """``bad``: ``(stream, ms, value)`` replaces one message's value (the IMU's value is
+        ``(gyro, accel)``; the air data's ``vector`` or ``qbar``)."""
         self.pipe, self.t0, self.outs = pipe, t0, []
+        self.bad = bad
 
     def q(self, t):
         return self.A * math.sin(self.W * (t - self.t0) * 1e-9)
 
+    def _bad(self, stream, t):
+        b = self.bad
+        return b[2] if b is not None and b[0] == stream and t == self.t0 + b[1] * MS else None
+
     def imu(self, t, **kw):
-        self.outs += self.pipe.add_imu(t, kw.get("gyro", (0.0, -self.q(t), 0.0)), kw.get("accel", (0.1, 0.0, 9.8)))
+        gyro, accel = self._bad("imu", t) or (kw.get("gyro", (0.0, -self.q(t), 0.0)), kw.get("accel", (0.1, 0.0, 9.8)))
+        self.outs += self.pipe.add_imu(t, gyro, accel)
 
     def air(self, t, vec=None):
-        self.outs += self.pipe.add_airspeed(t, vec or (self.V, 0.0, -0.05 * self.V))
-        self.outs += self.pipe.add_dynamic_pressure(t, 0.5 * 1.2 * self.V**2)
+        bad_vec, bad_qbar = self._bad("airspeed", t), self._bad("dynamic_pressure", t)
+        self.outs += self.pipe.add_airspeed(t, bad_vec or vec or (self.V, 0.0, -0.05 * self.V))
+        self.outs += self.pipe.add_dynamic_pressure(t, 0.5 * 1.2 * self.V**2 if bad_qbar is None else bad_qbar)
 
     def surfaces(self, t, names=None, positions=None):
         names = names or ["elevator", "aileron_left", "aileron_right", "rudder"]
-        positions = positions or [0.01 * math.cos(3 * (t - self.t0) * 1e-9), -0.02, 0.04, 0.0]
+        positions = self._bad("control_surfaces", t) or positions or \
+            [0.01 * math.cos(3 * (t - self.t0) * 1e-9), -0.02, 0.04, 0.0]
         self.outs += self.pipe.add_surfaces(t, names, positions)
 
     def run(self, start_ms, end_ms, imu_ms=5, air_ms=20, srf_ms=10, skip_air=None):
@@ -230,25 +246,145 @@ def test_bad_messages_are_counted_and_never_reach_the_outputs():
             assert np.isfinite(th).all() and np.isfinite(se).all() and np.isfinite(sc).all()
 
 
-def test_zero_airspeed_rejects_exactly_the_samples_that_have_it():
+def test_zero_and_backwards_airspeed_messages_are_rejected_one_by_one():
+    """Zero airspeed, flying backwards and flying sideways are impossible as messages: each is
+    rejected with its reason and no regression row is formed from it (q_hat carries 1/V)."""
     pipe = pitch_pipeline()
     syn = Synthetic(pipe)
     syn.run(0, 1000)
-    zero_at = [syn.t0 + ms * MS for ms in range(1003, 1400, 20)]
+    bad = {0: (0.0, 0.0, 0.0), 1: (-40.0, 0.0, 2.0), 2: (1.0, 40.0, 0.0), 3: (0.0, 0.0, -40.0)}
     for ms in range(1000, 2000):
         t = syn.t0 + ms * MS
         if ms % 5 == 0:
             syn.imu(t)
         if ms % 20 == 3:
-            syn.air(t, vec=(0.0, 0.0, 0.0) if t in zero_at else None)
+            syn.air(t, vec=bad.get((ms - 1003) // 100) if ms in range(1003, 1400, 100) else None)
         if ms % 10 == 1:
             syn.surfaces(t)
     syn.run(2000, 3000)
     pipe.finish()
-    # Grid samples whose both interpolation neighbours are zero: 1020 ... 1380 ms.
-    expected = sum(1 for g in range(1000, 1400, 20) if 1003 <= g - 17 and g + 3 <= 1383)
-    assert pipe.bookkeeping.samples_rejected["nonpositive_airspeed"] == expected
-    assert all(np.isfinite(o.theta[0, :3]).all() for o in syn.outs if o.ready[0])
+    c = pipe.counters()
+    assert c["streams"]["airspeed"]["rejected"] == {
+        "implausible_airspeed": 1, "implausible_alpha": 2, "implausible_beta": 1}
+    assert c["samples_formed"] == c["samples_used"] + sum(c["samples_rejected"].values())
+    t = np.array([(r[0] - syn.t0) * 1e-9 for r in pipe.regression])
+    X = np.array([r[1][0] for r in pipe.regression])
+    V = math.hypot(syn.V, 0.05 * syn.V)  # the only airspeed any used sample may see
+    np.testing.assert_allclose(X[:, 1] * 2 * V / T2.cbar, syn.A * np.sin(syn.W * t), atol=1e-12)
+    assert pipe.bank.k == c["samples_used"] > 80  # of 141 in the clean run
+
+
+# Issue 12's absurd values, one message each, in the middle of a clean run: (stream, ms,
+# value, reason). IMU at 5 ms, air data at 3 + 20 k ms, surfaces at 1 + 10 k ms.
+ISSUE_12 = {
+    "gyro 1e100 rad/s": ("imu", 1005, ((0.0, 1e100, 0.0), (0.1, 0.0, 9.8)), "implausible_angular_rate"),
+    "acceleration 1e150": ("imu", 1005, ((0.0, -0.05, 0.0), (0.1, 0.0, 1e150)), "implausible_specific_force"),
+    "surface 1e150": ("control_surfaces", 1011, [1e150, -0.02, 0.04, 0.0], "implausible_surface"),
+    "dynamic pressure 1e-300 Pa": ("dynamic_pressure", 1023, 1e-300, "implausible_dynamic_pressure"),
+    "negative airspeed": ("airspeed", 1023, (-40.0, 0.0, 2.0), "implausible_alpha"),
+    "alpha 179.3 deg": ("airspeed", 1023, (-40.0, 0.0, -0.5), "implausible_alpha"),
+    "airspeed 1e300": ("airspeed", 1023, (1e300, 0.0, 0.0), "implausible_airspeed"),
+    "gyro subnormal, accel -0.0": ("imu", 1005, ((5e-324, -0.0, 0.0), (-0.0, 0.0, 9.8)), None),  # plausible
+}
+
+
+@pytest.fixture(scope="module")
+def clean_pitch_run():
+    pipe = pitch_pipeline()
+    Synthetic(pipe).run(0, 3000)
+    pipe.finish()
+    return pipe
+
+
+@pytest.mark.parametrize("case", ISSUE_12)
+def test_one_absurd_value_is_rejected_and_changes_nothing_else(case, clean_pitch_run):
+    """Before: the gyro case published NaN/Inf estimates from then on, the others finite but
+    ruined estimates (R^2 of CZ 0.91 -> 0.006 for one 1e150 acceleration on the bundled bag).
+    Now the message is counted with its reason, every used sample equals the clean run's at
+    the same stamp (the elevator is interpolated over 20 ms instead of 10 ms where its message
+    is missing: 1e-6 rad; samples next to the message may be skipped), and the estimates are
+    the batch least squares of those samples."""
+    stream, ms, value, reason = ISSUE_12[case]
+    pipe = pitch_pipeline()
+    syn = Synthetic(pipe, bad=(stream, ms, value))
+    syn.run(0, 3000)
+    pipe.finish()
+    c = pipe.counters()
+    assert c["streams"][stream]["rejected"] == ({reason: 1} if reason else {})
+    for other in set(STREAMS) - {stream}:
+        assert c["streams"][other]["rejected"] == {}
+    assert c["samples_formed"] == c["samples_used"] + sum(c["samples_rejected"].values())
+    clean = {r[0]: r for r in clean_pitch_run.regression}
+    assert len(pipe.regression) >= len(clean) - 20
+    for t, X, z in pipe.regression:
+        np.testing.assert_allclose(X, clean[t][1], rtol=0, atol=1e-6)
+        np.testing.assert_allclose(z, clean[t][2], rtol=1e-9, atol=1e-12)
+    rows = [row for out in syn.outs for row in pipe.published(out)]
+    assert rows and all(np.isfinite(np.concatenate(r[2:])).all() for r in rows)
+    X = np.array([r[1][0, :3] for r in pipe.regression])
+    z = np.array([r[2][0] for r in pipe.regression])
+    np.testing.assert_allclose(pipe.bank.theta_all()[0, :3], np.linalg.lstsq(X, z, rcond=None)[0], rtol=1e-8)
+
+
+def test_derived_dynamic_pressure_is_judged_per_sample():
+    """Without the pressure topic qbar = rho V^2 / 2: thin air (0.01 kg/m^3) at 25 m/s gives
+    3.1 Pa, below limits.dynamic_pressure_min, so every sample is rejected though each message
+    was plausible; 0.05 kg/m^3 (15.6 Pa) is used."""
+    for rho, used in ((0.01, False), (0.05, True)):
+        pipe = pitch_pipeline(**{"inputs.use_dynamic_pressure": False, "inputs.air_density": rho})
+        syn = Synthetic(pipe)
+        syn.V = 25.0
+        syn.run(0, 2000)
+        pipe.finish()
+        c = pipe.counters()
+        assert all(not s["rejected"] for s in c["streams"].values())
+        assert c["samples_formed"] == c["samples_used"] + sum(c["samples_rejected"].values())
+        if used:
+            assert c["samples_used"] > 80 and "implausible_dynamic_pressure" not in c["samples_rejected"]
+        else:
+            assert c["samples_used"] == 0 and not syn.outs
+            assert c["samples_rejected"]["implausible_dynamic_pressure"] == c["samples_formed"] - 8
+
+
+def test_the_limits_are_parameters():
+    """A tighter limit rejects what the default accepts: a pitch rate of 0.2 sin(w t) rad/s
+    against limits.angular_rate 0.15."""
+    pipe = pitch_pipeline(**{"limits.angular_rate": 0.15})
+    syn = Synthetic(pipe)
+    syn.A = 0.2
+    syn.run(0, 1000)
+    beyond = sum(1 for k in range(200) if abs(syn.q(syn.t0 + 5 * k * MS)) > 0.15)
+    assert beyond > 50
+    assert pipe.counters()["streams"]["imu"]["rejected"] == {"implausible_angular_rate": beyond}
+
+
+def test_a_refused_estimator_update_is_counted_and_changes_nothing(monkeypatch):
+    """The estimator raises NonFiniteInput, state unchanged, for an update that would make its
+    state non-finite (estimator.py); the pipeline counts the sample as non_finite_regression."""
+    from rls_uncertainty.errors import NonFiniteInput
+
+    pipe = pitch_pipeline()
+    syn = Synthetic(pipe)
+    syn.run(0, 1000)
+    k, theta = pipe.bank.k, pipe.bank.theta_all()
+    real_update, calls = pipe.bank.update, []
+
+    def refusing(X, z):
+        calls.append(1)
+        if len(calls) <= 3:
+            raise NonFiniteInput("update would overflow")
+        return real_update(X, z)
+
+    monkeypatch.setattr(pipe.bank, "update", refusing)
+    n_out = len(syn.outs)
+    syn.run(1000, 1061)  # three samples
+    assert pipe.bank.k == k and np.array_equal(pipe.bank.theta_all(), theta, equal_nan=True)
+    assert len(syn.outs) == n_out
+    syn.run(1061, 2000)
+    pipe.finish()
+    c = pipe.counters()
+    assert c["samples_rejected"]["non_finite_regression"] == 3
+    assert c["samples_formed"] == c["samples_used"] + sum(c["samples_rejected"].values())
 
 
 def test_a_stream_that_stops_skips_its_gap_and_restarts_the_differentiator():
@@ -386,3 +522,46 @@ def test_messages_lost_in_transport_are_counted_from_stamp_gaps():
     c = pipe.counters()["streams"]
     assert c["imu"]["missing"] == len(dropped)
     assert c["airspeed"]["missing"] == 0 and c["control_surfaces"]["missing"] == 0
+
+
+# ----------------------------------------------------------------------------- replay
+def _flip(raw: bytes, value: float, bit: int) -> bytes:
+    """``raw`` with one bit of the little-endian double ``value`` (found once) flipped."""
+    packed = struct.pack("<d", value)
+    at = raw.find(packed)
+    assert at > 0 and raw.find(packed, at + 1) < 0
+    flipped = struct.pack("<q", struct.unpack("<q", packed)[0] ^ (1 << bit))
+    return raw[:at] + flipped + raw[at + 8:]
+
+
+def test_a_flipped_bit_in_a_recorded_double_is_counted_and_never_replayed(tmp_path, capsys):
+    """Issue 12: one flipped exponent bit in a recorded pitch rate (-0.105 rad/s at 2.9 s
+    becomes -1.9e307) made the replay exit 0 with NaN and Inf rows. Now the message is rejected as
+    implausible_angular_rate, the CSV holds only finite numbers, and the summary says so."""
+    from rosbags.highlevel import AnyReader
+
+    from rls_uncertainty import cli
+    from rls_uncertainty.bags import write_replay
+    from rls_uncertainty.cdr import decode
+
+    records, flipped = [], None
+    with AnyReader([BUNDLED]) as reader:
+        for i, (conn, t, recorded) in enumerate(reader.messages()):
+            raw = bytes(recorded)
+            if conn.topic == "/imu" and i >= 1200 and flipped is None:  # about 3 s into the maneuver
+                y = decode(conn.msgtype, raw).angular_velocity.y
+                raw = _flip(raw, y, 62)
+                flipped = decode(conn.msgtype, raw).angular_velocity.y
+            records.append((t, conn.topic, conn.msgtype, raw))
+    assert math.isfinite(flipped) and abs(flipped) > 1e300
+    bag = write_replay(tmp_path / "flipped", records)
+    out = tmp_path / "out"
+    code = cli.main(["replay", str(bag), "--config", "t2", "--out", str(out), "--no-plots", "--quiet"])
+    assert code == 0
+    text = capsys.readouterr().out
+    assert "imu: 2400 received, rejected {'implausible_angular_rate': 1}" in text
+    with open(out / "estimates.csv") as fh:
+        rows = list(csv.DictReader(fh))
+    assert len(rows) > 1000
+    values = np.array([[float(r[k]) for k in ("estimate", "std_error", "std_error_conventional")] for r in rows])
+    assert np.isfinite(values).all()
