@@ -20,9 +20,11 @@ Every formed sample ends as used or as rejected with a reason, and every message
 or rejected: :class:`Bookkeeping` holds every counter, :meth:`Pipeline.counters` reports them
 (the node's ``/diagnostics``), and a reconfigured pipeline takes over the same object.
 
-Nothing implausible is used: a message with a value that is non-finite or beyond
-``limits.*`` (:class:`.aero.PlausibilityLimits`) is rejected with its reason; so is a sample
-that is implausible once formed, or that the estimator refuses (``non_finite_regression``).
+Nothing non-finite leaves: a message with a value that is non-finite or beyond ``limits.*``
+(:class:`.aero.PlausibilityLimits`) is rejected with its reason; so is a sample that is
+implausible once formed, or that the estimator refuses (``non_finite_regression``); and a
+model whose outputs are not all finite is withheld from :meth:`Pipeline.published` and
+counted.
 """
 
 from __future__ import annotations
@@ -55,7 +57,9 @@ class SampleOutput(NamedTuple):
 
     ``theta``, ``se`` (corrected, Eqs. 20/22) and ``se_conventional`` (Eq. 13) are
     ``(M, n_max)`` arrays in the order of ``config.models``; rows of models that are not
-    ``ready`` yet (exact initialization still waiting) and the padding are NaN.
+    ``ready`` yet (exact initialization still waiting) and the padding are NaN. ``ready`` is
+    false too for a model whose estimates or standard errors are not all finite (withheld,
+    counted in ``outputs_withheld``): a ready row is safe to publish.
     """
 
     stamp_ns: int
@@ -77,8 +81,9 @@ def _new_stream_counts() -> dict[str, StreamCounts]:
 @dataclass
 class Bookkeeping:
     """Every counter of a pipeline, kept across reconfigurations: the messages of each input
-    stream, samples formed, used and rejected (by reason), estimator resets (by reason) and
-    JointState joints that no surface uses (by name)."""
+    stream, samples formed, used and rejected (by reason), estimator resets (by reason),
+    JointState joints that no surface uses (by name) and model outputs withheld because they
+    were not finite (by model)."""
 
     streams: dict[str, StreamCounts] = field(default_factory=_new_stream_counts)
     samples_formed: int = 0
@@ -86,6 +91,7 @@ class Bookkeeping:
     samples_rejected: Counter = field(default_factory=Counter)
     resets: Counter = field(default_factory=Counter)
     unknown_joints: Counter = field(default_factory=Counter)
+    outputs_withheld: Counter = field(default_factory=Counter)
 
 
 class Pipeline:
@@ -143,6 +149,7 @@ class Pipeline:
         rows = [m.regressors for m in config.models]
         self._x_names = [name for names in rows for name in names]
         self._x_index = np.array([j * n_max + i for j, names in enumerate(rows) for i in range(len(names))], dtype=np.intp)
+        self._real = np.arange(n_max) < np.array(self.sizes)[:, None]  # (M, n_max): not padding
 
     @staticmethod
     def _required_streams(config: PipelineConfig) -> tuple[str, ...]:
@@ -165,6 +172,7 @@ class Pipeline:
         self._z = np.zeros(len(self.sizes))
         self._zsum = np.zeros(len(self.sizes))  # sums of z and z^2 since the estimator started
         self._zsq = np.zeros(len(self.sizes))
+        self._withheld = np.zeros(len(self.sizes), dtype=bool)  # the last output's, per model
 
     @property
     def samples_used(self) -> int:
@@ -322,22 +330,30 @@ class Pipeline:
             self.regression.append((t, X.copy(), z.copy()))
         bank = self.bank
         self._index += 1
-        return SampleOutput(
-            stamp_ns=t,
-            index=self._index,
-            theta=bank.theta_all(),
-            se=bank.standard_errors_all("corrected"),
-            se_conventional=bank.standard_errors_all("conventional"),
-            ready=bank.ready,
-        )
+        theta = bank.theta_all()
+        se = bank.standard_errors_all("corrected")
+        se_conv = bank.standard_errors_all("conventional")
+        ready = bank.ready
+        # The last guard: a ready model with a non-finite estimate or SE is withheld, counted.
+        bad = ready & (self._real & ~(np.isfinite(theta) & np.isfinite(se) & np.isfinite(se_conv))).any(axis=1)
+        self._withheld = bad
+        if bad.any():
+            for j in np.flatnonzero(bad):
+                book.outputs_withheld[self._outputs[j]] += 1
+            ready &= ~bad
+        return SampleOutput(stamp_ns=t, index=self._index, theta=theta, se=se, se_conventional=se_conv, ready=ready)
 
     def published(self, out: SampleOutput):
-        """What the node publishes for a sample, per ready model: ``(output, label, estimates,
-        corrected SEs, conventional SEs)``; models still initializing publish nothing, so no
-        NaN ever leaves the pipeline."""
+        """What the node publishes (and the replay writes) for a sample, per ready model:
+        ``(output, label, estimates, corrected SEs, conventional SEs)``. Models still
+        initializing, and models whose outputs are not all finite (withheld when the output
+        was made, counted in ``outputs_withheld``), yield nothing; the rows are checked again
+        here, so no NaN or infinity ever leaves the pipeline."""
         for j, (name, label, n) in enumerate(zip(self._outputs, self.labels, self.sizes)):
             if out.ready[j]:
-                yield name, label, out.theta[j, :n], out.se[j, :n], out.se_conventional[j, :n]
+                rows = out.theta[j, :n], out.se[j, :n], out.se_conventional[j, :n]
+                if all(map(math.isfinite, rows[0].tolist() + rows[1].tolist() + rows[2].tolist())):
+                    yield name, label, *rows
 
     # ------------------------------------------------------------------ lifecycle
     def reset(self, reason: str, *, clear_inputs: bool = False) -> None:
@@ -370,15 +386,26 @@ class Pipeline:
     def model_fit(self, j: int) -> dict:
         """R^2 of model ``j`` (1 - residual variance / output variance) and residual
         whiteness: the lag-1 autocorrelation coefficient and the fraction of lags whose
-        coefficient lies outside the 2-sigma white-noise bound 2/sqrt(n)."""
+        coefficient lies outside the 2-sigma white-noise bound 2/sqrt(n). ``ready`` is false,
+        with a ``problem``, when R^2 is undefined (constant output) or the model's outputs
+        were withheld as non-finite."""
         bank = self.bank
+        withheld = self.bookkeeping.outputs_withheld.get(self._outputs[j], 0)
         if not bank.ready[j]:
             return {"ready": False, "samples": bank.k}
         n = bank.k  # samples since the estimator (re)started
         mean = self._zsum[j] / n
-        var_z = self._zsq[j] / n - mean * mean
+        mean_sq = self._zsq[j] / n
+        var_z = mean_sq - mean * mean
         R = bank.autocorrelation(j)
-        r2 = 1.0 - R[0] / var_z if var_z > 0 else float("nan")
+        # A constant output (variance at rounding level) leaves R^2 undefined; a non-finite
+        # estimator state (withheld outputs) leaves it NaN: either way the fit is reported as
+        # not ready, with the problem, never as an OK "nan".
+        r2 = 1.0 - R[0] / var_z if var_z > 1e-12 * mean_sq else math.nan
+        if not math.isfinite(r2) or self._withheld[j]:
+            problem = "outputs not finite, withheld" if self._withheld[j] or not np.isfinite(R).all() else \
+                "output constant: R^2 undefined"
+            return {"ready": False, "samples": bank.k, "problem": problem, "outputs_withheld": withheld}
         rho = R[1:] / R[0] if R[0] > 0 else np.zeros(0)
         bound = 2.0 / math.sqrt(max(n, 1))
         return {
@@ -388,6 +415,7 @@ class Pipeline:
             "residual_rho1": float(rho[0]) if rho.size else float("nan"),
             "lags_outside_2sigma": float(np.mean(np.abs(rho) > bound)) if rho.size else float("nan"),
             "repairs": int(bank.repairs[j]),
+            "outputs_withheld": withheld,
         }
 
     def counters(self) -> dict:
@@ -401,6 +429,7 @@ class Pipeline:
             "samples_pending": len(self._pending),
             "resets": dict(book.resets),
             "unknown_joints": dict(book.unknown_joints),
+            "outputs_withheld": dict(book.outputs_withheld),
         }
 
     # ------------------------------------------------------------------ persistence

@@ -2,7 +2,7 @@
 independent interpolation and reduction, alignment of the differentiator's lag, estimates
 against batch least squares, the bookkeeping of every bad input, and the lifecycle (disable,
 reset, reconfigure, state file). Input sanity: plausibility limits (and a corrupted bag
-replayed). The parts have
+replayed), the last guard before publishing. The parts have
 their own tests (test_sampling, test_aero, test_state_file, test_config,
 test_differentiation). No ROS, no DDS (bags through rosbags)."""
 
@@ -385,6 +385,54 @@ def test_a_refused_estimator_update_is_counted_and_changes_nothing(monkeypatch):
     c = pipe.counters()
     assert c["samples_rejected"]["non_finite_regression"] == 3
     assert c["samples_formed"] == c["samples_used"] + sum(c["samples_rejected"].values())
+
+
+def test_a_model_whose_outputs_are_not_finite_is_withheld_and_counted(monkeypatch):
+    """The last guard (unreachable through the inputs): a ready model whose estimates are not
+    finite publishes nothing, is counted, and its fit says why; after a reset it recovers."""
+    pipe = pitch_pipeline(**{"models.enabled": ["CZ", "Cm"], "models.CZ": ["1", "delta_e"]})
+    syn = Synthetic(pipe)
+    syn.run(0, 1000)
+    assert pipe.model_fit(1)["ready"] and pipe.model_fit(1)["outputs_withheld"] == 0
+    real_theta = pipe.bank.theta_all
+
+    def broken():
+        theta = real_theta()
+        theta[1, 1] = math.inf  # Cm_q
+        return theta
+
+    monkeypatch.setattr(pipe.bank, "theta_all", broken)
+    n_out = len(syn.outs)
+    syn.run(1000, 1400)
+    new = syn.outs[n_out:]
+    assert len(new) == 20
+    published = [row[0] for out in new for row in pipe.published(out)]
+    assert published == ["CZ"] * 20  # Cm withheld, CZ unaffected
+    assert all(not out.ready[1] for out in new)
+    assert pipe.counters()["outputs_withheld"] == {"Cm": 20}
+    fit = pipe.model_fit(1)
+    assert fit["ready"] is False and "withheld" in fit["problem"] and fit["outputs_withheld"] == 20
+    # Even an output built by hand passes published() only with finite rows.
+    hand = new[-1]._replace(ready=np.array([True, True]))
+    assert [row[0] for row in pipe.published(hand)] == ["CZ"]
+    monkeypatch.undo()
+    pipe.reset("service")
+    syn.run(1400, 2400)
+    assert pipe.model_fit(1)["ready"] and pipe.counters()["outputs_withheld"] == {"Cm": 20}
+
+
+def test_r_squared_of_a_constant_output_is_not_reported_as_ok():
+    """Before: CY with no lateral motion (ay = 0, so CY = 0 exactly) was ready with
+    r_squared NaN, which the diagnostics showed at level OK. Now the fit is not ready and says
+    why; the estimate (0) is still published."""
+    pipe = pitch_pipeline(**{"models.enabled": ["CY", "Cm"], "models.CY": ["1"]})
+    syn = Synthetic(pipe)
+    syn.run(0, 1000)
+    fit = pipe.model_fit(0)
+    assert fit == {"ready": False, "samples": pipe.bank.k, "problem": "output constant: R^2 undefined",
+                   "outputs_withheld": 0}
+    assert pipe.model_fit(1)["ready"] and math.isfinite(pipe.model_fit(1)["r_squared"])
+    assert [row[0] for row in pipe.published(syn.outs[-1])] == ["CY", "Cm"]
 
 
 def test_a_stream_that_stops_skips_its_gap_and_restarts_the_differentiator():
