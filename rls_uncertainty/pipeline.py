@@ -24,7 +24,8 @@ Nothing non-finite leaves: a message with a value that is non-finite or beyond `
 (:class:`.aero.PlausibilityLimits`) is rejected with its reason; so is a sample that is
 implausible once formed, or that the estimator refuses (``non_finite_regression``); and a
 model whose outputs are not all finite is withheld from :meth:`Pipeline.published` and
-counted.
+counted. Every table keyed by what arrives (JointState names, caller-given rejection
+reasons) keeps a bounded number of keys.
 """
 
 from __future__ import annotations
@@ -47,9 +48,25 @@ from .sampling import Sample, Sampler, Stream, StreamCounts
 from .state_file import EstimatorState, load_state, save_state
 from .surface_mixing import SURFACES, SurfaceMixer
 
-__all__ = ["Pipeline", "SampleOutput", "Bookkeeping", "STREAMS", "StateFileError"]
+__all__ = ["Pipeline", "SampleOutput", "Bookkeeping", "STREAMS", "StateFileError", "count_bounded"]
 
 STREAMS = INPUTS
+
+# Bounds of the tables keyed by what arrives (issue 12 item 5): a flood of distinct JointState
+# names or caller-given reasons adds one overflow key, not a key each.
+KEYS_KEPT = 32  # distinct keys per table, the overflow key aside
+KEY_CHARS = 64  # longer keys (a JointState name is any string) are cut to this length
+OTHER_JOINTS = "<others>"  # unknown joints beyond the first KEYS_KEPT names
+OTHER_REASONS = "other"  # rejection reasons beyond the first KEYS_KEPT of a stream
+
+
+def count_bounded(counter: Counter, key: str, other: str, n: int = 1) -> None:
+    """``counter[key] += n`` for at most :data:`KEYS_KEPT` distinct keys (cut to
+    :data:`KEY_CHARS` characters); once the table is full, new keys count under ``other``."""
+    key = key[:KEY_CHARS]
+    if key not in counter and len(counter) - (other in counter) >= KEYS_KEPT:
+        key = other
+    counter[key] += n
 
 
 class SampleOutput(NamedTuple):
@@ -82,8 +99,8 @@ def _new_stream_counts() -> dict[str, StreamCounts]:
 class Bookkeeping:
     """Every counter of a pipeline, kept across reconfigurations: the messages of each input
     stream, samples formed, used and rejected (by reason), estimator resets (by reason),
-    JointState joints that no surface uses (by name) and model outputs withheld because they
-    were not finite (by model)."""
+    JointState joints that no surface uses (by name, at most :data:`KEYS_KEPT`, the rest as
+    :data:`OTHER_JOINTS`) and model outputs withheld because they were not finite (by model)."""
 
     streams: dict[str, StreamCounts] = field(default_factory=_new_stream_counts)
     samples_formed: int = 0
@@ -231,7 +248,7 @@ class Pipeline:
             return []
         unknown = self.bookkeeping.unknown_joints
         for n in layout.unknown:
-            unknown[n] += 1
+            count_bounded(unknown, n, OTHER_JOINTS)
         used = [positions[i] for i in layout.used]
         reason = self.limits.surface_rejection(used)
         if reason is not None:
@@ -252,8 +269,14 @@ class Pipeline:
 
     def reject(self, stream: str, reason: str) -> None:
         """Count a message of input ``stream`` that never reached the pipeline's ``add_*``
-        (the node could not decode it)."""
-        self.sampler.reject(self.sampler.streams[stream], reason)
+        (the node could not decode it). Reasons are the caller's: a stream keeps at most
+        :data:`KEYS_KEPT` distinct ones, later new ones count as :data:`OTHER_REASONS`."""
+        s = self.sampler.streams[stream]
+        rejected = s.counts.rejected
+        reason = reason[:KEY_CHARS]
+        if reason not in rejected and len(rejected) - (OTHER_REASONS in rejected) >= KEYS_KEPT:
+            reason = OTHER_REASONS
+        self.sampler.reject(s, reason)
 
     # ------------------------------------------------------------------ per sample
     def _advance(self) -> list[SampleOutput]:

@@ -100,9 +100,13 @@ class JointLayout(NamedTuple):
 
 class SurfaceMixer:
     """:meth:`SurfaceMixing.layout` for a stream of messages: the layout of the last name list
-    is kept (every message normally has the same list) and a few others are cached."""
+    is kept (every message normally has the same list) and a few others are cached. Memory
+    stays bounded whatever arrives: at most ``_CACHE_SIZE`` lists of at most
+    ``_CACHE_MAX_NAMES`` names are cached (a longer list is laid out afresh each time), plus
+    the last list seen."""
 
     _CACHE_SIZE = 16  # name lists normally never change; stay bounded when they do
+    _CACHE_MAX_NAMES = 64  # a surface JointState has a handful of joints
 
     def __init__(self, mixing: SurfaceMixing) -> None:
         self.mixing = mixing
@@ -118,8 +122,10 @@ class SurfaceMixer:
         key = tuple(names)
         layout = self._layouts.get(key)
         if layout is None:
-            if len(self._layouts) >= self._CACHE_SIZE:
-                self._layouts.clear()
-            layout = self._layouts[key] = self.mixing.layout(key)
+            layout = self.mixing.layout(key)
+            if len(key) <= self._CACHE_MAX_NAMES:
+                if len(self._layouts) >= self._CACHE_SIZE:
+                    self._layouts.clear()
+                self._layouts[key] = layout
         self._last_names, self._last_layout = list(key), layout
         return layout

@@ -276,3 +276,17 @@ def test_the_used_joints_are_the_mixed_ones():
     combined = SurfaceMixing(aileron_combined="ail").layout(("aileron_left", "ail", "rudder", "elevator"))
     assert combined.used == (1, 2, 3) and combined.unknown == ("aileron_left",)
 
+
+def test_the_mixer_never_caches_long_name_lists():
+    """A JointState with thousands of names is laid out (and its unknown joints listed) but
+    not kept: the cache holds at most _CACHE_SIZE lists of at most _CACHE_MAX_NAMES names."""
+    mixer = SurfaceMixer(SurfaceMixing())
+    base = ["elevator", "aileron_left", "aileron_right", "rudder"]
+    for k in range(40):
+        names = base + [f"junk{k}_{i}" for i in range(5000)]
+        layout = mixer.layout(names)
+        assert layout.deflections([0.1, 0.2, 0.4, 0.3] + [0.0] * 5000) == (0.1, pytest.approx(0.1), 0.3)
+        assert len(layout.unknown) == 5000
+        assert mixer.layout(names) is layout  # the last list is still recognised
+    assert all(len(key) <= SurfaceMixer._CACHE_MAX_NAMES for key in mixer._layouts)
+    assert len(mixer._layouts) <= SurfaceMixer._CACHE_SIZE

@@ -2,7 +2,7 @@
 independent interpolation and reduction, alignment of the differentiator's lag, estimates
 against batch least squares, the bookkeeping of every bad input, and the lifecycle (disable,
 reset, reconfigure, state file). Input sanity: plausibility limits (and a corrupted bag
-replayed), the last guard before publishing. The parts have
+replayed), the last guard before publishing, bounded tables. The parts have
 their own tests (test_sampling, test_aero, test_state_file, test_config,
 test_differentiation). No ROS, no DDS (bags through rosbags)."""
 
@@ -10,6 +10,7 @@ import csv
 import math
 import struct
 import sys
+import tracemalloc
 from pathlib import Path
 
 import numpy as np
@@ -570,6 +571,64 @@ def test_messages_lost_in_transport_are_counted_from_stamp_gaps():
     c = pipe.counters()["streams"]
     assert c["imu"]["missing"] == len(dropped)
     assert c["airspeed"]["missing"] == 0 and c["control_surfaces"]["missing"] == 0
+
+
+# ----------------------------------------------------------------------------- bounded tables
+def test_a_flood_of_unknown_joint_names_keeps_every_table_small():
+    """Issue 12 item 5: 100k distinct unknown JointState names used to add a counter each, all
+    sent in every /diagnostics message (74 -> 154 MB, 3.6 MB messages). Now the first 32 names
+    are counted by name and the rest under one key; every occurrence is still counted, the
+    messages are still used, and memory does not grow with the names."""
+    from rls_uncertainty.pipeline import KEYS_KEPT, OTHER_JOINTS
+
+    pipe = Pipeline(pipeline_config({"models.enabled": ["Cm"], "models.Cm": ["1", "q_hat", "delta_e"]}))
+    syn = Synthetic(pipe)
+    base = ["elevator", "aileron_left", "aileron_right", "rudder"]
+    per_message, n_messages = 100, 1000  # 100k names in 10 s of surfaces at 100 Hz
+
+    def run(first_ms, last_ms):
+        for ms in range(first_ms, last_ms):
+            t = syn.t0 + ms * MS
+            if ms % 5 == 0:
+                syn.imu(t)
+            if ms % 20 == 3:
+                syn.air(t)
+            if ms % 10 == 1:
+                k = ms // 10
+                syn.surfaces(t, names=base + [f"junk_{k}_{i}" for i in range(per_message)],
+                             positions=[0.01, -0.02, 0.04, 0.0] + [1e300] * per_message)
+            syn.outs.clear()
+
+    run(0, 10)  # the first message: its names fill the table
+    tracemalloc.start()
+    before = tracemalloc.get_traced_memory()[0]
+    run(10, 10 * n_messages)
+    grown = tracemalloc.get_traced_memory()[0] - before
+    tracemalloc.stop()
+    c = pipe.counters()
+    unknown = c["unknown_joints"]
+    assert len(unknown) == KEYS_KEPT + 1
+    assert sum(unknown.values()) == per_message * n_messages
+    assert unknown[OTHER_JOINTS] == per_message * n_messages - KEYS_KEPT
+    assert c["streams"]["control_surfaces"]["accepted"] == n_messages  # unknown joints are not errors
+    assert c["samples_used"] > 450
+    assert len(repr(c)) < 4000
+    assert grown < 500_000, grown  # a counter per name would hold > 10 MB
+
+
+def test_caller_given_rejection_reasons_are_bounded_and_long_keys_cut():
+    from rls_uncertainty.pipeline import KEY_CHARS, KEYS_KEPT, OTHER_REASONS
+
+    pipe = pitch_pipeline()
+    for k in range(1000):
+        pipe.reject("thrust", f"malformed: Error{k}")
+    rejected = pipe.counters()["streams"]["thrust"]["rejected"]
+    assert len(rejected) == KEYS_KEPT + 1 and rejected[OTHER_REASONS] == 1000 - KEYS_KEPT
+    assert pipe.counters()["streams"]["thrust"]["received"] == 1000
+    syn = Synthetic(pipe)
+    syn.surfaces(syn.t0, names=["elevator", "aileron_left", "aileron_right", "rudder", "x" * 10**6],
+                 positions=[0.0] * 5)
+    assert list(pipe.counters()["unknown_joints"]) == ["x" * KEY_CHARS]
 
 
 # ----------------------------------------------------------------------------- replay
