@@ -228,10 +228,15 @@ PARAMETERS: tuple[ParamSpec, ...] = (
     ParamSpec("inputs.use_thrust", True, "use the thrust topic (force.x, N) in Eq. 1a; false sets thrust to 0"),
     ParamSpec("inputs.max_gap", 0.25, "largest gap between two messages of one stream that is interpolated across, s", 0.001, 10.0),
     ParamSpec("inputs.buffer_duration", 2.0, "how far a stream may run ahead of the slowest one before its old messages expire, s", 0.1, 60.0),
-    # Input sanity (issue 12 item 1): what a measurement of an aircraft in flight can be
-    # (aero.PlausibilityLimits says why each default is beyond any aircraft this package
-    # targets). A message out of bounds is rejected as implausible_<field>; a sample
-    # (interpolated, or qbar from air density) too.
+    # Input sanity (issue 12 item 1, issue 13): the body frame the inputs must be stamped in,
+    # and what a measurement of an aircraft in flight can be (aero.PlausibilityLimits says
+    # why each default is beyond any aircraft this package targets). A message out of bounds
+    # is rejected as implausible_<field>; a sample (interpolated, or qbar from air density) too.
+    ParamSpec(
+        "inputs.frame_id", "base_link",
+        "header.frame_id every input must carry (the REP-103 body frame); a message in another frame is "
+        "rejected as frame_mismatch; empty: not checked",
+    ),
     ParamSpec(
         "limits.airspeed_min", 3.0,
         "lowest plausible true airspeed, m/s (flow angles and p b/2V are noise below it); rejected as "
@@ -387,19 +392,23 @@ class EstimatorConfig:
 class InputConfig:
     """How the input streams are used (``inputs.*`` parameters): the dynamic-pressure topic or
     ``0.5 air_density V^2`` (kg/m^3), the thrust topic or zero thrust, the longest gap
-    interpolated across and how far a stream may run ahead before its old messages expire (s)."""
+    interpolated across and how far a stream may run ahead before its old messages expire (s),
+    and the ``header.frame_id`` every input must carry (empty: not checked)."""
 
     use_dynamic_pressure: bool = True
     air_density: float = 1.225
     use_thrust: bool = True
     max_gap: float = 0.25
     buffer_duration: float = 2.0
+    frame_id: str = "base_link"
 
     def __post_init__(self) -> None:
         for name in ("air_density", "max_gap", "buffer_duration"):
             value = getattr(self, name)
             if not (_finite(value) and value > 0):
                 raise ConfigError(f"inputs.{name} must be a positive number, got {value!r}")
+        if not isinstance(self.frame_id, str):
+            raise ConfigError(f"inputs.frame_id must be a string, got {self.frame_id!r}")
 
     @property
     def max_gap_ns(self) -> int:

@@ -20,12 +20,12 @@ Every formed sample ends as used or as rejected with a reason, and every message
 or rejected: :class:`Bookkeeping` holds every counter, :meth:`Pipeline.counters` reports them
 (the node's ``/diagnostics``), and a reconfigured pipeline takes over the same object.
 
-Nothing non-finite leaves: a message with a value that is non-finite or beyond ``limits.*``
-(:class:`.aero.PlausibilityLimits`) is rejected with its reason; so is a sample that is
-implausible once formed, or that the estimator refuses (``non_finite_regression``); and a
-model whose outputs are not all finite is withheld from :meth:`Pipeline.published` and
-counted. Every table keyed by what arrives (JointState names, caller-given rejection
-reasons) keeps a bounded number of keys.
+Nothing non-finite leaves: a message in another frame than ``inputs.frame_id``, or with a value
+that is non-finite or beyond ``limits.*`` (:class:`.aero.PlausibilityLimits`), is rejected
+with its reason; so is a sample that is implausible once formed, or that the estimator refuses
+(``non_finite_regression``); and a model whose outputs are not all finite is withheld from
+:meth:`Pipeline.published` and counted. Every table keyed by what arrives (JointState names,
+caller-given rejection reasons) keeps a bounded number of keys.
 """
 
 from __future__ import annotations
@@ -155,6 +155,7 @@ class Pipeline:
         self._i_thrust = where.get("thrust")
         self._mixer = SurfaceMixer(config.surfaces)
         self.limits = config.limits
+        self.frame_id = config.inputs.frame_id  # read by messages.feed
         self._index = 0
         self._new_estimator()
         self._diff = FixedLagDifferentiator(config.differentiator, 1.0 / config.rate, width=3)
@@ -265,6 +266,13 @@ class Pipeline:
             self.sampler.add(stream, int(stamp_ns), values, False)
         else:
             self.sampler.reject_invalid(stream, int(stamp_ns), reason)
+        return []
+
+    def reject_frame(self, stream: str, stamp_ns: int) -> list[SampleOutput]:
+        """Count a message of input ``stream`` whose ``header.frame_id`` is not
+        ``inputs.frame_id`` (:func:`.messages.feed` checks): its numbers are in a frame the
+        pipeline cannot convert, so it is rejected as ``frame_mismatch``, never used."""
+        self.sampler.reject_invalid(self.sampler.streams[stream], int(stamp_ns), "frame_mismatch")
         return []
 
     def reject(self, stream: str, reason: str) -> None:

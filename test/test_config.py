@@ -73,6 +73,7 @@ def test_models_are_configuration():
     ({"limits.dynamic_pressure_min": 1e-300}, "limits.dynamic_pressure_min"),
     ({"limits.angular_rate": 1e100}, "limits.angular_rate"),
     ({"limits.airspeed_min": 90.0, "limits.airspeed_max": 80.0}, "limits.airspeed_min"),
+    ({"inputs.frame_id": 7}, "inputs.frame_id"),
 ])
 def test_invalid_settings_are_refused_with_the_reason(params, match):
     with pytest.raises(ConfigError, match=match):
@@ -102,6 +103,7 @@ def test_every_parameter_reaches_its_nested_field():
         "inputs.use_thrust": (("inputs", "use_thrust"), False),
         "inputs.max_gap": (("inputs", "max_gap"), 0.5),
         "inputs.buffer_duration": (("inputs", "buffer_duration"), 3.0),
+        "inputs.frame_id": (("inputs", "frame_id"), "body"),
         "surfaces.elevator": (("surfaces", "elevator"), ["e1", "e2"]),
         "surfaces.aileron_right": (("surfaces", "aileron_right"), ["ar"]),
         "surfaces.aileron_left": (("surfaces", "aileron_left"), ["al"]),
@@ -168,6 +170,7 @@ def test_estimator_choices_are_the_estimators_own():
     (lambda: InputConfig(max_gap=0.0), "inputs.max_gap"),
     (lambda: InputConfig(air_density=float("nan")), "inputs.air_density"),
     (lambda: InputConfig(buffer_duration=-1.0), "inputs.buffer_duration"),
+    (lambda: InputConfig(frame_id=None), "inputs.frame_id"),
     (lambda: PlausibilityLimits(angular_rate=0.0), "limits.angular_rate"),
     (lambda: PlausibilityLimits(thrust=float("inf")), "limits.thrust"),
     (lambda: PlausibilityLimits(specific_force=True), "limits.specific_force"),

@@ -2,10 +2,11 @@
 independent interpolation and reduction, alignment of the differentiator's lag, estimates
 against batch least squares, the bookkeeping of every bad input, and the lifecycle (disable,
 reset, reconfigure, state file). Input sanity: plausibility limits (and a corrupted bag
-replayed), the last guard before publishing, bounded tables. The parts have
+replayed), the last guard before publishing, bounded tables, input frames. The parts have
 their own tests (test_sampling, test_aero, test_state_file, test_config,
 test_differentiation). No ROS, no DDS (bags through rosbags)."""
 
+import copy
 import csv
 import math
 import struct
@@ -16,9 +17,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from rls_uncertainty.config import load_aircraft, pipeline_config
+from rls_uncertainty.config import load_aircraft, load_parameters_file, pipeline_config
 from rls_uncertainty.differentiation import DifferentiatorConfig, differentiate
 from rls_uncertainty.pipeline import STREAMS, Pipeline, StateFileError
+from rls_uncertainty.replay import run_pipeline
 from rls_uncertainty.simulation import simulate_sensor_streams
 from rls_uncertainty.surface_mixing import SurfaceMixing
 
@@ -571,6 +573,73 @@ def test_messages_lost_in_transport_are_counted_from_stamp_gaps():
     c = pipe.counters()["streams"]
     assert c["imu"]["missing"] == len(dropped)
     assert c["airspeed"]["missing"] == 0 and c["control_surfaces"]["missing"] == 0
+
+
+# ----------------------------------------------------------------------------- frames
+
+@pytest.fixture(scope="module")
+def bundled_messages():
+    """The bundled bag's messages, decoded by rls_uncertainty.cdr as the node decodes them."""
+    from rls_uncertainty.bags import read_inputs
+
+    return read_inputs(BUNDLED)[0]
+
+
+def _t2_config(**params):
+    return pipeline_config({**load_parameters_file("t2"), **params})
+
+
+def _relabelled(messages, kind, every, frame):
+    out, n = [], 0
+    for k, (msg_kind, stamp, msg) in enumerate(messages):
+        if msg_kind == kind and k % every == 0:
+            relabelled = copy.deepcopy(msg)
+            relabelled.header.frame_id = frame
+            out.append((msg_kind, stamp, relabelled))
+            n += 1
+        else:
+            out.append((msg_kind, stamp, msg))
+    return out, n
+
+
+def test_inputs_in_another_frame_are_rejected_as_frame_mismatch(bundled_messages):
+    """messages.feed (the node's and the replay's only way in) compares header.frame_id with
+    inputs.frame_id. The bundled bag is in base_link, the default: nothing is rejected. IMU
+    messages relabelled imu_link are rejected (their numbers would be in an unknown frame);
+    an empty inputs.frame_id checks nothing; a frame no input carries rejects everything."""
+    assert {m.header.frame_id for _k, _s, m in bundled_messages} == {"base_link"}
+    clean = run_pipeline(bundled_messages, _t2_config(), record=False).pipeline.counters()
+    assert all(not s["rejected"] for s in clean["streams"].values())
+    relabelled, n = _relabelled(bundled_messages, "imu", 7, "imu_link")
+    assert n > 100
+    result = run_pipeline(relabelled, _t2_config(), record=False)
+    c = result.pipeline.counters()
+    assert c["streams"]["imu"]["rejected"] == {"frame_mismatch": n}
+    assert c["streams"]["imu"]["received"] == clean["streams"]["imu"]["received"]
+    assert c["samples_used"] > 500 and all(np.isfinite(np.concatenate(r[2:])).all()
+                                           for o in result.outputs for r in result.pipeline.published(o))
+    unchecked = run_pipeline(relabelled, _t2_config(**{"inputs.frame_id": ""}), record=False).pipeline.counters()
+    assert unchecked["streams"]["imu"]["rejected"] == {} and unchecked["samples_used"] == clean["samples_used"]
+    other = run_pipeline(bundled_messages, _t2_config(**{"inputs.frame_id": "body"}), record=False)
+    c = other.pipeline.counters()
+    assert not other.outputs and c["samples_formed"] == 0
+    for kind, s in c["streams"].items():
+        assert s["rejected"] == {"frame_mismatch": clean["streams"][kind]["received"]}
+
+
+def test_converted_and_generated_bags_carry_the_default_frame():
+    """bags.convert and the bundled bag's generator build every input with one header
+    builder: its frame is the default inputs.frame_id (the real conversions are checked in
+    the report: the three Twin Otter flights convert to base_link on every topic)."""
+    from rls_uncertainty.bags import _standard_message, typestore
+    from rls_uncertainty.config import parameter_defaults
+
+    store = typestore()
+    values = {"imu": [0.0] * 6, "airspeed": [40.0, 0.0, 0.0], "dynamic_pressure": 900.0,
+              "control_surfaces": [0.0], "thrust": 10.0}
+    for kind in STREAMS:
+        msg = _standard_message(store, kind, 10**18, values[kind], ["elevator"])
+        assert msg.header.frame_id == parameter_defaults()["inputs.frame_id"] == "base_link"
 
 
 # ----------------------------------------------------------------------------- bounded tables
