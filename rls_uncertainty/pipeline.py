@@ -377,8 +377,12 @@ class Pipeline:
 
     def load_state(self, path: str | Path) -> None:
         """Continue from :meth:`save_state`. Raises :class:`StateFileError` when the file is
-        unreadable or was written with another configuration."""
-        state = load_state(path, self.config.fingerprint())
+        unreadable, not a valid state or was written with another configuration (every field is
+        checked against this pipeline's configuration before anything is allocated)."""
+        c, bank = self.config.estimator, self.bank
+        expect = {"sizes": list(self.sizes), "n_lags": c.n_lags, "window": c.window, "forgetting": c.forgetting,
+                  "residual": c.residual, "init_condition": bank.init_condition}
+        state = load_state(path, self.config.fingerprint(), expect=expect)
         self.bank = state.bank
         self.bookkeeping.samples_used = state.samples_used
         self._zsum = state.output_sum
