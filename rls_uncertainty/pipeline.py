@@ -14,7 +14,10 @@ coordinates the modules that do the work:
    ``lag`` samples late but time-aligned.
 4. :mod:`.aero` converts the sample to aircraft body axes (:func:`.aero.aircraft_sample`),
    then Eq. 1 coefficients and Eq. 2 regressors feed one :class:`.estimator.EstimatorBank`
-   (Eqs. 15-22), and each used sample yields a :class:`SampleOutput`.
+   (Eqs. 15-22), and each used sample yields a :class:`SampleOutput`: estimates, standard
+   errors, per-parameter convergence flags (:mod:`.convergence`, one monitor reset with the
+   estimator) and, every ``outputs.covariance_decimation`` grid points, the full covariances.
+   :meth:`Pipeline.published_arrays` lists what the node publishes (and the replay writes).
 
 Every formed sample ends as used or as rejected with a reason, and every message as accepted
 or rejected: :class:`Bookkeeping` holds every counter, :meth:`Pipeline.counters` reports them
@@ -25,7 +28,7 @@ from __future__ import annotations
 
 import math
 from collections import Counter, deque
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import NamedTuple
 
@@ -33,17 +36,22 @@ import numpy as np
 
 from .aero import RATES, aircraft_sample, coefficients, flight_state, regressors
 from .config import PipelineConfig
+from .convergence import ConvergenceMonitor
 from .differentiation import FixedLagDifferentiator
 from .errors import NonFiniteInput, StateFileError
 from .estimator import EstimatorBank
-from .messages import INPUTS
+from .messages import ARRAY_OUTPUTS, INPUTS
 from .sampling import Sample, Sampler, StreamCounts
 from .state_file import EstimatorState, load_state, save_state
 from .surface_mixing import SURFACES, SurfaceMixer
 
-__all__ = ["Pipeline", "SampleOutput", "Bookkeeping", "STREAMS", "StateFileError"]
+__all__ = ["Pipeline", "SampleOutput", "PublishedArray", "MODEL_OUTPUTS", "Bookkeeping", "STREAMS", "StateFileError"]
 
 STREAMS = INPUTS
+# Every array published per model M as ~/M/<suffix> (std_msgs/Float64MultiArray), in the
+# order :meth:`Pipeline.published_arrays` yields them: the three of ARRAY_OUTPUTS, the
+# convergence flags, then (decimated) the two covariance matrices.
+MODEL_OUTPUTS = (*ARRAY_OUTPUTS, "converged", "covariance", "covariance_conventional")
 
 
 class SampleOutput(NamedTuple):
@@ -52,6 +60,13 @@ class SampleOutput(NamedTuple):
     ``theta``, ``se`` (corrected, Eqs. 20/22) and ``se_conventional`` (Eq. 13) are
     ``(M, n_max)`` arrays in the order of ``config.models``; rows of models that are not
     ``ready`` yet (exact initialization still waiting) and the padding are NaN.
+    ``converged`` ``(M, n_max)`` and ``model_converged`` ``(M,)`` are the
+    :class:`.convergence.ConvergenceMonitor` flags (False on padding and models not ready; a
+    model is converged when all its parameters are). ``covariance`` is ``None``, or on the
+    samples whose grid index is a multiple of ``outputs.covariance_decimation`` the
+    ``(2, M, n_max, n_max)`` corrected (``[0]``) and conventional (``[1]``) covariances
+    (:meth:`.estimator.EstimatorBank.covariance`, the corrected one repaired to positive
+    semi-definite; symmetrized), NaN off the ready models' parameters.
     """
 
     stamp_ns: int
@@ -60,10 +75,37 @@ class SampleOutput(NamedTuple):
     se: np.ndarray
     se_conventional: np.ndarray
     ready: np.ndarray
+    converged: np.ndarray
+    model_converged: np.ndarray
+    covariance: np.ndarray | None = None
 
     @property
     def time(self) -> float:
         return self.stamp_ns * 1e-9
+
+
+class PublishedArray(NamedTuple):
+    """One array the node publishes for a sample: ``~/<model>/<suffix>`` with ``data`` (flat,
+    row-major float64) of ``shape`` ``(n,)`` or ``(n, n)`` over the parameters ``names``
+    (comma-separated, as in ``layout.dim[0].label``)."""
+
+    model: str
+    suffix: str
+    names: str
+    shape: tuple[int, ...]
+    data: np.ndarray
+
+    def dims(self, stamp: str) -> list[tuple[str, int, int]]:
+        """The ``std_msgs/MultiArrayLayout`` dims ``(label, size, stride)``, row-major as ROS
+        defines them: one per axis labelled with the parameter names, then ``(stamp, 1, 1)``
+        with ``stamp`` the sample's :func:`.messages.stamp_label` (the stamp is always in the
+        last dim)."""
+        dims = [(self.names, size, 0) for size in self.shape] + [(stamp, 1, 1)]
+        stride = 1
+        for i in range(len(dims) - 1, -1, -1):
+            stride *= dims[i][1]
+            dims[i] = (dims[i][0], dims[i][1], stride)
+        return dims
 
 
 def _new_stream_counts() -> dict[str, StreamCounts]:
@@ -128,6 +170,9 @@ class Pipeline:
         self._i_thrust = where.get("thrust")
         self._mixer = SurfaceMixer(config.surfaces)
         self._index = 0
+        self._monitor = ConvergenceMonitor(self.sizes, replace(config.convergence, rate_hz=config.rate))
+        self._cov_every = config.outputs.covariance_decimation
+        self._period_ns = config.period_ns
         self._new_estimator()
         self._diff = FixedLagDifferentiator(config.differentiator, 1.0 / config.rate, width=3)
         self._lag = config.differentiator.lag
@@ -160,6 +205,8 @@ class Pipeline:
         self._z = np.zeros(len(self.sizes))
         self._zsum = np.zeros(len(self.sizes))  # sums of z and z^2 since the estimator started
         self._zsq = np.zeros(len(self.sizes))
+        self._monitor.reset()
+        self._converged = self._monitor._none()  # the newest sample's flags
 
     @property
     def samples_used(self) -> int:
@@ -288,22 +335,67 @@ class Pipeline:
             self.regression.append((t, X.copy(), z.copy()))
         bank = self.bank
         self._index += 1
+        theta, se, ready = bank.theta_all(), bank.standard_errors_all("corrected"), bank.ready
+        self._converged = flags, model_flags = self._monitor.update(t, theta, se, ready)
+        every = self._cov_every
         return SampleOutput(
             stamp_ns=t,
             index=self._index,
-            theta=bank.theta_all(),
-            se=bank.standard_errors_all("corrected"),
+            theta=theta,
+            se=se,
             se_conventional=bank.standard_errors_all("conventional"),
-            ready=bank.ready,
+            ready=ready,
+            converged=flags,
+            model_converged=model_flags,
+            covariance=self._covariances(ready) if every and (t // self._period_ns) % every == 0 else None,
         )
+
+    def _covariances(self, ready: np.ndarray) -> np.ndarray:
+        """``(2, M, n_max, n_max)``: corrected and conventional covariances of the ready models
+        now, made exactly symmetric (``(C + C')/2``: the products leave rounding-level
+        asymmetry), NaN elsewhere. Computed only on the samples that publish them."""
+        n = self.bank.n_max
+        cov = np.full((2, len(self.sizes), n, n), np.nan)
+        for j in np.flatnonzero(ready):
+            s = self.sizes[j]
+            for k, kind in enumerate(("corrected", "conventional")):
+                c = self.bank.covariance(int(j), kind)
+                if np.diag(c).min() < 0.0:
+                    # Only at an exact fit (the initialization sample), whose R(0) comes out
+                    # as a tiny negative number: zero, as its standard errors are.
+                    c = np.zeros_like(c)
+                cov[k, j, :s, :s] = 0.5 * (c + c.T)
+        return cov
 
     def published(self, out: SampleOutput):
         """What the node publishes for a sample, per ready model: ``(output, label, estimates,
         corrected SEs, conventional SEs)``; models still initializing publish nothing, so no
-        NaN ever leaves the pipeline."""
+        NaN ever leaves the pipeline. :meth:`published_arrays` gives every array, the
+        convergence flags and covariances too."""
         for j, (name, label, n) in enumerate(zip(self._outputs, self.labels, self.sizes)):
             if out.ready[j]:
                 yield name, label, out.theta[j, :n], out.se[j, :n], out.se_conventional[j, :n]
+
+    def published_arrays(self, out: SampleOutput):
+        """Every array published for a sample, as :class:`PublishedArray`, per ready model in
+        the order of :data:`MODEL_OUTPUTS`: ``estimates``, ``standard_errors``,
+        ``standard_errors_conventional``, ``converged`` (1.0 or 0.0 per parameter; the model
+        is converged when all are 1), and when ``out.covariance`` is set ``covariance`` and
+        ``covariance_conventional`` (n x n, row-major). Models still initializing publish
+        nothing (no NaN leaves the pipeline)."""
+        cov = out.covariance
+        for j, (name, label, n) in enumerate(zip(self._outputs, self.labels, self.sizes)):
+            if not out.ready[j]:
+                continue
+            vector = (n,)
+            yield PublishedArray(name, "estimates", label, vector, out.theta[j, :n])
+            yield PublishedArray(name, "standard_errors", label, vector, out.se[j, :n])
+            yield PublishedArray(name, "standard_errors_conventional", label, vector, out.se_conventional[j, :n])
+            yield PublishedArray(name, "converged", label, vector, out.converged[j, :n].astype(np.float64))
+            if cov is not None:
+                square = (n, n)
+                yield PublishedArray(name, "covariance", label, square, cov[0, j, :n, :n].ravel())
+                yield PublishedArray(name, "covariance_conventional", label, square, cov[1, j, :n, :n].ravel())
 
     # ------------------------------------------------------------------ lifecycle
     def reset(self, reason: str, *, clear_inputs: bool = False) -> None:
@@ -350,11 +442,22 @@ class Pipeline:
         return {
             "ready": True,
             "samples": bank.k,
+            # The residual autocorrelation lags the corrected covariance uses now (Eq. 22: at
+            # most estimator.lags). Hook for automatic lag selection: report its per-model
+            # choice here.
+            "lags": bank.n_window - 1,
             "r_squared": float(r2),
             "residual_rho1": float(rho[0]) if rho.size else float("nan"),
             "lags_outside_2sigma": float(np.mean(np.abs(rho) > bound)) if rho.size else float("nan"),
             "repairs": int(bank.repairs[j]),
         }
+
+    def convergence(self, j: int) -> dict:
+        """The newest sample's convergence flags of model ``j`` for diagnostics: ``converged``
+        (the model flag) and ``converged_parameters`` (the names, comma-separated)."""
+        flags, model_flags = self._converged
+        names = [p for p, f in zip(self.parameter_names[j], flags[j], strict=False) if f]
+        return {"converged": bool(model_flags[j]), "converged_parameters": ",".join(names)}
 
     def counters(self) -> dict:
         """Bookkeeping for diagnostics: messages per stream and samples, with reasons."""
@@ -387,3 +490,6 @@ class Pipeline:
         self.bookkeeping.samples_used = state.samples_used
         self._zsum = state.output_sum
         self._zsq = state.output_sum_squares
+        # The convergence history restarts: flags need window seconds of the resumed estimates.
+        self._monitor.reset()
+        self._converged = self._monitor._none()
