@@ -172,6 +172,8 @@ class Pipeline:
         self._index = 0
         self._monitor = ConvergenceMonitor(self.sizes, replace(config.convergence, rate_hz=config.rate))
         self._cov_every = config.outputs.covariance_decimation
+        self._published_models = [(m.output, label, n, (n,), (n, n))
+                                  for m, label, n in zip(config.models, self.labels, self.sizes, strict=True)]
         self._period_ns = config.period_ns
         self._new_estimator()
         self._diff = FixedLagDifferentiator(config.differentiator, 1.0 / config.rate, width=3)
@@ -384,18 +386,20 @@ class Pipeline:
         ``covariance_conventional`` (n x n, row-major). Models still initializing publish
         nothing (no NaN leaves the pipeline)."""
         cov = out.covariance
-        for j, (name, label, n) in enumerate(zip(self._outputs, self.labels, self.sizes)):
-            if not out.ready[j]:
+        ready = out.ready.tolist()
+        theta, se, se_conv = out.theta, out.se, out.se_conventional
+        flags = out.converged.astype(np.float64)
+        new = PublishedArray._make
+        for j, (name, label, n, vector, square) in enumerate(self._published_models):
+            if not ready[j]:
                 continue
-            vector = (n,)
-            yield PublishedArray(name, "estimates", label, vector, out.theta[j, :n])
-            yield PublishedArray(name, "standard_errors", label, vector, out.se[j, :n])
-            yield PublishedArray(name, "standard_errors_conventional", label, vector, out.se_conventional[j, :n])
-            yield PublishedArray(name, "converged", label, vector, out.converged[j, :n].astype(np.float64))
+            yield new((name, "estimates", label, vector, theta[j, :n]))
+            yield new((name, "standard_errors", label, vector, se[j, :n]))
+            yield new((name, "standard_errors_conventional", label, vector, se_conv[j, :n]))
+            yield new((name, "converged", label, vector, flags[j, :n]))
             if cov is not None:
-                square = (n, n)
-                yield PublishedArray(name, "covariance", label, square, cov[0, j, :n, :n].ravel())
-                yield PublishedArray(name, "covariance_conventional", label, square, cov[1, j, :n, :n].ravel())
+                yield new((name, "covariance", label, square, cov[0, j, :n, :n].ravel()))
+                yield new((name, "covariance_conventional", label, square, cov[1, j, :n, :n].ravel()))
 
     # ------------------------------------------------------------------ lifecycle
     def reset(self, reason: str, *, clear_inputs: bool = False) -> None:
