@@ -25,6 +25,7 @@ messages, byte for byte and field for field.
 from __future__ import annotations
 
 import struct
+from collections.abc import Sequence
 from dataclasses import make_dataclass
 
 __all__ = ["decode", "encode_header", "encode_float64_multiarray", "encode_float64_multiarray_dims", "DECODABLE"]
@@ -223,7 +224,8 @@ def encode_float64_multiarray(label: str, data, second: str | None = None) -> by
     return _LE_HEADER + bytes(out)
 
 
-def encode_float64_multiarray_dims(dims, data, data_offset: int = 0) -> bytes:
+def encode_float64_multiarray_dims(dims: Sequence[tuple[str, int, int]], data: Sequence[float],
+                                   data_offset: int = 0) -> bytes:
     """CDR of a ``std_msgs/Float64MultiArray`` with ``layout.dim`` = ``dims``, a sequence of
     ``(label, size, stride)``, ``layout.data_offset`` and ``data`` (a sequence of floats)."""
     out = bytearray(_U32.pack(len(dims)))

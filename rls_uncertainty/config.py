@@ -12,7 +12,7 @@ built, so a configuration that exists is a valid one.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, field, fields
 from numbers import Integral
 from pathlib import Path
 from typing import Any
@@ -375,7 +375,7 @@ class OutputConfig:
     covariance_decimation: int = 10
 
     def __post_init__(self) -> None:
-        d = self.covariance_decimation
+        d: Any = self.covariance_decimation
         if isinstance(d, bool) or not isinstance(d, Integral) or d < 0:
             raise ConfigError(f"outputs.covariance_decimation must be an integer >= 0, got {d!r}")
 
@@ -394,7 +394,7 @@ class PipelineConfig:
     inputs: InputConfig = InputConfig()
     surfaces: SurfaceMixing = SurfaceMixing()
     # Consumers' outputs (not part of the fingerprint: they do not change the estimator state).
-    convergence: ConvergenceConfig = ConvergenceConfig()
+    convergence: ConvergenceConfig = field(default_factory=ConvergenceConfig)
     outputs: OutputConfig = OutputConfig()
 
     def __post_init__(self) -> None:

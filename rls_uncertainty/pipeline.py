@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import math
 from collections import Counter, deque
+from collections.abc import Iterator
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import NamedTuple
@@ -378,7 +379,7 @@ class Pipeline:
             if out.ready[j]:
                 yield name, label, out.theta[j, :n], out.se[j, :n], out.se_conventional[j, :n]
 
-    def published_arrays(self, out: SampleOutput):
+    def published_arrays(self, out: SampleOutput) -> Iterator[PublishedArray]:
         """Every array published for a sample, as :class:`PublishedArray`, per ready model in
         the order of :data:`MODEL_OUTPUTS`: ``estimates``, ``standard_errors``,
         ``standard_errors_conventional``, ``converged`` (1.0 or 0.0 per parameter; the model
