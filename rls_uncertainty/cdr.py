@@ -9,7 +9,9 @@ codecs cover exactly:
   ``sensor_msgs/JointState``, ``geometry_msgs/WrenchStamped`` into light objects with the
   same field names (what :mod:`.messages` reads), little- and big-endian, so node and replay
   have one decoding path;
-* encoding ``std_msgs/Header`` and ``std_msgs/Float64MultiArray`` (little endian).
+* encoding ``std_msgs/Header`` and ``std_msgs/Float64MultiArray`` (little endian), the latter
+  with the vector layout of the estimates (:func:`encode_float64_multiarray`) or any layout
+  (:func:`encode_float64_multiarray_dims`: the covariance matrices).
 
 A payload that does not hold a whole message (truncated, a bad string length or terminator,
 text that is not UTF-8, a sequence longer than the payload, an unknown encapsulation) raises
@@ -23,9 +25,10 @@ messages, byte for byte and field for field.
 from __future__ import annotations
 
 import struct
+from collections.abc import Sequence
 from dataclasses import make_dataclass
 
-__all__ = ["decode", "encode_header", "encode_float64_multiarray", "DECODABLE"]
+__all__ = ["decode", "encode_header", "encode_float64_multiarray", "encode_float64_multiarray_dims", "DECODABLE"]
 
 _LE_HEADER = b"\x00\x01\x00\x00"
 _TIME = struct.Struct("<iI")
@@ -214,6 +217,24 @@ def encode_float64_multiarray(label: str, data, second: str | None = None) -> by
         out += b"\x00" * (_align(len(out), 4) - len(out))
         out += _U32.pack(size) + _U32.pack(stride)
     out += _U32.pack(0)  # data_offset
+    out += _U32.pack(n)
+    if n:
+        out += b"\x00" * (_align(len(out), 8) - len(out))
+        out += struct.pack(f"<{n}d", *data)
+    return _LE_HEADER + bytes(out)
+
+
+def encode_float64_multiarray_dims(dims: Sequence[tuple[str, int, int]], data: Sequence[float],
+                                   data_offset: int = 0) -> bytes:
+    """CDR of a ``std_msgs/Float64MultiArray`` with ``layout.dim`` = ``dims``, a sequence of
+    ``(label, size, stride)``, ``layout.data_offset`` and ``data`` (a sequence of floats)."""
+    out = bytearray(_U32.pack(len(dims)))
+    for text, size, stride in dims:
+        _string(out, text)
+        out += b"\x00" * (_align(len(out), 4) - len(out))
+        out += _U32.pack(size) + _U32.pack(stride)
+    out += _U32.pack(data_offset)
+    n = len(data)
     out += _U32.pack(n)
     if n:
         out += b"\x00" * (_align(len(out), 8) - len(out))

@@ -12,7 +12,7 @@ built, so a configuration that exists is a valid one.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, field, fields
 from numbers import Integral
 from pathlib import Path
 from typing import Any
@@ -20,6 +20,7 @@ from typing import Any
 import yaml
 
 from .aero import PlausibilityLimits
+from .convergence import ConvergenceConfig
 from .differentiation import DifferentiatorConfig
 from .errors import ConfigError
 from .estimator import RESIDUALS, WINDOWS, Residual, Window
@@ -31,6 +32,7 @@ __all__ = [
     "EstimatorConfig",
     "InputConfig",
     "PlausibilityLimits",
+    "OutputConfig",
     "ConfigError",
     "DEFAULT_MODELS",
     "REGRESSORS",
@@ -317,6 +319,23 @@ PARAMETERS: tuple[ParamSpec, ...] = (
     ParamSpec("state_save_period", 10.0, "seconds between periodic state saves (0 = only on shutdown and disable)", 0.0, 3600.0),
     ParamSpec("diagnostics_period", 1.0, "seconds between /diagnostics messages", 0.05, 60.0),
     ParamSpec("frame_id", "base_link", "frame_id of the ~/sample_stamp header"),
+    # Outputs for consumers and long flights (issues 13 and 14): convergence flags, full
+    # covariances, and the window of the /diagnostics levels.
+    ParamSpec("convergence.window", 2.0,
+              "convergence flags (~/M/converged): seconds of history that must be settled; "
+              "window x rate may not exceed 4094 samples", 0.05, 60.0),
+    ParamSpec("convergence.band", 1.0,
+              "convergence flags: every estimate of the window within this many current corrected standard errors "
+              "of the current estimate", 0.01, 1e6),
+    ParamSpec("convergence.max_se_rate", 0.25,
+              "convergence flags: every standard error of the window within a factor exp(max_se_rate x age) of the "
+              "current one, 1/s", 0.001, 100.0),
+    ParamSpec("outputs.covariance_decimation", 10,
+              "publish ~/M/covariance and ~/M/covariance_conventional for samples whose grid index (stamp x rate) "
+              "is a multiple of this; 0 = never", 0, 100000),
+    ParamSpec("diagnostics_window", 10.0,
+              "seconds over which /diagnostics levels count rejected, missing and expired messages (cumulative "
+              "counts are reported beside)", 0.1, 3600.0),
 )
 PARAMETER_NAMES = {p.name: p for p in PARAMETERS}
 
@@ -450,6 +469,20 @@ class InputConfig:
 
 
 @dataclass(frozen=True)
+class OutputConfig:
+    """What the pipeline computes for its consumers beyond estimates and standard errors
+    (``outputs.*`` parameters): full covariance matrices for the samples whose grid index is a
+    multiple of ``covariance_decimation`` (0: never)."""
+
+    covariance_decimation: int = 10
+
+    def __post_init__(self) -> None:
+        d: Any = self.covariance_decimation
+        if isinstance(d, bool) or not isinstance(d, Integral) or d < 0:
+            raise ConfigError(f"outputs.covariance_decimation must be an integer >= 0, got {d!r}")
+
+
+@dataclass(frozen=True)
 class PipelineConfig:
     """Everything that decides the numbers: sample rate (Hz), aircraft, models, and the nested
     estimator, differentiator, input, surface-mixing and plausibility settings. The node and
@@ -463,10 +496,19 @@ class PipelineConfig:
     inputs: InputConfig = InputConfig()
     surfaces: SurfaceMixing = SurfaceMixing()
     limits: PlausibilityLimits = PlausibilityLimits()
+    # Consumers' outputs (not part of the fingerprint: they do not change the estimator state).
+    convergence: ConvergenceConfig = field(default_factory=ConvergenceConfig)
+    outputs: OutputConfig = OutputConfig()
 
     def __post_init__(self) -> None:
         if not (_finite(self.rate) and self.rate > 0):
             raise ConfigError(f"rate must be a positive number, got {self.rate!r}")
+        held = math.ceil(self.convergence.window * self.rate) + 2
+        if held > self.convergence.max_samples:
+            raise ConfigError(
+                f"convergence.window ({self.convergence.window:g} s) at rate {self.rate:g} Hz spans {held - 2} "
+                f"samples; at most {self.convergence.max_samples - 2} are kept (shorten the window)"
+            )
         if not self.models:
             raise ConfigError("at least one model must be enabled")
         outputs = [m.output for m in self.models]
@@ -513,6 +555,7 @@ class NodeConfig:
     state_save_period: float = 10.0
     diagnostics_period: float = 1.0
     frame_id: str = "base_link"
+    diagnostics_window: float = 10.0
 
 
 def pipeline_config(params: dict[str, Any] | None = None) -> PipelineConfig:
@@ -539,6 +582,8 @@ def pipeline_config(params: dict[str, Any] | None = None) -> PipelineConfig:
         inputs=InputConfig(**_section(v, "inputs")),
         surfaces=SurfaceMixing(**{k: tuple(x) if isinstance(x, list) else x for k, x in _section(v, "surfaces").items()}),
         limits=PlausibilityLimits(**_section(v, "limits")),
+        convergence=ConvergenceConfig(**_section(v, "convergence")),  # rate_hz: the pipeline uses rate
+        outputs=OutputConfig(**_section(v, "outputs")),
     )
 
 
@@ -558,6 +603,7 @@ def node_config(params: dict[str, Any] | None = None) -> NodeConfig:
         state_save_period=v["state_save_period"],
         diagnostics_period=v["diagnostics_period"],
         frame_id=v["frame_id"],
+        diagnostics_window=v["diagnostics_window"],
     )
 
 

@@ -8,23 +8,40 @@ ordered key-values. The node only converts them into a ``diagnostic_msgs/Diagnos
 
 Three statuses, named ``rls_estimator: ...``:
 
-* ``inputs``: per stream ``required``, ``publishers``, ``rate_hz``, ``age_s``, ``received``,
-  ``accepted``, ``expired``, ``missing``, ``rejected.<reason>``. WARN when a required stream
-  is silent or stale (older than ``max(1 s, 2 max_gap)``; with a hint when no publisher
-  matched), when anything was rejected, or when messages are missing.
+* ``inputs``: ``recent_window_s``, then per stream ``required``, ``publishers``, ``rate_hz``,
+  ``age_s``, the cumulative ``received``, ``accepted``, ``expired``, ``missing``, the counts of
+  the recent window ``recent.rejected``, ``recent.missing``, ``recent.expired``, and the
+  cumulative ``rejected.<reason>``. WARN when a required stream is silent or stale (older than
+  ``max(1 s, 2 max_gap)``; with a hint when no publisher matched), or when messages were
+  rejected, missing or expired *within the recent window*: one dropped packet warns for
+  ``window_s`` seconds, not for the rest of the flight (the cumulative counters stay beside).
 * ``samples``: ``enabled``, ``samples_formed``, ``samples_used``, ``samples_pending``,
   ``samples_rejected.<reason>``, ``resets.<reason>``, ``unknown_joint.<name>``, callback
   latency and CPU percentiles of the period, ``state_file``. Always OK.
-* ``model M``: the model fit; OK when ready, and while initializing OK until the first
-  sample is used, WARN after (the regressors are not informative).
+* ``model M``: the model fit, and the convergence flags when the node hands them in
+  (``converged``, ``converged_parameters``); OK when ready, and while initializing OK until
+  the first sample is used, WARN after (the regressors are not informative).
 
-Levels are cumulative today (a stream that ever rejected a message stays WARN). The policy is
-a small stateful object fed one snapshot per period and keeps the previous one, so levels
-computed over a recent window can be added beside the cumulative counters.
+**The window.** The policy keeps, per snapshot, the steady time (the sum of ``elapsed_s``)
+and each stream's rejected, missing and expired totals. The recent counts are the current
+totals minus those of the newest snapshot at least ``window_s`` old (the node's start before
+the first ``window_s`` seconds), so the window spans ``window_s`` to ``window_s`` plus one
+period; the history holds about ``window_s / period`` small tuples.
+
+**Bounded size.** Whatever arrives, each table of names (a stream's rejection reasons,
+rejected samples, resets, unknown joints) shows at most ``max_keys`` entries, the largest
+counts first, then ``<table>_other_names`` and ``<table>_other_count`` for the rest; a name
+is cut to :data:`MAX_NAME` characters (with a hash, so keys stay unique) and unprintable
+characters become ``?``; a value is cut to :data:`MAX_VALUE` characters. The ``inputs`` status
+holds at most ``1 + 5 (13 + max_keys)`` key-values, ``samples`` at most ``10 + 3 (2 +
+max_keys)``.
 """
 
 from __future__ import annotations
 
+import heapq
+import zlib
+from collections import deque
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 
@@ -42,7 +59,14 @@ __all__ = [
     "percentile",
     "malformed_reason",
     "malformed_warning",
+    "MAX_KEYS",
+    "MAX_NAME",
+    "MAX_VALUE",
 ]
+
+MAX_KEYS = 16  # entries shown per table of names (rejection reasons, unknown joints, ...)
+MAX_NAME = 64  # characters of a name inside a key
+MAX_VALUE = 1024  # characters of a value
 
 # diagnostic_msgs/DiagnosticStatus levels (the message defines them as bytes 0..3).
 OK, WARN, ERROR, STALE = 0, 1, 2, 3
@@ -119,27 +143,78 @@ def _ms(seconds: float) -> str:
     return f"{1e3 * seconds:.3f}"
 
 
+def _name(text: str) -> str:
+    """A name (a joint, a reason) as it appears in a key: printable and at most MAX_NAME
+    characters. A name that had to change (cut, or unprintable characters replaced by ``?``)
+    ends in a hash of the whole, so keys stay unique."""
+    if len(text) <= MAX_NAME and text.isprintable():
+        return text
+    head = "".join(c if c.isprintable() else "?" for c in text[: MAX_NAME - 12])
+    return f"{head}...#{zlib.crc32(text.encode('utf-8', 'surrogatepass')):08x}"
+
+
+def _table(prefix: str, counts: Mapping[str, int], max_keys: int, noun: str) -> list[tuple[str, object]]:
+    """``prefix.<name>`` for the ``max_keys`` largest counts (ties by name), sorted by name, then
+    ``prefix_other_<noun>`` and ``prefix_other_count`` for the rest."""
+    if len(counts) <= max_keys:
+        shown = sorted(counts.items())
+    else:
+        shown = sorted(heapq.nsmallest(max_keys, counts.items(), key=lambda kv: (-kv[1], kv[0])))
+    kv: list[tuple[str, object]] = [(f"{prefix}.{_name(name)}", n) for name, n in shown]
+    if len(shown) < len(counts):
+        kv += [(f"{prefix}_other_{noun}", len(counts) - len(shown)),
+               (f"{prefix}_other_count", sum(counts.values()) - sum(n for _, n in shown))]
+    return kv
+
+
 class DiagnosticsPolicy:
     """Turns one :class:`Snapshot` per period into the node's statuses.
 
     Stateful: input rates are the received-count differences between consecutive snapshots
-    over ``elapsed_s`` (the first period counts from zero). :attr:`previous` is the last
-    snapshot handed in.
+    over ``elapsed_s`` (the first period counts from zero), and levels come from the counts of
+    the last ``window_s`` seconds (see the module docstring). :attr:`previous` is the last
+    snapshot handed in. ``max_keys`` bounds every table of names.
     """
 
-    def __init__(self, node_name: str = NODE_NAME) -> None:
+    def __init__(self, node_name: str = NODE_NAME, window_s: float = 10.0, max_keys: int = MAX_KEYS) -> None:
+        if not window_s > 0:
+            raise ValueError(f"window_s must be positive, got {window_s!r}")
+        if max_keys < 1:
+            raise ValueError(f"max_keys must be at least 1, got {max_keys!r}")
         self.node_name = node_name
+        self.window_s = float(window_s)
+        self.max_keys = int(max_keys)
         self.previous: Snapshot | None = None
+        self._time = 0.0  # steady seconds since the policy started (sum of elapsed_s)
+        # (time, {stream: (rejected, missing, expired)}) of earlier snapshots, oldest first;
+        # the start counts as a snapshot with every total zero.
+        self._history: deque[tuple[float, dict[str, tuple[int, int, int]]]] = deque([(0.0, {})])
 
     def update(self, snap: Snapshot) -> list[Status]:
         """The statuses of this period: ``inputs``, ``samples``, then one per model."""
-        statuses = [self._inputs(snap), self._samples(snap)]
+        self._time += max(snap.elapsed_s, 0.0)
+        totals = {kind: (sum(s["rejected"].values()), s["missing"], s["expired"])
+                  for kind, s in snap.counters["streams"].items()}
+        baseline = self._baseline()
+        statuses = [self._inputs(snap, totals, baseline), self._samples(snap)]
         statuses += [self._model(name, fit, snap) for name, fit in snap.models]
+        self._history.append((self._time, totals))
         self.previous = snap
         return statuses
 
+    def _baseline(self) -> dict[str, tuple[int, int, int]]:
+        """The totals of the newest snapshot at least ``window_s`` old; older ones are dropped."""
+        history, cut = self._history, self._time - self.window_s
+        while len(history) > 1 and history[1][0] <= cut:
+            history.popleft()
+        return history[0][1]
+
     def _status(self, name: str, level: int, message: str, values: list[tuple[str, object]]) -> Status:
-        return Status(f"{self.node_name}: {name}", level, message, tuple((k, str(v)) for k, v in values),
+        def text(v: object) -> str:
+            t = str(v)
+            return t if len(t) <= MAX_VALUE else t[: MAX_VALUE - 3] + "..."
+
+        return Status(f"{self.node_name}: {name}", level, text(message), tuple((k, text(v)) for k, v in values),
                       hardware_id=self.node_name)
 
     def _received_before(self, kind: str) -> int:
@@ -148,10 +223,12 @@ class DiagnosticsPolicy:
         stream = self.previous.counters["streams"].get(kind)
         return stream["received"] if stream else 0
 
-    def _inputs(self, snap: Snapshot) -> Status:
+    def _inputs(self, snap: Snapshot, totals: Mapping[str, tuple[int, int, int]],
+                baseline: Mapping[str, tuple[int, int, int]]) -> Status:
         period = max(snap.elapsed_s, 1e-9)
         limit = stale_after(snap.max_gap)
-        kv: list[tuple[str, object]] = []
+        window = f"in the last {self.window_s:g} s"
+        kv: list[tuple[str, object]] = [("recent_window_s", f"{self.window_s:g}")]
         problems: list[str] = []
         for kind, s in snap.counters["streams"].items():
             needed = kind in snap.required
@@ -159,6 +236,9 @@ class DiagnosticsPolicy:
             newest = s["newest_stamp_ns"]
             age = (snap.now_ns - newest) * 1e-9 if newest is not None else None
             publishers = snap.publishers[kind]
+            now, before = totals[kind], baseline.get(kind, (0, 0, 0))
+            # Counters only grow; one that went down restarted, and counts from zero.
+            rejected, missing, expired = (n - b if n >= b else n for n, b in zip(now, before, strict=True))
             kv += [
                 (f"{kind}.required", needed),
                 (f"{kind}.publishers", publishers),
@@ -168,17 +248,23 @@ class DiagnosticsPolicy:
                 (f"{kind}.accepted", s["accepted"]),
                 (f"{kind}.expired", s["expired"]),
                 (f"{kind}.missing", s["missing"]),
+                (f"{kind}.recent.rejected", rejected),
+                (f"{kind}.recent.missing", missing),
+                (f"{kind}.recent.expired", expired),
             ]
-            kv += [(f"{kind}.rejected.{reason}", n) for reason, n in sorted(s["rejected"].items())]
+            kv += _table(f"{kind}.rejected", s["rejected"], self.max_keys, "reasons")
             if needed and (age is None or age > limit):
                 problems.append(f"{kind} {'silent' if age is None else f'stale ({age:.1f} s)'}")
                 if publishers == 0:
                     problems.append(f"no publisher matched on {snap.topics[kind]} "
                                     f"(none running, or incompatible QoS: qos.reliable={snap.reliable})")
-            if s["rejected"]:
-                problems.append(f"{kind} rejected {sum(s['rejected'].values())}")
-            if s["missing"]:
-                problems.append(f"{kind} missing about {s['missing']} (stamp gaps: lost in transport?)")
+            if rejected:
+                problems.append(f"{kind} rejected {rejected} {window}")
+            if missing:
+                problems.append(f"{kind} missing about {missing} {window} (stamp gaps: lost in transport?)")
+            if expired:
+                problems.append(f"{kind} expired {expired} {window} (buffered, never used: another stream "
+                                "lagging, or a reset)")
         level = WARN if problems else OK
         return self._status("inputs", level, "; ".join(problems) or "all inputs fresh", kv)
 
@@ -190,9 +276,9 @@ class DiagnosticsPolicy:
             ("samples_used", c["samples_used"]),
             ("samples_pending", c["samples_pending"]),
         ]
-        kv += [(f"samples_rejected.{reason}", n) for reason, n in sorted(c["samples_rejected"].items())]
-        kv += [(f"resets.{reason}", n) for reason, n in sorted(c["resets"].items())]
-        kv += [(f"unknown_joint.{joint}", n) for joint, n in sorted(c["unknown_joints"].items())]
+        kv += _table("samples_rejected", c["samples_rejected"], self.max_keys, "reasons")
+        kv += _table("resets", c["resets"], self.max_keys, "reasons")
+        kv += _table("unknown_joint", c["unknown_joints"], self.max_keys, "names")
         if snap.latencies_s:
             lat, cpu = sorted(snap.latencies_s), sorted(snap.cpu_times_s)
             kv += [
@@ -214,6 +300,13 @@ class DiagnosticsPolicy:
     def _model(self, name: str, fit: Mapping, snap: Snapshot) -> Status:
         if fit["ready"]:
             text = f"R^2 {fit['r_squared']:.3f}, residual lag-1 correlation {fit['residual_rho1']:.2f}"
+            if "converged" in fit:
+                if fit["converged"]:
+                    text += "; converged"
+                elif fit.get("converged_parameters"):
+                    text += f"; converged: {fit['converged_parameters']}"
+                else:
+                    text += "; not converged"
             level = OK
         else:
             text = "initializing: regressors not yet informative"

@@ -2,12 +2,16 @@
 
 The node only converts, schedules and publishes: messages are decoded by :mod:`.cdr` and go
 through :func:`.messages.feed` (the code the offline replay runs), and every completed sample is
-published as ``~/M/estimates``, ``~/M/standard_errors`` (corrected, Eqs. 20/22) and
-``~/M/standard_errors_conventional`` (Eq. 13) for each ready model M, each a
-``std_msgs/Float64MultiArray`` whose ``layout.dim[0].label`` names the parameters, preceded
-by ``~/sample_stamp`` (``std_msgs/Header``) carrying the sample's time. ``/diagnostics``
-reports input rates and ages, the fate of every message and sample, model fit and latency:
-the statuses are computed by :mod:`.diagnostics` from a snapshot the node takes each period.
+published as ``~/M/estimates``, ``~/M/standard_errors`` (corrected, Eqs. 20/22),
+``~/M/standard_errors_conventional`` (Eq. 13) and ``~/M/converged`` (1/0 per parameter) for
+each ready model M, and on every ``outputs.covariance_decimation``-th grid point
+``~/M/covariance`` and ``~/M/covariance_conventional`` (n x n): each a
+``std_msgs/Float64MultiArray`` whose ``layout.dim[0].label`` names the parameters and whose
+last dim's label is the sample's stamp (:meth:`.pipeline.PublishedArray.dims`), preceded by
+``~/sample_stamp`` (``std_msgs/Header``) carrying the sample's time. ``/diagnostics`` reports
+input rates and ages, the fate of every message and sample, model fit, convergence and
+latency: the statuses are computed by :mod:`.diagnostics` from a snapshot the node takes each
+period.
 
 Parameters (declared with descriptions and ranges; see :data:`.config.PARAMETERS`), the
 ``~/reset`` and ``~/enable`` services, an optional state file, ``use_sim_time`` and
@@ -33,11 +37,12 @@ from rclpy.qos import QoSHistoryPolicy, QoSProfile, QoSReliabilityPolicy, qos_pr
 from std_msgs.msg import Float64MultiArray, Header
 from std_srvs.srv import SetBool, Trigger
 
-from .cdr import decode, encode_float64_multiarray, encode_header
+from .cdr import decode, encode_float64_multiarray, encode_float64_multiarray_dims, encode_header
 from .config import PARAMETERS, ConfigError, node_config, pipeline_config
 from .diagnostics import DiagnosticsPolicy, Snapshot, malformed_reason, malformed_warning
-from .messages import ARRAY_OUTPUTS, INPUTS, MESSAGE_TYPES, NODE_NAME, feed, message_class, stamp_label
-from .pipeline import Pipeline, StateFileError
+from .messages import INPUTS, MESSAGE_TYPES, NODE_NAME, feed, message_class, stamp_label
+from .pipeline import MODEL_OUTPUTS, Pipeline, StateFileError
+from .state_file import set_aside
 
 __all__ = ["EstimatorNode", "main", "NODE_NAME"]
 
@@ -47,8 +52,11 @@ _TYPES = {kind: message_class(MESSAGE_TYPES[kind]) for kind in INPUTS}
 # (``<stream>.publishers`` is 0 and the stream is reported silent).
 _NO_EVENTS = PublisherEventCallbacks(use_default_callbacks=False)
 _NO_SUB_EVENTS = SubscriptionEventCallbacks(use_default_callbacks=False)
-# Settings that change subscriptions or QoS: read-only, they need a restart.
+# Settings that change subscriptions or QoS: read-only, they need a restart. So does the state
+# file: the node only ever writes the one it checked at start-up (it never replaces a file it
+# has not read).
 _READ_ONLY_PREFIXES = ("topics.", "qos.")
+_READ_ONLY_NAMES = ("state_file",)
 
 
 def _descriptor(spec) -> ParameterDescriptor:
@@ -60,7 +68,7 @@ def _descriptor(spec) -> ParameterDescriptor:
             d.floating_point_range = [FloatingPointRange(from_value=float(spec.low), to_value=float(spec.high), step=0.0)]
         else:
             d.integer_range = [IntegerRange(from_value=int(spec.low), to_value=int(spec.high), step=1)]
-    d.read_only = spec.name.startswith(_READ_ONLY_PREFIXES)
+    d.read_only = spec.name.startswith(_READ_ONLY_PREFIXES) or spec.name in _READ_ONLY_NAMES
     return d
 
 
@@ -89,7 +97,7 @@ class EstimatorNode(Node):
         self._latencies: list[float] = []  # wall time from message to last publish
         self._cpu_times: list[float] = []  # CPU time of the same (without preemption)
         self._malformed_logged: set[str] = set()  # inputs whose first malformed message was logged
-        self._diagnostics = DiagnosticsPolicy(NODE_NAME)
+        self._diagnostics = DiagnosticsPolicy(NODE_NAME, window_s=self.node_cfg.diagnostics_window)
         self._last_diag = time.monotonic()
 
         self._out_qos = QoSProfile(depth=self.node_cfg.depth, reliability=QoSReliabilityPolicy.RELIABLE,
@@ -149,6 +157,7 @@ class EstimatorNode(Node):
         new = pipeline_config(values)
         self.node_cfg = node_config(values)
         self.pipeline.enabled = self.node_cfg.enabled
+        self._diagnostics.window_s = self.node_cfg.diagnostics_window
         if new != self.config:
             changed = ", ".join(sorted(p.name for p in params))
             old_fp, new_fp = self.config.fingerprint(), new.fingerprint()
@@ -162,15 +171,15 @@ class EstimatorNode(Node):
         wanted = {m.output for m in self.config.models}
         for name in list(self._model_pubs):
             if name not in wanted:
-                for pub in self._model_pubs.pop(name):
+                for pub in self._model_pubs.pop(name).values():
                     self.destroy_publisher(pub)
         for m in self.config.models:
             if m.output not in self._model_pubs:
-                self._model_pubs[m.output] = tuple(
-                    self.create_publisher(Float64MultiArray, f"~/{m.output}/{suffix}", self._out_qos,
-                                          event_callbacks=_NO_EVENTS)
-                    for suffix in ARRAY_OUTPUTS
-                )
+                self._model_pubs[m.output] = {
+                    suffix: self.create_publisher(Float64MultiArray, f"~/{m.output}/{suffix}", self._out_qos,
+                                                  event_callbacks=_NO_EVENTS)
+                    for suffix in MODEL_OUTPUTS
+                }
 
     # ------------------------------------------------------------------ data path
     def _callback(self, kind: str):
@@ -206,16 +215,21 @@ class EstimatorNode(Node):
             self.get_logger().warning(malformed_warning(self._subs[kind].topic_name, exc))
 
     def _publish(self, out) -> None:
-        """``~/sample_stamp``, then each ready model's three arrays. The messages are
-        serialized by :mod:`.cdr` (byte-identical to rosbags' serialization and read back by
-        rclpy, checked in test_cdr.py) and published raw: converting 19 Python messages per
-        sample cost more CPU and latency than the estimation."""
+        """``~/sample_stamp``, then each ready model's arrays
+        (:meth:`.pipeline.Pipeline.published_arrays`). The messages are serialized by
+        :mod:`.cdr` (byte-identical to rosbags' serialization and read back by rclpy, checked
+        in test_cdr.py) and published raw: converting 25 Python messages per sample cost more
+        CPU and latency than the estimation."""
         sec, nanosec = divmod(out.stamp_ns, 1_000_000_000)
         self._stamp_pub.publish(encode_header(sec, nanosec, self.node_cfg.frame_id))
         when = stamp_label(out.stamp_ns)
-        for name, label, theta, se, se_conv in self.pipeline.published(out):
-            for pub, values in zip(self._model_pubs[name], (theta, se, se_conv)):
-                pub.publish(encode_float64_multiarray(label, values.tolist(), when))
+        pubs = self._model_pubs
+        for a in self.pipeline.published_arrays(out):
+            if len(a.shape) == 1:
+                raw = encode_float64_multiarray(a.names, a.data.tolist(), when)
+            else:
+                raw = encode_float64_multiarray_dims(a.dims(when), a.data.tolist())
+            pubs[a.model][a.suffix].publish(raw)
 
     # ------------------------------------------------------------------ services, time
     def _on_reset(self, request, response):
@@ -252,21 +266,36 @@ class EstimatorNode(Node):
 
     # ------------------------------------------------------------------ state file
     def _load_state(self) -> None:
-        path = self.node_cfg.state_file
+        """Resume from ``state_file`` when it holds this configuration's state. A file that
+        exists but cannot be used (corrupt, crafted, another configuration's) is renamed aside
+        (:func:`.state_file.set_aside`) so that the fresh state saved later never replaces it;
+        if it cannot be moved, nothing is saved this run."""
+        path = self._state_path = self.node_cfg.state_file
         if not path:
             return
-        if not os.path.exists(path):
+        if not os.path.lexists(path):
             self.state_status = f"state file {path} not found: starting fresh"
             return
         try:
             self.pipeline.load_state(path)
-            self.state_status = f"resumed from {path} ({self.pipeline.bank.k} samples)"
         except StateFileError as exc:
-            self.state_status = f"state file ignored: {exc}"
-            self.get_logger().warning(self.state_status)
+            reason = str(exc)
+        else:
+            self.state_status = f"resumed from {path} ({self.pipeline.bank.k} samples)"
+            return
+        try:
+            aside = set_aside(path)
+        except OSError as exc:
+            self._state_path = ""
+            self.state_status = (f"state file ignored: {reason}; it could not be moved aside ({exc}), so it is "
+                                 "left as it is and no state is saved this run")
+            self.get_logger().error(self.state_status)
+            return
+        self.state_status = f"state file ignored: {reason}; kept as {aside}; a fresh state will be saved to {path}"
+        self.get_logger().warning(self.state_status)
 
     def save_state(self) -> None:
-        path = self.node_cfg.state_file
+        path = self._state_path
         if path:
             try:
                 self.pipeline.save_state(path)
@@ -274,13 +303,18 @@ class EstimatorNode(Node):
                 self.get_logger().error(f"cannot save state to {path}: {exc}")
 
     # ------------------------------------------------------------------ diagnostics
+    def _model_report(self, j: int) -> dict:
+        """The fit of model ``j`` and, once it is ready, its newest convergence flags."""
+        fit = self.pipeline.model_fit(j)
+        return {**fit, **self.pipeline.convergence(j)} if fit["ready"] else fit
+
     def _publish_diagnostics(self) -> None:
         """One :class:`.diagnostics.Snapshot` per period in, one ``DiagnosticArray`` out."""
         now_ns = self.get_clock().now().nanoseconds
         wall = time.monotonic()
         snapshot = Snapshot(
             counters=self.pipeline.counters(),
-            models=[(m.output, self.pipeline.model_fit(j)) for j, m in enumerate(self.config.models)],
+            models=[(m.output, self._model_report(j)) for j, m in enumerate(self.config.models)],
             required=tuple(self.pipeline.required),
             max_gap=self.config.inputs.max_gap,
             now_ns=now_ns,

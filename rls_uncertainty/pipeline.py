@@ -16,7 +16,10 @@ coordinates the modules that do the work:
    ``lag`` samples late but time-aligned.
 4. :mod:`.aero` converts the sample to aircraft body axes (:func:`.aero.aircraft_sample`),
    then Eq. 1 coefficients and Eq. 2 regressors feed one :class:`.estimator.EstimatorBank`
-   (Eqs. 15-22), and each used sample yields a :class:`SampleOutput`.
+   (Eqs. 15-22), and each used sample yields a :class:`SampleOutput`: estimates, standard
+   errors, per-parameter convergence flags (:mod:`.convergence`, one monitor reset with the
+   estimator) and, every ``outputs.covariance_decimation`` grid points, the full covariances.
+   :meth:`Pipeline.published_arrays` lists what the node publishes (and the replay writes).
 
 Every formed sample ends as used or as rejected with a reason, and every message as accepted
 or rejected: :class:`Bookkeeping` holds every counter, :meth:`Pipeline.counters` reports them
@@ -34,7 +37,8 @@ from __future__ import annotations
 
 import math
 from collections import Counter, deque
-from dataclasses import dataclass, field
+from collections.abc import Iterator
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import NamedTuple
 
@@ -42,17 +46,25 @@ import numpy as np
 
 from .aero import RATES, aircraft_sample, coefficients, flight_state, regressors
 from .config import PipelineConfig
+from .convergence import ConvergenceMonitor
 from .differentiation import FixedLagDifferentiator
 from .errors import NonFiniteInput, StateFileError
 from .estimator import EstimatorBank
-from .messages import INPUTS
 from .estimator.state_file import EstimatorState, load_state, save_state
+from .messages import ARRAY_OUTPUTS, INPUTS
 from .sampling import Sample, Sampler, Skipped, Stream, StreamCounts
 from .surface_mixing import SURFACES, SurfaceMixer
 
-__all__ = ["Pipeline", "SampleOutput", "Bookkeeping", "STREAMS", "StateFileError", "count_bounded"]
+__all__ = [
+    "Pipeline", "SampleOutput", "PublishedArray", "MODEL_OUTPUTS", "Bookkeeping", "STREAMS", "StateFileError",
+    "count_bounded",
+]
 
 STREAMS = INPUTS
+# Every array published per model M as ~/M/<suffix> (std_msgs/Float64MultiArray), in the
+# order :meth:`Pipeline.published_arrays` yields them: the three of ARRAY_OUTPUTS, the
+# convergence flags, then (decimated) the two covariance matrices.
+MODEL_OUTPUTS = (*ARRAY_OUTPUTS, "converged", "covariance", "covariance_conventional")
 
 # Bounds of the tables keyed by what arrives (issue 12 item 5): a flood of distinct JointState
 # names or caller-given reasons adds one overflow key, not a key each.
@@ -79,6 +91,13 @@ class SampleOutput(NamedTuple):
     ``ready`` yet (exact initialization still waiting) and the padding are NaN. ``ready`` is
     false too for a model whose estimates or standard errors are not all finite (withheld,
     counted in ``outputs_withheld``): a ready row is safe to publish.
+    ``converged`` ``(M, n_max)`` and ``model_converged`` ``(M,)`` are the
+    :class:`.convergence.ConvergenceMonitor` flags (False on padding and models not ready; a
+    model is converged when all its parameters are). ``covariance`` is ``None``, or on the
+    samples whose grid index is a multiple of ``outputs.covariance_decimation`` the
+    ``(2, M, n_max, n_max)`` corrected (``[0]``) and conventional (``[1]``) covariances
+    (:meth:`.estimator.EstimatorBank.covariance`, the corrected one repaired to positive
+    semi-definite; symmetrized), NaN off the ready models' parameters.
     """
 
     stamp_ns: int
@@ -87,10 +106,37 @@ class SampleOutput(NamedTuple):
     se: np.ndarray
     se_conventional: np.ndarray
     ready: np.ndarray
+    converged: np.ndarray
+    model_converged: np.ndarray
+    covariance: np.ndarray | None = None
 
     @property
     def time(self) -> float:
         return self.stamp_ns * 1e-9
+
+
+class PublishedArray(NamedTuple):
+    """One array the node publishes for a sample: ``~/<model>/<suffix>`` with ``data`` (flat,
+    row-major float64) of ``shape`` ``(n,)`` or ``(n, n)`` over the parameters ``names``
+    (comma-separated, as in ``layout.dim[0].label``)."""
+
+    model: str
+    suffix: str
+    names: str
+    shape: tuple[int, ...]
+    data: np.ndarray
+
+    def dims(self, stamp: str) -> list[tuple[str, int, int]]:
+        """The ``std_msgs/MultiArrayLayout`` dims ``(label, size, stride)``, row-major as ROS
+        defines them: one per axis labelled with the parameter names, then ``(stamp, 1, 1)``
+        with ``stamp`` the sample's :func:`.messages.stamp_label` (the stamp is always in the
+        last dim)."""
+        dims = [(self.names, size, 0) for size in self.shape] + [(stamp, 1, 1)]
+        stride = 1
+        for i in range(len(dims) - 1, -1, -1):
+            stride *= dims[i][1]
+            dims[i] = (dims[i][0], dims[i][1], stride)
+        return dims
 
 
 def _new_stream_counts() -> dict[str, StreamCounts]:
@@ -166,6 +212,11 @@ class Pipeline:
         self.limits = config.limits
         self.frame_id = config.inputs.frame_id  # read by messages.feed
         self._index = 0
+        self._monitor = ConvergenceMonitor(self.sizes, replace(config.convergence, rate_hz=config.rate))
+        self._cov_every = config.outputs.covariance_decimation
+        self._published_models = [(m.output, label, n, (n,), (n, n))
+                                  for m, label, n in zip(config.models, self.labels, self.sizes, strict=True)]
+        self._period_ns = config.period_ns
         self._new_estimator()
         self._diff = FixedLagDifferentiator(config.differentiator, 1.0 / config.rate, width=3)
         self._lag = config.differentiator.lag
@@ -200,6 +251,8 @@ class Pipeline:
         self._zsum = np.zeros(len(self.sizes))  # sums of z and z^2 since the estimator started
         self._zsq = np.zeros(len(self.sizes))
         self._withheld = np.zeros(len(self.sizes), dtype=bool)  # the last output's, per model
+        self._monitor.reset()
+        self._converged = self._monitor._none()  # the newest sample's flags
 
     @property
     def samples_used(self) -> int:
@@ -414,19 +467,72 @@ class Pipeline:
             for j in np.flatnonzero(bad):
                 book.outputs_withheld[self._outputs[j]] += 1
             ready &= ~bad
-        return SampleOutput(stamp_ns=t, index=self._index, theta=theta, se=se, se_conventional=se_conv, ready=ready)
+        self._converged = flags, model_flags = self._monitor.update(t, theta, se, ready)
+        every = self._cov_every
+        return SampleOutput(
+            stamp_ns=t,
+            index=self._index,
+            theta=theta,
+            se=se,
+            se_conventional=se_conv,
+            ready=ready,
+            converged=flags,
+            model_converged=model_flags,
+            covariance=self._covariances(ready) if every and (t // self._period_ns) % every == 0 else None,
+        )
+
+    def _covariances(self, ready: np.ndarray) -> np.ndarray:
+        """``(2, M, n_max, n_max)``: corrected and conventional covariances of the ready models
+        now, made exactly symmetric (``(C + C')/2``: the products leave rounding-level
+        asymmetry), NaN elsewhere. Computed only on the samples that publish them."""
+        n = self.bank.n_max
+        cov = np.full((2, len(self.sizes), n, n), np.nan)
+        for j in np.flatnonzero(ready):
+            s = self.sizes[j]
+            for k, kind in enumerate(("corrected", "conventional")):
+                c = self.bank.covariance(int(j), kind)
+                if np.diag(c).min() < 0.0:
+                    # Only at an exact fit (the initialization sample), whose R(0) comes out
+                    # as a tiny negative number: zero, as its standard errors are.
+                    c = np.zeros_like(c)
+                cov[k, j, :s, :s] = 0.5 * (c + c.T)
+        return cov
 
     def published(self, out: SampleOutput):
         """What the node publishes (and the replay writes) for a sample, per ready model:
         ``(output, label, estimates, corrected SEs, conventional SEs)``. Models still
         initializing, and models whose outputs are not all finite (withheld when the output
         was made, counted in ``outputs_withheld``), yield nothing; the rows are checked again
-        here, so no NaN or infinity ever leaves the pipeline."""
+        here, so no NaN or infinity ever leaves the pipeline. :meth:`published_arrays` gives
+        every array, the convergence flags and covariances too."""
         for j, (name, label, n) in enumerate(zip(self._outputs, self.labels, self.sizes)):
             if out.ready[j]:
                 rows = out.theta[j, :n], out.se[j, :n], out.se_conventional[j, :n]
                 if all(map(math.isfinite, rows[0].tolist() + rows[1].tolist() + rows[2].tolist())):
                     yield name, label, *rows
+
+    def published_arrays(self, out: SampleOutput) -> Iterator[PublishedArray]:
+        """Every array published for a sample, as :class:`PublishedArray`, per ready model in
+        the order of :data:`MODEL_OUTPUTS`: ``estimates``, ``standard_errors``,
+        ``standard_errors_conventional``, ``converged`` (1.0 or 0.0 per parameter; the model
+        is converged when all are 1), and when ``out.covariance`` is set ``covariance`` and
+        ``covariance_conventional`` (n x n, row-major). Models still initializing publish
+        nothing (no NaN leaves the pipeline)."""
+        cov = out.covariance
+        ready = out.ready.tolist()
+        theta, se, se_conv = out.theta, out.se, out.se_conventional
+        flags = out.converged.astype(np.float64)
+        new = PublishedArray._make
+        for j, (name, label, n, vector, square) in enumerate(self._published_models):
+            if not ready[j]:
+                continue
+            yield new((name, "estimates", label, vector, theta[j, :n]))
+            yield new((name, "standard_errors", label, vector, se[j, :n]))
+            yield new((name, "standard_errors_conventional", label, vector, se_conv[j, :n]))
+            yield new((name, "converged", label, vector, flags[j, :n]))
+            if cov is not None:
+                yield new((name, "covariance", label, square, cov[0, j, :n, :n].ravel()))
+                yield new((name, "covariance_conventional", label, square, cov[1, j, :n, :n].ravel()))
 
     # ------------------------------------------------------------------ lifecycle
     def reset(self, reason: str, *, clear_inputs: bool = True) -> None:
@@ -493,12 +599,23 @@ class Pipeline:
         return {
             "ready": True,
             "samples": bank.k,
+            # The residual autocorrelation lags the corrected covariance uses now (Eq. 22: at
+            # most estimator.lags). Hook for automatic lag selection: report its per-model
+            # choice here.
+            "lags": bank.n_window - 1,
             "r_squared": float(r2),
             "residual_rho1": float(rho[0]) if rho.size else float("nan"),
             "lags_outside_2sigma": float(np.mean(np.abs(rho) > bound)) if rho.size else float("nan"),
             "repairs": int(bank.repairs[j]),
             "outputs_withheld": withheld,
         }
+
+    def convergence(self, j: int) -> dict:
+        """The newest sample's convergence flags of model ``j`` for diagnostics: ``converged``
+        (the model flag) and ``converged_parameters`` (the names, comma-separated)."""
+        flags, model_flags = self._converged
+        names = [p for p, f in zip(self.parameter_names[j], flags[j], strict=False) if f]
+        return {"converged": bool(model_flags[j]), "converged_parameters": ",".join(names)}
 
     def counters(self) -> dict:
         """Bookkeeping for diagnostics: messages per stream and samples, with reasons."""
@@ -522,9 +639,16 @@ class Pipeline:
 
     def load_state(self, path: str | Path) -> None:
         """Continue from :meth:`save_state`. Raises :class:`StateFileError` when the file is
-        unreadable or was written with another configuration."""
-        state = load_state(path, self.config.fingerprint())
+        unreadable, not a valid state or was written with another configuration (every field is
+        checked against this pipeline's configuration before anything is allocated)."""
+        c, bank = self.config.estimator, self.bank
+        expect = {"sizes": list(self.sizes), "n_lags": c.n_lags, "window": c.window, "forgetting": c.forgetting,
+                  "residual": c.residual, "init_condition": bank.init_condition}
+        state = load_state(path, self.config.fingerprint(), expect=expect)
         self.bank = state.bank
         self.bookkeeping.samples_used = state.samples_used
         self._zsum = state.output_sum
         self._zsq = state.output_sum_squares
+        # The convergence history restarts: flags need window seconds of the resumed estimates.
+        self._monitor.reset()
+        self._converged = self._monitor._none()

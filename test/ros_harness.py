@@ -15,7 +15,8 @@ from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.qos import QoSHistoryPolicy, QoSProfile, QoSReliabilityPolicy
 from std_msgs.msg import Float64MultiArray, Header
 
-from rls_uncertainty.messages import ARRAY_OUTPUTS, INPUTS, MESSAGE_TYPES, NODE_NAME, message_class
+from rls_uncertainty.messages import INPUTS, MESSAGE_TYPES, NODE_NAME, message_class
+from rls_uncertainty.pipeline import MODEL_OUTPUTS
 
 ROOT = Path(__file__).resolve().parents[1]
 TYPES = {kind: message_class(MESSAGE_TYPES[kind]) for kind in INPUTS}
@@ -62,7 +63,7 @@ class RosTester:
         self.diagnostics: list = []
         self.subs = []
         for m in models:
-            for suffix in ARRAY_OUTPUTS:
+            for suffix in MODEL_OUTPUTS:
                 self._record(Float64MultiArray, f"/{NODE_NAME}/{m}/{suffix}")
         self._record(Header, f"/{NODE_NAME}/sample_stamp")
         self.subs.append(self.node.create_subscription(DiagnosticArray, "/diagnostics", self.diagnostics.append, 50))

@@ -358,3 +358,43 @@ def test_random_multiarrays_encode_byte_identical_to_rosbags():
         assert got == serialize(_multiarray(label, data, second), "std_msgs/msg/Float64MultiArray")
         back = STORE.deserialize_cdr(got, "std_msgs/msg/Float64MultiArray")
         assert [bits(x) for x in back.data] == [bits(x) for x in data]
+
+
+def _layout_array(dims, data, data_offset=0):
+    Dim = T["std_msgs/msg/MultiArrayDimension"]
+    return T["std_msgs/msg/Float64MultiArray"](
+        layout=T["std_msgs/msg/MultiArrayLayout"](dim=[Dim(label=lb, size=sz, stride=st) for lb, sz, st in dims],
+                                                  data_offset=data_offset),
+        data=np.array(data, dtype=np.float64))
+
+
+def test_the_layout_encoder_equals_rosbags_and_rclpy_on_a_covariance():
+    """The node's n x n covariance layout: dims (names, n, n*n), (names, n, n), (stamp, 1, 1)."""
+    from rclpy.serialization import deserialize_message
+    from std_msgs.msg import Float64MultiArray
+
+    names = "Cm_0,Cm_alpha,Cm_q,Cm_delta_e"
+    dims = [(names, 4, 16), (names, 4, 4), ("stamp:1767225600.140000000", 1, 1)]
+    data = [float(i) * 1e-3 - 0.002 for i in range(16)]
+    got = cdr.encode_float64_multiarray_dims(dims, data)
+    assert got == serialize(_layout_array(dims, data), "std_msgs/msg/Float64MultiArray")
+    back = deserialize_message(got, Float64MultiArray)
+    assert [(d.label, d.size, d.stride) for d in back.layout.dim] == dims
+    assert back.layout.data_offset == 0 and list(back.data) == data
+    # The vector layout through either encoder is the same bytes.
+    assert cdr.encode_float64_multiarray_dims([("a,b", 2, 2), ("s", 1, 1)], [1.0, 2.0]) == \
+        cdr.encode_float64_multiarray("a,b", [1.0, 2.0], "s")
+
+
+def test_random_layouts_encode_byte_identical_to_rosbags():
+    rng = random.Random(9)
+    for _ in range(N_RANDOM):
+        dims = [(rand_text(rng, 40), rng.randint(0, UINT32_MAX), rng.randint(0, UINT32_MAX))
+                for _ in range(rng.choice((0, 1, 2, 3, rng.randint(0, 8))))]
+        data = [rand_float(rng) for _ in range(rng.choice((0, 1, 4, 9, rng.randint(0, 40))))]
+        offset = rng.choice((0, rng.randint(0, UINT32_MAX)))
+        got = cdr.encode_float64_multiarray_dims(dims, data, offset)
+        assert got == serialize(_layout_array(dims, data, offset), "std_msgs/msg/Float64MultiArray")
+        back = STORE.deserialize_cdr(got, "std_msgs/msg/Float64MultiArray")
+        assert [(d.label, d.size, d.stride) for d in back.layout.dim] == dims and back.layout.data_offset == offset
+        assert [bits(x) for x in back.data] == [bits(x) for x in data]

@@ -85,7 +85,9 @@ def test_input_keys_per_stream_in_order_with_rejections_sorted():
     imu = [(k, v) for k, v in s.values if k.startswith("imu.")]
     assert imu == [("imu.required", "True"), ("imu.publishers", "1"), ("imu.rate_hz", "14.0"),
                    ("imu.age_s", "0.020"), ("imu.received", "7"), ("imu.accepted", "4"), ("imu.expired", "1"),
-                   ("imu.missing", "0"), ("imu.rejected.duplicate", "1"), ("imu.rejected.out_of_order", "2")]
+                   ("imu.missing", "0"), ("imu.recent.rejected", "3"), ("imu.recent.missing", "0"),
+                   ("imu.recent.expired", "1"), ("imu.rejected.duplicate", "1"), ("imu.rejected.out_of_order", "2")]
+    assert s.values[0] == ("recent_window_s", "10")
     # Streams in the counters' order, each block starting with its required flag.
     firsts = [k.split(".")[0] for k, _ in s.values if k.endswith(".required")]
     assert firsts == list(INPUTS)
@@ -139,8 +141,8 @@ def test_rejected_and_missing_messages_warn_with_totals_in_stream_order():
                   "control_surfaces": stream(received=8, rejected={"mismatched_arrays": 1})})
     s = statuses(snapshot(c))["inputs"]
     assert s.level == WARN
-    assert s.message == ("imu rejected 3; airspeed missing about 4 (stamp gaps: lost in transport?); "
-                         "control_surfaces rejected 1")
+    assert s.message == ("imu rejected 3 in the last 10 s; airspeed missing about 4 in the last 10 s (stamp gaps: "
+                         "lost in transport?); control_surfaces rejected 1 in the last 10 s")
     v = values(s)
     assert (v["imu.rejected.malformed: error"], v["imu.rejected.non_finite"], v["imu.accepted"]) == ("1", "2", "27")
     assert v["airspeed.missing"] == "4"
@@ -150,8 +152,8 @@ def test_problems_of_one_stream_are_listed_together():
     c = counters({"airspeed": stream(received=4, rejected={"duplicate": 1}, missing=2, newest=NOW - 5 * SEC)})
     s = statuses(snapshot(c, publishers={"airspeed": 0}))["inputs"]
     assert s.message == ("airspeed stale (5.0 s); no publisher matched on /airspeed (none running, or incompatible "
-                         "QoS: qos.reliable=False); airspeed rejected 1; airspeed missing about 2 (stamp gaps: lost in "
-                         "transport?)")
+                         "QoS: qos.reliable=False); airspeed rejected 1 in the last 10 s; airspeed missing about 2 in "
+                         "the last 10 s (stamp gaps: lost in transport?)")
 
 
 # ------------------------------------------------------------------ rates
@@ -274,7 +276,136 @@ def test_statuses_from_a_real_pipeline():
     assert v["imu.rejected.duplicate"] == "1" and v["imu.rate_hz"] == "14.0" and v["imu.age_s"] == "0.000"
     assert v["airspeed.age_s"] == "never received"
     assert out["inputs"].level == WARN
-    assert out["inputs"].message.startswith("imu rejected 2; airspeed silent")
+    assert out["inputs"].message.startswith("imu rejected 2 in the last 10 s; airspeed silent")
     assert out["samples"].message == "0 of 0 samples used"
     assert [n for n in out if n.startswith("model")] == [f"model {m.output}" for m in config.models]
     assert all(s.level == OK for n, s in out.items() if n.startswith("model"))
+
+
+# ------------------------------------------------------------------ levels from a recent window (issue 13)
+def _run(policy, periods, *, elapsed=1.0):
+    """Feed one snapshot per entry of ``periods`` (each a counters dict); the inputs statuses."""
+    return [statuses(snapshot(c, elapsed=elapsed), policy)["inputs"] for c in periods]
+
+
+def test_one_dropped_packet_warns_for_the_window_then_clears_with_the_cumulative_count_kept():
+    """A long flight: one IMU packet lost at the start; WARN for exactly the window (10
+    periods of 1 s), OK for the rest of the hour, and imu.missing keeps saying 1."""
+    policy = DiagnosticsPolicy(window_s=10.0)
+    clean = counters({"imu": stream(received=100)})
+    dropped = counters({"imu": stream(received=100, missing=1)})
+    out = _run(policy, [clean] + [dropped] * 3600)
+    levels = [s.level for s in out]
+    assert levels[0] == OK
+    assert levels[1:11] == [WARN] * 10  # the drop happened in period 1; baselines t <= now - 10 s
+    assert set(levels[11:]) == {OK}
+    assert out[5].message == "imu missing about 1 in the last 10 s (stamp gaps: lost in transport?)"
+    end = values(out[-1])
+    assert (end["imu.missing"], end["imu.recent.missing"], out[-1].message) == ("1", "0", "all inputs fresh")
+    assert len(policy._history) <= 12  # the window's snapshots, not the flight's
+
+
+def test_rejections_and_expiries_in_the_window_warn_and_are_counted_beside_the_totals():
+    policy = DiagnosticsPolicy(window_s=3.0)
+    seq = [counters({"imu": stream(received=10 * (i + 1), rejected={"out_of_order": r}, expired=e)})
+           for i, (r, e) in enumerate([(0, 0), (2, 0), (2, 0), (2, 0), (2, 0), (5, 4), (5, 4), (5, 4), (5, 4), (5, 4)])]
+    out = _run(policy, seq)
+    recent = [(values(s)["imu.recent.rejected"], values(s)["imu.recent.expired"]) for s in out]
+    assert recent == [("0", "0"), ("2", "0"), ("2", "0"), ("2", "0"), ("0", "0"), ("3", "4"), ("3", "4"),
+                      ("3", "4"), ("0", "0"), ("0", "0")]
+    assert [s.level for s in out] == [OK, WARN, WARN, WARN, OK, WARN, WARN, WARN, OK, OK]
+    assert out[5].message == ("imu rejected 3 in the last 3 s; imu expired 4 in the last 3 s (buffered, never used: "
+                              "another stream lagging, or a reset)")
+    assert values(out[-1])["imu.rejected.out_of_order"] == "5" and values(out[-1])["imu.expired"] == "4"
+
+
+def test_the_window_follows_the_steady_time_of_irregular_periods():
+    policy = DiagnosticsPolicy(window_s=10.0)
+    _run(policy, [counters({"airspeed": stream(received=5, rejected={"duplicate": 1})})], elapsed=0.5)
+    # 9 s later: still inside the window; 10.5 s after the rejection: the baseline holds it.
+    s = _run(policy, [counters({"airspeed": stream(received=9, rejected={"duplicate": 1})})], elapsed=9.0)[0]
+    assert s.level == WARN and values(s)["airspeed.recent.rejected"] == "1"
+    s = _run(policy, [counters({"airspeed": stream(received=9, rejected={"duplicate": 1})})], elapsed=1.5)[0]
+    assert s.level == OK and values(s)["airspeed.recent.rejected"] == "0"
+
+
+def test_a_counter_that_restarted_counts_from_zero():
+    policy = DiagnosticsPolicy(window_s=100.0)
+    _run(policy, [counters({"imu": stream(received=50, missing=7)})])
+    s = _run(policy, [counters({"imu": stream(received=3, missing=2)})])[0]
+    assert values(s)["imu.recent.missing"] == "2"
+
+
+def test_stale_streams_warn_whatever_the_window():
+    policy = DiagnosticsPolicy(window_s=0.5)
+    c = counters({"airspeed": stream(received=5, newest=NOW - 3 * SEC)})
+    assert [s.level for s in _run(policy, [c] * 5)] == [WARN] * 5
+
+
+@pytest.mark.parametrize("bad", [dict(window_s=0.0), dict(window_s=-1.0), dict(max_keys=0)])
+def test_policy_settings_are_checked(bad):
+    with pytest.raises(ValueError):
+        DiagnosticsPolicy(**bad)
+
+
+# ------------------------------------------------------------------ bounded size (issue 12 item 5)
+def _size(status):
+    return len(status.name) + len(status.message) + sum(len(k) + len(v) for k, v in status.values)
+
+
+def test_every_status_stays_bounded_whatever_arrives():
+    """10 000 unknown joints with 10 kB names, 500 rejection reasons on every stream, 300
+    sample-rejection and reset reasons: each table shows MAX_KEYS entries (the largest
+    counts) and the rest as two overflow keys; each status stays a few kB."""
+    joints = {f"joint_{i:05d}_" + "x" * 10_000: 1 + i % 7 for i in range(10_000)}
+    reasons = {f"malformed: Error{i}": 1 + i for i in range(500)}
+    c = counters({k: stream(received=10_000, rejected=reasons) for k in INPUTS},
+                 samples_rejected={f"reason_{i}": i + 1 for i in range(300)}, resets={f"r{i}": 1 for i in range(300)},
+                 unknown=joints)
+    out = statuses(snapshot(c, state="x" * 100_000))
+    inputs, samples = out["inputs"], out["samples"]
+    assert len(inputs.values) <= 1 + 5 * (13 + dg.MAX_KEYS)
+    assert len(samples.values) <= 10 + 3 * (2 + dg.MAX_KEYS)
+    assert _size(inputs) < 20_000 and _size(samples) < 10_000
+    for s in (inputs, samples):
+        assert len({k for k, _ in s.values}) == len(s.values)  # keys unique
+    v = values(inputs)
+    shown = [k for k in v if k.startswith("imu.rejected.")]
+    assert len(shown) == dg.MAX_KEYS
+    assert sorted(int(v[k]) for k in shown) == list(range(485, 501))  # the largest counts
+    assert v["imu.rejected_other_reasons"] == "484"
+    assert int(v["imu.rejected_other_count"]) == sum(range(1, 485))
+    assert "imu rejected " + str(sum(reasons.values())) in inputs.message  # the total, not the shown part
+    w = values(samples)
+    assert w["unknown_joint_other_names"] == str(10_000 - dg.MAX_KEYS)
+    assert int(w["unknown_joint_other_count"]) + sum(int(w[k]) for k in w if k.startswith("unknown_joint.")) == \
+        sum(joints.values())
+    assert all(len(k) <= len("unknown_joint.") + dg.MAX_NAME for k in w if k.startswith("unknown_joint."))
+    assert len(w["state_file"]) == dg.MAX_VALUE and w["state_file"].endswith("...")
+
+
+def test_tables_within_the_limit_are_shown_whole_and_sorted():
+    c = counters(unknown={"flap": 3, "canard": 1})
+    kv = statuses(snapshot(c))["samples"].values
+    assert [k for k, _ in kv if "joint" in k] == ["unknown_joint.canard", "unknown_joint.flap"]
+
+
+def test_names_are_printable_short_and_unique():
+    long_a, long_b = "a" * 100 + "1", "a" * 100 + "2"
+    c = counters(unknown={long_a: 1, long_b: 1, "tab\there": 1, "tab\nhere": 1, "ok_name": 1})
+    keys = [k for k, _ in statuses(snapshot(c))["samples"].values if k.startswith("unknown_joint.")]
+    assert len(set(keys)) == 5 and "unknown_joint.ok_name" in keys
+    assert all(k.isprintable() and len(k) <= len("unknown_joint.") + dg.MAX_NAME for k in keys)
+
+
+# ------------------------------------------------------------------ convergence in the model status
+@pytest.mark.parametrize("conv,suffix", [
+    ({"converged": True, "converged_parameters": "CZ_0,CZ_alpha"}, "; converged"),
+    ({"converged": False, "converged_parameters": "CZ_0"}, "; converged: CZ_0"),
+    ({"converged": False, "converged_parameters": ""}, "; not converged"),
+    ({}, ""),
+])
+def test_a_ready_model_says_which_parameters_converged(conv, suffix):
+    s = statuses(snapshot(counters(used=512), models=[("CZ", {**FIT, **conv})]))["model CZ"]
+    assert (s.level, s.message) == (OK, "R^2 0.912, residual lag-1 correlation 0.12" + suffix)
+    assert dict(s.values).get("converged_parameters") == conv.get("converged_parameters")

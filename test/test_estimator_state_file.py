@@ -1,15 +1,23 @@
 """The estimator state file (rls_uncertainty.estimator.state_file): a saved bank continues bit for bit,
 files of another configuration or format, corrupt or missing files are refused by name, no
-pickle is involved, and a failed save leaves the previous file as it was."""
+pickle is involved, and a failed save leaves the previous file as it was. Crafted files (meta
+of the wrong type, missing keys, absurd counters, wrong-length arrays, zip entries that would
+inflate) are refused with one StateFileError naming the field, before anything large is
+allocated; a refused file can be set aside without overwriting anything."""
 
+import io
 import json
+import os
+import tracemalloc
+import zipfile
+from datetime import UTC, datetime
 
 import numpy as np
 import pytest
 
 from rls_uncertainty.errors import StateFileError
 from rls_uncertainty.estimator import EstimatorBank
-from rls_uncertainty.estimator.state_file import EstimatorState, load_state, save_state
+from rls_uncertainty.estimator.state_file import EstimatorState, load_state, save_state, set_aside, state_layout
 
 FINGERPRINT = {"aircraft": [1.0, 2.0], "models": [["CZ", "1", "alpha", "delta_e"], ["Cm", "1", "q_hat"]], "n_lags": 10}
 
@@ -30,6 +38,35 @@ def saved(tmp_path):
     path = tmp_path / "state.npz"
     save_state(path, EstimatorState(bank, 300, z.sum(axis=0), (z * z).sum(axis=0)), FINGERPRINT)
     return path
+
+
+def contents(path):
+    """The arrays and the decoded meta of a state file (read by numpy, as a person would)."""
+    with np.load(path) as data:
+        arrays = {k: data[k] for k in data.files}
+    return arrays, json.loads(str(arrays.pop("meta")))
+
+
+def write(path, meta, arrays, *, meta_array=None):
+    np.savez(path, meta=np.array(json.dumps(meta)) if meta_array is None else meta_array, **arrays)
+    return path
+
+
+def npy(arr):
+    buf = io.BytesIO()
+    np.lib.format.write_array(buf, np.asarray(arr), allow_pickle=True)
+    return buf.getvalue()
+
+
+def refused(path, *needles, fingerprint=FINGERPRINT, **kw):
+    with pytest.raises(StateFileError) as info:
+        load_state(path, fingerprint, **kw)
+    text = str(info.value)
+    assert text.startswith(f"{path}: ")
+    for needle in needles:
+        assert needle in text, text
+    assert "\n" not in text and len(text) < 400 + len(str(path))
+    return text
 
 
 def test_a_saved_state_continues_bit_identically(tmp_path):
@@ -89,24 +126,27 @@ def test_unreadable_missing_and_foreign_files_are_refused_by_name(tmp_path):
         load_state(old, FINGERPRINT)
 
 
-@pytest.mark.parametrize("damage", ["drop_array", "reshape_array", "short_zsum", "no_samples_used"])
-def test_an_inconsistent_state_is_refused(tmp_path, damage):
+@pytest.mark.parametrize("damage,field", [
+    ("drop_array", "field 'arrays.lag_sums' is missing"),
+    ("reshape_array", "field 'arrays.lag_sums' has shape (2, 10), the configuration implies (2, 11)"),
+    ("short_zsum", "field 'zsum' must be a list of 2 numbers"),
+    ("no_samples_used", "field 'samples_used' is missing"),
+])
+def test_an_inconsistent_state_is_refused_naming_the_field(tmp_path, damage, field):
     path = saved(tmp_path)
-    with np.load(path) as data:
-        arrays = {k: data[k] for k in data.files}
-    meta = json.loads(str(arrays.pop("meta")))
+    arrays, meta = contents(path)
     if damage == "drop_array":
-        arrays.pop("dispersion")
+        arrays.pop("lag_sums")
     elif damage == "reshape_array":
-        arrays["dispersion"] = arrays["dispersion"][..., :-1]
+        arrays["lag_sums"] = arrays["lag_sums"][..., :-1]
     elif damage == "short_zsum":
         meta["zsum"] = meta["zsum"][:1]
     else:
         del meta["samples_used"]
-    broken = tmp_path / "broken.npz"
-    np.savez(broken, meta=np.array(json.dumps(meta)), **arrays)
-    with pytest.raises(StateFileError, match="inconsistent"):
+    broken = write(tmp_path / "broken.npz", meta, arrays)
+    with pytest.raises(StateFileError) as info:
         load_state(broken, FINGERPRINT)
+    assert str(info.value) == f"{broken}: {field}" or str(info.value).startswith(f"{broken}: {field}")
 
 
 def test_a_failed_save_leaves_the_previous_file_and_no_temporary(tmp_path):
@@ -120,3 +160,344 @@ def test_a_failed_save_leaves_the_previous_file_and_no_temporary(tmp_path):
     # A successful save replaces it.
     save_state(path, EstimatorState(bank, 1, z.sum(axis=0), z.sum(axis=0)), FINGERPRINT)
     assert load_state(path, FINGERPRINT).samples_used == 1
+
+
+# ------------------------------------------------------------------ crafted files (issue 12)
+@pytest.mark.parametrize("meta,needle", [
+    ([1, 2], "field 'meta' must be a JSON object, found a list of 2 items"),
+    ("just text", "field 'meta' must be a JSON object, found str 'just text'"),
+    (None, "field 'meta' must be a JSON object"),
+    (3, "field 'meta' must be a JSON object"),
+    ({}, "field 'format' is missing"),
+    ({"format": "3"}, "state format str '3'"),
+])
+def test_meta_that_is_not_an_object_or_lacks_the_format_is_refused(tmp_path, meta, needle):
+    arrays, _ = contents(saved(tmp_path))
+    refused(write(tmp_path / "c.npz", meta, arrays), needle)
+
+
+def _with(meta, dotted, value):
+    meta = json.loads(json.dumps(meta))
+    *parents, last = dotted.split(".")
+    target = meta
+    for p in parents:
+        target = target[p]
+    if value is KeyError:
+        del target[last]
+    else:
+        target[last] = value
+    return meta
+
+
+@pytest.mark.parametrize("dotted,value,needle", [
+    ("bank_config", KeyError, "field 'bank_config' is missing"),
+    ("bank_counters", "k=3", "field 'bank_counters' must be a JSON object, found str"),
+    ("extra", 1, "field 'extra' is not part of a state file"),
+    ("bank_config.sizes", "3,2", "field 'bank_config.sizes' must be a list"),
+    ("bank_config.sizes", [3, 2.5], "field 'bank_config.sizes[1]' must be an integer"),
+    ("bank_config.sizes", [3, 10**9], "field 'bank_config.sizes[1]' must be in [1, 64]"),
+    ("bank_config.sizes", [3], "field 'bank_config.sizes' is [3], the configuration has [3, 2]"),
+    ("bank_config.n_lags", "10", "field 'bank_config.n_lags' must be an integer"),
+    ("bank_config.n_lags", 11, "field 'bank_config.n_lags' is 11, the configuration has 10"),
+    ("bank_config.window", "hann", "field 'bank_config.window' must be one of"),
+    ("bank_config.forgetting", 1.5, "field 'bank_config.forgetting' must be in (0, 1]"),
+    ("bank_config.forgetting", None, "field 'bank_config.forgetting' must be a number"),
+    ("bank_config.init_condition", 0.5, "field 'bank_config.init_condition' must be > 1"),
+    ("bank_config.residual", KeyError, "field 'bank_config.residual' is missing"),
+    ("bank_counters.k", -1, "field 'bank_counters.k' must be in [0, "),
+    ("bank_counters.k", True, "field 'bank_counters.k' must be an integer, found bool"),
+    ("bank_counters.n_eff", 1e300, "field 'bank_counters.n_eff' must be in [0, k = 300]"),
+    ("bank_counters.cap", 10**12, "field 'bank_counters.cap' is 1000000000000; 10 lags after 300 samples hold 11"),
+    ("bank_counters.cap", [], "field 'bank_counters.cap' must be an integer, found a list"),
+    ("samples_used", -5, "field 'samples_used' must be in [0, "),
+    ("samples_used", 1.0, "field 'samples_used' must be an integer"),
+    ("zsum", [1.0, "x"], "field 'zsum[1]' must be a number"),
+    ("zsq", [1.0, -2.0], "field 'zsq' must not be negative"),
+    ("zsum", {"a": 1}, "field 'zsum' must be a list of 2 numbers"),
+])
+def test_every_meta_field_is_checked_by_type_and_range(tmp_path, dotted, value, needle):
+    arrays, meta = contents(saved(tmp_path))
+    expect = {"sizes": [3, 2], "n_lags": 10}  # what the configuration continues with
+    refused(write(tmp_path / "c.npz", _with(meta, dotted, value), arrays), needle, expect=expect)
+
+
+def test_json_nan_and_deep_nesting_are_refused(tmp_path):
+    arrays, meta = contents(saved(tmp_path))
+    meta["zsum"] = [float("nan"), 1.0]
+    refused(write(tmp_path / "nan.npz", meta, arrays), "field 'zsum[0]' must be finite")
+    deep = "[" * 100_000 + "]" * 100_000
+    refused(write(tmp_path / "deep.npz", None, arrays, meta_array=np.array(deep)), "field 'meta' is not valid JSON")
+    refused(write(tmp_path / "num.npz", None, arrays, meta_array=np.arange(3.0)), "field 'meta' has shape (3,)")
+
+
+@pytest.mark.parametrize("name", ["dispersion", "theta", "inv_s", "ready", "ready_at", "repairs", "x", "y", "v",
+                                  "lag_sums", "lag_products"])
+def test_every_array_of_the_wrong_length_or_dtype_is_refused(tmp_path, name):
+    arrays, meta = contents(saved(tmp_path))
+    good = arrays[name]
+    arrays[name] = good[..., :-1] if good.shape[-1] > 1 else np.concatenate([good, good])
+    text = refused(write(tmp_path / "short.npz", meta, arrays), f"field 'arrays.{name}' ")
+    # Refused from the entry's declared size when it is too far off, else from its header.
+    assert f"has shape {arrays[name].shape}" in text or "declares" in text
+    arrays[name] = good.astype(np.float32 if good.dtype != np.float32 else np.float64)
+    text = refused(write(tmp_path / "dtype.npz", meta, arrays), f"field 'arrays.{name}' ")
+    assert "has dtype" in text or "declares" in text
+
+
+def test_arrays_of_another_window_count_are_refused(tmp_path):
+    """The history windows must hold min(k, cap) samples: a state claiming fewer samples
+    (its k lowered) no longer matches its histories, and is refused before from_state."""
+    arrays, meta = contents(saved(tmp_path))
+    meta["bank_counters"]["k"] = 5
+    meta["bank_counters"]["n_eff"] = 5.0
+    meta["bank_counters"]["cap"] = 11
+    refused(write(tmp_path / "c.npz", meta, arrays), "field 'arrays.v' has shape (2, 11), the configuration "
+            "implies (2, 5)")
+
+
+def test_non_finite_values_and_counters_out_of_range_are_refused(tmp_path):
+    arrays, meta = contents(saved(tmp_path))
+    q = arrays["lag_products"].copy()
+    q[0, 1, 2, 2] = np.nan
+    refused(write(tmp_path / "nan.npz", meta, {**arrays, "lag_products": q}),
+            "field 'arrays.lag_products' holds NaN or infinite")
+    refused(write(tmp_path / "at.npz", meta, {**arrays, "ready_at": np.array([1, 301])}),
+            "field 'arrays.ready_at' must hold counts in [0, 300]")
+    refused(write(tmp_path / "rep.npz", meta, {**arrays, "repairs": np.array([0, -1])}), "field 'arrays.repairs'")
+
+
+def test_entries_that_are_not_the_state_are_refused(tmp_path):
+    arrays, meta = contents(saved(tmp_path))
+    refused(write(tmp_path / "extra.npz", meta, {**arrays, "evil": np.zeros(3)}),
+            "field 'arrays.evil' is not part of this configuration's state")
+    refused(write(tmp_path / "obj.npz", meta, {**arrays, "lag_sums": np.array([object()] * 22).reshape(2, 11)}),
+            "field 'arrays.lag_sums' has dtype |O, not plain numbers")
+    path = tmp_path / "names.npz"
+    with zipfile.ZipFile(path, "w") as zf:
+        zf.writestr("meta.npy", npy(np.array(json.dumps(meta))))
+        zf.writestr("../escape.npy", npy(np.zeros(1)))
+    refused(path, "entry '../escape.npy' is not a numpy array of a state")
+    with zipfile.ZipFile(path, "w") as zf:
+        zf.writestr("meta.npy", npy(np.array(json.dumps(meta))))
+        for i in range(40):
+            zf.writestr(f"a{i}.npy", b"")
+    refused(path, "41 entries (a state has at most 32)")
+    with zipfile.ZipFile(path, "w") as zf:
+        zf.writestr("lag_sums.npy", npy(arrays["lag_sums"]))
+    refused(path, "field 'meta' is missing (not a state file)")
+
+
+def test_a_compressed_entry_is_never_inflated(tmp_path):
+    """256 MB of zeros deflate to about 250 kB; the file is refused from its directory entry,
+    without reading (or allocating) any of it."""
+    arrays, meta = contents(saved(tmp_path))
+    path = tmp_path / "bomb.npz"
+    with zipfile.ZipFile(path, "w") as zf:
+        zf.writestr("meta.npy", npy(np.array(json.dumps(meta))))
+        for name, arr in arrays.items():
+            if name != "lag_products":
+                zf.writestr(f"{name}.npy", npy(arr))
+        with zf.open("lag_products.npy", "w", force_zip64=True) as fh:
+            fh.write(npy(np.zeros((2, 3, 11, 3)))[:128])
+        info = zipfile.ZipInfo("big.npy")
+        info.compress_type = zipfile.ZIP_DEFLATED
+        with zf.open(info, "w", force_zip64=True) as fh:
+            chunk = bytes(1 << 20)
+            for _ in range(256):
+                fh.write(chunk)
+    assert path.stat().st_size < 1 << 20
+    tracemalloc.start()
+    try:
+        refused(path, "entry 'big.npy' is compressed")
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak < 2 << 20
+
+
+def test_declared_sizes_larger_than_the_file_are_refused_before_reading(tmp_path):
+    arrays, meta = contents(saved(tmp_path))
+    path = write(tmp_path / "lie.npz", meta, arrays)
+    data = bytearray(path.read_bytes())
+    # Make the central directory declare a 4 GB lag_products entry (uncompressed and compressed size).
+    with zipfile.ZipFile(path) as zf:
+        q = zf.getinfo("lag_products.npy")
+    cd = data.rfind(b"PK\x01\x02" + data[data.find(b"PK\x01\x02") + 4: data.find(b"PK\x01\x02") + 4])
+    i = data.find(b"lag_products.npy", data.find(b"PK\x01\x02")) - 46
+    assert data[i:i + 4] == b"PK\x01\x02" and cd >= 0
+    data[i + 20:i + 28] = (0xFFFF0000).to_bytes(4, "little") * 2
+    path.write_bytes(bytes(data))
+    tracemalloc.start()
+    try:
+        refused(path, "its entries declare", f"the file holds {len(data)}")
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak < 2 << 20 and q.file_size < 10_000
+
+
+def test_a_header_declaring_a_huge_shape_is_refused_before_reading(tmp_path):
+    """An absurd capacity, consistent in meta, implies arrays larger than the file: refused
+    from the declared entry sizes; and an entry whose npy header lies about its shape is
+    refused from the header, before numpy allocates it."""
+    arrays, meta = contents(saved(tmp_path))
+    big = _with(meta, "bank_config.n_lags", 10**7 - 1)
+    big["bank_counters"]["cap"] = 10**7
+    fp = {**FINGERPRINT, "n_lags": 10**7 - 1}
+    big["fingerprint"] = fp
+    tracemalloc.start()
+    try:
+        # Counters implying far more state than the file holds: refused before anything is
+        # allocated for them.
+        refused(write(tmp_path / "cap.npz", big, arrays), "bank_counters.cap", "implies about", fingerprint=fp)
+        path = tmp_path / "header.npz"
+        with zipfile.ZipFile(path, "w") as zf:
+            zf.writestr("meta.npy", npy(np.array(json.dumps(meta))))
+            for name, arr in arrays.items():
+                raw = npy(arr)
+                if name == "lag_sums":
+                    header = np.lib.format.header_data_from_array_1_0(arr)
+                    header["shape"] = (2, 10**12)
+                    buf = io.BytesIO()
+                    np.lib.format.write_array_header_1_0(buf, header)
+                    raw = buf.getvalue() + raw[len(buf.getvalue()):]
+                zf.writestr(f"{name}.npy", raw)
+        refused(path, "field 'arrays.lag_sums' has shape (2, 1000000000000), the configuration implies (2, 11)")
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak < 8 << 20
+
+
+@pytest.mark.parametrize("content,needle", [
+    (b"", "not a zip archive"),
+    (b"PK\x03\x04" + bytes(100), "not a zip archive"),
+])
+def test_garbage_is_refused_as_unreadable(tmp_path, content, needle):
+    path = tmp_path / "g.npz"
+    path.write_bytes(content)
+    refused(path, "not a readable state file", needle)
+    refused(tmp_path, "not a readable state file")
+
+
+def test_a_corrupted_byte_in_an_array_fails_the_crc(tmp_path):
+    path = saved(tmp_path)
+    data = bytearray(path.read_bytes())
+    with zipfile.ZipFile(path) as zf:
+        info = zf.getinfo("lag_products.npy")
+    data[info.header_offset + 30 + len("lag_products.npy") + 200] ^= 0xFF
+    path.write_bytes(bytes(data))
+    refused(path, "not a readable state file", "CRC")
+
+
+def test_expect_must_match_the_files_bank_configuration(tmp_path):
+    path = saved(tmp_path)
+    assert load_state(path, FINGERPRINT, expect={"sizes": (3, 2), "n_lags": 10, "window": "truncated"}).bank.k == 300
+    refused(path, "field 'bank_config.window' is 'truncated', the configuration has 'bartlett'",
+            expect={"window": "bartlett"})
+
+
+def test_big_endian_arrays_load_and_continue_identically(tmp_path):
+    bank, _z = fed_bank()
+    path = saved(tmp_path)
+    arrays, meta = contents(path)
+    swapped = {k: v.astype(v.dtype.newbyteorder(">")) for k, v in arrays.items()}
+    state = load_state(write(tmp_path / "be.npz", meta, swapped), FINGERPRINT)
+    np.testing.assert_array_equal(state.bank.theta_all(), bank.theta_all())
+    np.testing.assert_array_equal(state.bank.standard_errors_all(), bank.standard_errors_all())
+
+
+@pytest.mark.parametrize("kw,n", [
+    (dict(n_lags=10), 5), (dict(n_lags=10), 300), (dict(n_lags=0), 50), (dict(n_lags=None), 40),
+    (dict(n_lags=None), 200), (dict(n_lags=7, forgetting=0.98), 100), (dict(n_lags=5, window="bartlett"), 1),
+])
+def test_the_layout_table_is_the_estimators_state(kw, n):
+    """state_layout() describes exactly what EstimatorBank.state() writes for the current
+    format (a new estimator layout must be added to the table)."""
+    rng = np.random.default_rng(1)
+    bank = EstimatorBank((3, 2, 4), **kw)
+    for _ in range(n):
+        bank.update(rng.standard_normal((3, 4)), rng.standard_normal(3))
+    s = bank.state()
+    layout = state_layout(s["format"], s["config"], s["counters"], waiting=not s["arrays"]["ready"].all())
+    assert layout is not None, f"state format {s['format']} has no layout in state_file.state_layout"
+    assert {k: (v.shape, v.dtype) for k, v in s["arrays"].items()} == {
+        k: (shape, dtype.newbyteorder("=")) for k, (shape, dtype) in layout.items()}
+
+
+def test_a_state_with_all_lags_round_trips(tmp_path):
+    rng = np.random.default_rng(2)
+    bank = EstimatorBank((3, 2), None, forgetting=0.99)
+    for _ in range(150):
+        bank.update(rng.standard_normal((2, 3)), rng.standard_normal(2))
+    path = tmp_path / "all.npz"
+    save_state(path, EstimatorState(bank, 150, np.zeros(2), np.ones(2)), FINGERPRINT)
+    state = load_state(path, FINGERPRINT, expect={"sizes": [3, 2], "n_lags": None, "forgetting": 0.99})
+    assert state.bank.state()["counters"] == {"k": 150, "n_eff": bank.n_eff, "cap": 256}
+    np.testing.assert_array_equal(state.bank.standard_errors_all(), bank.standard_errors_all())
+
+
+# ------------------------------------------------------------------ writing safely, setting aside
+def test_a_planted_temporary_symlink_is_never_written_through(tmp_path):
+    victim = tmp_path / "victim.txt"
+    victim.write_text("precious")
+    path = tmp_path / "state.npz"
+    for planted in ("state.npz.tmp", ".state.npz.tmp", "state.npz.partial"):
+        os.symlink(victim, tmp_path / planted)
+    bank, z = fed_bank()
+    save_state(path, EstimatorState(bank, 300, z.sum(axis=0), (z * z).sum(axis=0)), FINGERPRINT)
+    assert victim.read_text() == "precious"
+    assert load_state(path, FINGERPRINT).samples_used == 300
+    # A symlink at the state path itself is replaced by the new file, its target untouched.
+    link = tmp_path / "linked.npz"
+    os.symlink(victim, link)
+    save_state(link, EstimatorState(bank, 300, z.sum(axis=0), (z * z).sum(axis=0)), FINGERPRINT)
+    assert victim.read_text() == "precious" and not link.is_symlink()
+
+
+def test_the_new_file_is_fsynced_before_the_rename(tmp_path, monkeypatch):
+    calls = []
+    real_fsync, real_replace = os.fsync, os.replace
+    monkeypatch.setattr(os, "fsync", lambda fd: (calls.append(("fsync", os.path.realpath(f"/proc/self/fd/{fd}"))),
+                                                 real_fsync(fd))[1])
+    monkeypatch.setattr(os, "replace", lambda a, b: (calls.append(("replace", str(a), str(b))), real_replace(a, b))[1])
+    bank, z = fed_bank()
+    path = tmp_path / "state.npz"
+    save_state(path, EstimatorState(bank, 1, z.sum(axis=0), z.sum(axis=0)), FINGERPRINT)
+    kinds = [c[0] for c in calls]
+    assert kinds[:2] == ["fsync", "replace"], calls
+    tmp = calls[1][1]
+    assert calls[0][1] == tmp and calls[1][2] == str(path)
+    assert os.path.dirname(tmp) == str(tmp_path) and os.path.basename(tmp).startswith(".state.npz.")
+
+
+def test_set_aside_never_overwrites(tmp_path):
+    now = datetime(2026, 3, 4, 5, 6, 7, tzinfo=UTC)
+    path = tmp_path / "state.npz"
+    taken = tmp_path / "state.npz.rejected-20260304T050607Z"
+    taken.write_text("an earlier rejected file")
+    path.write_text("rejected now")
+    moved = set_aside(path, now)
+    assert moved == tmp_path / "state.npz.rejected-20260304T050607Z-1"
+    assert moved.read_text() == "rejected now" and taken.read_text() == "an earlier rejected file"
+    assert not path.exists()
+    # A symlink is moved as the link; its target stays where it is.
+    target = tmp_path / "elsewhere.npz"
+    target.write_text("target")
+    os.symlink(target, path)
+    moved = set_aside(path, now)
+    assert moved.is_symlink() and os.readlink(moved) == str(target) and target.read_text() == "target"
+
+
+def test_set_aside_without_hard_links_still_keeps_every_file(tmp_path, monkeypatch):
+    def no_links(*a, **k):
+        raise PermissionError(1, "Operation not permitted")
+
+    monkeypatch.setattr(os, "link", no_links)
+    now = datetime(2026, 3, 4, 5, 6, 7, tzinfo=UTC)
+    path = tmp_path / "state.npz"
+    (tmp_path / "state.npz.rejected-20260304T050607Z").write_text("old")
+    path.write_text("new")
+    moved = set_aside(path, now)
+    assert moved.name.endswith("-1") and moved.read_text() == "new"
+    assert (tmp_path / "state.npz.rejected-20260304T050607Z").read_text() == "old"

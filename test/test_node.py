@@ -1,13 +1,18 @@
 """The estimator node in its own process, talking real DDS on loopback to this test process:
-outputs equal the offline replay, labels, diagnostics, bad and malformed input, parameters,
-services, state file, simulated time; and main() leaves DDS discovery to the environment."""
+outputs equal the offline replay (estimates, standard errors, convergence flags and the
+decimated covariances against bank.covariance), labels and layouts, diagnostics, bad and
+malformed input, parameters, services, state file (a refused file is kept), simulated time,
+the consumer example; and main() leaves DDS discovery to the environment."""
 
 from __future__ import annotations
 
+import io
+import json
 import math
 import os
 import subprocess
 import sys
+import zipfile
 
 import numpy as np
 import pytest
@@ -18,13 +23,15 @@ from rcl_interfaces.srv import SetParameters
 from rosgraph_msgs.msg import Clock
 from std_srvs.srv import SetBool, Trigger
 
-from ros_harness import ROOT, NodeProcess, RosTester, to_rclpy
 from rls_uncertainty.bags import read_inputs
 from rls_uncertainty.config import load_parameters_file, pipeline_config
 from rls_uncertainty.messages import MESSAGE_TYPES, feed, parse_stamp_label
 from rls_uncertainty.messages import NODE_NAME as NODE
 from rls_uncertainty.pipeline import Pipeline
 from rls_uncertainty.replay import run_pipeline
+from rls_uncertainty.state_file import load_state
+
+from ros_harness import ROOT, NodeProcess, RosTester, to_rclpy
 
 BUNDLED = ROOT / "bags" / "t2_maneuver"
 T2 = str(ROOT / "config" / "t2.yaml")
@@ -76,6 +83,33 @@ def _arrays(tester, model, suffix):
     return tester.outputs[f"/{NODE}/{model}/{suffix}"]
 
 
+def _stamp(msg):
+    return parse_stamp_label(msg.layout.dim[-1].label)
+
+
+def _offline_covariances(bag, config):
+    """A Pipeline fed the messages one by one, and for each sample that publishes covariances
+    ``{stamp: {model index: (corrected, conventional)}}``: bank.covariance itself when the
+    sample was the last its message completed (the bank is still there), else the pipeline's."""
+    pipe = Pipeline(config)
+    cov = {}
+    for kind, _s, msg in bag:
+        produced = feed(pipe, kind, msg)
+        for i, out in enumerate(produced):
+            if out.covariance is None:
+                continue
+            cov[out.stamp_ns] = {}
+            for j, n in enumerate(pipe.sizes):
+                if not out.ready[j]:
+                    continue
+                if i == len(produced) - 1:
+                    pair = tuple(pipe.bank.covariance(j, k) for k in ("corrected", "conventional"))
+                else:
+                    pair = (out.covariance[0, j, :n, :n], out.covariance[1, j, :n, :n])
+                cov[out.stamp_ns][j] = pair
+    return cov
+
+
 def test_live_node_reproduces_the_offline_replay(tmp_path, tester, bag):
     node = _node(tmp_path, *_ros_params(NO_EXPIRY))
     try:
@@ -101,13 +135,52 @@ def test_live_node_reproduces_the_offline_replay(tmp_path, tester, bag):
                 assert (msgs[-1].layout.dim[1].size, msgs[-1].layout.dim[1].stride) == (1, 1)
                 np.testing.assert_allclose(np.array(msgs[-1].data), want[j, :n], rtol=1e-9, atol=0)
                 assert all(np.isfinite(m.data).all() for m in msgs)
+        _check_convergence_and_covariance(tester, bag, offline)
         diag = tester.wait_diagnostics(lambda d: f"{NODE}: samples" in d)
         assert diag[f"{NODE}: samples"]["samples_used"] == str(offline.pipeline.samples_used)
         assert diag[f"{NODE}: inputs"]["imu.received"] == "2400"
         assert float(diag[f"{NODE}: model CZ"]["r_squared"]) > 0.8
         assert "latency_ms.p99" in diag[f"{NODE}: samples"] or len(tester.diagnostics) >= 1
+        # Convergence in the model status (the bundled maneuver converges), the lags in use.
+        cm = diag[f"{NODE}: model Cm"]
+        assert (cm["converged"], cm["converged_parameters"]) == ("True", "Cm_0,Cm_alpha,Cm_q,Cm_delta_e")
+        assert cm["message"].endswith("; converged") and cm["lags"] == "50"
+        assert diag[f"{NODE}: inputs"]["recent_window_s"] == "10"
     finally:
         assert node.stop() == 0, node.text()
+
+
+def _check_convergence_and_covariance(tester, bag, offline):
+    """``~/M/converged`` equals the offline pipeline's flags sample for sample; ``~/M/covariance``
+    and ``~/M/covariance_conventional`` come on the decimated samples (every 10th grid point),
+    n x n row-major with the stamp in a third dim, equal to bank.covariance to 1e-9."""
+    config = offline.pipeline.config
+    expected_cov = _offline_covariances(bag, config)
+    assert expected_cov and all(s % (10 * config.period_ns) == 0 for s in expected_cov)
+    for j, (model, n) in enumerate((("CZ", 3), ("Cm", 4))):
+        label = offline.pipeline.labels[j]
+        ready = [o for o in offline.outputs if o.ready[j]]
+        conv = _arrays(tester, model, "converged")
+        assert [_stamp(m) for m in conv] == [o.stamp_ns for o in ready]
+        for msg, out in zip(conv, ready, strict=True):
+            assert [(d.label, d.size, d.stride) for d in msg.layout.dim] == [(label, n, n), (msg.layout.dim[1].label,
+                                                                              1, 1)]
+            assert list(msg.data) == out.converged[j, :n].astype(float).tolist()
+        assert conv[-1].data.tolist() == [1.0] * n  # the bundled maneuver converges
+        for suffix, k in (("covariance", 0), ("covariance_conventional", 1)):
+            msgs = _arrays(tester, model, suffix)
+            want = {s: c[j][k] for s, c in expected_cov.items() if j in c}
+            assert [_stamp(m) for m in msgs] == sorted(want)
+            for msg in msgs:
+                dims = [(d.label, d.size, d.stride) for d in msg.layout.dim]
+                assert dims == [(label, n, n * n), (label, n, n), (msg.layout.dim[2].label, 1, 1)]
+                assert msg.layout.data_offset == 0
+                cov = np.array(msg.data).reshape(n, n)
+                ref = want[_stamp(msg)]
+                if np.diag(ref).min() < 0:  # an exact fit's rounding at initialization: published as zero
+                    ref = np.zeros_like(ref)
+                np.testing.assert_allclose(cov, ref, rtol=0, atol=1e-9 * np.abs(ref).max())
+                np.testing.assert_array_equal(cov, cov.T)
 
 
 def _excitation(t):
@@ -312,6 +385,9 @@ def test_parameters_are_refused_with_reasons_and_changes_reset(tmp_path, tester)
         assert not r.successful
         (r,) = _set_parameters(tester, **{"topics.imu": "other_imu"})
         assert not r.successful and "read-only" in r.reason.lower()
+        # The node only writes the state file it checked at start-up.
+        (r,) = _set_parameters(tester, **{"state_file": str(tmp_path / "elsewhere.npz")})
+        assert not r.successful and "read-only" in r.reason.lower()
         (r,) = _set_parameters(tester, **{"differentiator.lag": 12})
         assert not r.successful and "differentiator.lag" in r.reason
         (r,) = _set_parameters(tester, **{"estimator.lags": 20})
@@ -411,14 +487,58 @@ def test_state_file_saves_on_shutdown_and_resumes(tmp_path, tester, bag):
         np.testing.assert_allclose(np.array(_arrays(tester, "CZ", "estimates")[-1].data), outs[-1].theta[0, :3], rtol=1e-9)
     finally:
         assert node.stop() == 0
-    # Another configuration ignores the file and says so.
+    # Another configuration ignores the file, says so, and keeps it: renamed aside, never
+    # overwritten by the fresh state saved at shutdown.
+    saved = state.read_bytes()
     node = _node(tmp_path, "-p", f"state_file:={state}", "-p", "estimator.lags:=7", name="third")
     try:
         tester.wait_connected(outputs=False)
         d = tester.wait_diagnostics(lambda d: f"{NODE}: samples" in d)
-        assert "ignored" in d[f"{NODE}: samples"]["state_file"]
+        status = d[f"{NODE}: samples"]["state_file"]
+        assert "ignored" in status and "another aircraft, model or estimator configuration" in status
     finally:
-        node.stop()
+        assert node.stop() == 0
+    (aside,) = tmp_path.glob("state.npz.rejected-*")
+    assert f"kept as {aside}" in status and aside.read_bytes() == saved
+    assert load_state(state, _t2_config({"estimator.lags": 7}).fingerprint()).samples_used == 0
+
+
+def _crafted_state(path):
+    """A state file whose meta is a JSON list: it crashed start-up with a traceback before."""
+    with zipfile.ZipFile(path, "w") as zf:
+        buf = io.BytesIO()
+        np.lib.format.write_array(buf, np.array(json.dumps([1, 2, 3])))
+        zf.writestr("meta.npy", buf.getvalue())
+    return path.read_bytes()
+
+
+def test_a_refused_state_file_is_kept_and_the_node_starts(tmp_path, tester):
+    """A crafted state file is refused with one diagnostic, renamed aside (never overwritten),
+    and the node estimates from scratch; at shutdown the fresh state is written through a new
+    exclusive temporary file: planted temporary names that are symlinks are not followed."""
+    state = tmp_path / "state.npz"
+    crafted = _crafted_state(state)
+    victim = tmp_path / "victim.txt"
+    victim.write_text("precious")
+    for planted in ("state.npz.tmp", ".state.npz.tmp", "state.npz.new"):
+        os.symlink(victim, tmp_path / planted)
+    node = _node(tmp_path, "-p", f"state_file:={state}", *_ros_params(NO_EXPIRY), name="crafted")
+    try:
+        tester.wait_connected()
+        d = tester.wait_diagnostics(lambda d: f"{NODE}: samples" in d)
+        status = d[f"{NODE}: samples"]["state_file"]
+        assert status.startswith(f"state file ignored: {state}: field 'meta' must be a JSON object, found a list")
+        (aside,) = tmp_path.glob("state.npz.rejected-*")
+        assert status.endswith(f"kept as {aside}; a fresh state will be saved to {state}")
+        assert aside.read_bytes() == crafted and not state.exists()
+        tester.publish_all(_synthetic(10**18, 3.0, bad=False))
+        est = _arrays(tester, "CZ", "estimates")
+        assert tester.spin_until(lambda: len(est) > 20), node.text()
+    finally:
+        assert node.stop() == 0, node.text()
+    assert "Traceback" not in node.text() and "kept as" in node.text()
+    assert victim.read_text() == "precious" and aside.read_bytes() == crafted
+    assert not state.is_symlink() and load_state(state, _t2_config(NO_EXPIRY).fingerprint()).samples_used > 20
 
 
 def test_sim_time_backwards_jump_resets(tmp_path, tester):
@@ -572,3 +692,77 @@ def test_a_bag_played_twice_gives_the_offline_numbers_twice(tmp_path, tester, ba
         assert resets in ({"resets.stamps_jumped_backwards": "1"}, {"resets.time_jumped_backwards": "1"}), resets
     finally:
         assert node.stop() == 0, node.text()
+
+
+def test_the_consumer_example_pairs_every_array_by_stamp(tmp_path, tester, bag):
+    """examples/consumer.py against the node on the bundled bag: one sample event per Cm
+    sample, with the estimates, standard errors and convergence flags of that very sample,
+    and one covariance event per decimated sample, paired with its own sample's estimates."""
+    node = _node(tmp_path, *_ros_params(NO_EXPIRY))
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(filter(None, [str(ROOT), os.environ.get("PYTHONPATH")])))
+    consumer = subprocess.Popen([sys.executable, str(ROOT / "examples" / "consumer.py"), "--model", "Cm", "--json",
+                                 "--idle", "5"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+    try:
+        tester.wait_connected()
+        topics = [f"/{NODE}/Cm/{k}" for k in ("estimates", "standard_errors", "converged", "covariance")]
+        assert tester.spin_until(lambda: all(tester.node.count_subscribers(t) >= 2 for t in topics), 30)
+        tester.spin_until(lambda: False, 0.5)
+        offline = run_pipeline(bag, _t2_config(NO_EXPIRY))
+        tester.publish_all([(k, to_rclpy(k, m)) for k, _s, m in bag])
+        out, err = consumer.communicate(timeout=180)
+    finally:
+        if consumer.poll() is None:
+            consumer.kill()
+            consumer.communicate()
+        assert node.stop() == 0, node.text()
+    assert consumer.returncode == 0, err
+    events = [json.loads(line) for line in out.splitlines()]
+    samples = [e for e in events if e["event"] == "sample"]
+    covs = [e for e in events if e["event"] == "covariance"]
+    ready = [o for o in offline.outputs if o.ready[1]]
+    assert [e["stamp"] for e in samples] == [o.stamp_ns for o in ready], err
+    for e, o in zip(samples, ready, strict=True):
+        assert e["names"] == ["Cm_0", "Cm_alpha", "Cm_q", "Cm_delta_e"]
+        assert e["estimates"] == o.theta[1, :4].tolist() and e["standard_errors"] == o.se[1, :4].tolist()
+        assert e["converged"] == o.converged[1, :4].astype(float).tolist()
+    by_stamp = {o.stamp_ns: o for o in ready}
+    assert sorted(e["stamp"] for e in covs) == [o.stamp_ns for o in ready if o.covariance is not None]
+    for e in covs:
+        o = by_stamp[e["stamp"]]
+        assert e["estimates"] == o.theta[1, :4].tolist()
+        np.testing.assert_array_equal(np.array(e["covariance"]), o.covariance[0, 1, :4, :4])
+    assert f"{len(samples)} samples, 0 incomplete" in err
+
+
+def test_the_consumer_pairing_does_not_depend_on_the_order_across_topics(bag):
+    """No DDS: each topic in order, the topics interleaved at random; the same events."""
+    import random
+
+    sys.path.insert(0, str(ROOT / "examples"))
+    try:
+        from consumer import Pairing
+    finally:
+        sys.path.pop(0)
+    offline = run_pipeline(bag[:2500], _t2_config())
+    names = ["Cm_0", "Cm_alpha", "Cm_q", "Cm_delta_e"]
+    topics: dict[str, list] = {k: [] for k in ("estimates", "standard_errors", "converged", "covariance")}
+    for o in offline.outputs:
+        if o.ready[1]:
+            topics["estimates"].append((o.stamp_ns, o.theta[1, :4].tolist()))
+            topics["standard_errors"].append((o.stamp_ns, o.se[1, :4].tolist()))
+            topics["converged"].append((o.stamp_ns, o.converged[1, :4].astype(float).tolist()))
+            if o.covariance is not None:
+                topics["covariance"].append((o.stamp_ns, o.covariance[0, 1, :4, :4].ravel().tolist()))
+    rng = random.Random(3)
+    pairing, events = Pairing(), []
+    queues = {k: list(v) for k, v in topics.items()}
+    while any(queues.values()):
+        kind = rng.choice([k for k, q in queues.items() if q])
+        stamp, data = queues[kind].pop(0)
+        events += pairing.add(kind, names, stamp, data)
+    samples = sorted(s for e, s, _ in events if e == "sample")
+    assert samples == [s for s, _ in topics["estimates"]]
+    assert sorted(s for e, s, _ in events if e == "covariance") == [s for s, _ in topics["covariance"]]
+    theta = dict(topics["estimates"])
+    assert all(rec["estimates"] == theta[s] for e, s, rec in events)
+    assert pairing.dropped == 0 and len(pairing.pending) <= pairing.keep

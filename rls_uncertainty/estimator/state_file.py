@@ -1,31 +1,77 @@
 """The estimator state file: a restarted node resumes the estimation where it stopped.
 
-One ``.npz`` archive (numpy only, no pickle): the :meth:`.EstimatorBank.state`
-arrays, plus a ``meta`` entry holding one JSON text with
+One ``.npz`` archive (numpy only, no pickle, entries stored uncompressed): the
+:meth:`.EstimatorBank.state` arrays, plus a ``meta`` entry holding one JSON text with
 
 * ``format``: :attr:`EstimatorBank.STATE_FORMAT` (a file of another layout is refused by name);
 * ``fingerprint``: what the state must match to be resumed (aircraft, models, rate and the
-  estimator settings; :meth:`rls_uncertainty.config.PipelineConfig.fingerprint`);
+  estimator settings; :meth:`.config.PipelineConfig.fingerprint`);
 * ``bank_config``, ``bank_counters``: the rest of the bank's state;
 * ``samples_used``, ``zsum``, ``zsq``: the samples behind the estimates and the running sums
   of each model's output and its square (the R^2 of the model fit).
 
-It is written with :func:`rls_uncertainty.files.atomic_file`, so a crash never leaves half a file.
+It is written with :func:`rls_uncertainty.files.atomic_file` (a fresh exclusive temporary file in the same
+directory, fsync'ed, then renamed), so a crash never leaves half a file and a planted
+temporary name or symlink is never written through.
+
+**Reading never trusts the file.** :func:`load_state` checks, in this order and before
+anything is allocated from the file's declarations: the archive (a regular file, a zip of at
+most :data:`MAX_ENTRIES` ``.npy`` entries, none compressed or encrypted, their declared sizes
+adding up to no more than the file holds: a small file cannot inflate); the ``meta`` entry
+(a unicode scalar of at most :data:`MAX_META_BYTES`); every ``meta`` field (type, keys, value
+range) and its agreement with the configuration the caller expects; then the array entries:
+exactly the names the state layout has, each entry's declared size equal to what the
+configuration and counters imply, each ``.npy`` header's dtype and shape as expected, every
+float finite and every counter in range. Any failure is one :class:`StateFileError` whose
+text names the file and the field. :meth:`EstimatorBank.from_state` checks shapes again (a
+second line). :func:`set_aside` renames a refused file out of the way without overwriting
+anything, so the node never replaces a file it could not use.
 """
 
 from __future__ import annotations
 
+import errno
 import json
+import math
+import os
+import stat
+import zipfile
+from collections.abc import Mapping
 from dataclasses import dataclass
+from datetime import UTC, datetime
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from ..errors import StateFileError
 from ..files import atomic_file
 from .bank import EstimatorBank
+from .lag_storage import GROWTH_START
+from .options import RESIDUALS, WINDOWS
 
-__all__ = ["EstimatorState", "save_state", "load_state", "StateFileError"]
+__all__ = [
+    "EstimatorState",
+    "save_state",
+    "load_state",
+    "set_aside",
+    "state_layout",
+    "StateFileError",
+    "MAX_ENTRIES",
+    "MAX_META_BYTES",
+]
+
+MAX_ENTRIES = 32  # entries of a state archive (format 3 has 11 or 12)
+MAX_META_BYTES = 1 << 20  # the meta entry's text as stored (4 bytes a character); a few kB in practice
+_NPY_PREAMBLE = 12 + 10_000  # magic, version, header length and numpy's largest header text
+_MAX_MODELS, _MAX_PARAMETERS = 64, 64
+_MAX_LAGS = 10_000_000
+_MAX_COUNT = 2**53  # samples: exact as a float
+_GROWTH_START = GROWTH_START  # the lag capacity an all-lags bank starts with, doubled as samples arrive
+_META_KEYS = ("format", "fingerprint", "bank_config", "bank_counters", "samples_used", "zsum", "zsq")
+_BANK_CONFIG_KEYS = ("sizes", "n_lags", "window", "forgetting", "residual", "init_condition")
+_COUNTER_KEYS = ("k", "n_eff", "cap")
+_F8, _I8, _B1 = np.dtype("<f8"), np.dtype("<i8"), np.dtype("|b1")
 
 
 @dataclass
@@ -55,45 +101,384 @@ def save_state(path: str | Path, state: EstimatorState, fingerprint: dict) -> No
         np.savez(fh, meta=np.array(json.dumps(meta)), **bank["arrays"])
 
 
-def load_state(path: str | Path, fingerprint: dict) -> EstimatorState:
-    """The state saved in ``path``. Raises :class:`StateFileError` when the file is missing,
-    unreadable, of another format, or saved with another configuration than ``fingerprint``."""
-    path = Path(path)
-    try:
-        with np.load(path, allow_pickle=False) as data:
-            meta = json.loads(str(data["meta"]))
-            arrays = {k: data[k] for k in data.files if k != "meta"}
-    except FileNotFoundError as exc:
-        raise StateFileError(f"{path}: no such state file") from exc
-    except Exception as exc:  # noqa: BLE001 - any corruption is reported the same way
-        raise StateFileError(f"{path}: not a readable state file ({exc})") from exc
-    if not isinstance(meta, dict) or meta.get("format") != EstimatorBank.STATE_FORMAT:
-        found = meta.get("format") if isinstance(meta, dict) else None
-        raise StateFileError(
-            f"{path}: state format {found!r}, this version reads "
+class _Invalid(Exception):
+    """One problem with one field; :func:`load_state` adds the path."""
+
+
+def _fail(field: str, problem: str) -> _Invalid:
+    return _Invalid(f"field '{field}' {problem}")
+
+
+# ---------------------------------------------------------------------------------------------
+# The array layout of each state format, from the validated configuration and counters.
+
+
+def _all_lags_capacity(k: int) -> int:
+    """The lag capacity of an all-lags bank after ``k`` samples: 64, doubled until it holds k."""
+    cap = _GROWTH_START
+    while cap < k:
+        cap *= 2
+    return cap
+
+
+Layout = dict[str, tuple[tuple[int, ...], np.dtype]]
+
+
+def state_layout(state_format: int, config: Mapping, counters: Mapping, waiting: bool) -> Layout | None:
+    """``{entry name: (shape, dtype)}`` of the arrays of a state of ``state_format`` with bank
+    ``config`` and ``counters`` (``waiting``: some model still waits for initialization), as
+    :meth:`EstimatorBank.state` writes them, or ``None`` for another format. The layout is the
+    estimator's own: an empty bank of that configuration is laid out at those counters and
+    asked (nothing is read from the file), so a new estimator layout needs no table here. The
+    caller bounds the size first (:func:`_implied_bytes`)."""
+    if state_format != EstimatorBank.STATE_FORMAT:
+        return None
+    kw = dict(config)
+    bank = EstimatorBank(kw.pop("sizes"), **kw)
+    lags = bank._lags
+    lags.waiting = waiting
+    lags.allocate(int(counters["cap"]))
+    bank.k = int(counters["k"])
+    lags.ptr -= bank.n_window  # the history window, as restoring would place it
+    return {name: (arr.shape, arr.dtype) for name, arr in bank.state()["arrays"].items()}
+
+
+def _implied_bytes(config: Mapping, counters: Mapping) -> int:
+    """An upper bound of the memory an empty bank of ``config`` takes at ``counters``' lag
+    capacity (histories, lag sums and products of y = (x, z))."""
+    sizes = config["sizes"]
+    m, n1, cap = len(sizes), max(sizes) + 1, int(counters["cap"])
+    return 8 * m * cap * (2 * n1 * n1 + 4 * 3 * n1 + 4)
+
+# ---------------------------------------------------------------------------------------------
+# meta
+
+
+def _is_int(value: Any) -> bool:
+    return isinstance(value, int) and not isinstance(value, bool)
+
+
+def _int(value: Any, field: str, low: int, high: int) -> int:
+    if not _is_int(value):
+        raise _fail(field, f"must be an integer, found {_kind(value)}")
+    if not low <= value <= high:
+        raise _fail(field, f"must be in [{low}, {high}], found {value}")
+    return value
+
+
+def _number(value: Any, field: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise _fail(field, f"must be a number, found {_kind(value)}")
+    value = float(value)
+    if not math.isfinite(value):
+        raise _fail(field, f"must be finite, found {value}")
+    return value
+
+
+def _kind(value: Any) -> str:
+    """A short description of a JSON value for a message (never the whole value)."""
+    if isinstance(value, (dict, list)):
+        return f"a {'JSON object' if isinstance(value, dict) else 'list'} of {len(value)} items"
+    text = repr(value)
+    return f"{type(value).__name__} {text[:40]}{'...' if len(text) > 40 else ''}"
+
+
+def _short(value: Any) -> str:
+    text = repr(list(value) if isinstance(value, tuple) else value)
+    return text if len(text) <= 60 else text[:57] + "..."
+
+
+def _object(value: Any, field: str, keys: tuple[str, ...]) -> dict:
+    if not isinstance(value, dict):
+        raise _fail(field, f"must be a JSON object, found {_kind(value)}")
+    missing = [k for k in keys if k not in value]
+    if missing:
+        raise _fail(f"{field}.{missing[0]}" if field else missing[0], "is missing")
+    extra = sorted(str(k) for k in value if k not in keys)
+    if extra:
+        raise _fail(f"{field}.{extra[0]}" if field else extra[0][:40], "is not part of a state file")
+    return value
+
+
+def _check_format(meta: Any) -> None:
+    if not isinstance(meta, dict):
+        raise _fail("meta", f"must be a JSON object, found {_kind(meta)}")
+    if "format" not in meta:
+        raise _fail("format", "is missing")
+    found = meta["format"]
+    if found != EstimatorBank.STATE_FORMAT or not _is_int(found):
+        raise _Invalid(
+            f"state format {_kind(found) if not _is_int(found) else found}, this version reads "
             f"{EstimatorBank.STATE_FORMAT} (saved by another version; delete it to start afresh)"
         )
+
+
+def _check_bank_config(cfg: Any, expect: Mapping | None) -> dict:
+    cfg = _object(cfg, "bank_config", _BANK_CONFIG_KEYS)
+    sizes = cfg["sizes"]
+    if not isinstance(sizes, list) or not 1 <= len(sizes) <= _MAX_MODELS:
+        raise _fail("bank_config.sizes", f"must be a list of 1 to {_MAX_MODELS} sizes, found {_kind(sizes)}")
+    for i, s in enumerate(sizes):
+        _int(s, f"bank_config.sizes[{i}]", 1, _MAX_PARAMETERS)
+    if cfg["n_lags"] is not None:
+        _int(cfg["n_lags"], "bank_config.n_lags", 0, _MAX_LAGS)
+    if cfg["window"] not in WINDOWS:
+        raise _fail("bank_config.window", f"must be one of {list(WINDOWS)}, found {_kind(cfg['window'])}")
+    if cfg["residual"] not in RESIDUALS:
+        raise _fail("bank_config.residual", f"must be one of {list(RESIDUALS)}, found {_kind(cfg['residual'])}")
+    f = _number(cfg["forgetting"], "bank_config.forgetting")
+    if not 0.0 < f <= 1.0:
+        raise _fail("bank_config.forgetting", f"must be in (0, 1], found {f}")
+    if not _number(cfg["init_condition"], "bank_config.init_condition") > 1.0:
+        raise _fail("bank_config.init_condition", f"must be > 1, found {cfg['init_condition']}")
+    for key, want in (expect or {}).items():
+        found = list(cfg[key]) if key == "sizes" else cfg[key]
+        if found != (list(want) if key == "sizes" else want):
+            raise _fail(f"bank_config.{key}", f"is {_short(found)}, the configuration has {_short(want)}")
+    return cfg
+
+
+def _check_counters(c: Any, cfg: dict) -> dict:
+    c = _object(c, "bank_counters", _COUNTER_KEYS)
+    k = _int(c["k"], "bank_counters.k", 0, _MAX_COUNT)
+    n_eff = _number(c["n_eff"], "bank_counters.n_eff")
+    if not 0.0 <= n_eff <= k * (1.0 + 1e-9):
+        raise _fail("bank_counters.n_eff", f"must be in [0, k = {k}], found {n_eff}")
+    n_lags = cfg["n_lags"]
+    want = _all_lags_capacity(k) if n_lags is None else n_lags + 1
+    cap = _int(c["cap"], "bank_counters.cap", 1, 2 * _MAX_COUNT)
+    if cap != want:
+        lags = "all lags" if n_lags is None else f"{n_lags} lags"
+        raise _fail("bank_counters.cap", f"is {cap}; {lags} after {k} samples hold {want}")
+    return c
+
+
+def _check_sums(meta: dict, m: int) -> tuple[np.ndarray, np.ndarray]:
+    out = []
+    for key in ("zsum", "zsq"):
+        values = meta[key]
+        if not isinstance(values, list) or len(values) != m:
+            raise _fail(key, f"must be a list of {m} numbers (one per model), found {_kind(values)}")
+        out.append(np.array([_number(v, f"{key}[{i}]") for i, v in enumerate(values)]))
+    if np.any(out[1] < 0):
+        raise _fail("zsq", "must not be negative (sums of squares)")
+    return out[0], out[1]
+
+
+# ---------------------------------------------------------------------------------------------
+# the archive
+
+
+def _entries(zf: zipfile.ZipFile, file_size: int) -> dict[str, zipfile.ZipInfo]:
+    """The archive's entries by array name, checked before any is read."""
+    infos = zf.infolist()
+    if len(infos) > MAX_ENTRIES:
+        raise _Invalid(f"not a state file: {len(infos)} entries (a state has at most {MAX_ENTRIES})")
+    entries: dict[str, zipfile.ZipInfo] = {}
+    declared = 0
+    for info in infos:
+        name = info.filename
+        shown = name[:40]
+        if not name.endswith(".npy") or not name[:-4].isidentifier():
+            raise _Invalid(f"not a state file: entry '{shown}' is not a numpy array of a state")
+        if name[:-4] in entries:
+            raise _Invalid(f"not a state file: entry '{shown}' appears twice")
+        if info.flag_bits & 0x1:
+            raise _Invalid(f"not a state file: entry '{shown}' is encrypted")
+        if info.compress_type != zipfile.ZIP_STORED:
+            raise _Invalid(f"not a state file: entry '{shown}' is compressed (state files are written "
+                           "uncompressed; it is not inflated)")
+        declared += info.file_size
+        entries[name[:-4]] = info
+    if declared > file_size:
+        raise _Invalid(f"not a state file: its entries declare {declared} bytes, the file holds {file_size}")
+    if "meta" not in entries:
+        raise _fail("meta", "is missing (not a state file)")
+    return entries
+
+
+def _read_array(zf: zipfile.ZipFile, info: zipfile.ZipInfo, field: str, shape: tuple[int, ...] | None,
+                dtype: np.dtype | None) -> np.ndarray:
+    """One ``.npy`` entry. Its header must declare ``dtype`` (kind and size, either byte
+    order) and ``shape`` (``None``: any, checked by the caller from the header's values before
+    the data is read), and the entry must hold exactly that many bytes after the header."""
+    with zf.open(info) as fp:
+        try:
+            version = np.lib.format.read_magic(fp)
+            if version == (1, 0):
+                found_shape, fortran, found = np.lib.format.read_array_header_1_0(fp)
+            elif version == (2, 0):
+                found_shape, fortran, found = np.lib.format.read_array_header_2_0(fp)
+            else:
+                raise ValueError(f"npy format version {version}")
+        except (ValueError, SyntaxError, EOFError, TypeError) as exc:
+            raise _fail(field, f"is not a readable numpy array ({str(exc)[:80]})") from None
+        if found.hasobject or found.fields is not None or found.subdtype is not None:
+            raise _fail(field, f"has dtype {found.str}, not plain numbers")
+        if dtype is not None and (found.kind, found.itemsize) != (dtype.kind, dtype.itemsize):
+            raise _fail(field, f"has dtype {found.str}, expected {dtype.str}")
+        if shape is not None and tuple(found_shape) != shape:
+            raise _fail(field, f"has shape {tuple(found_shape)}, the configuration implies {shape}")
+        nbytes = math.prod(found_shape) * found.itemsize
+        if fp.tell() + nbytes != info.file_size:
+            raise _fail(field, f"holds {info.file_size - fp.tell()} bytes of data, its shape needs {nbytes}")
+        data = fp.read(nbytes)
+    if len(data) != nbytes:  # pragma: no cover - zipfile checks the size and CRC
+        raise _fail(field, "is truncated")
+    native = found.newbyteorder("=") if found.byteorder in "<>" else found
+    arr = np.frombuffer(data, dtype=found).astype(native, copy=True)
+    return arr.reshape(found_shape, order="F" if fortran else "C")
+
+
+def _read_meta(zf: zipfile.ZipFile, info: zipfile.ZipInfo) -> Any:
+    if info.file_size > MAX_META_BYTES + _NPY_PREAMBLE:
+        raise _fail("meta", f"declares {info.file_size} bytes (at most {MAX_META_BYTES})")
+    arr = _read_array(zf, info, "meta", (), None)
+    if arr.dtype.kind != "U":
+        raise _fail("meta", f"must be a JSON text, found an array of dtype {arr.dtype.str}")
+    try:
+        return json.loads(str(arr[()]))
+    except (ValueError, RecursionError) as exc:
+        raise _fail("meta", f"is not valid JSON ({str(exc)[:80]})") from None
+
+
+def _check_values(arrays: dict[str, np.ndarray], k: int) -> None:
+    for name, arr in arrays.items():
+        if arr.dtype.kind == "f" and not np.isfinite(arr).all():
+            raise _fail(f"arrays.{name}", "holds NaN or infinite values (a bank's state never does)")
+    for name, low, high in (("ready_at", 0, k), ("repairs", 0, _MAX_COUNT)):
+        counts = arrays.get(name)
+        if counts is not None and counts.size > 0 and not (counts.min() >= low and counts.max() <= high):
+            raise _fail(f"arrays.{name}", f"must hold counts in [{low}, {high}]")
+
+
+def _generic_bounds(entries: dict[str, zipfile.ZipInfo], cfg: dict, counters: dict) -> None:
+    """For a format without a layout table: no array larger than the largest the configuration
+    implies (M x (n+1) x cap x (n+1) doubles)."""
+    sizes = cfg["sizes"]
+    largest = len(sizes) * (max(sizes) + 1) ** 2 * int(counters["cap"]) * 8 + _NPY_PREAMBLE
+    for name, info in entries.items():
+        if name != "meta" and info.file_size > largest:
+            raise _fail(f"arrays.{name}", f"declares {info.file_size} bytes, more than any array of this "
+                        f"configuration ({largest})")
+
+
+def _load(path: Path, fingerprint: dict, expect: Mapping | None) -> EstimatorState:
+    try:
+        fh = open(path, "rb")  # noqa: SIM115 - closed below, after the zip
+    except FileNotFoundError:
+        raise _Invalid("no such state file") from None
+    except OSError as exc:
+        raise _Invalid(f"not a readable state file ({exc.strerror or exc})") from None
+    with fh:
+        st = os.fstat(fh.fileno())
+        if not stat.S_ISREG(st.st_mode):
+            raise _Invalid("not a readable state file (not a regular file)")
+        try:
+            zf = zipfile.ZipFile(fh)
+        except (zipfile.BadZipFile, zipfile.LargeZipFile, ValueError, OSError, EOFError) as exc:
+            raise _Invalid(f"not a readable state file (not a zip archive: {str(exc)[:80]})") from None
+        with zf:
+            try:
+                return _load_archive(zf, st.st_size, fingerprint, expect)
+            except (zipfile.BadZipFile, OSError, EOFError) as exc:  # a CRC or size mismatch while reading
+                raise _Invalid(f"not a readable state file ({str(exc)[:80]})") from None
+
+
+def _load_archive(zf: zipfile.ZipFile, file_size: int, fingerprint: dict, expect: Mapping | None) -> EstimatorState:
+    entries = _entries(zf, file_size)
+    meta = _read_meta(zf, entries["meta"])
+    _check_format(meta)
+    meta = _object(meta, "", _META_KEYS)
     # Compare as JSON would store it (tuples become lists).
-    if meta.get("fingerprint") != json.loads(json.dumps(fingerprint)):
-        raise StateFileError(f"{path}: saved with another aircraft, model or estimator configuration")
+    if meta["fingerprint"] != json.loads(json.dumps(fingerprint)):
+        raise _Invalid("saved with another aircraft, model or estimator configuration")
+    cfg = _check_bank_config(meta["bank_config"], expect)
+    counters = _check_counters(meta["bank_counters"], cfg)
+    samples_used = _int(meta["samples_used"], "samples_used", 0, _MAX_COUNT)
+    zsum, zsq = _check_sums(meta, len(cfg["sizes"]))
+
+    names = set(entries) - {"meta"}
+    implied = _implied_bytes(cfg, counters)
+    if implied > 64 * file_size + (16 << 20):  # the arrays of such a state would be in the file
+        raise _fail("bank_counters.cap", f"implies about {implied} bytes of estimator state; the file holds {file_size}")
+    if "ready" not in entries:
+        raise _fail("arrays.ready", "is missing")
+    ready = _read_array(zf, entries["ready"], "arrays.ready", (len(cfg["sizes"]),), np.dtype(bool))
+    layout = state_layout(meta["format"], cfg, counters, waiting=not bool(ready.all()))
+    if layout is None:
+        _generic_bounds(entries, cfg, counters)
+    else:
+        missing, extra = sorted(set(layout) - names), sorted(names - set(layout))
+        if missing:
+            raise _fail(f"arrays.{missing[0]}", "is missing")
+        if extra:
+            raise _fail(f"arrays.{extra[0]}", "is not part of this configuration's state")
+        for name, (want_shape, want_dtype) in layout.items():  # declared sizes, before reading anything
+            nbytes = math.prod(want_shape) * want_dtype.itemsize
+            declared = entries[name].file_size
+            if not nbytes < declared <= nbytes + _NPY_PREAMBLE:
+                raise _fail(f"arrays.{name}", f"declares {declared} bytes; the configuration implies an array "
+                            f"{want_shape} of {nbytes} bytes")
+    arrays = {}
+    for name in sorted(names):
+        shape: tuple[int, ...] | None = None
+        dtype: np.dtype | None = None
+        if layout is not None:
+            shape, dtype = layout[name]
+        arr = _read_array(zf, entries[name], f"arrays.{name}", shape, dtype)
+        if dtype is None and arr.dtype.kind not in "fib":
+            raise _fail(f"arrays.{name}", f"has dtype {arr.dtype.str}, not numbers")
+        arrays[name] = arr
+    _check_values(arrays, counters["k"])
+
     try:
         bank = EstimatorBank.from_state(
-            {
-                "format": EstimatorBank.STATE_FORMAT,
-                "config": meta["bank_config"],
-                "counters": meta["bank_counters"],
-                "arrays": arrays,
-            }
+            {"format": meta["format"], "config": cfg, "counters": counters, "arrays": arrays}
         )
-        m = bank.n_models
-        state = EstimatorState(
-            bank=bank,
-            samples_used=int(meta["samples_used"]),
-            output_sum=np.array(meta["zsum"], dtype=float),
-            output_sum_squares=np.array(meta["zsq"], dtype=float),
-        )
-        if state.output_sum.shape != (m,) or state.output_sum_squares.shape != (m,):
-            raise ValueError(f"output sums of {m} models expected")
-    except (KeyError, TypeError, ValueError) as exc:
-        raise StateFileError(f"{path}: inconsistent estimator state ({exc})") from exc
-    return state
+    except (KeyError, TypeError, ValueError, IndexError) as exc:  # the second line: the bank's own checks
+        raise _Invalid(f"inconsistent estimator state ({str(exc)[:120]})") from None
+    return EstimatorState(bank=bank, samples_used=samples_used, output_sum=zsum, output_sum_squares=zsq)
+
+
+def load_state(path: str | Path, fingerprint: dict, *, expect: Mapping | None = None) -> EstimatorState:
+    """The state saved in ``path``. Raises :class:`StateFileError` naming the file and the
+    field when the file is missing, unreadable, not a state file, of another format, saved with
+    another configuration than ``fingerprint``, or inconsistent (see the module docstring).
+
+    ``expect``: the bank configuration the caller will continue with (any of ``sizes``,
+    ``n_lags``, ``window``, ``forgetting``, ``residual``, ``init_condition``); the file's must
+    be the same."""
+    path = Path(path)
+    try:
+        return _load(path, fingerprint, expect)
+    except _Invalid as exc:
+        raise StateFileError(f"{path}: {exc}") from None
+
+
+def set_aside(path: str | Path, now: datetime | None = None) -> Path:
+    """Rename ``path`` to ``PATH.rejected-YYYYmmddTHHMMSSZ`` (UTC; ``-1``, ``-2``, ... appended
+    while that name is taken) and return the new path. An existing file is never replaced: the
+    new name is made with a hard link (which fails if the name exists) and the old one removed;
+    where the file system has no hard links, a rename to a name checked to be free. A symlink
+    is moved as the link itself. Raises :class:`OSError` when it cannot."""
+    path = Path(path)
+    stamp = (now or datetime.now(UTC)).strftime("%Y%m%dT%H%M%SZ")
+    base = f"{path.name}.rejected-{stamp}"
+    for i in range(1000):
+        target = path.with_name(base if i == 0 else f"{base}-{i}")
+        try:
+            os.link(path, target, follow_symlinks=False)
+        except FileExistsError:
+            continue
+        except OSError as exc:
+            if exc.errno not in (errno.EPERM, errno.EXDEV, errno.ENOTSUP, errno.EOPNOTSUPP, errno.ENOSYS,
+                                 errno.EMLINK, errno.EACCES):
+                raise
+            if os.path.lexists(target):
+                continue
+            os.rename(path, target)  # no hard links here (or a directory): the name was free just now
+            return target
+        os.unlink(path)
+        return target
+    raise OSError(errno.EEXIST, f"no free name for {path} after 1000 tries")
