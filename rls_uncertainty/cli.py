@@ -5,7 +5,9 @@ from __future__ import annotations
 import argparse
 import math
 import sys
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any, NoReturn
 
 import numpy as np
 
@@ -29,7 +31,7 @@ def _simulate(args: argparse.Namespace) -> int:
 
     record = add_noise(simulate_short_period(), args.noise / 100.0, np.random.default_rng(args.seed))
     t, data = reduce_short_period(record)
-    models = [m for m in T2_MODELS]
+    models = list(T2_MODELS)
     bank = EstimatorBank([len(m.regressors) for m in models], args.lags, args.window, args.forgetting)
     z = np.empty(len(models))
     for k in range(t.size):
@@ -90,7 +92,7 @@ def _multisine(args: argparse.Namespace) -> int:
         raise OutputPathError(f"{out}: exists (use --force to replace it)")
     lines = ["input,harmonic,frequency_hz,relative_amplitude,phase_rad\n"]
     for ms in designs:
-        for k, a, ph in zip(ms.harmonics, ms.rel_amplitudes, ms.phases):
+        for k, a, ph in zip(ms.harmonics, ms.rel_amplitudes, ms.phases, strict=True):
             lines.append(f"{ms.name},{k},{k / ms.period:.6g},{a:.6g},{ph:.9g}\n")
     out.parent.mkdir(parents=True, exist_ok=True)
     with atomic_file(out) as fh:
@@ -124,11 +126,11 @@ def _convert(args: argparse.Namespace) -> int:
     return 0
 
 
-def _not_text(name, exc: UnicodeDecodeError) -> ConfigError:
+def _not_text(name: str, exc: UnicodeDecodeError) -> ConfigError:
     return ConfigError(f"{name}: not UTF-8 text (byte {exc.start})")
 
 
-def _replay_params(args: argparse.Namespace) -> dict:
+def _replay_params(args: argparse.Namespace) -> dict[str, Any]:
     from .config import load_parameters_file, pipeline_config
 
     try:
@@ -189,7 +191,7 @@ def _play(args: argparse.Namespace) -> int:
                 ack_timeout=args.ack_timeout, report=args.report)
 
 
-def _lags(value: str):
+def _lags(value: str) -> int | None:
     """simulate --lags: an integer >= 0, or 'all' (None)."""
     if value in ("all", "none", "None"):
         return None
@@ -212,7 +214,7 @@ def _replay_lags(value: str) -> int:
         raise argparse.ArgumentTypeError(f"must be an integer or 'all', got {value!r}") from None
 
 
-def _real(low: float, *, low_open: bool = False, high: float | None = None):
+def _real(low: float, *, low_open: bool = False, high: float | None = None) -> Callable[[str], float]:
     """An argparse type: a finite number >= low (> low with ``low_open``), <= high."""
     bound = f"> {low:g}" if low_open else f">= {low:g}"
     if high is not None:
@@ -230,7 +232,7 @@ def _real(low: float, *, low_open: bool = False, high: float | None = None):
     return real
 
 
-def _integer(low: int):
+def _integer(low: int) -> Callable[[str], int]:
     """An argparse type: an integer >= low."""
 
     def integer(value: str) -> int:
@@ -248,7 +250,7 @@ def _integer(low: int):
 class _Parser(argparse.ArgumentParser):
     """Usage errors in one line, like every other error of the command (exit status 2)."""
 
-    def error(self, message: str):
+    def error(self, message: str) -> NoReturn:
         self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
 
 

@@ -11,8 +11,14 @@ published). No ROS import: :mod:`.cdr` encodes.
 
 from __future__ import annotations
 
+from collections.abc import Iterable
+from typing import TYPE_CHECKING
+
 from .cdr import encode_float64_multiarray, encode_header
 from .messages import ARRAY_OUTPUTS, stamp_label
+
+if TYPE_CHECKING:
+    from .pipeline import Pipeline, SampleOutput
 
 __all__ = ["HEADER", "FLOAT64_MULTIARRAY", "SAMPLE_STAMP", "sample_messages", "output_topics"]
 
@@ -21,7 +27,7 @@ FLOAT64_MULTIARRAY = "std_msgs/msg/Float64MultiArray"
 SAMPLE_STAMP = "sample_stamp"
 
 
-def sample_messages(pipeline, out, frame_id: str) -> list[tuple[str, str, bytes]]:
+def sample_messages(pipeline: Pipeline, out: SampleOutput, frame_id: str) -> list[tuple[str, str, bytes]]:
     """``(relative topic, message type, CDR bytes)`` of every message the node publishes for
     the :class:`.pipeline.SampleOutput` ``out`` (models still initializing publish nothing)."""
     stamp = out.stamp_ns
@@ -29,13 +35,13 @@ def sample_messages(pipeline, out, frame_id: str) -> list[tuple[str, str, bytes]
     messages = [(SAMPLE_STAMP, HEADER, encode_header(sec, nanosec, frame_id))]
     when = stamp_label(stamp)
     for name, label, theta, se, se_conv in pipeline.published(out):
-        for suffix, data in zip(ARRAY_OUTPUTS, (theta, se, se_conv)):
+        for suffix, data in zip(ARRAY_OUTPUTS, (theta, se, se_conv), strict=True):
             messages.append((f"{name}/{suffix}", FLOAT64_MULTIARRAY,
                              encode_float64_multiarray(label, data.tolist(), when)))
     return messages
 
 
-def output_topics(models) -> list[tuple[str, str]]:
+def output_topics(models: Iterable[str]) -> list[tuple[str, str]]:
     """``(relative topic, message type)`` of every per-sample output of the models named in
     ``models`` (e.g. ``["CZ", "Cm"]``), in publishing order."""
     arrays = [(f"{m}/{suffix}", FLOAT64_MULTIARRAY) for m in models for suffix in ARRAY_OUTPUTS]

@@ -30,11 +30,17 @@ import os
 import subprocess
 import sys
 import time
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING, Protocol
 
 from .errors import BagError, ConfigError
 from .messages import ARRAY_OUTPUTS, NODE_NAME, message_class
+
+if TYPE_CHECKING:
+    from rclpy.node import Node
+    from rclpy.publisher import Publisher
 
 __all__ = ["play", "demo", "bundled_bag", "TopicStats", "DEFAULT_WINDOW"]
 
@@ -67,6 +73,26 @@ class TopicStats:
         self.subscribers_max = max(self.subscribers_max, n)
 
 
+class _Dimension(Protocol):
+    @property
+    def label(self) -> str: ...
+
+
+class _Layout(Protocol):
+    @property
+    def dim(self) -> Sequence[_Dimension]: ...
+
+
+class _ArrayMessage(Protocol):
+    """What the demo reads of a ``std_msgs/Float64MultiArray`` (rosidl's classes are untyped)."""
+
+    @property
+    def layout(self) -> _Layout: ...
+
+    @property
+    def data(self) -> Sequence[float]: ...
+
+
 class NotAcknowledged(Exception):
     """A reliable subscriber did not acknowledge a topic's messages in time."""
 
@@ -79,7 +105,7 @@ class NotAcknowledged(Exception):
 class _Publisher:
     """Publishers for every topic of a bag (and /clock) on an existing rclpy node."""
 
-    def __init__(self, node, bag: Path, *, clock: bool, reliable: bool, window: int = DEFAULT_WINDOW) -> None:
+    def __init__(self, node: Node, bag: Path, *, clock: bool, reliable: bool, window: int = DEFAULT_WINDOW) -> None:
         from rclpy.qos import QoSHistoryPolicy, QoSProfile, QoSReliabilityPolicy  # noqa: PLC0415
 
         from .bags import _open_reader, typestore  # noqa: PLC0415
@@ -93,7 +119,7 @@ class _Publisher:
         # wait for acknowledgement, so keep-last never drops one that was not delivered.
         reliability = QoSReliabilityPolicy.RELIABLE if reliable else QoSReliabilityPolicy.BEST_EFFORT
         self.qos = QoSProfile(depth=self.window, history=QoSHistoryPolicy.KEEP_LAST, reliability=reliability)
-        self.pubs = {}
+        self.pubs: dict[str, Publisher] = {}
         self.stats: dict[str, TopicStats] = {}
         for conn in self.reader.connections:
             try:
@@ -115,13 +141,16 @@ class _Publisher:
         for topic, pub in self.pubs.items():
             self.stats[topic].saw(pub.get_subscription_count())
 
-    def wait_for_subscribers(self, n: int, timeout: float, spin=None) -> None:
+    def wait_for_subscribers(self, n: int, timeout: float, spin: Callable[[], None] | None = None) -> None:
         deadline = time.monotonic() + timeout
         while n and any(p.get_subscription_count() < n for p in self.pubs.values()):
             if time.monotonic() > deadline:
                 missing = [t for t, p in self.pubs.items() if p.get_subscription_count() < n]
                 raise BagError(f"{self.path}: no subscriber on {missing} after {timeout:g} s")
-            spin() if spin else time.sleep(0.05)
+            if spin:
+                spin()
+            else:
+                time.sleep(0.05)
 
     def confirm(self, topic: str, timeout: float) -> bool:
         """Wait until every reliable subscriber of ``topic`` acknowledged every message."""
@@ -145,7 +174,8 @@ class _Publisher:
         deadline = time.monotonic() + timeout
         return [t for t in self.pubs if not self.confirm(t, max(0.0, deadline - time.monotonic()))]
 
-    def run(self, rate: float, spin=None, *, loops: int = 1, ack_timeout: float = 30.0) -> int:
+    def run(self, rate: float, spin: Callable[[], None] | None = None, *, loops: int = 1,
+            ack_timeout: float = 30.0) -> int:
         """Publish every message ``loops`` times; ``spin`` is called between messages when
         given. Raises :class:`NotAcknowledged` when a topic's window stays unacknowledged for
         ``ack_timeout`` (publishing on would overwrite undelivered messages)."""
@@ -235,8 +265,10 @@ def play(bag: str | Path, *, rate: float = 1.0, clock: bool = True, reliable: bo
     first. Returns a process exit code: 0 when every reliable subscriber acknowledged every
     message, 1 when not (what was not delivered is printed)."""
     _check_rate(rate)
-    for name, n, low in (("number of subscribers to wait for", wait_for_subscribers, 0), ("loop count", loops, 1),
-                         ("window", window, 1)):
+    # Checked at run time whatever the annotations say: callers from Python may pass anything.
+    integers: tuple[tuple[str, object, int], ...] = (
+        ("number of subscribers to wait for", wait_for_subscribers, 0), ("loop count", loops, 1), ("window", window, 1))
+    for name, n, low in integers:
         if not (isinstance(n, int) and not isinstance(n, bool) and n >= low):
             raise ConfigError(f"the {name} must be an integer >= {low}, got {n!r}")
     for name, value in (("start delay", start_delay), ("wait timeout", wait_timeout), ("ack timeout", ack_timeout)):
@@ -317,14 +349,17 @@ def demo(rate: float = 4.0, params_file: str = "t2") -> int:
     print(f"starting the estimator node ({params_path}) and playing {bag} over DDS at {rate:g}x ...")
     import tempfile  # noqa: PLC0415
 
-    node_log = tempfile.NamedTemporaryFile("w+", prefix="rls_demo_node_", suffix=".log", delete=False)
-    node_proc = subprocess.Popen(
-        [sys.executable, "-m", "rls_uncertainty.node", "--ros-args", "--params-file", params_path,
-         "-p", "qos.reliable:=true", "-p", f"qos.depth:={_REPLAY_DEPTH}"], stdout=node_log, stderr=subprocess.STDOUT, text=True,
-    )
+    # The node writes its log through its own copy of the file descriptor: ours is closed once
+    # the node is started; the file stays (delete=False) until the demo succeeds.
+    with tempfile.NamedTemporaryFile("w+", prefix="rls_demo_node_", suffix=".log", delete=False) as node_log:
+        node_proc = subprocess.Popen(
+            [sys.executable, "-m", "rls_uncertainty.node", "--ros-args", "--params-file", params_path,
+             "-p", "qos.reliable:=true", "-p", f"qos.depth:={_REPLAY_DEPTH}"],
+            stdout=node_log, stderr=subprocess.STDOUT, text=True,
+        )
     rclpy.init()
     node = rclpy.create_node("rls_demo")
-    latest: dict[str, object] = {}
+    latest: dict[str, _ArrayMessage] = {}
     counts = {"samples": 0}
     qos = QoSProfile(depth=1000, reliability=QoSReliabilityPolicy.RELIABLE, history=QoSHistoryPolicy.KEEP_LAST)
     subs = [node.create_subscription(message_class("std_msgs/msg/Header"), f"/{NODE_NAME}/sample_stamp",
@@ -333,8 +368,11 @@ def demo(rate: float = 4.0, params_file: str = "t2") -> int:
     for m in config.models:
         for suffix in ARRAY_OUTPUTS:
             topic = f"/{NODE_NAME}/{m.output}/{suffix}"
-            subs.append(node.create_subscription(array_type, topic,
-                                                 lambda msg, t=topic: latest.__setitem__(t, msg), qos))
+
+            def keep(msg: _ArrayMessage, t: str = topic) -> None:
+                latest[t] = msg
+
+            subs.append(node.create_subscription(array_type, topic, keep, qos))
     player = None
     try:
         player = _Publisher(node, bag, clock=False, reliable=True)
@@ -370,15 +408,15 @@ def demo(rate: float = 4.0, params_file: str = "t2") -> int:
     rows = []
     worst = 0.0
     for j, m in enumerate(config.models):
-        get = lambda s: latest.get(f"/{NODE_NAME}/{m.output}/{s}")  # noqa: E731
-        est, se, sc = (get(suffix) for suffix in ARRAY_OUTPUTS)
+        est, se, sc = (latest.get(f"/{NODE_NAME}/{m.output}/{suffix}") for suffix in ARRAY_OUTPUTS)
         if est is None or se is None or sc is None:
             print(f"{m.output}: no estimate received from the node; its log: {node_log.name}")
             return 1
         names = est.layout.dim[0].label.split(",")
         rows += rows_from_arrays(names, est.data, sc.data, se.data, T2_TRUE)
         n = len(names)
-        for live, off in ((est.data, last.theta[j, :n]), (se.data, last.se[j, :n]), (sc.data, last.se_conventional[j, :n])):
+        pairs = ((est.data, last.theta[j, :n]), (se.data, last.se[j, :n]), (sc.data, last.se_conventional[j, :n]))
+        for live, off in pairs:
             worst = max(worst, float(np.max(np.abs(np.array(live) - off) / np.abs(off))))
     print(results_table(rows))
     print(f"\nlargest relative difference between the live node and the offline replay: {worst:.1e}")

@@ -24,8 +24,10 @@ from __future__ import annotations
 import gc
 import sys
 import time
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any, TextIO
 
 import numpy as np
 
@@ -34,7 +36,7 @@ from .config import PipelineConfig, node_config, pipeline_config
 from .files import output_directory
 from .messages import NODE_NAME, feed
 from .outputs import sample_messages
-from .pipeline import Pipeline
+from .pipeline import Pipeline, SampleOutput
 from .report import results_table, rows_from_arrays
 
 __all__ = ["ReplayResult", "run_pipeline", "replay", "output_records", "NODE_NAME"]
@@ -45,7 +47,7 @@ class ReplayResult:
     """The pipeline after the run, every published sample and timing."""
 
     pipeline: Pipeline
-    outputs: list = field(default_factory=list)
+    outputs: list[SampleOutput] = field(default_factory=list)
     n_messages: int = 0
     wall_seconds: float = 0.0
     data_seconds: float = 0.0
@@ -56,7 +58,7 @@ class ReplayResult:
         return self.data_seconds / self.wall_seconds if self.wall_seconds > 0 else float("inf")
 
 
-def _is_terminal(stream) -> bool:
+def _is_terminal(stream: TextIO) -> bool:
     try:
         return bool(stream.isatty())
     except (AttributeError, ValueError):  # no isatty, or a closed stream
@@ -71,7 +73,8 @@ def _progress(done: int, total: int, width: int = 40) -> None:
     sys.stderr.flush()
 
 
-def run_pipeline(messages, config: PipelineConfig, *, record: bool = True, progress: bool = False) -> ReplayResult:
+def run_pipeline(messages: Sequence[tuple[str, int, object]], config: PipelineConfig, *, record: bool = True,
+                 progress: bool = False) -> ReplayResult:
     """Feed ``(kind, stamp, msg)`` messages through a fresh pipeline; keep every output.
     ``progress`` draws a bar on stderr when stderr is a terminal (never carriage-return
     frames into a log file or a pipe)."""
@@ -105,20 +108,22 @@ def run_pipeline(messages, config: PipelineConfig, *, record: bool = True, progr
     return result
 
 
-def output_records(pipe: Pipeline, outputs, frame_id: str = "base_link", node: str = NODE_NAME) -> list:
+def output_records(pipe: Pipeline, outputs: Iterable[SampleOutput], frame_id: str = "base_link",
+                   node: str = NODE_NAME) -> list[tuple[int, str, str, bytes]]:
     """The node's output messages for every sample, as bag records of CDR bytes: exactly what
     the node publishes (:func:`.outputs.sample_messages`)."""
     return [(out.stamp_ns, f"/{node}/{topic}", msgtype, data)
             for out in outputs for topic, msgtype, data in sample_messages(pipe, out, frame_id)]
 
 
-def _write_csv(path: Path, pipe: Pipeline, outputs) -> None:
+def _write_csv(path: Path, pipe: Pipeline, outputs: Iterable[SampleOutput]) -> None:
     with open(path, "w") as fh:
         fh.write("time,model,parameter,estimate,std_error,std_error_conventional\n")
         for out in outputs:
             t = f"{out.stamp_ns // 10**9}.{out.stamp_ns % 10**9:09d}"
-            for (name, _label, theta, se, se_conv), names in zip(pipe.published(out), _names_of(pipe, out)):
-                for p, a, b, c in zip(names, theta, se, se_conv):
+            published = zip(pipe.published(out), _names_of(pipe, out), strict=True)
+            for (name, _label, theta, se, se_conv), names in published:
+                for p, a, b, c in zip(names, theta, se, se_conv, strict=True):
                     fh.write(f"{t},{name},{p},{float(a)!r},{float(b)!r},{float(c)!r}\n")
 
 
@@ -131,7 +136,7 @@ def wide_columns(pipe: Pipeline) -> list[str]:
     return ["time"] + [f"{p}{suffix}" for names in pipe.parameter_names for p in names for suffix, _ in WIDE_QUANTITIES]
 
 
-def _write_wide_csv(path: Path, pipe: Pipeline, outputs) -> None:
+def _write_wide_csv(path: Path, pipe: Pipeline, outputs: Iterable[SampleOutput]) -> None:
     """``estimates_wide.csv``: one row per sample, one column per parameter and quantity
     (:func:`wide_columns`), empty where the model is not ready yet. Comma separated, a header
     row and a numeric time column (s): what PlotJuggler's CSV loader reads as is."""
@@ -149,28 +154,28 @@ def _write_wide_csv(path: Path, pipe: Pipeline, outputs) -> None:
             fh.write(",".join(cells) + "\n")
 
 
-def _names_of(pipe: Pipeline, out):
+def _names_of(pipe: Pipeline, out: SampleOutput) -> list[tuple[str, ...]]:
     return [pipe.parameter_names[j] for j in range(len(pipe.sizes)) if out.ready[j]]
 
 
-def summary_table(pipe: Pipeline, outputs) -> str:
+def summary_table(pipe: Pipeline, outputs: Sequence[SampleOutput]) -> str:
     """The last sample's estimates of every ready model (:func:`.report.results_table`)."""
     if not outputs:
         return "no estimates: no model became ready (check the excitation and the configuration)"
     last = outputs[-1]
     rows = []
-    for (_name, _l, theta, se, sc), names in zip(pipe.published(last), _names_of(pipe, last)):
+    for (_name, _l, theta, se, sc), names in zip(pipe.published(last), _names_of(pipe, last), strict=True):
         rows += rows_from_arrays(names, theta, sc, se)
     return results_table(rows)
 
 
-def _plots(out_dir: Path, pipe: Pipeline, outputs) -> list[Path]:
+def _plots(out_dir: Path, pipe: Pipeline, outputs: Sequence[SampleOutput]) -> list[Path]:
     import matplotlib  # noqa: PLC0415
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt  # noqa: PLC0415
 
-    written = []
+    written: list[Path] = []
     if not outputs:
         return written
     t0 = outputs[0].stamp_ns
@@ -225,8 +230,9 @@ def _plots(out_dir: Path, pipe: Pipeline, outputs) -> list[Path]:
     return written
 
 
-def replay(bag: str | Path, params: dict, out: str | Path, *, start=None, end=None, strict: bool = True,
-           progress: bool = True, plots: bool = True, force: bool = False, inputs=()) -> ReplayResult:
+def replay(bag: str | Path, params: dict[str, Any], out: str | Path, *, start: float | None = None,
+           end: float | None = None, strict: bool = True, progress: bool = True, plots: bool = True,
+           force: bool = False, inputs: Iterable[str | Path] = ()) -> ReplayResult:
     """Run a replay bag through the pipeline and write the outputs to ``out``
     (:func:`.files.output_directory`: complete or absent; an existing non-empty ``out`` only
     with ``force``; never over the input bag or the other ``inputs``, such as the parameter

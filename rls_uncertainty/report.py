@@ -34,13 +34,13 @@ class ResultRow:
 
 def rows_from_arrays(
     names: Sequence[str],
-    estimates: Sequence[float],
-    se_conventional: Sequence[float],
-    se_corrected: Sequence[float],
+    estimates: Iterable[float],
+    se_conventional: Iterable[float],
+    se_corrected: Iterable[float],
     truth: Mapping[str, float] | None = None,
 ) -> list[ResultRow]:
-    """Rows of one model from its parameter names and arrays; ``truth`` maps names to true
-    values (names it lacks have none)."""
+    """Rows of one model from its parameter names and arrays (numpy arrays or sequences, all
+    of the names' length); ``truth`` maps names to true values (names it lacks have none)."""
     truth = truth or {}
     return [
         ResultRow(name, float(a), float(b), float(c), truth.get(name))

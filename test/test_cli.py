@@ -22,7 +22,8 @@ def test_multisine_command_writes_an_orthogonal_input_table(tmp_path, capsys):
     out = tmp_path / "inputs.csv"
     assert cli.main(["multisine", "--period", "12", "--band", "0.2", "2", "--inputs", "3",
                      "--names", "elevator", "aileron", "rudder", "--out", str(out)]) == 0
-    rows = list(csv.DictReader(open(out)))
+    with open(out) as fh:
+        rows = list(csv.DictReader(fh))
     by_input = {}
     for r in rows:
         by_input.setdefault(r["input"], set()).add(int(r["harmonic"]))
@@ -81,7 +82,7 @@ def test_the_input_bag_is_never_the_output(tmp_path, capsys, command, force):
 
 
 def test_the_mapping_and_parameter_files_are_inputs_too(tmp_path, capsys):
-    args, inputs = _setup("convert", tmp_path)
+    args, _inputs = _setup("convert", tmp_path)
     out = tmp_path / "out"
     out.mkdir()
     mapping = out / "mapping.yaml"
@@ -167,9 +168,11 @@ BAD_ARGUMENTS = [
     (["replay", "{bag}", "--out", "{tmp}/r", "--quiet", "--start", "nan"], "--start"),
     (["replay", "{bag}", "--out", "{tmp}/r", "--quiet", "--start", "-1"], "--start"),
     (["replay", "{bag}", "--out", "{tmp}/r", "--quiet", "--end", "nan"], "--end"),
-    (["replay", "{bag}", "--out", "{tmp}/r", "--quiet", "--start", "5", "--end", "2"], "end (2 s) must be after start (5 s)"),
+    (["replay", "{bag}", "--out", "{tmp}/r", "--quiet", "--start", "5", "--end", "2"],
+     "end (2 s) must be after start (5 s)"),
     (["replay", "{bag}", "--out", "{tmp}/r", "--quiet", "--start", "3", "--end", "3"], "must be after start"),
-    (["replay", "{bag}", "--out", "{tmp}/r", "--quiet", "--start", "100"], "from 100 s to the end (the bag holds 12.0 s)"),
+    (["replay", "{bag}", "--out", "{tmp}/r", "--quiet", "--start", "100"],
+     "from 100 s to the end (the bag holds 12.0 s)"),
     (["replay", "{bag}", "--out", "{tmp}/r", "--quiet", "--lags", "abc"], "--lags"),
     (["replay", "{bag}", "--out", "{tmp}/r", "--quiet", "--lags", "-5"], "estimator.lags"),
     (["replay", "{bag}", "--out", "{tmp}/r", "--quiet", "--forgetting", "nan"], "estimator.forgetting"),
@@ -212,7 +215,8 @@ def test_bad_text_in_parameter_and_aircraft_files_is_one_line(tmp_path, capsys):
     (tmp_path / "binary.yaml").write_bytes(b"\xff\xfe\x00")
     fails(capsys, ["replay", str(BUNDLED), "--config", str(tmp_path / "binary.yaml"), "--out", str(tmp_path / "r"),
                    "--quiet"], "binary.yaml", "not UTF-8")
-    (tmp_path / "air.yaml").write_text(f"rls_estimator:\n  ros__parameters:\n    aircraft: {tmp_path / 'binary.yaml'}\n")
+    (tmp_path / "air.yaml").write_text(
+        f"rls_estimator:\n  ros__parameters:\n    aircraft: {tmp_path / 'binary.yaml'}\n")
     fails(capsys, ["replay", str(BUNDLED), "--config", str(tmp_path / "air.yaml"), "--out", str(tmp_path / "r"),
                    "--quiet"], "aircraft", "binary.yaml", "not UTF-8")
     (tmp_path / "broken.yaml").write_text("rls_estimator:\n  ros__parameters: [1\n")

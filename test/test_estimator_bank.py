@@ -54,7 +54,7 @@ def test_rank_deficient_early_samples_wait_for_excitation():
         if k < 150:
             assert not est.is_ready
             with pytest.raises(EstimatorNotReady):
-                est.theta
+                _ = est.theta  # the property access is what raises
             with pytest.raises(EstimatorNotReady):
                 est.standard_errors()
     assert est.is_ready
@@ -146,7 +146,7 @@ def test_bank_equals_independent_estimators():
     singles = [RecursiveEstimator(s, n_lags=11) for s in sizes]
     for k in range(n):
         bank.update([r[k] for r in rows], np.array([zz[k] for zz in zs]))
-        for est, r, zz in zip(singles, rows, zs):
+        for est, r, zz in zip(singles, rows, zs, strict=True):
             est.update(r[k], zz[k])
     for j, est in enumerate(singles):
         np.testing.assert_allclose(bank.theta(j), est.theta, rtol=1e-12)
@@ -187,7 +187,7 @@ def assert_bank_equals_reference(bank, refs, k, rtol=1e-8):
     assert list(bank.ready) == [r.ready for r in refs], k
     theta_all = bank.theta_all()
     se = {kind: bank.standard_errors_all(kind) for kind in ("corrected", "conventional")}
-    for j, (ref, s) in enumerate(zip(refs, sizes)):
+    for j, (ref, s) in enumerate(zip(refs, sizes, strict=True)):
         if not ref.ready:
             assert np.isnan(theta_all[j]).all() and np.isnan(se["corrected"][j]).all()
             with pytest.raises(EstimatorNotReady):

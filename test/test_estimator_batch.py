@@ -41,5 +41,5 @@ def test_batch_estimate_equals_the_papers_matrices(n_lags, window, forgetting, g
     v = rng.standard_normal(n) if given_residuals else None
     fast = batch_estimate(X, z, n_lags, window, residuals=v, forgetting=forgetting)
     literal = batch_reference(X, z, n_lags, window, forgetting=forgetting, residuals=v)
-    for a, b in zip(fast, literal):
+    for a, b in zip(fast, literal, strict=True):
         rel_close(a, b, 1e-10)

@@ -35,7 +35,8 @@ def test_batch_reference_is_eqs_6_10_11_13_14_as_sums(n_lags, window, forgetting
     theta, cov_conv, cov_corr = batch_reference(X, z, n_lags, window, forgetting=forgetting)
     A = sum(w[j] * np.outer(X[j], X[j]) for j in range(N))
     D = np.linalg.inv(A)
-    np.testing.assert_allclose(theta, np.linalg.solve(A, sum(w[j] * X[j] * z[j] for j in range(N))), rtol=1e-10)  # Eq. 6
+    np.testing.assert_allclose(theta, np.linalg.solve(A, sum(w[j] * X[j] * z[j] for j in range(N))),
+                               rtol=1e-10)  # Eq. 6
     v = z - X @ theta  # Eq. 7
     R = [sum(w[j] * v[j] * v[j - i] for j in range(i, N)) / w.sum() for i in range(N)]  # Eq. 10
     c = lag_weights(N - 1 if n_lags is None else n_lags, window, N)
@@ -128,7 +129,8 @@ def test_residual_kinds_and_the_autocorrelation_of_each(forgetting):
     the signed geometric mean; R_k(i) (Eq. 17) is sum_j w_j v_j v_(j-i) / n_k of the residual
     history; with the standardized residual R_k(0) is the batch fit error variance (Eq. 14)."""
     X, z = problem()
-    refs = {r: RecursiveReference(3, 6, forgetting=forgetting, residual=r) for r in ("a_priori", "a_posteriori", "standardized")}
+    refs = {r: RecursiveReference(3, 6, forgetting=forgetting, residual=r)
+            for r in ("a_priori", "a_posteriori", "standardized")}
     thetas = [None]
     for k in range(1, len(z) + 1):
         for ref in refs.values():
@@ -152,7 +154,9 @@ def test_residual_kinds_and_the_autocorrelation_of_each(forgetting):
 
 
 @pytest.mark.parametrize("forgetting", [1.0, 0.95])
-@pytest.mark.parametrize("n_lags, window", [(None, "truncated"), (None, "bartlett"), (6, "truncated"), (6, "bartlett"), (0, "truncated")])
+@pytest.mark.parametrize(
+    "n_lags, window", [(None, "truncated"), (None, "bartlett"), (6, "truncated"), (6, "bartlett"), (0, "truncated")]
+)
 def test_recursive_covariance_is_eq_11_on_the_recursive_residuals(n_lags, window, forgetting):
     """Eq. 20/22 with R_k of the recursive residual history is the batch covariance of Eq. 8
     (Eq. 11 regrouped as Eq. 18) with those residuals; the conventional one is Eq. 13."""

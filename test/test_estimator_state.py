@@ -29,7 +29,9 @@ def test_snapshot_while_a_model_waits_for_initialization_continues_bit_identical
     n = 500
     X = np.zeros((n, 2, 3))
     X[:, 0, :2] = np.column_stack([np.ones(n), rng.standard_normal(n)])
-    X[:, 1] = np.column_stack([np.ones(n), rng.standard_normal(n), np.where(np.arange(n) < 200, 0.0, rng.standard_normal(n))])
+    X[:, 1] = np.column_stack(
+        [np.ones(n), rng.standard_normal(n), np.where(np.arange(n) < 200, 0.0, rng.standard_normal(n))]
+    )
     Z = np.einsum("kmi,mi->km", X, [[1.0, 2.0, 0.0], [0.5, -1.0, 3.0]]) + 0.1 * rng.standard_normal((n, 2))
     for n_lags in (None, 20):
         a = EstimatorBank((2, 3), n_lags, forgetting=forgetting)

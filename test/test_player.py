@@ -120,7 +120,9 @@ def _diff(got: dict, want: dict) -> str:
     """Where two per-topic message lists first differ (for an assertion message)."""
     for topic in want:
         g, w = got.get(topic, []), want[topic]
-        i = next((k for k, (a, b) in enumerate(zip(g, w)) if not _same_message(a, b)), min(len(g), len(w)))
+        # Over the shorter list only: a missing or extra message is a difference at its end.
+        i = next((k for k, (a, b) in enumerate(zip(g, w, strict=False)) if not _same_message(a, b)),
+                 min(len(g), len(w)))
         if i < max(len(g), len(w)):
             return f"{topic}: {len(g)} messages, expected {len(w)}; first difference at #{i}"
     return "equal"

@@ -2,6 +2,7 @@
 pipeline, options, and no partial output on failure. No DDS."""
 
 import csv
+from itertools import pairwise
 from pathlib import Path
 
 import numpy as np
@@ -28,7 +29,7 @@ def test_replay_writes_identical_outputs_twice_and_matches_the_pipeline(tmp_path
         rows = list(csv.DictReader(fh))
     assert list(rows[0]) == ["time", "model", "parameter", "estimate", "std_error", "std_error_conventional"]
     # One row per sample and parameter of every ready model.
-    n_rows = sum(int(sum(n for n, r in zip(r1.pipeline.sizes, o.ready) if r)) for o in r1.outputs)
+    n_rows = sum(int(sum(n for n, r in zip(r1.pipeline.sizes, o.ready, strict=True) if r)) for o in r1.outputs)
     assert len(rows) == n_rows
     # The CSV's last values are the pipeline's, fed message by message independently here.
     messages, _ = read_inputs(BUNDLED)
@@ -83,7 +84,7 @@ def test_the_printed_summary_is_the_last_sample_of_every_ready_model(tmp_path, c
     rows = [line.split() for line in out[2:2 + len(expected)]]
     assert [r[0] for r in rows] == [e[0] for e in expected] == [
         "CZ_0", "CZ_alpha", "CZ_delta_e", "Cm_0", "Cm_alpha", "Cm_q", "Cm_delta_e"]
-    for row, (_name, est, se_conv, se_corr) in zip(rows, expected):
+    for row, (_name, est, se_conv, se_corr) in zip(rows, expected, strict=True):
         # Four decimals: these standard errors are all above 0.001.
         assert row[1:] == [f"{est:.4f}", f"{se_conv:.4f}", f"{se_corr:.4f}", f"{se_corr / se_conv:.2f}"]
     assert out[2 + len(expected)] == ""
@@ -104,8 +105,8 @@ def test_the_wide_csv_holds_the_long_csv_one_row_per_sample(tmp_path):
     assert len(rows) == len(result.outputs)
     assert all(len(r) == len(header) for r in rows)
     times = [float(r[0]) for r in rows]  # numeric, increasing
-    assert all(b > a for a, b in zip(times, times[1:]))
-    wide = {(r[0], col): cell for r in rows for col, cell in zip(header[1:], r[1:])}
+    assert all(b > a for a, b in pairwise(times))
+    wide = {(r[0], col): cell for r in rows for col, cell in zip(header[1:], r[1:], strict=True)}
     with open(tmp_path / "r" / "estimates.csv") as fh:
         long = list(csv.DictReader(fh))
     seen = set()
@@ -117,9 +118,9 @@ def test_the_wide_csv_holds_the_long_csv_one_row_per_sample(tmp_path):
     # Every other cell is empty: exactly the samples where the model was not ready.
     assert all(cell == "" for key, cell in wide.items() if key not in seen)
     assert sum(cell == "" for cell in wide.values()) > 0
-    for out, r in zip(result.outputs, rows):
+    for out, r in zip(result.outputs, rows, strict=True):
         for j, cols in enumerate(result.pipeline.parameter_names):
-            cells = [dict(zip(header, r))[c] for c in cols]
+            cells = [dict(zip(header, r, strict=True))[c] for c in cols]
             assert all(c != "" for c in cells) if out.ready[j] else all(c == "" for c in cells)
 
 
@@ -132,7 +133,8 @@ def test_the_replays_mcap_carries_every_topic_the_node_publishes_byte_for_byte(t
 
     with open(tmp_path / "r" / "estimates.mcap", "rb") as fh:
         reader = make_reader(fh)
-        got = [(ch.topic, sch.name, msg.log_time, msg.data) for sch, ch, msg in reader.iter_messages(log_time_order=False)]
+        got = [(ch.topic, sch.name, msg.log_time, msg.data)
+               for sch, ch, msg in reader.iter_messages(log_time_order=False)]
     want_topics = {(f"/rls_estimator/{t}", m) for t, m in output_topics(["CZ", "Cm"])}
     assert {(t, s) for t, s, _, _ in got} == want_topics
     expected = [(f"/rls_estimator/{t}", m, out.stamp_ns, data)

@@ -1,9 +1,16 @@
-"""Markdown tables of the study's results (``study.py report`` writes ``tables.md``)."""
+"""Markdown tables of the study's results (``study.py report`` writes ``tables.md``).
+
+Imported by ``study.py report`` (which puts this directory on ``sys.path``), never by the
+modules it imports, so importing them here is not circular."""
 
 from __future__ import annotations
 
 import json
 from pathlib import Path
+
+import numpy as np
+from study import FORGETTING, true_autocovariance
+from transients import table
 
 NOISE_LABEL = {
     "white": "white",
@@ -35,19 +42,15 @@ def _cell(s, key, what="ratio"):
 def weighted_share(f: float, noise: str, n_lags: int = 50) -> float:
     """Share of ``sum_i f^|i| gamma(i)`` (the bias parameter's long-run variance seen through
     the forgetting window) within ``|i| <= n_lags``."""
-    import numpy as np
-    from study import true_autocovariance
-
     g = true_autocovariance(noise)
     w = f ** np.arange(len(g)) * g
     return float((w[0] + 2 * w[1 : n_lags + 1].sum()) / (w[0] + 2 * w[1:].sum()))
 
 
 def main_table(results: Path) -> list[str]:
-    from study import FORGETTING
-
     lines = [
-        "| f | noise | LRV share in 50 lags (f-weighted) | current: SE/true (2-SE coverage %) | fix: SE/true (coverage %) | fix SE spread (CV) |",
+        "| f | noise | LRV share in 50 lags (f-weighted) | current: SE/true (2-SE coverage %) | "
+        "fix: SE/true (coverage %) | fix SE spread (CV) |",
         "| --- | --- | --- | --- | --- | --- |",
     ]
     for f in FORGETTING:
@@ -57,8 +60,8 @@ def main_table(results: Path) -> list[str]:
                 continue
             cv = "/".join(f"{x:.2f}" for x in s["fix"]["cv"])
             lines.append(
-                f"| {f} | {NOISE_LABEL[nz]} | {s['config']['lags_share']:.3f} ({weighted_share(f, nz):.3f}) | {_cell(s, 'bank')} | "
-                f"{_cell(s, 'fix')} | {cv} |"
+                f"| {f} | {NOISE_LABEL[nz]} | {s['config']['lags_share']:.3f} ({weighted_share(f, nz):.3f}) | "
+                f"{_cell(s, 'bank')} | {_cell(s, 'fix')} | {cv} |"
             )
     return lines
 
@@ -94,14 +97,16 @@ def attribution_table(results: Path, names) -> list[str]:
              "| --- | " + " | ".join("---" for _ in heads) + " |"]
     for key, label in VARIANTS:
         lines.append(f"| {label} | " + " | ".join(_cell(s, key) for s in data) + " |")
-    lines.append("| MC std / exact | " + " | ".join("/".join(f"{x:.2f}" for x in s["mc_over_true"]) for s in data) + " |")
+    lines.append("| MC std / exact | "
+                 + " | ".join("/".join(f"{x:.2f}" for x in s["mc_over_true"]) for s in data) + " |")
     lines.append("| n_eff = sum f^(k-j); p_eff = tr(D Lambda(0)) | "
                  + " | ".join(f"{s['n_eff']:.0f}; {s.get('p_eff', float('nan')):.2f}" for s in data) + " |")
     return lines
 
 
 def extra_table(results: Path) -> list[str]:
-    lines = ["| case | current: SE/true (coverage %) | fix: SE/true (coverage %) | true gamma, 50 lags: SE/true (coverage %) | LRV share in 50 lags (f-weighted) |",
+    lines = ["| case | current: SE/true (coverage %) | fix: SE/true (coverage %) | "
+             "true gamma, 50 lags: SE/true (coverage %) | LRV share in 50 lags (f-weighted) |",
              "| --- | --- | --- | --- | --- |"]
     for p in sorted(results.glob("f*.json")):
         s = json.loads(p.read_text())
@@ -112,7 +117,10 @@ def extra_table(results: Path) -> list[str]:
         if not tag and c["noise"] not in ("ar50", "bl05") and c["f"] != 1.0:
             continue
         label = f"f={c['f']}, {NOISE_LABEL[c['noise']]}" + (f", {tag}" if tag else "")
-        share = f"{c['lags_share']:.3f} ({weighted_share(c['f'], c['noise']):.3f})" if c["f"] < 1 else f"{c['lags_share']:.3f}"
+        if c["f"] < 1:
+            share = f"{c['lags_share']:.3f} ({weighted_share(c['f'], c['noise']):.3f})"
+        else:
+            share = f"{c['lags_share']:.3f}"
         lines.append(f"| {label} | {_cell(s, 'bank')} | {_cell(s, 'fix')} | {_cell(s, 'oracle_L')} | {share} |")
     return lines
 
@@ -135,14 +143,14 @@ def write_tables(results: Path, out: Path) -> None:
     parts = ["# Generated tables (study.py report)", "",
              "Cells: bias / alpha / delta_e parameter; SE/true = mean corrected SE over runs / exact "
              "sampling std, averaged over checkpoints; coverage = share of |error| < 2 SE.", "",
-             "## Main grid", ""] + main_table(results)
-    parts += ["", "## Attribution", ""] + attribution_table(
+             "## Main grid", "", *main_table(results)]
+    parts += ["", "## Attribution", "", *attribution_table(
         results, ["f0.95_white_level.json", "f0.98_white_level.json", "f0.98_ar5_level.json", "f0.98_bl2_level.json",
-                  "f0.99_ar10_level.json", "f0.995_bl2_level.json", "f0.999_ar5_level.json", "f0.999_bl1_level.json"])
-    parts += ["", "## Limits, residual kinds, windows, f = 1", ""] + extra_table(results)
-    parts += ["", "## Noise memory f_R", ""] + sweep_table(results)
-    parts += ["", "## Soak (soak.py)", ""] + soak_table(results)
-    parts += ["", "## Transients (transients.py)", ""] + transient_tables(results)
+                  "f0.99_ar10_level.json", "f0.995_bl2_level.json", "f0.999_ar5_level.json", "f0.999_bl1_level.json"])]
+    parts += ["", "## Limits, residual kinds, windows, f = 1", "", *extra_table(results)]
+    parts += ["", "## Noise memory f_R", "", *sweep_table(results)]
+    parts += ["", "## Soak (soak.py)", "", *soak_table(results)]
+    parts += ["", "## Transients (transients.py)", "", *transient_tables(results)]
     out.write_text("\n".join(parts) + "\n")
     print(out.read_text())
 
@@ -166,11 +174,9 @@ def soak_table(results: Path) -> list[str]:
 
 
 def transient_tables(results: Path) -> list[str]:
-    from transients import table
-
     lines = []
     for kind in ("noise_step", "parameter_step"):
         s = _load(results, f"transient_{kind}.json")
         if s is not None:
-            lines += table(s) + [""]
+            lines += [*table(s), ""]
     return lines

@@ -20,8 +20,7 @@ from pathlib import Path
 import numpy as np
 from scipy import signal
 
-HERE = Path(__file__).resolve().parent
-sys.path.insert(0, str(HERE))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from prototype import HonestForgettingBank, NoiseModel, covariance_from_bank
 from study import RESULTS, THETA, make_noise, t2_regressors, true_autocovariance
@@ -94,10 +93,12 @@ def table(res: dict) -> list[str]:
         return "/".join(f"{100 * x:.0f}" for x in v)
 
     out = [f"{res['kind']} at k = {res['K0']} (f = {res['f']}, f_R = {res['f_R']:.5f})", "",
-           "| samples after step | RMS error / true SE | current SE/true (coverage %) | fix SE/true (coverage %) | level-adaptive fix |",
+           "| samples after step | RMS error / true SE | current SE/true (coverage %) | fix SE/true (coverage %) | "
+           "level-adaptive fix |",
            "| --- | --- | --- | --- | --- |"]
     for r in res["rows"]:
-        out.append(f"| {r['offset']} | {c(r['rms_err_over_true'])} | {c(r['current_ratio'])} ({p(r['current_coverage'])}) | "
+        out.append(f"| {r['offset']} | {c(r['rms_err_over_true'])} | "
+                   f"{c(r['current_ratio'])} ({p(r['current_coverage'])}) | "
                    f"{c(r['fix_ratio'])} ({p(r['fix_coverage'])}) | {c(r['level_ratio'])} ({p(r['level_coverage'])}) |")
     return out
 
