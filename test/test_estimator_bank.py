@@ -11,7 +11,7 @@ import sys
 
 import numpy as np
 import pytest
-from estimator_cases import RATE, ar1, indefinite_problem, rel_close, run, wide_scale_problem
+from test_estimator_cases import RATE, ar1, indefinite_problem, rel_close, run, wide_scale_problem
 
 from rls_uncertainty.estimator import (
     EstimatorBank,

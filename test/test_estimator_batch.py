@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from estimator_cases import ar1, rel_close
+from test_estimator_cases import ar1, rel_close
 
 from rls_uncertainty.estimator import batch_estimate
 from rls_uncertainty.estimator.reference import batch_reference

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from estimator_cases import ar1, indefinite_problem, rel_close
+from test_estimator_cases import ar1, indefinite_problem, rel_close
 
 from rls_uncertainty.estimator import EstimatorNotReady
 from rls_uncertainty.estimator.lag_window import lag_weights

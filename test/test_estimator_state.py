@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from estimator_cases import run, wide_scale_problem
+from test_estimator_cases import run, wide_scale_problem
 
 from rls_uncertainty.estimator import EstimatorBank, RecursiveEstimator
 

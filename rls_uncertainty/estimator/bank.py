@@ -132,11 +132,14 @@ class EstimatorBank:
         # magnitudes decide whether the sample can be applied unchecked (_prepare).
         self._y = np.zeros((m, n + 1))
         self._y_xs = self._xs = self._y[:, :n]
+        self._z_slot = self._y[:, n]
+        self._y_flat = self._y.reshape(-1)
         self._g = np.zeros((m, n + 1, 1))  # u as a column: the matmul's output
         self._Dx = self._g[:, :n, 0]
         self._Dx_row = self._g[:, None, :n, 0]
         self._neg_e = self._g[:, n, 0]
         self._y_abs = np.zeros_like(self._y)
+        self._y_abs_flat = self._y_abs.reshape(-1)
         self._g_flat = self._g.reshape(-1)
         self._y_xs_col = self._xs_col = self._xs[:, :, None]
         self._d = np.zeros(m)  # d_k = f + x' D x
@@ -159,6 +162,7 @@ class EstimatorBank:
         self._all_ready = bool(self._ready.all())
         if self._all_ready:
             self._lags.all_initialized()
+            self._xs, self._xs_col = self._y_xs, self._y_xs_col  # the scratch from now on
         invalid = ~(self._mask & self._ready[:, None])  # padding and models not ready: NaN
         self._theta_scale = np.where(invalid, np.nan, self._inv_s)
         self._cov_scale = self._theta_scale[:, :, None] * self._theta_scale[:, None, :]
@@ -202,11 +206,13 @@ class EstimatorBank:
         if self._lags.waiting:
             y = self._lags.y[:, self._lags.ptr - 1]
             self._y_k, self._xs, self._xs_col = y, y[:, : self.n_max], y[:, : self.n_max, None]
-        else:
-            y, self._xs, self._xs_col = self._y, self._y_xs, self._y_xs_col
-        np.multiply(x, self._inv_s, out=self._xs)
-        y[:, self.n_max] = z
-        small = np.maximum.reduce(np.absolute(y, out=self._y_abs), axis=None) <= _SAFE
+            np.multiply(x, self._inv_s, out=self._xs)
+            y[:, self.n_max] = z
+            small = np.maximum.reduce(np.absolute(y, out=self._y_abs), axis=None) <= _SAFE
+        else:  # scratch (self._xs is its x part once every model is initialized)
+            np.multiply(x, self._inv_s, out=self._xs)
+            self._z_slot[...] = z
+            small = np.maximum.reduce(np.absolute(self._y_flat, out=self._y_abs_flat)) <= _SAFE
         if check and not small:
             return False
         np.matmul(self._aug, self._xs_col, out=self._g)  # (D x, theta' x)

@@ -1,4 +1,4 @@
-"""Test problems and helpers shared by the estimator tests (test_estimator_*.py)."""
+"""Test problems and helpers shared by the estimator tests (no tests of its own)."""
 
 from __future__ import annotations
 
