@@ -14,3 +14,12 @@ def test_readme_documents_every_parameter_and_output():
     for topic in ("~/sample_stamp", "~/M/estimates", "~/M/standard_errors", "~/M/standard_errors_conventional",
                   "/diagnostics", "~/reset", "~/enable"):
         assert topic in text
+
+
+def test_readme_parameter_table_is_generated_from_the_parameter_table():
+    """README's parameter table is exactly what scripts/readme_parameters.py makes of
+    config.PARAMETERS (run it with --write after changing a parameter)."""
+    import runpy
+
+    script = runpy.run_path(str(ROOT / "scripts" / "readme_parameters.py"))
+    assert script["table"]() in (ROOT / "README.md").read_text()
