@@ -37,10 +37,11 @@ from rclpy.qos import QoSHistoryPolicy, QoSProfile, QoSReliabilityPolicy, qos_pr
 from std_msgs.msg import Float64MultiArray, Header
 from std_srvs.srv import SetBool, Trigger
 
-from .cdr import decode, encode_float64_multiarray, encode_float64_multiarray_dims, encode_header
+from .cdr import decode
 from .config import PARAMETERS, ConfigError, node_config, pipeline_config
 from .diagnostics import DiagnosticsPolicy, Snapshot, malformed_reason, malformed_warning
-from .messages import INPUTS, MESSAGE_TYPES, NODE_NAME, feed, message_class, stamp_label
+from .messages import INPUTS, MESSAGE_TYPES, NODE_NAME, feed, message_class
+from .outputs import SAMPLE_STAMP, sample_messages
 from .pipeline import MODEL_OUTPUTS, Pipeline, StateFileError
 from .state_file import set_aside
 
@@ -220,16 +221,13 @@ class EstimatorNode(Node):
         :mod:`.cdr` (byte-identical to rosbags' serialization and read back by rclpy, checked
         in test_cdr.py) and published raw: converting 25 Python messages per sample cost more
         CPU and latency than the estimation."""
-        sec, nanosec = divmod(out.stamp_ns, 1_000_000_000)
-        self._stamp_pub.publish(encode_header(sec, nanosec, self.node_cfg.frame_id))
-        when = stamp_label(out.stamp_ns)
         pubs = self._model_pubs
-        for a in self.pipeline.published_arrays(out):
-            if len(a.shape) == 1:
-                raw = encode_float64_multiarray(a.names, a.data.tolist(), when)
+        for topic, _msgtype, raw in sample_messages(self.pipeline, out, self.node_cfg.frame_id):
+            if topic == SAMPLE_STAMP:
+                self._stamp_pub.publish(raw)
             else:
-                raw = encode_float64_multiarray_dims(a.dims(when), a.data.tolist())
-            pubs[a.model][a.suffix].publish(raw)
+                model, suffix = topic.split("/", 1)
+                pubs[model][suffix].publish(raw)
 
     # ------------------------------------------------------------------ services, time
     def _on_reset(self, request, response):

@@ -3,10 +3,12 @@ publishes or records them (the offline replay's ``estimates.mcap``; the node pub
 same bytes, checked over DDS in ``test/test_player.py``).
 
 Per sample, in this order: ``sample_stamp`` (``std_msgs/Header``), then for each ready model M
-``M/estimates``, ``M/standard_errors`` (corrected) and ``M/standard_errors_conventional``
-(``std_msgs/Float64MultiArray``, parameter names in ``layout.dim[0].label``, the sample time in
-``layout.dim[1].label``). Topics are relative to the node (``/rls_estimator/...`` when
-published). No ROS import: :mod:`.cdr` encodes.
+the arrays of :meth:`.pipeline.Pipeline.published_arrays` (``std_msgs/Float64MultiArray``):
+``M/estimates``, ``M/standard_errors`` (corrected), ``M/standard_errors_conventional``,
+``M/converged``, and on decimated samples ``M/covariance`` and ``M/covariance_conventional``
+(parameter names in the label of each parameter axis, the sample time in the label of the last
+dim). Topics are relative to the node (``/rls_estimator/...`` when published). The node
+publishes exactly these bytes. No ROS import: :mod:`.cdr` encodes.
 """
 
 from __future__ import annotations
@@ -14,8 +16,8 @@ from __future__ import annotations
 from collections.abc import Iterable
 from typing import TYPE_CHECKING
 
-from .cdr import encode_float64_multiarray, encode_header
-from .messages import ARRAY_OUTPUTS, stamp_label
+from .cdr import encode_float64_multiarray, encode_float64_multiarray_dims, encode_header
+from .messages import stamp_label
 
 if TYPE_CHECKING:
     from .pipeline import Pipeline, SampleOutput
@@ -34,15 +36,19 @@ def sample_messages(pipeline: Pipeline, out: SampleOutput, frame_id: str) -> lis
     sec, nanosec = divmod(stamp, 1_000_000_000)
     messages = [(SAMPLE_STAMP, HEADER, encode_header(sec, nanosec, frame_id))]
     when = stamp_label(stamp)
-    for name, label, theta, se, se_conv in pipeline.published(out):
-        for suffix, data in zip(ARRAY_OUTPUTS, (theta, se, se_conv), strict=True):
-            messages.append((f"{name}/{suffix}", FLOAT64_MULTIARRAY,
-                             encode_float64_multiarray(label, data.tolist(), when)))
+    for a in pipeline.published_arrays(out):
+        if len(a.shape) == 1:
+            raw = encode_float64_multiarray(a.names, a.data.tolist(), when)
+        else:
+            raw = encode_float64_multiarray_dims(a.dims(when), a.data.tolist())
+        messages.append((f"{a.model}/{a.suffix}", FLOAT64_MULTIARRAY, raw))
     return messages
 
 
 def output_topics(models: Iterable[str]) -> list[tuple[str, str]]:
     """``(relative topic, message type)`` of every per-sample output of the models named in
     ``models`` (e.g. ``["CZ", "Cm"]``), in publishing order."""
-    arrays = [(f"{m}/{suffix}", FLOAT64_MULTIARRAY) for m in models for suffix in ARRAY_OUTPUTS]
+    from .pipeline import MODEL_OUTPUTS  # noqa: PLC0415 - pipeline imports numpy and the estimator
+
+    arrays = [(f"{m}/{suffix}", FLOAT64_MULTIARRAY) for m in models for suffix in MODEL_OUTPUTS]
     return [(SAMPLE_STAMP, HEADER), *arrays]
