@@ -43,7 +43,7 @@ from .diagnostics import DiagnosticsPolicy, Snapshot, malformed_reason, malforme
 from .messages import INPUTS, MESSAGE_TYPES, NODE_NAME, feed, message_class
 from .outputs import SAMPLE_STAMP, sample_messages
 from .pipeline import MODEL_OUTPUTS, Pipeline, StateFileError
-from .state_file import set_aside
+from .estimator.state_file import set_aside
 
 __all__ = ["EstimatorNode", "main", "NODE_NAME"]
 
