@@ -266,7 +266,7 @@ class EstimatorNode(Node):
     def _load_state(self) -> None:
         """Resume from ``state_file`` when it holds this configuration's state. A file that
         exists but cannot be used (corrupt, crafted, another configuration's) is renamed aside
-        (:func:`.state_file.set_aside`) so that the fresh state saved later never replaces it;
+        (:func:`.estimator.state_file.set_aside`) so that the fresh state saved later never replaces it;
         if it cannot be moved, nothing is saved this run."""
         path = self._state_path = self.node_cfg.state_file
         if not path:

@@ -29,7 +29,7 @@ from rls_uncertainty.messages import MESSAGE_TYPES, feed, parse_stamp_label
 from rls_uncertainty.messages import NODE_NAME as NODE
 from rls_uncertainty.pipeline import Pipeline
 from rls_uncertainty.replay import run_pipeline
-from rls_uncertainty.state_file import load_state
+from rls_uncertainty.estimator.state_file import load_state
 
 from ros_harness import ROOT, NodeProcess, RosTester, to_rclpy
 
