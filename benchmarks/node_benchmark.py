@@ -104,6 +104,7 @@ def publisher(args) -> None:
             m = WrenchStamped()
             m.wrench.force.x = 4000.0
         m.header.stamp.sec, m.header.stamp.nanosec = divmod(stamp, 10**9)
+        m.header.frame_id = "base_link"  # the node's inputs.frame_id
         pubs[kind].publish(m)
         log[i] = (time.monotonic(), kinds[kind], stamp - T0)
     np.save(args.log, log)

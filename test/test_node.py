@@ -196,6 +196,7 @@ def _synthetic(t0_ns, seconds, *, gap=None, zero_air=None, bad=True):
 
     def hdr(msg, ns):
         msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(ns, 10**9)
+        msg.header.frame_id = "base_link"  # inputs.frame_id: inputs in another frame are rejected
         return msg
 
     out = []
@@ -262,7 +263,10 @@ def test_bad_input_is_counted_in_diagnostics_and_never_published(tmp_path, teste
         assert samples["unknown_joint.flap"] == "1"
         # The 1 s air-data gap: grid points 4.00 ... 4.98 s skip (last message 3.983 s).
         assert samples["samples_rejected.gap_airspeed"] == str(len(range(4000, 5001, 20)))
-        assert int(samples["samples_rejected.nonpositive_airspeed"]) > 0
+        # Zero airspeed is below limits.airspeed_min: those messages are rejected, and no sample
+        # is interpolated across them.
+        assert int(inputs["airspeed.rejected.implausible_airspeed"]) > 0
+        assert int(samples["samples_rejected.invalid_airspeed"]) > 0
         for key, value in c["samples_rejected"].items():
             assert samples[f"samples_rejected.{key}"] == str(value)
         assert inputs["message"] != "all inputs fresh" and d[f"{NODE}: inputs"]["level"] == 1
@@ -283,7 +287,7 @@ def test_malformed_messages_are_counted_and_the_first_of_each_input_logged(tmp_p
     store = get_typestore(Stores.ROS2_JAZZY)
     T = store.types
     imu = T["sensor_msgs/msg/Imu"](
-        header=T["std_msgs/msg/Header"](stamp=T["builtin_interfaces/msg/Time"](sec=5, nanosec=0), frame_id="imu"),
+        header=T["std_msgs/msg/Header"](stamp=T["builtin_interfaces/msg/Time"](sec=5, nanosec=0), frame_id="base_link"),
         orientation=T["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=0.0, w=1.0),
         orientation_covariance=np.zeros(9), angular_velocity=T["geometry_msgs/msg/Vector3"](x=0.0, y=0.1, z=0.0),
         angular_velocity_covariance=np.zeros(9), linear_acceleration=T["geometry_msgs/msg/Vector3"](x=0.0, y=0.0, z=9.8),
@@ -586,11 +590,13 @@ def test_node_module_is_the_console_script():
 
 
 def test_play_command_drives_the_live_node_to_the_replay_numbers(tmp_path, tester, bag):
-    """`rls-uncertainty play` (with /clock, the node on use_sim_time) reproduces `replay`."""
-    node = _node(tmp_path, "-p", "use_sim_time:=true")
+    """`rls-uncertainty play` (with /clock, the node on use_sim_time) reproduces `replay`. The
+    node is started as the README advises for replays (a deep reliable queue and a long
+    buffer: a node slowed by a busy machine delays messages instead of expiring them)."""
+    node = _node(tmp_path, "-p", "use_sim_time:=true", *_ros_params(NO_EXPIRY))
     try:
         tester.wait_connected()
-        offline = run_pipeline(bag, pipeline_config(load_parameters_file("t2")))
+        offline = run_pipeline(bag, _t2_config(NO_EXPIRY))
         player = subprocess.run(
             [sys.executable, "-m", "rls_uncertainty.cli", "play", str(BUNDLED), "--rate", "4", "--wait", "1"],
             capture_output=True, text=True, timeout=120, cwd=ROOT,
