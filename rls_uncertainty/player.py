@@ -326,6 +326,10 @@ def bundled_bag() -> Path:
 # Input queue depth for the node in a reliable replay: deeper than any topic of the bundled
 # bag, so a node that falls behind (a busy machine) delays messages instead of overwriting them.
 _REPLAY_DEPTH = 10_000
+# And a long input buffer: a node that falls behind takes about one message per topic per
+# executor round, so its slow streams run seconds ahead of the IMU; with the default 2 s their
+# messages would expire (README, play).
+_REPLAY_BUFFER_S = 60.0
 
 
 def demo(rate: float = 4.0, params_file: str = "t2") -> int:
@@ -344,7 +348,7 @@ def demo(rate: float = 4.0, params_file: str = "t2") -> int:
 
     bag = bundled_bag()
     params_path = str(config_dir() / f"{params_file}.yaml")
-    params = load_parameters_file(params_path)
+    params = {**load_parameters_file(params_path), "inputs.buffer_duration": _REPLAY_BUFFER_S}
     config = pipeline_config(params)
     print(f"starting the estimator node ({params_path}) and playing {bag} over DDS at {rate:g}x ...")
     import tempfile  # noqa: PLC0415
@@ -354,7 +358,8 @@ def demo(rate: float = 4.0, params_file: str = "t2") -> int:
     with tempfile.NamedTemporaryFile("w+", prefix="rls_demo_node_", suffix=".log", delete=False) as node_log:
         node_proc = subprocess.Popen(
             [sys.executable, "-m", "rls_uncertainty.node", "--ros-args", "--params-file", params_path,
-             "-p", "qos.reliable:=true", "-p", f"qos.depth:={_REPLAY_DEPTH}"],
+             "-p", "qos.reliable:=true", "-p", f"qos.depth:={_REPLAY_DEPTH}",
+             "-p", f"inputs.buffer_duration:={_REPLAY_BUFFER_S}"],
             stdout=node_log, stderr=subprocess.STDOUT, text=True,
         )
     rclpy.init()
