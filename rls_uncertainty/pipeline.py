@@ -306,9 +306,8 @@ class Pipeline:
         layout = self._mixer.layout(names)
         if len(positions) != len(names):
             layout = "mismatched_arrays"
-        if type(layout) is str:
-            self.sampler.reject(self._surfaces, layout)
-            return []
+        if type(layout) is str:  # unusable at its stamp, like any invalid message: a hole
+            return self._invalid(self._surfaces, stamp_ns, (), layout)
         unknown = self.bookkeeping.unknown_joints
         for n in layout.unknown:
             count_bounded(unknown, n, OTHER_JOINTS)
@@ -322,8 +321,9 @@ class Pipeline:
         return []
 
     def _invalid(self, stream: Stream, stamp_ns: int, values: tuple, reason: str) -> list[SampleOutput]:
-        """A message with a value the limits refuse: ``non_finite`` goes to the sampler as
-        before; ``implausible_<field>`` is rejected at its stamp."""
+        """A message whose content is refused (a value the limits refuse, a JointState that
+        cannot be mixed): ``non_finite`` goes to the sampler as before, the other reasons are
+        rejected at the message's stamp; either way it is a hole (:mod:`.sampling`)."""
         if reason == "non_finite":
             due = self.sampler.add(stream, int(stamp_ns), values, False)
         else:

@@ -249,7 +249,7 @@ def test_bad_messages_are_counted_and_never_reach_the_outputs():
     for k in range(30):  # a burst of old messages
         syn.imu(syn.t0 + (500 + k) * MS)
     syn.surfaces(t, names=["elevator", "rudder"], positions=[0.0])  # mismatched arrays
-    syn.surfaces(t, names=["rudder", "aileron_left", "aileron_right"], positions=[0.0, 0.0, 0.0])  # no elevator
+    syn.surfaces(t + MS // 2, names=["rudder", "aileron_left", "aileron_right"], positions=[0.0] * 3)  # no elevator
     syn.surfaces(t + 2 * MS, names=["elevator", "aileron_left", "aileron_right", "rudder", "flap"],
                  positions=[0.0, 0.0, 0.0, 0.0, 0.3])  # unknown joint: counted, message used
     syn.air(t + 3 * MS, vec=(float("nan"), 0.0, 0.0))
@@ -267,7 +267,8 @@ def test_bad_messages_are_counted_and_never_reach_the_outputs():
     assert c["samples_formed"] == c["samples_used"] + sum(c["samples_rejected"].values())
     # No sample is interpolated across a non-finite message: IMU 995 ms, NaN 1000, Inf 1001,
     # then 1005 ms skips the 1000 ms grid point; air data 983 ms, NaN 1003, then 1023 ms skips
-    # 1020 ms. The 4 samples in the delay line are dropped and the differentiator warms up again.
+    # 1020 ms. The two JointStates that cannot be mixed (1000, 1000.5 ms) are holes in the
+    # interval already skipped. The 4 samples in the delay line are dropped and the differentiator warms up again.
     assert c["samples_rejected"] == {"differentiator_warmup": 8, "end_of_data": 4, "invalid_imu": 1,
                                      "invalid_airspeed": 1, "discontinuity": 4}
     t_used = {(r[0] - syn.t0) // MS for r in pipe.regression}
@@ -767,46 +768,59 @@ def bundled_messages():
     return read_inputs(BUNDLED)[0]
 
 
+CFG_LAG = 4  # differentiator.lag of config/t2.yaml: samples dropped at a skip, then warm-up
+
+
 def _t2_config(**params):
     return pipeline_config({**load_parameters_file("t2"), **params})
 
 
 def _relabelled(messages, kind, every, frame):
+    """The message of ``kind`` in the middle of every ``every`` relabelled ``frame`` (copies),
+    and how many."""
     out, n = [], 0
-    for k, (msg_kind, stamp, msg) in enumerate(messages):
-        if msg_kind == kind and k % every == 0:
-            relabelled = copy.deepcopy(msg)
-            relabelled.header.frame_id = frame
-            out.append((msg_kind, stamp, relabelled))
+    for msg_kind, stamp, msg in messages:
+        if msg_kind == kind:
             n += 1
-        else:
-            out.append((msg_kind, stamp, msg))
-    return out, n
+            if n % every == every // 2:
+                relabelled = copy.deepcopy(msg)
+                relabelled.header.frame_id = frame
+                out.append((msg_kind, stamp, relabelled))
+                continue
+        out.append((msg_kind, stamp, msg))
+    return out, (n + every // 2) // every
 
 
 def test_inputs_in_another_frame_are_rejected_as_frame_mismatch(bundled_messages):
     """messages.feed (the node's and the replay's only way in) compares header.frame_id with
-    inputs.frame_id. The bundled bag is in base_link, the default: nothing is rejected. IMU
-    messages relabelled imu_link are rejected (their numbers would be in an unknown frame);
-    an empty inputs.frame_id checks nothing; a frame no input carries rejects everything."""
+    inputs.frame_id. The bundled bag is in base_link, the default: nothing is rejected. Six air
+    data messages relabelled pitot_link are rejected (their numbers would be in an unknown
+    frame) and leave holes: the two grid points around each, interpolated from air data, are
+    skipped (and the differentiator restarts), every other sample is the clean run's.
+    An empty inputs.frame_id checks nothing; a frame no input carries rejects everything."""
     assert {m.header.frame_id for _k, _s, m in bundled_messages} == {"base_link"}
-    clean = run_pipeline(bundled_messages, _t2_config(), record=False).pipeline.counters()
-    assert all(not s["rejected"] for s in clean["streams"].values())
-    relabelled, n = _relabelled(bundled_messages, "imu", 7, "imu_link")
-    assert n > 100
-    result = run_pipeline(relabelled, _t2_config(), record=False)
+    clean = run_pipeline(bundled_messages, _t2_config())
+    c_clean = clean.pipeline.counters()
+    assert all(not s["rejected"] for s in c_clean["streams"].values())
+    relabelled, n = _relabelled(bundled_messages, "airspeed", 100, "pitot_link")
+    assert n == 6
+    result = run_pipeline(relabelled, _t2_config())
     c = result.pipeline.counters()
-    assert c["streams"]["imu"]["rejected"] == {"frame_mismatch": n}
-    assert c["streams"]["imu"]["received"] == clean["streams"]["imu"]["received"]
-    assert c["samples_used"] > 500 and all(np.isfinite(np.concatenate(r[2:])).all()
-                                           for o in result.outputs for r in result.pipeline.published(o))
+    assert c["streams"]["airspeed"]["rejected"] == {"frame_mismatch": n}
+    assert c["streams"]["airspeed"]["received"] == c_clean["streams"]["airspeed"]["received"]
+    assert c["samples_rejected"]["invalid_airspeed"] == 2 * n
+    assert c["samples_used"] == c_clean["samples_used"] - n * (2 + 2 * CFG_LAG)  # skipped, flushed, warm-up
+    rows = {t: (X, z) for t, X, z in clean.pipeline.regression}
+    for t, X, z in result.pipeline.regression:
+        np.testing.assert_array_equal(X, rows[t][0])
+        np.testing.assert_array_equal(z, rows[t][1])
     unchecked = run_pipeline(relabelled, _t2_config(**{"inputs.frame_id": ""}), record=False).pipeline.counters()
-    assert unchecked["streams"]["imu"]["rejected"] == {} and unchecked["samples_used"] == clean["samples_used"]
+    assert unchecked["streams"]["airspeed"]["rejected"] == {} and unchecked["samples_used"] == c_clean["samples_used"]
     other = run_pipeline(bundled_messages, _t2_config(**{"inputs.frame_id": "body"}), record=False)
     c = other.pipeline.counters()
     assert not other.outputs and c["samples_formed"] == 0
     for kind, s in c["streams"].items():
-        assert s["rejected"] == {"frame_mismatch": clean["streams"][kind]["received"]}
+        assert s["rejected"] == {"frame_mismatch": c_clean["streams"][kind]["received"]}
 
 
 def test_converted_and_generated_bags_carry_the_default_frame():
