@@ -223,9 +223,9 @@ class EstimatorNode(Node):
         pubs = self._model_pubs
         for a in self.pipeline.published_arrays(out):
             if len(a.shape) == 1:
-                raw = encode_float64_multiarray(a.names, a.data.tolist(), when)
+                raw = encode_float64_multiarray(a.names, a.data, when)
             else:
-                raw = encode_float64_multiarray_dims(a.dims(when), a.data.tolist())
+                raw = encode_float64_multiarray_dims(a.dims(when), a.data)
             pubs[a.model][a.suffix].publish(raw)
 
     # ------------------------------------------------------------------ services, time
