@@ -16,6 +16,7 @@ setup(
         (f"share/{PACKAGE}/config", glob("config/*.yaml")),
         (f"share/{PACKAGE}/config/aircraft", glob("config/aircraft/*.yaml")),
         (f"share/{PACKAGE}/launch", glob("launch/*.py")),
+        (f"share/{PACKAGE}/layouts", glob("layouts/*")),
         (f"share/{PACKAGE}/bags/t2_maneuver", glob("bags/t2_maneuver/*")),
         (f"share/{PACKAGE}/msg_schemas/fti_msgs", glob("msg_schemas/fti_msgs/*.yaml")),
         (f"share/{PACKAGE}/msg_schemas/fti_msgs/msg", glob("msg_schemas/fti_msgs/msg/*.msg")),

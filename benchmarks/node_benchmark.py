@@ -14,6 +14,7 @@ differentiator) to the reception of that sample's last output array.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import math
 import os
@@ -25,7 +26,7 @@ from pathlib import Path
 os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
 os.environ.setdefault("ROS_DOMAIN_ID", str(1 + os.getpid() % 100))
 
-import numpy as np  # noqa: E402
+import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 T0 = 1_800_000_000 * 10**9
@@ -89,7 +90,9 @@ def publisher(args) -> None:
             m = Vector3Stamped()
             V = 60.0
             a, b = x["alpha"], x["beta"]
-            m.vector.x, m.vector.y, m.vector.z = V * math.cos(a) * math.cos(b), -V * math.sin(b), -V * math.sin(a) * math.cos(b)
+            m.vector.x = V * math.cos(a) * math.cos(b)
+            m.vector.y = -V * math.sin(b)
+            m.vector.z = -V * math.sin(a) * math.cos(b)
         elif kind == "dynamic_pressure":
             m = FluidPressure()
             m.fluid_pressure = 0.5 * 1.1 * 60.0**2
@@ -120,10 +123,8 @@ def echo_node() -> None:
     qos = QoSProfile(depth=1000, reliability=QoSReliabilityPolicy.RELIABLE)
     pub = node.create_publisher(Header, "bench_echo_out", qos)
     node.create_subscription(Header, "bench_echo_in", pub.publish, qos)
-    try:
+    with contextlib.suppress(KeyboardInterrupt):
         rclpy.spin(node)
-    except KeyboardInterrupt:
-        pass
 
 
 def echo_baseline(samples: int = 1000) -> np.ndarray:
@@ -168,11 +169,11 @@ def completing_times(log: np.ndarray, rate: float, lag: int, required=(0, 1, 2, 
     """For each output sample stamp: when the input that completed sample (stamp + lag) was
     published (the pipeline's frontier rule, replayed on the publication log)."""
     P = int(round(1e9 / rate))
-    newest = {k: -1 for k in required}
+    newest = dict.fromkeys(required, -1)
     out = {}
     t_next = None
-    for wall, kind, stamp in log:
-        kind, stamp = int(kind), int(stamp)
+    for wall, kind_logged, stamp_logged in log:
+        kind, stamp = int(kind_logged), int(stamp_logged)
         if kind not in newest:
             continue
         newest[kind] = stamp
@@ -213,12 +214,15 @@ def main() -> int:
 
     tmp = Path(os.environ.get("TMPDIR", "/tmp")) / f"rls_bench_{os.getpid()}"
     tmp.mkdir(parents=True, exist_ok=True)
-    node = subprocess.Popen(
-        [sys.executable, *os.environ.get("RLS_BENCH_PYFLAGS", "").split(), "-m", "rls_uncertainty.node", "--ros-args", "-p", "qos.reliable:=true",
-         "-p", f"rate:={args.rate}", "-p", f"estimator.lags:={args.lags}", "-p", "surfaces.elevator:=[elevator]",
-         "-p", "qos.depth:=1000"],
-        stdout=open(tmp / "node.log", "w"), stderr=subprocess.STDOUT, cwd=ROOT,
-    )
+    # The child writes node.log through its own descriptor: ours is closed once it has started.
+    with open(tmp / "node.log", "w") as node_log:
+        node = subprocess.Popen(
+            [sys.executable, *os.environ.get("RLS_BENCH_PYFLAGS", "").split(), "-m", "rls_uncertainty.node",
+             "--ros-args", "-p", "qos.reliable:=true",
+             "-p", f"rate:={args.rate}", "-p", f"estimator.lags:={args.lags}", "-p", "surfaces.elevator:=[elevator]",
+             "-p", "qos.depth:=1000"],
+            stdout=node_log, stderr=subprocess.STDOUT, cwd=ROOT,
+        )
     rclpy.init()
     sub = rclpy.create_node("bench_subscriber")
     qos = QoSProfile(depth=1000, reliability=QoSReliabilityPolicy.RELIABLE, history=QoSHistoryPolicy.KEEP_LAST)
@@ -299,10 +303,11 @@ def main() -> int:
               f"in-node wall p99 (worst second) {max((p[0] for p in proc_p99), default=float('nan')):.3f} ms")
         print(f"  in-node CPU per output sample    p50 {np.median([p[2] for p in proc_p99]):.3f} ms, "
               f"p99 (worst second) {max((p[1] for p in proc_p99), default=float('nan')):.3f} ms")
-    json.dump({"p50_ms": float(np.percentile(lat, 50)) if lat.size else None,
-               "p99_ms": float(np.percentile(lat, 99)) if lat.size else None,
-               "cpu_percent": 100 * (cpu1 - cpu0) / (wall1 - wall0),
-               "dropped": expected - count["stamps"]}, open(tmp / "result.json", "w"))
+    with open(tmp / "result.json", "w") as fh:
+        json.dump({"p50_ms": float(np.percentile(lat, 50)) if lat.size else None,
+                   "p99_ms": float(np.percentile(lat, 99)) if lat.size else None,
+                   "cpu_percent": 100 * (cpu1 - cpu0) / (wall1 - wall0),
+                   "dropped": expected - count["stamps"]}, fh)
     sub.destroy_node()
     if not args.no_baseline:
         base = echo_baseline()

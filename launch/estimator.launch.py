@@ -4,8 +4,8 @@ params_file:=/path/to/config.yaml`` (default: the package's config/t2.yaml)."""
 import os
 
 from ament_index_python.packages import get_package_share_directory
-from launch import LaunchDescription
 from launch.actions import DeclareLaunchArgument
+from launch.launch_description import LaunchDescription  # ruff sorts a bare `launch` as ./launch/
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
 

@@ -19,19 +19,27 @@ topic and what is wrong.
 from __future__ import annotations
 
 import math
+import numbers
 import struct
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Iterator
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+import numpy.typing as npt
 
 from . import cdr
 from .aero import rep103_to_aircraft
-from .config import package_path, read_yaml
+from .config import package_path
 from .errors import BagError, ConfigError
 from .files import output_directory
 from .messages import INPUTS, MESSAGE_TYPES, stamp_ns
+
+if TYPE_CHECKING:  # annotations only: rosbags itself is imported where it is used
+    from rosbags.highlevel import AnyReader
+    from rosbags.interfaces import Connection
+    from rosbags.typesys.store import Typestore
 
 __all__ = [
     "BagError",
@@ -51,10 +59,10 @@ def schema_dir() -> Path:
     return package_path("msg_schemas")
 
 
-def typestore(extra_schemas: list[Path] | None = None):
+def typestore(extra_schemas: list[Path] | None = None) -> Typestore:
     """Jazzy typestore with the ``.msg`` files of ``msg_schemas/`` and ``extra_schemas``
     (directories laid out as ``PKG/msg/NAME.msg``)."""
-    from rosbags.typesys import Stores, get_typestore, get_types_from_msg  # noqa: PLC0415
+    from rosbags.typesys import Stores, get_types_from_msg, get_typestore  # noqa: PLC0415
 
     store = get_typestore(Stores.ROS2_JAZZY)
     dirs = [schema_dir(), *(Path(d) for d in (extra_schemas or []))]
@@ -66,7 +74,7 @@ def typestore(extra_schemas: list[Path] | None = None):
             name = f"{msg.parent.parent.name}/msg/{msg.stem}"
             try:
                 types.update(get_types_from_msg(msg.read_text(), name))
-            except Exception as exc:  # noqa: BLE001
+            except Exception as exc:  # the parser raises several types
                 raise BagError(f"{msg}: cannot parse message schema: {exc}") from exc
     store.register(types)
     return store
@@ -104,14 +112,14 @@ def check_mcap_integrity(path: Path) -> None:
                         count += opcode == message_opcode
     except BagError:
         raise
-    except Exception as exc:  # noqa: BLE001 - the mcap library raises many types
+    except Exception as exc:  # the mcap library raises many types
         raise BagError(f"{path}: corrupt or truncated MCAP: {exc}") from exc
     expected = summary.statistics.message_count
     if count != expected:
         raise BagError(f"{path}: corrupt MCAP: read {count} of the {expected} messages its summary lists")
 
 
-def _open_reader(path: Path, store):
+def _open_reader(path: Path, store: Typestore) -> AnyReader:
     from rosbags.highlevel import AnyReader  # noqa: PLC0415
 
     if not path.exists():
@@ -122,22 +130,24 @@ def _open_reader(path: Path, store):
     try:
         reader = AnyReader([path], default_typestore=store)
         reader.open()
-    except Exception as exc:  # noqa: BLE001 - rosbags raises several types for corrupt files
+    except Exception as exc:  # rosbags raises several types for corrupt files
         raise BagError(f"{path}: cannot open bag: {exc}") from exc
     return reader
 
 
-def _has_schema(msgtype: str, store, reader) -> bool:
+def _has_schema(msgtype: str, store: Typestore, reader: AnyReader) -> bool:
     """A definition with fields, from msg_schemas/ / --schemas or embedded in the bag."""
     if msgtype in store.fielddefs:
         return True
     fields_ = getattr(reader, "typestore", store).fielddefs.get(msgtype)
-    return bool(fields_) and not (
-        len(fields_[1]) == 1 and fields_[1][0][0] == "structure_needs_at_least_one_member"
-    )
+    if not fields_:
+        return False
+    return not (len(fields_[1]) == 1 and fields_[1][0][0] == "structure_needs_at_least_one_member")
 
 
-def _iter_messages(path: Path, reader, connections, store=None, fast: bool = False) -> Iterator:
+def _iter_messages(
+    path: Path, reader: AnyReader, connections: Sequence[Connection], store: Typestore | None = None, fast: bool = False
+) -> Iterator[tuple[Connection, int, object]]:
     """Messages of ``connections`` in log order, deserialized; corruption names the file.
     ``fast`` decodes the standard input types of a ROS 2 bag with :mod:`.cdr`."""
     it = reader.messages(connections=connections)
@@ -147,7 +157,7 @@ def _iter_messages(path: Path, reader, connections, store=None, fast: bool = Fal
             conn, t, raw = next(it)
         except StopIteration:
             return
-        except Exception as exc:  # noqa: BLE001
+        except Exception as exc:  # a corrupt bag raises many types
             raise BagError(f"{path}: corrupt or truncated bag: {exc}") from exc
         if fast and conn.msgtype in cdr.DECODABLE:
             try:
@@ -159,7 +169,7 @@ def _iter_messages(path: Path, reader, connections, store=None, fast: bool = Fal
                 continue
         try:
             msg = reader.deserialize(raw, conn.msgtype)
-        except Exception as exc:  # noqa: BLE001
+        except Exception as exc:  # re-raised as BagError unless the fallback below decodes it
             # An empty or broken embedded schema: the msg_schemas/ or --schemas type decides.
             if store is not None and conn.msgtype in store.types:
                 try:
@@ -187,24 +197,30 @@ class _Record:
     msg: object
 
 
-def _mk(store):
+def _mk(
+    store: Typestore,
+) -> tuple[Mapping[str, Callable[..., object]], Callable[[int], object], Callable[[float, float, float], object]]:
     T = store.types
 
-    def header(stamp, frame="base_link"):
+    def header(stamp: int, frame: str = "base_link") -> object:
         return T["std_msgs/msg/Header"](
             stamp=T["builtin_interfaces/msg/Time"](sec=int(stamp // 10**9), nanosec=int(stamp % 10**9)),
             frame_id=frame,
         )
 
-    def vec(x, y, z):
+    def vec(x: float, y: float, z: float) -> object:
         return T["geometry_msgs/msg/Vector3"](x=float(x), y=float(y), z=float(z))
 
     return T, header, vec
 
 
-def _standard_message(store, kind: str, stamp: int, values, names=None):
-    """A standard input message from plain values (REP-103, SI)."""
+def _standard_message(
+    store: Typestore, kind: str, stamp: int, values: npt.ArrayLike, names: Sequence[str] | None = None
+) -> object:
+    """A standard input message from plain values (REP-103, SI): a number (dynamic pressure,
+    thrust) or a sequence of them."""
     T, header, vec = _mk(store)
+    values = np.asarray(values, dtype=float)
     if kind == "imu":
         cov = np.zeros(9)
         unknown = np.zeros(9)
@@ -223,10 +239,12 @@ def _standard_message(store, kind: str, stamp: int, values, names=None):
     if kind == "dynamic_pressure":
         return T["sensor_msgs/msg/FluidPressure"](header=header(stamp), fluid_pressure=float(values), variance=0.0)
     if kind == "control_surfaces":
+        if names is None:
+            raise ValueError("control_surfaces needs the joint names")
         return T["sensor_msgs/msg/JointState"](
             header=header(stamp),
             name=list(names),
-            position=np.asarray(values, dtype=float),
+            position=values,
             velocity=np.zeros(0),
             effort=np.zeros(0),
         )
@@ -238,8 +256,8 @@ def _standard_message(store, kind: str, stamp: int, values, names=None):
     raise ValueError(kind)
 
 
-def write_replay(path: str | Path, records: list, store=None, *, force: bool = False,
-                 inputs: tuple = ()) -> Path:
+def write_replay(path: str | Path, records: Sequence[tuple[int, str, str, object]], store: Typestore | None = None,
+                 *, force: bool = False, inputs: tuple[str | Path, ...] = ()) -> Path:
     """Write ``records`` (``(stamp_ns, topic, msgtype, msg)``, ``msg`` a message or its CDR
     bytes) as a ROS 2 MCAP bag at ``path`` (a directory), log time = stamp, ordered by stamp
     with a stable tie-break. Atomic (:func:`.files.output_directory`): the bag appears under
@@ -254,7 +272,10 @@ def write_replay(path: str | Path, records: list, store=None, *, force: bool = F
     ]
     if not recs:
         raise BagError(f"{path}: nothing to write (no messages)")
-    rank = {}
+    bad = next((r for r in recs if not 0 <= r.stamp < 2**64), None)
+    if bad is not None:
+        raise BagError(f"{path}: topic {bad.topic}: stamp {bad.stamp} ns cannot be a log time (0 to 2^64 - 1 ns)")
+    rank: dict[str, int] = {}
     for r in recs:
         rank.setdefault(r.topic, _TOPIC_RANK.get(r.topic.strip("/"), len(_TOPIC_RANK)))
     recs.sort(key=lambda r: (r.stamp, rank[r.topic], r.topic, r.seq))
@@ -304,12 +325,13 @@ def input_topics(topics: dict[str, str] | None = None) -> dict[str, str]:
 
 
 def read_inputs(path: str | Path, topics: dict[str, str] | None = None, *, strict: bool = True,
-                start: float | None = None, end: float | None = None):
+                start: float | None = None, end: float | None = None) -> tuple[list[tuple[str, int, object]], int]:
     """Standard-input messages of a replay bag in log order: a list of ``(kind, stamp_ns,
     msg)`` and the bag's start time. ``strict`` refuses a topic whose header stamps do not
     increase or differ from the log time; ``start``/``end`` (s from the bag start) cut the
-    span."""
+    span (finite, at least 0, ``end`` after ``start``; else :class:`ConfigError`)."""
     path = Path(path)
+    _check_span(start, end)
     store = typestore()
     wanted = input_topics(topics)
     by_topic = {v: k for k, v in wanted.items()}
@@ -330,8 +352,12 @@ def read_inputs(path: str | Path, topics: dict[str, str] | None = None, *, stric
         hi = None if end is None else t0 + int(round(end * 1e9))
         last: dict[str, int] = {}
         out = []
+        seen = 0
         for conn, _t, msg in _iter_messages(path, reader, conns, store, fast=True):
+            seen += 1
             stamp = stamp_ns(msg)
+            if stamp < 0:
+                raise BagError(f"{path}: topic {conn.topic}: negative header stamp ({stamp} ns, before 1970)")
             if strict:
                 prev = last.get(conn.topic)
                 if prev is not None and stamp <= prev:
@@ -341,11 +367,28 @@ def read_inputs(path: str | Path, topics: dict[str, str] | None = None, *, stric
             if (lo is not None and stamp < lo) or (hi is not None and stamp > hi):
                 continue
             out.append((by_topic[conn.topic], stamp, msg))
+        duration = (reader.end_time - t0) * 1e-9
     finally:
         reader.close()
     if not out:
-        raise BagError(f"{path}: no input messages (empty bag or empty time span)")
+        if seen:
+            raise BagError(f"{path}: no input messages from {start or 0:g} s to "
+                           f"{'the end' if end is None else f'{end:g} s'} (the bag holds {duration:.1f} s)")
+        raise BagError(f"{path}: no input messages (empty bag)")
     return out, t0
+
+
+def _check_span(start: float | None, end: float | None) -> None:
+    """``start`` and ``end``: None or finite seconds >= 0 from the bag start, end after start."""
+    # Checked as any object: callers pass what the command line or a script gave.
+    given: tuple[tuple[str, object], ...] = (("start", start), ("end", end))
+    for name, value in given:
+        if value is None:
+            continue
+        if isinstance(value, bool) or not isinstance(value, numbers.Real) or not math.isfinite(value) or value < 0:
+            raise ConfigError(f"{name} must be a finite number of seconds >= 0 from the bag start, got {value!r}")
+    if start is not None and end is not None and end <= start:
+        raise ConfigError(f"end ({end:g} s) must be after start ({start:g} s)")
 
 
 # ------------------------------------------------------------------------------ convert
@@ -359,6 +402,29 @@ UNITS = {
     "N": 1.0, "lbf": 4.448221615, "kN": 1000.0,
 }
 FRAMES = ("rep103", "aircraft")
+_QUANTITY_UNITS = {
+    "angular rate": ("rad/s", "deg/s"),
+    "acceleration": ("m/s^2", "g", "ft/s^2"),
+    "speed": ("m/s", "ft/s", "kt", "km/h"),
+    "angle": ("rad", "deg"),
+    "pressure": ("Pa", "hPa", "psf", "psi"),
+    "force": ("N", "lbf", "kN"),
+}
+# Per standard input, every key a mapping may give: what it holds (a field list of three,
+# one field, a unit of a quantity, ...). Anything else is refused, so a misspelt key is an
+# error instead of a silently ignored setting.
+_MAPPING_KEYS = {
+    "imu": {"topic": "topic", "frame": "frame",
+            "angular_velocity": "fields3", "angular_velocity_units": "angular rate",
+            "linear_acceleration": "fields3", "linear_acceleration_units": "acceleration"},
+    "airspeed": {"topic": "topic", "frame": "frame", "vector": "fields3", "units": "speed",
+                 "polar": "polar", "speed_units": "speed", "angle_units": "angle"},
+    "dynamic_pressure": {"topic": "topic", "field": "field", "units": "pressure"},
+    "control_surfaces": {"topic": "topic", "joints": "joints", "units": "angle"},
+    "thrust": {"topic": "topic", "field": "field", "units": "force"},
+}
+_POLAR_KEYS = ("speed", "alpha", "beta")
+_REDUCTIONS = ("sum", "mean")
 
 
 def _unit(spec: dict, key: str, default: str, where: str) -> float:
@@ -368,28 +434,120 @@ def _unit(spec: dict, key: str, default: str, where: str) -> float:
     return UNITS[name]
 
 
-def load_mapping(path: str | Path) -> dict:
-    """A mapping file: for each standard input, the recorded topic, fields, units and frame."""
-    path = Path(path)
+def _check_field(value: object, where: str) -> None:
+    """A field: a dotted path (``-`` prefix flips the sign), or ``{field: PATH, reduce: sum|mean}``."""
+    if isinstance(value, dict):
+        extra = sorted(map(str, set(value) - {"field", "reduce"}))
+        if extra:
+            raise BagError(f"{where}: unknown key(s) {extra}; a field is PATH or {{field: PATH, reduce: sum|mean}}")
+        if "field" not in value:
+            raise BagError(f"{where}: needs 'field: PATH'")
+        if value.get("reduce", "sum") not in _REDUCTIONS:
+            raise BagError(f"{where}: reduce must be one of {list(_REDUCTIONS)}, got {value['reduce']!r}")
+        value = value["field"]
+    if not isinstance(value, str) or not value.lstrip("-"):
+        raise BagError(f"{where}: expected a field name (a dotted path such as vector.x), got {value!r}")
+
+
+def _check_input(kind: str, spec: object, where: str) -> None:
+    keys = _MAPPING_KEYS[kind]
+    if not isinstance(spec, dict):
+        raise BagError(f"{where}: expected a mapping with at least 'topic', got {spec!r}")
+    extra = sorted(map(str, set(spec) - set(keys)))
+    if extra:
+        raise BagError(f"{where}: unknown key(s) {extra}; known: {list(keys)}")
+    if "topic" not in spec:
+        raise BagError(f"{where}: needs a 'topic'")
+    if kind == "control_surfaces" and "joints" not in spec:
+        raise BagError(f"{where}: needs 'joints: {{joint_name: field, ...}}'")
+    if kind == "airspeed":
+        given = "polar" if "polar" in spec else "vector"
+        other = ("vector", "units") if given == "polar" else ("polar", "speed_units", "angle_units")
+        clash = [k for k in other if k in spec]
+        if clash:
+            raise BagError(f"{where}: {clash} do not go with the {given} form; give the airspeed either as "
+                           "'vector' (with 'units') or as 'polar' (with 'speed_units', 'angle_units')")
+    for key, value in spec.items():
+        what, at = keys[key], f"{where}: {key}"
+        if what == "topic":
+            if not isinstance(value, str) or not value:
+                raise BagError(f"{at}: expected a topic name, got {value!r}")
+        elif what == "frame":
+            if not isinstance(value, str) or value not in FRAMES:
+                raise BagError(f"{at}: must be one of {list(FRAMES)}, got {value!r}")
+        elif what == "fields3":
+            if not isinstance(value, list) or len(value) != 3:
+                raise BagError(f"{at}: expected a list of three fields (x, y, z), got {value!r}")
+            for i, f in enumerate(value):
+                _check_field(f, f"{at}[{i}]")
+        elif what == "field":
+            _check_field(value, at)
+        elif what == "polar":
+            if not isinstance(value, dict):
+                raise BagError(f"{at}: expected {{speed: FIELD, alpha: FIELD, beta: FIELD}}, got {value!r}")
+            extra = sorted(map(str, set(value) - set(_POLAR_KEYS)))
+            missing = [k for k in ("speed", "alpha") if k not in value]
+            if extra or missing:
+                raise BagError(f"{at}: " + (f"unknown key(s) {extra}" if extra else f"needs {missing}")
+                               + f"; known: {list(_POLAR_KEYS)} (beta optional)")
+            for k, f in value.items():
+                _check_field(f, f"{at}.{k}")
+        elif what == "joints":
+            if not isinstance(value, dict) or not value:
+                raise BagError(f"{at}: expected {{joint_name: field, ...}}, got {value!r}")
+            for name, f in value.items():
+                if not isinstance(name, str) or not name:
+                    raise BagError(f"{at}: joint names must be text, got {name!r}")
+                _check_field(f, f"{at}.{name}")
+        else:  # a unit of the quantity ``what``
+            allowed = _QUANTITY_UNITS[what]
+            if not isinstance(value, str) or value not in UNITS:
+                raise BagError(f"{at}: unknown unit {value!r}; {what} units: {list(allowed)}")
+            if value not in allowed:
+                raise BagError(f"{at}: {value!r} is not a unit of {what}; {what} units: {list(allowed)}")
+
+
+def _read_mapping_yaml(path: Path) -> dict:
+    """The mapping file's YAML; every problem is a one-line :class:`BagError`."""
+    import yaml  # noqa: PLC0415
+
     try:
-        data = read_yaml(path)
-    except ConfigError as exc:
-        raise BagError(f"mapping file {exc}") from exc
-    unknown = sorted(set(data) - set(INPUTS))
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError as exc:
+        raise BagError(f"mapping file {path}: no such file") from exc
+    except UnicodeDecodeError as exc:
+        raise BagError(f"mapping file {path}: not UTF-8 text (byte {exc.start})") from exc
+    try:
+        data = yaml.safe_load(text)
+    except yaml.MarkedYAMLError as exc:
+        where = exc.problem_mark or exc.context_mark
+        at = f" (line {where.line + 1}, column {where.column + 1})" if where is not None else ""
+        raise BagError(f"mapping file {path}: not valid YAML: {exc.problem or exc.context}{at}") from exc
+    except yaml.YAMLError as exc:
+        raise BagError(f"mapping file {path}: not valid YAML: {' '.join(str(exc).split())}") from exc
+    if not isinstance(data, dict):
+        raise BagError(f"mapping file {path}: expected a mapping at the top level")
+    return data
+
+
+def load_mapping(path: str | Path) -> dict:
+    """A mapping file: for each standard input, the recorded topic, fields, units and frame.
+    Every key and value is checked here, before any bag is read: a problem is a
+    :class:`BagError` naming the file, the input and the key."""
+    path = Path(path)
+    data = _read_mapping_yaml(path)
+    unknown = sorted(map(str, set(data) - set(INPUTS)))
     if unknown:
         raise BagError(f"{path}: unknown input(s) {unknown}; known: {list(INPUTS)}")
     for kind in ("imu", "airspeed"):
         if kind not in data:
             raise BagError(f"{path}: the mapping must give {kind!r}")
     for kind, spec in data.items():
-        if not isinstance(spec, dict) or "topic" not in spec:
-            raise BagError(f"{path}: input {kind!r} needs a 'topic'")
-        if spec.get("frame", "rep103") not in FRAMES:
-            raise BagError(f"{path}: input {kind!r}: frame must be one of {FRAMES}")
+        _check_input(kind, spec, f"{path}: input {kind!r}")
     return data
 
 
-def _field(msg, dotted: str, where: str):
+def _field(msg: object, dotted: str, where: str) -> Any:  # a message field: any type
     value = msg
     for part in dotted.split("."):
         if not hasattr(value, part):
@@ -398,26 +556,26 @@ def _field(msg, dotted: str, where: str):
     return value
 
 
-def _scalar(msg, spec, where: str) -> float:
+def _scalar(msg: object, spec: str | Mapping[str, str], where: str) -> float:
     """A field with an optional leading '-' (sign flip); arrays reduce by sum or mean."""
     name = spec if isinstance(spec, str) else spec["field"]
     sign = -1.0 if name.startswith("-") else 1.0
     value = _field(msg, name.lstrip("-"), where)
-    if isinstance(value, (list, tuple, np.ndarray)):
-        reduce = "sum" if isinstance(spec, str) else spec.get("reduce", "sum")
-        value = float(np.sum(value)) if reduce == "sum" else float(np.mean(value))
     try:
+        if isinstance(value, (list, tuple, np.ndarray)):
+            reduce = "sum" if isinstance(spec, str) else spec.get("reduce", "sum")
+            value = np.sum(value) if reduce == "sum" else np.mean(value)
         return sign * float(value)
     except (TypeError, ValueError) as exc:
         raise BagError(f"{where}: field {name!r} is not a number") from exc
 
 
-def _to_rep103(vec, frame: str):
+def _to_rep103(vec: Sequence[float], frame: str) -> tuple[float, ...]:
     # The aircraft-to-REP-103 rotation (pi about x) is its own inverse.
     return tuple(float(x) for x in rep103_to_aircraft(vec)) if frame == "aircraft" else tuple(vec)
 
 
-def _mapped_values(kind: str, spec: dict, msg, where: str):
+def _mapped_values(kind: str, spec: dict, msg: object, where: str) -> float | Sequence[float]:
     """Plain REP-103 SI values of one standard input from a recorded message."""
     frame = spec.get("frame", "rep103")
     if kind == "imu":
@@ -469,7 +627,8 @@ def convert(src: str | Path, mapping: str | Path, out: str | Path, schemas: list
         for kind, s in spec.items():
             if s["topic"] not in topics:
                 raise BagError(
-                    f"{src}: topic {s['topic']} (mapped to {kind} in {mapping}) is not in the bag; it has {sorted(topics)}"
+                    f"{src}: topic {s['topic']} (mapped to {kind} in {mapping}) is not in the bag; "
+                    f"it has {sorted(topics)}"
                 )
         wanted = sorted({s["topic"] for s in spec.values()})
         conns = [c for c in reader.connections if c.topic in wanted]
@@ -484,6 +643,9 @@ def convert(src: str | Path, mapping: str | Path, out: str | Path, schemas: list
                 stamp = stamp_ns(msg)
             except AttributeError as exc:
                 raise BagError(f"{src}: topic {conn.topic}: message has no header stamp") from exc
+            if stamp < 0:
+                raise BagError(f"{src}: topic {conn.topic}: negative header stamp ({stamp} ns, before 1970); "
+                               "a replay bag logs every message at its stamp")
             prev = last.get(conn.topic)
             if prev is not None and stamp <= prev:
                 what = "duplicate" if stamp == prev else "non-monotonic"

@@ -3,11 +3,15 @@
 from __future__ import annotations
 
 import argparse
+import math
 import sys
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any, NoReturn
 
 import numpy as np
 
-from .errors import ConfigError, RlsUncertaintyError
+from .errors import ConfigError, OutputPathError, RlsUncertaintyError
 
 __all__ = ["main"]
 
@@ -22,11 +26,12 @@ def _demo(args: argparse.Namespace) -> int:
 def _simulate(args: argparse.Namespace) -> int:
     """Estimator on a seeded simulated T-2 maneuver (Section IV.A), one sample at a time."""
     from .estimator import EstimatorBank
+    from .report import results_table, rows_from_arrays
     from .simulation import T2_MODELS, T2_TRUE, add_noise, reduce_short_period, simulate_short_period
 
     record = add_noise(simulate_short_period(), args.noise / 100.0, np.random.default_rng(args.seed))
     t, data = reduce_short_period(record)
-    models = [m for m in T2_MODELS]
+    models = list(T2_MODELS)
     bank = EstimatorBank([len(m.regressors) for m in models], args.lags, args.window, args.forgetting)
     z = np.empty(len(models))
     for k in range(t.size):
@@ -39,17 +44,11 @@ def _simulate(args: argparse.Namespace) -> int:
         f"T-2 short-period maneuver, {args.noise:g}% band-limited noise (seed {args.seed}), "
         f"{t.size} samples at 50 Hz, {lags} lags, {args.window} window\n"
     )
-    header = f"{'parameter':<12}{'true':>10}{'estimate':>11}{'SE conv.':>11}{'SE corr.':>11}{'corr/conv':>11}"
-    print(header)
-    print("-" * len(header))
+    rows = []
     for j, m in enumerate(models):
-        theta = bank.theta(j)
-        se_conv = bank.standard_errors(j, "conventional")
-        se_corr = bank.standard_errors(j, "corrected")
-        for name, th, sv, sc in zip(m.parameter_names, theta, se_conv, se_corr):
-            true = T2_TRUE.get(name)
-            true_s = f"{true:10.3f}" if true is not None else f"{'-':>10}"
-            print(f"{name:<12}{true_s}{th:11.4f}{sv:11.4f}{sc:11.4f}{sc / sv:11.2f}")
+        rows += rows_from_arrays(m.parameter_names, bank.theta(j), bank.standard_errors(j, "conventional"),
+                                 bank.standard_errors(j, "corrected"), T2_TRUE)
+    print(results_table(rows))
     print(
         "\nConventional standard errors assume white residuals (Eq. 13); corrected ones use the "
         "recursive residual autocorrelation (Eqs. 17-22)."
@@ -59,24 +58,26 @@ def _simulate(args: argparse.Namespace) -> int:
 
 def _montecarlo(args: argparse.Namespace) -> int:
     """Table 3 of the paper: every noise level, ``--runs`` runs each, on every core."""
-    from pathlib import Path
-
+    from .files import output_directory
     from .montecarlo import LEVELS, run_table3, write_outputs
 
     levels = LEVELS if args.levels is None else tuple(x / 100.0 for x in args.levels)
-    print(f"Monte Carlo: {args.runs} runs x {len(levels)} levels, {args.lags} lags, {args.jobs or 'all'} processes")
-    results = run_table3(args.runs, levels, n_lags=args.lags, jobs=args.jobs)
-    paths = write_outputs(results, Path(args.out), figures=not args.no_figures)
-    print(Path(paths["md"]).read_text())
-    for key, path in paths.items():
-        print(f"wrote {path}")
+    out = Path(args.out)
+    # The output directory is checked before the runs and appears only when complete.
+    with output_directory(out, force=args.force) as tmp:
+        print(f"Monte Carlo: {args.runs} runs x {len(levels)} levels, {args.lags} lags, {args.jobs or 'all'} processes")
+        results = run_table3(args.runs, levels, n_lags=args.lags, jobs=args.jobs)
+        paths = write_outputs(results, tmp, figures=not args.no_figures)
+        table = paths["md"].read_text()
+    print(table)
+    for path in paths.values():
+        print(f"wrote {out / path.relative_to(tmp)}")
     return 0
 
 
 def _multisine(args: argparse.Namespace) -> int:
     """Design orthogonal phase-optimized multisines and write their input table (CSV)."""
-    from pathlib import Path
-
+    from .files import atomic_file
     from .multisine import design_multisines, relative_peak_factor
 
     names = tuple(args.names) if args.names else tuple(f"input{i + 1}" for i in range(args.inputs))
@@ -85,12 +86,17 @@ def _multisine(args: argparse.Namespace) -> int:
     designs = design_multisines(args.period, (args.band[0], args.band[1]), args.inputs, names=names,
                                 amplitude=args.amplitude)
     out = Path(args.out)
+    if out.is_dir() and not out.is_symlink():
+        raise OutputPathError(f"{out}: is a directory; give the CSV file's name")
+    if (out.exists() or out.is_symlink()) and not args.force:
+        raise OutputPathError(f"{out}: exists (use --force to replace it)")
+    lines = ["input,harmonic,frequency_hz,relative_amplitude,phase_rad\n"]
+    for ms in designs:
+        for k, a, ph in zip(ms.harmonics, ms.rel_amplitudes, ms.phases, strict=True):
+            lines.append(f"{ms.name},{k},{k / ms.period:.6g},{a:.6g},{ph:.9g}\n")
     out.parent.mkdir(parents=True, exist_ok=True)
-    with open(out, "w") as fh:
-        fh.write("input,harmonic,frequency_hz,relative_amplitude,phase_rad\n")
-        for ms in designs:
-            for k, a, ph in zip(ms.harmonics, ms.rel_amplitudes, ms.phases):
-                fh.write(f"{ms.name},{k},{k / ms.period:.6g},{a:.6g},{ph:.9g}\n")
+    with atomic_file(out) as fh:
+        fh.write("".join(lines).encode())
     t = np.linspace(0.0, args.period, 4096, endpoint=False)
     for ms in designs:
         freqs = ", ".join(f"{f:.3g}" for f in ms.frequencies)
@@ -120,27 +126,49 @@ def _convert(args: argparse.Namespace) -> int:
     return 0
 
 
-def _replay_params(args: argparse.Namespace) -> dict:
-    from .config import load_parameters_file
+def _not_text(name: str, exc: UnicodeDecodeError) -> ConfigError:
+    return ConfigError(f"{name}: not UTF-8 text (byte {exc.start})")
 
-    params = load_parameters_file(args.config) if args.config else {}
+
+def _replay_params(args: argparse.Namespace) -> dict[str, Any]:
+    from .config import load_parameters_file, pipeline_config
+
+    try:
+        params = load_parameters_file(args.config) if args.config else {}
+    except UnicodeDecodeError as exc:
+        raise _not_text(args.config, exc) from exc
     if args.lags is not None:
-        params["estimator.lags"] = -1 if args.lags == "all" else int(args.lags)
+        params["estimator.lags"] = args.lags
     if args.window:
         params["estimator.window"] = args.window
     if args.forgetting is not None:
         params["estimator.forgetting"] = args.forgetting
     if args.models:
         params["models.enabled"] = list(args.models)
+    try:
+        pipeline_config(params)  # every setting checked and the aircraft file read before any output
+    except UnicodeDecodeError as exc:
+        raise _not_text(f"aircraft {params.get('aircraft')}", exc) from exc
     return params
 
 
+def _yaml_file(name_or_path: str, directory: Path) -> Path:
+    """The file a parameter or aircraft name stands for (as :mod:`.config` resolves it)."""
+    path = Path(name_or_path)
+    return path if path.suffix else directory / f"{name_or_path}.yaml"
+
+
 def _replay(args: argparse.Namespace) -> int:
+    from .config import config_dir
     from .replay import replay, summary_table
 
     params = _replay_params(args)
+    # Files the replay reads besides the bag: never replaced by its output, even with --force.
+    inputs = [_yaml_file(args.config, config_dir())] if args.config else []
+    if isinstance(params.get("aircraft"), str) and params["aircraft"]:
+        inputs.append(_yaml_file(params["aircraft"], config_dir() / "aircraft"))
     result = replay(args.bag, params, args.out, start=args.start, end=args.end, strict=not args.lenient,
-                    progress=not args.quiet, plots=not args.no_plots, force=args.force)
+                    progress=not args.quiet, plots=not args.no_plots, force=args.force, inputs=inputs)
     pipe = result.pipeline
     c = pipe.counters()
     print(summary_table(pipe, result.outputs))
@@ -159,61 +187,123 @@ def _play(args: argparse.Namespace) -> int:
     from .player import play
 
     return play(args.bag, rate=args.rate, clock=not args.no_clock, reliable=not args.best_effort,
-                wait_for_subscribers=args.wait, start_delay=args.delay)
+                wait_for_subscribers=args.wait, start_delay=args.delay, loops=args.loop, window=args.window,
+                ack_timeout=args.ack_timeout, report=args.report)
 
 
-def _lags(value: str):
+def _lags(value: str) -> int | None:
+    """simulate --lags: an integer >= 0, or 'all' (None)."""
     if value in ("all", "none", "None"):
         return None
-    n = int(value)
+    try:
+        n = int(value)
+    except ValueError:
+        n = -1
     if n < 0:
-        raise argparse.ArgumentTypeError("lags must be >= 0 or 'all'")
+        raise argparse.ArgumentTypeError(f"must be an integer >= 0 or 'all', got {value!r}")
     return n
+
+
+def _replay_lags(value: str) -> int:
+    """replay --lags: an integer (the parameter's range is checked with the others) or 'all' (-1)."""
+    if value == "all":
+        return -1
+    try:
+        return int(value)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be an integer or 'all', got {value!r}") from None
+
+
+def _real(low: float, *, low_open: bool = False, high: float | None = None) -> Callable[[str], float]:
+    """An argparse type: a finite number >= low (> low with ``low_open``), <= high."""
+    bound = f"> {low:g}" if low_open else f">= {low:g}"
+    if high is not None:
+        bound = f"in ({low:g}, {high:g}]" if low_open else f"in [{low:g}, {high:g}]"
+
+    def real(value: str) -> float:
+        try:
+            x = float(value)
+        except ValueError:
+            x = math.nan
+        if not (math.isfinite(x) and (x > low if low_open else x >= low) and (high is None or x <= high)):
+            raise argparse.ArgumentTypeError(f"must be a finite number {bound}, got {value!r}")
+        return x
+
+    return real
+
+
+def _integer(low: int) -> Callable[[str], int]:
+    """An argparse type: an integer >= low."""
+
+    def integer(value: str) -> int:
+        try:
+            n = int(value)
+        except ValueError:
+            n = None
+        if n is None or n < low:
+            raise argparse.ArgumentTypeError(f"must be an integer >= {low}, got {value!r}")
+        return n
+
+    return integer
+
+
+class _Parser(argparse.ArgumentParser):
+    """Usage errors in one line, like every other error of the command (exit status 2)."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
 
 
 _FORCE_HELP = "replace an existing non-empty output directory (never the input)"
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    from .player import DEFAULT_WINDOW  # no ROS import at module level
+
+    parser = _Parser(
         prog="rls-uncertainty",
         description="Recursive least squares with colored-residual parameter uncertainty.",
     )
     sub = parser.add_subparsers(dest="command", required=True)
     demo = sub.add_parser("demo", help="the live estimator node on the bundled T-2 bag over DDS")
-    demo.add_argument("--rate", type=float, default=4.0, help="playback speed factor (default 4)")
+    demo.add_argument("--rate", type=_real(0.0), default=4.0,
+                      help="playback speed factor (default 4; 0 = as fast as possible)")
     demo.set_defaults(func=_demo)
 
     sim = sub.add_parser("simulate", help="estimate the T-2 derivatives of a simulated maneuver (no ROS)")
-    sim.add_argument("--noise", type=float, default=20.0, help="band-limited noise, percent (default 20)")
-    sim.add_argument("--seed", type=int, default=250, help="noise seed (default 250)")
+    sim.add_argument("--noise", type=_real(0.0), default=20.0, help="band-limited noise, percent (default 20)")
+    sim.add_argument("--seed", type=_integer(0), default=250, help="noise seed (default 250)")
     sim.add_argument("--lags", type=_lags, default=50, help="retained lags, or 'all' (default 50)")
     sim.add_argument("--window", choices=("truncated", "bartlett"), default="truncated")
-    sim.add_argument("--forgetting", type=float, default=1.0)
+    sim.add_argument("--forgetting", type=_real(0.0, low_open=True, high=1.0), default=1.0,
+                     help="exponential forgetting factor in (0, 1] (default 1)")
     sim.set_defaults(func=_simulate)
 
     mc = sub.add_parser("montecarlo", help="reproduce Table 3 and Figs. 5-7 of the paper")
-    mc.add_argument("--runs", type=int, default=250, help="runs per noise level (default 250)")
+    mc.add_argument("--runs", type=_integer(1), default=250, help="runs per noise level (default 250)")
     mc.add_argument("--out", required=True, help="output directory")
-    mc.add_argument("--levels", type=float, nargs="+", help="noise levels in percent (default 0 5 10 15 20)")
-    mc.add_argument("--lags", type=int, default=50, help="retained lags (default 50)")
-    mc.add_argument("--jobs", type=int, default=None, help="processes (default: every core)")
+    mc.add_argument("--levels", type=_real(0.0), nargs="+", help="noise levels in percent (default 0 5 10 15 20)")
+    mc.add_argument("--lags", type=_integer(0), default=50, help="retained lags (default 50)")
+    mc.add_argument("--jobs", type=_integer(1), default=None, help="processes (default: every core)")
     mc.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
+    mc.add_argument("--force", action="store_true", help=_FORCE_HELP)
     mc.set_defaults(func=_montecarlo)
 
     ms = sub.add_parser("multisine", help="design orthogonal phase-optimized multisine inputs (Eq. 24)")
-    ms.add_argument("--period", type=float, required=True, help="record length T, s")
-    ms.add_argument("--band", type=float, nargs=2, required=True, metavar=("LOW", "HIGH"), help="band, Hz")
-    ms.add_argument("--inputs", type=int, required=True, help="number of inputs")
+    ms.add_argument("--period", type=_real(0.0, low_open=True), required=True, help="record length T, s")
+    ms.add_argument("--band", type=_real(0.0), nargs=2, required=True, metavar=("LOW", "HIGH"), help="band, Hz")
+    ms.add_argument("--inputs", type=_integer(1), required=True, help="number of inputs")
     ms.add_argument("--names", nargs="+", help="input names (default input1, input2, ...)")
-    ms.add_argument("--amplitude", type=float, default=1.0, help="aggregate amplitude a (default 1)")
+    ms.add_argument("--amplitude", type=_real(0.0, low_open=True), default=1.0,
+                    help="aggregate amplitude a (default 1)")
     ms.add_argument("--out", required=True, help="CSV file for the input table")
+    ms.add_argument("--force", action="store_true", help="replace an existing file")
     ms.set_defaults(func=_multisine)
 
     mb = sub.add_parser("make-bag", help="write the seeded T-2 maneuver as a bag on the standard input topics")
     mb.add_argument("--out", default="bags/t2_maneuver", help="bag directory (default bags/t2_maneuver)")
-    mb.add_argument("--noise", type=float, default=20.0, help="band-limited noise, percent (default 20)")
-    mb.add_argument("--seed", type=int, default=250)
+    mb.add_argument("--noise", type=_real(0.0), default=20.0, help="band-limited noise, percent (default 20)")
+    mb.add_argument("--seed", type=_integer(0), default=250, help="noise seed (default 250)")
     mb.add_argument("--force", action="store_true", help=_FORCE_HELP)
     mb.set_defaults(func=_make_bag)
 
@@ -229,12 +319,12 @@ def build_parser() -> argparse.ArgumentParser:
     rp.add_argument("bag", help="replay bag on the standard topics")
     rp.add_argument("--config", help="ROS parameter file, e.g. config/t2.yaml (default: node defaults)")
     rp.add_argument("--out", required=True, help="output directory")
-    rp.add_argument("--lags", help="override estimator.lags (integer or 'all')")
+    rp.add_argument("--lags", type=_replay_lags, help="override estimator.lags (integer or 'all')")
     rp.add_argument("--window", choices=("truncated", "bartlett"), help="override estimator.window")
     rp.add_argument("--forgetting", type=float, help="override estimator.forgetting")
     rp.add_argument("--models", nargs="+", help="override models.enabled (e.g. CZ Cm)")
-    rp.add_argument("--start", type=float, help="start, s from the bag start")
-    rp.add_argument("--end", type=float, help="end, s from the bag start")
+    rp.add_argument("--start", type=_real(0.0), help="start, s from the bag start")
+    rp.add_argument("--end", type=_real(0.0), help="end, s from the bag start (after --start)")
     rp.add_argument("--lenient", action="store_true",
                     help="pass out-of-order and duplicate stamps to the pipeline (counted like the node does)")
     rp.add_argument("--no-plots", action="store_true")
@@ -242,13 +332,27 @@ def build_parser() -> argparse.ArgumentParser:
     rp.add_argument("--force", action="store_true", help=_FORCE_HELP)
     rp.set_defaults(func=_replay)
 
-    pl = sub.add_parser("play", help="publish a replay bag over DDS with /clock")
+    pl = sub.add_parser("play", help="publish a replay bag over DDS with /clock",
+                        description="Publish a replay bag over DDS with /clock. Exit status 0 when every reliable "
+                                    "subscriber acknowledged every message, 1 when not (what was not delivered is "
+                                    "printed), 2 on bad input.")
     pl.add_argument("bag")
-    pl.add_argument("--rate", type=float, default=1.0, help="rate factor (default 1 = real time)")
+    pl.add_argument("--rate", type=_real(0.0), default=1.0,
+                    help="rate factor (default 1 = real time; 0 = as fast as the acknowledgements allow)")
+    pl.add_argument("--loop", type=_integer(1), default=1, metavar="N",
+                    help="play the bag N times; stamps and /clock restart with every pass (default 1)")
+    pl.add_argument("--window", type=_integer(1), default=DEFAULT_WINDOW,
+                    help="messages per topic that may await acknowledgement; the publishers keep this many "
+                         f"(default {DEFAULT_WINDOW}, the node's default qos.depth)")
+    pl.add_argument("--ack-timeout", type=_real(0.0), default=30.0, metavar="SECONDS",
+                    help="how long to wait for the acknowledgements of a window and at the end (default 30)")
+    pl.add_argument("--report", action="store_true",
+                    help="print per topic the messages published, acknowledged, and the discovered subscriptions")
     pl.add_argument("--no-clock", action="store_true", help="do not publish /clock")
     pl.add_argument("--best-effort", action="store_true", help="best-effort QoS (default reliable)")
-    pl.add_argument("--wait", type=int, default=0, help="wait for this many subscribers on each topic")
-    pl.add_argument("--delay", type=float, default=0.5, help="seconds between discovery and the first message")
+    pl.add_argument("--wait", type=_integer(0), default=0, help="wait for this many subscribers on each topic")
+    pl.add_argument("--delay", type=_real(0.0), default=0.5,
+                    help="seconds between discovery and the first message (default 0.5)")
     pl.set_defaults(func=_play)
     return parser
 
@@ -260,8 +364,9 @@ def main(argv: list[str] | None = None) -> int:
         return int(args.func(args) or 0)
     except (RlsUncertaintyError, OSError) as exc:
         # The package's own errors and file-system problems are the user's to fix; anything
-        # else is a bug and shows its traceback.
-        print(f"rls-uncertainty {args.command}: error: {exc}", file=sys.stderr)
+        # else is a bug and shows its traceback. One line, whatever the message holds.
+        message = " ".join(str(exc).split())
+        print(f"rls-uncertainty {args.command}: error: {message}", file=sys.stderr)
         return 2
 
 

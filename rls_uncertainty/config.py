@@ -19,6 +19,7 @@ from typing import Any
 
 import yaml
 
+from .aero import PlausibilityLimits
 from .convergence import ConvergenceConfig
 from .differentiation import DifferentiatorConfig
 from .errors import ConfigError
@@ -30,6 +31,7 @@ __all__ = [
     "ModelConfig",
     "EstimatorConfig",
     "InputConfig",
+    "PlausibilityLimits",
     "OutputConfig",
     "ConfigError",
     "DEFAULT_MODELS",
@@ -228,6 +230,78 @@ PARAMETERS: tuple[ParamSpec, ...] = (
     ParamSpec("inputs.use_thrust", True, "use the thrust topic (force.x, N) in Eq. 1a; false sets thrust to 0"),
     ParamSpec("inputs.max_gap", 0.25, "largest gap between two messages of one stream that is interpolated across, s", 0.001, 10.0),
     ParamSpec("inputs.buffer_duration", 2.0, "how far a stream may run ahead of the slowest one before its old messages expire, s", 0.1, 60.0),
+    # Stream timelines (issue 12 items 2 and 5, issue 13): jumps of a stream's stamps, the
+    # node's clock, and the count bound of the buffers (sampling.py's docstring has the policy).
+    ParamSpec("inputs.max_stamp_jump", 5.0, "a stamp this far behind a stream's newest, or this far ahead of it and of every stream, is a jump candidate: held until inputs.jump_confirmation more messages confirm a new timeline (a looped replay restarts), else rejected as stamp_jump, s", 0.01, 1.0e9),
+    ParamSpec("inputs.jump_confirmation", 5, "messages after a jump candidate that must continue its stamps before the jump is taken as real (0: at once)", 0, 1000),
+    ParamSpec("inputs.max_clock_offset", 0.0, "reject messages stamped farther than this from the node's clock as far_from_clock, s; 0 = off (replays played without /clock keep their recorded stamps)", 0.0, 1.0e9),
+    ParamSpec("inputs.max_buffered", 20000, "messages buffered per stream at most (2 s at 10 kHz); beyond it the oldest expire", 10, 10000000),
+    # Input sanity (issue 12 item 1, issue 13): the body frame the inputs must be stamped in,
+    # and what a measurement of an aircraft in flight can be (aero.PlausibilityLimits says
+    # why each default is beyond any aircraft this package targets). A message out of bounds
+    # is rejected as implausible_<field>; a sample (interpolated, or qbar from air density) too.
+    ParamSpec(
+        "inputs.frame_id", "base_link",
+        "header.frame_id every input must carry (the REP-103 body frame); a message in another frame is "
+        "rejected as frame_mismatch; empty: not checked",
+    ),
+    ParamSpec(
+        "limits.airspeed_min", 3.0,
+        "lowest plausible true airspeed, m/s (flow angles and p b/2V are noise below it); rejected as "
+        "implausible_airspeed",
+        0.1, 100.0,
+    ),
+    ParamSpec(
+        "limits.airspeed_max", 400.0,
+        "highest plausible true airspeed, m/s (supersonic at any altitude); rejected as implausible_airspeed",
+        1.0, 3000.0,
+    ),
+    ParamSpec(
+        "limits.alpha", 1.0,
+        "largest plausible angle of attack, either sign, rad (57 deg; flying backwards is near 3.14); rejected as "
+        "implausible_alpha",
+        0.05, 1.5,
+    ),
+    ParamSpec(
+        "limits.beta", 0.6,
+        "largest plausible sideslip angle, either sign, rad (34 deg); rejected as implausible_beta",
+        0.05, 1.5,
+    ),
+    ParamSpec(
+        "limits.angular_rate", 20.0,
+        "largest plausible body rate about any axis, rad/s (1150 deg/s); rejected as implausible_angular_rate",
+        0.1, 100.0,
+    ),
+    ParamSpec(
+        "limits.specific_force", 200.0,
+        "largest plausible specific force along any axis, m/s^2 (20 g); rejected as "
+        "implausible_specific_force",
+        1.0, 2000.0,
+    ),
+    ParamSpec(
+        "limits.surface", 1.0,
+        "largest plausible deflection of a mixed control-surface joint, either sign, rad (57 deg); rejected as "
+        "implausible_surface",
+        0.01, 1.5,
+    ),
+    ParamSpec(
+        "limits.dynamic_pressure_min", 5.0,
+        "lowest plausible dynamic pressure, Pa (3 m/s at sea level; Eq. 1 divides by it); rejected as "
+        "implausible_dynamic_pressure",
+        0.01, 10000.0,
+    ),
+    ParamSpec(
+        "limits.dynamic_pressure_max", 1.0e5,
+        "highest plausible dynamic pressure, Pa (400 m/s at sea level); rejected as "
+        "implausible_dynamic_pressure",
+        1.0, 1.0e7,
+    ),
+    ParamSpec(
+        "limits.thrust", 2.0e6,
+        "largest plausible thrust, either sign (reverse thrust), N (above the largest aircraft's total "
+        "thrust); rejected as implausible_thrust",
+        1.0, 1.0e8,
+    ),
     ParamSpec("surfaces.elevator", ["elevator"], "JointState names averaged into the elevator deflection (Eq. 23)"),
     ParamSpec("surfaces.aileron_right", ["aileron_right"], "JointState names of right ailerons; delta_a = (right - left)/2 (Eq. 23)"),
     ParamSpec("surfaces.aileron_left", ["aileron_left"], "JointState names of left ailerons"),
@@ -343,19 +417,39 @@ class EstimatorConfig:
 class InputConfig:
     """How the input streams are used (``inputs.*`` parameters): the dynamic-pressure topic or
     ``0.5 air_density V^2`` (kg/m^3), the thrust topic or zero thrust, the longest gap
-    interpolated across and how far a stream may run ahead before its old messages expire (s)."""
+    interpolated across and how far a stream may run ahead before its old messages expire (s),
+    the stream timelines (:mod:`.sampling`): the stamp jump (s) that needs
+    ``jump_confirmation`` messages to be taken as a new timeline, the largest offset from the
+    node's clock (s, 0 = not checked) and the most messages buffered per stream; and the
+    ``header.frame_id`` every input must carry (empty: not checked)."""
 
     use_dynamic_pressure: bool = True
     air_density: float = 1.225
     use_thrust: bool = True
     max_gap: float = 0.25
     buffer_duration: float = 2.0
+    # Stream timelines: jump threshold (s), confirmations, clock check (s, 0 = off), count bound.
+    max_stamp_jump: float = 5.0
+    jump_confirmation: int = 5
+    max_clock_offset: float = 0.0
+    max_buffered: int = 20000
+    frame_id: str = "base_link"
 
     def __post_init__(self) -> None:
-        for name in ("air_density", "max_gap", "buffer_duration"):
+        for name in ("air_density", "max_gap", "buffer_duration", "max_stamp_jump"):
             value = getattr(self, name)
             if not (_finite(value) and value > 0):
                 raise ConfigError(f"inputs.{name} must be a positive number, got {value!r}")
+        if not (_finite(self.max_clock_offset) and self.max_clock_offset >= 0):
+            raise ConfigError(f"inputs.max_clock_offset must be 0 (off) or positive, got {self.max_clock_offset!r}")
+        for name, low in (("jump_confirmation", 0), ("max_buffered", 10)):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, Integral) or value < low:
+                raise ConfigError(f"inputs.{name} must be an integer >= {low}, got {value!r}")
+        if self.max_stamp_jump < self.max_gap:
+            raise ConfigError(f"inputs.max_stamp_jump ({self.max_stamp_jump} s) must be at least inputs.max_gap ({self.max_gap} s)")
+        if not isinstance(self.frame_id, str):
+            raise ConfigError(f"inputs.frame_id must be a string, got {self.frame_id!r}")
 
     @property
     def max_gap_ns(self) -> int:
@@ -364,6 +458,14 @@ class InputConfig:
     @property
     def buffer_ns(self) -> int:
         return int(round(self.buffer_duration * 1e9))
+
+    @property
+    def max_stamp_jump_ns(self) -> int:
+        return int(round(self.max_stamp_jump * 1e9))
+
+    @property
+    def max_clock_offset_ns(self) -> int:
+        return int(round(self.max_clock_offset * 1e9))
 
 
 @dataclass(frozen=True)
@@ -383,8 +485,8 @@ class OutputConfig:
 @dataclass(frozen=True)
 class PipelineConfig:
     """Everything that decides the numbers: sample rate (Hz), aircraft, models, and the nested
-    estimator, differentiator, input and surface-mixing settings. The node and the offline
-    replay build it the same way (:func:`pipeline_config`)."""
+    estimator, differentiator, input, surface-mixing and plausibility settings. The node and
+    the offline replay build it the same way (:func:`pipeline_config`)."""
 
     aircraft: AircraftConfig
     models: tuple[ModelConfig, ...] = DEFAULT_MODELS
@@ -393,6 +495,7 @@ class PipelineConfig:
     differentiator: DifferentiatorConfig = DifferentiatorConfig()
     inputs: InputConfig = InputConfig()
     surfaces: SurfaceMixing = SurfaceMixing()
+    limits: PlausibilityLimits = PlausibilityLimits()
     # Consumers' outputs (not part of the fingerprint: they do not change the estimator state).
     convergence: ConvergenceConfig = field(default_factory=ConvergenceConfig)
     outputs: OutputConfig = OutputConfig()
@@ -478,6 +581,7 @@ def pipeline_config(params: dict[str, Any] | None = None) -> PipelineConfig:
         differentiator=DifferentiatorConfig(**_section(v, "differentiator")),
         inputs=InputConfig(**_section(v, "inputs")),
         surfaces=SurfaceMixing(**{k: tuple(x) if isinstance(x, list) else x for k, x in _section(v, "surfaces").items()}),
+        limits=PlausibilityLimits(**_section(v, "limits")),
         convergence=ConvergenceConfig(**_section(v, "convergence")),  # rate_hz: the pipeline uses rate
         outputs=OutputConfig(**_section(v, "outputs")),
     )

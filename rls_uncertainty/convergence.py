@@ -67,6 +67,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
+import numpy.typing as npt
 
 from .errors import ConfigError
 
@@ -184,15 +185,15 @@ class ConvergenceMonitor:
         self._cur_views = (c[0, :, :n], c[1, :, :n], c[:2], c[2:], c[1])
         self._lim_views = (self._lim[0], self._lim[2])
         self._lower = np.full((m, n), np.nan)  # 0 on the ready models' parameters, else NaN
-        self._ready_key = None
+        self._ready_key: bytes | None = None
         self.reset()
 
     def reset(self) -> None:
         """Forget the history: nothing is flagged until ``window`` seconds have arrived again."""
         self._lo = self._hi = self._front = 0
         self._anchor = -1
-        self._last = None
-        self._dt = None  # t - t_a of the gains g, 1/g
+        self._last: int | None = None
+        self._dt: int | None = None  # t - t_a of the gains g, 1/g
         self._back.fill(-np.inf)
 
     @property
@@ -203,7 +204,9 @@ class ConvergenceMonitor:
     def _none(self) -> tuple[np.ndarray, np.ndarray]:
         return np.zeros(self.shape, dtype=bool), np.zeros(self.shape[0], dtype=bool)
 
-    def update(self, stamp_ns: int, theta, se, ready) -> tuple[np.ndarray, np.ndarray]:
+    def update(
+        self, stamp_ns: int, theta: npt.ArrayLike, se: npt.ArrayLike, ready: npt.ArrayLike
+    ) -> tuple[np.ndarray, np.ndarray]:
         """Add one sample; return ``(flags (M, n_max) bool, model_flags (M,) bool)``.
 
         ``stamp_ns``: sample time, integer nanoseconds (any epoch, ``|stamp| < 2**62``;

@@ -16,10 +16,13 @@ from dataclasses import dataclass
 from numbers import Integral
 
 import numpy as np
+import numpy.typing as npt
 
 from .errors import ConfigError
 
 __all__ = ["DifferentiatorConfig", "FixedLagDifferentiator", "derivative_weights", "differentiate"]
+
+FloatArray = npt.NDArray[np.float64]
 
 
 @dataclass(frozen=True)
@@ -48,7 +51,7 @@ class DifferentiatorConfig:
             )
 
 
-def derivative_weights(config: DifferentiatorConfig, dt: float) -> np.ndarray:
+def derivative_weights(config: DifferentiatorConfig, dt: float) -> FloatArray:
     """FIR weights ``c`` (oldest sample first) with ``dy/dt(k - lag) = c @ y[k-window+1 : k+1]``.
 
     Exact for polynomials up to ``config.order``.
@@ -59,10 +62,11 @@ def derivative_weights(config: DifferentiatorConfig, dt: float) -> np.ndarray:
     tau = np.arange(n, dtype=float) - (n - 1 - config.lag)  # sample offsets from k - lag
     V = np.vander(tau, config.order + 1, increasing=True)  # columns 1, tau, tau^2, ...
     pinv = np.linalg.pinv(V)  # rows: polynomial coefficients
-    return pinv[1] / dt  # derivative at tau = 0 is the linear coefficient
+    weights: FloatArray = pinv[1] / dt  # derivative at tau = 0 is the linear coefficient
+    return weights
 
 
-def differentiate(y: np.ndarray, dt: float, config: DifferentiatorConfig = DifferentiatorConfig()) -> np.ndarray:
+def differentiate(y: FloatArray, dt: float, config: DifferentiatorConfig = DifferentiatorConfig()) -> FloatArray:
     """Apply the fixed-lag differentiator to a whole record.
 
     Returns ``d`` with ``d[j]`` the derivative at sample ``j`` for ``j`` in
@@ -99,7 +103,7 @@ class FixedLagDifferentiator:
         self._buf[:] = 0.0
         self._count = 0
 
-    def push(self, y) -> np.ndarray | None:
+    def push(self, y: npt.ArrayLike) -> FloatArray | None:
         n = self.config.window
         i = self._count % n
         self._buf[i] = y

@@ -2,8 +2,9 @@
 
 * :func:`atomic_file` writes one file: a new temporary file is created exclusively in the
   target's directory (a fresh random name, so a planted file or symlink is never opened or
-  written through), flushed and fsync'ed, then renamed over the target, and the directory is
-  fsync'ed. On any failure the temporary file is removed and the target is untouched.
+  written through), given the replaced file's permissions (a new file those of ``open``),
+  flushed and fsync'ed, then renamed over the target, and the directory is fsync'ed. On any
+  failure the temporary file is removed and the target is untouched.
 * :func:`output_directory` builds an output directory (a bag, a replay's results) in a new
   temporary directory beside it and renames it into place only when complete. It refuses an
   output that would destroy data the command did not create: an existing file, a non-empty
@@ -16,6 +17,7 @@ from __future__ import annotations
 
 import os
 import shutil
+import stat
 import tempfile
 from collections.abc import Iterable, Iterator
 from contextlib import contextmanager, suppress
@@ -36,6 +38,27 @@ def _fsync_directory(directory: Path) -> None:
             os.close(fd)
 
 
+def _umask() -> int:
+    """The process's umask, read without changing it where the system tells (Linux)."""
+    with suppress(OSError, ValueError), open("/proc/self/status") as fh:
+        for line in fh:
+            if line.startswith("Umask:"):
+                return int(line.split()[1], 8)
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
+
+
+def _new_file_mode(target: Path) -> int:
+    """The permissions the file gets: those of the regular file it replaces, else what
+    ``open(path, "w")`` would give (0666 less the umask), not mkstemp's private 0600."""
+    with suppress(OSError):
+        st = os.lstat(target)
+        if stat.S_ISREG(st.st_mode):
+            return stat.S_IMODE(st.st_mode)
+    return 0o666 & ~_umask()
+
+
 @contextmanager
 def atomic_file(path: str | os.PathLike[str]) -> Iterator[IO[bytes]]:
     """Yield a binary file whose content replaces ``path`` atomically when the block ends."""
@@ -44,6 +67,7 @@ def atomic_file(path: str | os.PathLike[str]) -> Iterator[IO[bytes]]:
     fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=directory)
     try:
         with os.fdopen(fd, "wb") as fh:
+            os.fchmod(fh.fileno(), _new_file_mode(target))
             yield fh
             fh.flush()
             os.fsync(fh.fileno())
@@ -75,11 +99,17 @@ def output_directory(
     """Yield a new empty directory that becomes ``path`` when the block succeeds.
 
     Raises :class:`~rls_uncertainty.errors.OutputPathError` before anything is written when
-    ``path`` is an existing file, an existing non-empty directory (allowed with ``force``: it
-    is replaced, after the new output is complete), or is, contains or lies inside one of
-    ``inputs`` (never allowed).
+    ``path`` is an existing file, a symbolic link, an existing non-empty directory (allowed
+    with ``force``: it is replaced, after the new output is complete; should that final swap
+    fail, the old directory is put back), or is, contains or lies inside one of ``inputs``
+    (never allowed).
     """
     given = Path(path)
+    if given.is_symlink():
+        # Resolving it would put the output wherever the link points (even where it dangles).
+        raise OutputPathError(
+            f"{given}: is a symbolic link (to {os.readlink(given)}); give the directory itself"
+        )
     final = given.resolve()
     if final == final.parent:
         raise OutputPathError(f"{given}: cannot write an output over the file system root")
@@ -90,7 +120,7 @@ def output_directory(
                 f"{given}: the output would overwrite the input {item} (it is, contains or lies inside it)"
             )
     replace = False
-    if final.is_symlink() or (final.exists() and not final.is_dir()):
+    if final.exists() and not final.is_dir():
         raise OutputPathError(f"{given}: exists and is not a directory; choose another output directory")
     if final.is_dir() and any(final.iterdir()):
         if not force:
@@ -99,21 +129,34 @@ def output_directory(
             )
         replace = True
     created_parent = _first_missing_ancestor(final.parent)
-    final.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{final.name}.", suffix=".partial", dir=final.parent))
+    tmp = None
     try:
+        final.parent.mkdir(parents=True, exist_ok=True)
+        tmp = Path(tempfile.mkdtemp(prefix=f".{final.name}.", suffix=".partial", dir=final.parent))
+        # mkdtemp's private 0700 would reach the output: give it what mkdir would.
+        os.chmod(tmp, 0o777 & ~_umask())
         yield tmp
         if replace:
             old = Path(tempfile.mkdtemp(prefix=f".{final.name}.", suffix=".old", dir=final.parent))
-            os.rename(final, old / final.name)
-            os.rename(tmp, final)
+            try:
+                os.rename(final, old / final.name)
+            except BaseException:
+                old.rmdir()
+                raise
+            try:
+                os.rename(tmp, final)
+            except BaseException:
+                os.rename(old / final.name, final)  # the old output goes back where it was
+                old.rmdir()
+                raise
             shutil.rmtree(old)
         else:
             if final.is_dir():
                 final.rmdir()  # empty: nothing is lost
             os.rename(tmp, final)
     except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
+        if tmp is not None:
+            shutil.rmtree(tmp, ignore_errors=True)
         if created_parent is not None:
             with suppress(OSError):
                 # Only directories this call made, and only while they are empty.

@@ -68,6 +68,7 @@ import math
 from typing import Literal, NamedTuple, get_args
 
 import numpy as np
+import numpy.typing as npt
 
 __all__ = [
     "RULES",
@@ -103,7 +104,7 @@ class LagChoice(NamedTuple):
     window: str
 
 
-def correlations(R, lambda_diag=None) -> np.ndarray:
+def correlations(R: npt.ArrayLike, lambda_diag: npt.ArrayLike | None = None) -> np.ndarray:
     """Autocorrelations of the series each rule looks at, ``(..., P, W)``.
 
     ``R``: ``(..., W)`` residual autocorrelation ``R(0..W-1)`` (Eq. 17; lag sums ``S(i)``
@@ -155,9 +156,9 @@ def _usable(rho: np.ndarray) -> np.ndarray:
     return np.isfinite(rho).all(axis=-1)
 
 
-def flat_top_lags(R, n_samples: float, *, cap: int | None = None, lambda_diag=None,
-                  c: float = 2.0, K: int | None = None, min_lags: int = 0,
-                  factor: int = 2) -> np.ndarray:
+def flat_top_lags(R: npt.ArrayLike, n_samples: float, *, cap: int | None = None,
+                  lambda_diag: npt.ArrayLike | None = None, c: float = 2.0, K: int | None = None,
+                  min_lags: int = 0, factor: int = 2) -> np.ndarray:
     """Politis (2003) / Politis & White (2004) flat-top rule: ``L = factor * m_hat``
     (``factor = 2`` is their ``M = 2 m_hat``); see the module docstring.
 
@@ -195,8 +196,9 @@ def flat_top_lags(R, n_samples: float, *, cap: int | None = None, lambda_diag=No
     return np.maximum(L, lo).astype(np.int64)
 
 
-def andrews_lags(R, n_samples: float, *, cap: int | None = None, lambda_diag=None,
-                 window: str = "truncated", min_lags: int = 0) -> np.ndarray:
+def andrews_lags(R: npt.ArrayLike, n_samples: float, *, cap: int | None = None,
+                 lambda_diag: npt.ArrayLike | None = None, window: str = "truncated",
+                 min_lags: int = 0) -> np.ndarray:
     """Andrews (1991) AR(1) plug-in bandwidth, ``L = floor(S)``; see the module docstring."""
     R = np.asarray(R, dtype=float)
     W = R.shape[-1]
@@ -219,8 +221,8 @@ def andrews_lags(R, n_samples: float, *, cap: int | None = None, lambda_diag=Non
     return _finish(L, usable, lo, hi)
 
 
-def newey_west_lags(R, n_samples: float, *, cap: int | None = None, lambda_diag=None,
-                    min_lags: int = 0) -> np.ndarray:
+def newey_west_lags(R: npt.ArrayLike, n_samples: float, *, cap: int | None = None,
+                    lambda_diag: npt.ArrayLike | None = None, min_lags: int = 0) -> np.ndarray:
     """Newey & West (1994) plug-in for the Bartlett window, ``L = floor(m)``; see the module
     docstring."""
     R = np.asarray(R, dtype=float)
@@ -245,8 +247,8 @@ def newey_west_lags(R, n_samples: float, *, cap: int | None = None, lambda_diag=
     return _finish(L, usable, lo, hi)
 
 
-def select_lags(R, n_samples: float, rule: str = "flat_top", *, cap: int | None = None,
-                lambda_diag=None, min_lags: int = 0) -> LagChoice:
+def select_lags(R: npt.ArrayLike, n_samples: float, rule: str = "flat_top", *, cap: int | None = None,
+                lambda_diag: npt.ArrayLike | None = None, min_lags: int = 0) -> LagChoice:
     """The largest retained lag of every model by ``rule`` (see the module docstring), with
     the window that rule's bandwidth is meant for."""
     if rule == "flat_top":

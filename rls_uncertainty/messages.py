@@ -2,7 +2,9 @@
 
 One function per input topic, duck-typed on the ROS message fields, so the live node (rclpy
 messages) and the offline replay (rosbags messages) run exactly the same code. No arithmetic
-happens here beyond reading fields and the header stamp; no ROS import.
+happens here beyond reading fields and the header stamp; no ROS import. :func:`feed` also
+checks ``header.frame_id`` against the pipeline's ``inputs.frame_id``, so node and replay
+reject a message in another frame identically.
 """
 
 from __future__ import annotations
@@ -103,5 +105,10 @@ _FEED = {
 
 
 def feed(pipeline, kind: str, msg) -> list:
-    """Hand one message of input ``kind`` to ``pipeline``; returns the samples it completed."""
+    """Hand one message of input ``kind`` to ``pipeline``; returns the samples it completed.
+    A message whose ``header.frame_id`` is not the pipeline's ``frame_id`` (when that is set)
+    is counted as ``frame_mismatch`` instead (:meth:`.pipeline.Pipeline.reject_frame`)."""
+    frame = pipeline.frame_id
+    if frame and msg.header.frame_id != frame:
+        return pipeline.reject_frame(kind, stamp_ns(msg))
     return _FEED[kind](pipeline, msg)

@@ -14,8 +14,9 @@ import csv
 import math
 import os
 import time
+from collections.abc import Callable, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
-from dataclasses import dataclass, field, replace
+from dataclasses import KW_ONLY, dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -91,17 +92,19 @@ class LevelResult:
     history_scatter: np.ndarray  # (N,): scatter of CZ_alpha over runs
     last_run: dict  # residual autocorrelations and lag sweep of the last run (Figs. 5, 7)
     # Convergence flags (issue 14), PARAMETERS order; times in s, inf where never flagged.
+    # Keyword-only (KW_ONLY): the arrays after the configuration's default need no placeholder default.
+    _: KW_ONLY
     convergence: ConvergenceConfig = field(default_factory=ConvergenceConfig)
-    flag_time: np.ndarray = None  # (runs, 5) first time each parameter is flagged
-    flag_theta: np.ndarray = None  # (runs, 5) estimate at that time (NaN if never)
-    flag_se: np.ndarray = None  # (runs, 5) corrected SE at that time
-    model_flag_time: np.ndarray = None  # (runs, 2) first time C_Z / C_m has every parameter flagged
-    model_flag_theta: np.ndarray = None  # (runs, 5) estimates at their model's flag time
-    model_flag_se: np.ndarray = None  # (runs, 5)
-    ensemble_mean: np.ndarray = None  # (N, 5) mean estimate over runs, each sample
-    ensemble_se: np.ndarray = None  # (N, 5) mean corrected SE over runs
-    ensemble_scatter: np.ndarray = None  # (N, 5) standard deviation of the estimates over runs
-    truth_outside: np.ndarray = None  # (N, 7) fraction of runs with the true value outside +-2 SE
+    flag_time: np.ndarray  # (runs, 5) first time each parameter is flagged
+    flag_theta: np.ndarray  # (runs, 5) estimate at that time (NaN if never)
+    flag_se: np.ndarray  # (runs, 5) corrected SE at that time
+    model_flag_time: np.ndarray  # (runs, 2) first time C_Z / C_m has every parameter flagged
+    model_flag_theta: np.ndarray  # (runs, 5) estimates at their model's flag time
+    model_flag_se: np.ndarray  # (runs, 5)
+    ensemble_mean: np.ndarray  # (N, 5) mean estimate over runs, each sample
+    ensemble_se: np.ndarray  # (N, 5) mean corrected SE over runs
+    ensemble_scatter: np.ndarray  # (N, 5) standard deviation of the estimates over runs
+    truth_outside: np.ndarray  # (N, 7) fraction of runs with the true value outside +-2 SE
     # (5 parameters, then any parameter of the C_Z / C_m model), each sample
 
     def summary(self) -> dict[str, dict[str, float]]:
@@ -124,7 +127,9 @@ def _pick(per_model: list[np.ndarray]) -> np.ndarray:
     return np.array([per_model[m][c] for m, c in (_WHERE[p] for p in PARAMETERS)])
 
 
-def level_inputs(level: float, runs: int, *, seed: int = 2016):
+def level_inputs(
+    level: float, runs: int, *, seed: int = 2016
+) -> tuple[np.ndarray, list[dict[str, tuple[np.ndarray, np.ndarray]]], list[int], np.ndarray, np.ndarray]:
     """Regressors and outputs of every run of one noise level, as the bank takes them.
 
     Returns ``(t, reductions, sizes, X, Z)``: sample times (N,), each run's reduced data
@@ -221,8 +226,8 @@ def run_level(
             rows.append(_pick(per))
         return np.array(rows)
 
-    batch = {n_lags: [], None: []}
-    for r, data in enumerate(reductions):
+    batch: dict[int | None, list[np.ndarray]] = {n_lags: [], None: []}
+    for data in reductions:
         for lags, rows in batch.items():
             per = [np.sqrt(np.diag(batch_estimate(*data[m.output], n_lags=lags)[2])) for m in T2_MODELS]
             rows.append(_pick(per))
@@ -256,11 +261,11 @@ def run_level(
 
 def run_table3(
     runs: int,
-    levels=LEVELS,
+    levels: Sequence[float] = LEVELS,
     *,
     n_lags: int = 50,
     jobs: int | None = None,
-    progress=print,
+    progress: Callable[[str], object] = print,
     convergence: ConvergenceConfig = MONTE_CARLO_CONVERGENCE,
 ) -> list[LevelResult]:
     """Run every level, in parallel over ``jobs`` processes (default: every core)."""
@@ -311,8 +316,9 @@ def convergence_summary(res: LevelResult) -> list[dict]:
       true value outside ``+- 2 se`` at the end of the maneuver; ``truth_outside_min``: the
       smallest such fraction at any sample from ``BEST_FROM`` (1 s, half a second into the
       elevator input) on -- the false-convergence rate of the best time to flag every run
-      at once, chosen in hindsight: a floor for any flag; ``bias_at_flag_se``: (mean estimate at the flag - true value) / mean SE at the
-      flag; ``se_over_scatter_at_flag``: mean SE / scatter at the median flag time.
+      at once, chosen in hindsight: a floor for any flag; ``bias_at_flag_se``: (mean
+      estimate at the flag - true value) / mean SE at the flag; ``se_over_scatter_at_flag``:
+      mean SE / scatter at the median flag time.
 
     For a model the flag time is the first time all its parameters are flagged, and a false
     convergence is any of its Table 3 parameters outside.
@@ -410,10 +416,12 @@ def _convergence_lines(results: list[LevelResult]) -> list[str]:
         for row in convergence_summary(res):
             model = row["parameter"].endswith("model")
             lines.append(
-                f"| {res.level * 100:.0f}% | {row['parameter']} | {pct(row['flagged'])} | {sec(row['flag_time_median'])} | "
+                f"| {res.level * 100:.0f}% | {row['parameter']} | {pct(row['flagged'])} | "
+                f"{sec(row['flag_time_median'])} | "
                 + ("- | - | " if model else
                    f"{sec(row['cover_time'])} ({sec(row['cover_time_strict'])}) | "
-                   f"{'-' if not math.isfinite(row['flag_minus_cover']) else format(row['flag_minus_cover'], '+.2f')} | ")
+                   + ("-" if not math.isfinite(row["flag_minus_cover"]) else format(row["flag_minus_cover"], "+.2f"))
+                   + " | ")
                 + f"{pct(row['false_convergence'])} | {pct(row['false_vs_mean'])} | "
                 + f"{pct(row['truth_outside_end'])} / {pct(row['truth_outside_min'])} | "
                 + ("- | - |" if model else
@@ -441,7 +449,8 @@ def write_outputs(results: list[LevelResult], out: Path, *, figures: bool = True
         f"{results[0].runs} runs per level; end-of-maneuver values. Each cell: ours / paper. "
         "SE = mean standard error over runs; scatter = standard deviation of the estimates.",
         "",
-        "| level | parameter | true | mean | SE conventional | SE corrected (50 lags) | scatter | corrected/scatter | conventional/scatter |",
+        "| level | parameter | true | mean | SE conventional | SE corrected (50 lags) | scatter | corrected/scatter "
+        "| conventional/scatter |",
         "| --- | --- | --- | --- | --- | --- | --- | --- | --- |",
     ]
     for res in results:
@@ -460,14 +469,16 @@ def write_outputs(results: list[LevelResult], out: Path, *, figures: bool = True
         "",
         "Recursive: Eqs. 17-22 as the node runs them. Batch: Eqs. 8-11 with the final batch residuals.",
         "",
-        "| level | parameter | recursive / batch, retained lags | recursive / batch, all lags | retained / all lags (recursive) |",
+        "| level | parameter | recursive / batch, retained lags | recursive / batch, all lags "
+        "| retained / all lags (recursive) |",
         "| --- | --- | --- | --- | --- |",
     ]
     for res in results:
         for name, row in res.summary().items():
             lines.append(
                 f"| {res.level * 100:.0f}% | {name} | {row['se_corrected'] / row['se_batch']:.3f} | "
-                f"{row['se_corrected_all'] / row['se_batch_all']:.3f} | {row['se_corrected'] / row['se_corrected_all']:.3f} |"
+                f"{row['se_corrected_all'] / row['se_batch_all']:.3f} | "
+                f"{row['se_corrected'] / row['se_corrected_all']:.3f} |"
             )
     lines += _convergence_lines(results)
     paths["md"].write_text("\n".join(lines) + "\n")
@@ -503,7 +514,9 @@ def _figures(results: list[LevelResult], out: Path) -> dict[str, Path]:
            title=f"Fig. 5: C_Z residual autocorrelation ({res.level * 100:.0f}% noise, last run)")
     ax.legend()
     paths["fig5"] = out / "fig5_autocorrelation.png"
-    fig.tight_layout(); fig.savefig(paths["fig5"], dpi=110); plt.close(fig)
+    fig.tight_layout()
+    fig.savefig(paths["fig5"], dpi=110)
+    plt.close(fig)
 
     fig, ax = plt.subplots(figsize=(7, 4))
     h, s, t = res.history_mean, res.history_scatter, res.time
@@ -516,13 +529,17 @@ def _figures(results: list[LevelResult], out: Path) -> dict[str, Path]:
            title=f"Fig. 6: mean C_Z_alpha ({res.level * 100:.0f}% noise); red dotted: 2x observed scatter")
     ax.legend(loc="lower right", fontsize=8)
     paths["fig6"] = out / "fig6_czalpha_history.png"
-    fig.tight_layout(); fig.savefig(paths["fig6"], dpi=110); plt.close(fig)
+    fig.tight_layout()
+    fig.savefig(paths["fig6"], dpi=110)
+    plt.close(fig)
 
     fig, ax = plt.subplots(figsize=(7, 4))
-    L, se = zip(*last["lag_sweep"])
+    L, se = zip(*last["lag_sweep"], strict=True)
     ax.semilogx(np.asarray(L) + 1, se, "o-")
     ax.set(xlabel="number of retained lags + 1", ylabel="corrected SE of C_Z_alpha",
            title="Fig. 7: corrected standard error against retained lags (last run)")
     paths["fig7"] = out / "fig7_lags.png"
-    fig.tight_layout(); fig.savefig(paths["fig7"], dpi=110); plt.close(fig)
+    fig.tight_layout()
+    fig.savefig(paths["fig7"], dpi=110)
+    plt.close(fig)
     return paths

@@ -10,8 +10,10 @@ minimization). numpy only.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import overload
 
 import numpy as np
+import numpy.typing as npt
 
 from .errors import ConfigError
 
@@ -21,6 +23,8 @@ __all__ = [
     "relative_peak_factor",
     "design_multisines",
 ]
+
+FloatArray = npt.NDArray[np.float64]
 
 
 @dataclass(frozen=True)
@@ -35,7 +39,7 @@ class Multisine:
     phases: tuple[float, ...]
     period: float
     amplitude: float = 1.0
-    meta: dict = field(default_factory=dict, compare=False)
+    meta: dict[str, float] = field(default_factory=dict, compare=False)
 
     def __post_init__(self) -> None:
         n = len(self.harmonics)
@@ -45,26 +49,39 @@ class Multisine:
             raise ConfigError(f"multisine {self.name!r}: period must be positive")
 
     @property
-    def frequencies(self) -> np.ndarray:
+    def frequencies(self) -> FloatArray:
         """Excitation frequencies ``k / T`` in Hz."""
         return np.asarray(self.harmonics, dtype=float) / self.period
 
-    def __call__(self, t: np.ndarray) -> np.ndarray:
-        """Eq. 24 at times ``t`` (s) measured from the start of the input."""
-        t = np.asarray(t, dtype=float)
-        k = np.asarray(self.harmonics, dtype=float)
-        arg = 2.0 * np.pi * np.multiply.outer(t, k) / self.period + np.asarray(self.phases)
-        return self.amplitude * (np.sin(arg) @ np.asarray(self.rel_amplitudes))
+    @overload
+    def __call__(self, t: float) -> float: ...
+    @overload
+    def __call__(self, t: FloatArray) -> FloatArray: ...
 
-    def derivative(self, t: np.ndarray) -> np.ndarray:
+    def __call__(self, t: float | FloatArray) -> float | FloatArray:
+        """Eq. 24 at times ``t`` (s) measured from the start of the input (a time gives a
+        number, an array of times an array of the same shape)."""
+        times = np.asarray(t, dtype=float)
+        k = np.asarray(self.harmonics, dtype=float)
+        arg = 2.0 * np.pi * np.multiply.outer(times, k) / self.period + np.asarray(self.phases)
+        u: float | FloatArray = self.amplitude * (np.sin(arg) @ np.asarray(self.rel_amplitudes))
+        return u
+
+    @overload
+    def derivative(self, t: float) -> float: ...
+    @overload
+    def derivative(self, t: FloatArray) -> FloatArray: ...
+
+    def derivative(self, t: float | FloatArray) -> float | FloatArray:
         """Time derivative of Eq. 24."""
-        t = np.asarray(t, dtype=float)
+        times = np.asarray(t, dtype=float)
         k = np.asarray(self.harmonics, dtype=float)
         w = 2.0 * np.pi * k / self.period
-        arg = np.multiply.outer(t, w) + np.asarray(self.phases)
-        return self.amplitude * (np.cos(arg) @ (w * np.asarray(self.rel_amplitudes)))
+        arg = np.multiply.outer(times, w) + np.asarray(self.phases)
+        du: float | FloatArray = self.amplitude * (np.cos(arg) @ (w * np.asarray(self.rel_amplitudes)))
+        return du
 
-    def scaled(self, amplitude: float) -> "Multisine":
+    def scaled(self, amplitude: float) -> Multisine:
         return Multisine(self.name, self.harmonics, self.rel_amplitudes, self.phases, self.period, amplitude)
 
 
@@ -90,7 +107,7 @@ T2_TABLE2 = {
 }
 
 
-def relative_peak_factor(u: np.ndarray) -> float:
+def relative_peak_factor(u: FloatArray) -> float:
     """Relative peak factor: ``(max(u) - min(u)) / (2 sqrt(2) rms(u - mean u))``; 1 for a
     single sinusoid."""
     u = np.asarray(u, dtype=float)
@@ -129,7 +146,7 @@ def design_multisines(
     lo, hi = band
     if period <= 0 or not (0 <= lo < hi) or n_inputs < 1:
         raise ConfigError("need period > 0, 0 <= band[0] < band[1] and n_inputs >= 1")
-    ks = [k for k in range(max(2, int(np.ceil(lo * period))), int(np.floor(hi * period)) + 1)]
+    ks = list(range(max(2, int(np.ceil(lo * period))), int(np.floor(hi * period)) + 1))
     if len(ks) < n_inputs:
         raise ConfigError(
             f"band {band} Hz with T = {period} s holds {len(ks)} harmonics; "

@@ -37,12 +37,13 @@ from rclpy.qos import QoSHistoryPolicy, QoSProfile, QoSReliabilityPolicy, qos_pr
 from std_msgs.msg import Float64MultiArray, Header
 from std_srvs.srv import SetBool, Trigger
 
-from .cdr import decode, encode_float64_multiarray, encode_float64_multiarray_dims, encode_header
+from .cdr import decode
 from .config import PARAMETERS, ConfigError, node_config, pipeline_config
 from .diagnostics import DiagnosticsPolicy, Snapshot, malformed_reason, malformed_warning
-from .messages import INPUTS, MESSAGE_TYPES, NODE_NAME, feed, message_class, stamp_label
+from .messages import INPUTS, MESSAGE_TYPES, NODE_NAME, feed, message_class
+from .outputs import SAMPLE_STAMP, sample_messages
 from .pipeline import MODEL_OUTPUTS, Pipeline, StateFileError
-from .state_file import set_aside
+from .estimator.state_file import set_aside
 
 __all__ = ["EstimatorNode", "main", "NODE_NAME"]
 
@@ -192,7 +193,10 @@ class EstimatorNode(Node):
             t0 = time.perf_counter()
             c0 = time.thread_time()
             try:
-                outputs = feed(self.pipeline, kind, decode(msgtype, raw))
+                pipeline = self.pipeline
+                if pipeline.needs_clock:  # inputs.max_clock_offset: stamps are checked against it
+                    pipeline.clock_ns = self.get_clock().now().nanoseconds
+                outputs = feed(pipeline, kind, decode(msgtype, raw))
             except Exception as exc:  # noqa: BLE001 - a bad message must never stop the node
                 self._malformed(kind, exc)
                 return
@@ -217,22 +221,19 @@ class EstimatorNode(Node):
         :mod:`.cdr` (byte-identical to rosbags' serialization and read back by rclpy, checked
         in test_cdr.py) and published raw: converting 25 Python messages per sample cost more
         CPU and latency than the estimation."""
-        sec, nanosec = divmod(out.stamp_ns, 1_000_000_000)
-        self._stamp_pub.publish(encode_header(sec, nanosec, self.node_cfg.frame_id))
-        when = stamp_label(out.stamp_ns)
         pubs = self._model_pubs
-        for a in self.pipeline.published_arrays(out):
-            if len(a.shape) == 1:
-                raw = encode_float64_multiarray(a.names, a.data, when)
+        for topic, _msgtype, raw in sample_messages(self.pipeline, out, self.node_cfg.frame_id):
+            if topic == SAMPLE_STAMP:
+                self._stamp_pub.publish(raw)
             else:
-                raw = encode_float64_multiarray_dims(a.dims(when), a.data)
-            pubs[a.model][a.suffix].publish(raw)
+                model, suffix = topic.split("/", 1)
+                pubs[model][suffix].publish(raw)
 
     # ------------------------------------------------------------------ services, time
     def _on_reset(self, request, response):
-        self.pipeline.reset("service")
+        self.pipeline.reset("service")  # the estimator and every input state: older stamps are accepted again
         response.success = True
-        response.message = "estimator reset: estimates restart from the next samples"
+        response.message = "estimator and inputs reset: estimates restart from the next messages, whatever their stamps"
         self.get_logger().info(response.message)
         return response
 
@@ -247,20 +248,25 @@ class EstimatorNode(Node):
         return response
 
     def _on_time_jump(self, jump) -> None:
-        """A backwards jump (a bag replay restarted, /clock reset) makes buffered stamps
-        meaningless: estimator, buffers and delay line restart, reported in diagnostics."""
+        """A backwards jump (a bag replay restarted, /clock reset): the streams whose stamps
+        step back near the new time start a new timeline without confirmation, and the data
+        path and estimator restart once they do (``resets.time_jumped_backwards``), after the
+        samples of the messages sent before the jump: those cannot wipe the new run."""
         if jump.clock_change in (ClockChange.ROS_TIME_ACTIVATED, ClockChange.ROS_TIME_DEACTIVATED):
             self.get_logger().info(f"clock source changed ({jump.clock_change.name})")
-        if jump.delta.nanoseconds < 0:
-            reason = "time_jumped_backwards"
-            self.get_logger().warning(f"time jumped {jump.delta.nanoseconds * 1e-9:+.3f} s: estimator and buffers reset")
-            self.pipeline.reset(reason, clear_inputs=True)
+        delta = jump.delta.nanoseconds
+        if delta < 0:
+            now = self.get_clock().now().nanoseconds
+            if self.pipeline.time_jumped(now, now - delta):
+                self.get_logger().warning(f"time jumped {delta * 1e-9:+.3f} s: estimator and inputs restart when the stamps follow")
+            else:
+                self.get_logger().info(f"time jumped {delta * 1e-9:+.3f} s: the inputs are already near the new time")
 
     # ------------------------------------------------------------------ state file
     def _load_state(self) -> None:
         """Resume from ``state_file`` when it holds this configuration's state. A file that
         exists but cannot be used (corrupt, crafted, another configuration's) is renamed aside
-        (:func:`.state_file.set_aside`) so that the fresh state saved later never replaces it;
+        (:func:`.estimator.state_file.set_aside`) so that the fresh state saved later never replaces it;
         if it cannot be moved, nothing is saved this run."""
         path = self._state_path = self.node_cfg.state_file
         if not path:

@@ -8,7 +8,9 @@ coordinates the modules that do the work:
    JointState surfaces are mixed into Eq. 23's deflections first (:mod:`.surface_mixing`).
 2. :mod:`.sampling` buffers the streams, counts every message (accepted, or rejected with a
    reason), and forms samples on the grid ``t_k = k / rate`` by linear interpolation, never
-   extrapolating; the pipeline names the streams a sample needs.
+   extrapolating; the pipeline names the streams a sample needs. When the stamps move to a new
+   timeline (a looped replay, a confirmed jump) the sampler says so between the samples of the
+   two timelines, and the pipeline restarts its data path there (:meth:`Pipeline._restart`).
 3. Rates go through the fixed-lag differentiator (:mod:`.differentiation`); every other
    signal waits in a delay line of the same lag, so a sample reaches the aerodynamics
    ``lag`` samples late but time-aligned.
@@ -22,6 +24,13 @@ coordinates the modules that do the work:
 Every formed sample ends as used or as rejected with a reason, and every message as accepted
 or rejected: :class:`Bookkeeping` holds every counter, :meth:`Pipeline.counters` reports them
 (the node's ``/diagnostics``), and a reconfigured pipeline takes over the same object.
+
+Nothing non-finite leaves: a message in another frame than ``inputs.frame_id``, or with a value
+that is non-finite or beyond ``limits.*`` (:class:`.aero.PlausibilityLimits`), is rejected
+with its reason; so is a sample that is implausible once formed, or that the estimator refuses
+(``non_finite_regression``); and a model whose outputs are not all finite is withheld from
+:meth:`Pipeline.published` and counted. Every table keyed by what arrives (JointState names,
+caller-given rejection reasons) keeps a bounded number of keys.
 """
 
 from __future__ import annotations
@@ -41,12 +50,15 @@ from .convergence import ConvergenceMonitor
 from .differentiation import FixedLagDifferentiator
 from .errors import NonFiniteInput, StateFileError
 from .estimator import EstimatorBank
+from .estimator.state_file import EstimatorState, load_state, save_state
 from .messages import ARRAY_OUTPUTS, INPUTS
-from .sampling import Sample, Sampler, StreamCounts
-from .state_file import EstimatorState, load_state, save_state
+from .sampling import Sample, Sampler, Skipped, Stream, StreamCounts
 from .surface_mixing import SURFACES, SurfaceMixer
 
-__all__ = ["Pipeline", "SampleOutput", "PublishedArray", "MODEL_OUTPUTS", "Bookkeeping", "STREAMS", "StateFileError"]
+__all__ = [
+    "Pipeline", "SampleOutput", "PublishedArray", "MODEL_OUTPUTS", "Bookkeeping", "STREAMS", "StateFileError",
+    "count_bounded",
+]
 
 STREAMS = INPUTS
 # Every array published per model M as ~/M/<suffix> (std_msgs/Float64MultiArray), in the
@@ -54,13 +66,31 @@ STREAMS = INPUTS
 # convergence flags, then (decimated) the two covariance matrices.
 MODEL_OUTPUTS = (*ARRAY_OUTPUTS, "converged", "covariance", "covariance_conventional")
 
+# Bounds of the tables keyed by what arrives (issue 12 item 5): a flood of distinct JointState
+# names or caller-given reasons adds one overflow key, not a key each.
+KEYS_KEPT = 32  # distinct keys per table, the overflow key aside
+KEY_CHARS = 64  # longer keys (a JointState name is any string) are cut to this length
+OTHER_JOINTS = "<others>"  # unknown joints beyond the first KEYS_KEPT names
+OTHER_REASONS = "other"  # rejection reasons beyond the first KEYS_KEPT of a stream
+
+
+def count_bounded(counter: Counter, key: str, other: str, n: int = 1) -> None:
+    """``counter[key] += n`` for at most :data:`KEYS_KEPT` distinct keys (cut to
+    :data:`KEY_CHARS` characters); once the table is full, new keys count under ``other``."""
+    key = key[:KEY_CHARS]
+    if key not in counter and len(counter) - (other in counter) >= KEYS_KEPT:
+        key = other
+    counter[key] += n
+
 
 class SampleOutput(NamedTuple):
     """What one estimator sample produced.
 
     ``theta``, ``se`` (corrected, Eqs. 20/22) and ``se_conventional`` (Eq. 13) are
     ``(M, n_max)`` arrays in the order of ``config.models``; rows of models that are not
-    ``ready`` yet (exact initialization still waiting) and the padding are NaN.
+    ``ready`` yet (exact initialization still waiting) and the padding are NaN. ``ready`` is
+    false too for a model whose estimates or standard errors are not all finite (withheld,
+    counted in ``outputs_withheld``): a ready row is safe to publish.
     ``converged`` ``(M, n_max)`` and ``model_converged`` ``(M,)`` are the
     :class:`.convergence.ConvergenceMonitor` flags (False on padding and models not ready; a
     model is converged when all its parameters are). ``covariance`` is ``None``, or on the
@@ -116,8 +146,9 @@ def _new_stream_counts() -> dict[str, StreamCounts]:
 @dataclass
 class Bookkeeping:
     """Every counter of a pipeline, kept across reconfigurations: the messages of each input
-    stream, samples formed, used and rejected (by reason), estimator resets (by reason) and
-    JointState joints that no surface uses (by name)."""
+    stream, samples formed, used and rejected (by reason), estimator resets (by reason),
+    JointState joints that no surface uses (by name, at most :data:`KEYS_KEPT`, the rest as
+    :data:`OTHER_JOINTS`) and model outputs withheld because they were not finite (by model)."""
 
     streams: dict[str, StreamCounts] = field(default_factory=_new_stream_counts)
     samples_formed: int = 0
@@ -125,6 +156,7 @@ class Bookkeeping:
     samples_rejected: Counter = field(default_factory=Counter)
     resets: Counter = field(default_factory=Counter)
     unknown_joints: Counter = field(default_factory=Counter)
+    outputs_withheld: Counter = field(default_factory=Counter)
 
 
 class Pipeline:
@@ -159,8 +191,15 @@ class Pipeline:
             period_ns=config.period_ns,
             max_gap_ns=config.inputs.max_gap_ns,
             buffer_ns=config.inputs.buffer_ns,
+            max_jump_ns=config.inputs.max_stamp_jump_ns,
+            confirm=config.inputs.jump_confirmation,
+            max_buffered=config.inputs.max_buffered,
+            max_clock_ns=config.inputs.max_clock_offset_ns,
             counts=book.streams,
         )
+        # The caller's clock is compared with the stamps only when inputs.max_clock_offset > 0
+        # (the node then sets clock_ns before each message; the offline replay has no clock).
+        self.needs_clock = config.inputs.max_clock_offset_ns > 0
         streams = self.sampler.streams
         self._imu, self._airspeed, self._surfaces = streams["imu"], streams["airspeed"], streams["control_surfaces"]
         self._qbar, self._thrust = streams["dynamic_pressure"], streams["thrust"]
@@ -170,6 +209,8 @@ class Pipeline:
         self._i_surfaces = where.get("control_surfaces")
         self._i_thrust = where.get("thrust")
         self._mixer = SurfaceMixer(config.surfaces)
+        self.limits = config.limits
+        self.frame_id = config.inputs.frame_id  # read by messages.feed
         self._index = 0
         self._monitor = ConvergenceMonitor(self.sizes, replace(config.convergence, rate_hz=config.rate))
         self._cov_every = config.outputs.covariance_decimation
@@ -186,6 +227,7 @@ class Pipeline:
         rows = [m.regressors for m in config.models]
         self._x_names = [name for names in rows for name in names]
         self._x_index = np.array([j * n_max + i for j, names in enumerate(rows) for i in range(len(names))], dtype=np.intp)
+        self._real = np.arange(n_max) < np.array(self.sizes)[:, None]  # (M, n_max): not padding
 
     @staticmethod
     def _required_streams(config: PipelineConfig) -> tuple[str, ...]:
@@ -208,6 +250,7 @@ class Pipeline:
         self._z = np.zeros(len(self.sizes))
         self._zsum = np.zeros(len(self.sizes))  # sums of z and z^2 since the estimator started
         self._zsq = np.zeros(len(self.sizes))
+        self._withheld = np.zeros(len(self.sizes), dtype=bool)  # the last output's, per model
         self._monitor.reset()
         self._converged = self._monitor._none()  # the newest sample's flags
 
@@ -217,29 +260,44 @@ class Pipeline:
         return self.bookkeeping.samples_used
 
     # ------------------------------------------------------------------ inputs
+    # Each message is judged on its own first (:class:`.aero.PlausibilityLimits`): a non-finite
+    # value is counted by the sampler (``non_finite``), an implausible one is rejected as
+    # ``implausible_<field>`` through Sampler.reject_invalid, which knows its stamp.
     def add_imu(self, stamp_ns: int, angular_velocity, linear_acceleration) -> list[SampleOutput]:
         """``sensor_msgs/Imu`` in the REP-103 body frame: rad/s and specific force m/s^2."""
         wx, wy, wz = angular_velocity
         fx, fy, fz = linear_acceleration
-        finite = math.isfinite(wx + wy + wz + fx + fy + fz)
-        if self.sampler.add(self._imu, int(stamp_ns), (wx, wy, wz, fx, fy, fz), finite):
+        values = (wx, wy, wz, fx, fy, fz)
+        reason = self.limits.imu_rejection(angular_velocity, linear_acceleration)
+        if reason is not None:
+            return self._invalid(self._imu, stamp_ns, values, reason)
+        if self.sampler.add(self._imu, int(stamp_ns), values):
             return self._advance()
         return []
 
     def add_airspeed(self, stamp_ns: int, velocity) -> list[SampleOutput]:
         """True-airspeed vector in the REP-103 body frame, m/s."""
         vx, vy, vz = velocity
-        if self.sampler.add(self._airspeed, int(stamp_ns), (vx, vy, vz), math.isfinite(vx + vy + vz)):
+        reason = self.limits.airspeed_rejection(velocity)
+        if reason is not None:
+            return self._invalid(self._airspeed, stamp_ns, (vx, vy, vz), reason)
+        if self.sampler.add(self._airspeed, int(stamp_ns), (vx, vy, vz)):
             return self._advance()
         return []
 
     def add_dynamic_pressure(self, stamp_ns: int, pascal: float) -> list[SampleOutput]:
-        if self.sampler.add(self._qbar, int(stamp_ns), (pascal,), math.isfinite(pascal)):
+        reason = self.limits.dynamic_pressure_rejection(pascal)
+        if reason is not None:
+            return self._invalid(self._qbar, stamp_ns, (pascal,), reason)
+        if self.sampler.add(self._qbar, int(stamp_ns), (pascal,)):
             return self._advance()
         return []
 
     def add_thrust(self, stamp_ns: int, force_x: float) -> list[SampleOutput]:
-        if self.sampler.add(self._thrust, int(stamp_ns), (force_x,), math.isfinite(force_x)):
+        reason = self.limits.thrust_rejection(force_x)
+        if reason is not None:
+            return self._invalid(self._thrust, stamp_ns, (force_x,), reason)
+        if self.sampler.add(self._thrust, int(stamp_ns), (force_x,)):
             return self._advance()
         return []
 
@@ -251,33 +309,93 @@ class Pipeline:
         if type(layout) is str:
             self.sampler.reject(self._surfaces, layout)
             return []
+        unknown = self.bookkeeping.unknown_joints
         for n in layout.unknown:
-            self.bookkeeping.unknown_joints[n] += 1
+            count_bounded(unknown, n, OTHER_JOINTS)
+        used = [positions[i] for i in layout.used]
+        reason = self.limits.surface_rejection(used)
+        if reason is not None:
+            return self._invalid(self._surfaces, stamp_ns, tuple(used), reason)
         de, da, dr = layout.deflections(positions)
-        if self.sampler.add(self._surfaces, int(stamp_ns), (de, da, dr), math.isfinite(de + da + dr)):
+        if self.sampler.add(self._surfaces, int(stamp_ns), (de, da, dr)):
             return self._advance()
+        return []
+
+    def _invalid(self, stream: Stream, stamp_ns: int, values: tuple, reason: str) -> list[SampleOutput]:
+        """A message with a value the limits refuse: ``non_finite`` goes to the sampler as
+        before; ``implausible_<field>`` is rejected at its stamp."""
+        if reason == "non_finite":
+            due = self.sampler.add(stream, int(stamp_ns), values, False)
+        else:
+            due = self.sampler.reject_invalid(stream, int(stamp_ns), reason)
+        return self._advance() if due else []
+
+    def reject_frame(self, stream: str, stamp_ns: int) -> list[SampleOutput]:
+        """Count a message of input ``stream`` whose ``header.frame_id`` is not
+        ``inputs.frame_id`` (:func:`.messages.feed` checks): its numbers are in a frame the
+        pipeline cannot convert, so it is rejected as ``frame_mismatch``, never used. Its
+        neighbours still bracket samples (like a message lost in transport): the values around
+        it are valid, only this message's frame is unknown."""
+        del stamp_ns
+        self.sampler.reject(self.sampler.streams[stream], "frame_mismatch")
         return []
 
     def reject(self, stream: str, reason: str) -> None:
         """Count a message of input ``stream`` that never reached the pipeline's ``add_*``
-        (the node could not decode it)."""
-        self.sampler.reject(self.sampler.streams[stream], reason)
+        (the node could not decode it). Reasons are the caller's: a stream keeps at most
+        :data:`KEYS_KEPT` distinct ones, later new ones count as :data:`OTHER_REASONS`."""
+        s = self.sampler.streams[stream]
+        rejected = s.counts.rejected
+        reason = reason[:KEY_CHARS]
+        if reason not in rejected and len(rejected) - (OTHER_REASONS in rejected) >= KEYS_KEPT:
+            reason = OTHER_REASONS
+        self.sampler.reject(s, reason)
+
+    def reject_invalid(self, stream: str, stamp_ns: int, reason: str) -> list[SampleOutput]:
+        """Count a message of input ``stream`` stamped ``stamp_ns`` whose values cannot be
+        used (``reason``): no sample is formed across it (:meth:`.sampling.Sampler.reject_invalid`)."""
+        if self.sampler.reject_invalid(self.sampler.streams[stream], int(stamp_ns), reason):
+            return self._advance()
+        return []
+
+    @property
+    def clock_ns(self) -> int | None:
+        """The caller's clock (ns) that stamps are checked against (``inputs.max_clock_offset``)."""
+        return self.sampler.clock_ns
+
+    @clock_ns.setter
+    def clock_ns(self, now: int | None) -> None:
+        self.sampler.clock_ns = now
 
     # ------------------------------------------------------------------ per sample
     def _advance(self) -> list[SampleOutput]:
         out: list[SampleOutput] = []
         book = self.bookkeeping
         for item in self.sampler.due():
-            if type(item) is Sample:
+            kind = type(item)
+            if kind is Sample:
                 book.samples_formed += 1
                 result = self._process(item.stamp_ns, self._sample_vector(item.values))
                 if result is not None:
                     out.append(result)
-            else:  # Skipped grid points: the differentiator restarts after them
+            elif kind is Skipped:  # grid points not formed: the differentiator restarts after them
                 book.samples_formed += item.count
                 book.samples_rejected[item.reason] += item.count
                 self._flush("discontinuity")
+            else:  # Restart: the stamps moved to a new timeline
+                self._restart(item.reason)
         return out
+
+    def _restart(self, reason: str) -> None:
+        """The data moved to a new timeline (every sample of the previous one was formed): the
+        delay line is dropped (``reset_<reason>``) and the differentiator restarts. After a
+        backward jump (a looped replay, ``/clock`` went back) the estimator restarts too; after a
+        forward jump it goes on, as after a dropout: the later data is the same flight."""
+        self.bookkeeping.resets[reason] += 1
+        self._flush(f"reset_{reason}")
+        if reason != "stamps_jumped_forward":
+            self._new_estimator()
+            self.regression.clear()
 
     def _sample_vector(self, values: list) -> list:
         """The sampled streams (in ``required`` order) as one :data:`.aero.SAMPLE_FIELDS`
@@ -313,7 +431,7 @@ class Pipeline:
 
     def _estimate(self, t: int, sample: list, rate_dot) -> SampleOutput | None:
         book = self.bookkeeping
-        state = flight_state(sample, rate_dot, self.config.inputs.air_density)
+        state = flight_state(sample, rate_dot, self.config.inputs.air_density, self.limits)
         if type(state) is str:
             book.samples_rejected[state] += 1
             return None
@@ -328,7 +446,7 @@ class Pipeline:
         z[:] = [coef[name] for name in self._outputs]
         try:
             self.bank.update(X, z)
-        except NonFiniteInput:  # pragma: no cover - inputs are checked above
+        except NonFiniteInput:  # the row, or the state it would make, is not finite: unchanged
             book.samples_rejected["non_finite_regression"] += 1
             return None
         book.samples_used += 1
@@ -338,7 +456,17 @@ class Pipeline:
             self.regression.append((t, X.copy(), z.copy()))
         bank = self.bank
         self._index += 1
-        theta, se, ready = bank.theta_all(), bank.standard_errors_all("corrected"), bank.ready
+        theta = bank.theta_all()
+        se = bank.standard_errors_all("corrected")
+        se_conv = bank.standard_errors_all("conventional")
+        ready = bank.ready
+        # The last guard: a ready model with a non-finite estimate or SE is withheld, counted.
+        bad = ready & (self._real & ~(np.isfinite(theta) & np.isfinite(se) & np.isfinite(se_conv))).any(axis=1)
+        self._withheld = bad
+        if bad.any():
+            for j in np.flatnonzero(bad):
+                book.outputs_withheld[self._outputs[j]] += 1
+            ready &= ~bad
         self._converged = flags, model_flags = self._monitor.update(t, theta, se, ready)
         every = self._cov_every
         return SampleOutput(
@@ -346,7 +474,7 @@ class Pipeline:
             index=self._index,
             theta=theta,
             se=se,
-            se_conventional=bank.standard_errors_all("conventional"),
+            se_conventional=se_conv,
             ready=ready,
             converged=flags,
             model_converged=model_flags,
@@ -371,13 +499,17 @@ class Pipeline:
         return cov
 
     def published(self, out: SampleOutput):
-        """What the node publishes for a sample, per ready model: ``(output, label, estimates,
-        corrected SEs, conventional SEs)``; models still initializing publish nothing, so no
-        NaN ever leaves the pipeline. :meth:`published_arrays` gives every array, the
-        convergence flags and covariances too."""
+        """What the node publishes (and the replay writes) for a sample, per ready model:
+        ``(output, label, estimates, corrected SEs, conventional SEs)``. Models still
+        initializing, and models whose outputs are not all finite (withheld when the output
+        was made, counted in ``outputs_withheld``), yield nothing; the rows are checked again
+        here, so no NaN or infinity ever leaves the pipeline. :meth:`published_arrays` gives
+        every array, the convergence flags and covariances too."""
         for j, (name, label, n) in enumerate(zip(self._outputs, self.labels, self.sizes)):
             if out.ready[j]:
-                yield name, label, out.theta[j, :n], out.se[j, :n], out.se_conventional[j, :n]
+                rows = out.theta[j, :n], out.se[j, :n], out.se_conventional[j, :n]
+                if all(map(math.isfinite, rows[0].tolist() + rows[1].tolist() + rows[2].tolist())):
+                    yield name, label, *rows
 
     def published_arrays(self, out: SampleOutput) -> Iterator[PublishedArray]:
         """Every array published for a sample, as :class:`PublishedArray`, per ready model in
@@ -403,17 +535,26 @@ class Pipeline:
                 yield new((name, "covariance_conventional", label, square, cov[1, j, :n, :n].ravel()))
 
     # ------------------------------------------------------------------ lifecycle
-    def reset(self, reason: str, *, clear_inputs: bool = False) -> None:
-        """Start the estimator afresh (``~/reset``, a time jump). The sample stream goes on:
-        samples in the differentiator's delay line reach the new estimator. With
-        ``clear_inputs`` (time jumped) the buffered messages and the delay line are dropped
-        too, counted as expired messages and ``reset_<reason>`` samples."""
+    def reset(self, reason: str, *, clear_inputs: bool = True) -> None:
+        """Start afresh (``~/reset``): the estimator, and with ``clear_inputs`` all input
+        state too: buffered and held messages (counted as expired), the streams' newest stamps
+        (older stamps are accepted again), jump candidates, timelines, the grid and the delay
+        line (``reset_<reason>`` samples). ``clear_inputs=False`` restarts the estimator only:
+        samples in the delay line then reach the new estimator."""
         self.bookkeeping.resets[reason] += 1
         self._new_estimator()
         self.regression.clear()
         if clear_inputs:
             self._flush(f"reset_{reason}")
             self.sampler.clear(forget_newest=True)
+
+    def time_jumped(self, now_ns: int, before_ns: int) -> bool:
+        """The caller's clock went back from ``before_ns`` to ``now_ns`` (``/clock`` restarted):
+        streams whose stamps step back near ``now_ns`` start the new timeline without
+        confirmation, and the restart (``resets.time_jumped_backwards``) happens when they do,
+        after the samples of the messages sent before the jump. False when there is nothing
+        to restart (no data yet, or the stamps already moved near ``now_ns``)."""
+        return self.sampler.time_jumped(int(now_ns), int(before_ns))
 
     def reconfigured(self, config: PipelineConfig, reason: str = "parameters_changed") -> Pipeline:
         """A pipeline with a new configuration that takes over this one's bookkeeping:
@@ -433,15 +574,26 @@ class Pipeline:
     def model_fit(self, j: int) -> dict:
         """R^2 of model ``j`` (1 - residual variance / output variance) and residual
         whiteness: the lag-1 autocorrelation coefficient and the fraction of lags whose
-        coefficient lies outside the 2-sigma white-noise bound 2/sqrt(n)."""
+        coefficient lies outside the 2-sigma white-noise bound 2/sqrt(n). ``ready`` is false,
+        with a ``problem``, when R^2 is undefined (constant output) or the model's outputs
+        were withheld as non-finite."""
         bank = self.bank
+        withheld = self.bookkeeping.outputs_withheld.get(self._outputs[j], 0)
         if not bank.ready[j]:
             return {"ready": False, "samples": bank.k}
         n = bank.k  # samples since the estimator (re)started
         mean = self._zsum[j] / n
-        var_z = self._zsq[j] / n - mean * mean
+        mean_sq = self._zsq[j] / n
+        var_z = mean_sq - mean * mean
         R = bank.autocorrelation(j)
-        r2 = 1.0 - R[0] / var_z if var_z > 0 else float("nan")
+        # A constant output (variance at rounding level) leaves R^2 undefined; a non-finite
+        # estimator state (withheld outputs) leaves it NaN: either way the fit is reported as
+        # not ready, with the problem, never as an OK "nan".
+        r2 = 1.0 - R[0] / var_z if var_z > 1e-12 * mean_sq else math.nan
+        if not math.isfinite(r2) or self._withheld[j]:
+            problem = "outputs not finite, withheld" if self._withheld[j] or not np.isfinite(R).all() else \
+                "output constant: R^2 undefined"
+            return {"ready": False, "samples": bank.k, "problem": problem, "outputs_withheld": withheld}
         rho = R[1:] / R[0] if R[0] > 0 else np.zeros(0)
         bound = 2.0 / math.sqrt(max(n, 1))
         return {
@@ -455,6 +607,7 @@ class Pipeline:
             "residual_rho1": float(rho[0]) if rho.size else float("nan"),
             "lags_outside_2sigma": float(np.mean(np.abs(rho) > bound)) if rho.size else float("nan"),
             "repairs": int(bank.repairs[j]),
+            "outputs_withheld": withheld,
         }
 
     def convergence(self, j: int) -> dict:
@@ -475,6 +628,7 @@ class Pipeline:
             "samples_pending": len(self._pending),
             "resets": dict(book.resets),
             "unknown_joints": dict(book.unknown_joints),
+            "outputs_withheld": dict(book.outputs_withheld),
         }
 
     # ------------------------------------------------------------------ persistence

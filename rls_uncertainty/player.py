@@ -3,7 +3,20 @@
 ``rls-uncertainty play BAG`` publishes each message's recorded CDR bytes unchanged on its
 topic at the bag's pace (times a rate factor), and ``/clock`` at every message's log time so
 a node with ``use_sim_time`` follows the bag (rosbag2's player is not installable here).
-Reliable QoS by default: an integration test against the live node must not lose messages.
+``--loop N`` plays the bag N times: stamps and ``/clock`` restart with every pass, as a looped
+``ros2 bag play`` does.
+
+Reliable QoS by default, with flow control by acknowledgements: a topic never has more than
+``window`` messages that its reliable subscribers have not all acknowledged (the writer keeps
+exactly ``window`` messages, so nothing unacknowledged is ever overwritten, and a full history
+makes DDS ask for acknowledgements at once). After the last message the player waits until
+every reliable subscriber acknowledged everything, or ``ack_timeout``, and says what was not
+delivered (exit status 1). What DDS lets a publisher know, and what it does not: an
+acknowledgement means the message is in every matched reliable subscriber's DDS queue (per
+publisher, for all its reliable subscribers together); not that the subscribing program took
+it from the queue, nor anything about best-effort subscribers. How many messages a subscriber
+processed only the subscriber can say (the estimator node: ``/diagnostics``,
+``inputs.<stream>.received``).
 
 ``rls-uncertainty demo`` starts the estimator node in its own process, plays the bundled
 T-2 bag to it over DDS, listens to its outputs and prints the final estimates beside the
@@ -12,37 +25,102 @@ offline replay of the same bag.
 
 from __future__ import annotations
 
+import math
 import os
 import subprocess
 import sys
 import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING, Protocol
 
-from .errors import ConfigError
-from .messages import message_class
+from .errors import BagError, ConfigError
+from .messages import ARRAY_OUTPUTS, NODE_NAME, message_class
 
-__all__ = ["play", "demo", "bundled_bag"]
+if TYPE_CHECKING:
+    from rclpy.node import Node
+    from rclpy.publisher import Publisher
+
+__all__ = ["play", "demo", "bundled_bag", "TopicStats", "DEFAULT_WINDOW"]
+
+# Messages per topic that may wait for acknowledgement: the estimator node's default input
+# queue depth (qos.depth), so a keep-last subscriber of that depth is never sent more at once.
+DEFAULT_WINDOW = 100
 
 
 def _loopback_default() -> None:
-    # DDS discovery stays on this machine unless the caller chose otherwise.
+    # DDS discovery stays on this machine unless the caller chose otherwise (the demo only).
     os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+
+
+@dataclass
+class TopicStats:
+    """What the player knows about one topic's delivery. ``unconfirmed``: messages published
+    since every reliable subscriber last acknowledged everything (0 once all are)."""
+
+    topic: str
+    msgtype: str
+    published: int = 0
+    unconfirmed: int = 0
+    ack_waits: int = 0
+    ack_wait_s: float = 0.0
+    subscribers_min: int | None = None
+    subscribers_max: int = 0
+
+    def saw(self, n: int) -> None:
+        self.subscribers_min = n if self.subscribers_min is None else min(self.subscribers_min, n)
+        self.subscribers_max = max(self.subscribers_max, n)
+
+
+class _Dimension(Protocol):
+    @property
+    def label(self) -> str: ...
+
+
+class _Layout(Protocol):
+    @property
+    def dim(self) -> Sequence[_Dimension]: ...
+
+
+class _ArrayMessage(Protocol):
+    """What the demo reads of a ``std_msgs/Float64MultiArray`` (rosidl's classes are untyped)."""
+
+    @property
+    def layout(self) -> _Layout: ...
+
+    @property
+    def data(self) -> Sequence[float]: ...
+
+
+class NotAcknowledged(Exception):
+    """A reliable subscriber did not acknowledge a topic's messages in time."""
+
+    def __init__(self, topic: str, pending: int, timeout: float) -> None:
+        super().__init__(f"{topic}: {pending} message(s) not acknowledged by every reliable subscriber "
+                         f"within {timeout:g} s")
+        self.topic, self.pending, self.timeout = topic, pending, timeout
 
 
 class _Publisher:
     """Publishers for every topic of a bag (and /clock) on an existing rclpy node."""
 
-    def __init__(self, node, bag: Path, *, clock: bool, reliable: bool, depth: int = 1000) -> None:
+    def __init__(self, node: Node, bag: Path, *, clock: bool, reliable: bool, window: int = DEFAULT_WINDOW) -> None:
         from rclpy.qos import QoSHistoryPolicy, QoSProfile, QoSReliabilityPolicy  # noqa: PLC0415
-        from rosgraph_msgs.msg import Clock  # noqa: PLC0415
 
-        from .bags import BagError, _open_reader, typestore  # noqa: PLC0415
+        from .bags import _open_reader, typestore  # noqa: PLC0415
 
         self.path = Path(bag)
+        self.node = node
+        self.reliable = reliable
+        self.window = int(window)
         self.reader = _open_reader(self.path, typestore())
-        qos = QoSProfile(depth=depth, history=QoSHistoryPolicy.KEEP_LAST,
-                         reliability=QoSReliabilityPolicy.RELIABLE if reliable else QoSReliabilityPolicy.BEST_EFFORT)
-        self.pubs = {}
+        # The writer keeps `window` messages: flow control (run) never lets more than that
+        # wait for acknowledgement, so keep-last never drops one that was not delivered.
+        reliability = QoSReliabilityPolicy.RELIABLE if reliable else QoSReliabilityPolicy.BEST_EFFORT
+        self.qos = QoSProfile(depth=self.window, history=QoSHistoryPolicy.KEEP_LAST, reliability=reliability)
+        self.pubs: dict[str, Publisher] = {}
+        self.stats: dict[str, TopicStats] = {}
         for conn in self.reader.connections:
             try:
                 cls = message_class(conn.msgtype)
@@ -50,63 +128,186 @@ class _Publisher:
                 self.reader.close()
                 raise BagError(f"{self.path}: topic {conn.topic}: type {conn.msgtype} is not available in this "
                                "ROS install") from exc
-            self.pubs[conn.topic] = node.create_publisher(cls, conn.topic, qos)
-        self.clock_pub = node.create_publisher(Clock, "/clock", 10) if clock else None
-        self._clock = Clock()
+            self.pubs[conn.topic] = node.create_publisher(cls, conn.topic, self.qos)
+            self.stats[conn.topic] = TopicStats(conn.topic, conn.msgtype)
+        clock_type = message_class("rosgraph_msgs/msg/Clock")
+        # /clock: only the newest value matters (rclpy's time source subscribes best effort,
+        # depth 1), so it takes no part in flow control.
+        self.clock_pub = node.create_publisher(clock_type, "/clock", 10) if clock else None
+        self._clock = clock_type()
+        self.loops_done = 0
 
-    def wait_for_subscribers(self, n: int, timeout: float, spin=None) -> None:
-        from .bags import BagError  # noqa: PLC0415
+    def count_subscribers(self) -> None:
+        for topic, pub in self.pubs.items():
+            self.stats[topic].saw(pub.get_subscription_count())
 
+    def wait_for_subscribers(self, n: int, timeout: float, spin: Callable[[], None] | None = None) -> None:
         deadline = time.monotonic() + timeout
         while n and any(p.get_subscription_count() < n for p in self.pubs.values()):
             if time.monotonic() > deadline:
                 missing = [t for t, p in self.pubs.items() if p.get_subscription_count() < n]
                 raise BagError(f"{self.path}: no subscriber on {missing} after {timeout:g} s")
-            spin() if spin else time.sleep(0.05)
-
-    def run(self, rate: float, spin=None) -> int:
-        """Publish every message; ``spin`` is called between messages when given."""
-        t_wall0, t_bag0, count = time.monotonic(), None, 0
-        for conn, t, raw in self.reader.messages():
-            if t_bag0 is None:
-                t_bag0 = t
-            if rate > 0:
-                delay = t_wall0 + (t - t_bag0) * 1e-9 / rate - time.monotonic()
-                if delay > 0:
-                    time.sleep(delay)
-            if self.clock_pub is not None:
-                self._clock.clock.sec, self._clock.clock.nanosec = divmod(t, 1_000_000_000)
-                self.clock_pub.publish(self._clock)
-            self.pubs[conn.topic].publish(bytes(raw))
-            count += 1
-            if spin is not None and count % 50 == 0:
+            if spin:
                 spin()
+            else:
+                time.sleep(0.05)
+
+    def confirm(self, topic: str, timeout: float) -> bool:
+        """Wait until every reliable subscriber of ``topic`` acknowledged every message."""
+        s = self.stats[topic]
+        if s.unconfirmed == 0:
+            return True
+        t0 = time.monotonic()
+        from rclpy.duration import Duration  # noqa: PLC0415
+
+        ok = self.pubs[topic].wait_for_all_acked(Duration(nanoseconds=int(timeout * 1e9)))
+        s.ack_waits += 1
+        s.ack_wait_s += time.monotonic() - t0
+        s.saw(self.pubs[topic].get_subscription_count())
+        if ok:
+            s.unconfirmed = 0
+        return ok
+
+    def confirm_all(self, timeout: float) -> list[str]:
+        """Wait for every topic's acknowledgements, ``timeout`` in all; the topics that still
+        wait for some."""
+        deadline = time.monotonic() + timeout
+        return [t for t in self.pubs if not self.confirm(t, max(0.0, deadline - time.monotonic()))]
+
+    def run(self, rate: float, spin: Callable[[], None] | None = None, *, loops: int = 1,
+            ack_timeout: float = 30.0) -> int:
+        """Publish every message ``loops`` times; ``spin`` is called between messages when
+        given. Raises :class:`NotAcknowledged` when a topic's window stays unacknowledged for
+        ``ack_timeout`` (publishing on would overwrite undelivered messages)."""
+        count = 0
+        window = self.window
+        stats, pubs = self.stats, self.pubs
+        clock_pub, clock = self.clock_pub, self._clock
+        for _ in range(loops):
+            t_wall0, t_bag0 = time.monotonic(), None
+            self.count_subscribers()
+            for conn, t, raw in self.reader.messages():
+                if t_bag0 is None:
+                    t_bag0 = t
+                if rate > 0:
+                    delay = t_wall0 + (t - t_bag0) * 1e-9 / rate - time.monotonic()
+                    if delay > 0:
+                        time.sleep(delay)
+                topic = conn.topic
+                s = stats[topic]
+                if s.unconfirmed >= window and not self.confirm(topic, ack_timeout):
+                    raise NotAcknowledged(topic, s.unconfirmed, ack_timeout)
+                if clock_pub is not None:
+                    clock.clock.sec, clock.clock.nanosec = divmod(t, 1_000_000_000)
+                    clock_pub.publish(clock)
+                pubs[topic].publish(bytes(raw))
+                s.published += 1
+                s.unconfirmed += 1
+                count += 1
+                if spin is not None and count % 50 == 0:
+                    spin()
+            # Each pass is delivered before the next one restarts the stamps.
+            late = self.confirm_all(ack_timeout)
+            if late:
+                raise NotAcknowledged(late[0], stats[late[0]].unconfirmed, ack_timeout)
+            self.loops_done += 1
         return count
+
+    def report(self) -> str:
+        """Per topic: messages published, whether every reliable subscriber acknowledged them,
+        the subscriptions matched (fewest and most seen while playing) and the subscriptions
+        DDS discovery lists (node and reliability: history depth is not part of discovery)."""
+        from rclpy.qos import QoSReliabilityPolicy  # noqa: PLC0415
+
+        me = f"{self.node.get_namespace().rstrip('/')}/{self.node.get_name()}"
+        rows = [("topic", "published", "acknowledged", "matched", "subscriptions discovered (node: reliability)")]
+        for topic, s in self.stats.items():
+            subs = []
+            for info in self.node.get_subscriptions_info_by_topic(topic):
+                name = f"{info.node_namespace.rstrip('/')}/{info.node_name}"
+                if name != me:
+                    reliable = info.qos_profile.reliability == QoSReliabilityPolicy.RELIABLE
+                    kind = "reliable" if reliable else "best effort"
+                    subs.append(f"{name}: {kind}")
+            if not self.reliable:
+                acked = "unknown (best effort)"
+            elif s.unconfirmed:
+                acked = f"NO: up to the last {s.unconfirmed}"
+            else:
+                acked = "all" if s.subscribers_max else "none needed"
+            lo, hi = s.subscribers_min or 0, s.subscribers_max
+            rows.append((topic, str(s.published), acked, str(hi) if lo == hi else f"{lo}-{hi}",
+                         ", ".join(sorted(subs)) or "none"))
+        widths = [max(len(r[i]) for r in rows) for i in range(4)]
+        lines = ["  ".join([*(r[i].ljust(widths[i]) for i in range(4)), r[4]]).rstrip() for r in rows]
+        lines.append(
+            "acknowledged: in the DDS queue of every matched reliable subscriber (DDS acknowledges per publisher, "
+            "for all its reliable subscribers together); it does not say that a subscriber's program took the "
+            "message, nor anything about best-effort subscribers. A subscription discovered but never matched "
+            "has incompatible QoS. How many messages each subscriber processed only it can say (the estimator "
+            "node: /diagnostics, inputs.<stream>.received).")
+        return "\n".join(lines)
 
     def close(self) -> None:
         self.reader.close()
 
 
+def _check_rate(rate: float) -> None:
+    if not (math.isfinite(rate) and rate >= 0):
+        raise ConfigError(f"rate must be a finite number >= 0 (0 = as fast as possible), got {rate!r}")
+
+
 def play(bag: str | Path, *, rate: float = 1.0, clock: bool = True, reliable: bool = True,
-         wait_for_subscribers: int = 0, start_delay: float = 0.5, wait_timeout: float = 30.0) -> int:
-    """Publish ``bag``; ``rate`` is the speed factor (0 = as fast as possible). Waits for
-    ``wait_for_subscribers`` subscribers on every topic first. Returns a process exit code."""
-    if rate < 0:
-        raise ConfigError(f"rate must be >= 0, got {rate}")
-    _loopback_default()
+         wait_for_subscribers: int = 0, start_delay: float = 0.5, wait_timeout: float = 30.0,
+         loops: int = 1, window: int = DEFAULT_WINDOW, ack_timeout: float = 30.0, report: bool = False) -> int:
+    """Publish ``bag`` ``loops`` times; ``rate`` is the speed factor (0 = as fast as the
+    acknowledgements allow). Waits for ``wait_for_subscribers`` subscribers on every topic
+    first. Returns a process exit code: 0 when every reliable subscriber acknowledged every
+    message, 1 when not (what was not delivered is printed)."""
+    _check_rate(rate)
+    # Checked at run time whatever the annotations say: callers from Python may pass anything.
+    integers: tuple[tuple[str, object, int], ...] = (
+        ("number of subscribers to wait for", wait_for_subscribers, 0), ("loop count", loops, 1), ("window", window, 1))
+    for name, n, low in integers:
+        if not (isinstance(n, int) and not isinstance(n, bool) and n >= low):
+            raise ConfigError(f"the {name} must be an integer >= {low}, got {n!r}")
+    for name, value in (("start delay", start_delay), ("wait timeout", wait_timeout), ("ack timeout", ack_timeout)):
+        if not (math.isfinite(value) and value >= 0):
+            raise ConfigError(f"{name} must be a finite number of seconds >= 0, got {value!r}")
     import rclpy  # noqa: PLC0415
 
     rclpy.init()
     node = rclpy.create_node("rls_player")
     player = None
     try:
-        player = _Publisher(node, Path(bag), clock=clock, reliable=reliable)
+        player = _Publisher(node, Path(bag), clock=clock, reliable=reliable, window=window)
         player.wait_for_subscribers(wait_for_subscribers, wait_timeout)
+        player.count_subscribers()
+        lo, hi = (f(s.subscribers_max for s in player.stats.values()) for f in (min, max))
+        print(f"playing {bag}: {lo if lo == hi else f'{lo}-{hi}'} subscription(s) matched per topic; first message "
+              f"in {start_delay:g} s", file=sys.stderr, flush=True)
         time.sleep(start_delay)
         t0 = time.monotonic()
-        count = player.run(rate)
-        time.sleep(0.5)  # let reliable delivery finish before the publishers go away
-        print(f"published {count} messages from {bag} in {time.monotonic() - t0:.2f} s", file=sys.stderr)
+        failure = None
+        try:
+            count = player.run(rate, loops=loops, ack_timeout=ack_timeout)
+        except NotAcknowledged as exc:
+            failure = exc
+            count = sum(s.published for s in player.stats.values())
+            # Whatever else is still in flight gets the same chance before the report.
+            player.confirm_all(ack_timeout)
+        player.count_subscribers()
+        passes = f"{player.loops_done} pass(es)" if loops > 1 or failure else "once"
+        print(f"published {count} messages from {bag} in {time.monotonic() - t0:.2f} s ({passes})", file=sys.stderr)
+        if report:
+            print(player.report(), file=sys.stderr)
+        late = [s for s in player.stats.values() if s.unconfirmed]
+        if failure is not None or late:
+            what = ", ".join(f"{s.topic} (up to {s.unconfirmed} of {s.published})" for s in late) or str(failure)
+            stopped = " - playback stopped: publishing on would overwrite them" if failure is not None else ""
+            print(f"NOT DELIVERED: not acknowledged within {ack_timeout:g} s by every reliable subscriber: "
+                  f"{what}{stopped}", file=sys.stderr)
+            return 1
         return 0
     finally:
         if player is not None:
@@ -129,15 +330,16 @@ _REPLAY_DEPTH = 10_000
 
 def demo(rate: float = 4.0, params_file: str = "t2") -> int:
     """The live node on the bundled bag: estimates over DDS beside the offline replay."""
+    _check_rate(rate)
     _loopback_default()
     import numpy as np  # noqa: PLC0415
     import rclpy  # noqa: PLC0415
     from rclpy.qos import QoSHistoryPolicy, QoSProfile, QoSReliabilityPolicy  # noqa: PLC0415
-    from std_msgs.msg import Float64MultiArray, Header  # noqa: PLC0415
 
     from .bags import read_inputs  # noqa: PLC0415
     from .config import config_dir, load_parameters_file, pipeline_config  # noqa: PLC0415
     from .replay import run_pipeline  # noqa: PLC0415
+    from .report import results_table, rows_from_arrays  # noqa: PLC0415
     from .simulation import T2_TRUE  # noqa: PLC0415
 
     bag = bundled_bag()
@@ -147,23 +349,30 @@ def demo(rate: float = 4.0, params_file: str = "t2") -> int:
     print(f"starting the estimator node ({params_path}) and playing {bag} over DDS at {rate:g}x ...")
     import tempfile  # noqa: PLC0415
 
-    node_log = tempfile.NamedTemporaryFile("w+", prefix="rls_demo_node_", suffix=".log", delete=False)
-    node_proc = subprocess.Popen(
-        [sys.executable, "-m", "rls_uncertainty.node", "--ros-args", "--params-file", params_path,
-         "-p", "qos.reliable:=true", "-p", f"qos.depth:={_REPLAY_DEPTH}"], stdout=node_log, stderr=subprocess.STDOUT, text=True,
-    )
+    # The node writes its log through its own copy of the file descriptor: ours is closed once
+    # the node is started; the file stays (delete=False) until the demo succeeds.
+    with tempfile.NamedTemporaryFile("w+", prefix="rls_demo_node_", suffix=".log", delete=False) as node_log:
+        node_proc = subprocess.Popen(
+            [sys.executable, "-m", "rls_uncertainty.node", "--ros-args", "--params-file", params_path,
+             "-p", "qos.reliable:=true", "-p", f"qos.depth:={_REPLAY_DEPTH}"],
+            stdout=node_log, stderr=subprocess.STDOUT, text=True,
+        )
     rclpy.init()
     node = rclpy.create_node("rls_demo")
-    latest: dict[str, object] = {}
+    latest: dict[str, _ArrayMessage] = {}
     counts = {"samples": 0}
     qos = QoSProfile(depth=1000, reliability=QoSReliabilityPolicy.RELIABLE, history=QoSHistoryPolicy.KEEP_LAST)
-    subs = [node.create_subscription(Header, "/rls_estimator/sample_stamp",
+    subs = [node.create_subscription(message_class("std_msgs/msg/Header"), f"/{NODE_NAME}/sample_stamp",
                                      lambda m: counts.__setitem__("samples", counts["samples"] + 1), qos)]
+    array_type = message_class("std_msgs/msg/Float64MultiArray")
     for m in config.models:
-        for suffix in ("estimates", "standard_errors", "standard_errors_conventional"):
-            topic = f"/rls_estimator/{m.output}/{suffix}"
-            subs.append(node.create_subscription(Float64MultiArray, topic,
-                                                 lambda msg, t=topic: latest.__setitem__(t, msg), qos))
+        for suffix in ARRAY_OUTPUTS:
+            topic = f"/{NODE_NAME}/{m.output}/{suffix}"
+
+            def keep(msg: _ArrayMessage, t: str = topic) -> None:
+                latest[t] = msg
+
+            subs.append(node.create_subscription(array_type, topic, keep, qos))
     player = None
     try:
         player = _Publisher(node, bag, clock=False, reliable=True)
@@ -196,24 +405,20 @@ def demo(rate: float = 4.0, params_file: str = "t2") -> int:
             node_proc.kill()
     last = offline.outputs[-1]
     print(f"\nlive node: {counts['samples']} samples published (offline replay: {want})\n")
-    header = f"{'parameter':<12}{'true':>9}{'estimate':>11}{'SE conv.':>10}{'SE corr.':>10}{'corr/conv':>10}"
-    print(header)
-    print("-" * len(header))
+    rows = []
     worst = 0.0
     for j, m in enumerate(config.models):
-        get = lambda s: latest.get(f"/rls_estimator/{m.output}/{s}")  # noqa: E731
-        est, se, sc = get("estimates"), get("standard_errors"), get("standard_errors_conventional")
-        if est is None:
+        est, se, sc = (latest.get(f"/{NODE_NAME}/{m.output}/{suffix}") for suffix in ARRAY_OUTPUTS)
+        if est is None or se is None or sc is None:
             print(f"{m.output}: no estimate received from the node; its log: {node_log.name}")
             return 1
         names = est.layout.dim[0].label.split(",")
-        for i, name in enumerate(names):
-            true = T2_TRUE.get(name)
-            t = f"{true:9.3f}" if true is not None else f"{'-':>9}"
-            print(f"{name:<12}{t}{est.data[i]:11.4f}{sc.data[i]:10.4f}{se.data[i]:10.4f}{se.data[i] / sc.data[i]:10.2f}")
+        rows += rows_from_arrays(names, est.data, sc.data, se.data, T2_TRUE)
         n = len(names)
-        for live, off in ((est.data, last.theta[j, :n]), (se.data, last.se[j, :n]), (sc.data, last.se_conventional[j, :n])):
+        pairs = ((est.data, last.theta[j, :n]), (se.data, last.se[j, :n]), (sc.data, last.se_conventional[j, :n]))
+        for live, off in pairs:
             worst = max(worst, float(np.max(np.abs(np.array(live) - off) / np.abs(off))))
+    print(results_table(rows))
     print(f"\nlargest relative difference between the live node and the offline replay: {worst:.1e}")
     os.unlink(node_log.name)
     print("Conventional standard errors assume white residuals (Eq. 13); the corrected ones use the recursive\n"

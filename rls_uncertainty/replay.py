@@ -7,11 +7,16 @@ temporary directory renamed to ``DIR`` only when complete):
 
 * ``estimates.csv``: ``time,model,parameter,estimate,std_error,std_error_conventional``, one
   row per sample and parameter of every ready model (time in s, the sample's stamp);
-* ``estimates.mcap``: the node's output topics (``/rls_estimator/M/estimates``,
-  ``.../standard_errors``, ``.../standard_errors_conventional``, ``/rls_estimator/sample_stamp``);
-* ``M_PARAM.png``-style plots: each parameter's history with corrected and conventional
-  2-sigma envelopes, and each model's residual autocorrelation.
-Two runs give bit-identical CSV and MCAP files.
+* ``estimates_wide.csv``: ``time`` and, per parameter P of every model, ``P``, ``P_se`` and
+  ``P_se_conventional``: one row per sample, cells empty while a model is not ready (for
+  PlotJuggler's CSV loader and spreadsheets);
+* ``estimates.mcap``: every topic the node publishes per sample, byte for byte
+  (:func:`.outputs.sample_messages`: ``/rls_estimator/sample_stamp``,
+  ``/rls_estimator/M/estimates``, ``.../standard_errors``, ``.../standard_errors_conventional``),
+  log time = the sample's stamp;
+* ``M_estimates.png``: each parameter's history with corrected and conventional 2-sigma
+  envelopes, and ``M_autocorrelation.png``: each model's residual autocorrelation.
+Two runs give bit-identical CSV and MCAP files. The progress bar is drawn only on a terminal.
 """
 
 from __future__ import annotations
@@ -19,17 +24,20 @@ from __future__ import annotations
 import gc
 import sys
 import time
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any, TextIO
 
 import numpy as np
 
 from .bags import read_inputs, typestore, write_replay
-from .cdr import encode_float64_multiarray, encode_header
 from .config import PipelineConfig, node_config, pipeline_config
 from .files import output_directory
-from .messages import ARRAY_OUTPUTS, NODE_NAME, feed, stamp_label
-from .pipeline import Pipeline
+from .messages import NODE_NAME, feed
+from .outputs import sample_messages
+from .pipeline import Pipeline, SampleOutput
+from .report import results_table, rows_from_arrays
 
 __all__ = ["ReplayResult", "run_pipeline", "replay", "output_records", "NODE_NAME"]
 
@@ -39,7 +47,7 @@ class ReplayResult:
     """The pipeline after the run, every published sample and timing."""
 
     pipeline: Pipeline
-    outputs: list = field(default_factory=list)
+    outputs: list[SampleOutput] = field(default_factory=list)
     n_messages: int = 0
     wall_seconds: float = 0.0
     data_seconds: float = 0.0
@@ -50,6 +58,13 @@ class ReplayResult:
         return self.data_seconds / self.wall_seconds if self.wall_seconds > 0 else float("inf")
 
 
+def _is_terminal(stream: TextIO) -> bool:
+    try:
+        return bool(stream.isatty())
+    except (AttributeError, ValueError):  # no isatty, or a closed stream
+        return False
+
+
 def _progress(done: int, total: int, width: int = 40) -> None:
     filled = int(width * done / total)
     sys.stderr.write(f"\r[{'#' * filled}{'.' * (width - filled)}] {100 * done // total:3d}%")
@@ -58,8 +73,12 @@ def _progress(done: int, total: int, width: int = 40) -> None:
     sys.stderr.flush()
 
 
-def run_pipeline(messages, config: PipelineConfig, *, record: bool = True, progress: bool = False) -> ReplayResult:
-    """Feed ``(kind, stamp, msg)`` messages through a fresh pipeline; keep every output."""
+def run_pipeline(messages: Sequence[tuple[str, int, object]], config: PipelineConfig, *, record: bool = True,
+                 progress: bool = False) -> ReplayResult:
+    """Feed ``(kind, stamp, msg)`` messages through a fresh pipeline; keep every output.
+    ``progress`` draws a bar on stderr when stderr is a terminal (never carriage-return
+    frames into a log file or a pipe)."""
+    progress = progress and _is_terminal(sys.stderr)
     pipe = Pipeline(config, record=record)
     result = ReplayResult(pipe, n_messages=len(messages))
     total = len(messages)
@@ -89,56 +108,74 @@ def run_pipeline(messages, config: PipelineConfig, *, record: bool = True, progr
     return result
 
 
-def output_records(pipe: Pipeline, outputs, frame_id: str = "base_link", node: str = NODE_NAME) -> list:
-    """The node's output messages for every sample, as bag records of CDR bytes
-    (:mod:`.cdr`; the same bytes rclpy publishes)."""
-    records = []
-    for out in outputs:
-        stamp = out.stamp_ns
-        header = encode_header(stamp // 10**9, stamp % 10**9, frame_id)
-        records.append((stamp, f"/{node}/sample_stamp", "std_msgs/msg/Header", header))
-        when = stamp_label(stamp)
-        for name, label, theta, se, se_conv in pipe.published(out):
-            for suffix, data in zip(ARRAY_OUTPUTS, (theta, se, se_conv)):
-                records.append((stamp, f"/{node}/{name}/{suffix}", "std_msgs/msg/Float64MultiArray",
-                                encode_float64_multiarray(label, data.tolist(), when)))
-    return records
+def output_records(pipe: Pipeline, outputs: Iterable[SampleOutput], frame_id: str = "base_link",
+                   node: str = NODE_NAME) -> list[tuple[int, str, str, bytes]]:
+    """The node's output messages for every sample, as bag records of CDR bytes: exactly what
+    the node publishes (:func:`.outputs.sample_messages`)."""
+    return [(out.stamp_ns, f"/{node}/{topic}", msgtype, data)
+            for out in outputs for topic, msgtype, data in sample_messages(pipe, out, frame_id)]
 
 
-def _write_csv(path: Path, pipe: Pipeline, outputs) -> None:
+def _write_csv(path: Path, pipe: Pipeline, outputs: Iterable[SampleOutput]) -> None:
     with open(path, "w") as fh:
         fh.write("time,model,parameter,estimate,std_error,std_error_conventional\n")
         for out in outputs:
             t = f"{out.stamp_ns // 10**9}.{out.stamp_ns % 10**9:09d}"
-            for (name, _label, theta, se, se_conv), names in zip(pipe.published(out), _names_of(pipe, out)):
-                for p, a, b, c in zip(names, theta, se, se_conv):
+            published = zip(pipe.published(out), _names_of(pipe, out), strict=True)
+            for (name, _label, theta, se, se_conv), names in published:
+                for p, a, b, c in zip(names, theta, se, se_conv, strict=True):
                     fh.write(f"{t},{name},{p},{float(a)!r},{float(b)!r},{float(c)!r}\n")
 
 
-def _names_of(pipe: Pipeline, out):
+# Columns of the wide CSV per parameter P: P (estimate), P_se (corrected), P_se_conventional.
+WIDE_QUANTITIES = (("", "theta"), ("_se", "se"), ("_se_conventional", "se_conventional"))
+
+
+def wide_columns(pipe: Pipeline) -> list[str]:
+    """The wide CSV's header: ``time`` then, per model and parameter, every quantity."""
+    return ["time"] + [f"{p}{suffix}" for names in pipe.parameter_names for p in names for suffix, _ in WIDE_QUANTITIES]
+
+
+def _write_wide_csv(path: Path, pipe: Pipeline, outputs: Iterable[SampleOutput]) -> None:
+    """``estimates_wide.csv``: one row per sample, one column per parameter and quantity
+    (:func:`wide_columns`), empty where the model is not ready yet. Comma separated, a header
+    row and a numeric time column (s): what PlotJuggler's CSV loader reads as is."""
+    sizes = pipe.sizes
+    with open(path, "w") as fh:
+        fh.write(",".join(wide_columns(pipe)) + "\n")
+        for out in outputs:
+            cells = [f"{out.stamp_ns // 10**9}.{out.stamp_ns % 10**9:09d}"]
+            arrays = [getattr(out, field) for _, field in WIDE_QUANTITIES]
+            for j, n in enumerate(sizes):
+                if out.ready[j]:
+                    cells += [repr(float(a[j, i])) for i in range(n) for a in arrays]
+                else:
+                    cells += [""] * (n * len(arrays))
+            fh.write(",".join(cells) + "\n")
+
+
+def _names_of(pipe: Pipeline, out: SampleOutput) -> list[tuple[str, ...]]:
     return [pipe.parameter_names[j] for j in range(len(pipe.sizes)) if out.ready[j]]
 
 
-def summary_table(pipe: Pipeline, outputs) -> str:
+def summary_table(pipe: Pipeline, outputs: Sequence[SampleOutput]) -> str:
+    """The last sample's estimates of every ready model (:func:`.report.results_table`)."""
     if not outputs:
         return "no estimates: no model became ready (check the excitation and the configuration)"
     last = outputs[-1]
-    lines = [f"{'parameter':<14}{'estimate':>13}{'SE corr.':>12}{'SE conv.':>12}{'corr/conv':>11}"]
-    lines.append("-" * len(lines[0]))
-    for (name, _l, theta, se, sc), names in zip(pipe.published(last), _names_of(pipe, last)):
-        for p, a, b, c in zip(names, theta, se, sc):
-            ratio = b / c if c > 0 else float("nan")
-            lines.append(f"{p:<14}{a:13.5g}{b:12.4g}{c:12.4g}{ratio:11.2f}")
-    return "\n".join(lines)
+    rows = []
+    for (_name, _l, theta, se, sc), names in zip(pipe.published(last), _names_of(pipe, last), strict=True):
+        rows += rows_from_arrays(names, theta, sc, se)
+    return results_table(rows)
 
 
-def _plots(out_dir: Path, pipe: Pipeline, outputs) -> list[Path]:
+def _plots(out_dir: Path, pipe: Pipeline, outputs: Sequence[SampleOutput]) -> list[Path]:
     import matplotlib  # noqa: PLC0415
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt  # noqa: PLC0415
 
-    written = []
+    written: list[Path] = []
     if not outputs:
         return written
     t0 = outputs[0].stamp_ns
@@ -193,17 +230,20 @@ def _plots(out_dir: Path, pipe: Pipeline, outputs) -> list[Path]:
     return written
 
 
-def replay(bag: str | Path, params: dict, out: str | Path, *, start=None, end=None, strict: bool = True,
-           progress: bool = True, plots: bool = True, force: bool = False) -> ReplayResult:
+def replay(bag: str | Path, params: dict[str, Any], out: str | Path, *, start: float | None = None,
+           end: float | None = None, strict: bool = True, progress: bool = True, plots: bool = True,
+           force: bool = False, inputs: Iterable[str | Path] = ()) -> ReplayResult:
     """Run a replay bag through the pipeline and write the outputs to ``out``
     (:func:`.files.output_directory`: complete or absent; an existing non-empty ``out`` only
-    with ``force``; never over the input bag)."""
+    with ``force``; never over the input bag or the other ``inputs``, such as the parameter
+    file)."""
     config = pipeline_config(params)
     topics = node_config(params).topics
-    with output_directory(out, force=force, inputs=(bag,)) as tmp:
+    with output_directory(out, force=force, inputs=(bag, *inputs)) as tmp:
         messages, _t0 = read_inputs(bag, topics, strict=strict, start=start, end=end)
         result = run_pipeline(messages, config, progress=progress)
         _write_csv(tmp / "estimates.csv", result.pipeline, result.outputs)
+        _write_wide_csv(tmp / "estimates_wide.csv", result.pipeline, result.outputs)
         store = typestore()
         records = output_records(result.pipeline, result.outputs, node_config(params).frame_id)
         if records:

@@ -14,6 +14,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+import numpy.typing as npt
 from scipy import signal
 
 from .aero import FlightState, coefficients, regressor_matrix, regressors
@@ -35,6 +36,9 @@ __all__ = [
     "simulate_sensor_streams",
 ]
 
+FloatArray = npt.NDArray[np.float64]
+Stamps = npt.NDArray[np.int64]
+
 G0 = 9.80665
 FT = 0.3048
 
@@ -50,7 +54,7 @@ SIGNALS = ("delta_e", "alpha", "q", "az")
 def standard_atmosphere_density(altitude_m: float) -> float:
     """ISA troposphere density (kg/m^3)."""
     T = 288.15 - 0.0065 * altitude_m
-    return 1.225 * (T / 288.15) ** (G0 / (287.05287 * 0.0065) - 1.0)
+    return float(1.225 * (T / 288.15) ** (G0 / (287.05287 * 0.0065) - 1.0))
 
 
 @dataclass(frozen=True)
@@ -64,10 +68,10 @@ class SimulationConfig:
     input_start: float = 0.5  # s
     sample_offset: float = 0.0  # s, first measurement time (a multiple of 1/fine_rate)
     fine_rate: float = 1000.0  # Hz, integration grid
-    snr: dict = field(default_factory=lambda: {"delta_e": 40.0, "alpha": 12.0, "q": 30.0, "az": 40.0})
+    snr: dict[str, float] = field(default_factory=lambda: {"delta_e": 40.0, "alpha": 12.0, "q": 30.0, "az": 40.0})
     band_limit_hz: float = 2.0
     chebyshev_ripple_db: float = 0.5
-    true: dict = field(default_factory=lambda: dict(T2_TRUE))
+    true: dict[str, float] = field(default_factory=lambda: dict(T2_TRUE))
 
     @property
     def density(self) -> float:
@@ -83,22 +87,24 @@ class ShortPeriodRecord:
     """Sampled signals (aircraft body axes, SI): time, elevator, alpha, q, a_z; constants V and
     qbar; ``noise_free`` holds the same signals without noise."""
 
-    t: np.ndarray
-    delta_e: np.ndarray
-    alpha: np.ndarray
-    q: np.ndarray
-    az: np.ndarray
+    t: FloatArray
+    delta_e: FloatArray
+    alpha: FloatArray
+    q: FloatArray
+    az: FloatArray
     V: float
     qbar: float
     aircraft: AircraftConfig
     config: SimulationConfig
-    noise_free: dict = field(default_factory=dict)
+    noise_free: dict[str, FloatArray] = field(default_factory=dict)
 
-    def signals(self) -> dict[str, np.ndarray]:
+    def signals(self) -> dict[str, FloatArray]:
         return {name: getattr(self, name) for name in SIGNALS}
 
 
-def _state_space(cfg: SimulationConfig, ac: AircraftConfig):
+def _state_space(
+    cfg: SimulationConfig, ac: AircraftConfig
+) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
     """Eq. 25a-b: states (d alpha, d q), input d delta_e, outputs (d alpha, d q, d a_z m/s^2)."""
     tv = cfg.true
     V, qS = cfg.airspeed, cfg.qbar * ac.S
@@ -166,7 +172,7 @@ def add_noise(record: ShortPeriodRecord, band_level: float, rng: np.random.Gener
 
 def reduce_short_period(
     record: ShortPeriodRecord, diff: DifferentiatorConfig = DifferentiatorConfig()
-) -> tuple[np.ndarray, dict[str, tuple[np.ndarray, np.ndarray]]]:
+) -> tuple[FloatArray, dict[str, tuple[FloatArray, FloatArray]]]:
     """Eq. 1 and Eq. 2 for the two short-period models, through the same aero reduction and
     fixed-lag differentiator the node uses.
 
@@ -196,12 +202,12 @@ class SensorStreams:
     integer-nanosecond stamps and a value array. ``surface_names`` label the surface columns."""
 
     start_ns: int
-    imu: tuple  # (stamps, (N, 6): angular velocity xyz, specific force xyz)
-    airspeed: tuple  # (stamps, (N, 3))
-    dynamic_pressure: tuple  # (stamps, (N,))
-    control_surfaces: tuple  # (stamps, (N, 5))
-    thrust: tuple  # (stamps, (N,))
-    surface_names: tuple = ("elevator_left", "elevator_right", "aileron_left", "aileron_right", "rudder")
+    imu: tuple[Stamps, FloatArray]  # (stamps, (N, 6): angular velocity xyz, specific force xyz)
+    airspeed: tuple[Stamps, FloatArray]  # (stamps, (N, 3))
+    dynamic_pressure: tuple[Stamps, FloatArray]  # (stamps, (N,))
+    control_surfaces: tuple[Stamps, FloatArray]  # (stamps, (N, 5))
+    thrust: tuple[Stamps, FloatArray]  # (stamps, (N,))
+    surface_names: tuple[str, ...] = ("elevator_left", "elevator_right", "aileron_left", "aileron_right", "rudder")
 
 
 def simulate_sensor_streams(
@@ -230,7 +236,7 @@ def simulate_sensor_streams(
     rng = np.random.default_rng(seed)
     ac = load_aircraft("t2")
 
-    def stream(rate, offset):
+    def stream(rate: float, offset: float) -> tuple[Stamps, ShortPeriodRecord]:
         rec = simulate_short_period(replace(cfg, rate=rate, sample_offset=offset), ac)
         noisy = add_noise(rec, band_level, rng)
         stamps = start_ns + np.round(rec.t * 1e9).astype(np.int64)

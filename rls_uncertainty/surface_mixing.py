@@ -54,6 +54,7 @@ class SurfaceMixing:
         aileron = self.names("delta_a")
         split = bool(aileron) and not self.aileron_combined
         known = set(self.elevator) | set(self.rudder) | set(aileron)
+        used = sorted({where[n] for n in known})
         return JointLayout(
             elevator=tuple(where[n] for n in self.elevator),
             aileron_right=tuple(where[n] for n in self.aileron_right) if split else (),
@@ -61,6 +62,7 @@ class SurfaceMixing:
             aileron_combined=where[self.aileron_combined] if self.aileron_combined else None,
             rudder=tuple(where[n] for n in self.rudder),
             unknown=tuple(n for n in names if n not in known),
+            used=tuple(used),
         )
 
 
@@ -73,7 +75,8 @@ def _mean(values, index: tuple[int, ...]) -> float:
 
 class JointLayout(NamedTuple):
     """Positions of the mixed joints in one JointState name list; ``unknown`` are the joints
-    the mixing does not use (reported, not an error)."""
+    the mixing does not use (reported, not an error), ``used`` the positions of all the
+    others (the values a message's plausibility is judged on)."""
 
     elevator: tuple[int, ...]
     aileron_right: tuple[int, ...]
@@ -81,6 +84,7 @@ class JointLayout(NamedTuple):
     aileron_combined: int | None
     rudder: tuple[int, ...]
     unknown: tuple[str, ...]
+    used: tuple[int, ...] = ()
 
     def deflections(self, positions) -> tuple[float, float, float]:
         """``(delta_e, delta_a, delta_r)`` of Eq. 23 from the message's positions (rad)."""
@@ -96,9 +100,13 @@ class JointLayout(NamedTuple):
 
 class SurfaceMixer:
     """:meth:`SurfaceMixing.layout` for a stream of messages: the layout of the last name list
-    is kept (every message normally has the same list) and a few others are cached."""
+    is kept (every message normally has the same list) and a few others are cached. Memory
+    stays bounded whatever arrives: at most ``_CACHE_SIZE`` lists of at most
+    ``_CACHE_MAX_NAMES`` names are cached (a longer list is laid out afresh each time), plus
+    the last list seen."""
 
     _CACHE_SIZE = 16  # name lists normally never change; stay bounded when they do
+    _CACHE_MAX_NAMES = 64  # a surface JointState has a handful of joints
 
     def __init__(self, mixing: SurfaceMixing) -> None:
         self.mixing = mixing
@@ -114,8 +122,10 @@ class SurfaceMixer:
         key = tuple(names)
         layout = self._layouts.get(key)
         if layout is None:
-            if len(self._layouts) >= self._CACHE_SIZE:
-                self._layouts.clear()
-            layout = self._layouts[key] = self.mixing.layout(key)
+            layout = self.mixing.layout(key)
+            if len(key) <= self._CACHE_MAX_NAMES:
+                if len(self._layouts) >= self._CACHE_SIZE:
+                    self._layouts.clear()
+                self._layouts[key] = layout
         self._last_names, self._last_layout = list(key), layout
         return layout

@@ -1,7 +1,7 @@
-"""Bag tools: the bundled T-2 bag, `convert` with the fti_msgs mapping, the offline
-`replay`, and every bad bag ending in a clear error with no output left behind. No DDS."""
+"""Bag I/O (rls_uncertainty/bags.py): the bundled T-2 bag, `convert` with the fti_msgs
+mapping, reading replay bags, and every bad bag or mapping ending in a one-line error with
+no output left behind. No DDS."""
 
-import csv
 import filecmp
 import math
 import struct
@@ -10,16 +10,17 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
+from bag_samples import SMALL_MAPPING, fails, fti_bag, read_all, tree, write_mapping
 
 from rls_uncertainty import cli
 from rls_uncertainty.bags import _standard_message, convert, read_inputs, typestore, write_replay
-from rls_uncertainty.config import load_parameters_file, pipeline_config
-from rls_uncertainty.replay import replay, run_pipeline
+from rls_uncertainty.errors import BagError, ConfigError
+
+from conftest import FLIGHT_DATA
 
 ROOT = Path(__file__).resolve().parents[1]
 BUNDLED = ROOT / "bags" / "t2_maneuver"
 MAPPING = ROOT / "msg_schemas" / "fti_msgs" / "mapping.yaml"
-from conftest import FLIGHT_DATA  # noqa: E402
 
 
 def test_bundled_bag_is_what_make_bag_writes(tmp_path):
@@ -46,16 +47,6 @@ def test_bag_log_time_is_the_header_stamp_in_order(tmp_path):
             last = t
 
 
-def _read_all(path):
-    from rosbags.highlevel import AnyReader
-
-    out = {}
-    with AnyReader([Path(path)], default_typestore=typestore()) as reader:
-        for conn, t, raw in reader.messages():
-            out.setdefault(conn.topic, []).append((t, reader.deserialize(raw, conn.msgtype)))
-    return out
-
-
 def test_convert_maps_the_fti_fields_and_is_byte_identical(tmp_path):
     src = FLIGHT_DATA / "totter_f1_017"
     a, b = tmp_path / "a", tmp_path / "b"
@@ -64,88 +55,33 @@ def test_convert_maps_the_fti_fields_and_is_byte_identical(tmp_path):
     c = tmp_path / "c" / "a"
     convert(src, MAPPING, c)
     assert (a / "a.mcap").read_bytes() == (c / "a.mcap").read_bytes()
-    original = _read_all(src)
-    replayed = _read_all(a)
+    original = read_all(src)
+    replayed = read_all(a)
     air = original["/fcc/air_data"]
     vel = replayed["/airspeed"]
     assert len(vel) == len(air) == 1001
-    for (t0, m0), (t1, m1) in zip(air[::97], vel[::97]):
+    for (t0, m0), (t1, m1) in zip(air[::97], vel[::97], strict=True):
         v = m1.vector
         assert t0 == t1
         assert math.hypot(v.x, v.y, v.z) == pytest.approx(m0.true_airspeed, rel=1e-12)
         # REP-103 to aircraft axes: (x, -y, -z); alpha = atan2(w, u), beta = asin(v / V).
         assert math.atan2(-v.z, v.x) == pytest.approx(m0.angle_of_attack, abs=1e-12)
         assert math.asin(-v.y / m0.true_airspeed) == pytest.approx(m0.angle_of_sideslip, abs=1e-12)
-    for (_, m0), (_, m1) in zip(original["/fcc/thrust"][::101], replayed["/thrust"][::101]):
+    for (_, m0), (_, m1) in zip(original["/fcc/thrust"][::101], replayed["/thrust"][::101], strict=True):
         assert m1.wrench.force.x == pytest.approx(float(np.sum(m0.thrust)))
-    for (_, m0), (_, m1) in zip(original["/fcc/surfaces"][::101], replayed["/control_surfaces"][::101]):
+    for (_, m0), (_, m1) in zip(original["/fcc/surfaces"][::101], replayed["/control_surfaces"][::101], strict=True):
         assert list(m1.name) == ["elevator", "aileron", "rudder"]
         assert list(m1.position) == [m0.elevator, m0.aileron, m0.rudder]
-    for (_, m0), (_, m1) in zip(original["/fcc/imu"][::101], replayed["/imu"][::101]):
+    for (_, m0), (_, m1) in zip(original["/fcc/imu"][::101], replayed["/imu"][::101], strict=True):
         for f in ("angular_velocity", "linear_acceleration"):
             a0, a1 = getattr(m0, f), getattr(m1, f)
             assert (a1.x, a1.y, a1.z) == (a0.x, a0.y, a0.z)
 
 
 # ----------------------------------------------------------------------------- bad bags
-def _fti_bag(tmp_path, name, *, imu_stamps_ns=None, n=50, empty=False):
-    """A small recording with fti_msgs types, optionally with bad IMU stamps."""
-    store = typestore()
-    T = store.types
-    records = []
-    stamps = imu_stamps_ns if imu_stamps_ns is not None else [10**18 + k * 20 * 10**6 for k in range(n)]
-    for k, s in enumerate(stamps):
-        records.append((s, "/fcc/imu", "sensor_msgs/msg/Imu",
-                        _standard_message(store, "imu", s, (0.0, 0.01 * k, 0.0, 0.0, 0.0, 9.8))))
-        hdr = _standard_message(store, "airspeed", s, (1.0, 0.0, 0.0)).header
-        records.append((s, "/fcc/air_data", "fti_msgs/msg/AirData", T["fti_msgs/msg/AirData"](
-            header=hdr, true_airspeed=50.0, angle_of_attack=0.05, angle_of_sideslip=0.0,
-            dynamic_pressure=1500.0, air_density=1.2, mach=0.15)))
-    path = tmp_path / name
-    if empty:
-        from rosbags.rosbag2 import StoragePlugin, Writer
-
-        with Writer(path, version=9, storage_plugin=StoragePlugin.MCAP) as w:
-            w.add_connection("/fcc/imu", "sensor_msgs/msg/Imu", typestore=store)
-            w.add_connection("/fcc/air_data", "fti_msgs/msg/AirData", typestore=store)
-        return path
-    # Like a recorder: log time is the arrival order, header stamps are what the sensor said.
-    from rosbags.rosbag2 import StoragePlugin, Writer
-
-    with Writer(path, version=9, storage_plugin=StoragePlugin.MCAP) as w:
-        conns = {}
-        for k, (_stamp, topic, msgtype, msg) in enumerate(records):
-            if topic not in conns:
-                conns[topic] = w.add_connection(topic, msgtype, typestore=store)
-            w.write(conns[topic], 10**18 + k * 10**6, store.serialize_cdr(msg, msgtype))
-    return path
-
-
-SMALL_MAPPING = {
-    "imu": {"topic": "/fcc/imu"},
-    "airspeed": {"topic": "/fcc/air_data", "frame": "aircraft",
-                 "polar": {"speed": "true_airspeed", "alpha": "angle_of_attack", "beta": "angle_of_sideslip"}},
-}
-
-
-def _mapping(tmp_path, spec=None):
-    path = tmp_path / "mapping.yaml"
-    path.write_text(yaml.safe_dump(spec or SMALL_MAPPING))
-    return path
-
-
-def _fails(capsys, args, *needles):
-    code = cli.main(args)
-    err = capsys.readouterr().err
-    assert code != 0
-    for needle in needles:
-        assert needle in err, err
-    return err
-
-
 def test_small_recording_converts(tmp_path):
     out = tmp_path / "out"
-    counts = convert(_fti_bag(tmp_path, "rec"), _mapping(tmp_path), out)
+    counts = convert(fti_bag(tmp_path, "rec"), write_mapping(tmp_path), out)
     assert counts == {"/imu": 50, "/airspeed": 50}
 
 
@@ -154,7 +90,7 @@ def test_truncated_mcap_names_the_file_and_leaves_nothing(tmp_path, capsys):
     data = (FLIGHT_DATA / "totter_f1_017" / "totter_f1_017.mcap").read_bytes()
     src.write_bytes(data[: len(data) // 2])
     out = tmp_path / "out"
-    _fails(capsys, ["convert", str(src), "--mapping", str(MAPPING), "--out", str(out)], str(src))
+    fails(capsys, ["convert", str(src), "--mapping", str(MAPPING), "--out", str(out)], str(src))
     assert not out.exists() and not (tmp_path / "out.partial").exists()
 
 
@@ -165,7 +101,7 @@ def test_corrupt_chunk_names_the_file(tmp_path, capsys):
     src = tmp_path / "corrupt.mcap"
     src.write_bytes(bytes(data))
     out = tmp_path / "out"
-    _fails(capsys, ["convert", str(src), "--mapping", str(MAPPING), "--out", str(out)], str(src))
+    fails(capsys, ["convert", str(src), "--mapping", str(MAPPING), "--out", str(out)], str(src))
     assert not out.exists()
 
 
@@ -180,28 +116,33 @@ def test_type_without_schema_is_named_and_schemas_dir_supplies_it(tmp_path, caps
         cid = w.register_channel(topic="/thing", message_encoding="cdr", schema_id=sid)
         w.add_message(channel_id=cid, log_time=1, publish_time=1, data=b"\x00\x01\x00\x00" + struct.pack("<d", 1.0))
         w.finish()
-    mapping = _mapping(tmp_path, {"imu": {"topic": "/thing"}, "airspeed": {"topic": "/thing"}})
-    _fails(capsys, ["convert", str(src), "--mapping", str(mapping), "--out", str(tmp_path / "o")],
+    mapping = write_mapping(tmp_path, {"imu": {"topic": "/thing"}, "airspeed": {"topic": "/thing"}})
+    fails(capsys, ["convert", str(src), "--mapping", str(mapping), "--out", str(tmp_path / "o")],
            str(src), "/thing", "acme_msgs/msg/Thing", "no schema")
     schemas = tmp_path / "schemas" / "acme_msgs" / "msg"
     schemas.mkdir(parents=True)
     (schemas / "Thing.msg").write_text("float64 value\n")
     # With the schema the type is known: the error is no longer about a missing schema.
-    err = _fails(capsys, ["convert", str(src), "--mapping", str(mapping), "--out", str(tmp_path / "o"),
+    err = fails(capsys, ["convert", str(src), "--mapping", str(mapping), "--out", str(tmp_path / "o"),
                           "--schemas", str(tmp_path / "schemas")], "/thing")
     assert "no schema" not in err
 
 
 def test_mapping_with_missing_topic_or_field(tmp_path, capsys):
-    src = _fti_bag(tmp_path, "rec")
+    src = fti_bag(tmp_path, "rec")
     spec = dict(SMALL_MAPPING, airspeed=dict(SMALL_MAPPING["airspeed"], topic="/fcc/adc"))
-    _fails(capsys, ["convert", str(src), "--mapping", str(_mapping(tmp_path, spec)), "--out", str(tmp_path / "o")],
+    fails(capsys, ["convert", str(src), "--mapping", str(write_mapping(tmp_path, spec)), "--out", str(tmp_path / "o")],
            str(src), "/fcc/adc", "not in the bag")
     spec = dict(SMALL_MAPPING, dynamic_pressure={"topic": "/fcc/air_data", "field": "qbar"})
-    _fails(capsys, ["convert", str(src), "--mapping", str(_mapping(tmp_path, spec)), "--out", str(tmp_path / "o")],
+    fails(capsys, ["convert", str(src), "--mapping", str(write_mapping(tmp_path, spec)), "--out", str(tmp_path / "o")],
            str(src), "/fcc/air_data", "'qbar'")
+    # Fields that are not numbers: a message, an array of text (JointState names).
+    for field in ("header", "header.frame_id"):
+        spec = dict(SMALL_MAPPING, dynamic_pressure={"topic": "/fcc/air_data", "field": field})
+        fails(capsys, ["convert", str(src), "--mapping", str(write_mapping(tmp_path, spec)), "--out",
+                       str(tmp_path / "o")], str(src), f"field {field!r} is not a number")
     spec = dict(SMALL_MAPPING, dynamic_pressure={"topic": "/fcc/air_data", "field": "dynamic_pressure", "units": "bar"})
-    _fails(capsys, ["convert", str(src), "--mapping", str(_mapping(tmp_path, spec)), "--out", str(tmp_path / "o")],
+    fails(capsys, ["convert", str(src), "--mapping", str(write_mapping(tmp_path, spec)), "--out", str(tmp_path / "o")],
            "unknown unit 'bar'")
     assert not (tmp_path / "o").exists()
 
@@ -211,8 +152,8 @@ def test_mapping_with_missing_topic_or_field(tmp_path, capsys):
     ("duplicate", [10**18 + k * 10**7 for k in (0, 1, 2, 2, 3, 4)]),
 ])
 def test_bad_stamps_are_refused_by_convert_and_replay(tmp_path, capsys, problem, stamps):
-    src = _fti_bag(tmp_path, "rec", imu_stamps_ns=stamps)
-    _fails(capsys, ["convert", str(src), "--mapping", str(_mapping(tmp_path)), "--out", str(tmp_path / "o")],
+    src = fti_bag(tmp_path, "rec", imu_stamps_ns=stamps)
+    fails(capsys, ["convert", str(src), "--mapping", str(write_mapping(tmp_path)), "--out", str(tmp_path / "o")],
            str(src), "/fcc/imu", problem)
     assert not (tmp_path / "o").exists()
     # A replay bag with the same problem (written on the standard topics without checks).
@@ -223,17 +164,17 @@ def test_bad_stamps_are_refused_by_convert_and_replay(tmp_path, capsys, problem,
     with Writer(bad, version=9, storage_plugin=StoragePlugin.MCAP) as w:
         conn = w.add_connection("/imu", "sensor_msgs/msg/Imu", typestore=store)
         for k, s in enumerate(stamps):
-            w.write(conn, 10**18 + k * 10**6, store.serialize_cdr(_standard_message(store, "imu", s, (0, 0, 0, 0, 0, 9.8)),
-                                                 "sensor_msgs/msg/Imu"))
-    _fails(capsys, ["replay", str(bad), "--out", str(tmp_path / "r"), "--quiet"], str(bad), "/imu", problem)
+            msg = _standard_message(store, "imu", s, (0, 0, 0, 0, 0, 9.8))
+            w.write(conn, 10**18 + k * 10**6, store.serialize_cdr(msg, "sensor_msgs/msg/Imu"))
+    fails(capsys, ["replay", str(bad), "--out", str(tmp_path / "r"), "--quiet"], str(bad), "/imu", problem)
     assert not (tmp_path / "r").exists()
 
 
 def test_empty_bag_is_an_error(tmp_path, capsys):
-    src = _fti_bag(tmp_path, "empty", empty=True)
-    _fails(capsys, ["convert", str(src), "--mapping", str(_mapping(tmp_path)), "--out", str(tmp_path / "o")],
+    src = fti_bag(tmp_path, "empty", empty=True)
+    fails(capsys, ["convert", str(src), "--mapping", str(write_mapping(tmp_path)), "--out", str(tmp_path / "o")],
            str(src), "no messages")
-    _fails(capsys, ["replay", str(src), "--out", str(tmp_path / "r"), "--quiet"], str(src))
+    fails(capsys, ["replay", str(src), "--out", str(tmp_path / "r"), "--quiet"], str(src))
     assert not (tmp_path / "o").exists() and not (tmp_path / "r").exists()
 
 
@@ -245,74 +186,9 @@ def test_write_replay_orders_by_stamp_with_a_stable_tie_break(tmp_path):
                  _standard_message(store, "airspeed", 10, (1, 0, 0))))
     write_replay(tmp_path / "o", recs, store)
     got = [(t, topic, m.angular_velocity.x if topic == "/imu" else None)
-           for topic, ms in _read_all(tmp_path / "o").items() for t, m in ms]
+           for topic, ms in read_all(tmp_path / "o").items() for t, m in ms]
     imu = [g for g in got if g[1] == "/imu"]
     assert [(t, x) for t, _, x in imu] == [(10, 1.0), (10, 3.0), (20, 2.0), (30, 0.0)]
-
-
-# ----------------------------------------------------------------------------- replay
-def test_replay_writes_identical_outputs_twice_and_matches_the_pipeline(tmp_path):
-    params = load_parameters_file("t2")
-    r1 = replay(BUNDLED, params, tmp_path / "r1", progress=False)
-    replay(BUNDLED, params, tmp_path / "r2", progress=False, plots=False)
-    for name in ("estimates.csv", "estimates.mcap"):
-        assert (tmp_path / "r1" / name).read_bytes() == (tmp_path / "r2" / name).read_bytes()
-    assert {p.name for p in (tmp_path / "r1").glob("*.png")} == {
-        "CZ_estimates.png", "Cm_estimates.png", "CZ_autocorrelation.png", "Cm_autocorrelation.png"}
-    with open(tmp_path / "r1" / "estimates.csv") as fh:
-        rows = list(csv.DictReader(fh))
-    assert list(rows[0]) == ["time", "model", "parameter", "estimate", "std_error", "std_error_conventional"]
-    # One row per sample and parameter of every ready model.
-    n_rows = sum(int(sum(n for n, r in zip(r1.pipeline.sizes, o.ready) if r)) for o in r1.outputs)
-    assert len(rows) == n_rows
-    # The CSV's last values are the pipeline's, fed message by message independently here.
-    messages, _ = read_inputs(BUNDLED)
-    again = run_pipeline(messages, pipeline_config(params))
-    last = again.outputs[-1]
-    final = {r["parameter"]: r for r in rows if float(r["time"]) == last.stamp_ns * 1e-9}
-    for j, names in enumerate(again.pipeline.parameter_names):
-        for i, name in enumerate(names):
-            assert float(final[name]["estimate"]) == last.theta[j, i]
-            assert float(final[name]["std_error"]) == last.se[j, i]
-            assert float(final[name]["std_error_conventional"]) == last.se_conventional[j, i]
-    topics = _read_all(tmp_path / "r1" / "estimates.mcap")
-    est = topics["/rls_estimator/CZ/estimates"]
-    assert est[-1][1].layout.dim[0].label == "CZ_0,CZ_alpha,CZ_delta_e"
-    from rls_uncertainty.messages import parse_stamp_label
-
-    for t, msg in est:  # every array carries its sample time; log time is the same
-        assert parse_stamp_label(msg.layout.dim[1].label) == t
-    assert list(est[-1][1].data) == list(last.theta[0, :3])
-    assert len(topics["/rls_estimator/sample_stamp"]) == len(again.outputs)
-
-
-def test_replay_options_select_span_models_and_lags(tmp_path):
-    code = cli.main(["replay", str(BUNDLED), "--config", "t2", "--out", str(tmp_path / "o"), "--models", "CZ",
-                     "--lags", "all", "--start", "1.0", "--end", "9.0", "--no-plots", "--quiet"])
-    assert code == 0
-    with open(tmp_path / "o" / "estimates.csv") as fh:
-        rows = list(csv.DictReader(fh))
-    assert {r["model"] for r in rows} == {"CZ"}
-    t = np.array([float(r["time"]) for r in rows])
-    t0 = 1_767_225_600
-    assert t.min() >= t0 + 1.0 and t.max() <= t0 + 9.0
-
-
-def test_no_partial_output_when_the_replay_fails(tmp_path, capsys):
-    out = tmp_path / "out"
-    _fails(capsys, ["replay", str(tmp_path / "missing"), "--out", str(out), "--quiet"], "missing", "no such bag")
-    assert not out.exists()
-
-
-def test_readme_documents_every_parameter_and_output():
-    from rls_uncertainty.config import PARAMETERS
-
-    text = (ROOT / "README.md").read_text()
-    missing = [p.name for p in PARAMETERS if f"`{p.name}`" not in text]
-    assert not missing, f"parameters not in the README: {missing}"
-    for topic in ("~/sample_stamp", "~/M/estimates", "~/M/standard_errors", "~/M/standard_errors_conventional",
-                  "/diagnostics", "~/reset", "~/enable"):
-        assert topic in text
 
 
 def _recorded_messages(store, n=60):
@@ -341,7 +217,7 @@ def _recorded_messages(store, n=60):
 def test_convert_reads_sqlite3_and_ros1_bags(tmp_path):
     from rosbags.rosbag1 import Writer as Writer1
     from rosbags.rosbag2 import StoragePlugin, Writer
-    from rosbags.typesys import Stores, get_typestore, get_types_from_msg
+    from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
     fti = (ROOT / "msg_schemas" / "fti_msgs" / "msg" / "AirData.msg").read_text()
     # ROS 2 sqlite3 storage.
@@ -363,79 +239,182 @@ def test_convert_reads_sqlite3_and_ros1_bags(tmp_path):
             if topic not in conns:
                 conns[topic] = w.add_connection(topic, msgtype, typestore=store1)
             w.write(conns[topic], s, store1.serialize_ros1(msg, msgtype))
-    mapping = _mapping(tmp_path)
+    mapping = write_mapping(tmp_path)
     results = []
     for src in (sqlite_bag, ros1_bag):
         out = tmp_path / f"out_{src.stem}"
         assert convert(src, mapping, out) == {"/imu": 60, "/airspeed": 60}
-        results.append(_read_all(out))
+        results.append(read_all(out))
     for r in results:
         alphas = [math.atan2(-m.vector.z, m.vector.x) for _t, m in r["/airspeed"]]
         np.testing.assert_allclose(alphas, 0.001 * np.arange(60), atol=1e-12)
         assert [m.angular_velocity.y for _t, m in r["/imu"]] == [0.01 * k for k in range(60)]
 
 
-def test_multisine_command_writes_an_orthogonal_input_table(tmp_path, capsys):
-    out = tmp_path / "inputs.csv"
-    assert cli.main(["multisine", "--period", "12", "--band", "0.2", "2", "--inputs", "3",
-                     "--names", "elevator", "aileron", "rudder", "--out", str(out)]) == 0
-    rows = list(csv.DictReader(open(out)))
-    by_input = {}
-    for r in rows:
-        by_input.setdefault(r["input"], set()).add(int(r["harmonic"]))
-        assert 0.2 - 1e-9 <= float(r["frequency_hz"]) <= 2.0 + 1e-9
-    assert set(by_input) == {"elevator", "aileron", "rudder"}
-    a, b, c = by_input.values()
-    assert not (a & b) and not (a & c) and not (b & c)  # interleaved harmonics: orthogonal inputs
-    assert "relative peak factor" in capsys.readouterr().out
+# ----------------------------------------------------------------------------- bad mapping files
+GOOD_AIRSPEED = SMALL_MAPPING["airspeed"]
+BAD_MAPPINGS = [
+    ("a number for an input", "imu: 5\nairspeed: {topic: /fcc/air_data}\n", "input 'imu': expected a mapping"),
+    ("a list for a unit", {"imu": {"topic": "/fcc/imu", "angular_velocity_units": ["rad/s"]}},
+     "angular_velocity_units: unknown unit ['rad/s']"),
+    ("an unknown key", {"imu": {"topic": "/fcc/imu", "angular_velocity_unit": "deg/s"}},
+     "unknown key(s) ['angular_velocity_unit']"),
+    ("an unknown input", {"gps": {"topic": "/fcc/gps"}}, "unknown input(s) ['gps']"),
+    ("a number as input name", "1: {topic: /a}\nimu: {topic: /fcc/imu}\n", "unknown input(s) ['1']"),
+    ("no airspeed", "imu: {topic: /fcc/imu}\n", "must give 'airspeed'"),
+    ("no topic", {"imu": {"frame": "rep103"}}, "input 'imu': needs a 'topic'"),
+    ("a list as topic", {"imu": {"topic": ["/fcc/imu"]}}, "topic: expected a topic name"),
+    ("an unknown frame", {"imu": {"topic": "/fcc/imu", "frame": "body"}}, "frame: must be one of"),
+    ("a frame for a scalar", {"thrust": {"topic": "/fcc/imu", "frame": "aircraft"}}, "unknown key(s) ['frame']"),
+    ("two fields for a vector", {"imu": {"topic": "/fcc/imu", "angular_velocity": ["a.x", "a.y"]}},
+     "angular_velocity: expected a list of three fields"),
+    ("a number as field", {"dynamic_pressure": {"topic": "/fcc/air_data", "field": 5}},
+     "field: expected a field name"),
+    ("a field spec without field", {"thrust": {"topic": "/fcc/air_data", "field": {"reduce": "sum"}}},
+     "needs 'field: PATH'"),
+    ("a field spec inside a field spec", {"thrust": {"topic": "/fcc/air_data", "field": {"field": {"field": "m"}}}},
+     "field: expected a field name"),
+    ("an unknown reduction", {"thrust": {"topic": "/fcc/air_data", "field": {"field": "mach", "reduce": "max"}}},
+     "reduce must be one of ['sum', 'mean']"),
+    ("a unit of another quantity", {"dynamic_pressure": {"topic": "/fcc/air_data", "units": "m/s"}},
+     "'m/s' is not a unit of pressure"),
+    ("a polar number", {"airspeed": {"topic": "/fcc/air_data", "polar": 5}}, "polar: expected {speed"),
+    ("a polar without alpha", {"airspeed": {"topic": "/fcc/air_data", "polar": {"speed": "true_airspeed"}}},
+     "polar: needs ['alpha']"),
+    ("a polar with units", {"airspeed": dict(GOOD_AIRSPEED, units="kt")}, "either as 'vector'"),
+    ("joints as a list", {"control_surfaces": {"topic": "/fcc/air_data", "joints": ["elevator"]}},
+     "joints: expected {joint_name: field"),
+    ("no joints", {"control_surfaces": {"topic": "/fcc/air_data"}}, "input 'control_surfaces': needs 'joints"),
+    ("a list at the top", "- imu\n- airspeed\n", "expected a mapping at the top level"),
+    ("an empty file", "", "expected a mapping at the top level"),
+    ("a YAML syntax error", "imu:\n\t- topic\n", "not valid YAML: found character '\\t' that cannot start any token "
+                                               "(line 2, column 1)"),
+    ("not UTF-8", b"imu: {topic: /fcc/imu}\n\xff\xfe\n", "not UTF-8 text (byte 23)"),
+]
 
 
-def test_launch_file_is_valid_python():
-    import py_compile
+@pytest.mark.parametrize("spec,needle", [c[1:] for c in BAD_MAPPINGS], ids=[c[0] for c in BAD_MAPPINGS])
+def test_a_malformed_mapping_file_is_one_line_naming_the_file(tmp_path, capsys, spec, needle):
+    src = fti_bag(tmp_path, "rec")
+    mapping = tmp_path / "mapping.yaml"
+    if isinstance(spec, dict):
+        spec = {"imu": SMALL_MAPPING["imu"], "airspeed": GOOD_AIRSPEED, **spec}
+        mapping.write_text(yaml.safe_dump(spec))
+    else:
+        mapping.write_bytes(spec if isinstance(spec, bytes) else spec.encode())
+    fails(capsys, ["convert", str(src), "--mapping", str(mapping), "--out", str(tmp_path / "o")],
+          str(mapping), needle)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["mapping.yaml", "rec"]
 
-    py_compile.compile(str(ROOT / "launch" / "estimator.launch.py"), doraise=True)
+
+def test_every_accepted_mapping_form_converts(tmp_path):
+    """The forms the checks must let through: vector airspeed with units, sign flips, field
+    specs with reduce, aircraft frames, every unit quantity."""
+    spec = {
+        "imu": {"topic": "/fcc/imu", "frame": "aircraft", "angular_velocity_units": "deg/s",
+                "angular_velocity": ["angular_velocity.x", "-angular_velocity.y", "angular_velocity.z"],
+                "linear_acceleration": ["linear_acceleration.x", "linear_acceleration.y",
+                                        {"field": "linear_acceleration.z", "reduce": "mean"}],
+                "linear_acceleration_units": "g"},
+        "airspeed": {"topic": "/fcc/imu", "vector": ["linear_acceleration.z", "angular_velocity.x",
+                                                     "angular_velocity.y"], "units": "kt"},
+        "dynamic_pressure": {"topic": "/fcc/air_data", "field": "dynamic_pressure", "units": "hPa"},
+        "thrust": {"topic": "/fcc/air_data", "field": {"field": "mach"}, "units": "lbf"},
+        "control_surfaces": {"topic": "/fcc/air_data", "joints": {"elevator": "-angle_of_attack"},
+                             "units": "deg"},
+    }
+    out = tmp_path / "out"
+    counts = convert(fti_bag(tmp_path, "rec"), write_mapping(tmp_path, spec), out)
+    assert counts == dict.fromkeys(("/imu", "/airspeed", "/dynamic_pressure", "/control_surfaces", "/thrust"), 50)
+    got = read_all(out)
+    k = 7
+    imu = got["/imu"][k][1]
+    # Recorded (REP-103) IMU: (0, 0.01 k, 0) rad/s and (0, 0, 9.8) m/s^2, read as aircraft
+    # axes in deg/s and g with the y rate flipped; back to REP-103 (x, -y, -z) in SI.
+    d, g = math.pi / 180.0, 9.80665
+    assert (imu.angular_velocity.x, imu.angular_velocity.y, imu.angular_velocity.z) == pytest.approx(
+        (0.0, 0.01 * k * d, 0.0), abs=1e-15)
+    assert imu.linear_acceleration.z == pytest.approx(-9.8 * g)
+    v = got["/airspeed"][k][1].vector
+    assert (v.x, v.y, v.z) == pytest.approx((9.8 * 1852 / 3600, 0.0, 0.01 * k * 1852 / 3600))
+    assert got["/dynamic_pressure"][k][1].fluid_pressure == pytest.approx(150000.0)
+    assert got["/thrust"][k][1].wrench.force.x == pytest.approx(0.15 * 4.448221615)
+    assert list(got["/control_surfaces"][k][1].position) == pytest.approx([-0.05 * d])
 
 
-def test_fast_cdr_codecs_equal_rosbags():
-    from rosbags.highlevel import AnyReader
+# ----------------------------------------------------------------------------- negative stamps
+def test_a_negative_header_stamp_is_one_line_and_leaves_nothing(tmp_path, capsys):
+    src = fti_bag(tmp_path, "rec", imu_stamps_ns=[-5 * 10**9 + k * 10**7 for k in range(10)])
+    mapping = write_mapping(tmp_path)
+    before = tree(tmp_path)
+    fails(capsys, ["convert", str(src), "--mapping", str(mapping), "--out", str(tmp_path / "out")],
+          str(src), "/fcc/imu", "negative header stamp (-5000000000 ns")
+    assert tree(tmp_path) == before  # neither out nor out.partial nor a hidden temporary
+    # The same stamps in a replay bag (log times are unsigned; header stamps are not).
+    store = typestore()
+    bad = tmp_path / "replay"
+    from rosbags.rosbag2 import StoragePlugin, Writer
 
-    from rls_uncertainty import cdr
+    with Writer(bad, version=9, storage_plugin=StoragePlugin.MCAP) as w:
+        conn = w.add_connection("/imu", "sensor_msgs/msg/Imu", typestore=store)
+        for k in range(10):
+            msg = _standard_message(store, "imu", -5 * 10**9 + k * 10**7, (0, 0, 0, 0, 0, 9.8))
+            w.write(conn, 10**9 + k * 10**7, store.serialize_cdr(msg, "sensor_msgs/msg/Imu"))
+    before = tree(tmp_path)
+    fails(capsys, ["replay", str(bad), "--out", str(tmp_path / "r"), "--quiet"], str(bad), "/imu",
+          "negative header stamp")
+    assert tree(tmp_path) == before
+
+
+def test_write_replay_refuses_a_stamp_that_cannot_be_a_log_time(tmp_path):
+    store = typestore()
+    msg = _standard_message(store, "imu", 0, (0, 0, 0, 0, 0, 9.8))
+    for stamp in (-1, 2**64):
+        with pytest.raises(BagError, match=f"stamp {stamp} ns"):
+            write_replay(tmp_path / "o", [(stamp, "/imu", "sensor_msgs/msg/Imu", msg)], store)
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("start,end,needle", [
+    (math.inf, None, "start must be"), (math.nan, None, "start must be"), (-0.5, None, "start must be"),
+    (None, math.nan, "end must be"), (None, -1, "end must be"), ("1", None, "start must be"),
+    (True, None, "start must be"), (5.0, 2.0, "end (2 s) must be after start (5 s)"), (3, 3, "after start"),
+])
+def test_read_inputs_refuses_a_bad_span(start, end, needle):
+    with pytest.raises(ConfigError) as exc:
+        read_inputs(BUNDLED, start=start, end=end)
+    assert needle in str(exc.value)
+
+
+def test_read_inputs_cuts_the_span_it_is_given():
+    t0 = read_inputs(BUNDLED)[1]
+    messages, _ = read_inputs(BUNDLED, start=2, end=np.float64(3.5))
+    stamps = np.array([s for _k, s, _m in messages])
+    assert stamps.min() >= t0 + 2 * 10**9 and stamps.max() <= t0 + 3.5 * 10**9
+    assert len(messages) == pytest.approx(4920 * 1.5 / 12, rel=0.02)
+
+
+def test_an_array_of_text_as_field_is_one_line(tmp_path, capsys):
+    from rosbags.rosbag2 import StoragePlugin, Writer
 
     store = typestore()
-    seen = set()
-    for bag in (BUNDLED,):
-        with AnyReader([bag], default_typestore=store) as reader:
-            for conn, _t, raw in reader.messages():
-                ref = reader.deserialize(raw, conn.msgtype)
-                fast = cdr.decode(conn.msgtype, raw)
-                seen.add(conn.msgtype)
-                assert (fast.header.stamp.sec, fast.header.stamp.nanosec, fast.header.frame_id) == (
-                    ref.header.stamp.sec, ref.header.stamp.nanosec, ref.header.frame_id)
-                if conn.msgtype.endswith("Imu"):
-                    for f in ("angular_velocity", "linear_acceleration"):
-                        a, b = getattr(fast, f), getattr(ref, f)
-                        assert (a.x, a.y, a.z) == (b.x, b.y, b.z)
-                    assert list(fast.orientation_covariance) == list(ref.orientation_covariance)
-                elif conn.msgtype.endswith("Vector3Stamped"):
-                    assert (fast.vector.x, fast.vector.y, fast.vector.z) == (ref.vector.x, ref.vector.y, ref.vector.z)
-                elif conn.msgtype.endswith("FluidPressure"):
-                    assert fast.fluid_pressure == ref.fluid_pressure
-                elif conn.msgtype.endswith("JointState"):
-                    assert fast.name == list(ref.name) and list(fast.position) == list(ref.position)
-                    assert len(fast.velocity) == len(ref.velocity) and len(fast.effort) == len(ref.effort)
-                else:
-                    assert fast.wrench.force.x == ref.wrench.force.x
-    assert seen == set(cdr.DECODABLE)
-    T = store.types
-    Dim = T["std_msgs/msg/MultiArrayDimension"]
-    for label, data, second in (("CZ_0,CZ_alpha,CZ_delta_e", [1.5, -2.25, 1e-300], "stamp:1767225600.140000000"),
-                                ("x", [], None), ("ab", [3.0], "s"), ("abc", [1.0, 2.0], None)):
-        dims = [Dim(label=label, size=len(data), stride=len(data))] + ([Dim(label=second, size=1, stride=1)] if second else [])
-        ref = T["std_msgs/msg/Float64MultiArray"](
-            layout=T["std_msgs/msg/MultiArrayLayout"](dim=dims, data_offset=0), data=np.array(data, dtype=float))
-        want = bytes(store.serialize_cdr(ref, "std_msgs/msg/Float64MultiArray"))
-        assert cdr.encode_float64_multiarray(label, data, second) == want
-    for frame in ("base_link", "", "abc"):
-        ref = T["std_msgs/msg/Header"](stamp=T["builtin_interfaces/msg/Time"](sec=17, nanosec=99), frame_id=frame)
-        assert cdr.encode_header(17, 99, frame) == bytes(store.serialize_cdr(ref, "std_msgs/msg/Header"))
-    assert cdr.decode("std_msgs/msg/String", b"\x00\x01\x00\x00") is None
+    src = tmp_path / "rec"
+    with Writer(src, version=9, storage_plugin=StoragePlugin.MCAP) as w:
+        conns = {t: w.add_connection(t, m, typestore=store) for t, m in (
+            ("/imu", "sensor_msgs/msg/Imu"), ("/air", "geometry_msgs/msg/Vector3Stamped"),
+            ("/js", "sensor_msgs/msg/JointState"))}
+        for k in range(5):
+            s = 10**18 + k * 10**7
+            for topic, kind, values, names in (("/imu", "imu", (0, 0, 0, 0, 0, 9.8), None),
+                                               ("/air", "airspeed", (50, 0, 1), None),
+                                               ("/js", "control_surfaces", [0.1, 0.2], ["l", "r"])):
+                msg = _standard_message(store, kind, s, values, names)
+                w.write(conns[topic], s, store.serialize_cdr(msg, conns[topic].msgtype))
+    spec = {"imu": {"topic": "/imu"}, "airspeed": {"topic": "/air"},
+            "control_surfaces": {"topic": "/js", "joints": {"elevator": "name"}}}
+    fails(capsys, ["convert", str(src), "--mapping", str(write_mapping(tmp_path, spec)), "--out", str(tmp_path / "o")],
+          "/js", "field 'name' is not a number")
+    # The numeric array of the same message is summed (the mapping's default reduction).
+    spec["control_surfaces"]["joints"] = {"elevator": "position"}
+    convert(src, write_mapping(tmp_path, spec), tmp_path / "o")
+    assert [list(m.position) for _t, m in read_all(tmp_path / "o")["/control_surfaces"]] == [[pytest.approx(0.3)]] * 5

@@ -12,6 +12,7 @@ from rls_uncertainty.config import (
     InputConfig,
     ModelConfig,
     PipelineConfig,
+    PlausibilityLimits,
     load_aircraft,
     load_models,
     load_parameters_file,
@@ -66,8 +67,14 @@ def test_models_are_configuration():
     ({"differentiator.lag": 9}, "differentiator.lag"),
     ({"differentiator.order": 9}, "differentiator.order"),
     ({"inputs.max_gap": 0.001}, "max_gap"),
+    ({"inputs.max_gap": 1.0, "inputs.max_stamp_jump": 0.5}, "max_stamp_jump"),
     ({"colour": "red"}, "unknown parameter"),
     ({"aircraft": "concorde"}, "no such file"),
+    ({"limits.alpha": 3.1}, "limits.alpha"),  # |alpha| near pi is flying backwards
+    ({"limits.dynamic_pressure_min": 1e-300}, "limits.dynamic_pressure_min"),
+    ({"limits.angular_rate": 1e100}, "limits.angular_rate"),
+    ({"limits.airspeed_min": 90.0, "limits.airspeed_max": 80.0}, "limits.airspeed_min"),
+    ({"inputs.frame_id": 7}, "inputs.frame_id"),
 ])
 def test_invalid_settings_are_refused_with_the_reason(params, match):
     with pytest.raises(ConfigError, match=match):
@@ -97,13 +104,28 @@ def test_every_parameter_reaches_its_nested_field():
         "inputs.use_thrust": (("inputs", "use_thrust"), False),
         "inputs.max_gap": (("inputs", "max_gap"), 0.5),
         "inputs.buffer_duration": (("inputs", "buffer_duration"), 3.0),
+        "inputs.max_stamp_jump": (("inputs", "max_stamp_jump"), 7.5),
+        "inputs.jump_confirmation": (("inputs", "jump_confirmation"), 3),
+        "inputs.max_clock_offset": (("inputs", "max_clock_offset"), 60.0),
+        "inputs.max_buffered": (("inputs", "max_buffered"), 500),
+        "inputs.frame_id": (("inputs", "frame_id"), "body"),
         "surfaces.elevator": (("surfaces", "elevator"), ["e1", "e2"]),
         "surfaces.aileron_right": (("surfaces", "aileron_right"), ["ar"]),
         "surfaces.aileron_left": (("surfaces", "aileron_left"), ["al"]),
         "surfaces.aileron_combined": (("surfaces", "aileron_combined"), "ail"),
         "surfaces.rudder": (("surfaces", "rudder"), ["r1"]),
+        "limits.airspeed_min": (("limits", "airspeed_min"), 5.0),
+        "limits.airspeed_max": (("limits", "airspeed_max"), 100.0),
+        "limits.alpha": (("limits", "alpha"), 0.5),
+        "limits.beta": (("limits", "beta"), 0.3),
+        "limits.angular_rate": (("limits", "angular_rate"), 5.0),
+        "limits.specific_force": (("limits", "specific_force"), 50.0),
+        "limits.surface": (("limits", "surface"), 0.5),
+        "limits.dynamic_pressure_min": (("limits", "dynamic_pressure_min"), 50.0),
+        "limits.dynamic_pressure_max": (("limits", "dynamic_pressure_max"), 5000.0),
+        "limits.thrust": (("limits", "thrust"), 1000.0),
     }
-    sections = {"rate", "estimator", "differentiator", "inputs", "surfaces"}
+    sections = {"rate", "estimator", "differentiator", "inputs", "surfaces", "limits"}
     pipeline_params = [p.name for p in PARAMETERS if p.name.split(".")[0] in sections]
     assert sorted(changed) == sorted(pipeline_params)
     default = pipeline_config({})
@@ -129,6 +151,7 @@ def test_defaults_of_the_table_and_the_dataclasses_agree():
     assert cfg.differentiator == DifferentiatorConfig()
     assert cfg.inputs == InputConfig()
     assert cfg.surfaces == SurfaceMixing()
+    assert cfg.limits == PlausibilityLimits()
     assert cfg.rate == d["rate"] == PipelineConfig(T2).rate
 
 
@@ -152,6 +175,14 @@ def test_estimator_choices_are_the_estimators_own():
     (lambda: InputConfig(max_gap=0.0), "inputs.max_gap"),
     (lambda: InputConfig(air_density=float("nan")), "inputs.air_density"),
     (lambda: InputConfig(buffer_duration=-1.0), "inputs.buffer_duration"),
+    (lambda: InputConfig(frame_id=None), "inputs.frame_id"),
+    (lambda: PlausibilityLimits(angular_rate=0.0), "limits.angular_rate"),
+    (lambda: PlausibilityLimits(thrust=float("inf")), "limits.thrust"),
+    (lambda: PlausibilityLimits(specific_force=True), "limits.specific_force"),
+    (lambda: PlausibilityLimits(alpha=1.6), "limits.alpha"),
+    (lambda: PlausibilityLimits(beta=2.0), "limits.beta"),
+    (lambda: PlausibilityLimits(airspeed_min=50.0, airspeed_max=40.0), "limits.airspeed_min"),
+    (lambda: PlausibilityLimits(dynamic_pressure_min=1e4, dynamic_pressure_max=1e4), "limits.dynamic_pressure_min"),
     (lambda: PipelineConfig(T2, rate=0.0), "rate"),
     (lambda: PipelineConfig(T2, models=()), "at least one model"),
     (lambda: PipelineConfig(T2, models=(ModelConfig("CZ", ("1",)), ModelConfig("CZ", ("alpha",)))), "twice"),
@@ -176,3 +207,27 @@ def test_fingerprint_is_what_a_state_file_stores():
         "residual": "standardized",
     }
     assert pipeline_config({"inputs.max_gap": 0.5}).fingerprint() == pipeline_config({}).fingerprint()
+
+
+def test_plausibility_defaults_lie_between_any_flight_and_absurd_values():
+    """Each default: beyond what the bundled T-2 maneuver and the three Twin Otter flights
+    reach (measured maxima, rounded up: 0.37 rad/s, 15.2 m/s^2, 40.8..74 m/s, |alpha| 0.126,
+    |beta| 0.118 rad, 981..2834 Pa, 0.122 rad of surface, 6.6 kN of thrust) by an order of
+    magnitude or more, and below the values of issue 12 (1e100 rad/s, 1e150, 1e-300 Pa,
+    |alpha| near pi). The parameter ranges keep every setting in that band as well."""
+    d = PlausibilityLimits()
+    flight = {"angular_rate": 0.37, "specific_force": 15.2, "alpha": 0.126, "beta": 0.118, "surface": 0.122,
+              "thrust": 6.6e3, "airspeed_max": 74.0, "dynamic_pressure_max": 2834.0}
+    for name, reached in flight.items():
+        assert getattr(d, name) >= 3 * reached, name
+    assert d.airspeed_min <= 40.8 / 10 and d.dynamic_pressure_min <= 981.0 / 100
+    assert d.alpha < 0.5 * 3.14159 and d.beta < 0.5 * 3.14159
+    spec = {p.name: p for p in PARAMETERS}
+    for f in dataclasses.fields(PlausibilityLimits):
+        p = spec[f"limits.{f.name}"]
+        assert p.default == getattr(d, f.name) and p.low <= p.default <= p.high
+        assert p.high < 1e9 and p.low > 1e-3, p.name
+        assert f"implausible_{f.name.removesuffix('_min').removesuffix('_max')}" in p.description
+    assert spec["limits.alpha"].high < 0.5 * 3.14159 and spec["limits.beta"].high < 0.5 * 3.14159
+    # A dynamic pressure above the one of the top airspeed at sea level (so both limits agree).
+    assert d.dynamic_pressure_max >= 0.5 * 1.225 * d.airspeed_max**2

@@ -266,10 +266,10 @@ def test_statuses_from_a_real_pipeline():
     t0 = 100 * SEC
     for i in range(5):
         p.add_imu(t0 + i * 5_000_000, (0.0, 0.01, 0.0), (0.0, 0.0, 9.8))
-    p.add_imu(t0 + 30_000_000, (float("nan"), 0.0, 0.0), (0.0, 0.0, 9.8))
-    p.add_imu(t0 + 20_000_000, (0.0, 0.0, 0.0), (0.0, 0.0, 9.8))  # the newest stamp again
+    p.add_imu(t0 + 25_000_000, (float("nan"), 0.0, 0.0), (0.0, 0.0, 9.8))  # rejected, but its stamp is the newest
+    p.add_imu(t0 + 25_000_000, (0.0, 0.0, 0.0), (0.0, 0.0, 9.8))  # the newest stamp again
     snap = snapshot(p.counters(), models=[(m.output, p.model_fit(j)) for j, m in enumerate(config.models)],
-                    required=tuple(p.required), now=t0 + 20_000_000, elapsed=0.5)
+                    required=tuple(p.required), now=t0 + 25_000_000, elapsed=0.5)
     out = statuses(snap)
     v = values(out["inputs"])
     assert (v["imu.received"], v["imu.accepted"], v["imu.rejected.non_finite"]) == ("7", "5", "1")

@@ -14,7 +14,9 @@ from rls_uncertainty.errors import ConfigError
 DT = 0.02
 
 
-@pytest.mark.parametrize("cfg", [DifferentiatorConfig(9, 3, 4), DifferentiatorConfig(7, 2, 0), DifferentiatorConfig(11, 4, 2)])
+@pytest.mark.parametrize(
+    "cfg", [DifferentiatorConfig(9, 3, 4), DifferentiatorConfig(7, 2, 0), DifferentiatorConfig(11, 4, 2)]
+)
 def test_exact_on_polynomials_up_to_the_fit_order(cfg):
     t = np.arange(80) * DT
     rng = np.random.default_rng(0)

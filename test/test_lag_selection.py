@@ -253,7 +253,9 @@ def test_andrews_limits_rho_near_one():
         at_one = andrews_lags(np.ones(400), n, window=window)
         assert at_one == andrews_lags(geometric(0.97, 400), n, window=window)
         assert 0 < at_one < 399
-        assert andrews_lags(geometric(-1.0, 400), n, window=window) == andrews_lags(geometric(-0.97, 400), n, window=window)
+        assert andrews_lags(geometric(-1.0, 400), n, window=window) == andrews_lags(
+            geometric(-0.97, 400), n, window=window
+        )
     # Hand value: rho = .97, Bartlett: alpha(1) = 4 .9409 / (.0009 * 3.8809) = 1077.5,
     # S = 1.1447 (538770)^(1/3) = 93.4 -> L = 93.
     assert andrews_lags(np.ones(400), n, window="bartlett") == 93

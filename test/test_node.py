@@ -29,7 +29,7 @@ from rls_uncertainty.messages import MESSAGE_TYPES, feed, parse_stamp_label
 from rls_uncertainty.messages import NODE_NAME as NODE
 from rls_uncertainty.pipeline import Pipeline
 from rls_uncertainty.replay import run_pipeline
-from rls_uncertainty.state_file import load_state
+from rls_uncertainty.estimator.state_file import load_state
 
 from ros_harness import ROOT, NodeProcess, RosTester, to_rclpy
 
@@ -228,7 +228,7 @@ def _synthetic(t0_ns, seconds, *, gap=None, zero_air=None, bad=True):
             m = hdr(Imu(), ns + 2 * 10**5)
             m.linear_acceleration.z = float("inf")
             out.append(("imu", m))
-            m = hdr(Imu(), ns)  # duplicate of the previous IMU stamp
+            m = hdr(Imu(), ns + 2 * 10**5)  # duplicate of the previous IMU stamp (the Inf one)
             out.append(("imu", m))
             for k in range(20):  # a burst of old messages
                 out.append(("imu", hdr(Imu(), ns - (500 + k) * 10**6)))
@@ -438,6 +438,17 @@ def test_reset_and_enable_services(tmp_path, tester):
         assert tester.spin_until(lambda: len(est) > before + 50)
         # After the reset the estimator restarted: it re-initialized on the new samples only.
         assert int(d[f"{NODE}: model CZ"]["samples"]) < 120
+        # ~/reset clears every input state: data older than anything seen (a replay started
+        # over, without /clock) is accepted again, none of it out of order.
+        _wait_received(tester, [("imu", None)] * (600 + 400 + 400))
+        assert _call(tester, Trigger, "reset", Trigger.Request()).success
+        before = len(est)
+        tester.publish_all(_synthetic(10**18 - 60 * 10**9, 2.0, bad=False))
+        d = tester.wait_diagnostics(lambda d: d.get(f"{NODE}: samples", {}).get("resets.service") == "2"
+                                    and d[f"{NODE}: inputs"].get("imu.received") == str(600 + 400 + 400 + 400))
+        assert tester.spin_until(lambda: len(est) > before + 30)
+        inputs = d[f"{NODE}: inputs"]
+        assert not any(k.endswith(".rejected.out_of_order") for k in inputs), inputs
     finally:
         assert node.stop() == 0
 
@@ -552,13 +563,17 @@ def test_sim_time_backwards_jump_resets(tmp_path, tester):
         _wait_received(tester, seq)
         tick(103)
         tick(50)  # the bag restarted: time jumps back
-        d = tester.wait_diagnostics(lambda d: "resets.time_jumped_backwards" in d.get(f"{NODE}: samples", {}))
-        assert d[f"{NODE}: samples"]["resets.time_jumped_backwards"] == "1"
-        # After the reset, old-stamped data is accepted again (buffers were cleared).
+        # Wait until the node's clock went back (its diagnostics are stamped with it), so the
+        # jump is handled before the new data arrives.
+        assert tester.spin_until(lambda: any(a.header.stamp.sec in (50, 51) for a in tester.diagnostics), 30)
+        formed = int(tester.latest_diagnostics()[f"{NODE}: samples"]["samples_formed"])
+        # The stamps follow the clock back: a new run, whose older stamps are all accepted.
         tick(51)
         tester.publish_all(_synthetic(50 * 10**9, 1.0, bad=False))
-        d = tester.wait_diagnostics(lambda d: int(d.get(f"{NODE}: samples", {}).get("samples_formed", 0)) > 0
-                                    and d[f"{NODE}: inputs"].get("imu.rejected.out_of_order") is None)
+        d = tester.wait_diagnostics(lambda d: d.get(f"{NODE}: samples", {}).get("resets.time_jumped_backwards") == "1"
+                                    and int(d[f"{NODE}: samples"]["samples_formed"]) > formed + 40)
+        assert d[f"{NODE}: inputs"].get("imu.rejected.out_of_order") is None
+        assert "resets.stamps_jumped_backwards" not in d[f"{NODE}: samples"]
     finally:
         assert node.stop() == 0
 
@@ -622,6 +637,61 @@ def test_default_sensor_qos_receives_and_a_qos_mismatch_is_diagnosed(tmp_path, t
         assert best_effort.get_subscription_count() == 0
     finally:
         assert node.stop() == 0
+
+
+@pytest.mark.parametrize("sim_time", [False, True], ids=["no_clock", "clock"])
+def test_a_bag_played_twice_gives_the_offline_numbers_twice(tmp_path, tester, bag, sim_time):
+    """A bag-replay integration test loops the bundled bag: both plays, back to back with no
+    wait, reach the node (without /clock; or with /clock and use_sim_time, the clock jumping
+    back between them), and each gives exactly the offline replay's numbers. In the first play
+    an IMU message stamped three years ahead changes nothing."""
+    args = [*_ros_params(NO_EXPIRY)] + (["-p", "use_sim_time:=true"] if sim_time else [])
+    node = _node(tmp_path, *args)
+    clock = tester.node.create_publisher(Clock, "/clock", 10) if sim_time else None
+    try:
+        tester.wait_connected()
+        offline = run_pipeline(bag, _t2_config(NO_EXPIRY)).outputs
+        msgs = [(k, to_rclpy(k, m)) for k, _s, m in bag]
+        i = next(j for j, (k, _m) in enumerate(msgs) if k == "imu" and j > len(msgs) // 2)
+        future = to_rclpy("imu", bag[i][2])
+        future.header.stamp.sec += 3 * 365 * 86400
+        first_play = [*msgs[:i], ("imu", future), *msgs[i:]]
+
+        def tick(stamp):
+            m = Clock()
+            m.clock.sec, m.clock.nanosec = stamp.sec, stamp.nanosec
+            clock.publish(m)
+
+        if sim_time:
+            assert tester.spin_until(lambda: clock.get_subscription_count() >= 1)
+            tick(msgs[0][1].header.stamp)
+            assert tester.spin_until(lambda: any(a.header.stamp.sec > 0 for a in tester.diagnostics), 30)
+            tester.publish_all(first_play)
+            tick(msgs[-1][1].header.stamp)
+            tick(msgs[0][1].header.stamp)  # the replay restarts: /clock jumps back
+            tester.publish_all(msgs)
+        else:
+            tester.publish_all(first_play + msgs)
+        stamps = tester.outputs[f"/{NODE}/sample_stamp"]
+        cm = _arrays(tester, "Cm", "standard_errors")
+        n_cm = sum(o.ready[1] for o in offline)
+        assert tester.spin_until(lambda: len(stamps) >= 2 * len(offline) and len(cm) >= 2 * n_cm, 60), node.text()
+        tester.spin_until(lambda: False, 0.5)  # nothing more arrives
+        assert [s.stamp.sec * 10**9 + s.stamp.nanosec for s in stamps] == 2 * [o.stamp_ns for o in offline]
+        for model, j, n in (("CZ", 0, 3), ("Cm", 1, 4)):
+            for suffix, field in (("estimates", "theta"), ("standard_errors", "se"),
+                                  ("standard_errors_conventional", "se_conventional")):
+                got = [np.array(m.data) for m in _arrays(tester, model, suffix)]
+                want = [getattr(o, field)[j, :n] for o in offline if o.ready[j]]
+                assert len(got) == 2 * len(want)
+                np.testing.assert_array_equal(np.array(got), np.array(2 * want), err_msg=f"{model} {suffix}")
+        d = tester.wait_diagnostics(lambda d: d.get(f"{NODE}: inputs", {}).get("imu.received") == str(2 * 2400 + 1))
+        samples, inputs = d[f"{NODE}: samples"], d[f"{NODE}: inputs"]
+        assert inputs["imu.rejected.stamp_jump"] == "1"
+        resets = {k: v for k, v in samples.items() if k.startswith("resets.")}
+        assert resets in ({"resets.stamps_jumped_backwards": "1"}, {"resets.time_jumped_backwards": "1"}), resets
+    finally:
+        assert node.stop() == 0, node.text()
 
 
 def test_the_consumer_example_pairs_every_array_by_stamp(tmp_path, tester, bag):

@@ -1,46 +1,77 @@
 """The pipeline that the node and the replay share, end to end: samples against an
 independent interpolation and reduction, alignment of the differentiator's lag, estimates
 against batch least squares, the bookkeeping of every bad input, and the lifecycle (disable,
-reset, reconfigure, state file). The parts have their own tests (test_sampling, test_aero,
-test_state_file, test_config, test_differentiation). No ROS."""
+reset, reconfigure, state file). Input sanity: plausibility limits (and a corrupted bag
+replayed), the last guard before publishing, bounded tables, input frames. The parts have
+their own tests (test_sampling, test_aero, test_state_file, test_config,
+test_differentiation). No ROS, no DDS (bags through rosbags)."""
 
+import copy
+import csv
 import math
+import struct
 import sys
+import tracemalloc
+from pathlib import Path
 
 import numpy as np
 import pytest
 
-from rls_uncertainty.config import load_aircraft, pipeline_config
+from rls_uncertainty.config import load_aircraft, load_parameters_file, pipeline_config
 from rls_uncertainty.differentiation import DifferentiatorConfig, differentiate
-from rls_uncertainty.pipeline import Pipeline, StateFileError
+from rls_uncertainty.pipeline import STREAMS, Pipeline, StateFileError
+from rls_uncertainty.replay import run_pipeline
 from rls_uncertainty.simulation import simulate_sensor_streams
 from rls_uncertainty.surface_mixing import SurfaceMixing
 
 T2 = load_aircraft("t2")
 T2_PARAMS = {"models.enabled": ["CZ", "Cm"], "surfaces.elevator": ["elevator_left", "elevator_right"]}
 MS = 1_000_000
+BUNDLED = Path(__file__).resolve().parents[1] / "bags" / "t2_maneuver"
 
 
-def feed_streams(pipe, st):
-    """Every message of a SensorStreams set, in stamp order (stable by stream)."""
-    events = []
-    for rank, kind in enumerate(("imu", "airspeed", "dynamic_pressure", "control_surfaces", "thrust")):
+KINDS = ("imu", "airspeed", "dynamic_pressure", "control_surfaces", "thrust")
+
+
+def stream_events(st, shift_ns=0):
+    """Each stream of a SensorStreams set as its own list of ``(stamp, kind, values)``."""
+    out = {}
+    for kind in KINDS:
         stamps, values = getattr(st, kind)
-        events += [(int(stamps[k]), rank, kind, values[k]) for k in range(stamps.size)]
-    events.sort(key=lambda e: (e[0], e[1]))
+        out[kind] = [(int(stamps[k]) + shift_ns, kind, values[k]) for k in range(stamps.size)]
+    return out
+
+
+def in_stamp_order(streams):
+    """Every message of ``{kind: events}`` in stamp order (stable by stream)."""
+    events = [(e[0], KINDS.index(kind), e) for kind, evs in streams.items() for e in evs]
+    events.sort(key=lambda x: (x[0], x[1]))
+    return [e for _t, _r, e in events]
+
+
+def apply(pipe, events, surface_names=("elevator_left", "elevator_right", "aileron_left", "aileron_right", "rudder")):
+    """Feed ``(stamp, kind, values)`` events (values None: a message rejected for its values,
+    as the physical-limit checks do); returns the outputs."""
     outs = []
-    for stamp, _r, kind, v in events:
-        if kind == "imu":
+    for stamp, kind, v in events:
+        if v is None:
+            outs += pipe.reject_invalid(kind, stamp, "invalid")
+        elif kind == "imu":
             outs += pipe.add_imu(stamp, v[:3], v[3:])
         elif kind == "airspeed":
             outs += pipe.add_airspeed(stamp, v)
         elif kind == "dynamic_pressure":
             outs += pipe.add_dynamic_pressure(stamp, float(v))
         elif kind == "control_surfaces":
-            outs += pipe.add_surfaces(stamp, st.surface_names, v)
+            outs += pipe.add_surfaces(stamp, list(surface_names), v)
         else:
             outs += pipe.add_thrust(stamp, float(v))
     return outs
+
+
+def feed_streams(pipe, st):
+    """Every message of a SensorStreams set, in stamp order (stable by stream)."""
+    return apply(pipe, in_stamp_order(stream_events(st)), st.surface_names)
 
 
 @pytest.fixture(scope="module")
@@ -122,22 +153,32 @@ class Synthetic:
     A = 0.1
     W = 2 * math.pi * 1.0
 
-    def __init__(self, pipe, t0=10**18):
+    def __init__(self, pipe, t0=10**18, bad=None):
+        """``bad``: ``(stream, ms, value)`` replaces one message's value (the IMU's value is
+        ``(gyro, accel)``; the air data's ``vector`` or ``qbar``)."""
         self.pipe, self.t0, self.outs = pipe, t0, []
+        self.bad = bad
 
     def q(self, t):
         return self.A * math.sin(self.W * (t - self.t0) * 1e-9)
 
+    def _bad(self, stream, t):
+        b = self.bad
+        return b[2] if b is not None and b[0] == stream and t == self.t0 + b[1] * MS else None
+
     def imu(self, t, **kw):
-        self.outs += self.pipe.add_imu(t, kw.get("gyro", (0.0, -self.q(t), 0.0)), kw.get("accel", (0.1, 0.0, 9.8)))
+        gyro, accel = self._bad("imu", t) or (kw.get("gyro", (0.0, -self.q(t), 0.0)), kw.get("accel", (0.1, 0.0, 9.8)))
+        self.outs += self.pipe.add_imu(t, gyro, accel)
 
     def air(self, t, vec=None):
-        self.outs += self.pipe.add_airspeed(t, vec or (self.V, 0.0, -0.05 * self.V))
-        self.outs += self.pipe.add_dynamic_pressure(t, 0.5 * 1.2 * self.V**2)
+        bad_vec, bad_qbar = self._bad("airspeed", t), self._bad("dynamic_pressure", t)
+        self.outs += self.pipe.add_airspeed(t, bad_vec or vec or (self.V, 0.0, -0.05 * self.V))
+        self.outs += self.pipe.add_dynamic_pressure(t, 0.5 * 1.2 * self.V**2 if bad_qbar is None else bad_qbar)
 
     def surfaces(self, t, names=None, positions=None):
         names = names or ["elevator", "aileron_left", "aileron_right", "rudder"]
-        positions = positions or [0.01 * math.cos(3 * (t - self.t0) * 1e-9), -0.02, 0.04, 0.0]
+        positions = self._bad("control_surfaces", t) or positions or \
+            [0.01 * math.cos(3 * (t - self.t0) * 1e-9), -0.02, 0.04, 0.0]
         self.outs += self.pipe.add_surfaces(t, names, positions)
 
     def run(self, start_ms, end_ms, imu_ms=5, air_ms=20, srf_ms=10, skip_air=None):
@@ -204,7 +245,7 @@ def test_bad_messages_are_counted_and_never_reach_the_outputs():
     t = syn.t0 + 1000 * MS
     syn.imu(t, gyro=(float("nan"), 0.0, 0.0))  # NaN field
     syn.imu(t + 1 * MS, gyro=(0.0, float("inf"), 0.0))  # Inf field
-    syn.imu(syn.t0 + 995 * MS)  # duplicate stamp
+    syn.imu(t + 1 * MS)  # duplicate stamp (of the Inf message)
     for k in range(30):  # a burst of old messages
         syn.imu(syn.t0 + (500 + k) * MS)
     syn.surfaces(t, names=["elevator", "rudder"], positions=[0.0])  # mismatched arrays
@@ -224,31 +265,205 @@ def test_bad_messages_are_counted_and_never_reach_the_outputs():
     for s in c["streams"].values():
         assert s["received"] == s["accepted"] + sum(s["rejected"].values())
     assert c["samples_formed"] == c["samples_used"] + sum(c["samples_rejected"].values())
-    assert c["samples_rejected"] == {"differentiator_warmup": 4, "end_of_data": 4}
+    # No sample is interpolated across a non-finite message: IMU 995 ms, NaN 1000, Inf 1001,
+    # then 1005 ms skips the 1000 ms grid point; air data 983 ms, NaN 1003, then 1023 ms skips
+    # 1020 ms. The 4 samples in the delay line are dropped and the differentiator warms up again.
+    assert c["samples_rejected"] == {"differentiator_warmup": 8, "end_of_data": 4, "invalid_imu": 1,
+                                     "invalid_airspeed": 1, "discontinuity": 4}
+    t_used = {(r[0] - syn.t0) // MS for r in pipe.regression}
+    assert not t_used & {1000, 1020}
     for out in syn.outs:
         for _n, _l, th, se, sc in pipe.published(out):
             assert np.isfinite(th).all() and np.isfinite(se).all() and np.isfinite(sc).all()
 
 
-def test_zero_airspeed_rejects_exactly_the_samples_that_have_it():
+def test_zero_and_backwards_airspeed_messages_are_rejected_one_by_one():
+    """Zero airspeed, flying backwards and flying sideways are impossible as messages: each is
+    rejected with its reason and no regression row is formed from it (q_hat carries 1/V)."""
     pipe = pitch_pipeline()
     syn = Synthetic(pipe)
     syn.run(0, 1000)
-    zero_at = [syn.t0 + ms * MS for ms in range(1003, 1400, 20)]
+    bad = {0: (0.0, 0.0, 0.0), 1: (-40.0, 0.0, 2.0), 2: (1.0, 40.0, 0.0), 3: (0.0, 0.0, -40.0)}
     for ms in range(1000, 2000):
         t = syn.t0 + ms * MS
         if ms % 5 == 0:
             syn.imu(t)
         if ms % 20 == 3:
-            syn.air(t, vec=(0.0, 0.0, 0.0) if t in zero_at else None)
+            syn.air(t, vec=bad.get((ms - 1003) // 100) if ms in range(1003, 1400, 100) else None)
         if ms % 10 == 1:
             syn.surfaces(t)
     syn.run(2000, 3000)
     pipe.finish()
-    # Grid samples whose both interpolation neighbours are zero: 1020 ... 1380 ms.
-    expected = sum(1 for g in range(1000, 1400, 20) if 1003 <= g - 17 and g + 3 <= 1383)
-    assert pipe.bookkeeping.samples_rejected["nonpositive_airspeed"] == expected
-    assert all(np.isfinite(o.theta[0, :3]).all() for o in syn.outs if o.ready[0])
+    c = pipe.counters()
+    assert c["streams"]["airspeed"]["rejected"] == {
+        "implausible_airspeed": 1, "implausible_alpha": 2, "implausible_beta": 1}
+    assert c["samples_formed"] == c["samples_used"] + sum(c["samples_rejected"].values())
+    t = np.array([(r[0] - syn.t0) * 1e-9 for r in pipe.regression])
+    X = np.array([r[1][0] for r in pipe.regression])
+    V = math.hypot(syn.V, 0.05 * syn.V)  # the only airspeed any used sample may see
+    np.testing.assert_allclose(X[:, 1] * 2 * V / T2.cbar, syn.A * np.sin(syn.W * t), atol=1e-12)
+    assert pipe.bank.k == c["samples_used"] > 80  # of 141 in the clean run
+
+
+# Issue 12's absurd values, one message each, in the middle of a clean run: (stream, ms,
+# value, reason). IMU at 5 ms, air data at 3 + 20 k ms, surfaces at 1 + 10 k ms.
+ISSUE_12 = {
+    "gyro 1e100 rad/s": ("imu", 1005, ((0.0, 1e100, 0.0), (0.1, 0.0, 9.8)), "implausible_angular_rate"),
+    "acceleration 1e150": ("imu", 1005, ((0.0, -0.05, 0.0), (0.1, 0.0, 1e150)), "implausible_specific_force"),
+    "surface 1e150": ("control_surfaces", 1011, [1e150, -0.02, 0.04, 0.0], "implausible_surface"),
+    "dynamic pressure 1e-300 Pa": ("dynamic_pressure", 1023, 1e-300, "implausible_dynamic_pressure"),
+    "negative airspeed": ("airspeed", 1023, (-40.0, 0.0, 2.0), "implausible_alpha"),
+    "alpha 179.3 deg": ("airspeed", 1023, (-40.0, 0.0, -0.5), "implausible_alpha"),
+    "airspeed 1e300": ("airspeed", 1023, (1e300, 0.0, 0.0), "implausible_airspeed"),
+    "gyro subnormal, accel -0.0": ("imu", 1005, ((5e-324, -0.0, 0.0), (-0.0, 0.0, 9.8)), None),  # plausible
+}
+
+
+@pytest.fixture(scope="module")
+def clean_pitch_run():
+    pipe = pitch_pipeline()
+    Synthetic(pipe).run(0, 3000)
+    pipe.finish()
+    return pipe
+
+
+@pytest.mark.parametrize("case", ISSUE_12)
+def test_one_absurd_value_is_rejected_and_changes_nothing_else(case, clean_pitch_run):
+    """Before: the gyro case published NaN/Inf estimates from then on, the others finite but
+    ruined estimates (R^2 of CZ 0.91 -> 0.006 for one 1e150 acceleration on the bundled bag).
+    Now the message is counted with its reason, every used sample equals the clean run's at
+    the same stamp (the elevator is interpolated over 20 ms instead of 10 ms where its message
+    is missing: 1e-6 rad; samples next to the message may be skipped), and the estimates are
+    the batch least squares of those samples."""
+    stream, ms, value, reason = ISSUE_12[case]
+    pipe = pitch_pipeline()
+    syn = Synthetic(pipe, bad=(stream, ms, value))
+    syn.run(0, 3000)
+    pipe.finish()
+    c = pipe.counters()
+    assert c["streams"][stream]["rejected"] == ({reason: 1} if reason else {})
+    for other in set(STREAMS) - {stream}:
+        assert c["streams"][other]["rejected"] == {}
+    assert c["samples_formed"] == c["samples_used"] + sum(c["samples_rejected"].values())
+    clean = {r[0]: r for r in clean_pitch_run.regression}
+    assert len(pipe.regression) >= len(clean) - 20
+    for t, X, z in pipe.regression:
+        np.testing.assert_allclose(X, clean[t][1], rtol=0, atol=1e-6)
+        np.testing.assert_allclose(z, clean[t][2], rtol=1e-9, atol=1e-12)
+    rows = [row for out in syn.outs for row in pipe.published(out)]
+    assert rows and all(np.isfinite(np.concatenate(r[2:])).all() for r in rows)
+    X = np.array([r[1][0, :3] for r in pipe.regression])
+    z = np.array([r[2][0] for r in pipe.regression])
+    np.testing.assert_allclose(pipe.bank.theta_all()[0, :3], np.linalg.lstsq(X, z, rcond=None)[0], rtol=1e-8)
+
+
+def test_derived_dynamic_pressure_is_judged_per_sample():
+    """Without the pressure topic qbar = rho V^2 / 2: thin air (0.01 kg/m^3) at 25 m/s gives
+    3.1 Pa, below limits.dynamic_pressure_min, so every sample is rejected though each message
+    was plausible; 0.05 kg/m^3 (15.6 Pa) is used."""
+    for rho, used in ((0.01, False), (0.05, True)):
+        pipe = pitch_pipeline(**{"inputs.use_dynamic_pressure": False, "inputs.air_density": rho})
+        syn = Synthetic(pipe)
+        syn.V = 25.0
+        syn.run(0, 2000)
+        pipe.finish()
+        c = pipe.counters()
+        assert all(not s["rejected"] for s in c["streams"].values())
+        assert c["samples_formed"] == c["samples_used"] + sum(c["samples_rejected"].values())
+        if used:
+            assert c["samples_used"] > 80 and "implausible_dynamic_pressure" not in c["samples_rejected"]
+        else:
+            assert c["samples_used"] == 0 and not syn.outs
+            assert c["samples_rejected"]["implausible_dynamic_pressure"] == c["samples_formed"] - 8
+
+
+def test_the_limits_are_parameters():
+    """A tighter limit rejects what the default accepts: a pitch rate of 0.2 sin(w t) rad/s
+    against limits.angular_rate 0.15."""
+    pipe = pitch_pipeline(**{"limits.angular_rate": 0.15})
+    syn = Synthetic(pipe)
+    syn.A = 0.2
+    syn.run(0, 1000)
+    beyond = sum(1 for k in range(200) if abs(syn.q(syn.t0 + 5 * k * MS)) > 0.15)
+    assert beyond > 50
+    assert pipe.counters()["streams"]["imu"]["rejected"] == {"implausible_angular_rate": beyond}
+
+
+def test_a_refused_estimator_update_is_counted_and_changes_nothing(monkeypatch):
+    """The estimator raises NonFiniteInput, state unchanged, for an update that would make its
+    state non-finite (estimator.py); the pipeline counts the sample as non_finite_regression."""
+    from rls_uncertainty.errors import NonFiniteInput
+
+    pipe = pitch_pipeline()
+    syn = Synthetic(pipe)
+    syn.run(0, 1000)
+    k, theta = pipe.bank.k, pipe.bank.theta_all()
+    real_update, calls = pipe.bank.update, []
+
+    def refusing(X, z):
+        calls.append(1)
+        if len(calls) <= 3:
+            raise NonFiniteInput("update would overflow")
+        return real_update(X, z)
+
+    monkeypatch.setattr(pipe.bank, "update", refusing)
+    n_out = len(syn.outs)
+    syn.run(1000, 1061)  # three samples
+    assert pipe.bank.k == k and np.array_equal(pipe.bank.theta_all(), theta, equal_nan=True)
+    assert len(syn.outs) == n_out
+    syn.run(1061, 2000)
+    pipe.finish()
+    c = pipe.counters()
+    assert c["samples_rejected"]["non_finite_regression"] == 3
+    assert c["samples_formed"] == c["samples_used"] + sum(c["samples_rejected"].values())
+
+
+def test_a_model_whose_outputs_are_not_finite_is_withheld_and_counted(monkeypatch):
+    """The last guard (unreachable through the inputs): a ready model whose estimates are not
+    finite publishes nothing, is counted, and its fit says why; after a reset it recovers."""
+    pipe = pitch_pipeline(**{"models.enabled": ["CZ", "Cm"], "models.CZ": ["1", "delta_e"]})
+    syn = Synthetic(pipe)
+    syn.run(0, 1000)
+    assert pipe.model_fit(1)["ready"] and pipe.model_fit(1)["outputs_withheld"] == 0
+    real_theta = pipe.bank.theta_all
+
+    def broken():
+        theta = real_theta()
+        theta[1, 1] = math.inf  # Cm_q
+        return theta
+
+    monkeypatch.setattr(pipe.bank, "theta_all", broken)
+    n_out = len(syn.outs)
+    syn.run(1000, 1400)
+    new = syn.outs[n_out:]
+    assert len(new) == 20
+    published = [row[0] for out in new for row in pipe.published(out)]
+    assert published == ["CZ"] * 20  # Cm withheld, CZ unaffected
+    assert all(not out.ready[1] for out in new)
+    assert pipe.counters()["outputs_withheld"] == {"Cm": 20}
+    fit = pipe.model_fit(1)
+    assert fit["ready"] is False and "withheld" in fit["problem"] and fit["outputs_withheld"] == 20
+    # Even an output built by hand passes published() only with finite rows.
+    hand = new[-1]._replace(ready=np.array([True, True]))
+    assert [row[0] for row in pipe.published(hand)] == ["CZ"]
+    monkeypatch.undo()
+    pipe.reset("service")
+    syn.run(1400, 2400)
+    assert pipe.model_fit(1)["ready"] and pipe.counters()["outputs_withheld"] == {"Cm": 20}
+
+
+def test_r_squared_of_a_constant_output_is_not_reported_as_ok():
+    """Before: CY with no lateral motion (ay = 0, so CY = 0 exactly) was ready with
+    r_squared NaN, which the diagnostics showed at level OK. Now the fit is not ready and says
+    why; the estimate (0) is still published."""
+    pipe = pitch_pipeline(**{"models.enabled": ["CY", "Cm"], "models.CY": ["1"]})
+    syn = Synthetic(pipe)
+    syn.run(0, 1000)
+    fit = pipe.model_fit(0)
+    assert fit == {"ready": False, "samples": pipe.bank.k, "problem": "output constant: R^2 undefined",
+                   "outputs_withheld": 0}
+    assert pipe.model_fit(1)["ready"] and math.isfinite(pipe.model_fit(1)["r_squared"])
+    assert [row[0] for row in pipe.published(syn.outs[-1])] == ["CY", "Cm"]
 
 
 def test_a_stream_that_stops_skips_its_gap_and_restarts_the_differentiator():
@@ -299,8 +514,17 @@ def test_disable_counts_samples_and_reset_restarts():
     pipe.enabled = True
     pipe.reset("service")
     assert pipe.bank.k == 0 and pipe.bookkeeping.resets["service"] == 1
+    # Every input state went with it: the 4 samples waiting in the delay line, the buffers.
+    assert pipe.bookkeeping.samples_rejected["reset_service"] == 4 and pipe.sampler.buffered() == 0
     syn.run(2000, 3000)
-    assert pipe.bank.k == 50
+    # The grid restarts at the first point every stream covers (2020 ms, after air data at
+    # 2003 ms) up to 2980 ms: 49 samples, 4 of them warming the differentiator up and the last
+    # 4 still in its delay line.
+    assert pipe.bank.k == 49 - 4 - 4
+    # Older stamps are accepted again after a reset (a replay started over): 20 ... 980 ms.
+    pipe.reset("service")
+    syn.run(0, 1000)
+    assert pipe.bank.k == 49 - 4 - 4 and all(not s["rejected"] for s in pipe.counters()["streams"].values())
 
 
 def test_state_file_resumes_and_refuses_other_configurations(tmp_path):
@@ -334,7 +558,7 @@ def test_pipeline_imports_no_ros():
     assert subprocess.run([sys.executable, "-c", code]).returncode == 0
 
 
-@pytest.mark.parametrize("module", ["sampling", "surface_mixing", "aero", "differentiation", "state_file"])
+@pytest.mark.parametrize("module", ["sampling", "surface_mixing", "aero", "differentiation", "estimator.state_file"])
 def test_the_numerical_core_imports_numpy_only(module):
     import subprocess
 
@@ -386,3 +610,316 @@ def test_messages_lost_in_transport_are_counted_from_stamp_gaps():
     c = pipe.counters()["streams"]
     assert c["imu"]["missing"] == len(dropped)
     assert c["airspeed"]["missing"] == 0 and c["control_surfaces"]["missing"] == 0
+
+
+# ----------------------------------------------------------------------------- timelines
+S = 1_000_000_000
+
+
+@pytest.fixture(scope="module")
+def t2_streams():
+    """The bundled bag's maneuver (``make-bag`` writes these streams), stream by stream."""
+    st = simulate_sensor_streams(0.2, 250)
+    return st, stream_events(st)
+
+
+def _interleave(rng, runs, weighted):
+    """Each stream's messages of consecutive runs in order, the streams randomly interleaved;
+    returns ``(event, run)`` pairs."""
+    queues = {kind: [(e, r) for r, run in enumerate(runs) for e in run[kind]] for kind in KINDS}
+    pos = dict.fromkeys(KINDS, 0)
+    out = []
+    while True:
+        left = [k for k in KINDS if pos[k] < len(queues[k])]
+        if not left:
+            return out
+        if weighted:
+            w = np.array([len(queues[k]) - pos[k] for k in left], dtype=float)
+            kind = left[rng.choice(len(left), p=w / w.sum())]
+        else:
+            kind = left[rng.integers(len(left))]
+        out.append(queues[kind][pos[kind]])
+        pos[kind] += 1
+
+
+def _same_outputs(a, b):
+    assert [o.stamp_ns for o in a] == [o.stamp_ns for o in b]
+    for x, y in zip(a, b, strict=True):
+        for field in ("theta", "se", "se_conventional", "ready"):
+            np.testing.assert_array_equal(getattr(x, field), getattr(y, field))
+
+
+@pytest.mark.parametrize("seed,weighted,buffer", [(1, False, 60.0), (2, True, 2.0), (3, True, 60.0)])
+def test_a_looped_bag_gives_each_run_the_numbers_of_a_fresh_pipeline(t2_streams, seed, weighted, buffer):
+    """The bag played three times to one pipeline (stamps restart each time), its streams
+    randomly interleaved: each run's outputs are bit-identical to a fresh pipeline's on that
+    run alone (fed in the same order), each backward jump counted as one restart."""
+    _st, run = t2_streams
+    rng = np.random.default_rng(seed)
+    events = _interleave(rng, [run, run, run], weighted)
+    params = {**T2_PARAMS, "inputs.buffer_duration": buffer}
+    looped = Pipeline(pipeline_config(params))
+    outs = apply(looped, [e for e, _r in events])  # run after run: a run ends before the next starts
+    looped.finish()
+    fresh = []
+    for r in range(3):
+        pipe = Pipeline(pipeline_config(params))
+        fresh.append(apply(pipe, [e for e, rr in events if rr == r]))
+    _same_outputs(outs, fresh[0] + fresh[1] + fresh[2])
+    assert len(fresh[0]) > 500
+    c = looped.counters()
+    assert c["resets"] == {"stamps_jumped_backwards": 2}
+    assert c["samples_formed"] == c["samples_used"] + sum(c["samples_rejected"].values())
+    # Only stragglers: messages of a run that arrived after its last sample was formed.
+    for name, stream in c["streams"].items():
+        assert set(stream["rejected"]) <= {"previous_timeline"}, name
+
+
+def test_a_stamp_years_ahead_or_first_stamps_of_zero_change_no_number(t2_streams):
+    _st, run = t2_streams
+    events = in_stamp_order(run)
+    want = apply(Pipeline(pipeline_config(T2_PARAMS)), events)
+    i = next(j for j in range(700, 800) if events[j][1] == "imu")
+    future = (events[i][0] + 3 * 365 * 86400 * S, "imu", events[i][2])
+    pipe = Pipeline(pipeline_config(T2_PARAMS))
+    _same_outputs(apply(pipe, [*events[:i], future, *events[i:]]), want)
+    c = pipe.counters()
+    assert c["streams"]["imu"]["rejected"] == {"stamp_jump": 1}
+    assert c["samples_formed"] == 599 and c["resets"] == {}
+    # Every stream's first message stamped 0 (published before the clock was set): one
+    # forward restart, not 8.8e10 grid points counted as formed and skipped.
+    zeros = [(0, kind, run[kind][0][2]) for kind in KINDS]
+    pipe = Pipeline(pipeline_config(T2_PARAMS))
+    _same_outputs(apply(pipe, zeros + events), want)
+    c = pipe.counters()
+    assert c["resets"] == {"stamps_jumped_forward": 1}
+    assert c["samples_formed"] == 599 + 1  # the sample at stamp 0, dropped from the delay line
+    assert c["samples_rejected"]["reset_stamps_jumped_forward"] == 1
+
+
+def test_a_forward_jump_keeps_the_estimator_and_a_backward_one_restarts_it():
+    pipe = pitch_pipeline()
+    syn = Synthetic(pipe)
+    syn.run(0, 3000)
+    k = pipe.bank.k
+    syn.run(20000, 23000)  # every stream silent for 17 s (more than inputs.max_stamp_jump)
+    c = pipe.counters()
+    assert c["resets"] == {"stamps_jumped_forward": 1}
+    assert not any(r.startswith("gap_") for r in c["samples_rejected"])  # no 17 s of grid points
+    assert pipe.bank.k > k + 100  # the same flight: the estimator went on
+    k = pipe.bank.k
+    syn.run(0, 3000)  # the data starts over (a looped replay)
+    assert pipe.counters()["resets"] == {"stamps_jumped_forward": 1, "stamps_jumped_backwards": 1}
+    assert pipe.bank.k < k and pipe.bank.k == 149 - 4 - 4  # 20 ... 2980 ms, warm-up, delay line
+
+
+def test_a_zero_dynamic_pressure_message_is_a_hole_no_sample_is_formed_across(t2_streams):
+    """What the physical-limit check does with a dynamic pressure <= 0 (``reject_invalid``):
+    the grid points between the valid messages around it are rejected, none is formed from an
+    interpolation with it, and the differentiator restarts as at a gap."""
+    _st, run = t2_streams
+    qbar = list(run["dynamic_pressure"])
+    k = 250
+    t_bad = qbar[k][0]
+    qbar[k] = (t_bad, "dynamic_pressure", None)
+    params = {**T2_PARAMS, "inputs.use_dynamic_pressure": True}
+    pipe = Pipeline(pipeline_config(params), record=True)
+    apply(pipe, in_stamp_order({**run, "dynamic_pressure": qbar}))
+    pipe.finish()
+    before, after = qbar[k - 1][0], qbar[k + 1][0]
+    P = 20 * MS
+    inside = [t for t in range(-(-before // P) * P, after, P) if t > before]
+    assert len(inside) == 2  # 50 Hz air data, 4 ms after the grid: two grid points around it
+    c = pipe.counters()
+    assert c["samples_rejected"]["invalid_dynamic_pressure"] == 2
+    assert c["samples_rejected"]["discontinuity"] == 4
+    assert c["streams"]["dynamic_pressure"]["rejected"] == {"invalid": 1}
+    used = np.array([r[0] for r in pipe.regression])
+    assert not np.any((used > before) & (used < after))
+    # Every other sample is used as without the bad message.
+    plain = Pipeline(pipeline_config(params), record=True)
+    apply(plain, in_stamp_order(run))
+    plain.finish()
+    assert plain.counters()["samples_formed"] == c["samples_formed"]
+    assert c["samples_used"] == plain.counters()["samples_used"] - 2 - 4 - 4
+
+
+def test_messages_far_from_the_clock_are_rejected_when_a_clock_is_given():
+    pipe = pitch_pipeline(**{"inputs.max_clock_offset": 60.0})
+    assert pipe.needs_clock and not pitch_pipeline().needs_clock
+    syn = Synthetic(pipe)
+    pipe.clock_ns = syn.t0
+    syn.imu(syn.t0 - 61 * S)
+    syn.imu(0)
+    syn.run(0, 1000)
+    c = pipe.counters()["streams"]
+    assert c["imu"]["rejected"] == {"far_from_clock": 2}
+    assert c["airspeed"]["rejected"] == {} and pipe.bank.k > 0
+
+
+# ----------------------------------------------------------------------------- frames
+
+@pytest.fixture(scope="module")
+def bundled_messages():
+    """The bundled bag's messages, decoded by rls_uncertainty.cdr as the node decodes them."""
+    from rls_uncertainty.bags import read_inputs
+
+    return read_inputs(BUNDLED)[0]
+
+
+def _t2_config(**params):
+    return pipeline_config({**load_parameters_file("t2"), **params})
+
+
+def _relabelled(messages, kind, every, frame):
+    out, n = [], 0
+    for k, (msg_kind, stamp, msg) in enumerate(messages):
+        if msg_kind == kind and k % every == 0:
+            relabelled = copy.deepcopy(msg)
+            relabelled.header.frame_id = frame
+            out.append((msg_kind, stamp, relabelled))
+            n += 1
+        else:
+            out.append((msg_kind, stamp, msg))
+    return out, n
+
+
+def test_inputs_in_another_frame_are_rejected_as_frame_mismatch(bundled_messages):
+    """messages.feed (the node's and the replay's only way in) compares header.frame_id with
+    inputs.frame_id. The bundled bag is in base_link, the default: nothing is rejected. IMU
+    messages relabelled imu_link are rejected (their numbers would be in an unknown frame);
+    an empty inputs.frame_id checks nothing; a frame no input carries rejects everything."""
+    assert {m.header.frame_id for _k, _s, m in bundled_messages} == {"base_link"}
+    clean = run_pipeline(bundled_messages, _t2_config(), record=False).pipeline.counters()
+    assert all(not s["rejected"] for s in clean["streams"].values())
+    relabelled, n = _relabelled(bundled_messages, "imu", 7, "imu_link")
+    assert n > 100
+    result = run_pipeline(relabelled, _t2_config(), record=False)
+    c = result.pipeline.counters()
+    assert c["streams"]["imu"]["rejected"] == {"frame_mismatch": n}
+    assert c["streams"]["imu"]["received"] == clean["streams"]["imu"]["received"]
+    assert c["samples_used"] > 500 and all(np.isfinite(np.concatenate(r[2:])).all()
+                                           for o in result.outputs for r in result.pipeline.published(o))
+    unchecked = run_pipeline(relabelled, _t2_config(**{"inputs.frame_id": ""}), record=False).pipeline.counters()
+    assert unchecked["streams"]["imu"]["rejected"] == {} and unchecked["samples_used"] == clean["samples_used"]
+    other = run_pipeline(bundled_messages, _t2_config(**{"inputs.frame_id": "body"}), record=False)
+    c = other.pipeline.counters()
+    assert not other.outputs and c["samples_formed"] == 0
+    for kind, s in c["streams"].items():
+        assert s["rejected"] == {"frame_mismatch": clean["streams"][kind]["received"]}
+
+
+def test_converted_and_generated_bags_carry_the_default_frame():
+    """bags.convert and the bundled bag's generator build every input with one header
+    builder: its frame is the default inputs.frame_id (the real conversions are checked in
+    the report: the three Twin Otter flights convert to base_link on every topic)."""
+    from rls_uncertainty.bags import _standard_message, typestore
+    from rls_uncertainty.config import parameter_defaults
+
+    store = typestore()
+    values = {"imu": [0.0] * 6, "airspeed": [40.0, 0.0, 0.0], "dynamic_pressure": 900.0,
+              "control_surfaces": [0.0], "thrust": 10.0}
+    for kind in STREAMS:
+        msg = _standard_message(store, kind, 10**18, values[kind], ["elevator"])
+        assert msg.header.frame_id == parameter_defaults()["inputs.frame_id"] == "base_link"
+
+
+# ----------------------------------------------------------------------------- bounded tables
+def test_a_flood_of_unknown_joint_names_keeps_every_table_small():
+    """Issue 12 item 5: 100k distinct unknown JointState names used to add a counter each, all
+    sent in every /diagnostics message (74 -> 154 MB, 3.6 MB messages). Now the first 32 names
+    are counted by name and the rest under one key; every occurrence is still counted, the
+    messages are still used, and memory does not grow with the names."""
+    from rls_uncertainty.pipeline import KEYS_KEPT, OTHER_JOINTS
+
+    pipe = Pipeline(pipeline_config({"models.enabled": ["Cm"], "models.Cm": ["1", "q_hat", "delta_e"]}))
+    syn = Synthetic(pipe)
+    base = ["elevator", "aileron_left", "aileron_right", "rudder"]
+    per_message, n_messages = 100, 1000  # 100k names in 10 s of surfaces at 100 Hz
+
+    def run(first_ms, last_ms):
+        for ms in range(first_ms, last_ms):
+            t = syn.t0 + ms * MS
+            if ms % 5 == 0:
+                syn.imu(t)
+            if ms % 20 == 3:
+                syn.air(t)
+            if ms % 10 == 1:
+                k = ms // 10
+                syn.surfaces(t, names=base + [f"junk_{k}_{i}" for i in range(per_message)],
+                             positions=[0.01, -0.02, 0.04, 0.0] + [1e300] * per_message)
+            syn.outs.clear()
+
+    run(0, 10)  # the first message: its names fill the table
+    tracemalloc.start()
+    before = tracemalloc.get_traced_memory()[0]
+    run(10, 10 * n_messages)
+    grown = tracemalloc.get_traced_memory()[0] - before
+    tracemalloc.stop()
+    c = pipe.counters()
+    unknown = c["unknown_joints"]
+    assert len(unknown) == KEYS_KEPT + 1
+    assert sum(unknown.values()) == per_message * n_messages
+    assert unknown[OTHER_JOINTS] == per_message * n_messages - KEYS_KEPT
+    assert c["streams"]["control_surfaces"]["accepted"] == n_messages  # unknown joints are not errors
+    assert c["samples_used"] > 450
+    assert len(repr(c)) < 4000
+    assert grown < 500_000, grown  # a counter per name would hold > 10 MB
+
+
+def test_caller_given_rejection_reasons_are_bounded_and_long_keys_cut():
+    from rls_uncertainty.pipeline import KEY_CHARS, KEYS_KEPT, OTHER_REASONS
+
+    pipe = pitch_pipeline()
+    for k in range(1000):
+        pipe.reject("thrust", f"malformed: Error{k}")
+    rejected = pipe.counters()["streams"]["thrust"]["rejected"]
+    assert len(rejected) == KEYS_KEPT + 1 and rejected[OTHER_REASONS] == 1000 - KEYS_KEPT
+    assert pipe.counters()["streams"]["thrust"]["received"] == 1000
+    syn = Synthetic(pipe)
+    syn.surfaces(syn.t0, names=["elevator", "aileron_left", "aileron_right", "rudder", "x" * 10**6],
+                 positions=[0.0] * 5)
+    assert list(pipe.counters()["unknown_joints"]) == ["x" * KEY_CHARS]
+
+
+# ----------------------------------------------------------------------------- replay
+def _flip(raw: bytes, value: float, bit: int) -> bytes:
+    """``raw`` with one bit of the little-endian double ``value`` (found once) flipped."""
+    packed = struct.pack("<d", value)
+    at = raw.find(packed)
+    assert at > 0 and raw.find(packed, at + 1) < 0
+    flipped = struct.pack("<q", struct.unpack("<q", packed)[0] ^ (1 << bit))
+    return raw[:at] + flipped + raw[at + 8:]
+
+
+def test_a_flipped_bit_in_a_recorded_double_is_counted_and_never_replayed(tmp_path, capsys):
+    """Issue 12: one flipped exponent bit in a recorded pitch rate (-0.105 rad/s at 2.9 s
+    becomes -1.9e307) made the replay exit 0 with NaN and Inf rows. Now the message is rejected as
+    implausible_angular_rate, the CSV holds only finite numbers, and the summary says so."""
+    from rosbags.highlevel import AnyReader
+
+    from rls_uncertainty import cli
+    from rls_uncertainty.bags import write_replay
+    from rls_uncertainty.cdr import decode
+
+    records, flipped = [], None
+    with AnyReader([BUNDLED]) as reader:
+        for i, (conn, t, recorded) in enumerate(reader.messages()):
+            raw = bytes(recorded)
+            if conn.topic == "/imu" and i >= 1200 and flipped is None:  # about 3 s into the maneuver
+                y = decode(conn.msgtype, raw).angular_velocity.y
+                raw = _flip(raw, y, 62)
+                flipped = decode(conn.msgtype, raw).angular_velocity.y
+            records.append((t, conn.topic, conn.msgtype, raw))
+    assert math.isfinite(flipped) and abs(flipped) > 1e300
+    bag = write_replay(tmp_path / "flipped", records)
+    out = tmp_path / "out"
+    code = cli.main(["replay", str(bag), "--config", "t2", "--out", str(out), "--no-plots", "--quiet"])
+    assert code == 0
+    text = capsys.readouterr().out
+    assert "imu: 2400 received, rejected {'implausible_angular_rate': 1}" in text
+    with open(out / "estimates.csv") as fh:
+        rows = list(csv.DictReader(fh))
+    assert len(rows) > 1000
+    values = np.array([[float(r[k]) for k in ("estimate", "std_error", "std_error_conventional")] for r in rows])
+    assert np.isfinite(values).all()

@@ -62,7 +62,8 @@ def test_reduced_monte_carlo_command(tmp_path):
     """20% band-limited noise, 60 runs: corrected SEs match the scatter, conventional ones are
     far too small, recursive and batch agree, 50 lags near all lags."""
     assert main(["montecarlo", "--runs", "60", "--levels", "20", "--out", str(tmp_path), "--jobs", "1"]) == 0
-    rows = list(csv.DictReader(open(tmp_path / "table3.csv")))
+    with open(tmp_path / "table3.csv") as fh:
+        rows = list(csv.DictReader(fh))
     assert [r["parameter"] for r in rows] == list(PAPER_TABLE3[0.2])
     for r in rows:
         ratio = float(r["se_corrected"]) / float(r["scatter"])
@@ -73,8 +74,9 @@ def test_reduced_monte_carlo_command(tmp_path):
         assert (tmp_path / name).stat().st_size > 10_000
     assert "| 20% | Cm_q |" in (tmp_path / "table3.md").read_text()
     # Convergence flags: every parameter and model flagged in most runs, within the maneuver.
-    conv = list(csv.DictReader(open(tmp_path / "convergence.csv")))
-    assert [r["parameter"] for r in conv] == list(PAPER_TABLE3[0.2]) + ["CZ model", "Cm model"]
+    with open(tmp_path / "convergence.csv") as fh:
+        conv = list(csv.DictReader(fh))
+    assert [r["parameter"] for r in conv] == [*PAPER_TABLE3[0.2], "CZ model", "Cm model"]
     for r in conv:
         assert float(r["flagged"]) > 0.9 and 2.0 < float(r["flag_time_median"]) < 12.0, r
     assert "## Convergence flags (issue 14)" in (tmp_path / "table3.md").read_text()
@@ -140,7 +142,7 @@ def test_monte_carlo_convergence_outputs_against_an_independent_recomputation(tm
     for k in range(len(t)):
         bank.update(X[k], Z[k])
         hist.append((bank.theta_all(), bank.standard_errors_all("corrected"), bank.ready))
-    theta, se, ready = (np.array(x) for x in zip(*hist))
+    theta, se, ready = (np.array(x) for x in zip(*hist, strict=True))
     flags = _reference_flags(t, theta, se, ready, MONTE_CARLO_CONVERGENCE)
     where = {"CZ_alpha": (0, 1), "CZ_delta_e": (0, 2), "Cm_alpha": (1, 1), "Cm_q": (1, 2), "Cm_delta_e": (1, 3)}
     assert list(where) == list(PARAMETERS)
@@ -184,7 +186,8 @@ def test_monte_carlo_convergence_outputs_against_an_independent_recomputation(tm
         assert row["false_vs_mean"] == pytest.approx(np.mean(off_mean))
         assert row["truth_outside_end"] == pytest.approx(np.mean(np.abs(x[-1] - truth[i]) > 2 * s[-1]))
         late = t >= BEST_FROM
-        assert row["truth_outside_min"] == pytest.approx(np.min(np.mean(np.abs(x[late] - truth[i]) > 2 * s[late], axis=1)))
+        outside_late = np.abs(x[late] - truth[i]) > 2 * s[late]
+        assert row["truth_outside_min"] == pytest.approx(np.min(np.mean(outside_late, axis=1)))
     column = [c for _, c in where.values()]
     for m, model in enumerate(("CZ model", "Cm model")):
         params = [i for i, (mm, _) in enumerate(where.values()) if mm == m]
@@ -202,7 +205,7 @@ def test_monte_carlo_convergence_outputs_against_an_independent_recomputation(tm
     paths = write_outputs([res], tmp_path, figures=False)
     with open(paths["convergence"]) as fh:
         written = list(csv.DictReader(fh))
-    assert [r["parameter"] for r in written] == list(PARAMETERS) + ["CZ model", "Cm model"]
+    assert [r["parameter"] for r in written] == [*PARAMETERS, "CZ model", "Cm model"]
     for r in written[:5]:
         assert float(r["flag_time_median"]) == pytest.approx(rows[r["parameter"]]["flag_time_median"], rel=1e-5)
         assert float(r["false_convergence"]) == pytest.approx(rows[r["parameter"]]["false_convergence"], abs=1e-6)

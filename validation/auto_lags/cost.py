@@ -53,7 +53,7 @@ def main(repeats: int = 3) -> None:
         for cap in caps:
             upd, full, p99 = per_sample(cap)
             rule = rule_cost(cap)
-            best[cap] = [min(a, b) for a, b in zip(best[cap], (upd, full, p99, rule))]
+            best[cap] = [min(a, b) for a, b in zip(best[cap], (upd, full, p99, rule), strict=True)]
     print("cap | update us | update + outputs us | p99 us | rule us | state kB")
     for cap in caps:
         bank = EstimatorBank(SIZES, cap)

@@ -48,7 +48,7 @@ import numpy as np
 
 from rls_uncertainty.estimator import EstimatorBank, nearest_psd
 from rls_uncertainty.lag_selection import flat_top_lags, select_lags
-from rls_uncertainty.montecarlo import LEVELS, PAPER_DIFFERENTIATOR, PARAMETERS, _WHERE
+from rls_uncertainty.montecarlo import _WHERE, LEVELS, PAPER_DIFFERENTIATOR, PARAMETERS
 from rls_uncertainty.simulation import T2_MODELS, add_noise, reduce_short_period, simulate_short_period
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -208,7 +208,8 @@ WARMUP = 50  # samples: the 0% diagnosis (1 s; the elevator input starts at 0.5 
 def run_mc_level(level: float, runs: int) -> dict:
     t0 = time.perf_counter()
     sizes, X, Z = simulate_level(level, runs)
-    banks = {"standardized": EstimatorBank(sizes, None), "a_posteriori": EstimatorBank(sizes, None, residual="a_posteriori")}
+    banks = {"standardized": EstimatorBank(sizes, None),
+             "a_posteriori": EstimatorBank(sizes, None, residual="a_posteriori")}
     bank50 = EstimatorBank(sizes, FIXED)
     for k in range(X.shape[0]):
         for b in banks.values():
@@ -228,7 +229,8 @@ def run_mc_level(level: float, runs: int) -> dict:
     out["se"]["all"] = pick(bank.standard_errors_all("corrected"), runs).mean(0).tolist()
     out["se"]["fixed50_a_posteriori"] = pick(fixed_se(banks["a_posteriori"], FIXED), runs).mean(0).tolist()
     for name, (rule, window, score, mn, cap, residual, *extra) in MC_VARIANTS.items():
-        se, L = auto_se(banks[residual], cap, rule, window=window, score=score, min_lags=mn, **(extra[0] if extra else {}))
+        se, L = auto_se(banks[residual], cap, rule, window=window, score=score, min_lags=mn,
+                        **(extra[0] if extra else {}))
         out["se"][name] = pick(se, runs).mean(0).tolist()
         out["lags"][name] = {"CZ": L[0::2].tolist(), "Cm": L[1::2].tolist()}
     # Diagnosis of the 0% excess: R from the residuals after the first WARMUP samples, with
@@ -263,7 +265,8 @@ def flight_rows(name: str, bags: Path):
     rec, extra = RECORDINGS[name]
     bag = bags / name
     if not bag.exists():
-        src = Path("/work/shared/flight_data") if Path("/work/shared/flight_data").is_dir() else ROOT.parent / "shared" / "flight_data"
+        shared = Path("/work/shared/flight_data")
+        src = shared if shared.is_dir() else ROOT.parent / "shared" / "flight_data"
         convert(src / rec, ROOT / "msg_schemas" / "fti_msgs" / "mapping.yaml", bag)
     messages, _ = read_inputs(bag)
     params = load_parameters_file("twin_otter_lateral")
@@ -322,11 +325,12 @@ def run_flight(name: str, bags: Path, caps=(50, 100, 200)) -> dict:
                                    "down": (d < 0).sum(axis=0).tolist(), "evaluations": int(h.shape[0])}
     # Sample-to-sample relative change of the corrected SEs over the second half of the record
     # (where the estimates have settled): do the changes of L make the auto SEs jumpy?
-    for key, h in se_hist.items():
-        h = np.array(h)
+    for key, se_list in se_hist.items():
+        h = np.array(se_list)
         h = h[h.shape[0] // 2 :]
         step = np.abs(np.diff(h, axis=0)) / h[1:]
-        out.setdefault("se_steps", {})[key] = {"median": float(np.nanmedian(step)), "p99": float(np.nanpercentile(step, 99)),
+        out.setdefault("se_steps", {})[key] = {"median": float(np.nanmedian(step)),
+                                                "p99": float(np.nanpercentile(step, 99)),
                                                 "max": float(np.nanmax(step))}
     se, L = auto_se(bank_post, CAP)
     out["se"]["auto_a_posteriori"], out["lags"]["auto_a_posteriori"] = se.tolist(), L.tolist()
@@ -362,7 +366,8 @@ def mc_tables(results: list[dict]) -> str:
             cells = [_fmt_ratio(res["se"][key][i] / sc[i]) for key, _ in cols]
             lines.append(f"| {res['level'] * 100:.0f}% | {p} | " + " | ".join(cells) + " |")
     lines += ["", "### Chosen L at the end of the maneuver (auto, cap 50): distribution over runs", "",
-              "| level | model | min | 10% | median | 90% | max | at cap |", "| --- | --- | --- | --- | --- | --- | --- | --- |"]
+              "| level | model | min | 10% | median | 90% | max | at cap |",
+              "| --- | --- | --- | --- | --- | --- | --- | --- |"]
     for res in results:
         for model in ("CZ", "Cm"):
             L = np.array(res["lags"]["auto"][model])
@@ -376,7 +381,7 @@ def mc_tables(results: list[dict]) -> str:
     for res in results:
         sc = np.array(res["scatter"])
         for key in others:
-            cells = [_fmt_ratio(v / s) for v, s in zip(res["se"][key], sc)]
+            cells = [_fmt_ratio(v / s) for v, s in zip(res["se"][key], sc, strict=True)]
             lags = res["lags"].get(key)
             med = f"{np.median(lags['CZ']):.0f}, {np.median(lags['Cm']):.0f}" if lags else "-"
             lines.append(f"| {res['level'] * 100:.0f}% | {key} | " + " | ".join(cells) + f" | {med} |")
@@ -387,11 +392,13 @@ def flight_tables(flights: dict) -> str:
     lines = []
     for name, res in flights.items():
         lines += [f"### Twin Otter `totter_{name}` ({res['samples']} samples; end of maneuver)", "",
-                  "| model | L auto (cap 50) | L auto cap 100 / 200 | L history p10/p50/p90 (cap 50) | changes of L (up / down) |",
+                  "| model | L auto (cap 50) | L auto cap 100 / 200 | L history p10/p50/p90 (cap 50) "
+                  "| changes of L (up / down) |",
                   "| --- | --- | --- | --- | --- |"]
         hist = res["lag_history"]["auto"]
         for j, m in enumerate(res["models"]):
-            lines.append(f"| {m} | {res['lags']['auto'][j]} | {res['lags']['auto_cap100'][j]} / {res['lags']['auto_cap200'][j]} | "
+            lines.append(f"| {m} | {res['lags']['auto'][j]} | "
+                         f"{res['lags']['auto_cap100'][j]} / {res['lags']['auto_cap200'][j]} | "
                          f"{hist['p10'][j]:.0f} / {hist['p50'][j]:.0f} / {hist['p90'][j]:.0f} | "
                          f"{hist['changes'][j]} ({hist['up'][j]} / {hist['down'][j]}) in {hist['evaluations']} |")
         st = res["se_steps"]
@@ -399,12 +406,14 @@ def flight_tables(flights: dict) -> str:
                   f"auto {st['auto']['median']:.2%} / {st['auto']['p99']:.2%} / {st['auto']['max']:.2%}; "
                   f"50 lags {st['fixed50']['median']:.2%} / {st['fixed50']['p99']:.2%} / {st['fixed50']['max']:.2%}. "
                   f"L with the a posteriori residual: {res['lags']['auto_a_posteriori']}.", "",
-                  "| parameter | estimate | SE auto | SE 50 lags | SE all lags | SE auto cap 200 | SE auto, a posteriori residual | SE conventional | auto / 50 |",
+                  "| parameter | estimate | SE auto | SE 50 lags | SE all lags | SE auto cap 200 "
+                  "| SE auto, a posteriori residual | SE conventional | auto / 50 |",
                   "| --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
         for j, names in enumerate(res["names"]):
             for a, p in enumerate(names):
                 se = {key: v[j][a] for key, v in res["se"].items()}
-                lines.append(f"| {p} | {res['theta'][j][a]:.4g} | {se['auto']:.3g} | {se['fixed50']:.3g} | {se['all']:.3g} | "
+                lines.append(f"| {p} | {res['theta'][j][a]:.4g} | {se['auto']:.3g} | {se['fixed50']:.3g} | "
+                             f"{se['all']:.3g} | "
                              f"{se['auto_cap200']:.3g} | {se['auto_a_posteriori']:.3g} | {se['conventional']:.3g} | "
                              f"{se['auto'] / se['fixed50']:.2f} |")
         lines.append("")
@@ -425,7 +434,8 @@ def main(argv=None) -> int:
         results = []
         for level in args.levels:
             res = run_mc_level(level, args.runs)
-            print(f"level {level * 100:3.0f}%: {res['seconds']:.1f} s, check {res['check_rel_diff']:.1e}", file=sys.stderr)
+            print(f"level {level * 100:3.0f}%: {res['seconds']:.1f} s, check {res['check_rel_diff']:.1e}",
+                  file=sys.stderr)
             results.append(res)
         (args.out / "montecarlo.json").write_text(json.dumps(results))
         (args.out / "montecarlo.md").write_text(mc_tables(results))

@@ -24,7 +24,7 @@ a, b, c = np.ones((6, 6)), np.ones((6, 6)), np.ones((6, 6))
 
 best, ref, flagged = [], [], 0
 step = 0
-for rep in range(REPEATS):
+for _rep in range(REPEATS):
     t0 = time.thread_time()
     for _ in range(BATCH):
         j = step % (2 * BATCH)

@@ -10,8 +10,13 @@ from tune import evaluate, load
 from rls_uncertainty.convergence import ConvergenceConfig
 
 data = load(sys.argv[1])
-grid = [float(x) for x in sys.argv[2].split(",")], [float(x) for x in sys.argv[3].split(",")], [float(x) for x in sys.argv[4].split(",")]
-print("T     k     r    | med flag per level (mean over params) | max false(mean) | mean false(mean) | 20% flag-cover(tol) per param")
+grid = (
+    [float(x) for x in sys.argv[2].split(",")],
+    [float(x) for x in sys.argv[3].split(",")],
+    [float(x) for x in sys.argv[4].split(",")],
+)
+print("T     k     r    | med flag per level (mean over params) | max false(mean) | mean false(mean) "
+      "| 20% flag-cover(tol) per param")
 for T, k, r in itertools.product(*grid):
     rows = evaluate(data, ConvergenceConfig(window=T, band=k, max_se_rate=r, rate_hz=50.0), verbose=False)
     rows = np.array([(x[0], x[2], x[3], x[4], x[5], x[6], x[7]) for x in rows], dtype=float)

@@ -1,7 +1,7 @@
 """The estimator state file: a restarted node resumes the estimation where it stopped.
 
 One ``.npz`` archive (numpy only, no pickle, entries stored uncompressed): the
-:meth:`.estimator.EstimatorBank.state` arrays, plus a ``meta`` entry holding one JSON text with
+:meth:`.EstimatorBank.state` arrays, plus a ``meta`` entry holding one JSON text with
 
 * ``format``: :attr:`EstimatorBank.STATE_FORMAT` (a file of another layout is refused by name);
 * ``fingerprint``: what the state must match to be resumed (aircraft, models, rate and the
@@ -10,7 +10,7 @@ One ``.npz`` archive (numpy only, no pickle, entries stored uncompressed): the
 * ``samples_used``, ``zsum``, ``zsq``: the samples behind the estimates and the running sums
   of each model's output and its square (the R^2 of the model fit).
 
-It is written with :func:`.files.atomic_file` (a fresh exclusive temporary file in the same
+It is written with :func:`rls_uncertainty.files.atomic_file` (a fresh exclusive temporary file in the same
 directory, fsync'ed, then renamed), so a crash never leaves half a file and a planted
 temporary name or symlink is never written through.
 
@@ -44,9 +44,11 @@ from typing import Any
 
 import numpy as np
 
-from .errors import StateFileError
-from .estimator import RESIDUALS, WINDOWS, EstimatorBank
-from .files import atomic_file
+from ..errors import StateFileError
+from ..files import atomic_file
+from .bank import EstimatorBank
+from .lag_storage import GROWTH_START
+from .options import RESIDUALS, WINDOWS
 
 __all__ = [
     "EstimatorState",
@@ -65,7 +67,7 @@ _NPY_PREAMBLE = 12 + 10_000  # magic, version, header length and numpy's largest
 _MAX_MODELS, _MAX_PARAMETERS = 64, 64
 _MAX_LAGS = 10_000_000
 _MAX_COUNT = 2**53  # samples: exact as a float
-_GROWTH_START = 64  # the lag capacity an all-lags bank starts with, doubled as samples arrive
+_GROWTH_START = GROWTH_START  # the lag capacity an all-lags bank starts with, doubled as samples arrive
 _META_KEYS = ("format", "fingerprint", "bank_config", "bank_counters", "samples_used", "zsum", "zsq")
 _BANK_CONFIG_KEYS = ("sizes", "n_lags", "window", "forgetting", "residual", "init_condition")
 _COUNTER_KEYS = ("k", "n_eff", "cap")
@@ -122,35 +124,31 @@ def _all_lags_capacity(k: int) -> int:
 Layout = dict[str, tuple[tuple[int, ...], np.dtype]]
 
 
-def state_layout(state_format: int, config: Mapping, counters: Mapping) -> Layout | None:
+def state_layout(state_format: int, config: Mapping, counters: Mapping, waiting: bool) -> Layout | None:
     """``{entry name: (shape, dtype)}`` of the arrays of a state of ``state_format`` with bank
-    ``config`` and ``counters`` (as :meth:`EstimatorBank.state` writes them), or ``None`` for a
-    format this module does not know (then only the generic bounds of :func:`load_state` and
-    :meth:`EstimatorBank.from_state`'s shape checks apply). ``test_state_file`` checks this
-    table against a real bank's ``state()`` for the current format: a new layout must be
-    added here."""
-    sizes = list(config["sizes"])
-    m, n = len(sizes), max(sizes)
-    n1, cap = n + 1, int(counters["cap"])
-    w = min(int(counters["k"]), cap)
-    if state_format == 3:
-        layout = {
-            "aug": ((m, n1, n), _F8),
-            "inv_s": ((m, n), _F8),
-            "ready": ((m,), _B1),
-            "ready_at": ((m,), _I8),
-            "repairs": ((m,), _I8),
-            "zz": ((m,), _F8),
-            "ybuf": ((m, w, n1), _F8),
-            "vbuf": ((m, w), _F8),
-            "S": ((m, cap), _F8),
-            "Q": ((m, n1, cap, n1), _F8),
-        }
-        if config["forgetting"] != 1.0:
-            layout["P"] = ((m, n1, cap, n1), _F8)
-        return layout
-    return None
+    ``config`` and ``counters`` (``waiting``: some model still waits for initialization), as
+    :meth:`EstimatorBank.state` writes them, or ``None`` for another format. The layout is the
+    estimator's own: an empty bank of that configuration is laid out at those counters and
+    asked (nothing is read from the file), so a new estimator layout needs no table here. The
+    caller bounds the size first (:func:`_implied_bytes`)."""
+    if state_format != EstimatorBank.STATE_FORMAT:
+        return None
+    kw = dict(config)
+    bank = EstimatorBank(kw.pop("sizes"), **kw)
+    lags = bank._lags
+    lags.waiting = waiting
+    lags.allocate(int(counters["cap"]))
+    bank.k = int(counters["k"])
+    lags.ptr -= bank.n_window  # the history window, as restoring would place it
+    return {name: (arr.shape, arr.dtype) for name, arr in bank.state()["arrays"].items()}
 
+
+def _implied_bytes(config: Mapping, counters: Mapping) -> int:
+    """An upper bound of the memory an empty bank of ``config`` takes at ``counters``' lag
+    capacity (histories, lag sums and products of y = (x, z))."""
+    sizes = config["sizes"]
+    m, n1, cap = len(sizes), max(sizes) + 1, int(counters["cap"])
+    return 8 * m * cap * (2 * n1 * n1 + 4 * 3 * n1 + 4)
 
 # ---------------------------------------------------------------------------------------------
 # meta
@@ -400,8 +398,14 @@ def _load_archive(zf: zipfile.ZipFile, file_size: int, fingerprint: dict, expect
     samples_used = _int(meta["samples_used"], "samples_used", 0, _MAX_COUNT)
     zsum, zsq = _check_sums(meta, len(cfg["sizes"]))
 
-    layout = state_layout(meta["format"], cfg, counters)
     names = set(entries) - {"meta"}
+    implied = _implied_bytes(cfg, counters)
+    if implied > 64 * file_size + (16 << 20):  # the arrays of such a state would be in the file
+        raise _fail("bank_counters.cap", f"implies about {implied} bytes of estimator state; the file holds {file_size}")
+    if "ready" not in entries:
+        raise _fail("arrays.ready", "is missing")
+    ready = _read_array(zf, entries["ready"], "arrays.ready", (len(cfg["sizes"]),), np.dtype(bool))
+    layout = state_layout(meta["format"], cfg, counters, waiting=not bool(ready.all()))
     if layout is None:
         _generic_bounds(entries, cfg, counters)
     else:

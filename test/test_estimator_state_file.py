@@ -1,4 +1,4 @@
-"""The estimator state file (rls_uncertainty.state_file): a saved bank continues bit for bit,
+"""The estimator state file (rls_uncertainty.estimator.state_file): a saved bank continues bit for bit,
 files of another configuration or format, corrupt or missing files are refused by name, no
 pickle is involved, and a failed save leaves the previous file as it was. Crafted files (meta
 of the wrong type, missing keys, absurd counters, wrong-length arrays, zip entries that would
@@ -17,7 +17,7 @@ import pytest
 
 from rls_uncertainty.errors import StateFileError
 from rls_uncertainty.estimator import EstimatorBank
-from rls_uncertainty.state_file import EstimatorState, load_state, save_state, set_aside, state_layout
+from rls_uncertainty.estimator.state_file import EstimatorState, load_state, save_state, set_aside, state_layout
 
 FINGERPRINT = {"aircraft": [1.0, 2.0], "models": [["CZ", "1", "alpha", "delta_e"], ["Cm", "1", "q_hat"]], "n_lags": 10}
 
@@ -127,8 +127,8 @@ def test_unreadable_missing_and_foreign_files_are_refused_by_name(tmp_path):
 
 
 @pytest.mark.parametrize("damage,field", [
-    ("drop_array", "field 'arrays.S' is missing"),
-    ("reshape_array", "field 'arrays.S' has shape (2, 10), the configuration implies (2, 11)"),
+    ("drop_array", "field 'arrays.lag_sums' is missing"),
+    ("reshape_array", "field 'arrays.lag_sums' has shape (2, 10), the configuration implies (2, 11)"),
     ("short_zsum", "field 'zsum' must be a list of 2 numbers"),
     ("no_samples_used", "field 'samples_used' is missing"),
 ])
@@ -136,9 +136,9 @@ def test_an_inconsistent_state_is_refused_naming_the_field(tmp_path, damage, fie
     path = saved(tmp_path)
     arrays, meta = contents(path)
     if damage == "drop_array":
-        arrays.pop("S")
+        arrays.pop("lag_sums")
     elif damage == "reshape_array":
-        arrays["S"] = arrays["S"][..., :-1]
+        arrays["lag_sums"] = arrays["lag_sums"][..., :-1]
     elif damage == "short_zsum":
         meta["zsum"] = meta["zsum"][:1]
     else:
@@ -230,7 +230,8 @@ def test_json_nan_and_deep_nesting_are_refused(tmp_path):
     refused(write(tmp_path / "num.npz", None, arrays, meta_array=np.arange(3.0)), "field 'meta' has shape (3,)")
 
 
-@pytest.mark.parametrize("name", ["aug", "inv_s", "ready", "ready_at", "repairs", "zz", "ybuf", "vbuf", "S", "Q"])
+@pytest.mark.parametrize("name", ["dispersion", "theta", "inv_s", "ready", "ready_at", "repairs", "x", "y", "v",
+                                  "lag_sums", "lag_products"])
 def test_every_array_of_the_wrong_length_or_dtype_is_refused(tmp_path, name):
     arrays, meta = contents(saved(tmp_path))
     good = arrays[name]
@@ -245,20 +246,21 @@ def test_every_array_of_the_wrong_length_or_dtype_is_refused(tmp_path, name):
 
 def test_arrays_of_another_window_count_are_refused(tmp_path):
     """The history windows must hold min(k, cap) samples: a state claiming fewer samples
-    (its k lowered) no longer matches its ybuf, and is refused before from_state."""
+    (its k lowered) no longer matches its histories, and is refused before from_state."""
     arrays, meta = contents(saved(tmp_path))
     meta["bank_counters"]["k"] = 5
     meta["bank_counters"]["n_eff"] = 5.0
     meta["bank_counters"]["cap"] = 11
-    refused(write(tmp_path / "c.npz", meta, arrays), "field 'arrays.vbuf' has shape (2, 11), the configuration "
+    refused(write(tmp_path / "c.npz", meta, arrays), "field 'arrays.v' has shape (2, 11), the configuration "
             "implies (2, 5)")
 
 
 def test_non_finite_values_and_counters_out_of_range_are_refused(tmp_path):
     arrays, meta = contents(saved(tmp_path))
-    q = arrays["Q"].copy()
-    q[0, 1, 2, 3] = np.nan
-    refused(write(tmp_path / "nan.npz", meta, {**arrays, "Q": q}), "field 'arrays.Q' holds NaN or infinite")
+    q = arrays["lag_products"].copy()
+    q[0, 1, 2, 2] = np.nan
+    refused(write(tmp_path / "nan.npz", meta, {**arrays, "lag_products": q}),
+            "field 'arrays.lag_products' holds NaN or infinite")
     refused(write(tmp_path / "at.npz", meta, {**arrays, "ready_at": np.array([1, 301])}),
             "field 'arrays.ready_at' must hold counts in [0, 300]")
     refused(write(tmp_path / "rep.npz", meta, {**arrays, "repairs": np.array([0, -1])}), "field 'arrays.repairs'")
@@ -268,8 +270,8 @@ def test_entries_that_are_not_the_state_are_refused(tmp_path):
     arrays, meta = contents(saved(tmp_path))
     refused(write(tmp_path / "extra.npz", meta, {**arrays, "evil": np.zeros(3)}),
             "field 'arrays.evil' is not part of this configuration's state")
-    refused(write(tmp_path / "obj.npz", meta, {**arrays, "S": np.array([object()] * 22).reshape(2, 11)}),
-            "field 'arrays.S' has dtype |O, not plain numbers")
+    refused(write(tmp_path / "obj.npz", meta, {**arrays, "lag_sums": np.array([object()] * 22).reshape(2, 11)}),
+            "field 'arrays.lag_sums' has dtype |O, not plain numbers")
     path = tmp_path / "names.npz"
     with zipfile.ZipFile(path, "w") as zf:
         zf.writestr("meta.npy", npy(np.array(json.dumps(meta))))
@@ -281,7 +283,7 @@ def test_entries_that_are_not_the_state_are_refused(tmp_path):
             zf.writestr(f"a{i}.npy", b"")
     refused(path, "41 entries (a state has at most 32)")
     with zipfile.ZipFile(path, "w") as zf:
-        zf.writestr("S.npy", npy(arrays["S"]))
+        zf.writestr("lag_sums.npy", npy(arrays["lag_sums"]))
     refused(path, "field 'meta' is missing (not a state file)")
 
 
@@ -293,10 +295,10 @@ def test_a_compressed_entry_is_never_inflated(tmp_path):
     with zipfile.ZipFile(path, "w") as zf:
         zf.writestr("meta.npy", npy(np.array(json.dumps(meta))))
         for name, arr in arrays.items():
-            if name != "Q":
+            if name != "lag_products":
                 zf.writestr(f"{name}.npy", npy(arr))
-        with zf.open("Q.npy", "w", force_zip64=True) as fh:
-            fh.write(npy(np.zeros((2, 4, 11, 4)))[:128].replace(b"(2, 4, 11, 4)", b"(2, 4, 11, 4)"))
+        with zf.open("lag_products.npy", "w", force_zip64=True) as fh:
+            fh.write(npy(np.zeros((2, 3, 11, 3)))[:128])
         info = zipfile.ZipInfo("big.npy")
         info.compress_type = zipfile.ZIP_DEFLATED
         with zf.open(info, "w", force_zip64=True) as fh:
@@ -317,11 +319,11 @@ def test_declared_sizes_larger_than_the_file_are_refused_before_reading(tmp_path
     arrays, meta = contents(saved(tmp_path))
     path = write(tmp_path / "lie.npz", meta, arrays)
     data = bytearray(path.read_bytes())
-    # Make the central directory declare a 4 GB Q entry (uncompressed and compressed size).
+    # Make the central directory declare a 4 GB lag_products entry (uncompressed and compressed size).
     with zipfile.ZipFile(path) as zf:
-        q = zf.getinfo("Q.npy")
+        q = zf.getinfo("lag_products.npy")
     cd = data.rfind(b"PK\x01\x02" + data[data.find(b"PK\x01\x02") + 4: data.find(b"PK\x01\x02") + 4])
-    i = data.find(b"Q.npy", data.find(b"PK\x01\x02")) - 46
+    i = data.find(b"lag_products.npy", data.find(b"PK\x01\x02")) - 46
     assert data[i:i + 4] == b"PK\x01\x02" and cd >= 0
     data[i + 20:i + 28] = (0xFFFF0000).to_bytes(4, "little") * 2
     path.write_bytes(bytes(data))
@@ -345,21 +347,22 @@ def test_a_header_declaring_a_huge_shape_is_refused_before_reading(tmp_path):
     big["fingerprint"] = fp
     tracemalloc.start()
     try:
-        refused(write(tmp_path / "cap.npz", big, arrays), "declares", "the configuration implies an array",
-                fingerprint=fp)
+        # Counters implying far more state than the file holds: refused before anything is
+        # allocated for them.
+        refused(write(tmp_path / "cap.npz", big, arrays), "bank_counters.cap", "implies about", fingerprint=fp)
         path = tmp_path / "header.npz"
         with zipfile.ZipFile(path, "w") as zf:
             zf.writestr("meta.npy", npy(np.array(json.dumps(meta))))
             for name, arr in arrays.items():
                 raw = npy(arr)
-                if name == "S":
+                if name == "lag_sums":
                     header = np.lib.format.header_data_from_array_1_0(arr)
                     header["shape"] = (2, 10**12)
                     buf = io.BytesIO()
                     np.lib.format.write_array_header_1_0(buf, header)
                     raw = buf.getvalue() + raw[len(buf.getvalue()):]
                 zf.writestr(f"{name}.npy", raw)
-        refused(path, "field 'arrays.S' has shape (2, 1000000000000), the configuration implies (2, 11)")
+        refused(path, "field 'arrays.lag_sums' has shape (2, 1000000000000), the configuration implies (2, 11)")
         peak = tracemalloc.get_traced_memory()[1]
     finally:
         tracemalloc.stop()
@@ -381,8 +384,8 @@ def test_a_corrupted_byte_in_an_array_fails_the_crc(tmp_path):
     path = saved(tmp_path)
     data = bytearray(path.read_bytes())
     with zipfile.ZipFile(path) as zf:
-        info = zf.getinfo("Q.npy")
-    data[info.header_offset + 30 + len("Q.npy") + 200] ^= 0xFF
+        info = zf.getinfo("lag_products.npy")
+    data[info.header_offset + 30 + len("lag_products.npy") + 200] ^= 0xFF
     path.write_bytes(bytes(data))
     refused(path, "not a readable state file", "CRC")
 
@@ -416,7 +419,7 @@ def test_the_layout_table_is_the_estimators_state(kw, n):
     for _ in range(n):
         bank.update(rng.standard_normal((3, 4)), rng.standard_normal(3))
     s = bank.state()
-    layout = state_layout(s["format"], s["config"], s["counters"])
+    layout = state_layout(s["format"], s["config"], s["counters"], waiting=not s["arrays"]["ready"].all())
     assert layout is not None, f"state format {s['format']} has no layout in state_file.state_layout"
     assert {k: (v.shape, v.dtype) for k, v in s["arrays"].items()} == {
         k: (shape, dtype.newbyteorder("=")) for k, (shape, dtype) in layout.items()}

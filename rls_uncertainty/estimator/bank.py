@@ -1,0 +1,451 @@
+"""The fast estimator: ``M`` recursive least-squares models updated together (Eqs. 15-22).
+
+:class:`EstimatorBank` runs the six coefficient models of Eq. 2 (3-6 parameters each), or
+the hundreds of a Monte Carlo study, with one set of vectorised numpy operations per sample.
+Its numbers are those of :class:`.reference.RecursiveReference`, which defines every option
+(forgetting, residual kinds, exact initialization, the lag window); the tests hold the two
+together. This module is the per-sample path; the rest lives beside it:
+:mod:`.lag_storage` (history and lag-indexed sums), :mod:`.initialization`,
+:mod:`.covariance` and :mod:`.state`.
+
+How the hot path differs from the reference, and why (each measured in
+``benchmarks/estimator_benchmark.py``):
+
+* Each model works on column-scaled regressors once initialized (``x / s``); results are
+  scaled back on output.
+* ``D`` and ``theta`` are the rows of one array ``[D; theta']``, so that one matmul gives
+  ``(D x, theta' x)`` and Eqs. 15b-c are one rank-one update with ``u = (D x, -e)``:
+  ``[D; theta'] -= u (D x)' / d``. ``D - (Dx)(Dx)'/d`` is exactly symmetric in floating
+  point; the algebraically equal ``(I - K x') D`` is not, and under forgetting its
+  antisymmetric rounding error grows like ``f^-k`` until the estimator diverges.
+* Eq. 17 is kept as the lag sums ``n_k R_k(i)`` and Eq. 21 one-sided (see
+  :mod:`.lag_storage`); the sample histories are written once into a newest-first buffer.
+* An update whose every quantity (scaled regressors, output, ``D x``, innovation) is at most
+  ``1e100`` in magnitude cannot make a finite state non-finite (its products with anything
+  already in the state stay below ``1e254``, which rounding absorbs even next to the largest
+  double), so it is applied directly. Any other sample is applied after a copy of the state
+  is taken, and rolled back and refused with :class:`NonFiniteInput` if the state is not
+  finite after it. (What the guard does not cover: ``D`` growing without bound under
+  forgetting when a regressor stays zero for a very long time.)
+"""
+
+from __future__ import annotations
+
+from typing import Sequence
+
+import numpy as np
+
+from ..errors import EstimatorNotReady, NonFiniteInput
+from . import covariance, state
+from .initialization import ExactInitialization
+from .lag_storage import GROWTH_START, LagStorage
+from .lag_window import lag_weights
+from .numpy_compat import vecdot
+from .options import check_kind, check_options, prior_diagonal
+
+__all__ = ["EstimatorBank"]
+
+_F64 = np.dtype(np.float64)
+
+# A sample whose quantities are all at most this in magnitude is applied without checks.
+_SAFE = 1e100
+_SAFE_SQUARED = _SAFE * _SAFE
+_KIND_INDEX = {"corrected": 0, "conventional": 1}  # COVARIANCE_KINDS
+
+
+class EstimatorBank:
+    """``M`` independent recursive least-squares models updated together (Eqs. 15-22).
+
+    Parameters
+    ----------
+    sizes:
+        Number of parameters of each model, e.g. ``(3, 4, 3, 6, 4, 4)`` for Eq. 2a-f.
+    n_lags:
+        Largest residual-autocorrelation lag kept (Eq. 22); ``None`` keeps all lags (Eq. 20,
+        memory and time grow with the number of samples). ``0`` gives the conventional
+        covariance.
+    window:
+        ``"truncated"`` (Eq. 22, uniform) or ``"bartlett"`` (positive semi-definite).
+    forgetting:
+        Exponential forgetting factor ``0 < f <= 1``; ``1`` is the paper.
+    residual:
+        ``"standardized"`` (default, ``e_k sqrt(f/d_k)``, which makes Eq. 16 equal Eq. 14),
+        ``"a_posteriori"`` (``z_k - x_k' theta_k``) or ``"a_priori"`` (``z_k - x_k' theta_{k-1}``).
+    p0:
+        ``None`` for exact initialization; a positive scalar or per-parameter sequence for the
+        prior ``D_0 = diag(p0)``, ``theta_0 = 0`` (applied to every model).
+    init_condition:
+        Exact initialization waits until the column-scaled ``X'X`` has a condition number
+        below this value.
+
+    The options are defined in :mod:`.reference`.
+    """
+
+    STATE_FORMAT = state.STATE_FORMAT
+
+    def __init__(
+        self,
+        sizes: Sequence[int],
+        n_lags: int | None = None,
+        window: str = "truncated",
+        forgetting: float = 1.0,
+        *,
+        residual: str = "standardized",
+        p0: float | Sequence[float] | None = None,
+        init_condition: float = 1e8,
+    ) -> None:
+        sizes = tuple(int(s) for s in sizes)
+        if not sizes or min(sizes) < 1:
+            raise ValueError(f"every model needs at least one parameter, got sizes={sizes}")
+        check_options(n_lags, window, forgetting, residual, init_condition)
+        self.sizes = sizes
+        self.n_models = m = len(sizes)
+        self.n_max = n = max(sizes)
+        self.n_lags = None if n_lags is None else int(n_lags)
+        self.window = window
+        self.forgetting = float(forgetting)
+        self.residual = residual
+        self.init_condition = float(init_condition)
+
+        self._x_shape, self._z_shape = (m, n), (m,)
+        self._mask = np.zeros((m, n), dtype=bool)
+        for j, s in enumerate(sizes):
+            self._mask[j, :s] = True
+
+        self.k = 0
+        self.n_eff = 0.0  # n_k = sum_j f^(k-j); equals k when f = 1
+        # [D; theta'] in column-scaled units: _aug[:, :n] = S D S, _aug[:, n] = S theta.
+        self._aug = np.zeros((m, n + 1, n))
+        self._D = self._aug[:, :n]
+        self._D_diagonal = self._D.diagonal(0, 1, 2)
+        self._theta, self._theta_row = self._aug[:, n], self._aug[:, n, None, :]
+        self._inv_s = self._mask.astype(float)  # 1/s on real parameters, 0 on padding
+        self._ready = np.zeros(m, dtype=bool)
+        self._ready_at = np.zeros(m, dtype=np.int64)
+        self.repairs = np.zeros(m, dtype=np.int64)
+        cap = GROWTH_START if self.n_lags is None else self.n_lags + 1
+        self._lags = LagStorage(
+            m, n, cap, all_lags=self.n_lags is None, forgetting=self.forgetting, waiting=p0 is None
+        )
+        self._init = ExactInitialization(self)
+        # Per-sample scratch, each contiguous: y = (x / s, z) and u = (D x, theta' x - z). Their
+        # magnitudes decide whether the sample can be applied unchecked (_prepare).
+        self._y = np.zeros((m, n + 1))
+        self._y_xs = self._xs = self._y[:, :n]
+        self._z_slot = self._y[:, n]
+        self._y_flat = self._y.reshape(-1)
+        self._g = np.zeros((m, n + 1, 1))  # u as a column: the matmul's output
+        self._Dx = self._g[:, :n, 0]
+        self._Dx_row = self._g[:, None, :n, 0]
+        self._neg_e = self._g[:, n, 0]
+        self._y_abs = np.zeros_like(self._y)
+        self._y_abs_flat = self._y_abs.reshape(-1)
+        self._g_flat = self._g.reshape(-1)
+        self._y_xs_col = self._xs_col = self._xs[:, :, None]
+        self._d = np.zeros(m)  # d_k = f + x' D x
+        self._d_col = self._d[:, None, None]
+        self._root = np.zeros(m)  # sqrt(d_k / f)
+        self._outer = np.zeros((m, n + 1, n))
+        self._evaluator = covariance.CovarianceEvaluator(eq13=self.forgetting == 1.0)
+        self._covariances = None  # covariance.Covariances of the current sample
+        self._window_key = None
+
+        if p0 is not None:
+            p = prior_diagonal(p0, n)
+            self._aug[:, :n] = np.eye(n) * p * self._mask[:, :, None] * self._mask[:, None, :]
+            self._ready[:] = True
+        self._readiness_changed()
+
+    def _readiness_changed(self) -> None:
+        """Recompute what depends on which models are ready (after an initialization or a
+        restored state)."""
+        self._all_ready = bool(self._ready.all())
+        if self._all_ready:
+            self._lags.all_initialized()
+            self._xs, self._xs_col = self._y_xs, self._y_xs_col  # the scratch from now on
+        invalid = ~(self._mask & self._ready[:, None])  # padding and models not ready: NaN
+        self._theta_scale = np.where(invalid, np.nan, self._inv_s)
+        self._cov_scale = self._theta_scale[:, :, None] * self._theta_scale[:, None, :]
+        self._se_scale = 2.0 * self._cov_scale.diagonal(0, 1, 2)  # see covariance.Covariances
+        self._init.reset()
+        self._covariances = None
+
+    @property
+    def n_window(self) -> int:
+        """Number of lags currently held: ``min(k, n_lags + 1)``, or ``k`` for all lags."""
+        return min(self.k, self._lags.cap)
+
+    # ------------------------------------------------------------------ update
+    def update(self, X, z) -> None:
+        """Process one sample for every model (Eqs. 15-17, 21).
+
+        ``X`` is ``(M, n_max)`` (row ``j`` holds model ``j``'s regressors first; the padding
+        is ignored) or a sequence of ``M`` regressor vectors; ``z`` holds the ``M`` measured
+        outputs. A NaN or infinite input, or one that would make the state non-finite,
+        raises :class:`NonFiniteInput` and leaves the state unchanged.
+        """
+        if type(X) is np.ndarray and X.shape == self._x_shape and X.dtype == _F64:
+            x = X
+        else:
+            x = self._as_regressors(X)
+        if not (type(z) is np.ndarray and z.shape == self._z_shape and z.dtype == _F64):
+            z = np.asarray(z, dtype=float).reshape(-1)
+            if z.shape != (self.n_models,):
+                raise ValueError(f"expected {self.n_models} measured outputs, got shape {z.shape}")
+        if self._prepare(x, z):
+            self._apply(z)
+        else:
+            self._apply_checked(x, z)
+
+    def _prepare(self, x: np.ndarray, z: np.ndarray, check: bool = True) -> bool:
+        """Write the sample's ``y = (x / s, z)`` (to its history slot in front of the window
+        while a model waits, else to scratch), ``u = (D x, theta' x - z)`` and ``d`` to
+        scratch: the state is not touched. True when every entry of ``y`` and ``u`` is at
+        most 1e100 in magnitude (then the update keeps a finite state finite); with ``check``,
+        NaN, infinity or a larger number in ``y`` stops it early and returns False."""
+        if self._lags.waiting:
+            y = self._lags.y[:, self._lags.ptr - 1]
+            self._y_k, self._xs, self._xs_col = y, y[:, : self.n_max], y[:, : self.n_max, None]
+            np.multiply(x, self._inv_s, out=self._xs)
+            y[:, self.n_max] = z
+            small = np.maximum.reduce(np.absolute(y, out=self._y_abs), axis=None) <= _SAFE
+        else:  # scratch (self._xs is its x part once every model is initialized)
+            np.multiply(x, self._inv_s, out=self._xs)
+            self._z_slot[...] = z
+            small = np.maximum.reduce(np.absolute(self._y_flat, out=self._y_abs_flat)) <= _SAFE
+        if check and not small:
+            return False
+        np.matmul(self._aug, self._xs_col, out=self._g)  # (D x, theta' x)
+        d = vecdot(self._xs, self._Dx, out=self._d)
+        d += self.forgetting  # d_k = f + x' D x: the denominator of Eq. 15a
+        np.subtract(self._neg_e, z, out=self._neg_e)  # -e_k = x' theta_(k-1) - z_k
+        return small and np.dot(self._g_flat, self._g_flat) <= _SAFE_SQUARED
+
+    def _apply(self, z: np.ndarray) -> None:
+        """Add the prepared sample to the state (Eqs. 15-17, 21)."""
+        f, lags = self.forgetting, self._lags
+        k = self.k + 1
+        w = k if k < lags.cap else lags.cap  # lags held after this sample
+        p = lags.ptr - 1  # the free slot in front of the window (see the end)
+        waiting, merged = lags.waiting, lags.merged
+        if not merged:
+            lags.x[:, p] = self._xs  # (while a model waits, _prepare wrote y to its slot)
+        self.k = k
+        lags.ptr = p
+        self.n_eff = f * self.n_eff + 1.0  # n_k
+
+        # Eqs. 15a-c: [D; theta'] -= u (D x)' / d with u = (D x, -e).
+        outer = np.multiply(self._g, self._Dx_row, out=self._outer)
+        outer /= self._d_col
+        self._aug -= outer  # Eq. 15b (D rows), Eq. 15c (theta row)
+        if f != 1.0:
+            self._D /= f  # Eq. 15b with forgetting
+        v = lags.v[:, p]
+        neg_e, d = self._neg_e, self._d
+        if self.residual == "standardized":  # v_k = e_k sqrt(f/d_k)
+            root = np.sqrt(d if f == 1.0 else np.divide(d, f, out=self._root), out=self._root)
+            np.divide(neg_e, np.negative(root, out=root), out=v)
+        elif self.residual == "a_posteriori":
+            np.multiply(neg_e / d, -f, out=v)  # v_k = e_k f/d_k = z_k - x_k' theta_k (Eq. 7)
+        else:
+            np.negative(neg_e, out=v)  # v_k = e_k
+
+        sums, sums_tmp, products, products_tmp = lags.full if w == lags.cap else lags.by_lag(w)
+        # Eq. 17 as sums: n_k R_k(i) = f n_(k-1) R_(k-1)(i) + v_k v_(k-i).
+        if f != 1.0:
+            sums *= f
+        v_window = lags.v[:, p : p + w]  # v_k, v_(k-1), ...
+        sums += np.multiply(v_window, v_window[:, :1], out=sums_tmp)
+
+        # Eq. 21, one-sided: Lambda+_k(i) = f^2 Lambda+_(k-1)(i) + f^i x_k x_(k-i)'.
+        m, n = self.n_models, self.n_max
+        if merged:  # of y = (x, z): Lambda+ and the lagged moments at once (see .lag_storage)
+            y_window = lags.y[:, p : p + w].reshape(m, 1, w * (n + 1))  # y_k, y_(k-1), ...
+            products += np.multiply(self._y_k[:, :, None], y_window, out=products_tmp)
+        else:
+            x_window = lags.x[:, p : p + w].reshape(m, 1, w * n)  # x_k, x_(k-1), ... (a view)
+            if f == 1.0:
+                products += np.multiply(self._xs_col, x_window, out=products_tmp)
+            else:
+                weighted = (x_window.reshape(m, w, n) * lags.lag_powers[None, :w, None]).reshape(m, 1, w * n)
+                lags.lag_products *= f * f
+                products += np.multiply(self._xs_col, weighted, out=products_tmp)
+            if waiting:  # the lagged moments, weighted f^(k-j)
+                moments, moments_tmp = lags.products_y_by_lag(w)
+                lags.products_y *= f
+                y_window = lags.y[:, p : p + w].reshape(m, 1, w * (n + 1))
+                moments += np.multiply(self._y_k[:, :, None], y_window, out=moments_tmp)
+        if waiting:
+            self._init.check(w)
+        if p == 0:  # keep a free slot in front of the window for the next sample
+            if self.n_lags is None:
+                lags.grow(w)
+                self._init.reset()  # its indices point into the old arrays
+            else:
+                lags.relocate(w)
+        self._covariances = None
+
+    def _apply_checked(self, x: np.ndarray, z: np.ndarray) -> None:
+        """Apply a sample on which :meth:`_prepare` found NaN, infinity or a large number:
+        refuse a non-finite input, or one that would make the state non-finite."""
+        bad = [
+            j for j in range(self.n_models)
+            if not (np.isfinite(x[j, : self.sizes[j]]).all() and np.isfinite(z[j]))
+        ]
+        if bad:
+            raise NonFiniteInput(f"non-finite regressor or output for model(s) {bad}; sample ignored")
+        x = np.where(self._mask, x, 0.0)  # the padding is ignored
+        before, outputs = self.state(), self._covariances
+        with np.errstate(all="ignore"):  # overflow is what is being checked
+            self._prepare(x, z, check=False)
+            self._apply(z)
+        finite = all(np.isfinite(a).all() for a in self.state()["arrays"].values())
+        if not finite:
+            state.restore(self, before)
+            self._covariances = outputs  # evaluated (and repairs counted) before this sample
+            raise NonFiniteInput(
+                "sample ignored: its magnitude would make the estimator state non-finite "
+                f"(largest |regressor| {np.max(np.abs(x)):.3g}, largest |output| {np.max(np.abs(z)):.3g})"
+            )
+
+    def _as_regressors(self, X) -> np.ndarray:
+        if isinstance(X, np.ndarray) and X.shape == (self.n_models, self.n_max):
+            return X if X.dtype == float else X.astype(float)
+        rows = [X] if isinstance(X, np.ndarray) and X.ndim == 1 else list(X)
+        if len(rows) != self.n_models:
+            raise ValueError(f"expected regressors for {self.n_models} models, got {len(rows)}")
+        x = np.zeros((self.n_models, self.n_max))
+        for j, (row, s) in enumerate(zip(rows, self.sizes)):
+            row = np.asarray(row, dtype=float).reshape(-1)
+            if row.shape != (s,):
+                raise ValueError(f"model {j} has {s} parameters, got {row.shape[0]} regressors")
+            x[j, :s] = row
+        return x
+
+    # ------------------------------------------------------------------ results
+    @property
+    def ready(self) -> np.ndarray:
+        """Boolean per model: initialized, so estimates and covariances exist."""
+        return self._ready.copy()
+
+    @property
+    def ready_at(self) -> np.ndarray:
+        """Sample count at which each model was initialized (0 while not ready)."""
+        return np.where(self._ready, self._ready_at, 0)
+
+    @property
+    def n_samples(self) -> int:
+        return self.k
+
+    def _require(self, j: int) -> None:
+        if not self._ready[j]:
+            raise EstimatorNotReady(
+                f"model {j} is not initialized after {self.k} samples: its regressors "
+                "have not yet made X'X well conditioned"
+            )
+
+    def theta(self, j: int) -> np.ndarray:
+        """Parameter estimate ``theta_k`` of model ``j`` (Eq. 15c)."""
+        self._require(j)
+        s_n = self.sizes[j]
+        return self._aug[j, self.n_max, :s_n] * self._inv_s[j, :s_n]
+
+    def theta_all(self) -> np.ndarray:
+        """Estimates of every model as an ``(M, n_max)`` array; padding and models that are
+        not :attr:`ready` are NaN."""
+        return self._theta * self._theta_scale
+
+    def residual_variance(self, j: int) -> float:
+        """Fit-error variance (Eq. 16), i.e. ``R_k(0)``."""
+        self._require(j)
+        return float(self._lags.lag_sums[j, 0] / self.n_eff)
+
+    def autocorrelation(self, j: int) -> np.ndarray:
+        """Residual autocorrelation ``R_k(i)``, ``i = 0..n_window-1`` (Eq. 17)."""
+        self._require(j)
+        return self._lags.lag_sums[j, : self.n_window] / self.n_eff
+
+    def residuals(self, j: int) -> np.ndarray:
+        """Stored residuals, oldest first: the whole history with ``n_lags=None``, otherwise
+        the last ``n_lags + 1``."""
+        self._require(j)
+        return self._lags.window(self._lags.v, self.n_window)[j, ::-1].copy()
+
+    def _half_window(self, largest: int, w: int) -> np.ndarray:
+        """Half window ``h`` of the ``w`` lags held, ``largest`` the largest lag of the window
+        (:func:`.covariance.half_window`); kept while they stay the same."""
+        self._window_h = covariance.half_window(lag_weights(largest, self.window, w))
+        self._window_key = (largest, w)
+        return self._window_h
+
+    def _evaluate(self) -> covariance.Covariances:
+        """Both covariances of every model at this sample, computed once."""
+        cov = self._covariances
+        if cov is None:
+            lags = self._lags
+            if self.k < lags.cap:
+                w = self.k
+                sums, products = lags.lag_sums[:, :w], lags.lag_products[:, :, :w]
+            else:
+                w = lags.cap
+                sums, products = lags.lag_sums, lags.lag_products
+            largest = self.k - 1 if self.n_lags is None else self.n_lags
+            h = self._window_h if self._window_key == (largest, w) else self._half_window(largest, w)
+            cov, repaired = self._evaluator(
+                self._D, self._D_diagonal, sums, h, products, 1.0 / self.n_eff,
+                self._cov_scale, self._se_scale, self._exact_fit, self.sizes,
+            )
+            if repaired:
+                self.repairs[repaired] += 1
+            self._covariances = cov
+        return cov
+
+    def _exact_fit(self) -> np.ndarray:
+        """Models whose residual variance ``R_k(0)`` is at most 1e-12 of the mean square of
+        their output ``x_j' theta_k`` (``theta' Lambda_k(0) theta / sum_j f^(2(k-j))``)."""
+        f, k = self.forgetting, self.k
+        output_square = vecdot(np.matmul(self._theta_row, self._lags.lag0)[:, 0], self._theta)
+        n_square = k if f == 1.0 else (1.0 - f ** (2 * k)) / (1.0 - f * f)
+        return self._lags.lag_sums[:, 0] <= (covariance.EXACT_FIT * self.n_eff / n_square) * output_square
+
+    def standard_errors_all(self, kind: str = "corrected") -> np.ndarray:
+        """Standard errors of every model as an ``(M, n_max)`` array: the square roots of the
+        diagonals of :meth:`covariance`. Padding and models that are not :attr:`ready` are NaN.
+        """
+        index = _KIND_INDEX.get(kind)
+        if index is None:
+            check_kind(kind)
+        return self._evaluate().standard_errors[index]
+
+    def covariance(self, j: int, kind: str = "corrected", *, repair: bool = True) -> np.ndarray:
+        """Parameter covariance of model ``j``.
+
+        ``kind="corrected"``: Eq. 20 (all lags) or Eq. 22 (``n_lags``) with the chosen window.
+        ``kind="conventional"``: Eq. 13 with the fit-error variance of Eq. 16.
+        With ``repair`` (default) a corrected covariance with a negative diagonal is replaced
+        by the nearest positive semi-definite matrix and counted in :attr:`repairs` (once per
+        sample), or by zero where the model fits exactly.
+        """
+        check_kind(kind)
+        self._require(j)
+        return self._evaluate().matrix(_KIND_INDEX[kind], j, self.sizes[j], repair=repair)
+
+    def standard_errors(self, j: int, kind: str = "corrected") -> np.ndarray:
+        """Square roots of the covariance diagonal (never NaN: see :meth:`covariance`)."""
+        check_kind(kind)
+        self._require(j)
+        return self.standard_errors_all(kind)[j, : self.sizes[j]].copy()
+
+    # ------------------------------------------------------------------ snapshot
+    def state(self) -> dict:
+        """A deep copy of the complete state; :meth:`from_state` continues bit-identically."""
+        return state.capture(self)
+
+    @classmethod
+    def from_state(cls, saved: dict) -> "EstimatorBank":
+        """Rebuild an estimator bank from :meth:`state` (also after a save to disk)."""
+        state.check_format(saved)
+        cfg = dict(saved["config"])
+        bank = cls(cfg.pop("sizes"), cfg.pop("n_lags"), cfg.pop("window"), cfg.pop("forgetting"), **cfg)
+        state.restore(bank, saved)
+        return bank

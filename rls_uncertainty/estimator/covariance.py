@@ -1,0 +1,175 @@
+"""Parameter covariances of every model of a bank, from one computation (Eqs. 13, 16, 20, 22).
+
+**The two-sided lag sum, in one place.** The bank stores the one-sided lag products
+``Lambda+_k(i) = sum_j x_j x_(j-i)'`` (newer sample on the left, weighted as Eq. 21), so that
+``Lambda_k(i) = Lambda+_k(i) + Lambda+_k(i)'`` for ``i > 0`` (Eq. 19) and
+``Lambda_k(0) = Lambda+_k(0) = (Lambda+_k(0) + Lambda+_k(0)') / 2``. Hence every covariance
+of Eqs. 20 and 22 is
+
+    cov = D [sum_i c_i R_k(i) Lambda_k(i)] D = P + P',    P = D N D,
+    N = sum_i h_i R_k(i) Lambda+_k(i),    h_0 = c_0 / 2, h_i = c_i   (half_window).
+
+The conventional covariance is Eq. 22 with ``n_tau = 0``: ``N = R_k(0) Lambda_k(0) / 2``;
+with ``f = 1``, ``D Lambda_k(0) D = D`` and Eq. 13 reads ``P = R_k(0) D / 2``. Nothing else
+in the package deals with the factor 2 of the two-sided sum.
+
+:class:`CovarianceEvaluator` computes both kinds for all models in one vectorised pass
+from ``D N``: the variances ``diag(P + P') = 2 diag(P)`` every sample, the full matrices when
+asked, with the same diagonals; the published standard errors are their square roots, so
+``standard_errors_all``, ``standard_errors(j)`` and ``covariance(j)`` of the bank are the
+same numbers. The ``1/n_k`` of ``R_k(i)`` and the column scaling are applied last (the
+order the variances were always summed in). A corrected covariance with a negative diagonal
+entry is replaced by :func:`nearest_psd` (a repair), or by zero when the model fits exactly
+(:data:`EXACT_FIT`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .numpy_compat import vecdot
+
+__all__ = ["EXACT_FIT", "nearest_psd", "half_window", "CovarianceEvaluator", "Covariances"]
+
+# An exact fit: R_k(0) at most this fraction of the mean square of the model output
+# x_j' theta_k (weighted as Lambda_k(0)). Its corrected variances are rounding of either
+# sign and are published as zero, not repaired.
+EXACT_FIT = 1e-12
+
+
+def nearest_psd(cov: np.ndarray) -> np.ndarray:
+    """Nearest (Frobenius) symmetric positive semi-definite matrix: eigenvalues clipped at 0."""
+    sym = 0.5 * (cov + cov.T)
+    vals, vecs = np.linalg.eigh(sym)
+    return (vecs * np.clip(vals, 0.0, None)) @ vecs.T
+
+
+def half_window(c: np.ndarray) -> np.ndarray:
+    """``h`` with ``h_0 = c_0 / 2`` and ``h_i = c_i``: the weights of the one-sided products in
+    ``N`` (module docstring)."""
+    h = np.array(c, dtype=float)
+    h[0] *= 0.5
+    return h
+
+
+class Covariances:
+    """Both covariances of every model at one sample.
+
+    ``variances`` ``(2, M, n_max)`` are the diagonals of the corrected (``[0]``, Eq. 20/22)
+    and conventional (``[1]``, Eq. 13) covariances in the regressors' units, published
+    (repaired), and ``standard_errors`` their square roots (negative rounding clipped at 0).
+    ``matrices()`` are the unrepaired covariances ``(2, M, n_max, n_max)``, formed on first use
+    from the same ``D N`` products as ``(P + P') * scale / n_k`` with ``P = D N D``, their
+    diagonals summed as the variances were, so that ``standard_errors`` are exactly
+    ``sqrt(diag(matrices))``. NaN outside the ready models' blocks. Where a corrected variance
+    is negative, ``repaired`` maps a model to its nearest positive semi-definite matrix, and
+    ``exact`` marks the models that fit exactly, whose covariance is published as zero.
+    """
+
+    __slots__ = ("standard_errors", "repaired", "exact", "_parts", "_matrices")
+
+    def __init__(self, standard_errors: np.ndarray, parts: tuple) -> None:
+        self.standard_errors = standard_errors
+        self.repaired: dict[int, np.ndarray] = {}
+        self.exact = None
+        self._parts = parts
+        self._matrices = None
+
+    def matrices(self) -> np.ndarray:
+        if self._matrices is None:
+            D, DN, DN0, hS0, scale, diagonal_scale, inv_n = self._parts
+            P = np.empty((2,) + D.shape)
+            np.matmul(DN, D, out=P[0])
+            if DN0 is None:
+                np.multiply(D, hS0[:, :, None], out=P[1])
+            else:
+                np.matmul(DN0, D, out=P[1])
+            cov = P + P.swapaxes(2, 3)  # the two-sided sum
+            cov *= scale * inv_n
+            a = np.arange(D.shape[1])
+            cov[:, :, a, a] = _diagonals(D, DN, DN0, hS0) * (diagonal_scale * inv_n)  # as the variances
+            self._matrices = cov
+        return self._matrices
+
+    def matrix(self, kind_index: int, j: int, size: int, *, repair: bool = True) -> np.ndarray:
+        """Model ``j``'s covariance (a copy), published (``repair``) or unrepaired."""
+        if repair and kind_index == 0:
+            if j in self.repaired:
+                return self.repaired[j].copy()
+            if self.exact is not None and self.exact[j]:
+                return np.zeros((size, size))
+        return self.matrices()[kind_index, j, :size, :size].copy()
+
+
+def _diagonals(D, DN, DN0, hS0) -> np.ndarray:
+    """``diag(P)`` of both kinds, ``(2, M, n)``: ``diag(D N D) = sum_c (D N)_ac D_ac``."""
+    out = np.empty((2,) + D.shape[:2])
+    vecdot(DN, D, out=out[0])
+    if DN0 is None:
+        np.multiply(hS0, D.diagonal(0, 1, 2), out=out[1])  # Eq. 13: R_k(0) D / 2
+    else:
+        vecdot(DN0, D, out=out[1])
+    return out
+
+
+class CovarianceEvaluator:
+    """Evaluates :class:`Covariances` for a bank whose conventional covariance is Eq. 13
+    (``eq13``, ``f = 1``) or ``R_k(0) D Lambda_k(0) D`` (``f < 1``)."""
+
+    def __init__(self, eq13: bool) -> None:
+        self.eq13 = eq13
+
+    def __call__(
+        self,
+        D: np.ndarray,
+        D_diagonal: np.ndarray,
+        lag_sums: np.ndarray,
+        h: np.ndarray,
+        lag_products: np.ndarray,
+        inv_n: float,
+        scale: np.ndarray,
+        diagonal_scale: np.ndarray,
+        exact_fit,
+        sizes: tuple,
+    ) -> tuple[Covariances, list]:
+        """Both covariances of every model, and the models whose corrected one was repaired.
+
+        ``D`` ``(M, n, n)`` (``D_diagonal`` its diagonal) and ``lag_products`` ``(M, n, w, n)`` (``Lambda+_k(i)``) are in
+        column-scaled units; ``lag_sums`` ``(M, w)`` is ``n_k R_k(i)`` and ``h`` the half
+        window of the ``w`` lags held; ``inv_n = 1 / n_k``; ``scale`` ``(M, n, n)`` takes
+        scaled units back to the regressors' (NaN outside the ready models' blocks) and
+        ``diagonal_scale`` is ``2 diag(scale)`` ``(M, n)``; ``exact_fit()`` returns the models
+        that fit exactly.
+        """
+        hS = lag_sums * h  # n_k h_i R_k(i)
+        N = np.matmul(hS[:, None, None, :], lag_products)[:, :, 0, :]  # n_k sum_i h_i R(i) Lambda+(i)
+        DN = np.matmul(D, N)
+        if self.eq13:
+            DN0 = None  # Eq. 13: P = R_k(0) D / 2
+        else:  # Eq. 22 with n_tau = 0: N = R_k(0) Lambda_k(0) / 2
+            DN0 = np.matmul(D, np.matmul(hS[:, None, None, :1], lag_products[:, :, :1])[:, :, 0, :])
+        hS0 = hS[:, :1]
+        var = np.empty((2,) + D.shape[:2])  # diag(P), as _diagonals
+        vecdot(DN, D, out=var[0])  # Eq. 20 / 22
+        if DN0 is None:
+            np.multiply(hS0, D_diagonal, out=var[1])  # Eq. 13: R_k(0) D / 2
+        else:
+            vecdot(DN0, D, out=var[1])  # Eq. 22 with n_tau = 0
+        negative = np.minimum.reduce(var[0], axis=None) < 0.0  # models not ready are 0 here
+        var *= diagonal_scale * inv_n  # diag(P + P') * scale / n_k
+        cov = Covariances(var, (D, DN, DN0, hS0, scale, diagonal_scale, inv_n))
+        counted: list[int] = []
+        if negative:
+            exact = cov.exact = exact_fit()
+            corrected = var[0]
+            corrected *= ~exact[:, None]  # exact fits: rounding, not indefiniteness: zero (NaN stays)
+            if np.fmin.reduce(corrected, axis=None) < 0.0:
+                for j in np.flatnonzero((corrected < 0.0).any(axis=1)):
+                    j = int(j)
+                    s = sizes[j]
+                    fixed = cov.repaired[j] = nearest_psd(cov.matrices()[0, j, :s, :s])
+                    counted.append(j)
+                    corrected[j, :s] = np.diag(fixed)
+        np.maximum(var, 0.0, out=var)
+        np.sqrt(var, out=var)  # the published standard errors
+        return cov, counted

@@ -1,0 +1,108 @@
+"""Exact initialization of the models of a bank (Eqs. 6, 7 and 10 at the first usable sample).
+
+Until its weighted ``A_k = X'WX`` is well conditioned after column scaling, a model only
+accumulates its lag products and lagged moments (:mod:`.lag_storage`). At that sample
+``k0`` it takes the batch solution ``theta = A^-1 X'Wz`` (Eq. 6), defines the residuals of
+samples ``1..k0`` with it (Eq. 7) and their lag sums ``n_k R_k(i)`` (Eq. 10) from the
+lagged moments, and continues with Eq. 15. From then on the model works in column-scaled
+units: its regressors are divided by ``s = sqrt(diag(A_k0))``, which keeps ``D`` well
+conditioned when the regressors span orders of magnitude.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["ExactInitialization"]
+
+
+class ExactInitialization:
+    """Watches the models that wait and initializes each as soon as its data allow it.
+
+    Only a model whose ``A_k`` has a positive diagonal can be well conditioned. A zero
+    diagonal entry (a regressor that has been exactly zero so far, such as a surface that
+    never moved) is remembered as the model's blocker, and only that one number is looked
+    at until it becomes positive.
+    """
+
+    def __init__(self, bank) -> None:
+        self.bank = bank
+        self._waiting = None  # [model, flat indices of its diag(A_k), blocker] per waiting model
+
+    def reset(self) -> None:
+        """Forget the cached indices (after a model initialized or the arrays changed)."""
+        self._waiting = None
+
+    def check(self, w: int) -> None:
+        """Initialize the waiting models whose ``A_k`` allows it (``w`` lags held)."""
+        bank = self.bank
+        waiting = self._waiting
+        if waiting is None:
+            # Flat indices of each waiting model's diag(A_k) in products_y, and its blocker.
+            n1, cap = bank.n_max + 1, bank._lags.cap
+            waiting = self._waiting = [
+                [j, np.array([((j * n1 + a) * cap) * n1 + a for a in range(bank.sizes[j])], dtype=np.intp), None]
+                for j in range(bank.n_models) if not bank._ready[j]
+            ]
+        flat = bank._lags.products_y.reshape(-1)
+        for entry in waiting:
+            blocker = entry[2]
+            if blocker is not None and not flat[blocker] > 0.0:
+                continue
+            diag = flat.take(entry[1])
+            zero = np.flatnonzero(~(diag > 0.0))
+            if zero.size:
+                entry[2] = int(entry[1][zero[0]])
+                continue
+            entry[2] = None
+            self.initialize(entry[0], w)  # resets the waiting list on success
+
+    def initialize(self, j: int, w: int) -> bool:
+        """Exact initialization of model ``j`` at the current sample, if ``A_k`` allows it and
+        the batch solution is finite. Before it, the model's units are the regressors'."""
+        bank = self.bank
+        lags = bank._lags
+        s_n, n = bank.sizes[j], bank.n_max
+        if bank.k < s_n:
+            return False
+        # P(i) = sum_j f^(k-j) y_j y_(j-i)' of y = (x, z): A_k = X'WX is its lag-0 x block.
+        P = lags.products_y[j]
+        A = P[:s_n, 0, :s_n]
+        s = np.sqrt(np.diag(A))
+        if not np.all(s > 0):
+            return False
+        C = A / np.outer(s, s)
+        if not np.linalg.cond(C) < bank.init_condition:
+            return False
+        D_scaled = np.linalg.inv(C)
+        D_scaled = 0.5 * (D_scaled + D_scaled.T)  # S D S with S = diag(s)
+        theta_scaled = D_scaled @ (P[:s_n, 0, n] / s)  # Eq. 6 (S theta), X'Wz the lag-0 x z moment
+        # Eq. 10 from the lagged moments: v_j = ta' y_j with ta = (-theta, 1), so
+        # sum_j w_j v_j v_(j-i) = ta' P(i) ta.
+        ta = np.zeros(n + 1)
+        ta[:s_n] = -theta_scaled / s
+        ta[n] = 1.0
+        lag_sums = np.einsum("a,aib,b->i", ta, P[:, :w, :], ta)
+        inv = np.zeros(n)
+        inv[:s_n] = 1.0 / s
+        history = lags.y[j]
+        x_scaled = history[:, :n] * inv[None, :]
+        residuals = history[:, n] - x_scaled @ np.concatenate([theta_scaled, np.zeros(n - s_n)])  # Eq. 7
+        if not (np.isfinite(theta_scaled).all() and np.isfinite(lag_sums).all()
+                and np.isfinite(residuals[lags.ptr : lags.ptr + w]).all()):
+            return False  # absurd (finite) data so far: the state would not stay finite
+        bank._aug[j, :s_n, :s_n] = D_scaled
+        bank._aug[j, n, :s_n] = theta_scaled
+        bank._inv_s[j, :s_n] = inv[:s_n]
+        lags.lag_sums[j, :w] = lag_sums
+        products = lags.lag_products[j]
+        products *= inv[:, None, None]  # regressors to scaled units
+        products *= inv[None, None, :]
+        history[:, :n] = x_scaled
+        lags.x[j] = x_scaled
+        lags.v[j] = residuals
+        bank._ready[j] = True
+        bank._ready_at[j] = bank.k
+        self._waiting = None
+        bank._readiness_changed()
+        return True

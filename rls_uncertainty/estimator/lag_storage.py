@@ -1,0 +1,181 @@
+"""What a bank keeps per lag: the recent samples and the lag-indexed sums.
+
+For ``M`` models of at most ``n`` parameters and a lag capacity ``cap`` (``n_lags + 1``,
+or growing by doubling when all lags are kept):
+
+* **History**, newest first: ``x`` (column-scaled regressors) and ``v`` (residuals of
+  Eqs. 16-17) of the last ``min(k, cap)`` samples, and while a model waits for
+  initialization ``y = (x, z)`` with the outputs. :meth:`LagStorage.window` of a buffer is
+  ``[:, 0]`` = sample ``k``, ``[:, i]`` = sample ``k - i``. Each sample is written once, in
+  front of the window, which stays contiguous, so one outer product updates every lag of
+  Eq. 21. When a sample lands on slot 0 the window is copied back to the end of the buffer
+  (every ``3 cap`` samples; the buffer holds ``4 cap``). With all lags the buffer is exactly
+  the capacity, and it grows when a sample fills it, so that a free slot is always in front
+  of the window.
+* **Eq. 17 as sums**: ``lag_sums[m, i] = n_k R_k(i) = sum_j w_j v_j v_(j-i)``, so that one
+  multiply-add per sample updates it; ``R_k(i) = lag_sums[:, i] / n_k``.
+* **Eq. 21, one-sided**: ``lag_products[m, a, i, b] = Lambda+_k(i)[a, b]`` with
+  ``Lambda+_k(i) = f^2 Lambda+_(k-1)(i) + f^i x_k x_(k-i)'``; the two-sided
+  ``Lambda_k(i)`` is formed in :mod:`.covariance`. The lag axis sits between the matrix axes
+  so that each model's row ``a`` is one contiguous block.
+* **Lagged moments** for exact initialization (:mod:`.initialization`), weighted
+  ``w_j = f^(k-j)``: the products of ``y = (x, z)``, ``products_y[m, a, i, b] = sum_j w_j
+  y_j[a] y_(j-i)[b]``, kept only while a model waits. Their blocks are named views:
+  ``moment_xx`` (``x x'``), ``moment_xz`` (``x_j z_(j-i)``) and ``moment_zy``
+  (``z_j y_(j-i)``).
+
+**While a model waits and f = 1**, the weights of Eq. 21 and of the moments coincide, so
+``lag_products`` is the ``x`` block of ``products_y`` and one outer product of ``y`` per
+sample updates both (a separate product of ``x`` plus the moments costs the six-model T-2
+replay about 20%). When every model is initialized (:meth:`LagStorage.all_initialized`),
+``lag_products`` moves to an array of its own and the moments are dropped.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["LagStorage", "GROWTH_START"]
+
+GROWTH_START = 64  # initial lag capacity when all lags are kept (n_lags=None)
+
+_HISTORY = ("x", "y", "v")
+
+
+class LagStorage:
+    """The history buffers and lag-indexed sums of ``m`` models (see the module docstring)."""
+
+    def __init__(self, m: int, n: int, cap: int, *, all_lags: bool, forgetting: float, waiting: bool) -> None:
+        self.m, self.n = m, n
+        self.all_lags = all_lags
+        self.forgetting = forgetting
+        self.waiting = waiting
+        self.allocate(cap)
+
+    def allocate(self, cap: int) -> None:
+        """Fresh zero arrays for a lag capacity ``cap`` (an empty history)."""
+        m, n = self.m, self.n
+        n1 = n + 1
+        self.cap = cap
+        # lag_products is the x block of products_y (while a model waits, f = 1)
+        self.merged = self.waiting and self.forgetting == 1.0
+        length = cap if self.all_lags else 4 * cap
+        self.x = np.zeros((m, length, n))
+        self.y = np.zeros((m, length, n1))
+        self.v = np.zeros((m, length))
+        self.ptr = length  # the window is [ptr, ptr + w)
+        self.lag_sums = np.zeros((m, cap))
+        self.sums_scratch = np.zeros((m, cap))
+        self.lag_powers = self.forgetting ** np.arange(cap, dtype=float)  # f^i of Eq. 21
+        self.products_y = self.products_y_scratch = None
+        self.moment_xx = self.moment_xz = self.moment_zy = None
+        if self.waiting:
+            self.products_y = np.zeros((m, n1, cap, n1))
+            self.products_y_scratch = np.zeros((m, n1, cap * n1))
+            self.moment_xx = self.products_y[:, :n, :, :n]
+            self.moment_xz = self.products_y[:, :n, :, n]
+            self.moment_zy = self.products_y[:, n]
+        if self.merged:
+            self.lag_products = self.moment_xx
+            self.products_scratch = None
+        else:
+            self.lag_products = np.zeros((m, n, cap, n))
+            self.products_scratch = np.zeros((m, n, cap * n))
+        self.full = self._restricted(cap)
+        self.lag0 = self.lag_products[:, :, 0, :]  # Lambda+_k(0)
+
+    def _restricted(self, w: int) -> tuple:
+        m, n = self.m, self.n
+        if self.merged:
+            products = self.products_y[:, :, :w].reshape(m, n + 1, w * (n + 1))
+            scratch = self.products_y_scratch[:, :, : w * (n + 1)]
+            return self.lag_sums[:, :w], self.sums_scratch[:, :w], products, scratch
+        products = self.lag_products[:, :, :w].reshape(m, n, w * n)
+        return self.lag_sums[:, :w], self.sums_scratch[:, :w], products, self.products_scratch[:, :, : w * n]
+
+    def by_lag(self, w: int) -> tuple:
+        """Views of the first ``w`` lags with the scratch their updates use: ``(lag_sums, .,
+        products, .)``, the products flattened to ``(M, rows, w cols)``: ``lag_products``, or
+        ``products_y`` when merged."""
+        return self.full if w == self.cap else self._restricted(w)
+
+    def products_y_by_lag(self, w: int) -> tuple:
+        """``products_y`` of the first ``w`` lags as ``(M, n+1, w (n+1))`` and its scratch."""
+        m, n1 = self.m, self.n + 1
+        return self.products_y[:, :, :w].reshape(m, n1, w * n1), self.products_y_scratch[:, :, : w * n1]
+
+    def all_initialized(self) -> None:
+        """Every model is initialized: ``lag_products`` gets an array of its own and the
+        moments are dropped."""
+        if not self.waiting:
+            return
+        if self.merged:
+            self.x[...] = self.y[:, :, : self.n]  # the x history was kept in y
+            lag_products = np.ascontiguousarray(self.lag_products)
+        else:
+            lag_products = self.lag_products
+        self.waiting = False
+        lag_sums, history = self.lag_sums, (self.x, self.y, self.v)
+        ptr = self.ptr
+        self.allocate(self.cap)
+        self.lag_sums, self.lag_products = lag_sums, lag_products
+        self.x, self.y, self.v = history
+        self.ptr = ptr
+        self.full = self._restricted(self.cap)
+        self.lag0 = self.lag_products[:, :, 0, :]
+
+    def window(self, buf: np.ndarray, w: int) -> np.ndarray:
+        """The last ``w`` entries of a history buffer, newest first (a view)."""
+        return buf[:, self.ptr : self.ptr + w]
+
+    def relocate(self, w: int) -> None:
+        """Move the history window from the buffer's front back to its end (called when the
+        newest sample was written at slot 0)."""
+        length = self.v.shape[1]
+        for buf in (self.y, self.v) if self.merged else (self.x, self.y, self.v):
+            buf[:, length - w :] = buf[:, :w]
+        self.ptr = length - w
+
+    def grow(self, w: int) -> None:
+        """Double the lag capacity (all lags), keeping the ``w`` samples and lags held."""
+        old = {name: getattr(self, name) for name in _HISTORY + ("lag_sums", "lag_products", "products_y")}
+        old_ptr, old_cap = self.ptr, self.cap
+        self.allocate(2 * old_cap)
+        self.ptr -= w
+        for name in _HISTORY:
+            getattr(self, name)[:, self.ptr :] = old[name][:, old_ptr : old_ptr + w]
+        self.lag_sums[:, :old_cap] = old["lag_sums"]
+        if old["products_y"] is not None:
+            self.products_y[:, :, :old_cap] = old["products_y"]
+        if not self.merged:
+            self.lag_products[:, :, :old_cap] = old["lag_products"]
+
+    # ------------------------------------------------------------------ state
+    def arrays(self, w: int) -> dict:
+        """Copies of the history windows (newest first) and the lag-indexed sums (the moments
+        only while a model waits)."""
+        out = {name: self.window(getattr(self, name), w).copy() for name in _HISTORY}
+        out["lag_sums"] = self.lag_sums.copy()
+        out["lag_products"] = self.lag_products.copy()  # (a contiguous copy, also of the view)
+        if self.waiting:
+            out["products_y"] = self.products_y.copy()
+        return out
+
+    def load(self, arrays: dict, w: int) -> None:
+        """Inverse of :meth:`arrays` (on freshly allocated storage of the same capacity)."""
+        self.ptr -= w
+        for name in _HISTORY:
+            assign_checked(self.window(getattr(self, name), w), arrays[name], name)
+        assign_checked(self.lag_sums, arrays["lag_sums"], "lag_sums")
+        if self.waiting:
+            assign_checked(self.products_y, arrays["products_y"], "products_y")
+        if not self.merged:
+            assign_checked(self.lag_products, arrays["lag_products"], "lag_products")
+
+
+def assign_checked(target: np.ndarray, value, name: str) -> None:
+    """``target[...] = value`` for a state field, refusing another shape by name."""
+    value = np.asarray(value)
+    if value.shape != target.shape:
+        raise ValueError(f"estimator state field {name!r} has shape {value.shape}, expected {target.shape}")
+    target[...] = value

@@ -1,0 +1,68 @@
+"""The estimator's choices, defined once, and their validation.
+
+Configuration, ROS parameters and the command line read the choices from here; the fast
+bank (:mod:`.bank`) and the executable specification (:mod:`.reference`) validate their
+arguments with the same function, so both accept exactly the same options.
+"""
+
+from __future__ import annotations
+
+from typing import Literal, Sequence, get_args
+
+import numpy as np
+
+__all__ = [
+    "Window",
+    "Residual",
+    "CovarianceKind",
+    "WINDOWS",
+    "RESIDUALS",
+    "COVARIANCE_KINDS",
+    "check_window",
+    "check_kind",
+    "check_options",
+    "prior_diagonal",
+]
+
+Window = Literal["truncated", "bartlett"]
+Residual = Literal["standardized", "a_posteriori", "a_priori"]
+CovarianceKind = Literal["corrected", "conventional"]
+WINDOWS: tuple[Window, ...] = get_args(Window)
+RESIDUALS: tuple[Residual, ...] = get_args(Residual)
+COVARIANCE_KINDS: tuple[CovarianceKind, ...] = get_args(CovarianceKind)
+
+
+def check_window(window: str) -> None:
+    if window not in WINDOWS:
+        raise ValueError(f"window must be one of {WINDOWS}, got {window!r}")
+
+
+def check_kind(kind: str) -> None:
+    if kind not in COVARIANCE_KINDS:
+        raise ValueError(f"kind must be one of {COVARIANCE_KINDS}, got {kind!r}")
+
+
+def check_options(
+    n_lags: int | None, window: str, forgetting: float, residual: str, init_condition: float
+) -> None:
+    """Refuse an invalid configuration with a message that names the option."""
+    if n_lags is not None and (isinstance(n_lags, bool) or int(n_lags) != n_lags or n_lags < 0):
+        raise ValueError(f"n_lags must be None or an integer >= 0, got {n_lags!r}")
+    check_window(window)
+    if not (0.0 < float(forgetting) <= 1.0):
+        raise ValueError(f"forgetting must be in (0, 1], got {forgetting!r}")
+    if residual not in RESIDUALS:
+        raise ValueError(f"residual must be one of {RESIDUALS}, got {residual!r}")
+    if not float(init_condition) > 1.0:
+        raise ValueError(f"init_condition must be > 1, got {init_condition!r}")
+
+
+def prior_diagonal(p0: float | Sequence[float], n: int) -> np.ndarray:
+    """The diagonal of the prior dispersion ``D_0 = diag(p0)`` for ``n`` parameters."""
+    p = np.asarray(p0, dtype=float)
+    p = np.full(n, float(p)) if p.ndim == 0 else p.reshape(-1)
+    if p.shape != (n,):
+        raise ValueError(f"p0 must be a scalar or have {n} entries, got {p.shape}")
+    if not np.all(np.isfinite(p)) or np.any(p <= 0):
+        raise ValueError(f"p0 must be positive and finite, got {p0!r}")
+    return p

@@ -1,0 +1,232 @@
+"""Eqs. 6-22 of Grauer & Morelli (2016), written as the paper writes them.
+
+This module is the executable specification of the estimator and the oracle of its tests,
+not the hot path: one statement per equation, in the paper's symbols (``D``, ``K``,
+``theta``, ``v``, ``R(i)``, ``Lambda(i)``), plain loops over samples and lags, no column
+scaling, no buffers. :class:`~.bank.EstimatorBank` must give the same numbers (to rounding)
+for every option; ``test/test_estimator_reference.py`` checks that, and checks this module
+against closed forms.
+
+What the paper leaves open is defined here, and the fast bank follows it:
+
+* **Forgetting** ``0 < f <= 1`` (``f = 1`` is the paper). At sample ``k`` sample ``j`` has
+  weight ``w_j = f^(k-j)`` and the sample count is ``n_k = sum_j w_j = f n_(k-1) + 1``.
+  Least squares is weighted by ``W = diag(w)``: ``D_k = (X'WX)^-1``. Eq. 15 then reads
+  ``K_k = D_(k-1) x_k / (f + x_k' D_(k-1) x_k)``, ``D_k = (I - K_k x_k') D_(k-1) / f``.
+  Eq. 17 becomes ``R_k(i) = (f n_(k-1)/n_k) R_(k-1)(i) + v_k v_(k-i) / n_k``, i.e.
+  ``R_k(i) = sum_j w_j v_j v_(j-i) / n_k``. The covariance is the sandwich
+  ``D X'W E[vv'] W X D`` of Eq. 8, so the lag products carry both weights:
+  ``Lambda_k(i) = f^2 Lambda_(k-1)(i) + f^i (x_k x_(k-i)' + x_(k-i) x_k')`` (Eq. 21), and
+  the conventional covariance is ``R_k(0) D_k Lambda_k(0) D_k``, which is Eq. 13 when
+  ``f = 1``.
+* **Residual** of Eqs. 16-17, from the a priori innovation ``e_k = z_k - x_k' theta_(k-1)``
+  and ``d_k = f + x_k' D_(k-1) x_k``: ``"a_priori"`` is ``e_k``; ``"a_posteriori"`` is
+  ``z_k - x_k' theta_k`` (Eq. 7 at sample ``k``, equal to ``e_k f / d_k``);
+  ``"standardized"`` (the default) is ``e_k sqrt(f / d_k)``, whose square is the product of
+  the other two. With it Eq. 16 is exact: ``n_k R_k(0)`` is the weighted residual sum of
+  squares of the batch fit of samples ``1..k`` (Brown, Durbin & Evans 1975), so ``R_k(0)``
+  is Eq. 14 at every sample.
+* **Exact initialization** (``p0=None``). A model accumulates the normal equations
+  ``A_k = X'WX``, ``b_k = X'Wz`` until ``A_k`` is well conditioned after column scaling:
+  ``k >= n``, a positive diagonal, and ``cond(S^-1 A_k S^-1) < init_condition`` with
+  ``S = diag(sqrt(diag(A_k)))``. At that sample ``k0`` it takes the batch solution (Eq. 6),
+  defines the residuals of samples ``1..k0`` with it (Eq. 7) and their autocorrelation with
+  Eq. 10 (weighted as above), and continues with Eqs. 15-17. ``Lambda_k(i)`` does not depend
+  on the estimate and is accumulated from sample 1. With a prior ``p0`` instead, ``D_0 =
+  diag(p0)``, ``theta_0 = 0`` and Eqs. 15-17 run from sample 1.
+* **Lag window** ``c_i`` (:func:`.lag_window.lag_weights`): Eq. 20 keeps all lags
+  ``i < k``, Eq. 22 lags ``i <= n_tau``; ``bartlett`` weights them by ``1 - i/(n_tau+1)``
+  (``n_tau = k - 1`` with all lags).
+* **Published covariance.** A corrected covariance with a negative diagonal entry is
+  replaced by the nearest positive semi-definite matrix (:func:`.covariance.nearest_psd`),
+  unless the model fits exactly (``R_k(0) <= 1e-12`` times the mean square of the model
+  output ``x_j' theta_k``, weighted as ``Lambda_k(0)``), when it is zero. Standard errors
+  are the square roots of the published diagonal. (In a bank, the exact fits are looked for
+  when any of its models has a negative corrected variance.)
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..errors import EstimatorNotReady
+from .covariance import EXACT_FIT, nearest_psd
+from .lag_window import lag_weights
+from .options import check_kind, check_options, check_window, prior_diagonal
+
+__all__ = ["batch_reference", "RecursiveReference"]
+
+
+def batch_reference(
+    X: np.ndarray,
+    z: np.ndarray,
+    n_lags: int | None = None,
+    window: str = "truncated",
+    *,
+    forgetting: float = 1.0,
+    residuals: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Eqs. 6-14 with the paper's matrices: ``(theta, cov_conventional, cov_corrected)``.
+
+    ``residuals`` replaces Eq. 7 (for instance the residual history of a recursive
+    estimator). Weighted by ``W = diag(f^(N-j))`` when ``forgetting < 1``.
+    """
+    X = np.asarray(X, dtype=float)
+    z = np.asarray(z, dtype=float)
+    check_window(window)
+    N = len(z)
+    f = forgetting
+    W = np.diag([f ** (N - j) for j in range(1, N + 1)])
+    D = np.linalg.inv(X.T @ W @ X)  # Eq. 6: dispersion matrix
+    theta = D @ X.T @ W @ z  # Eq. 6
+    v = z - X @ theta if residuals is None else np.asarray(residuals, dtype=float)  # Eq. 7
+    n_N = np.trace(W)  # N when f = 1
+    R = np.zeros(N)
+    for i in range(N):
+        R[i] = sum(W[i + j, i + j] * v[i + j] * v[j] for j in range(N - i)) / n_N  # Eq. 10
+    n_tau = N - 1 if n_lags is None else int(n_lags)
+    c = lag_weights(n_tau, window, N)
+    E = np.array([[c[abs(a - b)] * R[abs(a - b)] for b in range(N)] for a in range(N)])  # Eq. 9 (22)
+    cov_corrected = D @ X.T @ W @ E @ W @ X @ D  # Eq. 8
+    sigma2 = R[0]  # Eq. 14
+    if f == 1.0:
+        cov_conventional = sigma2 * D  # Eq. 13
+    else:
+        cov_conventional = D @ X.T @ W @ (sigma2 * np.eye(N)) @ W @ X @ D  # Eq. 8 with Eq. 12
+    return theta, cov_conventional, cov_corrected
+
+
+class RecursiveReference:
+    """Eqs. 15-22 for one model, literally (see the module docstring for the options).
+
+    ``RecursiveReference(n, n_lags=None, window="truncated", forgetting=1.0, *,
+    residual="standardized", p0=None, init_condition=1e8)``, the arguments of
+    :class:`~.bank.EstimatorBank` for one model of ``n`` parameters.
+    """
+
+    def __init__(
+        self,
+        n: int,
+        n_lags: int | None = None,
+        window: str = "truncated",
+        forgetting: float = 1.0,
+        *,
+        residual: str = "standardized",
+        p0=None,
+        init_condition: float = 1e8,
+    ) -> None:
+        check_options(n_lags, window, forgetting, residual, init_condition)
+        self.n, self.n_lags, self.window = n, n_lags, window
+        self.f, self.residual, self.init_condition = float(forgetting), residual, float(init_condition)
+        self.k = 0
+        self.n_k = 0.0  # sum_j f^(k-j)
+        self.x: list[np.ndarray] = []  # x_1, x_2, ... (x[j-1] is x_j)
+        self.z: list[float] = []
+        self.v: list[float] = []  # residuals v_1..v_k once initialized
+        self.R: dict[int, float] = {}  # R_k(i)
+        self.Lam: dict[int, np.ndarray] = {}  # Lambda_k(i)
+        self.A = np.zeros((n, n))  # X'WX before initialization
+        self.b = np.zeros(n)  # X'Wz before initialization
+        self.ready = p0 is not None
+        self.ready_at = 0
+        if p0 is not None:
+            self.D = np.diag(prior_diagonal(p0, n))
+            self.theta = np.zeros(n)
+        else:
+            self.D = np.zeros((n, n))
+            self.theta = np.zeros(n)
+
+    def largest_lag(self) -> int:
+        """The largest lag held at sample ``k``: ``k - 1`` (Eq. 20) or ``min(k - 1, n_tau)``."""
+        return self.k - 1 if self.n_lags is None else min(self.k - 1, self.n_lags)
+
+    def update(self, x, z: float) -> None:
+        x = np.asarray(x, dtype=float)
+        z = float(z)
+        f = self.f
+        self.k += 1
+        k = self.k
+        self.x.append(x)
+        self.z.append(z)
+        n_prev, self.n_k = self.n_k, f * self.n_k + 1.0
+        for i in range(self.largest_lag() + 1):  # Eq. 21 (weighted)
+            if i == 0:
+                self.Lam[0] = f**2 * self.Lam.get(0, 0.0) + np.outer(x, x)
+            else:
+                x_lag = self.x[k - i - 1]  # x_(k-i)
+                self.Lam[i] = f**2 * self.Lam.get(i, 0.0) + f**i * (np.outer(x, x_lag) + np.outer(x_lag, x))
+        if not self.ready:
+            self.A = f * self.A + np.outer(x, x)
+            self.b = f * self.b + x * z
+            self._try_initialize()
+            return
+        D, theta = self.D, self.theta
+        d = f + x @ D @ x
+        K = D @ x / d  # Eq. 15a
+        e = z - x @ theta  # the a priori innovation of Eq. 15c
+        self.D = (np.eye(self.n) - np.outer(K, x)) @ D / f  # Eq. 15b
+        self.theta = theta + K * e  # Eq. 15c
+        if self.residual == "a_priori":
+            v = e
+        elif self.residual == "a_posteriori":
+            v = z - x @ self.theta  # Eq. 7 at sample k
+        else:
+            v = e * np.sqrt(f / d)  # standardized
+        self.v.append(v)
+        for i in range(self.largest_lag() + 1):
+            # Eq. 17 (Eq. 16 at i = 0), weighted: n_k R_k(i) = f n_(k-1) R_(k-1)(i) + v_k v_(k-i)
+            self.R[i] = (f * n_prev / self.n_k) * self.R.get(i, 0.0) + v * self.v[k - i - 1] / self.n_k
+
+    def _try_initialize(self) -> None:
+        """Exact initialization at this sample if ``A_k`` is well conditioned (Eqs. 6, 7, 10)."""
+        A = self.A
+        s = np.sqrt(np.diag(A))
+        if self.k < self.n or not np.all(s > 0):
+            return
+        if not np.linalg.cond(A / np.outer(s, s)) < self.init_condition:
+            return
+        self.D = np.linalg.inv(A)  # Eq. 6
+        self.theta = self.D @ self.b  # Eq. 6
+        k, f = self.k, self.f
+        self.v = [self.z[j] - self.x[j] @ self.theta for j in range(k)]  # Eq. 7, samples 1..k
+        for i in range(self.largest_lag() + 1):
+            # Eq. 10, weighted: R_k(i) = sum_j w_j v_j v_(j-i) / n_k
+            self.R[i] = sum(f ** (k - 1 - j) * self.v[j] * self.v[j - i] for j in range(i, k)) / self.n_k
+        self.ready, self.ready_at = True, k
+
+    # ------------------------------------------------------------------ results
+    def _require(self) -> None:
+        if not self.ready:
+            raise EstimatorNotReady(f"not initialized after {self.k} samples")
+
+    def weights(self) -> np.ndarray:
+        """Lag window ``c_i`` for the lags held (Eqs. 20, 22)."""
+        held = self.largest_lag() + 1
+        return lag_weights(self.k - 1 if self.n_lags is None else self.n_lags, self.window, held)
+
+    def covariance(self, kind: str = "corrected") -> np.ndarray:
+        """Eq. 20 / 22 (``corrected``) or Eq. 13 with Eq. 16 (``conventional``), unrepaired."""
+        check_kind(kind)
+        self._require()
+        D, R, Lam = self.D, self.R, self.Lam
+        if kind == "conventional":
+            if self.f == 1.0:
+                return R[0] * D  # Eq. 13 with sigma^2 = R_k(0) (Eq. 16)
+            return R[0] * D @ Lam[0] @ D
+        c = self.weights()
+        middle = sum(c[i] * R[i] * Lam[i] for i in range(len(c)))  # Eq. 20 / 22
+        return D @ middle @ D  # Eq. 20 / 22
+
+    def published_covariance(self, kind: str = "corrected") -> np.ndarray:
+        """The covariance the estimator publishes: repaired where a diagonal is negative."""
+        cov = self.covariance(kind)
+        if kind == "corrected" and np.any(np.diag(cov) < 0.0):
+            output_square = self.theta @ self.Lam[0] @ self.theta  # sum_j f^(2(k-j)) (x_j' theta)^2
+            n_square = sum(self.f ** (2 * (self.k - j)) for j in range(1, self.k + 1))
+            if self.R[0] <= EXACT_FIT * output_square / n_square:
+                return np.zeros_like(cov)  # an exact fit: rounding, not indefiniteness
+            return nearest_psd(cov)
+        return cov
+
+    def standard_errors(self, kind: str = "corrected") -> np.ndarray:
+        return np.sqrt(np.maximum(np.diag(self.published_covariance(kind)), 0.0))

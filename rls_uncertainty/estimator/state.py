@@ -1,0 +1,67 @@
+"""The complete state of a bank as plain data, and back (``state()`` / ``from_state()``).
+
+A state is ``{"format", "config", "counters", "arrays"}``: the constructor arguments, the
+sample counters and numpy arrays, nothing else (no pickle), so that it can be written to an
+``.npz`` file. Restoring it and continuing gives bit-identically the same numbers as the
+bank it was taken from. A state of another :data:`STATE_FORMAT` is refused by name.
+"""
+
+from __future__ import annotations
+
+from .lag_storage import assign_checked
+
+__all__ = ["STATE_FORMAT", "capture", "restore"]
+
+# 2: lagged moments as one array of y = (x, z) products; 3: Eq. 17 as sums, history windows
+# only; 4: the package layout (lag_storage): Lambda+ of x alone once every model is
+# initialized, the y products only while one waits, residuals with their sign, D and theta
+# as separate arrays.
+STATE_FORMAT = 4
+
+_BANK_ARRAYS = ("_inv_s", "_ready", "_ready_at", "repairs")
+
+
+def capture(bank) -> dict:
+    """A deep copy of the complete state of ``bank``."""
+    config = {
+        "sizes": list(bank.sizes),
+        "n_lags": bank.n_lags,
+        "window": bank.window,
+        "forgetting": bank.forgetting,
+        "residual": bank.residual,
+        "init_condition": bank.init_condition,
+    }
+    counters = {"k": bank.k, "n_eff": bank.n_eff, "cap": bank._lags.cap}
+    n = bank.n_max
+    arrays = {"dispersion": bank._aug[:, :n].copy(), "theta": bank._aug[:, n].copy()}
+    arrays.update({name.lstrip("_"): getattr(bank, name).copy() for name in _BANK_ARRAYS})
+    arrays.update(bank._lags.arrays(bank.n_window))
+    return {"format": STATE_FORMAT, "config": config, "counters": counters, "arrays": arrays}
+
+
+def check_format(state: dict) -> None:
+    if state.get("format") != STATE_FORMAT:
+        raise ValueError(
+            f"unknown estimator state format {state.get('format')!r} "
+            f"(this version reads format {STATE_FORMAT})"
+        )
+
+
+def restore(bank, state: dict) -> None:
+    """Load ``state`` into ``bank`` (built with the same configuration), in place."""
+    check_format(state)
+    c = state["counters"]
+    arrays = state["arrays"]
+    bank.k, bank.n_eff = int(c["k"]), float(c["n_eff"])
+    for name in _BANK_ARRAYS:
+        assign_checked(getattr(bank, name), arrays[name.lstrip("_")], name.lstrip("_"))
+    n = bank.n_max
+    assign_checked(bank._aug[:, :n], arrays["dispersion"], "dispersion")
+    assign_checked(bank._aug[:, n], arrays["theta"], "theta")
+    lags = bank._lags
+    lags.waiting = not bool(bank._ready.all())
+    lags.allocate(int(c["cap"]))
+    lags.load(arrays, bank.n_window)
+    if lags.ptr == 0:  # a full buffer (all lags): the next sample needs a free slot
+        lags.grow(bank.n_window)
+    bank._readiness_changed()

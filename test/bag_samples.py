@@ -1,0 +1,99 @@
+"""Small bags and mapping files for the bag-tool tests, the CLI's one-line-error check and a
+directory snapshot."""
+
+import os
+from pathlib import Path
+
+import yaml
+
+from rls_uncertainty import cli
+from rls_uncertainty.bags import _standard_message, typestore
+
+
+def read_all(path):
+    from rosbags.highlevel import AnyReader
+
+    out = {}
+    with AnyReader([Path(path)], default_typestore=typestore()) as reader:
+        for conn, t, raw in reader.messages():
+            out.setdefault(conn.topic, []).append((t, reader.deserialize(raw, conn.msgtype)))
+    return out
+
+
+def fti_bag(tmp_path, name, *, imu_stamps_ns=None, n=50, empty=False):
+    """A small recording with fti_msgs types, optionally with bad IMU stamps."""
+    store = typestore()
+    T = store.types
+    records = []
+    stamps = imu_stamps_ns if imu_stamps_ns is not None else [10**18 + k * 20 * 10**6 for k in range(n)]
+    for k, s in enumerate(stamps):
+        records.append((s, "/fcc/imu", "sensor_msgs/msg/Imu",
+                        _standard_message(store, "imu", s, (0.0, 0.01 * k, 0.0, 0.0, 0.0, 9.8))))
+        hdr = _standard_message(store, "airspeed", s, (1.0, 0.0, 0.0)).header
+        records.append((s, "/fcc/air_data", "fti_msgs/msg/AirData", T["fti_msgs/msg/AirData"](
+            header=hdr, true_airspeed=50.0, angle_of_attack=0.05, angle_of_sideslip=0.0,
+            dynamic_pressure=1500.0, air_density=1.2, mach=0.15)))
+    path = tmp_path / name
+    if empty:
+        from rosbags.rosbag2 import StoragePlugin, Writer
+
+        with Writer(path, version=9, storage_plugin=StoragePlugin.MCAP) as w:
+            w.add_connection("/fcc/imu", "sensor_msgs/msg/Imu", typestore=store)
+            w.add_connection("/fcc/air_data", "fti_msgs/msg/AirData", typestore=store)
+        return path
+    # Like a recorder: log time is the arrival order, header stamps are what the sensor said.
+    from rosbags.rosbag2 import StoragePlugin, Writer
+
+    with Writer(path, version=9, storage_plugin=StoragePlugin.MCAP) as w:
+        conns = {}
+        for k, (_stamp, topic, msgtype, msg) in enumerate(records):
+            if topic not in conns:
+                conns[topic] = w.add_connection(topic, msgtype, typestore=store)
+            w.write(conns[topic], 10**18 + k * 10**6, store.serialize_cdr(msg, msgtype))
+    return path
+
+
+SMALL_MAPPING = {
+    "imu": {"topic": "/fcc/imu"},
+    "airspeed": {"topic": "/fcc/air_data", "frame": "aircraft",
+                 "polar": {"speed": "true_airspeed", "alpha": "angle_of_attack", "beta": "angle_of_sideslip"}},
+}
+
+
+def write_mapping(tmp_path, spec=None):
+    path = tmp_path / "mapping.yaml"
+    path.write_text(yaml.safe_dump(spec or SMALL_MAPPING))
+    return path
+
+
+def fails(capsys, args, *needles):
+    """Run the command: it must end with exit status 2 and one line on stderr, the command's
+    own error line (no traceback, no usage text), containing every needle."""
+    try:
+        code = cli.main(args)
+    except SystemExit as exc:  # argparse's usage errors
+        code = exc.code
+    captured = capsys.readouterr()
+    lines = captured.err.splitlines()
+    assert code == 2, captured
+    assert len(lines) == 1 and lines[0].startswith(f"rls-uncertainty {args[0]}: error: "), captured.err
+    for needle in needles:
+        assert needle in lines[0], lines[0]
+    return lines[0]
+
+
+def tree(root: Path) -> dict:
+    """Every entry under ``root``, not following symlinks: relative path -> file bytes,
+    ``"dir"`` or ``("link", target)``; compares a directory before and after a command."""
+    out = {}
+    for dirpath, dirnames, filenames in os.walk(root):
+        for name in dirnames + filenames:
+            p = Path(dirpath) / name
+            rel = str(p.relative_to(root))
+            if p.is_symlink():
+                out[rel] = ("link", os.readlink(p))
+            elif p.is_dir():
+                out[rel] = "dir"
+            else:
+                out[rel] = p.read_bytes()
+    return out

@@ -1,0 +1,312 @@
+"""The `rls-uncertainty` command line (rls_uncertainty/cli.py): subcommands, outputs, and
+every bad input ending in a one-line error with exit status 2 (programming errors keep
+their traceback). No DDS."""
+
+import csv
+import math
+import os
+import shutil
+from pathlib import Path
+
+import pytest
+from bag_samples import fails, fti_bag, tree, write_mapping
+
+from rls_uncertainty import cli
+from rls_uncertainty.errors import ConfigError
+
+ROOT = Path(__file__).resolve().parents[1]
+BUNDLED = ROOT / "bags" / "t2_maneuver"
+
+
+def test_multisine_command_writes_an_orthogonal_input_table(tmp_path, capsys):
+    out = tmp_path / "inputs.csv"
+    assert cli.main(["multisine", "--period", "12", "--band", "0.2", "2", "--inputs", "3",
+                     "--names", "elevator", "aileron", "rudder", "--out", str(out)]) == 0
+    with open(out) as fh:
+        rows = list(csv.DictReader(fh))
+    by_input = {}
+    for r in rows:
+        by_input.setdefault(r["input"], set()).add(int(r["harmonic"]))
+        assert 0.2 - 1e-9 <= float(r["frequency_hz"]) <= 2.0 + 1e-9
+    assert set(by_input) == {"elevator", "aileron", "rudder"}
+    a, b, c = by_input.values()
+    assert not (a & b) and not (a & c) and not (b & c)  # interleaved harmonics: orthogonal inputs
+    assert "relative peak factor" in capsys.readouterr().out
+
+
+# ------------------------------------------------------------------ output directories
+def _setup(command, tmp_path):
+    """The command's arguments without --out, and the directory holding its inputs."""
+    inputs = tmp_path / "inputs"
+    inputs.mkdir()
+    if command == "make-bag":
+        return ["make-bag", "--noise", "5"], inputs
+    if command == "convert":
+        src = fti_bag(inputs, "rec")
+        return ["convert", str(src), "--mapping", str(write_mapping(inputs))], inputs
+    bag = inputs / "t2_maneuver"
+    shutil.copytree(BUNDLED, bag)
+    return ["replay", str(bag), "--config", "t2", "--models", "CZ", "--no-plots", "--quiet"], inputs
+
+
+def _expected_outputs(command, out):
+    if command == "replay":
+        return {"estimates.csv", "estimates_wide.csv", "estimates.mcap"}
+    return {f"{out.name}.mcap", "metadata.yaml"}
+
+
+@pytest.mark.parametrize("command", ["make-bag", "convert", "replay"])
+def test_a_non_empty_output_is_refused_and_replaced_with_force(tmp_path, capsys, command):
+    args, _inputs = _setup(command, tmp_path)
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "notes.txt").write_bytes(b"someone's notes")
+    before = tree(tmp_path)
+    fails(capsys, [*args, "--out", str(out)], str(out), "not empty", "--force")
+    assert tree(tmp_path) == before
+    assert cli.main([*args, "--out", str(out), "--force"]) == 0
+    assert {p.name for p in out.iterdir()} == _expected_outputs(command, out)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["inputs", "out"]  # no temporary left
+
+
+@pytest.mark.parametrize("command", ["convert", "replay"])
+@pytest.mark.parametrize("force", [[], ["--force"]])
+def test_the_input_bag_is_never_the_output(tmp_path, capsys, command, force):
+    args, inputs = _setup(command, tmp_path)
+    bag = Path(args[1])
+    (inputs / "sub").mkdir()
+    before = tree(tmp_path)
+    for out in (bag, inputs / "sub" / "..", bag / "estimates", inputs):
+        fails(capsys, [*args, "--out", str(out), *force], "input")
+        assert tree(tmp_path) == before
+
+
+def test_the_mapping_and_parameter_files_are_inputs_too(tmp_path, capsys):
+    args, _inputs = _setup("convert", tmp_path)
+    out = tmp_path / "out"
+    out.mkdir()
+    mapping = out / "mapping.yaml"
+    mapping.write_bytes(Path(args[3]).read_bytes())
+    args[3] = str(mapping)
+    before = tree(tmp_path)
+    fails(capsys, [*args, "--out", str(out), "--force"], "mapping.yaml")
+    assert tree(tmp_path) == before
+    config = out / "t2.yaml"
+    config.write_bytes((ROOT / "config" / "t2.yaml").read_bytes())
+    before = tree(tmp_path)
+    fails(capsys, ["replay", str(BUNDLED), "--config", str(config), "--out", str(out), "--force", "--quiet"],
+          "t2.yaml")
+    assert tree(tmp_path) == before
+
+
+@pytest.mark.parametrize("command", ["make-bag", "convert", "replay"])
+def test_dir_sub_dotdot_is_the_directory_itself(tmp_path, capsys, command):
+    args, inputs = _setup(command, tmp_path)
+    (inputs / "sub").mkdir()
+    before = tree(tmp_path)
+    fails(capsys, [*args, "--out", str(inputs / "sub" / "..")], "inputs/sub/..")
+    assert tree(tmp_path) == before
+
+
+@pytest.mark.parametrize("command", ["make-bag", "convert", "replay"])
+@pytest.mark.parametrize("force", [[], ["--force"]])
+def test_an_existing_file_as_output_is_refused_and_nothing_is_left_behind(tmp_path, capsys, command, force):
+    args, _inputs = _setup(command, tmp_path)
+    (tmp_path / "out").write_bytes(b"a file")
+    before = tree(tmp_path)
+    fails(capsys, [*args, "--out", str(tmp_path / "out"), *force], "not a directory")
+    assert tree(tmp_path) == before  # in particular no out.partial or .out.*.partial
+
+
+def test_a_file_system_error_is_one_line_too(tmp_path, capsys):
+    (tmp_path / "file").write_bytes(b"a file")
+    fails(capsys, ["replay", str(BUNDLED), "--out", str(tmp_path / "file" / "out"), "--quiet"], "file")
+    assert (tmp_path / "file").read_bytes() == b"a file"
+
+
+def test_multisine_never_overwrites_a_file_without_force(tmp_path, capsys):
+    out = tmp_path / "inputs.csv"
+    out.write_bytes(b"a flight-test card")
+    args = ["multisine", "--period", "12", "--band", "0.2", "2", "--inputs", "2", "--out", str(out)]
+    fails(capsys, args, str(out), "--force")
+    assert out.read_bytes() == b"a flight-test card"
+    fails(capsys, [*args[:-1], str(tmp_path)], "is a directory")
+    assert cli.main([*args, "--force"]) == 0
+    assert out.read_text().startswith("input,harmonic,frequency_hz,relative_amplitude,phase_rad\n")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["inputs.csv"]
+
+
+def test_montecarlo_refuses_a_non_empty_output_before_running(tmp_path, capsys):
+    (tmp_path / "table3.csv").write_bytes(b"last week's table")
+    fails(capsys, ["montecarlo", "--runs", "2", "--levels", "5", "--out", str(tmp_path), "--jobs", "1"],
+          "not empty", "--force")
+    assert [p.name for p in tmp_path.iterdir()] == ["table3.csv"]
+    assert (tmp_path / "table3.csv").read_bytes() == b"last week's table"
+
+
+# ------------------------------------------------------------------ bad arguments
+BAD_ARGUMENTS = [
+    (["simulate", "--noise", "-5"], "--noise"),
+    (["simulate", "--noise", "nan"], "--noise"),
+    (["simulate", "--seed", "-1"], "--seed"),
+    (["simulate", "--forgetting", "0"], "--forgetting"),
+    (["simulate", "--forgetting", "1.5"], "--forgetting"),
+    (["simulate", "--lags", "abc"], "--lags"),
+    (["montecarlo", "--out", "{tmp}/mc", "--runs", "0"], "--runs"),
+    (["montecarlo", "--out", "{tmp}/mc", "--levels", "-5"], "--levels"),
+    (["montecarlo", "--out", "{tmp}/mc", "--lags", "-3"], "--lags"),
+    (["montecarlo", "--out", "{tmp}/mc", "--jobs", "0"], "--jobs"),
+    (["multisine", "--period", "nan", "--band", "0.2", "2", "--inputs", "3", "--out", "{tmp}/ms.csv"], "--period"),
+    (["multisine", "--period", "12", "--band", "2", "0.2", "--inputs", "3", "--out", "{tmp}/ms.csv"], "band"),
+    (["multisine", "--period", "12", "--band", "0.2", "2", "--inputs", "0", "--out", "{tmp}/ms.csv"], "--inputs"),
+    (["multisine", "--period", "12", "--band", "0.2", "2", "--inputs", "3", "--amplitude", "inf",
+      "--out", "{tmp}/ms.csv"], "--amplitude"),
+    (["multisine", "--period", "2", "--band", "0.5", "1", "--inputs", "3", "--out", "{tmp}/ms.csv"], "harmonics"),
+    (["make-bag", "--out", "{tmp}/bag", "--noise", "nan"], "--noise"),
+    (["make-bag", "--out", "{tmp}/bag", "--seed", "-1"], "--seed"),
+    (["replay", "{bag}", "--out", "{tmp}/r", "--quiet", "--start", "inf"], "--start"),
+    (["replay", "{bag}", "--out", "{tmp}/r", "--quiet", "--start", "nan"], "--start"),
+    (["replay", "{bag}", "--out", "{tmp}/r", "--quiet", "--start", "-1"], "--start"),
+    (["replay", "{bag}", "--out", "{tmp}/r", "--quiet", "--end", "nan"], "--end"),
+    (["replay", "{bag}", "--out", "{tmp}/r", "--quiet", "--start", "5", "--end", "2"],
+     "end (2 s) must be after start (5 s)"),
+    (["replay", "{bag}", "--out", "{tmp}/r", "--quiet", "--start", "3", "--end", "3"], "must be after start"),
+    (["replay", "{bag}", "--out", "{tmp}/r", "--quiet", "--start", "100"],
+     "from 100 s to the end (the bag holds 12.0 s)"),
+    (["replay", "{bag}", "--out", "{tmp}/r", "--quiet", "--lags", "abc"], "--lags"),
+    (["replay", "{bag}", "--out", "{tmp}/r", "--quiet", "--lags", "-5"], "estimator.lags"),
+    (["replay", "{bag}", "--out", "{tmp}/r", "--quiet", "--forgetting", "nan"], "estimator.forgetting"),
+    (["replay", "{bag}", "--out", "{tmp}/r", "--quiet", "--models", "XX"], "'XX'"),
+    (["replay", "{bag}", "--out", "{tmp}/r", "--quiet", "--config", "{tmp}/missing.yaml"], "missing.yaml"),
+    (["replay", "{tmp}/missing_bag", "--out", "{tmp}/r", "--quiet"], "no such bag"),
+    (["replay", "{bag}", "--quiet"], "--out"),
+    (["play", "{bag}", "--rate", "-1"], "--rate"),
+    (["play", "{bag}", "--rate", "nan"], "--rate"),
+    (["play", "{bag}", "--delay", "-1"], "--delay"),
+    (["play", "{bag}", "--wait", "-1"], "--wait"),
+    (["play", "{bag}", "--loop", "0"], "--loop"),
+    (["play", "{bag}", "--loop", "1.5"], "--loop"),
+    (["play", "{bag}", "--window", "0"], "--window"),
+    (["play", "{bag}", "--ack-timeout", "-1"], "--ack-timeout"),
+    (["play", "{bag}", "--ack-timeout", "nan"], "--ack-timeout"),
+    (["demo", "--rate", "inf"], "--rate"),
+    (["nonsense"], "nonsense"),
+]
+
+
+def _case_id(args):
+    return " ".join(a for a in args if "{" not in a and a not in ("--out", "--quiet"))
+
+
+@pytest.mark.parametrize("args,needle", BAD_ARGUMENTS, ids=[_case_id(a) for a, _ in BAD_ARGUMENTS])
+def test_a_bad_argument_is_one_line_with_exit_status_2_and_no_output(tmp_path, capsys, args, needle):
+    args = [a.format(tmp=tmp_path, bag=BUNDLED) for a in args]
+    if args[0] == "nonsense":
+        with pytest.raises(SystemExit) as exc:
+            cli.main(args)
+        err = capsys.readouterr().err
+        assert exc.value.code == 2 and len(err.splitlines()) == 1 and needle in err, err
+        return
+    fails(capsys, args, needle)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_bad_text_in_parameter_and_aircraft_files_is_one_line(tmp_path, capsys):
+    (tmp_path / "binary.yaml").write_bytes(b"\xff\xfe\x00")
+    fails(capsys, ["replay", str(BUNDLED), "--config", str(tmp_path / "binary.yaml"), "--out", str(tmp_path / "r"),
+                   "--quiet"], "binary.yaml", "not UTF-8")
+    (tmp_path / "air.yaml").write_text(
+        f"rls_estimator:\n  ros__parameters:\n    aircraft: {tmp_path / 'binary.yaml'}\n")
+    fails(capsys, ["replay", str(BUNDLED), "--config", str(tmp_path / "air.yaml"), "--out", str(tmp_path / "r"),
+                   "--quiet"], "aircraft", "binary.yaml", "not UTF-8")
+    (tmp_path / "broken.yaml").write_text("rls_estimator:\n  ros__parameters: [1\n")
+    fails(capsys, ["replay", str(BUNDLED), "--config", str(tmp_path / "broken.yaml"), "--out", str(tmp_path / "r"),
+                   "--quiet"], "broken.yaml", "not valid YAML")
+    assert not (tmp_path / "r").exists()
+
+
+def test_the_player_functions_refuse_bad_numbers_before_starting_dds():
+    from rls_uncertainty import player
+
+    for kwargs in ({"rate": math.nan}, {"rate": -1.0}, {"rate": math.inf}, {"start_delay": -0.5},
+                   {"wait_for_subscribers": -1}, {"wait_timeout": math.nan}, {"loops": 0}, {"loops": True},
+                   {"window": 0}, {"ack_timeout": -1.0}, {"ack_timeout": math.inf}):
+        with pytest.raises(ConfigError):
+            player.play(BUNDLED, **kwargs)
+    with pytest.raises(ConfigError, match="rate"):
+        player.demo(rate=math.nan)
+
+
+def test_play_leaves_dds_discovery_to_the_environment(monkeypatch):
+    """The product never pins ROS_AUTOMATIC_DISCOVERY_RANGE (a control room spans machines):
+    `play` starts DDS with the caller's environment, whatever it is."""
+    import rclpy
+
+    from rls_uncertainty import player
+
+    class Started(Exception):
+        pass
+
+    seen = []
+
+    def init(*_args, **_kwargs):
+        seen.append(os.environ.get("ROS_AUTOMATIC_DISCOVERY_RANGE", "<unset>"))
+        raise Started
+
+    monkeypatch.setattr(rclpy, "init", init)
+    monkeypatch.delenv("ROS_AUTOMATIC_DISCOVERY_RANGE", raising=False)
+    with pytest.raises(Started):
+        player.play(BUNDLED)
+    assert seen == ["<unset>"] and "ROS_AUTOMATIC_DISCOVERY_RANGE" not in os.environ
+    monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "SUBNET")
+    with pytest.raises(Started):
+        player.play(BUNDLED)
+    assert seen[-1] == "SUBNET"
+
+
+# ------------------------------------------------------------------ programming errors
+WORKERS = [
+    ("rls_uncertainty.replay.replay", ["replay", "{bag}", "--out", "{tmp}/r", "--quiet"]),
+    ("rls_uncertainty.bags.convert", ["convert", "{bag}", "--mapping", "m.yaml", "--out", "{tmp}/c"]),
+    ("rls_uncertainty.bags.write_t2_bag", ["make-bag", "--out", "{tmp}/b"]),
+    ("rls_uncertainty.multisine.design_multisines",
+     ["multisine", "--period", "12", "--band", "0.2", "2", "--inputs", "2", "--out", "{tmp}/m.csv"]),
+    ("rls_uncertainty.player.play", ["play", "{bag}"]),
+    ("rls_uncertainty.player.demo", ["demo"]),
+]
+
+
+@pytest.mark.parametrize("error", [KeyError, ValueError])
+@pytest.mark.parametrize("worker,args", WORKERS, ids=[w.rsplit(".", 1)[1] for w, _ in WORKERS])
+def test_a_programming_error_keeps_its_traceback(tmp_path, capsys, monkeypatch, worker, args, error):
+    """Only the package's errors and OSError become one-line messages: a KeyError (or a plain
+    ValueError, the built-in base of ConfigError) is a bug and propagates out of main."""
+
+    def bug(*_args, **_kwargs):
+        raise error("a bug")
+
+    monkeypatch.setattr(worker, bug)
+    with pytest.raises(error, match="a bug"):
+        cli.main([a.format(tmp=tmp_path, bag=BUNDLED) for a in args])
+    assert "error:" not in capsys.readouterr().err
+
+
+# ------------------------------------------------------------------ simulate
+def test_simulate_prints_every_t2_parameter_with_its_true_value(capsys):
+    from rls_uncertainty.simulation import T2_MODELS, T2_TRUE
+
+    assert cli.main(["simulate", "--noise", "10", "--seed", "3"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    head = lines.index(next(line for line in lines if line.startswith("parameter")))
+    assert lines[head].split() == ["parameter", "true", "estimate", "SE", "conv.", "SE", "corr.", "corr/conv"]
+    names = [n for m in T2_MODELS for n in m.parameter_names]
+    rows = [line.split() for line in lines[head + 2:head + 2 + len(names)]]
+    assert [r[0] for r in rows] == names
+    for name, true, est, se_conv, se_corr, ratio in rows:
+        assert true == (f"{T2_TRUE[name]:.3f}" if name in T2_TRUE else "-")
+        # The ratio is of the unrounded errors: the printed ones' within their rounding (5e-5
+        # each) and the ratio's own (0.005).
+        r, c = float(se_corr) / float(se_conv), float(se_conv)
+        assert float(ratio) == pytest.approx(r, abs=0.005 + 5e-5 * (1 + r) / c + 1e-9)
+        if name in T2_TRUE:  # 10% noise: every estimate within a few corrected standard errors
+            assert abs(float(est) - T2_TRUE[name]) < 0.5 * abs(T2_TRUE[name]) + 4 * float(se_corr)

@@ -1,0 +1,388 @@
+"""The fast bank (:class:`EstimatorBank`, :class:`RecursiveEstimator`): the reference's numbers
+for every option, estimates against batch least squares, options, input checks (Eqs. 15-22)."""
+
+from __future__ import annotations
+
+import ast
+import itertools
+import pathlib
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+from test_estimator_cases import RATE, ar1, indefinite_problem, rel_close, run, wide_scale_problem
+
+from rls_uncertainty.estimator import (
+    EstimatorBank,
+    EstimatorNotReady,
+    NonFiniteInput,
+    RecursiveEstimator,
+    batch_estimate,
+)
+from rls_uncertainty.estimator.reference import RecursiveReference
+
+
+# --------------------------------------------------------------------------- estimates
+def test_theta_equals_batch_ols_with_scales_from_1e_4_to_1e2():
+    X, z = wide_scale_problem()
+    est = run(RecursiveEstimator(4, n_lags=50), X, z)
+    ols = np.linalg.lstsq(X, z, rcond=None)[0]
+    assert np.max(np.abs(est.theta - ols) / np.abs(ols)) < 1e-6
+    assert est.n_samples == len(z)
+
+def test_exact_initialization_agrees_with_batch_from_the_first_well_conditioned_sample():
+    X, z = wide_scale_problem()
+    est = RecursiveEstimator(4)
+    for k in range(len(z)):
+        est.update(X[k], z[k])
+        if est.is_ready:
+            ols = np.linalg.lstsq(X[: k + 1], z[: k + 1], rcond=None)[0]
+            np.testing.assert_allclose(est.theta, ols, rtol=1e-6)
+
+def test_rank_deficient_early_samples_wait_for_excitation():
+    """Elevator still at trim for 150 samples: X'X is singular until the maneuver starts."""
+    X, z = wide_scale_problem()
+    X = X.copy()
+    X[:150, 2] = 0.0
+    z = X @ np.array([0.5, 300.0, -0.01, 2.0]) + 0.01 * np.random.default_rng(2).standard_normal(len(z))
+    est = RecursiveEstimator(4, n_lags=50)
+    full = RecursiveEstimator(4)
+    for k in range(len(z)):
+        est.update(X[k], z[k])
+        full.update(X[k], z[k])
+        if k < 150:
+            assert not est.is_ready
+            with pytest.raises(EstimatorNotReady):
+                _ = est.theta  # the property access is what raises
+            with pytest.raises(EstimatorNotReady):
+                est.standard_errors()
+    assert est.is_ready
+    ols = np.linalg.lstsq(X, z, rcond=None)[0]
+    assert np.max(np.abs(est.theta - ols) / np.abs(ols)) < 1e-6
+    batch = batch_estimate(X, z, 50, residuals=full.residuals())
+    rel_close(est.covariance(repair=False), batch[2], 1e-9)
+
+def test_prior_initialization_is_ridge_regression():
+    """With D0 = p0 I the recursion solves (X'X + I/p0) theta = X'z exactly."""
+    X, z = wide_scale_problem()
+    p0 = 1e6
+    est = run(RecursiveEstimator(4, p0=p0), X, z)
+    ridge = np.linalg.solve(X.T @ X + np.eye(4) / p0, X.T @ z)
+    np.testing.assert_allclose(est.theta, ridge, rtol=1e-6)
+    ols = np.linalg.lstsq(X, z, rcond=None)[0]
+    # The prior visibly biases the small-scale regressor's parameter; exact init does not.
+    assert abs(est.theta[1] - ols[1]) / abs(ols[1]) > 1e-3
+
+def test_residual_options_are_the_innovation_the_a_posteriori_residual_and_their_geometric_mean():
+    X, z = wide_scale_problem()
+    est = {r: RecursiveEstimator(4, residual=r) for r in ("a_posteriori", "a_priori", "standardized")}
+    thetas = []
+    for k in range(len(z)):
+        for e in est.values():
+            e.update(X[k], z[k])
+        thetas.append(est["standardized"].theta if est["standardized"].is_ready else None)
+    k0 = next(i for i, t in enumerate(thetas) if t is not None)
+    v = {r: e.residuals() for r, e in est.items()}
+    for k in range(k0 + 1, len(z)):
+        post = z[k] - X[k] @ thetas[k]
+        prior = z[k] - X[k] @ thetas[k - 1]
+        assert v["a_posteriori"][k] == pytest.approx(post, rel=1e-6, abs=1e-9)
+        assert v["a_priori"][k] == pytest.approx(prior, rel=1e-6, abs=1e-9)
+        assert v["standardized"][k] == pytest.approx(np.sign(prior) * np.sqrt(post * prior), rel=1e-6, abs=1e-9)
+    np.testing.assert_array_equal(est["a_posteriori"].theta, est["a_priori"].theta)
+    np.testing.assert_array_equal(est["a_posteriori"].theta, est["standardized"].theta)
+
+@pytest.mark.parametrize("forgetting", [1.0, 0.98])
+def test_standardized_residual_makes_eq16_the_batch_fit_error_variance_at_every_sample(forgetting):
+    """RSS_k = f RSS_(k-1) + e_k^2 f / d_k: with the default residual, R_k(0) (Eq. 16) equals
+    the weighted batch fit-error variance (Eq. 14) of samples 1..k with theta_k, and the
+    conventional standard errors equal the batch ones; the a posteriori residual falls short."""
+    rng = np.random.default_rng(11)
+    n = 400
+    X = np.column_stack([np.ones(n), rng.standard_normal((n, 2))])
+    colored = np.convolve(rng.standard_normal(n + 9), np.ones(10) / 3.0, "valid")
+    z = X @ [0.5, -2.0, 1.0] + colored
+    est = RecursiveEstimator(3, 20, forgetting=forgetting)
+    post = RecursiveEstimator(3, 20, forgetting=forgetting, residual="a_posteriori")
+    short = []
+    for k in range(n):
+        est.update(X[k], z[k])
+        post.update(X[k], z[k])
+        if not est.is_ready:
+            continue
+        w = forgetting ** np.arange(k, -1, -1)
+        theta, cov_conv, _ = batch_estimate(X[: k + 1], z[: k + 1], 20, forgetting=forgetting)
+        v = z[: k + 1] - X[: k + 1] @ theta
+        assert est.residual_variance == pytest.approx((w * v * v).sum() / w.sum(), rel=1e-9)
+        np.testing.assert_allclose(est.covariance("conventional"), cov_conv, rtol=1e-8, atol=1e-12)
+        short.append(1.0 - post.residual_variance / est.residual_variance)
+    assert np.mean(short) > 0.005  # the a posteriori residual is biased low
+
+def test_forgetting_tracks_a_parameter_change():
+    rng = np.random.default_rng(4)
+    n = 2000
+    t = np.arange(n) / RATE
+    X = np.column_stack([np.ones(n), np.sin(2 * np.pi * 0.5 * t), rng.standard_normal(n)])
+    theta = np.where(t[:, None] < 20, [1.0, -2.0, 0.5], [1.0, -3.0, 0.5])
+    z = np.sum(X * theta, axis=1) + 0.01 * rng.standard_normal(n)
+    tracking = run(RecursiveEstimator(3, n_lags=11, forgetting=0.99), X, z)
+    plain = run(RecursiveEstimator(3, n_lags=11), X, z)
+    assert tracking.theta[1] == pytest.approx(-3.0, abs=0.02)
+    assert abs(plain.theta[1] + 3.0) > 0.3
+
+def test_bank_equals_independent_estimators():
+    """The six models of Eq. 2 in one bank give what six separate estimators give."""
+    rng = np.random.default_rng(9)
+    sizes = (3, 4, 3, 6, 4, 4)
+    n = 400
+    t = np.arange(n) / RATE
+    base = np.column_stack(
+        [np.ones(n)] + [np.sin(2 * np.pi * (0.2 + 0.13 * i) * t + i) for i in range(5)]
+    )
+    rows = [base[:, :s] + 0.01 * rng.standard_normal((n, s)) * (np.arange(s) > 0) for s in sizes]
+    zs = [r @ rng.standard_normal(r.shape[1]) + 0.01 * ar1(rng, 0.8, (n,)) for r in rows]
+    bank = EstimatorBank(sizes, n_lags=11)
+    singles = [RecursiveEstimator(s, n_lags=11) for s in sizes]
+    for k in range(n):
+        bank.update([r[k] for r in rows], np.array([zz[k] for zz in zs]))
+        for est, r, zz in zip(singles, rows, zs, strict=True):
+            est.update(r[k], zz[k])
+    for j, est in enumerate(singles):
+        np.testing.assert_allclose(bank.theta(j), est.theta, rtol=1e-12)
+        np.testing.assert_allclose(bank.standard_errors(j), est.standard_errors(), rtol=1e-10)
+        np.testing.assert_allclose(bank.theta_all()[j, : sizes[j]], est.theta, rtol=1e-12)
+    assert np.isnan(bank.theta_all()[0, 3:]).all()
+
+
+# --------------------------------------------------------------------------- bank = reference
+def equivalence_problem(n=90, seed=7):
+    """Two models of 3 and 2 parameters with colored errors; model 0's last regressor is zero
+    for the first 12 samples, so that it initializes late (after the 5-lag window filled)."""
+    rng = np.random.default_rng(seed)
+    k = np.arange(n)
+    x0 = np.column_stack([np.ones(n), np.sin(0.3 * k) + 0.3 * rng.standard_normal(n),
+                          np.where(k < 12, 0.0, np.cos(0.17 * k) + 0.3 * rng.standard_normal(n))])
+    x1 = np.column_stack([0.5 + 0.2 * rng.standard_normal(n), np.sin(0.11 * k + 1.0)])
+    X = np.zeros((n, 2, 3))
+    X[:, 0] = x0
+    X[:, 1, :2] = x1
+    Z = np.column_stack([x0 @ [0.4, -1.2, 2.0], x1 @ [1.5, 0.7]]) + 0.2 * ar1(rng, 0.7, (2, n)).T
+    return X, Z
+
+
+OPTIONS = list(itertools.product(
+    ["truncated", "bartlett"], [None, 0, 5], [1.0, 0.97], ["standardized", "a_posteriori", "a_priori"], [None, 100.0]
+))
+CHECK_K = (2, 5, 12, 13, 14, 30, 90)  # before initialization, at it, after the window fills
+
+
+def assert_bank_equals_reference(bank, refs, k, rtol=1e-8):
+    """Bank and reference agree to ``rtol`` of each quantity's largest entry, or to the
+    rounding floor where the quantity is itself rounding (the residuals of a model that has
+    just initialized on as many samples as parameters are zero): exact initialization forms
+    R_k(i) from lagged moments, ``sum z^2 - 2 theta' X'z + theta' X'X theta``, whose rounding
+    is ``eps sum z^2``; it reaches the covariance through ``D Lambda D``."""
+    sizes = bank.sizes
+    assert list(bank.ready) == [r.ready for r in refs], k
+    theta_all = bank.theta_all()
+    se = {kind: bank.standard_errors_all(kind) for kind in ("corrected", "conventional")}
+    for j, (ref, s) in enumerate(zip(refs, sizes, strict=True)):
+        if not ref.ready:
+            assert np.isnan(theta_all[j]).all() and np.isnan(se["corrected"][j]).all()
+            with pytest.raises(EstimatorNotReady):
+                bank.covariance(j)
+            continue
+        assert bank.ready_at[j] == ref.ready_at
+        rel_close(theta_all[j, :s], ref.theta, 1e-9)
+        floor_R = 1e-12 * np.mean(np.square(ref.z))
+        R = [ref.R[i] for i in range(len(ref.R))]
+        np.testing.assert_allclose(bank.autocorrelation(j), R, rtol=0, atol=rtol * np.max(np.abs(R)) + floor_R)
+        floor_cov = floor_R * len(R) * np.max(np.abs(ref.D))
+        for kind in ("corrected", "conventional"):
+            for mine, theirs in ((bank.covariance(j, kind, repair=False), ref.covariance(kind)),
+                                 (bank.covariance(j, kind), ref.published_covariance(kind))):
+                np.testing.assert_allclose(mine, theirs, rtol=0, atol=rtol * np.max(np.abs(theirs)) + floor_cov)
+            theirs = ref.standard_errors(kind)
+            np.testing.assert_allclose(se[kind][j, :s], theirs, rtol=0, atol=rtol * np.max(theirs) + np.sqrt(floor_cov))
+
+
+@pytest.mark.parametrize("window, n_lags, forgetting, residual, p0", OPTIONS)
+def test_bank_equals_the_reference_for_every_option(window, n_lags, forgetting, residual, p0):
+    """Theta, both full covariances (unrepaired and published) and the published standard
+    errors of the bank equal the literal Eqs. 15-22 of reference.py, before and at exact
+    initialization, once the lag window is full, and at the end."""
+    X, Z = equivalence_problem()
+    options = dict(residual=residual, p0=p0)
+    bank = EstimatorBank((3, 2), n_lags, window, forgetting, **options)
+    refs = [RecursiveReference(s, n_lags, window, forgetting, **options) for s in (3, 2)]
+    for k in range(len(Z)):
+        bank.update(X[k], Z[k])
+        refs[0].update(X[k, 0], Z[k, 0])
+        refs[1].update(X[k, 1, :2], Z[k, 1])
+        if k + 1 in CHECK_K:
+            assert_bank_equals_reference(bank, refs, k + 1)
+    if p0 is None:
+        assert refs[0].ready_at > 12 and refs[1].ready_at <= 5
+
+
+@pytest.mark.parametrize("p0", [None, 100.0])
+def test_bank_equals_the_reference_where_the_truncated_window_is_repaired(p0):
+    """The published (repaired) covariance and standard errors where the uniform window makes
+    the covariance indefinite."""
+    X, z = indefinite_problem(240)
+    bank = EstimatorBank((2,), 5, p0=p0)
+    ref = RecursiveReference(2, 5, p0=p0)
+    repaired = 0
+    for k in range(len(z)):
+        bank.update(X[k : k + 1], z[k : k + 1])
+        ref.update(X[k], z[k])
+        if k % 20 == 19:
+            assert_bank_equals_reference(bank, [ref], k + 1)
+            repaired += np.min(np.diag(ref.covariance())) < 0
+    assert repaired >= 3 and bank.repairs[0] == repaired
+
+
+# --------------------------------------------------------------------------- issue 12
+@pytest.mark.parametrize("magnitude", [1e160, 1e200, 1e300, 1.7e308])
+@pytest.mark.parametrize("where", ["regressor", "output", "padding"])
+def test_finite_but_huge_input_is_refused_and_leaves_the_state_bit_identical(magnitude, where):
+    """A finite sample whose square overflows would make the state non-finite: refused with
+    NonFiniteInput, the state unchanged bit for bit, and the bank goes on as if it never came
+    (the padding, which is ignored, is accepted)."""
+    rng = np.random.default_rng(3)
+    n = 160
+    X = np.zeros((n, 2, 3))
+    X[:, :, 0] = 1.0
+    X[:, :, 1:] = rng.standard_normal((n, 2, 2))
+    X[:, 1, 2] = 0.0  # model 1 has two parameters
+    X[:60, 0, 2] = 0.0  # model 0 waits for initialization until sample 61
+    Z = X.sum(axis=2) + 0.1 * rng.standard_normal((n, 2))
+    for stop in (30, 120):  # while model 0 waits, and once both are ready
+        a = EstimatorBank((3, 2), 20)
+        b = EstimatorBank((3, 2), 20)
+        run(a, X, Z, stop)
+        run(b, X, Z, stop)
+        before = a.state()
+        se_before = a.standard_errors_all()
+        x_bad, z_bad = X[stop].copy(), Z[stop].copy()
+        if where == "regressor":
+            x_bad[0, 1] = magnitude
+        elif where == "output":
+            z_bad[1] = -magnitude
+        else:
+            x_bad[1, 2] = magnitude
+        if where == "padding":
+            a.update(x_bad, z_bad)
+            b.update(X[stop], Z[stop])
+        else:
+            with pytest.raises(NonFiniteInput, match="non-finite"):
+                a.update(x_bad, z_bad)
+            after = a.state()
+            assert after["counters"] == before["counters"]
+            assert after["arrays"].keys() == before["arrays"].keys()
+            for name, arr in before["arrays"].items():
+                assert arr.dtype == after["arrays"][name].dtype
+                assert arr.tobytes() == after["arrays"][name].tobytes(), name
+            assert a.standard_errors_all().tobytes() == se_before.tobytes()
+        for k in range(stop + 1, n):
+            a.update(X[k], Z[k])
+            b.update(X[k], Z[k])
+        np.testing.assert_array_equal(a.theta_all(), b.theta_all())
+        np.testing.assert_array_equal(a.standard_errors_all(), b.standard_errors_all())
+
+
+def test_large_input_that_keeps_the_state_finite_is_accepted():
+    """Above the bound where the update is checked (1e100) a sample is still applied when the
+    state stays finite: the check refuses only what would overflow."""
+    X, z = wide_scale_problem()
+    est = run(RecursiveEstimator(4, n_lags=5), X, z, stop=100)
+    x = X[100].copy()
+    x[3] = 1e120  # its square, 1e240, and every product with it stay finite
+    est.update(x, z[100])
+    assert est.n_samples == 101
+    assert all(np.isfinite(a).all() for a in est.state()["arrays"].values())
+
+
+# --------------------------------------------------------------------------- inputs and options
+@pytest.mark.parametrize("bad", [np.nan, np.inf, -np.inf])
+def test_non_finite_input_is_rejected_and_leaves_state_untouched(bad):
+    X, z = wide_scale_problem()
+    est = run(RecursiveEstimator(4, n_lags=5), X, z, stop=100)
+    before = est.state()
+    x_bad = X[100].copy()
+    x_bad[2] = bad
+    with pytest.raises(NonFiniteInput, match="model"):
+        est.update(x_bad, z[100])
+    with pytest.raises(NonFiniteInput):
+        est.update(X[100], bad)
+    after = est.state()
+    assert before["counters"] == after["counters"]
+    for name, arr in before["arrays"].items():
+        np.testing.assert_array_equal(arr, after["arrays"][name], err_msg=name)
+
+@pytest.mark.parametrize(
+    "kwargs, match",
+    [
+        (dict(n_lags=-1), "n_lags"),
+        (dict(n_lags=2.5), "n_lags"),
+        (dict(window="hann"), "window"),
+        (dict(forgetting=0.0), "forgetting"),
+        (dict(forgetting=1.5), "forgetting"),
+        (dict(residual="both"), "residual"),
+        (dict(p0=-1.0), "p0"),
+    ],
+)
+def test_invalid_configuration_is_refused_clearly(kwargs, match):
+    with pytest.raises(ValueError, match=match):
+        RecursiveEstimator(3, **kwargs)
+
+def test_wrong_shapes_are_refused():
+    est = RecursiveEstimator(3)
+    with pytest.raises(ValueError, match="regressors"):
+        est.update([1.0, 2.0], 0.0)
+    bank = EstimatorBank((2, 3))
+    with pytest.raises(ValueError, match="model 1"):
+        bank.update([[1.0, 2.0], [1.0]], [0.0, 0.0])
+
+def test_numerical_core_imports_numpy_only():
+    """Every module of the estimator package imports numpy, the standard library's math and
+    typing, and the package's own modules only; importing it does not load rclpy."""
+    package = pathlib.Path(__file__).resolve().parents[1] / "rls_uncertainty" / "estimator"
+    modules = sorted(package.glob("*.py"))
+    assert {p.name for p in modules} >= {"__init__.py", "bank.py", "reference.py", "covariance.py"}
+    for path in modules:
+        tree = ast.parse(path.read_text())
+        imported = set()
+        for node in ast.walk(tree):
+            if isinstance(node, ast.ImportFrom) and node.level > 0:
+                # The package's own modules, or its parent's errors module (and, for the state
+                # file, the atomic-write helper).
+                parent_ok = {"errors", "files"} if path.name == "state_file.py" else {"errors"}
+                assert node.level == 1 or node.module in parent_ok, (path.name, node.module)
+            elif isinstance(node, ast.ImportFrom):
+                imported.add(node.module.split(".")[0])
+            elif isinstance(node, ast.Import):
+                imported.update(alias.name.split(".")[0] for alias in node.names)
+        allowed = {"numpy", "math", "typing", "__future__"}
+        if path.name == "state_file.py":  # the file format: JSON metadata in a zip (npz) archive
+            allowed |= {"json", "dataclasses", "pathlib", "zipfile", "os", "io", "datetime", "errno", "stat", "collections"}
+        assert imported <= allowed, (path.name, imported)
+    out = subprocess.run(
+        [sys.executable, "-c", "import sys, rls_uncertainty.estimator; print('rclpy' in sys.modules)"],
+        capture_output=True, text=True, check=True,
+    )
+    assert out.stdout.strip() == "False"
+
+def test_numpy_126_vecdot_fallback_gives_the_same_standard_errors(monkeypatch):
+    """numpy < 2.0 has no vecdot; the einsum fallback must give the same covariances."""
+    from rls_uncertainty.estimator import bank, covariance, numpy_compat
+
+    X, z = wide_scale_problem()
+    ref = run(RecursiveEstimator(4, n_lags=20, forgetting=0.99), X, z)
+    for module in (bank, covariance):
+        monkeypatch.setattr(module, "vecdot", numpy_compat.einsum_vecdot)
+    alt = run(RecursiveEstimator(4, n_lags=20, forgetting=0.99), X, z)
+    np.testing.assert_allclose(alt.standard_errors(), ref.standard_errors(), rtol=1e-12)
+    np.testing.assert_allclose(alt.standard_errors("conventional"), ref.standard_errors("conventional"), rtol=1e-12)
+    np.testing.assert_allclose(alt.theta, ref.theta, rtol=1e-12)

@@ -1,0 +1,303 @@
+"""Writing outputs without losing data (rls_uncertainty/files.py): output directories that
+appear only when complete and never replace an input, and atomic single files."""
+
+import os
+import tempfile
+from pathlib import Path
+
+import pytest
+from bag_samples import tree as _tree
+
+from rls_uncertainty import files
+from rls_uncertainty.errors import OutputPathError
+from rls_uncertainty.files import atomic_file, output_directory
+
+
+def _write(out: Path, name="result.txt", data=b"new"):
+    (out / name).write_bytes(data)
+
+
+@pytest.fixture
+def bag(tmp_path):
+    """An input bag directory, as the commands take it."""
+    bag = tmp_path / "data" / "bag"
+    bag.mkdir(parents=True)
+    (bag / "bag.mcap").write_bytes(b"recorded flight data")
+    (bag / "metadata.yaml").write_bytes(b"rosbag2_bagfile_information: {}\n")
+    return bag
+
+
+# ----------------------------------------------------------------------- output_directory
+def test_the_output_appears_only_when_complete(tmp_path):
+    out = tmp_path / "out"
+    with output_directory(out) as tmp:
+        _write(tmp)
+        assert not out.exists()
+        assert tmp.parent == tmp_path
+    assert _tree(tmp_path) == {"out": "dir", "out/result.txt": b"new"}
+
+
+def test_an_empty_existing_directory_is_used(tmp_path):
+    (tmp_path / "out").mkdir()
+    with output_directory(tmp_path / "out") as tmp:
+        _write(tmp)
+    assert _tree(tmp_path) == {"out": "dir", "out/result.txt": b"new"}
+
+
+def test_a_non_empty_output_is_refused_without_force_and_replaced_with_force(tmp_path):
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "old.txt").write_bytes(b"old")
+    (out / "sub").mkdir()
+    (out / "sub" / "deep.txt").write_bytes(b"deep")
+    before = _tree(tmp_path)
+    with pytest.raises(OutputPathError, match=r"not empty.*--force"), output_directory(out) as tmp:
+        pytest.fail(f"the block ran with {tmp}")
+    assert _tree(tmp_path) == before
+    with output_directory(out, force=True) as tmp:
+        _write(tmp)
+        # The old output stays in place until the new one is complete.
+        assert _tree(out) == {"old.txt": b"old", "sub": "dir", "sub/deep.txt": b"deep"}
+    assert _tree(tmp_path) == {"out": "dir", "out/result.txt": b"new"}
+
+
+@pytest.mark.parametrize("case", [
+    "output is the input",
+    "output inside the input",
+    "input inside the output",
+    "DIR/sub/.. holding the input",
+    "DIR/missing/.. holding the input",
+    "output is a symlink to the input",
+    "input given through a symlink",
+    "output inside a symlink to the input",
+])
+@pytest.mark.parametrize("force", [False, True])
+def test_an_input_is_never_removed_or_overwritten(tmp_path, bag, case, force):
+    data = tmp_path / "data"
+    (data / "sub").mkdir()
+    link = tmp_path / "link"
+    link.symlink_to(bag, target_is_directory=True)
+    inputs, out = (bag,), {
+        "output is the input": bag,
+        "output inside the input": bag / "estimates",
+        "input inside the output": data,
+        "DIR/sub/.. holding the input": data / "sub" / "..",
+        "DIR/missing/.. holding the input": data / "missing" / "..",
+        "output is a symlink to the input": link,
+        "input given through a symlink": bag,
+        "output inside a symlink to the input": link / "estimates",
+    }[case]
+    if case == "input given through a symlink":
+        inputs = (link,)
+    before = _tree(tmp_path)
+    with pytest.raises(OutputPathError, match="input"), output_directory(out, force=force, inputs=inputs) as tmp:
+        _write(tmp)
+    assert _tree(tmp_path) == before
+
+
+def test_a_mapping_file_inside_the_output_is_an_input_too(tmp_path, bag):
+    mapping = tmp_path / "out" / "mapping.yaml"
+    mapping.parent.mkdir()
+    mapping.write_bytes(b"imu: {topic: /imu}\n")
+    before = _tree(tmp_path)
+    with (
+        pytest.raises(OutputPathError, match=r"mapping\.yaml"),
+        output_directory(tmp_path / "out", force=True, inputs=(bag, mapping)),
+    ):
+        pass
+    assert _tree(tmp_path) == before
+
+
+@pytest.mark.parametrize("force", [False, True])
+def test_an_existing_file_is_refused_and_nothing_is_left_behind(tmp_path, force):
+    (tmp_path / "out").write_bytes(b"precious")
+    before = _tree(tmp_path)
+    with pytest.raises(OutputPathError, match="not a directory"), output_directory(tmp_path / "out", force=force):
+        pass
+    assert _tree(tmp_path) == before
+
+
+@pytest.mark.parametrize("force", [False, True])
+def test_a_symlink_as_output_is_refused_and_nothing_is_written_where_it_points(tmp_path, force):
+    """A dangling link would otherwise make the output appear wherever it points."""
+    (tmp_path / "out").symlink_to(tmp_path / "elsewhere" / "target")
+    before = _tree(tmp_path)
+    with pytest.raises(OutputPathError, match="symbolic link"), output_directory(tmp_path / "out", force=force) as tmp:
+        _write(tmp)
+    assert _tree(tmp_path) == before
+
+
+def test_a_failure_removes_what_the_call_created_and_nothing_else(tmp_path):
+    (tmp_path / "a").mkdir()
+    (tmp_path / "a" / "keep.txt").write_bytes(b"keep")
+    before = _tree(tmp_path)
+    # Three parent directories are created for the output; the failure removes them all.
+    with pytest.raises(KeyError), output_directory(tmp_path / "a" / "b" / "c" / "d" / "out") as tmp:
+        assert (tmp_path / "a" / "b" / "c" / "d").is_dir()
+        _write(tmp)
+        (tmp / "nested").mkdir()
+        _write(tmp / "nested")
+        raise KeyError("boom")
+    assert _tree(tmp_path) == before
+
+
+def test_a_failure_to_create_the_temporary_directory_removes_the_created_parents(tmp_path, monkeypatch):
+    def failing_mkdtemp(**kwargs):
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(files.tempfile, "mkdtemp", failing_mkdtemp)
+    with pytest.raises(OSError, match="No space"), output_directory(tmp_path / "a" / "b" / "out"):
+        pytest.fail("the block ran")
+    assert _tree(tmp_path) == {}
+
+
+def test_a_failure_leaves_a_replaced_output_as_it_was(tmp_path):
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "old.txt").write_bytes(b"old")
+    before = _tree(tmp_path)
+    with pytest.raises(RuntimeError), output_directory(out, force=True) as tmp:
+        _write(tmp)
+        raise RuntimeError("interrupted")
+    assert _tree(tmp_path) == before
+
+
+@pytest.mark.parametrize("step", ["old output moving aside", "new output moving into place"])
+def test_a_failure_while_swapping_in_a_forced_output_restores_the_old_one(tmp_path, monkeypatch, step):
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "old.txt").write_bytes(b"old")
+    before = _tree(tmp_path)
+    rename = os.rename
+
+    def failing_rename(src, dst):
+        moving = Path(src).name.endswith(".partial") if "new" in step else Path(dst).parent.name.endswith(".old")
+        if moving:
+            raise OSError(28, "No space left on device")
+        rename(src, dst)
+
+    monkeypatch.setattr(files.os, "rename", failing_rename)
+    with pytest.raises(OSError, match="No space"), output_directory(out, force=True) as tmp:
+        _write(tmp)
+    assert _tree(tmp_path) == before
+
+
+def test_the_temporary_directory_never_reuses_a_planted_name(tmp_path):
+    """The temporary directory is created exclusively (mkdtemp), so a directory or link
+    planted beside the output is never written into."""
+    victim = tmp_path / "victim"
+    victim.mkdir()
+    for name in ("out.partial", ".out.partial", "out.tmp", ".out.old"):
+        (tmp_path / name).symlink_to(victim, target_is_directory=True)
+    with output_directory(tmp_path / "out") as tmp:
+        assert not tmp.is_symlink() and tmp.resolve().parent == tmp_path
+        _write(tmp)
+    assert list(victim.iterdir()) == []
+    assert (tmp_path / "out" / "result.txt").read_bytes() == b"new"
+
+
+# ----------------------------------------------------------------------------- atomic_file
+def test_atomic_file_replaces_the_content_and_leaves_no_temporary_file(tmp_path):
+    path = tmp_path / "STATE.npz"
+    path.write_bytes(b"old state")
+    with atomic_file(path) as fh:
+        fh.write(b"new state")
+        assert path.read_bytes() == b"old state"
+    assert path.read_bytes() == b"new state"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["STATE.npz"]
+
+
+def test_atomic_file_never_writes_through_a_planted_symlink(tmp_path, monkeypatch):
+    victim = tmp_path / "victim.txt"
+    victim.write_bytes(b"victim")
+    path = tmp_path / "STATE"
+    planted = ["STATE.tmp", ".STATE.tmp", "STATE.npz.tmp", ".STATE.planted.tmp"]
+    for name in planted:
+        (tmp_path / name).symlink_to(victim)
+    # Make the temporary-name generator offer the planted name first, then a fresh one:
+    # exclusive creation must skip it rather than open it.
+    names = iter(["planted", "fresh"])
+    monkeypatch.setattr(tempfile, "_get_candidate_names", lambda: names)
+    with atomic_file(path) as fh:
+        fh.write(b"state")
+    assert victim.read_bytes() == b"victim"
+    assert path.read_bytes() == b"state" and not path.is_symlink()
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(["victim.txt", "STATE", *planted])
+
+
+def test_atomic_file_replaces_a_symlink_at_the_target_instead_of_writing_through_it(tmp_path):
+    victim = tmp_path / "victim.txt"
+    victim.write_bytes(b"victim")
+    path = tmp_path / "STATE"
+    path.symlink_to(victim)
+    with atomic_file(path) as fh:
+        fh.write(b"state")
+    assert victim.read_bytes() == b"victim"
+    assert not path.is_symlink() and path.read_bytes() == b"state"
+
+
+def test_atomic_file_fsyncs_the_file_before_the_rename_and_the_directory_after(tmp_path, monkeypatch):
+    events = []
+    fsync, replace = os.fsync, os.replace
+
+    def record_fsync(fd):
+        st = os.fstat(fd)
+        kind = "dir" if os.path.samestat(st, os.stat(tmp_path)) else "file"
+        data = b""
+        if kind == "file":
+            data = os.pread(fd, 100, 0)
+        events.append(("fsync", kind, data))
+        fsync(fd)
+
+    def record_replace(src, dst):
+        events.append(("replace", Path(dst).name, b""))
+        replace(src, dst)
+
+    monkeypatch.setattr(files.os, "fsync", record_fsync)
+    monkeypatch.setattr(files.os, "replace", record_replace)
+    with atomic_file(tmp_path / "STATE") as fh:
+        fh.write(b"state")
+    assert events == [("fsync", "file", b"state"), ("replace", "STATE", b""), ("fsync", "dir", b"")]
+
+
+@pytest.mark.parametrize("where", ["in the block", "in fsync"])
+def test_a_failed_atomic_write_leaves_the_old_file_and_no_temporary_file(tmp_path, monkeypatch, where):
+    path = tmp_path / "STATE"
+    path.write_bytes(b"old state")
+
+    def failing_fsync(fd):
+        raise OSError(5, "Input/output error")
+
+    if where == "in fsync":
+        monkeypatch.setattr(files.os, "fsync", failing_fsync)
+    with pytest.raises(OSError if where == "in fsync" else ValueError), atomic_file(path) as fh:
+        fh.write(b"half")
+        if where == "in the block":
+            raise ValueError("the writer failed")
+    assert path.read_bytes() == b"old state"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["STATE"]
+
+
+def test_atomic_file_gives_the_permissions_of_a_normal_write_or_of_the_replaced_file(tmp_path):
+    old_mask = os.umask(0o027)
+    try:
+        with atomic_file(tmp_path / "new.csv") as fh:
+            fh.write(b"a")
+        (tmp_path / "kept.npz").write_bytes(b"old")
+        os.chmod(tmp_path / "kept.npz", 0o604)
+        with atomic_file(tmp_path / "kept.npz") as fh:
+            fh.write(b"b")
+    finally:
+        os.umask(old_mask)
+    assert oct(os.stat(tmp_path / "new.csv").st_mode & 0o777) == oct(0o640)  # not mkstemp's 0600
+    assert oct(os.stat(tmp_path / "kept.npz").st_mode & 0o777) == oct(0o604)
+
+
+def test_the_output_directory_gets_the_permissions_of_mkdir(tmp_path):
+    old_mask = os.umask(0o022)
+    try:
+        with output_directory(tmp_path / "out") as tmp:
+            _write(tmp)
+    finally:
+        os.umask(old_mask)
+    assert oct(os.stat(tmp_path / "out").st_mode & 0o777) == oct(0o755)  # not mkdtemp's 0700

@@ -1,0 +1,164 @@
+"""The offline replay (rls_uncertainty/replay.py): outputs, determinism, agreement with the
+pipeline, options, and no partial output on failure. No DDS."""
+
+import csv
+from itertools import pairwise
+from pathlib import Path
+
+import numpy as np
+from bag_samples import fails, read_all
+
+from rls_uncertainty import cli
+from rls_uncertainty.bags import read_inputs
+from rls_uncertainty.config import load_parameters_file, pipeline_config
+from rls_uncertainty.replay import replay, run_pipeline
+
+ROOT = Path(__file__).resolve().parents[1]
+BUNDLED = ROOT / "bags" / "t2_maneuver"
+
+
+def test_replay_writes_identical_outputs_twice_and_matches_the_pipeline(tmp_path):
+    params = load_parameters_file("t2")
+    r1 = replay(BUNDLED, params, tmp_path / "r1", progress=False)
+    replay(BUNDLED, params, tmp_path / "r2", progress=False, plots=False)
+    for name in ("estimates.csv", "estimates.mcap"):
+        assert (tmp_path / "r1" / name).read_bytes() == (tmp_path / "r2" / name).read_bytes()
+    assert {p.name for p in (tmp_path / "r1").glob("*.png")} == {
+        "CZ_estimates.png", "Cm_estimates.png", "CZ_autocorrelation.png", "Cm_autocorrelation.png"}
+    with open(tmp_path / "r1" / "estimates.csv") as fh:
+        rows = list(csv.DictReader(fh))
+    assert list(rows[0]) == ["time", "model", "parameter", "estimate", "std_error", "std_error_conventional"]
+    # One row per sample and parameter of every ready model.
+    n_rows = sum(int(sum(n for n, r in zip(r1.pipeline.sizes, o.ready, strict=True) if r)) for o in r1.outputs)
+    assert len(rows) == n_rows
+    # The CSV's last values are the pipeline's, fed message by message independently here.
+    messages, _ = read_inputs(BUNDLED)
+    again = run_pipeline(messages, pipeline_config(params))
+    last = again.outputs[-1]
+    final = {r["parameter"]: r for r in rows if float(r["time"]) == last.stamp_ns * 1e-9}
+    for j, names in enumerate(again.pipeline.parameter_names):
+        for i, name in enumerate(names):
+            assert float(final[name]["estimate"]) == last.theta[j, i]
+            assert float(final[name]["std_error"]) == last.se[j, i]
+            assert float(final[name]["std_error_conventional"]) == last.se_conventional[j, i]
+    topics = read_all(tmp_path / "r1" / "estimates.mcap")
+    est = topics["/rls_estimator/CZ/estimates"]
+    assert est[-1][1].layout.dim[0].label == "CZ_0,CZ_alpha,CZ_delta_e"
+    from rls_uncertainty.messages import parse_stamp_label
+
+    for t, msg in est:  # every array carries its sample time; log time is the same
+        assert parse_stamp_label(msg.layout.dim[1].label) == t
+    assert list(est[-1][1].data) == list(last.theta[0, :3])
+    assert len(topics["/rls_estimator/sample_stamp"]) == len(again.outputs)
+
+
+def test_replay_options_select_span_models_and_lags(tmp_path):
+    code = cli.main(["replay", str(BUNDLED), "--config", "t2", "--out", str(tmp_path / "o"), "--models", "CZ",
+                     "--lags", "all", "--start", "1.0", "--end", "9.0", "--no-plots", "--quiet"])
+    assert code == 0
+    with open(tmp_path / "o" / "estimates.csv") as fh:
+        rows = list(csv.DictReader(fh))
+    assert {r["model"] for r in rows} == {"CZ"}
+    t = np.array([float(r["time"]) for r in rows])
+    t0 = 1_767_225_600
+    assert t.min() >= t0 + 1.0 and t.max() <= t0 + 9.0
+
+
+def test_no_partial_output_when_the_replay_fails(tmp_path, capsys):
+    out = tmp_path / "out"
+    fails(capsys, ["replay", str(tmp_path / "missing"), "--out", str(out), "--quiet"], "missing", "no such bag")
+    assert not out.exists()
+
+
+def test_the_printed_summary_is_the_last_sample_of_every_ready_model(tmp_path, capsys):
+    assert cli.main(["replay", str(BUNDLED), "--config", "t2", "--out", str(tmp_path / "o"), "--no-plots",
+                     "--quiet"]) == 0
+    out = capsys.readouterr().out.splitlines()
+    assert out[0].split() == ["parameter", "estimate", "SE", "conv.", "SE", "corr.", "corr/conv"]
+    assert set(out[1]) == {"-"}
+    params = load_parameters_file("t2")
+    again = run_pipeline(read_inputs(BUNDLED)[0], pipeline_config(params))
+    last = again.outputs[-1]
+    expected = [(name, last.theta[j, i], last.se_conventional[j, i], last.se[j, i])
+                for j, names in enumerate(again.pipeline.parameter_names) for i, name in enumerate(names)]
+    rows = [line.split() for line in out[2:2 + len(expected)]]
+    assert [r[0] for r in rows] == [e[0] for e in expected] == [
+        "CZ_0", "CZ_alpha", "CZ_delta_e", "Cm_0", "Cm_alpha", "Cm_q", "Cm_delta_e"]
+    for row, (_name, est, se_conv, se_corr) in zip(rows, expected, strict=True):
+        # Four decimals: these standard errors are all above 0.001.
+        assert row[1:] == [f"{est:.4f}", f"{se_conv:.4f}", f"{se_corr:.4f}", f"{se_corr / se_conv:.2f}"]
+    assert out[2 + len(expected)] == ""
+
+
+# ------------------------------------------------------------------ outputs a plotting tool can name
+def test_the_wide_csv_holds_the_long_csv_one_row_per_sample(tmp_path):
+    """estimates_wide.csv: a header row, a numeric time column, one column per parameter and
+    quantity, comma separated, empty cells while a model is not ready: what PlotJuggler's CSV
+    loader reads (it skips empty cells); every number equals estimates.csv's."""
+    result = replay(BUNDLED, load_parameters_file("t2"), tmp_path / "r", progress=False, plots=False)
+    lines = (tmp_path / "r" / "estimates_wide.csv").read_text().splitlines()
+    header = lines[0].split(",")
+    names = [p for names in result.pipeline.parameter_names for p in names]
+    assert header == ["time"] + [f"{p}{q}" for p in names for q in ("", "_se", "_se_conventional")]
+    assert len(header) == len(set(header))
+    rows = [line.split(",") for line in lines[1:]]
+    assert len(rows) == len(result.outputs)
+    assert all(len(r) == len(header) for r in rows)
+    times = [float(r[0]) for r in rows]  # numeric, increasing
+    assert all(b > a for a, b in pairwise(times))
+    wide = {(r[0], col): cell for r in rows for col, cell in zip(header[1:], r[1:], strict=True)}
+    with open(tmp_path / "r" / "estimates.csv") as fh:
+        long = list(csv.DictReader(fh))
+    seen = set()
+    for r in long:
+        for q, field in (("", "estimate"), ("_se", "std_error"), ("_se_conventional", "std_error_conventional")):
+            key = (r["time"], r["parameter"] + q)
+            assert wide[key] == r[field]
+            seen.add(key)
+    # Every other cell is empty: exactly the samples where the model was not ready.
+    assert all(cell == "" for key, cell in wide.items() if key not in seen)
+    assert sum(cell == "" for cell in wide.values()) > 0
+    for out, r in zip(result.outputs, rows, strict=True):
+        for j, cols in enumerate(result.pipeline.parameter_names):
+            cells = [dict(zip(header, r, strict=True))[c] for c in cols]
+            assert all(c != "" for c in cells) if out.ready[j] else all(c == "" for c in cells)
+
+
+def test_the_replays_mcap_carries_every_topic_the_node_publishes_byte_for_byte(tmp_path):
+    from rls_uncertainty.outputs import output_topics, sample_messages
+
+    params = load_parameters_file("t2")
+    result = replay(BUNDLED, params, tmp_path / "r", progress=False, plots=False)
+    from mcap.reader import make_reader
+
+    with open(tmp_path / "r" / "estimates.mcap", "rb") as fh:
+        reader = make_reader(fh)
+        got = [(ch.topic, sch.name, msg.log_time, msg.data)
+               for sch, ch, msg in reader.iter_messages(log_time_order=False)]
+    want_topics = {(f"/rls_estimator/{t}", m) for t, m in output_topics(["CZ", "Cm"])}
+    assert {(t, s) for t, s, _, _ in got} == want_topics
+    expected = [(f"/rls_estimator/{t}", m, out.stamp_ns, data)
+                for out in result.outputs for t, m, data in sample_messages(result.pipeline, out, "base_link")]
+    key = lambda r: (r[2], r[0])  # noqa: E731 - the bag is ordered by log time, then topic rank
+    assert sorted(got, key=key) == sorted(expected, key=key)
+
+
+def test_the_progress_bar_is_drawn_only_on_a_terminal(monkeypatch):
+    import io
+    import sys
+
+    messages, _ = read_inputs(BUNDLED)
+    config = pipeline_config(load_parameters_file("t2"))
+
+    class Terminal(io.StringIO):
+        def isatty(self):
+            return True
+
+    log, tty = io.StringIO(), Terminal()
+    monkeypatch.setattr(sys, "stderr", log)
+    run_pipeline(messages, config, progress=True)
+    assert log.getvalue() == ""  # a log file or pipe gets no carriage-return frames
+    monkeypatch.setattr(sys, "stderr", tty)
+    run_pipeline(messages, config, progress=True)
+    frames = tty.getvalue()
+    assert frames.count("\r") > 10 and frames.endswith("100%\n")
