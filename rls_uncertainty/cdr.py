@@ -27,6 +27,9 @@ from __future__ import annotations
 import struct
 from collections.abc import Sequence
 from dataclasses import make_dataclass
+from functools import lru_cache
+
+import numpy as np
 
 __all__ = ["decode", "encode_header", "encode_float64_multiarray", "encode_float64_multiarray_dims", "DECODABLE"]
 
@@ -206,37 +209,51 @@ def encode_header(sec: int, nanosec: int, frame_id: str) -> bytes:
     return _LE_HEADER + bytes(out)
 
 
+# A MultiArrayDimension starts 4-aligned and its bytes (label length, label, NUL, padding to 4,
+# size, stride) are a multiple of 4 long, so each one's bytes do not depend on where it sits:
+# they are built once per (label, size, stride). The parameter labels repeat for every sample
+# and one sample's stamp label for each of its arrays.
+@lru_cache(maxsize=512)
+def _dim(text: str, size: int, stride: int) -> bytes:
+    data = text.encode() + b"\x00"
+    return _U32.pack(len(data)) + data + b"\x00" * (-len(data) % 4) + _U32.pack(size) + _U32.pack(stride)
+
+
+@lru_cache(maxsize=64)
+def _doubles(n: int) -> struct.Struct:
+    return struct.Struct(f"<{n}d")
+
+
+_COUNTS = tuple(_U32.pack(i) for i in range(8))
+_LE_F64 = np.dtype("<f8")
+
+
+def _multiarray(dims: bytes, data_offset: int, data: Sequence[float] | np.ndarray) -> bytes:
+    n = len(data)
+    head = dims + _U32.pack(data_offset) + _U32.pack(n)
+    if not n:
+        return _LE_HEADER + head
+    # A numpy array is copied out as little-endian doubles at once (the node's case).
+    raw = data.astype(_LE_F64, copy=False).tobytes() if type(data) is np.ndarray else _doubles(n).pack(*data)
+    return _LE_HEADER + head + b"\x00" * (-len(head) % 8) + raw
+
+
 def encode_float64_multiarray(label: str, data, second: str | None = None) -> bytes:
     """CDR of a ``std_msgs/Float64MultiArray`` with ``dim[0] = (label, n, n)`` and, when
-    ``second`` is given, ``dim[1] = (second, 1, 1)``."""
+    ``second`` is given, ``dim[1] = (second, 1, 1)``; ``data``: a sequence of floats or a
+    one-dimensional numpy array."""
     n = len(data)
-    dims = [(label, n, n)] + ([(second, 1, 1)] if second is not None else [])
-    out = bytearray(_U32.pack(len(dims)))
-    for text, size, stride in dims:
-        _string(out, text)
-        out += b"\x00" * (_align(len(out), 4) - len(out))
-        out += _U32.pack(size) + _U32.pack(stride)
-    out += _U32.pack(0)  # data_offset
-    out += _U32.pack(n)
-    if n:
-        out += b"\x00" * (_align(len(out), 8) - len(out))
-        out += struct.pack(f"<{n}d", *data)
-    return _LE_HEADER + bytes(out)
+    if second is None:
+        dims = _COUNTS[1] + _dim(label, n, n)
+    else:
+        dims = _COUNTS[2] + _dim(label, n, n) + _dim(second, 1, 1)
+    return _multiarray(dims, 0, data)
 
 
 def encode_float64_multiarray_dims(dims: Sequence[tuple[str, int, int]], data: Sequence[float],
                                    data_offset: int = 0) -> bytes:
     """CDR of a ``std_msgs/Float64MultiArray`` with ``layout.dim`` = ``dims``, a sequence of
-    ``(label, size, stride)``, ``layout.data_offset`` and ``data`` (a sequence of floats)."""
-    out = bytearray(_U32.pack(len(dims)))
-    for text, size, stride in dims:
-        _string(out, text)
-        out += b"\x00" * (_align(len(out), 4) - len(out))
-        out += _U32.pack(size) + _U32.pack(stride)
-    out += _U32.pack(data_offset)
-    n = len(data)
-    out += _U32.pack(n)
-    if n:
-        out += b"\x00" * (_align(len(out), 8) - len(out))
-        out += struct.pack(f"<{n}d", *data)
-    return _LE_HEADER + bytes(out)
+    ``(label, size, stride)``, ``layout.data_offset`` and ``data`` (a sequence of floats or a
+    one-dimensional numpy array)."""
+    head = _U32.pack(len(dims)) + b"".join(_dim(text, size, stride) for text, size, stride in dims)
+    return _multiarray(head, data_offset, data)

@@ -356,6 +356,7 @@ def test_random_multiarrays_encode_byte_identical_to_rosbags():
         label, second = rand_text(rng, 60), rng.choice((None, rand_text(rng, 30)))
         got = cdr.encode_float64_multiarray(label, data, second)
         assert got == serialize(_multiarray(label, data, second), "std_msgs/msg/Float64MultiArray")
+        assert cdr.encode_float64_multiarray(label, np.array(data, dtype=np.float64), second) == got
         back = STORE.deserialize_cdr(got, "std_msgs/msg/Float64MultiArray")
         assert [bits(x) for x in back.data] == [bits(x) for x in data]
 
@@ -395,6 +396,9 @@ def test_random_layouts_encode_byte_identical_to_rosbags():
         offset = rng.choice((0, rng.randint(0, UINT32_MAX)))
         got = cdr.encode_float64_multiarray_dims(dims, data, offset)
         assert got == serialize(_layout_array(dims, data, offset), "std_msgs/msg/Float64MultiArray")
+        # numpy arrays (the node passes them) give the same bytes, also as strided views.
+        assert cdr.encode_float64_multiarray_dims(dims, np.array(data), offset) == got
+        assert cdr.encode_float64_multiarray_dims(dims, np.repeat(np.array(data), 2)[::2], offset) == got
         back = STORE.deserialize_cdr(got, "std_msgs/msg/Float64MultiArray")
         assert [(d.label, d.size, d.stride) for d in back.layout.dim] == dims and back.layout.data_offset == offset
         assert [bits(x) for x in back.data] == [bits(x) for x in data]
