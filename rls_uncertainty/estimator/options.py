@@ -21,8 +21,14 @@ __all__ = [
     "check_window",
     "check_kind",
     "check_options",
+    "check_noise_forgetting",
+    "default_noise_forgetting",
+    "NOISE_MEMORY_LAGS",
     "prior_diagonal",
 ]
+
+# Default memory of the noise model under forgetting, in units of n_lags + 1 samples.
+NOISE_MEMORY_LAGS = 40.0
 
 Window = Literal["truncated", "bartlett"]
 Residual = Literal["standardized", "a_posteriori", "a_priori"]
@@ -55,6 +61,32 @@ def check_options(
         raise ValueError(f"residual must be one of {RESIDUALS}, got {residual!r}")
     if not float(init_condition) > 1.0:
         raise ValueError(f"init_condition must be > 1, got {init_condition!r}")
+
+
+def default_noise_forgetting(forgetting: float, n_lags: int | None) -> float:
+    """The default ``f_R`` of the noise model: ``max(f, 1 - 1/(NOISE_MEMORY_LAGS (n_lags + 1)))``,
+    ``f`` itself when ``f = 1`` or all lags are kept (``n_lags=None``).
+
+    The noise autocovariance is then averaged over ``40 (n_lags + 1)`` samples (2040 for 50
+    lags, ``f_R = 0.99951``): the noise model's own fit absorbs about ``1/40`` of the lag sum
+    (2.5 % in variance), and the relative spread of the lag sum is about ``sqrt(2/40)``."""
+    f = float(forgetting)
+    if f == 1.0 or n_lags is None:
+        return f
+    return max(f, 1.0 - 1.0 / (NOISE_MEMORY_LAGS * (int(n_lags) + 1)))
+
+
+def check_noise_forgetting(noise_forgetting: float | None, forgetting: float, n_lags: int | None) -> float:
+    """``f_R`` for the option ``noise_forgetting`` (``None``: :func:`default_noise_forgetting`),
+    refused unless ``forgetting <= f_R <= 1``."""
+    if noise_forgetting is None:
+        return default_noise_forgetting(forgetting, n_lags)
+    g = float(noise_forgetting)
+    if not (float(forgetting) <= g <= 1.0):
+        raise ValueError(
+            f"noise_forgetting must be None or in [forgetting, 1] = [{forgetting}, 1], got {noise_forgetting!r}"
+        )
+    return g
 
 
 def prior_diagonal(p0: float | Sequence[float], n: int) -> np.ndarray:

@@ -74,6 +74,9 @@ class RecursiveEstimator:
     def residuals(self) -> np.ndarray:
         return self._bank.residuals(0)
 
+    def noise_residuals(self) -> np.ndarray:
+        return self._bank.noise_residuals(0)
+
     def covariance(self, kind: str = "corrected", *, repair: bool = True) -> np.ndarray:
         return self._bank.covariance(0, kind, repair=repair)
 
