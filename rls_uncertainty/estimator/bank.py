@@ -38,10 +38,11 @@ import numpy as np
 from ..errors import EstimatorNotReady, NonFiniteInput
 from . import covariance, state
 from .initialization import ExactInitialization
+from .lag_selection import flat_top_lags
 from .lag_storage import GROWTH_START, LagStorage
 from .lag_window import lag_weights
 from .numpy_compat import vecdot
-from .options import check_kind, check_noise_forgetting, check_options, prior_diagonal
+from .options import AUTO, check_kind, check_noise_forgetting, check_options, prior_diagonal
 
 __all__ = ["EstimatorBank"]
 
@@ -63,7 +64,10 @@ class EstimatorBank:
     n_lags:
         Largest residual-autocorrelation lag kept (Eq. 22); ``None`` keeps all lags (Eq. 20,
         memory and time grow with the number of samples). ``0`` gives the conventional
-        covariance.
+        covariance. ``"auto"``: each model's ``L`` is chosen from the data at every evaluated
+        sample (Politis' flat-top rule on ``R_k(0..max_lags)``,
+        :func:`.lag_selection.flat_top_lags`; truncated window only), with the memory of
+        ``n_lags=max_lags``; :attr:`lags_used` tells the choice.
     window:
         ``"truncated"`` (Eq. 22, uniform) or ``"bartlett"`` (positive semi-definite).
     forgetting:
@@ -83,6 +87,9 @@ class EstimatorBank:
         ``max(f, 1 - 1/(40 (n_lags + 1)))`` (:func:`.options.default_noise_forgetting`; ``f``
         itself when ``f = 1`` or all lags are kept). ``f_R = f`` uses the estimator's own
         residuals (the formulas before issue 12, which under-report under forgetting).
+    max_lags, min_lags:
+        With ``n_lags="auto"``: the most lags the rule may choose (the memory bound) and the
+        fewest it uses (default 50 and 0); ignored otherwise.
 
     The options are defined in :mod:`.reference`; the noise model in the package docstring.
     """
@@ -100,16 +107,22 @@ class EstimatorBank:
         p0: float | Sequence[float] | None = None,
         init_condition: float = 1e8,
         noise_forgetting: float | None = None,
+        max_lags: int = 50,
+        min_lags: int = 0,
     ) -> None:
         sizes = tuple(int(s) for s in sizes)
         if not sizes or min(sizes) < 1:
             raise ValueError(f"every model needs at least one parameter, got sizes={sizes}")
-        check_options(n_lags, window, forgetting, residual, init_condition)
-        g = check_noise_forgetting(noise_forgetting, forgetting, n_lags)
+        check_options(n_lags, window, forgetting, residual, init_condition, max_lags=max_lags, min_lags=min_lags)
+        self.auto = n_lags == AUTO
+        self.max_lags, self.min_lags = int(max_lags), int(min_lags)
+        # The largest lag held: n_lags, max_lags with auto, None (growing) for all lags.
+        held = None if n_lags is None else (self.max_lags if self.auto else int(n_lags))
+        g = check_noise_forgetting(noise_forgetting, forgetting, held)
         self.sizes = sizes
         self.n_models = m = len(sizes)
         self.n_max = n = max(sizes)
-        self.n_lags = None if n_lags is None else int(n_lags)
+        self.n_lags = AUTO if self.auto else (None if n_lags is None else int(n_lags))
         self.window = window
         self.forgetting = float(forgetting)
         self.residual = residual
@@ -134,9 +147,9 @@ class EstimatorBank:
         self._ready = np.zeros(m, dtype=bool)
         self._ready_at = np.zeros(m, dtype=np.int64)
         self.repairs = np.zeros(m, dtype=np.int64)
-        cap = GROWTH_START if self.n_lags is None else self.n_lags + 1
+        cap = GROWTH_START if held is None else held + 1
         self._lags = LagStorage(
-            m, n, cap, all_lags=self.n_lags is None, forgetting=self.forgetting, waiting=p0 is None,
+            m, n, cap, all_lags=held is None, forgetting=self.forgetting, waiting=p0 is None,
             noise_forgetting=g,
         )
         self._init = ExactInitialization(self)
@@ -169,6 +182,7 @@ class EstimatorBank:
             self._nouter = np.zeros((m, n + 1, n))
         self._evaluator = covariance.CovarianceEvaluator(eq13=self.forgetting == 1.0)
         self._covariances = None  # covariance.Covariances of the current sample
+        self._chosen = None  # lags_used at the current sample (chosen on first use)
         self._window_key = None
 
         if p0 is not None:
@@ -190,7 +204,7 @@ class EstimatorBank:
         self._cov_scale = self._theta_scale[:, :, None] * self._theta_scale[:, None, :]
         self._se_scale = 2.0 * self._cov_scale.diagonal(0, 1, 2)  # see covariance.Covariances
         self._init.reset()
-        self._covariances = None
+        self._covariances = self._chosen = None
 
     @property
     def n_window(self) -> int:
@@ -318,7 +332,7 @@ class EstimatorBank:
                 self._init.reset()  # its indices point into the old arrays
             else:
                 lags.relocate(w)
-        self._covariances = None
+        self._covariances = self._chosen = None
 
     def _residual(self, out: np.ndarray, neg_e: np.ndarray, d: np.ndarray, root: np.ndarray, f: float) -> None:
         """The residual of Eqs. 16-17 of the chosen kind, from ``-e_k`` and ``d_k`` (forgetting
@@ -449,8 +463,15 @@ class EstimatorBank:
             else:
                 w = lags.cap
                 sums, products = lags.lag_sums, lags.lag_products
-            largest = self.k - 1 if self.n_lags is None else self.n_lags
-            h = self._window_h if self._window_key == (largest, w) else self._half_window(largest, w)
+            if self.auto:  # Eq. 22 with each model's L: weight 1 on lags 0..L (lag 0 halved)
+                L = self._lags_chosen()
+                w = min(w, int(L[self._ready].max(initial=0)) + 1)  # no lag beyond the largest L
+                sums, products = lags.lag_sums[:, :w], lags.lag_products[:, :, :w]
+                h = (np.arange(w) <= L[:, None]).astype(float)
+                h[:, 0] = 0.5
+            else:
+                largest = self.k - 1 if self.n_lags is None else self.n_lags
+                h = self._window_h if self._window_key == (largest, w) else self._half_window(largest, w)
             cov, repaired = self._evaluator(
                 self._D, self._D_diagonal, sums, h, products, 1.0 / self.n_R,
                 self._cov_scale, self._se_scale, self._exact_fit, self.sizes,
@@ -459,6 +480,40 @@ class EstimatorBank:
                 self.repairs[repaired] += 1
             self._covariances = cov
         return cov
+
+    @property
+    def lags_used(self) -> np.ndarray:
+        """The largest lag ``L`` of Eq. 22 each model uses at this sample, ``(M,)`` ints: with
+        ``n_lags="auto"`` chosen by the flat-top rule (``min_lags``, as far as the lags held
+        allow, for a model that is not ready), otherwise ``min(n_lags, k - 1)`` (``k - 1`` with
+        all lags)."""
+        return self._lags_chosen().copy()
+
+    def _lags_chosen(self) -> np.ndarray:
+        chosen = self._chosen
+        if chosen is None:
+            k, m = self.k, self.n_models
+            if not self.auto:
+                largest = max(k - 1, 0) if self.n_lags is None else min(self.n_lags, max(k - 1, 0))
+                chosen = np.full(m, largest, dtype=np.int64)
+            else:  # models not ready get R(0) = 0: min_lags (the rule's edge case)
+                sums = self._lags.lag_sums[:, : self.n_window]
+                if not self._all_ready:
+                    sums = np.where(self._ready[:, None], sums, 0.0)
+                chosen = flat_top_lags(sums, self.rule_samples, cap=self.max_lags, min_lags=self.min_lags)
+            self._chosen = chosen
+        return chosen
+
+    @property
+    def rule_samples(self) -> float:
+        """The sample count the lag rule uses: ``k``, or under forgetting Kish's effective size
+        ``(sum w)^2 / sum w^2`` of the weights ``w_j = g^(k-j)`` of ``R_k(i)`` (``g = f_R``),
+        ``(1 - g^k)(1 + g) / ((1 - g)(1 + g^k))``."""
+        g, k = self.noise_forgetting, self.k
+        if g == 1.0:
+            return float(k)
+        gk = g**k
+        return (1.0 - gk) * (1.0 + g) / ((1.0 - g) * (1.0 + gk))
 
     def _exact_fit(self) -> np.ndarray:
         """Models whose residual variance ``R_k(0)`` is at most 1e-12 of the mean square of

@@ -21,6 +21,7 @@ __all__ = [
     "check_window",
     "check_kind",
     "check_options",
+    "AUTO",
     "check_noise_forgetting",
     "default_noise_forgetting",
     "NOISE_MEMORY_LAGS",
@@ -48,12 +49,30 @@ def check_kind(kind: str) -> None:
         raise ValueError(f"kind must be one of {COVARIANCE_KINDS}, got {kind!r}")
 
 
+def _is_count(value) -> bool:
+    return not isinstance(value, (bool, str)) and isinstance(value, (int, np.integer, float)) and int(value) == value
+
+AUTO = "auto"  # n_lags chosen from the data (lag_selection.flat_top_lags)
+
+
 def check_options(
-    n_lags: int | None, window: str, forgetting: float, residual: str, init_condition: float
+    n_lags: int | str | None, window: str, forgetting: float, residual: str, init_condition: float,
+    *, max_lags: int = 50, min_lags: int = 0,
 ) -> None:
     """Refuse an invalid configuration with a message that names the option."""
-    if n_lags is not None and (isinstance(n_lags, bool) or int(n_lags) != n_lags or n_lags < 0):
-        raise ValueError(f"n_lags must be None or an integer >= 0, got {n_lags!r}")
+    if n_lags == AUTO:
+        if not (_is_count(max_lags) and max_lags >= 1):
+            raise ValueError(f"max_lags must be an integer >= 1, got {max_lags!r}")
+        if not (_is_count(min_lags) and 0 <= min_lags <= max_lags):
+            raise ValueError(f"min_lags must be an integer in [0, max_lags = {max_lags}], got {min_lags!r}")
+        if window != "truncated":
+            raise ValueError(
+                f"n_lags='auto' needs window='truncated', got {window!r}: the flat-top rule chooses a "
+                "truncation point, and the Bartlett taper cannot let the anti-correlated lags of "
+                "differentiated noise cancel (validation/auto_lags/REPORT.md)"
+            )
+    elif n_lags is not None and not (_is_count(n_lags) and n_lags >= 0):
+        raise ValueError(f"n_lags must be None, 'auto' or an integer >= 0, got {n_lags!r}")
     check_window(window)
     if not (0.0 < float(forgetting) <= 1.0):
         raise ValueError(f"forgetting must be in (0, 1], got {forgetting!r}")

@@ -48,6 +48,11 @@ class RecursiveEstimator:
         return self._bank.n_lags
 
     @property
+    def lags_used(self) -> int:
+        """The largest lag of Eq. 22 used at this sample (chosen with ``n_lags="auto"``)."""
+        return int(self._bank.lags_used[0])
+
+    @property
     def n_samples(self) -> int:
         return self._bank.k
 

@@ -48,6 +48,15 @@ What the paper leaves open is defined here, and the fast bank follows it:
 * **Lag window** ``c_i`` (:func:`.lag_window.lag_weights`): Eq. 20 keeps all lags
   ``i < k``, Eq. 22 lags ``i <= n_tau``; ``bartlett`` weights them by ``1 - i/(n_tau+1)``
   (``n_tau = k - 1`` with all lags).
+* **Automatic lags** (``n_lags="auto"``, truncated window only): ``R_k(i)`` is kept for
+  ``i <= max_lags`` and, when a covariance is evaluated, ``n_tau = L`` is chosen by Politis'
+  flat-top rule (:func:`flat_top_lag`): with ``rho(i) = R_k(i)/R_k(0)``, the threshold
+  ``tau = 2 sqrt(log10 n / n)`` and ``K = max(5, ceil(sqrt(log10 n)))``, ``m`` is the smallest
+  ``m >= 0`` with ``|rho(m+j)| < tau`` for ``j = 1..K`` and ``L = 2 m``, or ``max_lags`` when
+  no such run fits in the lags held; ``L`` is limited to ``[min_lags, min(max_lags, lags
+  held, n - 1)]`` and is ``min_lags`` when ``R_k(0) <= 0`` (an exact fit) or before
+  initialization. ``n`` is ``k``, or under forgetting Kish's effective size
+  ``(sum w)^2 / sum w^2`` of the weights ``w_j = f_R^(k-j)`` of ``R_k(i)``.
 * **Published covariance.** A corrected covariance with a negative diagonal entry is
   replaced by the nearest positive semi-definite matrix (:func:`.covariance.nearest_psd`),
   unless the model fits exactly (``R_k(0) <= 1e-12`` times the mean square of the model
@@ -58,6 +67,8 @@ What the paper leaves open is defined here, and the fast bank follows it:
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from ..errors import EstimatorNotReady
@@ -65,7 +76,22 @@ from .covariance import EXACT_FIT, nearest_psd
 from .lag_window import lag_weights
 from .options import check_kind, check_noise_forgetting, check_options, check_window, prior_diagonal
 
-__all__ = ["batch_reference", "RecursiveReference"]
+__all__ = ["batch_reference", "RecursiveReference", "flat_top_lag"]
+
+
+def flat_top_lag(R, n: float, max_lags: int, min_lags: int = 0) -> int:
+    """Politis' flat-top rule on ``R(0..W-1)`` (the module docstring), one model, literally."""
+    W = len(R)
+    hi = max(min(W - 1, max_lags, math.floor(n) - 1), 0)
+    lo = min(min_lags, hi)
+    if n < 2 or W < 2 or not R[0] > 0 or not all(math.isfinite(r) for r in R):
+        return lo
+    tau = 2.0 * math.sqrt(math.log10(n) / n)
+    K = max(5, math.ceil(math.sqrt(math.log10(n))))
+    for m in range(W - K):  # a run of K lags m+1..m+K inside the W lags held
+        if all(abs(R[m + j]) < tau * R[0] for j in range(1, K + 1)):
+            return max(min(2 * m, hi), lo)
+    return hi
 
 
 def batch_reference(
@@ -117,8 +143,9 @@ class RecursiveReference:
     """Eqs. 15-22 for one model, literally (see the module docstring for the options).
 
     ``RecursiveReference(n, n_lags=None, window="truncated", forgetting=1.0, *,
-    residual="standardized", p0=None, init_condition=1e8, noise_forgetting=None)``, the
-    arguments of :class:`~.bank.EstimatorBank` for one model of ``n`` parameters.
+    residual="standardized", p0=None, init_condition=1e8, noise_forgetting=None,
+    max_lags=50, min_lags=0)``, the arguments of :class:`~.bank.EstimatorBank` for one model of
+    ``n`` parameters.
     """
 
     def __init__(
@@ -132,11 +159,16 @@ class RecursiveReference:
         p0=None,
         init_condition: float = 1e8,
         noise_forgetting: float | None = None,
+        max_lags: int = 50,
+        min_lags: int = 0,
     ) -> None:
-        check_options(n_lags, window, forgetting, residual, init_condition)
+        check_options(n_lags, window, forgetting, residual, init_condition, max_lags=max_lags, min_lags=min_lags)
         self.n, self.n_lags, self.window = n, n_lags, window
         self.f, self.residual, self.init_condition = float(forgetting), residual, float(init_condition)
-        self.g = check_noise_forgetting(noise_forgetting, forgetting, n_lags)  # f_R
+        self.auto = n_lags == "auto"
+        self.max_lags, self.min_lags = max_lags, min_lags
+        self.held = None if n_lags is None else (max_lags if self.auto else n_lags)  # n_tau of the memory
+        self.g = check_noise_forgetting(noise_forgetting, forgetting, self.held)  # f_R
         self.noise = self.g != self.f  # R(i) from the noise model
         self.k = 0
         self.n_k = 0.0  # sum_j f^(k-j)
@@ -163,7 +195,7 @@ class RecursiveReference:
 
     def largest_lag(self) -> int:
         """The largest lag held at sample ``k``: ``k - 1`` (Eq. 20) or ``min(k - 1, n_tau)``."""
-        return self.k - 1 if self.n_lags is None else min(self.k - 1, self.n_lags)
+        return self.k - 1 if self.held is None else min(self.k - 1, self.held)
 
     def update(self, x, z: float) -> None:
         x = np.asarray(x, dtype=float)
@@ -250,9 +282,20 @@ class RecursiveReference:
         if not self.ready:
             raise EstimatorNotReady(f"not initialized after {self.k} samples")
 
+    def lags_used(self) -> int:
+        """``n_tau`` of Eq. 22 at this sample: chosen with ``n_lags="auto"``, else the lags held."""
+        if not self.auto:
+            return self.largest_lag()
+        g, k = self.g, self.k
+        n = k if g == 1.0 else (sum(g**i for i in range(k)) ** 2 / sum(g ** (2 * i) for i in range(k)))
+        R = [self.R[i] if self.ready else 0.0 for i in range(self.largest_lag() + 1)]  # not ready: as R(0) = 0
+        return flat_top_lag(R, n, self.max_lags, self.min_lags)
+
     def weights(self) -> np.ndarray:
         """Lag window ``c_i`` for the lags held (Eqs. 20, 22)."""
         held = self.largest_lag() + 1
+        if self.auto:
+            return lag_weights(self.lags_used(), "truncated", held)
         return lag_weights(self.k - 1 if self.n_lags is None else self.n_lags, self.window, held)
 
     def covariance(self, kind: str = "corrected") -> np.ndarray:

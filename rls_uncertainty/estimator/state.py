@@ -16,7 +16,8 @@ __all__ = ["STATE_FORMAT", "capture", "restore"]
 # only; 4: the package layout (lag_storage): Lambda+ of x alone once every model is
 # initialized, the y products only while one waits, residuals with their sign, D and theta
 # as separate arrays; 5: the noise model under forgetting (noise_forgetting; its dispersion,
-# estimate and residual history u, the f-weighted lag-0 moments while a model waits).
+# estimate and residual history u, the f-weighted lag-0 moments while a model waits) and
+# n_lags="auto" with max_lags, min_lags.
 STATE_FORMAT = 5
 
 _BANK_ARRAYS = ("_inv_s", "_ready", "_ready_at", "repairs")
@@ -32,6 +33,8 @@ def capture(bank) -> dict:
         "residual": bank.residual,
         "init_condition": bank.init_condition,
         "noise_forgetting": bank.noise_forgetting,
+        "max_lags": bank.max_lags,
+        "min_lags": bank.min_lags,
     }
     counters = {"k": bank.k, "n_eff": bank.n_eff, "n_noise": bank.n_noise, "cap": bank._lags.cap}
     n = bank.n_max
