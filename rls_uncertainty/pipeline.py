@@ -51,7 +51,9 @@ class SampleOutput(NamedTuple):
 
     ``theta``, ``se`` (corrected, Eqs. 20/22) and ``se_conventional`` (Eq. 13) are
     ``(M, n_max)`` arrays in the order of ``config.models``; rows of models that are not
-    ``ready`` yet (exact initialization still waiting) and the padding are NaN.
+    ``ready`` yet (exact initialization still waiting) and the padding are NaN. ``lags``
+    ``(M,)`` ints: the largest lag of Eq. 22 behind each corrected SE (chosen per sample with
+    ``estimator.lag_selection: auto``), 0 for models not ready.
     """
 
     stamp_ns: int
@@ -60,6 +62,7 @@ class SampleOutput(NamedTuple):
     se: np.ndarray
     se_conventional: np.ndarray
     ready: np.ndarray
+    lags: np.ndarray | None = None
 
     @property
     def time(self) -> float:
@@ -155,7 +158,9 @@ class Pipeline:
 
     def _new_estimator(self) -> None:
         c = self.config.estimator
-        self.bank = EstimatorBank(self.sizes, c.n_lags, c.window, c.forgetting, residual=c.residual)
+        self.bank = EstimatorBank(
+            self.sizes, c.bank_lags, c.window, c.forgetting, residual=c.residual, max_lags=c.max_lags
+        )
         self._X = np.zeros((len(self.sizes), self.bank.n_max))
         self._z = np.zeros(len(self.sizes))
         self._zsum = np.zeros(len(self.sizes))  # sums of z and z^2 since the estimator started
@@ -295,6 +300,7 @@ class Pipeline:
             se=bank.standard_errors_all("corrected"),
             se_conventional=bank.standard_errors_all("conventional"),
             ready=bank.ready,
+            lags=np.where(bank.ready, bank.lags_used, 0),
         )
 
     def published(self, out: SampleOutput):
@@ -354,6 +360,7 @@ class Pipeline:
             "residual_rho1": float(rho[0]) if rho.size else float("nan"),
             "lags_outside_2sigma": float(np.mean(np.abs(rho) > bound)) if rho.size else float("nan"),
             "repairs": int(bank.repairs[j]),
+            "lags": int(bank.lags_used[j]),  # the largest lag of Eq. 22 (chosen with lag_selection auto)
         }
 
     def counters(self) -> dict:

@@ -141,3 +141,58 @@ def test_auto_state_continues_bit_identically_with_the_memory_of_max_lags(forget
                 np.testing.assert_array_equal(a.lags_used, b.lags_used)
                 np.testing.assert_array_equal(a.standard_errors_all(), b.standard_errors_all())
         np.testing.assert_array_equal(a.theta_all(), b.theta_all())
+
+
+# --------------------------------------------------------------------------- configuration, pipeline, CLI
+def test_parameters_reach_the_bank_and_are_validated():
+    from rls_uncertainty.config import ConfigError, EstimatorConfig, pipeline_config
+
+    cfg = pipeline_config({"estimator.lag_selection": "auto", "estimator.max_lags": 80})
+    assert cfg.estimator.bank_lags == "auto" and cfg.estimator.max_lags == 80
+    assert cfg.fingerprint()["n_lags"] == "auto" and cfg.fingerprint()["max_lags"] == 80
+    fixed = pipeline_config({"estimator.max_lags": 80})
+    assert fixed.estimator.bank_lags == 50 and "max_lags" not in fixed.fingerprint()
+    for params, match in [
+        ({"estimator.lag_selection": "auto", "estimator.window": "bartlett"}, "truncated"),
+        ({"estimator.lag_selection": "sometimes"}, "estimator.lag_selection"),
+        ({"estimator.max_lags": 0}, "estimator.max_lags"),
+    ]:
+        with pytest.raises(ConfigError, match=match):
+            pipeline_config(params)
+    with pytest.raises(ConfigError, match="estimator.max_lags"):
+        EstimatorConfig(max_lags=2.5)
+
+
+def test_pipeline_publishes_the_chosen_lags_per_sample_and_in_the_model_fit():
+    from test_pipeline import T2_PARAMS, feed_streams
+
+    from rls_uncertainty.config import pipeline_config
+    from rls_uncertainty.pipeline import Pipeline
+    from rls_uncertainty.simulation import simulate_sensor_streams
+
+    st = simulate_sensor_streams(0.2, 250)
+    pipe = Pipeline(pipeline_config({**T2_PARAMS, "estimator.lag_selection": "auto"}))
+    outs = feed_streams(pipe, st)
+    assert pipe.bank.n_lags == "auto" and pipe.bank.max_lags == 50
+    lags = np.array([o.lags for o in outs])
+    ready = np.array([o.ready for o in outs])
+    assert lags.dtype.kind == "i" and np.all(lags[~ready] == 0) and lags.max() <= 50
+    assert len(np.unique(lags[ready[:, 0], 0])) > 2  # the choice follows the data
+    np.testing.assert_array_equal(outs[-1].lags, pipe.bank.lags_used)
+    assert [pipe.model_fit(j)["lags"] for j in range(2)] == list(pipe.bank.lags_used)
+    fixed = Pipeline(pipeline_config(T2_PARAMS))
+    outs = feed_streams(fixed, st)
+    assert np.all(outs[-1].lags == 50) and fixed.model_fit(0)["lags"] == 50
+
+
+def test_command_line_lags_auto():
+    from rls_uncertainty import cli
+
+    parser = cli.build_parser()
+    args = parser.parse_args(["replay", "bag", "--out", "o", "--lags", "auto", "--max-lags", "70"])
+    params = cli._replay_params(args)
+    assert params["estimator.lag_selection"] == "auto" and params["estimator.max_lags"] == 70
+    assert "estimator.lags" not in params
+    assert parser.parse_args(["montecarlo", "--out", "o", "--lags", "auto"]).lags == "auto"
+    assert parser.parse_args(["montecarlo", "--out", "o", "--lags", "7"]).lags == 7
+    assert parser.parse_args(["simulate", "--lags", "auto"]).lags == "auto"
