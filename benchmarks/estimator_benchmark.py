@@ -7,6 +7,7 @@ Prints, in one run on this machine:
   2. for n_lags = 50, the cost around k = 1e3, 1e4 and 1e5 (must stay flat) and the memory;
   2b. forgetting f = 0.98 at 50 lags: the estimator's own residuals (noise_forgetting = f, the
      formulas before issue 12 item 7) against the default noise model (f_R = 0.99951);
+  2c. n_lags = "auto" (max_lags 50, the lags chosen at every sample) beside n_lags = 50;
   3. the ratio against refitting batch OLS with a HAC covariance (statsmodels, uniform kernel,
      maxlags 50) at every sample of a 600-sample maneuver, six models.
 
@@ -143,6 +144,12 @@ def main() -> None:
         kib = sum(a.nbytes for a in EstimatorBank(SIZES, 50, forgetting=0.98, noise_forgetting=g, p0=1.0)
                   .state()["arrays"].values()) / 1024
         print(f"   {label:>26}{upd:10.1f}{total:17.1f}{p99:9.1f}{kib:8.1f}")
+
+    print("\n2c. Automatic lags (issue 14), median microseconds per sample")
+    print(f"   {'n_lags':>26}{'update':>10}{'update+outputs':>17}{'p99':>9}")
+    for label, n_lags in (("50", 50), ("auto (max_lags 50)", "auto")):
+        upd, total, p99 = per_sample(n_lags)
+        print(f"   {label:>26}{upd:10.1f}{total:17.1f}{p99:9.1f}")
 
     print("\n3. 600-sample maneuver, six models, 50 lags: recursive vs refitting batch OLS + HAC "
           "(statsmodels, uniform kernel) at every sample")

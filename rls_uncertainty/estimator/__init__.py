@@ -66,6 +66,24 @@ section 6; ``f = 0.98``, 50 lags unless said):
 5. Early samples (``k < ~1/(1-f_R)``): ``R_k(i)`` from fewer samples, unbiased but with more
    spread. With all lags (``n_lags=None``) the default is ``f_R = f`` (no noise model: the
    notch above remains); pass ``noise_forgetting`` explicitly there.
+
+Automatic lags (issue 14)
+-------------------------
+``n_lags="auto"`` (``max_lags=50``, ``min_lags=0``) keeps ``R_k(i)`` and ``Lambda_k(i)`` up to
+``max_lags`` (the memory and update cost of ``n_lags=max_lags``) and, at the first covariance
+evaluation of each sample, chooses every model's ``L`` by Politis' flat-top rule
+(:mod:`.lag_selection`: ``L = 2 m``, ``m`` the lag before the first run of 5 autocorrelations
+``|R_k(i)/R_k(0)| < 2 sqrt(log10 k / k)``; ``max_lags`` when no such run fits), then evaluates
+Eq. 22 with the truncated window up to each model's ``L``. :attr:`.EstimatorBank.lags_used`
+gives the choice. ``window="bartlett"`` is refused with it (the rule picks a truncation point;
+the taper cannot let the anti-correlated lags of differentiated noise cancel). Table 3 Monte
+Carlo (250 runs x 5 levels): corrected SE / scatter 0.83-1.27, 24 of 25 cells in [0.8, 1.25]
+(50 lags 0.93-1.44, 22 of 25; all lags 0.94-1.53, 21 of 25); the miss is C_m_alpha at 0 %
+(1.27), from the residuals of the first ~50 samples after exact initialization, before the
+input starts; with ``residual="a_posteriori"`` all 25 cells are met (0.81-1.14). A long
+correlation that first becomes significant can step a standard error (up to +30 % at one
+sample on the Twin Otter data, onto the value 50 lags had). Under forgetting the rule's sample
+count is Kish's effective size of the weights of ``R_k(i)``; that combination is not validated.
 """
 
 from ..errors import EstimatorNotReady, NonFiniteInput
