@@ -5,6 +5,9 @@ Prints, in one run on this machine:
      n_lags = 0, 11, 50, 200 and all: the update alone (Eqs. 15-17, 21) and the update plus
      every output a node publishes (estimates, corrected and conventional standard errors);
   2. for n_lags = 50, the cost around k = 1e3, 1e4 and 1e5 (must stay flat) and the memory;
+  2b. forgetting f = 0.98 at 50 lags: the estimator's own residuals (noise_forgetting = f, the
+     formulas before issue 12 item 7) against the default noise model (f_R = 0.99951);
+  2c. n_lags = "auto" (max_lags 50, the lags chosen at every sample) beside n_lags = 50;
   3. the ratio against refitting batch OLS with a HAC covariance (statsmodels, uniform kernel,
      maxlags 50) at every sample of a 600-sample maneuver, six models.
 
@@ -53,9 +56,9 @@ def outputs(bank: EstimatorBank) -> None:
     bank.standard_errors_all("conventional")
 
 
-def per_sample(n_lags, n: int = 3000, warm: int = 300) -> tuple[float, float, float]:
+def per_sample(n_lags, n: int = 3000, warm: int = 300, **options) -> tuple[float, float, float]:
     X, z = maneuver(n)
-    bank = EstimatorBank(SIZES, n_lags)
+    bank = EstimatorBank(SIZES, n_lags, **options)
     for k in range(warm):
         bank.update(X[k], z[k])
     t_upd, t_all = [], []
@@ -133,6 +136,20 @@ def main() -> None:
         print(f"   k = {k:>7,}: {us:6.1f} us")
     rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     print(f"   estimator state {state_bytes / 1024:.1f} KiB; process max RSS {rss:.1f} MiB")
+
+    print("\n2b. Forgetting f = 0.98, 50 lags, median microseconds per sample (state KiB)")
+    print(f"   {'R_k(i) from':>26}{'update':>10}{'update+outputs':>17}{'p99':>9}{'state':>8}")
+    for label, g in (("own residuals (f_R = f)", 0.98), ("noise model (default f_R)", None)):
+        upd, total, p99 = per_sample(50, forgetting=0.98, noise_forgetting=g)
+        kib = sum(a.nbytes for a in EstimatorBank(SIZES, 50, forgetting=0.98, noise_forgetting=g, p0=1.0)
+                  .state()["arrays"].values()) / 1024
+        print(f"   {label:>26}{upd:10.1f}{total:17.1f}{p99:9.1f}{kib:8.1f}")
+
+    print("\n2c. Automatic lags (issue 14), median microseconds per sample")
+    print(f"   {'n_lags':>26}{'update':>10}{'update+outputs':>17}{'p99':>9}")
+    for label, n_lags in (("50", 50), ("auto (max_lags 50)", "auto")):
+        upd, total, p99 = per_sample(n_lags)
+        print(f"   {label:>26}{upd:10.1f}{total:17.1f}{p99:9.1f}")
 
     print("\n3. 600-sample maneuver, six models, 50 lags: recursive vs refitting batch OLS + HAC "
           "(statsmodels, uniform kernel) at every sample")

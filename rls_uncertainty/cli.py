@@ -40,6 +40,8 @@ def _simulate(args: argparse.Namespace) -> int:
             z[j] = data[m.output][1][k]
         bank.update(rows, z)
     lags = "all" if args.lags is None else args.lags
+    if args.lags == "auto":
+        lags = "auto (" + ", ".join(f"{m.output} {L}" for m, L in zip(models, bank.lags_used, strict=True)) + ")"
     print(
         f"T-2 short-period maneuver, {args.noise:g}% band-limited noise (seed {args.seed}), "
         f"{t.size} samples at 50 Hz, {lags} lags, {args.window} window\n"
@@ -137,8 +139,12 @@ def _replay_params(args: argparse.Namespace) -> dict[str, Any]:
         params = load_parameters_file(args.config) if args.config else {}
     except UnicodeDecodeError as exc:
         raise _not_text(args.config, exc) from exc
-    if args.lags is not None:
+    if args.lags == "auto":
+        params["estimator.lag_selection"] = "auto"
+    elif args.lags is not None:
         params["estimator.lags"] = args.lags
+    if args.max_lags is not None:
+        params["estimator.max_lags"] = args.max_lags
     if args.window:
         params["estimator.window"] = args.window
     if args.forgetting is not None:
@@ -191,8 +197,10 @@ def _play(args: argparse.Namespace) -> int:
                 ack_timeout=args.ack_timeout, report=args.report)
 
 
-def _lags(value: str) -> int | None:
-    """simulate --lags: an integer >= 0, or 'all' (None)."""
+def _lags(value: str) -> int | str | None:
+    """simulate and montecarlo --lags: an integer >= 0, 'all' (None) or 'auto'."""
+    if value == "auto":
+        return value
     if value in ("all", "none", "None"):
         return None
     try:
@@ -200,18 +208,28 @@ def _lags(value: str) -> int | None:
     except ValueError:
         n = -1
     if n < 0:
-        raise argparse.ArgumentTypeError(f"must be an integer >= 0 or 'all', got {value!r}")
+        raise argparse.ArgumentTypeError(f"must be an integer >= 0, 'all' or 'auto', got {value!r}")
     return n
 
 
-def _replay_lags(value: str) -> int:
-    """replay --lags: an integer (the parameter's range is checked with the others) or 'all' (-1)."""
+def _montecarlo_lags(value: str):
+    """montecarlo --lags: an integer >= 0 or 'auto'."""
+    if value == "auto":
+        return value
+    return _integer(0)(value)
+
+
+def _replay_lags(value: str) -> int | str:
+    """replay --lags: an integer (the parameter's range is checked with the others), 'all' (-1)
+    or 'auto' (estimator.lag_selection auto)."""
+    if value == "auto":
+        return value
     if value == "all":
         return -1
     try:
         return int(value)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"must be an integer or 'all', got {value!r}") from None
+        raise argparse.ArgumentTypeError(f"must be an integer, 'all' or 'auto', got {value!r}") from None
 
 
 def _real(low: float, *, low_open: bool = False, high: float | None = None) -> Callable[[str], float]:
@@ -273,7 +291,7 @@ def build_parser() -> argparse.ArgumentParser:
     sim = sub.add_parser("simulate", help="estimate the T-2 derivatives of a simulated maneuver (no ROS)")
     sim.add_argument("--noise", type=_real(0.0), default=20.0, help="band-limited noise, percent (default 20)")
     sim.add_argument("--seed", type=_integer(0), default=250, help="noise seed (default 250)")
-    sim.add_argument("--lags", type=_lags, default=50, help="retained lags, or 'all' (default 50)")
+    sim.add_argument("--lags", type=_lags, default=50, help="retained lags, 'all' or 'auto' (default 50)")
     sim.add_argument("--window", choices=("truncated", "bartlett"), default="truncated")
     sim.add_argument("--forgetting", type=_real(0.0, low_open=True, high=1.0), default=1.0,
                      help="exponential forgetting factor in (0, 1] (default 1)")
@@ -283,7 +301,8 @@ def build_parser() -> argparse.ArgumentParser:
     mc.add_argument("--runs", type=_integer(1), default=250, help="runs per noise level (default 250)")
     mc.add_argument("--out", required=True, help="output directory")
     mc.add_argument("--levels", type=_real(0.0), nargs="+", help="noise levels in percent (default 0 5 10 15 20)")
-    mc.add_argument("--lags", type=_integer(0), default=50, help="retained lags (default 50)")
+    mc.add_argument("--lags", type=_montecarlo_lags, default=50,
+                    help="retained lags, or 'auto' (chosen per run and model, at most 50) (default 50)")
     mc.add_argument("--jobs", type=_integer(1), default=None, help="processes (default: every core)")
     mc.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
     mc.add_argument("--force", action="store_true", help=_FORCE_HELP)
@@ -319,7 +338,9 @@ def build_parser() -> argparse.ArgumentParser:
     rp.add_argument("bag", help="replay bag on the standard topics")
     rp.add_argument("--config", help="ROS parameter file, e.g. config/t2.yaml (default: node defaults)")
     rp.add_argument("--out", required=True, help="output directory")
-    rp.add_argument("--lags", type=_replay_lags, help="override estimator.lags (integer or 'all')")
+    rp.add_argument("--lags", type=_replay_lags,
+                    help="override estimator.lags (integer or 'all'), or 'auto' (estimator.lag_selection auto)")
+    rp.add_argument("--max-lags", type=_integer(1), help="override estimator.max_lags (with auto)")
     rp.add_argument("--window", choices=("truncated", "bartlett"), help="override estimator.window")
     rp.add_argument("--forgetting", type=float, help="override estimator.forgetting")
     rp.add_argument("--models", nargs="+", help="override models.enabled (e.g. CZ Cm)")

@@ -209,6 +209,7 @@ class ParamSpec:
 
 
 _EQ2 = {m.output: list(m.regressors) for m in DEFAULT_MODELS}
+LAG_SELECTIONS = ("fixed", "auto")
 
 PARAMETERS: tuple[ParamSpec, ...] = (
     ParamSpec("rate", 50.0, "estimator sample rate, Hz; input streams are interpolated to it", 1.0, 1000.0),
@@ -222,6 +223,8 @@ PARAMETERS: tuple[ParamSpec, ...] = (
     ParamSpec("estimator.window", "truncated", "lag window: truncated (Eq. 22) or bartlett (always positive semi-definite)", choices=WINDOWS),
     ParamSpec("estimator.forgetting", 1.0, "exponential forgetting factor; 1 is the paper's growing-memory estimator", 0.5, 1.0),
     ParamSpec("estimator.residual", "standardized", "residual used in Eqs. 16-17: standardized (innovation / sqrt(1 + x'Dx), makes Eq. 16 equal the batch Eq. 14), a_posteriori (z - x'theta_k) or a_priori (z - x'theta_k-1)", choices=RESIDUALS),
+    ParamSpec("estimator.lag_selection", "fixed", "fixed: estimator.lags lags; auto: each model's lags chosen from its residual autocorrelation at every sample (Politis flat-top rule, truncated window only), up to estimator.max_lags", choices=LAG_SELECTIONS),
+    ParamSpec("estimator.max_lags", 50, "with estimator.lag_selection auto: the most lags the rule may choose, and the memory kept (as estimator.lags of that value)", 1, 100000),
     ParamSpec("differentiator.window", 9, "angular-acceleration differentiator window, samples", 3, 201),
     ParamSpec("differentiator.order", 3, "local polynomial order of the differentiator", 1, 10),
     ParamSpec("differentiator.lag", 4, "differentiator fixed lag, samples (0 = causal); every signal is delayed by it", 0, 200),
@@ -394,12 +397,21 @@ class EstimatorConfig:
     """Settings of the :class:`.estimator.EstimatorBank` (``estimator.*`` parameters):
     ``n_lags`` residual autocorrelation lags of Eq. 22 (``None``: all lags, Eq. 20; 0: the
     conventional covariance, Eq. 13), the lag ``window``, the exponential ``forgetting``
-    factor (1 is the paper) and the ``residual`` used in Eqs. 16-17."""
+    factor (1 is the paper) and the ``residual`` used in Eqs. 16-17; ``lag_selection``
+    ``"auto"`` chooses each model's lags up to ``max_lags`` from the data instead of
+    ``n_lags`` (``EstimatorBank(n_lags="auto", max_lags=...)``)."""
 
     n_lags: int | None = 50
     window: Window = "truncated"
     forgetting: float = 1.0
     residual: Residual = "standardized"
+    lag_selection: str = "fixed"
+    max_lags: int = 50
+
+    @property
+    def bank_lags(self) -> int | str | None:
+        """The bank's ``n_lags``: ``"auto"`` or the fixed lags."""
+        return "auto" if self.lag_selection == "auto" else self.n_lags
 
     def __post_init__(self) -> None:
         lags = self.n_lags
@@ -411,6 +423,18 @@ class EstimatorConfig:
             raise ConfigError(f"estimator.forgetting must be in (0, 1], got {self.forgetting!r}")
         if self.residual not in RESIDUALS:
             raise ConfigError(f"estimator.residual must be one of {list(RESIDUALS)}, got {self.residual!r}")
+        if self.lag_selection not in LAG_SELECTIONS:
+            raise ConfigError(
+                f"estimator.lag_selection must be one of {list(LAG_SELECTIONS)}, got {self.lag_selection!r}"
+            )
+        m = self.max_lags
+        if isinstance(m, bool) or not isinstance(m, Integral) or m < 1:
+            raise ConfigError(f"estimator.max_lags must be an integer >= 1, got {m!r}")
+        if self.lag_selection == "auto" and self.window != "truncated":
+            raise ConfigError(
+                "estimator.lag_selection auto needs estimator.window truncated (the rule chooses a "
+                f"truncation point), got {self.window!r}"
+            )
 
 
 @dataclass(frozen=True)
@@ -540,7 +564,7 @@ class PipelineConfig:
             "window": e.window,
             "forgetting": e.forgetting,
             "residual": e.residual,
-        }
+        } | ({"n_lags": "auto", "max_lags": e.max_lags} if e.lag_selection == "auto" else {})
 
 
 @dataclass(frozen=True)
@@ -577,6 +601,8 @@ def pipeline_config(params: dict[str, Any] | None = None) -> PipelineConfig:
             window=v["estimator.window"],
             forgetting=v["estimator.forgetting"],
             residual=v["estimator.residual"],
+            lag_selection=v["estimator.lag_selection"],
+            max_lags=v["estimator.max_lags"],
         ),
         differentiator=DifferentiatorConfig(**_section(v, "differentiator")),
         inputs=InputConfig(**_section(v, "inputs")),

@@ -106,6 +106,8 @@ class LevelResult:
     ensemble_scatter: np.ndarray  # (N, 5) standard deviation of the estimates over runs
     truth_outside: np.ndarray  # (N, 7) fraction of runs with the true value outside +-2 SE
     # (5 parameters, then any parameter of the C_Z / C_m model), each sample
+    lags_used: np.ndarray | None = None  # (runs, 2) final L of C_Z / C_m (n_lags="auto"; else the lags held)
+    n_lags: int | str = 50  # retained lags of se_corrected, or "auto"
 
     def summary(self) -> dict[str, dict[str, float]]:
         out = {}
@@ -160,11 +162,13 @@ def run_level(
     level: float,
     runs: int,
     *,
-    n_lags: int = 50,
+    n_lags: int | str = 50,
     seed: int = 2016,
     convergence: ConvergenceConfig = MONTE_CARLO_CONVERGENCE,
 ) -> LevelResult:
-    """All runs of one band-limited noise level (fraction, e.g. 0.2).
+    """All runs of one band-limited noise level (fraction, e.g. 0.2). ``n_lags="auto"``: each
+    run's models choose their lags (at most 50); the batch formula then uses each model's
+    final choice.
 
     Besides the end-of-maneuver results, one :class:`~rls_uncertainty.convergence.
     ConvergenceMonitor` over every run's models records when each parameter (and each model)
@@ -226,10 +230,14 @@ def run_level(
             rows.append(_pick(per))
         return np.array(rows)
 
-    batch: dict[int | None, list[np.ndarray]] = {n_lags: [], None: []}
-    for data in reductions:
+    lags_used = bank.lags_used.reshape(runs, n_models)
+    batch: dict[int | str | None, list[np.ndarray]] = {n_lags: [], None: []}
+    for r, data in enumerate(reductions):
         for lags, rows in batch.items():
-            per = [np.sqrt(np.diag(batch_estimate(*data[m.output], n_lags=lags)[2])) for m in T2_MODELS]
+            per = [
+                np.sqrt(np.diag(batch_estimate(*data[m.output], n_lags=lags_used[r, i] if lags == "auto" else lags)[2]))
+                for i, m in enumerate(T2_MODELS)
+            ]
             rows.append(_pick(per))
     # Figs. 5 and 7 for the last run: recursive vs batch autocorrelation of the C_Z residual,
     # and corrected SE of C_Z_alpha against the number of retained lags.
@@ -256,6 +264,7 @@ def run_level(
         model_flag_time=np.where(model_k >= 0, t[model_k], np.inf),
         model_flag_theta=model_theta, model_flag_se=model_se,
         ensemble_mean=ens[0], ensemble_se=ens[1], ensemble_scatter=ens[2], truth_outside=outside,
+        lags_used=lags_used, n_lags=n_lags,
     )
 
 
@@ -263,7 +272,7 @@ def run_table3(
     runs: int,
     levels: Sequence[float] = LEVELS,
     *,
-    n_lags: int = 50,
+    n_lags: int | str = 50,
     jobs: int | None = None,
     progress: Callable[[str], object] = print,
     convergence: ConvergenceConfig = MONTE_CARLO_CONVERGENCE,
@@ -443,14 +452,15 @@ def write_outputs(results: list[LevelResult], out: Path, *, figures: bool = True
             for name, row in res.summary().items():
                 w.writerow([f"{res.level:.2f}", name, row["true"], f"{row['mean']:.6g}",
                             f"{row['se_conventional']:.6g}", f"{row['se_corrected']:.6g}", f"{row['scatter']:.6g}"])
+    n_lags = results[0].n_lags
     lines = [
         "# Table 3 reproduction",
         "",
         f"{results[0].runs} runs per level; end-of-maneuver values. Each cell: ours / paper. "
         "SE = mean standard error over runs; scatter = standard deviation of the estimates.",
         "",
-        "| level | parameter | true | mean | SE conventional | SE corrected (50 lags) | scatter | corrected/scatter "
-        "| conventional/scatter |",
+        f"| level | parameter | true | mean | SE conventional | SE corrected ({n_lags} lags) | scatter | "
+        "corrected/scatter | conventional/scatter |",
         "| --- | --- | --- | --- | --- | --- | --- | --- | --- |",
     ]
     for res in results:
@@ -480,6 +490,14 @@ def write_outputs(results: list[LevelResult], out: Path, *, figures: bool = True
                 f"{row['se_corrected_all'] / row['se_batch_all']:.3f} | "
                 f"{row['se_corrected'] / row['se_corrected_all']:.3f} |"
             )
+    if n_lags == "auto":
+        lines += ["", "## Chosen lags (auto), end of maneuver: median [10%-90%] over runs", "",
+                  "| level | " + " | ".join(m.output for m in T2_MODELS) + " |",
+                  "| --- |" + " --- |" * len(T2_MODELS)]
+        for res in results:
+            q = np.percentile(res.lags_used, [50, 10, 90], axis=0)
+            lines.append(f"| {res.level * 100:.0f}% | " + " | ".join(
+                f"{q[0, i]:.0f} [{q[1, i]:.0f}-{q[2, i]:.0f}]" for i in range(len(T2_MODELS))) + " |")
     lines += _convergence_lines(results)
     paths["md"].write_text("\n".join(lines) + "\n")
     with open(paths["convergence"], "w", newline="") as fh:

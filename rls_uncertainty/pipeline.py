@@ -98,6 +98,8 @@ class SampleOutput(NamedTuple):
     ``(2, M, n_max, n_max)`` corrected (``[0]``) and conventional (``[1]``) covariances
     (:meth:`.estimator.EstimatorBank.covariance`, the corrected one repaired to positive
     semi-definite; symmetrized), NaN off the ready models' parameters.
+    ``lags`` ``(M,)`` ints: the largest lag of Eq. 22 behind each corrected SE (chosen per
+    sample with ``estimator.lag_selection: auto``), 0 for models not ready.
     """
 
     stamp_ns: int
@@ -109,6 +111,7 @@ class SampleOutput(NamedTuple):
     converged: np.ndarray
     model_converged: np.ndarray
     covariance: np.ndarray | None = None
+    lags: np.ndarray | None = None
 
     @property
     def time(self) -> float:
@@ -245,7 +248,9 @@ class Pipeline:
 
     def _new_estimator(self) -> None:
         c = self.config.estimator
-        self.bank = EstimatorBank(self.sizes, c.n_lags, c.window, c.forgetting, residual=c.residual)
+        self.bank = EstimatorBank(
+            self.sizes, c.bank_lags, c.window, c.forgetting, residual=c.residual, max_lags=c.max_lags
+        )
         self._X = np.zeros((len(self.sizes), self.bank.n_max))
         self._z = np.zeros(len(self.sizes))
         self._zsum = np.zeros(len(self.sizes))  # sums of z and z^2 since the estimator started
@@ -479,6 +484,7 @@ class Pipeline:
             converged=flags,
             model_converged=model_flags,
             covariance=self._covariances(ready) if every and (t // self._period_ns) % every == 0 else None,
+            lags=np.where(ready, bank.lags_used, 0),
         )
 
     def _covariances(self, ready: np.ndarray) -> np.ndarray:
@@ -608,6 +614,7 @@ class Pipeline:
             "lags_outside_2sigma": float(np.mean(np.abs(rho) > bound)) if rho.size else float("nan"),
             "repairs": int(bank.repairs[j]),
             "outputs_withheld": withheld,
+            "lags": int(bank.lags_used[j]),  # the largest lag of Eq. 22 (chosen with lag_selection auto)
         }
 
     def convergence(self, j: int) -> dict:

@@ -96,6 +96,8 @@ def test_every_parameter_reaches_its_nested_field():
         "estimator.window": (("estimator", "window"), "bartlett"),
         "estimator.forgetting": (("estimator", "forgetting"), 0.99),
         "estimator.residual": (("estimator", "residual"), "a_priori"),
+        "estimator.lag_selection": (("estimator", "lag_selection"), "auto"),
+        "estimator.max_lags": (("estimator", "max_lags"), 80),
         "differentiator.window": (("differentiator", "window"), 11),
         "differentiator.order": (("differentiator", "order"), 2),
         "differentiator.lag": (("differentiator", "lag"), 5),

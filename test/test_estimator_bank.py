@@ -97,7 +97,9 @@ def test_residual_options_are_the_innovation_the_a_posteriori_residual_and_their
 def test_standardized_residual_makes_eq16_the_batch_fit_error_variance_at_every_sample(forgetting):
     """RSS_k = f RSS_(k-1) + e_k^2 f / d_k: with the default residual, R_k(0) (Eq. 16) equals
     the weighted batch fit-error variance (Eq. 14) of samples 1..k with theta_k, and the
-    conventional standard errors equal the batch ones; the a posteriori residual falls short."""
+    conventional standard errors equal the batch ones; the a posteriori residual falls short.
+    Under forgetting (issue 12 item 7) R_k(0) is the noise model's: the same identity for the
+    fit weighted f_R^(k-j) (f_R = 0.99878 for 20 lags), with the estimator's D and Lambda."""
     rng = np.random.default_rng(11)
     n = 400
     X = np.column_stack([np.ones(n), rng.standard_normal((n, 2))])
@@ -111,9 +113,11 @@ def test_standardized_residual_makes_eq16_the_batch_fit_error_variance_at_every_
         post.update(X[k], z[k])
         if not est.is_ready:
             continue
-        w = forgetting ** np.arange(k, -1, -1)
-        theta, cov_conv, _ = batch_estimate(X[: k + 1], z[: k + 1], 20, forgetting=forgetting)
-        v = z[: k + 1] - X[: k + 1] @ theta
+        f_R = est._bank.noise_forgetting
+        w = f_R ** np.arange(k, -1, -1)
+        _, cov_conv, _ = batch_estimate(X[: k + 1], z[: k + 1], 20, forgetting=forgetting, noise_forgetting=f_R)
+        theta_R = batch_estimate(X[: k + 1], z[: k + 1], 0, forgetting=f_R)[0]
+        v = z[: k + 1] - X[: k + 1] @ theta_R
         assert est.residual_variance == pytest.approx((w * v * v).sum() / w.sum(), rel=1e-9)
         np.testing.assert_allclose(est.covariance("conventional"), cov_conv, rtol=1e-8, atol=1e-12)
         short.append(1.0 - post.residual_variance / est.residual_variance)

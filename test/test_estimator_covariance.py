@@ -17,8 +17,10 @@ CHECK_AT = (40, 200, 600)
 @pytest.mark.parametrize("window", ["truncated", "bartlett"])
 @pytest.mark.parametrize("n_lags", [None, 0, 1, 5, 50])
 def test_recursive_covariance_equals_batch_formula_on_recursive_residuals(n_lags, window, forgetting):
+    """The estimator's own residuals (``noise_forgetting = forgetting``: the paper's formulas
+    and, under forgetting, those before issue 12 item 7)."""
     X, z = wide_scale_problem()
-    est = RecursiveEstimator(4, n_lags=n_lags, window=window, forgetting=forgetting)
+    est = RecursiveEstimator(4, n_lags=n_lags, window=window, forgetting=forgetting, noise_forgetting=forgetting)
     full = RecursiveEstimator(4, forgetting=forgetting)  # keeps the whole residual history
     for k in range(len(z)):
         est.update(X[k], z[k])
@@ -35,6 +37,40 @@ def test_recursive_covariance_equals_batch_formula_on_recursive_residuals(n_lags
         rel_close(est.theta, theta, 1e-9)
         rel_close(est.covariance("corrected", repair=False), cov_corr, 1e-9)
         rel_close(est.covariance("conventional"), cov_conv, 1e-9)
+
+@pytest.mark.parametrize("window", ["truncated", "bartlett"])
+@pytest.mark.parametrize("n_lags", [1, 5, 50])
+def test_noise_model_covariance_equals_batch_formula_on_noise_model_residuals(n_lags, window):
+    """Under forgetting R_k(i) comes from the noise model (RLS with f_R): the corrected and
+    conventional covariances are the batch formulas with the f-weighted D, Lambda and the
+    f_R-weighted autocorrelation of the noise model's residual history, and the noise
+    residual is the standardized innovation of the f_R-weighted batch fit of the samples before."""
+    X, z = wide_scale_problem()
+    f = 0.98
+    est = RecursiveEstimator(4, n_lags=n_lags, window=window, forgetting=f)
+    f_R = est._bank.noise_forgetting
+    assert f_R == max(f, 1.0 - 1.0 / (40.0 * (n_lags + 1))) > f
+    full = RecursiveEstimator(4, forgetting=f, noise_forgetting=f_R)  # all lags, whole history
+    for k in range(len(z)):
+        est.update(X[k], z[k])
+        full.update(X[k], z[k])
+        if k + 1 not in CHECK_AT:
+            continue
+        history = full.noise_residuals()
+        assert len(history) == k + 1
+        np.testing.assert_array_equal(est.noise_residuals(), history[-len(est.noise_residuals()) :])
+        np.testing.assert_array_equal(est.residuals(), full.residuals()[-len(est.residuals()) :])
+        theta, cov_conv, cov_corr = batch_estimate(
+            X[: k + 1], z[: k + 1], n_lags, window, residuals=history, forgetting=f, noise_forgetting=f_R
+        )
+        rel_close(est.theta, theta, 1e-9)
+        rel_close(est.covariance("corrected", repair=False), cov_corr, 1e-9)
+        rel_close(est.covariance("conventional"), cov_conv, 1e-9)
+        th_R = batch_estimate(X[:k], z[:k], 0, forgetting=f_R)[0]
+        A = X[:k].T @ (X[:k] * (f_R ** np.arange(k - 1, -1, -1.0))[:, None])
+        d = f_R + X[k] @ np.linalg.solve(A, X[k])
+        assert history[-1] == pytest.approx((z[k] - X[k] @ th_R) * np.sqrt(f_R / d), rel=1e-7)
+
 
 def test_zero_lags_gives_the_conventional_covariance():
     X, z = wide_scale_problem()

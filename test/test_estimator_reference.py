@@ -129,8 +129,10 @@ def test_residual_kinds_and_the_autocorrelation_of_each(forgetting):
     the signed geometric mean; R_k(i) (Eq. 17) is sum_j w_j v_j v_(j-i) / n_k of the residual
     history; with the standardized residual R_k(0) is the batch fit error variance (Eq. 14)."""
     X, z = problem()
-    refs = {r: RecursiveReference(3, 6, forgetting=forgetting, residual=r)
-            for r in ("a_priori", "a_posteriori", "standardized")}
+    refs = {
+        r: RecursiveReference(3, 6, forgetting=forgetting, residual=r, noise_forgetting=forgetting)
+        for r in ("a_priori", "a_posteriori", "standardized")
+    }  # the estimator's own residuals (the noise model: the next test)
     thetas = [None]
     for k in range(1, len(z) + 1):
         for ref in refs.values():
@@ -153,18 +155,58 @@ def test_residual_kinds_and_the_autocorrelation_of_each(forgetting):
         assert refs["standardized"].R[0] == pytest.approx(np.sum(w * batch_v**2) / w.sum(), rel=1e-9)
 
 
+@pytest.mark.parametrize("residual", ["a_priori", "a_posteriori", "standardized"])
+@pytest.mark.parametrize("noise_forgetting", [None, 0.99, 1.0])
+def test_noise_model_is_least_squares_weighted_f_R_and_gives_R(noise_forgetting, residual):
+    """Under forgetting (f = 0.95, 6 lags) the noise model is the f_R-weighted batch fit at every
+    sample, its residuals are of the chosen kind with f_R, R_k(i) (Eq. 17) is their
+    f_R-weighted autocorrelation, and D_k, theta_k stay the f-weighted fit's."""
+    X, z = problem()
+    f = 0.95
+    ref = RecursiveReference(3, 6, forgetting=f, residual=residual, noise_forgetting=noise_forgetting)
+    g = ref.g
+    assert g == (1.0 - 1.0 / 280.0 if noise_forgetting is None else noise_forgetting) and ref.noise
+    for k in range(1, len(z) + 1):
+        theta_R_before = ref.theta_R.copy()
+        ref.update(X[k - 1], z[k - 1])
+        if k < 3:
+            assert not ref.ready
+            continue
+        w, w_R = weights(k, f), weights(k, g)
+        A, A_R = X[:k].T @ (w[:, None] * X[:k]), X[:k].T @ (w_R[:, None] * X[:k])
+        rel_close(ref.D, np.linalg.inv(A), 1e-9)
+        rel_close(ref.theta, np.linalg.solve(A, X[:k].T @ (w * z[:k])), 1e-9)
+        rel_close(ref.D_R, np.linalg.inv(A_R), 1e-9)
+        rel_close(ref.theta_R, np.linalg.solve(A_R, X[:k].T @ (w_R * z[:k])), 1e-9)
+        u = np.array(ref.u)
+        if k > 3:
+            x, zk = X[k - 1], z[k - 1]
+            prior, post = zk - x @ theta_R_before, zk - x @ ref.theta_R
+            expected = {"a_priori": prior, "a_posteriori": post, "standardized": np.sign(prior) * np.sqrt(prior * post)}
+            assert u[-1] == pytest.approx(expected[residual], rel=1e-8, abs=1e-12)
+        else:  # at initialization: Eq. 7 of the f_R-weighted batch fit
+            np.testing.assert_allclose(u, z[:k] - X[:k] @ ref.theta_R, rtol=1e-9, atol=1e-12)
+        R = [sum(w_R[j] * u[j] * u[j - i] for j in range(i, k)) / w_R.sum() for i in range(min(k, 7))]
+        np.testing.assert_allclose([ref.R[i] for i in range(len(R))], R, rtol=1e-9, atol=1e-14)
+
+
 @pytest.mark.parametrize("forgetting", [1.0, 0.95])
 @pytest.mark.parametrize(
     "n_lags, window", [(None, "truncated"), (None, "bartlett"), (6, "truncated"), (6, "bartlett"), (0, "truncated")]
 )
 def test_recursive_covariance_is_eq_11_on_the_recursive_residuals(n_lags, window, forgetting):
     """Eq. 20/22 with R_k of the recursive residual history is the batch covariance of Eq. 8
-    (Eq. 11 regrouped as Eq. 18) with those residuals; the conventional one is Eq. 13."""
+    (Eq. 11 regrouped as Eq. 18) with those residuals; the conventional one is Eq. 13. Under
+    forgetting with lags (a noise model) these are the noise model's residuals, weighted f_R."""
     X, z = problem(50)
     ref = RecursiveReference(3, n_lags, window, forgetting)
     for k in range(len(z)):
         ref.update(X[k], z[k])
-    _, conv, corr = batch_reference(X, z, n_lags, window, forgetting=forgetting, residuals=np.array(ref.v))
+    assert ref.noise == (forgetting < 1.0 and n_lags is not None)
+    _, conv, corr = batch_reference(
+        X, z, n_lags, window, forgetting=forgetting, residuals=np.array(ref.u if ref.noise else ref.v),
+        noise_forgetting=ref.g,
+    )
     rel_close(ref.covariance("corrected"), corr, 1e-9)
     rel_close(ref.covariance("conventional"), conv, 1e-9)
 

@@ -63,9 +63,9 @@ def test_snapshot_is_a_copy(n_lags):
 def test_a_state_of_another_format_or_shape_is_refused_by_name():
     X, z = wide_scale_problem()
     saved = run(RecursiveEstimator(4, n_lags=5), X, z, stop=50).state()
-    assert saved["format"] == EstimatorBank.STATE_FORMAT == 4
-    old = dict(saved, format=3)
-    with pytest.raises(ValueError, match="state format 3"):
+    assert saved["format"] == EstimatorBank.STATE_FORMAT == 5
+    old = dict(saved, format=4)  # before the noise model of issue 12 item 7
+    with pytest.raises(ValueError, match="state format 4"):
         EstimatorBank.from_state(old)
     bad = dict(saved, arrays=dict(saved["arrays"], lag_sums=np.zeros((1, 5))))
     with pytest.raises(ValueError, match="lag_sums"):

@@ -11,7 +11,7 @@ from statsmodels.tsa.stattools import acf
 
 from rls_uncertainty.differentiation import DifferentiatorConfig, derivative_weights
 from rls_uncertainty.estimator import EstimatorBank
-from rls_uncertainty.lag_selection import (
+from rls_uncertainty.estimator.lag_selection import (
     RULES,
     andrews_lags,
     correlations,

@@ -38,10 +38,11 @@ import numpy as np
 from ..errors import EstimatorNotReady, NonFiniteInput
 from . import covariance, state
 from .initialization import ExactInitialization
+from .lag_selection import flat_top_lags
 from .lag_storage import GROWTH_START, LagStorage
 from .lag_window import lag_weights
 from .numpy_compat import vecdot
-from .options import check_kind, check_options, prior_diagonal
+from .options import AUTO, check_kind, check_noise_forgetting, check_options, prior_diagonal
 
 __all__ = ["EstimatorBank"]
 
@@ -63,7 +64,10 @@ class EstimatorBank:
     n_lags:
         Largest residual-autocorrelation lag kept (Eq. 22); ``None`` keeps all lags (Eq. 20,
         memory and time grow with the number of samples). ``0`` gives the conventional
-        covariance.
+        covariance. ``"auto"``: each model's ``L`` is chosen from the data at every evaluated
+        sample (Politis' flat-top rule on ``R_k(0..max_lags)``,
+        :func:`.lag_selection.flat_top_lags`; truncated window only), with the memory of
+        ``n_lags=max_lags``; :attr:`lags_used` tells the choice.
     window:
         ``"truncated"`` (Eq. 22, uniform) or ``"bartlett"`` (positive semi-definite).
     forgetting:
@@ -77,8 +81,17 @@ class EstimatorBank:
     init_condition:
         Exact initialization waits until the column-scaled ``X'X`` has a condition number
         below this value.
+    noise_forgetting:
+        Forgetting ``f_R`` of the noise model whose residuals give ``R_k(i)`` under forgetting
+        (``forgetting <= f_R <= 1``). ``None`` (default) takes
+        ``max(f, 1 - 1/(40 (n_lags + 1)))`` (:func:`.options.default_noise_forgetting`; ``f``
+        itself when ``f = 1`` or all lags are kept). ``f_R = f`` uses the estimator's own
+        residuals (the formulas before issue 12, which under-report under forgetting).
+    max_lags, min_lags:
+        With ``n_lags="auto"``: the most lags the rule may choose (the memory bound) and the
+        fewest it uses (default 50 and 0); ignored otherwise.
 
-    The options are defined in :mod:`.reference`.
+    The options are defined in :mod:`.reference`; the noise model in the package docstring.
     """
 
     STATE_FORMAT = state.STATE_FORMAT
@@ -93,19 +106,29 @@ class EstimatorBank:
         residual: str = "standardized",
         p0: float | Sequence[float] | None = None,
         init_condition: float = 1e8,
+        noise_forgetting: float | None = None,
+        max_lags: int = 50,
+        min_lags: int = 0,
     ) -> None:
         sizes = tuple(int(s) for s in sizes)
         if not sizes or min(sizes) < 1:
             raise ValueError(f"every model needs at least one parameter, got sizes={sizes}")
-        check_options(n_lags, window, forgetting, residual, init_condition)
+        check_options(n_lags, window, forgetting, residual, init_condition, max_lags=max_lags, min_lags=min_lags)
+        self.auto = n_lags == AUTO
+        self.max_lags, self.min_lags = int(max_lags), int(min_lags)
+        # The largest lag held: n_lags, max_lags with auto, None (growing) for all lags.
+        held = None if n_lags is None else (self.max_lags if self.auto else int(n_lags))
+        g = check_noise_forgetting(noise_forgetting, forgetting, held)
         self.sizes = sizes
         self.n_models = m = len(sizes)
         self.n_max = n = max(sizes)
-        self.n_lags = None if n_lags is None else int(n_lags)
+        self.n_lags = AUTO if self.auto else (None if n_lags is None else int(n_lags))
         self.window = window
         self.forgetting = float(forgetting)
         self.residual = residual
         self.init_condition = float(init_condition)
+        self.noise_forgetting = g  # f_R
+        self._noise = g != self.forgetting  # a noise model gives R_k(i) (f < 1)
 
         self._x_shape, self._z_shape = (m, n), (m,)
         self._mask = np.zeros((m, n), dtype=bool)
@@ -114,6 +137,7 @@ class EstimatorBank:
 
         self.k = 0
         self.n_eff = 0.0  # n_k = sum_j f^(k-j); equals k when f = 1
+        self.n_noise = 0.0  # n^N_k = sum_j f_R^(k-j): R_k(i) = lag_sums / n_R (n_eff without noise model)
         # [D; theta'] in column-scaled units: _aug[:, :n] = S D S, _aug[:, n] = S theta.
         self._aug = np.zeros((m, n + 1, n))
         self._D = self._aug[:, :n]
@@ -123,9 +147,10 @@ class EstimatorBank:
         self._ready = np.zeros(m, dtype=bool)
         self._ready_at = np.zeros(m, dtype=np.int64)
         self.repairs = np.zeros(m, dtype=np.int64)
-        cap = GROWTH_START if self.n_lags is None else self.n_lags + 1
+        cap = GROWTH_START if held is None else held + 1
         self._lags = LagStorage(
-            m, n, cap, all_lags=self.n_lags is None, forgetting=self.forgetting, waiting=p0 is None
+            m, n, cap, all_lags=held is None, forgetting=self.forgetting, waiting=p0 is None,
+            noise_forgetting=g,
         )
         self._init = ExactInitialization(self)
         # Per-sample scratch, each contiguous: y = (x / s, z) and u = (D x, theta' x - z). Their
@@ -146,13 +171,28 @@ class EstimatorBank:
         self._d_col = self._d[:, None, None]
         self._root = np.zeros(m)  # sqrt(d_k / f)
         self._outer = np.zeros((m, n + 1, n))
+        if self._noise:  # the noise model: [D^N; theta^N'] and its scratch, as the estimator's
+            self._naug = np.zeros((m, n + 1, n))
+            self._nD = self._naug[:, :n]
+            self._ng = np.zeros((m, n + 1, 1))
+            self._nDx = self._ng[:, :n, 0]
+            self._nDx_row = self._ng[:, None, :n, 0]
+            self._n_neg_e = self._ng[:, n, 0]
+            self._ng_flat = self._ng.reshape(-1)
+            self._nd = np.zeros(m)
+            self._nd_col = self._nd[:, None, None]
+            self._nroot = np.zeros(m)
+            self._nouter = np.zeros((m, n + 1, n))
         self._evaluator = covariance.CovarianceEvaluator(eq13=self.forgetting == 1.0)
         self._covariances = None  # covariance.Covariances of the current sample
+        self._chosen = None  # lags_used at the current sample (chosen on first use)
         self._window_key = None
 
         if p0 is not None:
             p = prior_diagonal(p0, n)
             self._aug[:, :n] = np.eye(n) * p * self._mask[:, :, None] * self._mask[:, None, :]
+            if self._noise:
+                self._naug[:, :n] = self._aug[:, :n]
             self._ready[:] = True
         self._readiness_changed()
 
@@ -168,7 +208,7 @@ class EstimatorBank:
         self._cov_scale = self._theta_scale[:, :, None] * self._theta_scale[:, None, :]
         self._se_scale = 2.0 * self._cov_scale.diagonal(0, 1, 2)  # see covariance.Covariances
         self._init.reset()
-        self._covariances = None
+        self._covariances = self._chosen = None
 
     @property
     def n_window(self) -> int:
@@ -219,7 +259,14 @@ class EstimatorBank:
         d = vecdot(self._xs, self._Dx, out=self._d)
         d += self.forgetting  # d_k = f + x' D x: the denominator of Eq. 15a
         np.subtract(self._neg_e, z, out=self._neg_e)  # -e_k = x' theta_(k-1) - z_k
-        return small and np.dot(self._g_flat, self._g_flat) <= _SAFE_SQUARED
+        small = small and np.dot(self._g_flat, self._g_flat) <= _SAFE_SQUARED
+        if self._noise:  # the same for the noise model (forgetting f_R)
+            np.matmul(self._naug, self._xs_col, out=self._ng)
+            vecdot(self._xs, self._nDx, out=self._nd)
+            self._nd += self.noise_forgetting
+            np.subtract(self._n_neg_e, z, out=self._n_neg_e)
+            small = small and np.dot(self._ng_flat, self._ng_flat) <= _SAFE_SQUARED
+        return small
 
     def _apply(self, z: np.ndarray) -> None:
         """Add the prepared sample to the state (Eqs. 15-17, 21)."""
@@ -240,21 +287,26 @@ class EstimatorBank:
         self._aug -= outer  # Eq. 15b (D rows), Eq. 15c (theta row)
         if f != 1.0:
             self._D /= f  # Eq. 15b with forgetting
-        v = lags.v[:, p]
-        neg_e, d = self._neg_e, self._d
-        if self.residual == "standardized":  # v_k = e_k sqrt(f/d_k)
-            root = np.sqrt(d if f == 1.0 else np.divide(d, f, out=self._root), out=self._root)
-            np.divide(neg_e, np.negative(root, out=root), out=v)
-        elif self.residual == "a_posteriori":
-            np.multiply(neg_e / d, -f, out=v)  # v_k = e_k f/d_k = z_k - x_k' theta_k (Eq. 7)
-        else:
-            np.negative(neg_e, out=v)  # v_k = e_k
+        self._residual(lags.v[:, p], self._neg_e, self._d, self._root, f)
+        series, g = lags.v, f
+        if self._noise:
+            # The noise model: Eq. 15 with f_R, and its residual u_k of the same kind.
+            g = self.noise_forgetting
+            outer = np.multiply(self._ng, self._nDx_row, out=self._nouter)
+            outer /= self._nd_col
+            self._naug -= outer
+            if g != 1.0:
+                self._nD /= g
+            self._residual(lags.u[:, p], self._n_neg_e, self._nd, self._nroot, g)
+            self.n_noise = g * self.n_noise + 1.0  # n^N_k
+            series = lags.u
 
         sums, sums_tmp, products, products_tmp = lags.full if w == lags.cap else lags.by_lag(w)
-        # Eq. 17 as sums: n_k R_k(i) = f n_(k-1) R_(k-1)(i) + v_k v_(k-i).
-        if f != 1.0:
-            sums *= f
-        v_window = lags.v[:, p : p + w]  # v_k, v_(k-1), ...
+        # Eq. 17 as sums: n_k R_k(i) = f n_(k-1) R_(k-1)(i) + v_k v_(k-i) (with a noise model
+        # f_R and its residuals u_k).
+        if g != 1.0:
+            sums *= g
+        v_window = series[:, p : p + w]  # v_k, v_(k-1), ...
         sums += np.multiply(v_window, v_window[:, :1], out=sums_tmp)
 
         # Eq. 21, one-sided: Lambda+_k(i) = f^2 Lambda+_(k-1)(i) + f^i x_k x_(k-i)'.
@@ -270,9 +322,12 @@ class EstimatorBank:
                 weighted = (x_window.reshape(m, w, n) * lags.lag_powers[None, :w, None]).reshape(m, 1, w * n)
                 lags.lag_products *= f * f
                 products += np.multiply(self._xs_col, weighted, out=products_tmp)
-            if waiting:  # the lagged moments, weighted f^(k-j)
+            if waiting:  # the lagged moments, weighted f^(k-j) (f_R^(k-j) with a noise model)
                 moments, moments_tmp = lags.products_y_by_lag(w)
-                lags.products_y *= f
+                if lags.moment0 is not None:  # the lag-0 moments weighted f^(k-j)
+                    lags.moment0 *= f
+                    lags.moment0 += self._y_k[:, :, None] * self._y_k[:, None, :]
+                lags.products_y *= lags.moment_forgetting
                 y_window = lags.y[:, p : p + w].reshape(m, 1, w * (n + 1))
                 moments += np.multiply(self._y_k[:, :, None], y_window, out=moments_tmp)
         if waiting:
@@ -283,7 +338,18 @@ class EstimatorBank:
                 self._init.reset()  # its indices point into the old arrays
             else:
                 lags.relocate(w)
-        self._covariances = None
+        self._covariances = self._chosen = None
+
+    def _residual(self, out: np.ndarray, neg_e: np.ndarray, d: np.ndarray, root: np.ndarray, f: float) -> None:
+        """The residual of Eqs. 16-17 of the chosen kind, from ``-e_k`` and ``d_k`` (forgetting
+        ``f``), written to ``out``."""
+        if self.residual == "standardized":  # v_k = e_k sqrt(f/d_k)
+            root = np.sqrt(d if f == 1.0 else np.divide(d, f, out=root), out=root)
+            np.divide(neg_e, np.negative(root, out=root), out=out)
+        elif self.residual == "a_posteriori":
+            np.multiply(neg_e / d, -f, out=out)  # v_k = e_k f/d_k = z_k - x_k' theta_k (Eq. 7)
+        else:
+            np.negative(neg_e, out=out)  # v_k = e_k
 
     def _apply_checked(self, x: np.ndarray, z: np.ndarray) -> None:
         """Apply a sample on which :meth:`_prepare` found NaN, infinity or a large number:
@@ -355,21 +421,35 @@ class EstimatorBank:
         not :attr:`ready` are NaN."""
         return self._theta * self._theta_scale
 
+    @property
+    def n_R(self) -> float:
+        """The weight total of ``R_k(i)``: ``n^N_k = sum_j f_R^(k-j)`` with a noise model,
+        otherwise ``n_k = sum_j f^(k-j)``."""
+        return self.n_noise if self._noise else self.n_eff
+
     def residual_variance(self, j: int) -> float:
-        """Fit-error variance (Eq. 16), i.e. ``R_k(0)``."""
+        """Fit-error variance (Eq. 16), i.e. ``R_k(0)`` (the noise model's under forgetting)."""
         self._require(j)
-        return float(self._lags.lag_sums[j, 0] / self.n_eff)
+        return float(self._lags.lag_sums[j, 0] / self.n_R)
 
     def autocorrelation(self, j: int) -> np.ndarray:
-        """Residual autocorrelation ``R_k(i)``, ``i = 0..n_window-1`` (Eq. 17)."""
+        """Residual autocorrelation ``R_k(i)``, ``i = 0..n_window-1`` (Eq. 17; under
+        forgetting that of the noise model's residuals, weighted ``f_R^(k-j)``)."""
         self._require(j)
-        return self._lags.lag_sums[j, : self.n_window] / self.n_eff
+        return self._lags.lag_sums[j, : self.n_window] / self.n_R
 
     def residuals(self, j: int) -> np.ndarray:
-        """Stored residuals, oldest first: the whole history with ``n_lags=None``, otherwise
-        the last ``n_lags + 1``."""
+        """Stored residuals of the estimator, oldest first: the whole history with
+        ``n_lags=None``, otherwise the last ``n_lags + 1``."""
         self._require(j)
         return self._lags.window(self._lags.v, self.n_window)[j, ::-1].copy()
+
+    def noise_residuals(self, j: int) -> np.ndarray:
+        """The residuals behind ``R_k(i)``, stored as :meth:`residuals`: the noise model's
+        ``u_k`` under forgetting, otherwise the estimator's own residuals."""
+        self._require(j)
+        buf = self._lags.u if self._noise else self._lags.v
+        return self._lags.window(buf, self.n_window)[j, ::-1].copy()
 
     def _half_window(self, largest: int, w: int) -> np.ndarray:
         """Half window ``h`` of the ``w`` lags held, ``largest`` the largest lag of the window
@@ -389,10 +469,17 @@ class EstimatorBank:
             else:
                 w = lags.cap
                 sums, products = lags.lag_sums, lags.lag_products
-            largest = self.k - 1 if self.n_lags is None else self.n_lags
-            h = self._window_h if self._window_key == (largest, w) else self._half_window(largest, w)
+            if self.auto:  # Eq. 22 with each model's L: weight 1 on lags 0..L (lag 0 halved)
+                L = self._lags_chosen()
+                w = min(w, int(L[self._ready].max(initial=0)) + 1)  # no lag beyond the largest L
+                sums, products = lags.lag_sums[:, :w], lags.lag_products[:, :, :w]
+                h = (np.arange(w) <= L[:, None]).astype(float)
+                h[:, 0] = 0.5
+            else:
+                largest = self.k - 1 if self.n_lags is None else self.n_lags
+                h = self._window_h if self._window_key == (largest, w) else self._half_window(largest, w)
             cov, repaired = self._evaluator(
-                self._D, self._D_diagonal, sums, h, products, 1.0 / self.n_eff,
+                self._D, self._D_diagonal, sums, h, products, 1.0 / self.n_R,
                 self._cov_scale, self._se_scale, self._exact_fit, self.sizes,
             )
             if repaired:
@@ -400,13 +487,47 @@ class EstimatorBank:
             self._covariances = cov
         return cov
 
+    @property
+    def lags_used(self) -> np.ndarray:
+        """The largest lag ``L`` of Eq. 22 each model uses at this sample, ``(M,)`` ints: with
+        ``n_lags="auto"`` chosen by the flat-top rule (``min_lags``, as far as the lags held
+        allow, for a model that is not ready), otherwise ``min(n_lags, k - 1)`` (``k - 1`` with
+        all lags)."""
+        return self._lags_chosen().copy()
+
+    def _lags_chosen(self) -> np.ndarray:
+        chosen = self._chosen
+        if chosen is None:
+            k, m = self.k, self.n_models
+            if not self.auto:
+                largest = max(k - 1, 0) if self.n_lags is None else min(self.n_lags, max(k - 1, 0))
+                chosen = np.full(m, largest, dtype=np.int64)
+            else:  # models not ready get R(0) = 0: min_lags (the rule's edge case)
+                sums = self._lags.lag_sums[:, : self.n_window]
+                if not self._all_ready:
+                    sums = np.where(self._ready[:, None], sums, 0.0)
+                chosen = flat_top_lags(sums, self.rule_samples, cap=self.max_lags, min_lags=self.min_lags)
+            self._chosen = chosen
+        return chosen
+
+    @property
+    def rule_samples(self) -> float:
+        """The sample count the lag rule uses: ``k``, or under forgetting Kish's effective size
+        ``(sum w)^2 / sum w^2`` of the weights ``w_j = g^(k-j)`` of ``R_k(i)`` (``g = f_R``),
+        ``(1 - g^k)(1 + g) / ((1 - g)(1 + g^k))``."""
+        g, k = self.noise_forgetting, self.k
+        if g == 1.0:
+            return float(k)
+        gk = g**k
+        return (1.0 - gk) * (1.0 + g) / ((1.0 - g) * (1.0 + gk))
+
     def _exact_fit(self) -> np.ndarray:
         """Models whose residual variance ``R_k(0)`` is at most 1e-12 of the mean square of
         their output ``x_j' theta_k`` (``theta' Lambda_k(0) theta / sum_j f^(2(k-j))``)."""
         f, k = self.forgetting, self.k
         output_square = vecdot(np.matmul(self._theta_row, self._lags.lag0)[:, 0], self._theta)
         n_square = k if f == 1.0 else (1.0 - f ** (2 * k)) / (1.0 - f * f)
-        return self._lags.lag_sums[:, 0] <= (covariance.EXACT_FIT * self.n_eff / n_square) * output_square
+        return self._lags.lag_sums[:, 0] <= (covariance.EXACT_FIT * self.n_R / n_square) * output_square
 
     def standard_errors_all(self, kind: str = "corrected") -> np.ndarray:
         """Standard errors of every model as an ``(M, n_max)`` array: the square roots of the

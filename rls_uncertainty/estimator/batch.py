@@ -24,6 +24,7 @@ def batch_estimate(
     residuals: np.ndarray | None = None,
     *,
     forgetting: float = 1.0,
+    noise_forgetting: float | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Batch least squares with conventional and colored-residual covariances.
 
@@ -33,7 +34,11 @@ def batch_estimate(
     corrected one. ``residuals`` replaces ``z - X theta`` in Eq. 10 (for instance the residual
     history of a recursive estimator). ``forgetting < 1`` gives the exponentially weighted
     formulas that :class:`~.bank.EstimatorBank` implements recursively (sample ``j`` of
-    ``N`` weighted by ``f^(N-j)``).
+    ``N`` weighted by ``f^(N-j)``). ``noise_forgetting`` ``f_R`` (default ``forgetting``)
+    weights the autocorrelation of Eq. 10 by ``f_R^(N-j)`` instead; without given
+    ``residuals`` they are then those of the ``f_R``-weighted fit (the batch counterpart of the
+    bank's noise model; pass the bank's :meth:`~.bank.EstimatorBank.noise_residuals` history
+    to reproduce its recursive covariance).
     """
     X = np.asarray(X, dtype=float)
     z = np.asarray(z, dtype=float).reshape(-1)
@@ -46,12 +51,20 @@ def batch_estimate(
     theta = np.linalg.lstsq(X * sw[:, None], z * sw, rcond=None)[0]  # Eq. 6
     A = X.T @ (X * wts[:, None])
     D = np.linalg.inv(A)  # Eq. 6: the dispersion matrix
-    v = z - X @ theta if residuals is None else np.asarray(residuals, dtype=float).reshape(-1)  # Eq. 7
+    g = forgetting if noise_forgetting is None else float(noise_forgetting)
+    g_wts = wts if g == forgetting else g ** np.arange(N - 1, -1, -1, dtype=float)
+    if residuals is not None:
+        v = np.asarray(residuals, dtype=float).reshape(-1)
+    elif g == forgetting:
+        v = z - X @ theta  # Eq. 7
+    else:  # Eq. 7 of the f_R-weighted fit (the noise model)
+        sg = np.sqrt(g_wts)
+        v = z - X @ np.linalg.lstsq(X * sg[:, None], z * sg, rcond=None)[0]
     if v.shape != (N,):
         raise ValueError(f"residuals must have {N} entries, got {v.shape}")
     L = N - 1 if n_lags is None else min(int(n_lags), N - 1)
-    # Eq. 10 (weighted): R(i) = sum_{j>i} w_j v_j v_{j-i} / sum_j w_j
-    R = np.array([np.dot(wts[i:] * v[i:], v[: N - i]) for i in range(L + 1)]) / wts.sum()
+    # Eq. 10 (weighted): R(i) = sum_{j>i} w_j v_j v_{j-i} / sum_j w_j (w = f_R^(N-j))
+    R = np.array([np.dot(g_wts[i:] * v[i:], v[: N - i]) for i in range(L + 1)]) / g_wts.sum()
     kernel = R * lag_weights(L if n_lags is None else int(n_lags), window, L + 1)
     Xw = X * wts[:, None]
     if forgetting == 1.0:

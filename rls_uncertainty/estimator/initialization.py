@@ -7,6 +7,13 @@ samples ``1..k0`` with it (Eq. 7) and their lag sums ``n_k R_k(i)`` (Eq. 10) fro
 lagged moments, and continues with Eq. 15. From then on the model works in column-scaled
 units: its regressors are divided by ``s = sqrt(diag(A_k0))``, which keeps ``D`` well
 conditioned when the regressors span orders of magnitude.
+
+With a noise model (forgetting ``f_R``, see :mod:`.bank`) the lagged moments are weighted
+``f_R^(k-j)`` and the lag-0 moments weighted ``f^(k-j)`` are kept beside them: at ``k0`` the
+estimator takes its batch solution from the latter, the noise model the ``f_R``-weighted
+batch solution (in the same scaled units), and ``R_k0(i)`` is formed from the noise model's
+residuals of samples ``1..k0``. ``A_k`` weighted ``f_R`` is at least ``A_k`` weighted ``f``
+(``f_R >= f``), so it is invertible whenever the estimator's is.
 """
 
 from __future__ import annotations
@@ -67,7 +74,8 @@ class ExactInitialization:
             return False
         # P(i) = sum_j f^(k-j) y_j y_(j-i)' of y = (x, z): A_k = X'WX is its lag-0 x block.
         P = lags.products_y[j]
-        A = P[:s_n, 0, :s_n]
+        P0 = P[:, 0, :] if lags.moment0 is None else lags.moment0[j]  # weighted f
+        A = P0[:s_n, :s_n]
         s = np.sqrt(np.diag(A))
         if not np.all(s > 0):
             return False
@@ -76,11 +84,16 @@ class ExactInitialization:
             return False
         D_scaled = np.linalg.inv(C)
         D_scaled = 0.5 * (D_scaled + D_scaled.T)  # S D S with S = diag(s)
-        theta_scaled = D_scaled @ (P[:s_n, 0, n] / s)  # Eq. 6 (S theta), X'Wz the lag-0 x z moment
+        theta_scaled = D_scaled @ (P0[:s_n, n] / s)  # Eq. 6 (S theta), X'Wz the lag-0 x z moment
+        theta_noise = None
+        if lags.noise:  # the noise model's batch solution, weighted f_R, in the same units
+            D_noise = np.linalg.inv(P[:s_n, 0, :s_n] / np.outer(s, s))
+            D_noise = 0.5 * (D_noise + D_noise.T)
+            theta_noise = D_noise @ (P[:s_n, 0, n] / s)
         # Eq. 10 from the lagged moments: v_j = ta' y_j with ta = (-theta, 1), so
-        # sum_j w_j v_j v_(j-i) = ta' P(i) ta.
+        # sum_j w_j v_j v_(j-i) = ta' P(i) ta (the noise model's theta and weights with one).
         ta = np.zeros(n + 1)
-        ta[:s_n] = -theta_scaled / s
+        ta[:s_n] = -(theta_scaled if theta_noise is None else theta_noise) / s
         ta[n] = 1.0
         lag_sums = np.einsum("a,aib,b->i", ta, P[:, :w, :], ta)
         inv = np.zeros(n)
@@ -88,8 +101,12 @@ class ExactInitialization:
         history = lags.y[j]
         x_scaled = history[:, :n] * inv[None, :]
         residuals = history[:, n] - x_scaled @ np.concatenate([theta_scaled, np.zeros(n - s_n)])  # Eq. 7
-        if not (np.isfinite(theta_scaled).all() and np.isfinite(lag_sums).all()
-                and np.isfinite(residuals[lags.ptr : lags.ptr + w]).all()):
+        finite = np.isfinite(theta_scaled).all() and np.isfinite(lag_sums).all()
+        if theta_noise is not None:
+            noise_residuals = history[:, n] - x_scaled @ np.concatenate([theta_noise, np.zeros(n - s_n)])
+            held = noise_residuals[lags.ptr : lags.ptr + w]
+            finite = finite and np.isfinite(theta_noise).all() and np.isfinite(held).all()
+        if not (finite and np.isfinite(residuals[lags.ptr : lags.ptr + w]).all()):
             return False  # absurd (finite) data so far: the state would not stay finite
         bank._aug[j, :s_n, :s_n] = D_scaled
         bank._aug[j, n, :s_n] = theta_scaled
@@ -101,6 +118,10 @@ class ExactInitialization:
         history[:, :n] = x_scaled
         lags.x[j] = x_scaled
         lags.v[j] = residuals
+        if theta_noise is not None:
+            bank._naug[j, :s_n, :s_n] = D_noise
+            bank._naug[j, n, :s_n] = theta_noise
+            lags.u[j] = noise_residuals
         bank._ready[j] = True
         bank._ready_at[j] = bank.k
         self._waiting = None

@@ -24,6 +24,13 @@ or growing by doubling when all lags are kept):
   ``moment_xx`` (``x x'``), ``moment_xz`` (``x_j z_(j-i)``) and ``moment_zy``
   (``z_j y_(j-i)``).
 
+**With a noise model** (forgetting ``f < 1`` with ``noise_forgetting`` ``f_R != f``, see
+:mod:`.bank`): a third history ``u`` holds the noise model's residuals, ``lag_sums`` are
+those of ``u`` weighted ``f_R^(k-j)``, and the lagged moments are weighted ``f_R^(k-j)`` (the
+noise model's exact initialization needs them at every lag), with the lag-0 moments
+weighted ``f^(k-j)`` kept beside them as ``moment0`` for the estimator's own initialization.
+The ``v`` history (the estimator's residuals) is kept for :meth:`.EstimatorBank.residuals`.
+
 **While a model waits and f = 1**, the weights of Eq. 21 and of the moments coincide, so
 ``lag_products`` is the ``x`` block of ``products_y`` and one outer product of ``y`` per
 sample updates both (a separate product of ``x`` plus the moments costs the six-model T-2
@@ -45,10 +52,17 @@ _HISTORY = ("x", "y", "v")
 class LagStorage:
     """The history buffers and lag-indexed sums of ``m`` models (see the module docstring)."""
 
-    def __init__(self, m: int, n: int, cap: int, *, all_lags: bool, forgetting: float, waiting: bool) -> None:
+    def __init__(
+        self, m: int, n: int, cap: int, *, all_lags: bool, forgetting: float, waiting: bool,
+        noise_forgetting: float | None = None,
+    ) -> None:
         self.m, self.n = m, n
         self.all_lags = all_lags
         self.forgetting = forgetting
+        # A noise model (f_R != f): the u history, lag sums of u, moments weighted f_R.
+        self.noise = noise_forgetting is not None and noise_forgetting != forgetting
+        self.moment_forgetting = noise_forgetting if self.noise else forgetting
+        self.history = (*_HISTORY, "u") if self.noise else _HISTORY
         self.waiting = waiting
         self.allocate(cap)
 
@@ -63,12 +77,16 @@ class LagStorage:
         self.x = np.zeros((m, length, n))
         self.y = np.zeros((m, length, n1))
         self.v = np.zeros((m, length))
+        self.u = np.zeros((m, length)) if self.noise else None
         self.ptr = length  # the window is [ptr, ptr + w)
         self.lag_sums = np.zeros((m, cap))
         self.sums_scratch = np.zeros((m, cap))
         self.lag_powers = self.forgetting ** np.arange(cap, dtype=float)  # f^i of Eq. 21
         self.products_y = self.products_y_scratch = None
         self.moment_xx = self.moment_xz = self.moment_zy = None
+        self.moment0 = None  # lag-0 moments weighted f (with a noise model, while waiting)
+        if self.waiting and self.noise:
+            self.moment0 = np.zeros((m, n1, n1))
         if self.waiting:
             self.products_y = np.zeros((m, n1, cap, n1))
             self.products_y_scratch = np.zeros((m, n1, cap * n1))
@@ -115,11 +133,11 @@ class LagStorage:
         else:
             lag_products = self.lag_products
         self.waiting = False
-        lag_sums, history = self.lag_sums, (self.x, self.y, self.v)
+        lag_sums, history = self.lag_sums, (self.x, self.y, self.v, self.u)
         ptr = self.ptr
         self.allocate(self.cap)
         self.lag_sums, self.lag_products = lag_sums, lag_products
-        self.x, self.y, self.v = history
+        self.x, self.y, self.v, self.u = history
         self.ptr = ptr
         self.full = self._restricted(self.cap)
         self.lag0 = self.lag_products[:, :, 0, :]
@@ -134,15 +152,20 @@ class LagStorage:
         length = self.v.shape[1]
         for buf in (self.y, self.v) if self.merged else (self.x, self.y, self.v):
             buf[:, length - w :] = buf[:, :w]
+        if self.noise:
+            self.u[:, length - w :] = self.u[:, :w]
         self.ptr = length - w
 
     def grow(self, w: int) -> None:
         """Double the lag capacity (all lags), keeping the ``w`` samples and lags held."""
-        old = {name: getattr(self, name) for name in _HISTORY + ("lag_sums", "lag_products", "products_y")}
+        names = (*self.history, "lag_sums", "lag_products", "products_y", "moment0")
+        old = {name: getattr(self, name) for name in names}
         old_ptr, old_cap = self.ptr, self.cap
         self.allocate(2 * old_cap)
         self.ptr -= w
-        for name in _HISTORY:
+        if old["moment0"] is not None:
+            self.moment0[...] = old["moment0"]
+        for name in self.history:
             getattr(self, name)[:, self.ptr :] = old[name][:, old_ptr : old_ptr + w]
         self.lag_sums[:, :old_cap] = old["lag_sums"]
         if old["products_y"] is not None:
@@ -154,21 +177,25 @@ class LagStorage:
     def arrays(self, w: int) -> dict:
         """Copies of the history windows (newest first) and the lag-indexed sums (the moments
         only while a model waits)."""
-        out = {name: self.window(getattr(self, name), w).copy() for name in _HISTORY}
+        out = {name: self.window(getattr(self, name), w).copy() for name in self.history}
         out["lag_sums"] = self.lag_sums.copy()
         out["lag_products"] = self.lag_products.copy()  # (a contiguous copy, also of the view)
         if self.waiting:
             out["products_y"] = self.products_y.copy()
+            if self.noise:
+                out["moment0"] = self.moment0.copy()
         return out
 
     def load(self, arrays: dict, w: int) -> None:
         """Inverse of :meth:`arrays` (on freshly allocated storage of the same capacity)."""
         self.ptr -= w
-        for name in _HISTORY:
+        for name in self.history:
             assign_checked(self.window(getattr(self, name), w), arrays[name], name)
         assign_checked(self.lag_sums, arrays["lag_sums"], "lag_sums")
         if self.waiting:
             assign_checked(self.products_y, arrays["products_y"], "products_y")
+            if self.noise:
+                assign_checked(self.moment0, arrays["moment0"], "moment0")
         if not self.merged:
             assign_checked(self.lag_products, arrays["lag_products"], "lag_products")
 

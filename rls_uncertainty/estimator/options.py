@@ -21,8 +21,15 @@ __all__ = [
     "check_window",
     "check_kind",
     "check_options",
+    "AUTO",
+    "check_noise_forgetting",
+    "default_noise_forgetting",
+    "NOISE_MEMORY_LAGS",
     "prior_diagonal",
 ]
+
+# Default memory of the noise model under forgetting, in units of n_lags + 1 samples.
+NOISE_MEMORY_LAGS = 40.0
 
 Window = Literal["truncated", "bartlett"]
 Residual = Literal["standardized", "a_posteriori", "a_priori"]
@@ -42,12 +49,30 @@ def check_kind(kind: str) -> None:
         raise ValueError(f"kind must be one of {COVARIANCE_KINDS}, got {kind!r}")
 
 
+def _is_count(value) -> bool:
+    return not isinstance(value, (bool, str)) and isinstance(value, (int, np.integer, float)) and int(value) == value
+
+AUTO = "auto"  # n_lags chosen from the data (lag_selection.flat_top_lags)
+
+
 def check_options(
-    n_lags: int | None, window: str, forgetting: float, residual: str, init_condition: float
+    n_lags: int | str | None, window: str, forgetting: float, residual: str, init_condition: float,
+    *, max_lags: int = 50, min_lags: int = 0,
 ) -> None:
     """Refuse an invalid configuration with a message that names the option."""
-    if n_lags is not None and (isinstance(n_lags, bool) or int(n_lags) != n_lags or n_lags < 0):
-        raise ValueError(f"n_lags must be None or an integer >= 0, got {n_lags!r}")
+    if n_lags == AUTO:
+        if not (_is_count(max_lags) and max_lags >= 1):
+            raise ValueError(f"max_lags must be an integer >= 1, got {max_lags!r}")
+        if not (_is_count(min_lags) and 0 <= min_lags <= max_lags):
+            raise ValueError(f"min_lags must be an integer in [0, max_lags = {max_lags}], got {min_lags!r}")
+        if window != "truncated":
+            raise ValueError(
+                f"n_lags='auto' needs window='truncated', got {window!r}: the flat-top rule chooses a "
+                "truncation point, and the Bartlett taper cannot let the anti-correlated lags of "
+                "differentiated noise cancel (validation/auto_lags/REPORT.md)"
+            )
+    elif n_lags is not None and not (_is_count(n_lags) and n_lags >= 0):
+        raise ValueError(f"n_lags must be None, 'auto' or an integer >= 0, got {n_lags!r}")
     check_window(window)
     if not (0.0 < float(forgetting) <= 1.0):
         raise ValueError(f"forgetting must be in (0, 1], got {forgetting!r}")
@@ -55,6 +80,32 @@ def check_options(
         raise ValueError(f"residual must be one of {RESIDUALS}, got {residual!r}")
     if not float(init_condition) > 1.0:
         raise ValueError(f"init_condition must be > 1, got {init_condition!r}")
+
+
+def default_noise_forgetting(forgetting: float, n_lags: int | None) -> float:
+    """The default ``f_R`` of the noise model: ``max(f, 1 - 1/(NOISE_MEMORY_LAGS (n_lags + 1)))``,
+    ``f`` itself when ``f = 1`` or all lags are kept (``n_lags=None``).
+
+    The noise autocovariance is then averaged over ``40 (n_lags + 1)`` samples (2040 for 50
+    lags, ``f_R = 0.99951``): the noise model's own fit absorbs about ``1/40`` of the lag sum
+    (2.5 % in variance), and the relative spread of the lag sum is about ``sqrt(2/40)``."""
+    f = float(forgetting)
+    if f == 1.0 or n_lags is None:
+        return f
+    return max(f, 1.0 - 1.0 / (NOISE_MEMORY_LAGS * (int(n_lags) + 1)))
+
+
+def check_noise_forgetting(noise_forgetting: float | None, forgetting: float, n_lags: int | None) -> float:
+    """``f_R`` for the option ``noise_forgetting`` (``None``: :func:`default_noise_forgetting`),
+    refused unless ``forgetting <= f_R <= 1``."""
+    if noise_forgetting is None:
+        return default_noise_forgetting(forgetting, n_lags)
+    g = float(noise_forgetting)
+    if not (float(forgetting) <= g <= 1.0):
+        raise ValueError(
+            f"noise_forgetting must be None or in [forgetting, 1] = [{forgetting}, 1], got {noise_forgetting!r}"
+        )
+    return g
 
 
 def prior_diagonal(p0: float | Sequence[float], n: int) -> np.ndarray:

@@ -48,6 +48,11 @@ class RecursiveEstimator:
         return self._bank.n_lags
 
     @property
+    def lags_used(self) -> int:
+        """The largest lag of Eq. 22 used at this sample (chosen with ``n_lags="auto"``)."""
+        return int(self._bank.lags_used[0])
+
+    @property
     def n_samples(self) -> int:
         return self._bank.k
 
@@ -73,6 +78,9 @@ class RecursiveEstimator:
 
     def residuals(self) -> np.ndarray:
         return self._bank.residuals(0)
+
+    def noise_residuals(self) -> np.ndarray:
+        return self._bank.noise_residuals(0)
 
     def covariance(self, kind: str = "corrected", *, repair: bool = True) -> np.ndarray:
         return self._bank.covariance(0, kind, repair=repair)

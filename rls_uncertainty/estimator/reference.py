@@ -19,6 +19,17 @@ What the paper leaves open is defined here, and the fast bank follows it:
   ``Lambda_k(i) = f^2 Lambda_(k-1)(i) + f^i (x_k x_(k-i)' + x_(k-i) x_k')`` (Eq. 21), and
   the conventional covariance is ``R_k(0) D_k Lambda_k(0) D_k``, which is Eq. 13 when
   ``f = 1``.
+* **Noise model** (``noise_forgetting`` ``f_R``, ``f <= f_R <= 1``; default
+  ``max(f, 1 - 1/(40 (n_tau + 1)))``, ``f`` when ``f = 1`` or all lags are kept). When
+  ``f_R != f``, ``R_k(i)`` of Eqs. 17-22 is not that of the estimator's residuals: a second
+  least-squares fit of the same model, weighted ``f_R^(k-j)`` (Eq. 15 with ``f_R``:
+  ``d^N_k = f_R + x_k' D^N_(k-1) x_k``, ``e^N_k = z_k - x_k' theta^N_(k-1)``), gives the
+  residuals ``u_k`` (of the chosen kind, with ``f_R``), and
+  ``R_k(i) = sum_j f_R^(k-j) u_j u_(j-i) / n^N_k``, ``n^N_k = sum_j f_R^(k-j)``. ``D_k`` and
+  ``Lambda_k(i)`` stay the estimator's. It initializes with the estimator, at ``k0``, from its
+  own weighted normal equations ``A^N_k0 = X'W_R X``, ``b^N_k0 = X'W_R z`` (Eq. 6), its
+  residuals of samples ``1..k0`` by Eq. 7 and their ``R_k0(i)`` by Eq. 10 weighted ``f_R``; with
+  a prior, ``D^N_0 = D_0``, ``theta^N_0 = 0``.
 * **Residual** of Eqs. 16-17, from the a priori innovation ``e_k = z_k - x_k' theta_(k-1)``
   and ``d_k = f + x_k' D_(k-1) x_k``: ``"a_priori"`` is ``e_k``; ``"a_posteriori"`` is
   ``z_k - x_k' theta_k`` (Eq. 7 at sample ``k``, equal to ``e_k f / d_k``);
@@ -37,6 +48,15 @@ What the paper leaves open is defined here, and the fast bank follows it:
 * **Lag window** ``c_i`` (:func:`.lag_window.lag_weights`): Eq. 20 keeps all lags
   ``i < k``, Eq. 22 lags ``i <= n_tau``; ``bartlett`` weights them by ``1 - i/(n_tau+1)``
   (``n_tau = k - 1`` with all lags).
+* **Automatic lags** (``n_lags="auto"``, truncated window only): ``R_k(i)`` is kept for
+  ``i <= max_lags`` and, when a covariance is evaluated, ``n_tau = L`` is chosen by Politis'
+  flat-top rule (:func:`flat_top_lag`): with ``rho(i) = R_k(i)/R_k(0)``, the threshold
+  ``tau = 2 sqrt(log10 n / n)`` and ``K = max(5, ceil(sqrt(log10 n)))``, ``m`` is the smallest
+  ``m >= 0`` with ``|rho(m+j)| < tau`` for ``j = 1..K`` and ``L = 2 m``, or ``max_lags`` when
+  no such run fits in the lags held; ``L`` is limited to ``[min_lags, min(max_lags, lags
+  held, n - 1)]`` and is ``min_lags`` when ``R_k(0) <= 0`` (an exact fit) or before
+  initialization. ``n`` is ``k``, or under forgetting Kish's effective size
+  ``(sum w)^2 / sum w^2`` of the weights ``w_j = f_R^(k-j)`` of ``R_k(i)``.
 * **Published covariance.** A corrected covariance with a negative diagonal entry is
   replaced by the nearest positive semi-definite matrix (:func:`.covariance.nearest_psd`),
   unless the model fits exactly (``R_k(0) <= 1e-12`` times the mean square of the model
@@ -47,14 +67,31 @@ What the paper leaves open is defined here, and the fast bank follows it:
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from ..errors import EstimatorNotReady
 from .covariance import EXACT_FIT, nearest_psd
 from .lag_window import lag_weights
-from .options import check_kind, check_options, check_window, prior_diagonal
+from .options import check_kind, check_noise_forgetting, check_options, check_window, prior_diagonal
 
-__all__ = ["batch_reference", "RecursiveReference"]
+__all__ = ["batch_reference", "RecursiveReference", "flat_top_lag"]
+
+
+def flat_top_lag(R, n: float, max_lags: int, min_lags: int = 0) -> int:
+    """Politis' flat-top rule on ``R(0..W-1)`` (the module docstring), one model, literally."""
+    W = len(R)
+    hi = max(min(W - 1, max_lags, math.floor(n) - 1), 0)
+    lo = min(min_lags, hi)
+    if n < 2 or W < 2 or not R[0] > 0 or not all(math.isfinite(r) for r in R):
+        return lo
+    tau = 2.0 * math.sqrt(math.log10(n) / n)
+    K = max(5, math.ceil(math.sqrt(math.log10(n))))
+    for m in range(W - K):  # a run of K lags m+1..m+K inside the W lags held
+        if all(abs(R[m + j]) < tau * R[0] for j in range(1, K + 1)):
+            return max(min(2 * m, hi), lo)
+    return hi
 
 
 def batch_reference(
@@ -65,25 +102,31 @@ def batch_reference(
     *,
     forgetting: float = 1.0,
     residuals: np.ndarray | None = None,
+    noise_forgetting: float | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Eqs. 6-14 with the paper's matrices: ``(theta, cov_conventional, cov_corrected)``.
 
     ``residuals`` replaces Eq. 7 (for instance the residual history of a recursive
-    estimator). Weighted by ``W = diag(f^(N-j))`` when ``forgetting < 1``.
+    estimator). Weighted by ``W = diag(f^(N-j))`` when ``forgetting < 1``. ``noise_forgetting``
+    ``f_R`` (default ``forgetting``) weights Eq. 10 by ``W_R = diag(f_R^(N-j))``; without given
+    ``residuals`` they are then those of the ``W_R``-weighted fit (the noise model).
     """
     X = np.asarray(X, dtype=float)
     z = np.asarray(z, dtype=float)
     check_window(window)
     N = len(z)
     f = forgetting
+    g = f if noise_forgetting is None else float(noise_forgetting)
     W = np.diag([f ** (N - j) for j in range(1, N + 1)])
+    W_R = np.diag([g ** (N - j) for j in range(1, N + 1)])
     D = np.linalg.inv(X.T @ W @ X)  # Eq. 6: dispersion matrix
     theta = D @ X.T @ W @ z  # Eq. 6
-    v = z - X @ theta if residuals is None else np.asarray(residuals, dtype=float)  # Eq. 7
-    n_N = np.trace(W)  # N when f = 1
+    theta_R = theta if g == f else np.linalg.solve(X.T @ W_R @ X, X.T @ W_R @ z)  # Eq. 6, W_R (noise model)
+    v = z - X @ theta_R if residuals is None else np.asarray(residuals, dtype=float)  # Eq. 7
+    n_N = np.trace(W_R)  # N when f = 1
     R = np.zeros(N)
     for i in range(N):
-        R[i] = sum(W[i + j, i + j] * v[i + j] * v[j] for j in range(N - i)) / n_N  # Eq. 10
+        R[i] = sum(W_R[i + j, i + j] * v[i + j] * v[j] for j in range(N - i)) / n_N  # Eq. 10
     n_tau = N - 1 if n_lags is None else int(n_lags)
     c = lag_weights(n_tau, window, N)
     E = np.array([[c[abs(a - b)] * R[abs(a - b)] for b in range(N)] for a in range(N)])  # Eq. 9 (22)
@@ -100,8 +143,9 @@ class RecursiveReference:
     """Eqs. 15-22 for one model, literally (see the module docstring for the options).
 
     ``RecursiveReference(n, n_lags=None, window="truncated", forgetting=1.0, *,
-    residual="standardized", p0=None, init_condition=1e8)``, the arguments of
-    :class:`~.bank.EstimatorBank` for one model of ``n`` parameters.
+    residual="standardized", p0=None, init_condition=1e8, noise_forgetting=None,
+    max_lags=50, min_lags=0)``, the arguments of :class:`~.bank.EstimatorBank` for one model of
+    ``n`` parameters.
     """
 
     def __init__(
@@ -114,12 +158,22 @@ class RecursiveReference:
         residual: str = "standardized",
         p0=None,
         init_condition: float = 1e8,
+        noise_forgetting: float | None = None,
+        max_lags: int = 50,
+        min_lags: int = 0,
     ) -> None:
-        check_options(n_lags, window, forgetting, residual, init_condition)
+        check_options(n_lags, window, forgetting, residual, init_condition, max_lags=max_lags, min_lags=min_lags)
         self.n, self.n_lags, self.window = n, n_lags, window
         self.f, self.residual, self.init_condition = float(forgetting), residual, float(init_condition)
+        self.auto = n_lags == "auto"
+        self.max_lags, self.min_lags = max_lags, min_lags
+        self.held = None if n_lags is None else (max_lags if self.auto else n_lags)  # n_tau of the memory
+        self.g = check_noise_forgetting(noise_forgetting, forgetting, self.held)  # f_R
+        self.noise = self.g != self.f  # R(i) from the noise model
         self.k = 0
         self.n_k = 0.0  # sum_j f^(k-j)
+        self.n_R = 0.0  # sum_j f_R^(k-j) (equal to n_k without a noise model)
+        self.u: list[float] = []  # the noise model's residuals u_1..u_k once initialized
         self.x: list[np.ndarray] = []  # x_1, x_2, ... (x[j-1] is x_j)
         self.z: list[float] = []
         self.v: list[float] = []  # residuals v_1..v_k once initialized
@@ -127,6 +181,8 @@ class RecursiveReference:
         self.Lam: dict[int, np.ndarray] = {}  # Lambda_k(i)
         self.A = np.zeros((n, n))  # X'WX before initialization
         self.b = np.zeros(n)  # X'Wz before initialization
+        self.A_R = np.zeros((n, n))  # X'W_R X and X'W_R z of the noise model before initialization
+        self.b_R = np.zeros(n)
         self.ready = p0 is not None
         self.ready_at = 0
         if p0 is not None:
@@ -135,10 +191,11 @@ class RecursiveReference:
         else:
             self.D = np.zeros((n, n))
             self.theta = np.zeros(n)
+        self.D_R, self.theta_R = self.D.copy(), self.theta.copy()  # the noise model
 
     def largest_lag(self) -> int:
         """The largest lag held at sample ``k``: ``k - 1`` (Eq. 20) or ``min(k - 1, n_tau)``."""
-        return self.k - 1 if self.n_lags is None else min(self.k - 1, self.n_lags)
+        return self.k - 1 if self.held is None else min(self.k - 1, self.held)
 
     def update(self, x, z: float) -> None:
         x = np.asarray(x, dtype=float)
@@ -149,6 +206,8 @@ class RecursiveReference:
         self.x.append(x)
         self.z.append(z)
         n_prev, self.n_k = self.n_k, f * self.n_k + 1.0
+        g = self.g
+        n_R_prev, self.n_R = self.n_R, g * self.n_R + 1.0
         for i in range(self.largest_lag() + 1):  # Eq. 21 (weighted)
             if i == 0:
                 self.Lam[0] = f**2 * self.Lam.get(0, 0.0) + np.outer(x, x)
@@ -158,6 +217,8 @@ class RecursiveReference:
         if not self.ready:
             self.A = f * self.A + np.outer(x, x)
             self.b = f * self.b + x * z
+            self.A_R = g * self.A_R + np.outer(x, x)
+            self.b_R = g * self.b_R + x * z
             self._try_initialize()
             return
         D, theta = self.D, self.theta
@@ -166,16 +227,32 @@ class RecursiveReference:
         e = z - x @ theta  # the a priori innovation of Eq. 15c
         self.D = (np.eye(self.n) - np.outer(K, x)) @ D / f  # Eq. 15b
         self.theta = theta + K * e  # Eq. 15c
-        if self.residual == "a_priori":
-            v = e
-        elif self.residual == "a_posteriori":
-            v = z - x @ self.theta  # Eq. 7 at sample k
+        self.v.append(self._residual(e, d, z - x @ self.theta, f))
+        series = self.v
+        if self.noise:  # the noise model: Eq. 15 with f_R
+            D, theta = self.D_R, self.theta_R
+            d = g + x @ D @ x
+            K = D @ x / d
+            e = z - x @ theta
+            self.D_R = (np.eye(self.n) - np.outer(K, x)) @ D / g
+            self.theta_R = theta + K * e
+            self.u.append(self._residual(e, d, z - x @ self.theta_R, g))
+            series = self.u
         else:
-            v = e * np.sqrt(f / d)  # standardized
-        self.v.append(v)
+            n_R_prev = n_prev
+        w = series[-1]
         for i in range(self.largest_lag() + 1):
             # Eq. 17 (Eq. 16 at i = 0), weighted: n_k R_k(i) = f n_(k-1) R_(k-1)(i) + v_k v_(k-i)
-            self.R[i] = (f * n_prev / self.n_k) * self.R.get(i, 0.0) + v * self.v[k - i - 1] / self.n_k
+            # (f_R and u with a noise model)
+            self.R[i] = (g * n_R_prev / self.n_R) * self.R.get(i, 0.0) + w * series[k - i - 1] / self.n_R
+
+    def _residual(self, e: float, d: float, post: float, f: float) -> float:
+        """The residual of the chosen kind from ``e_k``, ``d_k`` and the a posteriori residual."""
+        if self.residual == "a_priori":
+            return e
+        if self.residual == "a_posteriori":
+            return post  # Eq. 7 at sample k
+        return e * np.sqrt(f / d)  # standardized
 
     def _try_initialize(self) -> None:
         """Exact initialization at this sample if ``A_k`` is well conditioned (Eqs. 6, 7, 10)."""
@@ -187,11 +264,17 @@ class RecursiveReference:
             return
         self.D = np.linalg.inv(A)  # Eq. 6
         self.theta = self.D @ self.b  # Eq. 6
-        k, f = self.k, self.f
+        k, g = self.k, self.g
         self.v = [self.z[j] - self.x[j] @ self.theta for j in range(k)]  # Eq. 7, samples 1..k
+        series = self.v
+        if self.noise:  # the noise model's batch solution (Eq. 6 weighted W_R) and residuals
+            self.D_R = np.linalg.inv(self.A_R)
+            self.theta_R = self.D_R @ self.b_R
+            self.u = [self.z[j] - self.x[j] @ self.theta_R for j in range(k)]
+            series = self.u
         for i in range(self.largest_lag() + 1):
-            # Eq. 10, weighted: R_k(i) = sum_j w_j v_j v_(j-i) / n_k
-            self.R[i] = sum(f ** (k - 1 - j) * self.v[j] * self.v[j - i] for j in range(i, k)) / self.n_k
+            # Eq. 10, weighted: R_k(i) = sum_j w_j v_j v_(j-i) / n_k (f_R and u with a noise model)
+            self.R[i] = sum(g ** (k - 1 - j) * series[j] * series[j - i] for j in range(i, k)) / self.n_R
         self.ready, self.ready_at = True, k
 
     # ------------------------------------------------------------------ results
@@ -199,9 +282,20 @@ class RecursiveReference:
         if not self.ready:
             raise EstimatorNotReady(f"not initialized after {self.k} samples")
 
+    def lags_used(self) -> int:
+        """``n_tau`` of Eq. 22 at this sample: chosen with ``n_lags="auto"``, else the lags held."""
+        if not self.auto:
+            return self.largest_lag()
+        g, k = self.g, self.k
+        n = k if g == 1.0 else (sum(g**i for i in range(k)) ** 2 / sum(g ** (2 * i) for i in range(k)))
+        R = [self.R[i] if self.ready else 0.0 for i in range(self.largest_lag() + 1)]  # not ready: as R(0) = 0
+        return flat_top_lag(R, n, self.max_lags, self.min_lags)
+
     def weights(self) -> np.ndarray:
         """Lag window ``c_i`` for the lags held (Eqs. 20, 22)."""
         held = self.largest_lag() + 1
+        if self.auto:
+            return lag_weights(self.lags_used(), "truncated", held)
         return lag_weights(self.k - 1 if self.n_lags is None else self.n_lags, self.window, held)
 
     def covariance(self, kind: str = "corrected") -> np.ndarray:

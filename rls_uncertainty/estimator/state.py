@@ -15,8 +15,10 @@ __all__ = ["STATE_FORMAT", "capture", "restore"]
 # 2: lagged moments as one array of y = (x, z) products; 3: Eq. 17 as sums, history windows
 # only; 4: the package layout (lag_storage): Lambda+ of x alone once every model is
 # initialized, the y products only while one waits, residuals with their sign, D and theta
-# as separate arrays.
-STATE_FORMAT = 4
+# as separate arrays; 5: the noise model under forgetting (noise_forgetting; its dispersion,
+# estimate and residual history u, the f-weighted lag-0 moments while a model waits) and
+# n_lags="auto" with max_lags, min_lags.
+STATE_FORMAT = 5
 
 _BANK_ARRAYS = ("_inv_s", "_ready", "_ready_at", "repairs")
 
@@ -30,10 +32,15 @@ def capture(bank) -> dict:
         "forgetting": bank.forgetting,
         "residual": bank.residual,
         "init_condition": bank.init_condition,
+        "noise_forgetting": bank.noise_forgetting,
+        "max_lags": bank.max_lags,
+        "min_lags": bank.min_lags,
     }
-    counters = {"k": bank.k, "n_eff": bank.n_eff, "cap": bank._lags.cap}
+    counters = {"k": bank.k, "n_eff": bank.n_eff, "n_noise": bank.n_noise, "cap": bank._lags.cap}
     n = bank.n_max
     arrays = {"dispersion": bank._aug[:, :n].copy(), "theta": bank._aug[:, n].copy()}
+    if bank._noise:
+        arrays.update(noise_dispersion=bank._naug[:, :n].copy(), noise_theta=bank._naug[:, n].copy())
     arrays.update({name.lstrip("_"): getattr(bank, name).copy() for name in _BANK_ARRAYS})
     arrays.update(bank._lags.arrays(bank.n_window))
     return {"format": STATE_FORMAT, "config": config, "counters": counters, "arrays": arrays}
@@ -52,12 +59,15 @@ def restore(bank, state: dict) -> None:
     check_format(state)
     c = state["counters"]
     arrays = state["arrays"]
-    bank.k, bank.n_eff = int(c["k"]), float(c["n_eff"])
+    bank.k, bank.n_eff, bank.n_noise = int(c["k"]), float(c["n_eff"]), float(c["n_noise"])
     for name in _BANK_ARRAYS:
         assign_checked(getattr(bank, name), arrays[name.lstrip("_")], name.lstrip("_"))
     n = bank.n_max
     assign_checked(bank._aug[:, :n], arrays["dispersion"], "dispersion")
     assign_checked(bank._aug[:, n], arrays["theta"], "theta")
+    if bank._noise:
+        assign_checked(bank._naug[:, :n], arrays["noise_dispersion"], "noise_dispersion")
+        assign_checked(bank._naug[:, n], arrays["noise_theta"], "noise_theta")
     lags = bank._lags
     lags.waiting = not bool(bank._ready.all())
     lags.allocate(int(c["cap"]))

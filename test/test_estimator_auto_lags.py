@@ -1,0 +1,198 @@
+"""Automatic lag selection in the estimator (issue 14): ``n_lags="auto"`` chooses each model's
+L of Eq. 22 by Politis' flat-top rule on its residual autocorrelation at every evaluated
+sample, with the memory of ``n_lags=max_lags``."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from estimator_cases import ar1, rel_close, run, wide_scale_problem
+from test_estimator_bank import assert_bank_equals_reference, equivalence_problem
+
+from rls_uncertainty.estimator import EstimatorBank, RecursiveEstimator, batch_estimate
+from rls_uncertainty.estimator.lag_selection import flat_top_lags
+from rls_uncertainty.estimator.reference import RecursiveReference, flat_top_lag
+
+
+@pytest.mark.parametrize("p0", [None, 100.0])
+@pytest.mark.parametrize("residual", ["standardized", "a_posteriori"])
+@pytest.mark.parametrize("forgetting", [1.0, 0.97])
+@pytest.mark.parametrize("max_lags, min_lags", [(5, 0), (50, 0), (8, 3)])
+def test_auto_bank_equals_the_reference(max_lags, min_lags, forgetting, residual, p0):
+    """Theta, covariances, standard errors and the chosen lags of the bank equal the literal
+    Eqs. 15-22 with the literal flat-top rule of reference.py, at every sample."""
+    X, Z = equivalence_problem(n=160)
+    options = dict(residual=residual, p0=p0, max_lags=max_lags, min_lags=min_lags)
+    bank = EstimatorBank((3, 2), "auto", "truncated", forgetting, **options)
+    refs = [RecursiveReference(s, "auto", "truncated", forgetting, **options) for s in (3, 2)]
+    chosen = set()
+    for k in range(len(Z)):
+        bank.update(X[k], Z[k])
+        refs[0].update(X[k, 0], Z[k, 0])
+        refs[1].update(X[k, 1, :2], Z[k, 1])
+        assert list(bank.lags_used) == [r.lags_used() for r in refs], k
+        chosen.update(int(L) for L, ready in zip(bank.lags_used, bank.ready) if ready)
+        if k % 10 == 9 or k < 15:
+            assert_bank_equals_reference(bank, refs, k + 1)
+    assert len(chosen) >= 2  # the choice moves
+
+
+def test_reference_rule_is_the_vectorised_rule():
+    """flat_top_lag (reference, one model, a loop) equals lag_selection.flat_top_lags."""
+    rng = np.random.default_rng(1)
+    for _ in range(300):
+        W = int(rng.integers(1, 60))
+        n = float(rng.choice([1.0, 1.5, 2.0, 7.0, 60.0, 500.0, 1e4]))
+        rho = rng.uniform(0.3, 0.99)
+        R = rho ** np.arange(W) * rng.choice([1.0, -1.0], W) ** rng.integers(0, 2) + 0.05 * rng.standard_normal(W)
+        R[0] = abs(R[0]) if rng.random() > 0.05 else 0.0
+        cap, lo = int(rng.integers(1, 70)), int(rng.integers(0, 5))
+        lo = min(lo, cap)
+        assert flat_top_lag(list(R), n, cap, lo) == flat_top_lags(R, n, cap=cap, min_lags=lo), (W, n, cap, lo)
+
+
+@pytest.mark.parametrize("forgetting", [1.0, 0.99])
+def test_auto_covariance_is_the_batch_formula_with_the_chosen_lags(forgetting):
+    """At every checked sample the covariance is Eq. 22 with L = lags_used on the residual
+    history (noise-model residuals under forgetting), and lags_used is the rule applied to
+    autocorrelation()."""
+    X, z = wide_scale_problem()
+    est = RecursiveEstimator(4, "auto", forgetting=forgetting, max_lags=40)
+    g = est._bank.noise_forgetting
+    full = RecursiveEstimator(4, forgetting=forgetting, noise_forgetting=g)  # whole history
+    seen = set()
+    for k in range(len(z)):
+        est.update(X[k], z[k])
+        full.update(X[k], z[k])
+        if k + 1 not in (30, 41, 42, 100, 250, 600):
+            continue
+        L = est.lags_used
+        seen.add(L)
+        n = k + 1 if g == 1.0 else est._bank.rule_samples
+        assert L == flat_top_lags(est.autocorrelation(), n, cap=40)
+        _, cov_conv, cov_corr = batch_estimate(
+            X[: k + 1], z[: k + 1], L, residuals=full.noise_residuals(), forgetting=forgetting, noise_forgetting=g
+        )
+        rel_close(est.covariance("corrected", repair=False), cov_corr, 1e-9)
+        rel_close(est.covariance("conventional"), cov_conv, 1e-9)
+    assert len(seen) >= 2, seen
+
+
+def test_white_residuals_get_no_lags_and_colored_ones_get_many():
+    rng = np.random.default_rng(2)
+    n = 2000
+    X = np.column_stack([np.ones(n), np.sin(0.05 * np.arange(n)), rng.standard_normal(n)])
+    z_white = X @ [1.0, 2.0, 3.0] + 0.1 * rng.standard_normal(n)
+    z_ar = X @ [1.0, 2.0, 3.0] + 0.1 * ar1(rng, 0.9, (n,))
+    bank = EstimatorBank((3, 3, 3), "auto", max_lags=50)
+    Xb = np.stack([X, X, X], axis=1)
+    Z = np.column_stack([z_white, z_ar, X @ [1.0, 2.0, 3.0]])  # the third fits exactly
+    run(bank, Xb, Z)
+    L = bank.lags_used
+    assert L[0] <= 4 and 16 <= L[1] <= 50 and L[2] == 0
+    assert np.all(bank.covariance(2) == 0.0) or np.all(np.abs(bank.covariance(2)) < 1e-20)
+
+
+def test_edge_cases_and_refusals():
+    bank = EstimatorBank((2,), "auto", max_lags=10, min_lags=3)
+    assert list(bank.lags_used) == [0]  # no sample: nothing held
+    rng = np.random.default_rng(0)
+    for _ in range(30):
+        bank.update(np.array([[1.0, 0.0]]), rng.standard_normal(1))  # never ready
+    assert not bank.ready[0] and list(bank.lags_used) == [3]
+    assert np.isnan(bank.standard_errors_all()).all()
+    for kwargs, match in [
+        (dict(window="bartlett"), "truncated"),
+        (dict(max_lags=0), "max_lags"),
+        (dict(max_lags=2.5), "max_lags"),
+        (dict(min_lags=51), "min_lags"),
+        (dict(min_lags=-1), "min_lags"),
+    ]:
+        with pytest.raises(ValueError, match=match):
+            EstimatorBank((2,), "auto", **kwargs)
+    with pytest.raises(ValueError, match="n_lags"):
+        EstimatorBank((2,), "automatic")
+    fixed = run(EstimatorBank((4,), 7), *(a[:, None] for a in wide_scale_problem()), stop=5)
+    assert list(fixed.lags_used) == [4]
+
+
+@pytest.mark.parametrize("forgetting", [1.0, 0.99])
+def test_auto_state_continues_bit_identically_with_the_memory_of_max_lags(forgetting):
+    """state()/from_state() round-trips n_lags="auto", max_lags, min_lags (also while a model
+    waits); the state has exactly the arrays of n_lags=max_lags."""
+    rng = np.random.default_rng(5)
+    n = 500
+    X = np.zeros((n, 2, 3))
+    X[:, 0, :2] = np.column_stack([np.ones(n), rng.standard_normal(n)])
+    X[:, 1] = np.column_stack([np.ones(n), rng.standard_normal(n), np.where(np.arange(n) < 200, 0.0, 1.0)])
+    Z = np.einsum("kmi,mi->km", X, [[1.0, 2.0, 0.0], [0.5, -1.0, 3.0]]) + 0.1 * ar1(rng, 0.8, (2, n)).T
+    for stop in (100, 300):
+        a = EstimatorBank((2, 3), "auto", forgetting=forgetting, max_lags=20, min_lags=1)
+        run(a, X, Z, stop)
+        saved = a.state()
+        fixed = run(EstimatorBank((2, 3), 20, forgetting=forgetting), X, Z, stop).state()
+        assert {k: v.shape for k, v in saved["arrays"].items()} == {k: v.shape for k, v in fixed["arrays"].items()}
+        b = EstimatorBank.from_state(saved)
+        assert (b.n_lags, b.max_lags, b.min_lags) == ("auto", 20, 1)
+        for k in range(stop, n):
+            a.update(X[k], Z[k])
+            b.update(X[k], Z[k])
+            if k % 50 == 0:
+                np.testing.assert_array_equal(a.lags_used, b.lags_used)
+                np.testing.assert_array_equal(a.standard_errors_all(), b.standard_errors_all())
+        np.testing.assert_array_equal(a.theta_all(), b.theta_all())
+
+
+# --------------------------------------------------------------------------- configuration, pipeline, CLI
+def test_parameters_reach_the_bank_and_are_validated():
+    from rls_uncertainty.config import ConfigError, EstimatorConfig, pipeline_config
+
+    cfg = pipeline_config({"estimator.lag_selection": "auto", "estimator.max_lags": 80})
+    assert cfg.estimator.bank_lags == "auto" and cfg.estimator.max_lags == 80
+    assert cfg.fingerprint()["n_lags"] == "auto" and cfg.fingerprint()["max_lags"] == 80
+    fixed = pipeline_config({"estimator.max_lags": 80})
+    assert fixed.estimator.bank_lags == 50 and "max_lags" not in fixed.fingerprint()
+    for params, match in [
+        ({"estimator.lag_selection": "auto", "estimator.window": "bartlett"}, "truncated"),
+        ({"estimator.lag_selection": "sometimes"}, "estimator.lag_selection"),
+        ({"estimator.max_lags": 0}, "estimator.max_lags"),
+    ]:
+        with pytest.raises(ConfigError, match=match):
+            pipeline_config(params)
+    with pytest.raises(ConfigError, match="estimator.max_lags"):
+        EstimatorConfig(max_lags=2.5)
+
+
+def test_pipeline_publishes_the_chosen_lags_per_sample_and_in_the_model_fit():
+    from test_pipeline import T2_PARAMS, feed_streams
+
+    from rls_uncertainty.config import pipeline_config
+    from rls_uncertainty.pipeline import Pipeline
+    from rls_uncertainty.simulation import simulate_sensor_streams
+
+    st = simulate_sensor_streams(0.2, 250)
+    pipe = Pipeline(pipeline_config({**T2_PARAMS, "estimator.lag_selection": "auto"}))
+    outs = feed_streams(pipe, st)
+    assert pipe.bank.n_lags == "auto" and pipe.bank.max_lags == 50
+    lags = np.array([o.lags for o in outs])
+    ready = np.array([o.ready for o in outs])
+    assert lags.dtype.kind == "i" and np.all(lags[~ready] == 0) and lags.max() <= 50
+    assert len(np.unique(lags[ready[:, 0], 0])) > 2  # the choice follows the data
+    np.testing.assert_array_equal(outs[-1].lags, pipe.bank.lags_used)
+    assert [pipe.model_fit(j)["lags"] for j in range(2)] == list(pipe.bank.lags_used)
+    fixed = Pipeline(pipeline_config(T2_PARAMS))
+    outs = feed_streams(fixed, st)
+    assert np.all(outs[-1].lags == 50) and fixed.model_fit(0)["lags"] == 50
+
+
+def test_command_line_lags_auto():
+    from rls_uncertainty import cli
+
+    parser = cli.build_parser()
+    args = parser.parse_args(["replay", "bag", "--out", "o", "--lags", "auto", "--max-lags", "70"])
+    params = cli._replay_params(args)
+    assert params["estimator.lag_selection"] == "auto" and params["estimator.max_lags"] == 70
+    assert "estimator.lags" not in params
+    assert parser.parse_args(["montecarlo", "--out", "o", "--lags", "auto"]).lags == "auto"
+    assert parser.parse_args(["montecarlo", "--out", "o", "--lags", "7"]).lags == 7
+    assert parser.parse_args(["simulate", "--lags", "auto"]).lags == "auto"
