@@ -338,12 +338,9 @@ class Pipeline:
     def reject_frame(self, stream: str, stamp_ns: int) -> list[SampleOutput]:
         """Count a message of input ``stream`` whose ``header.frame_id`` is not
         ``inputs.frame_id`` (:func:`.messages.feed` checks): its numbers are in a frame the
-        pipeline cannot convert, so it is rejected as ``frame_mismatch``, never used. Its
-        neighbours still bracket samples (like a message lost in transport): the values around
-        it are valid, only this message's frame is unknown."""
-        del stamp_ns
-        self.sampler.reject(self.sampler.streams[stream], "frame_mismatch")
-        return []
+        pipeline cannot convert, so it is rejected as ``frame_mismatch``, never used, and like
+        any invalid message it leaves a hole: no sample is interpolated across it."""
+        return self.reject_invalid(stream, stamp_ns, "frame_mismatch")
 
     def reject(self, stream: str, reason: str) -> None:
         """Count a message of input ``stream`` that never reached the pipeline's ``add_*``

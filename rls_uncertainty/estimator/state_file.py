@@ -69,8 +69,11 @@ _MAX_LAGS = 10_000_000
 _MAX_COUNT = 2**53  # samples: exact as a float
 _GROWTH_START = GROWTH_START  # the lag capacity an all-lags bank starts with, doubled as samples arrive
 _META_KEYS = ("format", "fingerprint", "bank_config", "bank_counters", "samples_used", "zsum", "zsq")
-_BANK_CONFIG_KEYS = ("sizes", "n_lags", "window", "forgetting", "residual", "init_condition")
-_COUNTER_KEYS = ("k", "n_eff", "cap")
+_BANK_CONFIG_KEYS = (
+    "sizes", "n_lags", "window", "forgetting", "residual", "init_condition", "noise_forgetting", "max_lags",
+    "min_lags",
+)
+_COUNTER_KEYS = ("k", "n_eff", "n_noise", "cap")
 _F8, _I8, _B1 = np.dtype("<f8"), np.dtype("<i8"), np.dtype("|b1")
 
 
@@ -220,8 +223,13 @@ def _check_bank_config(cfg: Any, expect: Mapping | None) -> dict:
         raise _fail("bank_config.sizes", f"must be a list of 1 to {_MAX_MODELS} sizes, found {_kind(sizes)}")
     for i, s in enumerate(sizes):
         _int(s, f"bank_config.sizes[{i}]", 1, _MAX_PARAMETERS)
-    if cfg["n_lags"] is not None:
+    if cfg["n_lags"] is not None and cfg["n_lags"] != "auto":
         _int(cfg["n_lags"], "bank_config.n_lags", 0, _MAX_LAGS)
+    max_lags = _int(cfg["max_lags"], "bank_config.max_lags", 1, _MAX_LAGS)
+    _int(cfg["min_lags"], "bank_config.min_lags", 0, max_lags)
+    f_noise = _number(cfg["noise_forgetting"], "bank_config.noise_forgetting")
+    if not 0.0 < f_noise <= 1.0:
+        raise _fail("bank_config.noise_forgetting", f"must be in (0, 1], found {f_noise}")
     if cfg["window"] not in WINDOWS:
         raise _fail("bank_config.window", f"must be one of {list(WINDOWS)}, found {_kind(cfg['window'])}")
     if cfg["residual"] not in RESIDUALS:
@@ -244,7 +252,12 @@ def _check_counters(c: Any, cfg: dict) -> dict:
     n_eff = _number(c["n_eff"], "bank_counters.n_eff")
     if not 0.0 <= n_eff <= k * (1.0 + 1e-9):
         raise _fail("bank_counters.n_eff", f"must be in [0, k = {k}], found {n_eff}")
+    n_noise = _number(c["n_noise"], "bank_counters.n_noise")
+    if not 0.0 <= n_noise <= k * (1.0 + 1e-9):
+        raise _fail("bank_counters.n_noise", f"must be in [0, k = {k}], found {n_noise}")
     n_lags = cfg["n_lags"]
+    if n_lags == "auto":
+        n_lags = cfg["max_lags"]
     want = _all_lags_capacity(k) if n_lags is None else n_lags + 1
     cap = _int(c["cap"], "bank_counters.cap", 1, 2 * _MAX_COUNT)
     if cap != want:
