@@ -27,6 +27,7 @@ from __future__ import annotations
 import struct
 from collections.abc import Sequence
 from dataclasses import make_dataclass
+from typing import Any
 
 __all__ = ["decode", "encode_header", "encode_float64_multiarray", "encode_float64_multiarray_dims", "DECODABLE"]
 
@@ -37,7 +38,7 @@ _U32 = struct.Struct("<I")
 
 # Light message objects with the ROS field names. Slotted, they are smaller than a
 # SimpleNamespace and quicker to read: the IMU handler takes about 1.2 instead of 1.8 us.
-def _message(name: str, fields: str):
+def _message(name: str, fields: str) -> type:
     return make_dataclass(name, fields.split(), slots=True)
 
 
@@ -166,7 +167,7 @@ _BIG = _decoders(">")
 DECODABLE = frozenset(_LITTLE)
 
 
-def decode(msgtype: str, raw: bytes):
+def decode(msgtype: str, raw: bytes | memoryview) -> Any:
     """The message decoded from a serialized payload (``bytes`` or ``memoryview``, with its
     4-byte encapsulation header), or ``None`` when this module does not handle ``msgtype``.
     Raises :class:`struct.error` naming the type and the problem when the payload does not
@@ -206,7 +207,7 @@ def encode_header(sec: int, nanosec: int, frame_id: str) -> bytes:
     return _LE_HEADER + bytes(out)
 
 
-def encode_float64_multiarray(label: str, data, second: str | None = None) -> bytes:
+def encode_float64_multiarray(label: str, data: Sequence[float], second: str | None = None) -> bytes:
     """CDR of a ``std_msgs/Float64MultiArray`` with ``dim[0] = (label, n, n)`` and, when
     ``second`` is given, ``dim[1] = (second, 1, 1)``."""
     n = len(data)
