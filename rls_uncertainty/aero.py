@@ -16,11 +16,12 @@ interpolated air data, dynamic pressure from the air density).
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, fields
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 from .errors import ConfigError
 
@@ -28,6 +29,8 @@ if TYPE_CHECKING:  # annotations only: this module imports numpy alone
     from .config import AircraftConfig, ModelConfig
 
 __all__ = [
+    "FloatArray",
+    "Signal",
     "rep103_to_aircraft",
     "SAMPLE_FIELDS",
     "RATES",
@@ -42,8 +45,12 @@ __all__ = [
     "plausibility_rejection",
 ]
 
+FloatArray = NDArray[np.float64]
+# A quantity of one sample (a float, the per-sample path) or of many (an array, batch reduction).
+Signal = float | FloatArray
 
-def rep103_to_aircraft(vec):
+
+def rep103_to_aircraft(vec: Sequence[float] | FloatArray) -> tuple[float, float, float] | FloatArray:
     """REP-103 body frame (x fwd, y left, z up) to aircraft body axes (x fwd, y right, z down).
 
     A rotation of pi about x: ``(x, y, z) -> (x, -y, -z)``. Applies to vectors (specific
@@ -53,8 +60,9 @@ def rep103_to_aircraft(vec):
     if (type(vec) is tuple or type(vec) is list) and len(vec) == 3:
         x, y, z = vec
         return (float(x), -float(y), -float(z))
-    v = np.asarray(vec, dtype=float)
-    return v * np.array([1.0, -1.0, -1.0])
+    v = np.asarray(vec, dtype=np.float64)
+    out: FloatArray = v * np.array([1.0, -1.0, -1.0])
+    return out
 
 
 @dataclass
@@ -67,23 +75,23 @@ class FlightState:
     ``delta_e, delta_a, delta_r`` (rad, Eq. 23 conventions); ``thrust`` along body x (N).
     """
 
-    ax: np.ndarray
-    ay: np.ndarray
-    az: np.ndarray
-    p: np.ndarray
-    q: np.ndarray
-    r: np.ndarray
-    p_dot: np.ndarray
-    q_dot: np.ndarray
-    r_dot: np.ndarray
-    V: np.ndarray
-    alpha: np.ndarray
-    beta: np.ndarray
-    qbar: np.ndarray
-    delta_e: np.ndarray = 0.0
-    delta_a: np.ndarray = 0.0
-    delta_r: np.ndarray = 0.0
-    thrust: np.ndarray = 0.0
+    ax: Signal
+    ay: Signal
+    az: Signal
+    p: Signal
+    q: Signal
+    r: Signal
+    p_dot: Signal
+    q_dot: Signal
+    r_dot: Signal
+    V: Signal
+    alpha: Signal
+    beta: Signal
+    qbar: Signal
+    delta_e: Signal = 0.0
+    delta_a: Signal = 0.0
+    delta_r: Signal = 0.0
+    thrust: Signal = 0.0
 
 
 # One measured sample, aircraft body axes: specific force (m/s^2), rates (rad/s), air-relative
@@ -95,7 +103,8 @@ RATES = slice(3, 6)  # p, q, r: the signals the differentiator turns into p_dot,
 _NO_SURFACES = (0.0, 0.0, 0.0)
 
 
-def aircraft_sample(imu, velocity, qbar: float = math.nan, surfaces=_NO_SURFACES, thrust: float = 0.0) -> list:
+def aircraft_sample(imu: Sequence[float], velocity: Sequence[float], qbar: float = math.nan,
+                    surfaces: Sequence[float] = _NO_SURFACES, thrust: float = 0.0) -> list[float]:
     """The :data:`SAMPLE_FIELDS` vector of one sample from REP-103 measurements: ``imu`` is
     ``(wx, wy, wz, fx, fy, fz)`` (rates, then specific force), ``velocity`` the air-relative
     velocity; ``qbar`` NaN means "compute it from the air density" (:func:`flight_state`)."""
@@ -109,7 +118,7 @@ def aircraft_sample(imu, velocity, qbar: float = math.nan, surfaces=_NO_SURFACES
     ]
 
 
-def flight_state(sample: list, rate_dot, air_density: float,
+def flight_state(sample: Sequence[float], rate_dot: FloatArray, air_density: float,
                  limits: PlausibilityLimits | None = None) -> FlightState | str:
     """A :data:`SAMPLE_FIELDS` vector and its angular accelerations as a :class:`FlightState`
     (``V``, ``alpha = atan2(w, u)``, ``beta = asin(v / V)``; ``qbar = rho V^2 / 2`` when not
@@ -255,7 +264,9 @@ def plausibility_rejection(state: FlightState, limits: PlausibilityLimits) -> st
     ``implausible_<field>``, or ``None``. Messages were judged one by one already; this also
     covers what only a sample has: flow angles and airspeed of interpolated air data, and
     ``rho V^2 / 2`` when the dynamic pressure is not measured."""
-    s = state
+    # One sample: every field is a float here (an Any view, as comparisons of float | array
+    # do not type as bool).
+    s: Any = state
     L = limits
     if not L.airspeed_min <= s.V <= L.airspeed_max:
         return "implausible_airspeed"
@@ -276,7 +287,7 @@ def plausibility_rejection(state: FlightState, limits: PlausibilityLimits) -> st
     return None
 
 
-def coefficients(s: FlightState, ac: AircraftConfig) -> dict[str, np.ndarray]:
+def coefficients(s: FlightState, ac: AircraftConfig) -> dict[str, Signal]:
     """Body-axis force and moment coefficients, Eq. 1a-f."""
     qS = s.qbar * ac.S if isinstance(s.qbar, float) else np.asarray(s.qbar, dtype=float) * ac.S
     return {
@@ -292,10 +303,12 @@ def coefficients(s: FlightState, ac: AircraftConfig) -> dict[str, np.ndarray]:
     }
 
 
-def regressors(s: FlightState, ac: AircraftConfig) -> dict[str, np.ndarray]:
+def regressors(s: FlightState, ac: AircraftConfig) -> dict[str, Signal]:
     """Every regressor of Eq. 2 by name: bias, flow angles, controls and the nondimensional
     rates ``p b/2V``, ``q cbar/2V``, ``r b/2V``. Absolute angles are used; the bias terms
     absorb the trim values (Eq. 2's perturbations differ from them by constants)."""
+    V2: Signal
+    one: Signal
     if isinstance(s.V, float):  # one sample
         V2, one = 2.0 * s.V, 1.0
     else:
@@ -314,6 +327,6 @@ def regressors(s: FlightState, ac: AircraftConfig) -> dict[str, np.ndarray]:
     }
 
 
-def regressor_matrix(model: ModelConfig, values: dict[str, np.ndarray]) -> np.ndarray:
+def regressor_matrix(model: ModelConfig, values: Mapping[str, Signal]) -> FloatArray:
     """Columns of ``model.regressors`` stacked: ``(N, n)`` for arrays, ``(n,)`` for a sample."""
     return np.stack([np.asarray(values[r], dtype=float) for r in model.regressors], axis=-1)

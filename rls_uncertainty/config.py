@@ -183,7 +183,7 @@ def load_aircraft(path_or_name: str | Path) -> AircraftConfig:
         raise ConfigError(f"{path}: {exc}") from exc
 
 
-def load_models(spec) -> tuple[ModelConfig, ...]:
+def load_models(spec: object) -> tuple[ModelConfig, ...]:
     """Model structures from a mapping ``{output: [regressor, ...]}`` (YAML ``models:``)."""
     if not isinstance(spec, dict) or not spec:
         raise ConfigError("models must be a non-empty mapping of output -> list of regressors")
@@ -213,32 +213,100 @@ LAG_SELECTIONS = ("fixed", "auto")
 
 PARAMETERS: tuple[ParamSpec, ...] = (
     ParamSpec("rate", 50.0, "estimator sample rate, Hz; input streams are interpolated to it", 1.0, 1000.0),
-    ParamSpec("aircraft", "t2", "aircraft properties: a name in config/aircraft/ (t2, twin_otter_f1_017, ...) or a YAML path"),
+    ParamSpec(
+        "aircraft", "t2",
+        "aircraft properties: a name in config/aircraft/ (t2, twin_otter_f1_017, ...) or a YAML path",
+    ),
     ParamSpec("models.enabled", list(OUTPUTS), "models to estimate, a subset of CX, CY, CZ, Cl, Cm, Cn"),
     *(
         ParamSpec(f"models.{out}", _EQ2[out], f"regressors of the {out} model (Eq. 2); names: " + ", ".join(REGRESSORS))
         for out in OUTPUTS
     ),
-    ParamSpec("estimator.lags", 50, "residual autocorrelation lags kept (Eq. 22); -1 keeps all lags (Eq. 20), 0 is the conventional covariance", -1, 100000),
-    ParamSpec("estimator.window", "truncated", "lag window: truncated (Eq. 22) or bartlett (always positive semi-definite)", choices=WINDOWS),
-    ParamSpec("estimator.forgetting", 1.0, "exponential forgetting factor; 1 is the paper's growing-memory estimator", 0.5, 1.0),
-    ParamSpec("estimator.residual", "standardized", "residual used in Eqs. 16-17: standardized (innovation / sqrt(1 + x'Dx), makes Eq. 16 equal the batch Eq. 14), a_posteriori (z - x'theta_k) or a_priori (z - x'theta_k-1)", choices=RESIDUALS),
-    ParamSpec("estimator.lag_selection", "fixed", "fixed: estimator.lags lags; auto: each model's lags chosen from its residual autocorrelation at every sample (Politis flat-top rule, truncated window only), up to estimator.max_lags", choices=LAG_SELECTIONS),
-    ParamSpec("estimator.max_lags", 50, "with estimator.lag_selection auto: the most lags the rule may choose, and the memory kept (as estimator.lags of that value)", 1, 100000),
+    ParamSpec(
+        "estimator.lags", 50,
+        "residual autocorrelation lags kept (Eq. 22); -1 keeps all lags (Eq. 20), 0 is the conventional covariance",
+        -1, 100000,
+    ),
+    ParamSpec(
+        "estimator.window", "truncated",
+        "lag window: truncated (Eq. 22) or bartlett (always positive semi-definite)",
+        choices=WINDOWS,
+    ),
+    ParamSpec(
+        "estimator.forgetting", 1.0,
+        "exponential forgetting factor; 1 is the paper's growing-memory estimator",
+        0.5, 1.0,
+    ),
+    ParamSpec(
+        "estimator.residual", "standardized",
+        "residual used in Eqs. 16-17: standardized (innovation / sqrt(1 + x'Dx), makes Eq. 16 equal the batch Eq. "
+        "14), a_posteriori (z - x'theta_k) or a_priori (z - x'theta_k-1)",
+        choices=RESIDUALS,
+    ),
+    ParamSpec(
+        "estimator.lag_selection", "fixed",
+        "fixed: estimator.lags lags; auto: each model's lags chosen from its residual autocorrelation at every sample "
+        "(Politis flat-top rule, truncated window only), up to estimator.max_lags",
+        choices=LAG_SELECTIONS,
+    ),
+    ParamSpec(
+        "estimator.max_lags", 50,
+        "with estimator.lag_selection auto: the most lags the rule may choose, and the memory kept (as "
+        "estimator.lags of that value)",
+        1, 100000,
+    ),
     ParamSpec("differentiator.window", 9, "angular-acceleration differentiator window, samples", 3, 201),
     ParamSpec("differentiator.order", 3, "local polynomial order of the differentiator", 1, 10),
-    ParamSpec("differentiator.lag", 4, "differentiator fixed lag, samples (0 = causal); every signal is delayed by it", 0, 200),
-    ParamSpec("inputs.use_dynamic_pressure", True, "use the dynamic_pressure topic; false computes 0.5 rho V^2 with inputs.air_density"),
-    ParamSpec("inputs.air_density", 1.225, "air density for 0.5 rho V^2 when the dynamic pressure topic is not used, kg/m^3", 0.01, 2.0),
+    ParamSpec(
+        "differentiator.lag", 4,
+        "differentiator fixed lag, samples (0 = causal); every signal is delayed by it",
+        0, 200,
+    ),
+    ParamSpec(
+        "inputs.use_dynamic_pressure", True,
+        "use the dynamic_pressure topic; false computes 0.5 rho V^2 with inputs.air_density",
+    ),
+    ParamSpec(
+        "inputs.air_density", 1.225,
+        "air density for 0.5 rho V^2 when the dynamic pressure topic is not used, kg/m^3",
+        0.01, 2.0,
+    ),
     ParamSpec("inputs.use_thrust", True, "use the thrust topic (force.x, N) in Eq. 1a; false sets thrust to 0"),
-    ParamSpec("inputs.max_gap", 0.25, "largest gap between two messages of one stream that is interpolated across, s", 0.001, 10.0),
-    ParamSpec("inputs.buffer_duration", 2.0, "how far a stream may run ahead of the slowest one before its old messages expire, s", 0.1, 60.0),
+    ParamSpec(
+        "inputs.max_gap", 0.25,
+        "largest gap between two messages of one stream that is interpolated across, s",
+        0.001, 10.0,
+    ),
+    ParamSpec(
+        "inputs.buffer_duration", 2.0,
+        "how far a stream may run ahead of the slowest one before its old messages expire, s",
+        0.1, 60.0,
+    ),
     # Stream timelines (issue 12 items 2 and 5, issue 13): jumps of a stream's stamps, the
     # node's clock, and the count bound of the buffers (sampling.py's docstring has the policy).
-    ParamSpec("inputs.max_stamp_jump", 5.0, "a stamp this far behind a stream's newest, or this far ahead of it and of every stream, is a jump candidate: held until inputs.jump_confirmation more messages confirm a new timeline (a looped replay restarts), else rejected as stamp_jump, s", 0.01, 1.0e9),
-    ParamSpec("inputs.jump_confirmation", 5, "messages after a jump candidate that must continue its stamps before the jump is taken as real (0: at once)", 0, 1000),
-    ParamSpec("inputs.max_clock_offset", 0.0, "reject messages stamped farther than this from the node's clock as far_from_clock, s; 0 = off (replays played without /clock keep their recorded stamps)", 0.0, 1.0e9),
-    ParamSpec("inputs.max_buffered", 20000, "messages buffered per stream at most (2 s at 10 kHz); beyond it the oldest expire", 10, 10000000),
+    ParamSpec(
+        "inputs.max_stamp_jump", 5.0,
+        "a stamp this far behind a stream's newest, or this far ahead of it and of every stream, is a jump candidate: "
+        "held until inputs.jump_confirmation more messages confirm a new timeline (a looped replay restarts), else "
+        "rejected as stamp_jump, s",
+        0.01, 1.0e9,
+    ),
+    ParamSpec(
+        "inputs.jump_confirmation", 5,
+        "messages after a jump candidate that must continue its stamps before the jump is taken as real (0: at once)",
+        0, 1000,
+    ),
+    ParamSpec(
+        "inputs.max_clock_offset", 0.0,
+        "reject messages stamped farther than this from the node's clock as far_from_clock, s; 0 = off (replays "
+        "played without /clock keep their recorded stamps)",
+        0.0, 1.0e9,
+    ),
+    ParamSpec(
+        "inputs.max_buffered", 20000,
+        "messages buffered per stream at most (2 s at 10 kHz); beyond it the oldest expire",
+        10, 10000000,
+    ),
     # Input sanity (issue 12 item 1, issue 13): the body frame the inputs must be stamped in,
     # and what a measurement of an aircraft in flight can be (aero.PlausibilityLimits says
     # why each default is beyond any aircraft this package targets). A message out of bounds
@@ -306,20 +374,37 @@ PARAMETERS: tuple[ParamSpec, ...] = (
         1.0, 1.0e8,
     ),
     ParamSpec("surfaces.elevator", ["elevator"], "JointState names averaged into the elevator deflection (Eq. 23)"),
-    ParamSpec("surfaces.aileron_right", ["aileron_right"], "JointState names of right ailerons; delta_a = (right - left)/2 (Eq. 23)"),
+    ParamSpec(
+        "surfaces.aileron_right", ["aileron_right"],
+        "JointState names of right ailerons; delta_a = (right - left)/2 (Eq. 23)",
+    ),
     ParamSpec("surfaces.aileron_left", ["aileron_left"], "JointState names of left ailerons"),
-    ParamSpec("surfaces.aileron_combined", "", "JointState name that already holds (right - left)/2; when set, aileron_right/left are ignored"),
+    ParamSpec(
+        "surfaces.aileron_combined", "",
+        "JointState name that already holds (right - left)/2; when set, aileron_right/left are ignored",
+    ),
     ParamSpec("surfaces.rudder", ["rudder"], "JointState names averaged into the rudder deflection (Eq. 23)"),
     ParamSpec("topics.imu", "imu", "sensor_msgs/Imu topic, REP-103 body frame"),
-    ParamSpec("topics.airspeed", "airspeed", "geometry_msgs/Vector3Stamped true-airspeed vector topic, REP-103 body frame, m/s"),
+    ParamSpec(
+        "topics.airspeed", "airspeed",
+        "geometry_msgs/Vector3Stamped true-airspeed vector topic, REP-103 body frame, m/s",
+    ),
     ParamSpec("topics.dynamic_pressure", "dynamic_pressure", "sensor_msgs/FluidPressure dynamic pressure topic, Pa"),
     ParamSpec("topics.control_surfaces", "control_surfaces", "sensor_msgs/JointState surface deflection topic, rad"),
     ParamSpec("topics.thrust", "thrust", "geometry_msgs/WrenchStamped thrust topic (force.x, N)"),
     ParamSpec("qos.reliable", False, "reliable QoS for the inputs instead of sensor-data (best effort)"),
     ParamSpec("qos.depth", 100, "input and output queue depth", 1, 100000),
     ParamSpec("enabled", True, "estimate from start-up; the ~/enable service gates estimation to maneuvers"),
-    ParamSpec("state_file", "", "estimator state file: loaded at start-up when it exists and matches, saved on shutdown, disable and periodically"),
-    ParamSpec("state_save_period", 10.0, "seconds between periodic state saves (0 = only on shutdown and disable)", 0.0, 3600.0),
+    ParamSpec(
+        "state_file", "",
+        "estimator state file: loaded at start-up when it exists and matches, saved on shutdown, disable and "
+        "periodically",
+    ),
+    ParamSpec(
+        "state_save_period", 10.0,
+        "seconds between periodic state saves (0 = only on shutdown and disable)",
+        0.0, 3600.0,
+    ),
     ParamSpec("diagnostics_period", 1.0, "seconds between /diagnostics messages", 0.05, 60.0),
     ParamSpec("frame_id", "base_link", "frame_id of the ~/sample_stamp header"),
     # Outputs for consumers and long flights (issues 13 and 14): convergence flags, full
@@ -415,7 +500,9 @@ class EstimatorConfig:
 
     def __post_init__(self) -> None:
         lags = self.n_lags
-        if lags is not None and (isinstance(lags, bool) or not isinstance(lags, Integral) or lags < 0):
+        # The value may come untyped from YAML or a parameter: numpy integers are Integral, not int
+        # (mypy does not relate int to numbers.Integral, hence "unreachable").
+        if lags is not None and (isinstance(lags, bool) or not isinstance(lags, Integral) or lags < 0):  # type: ignore[unreachable]
             raise ConfigError(f"estimator.lags must be all (-1) or an integer >= 0, got {lags!r}")
         if self.window not in WINDOWS:
             raise ConfigError(f"estimator.window must be one of {list(WINDOWS)}, got {self.window!r}")
@@ -471,7 +558,8 @@ class InputConfig:
             if isinstance(value, bool) or not isinstance(value, Integral) or value < low:
                 raise ConfigError(f"inputs.{name} must be an integer >= {low}, got {value!r}")
         if self.max_stamp_jump < self.max_gap:
-            raise ConfigError(f"inputs.max_stamp_jump ({self.max_stamp_jump} s) must be at least inputs.max_gap ({self.max_gap} s)")
+            raise ConfigError(f"inputs.max_stamp_jump ({self.max_stamp_jump} s) must be at least "
+                              f"inputs.max_gap ({self.max_gap} s)")
         if not isinstance(self.frame_id, str):
             raise ConfigError(f"inputs.frame_id must be a string, got {self.frame_id!r}")
 
@@ -542,11 +630,13 @@ class PipelineConfig:
             for surface in SURFACES:
                 if surface in m.regressors and not self.surfaces.names(surface):
                     raise ConfigError(
-                        f"model {m.output} uses {surface} but no control surface is mapped to it (surfaces.* parameters)"
+                        f"model {m.output} uses {surface} but no control surface is mapped to it "
+                        "(surfaces.* parameters)"
                     )
         if self.inputs.max_gap * self.rate < 1.0:
             raise ConfigError(
-                f"inputs.max_gap ({self.inputs.max_gap} s) is shorter than one estimator sample (1/rate = {1 / self.rate:g} s)"
+                f"inputs.max_gap ({self.inputs.max_gap} s) is shorter than one estimator sample "
+                f"(1/rate = {1 / self.rate:g} s)"
             )
 
     @property
@@ -592,6 +682,8 @@ def pipeline_config(params: dict[str, Any] | None = None) -> PipelineConfig:
         raise ConfigError(f"parameter 'models.enabled': unknown model(s) {bad}; known: {list(OUTPUTS)}")
     models = tuple(ModelConfig(out, tuple(v[f"models.{out}"])) for out in enabled)
     lags = v["estimator.lags"]
+    # Lists from YAML or ROS parameters become the tuples SurfaceMixing holds.
+    surfaces: dict[str, Any] = {k: tuple(x) if isinstance(x, list) else x for k, x in _section(v, "surfaces").items()}
     return PipelineConfig(
         aircraft=load_aircraft(v["aircraft"]),
         models=models,
@@ -606,7 +698,7 @@ def pipeline_config(params: dict[str, Any] | None = None) -> PipelineConfig:
         ),
         differentiator=DifferentiatorConfig(**_section(v, "differentiator")),
         inputs=InputConfig(**_section(v, "inputs")),
-        surfaces=SurfaceMixing(**{k: tuple(x) if isinstance(x, list) else x for k, x in _section(v, "surfaces").items()}),
+        surfaces=SurfaceMixing(**surfaces),
         limits=PlausibilityLimits(**_section(v, "limits")),
         convergence=ConvergenceConfig(**_section(v, "convergence")),  # rate_hz: the pipeline uses rate
         outputs=OutputConfig(**_section(v, "outputs")),

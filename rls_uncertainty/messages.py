@@ -10,6 +10,10 @@ reject a message in another frame identically.
 from __future__ import annotations
 
 import importlib
+from typing import TYPE_CHECKING, Protocol
+
+if TYPE_CHECKING:  # annotations only: no import cycle with the pipeline
+    from .pipeline import Pipeline, SampleOutput
 
 __all__ = [
     "NODE_NAME",
@@ -39,6 +43,28 @@ INPUTS = tuple(MESSAGE_TYPES)
 ARRAY_OUTPUTS = ("estimates", "standard_errors", "standard_errors_conventional")
 
 
+class _Time(Protocol):
+    @property
+    def sec(self) -> int: ...
+    @property
+    def nanosec(self) -> int: ...
+
+
+class _Header(Protocol):
+    @property
+    def stamp(self) -> _Time: ...
+    @property
+    def frame_id(self) -> str: ...
+
+
+class Stamped(Protocol):
+    """What is read of every input message here: ``header.stamp.sec/nanosec`` and
+    ``header.frame_id`` (rclpy's generated classes, :mod:`.cdr`'s light objects)."""
+
+    @property
+    def header(self) -> _Header: ...
+
+
 def message_class(msgtype: str) -> type:
     """The generated ROS message class of a type name such as ``sensor_msgs/msg/Imu`` (imported
     on demand: this module itself imports no ROS package)."""
@@ -46,7 +72,7 @@ def message_class(msgtype: str) -> type:
     return getattr(importlib.import_module(f"{pkg}.msg"), name)
 
 
-def stamp_ns(msg) -> int:
+def stamp_ns(msg: Stamped) -> int:
     """``header.stamp`` in integer nanoseconds."""
     s = msg.header.stamp
     return int(s.sec) * 1_000_000_000 + int(s.nanosec)
@@ -104,7 +130,7 @@ _FEED = {
 }
 
 
-def feed(pipeline, kind: str, msg) -> list:
+def feed(pipeline: Pipeline, kind: str, msg: Stamped) -> list[SampleOutput]:
     """Hand one message of input ``kind`` to ``pipeline``; returns the samples it completed.
     A message whose ``header.frame_id`` is not the pipeline's ``frame_id`` (when that is set)
     is counted as ``frame_mismatch`` instead (:meth:`.pipeline.Pipeline.reject_frame`)."""

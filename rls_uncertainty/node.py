@@ -24,26 +24,29 @@ import gc
 import os
 import sys
 import time
+from collections.abc import Callable
+from typing import Any
 
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult
-from rclpy.clock import Clock, ClockChange, ClockType, JumpThreshold
+from rclpy.clock import Clock, ClockChange, ClockType, JumpThreshold, TimeJump
 from rclpy.duration import Duration
 from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallbacks
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
+from rclpy.parameter import Parameter
 from rclpy.qos import QoSHistoryPolicy, QoSProfile, QoSReliabilityPolicy, qos_profile_sensor_data
 from std_msgs.msg import Float64MultiArray, Header
 from std_srvs.srv import SetBool, Trigger
 
 from .cdr import decode
-from .config import PARAMETERS, ConfigError, node_config, pipeline_config
+from .config import PARAMETERS, ConfigError, ParamSpec, node_config, pipeline_config
 from .diagnostics import DiagnosticsPolicy, Snapshot, malformed_reason, malformed_warning
+from .estimator.state_file import set_aside
 from .messages import INPUTS, MESSAGE_TYPES, NODE_NAME, feed, message_class
 from .outputs import SAMPLE_STAMP, sample_messages
-from .pipeline import MODEL_OUTPUTS, Pipeline, StateFileError
-from .estimator.state_file import set_aside
+from .pipeline import MODEL_OUTPUTS, Pipeline, SampleOutput, StateFileError
 
 __all__ = ["EstimatorNode", "main", "NODE_NAME"]
 
@@ -60,13 +63,15 @@ _READ_ONLY_PREFIXES = ("topics.", "qos.")
 _READ_ONLY_NAMES = ("state_file",)
 
 
-def _descriptor(spec) -> ParameterDescriptor:
+def _descriptor(spec: ParamSpec) -> ParameterDescriptor:
     d = ParameterDescriptor(description=spec.description)
     if spec.choices:
         d.additional_constraints = "one of: " + ", ".join(spec.choices)
-    if spec.low is not None:
+    if spec.low is not None and spec.high is not None:  # a range has both bounds
         if isinstance(spec.default, float):
-            d.floating_point_range = [FloatingPointRange(from_value=float(spec.low), to_value=float(spec.high), step=0.0)]
+            d.floating_point_range = [
+                FloatingPointRange(from_value=float(spec.low), to_value=float(spec.high), step=0.0)
+            ]
         else:
             d.integer_range = [IntegerRange(from_value=int(spec.low), to_value=int(spec.high), step=1)]
     d.read_only = spec.name.startswith(_READ_ONLY_PREFIXES) or spec.name in _READ_ONLY_NAMES
@@ -84,7 +89,7 @@ def _input_qos(reliable: bool, depth: int) -> QoSProfile:
 class EstimatorNode(Node):
     """Recursive estimation of stability and control derivatives with honest uncertainty."""
 
-    def __init__(self, **kwargs) -> None:
+    def __init__(self, **kwargs: Any) -> None:
         super().__init__(NODE_NAME, **kwargs)
         for spec in PARAMETERS:
             self.declare_parameter(spec.name, spec.default, _descriptor(spec))
@@ -109,8 +114,8 @@ class EstimatorNode(Node):
         self._diag_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10, event_callbacks=_NO_EVENTS)
         in_qos = _input_qos(self.node_cfg.reliable, self.node_cfg.depth)
         self._subs = {
-            kind: self.create_subscription(_TYPES[kind], self.node_cfg.topics[kind], self._callback(kind), in_qos, raw=True,
-                                           event_callbacks=_NO_SUB_EVENTS)
+            kind: self.create_subscription(_TYPES[kind], self.node_cfg.topics[kind], self._callback(kind), in_qos,
+                                           raw=True, event_callbacks=_NO_SUB_EVENTS)
             for kind in INPUTS
         }
         self.create_service(Trigger, "~/reset", self._on_reset)
@@ -135,13 +140,13 @@ class EstimatorNode(Node):
         )
 
     # ------------------------------------------------------------------ parameters
-    def _parameter_values(self, overrides=None) -> dict:
+    def _parameter_values(self, overrides: list[Parameter] | None = None) -> dict[str, Any]:
         values = {spec.name: self.get_parameter(spec.name).value for spec in PARAMETERS}
         for p in overrides or []:
             values[p.name] = p.value
         return values
 
-    def _validate_parameters(self, params) -> SetParametersResult:
+    def _validate_parameters(self, params: list[Parameter]) -> SetParametersResult:
         """Refuse any change that makes an invalid configuration, saying why."""
         names = {p.name for p in params}
         if not names & {s.name for s in PARAMETERS}:
@@ -153,7 +158,7 @@ class EstimatorNode(Node):
             return SetParametersResult(successful=False, reason=str(exc))
         return SetParametersResult(successful=True)
 
-    def _apply_parameters(self, params) -> None:
+    def _apply_parameters(self, params: list[Parameter]) -> None:
         values = self._parameter_values()
         new = pipeline_config(values)
         self.node_cfg = node_config(values)
@@ -183,7 +188,7 @@ class EstimatorNode(Node):
                 }
 
     # ------------------------------------------------------------------ data path
-    def _callback(self, kind: str):
+    def _callback(self, kind: str) -> Callable[[bytes], None]:
         """Inputs arrive serialized (``raw=True``) and are decoded by :mod:`.cdr` (either byte
         order) into light objects with the message's field names: building rclpy's Python
         messages (numpy covariance arrays and all) cost more than the pipeline itself."""
@@ -215,7 +220,7 @@ class EstimatorNode(Node):
             self._malformed_logged.add(kind)
             self.get_logger().warning(malformed_warning(self._subs[kind].topic_name, exc))
 
-    def _publish(self, out) -> None:
+    def _publish(self, out: SampleOutput) -> None:
         """``~/sample_stamp``, then each ready model's arrays
         (:meth:`.pipeline.Pipeline.published_arrays`). The messages are serialized by
         :mod:`.cdr` (byte-identical to rosbags' serialization and read back by rclpy, checked
@@ -230,14 +235,14 @@ class EstimatorNode(Node):
                 pubs[model][suffix].publish(raw)
 
     # ------------------------------------------------------------------ services, time
-    def _on_reset(self, request, response):
+    def _on_reset(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
         self.pipeline.reset("service")  # the estimator and every input state: older stamps are accepted again
         response.success = True
         response.message = "estimator and inputs reset: estimates restart from the next messages, whatever their stamps"
         self.get_logger().info(response.message)
         return response
 
-    def _on_enable(self, request, response):
+    def _on_enable(self, request: SetBool.Request, response: SetBool.Response) -> SetBool.Response:
         enabled = bool(request.data)
         self.pipeline.enabled = enabled
         if not enabled:
@@ -247,7 +252,7 @@ class EstimatorNode(Node):
         self.get_logger().info(response.message)
         return response
 
-    def _on_time_jump(self, jump) -> None:
+    def _on_time_jump(self, jump: TimeJump) -> None:
         """A backwards jump (a bag replay restarted, /clock reset): the streams whose stamps
         step back near the new time start a new timeline without confirmation, and the data
         path and estimator restart once they do (``resets.time_jumped_backwards``), after the
@@ -258,7 +263,9 @@ class EstimatorNode(Node):
         if delta < 0:
             now = self.get_clock().now().nanoseconds
             if self.pipeline.time_jumped(now, now - delta):
-                self.get_logger().warning(f"time jumped {delta * 1e-9:+.3f} s: estimator and inputs restart when the stamps follow")
+                self.get_logger().warning(
+                    f"time jumped {delta * 1e-9:+.3f} s: estimator and inputs restart when the stamps follow"
+                )
             else:
                 self.get_logger().info(f"time jumped {delta * 1e-9:+.3f} s: the inputs are already near the new time")
 
@@ -337,7 +344,7 @@ class EstimatorNode(Node):
         self._diag_pub.publish(arr)
 
 
-def main(args=None) -> int:
+def main(args: list[str] | None = None) -> int:
     """Console script ``estimator_node`` (``ros2 run rls_uncertainty estimator_node``).
 
     DDS discovery follows the environment (``ROS_AUTOMATIC_DISCOVERY_RANGE``, ROS's default

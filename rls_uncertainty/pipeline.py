@@ -37,14 +37,14 @@ from __future__ import annotations
 
 import math
 from collections import Counter, deque
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import NamedTuple
 
 import numpy as np
 
-from .aero import RATES, aircraft_sample, coefficients, flight_state, regressors
+from .aero import RATES, FloatArray, aircraft_sample, coefficients, flight_state, regressors
 from .config import PipelineConfig
 from .convergence import ConvergenceMonitor
 from .differentiation import FixedLagDifferentiator
@@ -103,7 +103,7 @@ class SampleOutput(NamedTuple):
     """
 
     stamp_ns: int
-    index: int
+    index: int  # type: ignore[assignment]  # shadows tuple.index; the field name is the API
     theta: np.ndarray
     se: np.ndarray
     se_conventional: np.ndarray
@@ -229,7 +229,8 @@ class Pipeline:
         n_max = self.bank.n_max
         rows = [m.regressors for m in config.models]
         self._x_names = [name for names in rows for name in names]
-        self._x_index = np.array([j * n_max + i for j, names in enumerate(rows) for i in range(len(names))], dtype=np.intp)
+        self._x_index = np.array([j * n_max + i for j, names in enumerate(rows) for i in range(len(names))],
+                                 dtype=np.intp)
         self._real = np.arange(n_max) < np.array(self.sizes)[:, None]  # (M, n_max): not padding
 
     @staticmethod
@@ -268,7 +269,8 @@ class Pipeline:
     # Each message is judged on its own first (:class:`.aero.PlausibilityLimits`): a non-finite
     # value is counted by the sampler (``non_finite``), an implausible one is rejected as
     # ``implausible_<field>`` through Sampler.reject_invalid, which knows its stamp.
-    def add_imu(self, stamp_ns: int, angular_velocity, linear_acceleration) -> list[SampleOutput]:
+    def add_imu(self, stamp_ns: int, angular_velocity: Sequence[float],
+                linear_acceleration: Sequence[float]) -> list[SampleOutput]:
         """``sensor_msgs/Imu`` in the REP-103 body frame: rad/s and specific force m/s^2."""
         wx, wy, wz = angular_velocity
         fx, fy, fz = linear_acceleration
@@ -280,7 +282,7 @@ class Pipeline:
             return self._advance()
         return []
 
-    def add_airspeed(self, stamp_ns: int, velocity) -> list[SampleOutput]:
+    def add_airspeed(self, stamp_ns: int, velocity: Sequence[float]) -> list[SampleOutput]:
         """True-airspeed vector in the REP-103 body frame, m/s."""
         vx, vy, vz = velocity
         reason = self.limits.airspeed_rejection(velocity)
@@ -306,21 +308,22 @@ class Pipeline:
             return self._advance()
         return []
 
-    def add_surfaces(self, stamp_ns: int, names, positions) -> list[SampleOutput]:
+    def add_surfaces(self, stamp_ns: int, names: Sequence[str], positions: Sequence[float]) -> list[SampleOutput]:
         """``sensor_msgs/JointState`` names and positions (rad), mixed by Eq. 23."""
         layout = self._mixer.layout(names)
         if len(positions) != len(names):
             layout = "mismatched_arrays"
         if type(layout) is str:  # unusable at its stamp, like any invalid message: a hole
             return self._invalid(self._surfaces, stamp_ns, (), layout)
+        # A JointLayout from here (mypy does not narrow on `type(x) is str`'s else branch).
         unknown = self.bookkeeping.unknown_joints
-        for n in layout.unknown:
+        for n in layout.unknown:  # type: ignore[union-attr]
             count_bounded(unknown, n, OTHER_JOINTS)
-        used = [positions[i] for i in layout.used]
+        used = [positions[i] for i in layout.used]  # type: ignore[union-attr]
         reason = self.limits.surface_rejection(used)
         if reason is not None:
             return self._invalid(self._surfaces, stamp_ns, tuple(used), reason)
-        de, da, dr = layout.deflections(positions)
+        de, da, dr = layout.deflections(positions)  # type: ignore[union-attr]
         if self.sampler.add(self._surfaces, int(stamp_ns), (de, da, dr)):
             return self._advance()
         return []
@@ -374,18 +377,19 @@ class Pipeline:
         out: list[SampleOutput] = []
         book = self.bookkeeping
         for item in self.sampler.due():
+            # `kind` tells the three item types apart; mypy does not narrow `item` through it.
             kind = type(item)
             if kind is Sample:
                 book.samples_formed += 1
-                result = self._process(item.stamp_ns, self._sample_vector(item.values))
+                result = self._process(item.stamp_ns, self._sample_vector(item.values))  # type: ignore[union-attr]
                 if result is not None:
                     out.append(result)
             elif kind is Skipped:  # grid points not formed: the differentiator restarts after them
-                book.samples_formed += item.count
-                book.samples_rejected[item.reason] += item.count
+                book.samples_formed += item.count  # type: ignore[operator]
+                book.samples_rejected[item.reason] += item.count  # type: ignore[union-attr, operator]
                 self._flush("discontinuity")
             else:  # Restart: the stamps moved to a new timeline
-                self._restart(item.reason)
+                self._restart(item.reason)  # type: ignore[union-attr]
         return out
 
     def _restart(self, reason: str) -> None:
@@ -431,7 +435,7 @@ class Pipeline:
         t, sample = self._pending.popleft()  # the sample `lag` samples back, aligned
         return self._estimate(t, sample, rate_dot)
 
-    def _estimate(self, t: int, sample: list, rate_dot) -> SampleOutput | None:
+    def _estimate(self, t: int, sample: list[float], rate_dot: FloatArray) -> SampleOutput | None:
         book = self.bookkeeping
         state = flight_state(sample, rate_dot, self.config.inputs.air_density, self.limits)
         if type(state) is str:
@@ -441,8 +445,9 @@ class Pipeline:
             book.samples_rejected["estimation_disabled"] += 1
             return None
         ac = self.config.aircraft
-        coef = coefficients(state, ac)
-        reg = regressors(state, ac)
+        # A FlightState from here (mypy does not narrow on `type(x) is str`'s else branch).
+        coef = coefficients(state, ac)  # type: ignore[arg-type]
+        reg = regressors(state, ac)  # type: ignore[arg-type]
         X, z = self._X, self._z
         X.flat[self._x_index] = [reg[name] for name in self._x_names]
         z[:] = [coef[name] for name in self._outputs]
@@ -501,14 +506,14 @@ class Pipeline:
                 cov[k, j, :s, :s] = 0.5 * (c + c.T)
         return cov
 
-    def published(self, out: SampleOutput):
+    def published(self, out: SampleOutput) -> Iterator[tuple[str, str, np.ndarray, np.ndarray, np.ndarray]]:
         """What the node publishes (and the replay writes) for a sample, per ready model:
         ``(output, label, estimates, corrected SEs, conventional SEs)``. Models still
         initializing, and models whose outputs are not all finite (withheld when the output
         was made, counted in ``outputs_withheld``), yield nothing; the rows are checked again
         here, so no NaN or infinity ever leaves the pipeline. :meth:`published_arrays` gives
         every array, the convergence flags and covariances too."""
-        for j, (name, label, n) in enumerate(zip(self._outputs, self.labels, self.sizes)):
+        for j, (name, label, n) in enumerate(zip(self._outputs, self.labels, self.sizes, strict=True)):
             if out.ready[j]:
                 rows = out.theta[j, :n], out.se[j, :n], out.se_conventional[j, :n]
                 if all(map(math.isfinite, rows[0].tolist() + rows[1].tolist() + rows[2].tolist())):

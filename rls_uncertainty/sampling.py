@@ -82,9 +82,10 @@ from __future__ import annotations
 
 from bisect import bisect_left, bisect_right
 from collections import Counter
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from operator import attrgetter
-from typing import Iterable, NamedTuple
+from typing import Any, NamedTuple
 
 __all__ = ["StreamCounts", "Stream", "Sample", "Skipped", "Restart", "Sampler", "CURRENT", "AHEAD", "BEHIND"]
 
@@ -93,6 +94,9 @@ CURRENT, AHEAD, BEHIND = 0, 1, 2
 MAX_PENDING = 4  # timelines opened after the current one and not yet reached (bounds memory)
 _RING = 9  # stamp intervals in the median reference interval
 _NEVER = -(1 << 62)  # "no stamp yet" for the timeline's newest stamp (keeps the hot path int-only)
+
+# One message's values (the caller's tuple of floats); ``None`` where a message is a hole.
+Values = tuple[float, ...]
 
 
 @dataclass(slots=True)
@@ -104,7 +108,7 @@ class StreamCounts:
     reference interval (lower median of the recent stamp intervals)."""
 
     received: int = 0
-    rejected: Counter = field(default_factory=Counter)
+    rejected: Counter[str] = field(default_factory=Counter)
     expired: int = 0
     missing: int = 0
     newest_ns: int | None = None
@@ -114,7 +118,7 @@ class StreamCounts:
     def accepted(self) -> int:
         return self.received - sum(self.rejected.values())
 
-    def report(self) -> dict:
+    def report(self) -> dict[str, Any]:
         """The counts as plain values (diagnostics, the replay's summary)."""
         return {
             "received": self.received,
@@ -139,14 +143,14 @@ class Stream:
     def __init__(self, name: str, counts: StreamCounts, hold_ns: int) -> None:
         self.name = name
         self.stamps: list[int] = []
-        self.values: list[tuple] = []
+        self.values: list[Values] = []
         self.last: int | None = None
         self.counts = counts
         self.broken: list[int] = []
         self.epoch = 0
         self.slow = True  # the message path needs more than the in-order fast path
-        self.held: list[tuple[int, tuple]] = []
-        self.segs: dict[int, tuple[list, list, list]] = {}
+        self.held: list[tuple[int, Values | None]] = []
+        self.segs: dict[int, tuple[list[int], list[Values], list[int]]] = {}
         self.left_at = 0  # behind: its newest stamp when the data left its timeline
         self.rewound = False
         known = int(counts.interval_ns)
@@ -161,14 +165,14 @@ class Sample(NamedTuple):
     :attr:`Sampler.required`)."""
 
     stamp_ns: int
-    values: list
+    values: list[Sequence[float]]
 
 
 class Skipped(NamedTuple):
     """``count`` consecutive grid points from ``stamp_ns`` that cannot be formed, and why."""
 
     stamp_ns: int
-    count: int
+    count: int  # type: ignore[assignment]  # shadows tuple.count; the field name is the API
     reason: str
 
 
@@ -185,7 +189,7 @@ class Restart(NamedTuple):
 _NEWEST = attrgetter("last")
 
 
-def _drop_front(stamps: list, values: list, broken: list, cut: int) -> None:
+def _drop_front(stamps: list[int], values: list[Values], broken: list[int], cut: int) -> None:
     del stamps[:cut]
     del values[:cut]
     if broken:
@@ -243,7 +247,8 @@ class Sampler:
         self.lo: int | None = None
         self.hi = _NEVER
         self.epoch = 0  # the current timeline
-        self.pending: dict[int, list] = {}  # later timelines by epoch: [lo, hi, restart reason]
+        # Later timelines by epoch: [lo (int), hi (int), restart reason (str)], updated in place.
+        self.pending: dict[int, list[Any]] = {}
         self.rewind_ns: int | None = None  # the clock time a /clock jump went back to
 
     @property
@@ -280,7 +285,7 @@ class Sampler:
                 return False
         return self._slow(stream, stamp, None, reason)
 
-    def add(self, stream: Stream, stamp: int, values: tuple, finite: bool = True) -> bool:
+    def add(self, stream: Stream, stamp: int, values: Values, finite: bool = True) -> bool:
         """Accept a message (``finite``: the caller found every value finite; if not, it is a
         ``non_finite`` hole, see :meth:`reject_invalid`) or count why not. Returns whether
         samples may be due (:meth:`due`): false while the required stream the grid waits for
@@ -294,7 +299,7 @@ class Sampler:
                 return False
         if stream.slow or not finite:
             return self._slow(stream, stamp, values if finite else None, "non_finite")
-        dt = stamp - counts.newest_ns
+        dt = stamp - counts.newest_ns  # type: ignore[operator]  # not slow: newest_ns is set (_update_slow)
         if dt <= 0:
             if dt >= self._back:
                 counts.rejected["duplicate" if dt == 0 else "out_of_order"] += 1
@@ -318,7 +323,8 @@ class Sampler:
         if stamp - stamps[0] > self.buffer_ns or len(stamps) > self.max_buffered:
             self._expire(stream, stamps, stream.values, stream.broken, stamp)
         frontier = self._frontier
-        return frontier is None or frontier.last >= self.next_ns
+        # The frontier is a needed stream that has messages, and next_ns is set once it is.
+        return frontier is None or frontier.last >= self.next_ns  # type: ignore[operator]
 
     def _interval(self, stream: Stream, dt: int) -> None:
         """An interval outside the reference band: recompute the reference (lower median of
@@ -336,7 +342,7 @@ class Sampler:
         stream.band_hi = ref + ref // 4
         stream.hold_ns = min(max(self.max_gap_ns, 3 * ref), self.max_jump_ns)
 
-    def _expire(self, stream: Stream, stamps: list, values: list, broken: list, newest: int) -> None:
+    def _expire(self, stream: Stream, stamps: list[int], values: list[Values], broken: list[int], newest: int) -> None:
         """Drop messages more than ``buffer_ns`` older than the newest (another stream holds the
         grid back), keeping the one just before the cut (it may still bracket a later sample),
         and beyond ``max_buffered`` (then an eighth more, so a flood costs O(1) per message).
@@ -364,6 +370,8 @@ class Sampler:
         J = self.max_jump_ns
         if epoch == self.epoch:
             return self.lo is None or self.lo - J <= m <= self.hi + J
+        lo: int
+        hi: int
         lo, hi, _ = self.pending[epoch]
         return lo - J <= m <= hi + J
 
@@ -378,7 +386,7 @@ class Sampler:
     def _present(self, s: Stream) -> int:
         return self.hi if s.epoch == self.epoch else self.pending[s.epoch][1]
 
-    def _slow(self, s: Stream, m: int, values: tuple | None, reason: str) -> bool:
+    def _slow(self, s: Stream, m: int, values: Values | None, reason: str) -> bool:
         """Every message that is not the in-order next one of a stream on the current
         timeline: first messages, holes (``values`` None, counted as ``reason``), jumps,
         candidates, streams on a later or an earlier timeline."""
@@ -433,7 +441,7 @@ class Sampler:
             return self._join(s, later, [*held, (m, values)], reason)
         return self._candidate(s, m, values, reason)
 
-    def _take(self, s: Stream, m: int, values: tuple | None, reason: str, dt: int | None) -> bool:
+    def _take(self, s: Stream, m: int, values: Values | None, reason: str, dt: int | None) -> bool:
         """Accept ``m`` on the stream's timeline (the current one or a later one); a hole
         (``values`` None) is counted as ``reason`` and marks the interval after the newest
         buffered message. ``dt``: the interval from the stream's previous message, if one."""
@@ -471,7 +479,7 @@ class Sampler:
             self._expire(s, stamps, vals, broken, m)
         return True
 
-    def _candidate(self, s: Stream, m: int, values: tuple | None, reason: str) -> bool:
+    def _candidate(self, s: Stream, m: int, values: Values | None, reason: str) -> bool:
         """Hold ``m`` as a jump candidate, or continue the held ones; confirm when enough."""
         counts = s.counts
         if values is None:  # a message with bad values never starts or continues a jump
@@ -517,7 +525,7 @@ class Sampler:
         opens = "stamps_jumped_backwards" if ref is not None and first < ref else "stamps_jumped_forward"
         return self._open(s, held, "", opens)
 
-    def _open(self, s: Stream, msgs: list, reason: str, opens: str) -> bool:
+    def _open(self, s: Stream, msgs: list[tuple[int, Values | None]], reason: str, opens: str) -> bool:
         """Stream ``s`` opens a new timeline with ``msgs``; the restart that reaches it is
         counted as ``opens``. Other streams' held candidates that land near it join it."""
         if msgs[-1][1] is None:  # a hole (only ever the last) moves nothing
@@ -533,7 +541,7 @@ class Sampler:
                 self._join(o, e, o.held, "")
         return True
 
-    def _join(self, s: Stream, e: int, msgs: list, reason: str) -> bool:
+    def _join(self, s: Stream, e: int, msgs: list[tuple[int, Values | None]], reason: str) -> bool:
         """Stream ``s`` moves on to timeline ``e`` with ``msgs`` (increasing)."""
         if msgs[-1][1] is None:
             s.counts.rejected[reason] += 1
@@ -551,7 +559,7 @@ class Sampler:
             prev = m
         return True
 
-    def _behind(self, s: Stream, m: int, values: tuple | None, reason: str) -> bool:
+    def _behind(self, s: Stream, m: int, values: Values | None, reason: str) -> bool:
         """A message of a stream still on a timeline the data has left (``newest_ns`` is its
         last stamp there)."""
         counts = s.counts
@@ -616,11 +624,12 @@ class Sampler:
             out.append(Restart(self.pending[self.epoch + 1][2]))
             self._next_timeline()
 
-    def _form(self, out: list) -> None:
+    def _form(self, out: list[Sample | Skipped | Restart]) -> None:
         needed = self._needed
         P = self.period_ns
         t = self.next_ns
-        if t is not None and self._frontier is not None and self._frontier.last < t:
+        # The frontier keeps at least one message (_trim and _expire never empty a buffer).
+        if t is not None and self._frontier is not None and self._frontier.last < t:  # type: ignore[operator]
             return
         for s in needed:
             if not s.stamps:
@@ -631,14 +640,16 @@ class Sampler:
         t_start = t
         while True:
             lagging = min(needed, key=_NEWEST)  # every needed stream holds a message here
-            if lagging.last < t:
+            if lagging.last < t:  # type: ignore[operator]  # (last is set: it holds a message)
                 self._frontier = lagging
                 break
             values, reason, skip_to = self._interpolate(t)
             if values is None:
                 # Every grid point up to skip_to shares the problem: report them at once.
-                n_skip = max(1, -(-(skip_to - t) // P))
-                out.append(Skipped(t, n_skip, reason))
+                # (values None comes with a reason and skip_to, see _interpolate's return type;
+                # mypy does not narrow the unpacked tuple's other items.)
+                n_skip = max(1, -(-(skip_to - t) // P))  # type: ignore[operator]
+                out.append(Skipped(t, n_skip, reason))  # type: ignore[arg-type]
                 t += n_skip * P
             else:
                 out.append(Sample(t, values))
@@ -647,9 +658,9 @@ class Sampler:
             self._trim(t)
         self.next_ns = t
 
-    def _interpolate(self, t: int):
+    def _interpolate(self, t: int) -> tuple[list[Sequence[float]], None, None] | tuple[None, str, int]:
         """``(values, None, None)`` at ``t``, or ``(None, reason, skip_to)``."""
-        vals = []
+        vals: list[Sequence[float]] = []
         max_gap = self.max_gap_ns
         for s in self._needed:
             stamps = s.stamps
@@ -669,7 +680,7 @@ class Sampler:
             if t1 - t0 > max_gap:
                 return None, f"gap_{s.name}", t1
             w = (t - t0) / (t1 - t0)
-            vals.append([x + w * (y - x) for x, y in zip(s.values[i - 1], s.values[i])])
+            vals.append([x + w * (y - x) for x, y in zip(s.values[i - 1], s.values[i], strict=True)])
         return vals, None, None
 
     def _trim(self, t_next: int) -> None:

@@ -192,7 +192,8 @@ def reduce_short_period(
     )
     coef = coefficients(state, record.aircraft)
     values = regressors(state, record.aircraft)
-    out = {m.output: (regressor_matrix(m, values), coef[m.output]) for m in T2_MODELS}
+    # Array states give array coefficients (aero.Signal is float | FloatArray).
+    out = {m.output: (regressor_matrix(m, values), np.asarray(coef[m.output], dtype=np.float64)) for m in T2_MODELS}
     return record.t[keep], out
 
 

@@ -10,6 +10,7 @@ joints' positions in a message found once per name list (:class:`JointLayout`).
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Literal, NamedTuple, get_args
 
@@ -66,7 +67,7 @@ class SurfaceMixing:
         )
 
 
-def _mean(values, index: tuple[int, ...]) -> float:
+def _mean(values: Sequence[float], index: tuple[int, ...]) -> float:
     """Mean of ``values`` at ``index`` (0 when there is none): Eq. 23's surface averages."""
     if len(index) == 1:
         return values[index[0]]
@@ -86,7 +87,7 @@ class JointLayout(NamedTuple):
     unknown: tuple[str, ...]
     used: tuple[int, ...] = ()
 
-    def deflections(self, positions) -> tuple[float, float, float]:
+    def deflections(self, positions: Sequence[float]) -> tuple[float, float, float]:
         """``(delta_e, delta_a, delta_r)`` of Eq. 23 from the message's positions (rad)."""
         de = _mean(positions, self.elevator)
         if self.aileron_combined is not None:
@@ -110,15 +111,16 @@ class SurfaceMixer:
 
     def __init__(self, mixing: SurfaceMixing) -> None:
         self.mixing = mixing
-        self._last_names: list | None = None
+        self._last_names: list[str] | None = None
         self._last_layout: JointLayout | str | None = None
         self._layouts: dict[tuple[str, ...], JointLayout | str] = {}
 
-    def layout(self, names) -> JointLayout | str:
+    def layout(self, names: Sequence[str]) -> JointLayout | str:
         """The layout of a message's joint ``names`` (a sequence of str), or the reason the
         message cannot be used."""
         if names == self._last_names:  # the usual case
-            return self._last_layout
+            # Set together with _last_names, so not None once a name list matched it.
+            return self._last_layout  # type: ignore[return-value]
         key = tuple(names)
         layout = self._layouts.get(key)
         if layout is None:

@@ -28,7 +28,7 @@ class NodeProcess:
 
     def __init__(self, tmp_path: Path, *ros_args: str, name: str = "node") -> None:
         self.log = tmp_path / f"{name}.log"
-        self._fh = open(self.log, "w")
+        self._fh = open(self.log, "w")  # noqa: SIM115 - the child process writes to it; closed in stop()
         self.proc = subprocess.Popen(
             [sys.executable, "-m", "rls_uncertainty.node", "--ros-args", *ros_args],
             stdout=self._fh, stderr=subprocess.STDOUT, cwd=ROOT, env=dict(os.environ),

@@ -37,10 +37,10 @@ def test_eq1_against_rigid_body_moment_equations():
     (aircraft axes, Ixz product) and compare with the coefficients of Eq. 1d-f."""
     s = state()
     c = coefficients(s, T2)
-    I = np.array([[T2.Ixx, 0, -T2.Ixz], [0, T2.Iyy, 0], [-T2.Ixz, 0, T2.Izz]])
+    inertia = np.array([[T2.Ixx, 0, -T2.Ixz], [0, T2.Iyy, 0], [-T2.Ixz, 0, T2.Izz]])
     w = np.array([s.p, s.q, s.r])
     wd = np.array([s.p_dot, s.q_dot, s.r_dot])
-    M = I @ wd + np.cross(w, I @ w)  # L, M, N
+    M = inertia @ wd + np.cross(w, inertia @ w)  # L, M, N
     qS = s.qbar * T2.S
     assert c["Cl"] == pytest.approx(M[0] / (qS * T2.b), rel=1e-12)
     assert c["Cm"] == pytest.approx(M[1] / (qS * T2.cbar), rel=1e-12)
@@ -88,7 +88,7 @@ def test_a_rep103_sample_becomes_aircraft_axes_and_a_flight_state():
     sample = aircraft_sample(imu, velocity, 950.0, (0.01, -0.02, 0.03), 120.0)
     expected = dict(ax=0.3, ay=-0.2, az=-9.8, p=0.01, q=0.1, r=-0.02, u=40.0, v=2.0, w=3.0, qbar=950.0,
                     delta_e=0.01, delta_a=-0.02, delta_r=0.03, thrust=120.0)
-    assert dict(zip(SAMPLE_FIELDS, sample)) == expected
+    assert dict(zip(SAMPLE_FIELDS, sample, strict=True)) == expected
     s = flight_state(sample, np.array([0.5, -0.6, 0.7]), air_density=1.225)
     V = math.sqrt(40.0**2 + 2.0**2 + 3.0**2)
     assert s.V == pytest.approx(V, rel=1e-15)

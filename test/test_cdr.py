@@ -88,7 +88,9 @@ def rand_vector3(rng: random.Random):
 def rand_message(rng: random.Random, msgtype: str):
     h = rand_header(rng)
     if msgtype == "sensor_msgs/msg/Imu":
-        q = T["geometry_msgs/msg/Quaternion"](x=rand_float(rng), y=rand_float(rng), z=rand_float(rng), w=rand_float(rng))
+        q = T["geometry_msgs/msg/Quaternion"](
+            x=rand_float(rng), y=rand_float(rng), z=rand_float(rng), w=rand_float(rng)
+        )
         return T[msgtype](header=h, orientation=q, orientation_covariance=rand_floats(rng, 9),
                           angular_velocity=rand_vector3(rng), angular_velocity_covariance=rand_floats(rng, 9),
                           linear_acceleration=rand_vector3(rng), linear_acceleration_covariance=rand_floats(rng, 9))
@@ -126,7 +128,7 @@ def assert_same(ours, ref, path: str = "msg") -> None:
         assert isinstance(ours, float) and bits(ours) == bits(float(ref)), f"{path}: {ours!r} != {ref!r}"
     else:  # a sequence: numpy array of doubles or list of strings
         assert len(ours) == len(ref), f"{path}: length {len(ours)} != {len(ref)}"
-        for i, (a, b) in enumerate(zip(ours, ref)):
+        for i, (a, b) in enumerate(zip(ours, ref, strict=True)):
             assert_same(a, b.item() if isinstance(b, np.generic) else b, f"{path}[{i}]")
 
 
@@ -313,7 +315,8 @@ def test_the_bundled_bag_decodes_like_rosbags():
 # ------------------------------------------------------------------ encoding
 def _multiarray(label: str, data, second: str | None):
     Dim = T["std_msgs/msg/MultiArrayDimension"]
-    dims = [Dim(label=label, size=len(data), stride=len(data))] + ([Dim(label=second, size=1, stride=1)] if second is not None else [])
+    dims = [Dim(label=label, size=len(data), stride=len(data))]
+    dims += [Dim(label=second, size=1, stride=1)] if second is not None else []
     return T["std_msgs/msg/Float64MultiArray"](layout=T["std_msgs/msg/MultiArrayLayout"](dim=dims, data_offset=0),
                                                data=np.array(data, dtype=np.float64))
 

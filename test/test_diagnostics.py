@@ -37,7 +37,7 @@ def counters(streams=None, formed=0, used=0, pending=0, samples_rejected=None, r
 def snapshot(c=None, *, models=(), required=REQUIRED, max_gap=0.25, now=NOW, elapsed=1.0, publishers=None,
              reliable=False, enabled=True, state="no state file", latencies=(), cpu=()):
     return Snapshot(counters=c or counters(), models=list(models), required=required, max_gap=max_gap, now_ns=now,
-                    elapsed_s=elapsed, publishers={k: 1 for k in INPUTS} | dict(publishers or {}),
+                    elapsed_s=elapsed, publishers=dict.fromkeys(INPUTS, 1) | dict(publishers or {}),
                     topics={k: f"/{k}" for k in INPUTS}, reliable=reliable, enabled=enabled, state_file=state,
                     latencies_s=list(latencies), cpu_times_s=list(cpu))
 

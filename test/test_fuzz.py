@@ -141,7 +141,7 @@ def corrupted(base, ops):
             dropped.update(range(i, i + op[2]))
         elif what == "insert":
             _w, _i, kind, which, value, stamp_op = op
-            source = next(m for k, m in zip(kinds[i:] + kinds, msgs[i:] + msgs) if k == kind)
+            source = next(m for k, m in zip(kinds[i:] + kinds, msgs[i:] + msgs, strict=True) if k == kind)
             new = copy.deepcopy(source)
             _set_value(kind, new, which, value)
             _set_stamp(new, stamp_op, _stamp(msgs[i]))
@@ -164,7 +164,7 @@ def corrupted(base, ops):
             else:  # frame
                 msg.header.frame_id = op[2]
     out = []
-    for i, (kind, msg) in enumerate(zip(kinds, msgs)):
+    for i, (kind, msg) in enumerate(zip(kinds, msgs, strict=True)):
         out += inserted.get(i, [])
         if i not in dropped:
             out.append((kind, msg))
@@ -206,7 +206,7 @@ def value_invalid(kind, msg):
     names, pos = list(msg.name), list(msg.position)
     if len(names) != len(pos) or len(set(names)) != len(names) or not MIXED <= set(names):
         return True
-    used = [p for n, p in zip(names, pos) if n in MIXED]
+    used = [p for n, p in zip(names, pos, strict=True) if n in MIXED]
     return not all(math.isfinite(p) and abs(p) <= L.surface for p in used)
 
 

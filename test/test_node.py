@@ -25,11 +25,11 @@ from std_srvs.srv import SetBool, Trigger
 
 from rls_uncertainty.bags import read_inputs
 from rls_uncertainty.config import load_parameters_file, pipeline_config
+from rls_uncertainty.estimator.state_file import load_state
 from rls_uncertainty.messages import MESSAGE_TYPES, feed, parse_stamp_label
 from rls_uncertainty.messages import NODE_NAME as NODE
 from rls_uncertainty.pipeline import Pipeline
 from rls_uncertainty.replay import run_pipeline
-from rls_uncertainty.estimator.state_file import load_state
 
 from ros_harness import ROOT, NodeProcess, RosTester, to_rclpy
 
@@ -118,12 +118,16 @@ def test_live_node_reproduces_the_offline_replay(tmp_path, tester, bag):
         n_out = len(offline.outputs)
         tester.publish_all([(k, to_rclpy(k, m)) for k, _s, m in bag])
         stamps = tester.outputs[f"/{NODE}/sample_stamp"]
-        assert tester.spin_until(lambda: len(stamps) >= n_out and len(_arrays(tester, "Cm", "standard_errors_conventional"))
-                                 >= sum(o.ready[1] for o in offline.outputs), 30), node.text()
+        assert tester.spin_until(
+            lambda: len(stamps) >= n_out
+            and len(_arrays(tester, "Cm", "standard_errors_conventional")) >= sum(o.ready[1] for o in offline.outputs),
+            30,
+        ), node.text()
         assert len(stamps) == n_out
         last = offline.outputs[-1]
         assert stamps[-1].stamp.sec * 10**9 + stamps[-1].stamp.nanosec == last.stamp_ns
-        for j, (model, label) in enumerate((("CZ", "CZ_0,CZ_alpha,CZ_delta_e"), ("Cm", "Cm_0,Cm_alpha,Cm_q,Cm_delta_e"))):
+        models = (("CZ", "CZ_0,CZ_alpha,CZ_delta_e"), ("Cm", "Cm_0,Cm_alpha,Cm_q,Cm_delta_e"))
+        for j, (model, label) in enumerate(models):
             n = len(label.split(","))
             for suffix, want in (("estimates", last.theta), ("standard_errors", last.se),
                                  ("standard_errors_conventional", last.se_conventional)):
@@ -200,7 +204,7 @@ def _synthetic(t0_ns, seconds, *, gap=None, zero_air=None, bad=True):
         return msg
 
     out = []
-    for ms in range(0, int(seconds * 1000)):
+    for ms in range(int(seconds * 1000)):
         ns = t0_ns + ms * 10**6
         t = ms * 1e-3
         q, alpha, de = _excitation(t)
@@ -254,7 +258,9 @@ def test_bad_input_is_counted_in_diagnostics_and_never_published(tmp_path, teste
             feed(expected, kind, msg)
         c = expected.counters()
         tester.publish_all(seq)
-        d = tester.wait_diagnostics(lambda d: d.get(f"{NODE}: samples", {}).get("samples_formed") == str(c["samples_formed"]))
+        d = tester.wait_diagnostics(
+            lambda d: d.get(f"{NODE}: samples", {}).get("samples_formed") == str(c["samples_formed"])
+        )
         inputs, samples = d[f"{NODE}: inputs"], d[f"{NODE}: samples"]
         assert inputs["imu.rejected.non_finite"] == "2"
         assert inputs["imu.rejected.duplicate"] == "1"
@@ -289,8 +295,10 @@ def test_malformed_messages_are_counted_and_the_first_of_each_input_logged(tmp_p
     imu = T["sensor_msgs/msg/Imu"](
         header=T["std_msgs/msg/Header"](stamp=T["builtin_interfaces/msg/Time"](sec=5, nanosec=0), frame_id="base_link"),
         orientation=T["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=0.0, w=1.0),
-        orientation_covariance=np.zeros(9), angular_velocity=T["geometry_msgs/msg/Vector3"](x=0.0, y=0.1, z=0.0),
-        angular_velocity_covariance=np.zeros(9), linear_acceleration=T["geometry_msgs/msg/Vector3"](x=0.0, y=0.0, z=9.8),
+        orientation_covariance=np.zeros(9),
+        angular_velocity=T["geometry_msgs/msg/Vector3"](x=0.0, y=0.1, z=0.0),
+        angular_velocity_covariance=np.zeros(9),
+        linear_acceleration=T["geometry_msgs/msg/Vector3"](x=0.0, y=0.0, z=9.8),
         linear_acceleration_covariance=np.zeros(9))
     good = bytes(store.serialize_cdr(imu, "sensor_msgs/msg/Imu"))
     big_endian = bytes(store.serialize_cdr(imu, "sensor_msgs/msg/Imu", little_endian=False))
@@ -390,7 +398,7 @@ def test_parameters_are_refused_with_reasons_and_changes_reset(tmp_path, tester)
         (r,) = _set_parameters(tester, **{"topics.imu": "other_imu"})
         assert not r.successful and "read-only" in r.reason.lower()
         # The node only writes the state file it checked at start-up.
-        (r,) = _set_parameters(tester, **{"state_file": str(tmp_path / "elsewhere.npz")})
+        (r,) = _set_parameters(tester, state_file=str(tmp_path / "elsewhere.npz"))
         assert not r.successful and "read-only" in r.reason.lower()
         (r,) = _set_parameters(tester, **{"differentiator.lag": 12})
         assert not r.successful and "differentiator.lag" in r.reason
@@ -429,7 +437,9 @@ def test_reset_and_enable_services(tmp_path, tester):
         assert r.success and "disabled" in r.message
         n_before = len(est)
         tester.publish_all(_synthetic(10**18 + 3 * 10**9, 2.0, bad=False))
-        d = tester.wait_diagnostics(lambda d: int(d.get(f"{NODE}: samples", {}).get("samples_rejected.estimation_disabled", 0)) >= 95)
+        d = tester.wait_diagnostics(
+            lambda d: int(d.get(f"{NODE}: samples", {}).get("samples_rejected.estimation_disabled", 0)) >= 95
+        )
         assert d[f"{NODE}: samples"]["enabled"] == "False"
         tester.spin_until(lambda: False, 0.3)
         assert len(est) == n_before  # nothing is estimated while disabled
@@ -488,7 +498,8 @@ def test_state_file_saves_on_shutdown_and_resumes(tmp_path, tester, bag):
         est = _arrays(tester, "Cm", "standard_errors")
         assert tester.spin_until(lambda: len(est) >= len(outs))
         np.testing.assert_allclose(np.array(est[-1].data), outs[-1].se[1, :4], rtol=1e-9)
-        np.testing.assert_allclose(np.array(_arrays(tester, "CZ", "estimates")[-1].data), outs[-1].theta[0, :3], rtol=1e-9)
+        np.testing.assert_allclose(np.array(_arrays(tester, "CZ", "estimates")[-1].data), outs[-1].theta[0, :3],
+                                   rtol=1e-9)
     finally:
         assert node.stop() == 0
     # Another configuration ignores the file, says so, and keeps it: renamed aside, never
@@ -583,9 +594,9 @@ def test_sim_time_backwards_jump_resets(tmp_path, tester):
 
 
 def test_node_module_is_the_console_script():
-    out = subprocess.run([sys.executable, "-c", "import importlib.metadata as m; "
-                          "print([e.value for e in m.entry_points(group='console_scripts') if e.name == 'estimator_node'])"],
-                         capture_output=True, text=True)
+    code = ("import importlib.metadata as m; "
+            "print([e.value for e in m.entry_points(group='console_scripts') if e.name == 'estimator_node'])")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
     assert "rls_uncertainty.node:main" in out.stdout
 
 
@@ -607,7 +618,8 @@ def test_play_command_drives_the_live_node_to_the_replay_numbers(tmp_path, teste
         assert tester.spin_until(lambda: len(stamps) >= len(offline.outputs), 20)
         last = offline.outputs[-1]
         np.testing.assert_allclose(np.array(_arrays(tester, "Cm", "estimates")[-1].data), last.theta[1, :4], rtol=1e-9)
-        np.testing.assert_allclose(np.array(_arrays(tester, "CZ", "standard_errors")[-1].data), last.se[0, :3], rtol=1e-9)
+        np.testing.assert_allclose(np.array(_arrays(tester, "CZ", "standard_errors")[-1].data), last.se[0, :3],
+                                   rtol=1e-9)
     finally:
         assert node.stop() == 0, node.text()
 

@@ -114,8 +114,10 @@ def test_samples_equal_an_independent_interpolation_and_reduction(t2_run):
     X = np.array([r[1] for r in pipe.regression])
     z = np.array([r[2] for r in pipe.regression])
     assert np.array_equal(t_rec, grid[keep])
-    np.testing.assert_allclose(X[:, 0, :3], np.column_stack([np.ones(keep.sum()), alpha[keep], de[keep]]), rtol=1e-12, atol=1e-15)
-    np.testing.assert_allclose(X[:, 1, :4], np.column_stack([np.ones(keep.sum()), alpha[keep], q_hat[keep], de[keep]]), rtol=1e-12, atol=1e-15)
+    np.testing.assert_allclose(X[:, 0, :3], np.column_stack([np.ones(keep.sum()), alpha[keep], de[keep]]),
+                               rtol=1e-12, atol=1e-15)
+    np.testing.assert_allclose(X[:, 1, :4], np.column_stack([np.ones(keep.sum()), alpha[keep], q_hat[keep], de[keep]]),
+                               rtol=1e-12, atol=1e-15)
     np.testing.assert_allclose(z[:, 0], CZ[keep], rtol=1e-12)
     np.testing.assert_allclose(z[:, 1], Cm[keep], rtol=1e-9, atol=1e-12)
 
@@ -235,7 +237,8 @@ def test_surfaces_are_mixed_by_the_configured_eq_23_before_sampling():
     assert pipe.sampler.streams["control_surfaces"].values == [expected]
     assert expected[1] == pytest.approx(0.2)
     assert "control_surfaces" in pipe.required
-    assert "control_surfaces" not in Pipeline(pipeline_config({"models.enabled": ["CZ"], "models.CZ": ["1", "alpha"]})).required
+    no_surfaces = pipeline_config({"models.enabled": ["CZ"], "models.CZ": ["1", "alpha"]})
+    assert "control_surfaces" not in Pipeline(no_surfaces).required
 
 
 def test_bad_messages_are_counted_and_never_reach_the_outputs():
@@ -600,7 +603,7 @@ def test_messages_lost_in_transport_are_counted_from_stamp_gaps():
     pipe = pitch_pipeline()
     syn = Synthetic(pipe)
     dropped = {1200, 1205, 1210, 1500}  # IMU messages (5 ms) that never arrive
-    for ms in range(0, 3000):
+    for ms in range(3000):
         t = syn.t0 + ms * MS
         if ms % 5 == 0 and ms not in dropped:
             syn.imu(t)

@@ -34,7 +34,11 @@ def feed(smp, events):
 
 def merged(*streams):
     """Events of several ``(name, stamps, values)`` streams in stamp order (stable by stream)."""
-    events = [(int(t), rank, name, v) for rank, (name, stamps, values) in enumerate(streams) for t, v in zip(stamps, values)]
+    events = [
+        (int(t), rank, name, v)
+        for rank, (name, stamps, values) in enumerate(streams)
+        for t, v in zip(stamps, values, strict=True)
+    ]
     events.sort(key=lambda e: (e[0], e[1]))
     return [(t, name, v) for t, _rank, name, v in events]
 
