@@ -528,7 +528,7 @@ class EstimatorBank:
         gk = g**k
         return (1.0 - gk) * (1.0 + g) / ((1.0 - g) * (1.0 + gk))
 
-    def _exact_fit(self) -> np.ndarray:
+    def _exact_fit(self) -> BoolArray:
         """Models whose residual variance ``R_k(0)`` is at most 1e-12 of the mean square of
         their output ``x_j' theta_k`` (``theta' Lambda_k(0) theta / sum_j f^(2(k-j))``)."""
         f, k = self.forgetting, self.k
