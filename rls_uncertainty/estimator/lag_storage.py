@@ -75,7 +75,7 @@ class LagStorage:
     moment_xx: FloatArray
     moment_xz: FloatArray
     moment_zy: FloatArray
-    moment0: FloatArray
+    moment0: FloatArray | None  # (checked where it may be None)
     lag_products: FloatArray
     products_scratch: FloatArray
     full: LagViews
@@ -114,7 +114,7 @@ class LagStorage:
         self.lag_powers = self.forgetting ** np.arange(cap, dtype=float)  # f^i of Eq. 21
         self.products_y = self.products_y_scratch = None  # type: ignore[assignment]  # set below while waiting
         self.moment_xx = self.moment_xz = self.moment_zy = None  # type: ignore[assignment]  # as products_y
-        self.moment0 = None  # type: ignore[assignment]  # lag-0 moments weighted f (with a noise model, while waiting)
+        self.moment0 = None  # lag-0 moments weighted f (with a noise model, while waiting)
         if self.waiting and self.noise:
             self.moment0 = np.zeros((m, n1, n1))
         if self.waiting:
@@ -194,7 +194,7 @@ class LagStorage:
         self.allocate(2 * old_cap)
         self.ptr -= w
         if old["moment0"] is not None:
-            self.moment0[...] = old["moment0"]
+            self.moment0[...] = old["moment0"]  # type: ignore[index]  # allocated again (waiting, noise)
         for name in self.history:
             getattr(self, name)[:, self.ptr :] = old[name][:, old_ptr : old_ptr + w]
         self.lag_sums[:, :old_cap] = old["lag_sums"]
@@ -213,7 +213,7 @@ class LagStorage:
         if self.waiting:
             out["products_y"] = self.products_y.copy()
             if self.noise:
-                out["moment0"] = self.moment0.copy()
+                out["moment0"] = self.moment0.copy()  # type: ignore[union-attr]  # set while waiting with noise
         return out
 
     def load(self, arrays: Mapping[str, npt.ArrayLike], w: int) -> None:
@@ -225,7 +225,7 @@ class LagStorage:
         if self.waiting:
             assign_checked(self.products_y, arrays["products_y"], "products_y")
             if self.noise:
-                assign_checked(self.moment0, arrays["moment0"], "moment0")
+                assign_checked(self.moment0, arrays["moment0"], "moment0")  # type: ignore[arg-type]  # as in arrays()
         if not self.merged:
             assign_checked(self.lag_products, arrays["lag_products"], "lag_products")
 
