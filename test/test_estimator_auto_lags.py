@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from estimator_cases import ar1, rel_close, run, wide_scale_problem
+from test_estimator_cases import ar1, rel_close, run, wide_scale_problem
 from test_estimator_bank import assert_bank_equals_reference, equivalence_problem
 
 from rls_uncertainty.estimator import EstimatorBank, RecursiveEstimator, batch_estimate
