@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from rls_uncertainty.estimator import EstimatorBank  # noqa: E402
+from rls_uncertainty.estimator import EstimatorBank
 
 SIZES = (3, 4, 3, 6, 4, 4)
 RATE = 50.0

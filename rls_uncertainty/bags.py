@@ -24,7 +24,7 @@ import struct
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 import numpy.typing as npt
@@ -34,7 +34,7 @@ from .aero import rep103_to_aircraft
 from .config import package_path
 from .errors import BagError, ConfigError
 from .files import output_directory
-from .messages import INPUTS, MESSAGE_TYPES, stamp_ns
+from .messages import INPUTS, MESSAGE_TYPES, Stamped, stamp_ns
 
 if TYPE_CHECKING:  # annotations only: rosbags itself is imported where it is used
     from rosbags.highlevel import AnyReader
@@ -325,7 +325,7 @@ def input_topics(topics: dict[str, str] | None = None) -> dict[str, str]:
 
 
 def read_inputs(path: str | Path, topics: dict[str, str] | None = None, *, strict: bool = True,
-                start: float | None = None, end: float | None = None) -> tuple[list[tuple[str, int, object]], int]:
+                start: float | None = None, end: float | None = None) -> tuple[list[tuple[str, int, Stamped]], int]:
     """Standard-input messages of a replay bag in log order: a list of ``(kind, stamp_ns,
     msg)`` and the bag's start time. ``strict`` refuses a topic whose header stamps do not
     increase or differ from the log time; ``start``/``end`` (s from the bag start) cut the
@@ -351,10 +351,11 @@ def read_inputs(path: str | Path, topics: dict[str, str] | None = None, *, stric
         lo = None if start is None else t0 + int(round(start * 1e9))
         hi = None if end is None else t0 + int(round(end * 1e9))
         last: dict[str, int] = {}
-        out = []
+        out: list[tuple[str, int, Stamped]] = []
         seen = 0
-        for conn, _t, msg in _iter_messages(path, reader, conns, store, fast=True):
+        for conn, _t, raw_msg in _iter_messages(path, reader, conns, store, fast=True):
             seen += 1
+            msg = cast(Stamped, raw_msg)  # the input types (checked above) all carry a header
             stamp = stamp_ns(msg)
             if stamp < 0:
                 raise BagError(f"{path}: topic {conn.topic}: negative header stamp ({stamp} ns, before 1970)")
@@ -640,7 +641,7 @@ def convert(src: str | Path, mapping: str | Path, out: str | Path, schemas: list
         last: dict[str, int] = {}
         for conn, _t, msg in _iter_messages(src, reader, conns, store):
             try:
-                stamp = stamp_ns(msg)
+                stamp = stamp_ns(cast(Stamped, msg))  # any type: one without a header raises below
             except AttributeError as exc:
                 raise BagError(f"{src}: topic {conn.topic}: message has no header stamp") from exc
             if stamp < 0:

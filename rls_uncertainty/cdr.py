@@ -28,9 +28,9 @@ import struct
 from collections.abc import Sequence
 from dataclasses import make_dataclass
 from functools import lru_cache
+from typing import Any
 
 import numpy as np
-from typing import Any
 
 __all__ = ["decode", "encode_header", "encode_float64_multiarray", "encode_float64_multiarray_dims", "DECODABLE"]
 
@@ -239,7 +239,7 @@ def _multiarray(dims: bytes, data_offset: int, data: Sequence[float] | np.ndarra
     return _LE_HEADER + head + b"\x00" * (-len(head) % 8) + raw
 
 
-def encode_float64_multiarray(label: str, data, second: str | None = None) -> bytes:
+def encode_float64_multiarray(label: str, data: Sequence[float] | np.ndarray, second: str | None = None) -> bytes:
     """CDR of a ``std_msgs/Float64MultiArray`` with ``dim[0] = (label, n, n)`` and, when
     ``second`` is given, ``dim[1] = (second, 1, 1)``; ``data``: a sequence of floats or a
     one-dimensional numpy array."""

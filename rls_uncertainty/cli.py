@@ -212,7 +212,7 @@ def _lags(value: str) -> int | str | None:
     return n
 
 
-def _montecarlo_lags(value: str):
+def _montecarlo_lags(value: str) -> int | str:
     """montecarlo --lags: an integer >= 0 or 'auto'."""
     if value == "auto":
         return value

@@ -514,7 +514,7 @@ class EstimatorConfig:
             raise ConfigError(
                 f"estimator.lag_selection must be one of {list(LAG_SELECTIONS)}, got {self.lag_selection!r}"
             )
-        m = self.max_lags
+        m: object = self.max_lags  # (whatever the parameters held: checked here)
         if isinstance(m, bool) or not isinstance(m, Integral) or m < 1:
             raise ConfigError(f"estimator.max_lags must be an integer >= 1, got {m!r}")
         if self.lag_selection == "auto" and self.window != "truncated":

@@ -607,16 +607,14 @@ class Pipeline:
         return {
             "ready": True,
             "samples": bank.k,
-            # The residual autocorrelation lags the corrected covariance uses now (Eq. 22: at
-            # most estimator.lags). Hook for automatic lag selection: report its per-model
-            # choice here.
-            "lags": bank.n_window - 1,
+            # The largest lag of Eq. 22 the corrected covariance uses now (at most
+            # estimator.lags; chosen per model with lag_selection auto).
+            "lags": int(bank.lags_used[j]),
             "r_squared": float(r2),
             "residual_rho1": float(rho[0]) if rho.size else float("nan"),
             "lags_outside_2sigma": float(np.mean(np.abs(rho) > bound)) if rho.size else float("nan"),
             "repairs": int(bank.repairs[j]),
             "outputs_withheld": withheld,
-            "lags": int(bank.lags_used[j]),  # the largest lag of Eq. 22 (chosen with lag_selection auto)
         }
 
     def convergence(self, j: int) -> dict:

@@ -34,7 +34,7 @@ import numpy as np
 from .bags import read_inputs, typestore, write_replay
 from .config import PipelineConfig, node_config, pipeline_config
 from .files import output_directory
-from .messages import NODE_NAME, feed
+from .messages import NODE_NAME, Stamped, feed
 from .outputs import sample_messages
 from .pipeline import Pipeline, SampleOutput
 from .report import results_table, rows_from_arrays
@@ -73,7 +73,7 @@ def _progress(done: int, total: int, width: int = 40) -> None:
     sys.stderr.flush()
 
 
-def run_pipeline(messages: Sequence[tuple[str, int, object]], config: PipelineConfig, *, record: bool = True,
+def run_pipeline(messages: Sequence[tuple[str, int, Stamped]], config: PipelineConfig, *, record: bool = True,
                  progress: bool = False) -> ReplayResult:
     """Feed ``(kind, stamp, msg)`` messages through a fresh pipeline; keep every output.
     ``progress`` draws a bar on stderr when stderr is a terminal (never carriage-return

@@ -6,8 +6,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from test_estimator_cases import ar1, rel_close, run, wide_scale_problem
 from test_estimator_bank import assert_bank_equals_reference, equivalence_problem
+from test_estimator_cases import ar1, rel_close, run, wide_scale_problem
 
 from rls_uncertainty.estimator import EstimatorBank, RecursiveEstimator, batch_estimate
 from rls_uncertainty.estimator.lag_selection import flat_top_lags
@@ -31,7 +31,7 @@ def test_auto_bank_equals_the_reference(max_lags, min_lags, forgetting, residual
         refs[0].update(X[k, 0], Z[k, 0])
         refs[1].update(X[k, 1, :2], Z[k, 1])
         assert list(bank.lags_used) == [r.lags_used() for r in refs], k
-        chosen.update(int(L) for L, ready in zip(bank.lags_used, bank.ready) if ready)
+        chosen.update(int(L) for L, ready in zip(bank.lags_used, bank.ready, strict=True) if ready)
         if k % 10 == 9 or k < 15:
             assert_bank_equals_reference(bank, refs, k + 1)
     assert len(chosen) >= 2  # the choice moves
@@ -159,7 +159,7 @@ def test_parameters_reach_the_bank_and_are_validated():
     ]:
         with pytest.raises(ConfigError, match=match):
             pipeline_config(params)
-    with pytest.raises(ConfigError, match="estimator.max_lags"):
+    with pytest.raises(ConfigError, match=r"estimator\.max_lags"):
         EstimatorConfig(max_lags=2.5)
 
 

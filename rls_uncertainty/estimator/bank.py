@@ -31,15 +31,17 @@ How the hot path differs from the reference, and why (each measured in
 
 from __future__ import annotations
 
-from typing import Sequence
+from collections.abc import Mapping, Sequence
+from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 
 from ..errors import EstimatorNotReady, NonFiniteInput
 from . import covariance, state
 from .initialization import ExactInitialization
 from .lag_selection import flat_top_lags
-from .lag_storage import GROWTH_START, LagStorage
+from .lag_storage import GROWTH_START, FloatArray, LagStorage
 from .lag_window import lag_weights
 from .numpy_compat import vecdot
 from .options import AUTO, check_kind, check_noise_forgetting, check_options, prior_diagonal
@@ -47,6 +49,9 @@ from .options import AUTO, check_kind, check_noise_forgetting, check_options, pr
 __all__ = ["EstimatorBank"]
 
 _F64 = np.dtype(np.float64)
+
+IntArray = npt.NDArray[np.int64]
+BoolArray = npt.NDArray[np.bool_]
 
 # A sample whose quantities are all at most this in magnitude is applied without checks.
 _SAFE = 1e100
@@ -99,7 +104,7 @@ class EstimatorBank:
     def __init__(
         self,
         sizes: Sequence[int],
-        n_lags: int | None = None,
+        n_lags: int | str | None = None,
         window: str = "truncated",
         forgetting: float = 1.0,
         *,
@@ -184,9 +189,9 @@ class EstimatorBank:
             self._nroot = np.zeros(m)
             self._nouter = np.zeros((m, n + 1, n))
         self._evaluator = covariance.CovarianceEvaluator(eq13=self.forgetting == 1.0)
-        self._covariances = None  # covariance.Covariances of the current sample
-        self._chosen = None  # lags_used at the current sample (chosen on first use)
-        self._window_key = None
+        self._covariances: covariance.Covariances | None = None  # of the current sample
+        self._chosen: IntArray | None = None  # lags_used at the current sample (chosen on first use)
+        self._window_key: tuple[int, int] | None = None
 
         if p0 is not None:
             p = prior_diagonal(p0, n)
@@ -216,7 +221,7 @@ class EstimatorBank:
         return min(self.k, self._lags.cap)
 
     # ------------------------------------------------------------------ update
-    def update(self, X, z) -> None:
+    def update(self, X: npt.NDArray[Any] | Sequence[npt.ArrayLike], z: npt.ArrayLike) -> None:
         """Process one sample for every model (Eqs. 15-17, 21).
 
         ``X`` is ``(M, n_max)`` (row ``j`` holds model ``j``'s regressors first; the padding
@@ -237,7 +242,7 @@ class EstimatorBank:
         else:
             self._apply_checked(x, z)
 
-    def _prepare(self, x: np.ndarray, z: np.ndarray, check: bool = True) -> bool:
+    def _prepare(self, x: FloatArray, z: FloatArray, check: bool = True) -> bool:
         """Write the sample's ``y = (x / s, z)`` (to its history slot in front of the window
         while a model waits, else to scratch), ``u = (D x, theta' x - z)`` and ``d`` to
         scratch: the state is not touched. True when every entry of ``y`` and ``u`` is at
@@ -248,7 +253,7 @@ class EstimatorBank:
             self._y_k, self._xs, self._xs_col = y, y[:, : self.n_max], y[:, : self.n_max, None]
             np.multiply(x, self._inv_s, out=self._xs)
             y[:, self.n_max] = z
-            small = np.maximum.reduce(np.absolute(y, out=self._y_abs), axis=None) <= _SAFE
+            small: bool = np.maximum.reduce(np.absolute(y, out=self._y_abs), axis=None) <= _SAFE
         else:  # scratch (self._xs is its x part once every model is initialized)
             np.multiply(x, self._inv_s, out=self._xs)
             self._z_slot[...] = z
@@ -268,7 +273,7 @@ class EstimatorBank:
             small = small and np.dot(self._ng_flat, self._ng_flat) <= _SAFE_SQUARED
         return small
 
-    def _apply(self, z: np.ndarray) -> None:
+    def _apply(self, z: FloatArray) -> None:
         """Add the prepared sample to the state (Eqs. 15-17, 21)."""
         f, lags = self.forgetting, self._lags
         k = self.k + 1
@@ -340,7 +345,7 @@ class EstimatorBank:
                 lags.relocate(w)
         self._covariances = self._chosen = None
 
-    def _residual(self, out: np.ndarray, neg_e: np.ndarray, d: np.ndarray, root: np.ndarray, f: float) -> None:
+    def _residual(self, out: FloatArray, neg_e: FloatArray, d: FloatArray, root: FloatArray, f: float) -> None:
         """The residual of Eqs. 16-17 of the chosen kind, from ``-e_k`` and ``d_k`` (forgetting
         ``f``), written to ``out``."""
         if self.residual == "standardized":  # v_k = e_k sqrt(f/d_k)
@@ -351,7 +356,7 @@ class EstimatorBank:
         else:
             np.negative(neg_e, out=out)  # v_k = e_k
 
-    def _apply_checked(self, x: np.ndarray, z: np.ndarray) -> None:
+    def _apply_checked(self, x: FloatArray, z: FloatArray) -> None:
         """Apply a sample on which :meth:`_prepare` found NaN, infinity or a large number:
         refuse a non-finite input, or one that would make the state non-finite."""
         bad = [
@@ -374,18 +379,18 @@ class EstimatorBank:
                 f"(largest |regressor| {np.max(np.abs(x)):.3g}, largest |output| {np.max(np.abs(z)):.3g})"
             )
 
-    def _as_regressors(self, X) -> np.ndarray:
+    def _as_regressors(self, X: npt.NDArray[Any] | Sequence[npt.ArrayLike]) -> FloatArray:
         if isinstance(X, np.ndarray) and X.shape == (self.n_models, self.n_max):
             return X if X.dtype == float else X.astype(float)
         rows = [X] if isinstance(X, np.ndarray) and X.ndim == 1 else list(X)
         if len(rows) != self.n_models:
             raise ValueError(f"expected regressors for {self.n_models} models, got {len(rows)}")
         x = np.zeros((self.n_models, self.n_max))
-        for j, (row, s) in enumerate(zip(rows, self.sizes)):
-            row = np.asarray(row, dtype=float).reshape(-1)
-            if row.shape != (s,):
-                raise ValueError(f"model {j} has {s} parameters, got {row.shape[0]} regressors")
-            x[j, :s] = row
+        for j, (row, s) in enumerate(zip(rows, self.sizes, strict=True)):  # (lengths checked above)
+            values = np.asarray(row, dtype=float).reshape(-1)
+            if values.shape != (s,):
+                raise ValueError(f"model {j} has {s} parameters, got {values.shape[0]} regressors")
+            x[j, :s] = values
         return x
 
     # ------------------------------------------------------------------ results
@@ -414,7 +419,8 @@ class EstimatorBank:
         """Parameter estimate ``theta_k`` of model ``j`` (Eq. 15c)."""
         self._require(j)
         s_n = self.sizes[j]
-        return self._aug[j, self.n_max, :s_n] * self._inv_s[j, :s_n]
+        theta: FloatArray = self._aug[j, self.n_max, :s_n] * self._inv_s[j, :s_n]
+        return theta
 
     def theta_all(self) -> np.ndarray:
         """Estimates of every model as an ``(M, n_max)`` array; padding and models that are
@@ -476,7 +482,8 @@ class EstimatorBank:
                 h = (np.arange(w) <= L[:, None]).astype(float)
                 h[:, 0] = 0.5
             else:
-                largest = self.k - 1 if self.n_lags is None else self.n_lags
+                # (not auto, so n_lags is an int or None, which mypy cannot see through self.auto)
+                largest: int = self.k - 1 if self.n_lags is None else self.n_lags  # type: ignore[assignment]
                 h = self._window_h if self._window_key == (largest, w) else self._half_window(largest, w)
             cov, repaired = self._evaluator(
                 self._D, self._D_diagonal, sums, h, products, 1.0 / self.n_R,
@@ -521,7 +528,7 @@ class EstimatorBank:
         gk = g**k
         return (1.0 - gk) * (1.0 + g) / ((1.0 - g) * (1.0 + gk))
 
-    def _exact_fit(self) -> np.ndarray:
+    def _exact_fit(self) -> BoolArray:
         """Models whose residual variance ``R_k(0)`` is at most 1e-12 of the mean square of
         their output ``x_j' theta_k`` (``theta' Lambda_k(0) theta / sum_j f^(2(k-j))``)."""
         f, k = self.forgetting, self.k
@@ -558,12 +565,12 @@ class EstimatorBank:
         return self.standard_errors_all(kind)[j, : self.sizes[j]].copy()
 
     # ------------------------------------------------------------------ snapshot
-    def state(self) -> dict:
+    def state(self) -> dict[str, Any]:
         """A deep copy of the complete state; :meth:`from_state` continues bit-identically."""
         return state.capture(self)
 
     @classmethod
-    def from_state(cls, saved: dict) -> "EstimatorBank":
+    def from_state(cls, saved: Mapping[str, Any]) -> EstimatorBank:
         """Rebuild an estimator bank from :meth:`state` (also after a save to disk)."""
         state.check_format(saved)
         cfg = dict(saved["config"])

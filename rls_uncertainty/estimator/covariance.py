@@ -25,7 +25,10 @@ entry is replaced by :func:`nearest_psd` (a repair), or by zero when the model f
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
+import numpy.typing as npt
 
 from .numpy_compat import vecdot
 
@@ -36,15 +39,22 @@ __all__ = ["EXACT_FIT", "nearest_psd", "half_window", "CovarianceEvaluator", "Co
 # sign and are published as zero, not repaired.
 EXACT_FIT = 1e-12
 
+FloatArray = npt.NDArray[np.float64]
+BoolArray = npt.NDArray[np.bool_]
+# What Covariances.matrices() is formed from: D, D N, D N0 (None for Eq. 13), h_0 S_0, scale,
+# diagonal scale, 1/n_k.
+_Parts = tuple[FloatArray, FloatArray, FloatArray | None, FloatArray, FloatArray, FloatArray, float]
 
-def nearest_psd(cov: np.ndarray) -> np.ndarray:
+
+def nearest_psd(cov: FloatArray) -> FloatArray:
     """Nearest (Frobenius) symmetric positive semi-definite matrix: eigenvalues clipped at 0."""
     sym = 0.5 * (cov + cov.T)
     vals, vecs = np.linalg.eigh(sym)
-    return (vecs * np.clip(vals, 0.0, None)) @ vecs.T
+    psd: FloatArray = (vecs * np.clip(vals, 0.0, None)) @ vecs.T
+    return psd
 
 
-def half_window(c: np.ndarray) -> np.ndarray:
+def half_window(c: npt.ArrayLike) -> FloatArray:
     """``h`` with ``h_0 = c_0 / 2`` and ``h_i = c_i``: the weights of the one-sided products in
     ``N`` (module docstring)."""
     h = np.array(c, dtype=float)
@@ -68,17 +78,17 @@ class Covariances:
 
     __slots__ = ("standard_errors", "repaired", "exact", "_parts", "_matrices")
 
-    def __init__(self, standard_errors: np.ndarray, parts: tuple) -> None:
+    def __init__(self, standard_errors: FloatArray, parts: _Parts) -> None:
         self.standard_errors = standard_errors
-        self.repaired: dict[int, np.ndarray] = {}
-        self.exact = None
+        self.repaired: dict[int, FloatArray] = {}
+        self.exact: BoolArray | None = None
         self._parts = parts
-        self._matrices = None
+        self._matrices: FloatArray | None = None
 
-    def matrices(self) -> np.ndarray:
+    def matrices(self) -> FloatArray:
         if self._matrices is None:
             D, DN, DN0, hS0, scale, diagonal_scale, inv_n = self._parts
-            P = np.empty((2,) + D.shape)
+            P = np.empty((2, *D.shape))
             np.matmul(DN, D, out=P[0])
             if DN0 is None:
                 np.multiply(D, hS0[:, :, None], out=P[1])
@@ -91,7 +101,7 @@ class Covariances:
             self._matrices = cov
         return self._matrices
 
-    def matrix(self, kind_index: int, j: int, size: int, *, repair: bool = True) -> np.ndarray:
+    def matrix(self, kind_index: int, j: int, size: int, *, repair: bool = True) -> FloatArray:
         """Model ``j``'s covariance (a copy), published (``repair``) or unrepaired."""
         if repair and kind_index == 0:
             if j in self.repaired:
@@ -101,9 +111,9 @@ class Covariances:
         return self.matrices()[kind_index, j, :size, :size].copy()
 
 
-def _diagonals(D, DN, DN0, hS0) -> np.ndarray:
+def _diagonals(D: FloatArray, DN: FloatArray, DN0: FloatArray | None, hS0: FloatArray) -> FloatArray:
     """``diag(P)`` of both kinds, ``(2, M, n)``: ``diag(D N D) = sum_c (D N)_ac D_ac``."""
-    out = np.empty((2,) + D.shape[:2])
+    out = np.empty((2, *D.shape[:2]))
     vecdot(DN, D, out=out[0])
     if DN0 is None:
         np.multiply(hS0, D.diagonal(0, 1, 2), out=out[1])  # Eq. 13: R_k(0) D / 2
@@ -121,21 +131,21 @@ class CovarianceEvaluator:
 
     def __call__(
         self,
-        D: np.ndarray,
-        D_diagonal: np.ndarray,
-        lag_sums: np.ndarray,
-        h: np.ndarray,
-        lag_products: np.ndarray,
+        D: FloatArray,
+        D_diagonal: FloatArray,
+        lag_sums: FloatArray,
+        h: FloatArray,
+        lag_products: FloatArray,
         inv_n: float,
-        scale: np.ndarray,
-        diagonal_scale: np.ndarray,
-        exact_fit,
-        sizes: tuple,
-    ) -> tuple[Covariances, list]:
+        scale: FloatArray,
+        diagonal_scale: FloatArray,
+        exact_fit: Callable[[], BoolArray],
+        sizes: tuple[int, ...],
+    ) -> tuple[Covariances, list[int]]:
         """Both covariances of every model, and the models whose corrected one was repaired.
 
-        ``D`` ``(M, n, n)`` (``D_diagonal`` its diagonal) and ``lag_products`` ``(M, n, w, n)`` (``Lambda+_k(i)``) are in
-        column-scaled units; ``lag_sums`` ``(M, w)`` is ``n_k R_k(i)`` and ``h`` the half
+        ``D`` ``(M, n, n)`` (``D_diagonal`` its diagonal) and ``lag_products`` ``(M, n, w, n)``
+        (``Lambda+_k(i)``) are in column-scaled units; ``lag_sums`` ``(M, w)`` is ``n_k R_k(i)`` and ``h`` the half
         window of the ``w`` lags held; ``inv_n = 1 / n_k``; ``scale`` ``(M, n, n)`` takes
         scaled units back to the regressors' (NaN outside the ready models' blocks) and
         ``diagonal_scale`` is ``2 diag(scale)`` ``(M, n)``; ``exact_fit()`` returns the models
@@ -149,7 +159,7 @@ class CovarianceEvaluator:
         else:  # Eq. 22 with n_tau = 0: N = R_k(0) Lambda_k(0) / 2
             DN0 = np.matmul(D, np.matmul(hS[:, None, None, :1], lag_products[:, :, :1])[:, :, 0, :])
         hS0 = hS[:, :1]
-        var = np.empty((2,) + D.shape[:2])  # diag(P), as _diagonals
+        var = np.empty((2, *D.shape[:2]))  # diag(P), as _diagonals
         vecdot(DN, D, out=var[0])  # Eq. 20 / 22
         if DN0 is None:
             np.multiply(hS0, D_diagonal, out=var[1])  # Eq. 13: R_k(0) D / 2
@@ -164,8 +174,8 @@ class CovarianceEvaluator:
             corrected = var[0]
             corrected *= ~exact[:, None]  # exact fits: rounding, not indefiniteness: zero (NaN stays)
             if np.fmin.reduce(corrected, axis=None) < 0.0:
-                for j in np.flatnonzero((corrected < 0.0).any(axis=1)):
-                    j = int(j)
+                for index in np.flatnonzero((corrected < 0.0).any(axis=1)):
+                    j = int(index)
                     s = sizes[j]
                     fixed = cov.repaired[j] = nearest_psd(cov.matrices()[0, j, :s, :s])
                     counted.append(j)

@@ -18,9 +18,25 @@ residuals of samples ``1..k0``. ``A_k`` weighted ``f_R`` is at least ``A_k`` wei
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
+import numpy.typing as npt
+
+if TYPE_CHECKING:
+    from .bank import EstimatorBank
 
 __all__ = ["ExactInitialization"]
+
+
+class _Waiting:
+    """A waiting model: its index, the flat indices of its ``diag(A_k)`` in ``products_y``
+    and its blocker (the flat index of a zero diagonal entry, or None)."""
+
+    __slots__ = ("model", "diagonal", "blocker")
+
+    def __init__(self, model: int, diagonal: npt.NDArray[np.intp], blocker: int | None) -> None:
+        self.model, self.diagonal, self.blocker = model, diagonal, blocker
 
 
 class ExactInitialization:
@@ -32,9 +48,9 @@ class ExactInitialization:
     at until it becomes positive.
     """
 
-    def __init__(self, bank) -> None:
+    def __init__(self, bank: EstimatorBank) -> None:
         self.bank = bank
-        self._waiting = None  # [model, flat indices of its diag(A_k), blocker] per waiting model
+        self._waiting: list[_Waiting] | None = None  # one per waiting model
 
     def reset(self) -> None:
         """Forget the cached indices (after a model initialized or the arrays changed)."""
@@ -48,21 +64,23 @@ class ExactInitialization:
             # Flat indices of each waiting model's diag(A_k) in products_y, and its blocker.
             n1, cap = bank.n_max + 1, bank._lags.cap
             waiting = self._waiting = [
-                [j, np.array([((j * n1 + a) * cap) * n1 + a for a in range(bank.sizes[j])], dtype=np.intp), None]
+                _Waiting(
+                    j, np.array([((j * n1 + a) * cap) * n1 + a for a in range(bank.sizes[j])], dtype=np.intp), None
+                )
                 for j in range(bank.n_models) if not bank._ready[j]
             ]
         flat = bank._lags.products_y.reshape(-1)
         for entry in waiting:
-            blocker = entry[2]
+            blocker = entry.blocker
             if blocker is not None and not flat[blocker] > 0.0:
                 continue
-            diag = flat.take(entry[1])
+            diag = flat.take(entry.diagonal)
             zero = np.flatnonzero(~(diag > 0.0))
             if zero.size:
-                entry[2] = int(entry[1][zero[0]])
+                entry.blocker = int(entry.diagonal[zero[0]])
                 continue
-            entry[2] = None
-            self.initialize(entry[0], w)  # resets the waiting list on success
+            entry.blocker = None
+            self.initialize(entry.model, w)  # resets the waiting list on success
 
     def initialize(self, j: int, w: int) -> bool:
         """Exact initialization of model ``j`` at the current sample, if ``A_k`` allows it and

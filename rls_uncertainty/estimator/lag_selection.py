@@ -152,8 +152,9 @@ def _finish(per_series: np.ndarray, usable: np.ndarray, lo: int, hi: int) -> np.
     return np.maximum(L, lo).astype(np.int64)
 
 
-def _usable(rho: np.ndarray) -> np.ndarray:
-    return np.isfinite(rho).all(axis=-1)
+def _usable(rho: np.ndarray) -> npt.NDArray[np.bool_]:
+    usable: npt.NDArray[np.bool_] = np.isfinite(rho).all(axis=-1)
+    return usable
 
 
 def flat_top_lags(R: npt.ArrayLike, n_samples: float, *, cap: int | None = None,

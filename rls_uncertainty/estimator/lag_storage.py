@@ -40,7 +40,10 @@ replay about 20%). When every model is initialized (:meth:`LagStorage.all_initia
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+
 import numpy as np
+import numpy.typing as npt
 
 __all__ = ["LagStorage", "GROWTH_START"]
 
@@ -48,9 +51,35 @@ GROWTH_START = 64  # initial lag capacity when all lags are kept (n_lags=None)
 
 _HISTORY = ("x", "y", "v")
 
+FloatArray = npt.NDArray[np.float64]
+# (lag_sums, its scratch, products, their scratch): the views one sample's update writes.
+LagViews = tuple[FloatArray, FloatArray, FloatArray, FloatArray]
+
 
 class LagStorage:
     """The history buffers and lag-indexed sums of ``m`` models (see the module docstring)."""
+
+    # Arrays that exist only in some configurations hold None otherwise (assigned in
+    # :meth:`allocate`); they are read only where they exist: ``u`` and ``moment0`` with a
+    # noise model, the moments while a model waits, ``products_scratch`` when not merged.
+    # Typed as arrays, since mypy cannot follow that invariant.
+    x: FloatArray
+    y: FloatArray
+    v: FloatArray
+    u: FloatArray
+    lag_sums: FloatArray
+    sums_scratch: FloatArray
+    lag_powers: FloatArray
+    products_y: FloatArray
+    products_y_scratch: FloatArray
+    moment_xx: FloatArray
+    moment_xz: FloatArray
+    moment_zy: FloatArray
+    moment0: FloatArray | None  # (checked where it may be None)
+    lag_products: FloatArray
+    products_scratch: FloatArray
+    full: LagViews
+    lag0: FloatArray
 
     def __init__(
         self, m: int, n: int, cap: int, *, all_lags: bool, forgetting: float, waiting: bool,
@@ -61,7 +90,8 @@ class LagStorage:
         self.forgetting = forgetting
         # A noise model (f_R != f): the u history, lag sums of u, moments weighted f_R.
         self.noise = noise_forgetting is not None and noise_forgetting != forgetting
-        self.moment_forgetting = noise_forgetting if self.noise else forgetting
+        # (self.noise implies noise_forgetting is a float, which mypy cannot see)
+        self.moment_forgetting: float = noise_forgetting if self.noise else forgetting  # type: ignore[assignment]
         self.history = (*_HISTORY, "u") if self.noise else _HISTORY
         self.waiting = waiting
         self.allocate(cap)
@@ -77,13 +107,13 @@ class LagStorage:
         self.x = np.zeros((m, length, n))
         self.y = np.zeros((m, length, n1))
         self.v = np.zeros((m, length))
-        self.u = np.zeros((m, length)) if self.noise else None
+        self.u = np.zeros((m, length)) if self.noise else None  # type: ignore[assignment]  # read only with noise
         self.ptr = length  # the window is [ptr, ptr + w)
         self.lag_sums = np.zeros((m, cap))
         self.sums_scratch = np.zeros((m, cap))
         self.lag_powers = self.forgetting ** np.arange(cap, dtype=float)  # f^i of Eq. 21
-        self.products_y = self.products_y_scratch = None
-        self.moment_xx = self.moment_xz = self.moment_zy = None
+        self.products_y = self.products_y_scratch = None  # type: ignore[assignment]  # set below while waiting
+        self.moment_xx = self.moment_xz = self.moment_zy = None  # type: ignore[assignment]  # as products_y
         self.moment0 = None  # lag-0 moments weighted f (with a noise model, while waiting)
         if self.waiting and self.noise:
             self.moment0 = np.zeros((m, n1, n1))
@@ -95,14 +125,14 @@ class LagStorage:
             self.moment_zy = self.products_y[:, n]
         if self.merged:
             self.lag_products = self.moment_xx
-            self.products_scratch = None
+            self.products_scratch = None  # type: ignore[assignment]  # unused when merged
         else:
             self.lag_products = np.zeros((m, n, cap, n))
             self.products_scratch = np.zeros((m, n, cap * n))
         self.full = self._restricted(cap)
         self.lag0 = self.lag_products[:, :, 0, :]  # Lambda+_k(0)
 
-    def _restricted(self, w: int) -> tuple:
+    def _restricted(self, w: int) -> LagViews:
         m, n = self.m, self.n
         if self.merged:
             products = self.products_y[:, :, :w].reshape(m, n + 1, w * (n + 1))
@@ -111,13 +141,13 @@ class LagStorage:
         products = self.lag_products[:, :, :w].reshape(m, n, w * n)
         return self.lag_sums[:, :w], self.sums_scratch[:, :w], products, self.products_scratch[:, :, : w * n]
 
-    def by_lag(self, w: int) -> tuple:
+    def by_lag(self, w: int) -> LagViews:
         """Views of the first ``w`` lags with the scratch their updates use: ``(lag_sums, .,
         products, .)``, the products flattened to ``(M, rows, w cols)``: ``lag_products``, or
         ``products_y`` when merged."""
         return self.full if w == self.cap else self._restricted(w)
 
-    def products_y_by_lag(self, w: int) -> tuple:
+    def products_y_by_lag(self, w: int) -> tuple[FloatArray, FloatArray]:
         """``products_y`` of the first ``w`` lags as ``(M, n+1, w (n+1))`` and its scratch."""
         m, n1 = self.m, self.n + 1
         return self.products_y[:, :, :w].reshape(m, n1, w * n1), self.products_y_scratch[:, :, : w * n1]
@@ -142,7 +172,7 @@ class LagStorage:
         self.full = self._restricted(self.cap)
         self.lag0 = self.lag_products[:, :, 0, :]
 
-    def window(self, buf: np.ndarray, w: int) -> np.ndarray:
+    def window(self, buf: FloatArray, w: int) -> FloatArray:
         """The last ``w`` entries of a history buffer, newest first (a view)."""
         return buf[:, self.ptr : self.ptr + w]
 
@@ -164,7 +194,7 @@ class LagStorage:
         self.allocate(2 * old_cap)
         self.ptr -= w
         if old["moment0"] is not None:
-            self.moment0[...] = old["moment0"]
+            self.moment0[...] = old["moment0"]  # type: ignore[index]  # allocated again (waiting, noise)
         for name in self.history:
             getattr(self, name)[:, self.ptr :] = old[name][:, old_ptr : old_ptr + w]
         self.lag_sums[:, :old_cap] = old["lag_sums"]
@@ -174,7 +204,7 @@ class LagStorage:
             self.lag_products[:, :, :old_cap] = old["lag_products"]
 
     # ------------------------------------------------------------------ state
-    def arrays(self, w: int) -> dict:
+    def arrays(self, w: int) -> dict[str, FloatArray]:
         """Copies of the history windows (newest first) and the lag-indexed sums (the moments
         only while a model waits)."""
         out = {name: self.window(getattr(self, name), w).copy() for name in self.history}
@@ -183,10 +213,10 @@ class LagStorage:
         if self.waiting:
             out["products_y"] = self.products_y.copy()
             if self.noise:
-                out["moment0"] = self.moment0.copy()
+                out["moment0"] = self.moment0.copy()  # type: ignore[union-attr]  # set while waiting with noise
         return out
 
-    def load(self, arrays: dict, w: int) -> None:
+    def load(self, arrays: Mapping[str, npt.ArrayLike], w: int) -> None:
         """Inverse of :meth:`arrays` (on freshly allocated storage of the same capacity)."""
         self.ptr -= w
         for name in self.history:
@@ -195,12 +225,12 @@ class LagStorage:
         if self.waiting:
             assign_checked(self.products_y, arrays["products_y"], "products_y")
             if self.noise:
-                assign_checked(self.moment0, arrays["moment0"], "moment0")
+                assign_checked(self.moment0, arrays["moment0"], "moment0")  # type: ignore[arg-type]  # as in arrays()
         if not self.merged:
             assign_checked(self.lag_products, arrays["lag_products"], "lag_products")
 
 
-def assign_checked(target: np.ndarray, value, name: str) -> None:
+def assign_checked(target: FloatArray, value: npt.ArrayLike, name: str) -> None:
     """``target[...] = value`` for a state field, refusing another shape by name."""
     value = np.asarray(value)
     if value.shape != target.shape:

@@ -7,7 +7,8 @@ arguments with the same function, so both accept exactly the same options.
 
 from __future__ import annotations
 
-from typing import Literal, Sequence, get_args
+from collections.abc import Sequence
+from typing import Literal, TypeGuard, get_args
 
 import numpy as np
 
@@ -49,7 +50,7 @@ def check_kind(kind: str) -> None:
         raise ValueError(f"kind must be one of {COVARIANCE_KINDS}, got {kind!r}")
 
 
-def _is_count(value) -> bool:
+def _is_count(value: object) -> TypeGuard[int | np.integer | float]:
     return not isinstance(value, (bool, str)) and isinstance(value, (int, np.integer, float)) and int(value) == value
 
 AUTO = "auto"  # n_lags chosen from the data (lag_selection.flat_top_lags)

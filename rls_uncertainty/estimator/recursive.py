@@ -2,7 +2,11 @@
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+from typing import Any
+
 import numpy as np
+import numpy.typing as npt
 
 from .bank import EstimatorBank
 
@@ -19,20 +23,20 @@ class RecursiveEstimator:
     def __init__(
         self,
         n_params: int,
-        n_lags: int | None = None,
+        n_lags: int | str | None = None,
         window: str = "truncated",
         forgetting: float = 1.0,
-        **options,
+        **options: Any,
     ) -> None:
         self._bank = EstimatorBank((int(n_params),), n_lags, window, forgetting, **options)
 
     @classmethod
-    def _wrap(cls, bank: EstimatorBank) -> "RecursiveEstimator":
+    def _wrap(cls, bank: EstimatorBank) -> RecursiveEstimator:
         est = cls.__new__(cls)
         est._bank = bank
         return est
 
-    def update(self, x, z) -> None:
+    def update(self, x: npt.ArrayLike, z: float) -> None:
         """Eq. 15-17, 21 for one sample; non-finite input raises :class:`NonFiniteInput`."""
         x = np.asarray(x, dtype=float).reshape(1, -1)
         if x.shape[1] != self._bank.n_max:
@@ -44,7 +48,7 @@ class RecursiveEstimator:
         return self._bank.n_max
 
     @property
-    def n_lags(self):
+    def n_lags(self) -> int | str | None:
         return self._bank.n_lags
 
     @property
@@ -88,11 +92,11 @@ class RecursiveEstimator:
     def standard_errors(self, kind: str = "corrected") -> np.ndarray:
         return self._bank.standard_errors(0, kind)
 
-    def state(self) -> dict:
+    def state(self) -> dict[str, Any]:
         return self._bank.state()
 
     @classmethod
-    def from_state(cls, state: dict) -> "RecursiveEstimator":
+    def from_state(cls, state: Mapping[str, Any]) -> RecursiveEstimator:
         if len(state["config"]["sizes"]) != 1:
             raise ValueError("state holds several models: use EstimatorBank.from_state")
         return cls._wrap(EstimatorBank.from_state(state))

@@ -68,8 +68,10 @@ What the paper leaves open is defined here, and the fast bank follows it:
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 
 import numpy as np
+import numpy.typing as npt
 
 from ..errors import EstimatorNotReady
 from .covariance import EXACT_FIT, nearest_psd
@@ -79,7 +81,7 @@ from .options import check_kind, check_noise_forgetting, check_options, check_wi
 __all__ = ["batch_reference", "RecursiveReference", "flat_top_lag"]
 
 
-def flat_top_lag(R, n: float, max_lags: int, min_lags: int = 0) -> int:
+def flat_top_lag(R: Sequence[float], n: float, max_lags: int, min_lags: int = 0) -> int:
     """Politis' flat-top rule on ``R(0..W-1)`` (the module docstring), one model, literally."""
     W = len(R)
     hi = max(min(W - 1, max_lags, math.floor(n) - 1), 0)
@@ -151,12 +153,12 @@ class RecursiveReference:
     def __init__(
         self,
         n: int,
-        n_lags: int | None = None,
+        n_lags: int | str | None = None,
         window: str = "truncated",
         forgetting: float = 1.0,
         *,
         residual: str = "standardized",
-        p0=None,
+        p0: float | Sequence[float] | None = None,
         init_condition: float = 1e8,
         noise_forgetting: float | None = None,
         max_lags: int = 50,
@@ -167,7 +169,8 @@ class RecursiveReference:
         self.f, self.residual, self.init_condition = float(forgetting), residual, float(init_condition)
         self.auto = n_lags == "auto"
         self.max_lags, self.min_lags = max_lags, min_lags
-        self.held = None if n_lags is None else (max_lags if self.auto else n_lags)  # n_tau of the memory
+        # n_tau of the memory (not auto: n_lags is an int, which mypy cannot see through self.auto)
+        self.held: int | None = None if n_lags is None else (max_lags if self.auto else n_lags)  # type: ignore[assignment]
         self.g = check_noise_forgetting(noise_forgetting, forgetting, self.held)  # f_R
         self.noise = self.g != self.f  # R(i) from the noise model
         self.k = 0
@@ -197,7 +200,7 @@ class RecursiveReference:
         """The largest lag held at sample ``k``: ``k - 1`` (Eq. 20) or ``min(k - 1, n_tau)``."""
         return self.k - 1 if self.held is None else min(self.k - 1, self.held)
 
-    def update(self, x, z: float) -> None:
+    def update(self, x: npt.ArrayLike, z: float) -> None:
         x = np.asarray(x, dtype=float)
         z = float(z)
         f = self.f
@@ -227,7 +230,8 @@ class RecursiveReference:
         e = z - x @ theta  # the a priori innovation of Eq. 15c
         self.D = (np.eye(self.n) - np.outer(K, x)) @ D / f  # Eq. 15b
         self.theta = theta + K * e  # Eq. 15c
-        self.v.append(self._residual(e, d, z - x @ self.theta, f))
+        # (e and the a posteriori residual are scalars: 1-D @ 1-D, typed as arrays by numpy's stubs)
+        self.v.append(self._residual(e, d, z - x @ self.theta, f))  # type: ignore[arg-type]
         series = self.v
         if self.noise:  # the noise model: Eq. 15 with f_R
             D, theta = self.D_R, self.theta_R
@@ -236,7 +240,7 @@ class RecursiveReference:
             e = z - x @ theta
             self.D_R = (np.eye(self.n) - np.outer(K, x)) @ D / g
             self.theta_R = theta + K * e
-            self.u.append(self._residual(e, d, z - x @ self.theta_R, g))
+            self.u.append(self._residual(e, d, z - x @ self.theta_R, g))  # type: ignore[arg-type]  # as self.v
             series = self.u
         else:
             n_R_prev = n_prev
@@ -252,7 +256,8 @@ class RecursiveReference:
             return e
         if self.residual == "a_posteriori":
             return post  # Eq. 7 at sample k
-        return e * np.sqrt(f / d)  # standardized
+        standardized: float = e * np.sqrt(f / d)
+        return standardized
 
     def _try_initialize(self) -> None:
         """Exact initialization at this sample if ``A_k`` is well conditioned (Eqs. 6, 7, 10)."""
@@ -265,12 +270,13 @@ class RecursiveReference:
         self.D = np.linalg.inv(A)  # Eq. 6
         self.theta = self.D @ self.b  # Eq. 6
         k, g = self.k, self.g
-        self.v = [self.z[j] - self.x[j] @ self.theta for j in range(k)]  # Eq. 7, samples 1..k
+        # (1-D @ 1-D is a scalar; numpy's stubs type it as an array)
+        self.v = [self.z[j] - self.x[j] @ self.theta for j in range(k)]  # type: ignore[misc]  # Eq. 7, samples 1..k
         series = self.v
         if self.noise:  # the noise model's batch solution (Eq. 6 weighted W_R) and residuals
             self.D_R = np.linalg.inv(self.A_R)
             self.theta_R = self.D_R @ self.b_R
-            self.u = [self.z[j] - self.x[j] @ self.theta_R for j in range(k)]
+            self.u = [self.z[j] - self.x[j] @ self.theta_R for j in range(k)]  # type: ignore[misc]  # as self.v
             series = self.u
         for i in range(self.largest_lag() + 1):
             # Eq. 10, weighted: R_k(i) = sum_j w_j v_j v_(j-i) / n_k (f_R and u with a noise model)
@@ -296,7 +302,8 @@ class RecursiveReference:
         held = self.largest_lag() + 1
         if self.auto:
             return lag_weights(self.lags_used(), "truncated", held)
-        return lag_weights(self.k - 1 if self.n_lags is None else self.n_lags, self.window, held)
+        # (not auto: n_lags is an int or None, which mypy cannot see through self.auto)
+        return lag_weights(self.k - 1 if self.n_lags is None else self.n_lags, self.window, held)  # type: ignore[arg-type]
 
     def covariance(self, kind: str = "corrected") -> np.ndarray:
         """Eq. 20 / 22 (``corrected``) or Eq. 13 with Eq. 16 (``conventional``), unrepaired."""
@@ -306,10 +313,12 @@ class RecursiveReference:
         if kind == "conventional":
             if self.f == 1.0:
                 return R[0] * D  # Eq. 13 with sigma^2 = R_k(0) (Eq. 16)
-            return R[0] * D @ Lam[0] @ D
+            conventional: npt.NDArray[np.float64] = R[0] * D @ Lam[0] @ D
+            return conventional
         c = self.weights()
         middle = sum(c[i] * R[i] * Lam[i] for i in range(len(c)))  # Eq. 20 / 22
-        return D @ middle @ D  # Eq. 20 / 22
+        corrected: npt.NDArray[np.float64] = D @ middle @ D  # Eq. 20 / 22
+        return corrected
 
     def published_covariance(self, kind: str = "corrected") -> np.ndarray:
         """The covariance the estimator publishes: repaired where a diagonal is negative."""

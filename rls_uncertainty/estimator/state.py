@@ -8,7 +8,13 @@ bank it was taken from. A state of another :data:`STATE_FORMAT` is refused by na
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+from typing import TYPE_CHECKING, Any
+
 from .lag_storage import assign_checked
+
+if TYPE_CHECKING:
+    from .bank import EstimatorBank
 
 __all__ = ["STATE_FORMAT", "capture", "restore"]
 
@@ -23,7 +29,7 @@ STATE_FORMAT = 5
 _BANK_ARRAYS = ("_inv_s", "_ready", "_ready_at", "repairs")
 
 
-def capture(bank) -> dict:
+def capture(bank: EstimatorBank) -> dict[str, Any]:
     """A deep copy of the complete state of ``bank``."""
     config = {
         "sizes": list(bank.sizes),
@@ -46,7 +52,7 @@ def capture(bank) -> dict:
     return {"format": STATE_FORMAT, "config": config, "counters": counters, "arrays": arrays}
 
 
-def check_format(state: dict) -> None:
+def check_format(state: Mapping[str, Any]) -> None:
     if state.get("format") != STATE_FORMAT:
         raise ValueError(
             f"unknown estimator state format {state.get('format')!r} "
@@ -54,7 +60,7 @@ def check_format(state: dict) -> None:
         )
 
 
-def restore(bank, state: dict) -> None:
+def restore(bank: EstimatorBank, state: Mapping[str, Any]) -> None:
     """Load ``state`` into ``bank`` (built with the same configuration), in place."""
     check_format(state)
     c = state["counters"]

@@ -88,7 +88,7 @@ class EstimatorState:
     output_sum_squares: np.ndarray
 
 
-def save_state(path: str | Path, state: EstimatorState, fingerprint: dict) -> None:
+def save_state(path: str | Path, state: EstimatorState, fingerprint: Mapping[str, Any]) -> None:
     """Write ``state`` (atomically) with the configuration ``fingerprint`` it belongs to."""
     bank = state.bank.state()
     meta = {
@@ -127,7 +127,9 @@ def _all_lags_capacity(k: int) -> int:
 Layout = dict[str, tuple[tuple[int, ...], np.dtype]]
 
 
-def state_layout(state_format: int, config: Mapping, counters: Mapping, waiting: bool) -> Layout | None:
+def state_layout(
+    state_format: int, config: Mapping[str, Any], counters: Mapping[str, Any], waiting: bool
+) -> Layout | None:
     """``{entry name: (shape, dtype)}`` of the arrays of a state of ``state_format`` with bank
     ``config`` and ``counters`` (``waiting``: some model still waits for initialization), as
     :meth:`EstimatorBank.state` writes them, or ``None`` for another format. The layout is the
@@ -146,10 +148,10 @@ def state_layout(state_format: int, config: Mapping, counters: Mapping, waiting:
     return {name: (arr.shape, arr.dtype) for name, arr in bank.state()["arrays"].items()}
 
 
-def _implied_bytes(config: Mapping, counters: Mapping) -> int:
+def _implied_bytes(config: Mapping[str, Any], counters: Mapping[str, Any]) -> int:
     """An upper bound of the memory an empty bank of ``config`` takes at ``counters``' lag
     capacity (histories, lag sums and products of y = (x, z))."""
-    sizes = config["sizes"]
+    sizes: list[int] = config["sizes"]
     m, n1, cap = len(sizes), max(sizes) + 1, int(counters["cap"])
     return 8 * m * cap * (2 * n1 * n1 + 4 * 3 * n1 + 4)
 
@@ -166,16 +168,17 @@ def _int(value: Any, field: str, low: int, high: int) -> int:
         raise _fail(field, f"must be an integer, found {_kind(value)}")
     if not low <= value <= high:
         raise _fail(field, f"must be in [{low}, {high}], found {value}")
-    return value
+    checked: int = value  # (an int: _is_int)
+    return checked
 
 
 def _number(value: Any, field: str) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise _fail(field, f"must be a number, found {_kind(value)}")
-    value = float(value)
-    if not math.isfinite(value):
-        raise _fail(field, f"must be finite, found {value}")
-    return value
+    number = float(value)
+    if not math.isfinite(number):
+        raise _fail(field, f"must be finite, found {number}")
+    return number
 
 
 def _kind(value: Any) -> str:
@@ -191,7 +194,7 @@ def _short(value: Any) -> str:
     return text if len(text) <= 60 else text[:57] + "..."
 
 
-def _object(value: Any, field: str, keys: tuple[str, ...]) -> dict:
+def _object(value: Any, field: str, keys: tuple[str, ...]) -> dict[str, Any]:
     if not isinstance(value, dict):
         raise _fail(field, f"must be a JSON object, found {_kind(value)}")
     missing = [k for k in keys if k not in value]
@@ -200,7 +203,8 @@ def _object(value: Any, field: str, keys: tuple[str, ...]) -> dict:
     extra = sorted(str(k) for k in value if k not in keys)
     if extra:
         raise _fail(f"{field}.{extra[0]}" if field else extra[0][:40], "is not part of a state file")
-    return value
+    checked: dict[str, Any] = value  # (a JSON object: string keys)
+    return checked
 
 
 def _check_format(meta: Any) -> None:
@@ -216,8 +220,8 @@ def _check_format(meta: Any) -> None:
         )
 
 
-def _check_bank_config(cfg: Any, expect: Mapping | None) -> dict:
-    cfg = _object(cfg, "bank_config", _BANK_CONFIG_KEYS)
+def _check_bank_config(raw: Any, expect: Mapping[str, Any] | None) -> dict[str, Any]:
+    cfg = _object(raw, "bank_config", _BANK_CONFIG_KEYS)
     sizes = cfg["sizes"]
     if not isinstance(sizes, list) or not 1 <= len(sizes) <= _MAX_MODELS:
         raise _fail("bank_config.sizes", f"must be a list of 1 to {_MAX_MODELS} sizes, found {_kind(sizes)}")
@@ -246,8 +250,8 @@ def _check_bank_config(cfg: Any, expect: Mapping | None) -> dict:
     return cfg
 
 
-def _check_counters(c: Any, cfg: dict) -> dict:
-    c = _object(c, "bank_counters", _COUNTER_KEYS)
+def _check_counters(raw: Any, cfg: dict[str, Any]) -> dict[str, Any]:
+    c = _object(raw, "bank_counters", _COUNTER_KEYS)
     k = _int(c["k"], "bank_counters.k", 0, _MAX_COUNT)
     n_eff = _number(c["n_eff"], "bank_counters.n_eff")
     if not 0.0 <= n_eff <= k * (1.0 + 1e-9):
@@ -266,7 +270,7 @@ def _check_counters(c: Any, cfg: dict) -> dict:
     return c
 
 
-def _check_sums(meta: dict, m: int) -> tuple[np.ndarray, np.ndarray]:
+def _check_sums(meta: dict[str, Any], m: int) -> tuple[np.ndarray, np.ndarray]:
     out = []
     for key in ("zsum", "zsq"):
         values = meta[key]
@@ -365,7 +369,7 @@ def _check_values(arrays: dict[str, np.ndarray], k: int) -> None:
             raise _fail(f"arrays.{name}", f"must hold counts in [{low}, {high}]")
 
 
-def _generic_bounds(entries: dict[str, zipfile.ZipInfo], cfg: dict, counters: dict) -> None:
+def _generic_bounds(entries: dict[str, zipfile.ZipInfo], cfg: dict[str, Any], counters: dict[str, Any]) -> None:
     """For a format without a layout table: no array larger than the largest the configuration
     implies (M x (n+1) x cap x (n+1) doubles)."""
     sizes = cfg["sizes"]
@@ -376,7 +380,7 @@ def _generic_bounds(entries: dict[str, zipfile.ZipInfo], cfg: dict, counters: di
                         f"configuration ({largest})")
 
 
-def _load(path: Path, fingerprint: dict, expect: Mapping | None) -> EstimatorState:
+def _load(path: Path, fingerprint: Mapping[str, Any], expect: Mapping[str, Any] | None) -> EstimatorState:
     try:
         fh = open(path, "rb")  # noqa: SIM115 - closed below, after the zip
     except FileNotFoundError:
@@ -398,7 +402,9 @@ def _load(path: Path, fingerprint: dict, expect: Mapping | None) -> EstimatorSta
                 raise _Invalid(f"not a readable state file ({str(exc)[:80]})") from None
 
 
-def _load_archive(zf: zipfile.ZipFile, file_size: int, fingerprint: dict, expect: Mapping | None) -> EstimatorState:
+def _load_archive(
+    zf: zipfile.ZipFile, file_size: int, fingerprint: Mapping[str, Any], expect: Mapping[str, Any] | None
+) -> EstimatorState:
     entries = _entries(zf, file_size)
     meta = _read_meta(zf, entries["meta"])
     _check_format(meta)
@@ -414,7 +420,9 @@ def _load_archive(zf: zipfile.ZipFile, file_size: int, fingerprint: dict, expect
     names = set(entries) - {"meta"}
     implied = _implied_bytes(cfg, counters)
     if implied > 64 * file_size + (16 << 20):  # the arrays of such a state would be in the file
-        raise _fail("bank_counters.cap", f"implies about {implied} bytes of estimator state; the file holds {file_size}")
+        raise _fail(
+            "bank_counters.cap", f"implies about {implied} bytes of estimator state; the file holds {file_size}"
+        )
     if "ready" not in entries:
         raise _fail("arrays.ready", "is missing")
     ready = _read_array(zf, entries["ready"], "arrays.ready", (len(cfg["sizes"]),), np.dtype(bool))
@@ -454,7 +462,9 @@ def _load_archive(zf: zipfile.ZipFile, file_size: int, fingerprint: dict, expect
     return EstimatorState(bank=bank, samples_used=samples_used, output_sum=zsum, output_sum_squares=zsq)
 
 
-def load_state(path: str | Path, fingerprint: dict, *, expect: Mapping | None = None) -> EstimatorState:
+def load_state(
+    path: str | Path, fingerprint: Mapping[str, Any], *, expect: Mapping[str, Any] | None = None
+) -> EstimatorState:
     """The state saved in ``path``. Raises :class:`StateFileError` naming the file and the
     field when the file is missing, unreadable, not a state file, of another format, saved with
     another configuration than ``fingerprint``, or inconsistent (see the module docstring).
