@@ -27,6 +27,7 @@ DEPENDENCY = {
     "matplotlib": "python3-matplotlib",
     "pytest": "python3-pytest",
     "statsmodels": "python3-statsmodels",
+    "hypothesis": "python3-hypothesis",
     "rclpy": "rclpy",
     "rcl_interfaces": "rcl_interfaces",
     "builtin_interfaces": "builtin_interfaces",
