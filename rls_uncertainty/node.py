@@ -133,7 +133,9 @@ class EstimatorNode(Node):
         if self.node_cfg.state_file and self.node_cfg.state_save_period > 0:
             self.create_timer(self.node_cfg.state_save_period, self.save_state, clock=steady)
         models = ", ".join(f"{m.output}({len(m.regressors)})" for m in self.config.models)
-        lags = "all" if self.config.estimator.n_lags is None else self.config.estimator.n_lags
+        est = self.config.estimator
+        lags = (f"auto (at most {est.max_lags})" if est.lag_selection == "auto"
+                else "all" if est.n_lags is None else est.n_lags)
         self.get_logger().info(
             f"estimating {models} at {self.config.rate:g} Hz, {lags} lags, aircraft {self.config.aircraft.name}; "
             f"inputs {', '.join(self.node_cfg.topics[k] for k in INPUTS)}; {self.state_status}"
@@ -308,18 +310,13 @@ class EstimatorNode(Node):
                 self.get_logger().error(f"cannot save state to {path}: {exc}")
 
     # ------------------------------------------------------------------ diagnostics
-    def _model_report(self, j: int) -> dict:
-        """The fit of model ``j`` and, once it is ready, its newest convergence flags."""
-        fit = self.pipeline.model_fit(j)
-        return {**fit, **self.pipeline.convergence(j)} if fit["ready"] else fit
-
     def _publish_diagnostics(self) -> None:
         """One :class:`.diagnostics.Snapshot` per period in, one ``DiagnosticArray`` out."""
         now_ns = self.get_clock().now().nanoseconds
         wall = time.monotonic()
         snapshot = Snapshot(
             counters=self.pipeline.counters(),
-            models=[(m.output, self._model_report(j)) for j, m in enumerate(self.config.models)],
+            models=[(m.output, self.pipeline.model_report(j)) for j, m in enumerate(self.config.models)],
             required=tuple(self.pipeline.required),
             max_gap=self.config.inputs.max_gap,
             now_ns=now_ns,

@@ -617,6 +617,12 @@ class Pipeline:
             "outputs_withheld": withheld,
         }
 
+    def model_report(self, j: int) -> dict:
+        """What ``/diagnostics`` reports of model ``j`` (node and replay alike): its
+        :meth:`model_fit` and, once it is ready, its newest :meth:`convergence` flags."""
+        fit = self.model_fit(j)
+        return {**fit, **self.convergence(j)} if fit["ready"] else fit
+
     def convergence(self, j: int) -> dict:
         """The newest sample's convergence flags of model ``j`` for diagnostics: ``converged``
         (the model flag) and ``converged_parameters`` (the names, comma-separated)."""

@@ -5,15 +5,20 @@ The messages go through :func:`.messages.feed` into one :class:`.pipeline.Pipeli
 as in the live node, so the node and the replay give the same numbers. Outputs (written to a
 temporary directory renamed to ``DIR`` only when complete):
 
-* ``estimates.csv``: ``time,model,parameter,estimate,std_error,std_error_conventional``, one
-  row per sample and parameter of every ready model (time in s, the sample's stamp);
-* ``estimates_wide.csv``: ``time`` and, per parameter P of every model, ``P``, ``P_se`` and
-  ``P_se_conventional``: one row per sample, cells empty while a model is not ready (for
-  PlotJuggler's CSV loader and spreadsheets);
-* ``estimates.mcap``: every topic the node publishes per sample, byte for byte
-  (:func:`.outputs.sample_messages`: ``/rls_estimator/sample_stamp``,
-  ``/rls_estimator/M/estimates``, ``.../standard_errors``, ``.../standard_errors_conventional``),
-  log time = the sample's stamp;
+* ``estimates.csv``: ``time,model,parameter,estimate,std_error,std_error_conventional,
+  converged,lags``, one row per sample and parameter of every ready model (time in s, the
+  sample's stamp; ``converged`` the parameter's flag 1/0; ``lags`` the model's lag count of
+  Eq. 22, chosen per sample under ``estimator.lag_selection: auto``);
+* ``estimates_wide.csv``: ``time`` and, per parameter P of every model, ``P``, ``P_se``,
+  ``P_se_conventional`` and ``P_converged``, and per model M ``M_lags``: one row per sample,
+  cells empty while a model is not ready (for PlotJuggler's CSV loader and spreadsheets);
+* ``estimates.mcap``: every topic the node publishes. Per sample, byte for byte what the node
+  sends (:func:`.outputs.sample_messages`: ``/rls_estimator/sample_stamp``, and per model
+  ``/rls_estimator/M/estimates``, ``.../standard_errors``, ``.../standard_errors_conventional``,
+  ``.../converged``, decimated ``.../covariance`` and ``.../covariance_conventional``), log
+  time = the sample's stamp; and ``/diagnostics`` once per ``diagnostics_period`` of data time
+  from the node's own diagnostics policy (:class:`_DataClockDiagnostics`), which carries each
+  model's lag count and convergence flags;
 * ``M_estimates.png``: each parameter's history with corrected and conventional 2-sigma
   envelopes, and ``M_autocorrelation.png``: each model's residual autocorrelation.
 Two runs give bit-identical CSV and MCAP files. The progress bar is drawn only on a terminal.
@@ -32,7 +37,8 @@ from typing import Any, TextIO
 import numpy as np
 
 from .bags import read_inputs, typestore, write_replay
-from .config import PipelineConfig, node_config, pipeline_config
+from .config import NodeConfig, PipelineConfig, node_config, pipeline_config
+from .diagnostics import DiagnosticsPolicy, Snapshot, Status
 from .files import output_directory
 from .messages import NODE_NAME, Stamped, feed
 from .outputs import sample_messages
@@ -51,6 +57,9 @@ class ReplayResult:
     n_messages: int = 0
     wall_seconds: float = 0.0
     data_seconds: float = 0.0
+    # (stamp_ns, statuses) of the /diagnostics the node would have published, one per
+    # diagnostics period of data time (empty unless run_pipeline was given a NodeConfig).
+    diagnostics: list[tuple[int, list[Status]]] = field(default_factory=list)
 
     @property
     def speed(self) -> float:
@@ -73,11 +82,58 @@ def _progress(done: int, total: int, width: int = 40) -> None:
     sys.stderr.flush()
 
 
+class _DataClockDiagnostics:
+    """The node's ``/diagnostics`` in a replay: every ``diagnostics_period`` of data time (the
+    newest message stamp), one :class:`.diagnostics.Snapshot` of the pipeline into the same
+    :class:`.diagnostics.DiagnosticsPolicy` the node uses. Data time stands in for the node's
+    clock and steady time; a stream counts one publisher once its first message is read (a
+    bag has no DDS matching); latencies and the state file do not apply."""
+
+    def __init__(self, pipe: Pipeline, config: PipelineConfig, node_cfg: NodeConfig) -> None:
+        self.pipe, self.config, self.node_cfg = pipe, config, node_cfg
+        self.policy = DiagnosticsPolicy(NODE_NAME, window_s=node_cfg.diagnostics_window)
+        self.period_ns = max(1, round(node_cfg.diagnostics_period * 1e9))
+        self.previous_ns: int | None = None
+        self.newest_ns = 0
+        self.seen: set[str] = set()
+        self.records: list[tuple[int, list[Status]]] = []
+
+    def after(self, kind: str, stamp_ns: int) -> None:
+        """Called after each message: a snapshot when a period of data time has passed."""
+        self.seen.add(kind)
+        self.newest_ns = max(self.newest_ns, stamp_ns)
+        if self.previous_ns is None:
+            self.previous_ns = stamp_ns
+        elif self.newest_ns - self.previous_ns >= self.period_ns:
+            self.snapshot()
+
+    def snapshot(self) -> None:
+        pipe, node_cfg = self.pipe, self.node_cfg
+        elapsed = (self.newest_ns - (self.previous_ns or self.newest_ns)) * 1e-9
+        snap = Snapshot(
+            counters=pipe.counters(),
+            models=[(m.output, pipe.model_report(j)) for j, m in enumerate(self.config.models)],
+            required=tuple(pipe.required),
+            max_gap=self.config.inputs.max_gap,
+            now_ns=self.newest_ns,
+            elapsed_s=elapsed,
+            publishers={kind: int(kind in self.seen) for kind in node_cfg.topics},
+            topics=dict(node_cfg.topics),
+            reliable=node_cfg.reliable,
+            enabled=pipe.enabled,
+            state_file="replay: no state file",
+        )
+        self.records.append((self.newest_ns, self.policy.update(snap)))
+        self.previous_ns = self.newest_ns
+
+
 def run_pipeline(messages: Sequence[tuple[str, int, Stamped]], config: PipelineConfig, *, record: bool = True,
-                 progress: bool = False) -> ReplayResult:
+                 progress: bool = False, diagnostics: NodeConfig | None = None) -> ReplayResult:
     """Feed ``(kind, stamp, msg)`` messages through a fresh pipeline; keep every output.
     ``progress`` draws a bar on stderr when stderr is a terminal (never carriage-return
-    frames into a log file or a pipe)."""
+    frames into a log file or a pipe). With ``diagnostics`` (the node's settings), also keep
+    the node's ``/diagnostics`` statuses once per diagnostics period of data time, and once
+    at the end (:attr:`ReplayResult.diagnostics`)."""
     progress = progress and _is_terminal(sys.stderr)
     pipe = Pipeline(config, record=record)
     result = ReplayResult(pipe, n_messages=len(messages))
@@ -85,18 +141,24 @@ def run_pipeline(messages: Sequence[tuple[str, int, Stamped]], config: PipelineC
     step = max(1, total // 50)
     t0 = time.perf_counter()
     outs = result.outputs
+    diag = _DataClockDiagnostics(pipe, config, diagnostics) if diagnostics is not None else None
     # The loop allocates many small objects and no reference cycles: pausing the cyclic
     # garbage collector saves its repeated passes over the messages already read (about 6%).
     gc_was_enabled = gc.isenabled()
     gc.disable()
     try:
-        for i, (kind, _stamp, msg) in enumerate(messages):
+        for i, (kind, stamp, msg) in enumerate(messages):
             produced = feed(pipe, kind, msg)
             if produced:
                 outs.extend(produced)
+            if diag is not None:
+                diag.after(kind, stamp)
             if progress and (i % step == 0):
                 _progress(i, total)
         pipe.finish()
+        if diag is not None and messages:
+            diag.snapshot()
+            result.diagnostics = diag.records
     finally:
         if gc_was_enabled:
             gc.enable()
@@ -116,24 +178,63 @@ def output_records(pipe: Pipeline, outputs: Iterable[SampleOutput], frame_id: st
             for out in outputs for topic, msgtype, data in sample_messages(pipe, out, frame_id)]
 
 
+DIAGNOSTIC_ARRAY = "diagnostic_msgs/msg/DiagnosticArray"
+
+
+def diagnostics_records(diagnostics: Iterable[tuple[int, list[Status]]], store: Any) -> list[tuple[int, str, str, Any]]:
+    """``/diagnostics`` bag records (``rosbags`` messages of ``store``) of the statuses a
+    replay kept (:attr:`ReplayResult.diagnostics`), stamped with the data time."""
+    types = store.types
+    header, stamp_t = types["std_msgs/msg/Header"], types["builtin_interfaces/msg/Time"]
+    array_t, status_t = types[DIAGNOSTIC_ARRAY], types["diagnostic_msgs/msg/DiagnosticStatus"]
+    key_value = types["diagnostic_msgs/msg/KeyValue"]
+    records = []
+    for stamp_ns, statuses in diagnostics:
+        sec, nanosec = divmod(stamp_ns, 1_000_000_000)
+        msg = array_t(
+            header=header(stamp=stamp_t(sec=sec, nanosec=nanosec), frame_id=""),
+            status=[status_t(level=s.level, name=s.name, message=s.message, hardware_id=s.hardware_id,
+                             values=[key_value(key=k, value=v) for k, v in s.values]) for s in statuses],
+        )
+        records.append((stamp_ns, "/diagnostics", DIAGNOSTIC_ARRAY, msg))
+    return records
+
+
+def _stamp_text(stamp_ns: int) -> str:
+    return f"{stamp_ns // 10**9}.{stamp_ns % 10**9:09d}"
+
+
+CSV_COLUMNS = ("time", "model", "parameter", "estimate", "std_error", "std_error_conventional", "converged", "lags")
+
+
 def _write_csv(path: Path, pipe: Pipeline, outputs: Iterable[SampleOutput]) -> None:
+    """``estimates.csv``: :data:`CSV_COLUMNS`, one row per sample and parameter of every ready
+    model; ``converged`` is the parameter's flag (1/0), ``lags`` the model's lag count of Eq. 22
+    behind ``std_error`` (chosen per sample under ``estimator.lag_selection: auto``)."""
     with open(path, "w") as fh:
-        fh.write("time,model,parameter,estimate,std_error,std_error_conventional\n")
+        fh.write(",".join(CSV_COLUMNS) + "\n")
         for out in outputs:
-            t = f"{out.stamp_ns // 10**9}.{out.stamp_ns % 10**9:09d}"
-            published = zip(pipe.published(out), _names_of(pipe, out), strict=True)
-            for (name, _label, theta, se, se_conv), names in published:
-                for p, a, b, c in zip(names, theta, se, se_conv, strict=True):
-                    fh.write(f"{t},{name},{p},{float(a)!r},{float(b)!r},{float(c)!r}\n")
+            t = _stamp_text(out.stamp_ns)
+            published = zip(pipe.published(out), _names_of(pipe, out), _ready_models(pipe, out), strict=True)
+            for (name, _label, theta, se, se_conv), names, j in published:
+                lags = int(out.lags[j]) if out.lags is not None else ""
+                flags = out.converged[j, : len(names)]
+                for p, a, b, c, f in zip(names, theta, se, se_conv, flags, strict=True):
+                    fh.write(f"{t},{name},{p},{float(a)!r},{float(b)!r},{float(c)!r},{int(f)},{lags}\n")
 
 
-# Columns of the wide CSV per parameter P: P (estimate), P_se (corrected), P_se_conventional.
-WIDE_QUANTITIES = (("", "theta"), ("_se", "se"), ("_se_conventional", "se_conventional"))
+# Columns of the wide CSV per parameter P: P (estimate), P_se (corrected), P_se_conventional,
+# P_converged (1.0/0.0); and per model M, after its parameters, M_lags.
+WIDE_QUANTITIES = (("", "theta"), ("_se", "se"), ("_se_conventional", "se_conventional"), ("_converged", "converged"))
 
 
 def wide_columns(pipe: Pipeline) -> list[str]:
-    """The wide CSV's header: ``time`` then, per model and parameter, every quantity."""
-    return ["time"] + [f"{p}{suffix}" for names in pipe.parameter_names for p in names for suffix, _ in WIDE_QUANTITIES]
+    """The wide CSV's header: ``time`` then, per model, every quantity of each parameter and
+    the model's lag count."""
+    columns = ["time"]
+    for m, names in zip(pipe.models, pipe.parameter_names, strict=True):
+        columns += [f"{p}{suffix}" for p in names for suffix, _ in WIDE_QUANTITIES] + [f"{m.output}_lags"]
+    return columns
 
 
 def _write_wide_csv(path: Path, pipe: Pipeline, outputs: Iterable[SampleOutput]) -> None:
@@ -144,14 +245,19 @@ def _write_wide_csv(path: Path, pipe: Pipeline, outputs: Iterable[SampleOutput])
     with open(path, "w") as fh:
         fh.write(",".join(wide_columns(pipe)) + "\n")
         for out in outputs:
-            cells = [f"{out.stamp_ns // 10**9}.{out.stamp_ns % 10**9:09d}"]
-            arrays = [getattr(out, field) for _, field in WIDE_QUANTITIES]
+            cells = [_stamp_text(out.stamp_ns)]
+            arrays = [np.asarray(getattr(out, field), dtype=np.float64) for _, field in WIDE_QUANTITIES]
             for j, n in enumerate(sizes):
                 if out.ready[j]:
                     cells += [repr(float(a[j, i])) for i in range(n) for a in arrays]
+                    cells.append(str(int(out.lags[j])) if out.lags is not None else "")
                 else:
-                    cells += [""] * (n * len(arrays))
+                    cells += [""] * (n * len(arrays) + 1)
             fh.write(",".join(cells) + "\n")
+
+
+def _ready_models(pipe: Pipeline, out: SampleOutput) -> list[int]:
+    return [j for j in range(len(pipe.sizes)) if out.ready[j]]
 
 
 def _names_of(pipe: Pipeline, out: SampleOutput) -> list[tuple[str, ...]]:
@@ -241,11 +347,12 @@ def replay(bag: str | Path, params: dict[str, Any], out: str | Path, *, start: f
     topics = node_config(params).topics
     with output_directory(out, force=force, inputs=(bag, *inputs)) as tmp:
         messages, _t0 = read_inputs(bag, topics, strict=strict, start=start, end=end)
-        result = run_pipeline(messages, config, progress=progress)
+        result = run_pipeline(messages, config, progress=progress, diagnostics=node_config(params))
         _write_csv(tmp / "estimates.csv", result.pipeline, result.outputs)
         _write_wide_csv(tmp / "estimates_wide.csv", result.pipeline, result.outputs)
         store = typestore()
         records = output_records(result.pipeline, result.outputs, node_config(params).frame_id)
+        records += diagnostics_records(result.diagnostics, store)
         if records:
             write_replay(tmp / "estimates", records, store)
             (tmp / "estimates" / "estimates.mcap").rename(tmp / "estimates.mcap")

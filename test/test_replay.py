@@ -27,7 +27,8 @@ def test_replay_writes_identical_outputs_twice_and_matches_the_pipeline(tmp_path
         "CZ_estimates.png", "Cm_estimates.png", "CZ_autocorrelation.png", "Cm_autocorrelation.png"}
     with open(tmp_path / "r1" / "estimates.csv") as fh:
         rows = list(csv.DictReader(fh))
-    assert list(rows[0]) == ["time", "model", "parameter", "estimate", "std_error", "std_error_conventional"]
+    assert list(rows[0]) == ["time", "model", "parameter", "estimate", "std_error", "std_error_conventional",
+                             "converged", "lags"]
     # One row per sample and parameter of every ready model.
     n_rows = sum(int(sum(n for n, r in zip(r1.pipeline.sizes, o.ready, strict=True) if r)) for o in r1.outputs)
     assert len(rows) == n_rows
@@ -41,6 +42,10 @@ def test_replay_writes_identical_outputs_twice_and_matches_the_pipeline(tmp_path
             assert float(final[name]["estimate"]) == last.theta[j, i]
             assert float(final[name]["std_error"]) == last.se[j, i]
             assert float(final[name]["std_error_conventional"]) == last.se_conventional[j, i]
+            assert int(final[name]["converged"]) == int(last.converged[j, i])
+            assert int(final[name]["lags"]) == int(last.lags[j]) == again.pipeline.bank.lags_used[j]
+    # The bundled maneuver converges: the flags in the CSV switch on for every parameter.
+    assert {r["parameter"] for r in rows if r["converged"] == "1"} == {r["parameter"] for r in rows}
     topics = read_all(tmp_path / "r1" / "estimates.mcap")
     est = topics["/rls_estimator/CZ/estimates"]
     assert est[-1][1].layout.dim[0].label == "CZ_0,CZ_alpha,CZ_delta_e"
@@ -98,8 +103,10 @@ def test_the_wide_csv_holds_the_long_csv_one_row_per_sample(tmp_path):
     result = replay(BUNDLED, load_parameters_file("t2"), tmp_path / "r", progress=False, plots=False)
     lines = (tmp_path / "r" / "estimates_wide.csv").read_text().splitlines()
     header = lines[0].split(",")
-    names = [p for names in result.pipeline.parameter_names for p in names]
-    assert header == ["time"] + [f"{p}{q}" for p in names for q in ("", "_se", "_se_conventional")]
+    quantities = ("", "_se", "_se_conventional", "_converged")
+    assert header == ["time"] + [f"{p}{q}" for names, model in zip(result.pipeline.parameter_names, ("CZ", "Cm"),
+                                                                    strict=True)
+                                  for p in [*names, model] for q in (quantities if p != model else ("_lags",))]
     assert len(header) == len(set(header))
     rows = [line.split(",") for line in lines[1:]]
     assert len(rows) == len(result.outputs)
@@ -115,6 +122,10 @@ def test_the_wide_csv_holds_the_long_csv_one_row_per_sample(tmp_path):
             key = (r["time"], r["parameter"] + q)
             assert wide[key] == r[field]
             seen.add(key)
+        key = (r["time"], r["parameter"] + "_converged")
+        assert float(wide[key]) == int(r["converged"])
+        assert int(wide[(r["time"], r["model"] + "_lags")]) == int(r["lags"])
+        seen |= {key, (r["time"], r["model"] + "_lags")}
     # Every other cell is empty: exactly the samples where the model was not ready.
     assert all(cell == "" for key, cell in wide.items() if key not in seen)
     assert sum(cell == "" for cell in wide.values()) > 0
@@ -136,11 +147,60 @@ def test_the_replays_mcap_carries_every_topic_the_node_publishes_byte_for_byte(t
         got = [(ch.topic, sch.name, msg.log_time, msg.data)
                for sch, ch, msg in reader.iter_messages(log_time_order=False)]
     want_topics = {(f"/rls_estimator/{t}", m) for t, m in output_topics(["CZ", "Cm"])}
+    want_topics.add(("/diagnostics", "diagnostic_msgs/msg/DiagnosticArray"))
     assert {(t, s) for t, s, _, _ in got} == want_topics
     expected = [(f"/rls_estimator/{t}", m, out.stamp_ns, data)
                 for out in result.outputs for t, m, data in sample_messages(result.pipeline, out, "base_link")]
     key = lambda r: (r[2], r[0])  # noqa: E731 - the bag is ordered by log time, then topic rank
-    assert sorted(got, key=key) == sorted(expected, key=key)
+    assert sorted(r for r in got if r[0] != "/diagnostics") == sorted(expected)
+    assert sorted((r for r in got if r[0] != "/diagnostics"), key=key) == sorted(expected, key=key)
+
+
+def test_the_replays_diagnostics_report_lags_and_flags_once_per_period_of_data_time(tmp_path):
+    """/diagnostics in estimates.mcap: one array per diagnostics_period (1 s) of data time plus
+    one at the end, from the node's own policy; each model's status carries the lag count and
+    convergence flags of the newest sample produced before it (auto lags, so the count moves)."""
+    params = {**load_parameters_file("t2"), "estimator.lag_selection": "auto"}
+    replay(BUNDLED, params, tmp_path / "r", progress=False, plots=False)
+    topics = read_all(tmp_path / "r" / "estimates.mcap")
+    diag = topics["/diagnostics"]
+    messages, _ = read_inputs(BUNDLED)
+    span = (max(s for _, s, _ in messages) - messages[0][1]) * 1e-9
+    assert int(span) <= len(diag) <= int(span) + 1
+    assert [t for t, _ in diag] == sorted(t for t, _ in diag)
+    # Independently: feed the messages one by one; whenever the newest stamp is a period past
+    # the previous report, the newest sample so far is what the report must show.
+    from rls_uncertainty.messages import feed
+    from rls_uncertainty.pipeline import Pipeline
+
+    pipe = Pipeline(pipeline_config(params))
+    newest, due, previous, expected = None, None, None, []
+    for kind, stamp, msg in messages:
+        newest = (feed(pipe, kind, msg) or [newest])[-1]
+        due = stamp if due is None else max(due, stamp)
+        if previous is None:
+            previous = stamp
+        elif due - previous >= 10**9:
+            expected.append((due, newest))
+            previous = due
+    assert [t for t, _ in diag[:-1]] == [t for t, _ in expected]
+    checked = set()
+    for (_t, msg), (_, out) in zip(diag, expected, strict=False):
+        for status in msg.status:
+            values = {kv.key: kv.value for kv in status.values}
+            model = status.name.split()[-1]  # "rls_estimator: model CZ"
+            j = ("CZ", "Cm").index(model) if model in ("CZ", "Cm") else None
+            if j is None or out is None or not out.ready[j]:
+                continue
+            assert int(values["lags"]) == int(out.lags[j])
+            names = pipe.parameter_names[j]
+            flagged = {p for p, f in zip(names, out.converged[j], strict=False) if f}
+            assert set(filter(None, values["converged_parameters"].split(","))) == flagged
+            checked.add((model, values["lags"], values["converged"]))
+    # auto lags vary, and both the flag states were seen.
+    assert {m for m, _, _ in checked} == {"CZ", "Cm"}
+    assert len({lags for _, lags, _ in checked}) > 2
+    assert {c for _, _, c in checked} == {"True", "False"}
 
 
 def test_the_progress_bar_is_drawn_only_on_a_terminal(monkeypatch):
