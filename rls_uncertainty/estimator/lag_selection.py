@@ -157,44 +157,89 @@ def _usable(rho: np.ndarray) -> npt.NDArray[np.bool_]:
     return usable
 
 
-def flat_top_lags(R: npt.ArrayLike, n_samples: float, *, cap: int | None = None,
+def flat_top_lags(R: npt.ArrayLike, n_samples: float | npt.ArrayLike, *, cap: int | None = None,
                   lambda_diag: npt.ArrayLike | None = None, c: float = 2.0, K: int | None = None,
                   min_lags: int = 0, factor: int = 2) -> np.ndarray:
     """Politis (2003) / Politis & White (2004) flat-top rule: ``L = factor * m_hat``
     (``factor = 2`` is their ``M = 2 m_hat``); see the module docstring.
 
     Written for a per-sample call (about 15 numpy operations on ``(M, W)`` arrays whatever
-    ``M``): a lag ``i`` is significant where ``|R(i)| >= threshold R(0)``.
+    ``M``): a lag ``i`` is significant where ``|R(i)| >= threshold R(0)``. ``n_samples`` is
+    one count for every model, or an array of ``R``'s leading shape with each model's own
+    count (each model then gets exactly what a call with its count alone gives).
     """
     R = np.asarray(R, dtype=float)
     W = R.shape[-1]
-    n = float(n_samples)
+    if np.ndim(n_samples) > 0:
+        return _flat_top_per_model(R, np.asarray(n_samples, dtype=float), cap, lambda_diag, c, K, min_lags, factor)
+    n = float(n_samples)  # type: ignore[arg-type]  # (a scalar here)
     hi, lo = _limits(W, n, cap, min_lags)
     if n < 2 or W < 2:
         return np.full(R.shape[:-1], lo, dtype=np.int64)
     if K is None:
         K = max(5, math.ceil(math.sqrt(math.log10(n))))
-    thr = politis_threshold(n, c)
+    return _flat_top(R, politis_threshold(n, c), K, hi, lo, lambda_diag, factor)
+
+
+def _flat_top(R: np.ndarray, thr: float | np.ndarray, K: int, hi: int | np.ndarray, lo: int | np.ndarray,
+              lambda_diag: npt.ArrayLike | None, factor: int) -> np.ndarray:
+    """The rule with the threshold ``thr``, run length ``K`` and limits ``[lo, hi]``, each a
+    scalar or one value per model (``R``'s leading shape)."""
+    W = R.shape[-1]
+    per_model = np.ndim(thr) > 0
     # Usable models: R(0) > 0 and every R finite (a sum is NaN or Inf otherwise).
     ok = (R[..., 0] > 0.0) & np.isfinite(R.sum(axis=-1))
     if lambda_diag is None:
-        sig = np.abs(R[..., 1:]) >= thr * R[..., :1]  # (..., W-1): lags 1..W-1
+        sig = np.abs(R[..., 1:]) >= (thr[..., None] if per_model else thr) * R[..., :1]  # type: ignore[index]  # lags 1..W-1
+        hi_series = hi
     else:
         rho = correlations(R, lambda_diag)  # (..., P, W); NaN compares False (ignored)
-        sig = np.abs(rho[..., 1:]) >= thr
+        sig = np.abs(rho[..., 1:]) >= (thr[..., None, None] if per_model else thr)  # type: ignore[index]
+        hi_series = np.asarray(hi)[..., None] if per_model else hi  # per series (..., P)
     if W - 1 < K:  # no room for a run of K lags: the correlation may go on
-        L = np.full(sig.shape[:-1], hi, dtype=np.int64)
+        L = np.broadcast_to(np.asarray(hi_series, dtype=np.int64), sig.shape[:-1])
     else:
         # counts[m] = significant lags among m+1..m+K, m = 0..W-1-K
         csum = np.cumsum(sig, axis=-1)
         counts = csum[..., K - 1 :].copy()
         counts[..., 1:] -= csum[..., : W - 1 - K]
         run = counts == 0
-        L = np.where(run.any(axis=-1), factor * run.argmax(axis=-1), hi)
+        L = np.where(run.any(axis=-1), factor * run.argmax(axis=-1), hi_series)
     if lambda_diag is not None:
         L = L.max(axis=-1)  # the model's L protects each of its parameters
     L = np.where(ok, np.minimum(L, hi), lo)
     return np.maximum(L, lo).astype(np.int64)
+
+
+def _flat_top_per_model(R: np.ndarray, n: np.ndarray, cap: int | None, lambda_diag: npt.ArrayLike | None,
+                        c: float, K: int | None, min_lags: int, factor: int) -> np.ndarray:
+    """:func:`flat_top_lags` with one count per model: the threshold, run length and limits of
+    each distinct count are those of the scalar call (the same arithmetic), then one pass per
+    distinct run length (``K = 5`` for every count up to 1e25)."""
+    lead, W = R.shape[:-1], R.shape[-1]
+    if n.shape != lead:
+        raise ValueError(f"n_samples has shape {n.shape}, R has {lead} models")
+    counts, which = np.unique(n, return_inverse=True)
+    which = which.reshape(lead)
+    hi_c, lo_c, thr_c, K_c, small_c = [], [], [], [], []
+    for count in counts.tolist():
+        hi, lo = _limits(W, count, cap, min_lags)
+        small = count < 2 or W < 2
+        hi_c.append(hi)
+        lo_c.append(lo)
+        small_c.append(small)
+        thr_c.append(0.0 if small else politis_threshold(count, c))  # (small: replaced by lo)
+        K_c.append(5 if small else (max(5, math.ceil(math.sqrt(math.log10(count)))) if K is None else K))
+    hi_m, lo_m = np.array(hi_c, dtype=np.int64)[which], np.array(lo_c, dtype=np.int64)[which]
+    thr_m, K_m = np.array(thr_c)[which], np.array(K_c)[which]
+    out = lo_m.copy()  # the models with fewer than two samples (or one lag) keep lo
+    for run_length in sorted(set(K_c)):
+        L = _flat_top(R, thr_m, run_length, hi_m, lo_m, lambda_diag, factor)
+        chosen = K_m == run_length
+        out[chosen] = L[chosen]
+    small_m = np.array(small_c)[which]
+    out[small_m] = lo_m[small_m]
+    return out
 
 
 def andrews_lags(R: npt.ArrayLike, n_samples: float, *, cap: int | None = None,
