@@ -216,3 +216,27 @@ def test_command_line_lags_auto():
     assert parser.parse_args(["montecarlo", "--out", "o", "--lags", "auto"]).lags == "auto"
     assert parser.parse_args(["montecarlo", "--out", "o", "--lags", "7"]).lags == 7
     assert parser.parse_args(["simulate", "--lags", "auto"]).lags == "auto"
+    # The residual burn-in: replay overrides the parameter ('default' is its -1), simulate and
+    # montecarlo pass it to the bank (not given or 'default': the bank's, 50 with auto).
+    for given, param in ((["--burn-in", "20"], 20), (["--burn-in", "default"], -1), ([], None)):
+        params = cli._replay_params(parser.parse_args(["replay", "bag", "--out", "o", "--lags", "auto", *given]))
+        assert params.get("estimator.residual_burn_in") == param
+    for given, bank in ((["--burn-in", "0"], 0), (["--burn-in", "default"], None), ([], None)):
+        assert cli._bank_burn_in(parser.parse_args(["montecarlo", "--out", "o", *given]).burn_in) == bank
+        assert cli._bank_burn_in(parser.parse_args(["simulate", *given]).burn_in) == bank
+
+
+def test_monte_carlo_with_auto_lags_uses_the_default_burn_in(tmp_path):
+    """run_level with n_lags="auto" runs the bank's default residual burn-in (50 samples) unless
+    told otherwise; the estimates do not depend on it, the standard errors do, and the table
+    says which was used."""
+    from rls_uncertainty.montecarlo import run_level, write_outputs
+
+    default = run_level(0.0, 3, n_lags="auto")
+    paper = run_level(0.0, 3, n_lags="auto", residual_burn_in=0)
+    assert (default.residual_burn_in, paper.residual_burn_in) == (50, 0)
+    np.testing.assert_array_equal(default.estimates, paper.estimates)
+    assert not np.array_equal(default.se_corrected, paper.se_corrected)
+    assert run_level(0.0, 2).residual_burn_in == 0  # fixed lags: the paper
+    assert "Residual burn-in 50 samples" in write_outputs([default], tmp_path, figures=False)["md"].read_text()
+
