@@ -155,6 +155,12 @@ def test_flat_top_with_one_count_per_model_is_each_models_own_call():
         alone = [flat_top_lags(R[j], n[j], cap=cap, min_lags=lo, lambda_diag=None if lam is None else lam[j])
                  for j in range(M)]
         assert per_model.dtype == np.int64 and list(per_model) == [int(L) for L in alone]
+    R = geometric(0.7, 51)[None, :] * np.array([[1.0], [0.9], [1.1]])
+    R[1, 20:] += 0.05
+    n = np.array([120.0, 5000.0, 60.0])  # every count above the lags held, then one below
+    for counts in (n[:2], n):
+        assert list(flat_top_lags(R[: len(counts)], counts, cap=50)) == [
+            int(flat_top_lags(R[j], counts[j], cap=50)) for j in range(len(counts))]
     with pytest.raises(ValueError, match="n_samples has shape"):
         flat_top_lags(np.ones((3, 10)), np.full(2, 100.0))
 

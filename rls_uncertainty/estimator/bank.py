@@ -173,6 +173,8 @@ class EstimatorBank:
         self._burn = self.residual_burn_in > 0
         self._burn_end = np.full(m, _NEVER, dtype=np.int64)
         self._burn_masking = self._burn
+        self._burned_at: int | None = None  # the sample _burned_counts is of
+        self._burned_counts: FloatArray | None = None
         cap = GROWTH_START if held is None else held + 1
         self._lags = LagStorage(
             m, n, cap, all_lags=held is None, forgetting=self.forgetting, waiting=p0 is None,
@@ -236,6 +238,7 @@ class EstimatorBank:
         if self._burn:
             self._burn_end = np.where(self._ready, self._ready_at + self.residual_burn_in, _NEVER)
             self._burn_masking = int((self.k - self._burn_end).min()) < max(1, self._lags.cap - 1)
+            self._burned_at = None
         self._init.reset()
         self._covariances = self._chosen = None
 
@@ -472,18 +475,27 @@ class EstimatorBank:
         burn-in the sum runs over ``j > k0 + B`` only."""
         return np.broadcast_to(self._weight_totals(), (self.n_models,)).copy()
 
+    def _burned(self) -> FloatArray | None:
+        """Each model's samples after its burn-in (0 during it) as floats, or None while no
+        model is past it (always with ``B = 0``); computed once per sample."""
+        if not self._burn:
+            return None
+        if self._burned_at != self.k:
+            after = self.k - self._burn_end
+            self._burned_counts = np.maximum(after, 0).astype(float) if int(after.max()) > 0 else None
+            self._burned_at = self.k
+        return self._burned_counts
+
     def _weight_totals(self) -> float | FloatArray:
         """:attr:`n_R`: one float while no model is past its burn-in (always with ``B = 0``),
         else one per model."""
         n = self.n_noise if self._noise else self.n_eff
-        if not self._burn:
+        c = self._burned()
+        if c is None:
             return n
-        after = self.k - self._burn_end
-        if int(after.max()) <= 0:
-            return n
-        g, c = self.noise_forgetting, np.maximum(after, 1)
-        burned = c.astype(float) if g == 1.0 else -np.expm1(c * math.log(g)) / (1.0 - g)  # sum_(j > k0+B) g^(k-j)
-        totals: FloatArray = np.where(after > 0, burned, n)
+        g = self.noise_forgetting
+        burned = c if g == 1.0 else -np.expm1(c * math.log(g)) / (1.0 - g)  # sum_(j > k0+B) g^(k-j)
+        totals: FloatArray = np.where(c > 0.0, burned, n)
         return totals
 
     def residual_variance(self, j: int) -> float:
@@ -592,18 +604,15 @@ class EstimatorBank:
         else:
             gk = g**k
             n = (1.0 - gk) * (1.0 + g) / ((1.0 - g) * (1.0 + gk))
-        if not self._burn:
+        c = self._burned()
+        if c is None:
             return n
-        after = self.k - self._burn_end
-        if int(after.max()) <= 0:
-            return n
-        c = np.maximum(after, 1)
         if g == 1.0:
-            burned = c.astype(float)
+            burned = c
         else:
-            gc = np.power(g, c.astype(float))
+            gc = np.power(g, c)
             burned = (1.0 - gc) * (1.0 + g) / ((1.0 - g) * (1.0 + gc))
-        counts: FloatArray = np.where(after > 0, burned, n)
+        counts: FloatArray = np.where(c > 0.0, burned, n)
         return counts
 
     def _exact_fit(self) -> BoolArray:

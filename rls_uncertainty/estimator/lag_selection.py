@@ -213,33 +213,37 @@ def _flat_top(R: np.ndarray, thr: float | np.ndarray, K: int, hi: int | np.ndarr
 
 def _flat_top_per_model(R: np.ndarray, n: np.ndarray, cap: int | None, lambda_diag: npt.ArrayLike | None,
                         c: float, K: int | None, min_lags: int, factor: int) -> np.ndarray:
-    """:func:`flat_top_lags` with one count per model: the threshold, run length and limits of
-    each distinct count are those of the scalar call (the same arithmetic), then one pass per
-    distinct run length (``K = 5`` for every count up to 1e25)."""
+    """:func:`flat_top_lags` with one count per model: the threshold and limits of the scalar
+    call, evaluated elementwise (numpy's log10 and sqrt, as ``math``'s correctly rounded here),
+    then one pass per distinct run length (``K = 5`` for every count up to 1e25)."""
     lead, W = R.shape[:-1], R.shape[-1]
     if n.shape != lead:
         raise ValueError(f"n_samples has shape {n.shape}, R has {lead} models")
-    counts, which = np.unique(n, return_inverse=True)
-    which = which.reshape(lead)
-    hi_c, lo_c, thr_c, K_c, small_c = [], [], [], [], []
-    for count in counts.tolist():
-        hi, lo = _limits(W, count, cap, min_lags)
-        small = count < 2 or W < 2
-        hi_c.append(hi)
-        lo_c.append(lo)
-        small_c.append(small)
-        thr_c.append(0.0 if small else politis_threshold(count, c))  # (small: replaced by lo)
-        K_c.append(5 if small else (max(5, math.ceil(math.sqrt(math.log10(count)))) if K is None else K))
-    hi_m, lo_m = np.array(hi_c, dtype=np.int64)[which], np.array(lo_c, dtype=np.int64)[which]
-    thr_m, K_m = np.array(thr_c)[which], np.array(K_c)[which]
-    out = lo_m.copy()  # the models with fewer than two samples (or one lag) keep lo
-    for run_length in sorted(set(K_c)):
-        L = _flat_top(R, thr_m, run_length, hi_m, lo_m, lambda_diag, factor)
-        chosen = K_m == run_length
-        out[chosen] = L[chosen]
-    small_m = np.array(small_c)[which]
-    out[small_m] = lo_m[small_m]
-    return out
+    top, top_lo = _limits(W, W + 1.0, cap, min_lags)  # checks cap and min_lags; the limits without n
+    hi: int | np.ndarray
+    lo: int | np.ndarray
+    if W >= 2 and n.min() >= W + 1.0:  # (the usual case) more samples than lags held: the limits of W
+        small, hi, lo, count = None, top, top_lo, n
+    else:
+        small = n < 2.0 if W >= 2 else np.ones(lead, dtype=bool)
+        hi = np.maximum(np.minimum(np.floor(n) - 1.0, top), 0.0).astype(np.int64)
+        lo = np.minimum(int(min_lags), hi)
+        count = np.where(small, 2.0, n)  # (small: replaced by lo below)
+    log_count = np.log10(count)
+    thr = c * np.sqrt(log_count / count)
+    if K is not None or count.max() <= 1e25:  # K = max(5, ceil(sqrt(log10 n))) is 5 up to 1e25
+        L = _flat_top(R, thr, 5 if K is None else K, hi, lo, lambda_diag, factor)
+        return L if small is None else np.where(small, lo, L)
+    run_length = np.maximum(5, np.ceil(np.sqrt(log_count))).astype(np.int64)
+    lengths = np.unique(run_length)
+    if lengths.size == 1:
+        out = _flat_top(R, thr, int(lengths[0]), hi, lo, lambda_diag, factor)
+    else:
+        out = np.empty(lead, dtype=np.int64)
+        for length in lengths.tolist():
+            chosen = run_length == length
+            out[chosen] = _flat_top(R, thr, length, hi, lo, lambda_diag, factor)[chosen]
+    return out if small is None else np.where(small, lo, out)
 
 
 def andrews_lags(R: npt.ArrayLike, n_samples: float, *, cap: int | None = None,
