@@ -32,7 +32,8 @@ def _simulate(args: argparse.Namespace) -> int:
     record = add_noise(simulate_short_period(), args.noise / 100.0, np.random.default_rng(args.seed))
     t, data = reduce_short_period(record)
     models = list(T2_MODELS)
-    bank = EstimatorBank([len(m.regressors) for m in models], args.lags, args.window, args.forgetting)
+    bank = EstimatorBank([len(m.regressors) for m in models], args.lags, args.window, args.forgetting,
+                         residual_burn_in=_bank_burn_in(args.burn_in))
     z = np.empty(len(models))
     for k in range(t.size):
         rows = [data[m.output][0][k] for m in models]
@@ -42,9 +43,10 @@ def _simulate(args: argparse.Namespace) -> int:
     lags = "all" if args.lags is None else args.lags
     if args.lags == "auto":
         lags = "auto (" + ", ".join(f"{m.output} {L}" for m, L in zip(models, bank.lags_used, strict=True)) + ")"
+    burn = f", residual burn-in {bank.residual_burn_in} samples" if bank.residual_burn_in else ""
     print(
         f"T-2 short-period maneuver, {args.noise:g}% band-limited noise (seed {args.seed}), "
-        f"{t.size} samples at 50 Hz, {lags} lags, {args.window} window\n"
+        f"{t.size} samples at 50 Hz, {lags} lags, {args.window} window{burn}\n"
     )
     rows = []
     for j, m in enumerate(models):
@@ -60,6 +62,7 @@ def _simulate(args: argparse.Namespace) -> int:
 
 def _montecarlo(args: argparse.Namespace) -> int:
     """Table 3 of the paper: every noise level, ``--runs`` runs each, on every core."""
+    from .estimator.options import check_burn_in
     from .files import output_directory
     from .montecarlo import LEVELS, run_table3, write_outputs
 
@@ -67,8 +70,11 @@ def _montecarlo(args: argparse.Namespace) -> int:
     out = Path(args.out)
     # The output directory is checked before the runs and appears only when complete.
     with output_directory(out, force=args.force) as tmp:
-        print(f"Monte Carlo: {args.runs} runs x {len(levels)} levels, {args.lags} lags, {args.jobs or 'all'} processes")
-        results = run_table3(args.runs, levels, n_lags=args.lags, jobs=args.jobs)
+        burn_in = _bank_burn_in(args.burn_in)
+        shown = check_burn_in(burn_in, args.lags)
+        print(f"Monte Carlo: {args.runs} runs x {len(levels)} levels, {args.lags} lags, residual burn-in {shown}, "
+              f"{args.jobs or 'all'} processes")
+        results = run_table3(args.runs, levels, n_lags=args.lags, jobs=args.jobs, residual_burn_in=burn_in)
         paths = write_outputs(results, tmp, figures=not args.no_figures)
         table = paths["md"].read_text()
     print(table)
@@ -145,6 +151,8 @@ def _replay_params(args: argparse.Namespace) -> dict[str, Any]:
         params["estimator.lags"] = args.lags
     if args.max_lags is not None:
         params["estimator.max_lags"] = args.max_lags
+    if args.burn_in is not None:
+        params["estimator.residual_burn_in"] = args.burn_in
     if args.window:
         params["estimator.window"] = args.window
     if args.forgetting is not None:
@@ -210,6 +218,29 @@ def _lags(value: str) -> int | str | None:
     if n < 0:
         raise argparse.ArgumentTypeError(f"must be an integer >= 0, 'all' or 'auto', got {value!r}")
     return n
+
+
+def _burn_in(value: str) -> int:
+    """--burn-in: an integer >= 0, or 'default' (-1, estimator.residual_burn_in's default: 50 with
+    auto lags, 0 with fixed lags); the parameter's upper bound is checked with the others."""
+    if value == "default":
+        return -1
+    try:
+        n = int(value)
+    except ValueError:
+        n = -1
+    if n < 0:
+        raise argparse.ArgumentTypeError(f"must be an integer >= 0 or 'default', got {value!r}")
+    return n
+
+
+def _bank_burn_in(value: int | None) -> int | None:
+    """The bank's residual_burn_in for --burn-in (None, the default, for -1 or not given)."""
+    return None if value is None or value < 0 else value
+
+
+_BURN_IN_HELP = ("residual burn-in: samples after each model's initialization whose residuals are left out of the "
+                 "residual autocorrelation (Eq. 17), or 'default' (50 with --lags auto, 0 otherwise)")
 
 
 def _montecarlo_lags(value: str) -> int | str:
@@ -292,6 +323,7 @@ def build_parser() -> argparse.ArgumentParser:
     sim.add_argument("--noise", type=_real(0.0), default=20.0, help="band-limited noise, percent (default 20)")
     sim.add_argument("--seed", type=_integer(0), default=250, help="noise seed (default 250)")
     sim.add_argument("--lags", type=_lags, default=50, help="retained lags, 'all' or 'auto' (default 50)")
+    sim.add_argument("--burn-in", type=_burn_in, help=_BURN_IN_HELP)
     sim.add_argument("--window", choices=("truncated", "bartlett"), default="truncated")
     sim.add_argument("--forgetting", type=_real(0.0, low_open=True, high=1.0), default=1.0,
                      help="exponential forgetting factor in (0, 1] (default 1)")
@@ -303,6 +335,7 @@ def build_parser() -> argparse.ArgumentParser:
     mc.add_argument("--levels", type=_real(0.0), nargs="+", help="noise levels in percent (default 0 5 10 15 20)")
     mc.add_argument("--lags", type=_montecarlo_lags, default=50,
                     help="retained lags, or 'auto' (chosen per run and model, at most 50) (default 50)")
+    mc.add_argument("--burn-in", type=_burn_in, help=_BURN_IN_HELP)
     mc.add_argument("--jobs", type=_integer(1), default=None, help="processes (default: every core)")
     mc.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
     mc.add_argument("--force", action="store_true", help=_FORCE_HELP)
@@ -341,6 +374,10 @@ def build_parser() -> argparse.ArgumentParser:
     rp.add_argument("--lags", type=_replay_lags,
                     help="override estimator.lags (integer or 'all'), or 'auto' (estimator.lag_selection auto)")
     rp.add_argument("--max-lags", type=_integer(1), help="override estimator.max_lags (with auto)")
+    rp.add_argument("--burn-in", type=_burn_in,
+                    help="override estimator.residual_burn_in: samples after each model's initialization whose "
+                         "residuals are left out of the residual autocorrelation, or 'default' (-1: 50 with auto, "
+                         "0 with fixed lags)")
     rp.add_argument("--window", choices=("truncated", "bartlett"), help="override estimator.window")
     rp.add_argument("--forgetting", type=float, help="override estimator.forgetting")
     rp.add_argument("--models", nargs="+", help="override models.enabled (e.g. CZ Cm)")

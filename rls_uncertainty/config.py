@@ -24,6 +24,7 @@ from .convergence import ConvergenceConfig
 from .differentiation import DifferentiatorConfig
 from .errors import ConfigError
 from .estimator import RESIDUALS, WINDOWS, Residual, Window
+from .estimator.options import AUTO_BURN_IN, MAX_BURN_IN, check_burn_in
 from .surface_mixing import SURFACES, SurfaceMixing
 
 __all__ = [
@@ -255,6 +256,13 @@ PARAMETERS: tuple[ParamSpec, ...] = (
         "estimator.lags of that value)",
         1, 100000,
     ),
+    ParamSpec(
+        "estimator.residual_burn_in", -1,
+        "samples after each model's initialization whose residuals are left out of the residual autocorrelation "
+        f"(Eq. 17; the first residuals, while the estimate is still poor, inflate it); -1: {AUTO_BURN_IN} with "
+        "estimator.lag_selection auto, 0 (the paper) with fixed lags",
+        -1, MAX_BURN_IN,
+    ),
     ParamSpec("differentiator.window", 9, "angular-acceleration differentiator window, samples", 3, 201),
     ParamSpec("differentiator.order", 3, "local polynomial order of the differentiator", 1, 10),
     ParamSpec(
@@ -484,7 +492,9 @@ class EstimatorConfig:
     conventional covariance, Eq. 13), the lag ``window``, the exponential ``forgetting``
     factor (1 is the paper) and the ``residual`` used in Eqs. 16-17; ``lag_selection``
     ``"auto"`` chooses each model's lags up to ``max_lags`` from the data instead of
-    ``n_lags`` (``EstimatorBank(n_lags="auto", max_lags=...)``)."""
+    ``n_lags`` (``EstimatorBank(n_lags="auto", max_lags=...)``); ``residual_burn_in``: samples
+    after each model's initialization left out of ``R_k(i)`` (``None``, the parameter's -1:
+    50 with ``lag_selection`` auto, 0 otherwise; :attr:`bank_burn_in` is the value used)."""
 
     n_lags: int | None = 50
     window: Window = "truncated"
@@ -492,11 +502,17 @@ class EstimatorConfig:
     residual: Residual = "standardized"
     lag_selection: str = "fixed"
     max_lags: int = 50
+    residual_burn_in: int | None = None
 
     @property
     def bank_lags(self) -> int | str | None:
         """The bank's ``n_lags``: ``"auto"`` or the fixed lags."""
         return "auto" if self.lag_selection == "auto" else self.n_lags
+
+    @property
+    def bank_burn_in(self) -> int:
+        """The bank's ``residual_burn_in`` with the default resolved (50 with auto, else 0)."""
+        return check_burn_in(self.residual_burn_in, self.bank_lags)
 
     def __post_init__(self) -> None:
         lags = self.n_lags
@@ -517,6 +533,12 @@ class EstimatorConfig:
         m: object = self.max_lags  # (whatever the parameters held: checked here)
         if isinstance(m, bool) or not isinstance(m, Integral) or m < 1:
             raise ConfigError(f"estimator.max_lags must be an integer >= 1, got {m!r}")
+        b: object = self.residual_burn_in
+        if b is not None and (isinstance(b, bool) or not isinstance(b, Integral) or not 0 <= int(b) <= MAX_BURN_IN):
+            raise ConfigError(
+                f"estimator.residual_burn_in must be -1 (the default: {AUTO_BURN_IN} with lag_selection auto, 0 "
+                f"otherwise) or an integer in [0, {MAX_BURN_IN}], got {b!r}"
+            )
         if self.lag_selection == "auto" and self.window != "truncated":
             raise ConfigError(
                 "estimator.lag_selection auto needs estimator.window truncated (the rule chooses a "
@@ -654,7 +676,9 @@ class PipelineConfig:
             "window": e.window,
             "forgetting": e.forgetting,
             "residual": e.residual,
-        } | ({"n_lags": "auto", "max_lags": e.max_lags} if e.lag_selection == "auto" else {})
+        } | ({"n_lags": "auto", "max_lags": e.max_lags} if e.lag_selection == "auto" else {}) | (
+            {"residual_burn_in": e.bank_burn_in} if e.bank_burn_in else {}
+        )
 
 
 @dataclass(frozen=True)
@@ -695,6 +719,7 @@ def pipeline_config(params: dict[str, Any] | None = None) -> PipelineConfig:
             residual=v["estimator.residual"],
             lag_selection=v["estimator.lag_selection"],
             max_lags=v["estimator.max_lags"],
+            residual_burn_in=None if v["estimator.residual_burn_in"] < 0 else v["estimator.residual_burn_in"],
         ),
         differentiator=DifferentiatorConfig(**_section(v, "differentiator")),
         inputs=InputConfig(**_section(v, "inputs")),

@@ -250,7 +250,8 @@ class Pipeline:
     def _new_estimator(self) -> None:
         c = self.config.estimator
         self.bank = EstimatorBank(
-            self.sizes, c.bank_lags, c.window, c.forgetting, residual=c.residual, max_lags=c.max_lags
+            self.sizes, c.bank_lags, c.window, c.forgetting, residual=c.residual, max_lags=c.max_lags,
+            residual_burn_in=c.bank_burn_in,
         )
         self._X = np.zeros((len(self.sizes), self.bank.n_max))
         self._z = np.zeros(len(self.sizes))
@@ -655,8 +656,8 @@ class Pipeline:
         unreadable, not a valid state or was written with another configuration (every field is
         checked against this pipeline's configuration before anything is allocated)."""
         c, bank = self.config.estimator, self.bank
-        expect = {"sizes": list(self.sizes), "n_lags": c.n_lags, "window": c.window, "forgetting": c.forgetting,
-                  "residual": c.residual, "init_condition": bank.init_condition}
+        expect = {"sizes": list(self.sizes), "n_lags": c.bank_lags, "window": c.window, "forgetting": c.forgetting,
+                  "residual": c.residual, "init_condition": bank.init_condition, "residual_burn_in": c.bank_burn_in}
         state = load_state(path, self.config.fingerprint(), expect=expect)
         self.bank = state.bank
         self.bookkeeping.samples_used = state.samples_used

@@ -59,6 +59,9 @@ def test_models_are_configuration():
 @pytest.mark.parametrize("params,match", [
     ({"estimator.window": "hann"}, "estimator.window"),
     ({"estimator.lags": -2}, "estimator.lags"),
+    ({"estimator.residual_burn_in": -2}, "estimator.residual_burn_in"),
+    ({"estimator.residual_burn_in": 2.5}, "estimator.residual_burn_in"),
+    ({"estimator.residual_burn_in": 100001}, "estimator.residual_burn_in"),
     ({"rate": 0.0}, "rate"),
     ({"rate": "fast"}, "rate"),
     ({"models.enabled": ["CQ"]}, "unknown model"),
@@ -98,6 +101,7 @@ def test_every_parameter_reaches_its_nested_field():
         "estimator.residual": (("estimator", "residual"), "a_priori"),
         "estimator.lag_selection": (("estimator", "lag_selection"), "auto"),
         "estimator.max_lags": (("estimator", "max_lags"), 80),
+        "estimator.residual_burn_in": (("estimator", "residual_burn_in"), 20),
         "differentiator.window": (("differentiator", "window"), 11),
         "differentiator.order": (("differentiator", "order"), 2),
         "differentiator.lag": (("differentiator", "lag"), 5),
@@ -144,6 +148,7 @@ def test_every_parameter_reaches_its_nested_field():
         restored = dataclasses.replace(getattr(cfg, section), **{attr: getattr(getattr(default, section), attr)})
         assert dataclasses.replace(cfg, **{section: restored}) == default, name
     assert pipeline_config({"estimator.lags": -1}).estimator.n_lags is None
+    assert pipeline_config({"estimator.residual_burn_in": -1}).estimator.residual_burn_in is None
 
 
 def test_defaults_of_the_table_and_the_dataclasses_agree():
@@ -174,6 +179,9 @@ def test_estimator_choices_are_the_estimators_own():
     (lambda: EstimatorConfig(forgetting=0.0), "estimator.forgetting"),
     (lambda: EstimatorConfig(forgetting=1.5), "estimator.forgetting"),
     (lambda: EstimatorConfig(residual="raw"), "estimator.residual"),
+    (lambda: EstimatorConfig(residual_burn_in=-1), "estimator.residual_burn_in"),
+    (lambda: EstimatorConfig(residual_burn_in=True), "estimator.residual_burn_in"),
+    (lambda: EstimatorConfig(residual_burn_in=7.0), "estimator.residual_burn_in"),
     (lambda: InputConfig(max_gap=0.0), "inputs.max_gap"),
     (lambda: InputConfig(air_density=float("nan")), "inputs.air_density"),
     (lambda: InputConfig(buffer_duration=-1.0), "inputs.buffer_duration"),
@@ -209,6 +217,21 @@ def test_fingerprint_is_what_a_state_file_stores():
         "residual": "standardized",
     }
     assert pipeline_config({"inputs.max_gap": 0.5}).fingerprint() == pipeline_config({}).fingerprint()
+
+
+def test_residual_burn_in_defaults_by_lag_selection_and_enters_the_fingerprint_when_used():
+    """-1 (None): 50 samples with lag_selection auto, 0 (the paper's Eq. 17) with fixed lags;
+    the burn-in the bank uses is part of the fingerprint unless it is 0 (the layout of the
+    fixed-lag fingerprint stays)."""
+    fixed, auto = pipeline_config({}), pipeline_config({"estimator.lag_selection": "auto"})
+    assert (fixed.estimator.bank_burn_in, auto.estimator.bank_burn_in) == (0, 50)
+    assert "residual_burn_in" not in fixed.fingerprint() and auto.fingerprint()["residual_burn_in"] == 50
+    assert pipeline_config({"estimator.lag_selection": "auto", "estimator.residual_burn_in": 0}).fingerprint() == {
+        **{k: v for k, v in auto.fingerprint().items() if k != "residual_burn_in"}}
+    twenty = pipeline_config({"estimator.residual_burn_in": 20})
+    assert twenty.estimator.bank_burn_in == 20 and twenty.fingerprint()["residual_burn_in"] == 20
+    spec = {p.name: p for p in PARAMETERS}["estimator.residual_burn_in"]
+    assert spec.default == -1 and (spec.low, spec.high) == (-1, 100000) and "-1: 50" in spec.description
 
 
 def test_plausibility_defaults_lie_between_any_flight_and_absurd_values():

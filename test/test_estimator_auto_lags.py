@@ -17,12 +17,16 @@ from rls_uncertainty.estimator.reference import RecursiveReference, flat_top_lag
 @pytest.mark.parametrize("p0", [None, 100.0])
 @pytest.mark.parametrize("residual", ["standardized", "a_posteriori"])
 @pytest.mark.parametrize("forgetting", [1.0, 0.97])
-@pytest.mark.parametrize("max_lags, min_lags", [(5, 0), (50, 0), (8, 3)])
-def test_auto_bank_equals_the_reference(max_lags, min_lags, forgetting, residual, p0):
+@pytest.mark.parametrize(
+    "max_lags, min_lags, burn_in", [(5, 0, None), (50, 0, None), (8, 3, None), (5, 0, 0), (8, 3, 7)]
+)
+def test_auto_bank_equals_the_reference(max_lags, min_lags, burn_in, forgetting, residual, p0):
     """Theta, covariances, standard errors and the chosen lags of the bank equal the literal
-    Eqs. 15-22 with the literal flat-top rule of reference.py, at every sample."""
+    Eqs. 15-22 with the literal flat-top rule of reference.py, at every sample; with the
+    default residual burn-in (50 samples: the models initialize at 13 and 2, or 0 with a
+    prior), without one (the paper) and with 7."""
     X, Z = equivalence_problem(n=160)
-    options = dict(residual=residual, p0=p0, max_lags=max_lags, min_lags=min_lags)
+    options = dict(residual=residual, p0=p0, max_lags=max_lags, min_lags=min_lags, residual_burn_in=burn_in)
     bank = EstimatorBank((3, 2), "auto", "truncated", forgetting, **options)
     refs = [RecursiveReference(s, "auto", "truncated", forgetting, **options) for s in (3, 2)]
     chosen = set()
@@ -51,13 +55,18 @@ def test_reference_rule_is_the_vectorised_rule():
         assert flat_top_lag(list(R), n, cap, lo) == flat_top_lags(R, n, cap=cap, min_lags=lo), (W, n, cap, lo)
 
 
+@pytest.mark.parametrize("burn_in", [0, None])
 @pytest.mark.parametrize("forgetting", [1.0, 0.99])
-def test_auto_covariance_is_the_batch_formula_with_the_chosen_lags(forgetting):
+def test_auto_covariance_is_the_batch_formula_with_the_chosen_lags(forgetting, burn_in):
     """At every checked sample the covariance is Eq. 22 with L = lags_used on the residual
     history (noise-model residuals under forgetting), and lags_used is the rule applied to
-    autocorrelation()."""
+    autocorrelation(). With the default residual burn-in (50 samples with auto), after the
+    burn-in the history's first k0 + 50 residuals are zeroed and R rescaled to the weight
+    total of the rest (the batch prototype of validation/integration/table3_lags.py), and the
+    rule's n is the count (Kish's size under forgetting) of the samples after it."""
     X, z = wide_scale_problem()
-    est = RecursiveEstimator(4, "auto", forgetting=forgetting, max_lags=40)
+    est = RecursiveEstimator(4, "auto", forgetting=forgetting, max_lags=40, residual_burn_in=burn_in)
+    assert est._bank.residual_burn_in == (50 if burn_in is None else 0)
     g = est._bank.noise_forgetting
     full = RecursiveEstimator(4, forgetting=forgetting, noise_forgetting=g)  # whole history
     seen = set()
@@ -66,15 +75,23 @@ def test_auto_covariance_is_the_batch_formula_with_the_chosen_lags(forgetting):
         full.update(X[k], z[k])
         if k + 1 not in (30, 41, 42, 100, 250, 600):
             continue
+        end = int(est._bank.ready_at[0]) + est._bank.residual_burn_in  # the last left-out sample
+        c = k + 1 - end if burn_in is None and k + 1 > end else k + 1  # samples behind R
+        n = c if g == 1.0 else (1 - g**c) * (1 + g) / ((1 - g) * (1 + g**c))
+        assert est._bank.rule_samples[0] == pytest.approx(n, rel=1e-12)
         L = est.lags_used
         seen.add(L)
-        n = k + 1 if g == 1.0 else est._bank.rule_samples
-        assert L == flat_top_lags(est.autocorrelation(), n, cap=40)
+        assert L == flat_top_lags(est.autocorrelation(), est._bank.rule_samples[0], cap=40)
+        v = full.noise_residuals()
+        scale = 1.0
+        if c < k + 1:
+            v[:end] = 0.0
+            scale = np.sum(g ** np.arange(k + 1)) / np.sum(g ** np.arange(c))
         _, cov_conv, cov_corr = batch_estimate(
-            X[: k + 1], z[: k + 1], L, residuals=full.noise_residuals(), forgetting=forgetting, noise_forgetting=g
+            X[: k + 1], z[: k + 1], L, residuals=v, forgetting=forgetting, noise_forgetting=g
         )
-        rel_close(est.covariance("corrected", repair=False), cov_corr, 1e-9)
-        rel_close(est.covariance("conventional"), cov_conv, 1e-9)
+        rel_close(est.covariance("corrected", repair=False), cov_corr * scale, 1e-9)
+        rel_close(est.covariance("conventional"), cov_conv * scale, 1e-9)
     assert len(seen) >= 2, seen
 
 
@@ -112,6 +129,9 @@ def test_edge_cases_and_refusals():
             EstimatorBank((2,), "auto", **kwargs)
     with pytest.raises(ValueError, match="n_lags"):
         EstimatorBank((2,), "automatic")
+    # The residual burn-in defaults to 50 samples with auto, to the paper (0) with fixed lags.
+    assert [EstimatorBank((2,), n).residual_burn_in for n in ("auto", 5, 0, None)] == [50, 0, 0, 0]
+    assert EstimatorBank((2,), "auto", residual_burn_in=0).residual_burn_in == 0
     fixed = run(EstimatorBank((4,), 7), *(a[:, None] for a in wide_scale_problem()), stop=5)
     assert list(fixed.lags_used) == [4]
 
@@ -196,3 +216,27 @@ def test_command_line_lags_auto():
     assert parser.parse_args(["montecarlo", "--out", "o", "--lags", "auto"]).lags == "auto"
     assert parser.parse_args(["montecarlo", "--out", "o", "--lags", "7"]).lags == 7
     assert parser.parse_args(["simulate", "--lags", "auto"]).lags == "auto"
+    # The residual burn-in: replay overrides the parameter ('default' is its -1), simulate and
+    # montecarlo pass it to the bank (not given or 'default': the bank's, 50 with auto).
+    for given, param in ((["--burn-in", "20"], 20), (["--burn-in", "default"], -1), ([], None)):
+        params = cli._replay_params(parser.parse_args(["replay", "bag", "--out", "o", "--lags", "auto", *given]))
+        assert params.get("estimator.residual_burn_in") == param
+    for given, bank in ((["--burn-in", "0"], 0), (["--burn-in", "default"], None), ([], None)):
+        assert cli._bank_burn_in(parser.parse_args(["montecarlo", "--out", "o", *given]).burn_in) == bank
+        assert cli._bank_burn_in(parser.parse_args(["simulate", *given]).burn_in) == bank
+
+
+def test_monte_carlo_with_auto_lags_uses_the_default_burn_in(tmp_path):
+    """run_level with n_lags="auto" runs the bank's default residual burn-in (50 samples) unless
+    told otherwise; the estimates do not depend on it, the standard errors do, and the table
+    says which was used."""
+    from rls_uncertainty.montecarlo import run_level, write_outputs
+
+    default = run_level(0.0, 3, n_lags="auto")
+    paper = run_level(0.0, 3, n_lags="auto", residual_burn_in=0)
+    assert (default.residual_burn_in, paper.residual_burn_in) == (50, 0)
+    np.testing.assert_array_equal(default.estimates, paper.estimates)
+    assert not np.array_equal(default.se_corrected, paper.se_corrected)
+    assert run_level(0.0, 2).residual_burn_in == 0  # fixed lags: the paper
+    assert "Residual burn-in 50 samples" in write_outputs([default], tmp_path, figures=False)["md"].read_text()
+

@@ -230,6 +230,71 @@ def test_bank_equals_the_reference_for_every_option(window, n_lags, forgetting, 
         assert refs[0].ready_at > 12 and refs[1].ready_at <= 5
 
 
+BURN_IN_OPTIONS = [  # window, n_lags, forgetting, residual, p0, residual_burn_in, noise_forgetting
+    ("truncated", 5, 1.0, "standardized", None, 7, None),
+    ("truncated", 5, 1.0, "a_posteriori", 100.0, 1, None),
+    ("bartlett", 5, 0.97, "a_posteriori", None, 7, None),  # the noise model (f_R = 0.9958)
+    ("truncated", 5, 0.97, "a_priori", 100.0, 30, None),
+    ("truncated", 5, 0.97, "standardized", None, 7, 0.97),  # the estimator's own residuals
+    ("truncated", None, 1.0, "a_priori", None, 7, None),
+    ("bartlett", None, 0.97, "standardized", 100.0, 3, None),
+    ("truncated", 0, 0.97, "standardized", None, 4, None),
+    ("truncated", 0, 1.0, "a_posteriori", None, 60, None),
+]
+
+
+@pytest.mark.parametrize("window, n_lags, forgetting, residual, p0, burn_in, noise_forgetting", BURN_IN_OPTIONS)
+def test_bank_equals_the_reference_with_a_residual_burn_in(window, n_lags, forgetting, residual, p0, burn_in,
+                                                           noise_forgetting):
+    """With a residual burn-in the bank equals reference.py at every sample: the paper's R_k(i)
+    up to k0 + B, then R_k(i) of the samples after it (the models initialize at 13 and 2, or 0
+    with a prior); the fixed-lag window's memory and all lags, with and without forgetting."""
+    X, Z = equivalence_problem()
+    options = dict(residual=residual, p0=p0, residual_burn_in=burn_in, noise_forgetting=noise_forgetting)
+    bank = EstimatorBank((3, 2), n_lags, window, forgetting, **options)
+    refs = [RecursiveReference(s, n_lags, window, forgetting, **options) for s in (3, 2)]
+    for k in range(len(Z)):
+        bank.update(X[k], Z[k])
+        refs[0].update(X[k, 0], Z[k, 0])
+        refs[1].update(X[k, 1, :2], Z[k, 1])
+        assert_bank_equals_reference(bank, refs, k + 1)
+        after = [k + 1 - r.ready_at - burn_in if r.ready else 0 for r in refs]
+        expected = [r.n_B if a > 0 else r.n_R for r, a in zip(refs, after, strict=True)]
+        np.testing.assert_allclose(bank.n_R, expected, rtol=1e-12)
+    assert bank.residual_burn_in == burn_in and not (n_lags is not None and bank._burn_masking)
+
+
+@pytest.mark.parametrize("forgetting", [1.0, 0.99])
+def test_burn_in_covariance_is_the_batch_formula_on_the_residuals_after_it(forgetting):
+    """Independent of reference.py: after the burn-in the bank's covariances (40 lags, burn-in
+    50) are batch_estimate (Eqs. 8-11) on the recursive residual history with the residuals of
+    samples 1..k0+50 zeroed, rescaled from the weight total of all samples to that of the
+    samples after the burn-in (the prototype of validation/integration/table3_lags.py: N/n
+    when f = 1); during the burn-in they are the paper's."""
+    X, z = wide_scale_problem()
+    est = RecursiveEstimator(4, 40, forgetting=forgetting, residual_burn_in=50)
+    g = est._bank.noise_forgetting
+    full = RecursiveEstimator(4, forgetting=forgetting, noise_forgetting=g)  # the whole residual history
+    for k in range(len(z)):
+        est.update(X[k], z[k])
+        full.update(X[k], z[k])
+        if k + 1 not in (40, 54, 55, 56, 90, 300, 600):
+            continue
+        end = int(est._bank.ready_at[0]) + 50
+        v = full.noise_residuals()
+        w = g ** np.arange(k + 1)
+        scale = 1.0
+        if k + 1 > end:
+            v[:end] = 0.0
+            scale = w.sum() / w[: k + 1 - end].sum()
+        _, cov_conv, cov_corr = batch_estimate(
+            X[: k + 1], z[: k + 1], 40, residuals=v, forgetting=forgetting, noise_forgetting=g
+        )
+        rel_close(est.covariance("corrected", repair=False), cov_corr * scale, 1e-9)
+        rel_close(est.covariance("conventional"), cov_conv * scale, 1e-9)
+    assert est._bank.ready_at[0] == 4  # samples 54 (the last of the burn-in), 55, 56 checked
+
+
 @pytest.mark.parametrize("p0", [None, 100.0])
 def test_bank_equals_the_reference_where_the_truncated_window_is_repaired(p0):
     """The published (repaired) covariance and standard errors where the uniform window makes
@@ -335,6 +400,11 @@ def test_non_finite_input_is_rejected_and_leaves_state_untouched(bad):
         (dict(forgetting=1.5), "forgetting"),
         (dict(residual="both"), "residual"),
         (dict(p0=-1.0), "p0"),
+        (dict(residual_burn_in=-1), "residual_burn_in must be None"),
+        (dict(residual_burn_in=2.5), "residual_burn_in"),
+        (dict(residual_burn_in="50"), "residual_burn_in"),
+        (dict(residual_burn_in=True), "residual_burn_in"),
+        (dict(residual_burn_in=100_001), r"\[0, 100000\]"),
     ],
 )
 def test_invalid_configuration_is_refused_clearly(kwargs, match):

@@ -235,3 +235,52 @@ def test_published_covariance_is_repaired_to_the_nearest_positive_semidefinite_m
     for k in range(60):
         exact.update(X[k], X[k] @ [0.3, 1.0])  # no noise: an exact fit publishes zero
     assert np.all(exact.published_covariance() == 0.0) or np.min(np.diag(exact.covariance())) >= 0
+
+
+# --------------------------------------------------------------------------- residual burn-in
+@pytest.mark.parametrize("residual", ["a_priori", "a_posteriori", "standardized"])
+@pytest.mark.parametrize(
+    "n_lags, window, forgetting",
+    [(6, "truncated", 1.0), (None, "bartlett", 1.0), (6, "truncated", 0.95), (None, "truncated", 0.95),
+     (0, "truncated", 0.95)],
+)
+def test_burn_in_is_eq_17_on_the_residuals_after_it(n_lags, window, forgetting, residual):
+    """With residual_burn_in B, R_k(i) is the paper's up to k0 + B and afterwards
+    sum_{j > k0+B, j-i > k0+B} w_j v_j v_(j-i) / sum_{j > k0+B} w_j (w_j = f_R^(k-j); the noise
+    model's residuals under forgetting with lags); the covariances are then Eq. 8 (batch) with
+    the residuals of samples 1..k0+B zeroed and Eq. 10 normalised by the weight total of the
+    samples after them (the batch prototype of validation/integration/table3_lags.py)."""
+    X, z = problem()
+    B = 9
+    ref = RecursiveReference(3, n_lags, window, forgetting, residual=residual, residual_burn_in=B)
+    paper = RecursiveReference(3, n_lags, window, forgetting, residual=residual, residual_burn_in=0)
+    g = ref.g
+    for k in range(1, len(z) + 1):
+        ref.update(X[k - 1], z[k - 1])
+        paper.update(X[k - 1], z[k - 1])
+        if not ref.ready:
+            continue
+        end = ref.ready_at + B
+        if k <= end:
+            assert ref.R == paper.R
+            continue
+        w = weights(k, g)
+        v = np.array(ref.u if ref.noise else ref.v)
+        lags = range(ref.largest_lag() + 1)
+        R = [sum(w[j] * v[j] * v[j - i] for j in range(end + i, k)) / w[end:].sum() for i in lags]
+        np.testing.assert_allclose([ref.R[i] for i in lags], R, rtol=1e-9, atol=1e-15)
+    assert ref.ready_at == 3 and len(z) > ref.ready_at + B
+    v = np.array(ref.u if ref.noise else ref.v)
+    v[:end] = 0.0
+    scale = w.sum() / w[end:].sum()
+    _, conv, corr = batch_reference(X, z, n_lags, window, forgetting=forgetting, residuals=v, noise_forgetting=g)
+    rel_close(ref.covariance("corrected"), corr * scale, 1e-9)
+    rel_close(ref.covariance("conventional"), conv * scale, 1e-9)
+
+
+def test_burn_in_option_is_validated_and_defaults_by_lag_selection():
+    assert RecursiveReference(3, "auto").B == 50 and RecursiveReference(3, 50).B == RecursiveReference(3).B == 0
+    assert RecursiveReference(3, "auto", residual_burn_in=0).B == 0
+    for bad in (-1, 1.5, "10", 10**6):
+        with pytest.raises(ValueError, match="residual_burn_in"):
+            RecursiveReference(3, 5, residual_burn_in=bad)

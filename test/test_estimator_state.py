@@ -47,6 +47,38 @@ def test_snapshot_while_a_model_waits_for_initialization_continues_bit_identical
         np.testing.assert_array_equal(a.standard_errors_all(), b.standard_errors_all())
         np.testing.assert_array_equal(a.standard_errors_all("conventional"), b.standard_errors_all("conventional"))
 
+@pytest.mark.parametrize("forgetting", [1.0, 0.99])
+@pytest.mark.parametrize("n_lags", [None, 20, "auto"])
+def test_snapshot_during_and_after_the_residual_burn_in_continues_bit_identically(n_lags, forgetting):
+    """The burn-in is not stored: its end follows from ready_at, the weight totals from k. A
+    state taken while a model waits, during its burn-in, at its last sample, while the lag
+    window still reaches into it and long after continues bit for bit; the configuration
+    keeps the resolved burn-in."""
+    rng = np.random.default_rng(6)
+    n = 360
+    X = np.zeros((n, 2, 3))
+    X[:, 0, :2] = np.column_stack([np.ones(n), rng.standard_normal(n)])
+    X[:, 1] = np.column_stack([np.ones(n), rng.standard_normal(n), np.where(np.arange(n) < 60, 0.0, 1.0)])
+    Z = np.einsum("kmi,mi->km", X, [[1.0, 2.0, 0.0], [0.5, -1.0, 3.0]]) + 0.1 * rng.standard_normal((n, 2))
+    kw = dict(forgetting=forgetting, residual_burn_in=None if n_lags == "auto" else 30, max_lags=20)
+    B = EstimatorBank((2, 3), n_lags, **kw).residual_burn_in
+    assert B == (50 if n_lags == "auto" else 30)
+    for stop in (40, 80, 61 + B, 62 + B, 70 + B, 300):  # model 1 initializes at 61
+        a = EstimatorBank((2, 3), n_lags, **kw)
+        for k in range(stop):
+            a.update(X[k], Z[k])
+        b = EstimatorBank.from_state(a.state())
+        assert b.residual_burn_in == B and list(a.ready) == [True, stop > 60]
+        for k in range(stop, n):
+            a.update(X[k], Z[k])
+            b.update(X[k], Z[k])
+            np.testing.assert_array_equal(a.standard_errors_all(), b.standard_errors_all())
+            np.testing.assert_array_equal(a.lags_used, b.lags_used)
+        np.testing.assert_array_equal(a.autocorrelation(1), b.autocorrelation(1))
+        np.testing.assert_array_equal(a.standard_errors_all("conventional"), b.standard_errors_all("conventional"))
+        assert list(a.ready_at) == [2, 61]
+
+
 @pytest.mark.parametrize("n_lags", [5, None])
 def test_snapshot_is_a_copy(n_lags):
     X, z = wide_scale_problem()
@@ -63,9 +95,9 @@ def test_snapshot_is_a_copy(n_lags):
 def test_a_state_of_another_format_or_shape_is_refused_by_name():
     X, z = wide_scale_problem()
     saved = run(RecursiveEstimator(4, n_lags=5), X, z, stop=50).state()
-    assert saved["format"] == EstimatorBank.STATE_FORMAT == 5
-    old = dict(saved, format=4)  # before the noise model of issue 12 item 7
-    with pytest.raises(ValueError, match="state format 4"):
+    assert saved["format"] == EstimatorBank.STATE_FORMAT == 6
+    old = dict(saved, format=5)  # before the residual burn-in
+    with pytest.raises(ValueError, match="state format 5"):
         EstimatorBank.from_state(old)
     bad = dict(saved, arrays=dict(saved["arrays"], lag_sums=np.zeros((1, 5))))
     with pytest.raises(ValueError, match="lag_sums"):

@@ -204,6 +204,9 @@ def _with(meta, dotted, value):
     ("bank_config.forgetting", None, "field 'bank_config.forgetting' must be a number"),
     ("bank_config.init_condition", 0.5, "field 'bank_config.init_condition' must be > 1"),
     ("bank_config.residual", KeyError, "field 'bank_config.residual' is missing"),
+    ("bank_config.residual_burn_in", KeyError, "field 'bank_config.residual_burn_in' is missing"),
+    ("bank_config.residual_burn_in", -1, "field 'bank_config.residual_burn_in' must be in [0, 100000]"),
+    ("bank_config.residual_burn_in", 2.0, "field 'bank_config.residual_burn_in' must be an integer"),
     ("bank_counters.k", -1, "field 'bank_counters.k' must be in [0, "),
     ("bank_counters.k", True, "field 'bank_counters.k' must be an integer, found bool"),
     ("bank_counters.n_eff", 1e300, "field 'bank_counters.n_eff' must be in [0, k = 300]"),
@@ -397,6 +400,22 @@ def test_expect_must_match_the_files_bank_configuration(tmp_path):
             expect={"window": "bartlett"})
 
 
+def test_a_state_saved_with_another_residual_burn_in_is_refused(tmp_path):
+    """The lag sums of a state with a burn-in are those of the samples after it: a state saved
+    with one burn-in is refused under another (the pipeline expects its resolved value)."""
+    rng = np.random.default_rng(3)
+    bank = EstimatorBank((3, 2), 10, residual_burn_in=20)
+    for _ in range(100):
+        bank.update(rng.standard_normal((2, 3)), rng.standard_normal(2))
+    path = tmp_path / "burn.npz"
+    save_state(path, EstimatorState(bank, 100, np.zeros(2), np.ones(2)), FINGERPRINT)
+    refused(path, "field 'bank_config.residual_burn_in' is 20, the configuration has 0",
+            expect={"n_lags": 10, "residual_burn_in": 0})
+    state = load_state(path, FINGERPRINT, expect={"n_lags": 10, "residual_burn_in": 20})
+    assert state.bank.residual_burn_in == 20
+    np.testing.assert_array_equal(state.bank.standard_errors_all(), bank.standard_errors_all())
+
+
 def test_big_endian_arrays_load_and_continue_identically(tmp_path):
     bank, _z = fed_bank()
     path = saved(tmp_path)
@@ -410,6 +429,7 @@ def test_big_endian_arrays_load_and_continue_identically(tmp_path):
 @pytest.mark.parametrize("kw,n", [
     (dict(n_lags=10), 5), (dict(n_lags=10), 300), (dict(n_lags=0), 50), (dict(n_lags=None), 40),
     (dict(n_lags=None), 200), (dict(n_lags=7, forgetting=0.98), 100), (dict(n_lags=5, window="bartlett"), 1),
+    (dict(n_lags="auto", max_lags=8), 120), (dict(n_lags=None, residual_burn_in=30), 100),
 ])
 def test_the_layout_table_is_the_estimators_state(kw, n):
     """state_layout() describes exactly what EstimatorBank.state() writes for the current

@@ -136,6 +136,35 @@ def test_rules_on_R_equal_literal_implementations_on_the_series(seed, rho):
     assert newey_west_lags(R, n, cap=10_000) == min(_literal_newey_west(h), W - 1)
 
 
+def test_flat_top_with_one_count_per_model_is_each_models_own_call():
+    """n_samples as an array (the bank's counts after a residual burn-in) gives every model
+    what the scalar call with its count gives: threshold, run length (K = 6 above 1e25) and the
+    limits n - 1 and min_lags, with and without the score series."""
+    rng = np.random.default_rng(0)
+    for _ in range(300):
+        M, W = int(rng.integers(1, 8)), int(rng.integers(1, 60))
+        R = 0.3 * rng.standard_normal((M, W)) + rng.uniform(0.3, 0.99, (M, 1)) ** np.arange(W)
+        R[:, 0] = np.abs(R[:, 0]) + 0.5
+        if rng.random() < 0.2:
+            R[0, 0] = 0.0
+        n = rng.choice([1.0, 1.5, 2.0, 7.0, 60.0, 500.0, 1e4, 1e26], M)
+        cap = int(rng.integers(1, 70))
+        lo = min(int(rng.integers(0, 5)), cap)
+        lam = rng.uniform(0.1, 1.0, (M, W, 3)) if rng.random() < 0.5 else None
+        per_model = flat_top_lags(R, n, cap=cap, min_lags=lo, lambda_diag=lam)
+        alone = [flat_top_lags(R[j], n[j], cap=cap, min_lags=lo, lambda_diag=None if lam is None else lam[j])
+                 for j in range(M)]
+        assert per_model.dtype == np.int64 and list(per_model) == [int(L) for L in alone]
+    R = geometric(0.7, 51)[None, :] * np.array([[1.0], [0.9], [1.1]])
+    R[1, 20:] += 0.05
+    n = np.array([120.0, 5000.0, 60.0])  # every count above the lags held, then one below
+    for counts in (n[:2], n):
+        assert list(flat_top_lags(R[: len(counts)], counts, cap=50)) == [
+            int(flat_top_lags(R[j], counts[j], cap=50)) for j in range(len(counts))]
+    with pytest.raises(ValueError, match="n_samples has shape"):
+        flat_top_lags(np.ones((3, 10)), np.full(2, 100.0))
+
+
 def test_score_correlations_follow_the_factorisation_of_eq_11():
     # One regressor column x, residual v: sum_j x_j x_(j-i) v_j v_(j-i) over sum x^2 v^2 is
     # rho(i) g(i) when v is independent of x; check the algebra on the defining sums.

@@ -395,6 +395,8 @@ def test_parameters_are_refused_with_reasons_and_changes_reset(tmp_path, tester)
         assert not r.successful
         (r,) = _set_parameters(tester, **{"estimator.forgetting": 1.5})
         assert not r.successful
+        (r,) = _set_parameters(tester, **{"estimator.residual_burn_in": -2})
+        assert not r.successful and "estimator.residual_burn_in" in r.reason
         (r,) = _set_parameters(tester, **{"topics.imu": "other_imu"})
         assert not r.successful and "read-only" in r.reason.lower()
         # The node only writes the state file it checked at start-up.

@@ -554,6 +554,26 @@ def test_state_file_resumes_and_refuses_other_configurations(tmp_path):
         other.load_state(path)
 
 
+@pytest.mark.parametrize("burn_in", [-1, 20])
+def test_state_file_with_auto_lags_and_a_residual_burn_in_resumes_and_refuses_another_burn_in(tmp_path, burn_in):
+    """With lag_selection auto (the bank's n_lags is "auto") a pipeline resumes its own state
+    file, and a state saved with one residual burn-in is refused under another (the default
+    -1 is 50 with auto)."""
+    params = {"estimator.lag_selection": "auto", "estimator.residual_burn_in": burn_in}
+    pipe = pitch_pipeline(**params)
+    assert pipe.bank.residual_burn_in == (50 if burn_in < 0 else burn_in)
+    Synthetic(pipe).run(0, 3000)
+    path = tmp_path / "state.npz"
+    pipe.save_state(path)
+    resumed = pitch_pipeline(**params)
+    resumed.load_state(path)
+    np.testing.assert_array_equal(resumed.bank.standard_errors_all(), pipe.bank.standard_errors_all())
+    for other_burn_in in (0, 7):
+        other = pitch_pipeline(**{**params, "estimator.residual_burn_in": other_burn_in})
+        with pytest.raises(StateFileError, match="another"):
+            other.load_state(path)
+
+
 def test_pipeline_imports_no_ros():
     import subprocess
 

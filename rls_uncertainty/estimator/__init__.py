@@ -76,14 +76,30 @@ evaluation of each sample, chooses every model's ``L`` by Politis' flat-top rule
 ``|R_k(i)/R_k(0)| < 2 sqrt(log10 k / k)``; ``max_lags`` when no such run fits), then evaluates
 Eq. 22 with the truncated window up to each model's ``L``. :attr:`.EstimatorBank.lags_used`
 gives the choice. ``window="bartlett"`` is refused with it (the rule picks a truncation point;
-the taper cannot let the anti-correlated lags of differentiated noise cancel). Table 3 Monte
-Carlo (250 runs x 5 levels): corrected SE / scatter 0.83-1.27, 24 of 25 cells in [0.8, 1.25]
-(50 lags 0.93-1.44, 22 of 25; all lags 0.94-1.53, 21 of 25); the miss is C_m_alpha at 0 %
-(1.27), from the residuals of the first ~50 samples after exact initialization, before the
-input starts; with ``residual="a_posteriori"`` all 25 cells are met (0.81-1.14). A long
+the taper cannot let the anti-correlated lags of differentiated noise cancel). A long
 correlation that first becomes significant can step a standard error (up to +30 % at one
 sample on the Twin Otter data, onto the value 50 lags had). Under forgetting the rule's sample
 count is Kish's effective size of the weights of ``R_k(i)``; that combination is not validated.
+
+Residual burn-in
+----------------
+``residual_burn_in=B`` leaves the residuals of the first ``B`` samples after each model's
+initialization at ``k0`` (and the initialization's own, samples ``1..k0``) out of ``R_k(i)``:
+until ``k0 + B`` it is the paper's, afterwards Eq. 17 on the samples after ``k0 + B`` (both
+``v_k`` and ``v_(k-i)``), divided by their count (weight total under forgetting), and the lag
+rule's ``n`` is that count (:mod:`.reference` defines it). ``None`` (default) is 50 with
+``n_lags="auto"`` and 0, the paper's Eq. 17 bit for bit, with fixed or all lags. Why: right
+after initialization the estimate is poor and its residuals large and correlated; Eq. 17
+keeps them for ever, and where the noise is small (Table 3 at 0 %) they inflate ``R_k(i)``
+and the corrected SE, the more so the more lags are kept. Table 3 Monte Carlo (250 runs x 5 levels,
+validation/integration/RESULTS.md): auto without burn-in 0.83-1.27, 24 of 25 cells in
+[0.8, 1.25] (the miss: C_m_alpha at 0 %, 1.27); auto with the default burn-in 0.83-1.20, all
+25; 50 lags 0.93-1.44 without (22 of 25) and 0.94-1.21 with a burn-in of 50 (all 25); all
+lags 0.94-1.53 (21 of 25). With ``residual="a_posteriori"`` auto meets all 25 cells without a
+burn-in (0.81-1.14). On the Twin Otter recordings the burn-in raises every auto SE by 3 %
+(the normalisation: the early residuals are small). Right after ``k0 + B`` ``R_k`` rests on a
+few samples and the covariance is as unsettled as right after initialization; a burn-in
+longer than a short record leaves ``R_k`` the paper's for most of it.
 """
 
 from ..errors import EstimatorNotReady, NonFiniteInput

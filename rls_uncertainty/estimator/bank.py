@@ -20,6 +20,11 @@ How the hot path differs from the reference, and why (each measured in
   antisymmetric rounding error grows like ``f^-k`` until the estimator diverges.
 * Eq. 17 is kept as the lag sums ``n_k R_k(i)`` and Eq. 21 one-sided (see
   :mod:`.lag_storage`); the sample histories are written once into a newest-first buffer.
+* The residual burn-in (``residual_burn_in`` ``B > 0``, :mod:`.reference`) is not stored:
+  each model's last left-out sample is ``k0 + B`` from ``ready_at``, the weight total of its
+  ``R_k(i)`` and the lag rule's sample count are closed forms of ``k - k0 - B``, and the
+  products reaching back into the burn-in are zeroed (``_burn_in``) only while some model's
+  lag window still reaches into it (``max_lags + 1`` samples after it; always with all lags).
 * An update whose every quantity (scaled regressors, output, ``D x``, innovation) is at most
   ``1e100`` in magnitude cannot make a finite state non-finite (its products with anything
   already in the state stay below ``1e254``, which rounding absorbs even next to the largest
@@ -31,6 +36,7 @@ How the hot path differs from the reference, and why (each measured in
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping, Sequence
 from typing import Any
 
@@ -44,7 +50,7 @@ from .lag_selection import flat_top_lags
 from .lag_storage import GROWTH_START, FloatArray, LagStorage
 from .lag_window import lag_weights
 from .numpy_compat import vecdot
-from .options import AUTO, check_kind, check_noise_forgetting, check_options, prior_diagonal
+from .options import AUTO, check_burn_in, check_kind, check_noise_forgetting, check_options, prior_diagonal
 
 __all__ = ["EstimatorBank"]
 
@@ -57,6 +63,7 @@ BoolArray = npt.NDArray[np.bool_]
 _SAFE = 1e100
 _SAFE_SQUARED = _SAFE * _SAFE
 _KIND_INDEX = {"corrected": 0, "conventional": 1}  # COVARIANCE_KINDS
+_NEVER = 2**62  # the burn-in end of a model that is not initialized (no sample reaches it)
 
 
 class EstimatorBank:
@@ -95,6 +102,13 @@ class EstimatorBank:
     max_lags, min_lags:
         With ``n_lags="auto"``: the most lags the rule may choose (the memory bound) and the
         fewest it uses (default 50 and 0); ignored otherwise.
+    residual_burn_in:
+        ``B``: once a model has had ``B`` samples after its initialization at ``k0``, its
+        ``R_k(i)`` is formed from the residuals of samples ``k0 + B + 1 .. k`` only (both
+        ``v_k`` and ``v_(k-i)``; the initialization's own residuals are left out too),
+        normalised by their weight total; until then it is the paper's. ``0`` is the paper's
+        Eq. 17; ``None`` (default) takes 50 with ``n_lags="auto"`` and 0 otherwise
+        (:func:`.options.check_burn_in`). Defined in :mod:`.reference`.
 
     The options are defined in :mod:`.reference`; the noise model in the package docstring.
     """
@@ -114,6 +128,7 @@ class EstimatorBank:
         noise_forgetting: float | None = None,
         max_lags: int = 50,
         min_lags: int = 0,
+        residual_burn_in: int | None = None,
     ) -> None:
         sizes = tuple(int(s) for s in sizes)
         if not sizes or min(sizes) < 1:
@@ -124,6 +139,7 @@ class EstimatorBank:
         # The largest lag held: n_lags, max_lags with auto, None (growing) for all lags.
         held = None if n_lags is None else (self.max_lags if self.auto else int(n_lags))
         g = check_noise_forgetting(noise_forgetting, forgetting, held)
+        self.residual_burn_in = check_burn_in(residual_burn_in, n_lags)  # B
         self.sizes = sizes
         self.n_models = m = len(sizes)
         self.n_max = n = max(sizes)
@@ -152,6 +168,13 @@ class EstimatorBank:
         self._ready = np.zeros(m, dtype=bool)
         self._ready_at = np.zeros(m, dtype=np.int64)
         self.repairs = np.zeros(m, dtype=np.int64)
+        # Residual burn-in: each model's last left-out sample k0 + B (_NEVER until initialized),
+        # and whether some model's lag window still reaches into its burn-in (see _apply).
+        self._burn = self.residual_burn_in > 0
+        self._burn_end = np.full(m, _NEVER, dtype=np.int64)
+        self._burn_masking = self._burn
+        self._burned_at: int | None = None  # the sample _burned_counts is of
+        self._burned_counts: FloatArray | None = None
         cap = GROWTH_START if held is None else held + 1
         self._lags = LagStorage(
             m, n, cap, all_lags=held is None, forgetting=self.forgetting, waiting=p0 is None,
@@ -212,6 +235,10 @@ class EstimatorBank:
         self._theta_scale = np.where(invalid, np.nan, self._inv_s)
         self._cov_scale = self._theta_scale[:, :, None] * self._theta_scale[:, None, :]
         self._se_scale = 2.0 * self._cov_scale.diagonal(0, 1, 2)  # see covariance.Covariances
+        if self._burn:
+            self._burn_end = np.where(self._ready, self._ready_at + self.residual_burn_in, _NEVER)
+            self._burn_masking = int((self.k - self._burn_end).min()) < max(1, self._lags.cap - 1)
+            self._burned_at = None
         self._init.reset()
         self._covariances = self._chosen = None
 
@@ -312,7 +339,10 @@ class EstimatorBank:
         if g != 1.0:
             sums *= g
         v_window = series[:, p : p + w]  # v_k, v_(k-1), ...
-        sums += np.multiply(v_window, v_window[:, :1], out=sums_tmp)
+        lagged = np.multiply(v_window, v_window[:, :1], out=sums_tmp)  # v_k v_(k-i)
+        if self._burn_masking:  # some model's window reaches into its burn-in
+            self._burn_in(sums, lagged, k, w)
+        sums += lagged
 
         # Eq. 21, one-sided: Lambda+_k(i) = f^2 Lambda+_(k-1)(i) + f^i x_k x_(k-i)'.
         m, n = self.n_models, self.n_max
@@ -344,6 +374,17 @@ class EstimatorBank:
             else:
                 lags.relocate(w)
         self._covariances = self._chosen = None
+
+    def _burn_in(self, sums: FloatArray, lagged: FloatArray, k: int, w: int) -> None:
+        """The residual burn-in at sample ``k`` (``w`` lags held): a model whose burn-in ended
+        at the previous sample starts its lag sums afresh, and the products with a partner
+        ``v_(k-i)`` of the burn-in (``k - i <= k0 + B``) are left out. Stops being called
+        once no model's window can reach into its burn-in (never with all lags)."""
+        after = k - self._burn_end  # samples since the burn-in ended (<= 0: in it, the paper's Eq. 17)
+        sums[after == 1] = 0.0
+        lagged[(np.arange(w) >= after[:, None]) & (after[:, None] > 0)] = 0.0
+        if int(after.min()) >= max(1, self._lags.cap - 1):  # every start done, no window reaches back
+            self._burn_masking = False
 
     def _residual(self, out: FloatArray, neg_e: FloatArray, d: FloatArray, root: FloatArray, f: float) -> None:
         """The residual of Eqs. 16-17 of the chosen kind, from ``-e_k`` and ``d_k`` (forgetting
@@ -428,21 +469,51 @@ class EstimatorBank:
         return self._theta * self._theta_scale
 
     @property
-    def n_R(self) -> float:
-        """The weight total of ``R_k(i)``: ``n^N_k = sum_j f_R^(k-j)`` with a noise model,
-        otherwise ``n_k = sum_j f^(k-j)``."""
-        return self.n_noise if self._noise else self.n_eff
+    def n_R(self) -> np.ndarray:
+        """The weight total of each model's ``R_k(i)``, ``(M,)``: ``n^N_k = sum_j f_R^(k-j)``
+        with a noise model, otherwise ``n_k = sum_j f^(k-j)``; after a model's residual
+        burn-in the sum runs over ``j > k0 + B`` only."""
+        return np.broadcast_to(self._weight_totals(), (self.n_models,)).copy()
+
+    def _burned(self) -> FloatArray | None:
+        """Each model's samples after its burn-in (0 during it) as floats, or None while no
+        model is past it (always with ``B = 0``); computed once per sample."""
+        if not self._burn:
+            return None
+        if self._burned_at != self.k:
+            after = self.k - self._burn_end
+            self._burned_counts = np.maximum(after, 0).astype(float) if int(after.max()) > 0 else None
+            self._burned_at = self.k
+        return self._burned_counts
+
+    def _weight_totals(self) -> float | FloatArray:
+        """:attr:`n_R`: one float while no model is past its burn-in (always with ``B = 0``),
+        else one per model."""
+        n = self.n_noise if self._noise else self.n_eff
+        c = self._burned()
+        if c is None:
+            return n
+        g = self.noise_forgetting
+        burned = c if g == 1.0 else -np.expm1(c * math.log(g)) / (1.0 - g)  # sum_(j > k0+B) g^(k-j)
+        totals: FloatArray = np.where(c > 0.0, burned, n)
+        return totals
 
     def residual_variance(self, j: int) -> float:
         """Fit-error variance (Eq. 16), i.e. ``R_k(0)`` (the noise model's under forgetting)."""
         self._require(j)
-        return float(self._lags.lag_sums[j, 0] / self.n_R)
+        return float(self._lags.lag_sums[j, 0] / self._weight_total(j))
 
     def autocorrelation(self, j: int) -> np.ndarray:
         """Residual autocorrelation ``R_k(i)``, ``i = 0..n_window-1`` (Eq. 17; under
-        forgetting that of the noise model's residuals, weighted ``f_R^(k-j)``)."""
+        forgetting that of the noise model's residuals, weighted ``f_R^(k-j)``; after the
+        residual burn-in from the samples after it)."""
         self._require(j)
-        return self._lags.lag_sums[j, : self.n_window] / self.n_R
+        R: FloatArray = self._lags.lag_sums[j, : self.n_window] / self._weight_total(j)
+        return R
+
+    def _weight_total(self, j: int) -> float:
+        totals = self._weight_totals()
+        return totals if isinstance(totals, float) else float(totals[j])
 
     def residuals(self, j: int) -> np.ndarray:
         """Stored residuals of the estimator, oldest first: the whole history with
@@ -486,7 +557,7 @@ class EstimatorBank:
                 largest: int = self.k - 1 if self.n_lags is None else self.n_lags  # type: ignore[assignment]
                 h = self._window_h if self._window_key == (largest, w) else self._half_window(largest, w)
             cov, repaired = self._evaluator(
-                self._D, self._D_diagonal, sums, h, products, 1.0 / self.n_R,
+                self._D, self._D_diagonal, sums, h, products, 1.0 / self._weight_totals(),
                 self._cov_scale, self._se_scale, self._exact_fit, self.sizes,
             )
             if repaired:
@@ -513,20 +584,36 @@ class EstimatorBank:
                 sums = self._lags.lag_sums[:, : self.n_window]
                 if not self._all_ready:
                     sums = np.where(self._ready[:, None], sums, 0.0)
-                chosen = flat_top_lags(sums, self.rule_samples, cap=self.max_lags, min_lags=self.min_lags)
+                chosen = flat_top_lags(sums, self._rule_samples(), cap=self.max_lags, min_lags=self.min_lags)
             self._chosen = chosen
         return chosen
 
     @property
-    def rule_samples(self) -> float:
-        """The sample count the lag rule uses: ``k``, or under forgetting Kish's effective size
-        ``(sum w)^2 / sum w^2`` of the weights ``w_j = g^(k-j)`` of ``R_k(i)`` (``g = f_R``),
-        ``(1 - g^k)(1 + g) / ((1 - g)(1 + g^k))``."""
+    def rule_samples(self) -> np.ndarray:
+        """The sample count the lag rule uses for each model, ``(M,)``: ``k``, or under
+        forgetting Kish's effective size ``(sum w)^2 / sum w^2`` of the weights ``w_j = g^(k-j)``
+        of ``R_k(i)`` (``g = f_R``), ``(1 - g^k)(1 + g) / ((1 - g)(1 + g^k))``; after a model's
+        residual burn-in the same with ``k - k0 - B`` samples."""
+        return np.broadcast_to(self._rule_samples(), (self.n_models,)).copy()
+
+    def _rule_samples(self) -> float | FloatArray:
+        """:attr:`rule_samples`: one float while no model is past its burn-in, else one per model."""
         g, k = self.noise_forgetting, self.k
         if g == 1.0:
-            return float(k)
-        gk = g**k
-        return (1.0 - gk) * (1.0 + g) / ((1.0 - g) * (1.0 + gk))
+            n = float(k)
+        else:
+            gk = g**k
+            n = (1.0 - gk) * (1.0 + g) / ((1.0 - g) * (1.0 + gk))
+        c = self._burned()
+        if c is None:
+            return n
+        if g == 1.0:
+            burned = c
+        else:
+            gc = np.power(g, c)
+            burned = (1.0 - gc) * (1.0 + g) / ((1.0 - g) * (1.0 + gc))
+        counts: FloatArray = np.where(c > 0.0, burned, n)
+        return counts
 
     def _exact_fit(self) -> BoolArray:
         """Models whose residual variance ``R_k(0)`` is at most 1e-12 of the mean square of
@@ -534,7 +621,7 @@ class EstimatorBank:
         f, k = self.forgetting, self.k
         output_square = vecdot(np.matmul(self._theta_row, self._lags.lag0)[:, 0], self._theta)
         n_square = k if f == 1.0 else (1.0 - f ** (2 * k)) / (1.0 - f * f)
-        return self._lags.lag_sums[:, 0] <= (covariance.EXACT_FIT * self.n_R / n_square) * output_square
+        return self._lags.lag_sums[:, 0] <= (covariance.EXACT_FIT * self._weight_totals() / n_square) * output_square
 
     def standard_errors_all(self, kind: str = "corrected") -> np.ndarray:
         """Standard errors of every model as an ``(M, n_max)`` array: the square roots of the

@@ -136,7 +136,7 @@ class CovarianceEvaluator:
         lag_sums: FloatArray,
         h: FloatArray,
         lag_products: FloatArray,
-        inv_n: float,
+        inv_n: float | FloatArray,
         scale: FloatArray,
         diagonal_scale: FloatArray,
         exact_fit: Callable[[], BoolArray],
@@ -146,11 +146,16 @@ class CovarianceEvaluator:
 
         ``D`` ``(M, n, n)`` (``D_diagonal`` its diagonal) and ``lag_products`` ``(M, n, w, n)``
         (``Lambda+_k(i)``) are in column-scaled units; ``lag_sums`` ``(M, w)`` is ``n_k R_k(i)`` and ``h`` the half
-        window of the ``w`` lags held; ``inv_n = 1 / n_k``; ``scale`` ``(M, n, n)`` takes
+        window of the ``w`` lags held; ``inv_n = 1 / n_k`` (or ``(M,)``, one per model: with a
+        residual burn-in each model's ``R_k(i)`` has its own weight total); ``scale`` ``(M, n, n)`` takes
         scaled units back to the regressors' (NaN outside the ready models' blocks) and
         ``diagonal_scale`` is ``2 diag(scale)`` ``(M, n)``; ``exact_fit()`` returns the models
         that fit exactly.
         """
+        if not isinstance(inv_n, float):  # one 1/n_k per model: folded into the scales (same products)
+            scale = scale * inv_n[:, None, None]
+            diagonal_scale = diagonal_scale * inv_n[:, None]
+            inv_n = 1.0
         hS = lag_sums * h  # n_k h_i R_k(i)
         N = np.matmul(hS[:, None, None, :], lag_products)[:, :, 0, :]  # n_k sum_i h_i R(i) Lambda+(i)
         DN = np.matmul(D, N)

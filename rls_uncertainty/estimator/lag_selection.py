@@ -157,44 +157,93 @@ def _usable(rho: np.ndarray) -> npt.NDArray[np.bool_]:
     return usable
 
 
-def flat_top_lags(R: npt.ArrayLike, n_samples: float, *, cap: int | None = None,
+def flat_top_lags(R: npt.ArrayLike, n_samples: float | npt.ArrayLike, *, cap: int | None = None,
                   lambda_diag: npt.ArrayLike | None = None, c: float = 2.0, K: int | None = None,
                   min_lags: int = 0, factor: int = 2) -> np.ndarray:
     """Politis (2003) / Politis & White (2004) flat-top rule: ``L = factor * m_hat``
     (``factor = 2`` is their ``M = 2 m_hat``); see the module docstring.
 
     Written for a per-sample call (about 15 numpy operations on ``(M, W)`` arrays whatever
-    ``M``): a lag ``i`` is significant where ``|R(i)| >= threshold R(0)``.
+    ``M``): a lag ``i`` is significant where ``|R(i)| >= threshold R(0)``. ``n_samples`` is
+    one count for every model, or an array of ``R``'s leading shape with each model's own
+    count (each model then gets exactly what a call with its count alone gives).
     """
     R = np.asarray(R, dtype=float)
     W = R.shape[-1]
-    n = float(n_samples)
+    if np.ndim(n_samples) > 0:
+        return _flat_top_per_model(R, np.asarray(n_samples, dtype=float), cap, lambda_diag, c, K, min_lags, factor)
+    n = float(n_samples)  # type: ignore[arg-type]  # (a scalar here)
     hi, lo = _limits(W, n, cap, min_lags)
     if n < 2 or W < 2:
         return np.full(R.shape[:-1], lo, dtype=np.int64)
     if K is None:
         K = max(5, math.ceil(math.sqrt(math.log10(n))))
-    thr = politis_threshold(n, c)
+    return _flat_top(R, politis_threshold(n, c), K, hi, lo, lambda_diag, factor)
+
+
+def _flat_top(R: np.ndarray, thr: float | np.ndarray, K: int, hi: int | np.ndarray, lo: int | np.ndarray,
+              lambda_diag: npt.ArrayLike | None, factor: int) -> np.ndarray:
+    """The rule with the threshold ``thr``, run length ``K`` and limits ``[lo, hi]``, each a
+    scalar or one value per model (``R``'s leading shape)."""
+    W = R.shape[-1]
+    per_model = np.ndim(thr) > 0
     # Usable models: R(0) > 0 and every R finite (a sum is NaN or Inf otherwise).
     ok = (R[..., 0] > 0.0) & np.isfinite(R.sum(axis=-1))
     if lambda_diag is None:
-        sig = np.abs(R[..., 1:]) >= thr * R[..., :1]  # (..., W-1): lags 1..W-1
+        sig = np.abs(R[..., 1:]) >= (thr[..., None] if per_model else thr) * R[..., :1]  # type: ignore[index]  # lags 1..W-1
+        hi_series = hi
     else:
         rho = correlations(R, lambda_diag)  # (..., P, W); NaN compares False (ignored)
-        sig = np.abs(rho[..., 1:]) >= thr
+        sig = np.abs(rho[..., 1:]) >= (thr[..., None, None] if per_model else thr)  # type: ignore[index]
+        hi_series = np.asarray(hi)[..., None] if per_model else hi  # per series (..., P)
     if W - 1 < K:  # no room for a run of K lags: the correlation may go on
-        L = np.full(sig.shape[:-1], hi, dtype=np.int64)
+        L = np.broadcast_to(np.asarray(hi_series, dtype=np.int64), sig.shape[:-1])
     else:
         # counts[m] = significant lags among m+1..m+K, m = 0..W-1-K
         csum = np.cumsum(sig, axis=-1)
         counts = csum[..., K - 1 :].copy()
         counts[..., 1:] -= csum[..., : W - 1 - K]
         run = counts == 0
-        L = np.where(run.any(axis=-1), factor * run.argmax(axis=-1), hi)
+        L = np.where(run.any(axis=-1), factor * run.argmax(axis=-1), hi_series)
     if lambda_diag is not None:
         L = L.max(axis=-1)  # the model's L protects each of its parameters
     L = np.where(ok, np.minimum(L, hi), lo)
     return np.maximum(L, lo).astype(np.int64)
+
+
+def _flat_top_per_model(R: np.ndarray, n: np.ndarray, cap: int | None, lambda_diag: npt.ArrayLike | None,
+                        c: float, K: int | None, min_lags: int, factor: int) -> np.ndarray:
+    """:func:`flat_top_lags` with one count per model: the threshold and limits of the scalar
+    call, evaluated elementwise (numpy's log10 and sqrt, as ``math``'s correctly rounded here),
+    then one pass per distinct run length (``K = 5`` for every count up to 1e25)."""
+    lead, W = R.shape[:-1], R.shape[-1]
+    if n.shape != lead:
+        raise ValueError(f"n_samples has shape {n.shape}, R has {lead} models")
+    top, top_lo = _limits(W, W + 1.0, cap, min_lags)  # checks cap and min_lags; the limits without n
+    hi: int | np.ndarray
+    lo: int | np.ndarray
+    if W >= 2 and n.min() >= W + 1.0:  # (the usual case) more samples than lags held: the limits of W
+        small, hi, lo, count = None, top, top_lo, n
+    else:
+        small = n < 2.0 if W >= 2 else np.ones(lead, dtype=bool)
+        hi = np.maximum(np.minimum(np.floor(n) - 1.0, top), 0.0).astype(np.int64)
+        lo = np.minimum(int(min_lags), hi)
+        count = np.where(small, 2.0, n)  # (small: replaced by lo below)
+    log_count = np.log10(count)
+    thr = c * np.sqrt(log_count / count)
+    if K is not None or count.max() <= 1e25:  # K = max(5, ceil(sqrt(log10 n))) is 5 up to 1e25
+        L = _flat_top(R, thr, 5 if K is None else K, hi, lo, lambda_diag, factor)
+        return L if small is None else np.where(small, lo, L)
+    run_length = np.maximum(5, np.ceil(np.sqrt(log_count))).astype(np.int64)
+    lengths = np.unique(run_length)
+    if lengths.size == 1:
+        out = _flat_top(R, thr, int(lengths[0]), hi, lo, lambda_diag, factor)
+    else:
+        out = np.empty(lead, dtype=np.int64)
+        for length in lengths.tolist():
+            chosen = run_length == length
+            out[chosen] = _flat_top(R, thr, length, hi, lo, lambda_diag, factor)[chosen]
+    return out if small is None else np.where(small, lo, out)
 
 
 def andrews_lags(R: npt.ArrayLike, n_samples: float, *, cap: int | None = None,

@@ -27,10 +27,17 @@ __all__ = [
     "default_noise_forgetting",
     "NOISE_MEMORY_LAGS",
     "prior_diagonal",
+    "AUTO_BURN_IN",
+    "MAX_BURN_IN",
+    "check_burn_in",
 ]
 
 # Default memory of the noise model under forgetting, in units of n_lags + 1 samples.
 NOISE_MEMORY_LAGS = 40.0
+# residual_burn_in: the default with n_lags="auto" (0, the paper, otherwise) and the largest
+# value accepted (samples).
+AUTO_BURN_IN = 50
+MAX_BURN_IN = 100_000
 
 Window = Literal["truncated", "bartlett"]
 Residual = Literal["standardized", "a_posteriori", "a_priori"]
@@ -107,6 +114,21 @@ def check_noise_forgetting(noise_forgetting: float | None, forgetting: float, n_
             f"noise_forgetting must be None or in [forgetting, 1] = [{forgetting}, 1], got {noise_forgetting!r}"
         )
     return g
+
+
+def check_burn_in(residual_burn_in: int | None, n_lags: int | str | None) -> int:
+    """The residual burn-in ``B`` for the option ``residual_burn_in`` (samples after a model's
+    initialization whose residuals are left out of ``R_k(i)``; see :mod:`.reference`):
+    ``None`` takes :data:`AUTO_BURN_IN` (50) with ``n_lags="auto"`` and 0 (the paper's Eq. 17)
+    otherwise; an integer must lie in ``[0, MAX_BURN_IN]``."""
+    if residual_burn_in is None:
+        return AUTO_BURN_IN if n_lags == AUTO else 0
+    if not (_is_count(residual_burn_in) and 0 <= residual_burn_in <= MAX_BURN_IN):
+        raise ValueError(
+            f"residual_burn_in must be None (the default: {AUTO_BURN_IN} with n_lags='auto', 0 otherwise) "
+            f"or an integer in [0, {MAX_BURN_IN}], got {residual_burn_in!r}"
+        )
+    return int(residual_burn_in)
 
 
 def prior_diagonal(p0: float | Sequence[float], n: int) -> np.ndarray:

@@ -57,6 +57,23 @@ What the paper leaves open is defined here, and the fast bank follows it:
   held, n - 1)]`` and is ``min_lags`` when ``R_k(0) <= 0`` (an exact fit) or before
   initialization. ``n`` is ``k``, or under forgetting Kish's effective size
   ``(sum w)^2 / sum w^2`` of the weights ``w_j = f_R^(k-j)`` of ``R_k(i)``.
+* **Residual burn-in** (``residual_burn_in`` ``B >= 0``; default ``50`` with
+  ``n_lags="auto"``, else 0). Right after a model's initialization at ``k0`` (``k0 = 0`` with a
+  prior) its estimate is still poor and its residuals are large and correlated; Eq. 17 keeps
+  them in ``R_k(i)`` for ever. With ``B > 0`` they are left out: for ``k <= k0 + B``,
+  ``R_k(i)`` is the paper's (above); from ``k = k0 + B + 1`` on it is Eq. 17 started afresh on
+  the residuals after the burn-in,
+  ``R_k(i) = sum_{j > k0+B, j-i > k0+B} w_j v_j v_(j-i) / n^B_k``,
+  ``n^B_k = sum_{j > k0+B} w_j`` (``k - k0 - B`` when ``f = 1``), recursively
+  ``n^B_k R_k(i) = f n^B_(k-1) R_(k-1)(i) + v_k v_(k-i)`` with the product left out while
+  ``k - i <= k0 + B``. Both ``v_k`` and its partner ``v_(k-i)`` must lie after the burn-in; the
+  initialization's own residuals (Eq. 7 of samples ``1..k0``) are left out too. Under
+  forgetting ``w_j = f_R^(k-j)`` and ``v`` are the noise model's (which initializes with the
+  estimator at ``k0``). ``D_k``, ``Lambda_k(i)`` and the lag window (``n_tau = k - 1`` with
+  all lags) are unchanged; the conventional covariance uses the same ``R_k(0)``. The lag
+  rule's ``n`` is the count ``k - k0 - B`` (Kish's size of those weights under forgetting).
+  ``B = 0`` is the paper. At ``k = k0 + B + 1``, ``R_k`` rests on one sample: the covariance
+  is as unsettled as right after initialization.
 * **Published covariance.** A corrected covariance with a negative diagonal entry is
   replaced by the nearest positive semi-definite matrix (:func:`.covariance.nearest_psd`),
   unless the model fits exactly (``R_k(0) <= 1e-12`` times the mean square of the model
@@ -76,7 +93,7 @@ import numpy.typing as npt
 from ..errors import EstimatorNotReady
 from .covariance import EXACT_FIT, nearest_psd
 from .lag_window import lag_weights
-from .options import check_kind, check_noise_forgetting, check_options, check_window, prior_diagonal
+from .options import check_burn_in, check_kind, check_noise_forgetting, check_options, check_window, prior_diagonal
 
 __all__ = ["batch_reference", "RecursiveReference", "flat_top_lag"]
 
@@ -146,7 +163,7 @@ class RecursiveReference:
 
     ``RecursiveReference(n, n_lags=None, window="truncated", forgetting=1.0, *,
     residual="standardized", p0=None, init_condition=1e8, noise_forgetting=None,
-    max_lags=50, min_lags=0)``, the arguments of :class:`~.bank.EstimatorBank` for one model of
+    max_lags=50, min_lags=0, residual_burn_in=None)``, the arguments of :class:`~.bank.EstimatorBank` for one model of
     ``n`` parameters.
     """
 
@@ -163,6 +180,7 @@ class RecursiveReference:
         noise_forgetting: float | None = None,
         max_lags: int = 50,
         min_lags: int = 0,
+        residual_burn_in: int | None = None,
     ) -> None:
         check_options(n_lags, window, forgetting, residual, init_condition, max_lags=max_lags, min_lags=min_lags)
         self.n, self.n_lags, self.window = n, n_lags, window
@@ -173,6 +191,8 @@ class RecursiveReference:
         self.held: int | None = None if n_lags is None else (max_lags if self.auto else n_lags)  # type: ignore[assignment]
         self.g = check_noise_forgetting(noise_forgetting, forgetting, self.held)  # f_R
         self.noise = self.g != self.f  # R(i) from the noise model
+        self.B = check_burn_in(residual_burn_in, n_lags)  # the residual burn-in
+        self.n_B = 0.0  # sum_(j > k0+B) f_R^(k-j) after the burn-in
         self.k = 0
         self.n_k = 0.0  # sum_j f^(k-j)
         self.n_R = 0.0  # sum_j f_R^(k-j) (equal to n_k without a noise model)
@@ -245,6 +265,17 @@ class RecursiveReference:
         else:
             n_R_prev = n_prev
         w = series[-1]
+        end = self.ready_at + self.B  # the last sample of the burn-in (B > 0)
+        if self.B > 0 and k > end:
+            # Eq. 17 on the residuals after the burn-in: afresh at k0 + B + 1, partners v_(k-i)
+            # of the burn-in left out, n^B_k = f_R n^B_(k-1) + 1
+            if k == end + 1:
+                self.R, self.n_B = {}, 0.0
+            n_B_prev, self.n_B = self.n_B, g * self.n_B + 1.0
+            for i in range(self.largest_lag() + 1):
+                partner = series[k - i - 1] if k - i > end else 0.0
+                self.R[i] = (g * n_B_prev / self.n_B) * self.R.get(i, 0.0) + w * partner / self.n_B
+            return
         for i in range(self.largest_lag() + 1):
             # Eq. 17 (Eq. 16 at i = 0), weighted: n_k R_k(i) = f n_(k-1) R_(k-1)(i) + v_k v_(k-i)
             # (f_R and u with a noise model)
@@ -293,6 +324,8 @@ class RecursiveReference:
         if not self.auto:
             return self.largest_lag()
         g, k = self.g, self.k
+        if self.B > 0 and self.ready and k > self.ready_at + self.B:
+            k -= self.ready_at + self.B  # the samples after the burn-in
         n = k if g == 1.0 else (sum(g**i for i in range(k)) ** 2 / sum(g ** (2 * i) for i in range(k)))
         R = [self.R[i] if self.ready else 0.0 for i in range(self.largest_lag() + 1)]  # not ready: as R(0) = 0
         return flat_top_lag(R, n, self.max_lags, self.min_lags)

@@ -23,8 +23,9 @@ __all__ = ["STATE_FORMAT", "capture", "restore"]
 # initialized, the y products only while one waits, residuals with their sign, D and theta
 # as separate arrays; 5: the noise model under forgetting (noise_forgetting; its dispersion,
 # estimate and residual history u, the f-weighted lag-0 moments while a model waits) and
-# n_lags="auto" with max_lags, min_lags.
-STATE_FORMAT = 5
+# n_lags="auto" with max_lags, min_lags; 6: residual_burn_in (with B > 0 the lag sums are
+# those of the samples after each model's burn-in, whose end k0 + B follows from ready_at).
+STATE_FORMAT = 6
 
 _BANK_ARRAYS = ("_inv_s", "_ready", "_ready_at", "repairs")
 
@@ -41,6 +42,7 @@ def capture(bank: EstimatorBank) -> dict[str, Any]:
         "noise_forgetting": bank.noise_forgetting,
         "max_lags": bank.max_lags,
         "min_lags": bank.min_lags,
+        "residual_burn_in": bank.residual_burn_in,
     }
     counters = {"k": bank.k, "n_eff": bank.n_eff, "n_noise": bank.n_noise, "cap": bank._lags.cap}
     n = bank.n_max

@@ -48,7 +48,7 @@ from ..errors import StateFileError
 from ..files import atomic_file
 from .bank import EstimatorBank
 from .lag_storage import GROWTH_START
-from .options import RESIDUALS, WINDOWS
+from .options import MAX_BURN_IN, RESIDUALS, WINDOWS
 
 __all__ = [
     "EstimatorState",
@@ -71,7 +71,7 @@ _GROWTH_START = GROWTH_START  # the lag capacity an all-lags bank starts with, d
 _META_KEYS = ("format", "fingerprint", "bank_config", "bank_counters", "samples_used", "zsum", "zsq")
 _BANK_CONFIG_KEYS = (
     "sizes", "n_lags", "window", "forgetting", "residual", "init_condition", "noise_forgetting", "max_lags",
-    "min_lags",
+    "min_lags", "residual_burn_in",
 )
 _COUNTER_KEYS = ("k", "n_eff", "n_noise", "cap")
 _F8, _I8, _B1 = np.dtype("<f8"), np.dtype("<i8"), np.dtype("|b1")
@@ -231,6 +231,7 @@ def _check_bank_config(raw: Any, expect: Mapping[str, Any] | None) -> dict[str, 
         _int(cfg["n_lags"], "bank_config.n_lags", 0, _MAX_LAGS)
     max_lags = _int(cfg["max_lags"], "bank_config.max_lags", 1, _MAX_LAGS)
     _int(cfg["min_lags"], "bank_config.min_lags", 0, max_lags)
+    _int(cfg["residual_burn_in"], "bank_config.residual_burn_in", 0, MAX_BURN_IN)
     f_noise = _number(cfg["noise_forgetting"], "bank_config.noise_forgetting")
     if not 0.0 < f_noise <= 1.0:
         raise _fail("bank_config.noise_forgetting", f"must be in (0, 1], found {f_noise}")
@@ -470,8 +471,8 @@ def load_state(
     another configuration than ``fingerprint``, or inconsistent (see the module docstring).
 
     ``expect``: the bank configuration the caller will continue with (any of ``sizes``,
-    ``n_lags``, ``window``, ``forgetting``, ``residual``, ``init_condition``); the file's must
-    be the same."""
+    ``n_lags``, ``window``, ``forgetting``, ``residual``, ``init_condition``,
+    ``residual_burn_in``, ...: the keys of ``bank_config``); the file's must be the same."""
     path = Path(path)
     try:
         return _load(path, fingerprint, expect)

@@ -3,7 +3,9 @@ msg_schemas/fti_msgs/mapping.yaml --out BAGS/totter_f1_0NN (017 and 014), then
 PYTHONPATH=$PWD python validation/integration/twin_otter_lags.py BAGS OUT.
 
 Issue 14 validation on the Twin Otter lateral recordings: replay (the package's replay())
-with estimator.lags 50, all, and lag_selection auto; chosen lags and corrected SEs at the end."""
+with estimator.lags 50, all, and lag_selection auto (its default residual burn-in of 50
+samples; "auto_burn0": burn-in 0, the paper's Eq. 17, as before the option existed); chosen
+lags and corrected SEs at the end."""
 
 import json
 import sys
@@ -20,6 +22,7 @@ for rec in ("totter_f1_017", "totter_f1_014"):
     base["aircraft"] = "twin_otter_" + rec.split("_", 1)[1]
     variants = {
         "auto": {"estimator.lag_selection": "auto"},
+        "auto_burn0": {"estimator.lag_selection": "auto", "estimator.residual_burn_in": 0},
         "50": {"estimator.lags": 50},
         "all": {"estimator.lags": -1},
         "auto100": {"estimator.lag_selection": "auto", "estimator.max_lags": 100},
