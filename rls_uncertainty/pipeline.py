@@ -232,6 +232,7 @@ class Pipeline:
         self._x_index = np.array([j * n_max + i for j, names in enumerate(rows) for i in range(len(names))],
                                  dtype=np.intp)
         self._real = np.arange(n_max) < np.array(self.sizes)[:, None]  # (M, n_max): not padding
+        self._real_square = self._real[:, :, None] & self._real[:, None, :]  # (M, n_max, n_max)
 
     @staticmethod
     def _required_streams(config: PipelineConfig) -> tuple[str, ...]:
@@ -494,17 +495,15 @@ class Pipeline:
         """``(2, M, n_max, n_max)``: corrected and conventional covariances of the ready models
         now, made exactly symmetric (``(C + C')/2``: the products leave rounding-level
         asymmetry), NaN elsewhere. Computed only on the samples that publish them."""
-        n = self.bank.n_max
-        cov = np.full((2, len(self.sizes), n, n), np.nan)
-        for j in np.flatnonzero(ready):
-            s = self.sizes[j]
-            for k, kind in enumerate(("corrected", "conventional")):
-                c = self.bank.covariance(int(j), kind)
-                if np.diag(c).min() < 0.0:
-                    # Only at an exact fit (the initialization sample), whose R(0) comes out
-                    # as a tiny negative number: zero, as its standard errors are.
-                    c = np.zeros_like(c)
-                cov[k, j, :s, :s] = 0.5 * (c + c.T)
+        c = self.bank.covariance_all()  # both kinds of every model at once
+        # A negative variance only at an exact fit (the initialization sample), whose R(0)
+        # comes out as a tiny negative number: zero, as its standard errors are.
+        smallest = np.minimum.reduce(c.diagonal(0, 2, 3), axis=2, where=self._real, initial=np.inf)
+        c[smallest < 0.0] = 0.0
+        cov = c + c.swapaxes(2, 3)
+        cov *= 0.5
+        # NaN off the ready models' blocks (padding, models not ready or withheld).
+        np.copyto(cov, np.nan, where=~(self._real_square & ready[:, None, None]))
         return cov
 
     def published(self, out: SampleOutput) -> Iterator[tuple[str, str, np.ndarray, np.ndarray, np.ndarray]]:

@@ -218,9 +218,10 @@ def _write_csv(path: Path, pipe: Pipeline, outputs: Iterable[SampleOutput]) -> N
             published = zip(pipe.published(out), _names_of(pipe, out), _ready_models(pipe, out), strict=True)
             for (name, _label, theta, se, se_conv), names, j in published:
                 lags = int(out.lags[j]) if out.lags is not None else ""
-                flags = out.converged[j, : len(names)]
-                for p, a, b, c, f in zip(names, theta, se, se_conv, flags, strict=True):
-                    fh.write(f"{t},{name},{p},{float(a)!r},{float(b)!r},{float(c)!r},{int(f)},{lags}\n")
+                flags = out.converged[j, : len(names)].tolist()
+                # (Python floats from tolist: the same repr as float() of each numpy element.)
+                for p, a, b, c, f in zip(names, theta.tolist(), se.tolist(), se_conv.tolist(), flags, strict=True):
+                    fh.write(f"{t},{name},{p},{a!r},{b!r},{c!r},{int(f)},{lags}\n")
 
 
 # Columns of the wide CSV per parameter P: P (estimate), P_se (corrected), P_se_conventional,
@@ -249,7 +250,8 @@ def _write_wide_csv(path: Path, pipe: Pipeline, outputs: Iterable[SampleOutput])
             arrays = [np.asarray(getattr(out, field), dtype=np.float64) for _, field in WIDE_QUANTITIES]
             for j, n in enumerate(sizes):
                 if out.ready[j]:
-                    cells += [repr(float(a[j, i])) for i in range(n) for a in arrays]
+                    rows = [a[j, :n].tolist() for a in arrays]  # Python floats: repr as float()
+                    cells += [repr(row[i]) for i in range(n) for row in rows]
                     cells.append(str(int(out.lags[j])) if out.lags is not None else "")
                 else:
                     cells += [""] * (n * len(arrays) + 1)

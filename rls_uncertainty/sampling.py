@@ -278,11 +278,8 @@ class Sampler:
         be due (:meth:`due`)."""
         counts = stream.counts
         counts.received += 1
-        if self.max_clock_ns:
-            clock = self.clock_ns
-            if clock and abs(stamp - clock) > self.max_clock_ns:
-                counts.rejected["far_from_clock"] += 1
-                return False
+        if self.max_clock_ns and self._far_from_clock(counts, stamp):
+            return False
         return self._slow(stream, stamp, None, reason)
 
     def add(self, stream: Stream, stamp: int, values: Values, finite: bool = True) -> bool:
@@ -292,11 +289,8 @@ class Sampler:
         has not reached the next grid point, the usual case."""
         counts = stream.counts
         counts.received += 1
-        if self.max_clock_ns:
-            clock = self.clock_ns
-            if clock and abs(stamp - clock) > self.max_clock_ns:
-                counts.rejected["far_from_clock"] += 1
-                return False
+        if self.max_clock_ns and self._far_from_clock(counts, stamp):  # (checked only when on)
+            return False
         if stream.slow or not finite:
             return self._slow(stream, stamp, values if finite else None, "non_finite")
         dt = stamp - counts.newest_ns  # type: ignore[operator]  # not slow: newest_ns is set (_update_slow)
@@ -325,6 +319,16 @@ class Sampler:
         frontier = self._frontier
         # The frontier is a needed stream that has messages, and next_ns is set once it is.
         return frontier is None or frontier.last >= self.next_ns  # type: ignore[operator]
+
+    def _far_from_clock(self, counts: StreamCounts, stamp: int) -> bool:
+        """Whether ``stamp`` lies more than ``max_clock_ns`` from the caller's clock (when it
+        is known): then the message is counted as ``far_from_clock``, and goes no further.
+        The one clock check of every received message (:meth:`add`, :meth:`reject_invalid`)."""
+        clock = self.clock_ns
+        if clock and abs(stamp - clock) > self.max_clock_ns:
+            counts.rejected["far_from_clock"] += 1
+            return True
+        return False
 
     def _interval(self, stream: Stream, dt: int) -> None:
         """An interval outside the reference band: recompute the reference (lower median of

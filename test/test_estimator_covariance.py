@@ -167,9 +167,10 @@ def test_an_exactly_fitted_model_has_zero_corrected_errors_without_repairs():
 @pytest.mark.parametrize("forgetting", [1.0, 0.99])
 @pytest.mark.parametrize("n_lags, window", [(None, "truncated"), (5, "truncated"), (20, "bartlett"), (0, "truncated")])
 def test_published_standard_errors_are_the_square_roots_of_the_covariance_diagonals(n_lags, window, forgetting):
-    """standard_errors_all, standard_errors(j) and covariance(j) are one computation: the
-    standard errors are exactly (bit for bit) sqrt(max(diag(covariance), 0)) for both kinds,
-    repaired covariances included, and the bank of six models equals its models alone."""
+    """standard_errors_all, standard_errors(j), covariance(j) and covariance_all() are one
+    computation: the standard errors are exactly (bit for bit) sqrt(max(diag(covariance), 0))
+    for both kinds, repaired covariances included, and the bank of six models equals its
+    models alone."""
     X, z = indefinite_problem(300)
     rng = np.random.default_rng(2)
     rows = np.zeros((300, 3, 3))
@@ -183,10 +184,13 @@ def test_published_standard_errors_are_the_square_roots_of_the_covariance_diagon
         bank.update(rows[k], Z[k])
         if k % 37 != 36:
             continue
-        for kind in ("corrected", "conventional"):
+        every = bank.covariance_all()
+        for i, kind in enumerate(("corrected", "conventional")):
             se_all = bank.standard_errors_all(kind)
             for j, s in enumerate(bank.sizes):
                 cov = bank.covariance(j, kind)
+                assert every[i, j, :s, :s].tobytes() == cov.tobytes()  # all at once: the same
+                assert np.isnan(every[i, j, s:]).all() and np.isnan(every[i, j, :, s:]).all()
                 expected = np.sqrt(np.maximum(np.diag(cov), 0.0))
                 assert se_all[j, :s].tobytes() == expected.tobytes()
                 assert bank.standard_errors(j, kind).tobytes() == expected.tobytes()

@@ -645,6 +645,12 @@ class EstimatorBank:
         self._require(j)
         return self._evaluate().matrix(_KIND_INDEX[kind], j, self.sizes[j], repair=repair)
 
+    def covariance_all(self) -> np.ndarray:
+        """:meth:`covariance` (repaired) of every model and both kinds at once, a new
+        ``(2, M, n_max, n_max)`` array: ``[0]`` corrected, ``[1]`` conventional; NaN outside
+        the :attr:`ready` models' blocks."""
+        return self._evaluate().published(self.sizes, self._ready)
+
     def standard_errors(self, j: int, kind: str = "corrected") -> np.ndarray:
         """Square roots of the covariance diagonal (never NaN: see :meth:`covariance`)."""
         check_kind(kind)

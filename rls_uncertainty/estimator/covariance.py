@@ -110,6 +110,20 @@ class Covariances:
                 return np.zeros((size, size))
         return self.matrices()[kind_index, j, :size, :size].copy()
 
+    def published(self, sizes: tuple[int, ...], ready: BoolArray) -> FloatArray:
+        """:meth:`matrix` with ``repair`` of every model and both kinds in one new array
+        ``(2, M, n_max, n_max)``, NaN outside the ``ready`` models' blocks (as
+        :meth:`matrices`): the corrected covariance of an exact fit is zero, that of a
+        repaired model its nearest positive semi-definite matrix."""
+        cov = self.matrices().copy()
+        if self.exact is not None:
+            for index in np.flatnonzero(self.exact & ready):
+                j = int(index)
+                cov[0, j, : sizes[j], : sizes[j]] = 0.0
+        for j, fixed in self.repaired.items():
+            cov[0, j, : sizes[j], : sizes[j]] = fixed
+        return cov
+
 
 def _diagonals(D: FloatArray, DN: FloatArray, DN0: FloatArray | None, hS0: FloatArray) -> FloatArray:
     """``diag(P)`` of both kinds, ``(2, M, n)``: ``diag(D N D) = sum_c (D N)_ac D_ac``."""
