@@ -22,7 +22,7 @@ setup(
         (f"share/{PACKAGE}/msg_schemas/fti_msgs/msg", glob("msg_schemas/fti_msgs/msg/*.msg")),
     ],
     # py.typed: the package ships its annotations (PEP 561) to mypy users of rls_uncertainty.
-    package_data={PACKAGE: ["py.typed"]},
+    package_data={PACKAGE: ["py.typed", "fastdds_player.xml"]},
     install_requires=["setuptools", "numpy", "scipy", "pyyaml"],
     zip_safe=True,
     maintainer="rls_uncertainty developers",

@@ -6,10 +6,11 @@ a node with ``use_sim_time`` follows the bag (rosbag2's player is not installabl
 ``--loop N`` plays the bag N times: stamps and ``/clock`` restart with every pass, as a looped
 ``ros2 bag play`` does.
 
-Reliable QoS by default, with flow control by acknowledgements: a topic never has more than
-``window`` messages that its reliable subscribers have not all acknowledged (the writer keeps
-exactly ``window`` messages, so nothing unacknowledged is ever overwritten, and a full history
-makes DDS ask for acknowledgements at once). After the last message the player waits until
+Reliable QoS by default, with flow control by acknowledgements (the player's writers ask for
+them every 50 ms: :data:`PLAYER_PROFILE`, a Fast DDS profile used unless the caller names
+one): a topic never has more than ``window`` messages that its reliable subscribers have not
+all acknowledged (the writer keeps exactly ``window`` messages, so nothing unacknowledged is
+ever overwritten). After the last message the player waits until
 every reliable subscriber acknowledged everything, or ``ack_timeout``, and says what was not
 delivered (exit status 1). What DDS lets a publisher know, and what it does not: an
 acknowledgement means the message is in every matched reliable subscriber's DDS queue (per
@@ -30,7 +31,8 @@ import os
 import subprocess
 import sys
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, MutableMapping, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Protocol
@@ -47,6 +49,31 @@ __all__ = ["play", "demo", "bundled_bag", "TopicStats", "DEFAULT_WINDOW"]
 # Messages per topic that may wait for acknowledgement: the estimator node's default input
 # queue depth (qos.depth), so a keep-last subscriber of that depth is never sent more at once.
 DEFAULT_WINDOW = 100
+
+
+# Fast DDS (the default RMW) sends a reliable writer's heartbeat, its request for
+# acknowledgements, every 3 s by default: flow control that waits for a window's
+# acknowledgements then waits up to 3 s per window, and a 200 Hz topic with a 100-message
+# window plays 2.5-5x slower than real time. The player's own writers take a 50 ms heartbeat
+# from this profile, shipped with the package.
+PLAYER_PROFILE = Path(__file__).with_name("fastdds_player.xml")
+_PROFILE_VARIABLES = ("FASTRTPS_DEFAULT_PROFILES_FILE", "FASTDDS_DEFAULT_PROFILES_FILE")
+
+
+@contextmanager
+def _player_writer_profile(env: MutableMapping[str, str] = os.environ) -> Iterator[bool]:
+    """While DDS starts (``rclpy.init`` and the first node), name :data:`PLAYER_PROFILE` as the
+    Fast DDS profile file, unless the caller already named one (then theirs stands, and this
+    yields False). The environment is restored afterwards, so processes started later (the
+    demo's node, or anything a test starts) never inherit it."""
+    if any(name in env for name in _PROFILE_VARIABLES):
+        yield False
+        return
+    env[_PROFILE_VARIABLES[0]] = str(PLAYER_PROFILE)
+    try:
+        yield True
+    finally:
+        env.pop(_PROFILE_VARIABLES[0], None)
 
 
 def _loopback_default() -> None:
@@ -276,8 +303,9 @@ def play(bag: str | Path, *, rate: float = 1.0, clock: bool = True, reliable: bo
             raise ConfigError(f"{name} must be a finite number of seconds >= 0, got {value!r}")
     import rclpy  # noqa: PLC0415
 
-    rclpy.init()
-    node = rclpy.create_node("rls_player")
+    with _player_writer_profile():
+        rclpy.init()
+        node = rclpy.create_node("rls_player")
     player = None
     try:
         player = _Publisher(node, Path(bag), clock=clock, reliable=reliable, window=window)
@@ -362,8 +390,9 @@ def demo(rate: float = 4.0, params_file: str = "t2") -> int:
              "-p", f"inputs.buffer_duration:={_REPLAY_BUFFER_S}"],
             stdout=node_log, stderr=subprocess.STDOUT, text=True,
         )
-    rclpy.init()
-    node = rclpy.create_node("rls_demo")
+    with _player_writer_profile():
+        rclpy.init()
+        node = rclpy.create_node("rls_demo")
     latest: dict[str, _ArrayMessage] = {}
     counts = {"samples": 0}
     qos = QoSProfile(depth=1000, reliability=QoSReliabilityPolicy.RELIABLE, history=QoSHistoryPolicy.KEEP_LAST)

@@ -201,3 +201,31 @@ def test_the_bundled_bag_holds_only_the_standard_inputs():
     with AnyReader([BUNDLED]) as reader:
         topics = {c.topic: c.msgtype for c in reader.connections}
     assert topics == {f"/{k}": t for k, t in MESSAGE_TYPES.items()}
+
+
+# ------------------------------------------------------------------ the player's writer profile
+def test_the_player_names_its_fast_heartbeat_profile_only_while_dds_starts_and_only_if_none_is_named():
+    """Fast DDS's writers ask for acknowledgements every 3 s by default, which made a
+    real-time play of the bundled bag take 30-73 s for 12 s of data. The player names its own
+    profile (a 50 ms heartbeat) while DDS starts, restores the environment, and never
+    replaces a profile file the caller named."""
+    import xml.etree.ElementTree as ET
+
+    from rls_uncertainty.player import PLAYER_PROFILE, _player_writer_profile
+
+    env: dict[str, str] = {"OTHER": "1"}
+    with _player_writer_profile(env) as used:
+        assert used and env["FASTRTPS_DEFAULT_PROFILES_FILE"] == str(PLAYER_PROFILE)
+    assert env == {"OTHER": "1"}  # nothing leaks into processes started later
+    for name in ("FASTRTPS_DEFAULT_PROFILES_FILE", "FASTDDS_DEFAULT_PROFILES_FILE"):
+        theirs = {name: "/site/profiles.xml"}
+        with _player_writer_profile(theirs) as used:
+            assert not used and theirs == {name: "/site/profiles.xml"}
+        assert theirs == {name: "/site/profiles.xml"}
+    ns = {"p": "http://www.eprosima.com/XMLSchemas/fastRTPS_Profiles"}
+    writer = ET.parse(PLAYER_PROFILE).getroot().find("p:publisher", ns)
+    assert writer is not None and writer.get("is_default_profile") == "true"
+    period = writer.find("p:times/p:heartbeatPeriod", ns)
+    assert int(period.find("p:sec", ns).text) + int(period.find("p:nanosec", ns).text) * 1e-9 == 0.05
+    # Installed with the package (setup.py package_data), next to player.py.
+    assert '"fastdds_player.xml"' in (ROOT / "setup.py").read_text()
