@@ -461,6 +461,26 @@ def s1_undelivered(ctx: Ctx, w: Watcher) -> None:
               f"matching: {second}", no_node=first, frozen=second)
 
 
+def s1_realtime(ctx: Ctx, w: Watcher) -> None:
+    """play --rate 1 (real time) of the 12 s bundled bag into the node (replay settings, /clock):
+    how long the player takes, and whether the node got everything."""
+    node = start_node(ctx, "1e_node", "-p", "use_sim_time:=true")
+    try:
+        if not w.wait_node(node):
+            say("1e", f"node did not come up: {last_lines(node.text())}")
+            return
+        n0 = w.samples
+        t0 = time.monotonic()
+        code, text = finish_player(w, start_play(ctx, "1e_play", str(ctx.bundled), "--rate", "1", "--wait", "1"), 300)
+        wall = time.monotonic() - t0
+        w.wait_processed(BUNDLED_COUNTS)
+        say("1e", f"play --rate 1 (12.0 s of data): player process {wall:.1f} s, exit {code}: "
+                  f"{last_lines(text, 1, 'published')}; {w.samples - n0} of {OFFLINE_SAMPLES} samples",
+            code=code, wall=round(wall, 1), samples=w.samples - n0)
+    finally:
+        node.stop()
+
+
 def s2_discovery(ctx: Ctx) -> None:
     code, grep = ctx.run(["grep", "-n", "-e", VAR, "-e", "_loopback_default()", "rls_uncertainty/node.py",
                           "rls_uncertainty/player.py"],
@@ -654,7 +674,7 @@ def s7() -> None:
 
 
 # ---------------------------------------------------------------------------------- main
-ORDER = ["2", "3b", "4a", "4b", "6", "1a", "1b", "1c", "1d", "3a", "5a", "5c", "5b", "7"]
+ORDER = ["2", "3b", "4a", "4b", "6", "1a", "1b", "1c", "1d", "1e", "3a", "5a", "5c", "5b", "7"]
 
 
 def main() -> int:
@@ -686,7 +706,7 @@ def main() -> int:
         need_bags = {"3a", "3b", "4a", "4b"} & set(wanted)
         b = bags(ctx) if need_bags else {}
         copy = copy_tree(ctx) if {"5a", "5b", "5c"} & set(wanted) else None
-        if {"1a", "1b", "1c", "1d", "3a"} & set(wanted):
+        if {"1a", "1b", "1c", "1d", "1e", "3a"} & set(wanted):
             import rclpy
 
             rclpy.init()
@@ -697,7 +717,7 @@ def main() -> int:
             t0 = time.monotonic()
             try:
                 {"1a": lambda: s1_looped(ctx, w), "1b": lambda: s1_loop3(ctx, w), "1c": lambda: s1_rate0(ctx, w),
-                 "1d": lambda: s1_undelivered(ctx, w), "2": lambda: s2_discovery(ctx),
+                 "1d": lambda: s1_undelivered(ctx, w), "1e": lambda: s1_realtime(ctx, w), "2": lambda: s2_discovery(ctx),
                  "3a": lambda: s3_window(ctx, w, b["drop_one_72s"]), "3b": lambda: s3_rate(ctx, b["rate_change"]),
                  "4a": lambda: s4_qbar(ctx, b["qbar0"]), "4b": lambda: s4_frame(ctx, b["frame"]),
                  "5a": lambda: s5_package_xml(ctx, copy), "5b": lambda: s5_colcon(ctx, copy),
