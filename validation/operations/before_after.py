@@ -502,8 +502,8 @@ def s3_window(ctx: Ctx, w: Watcher, bag: Path) -> None:
             return
         first = len(w.diags)
         code, text = finish_player(w, start_play(ctx, "3a_play", str(bag), "--rate", "1", "--wait", "1"), 240)
-        w.spin_until(lambda: False, 1.0)
-        diags = [d for d in w.diags[first:] if int(d["inputs"].get("imu.received", 0)) > 0]
+        played = time.monotonic()  # diagnostics after this see the player gone: not counted
+        diags = [d for d in w.diags[first:] if int(d["inputs"].get("imu.received", 0)) > 0 and d["wall"] <= played]
     finally:
         node.stop()
     if not diags:
@@ -518,17 +518,26 @@ def s3_window(ctx: Ctx, w: Watcher, bag: Path) -> None:
 
     rows = [row(d) for d in diags]
     (ctx.logs / "3a_diagnostics.json").write_text(json.dumps(rows, indent=1))
-    fresh = [r for r in rows if r["imu.age_s"] not in (None, "never received") and float(r["imu.age_s"]) < 0.9]
     names = {0: "OK", 1: "WARN", 2: "ERROR", 3: "STALE"}
-    warn = [r for r in fresh if r["level"] == 1]
-    end = fresh[-1] if fresh else rows[-1]
-    ok_again = next((r for r in fresh if warn and r["t"] > warn[0]["t"] and r["level"] == 0), None)
+    # The claim is about the "missing" warning: it must end once the window has passed. Other
+    # reasons (a node that falls behind the player on a loaded machine reports its inputs
+    # stale) are reported beside it, not mixed in.
+    missing = [r for r in rows if "missing" in r["message"]]
+    late = [r for r in rows if r["t"] >= 15.0]
+    late_missing = [r for r in late if "missing" in r["message"]]
+    late_ok = [r for r in late if r["level"] == 0]
+    other = sorted({re.sub(r"[\d.]+ s\)", "s)", part.strip()) for r in late if r["level"] != 0
+                    for part in r["message"].split(";") if "missing" not in part})
+    end = rows[-1]  # the last diagnostics while the player ran
     say("3a", f"one IMU message dropped at t=2.0 s, clean data to t=72 s (play --rate 1, node on /clock): "
-              f"first WARN t={warn[0]['t'] if warn else '-'} s ({warn[0]['message'] if warn else ''}); "
-              f"back to OK at t={ok_again['t'] if ok_again else 'never'}; at the end of the data (t={end['t']} s): "
-              f"{names.get(end['level'], end['level'])} '{end['message']}' (imu.missing {end['imu.missing']}); "
-              f"player: {last_lines(text, 1, 'published')}",
-        rows=len(rows), first_warn=warn[0] if warn else None, ok_again=ok_again, end=end)
+              f"'missing' warned from t={missing[0]['t'] if missing else '-'} to t={missing[-1]['t'] if missing else '-'} s "
+              f"({missing[0]['message'] if missing else 'never'}); diagnostics from t=15 s on: {len(late)}, "
+              f"{len(late_missing)} of them warn 'missing', {len(late_ok)} OK"
+              + (f", other warnings: {'; '.join(other)}" if other else "")
+              + f"; last while playing (t={end['t']} s): {names.get(end['level'], end['level'])} '{end['message']}' "
+              f"(imu.missing {end['imu.missing']}); player: {last_lines(text, 1, 'published')}",
+        rows=len(rows), first_missing=missing[0] if missing else None, last_missing=missing[-1] if missing else None,
+        late=len(late), late_missing=len(late_missing), late_ok=len(late_ok), end=end)
 
 
 def probe_replay(ctx: Ctx, bag: Path, name: str) -> dict:
