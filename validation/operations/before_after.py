@@ -24,6 +24,7 @@ qos.reliable:=true -p qos.depth:=10000 -p inputs.buffer_duration:=60.0``.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import os
 import re
@@ -31,7 +32,6 @@ import shutil
 import signal
 import subprocess
 import sys
-import threading
 import time
 import xml.etree.ElementTree as ET
 from pathlib import Path
@@ -79,7 +79,7 @@ class Ctx:
     def run(self, cmd, *, timeout: float = 300, log: str | None = None, env=None, cwd=None) -> tuple[int, str]:
         try:
             p = subprocess.run(cmd, cwd=cwd or self.tree, env=env or self.env, stdout=subprocess.PIPE,
-                               stderr=subprocess.STDOUT, timeout=timeout)
+                               stderr=subprocess.STDOUT, timeout=timeout, check=False)
             code, text = p.returncode, p.stdout.decode(errors="replace")
         except subprocess.TimeoutExpired as exc:
             code, text = "timeout", (exc.stdout or b"").decode(errors="replace") + f"\n(timed out after {timeout} s)"
@@ -342,7 +342,7 @@ def s1_looped(ctx: Ctx, w: Watcher) -> None:
                 continue
             n0 = w.samples
             used0 = int((w.diag or {}).get("samples", {}).get("samples_used", 0))
-            code, text = finish_player(w, start_play(ctx, f"1a_play{i}", str(ctx.bundled), "--rate", "4", "--wait", "1"), 120)
+            code, _text = finish_player(w, start_play(ctx, f"1a_play{i}", str(ctx.bundled), "--rate", "4", "--wait", "1"), 120)
             k = len(runs) + 1
             complete = w.wait_processed({kd: n * k for kd, n in BUNDLED_COUNTS.items()})
             used = int(w.diag["samples"]["samples_used"]) - used0 if w.diag else None
@@ -372,7 +372,7 @@ def s1_loop3(ctx: Ctx, w: Watcher) -> None:
         if bad:
             say("1b", f"play --loop 3: exit {code}: {bad}", code=code)
             return
-        complete = w.wait_processed({k: 3 * n for k, n in BUNDLED_COUNTS.items()})
+        w.wait_processed({k: 3 * n for k, n in BUNDLED_COUNTS.items()})
         say("1b", f"play --rate 0 --loop 3: exit {code}; {w.samples - n0} sample_stamp messages "
                   f"(3 x offline {OFFLINE_SAMPLES} = {3 * OFFLINE_SAMPLES}); node received {w.received()}; "
                   f"player: {last_lines(text, 1, 'published')}", code=code, samples=w.samples - n0)
@@ -403,7 +403,7 @@ def s1_rate0(ctx: Ctx, w: Watcher) -> None:
             expired = {k: w.diag["inputs"].get(f"{k}.expired") for k in KINDS} if w.diag else {}
             expired = {k: v for k, v in expired.items() if v not in (None, "0")}
             parts.append(f"{label}: {w.samples - n0} of {OFFLINE_SAMPLES} samples, received "
-                         + "/".join(str(rec[k]) for k in KINDS) + f" of 2400/600/600/1200/120"
+                         + "/".join(str(rec[k]) for k in KINDS) + " of 2400/600/600/1200/120"
                          + (f", expired {expired}" if expired else "") + f"; play exit {code}: "
                          + last_lines(text, 2, "published|NOT DELIVERED"))
             data[tag] = {"samples": w.samples - n0, "received": rec, "expired": expired, "code": code}
@@ -432,13 +432,13 @@ def s1_undelivered(ctx: Ctx, w: Watcher) -> None:
                 player = start_play(ctx, f"1d_frozen{attempt}", str(ctx.bundled), "--rate", "0", "--wait", "1",
                                     "--delay", "4", *opts)
                 seen = None
-                ok = w.spin_until(lambda: player.proc.poll() is not None or "subscription(s) matched" in player.text()
+                ok = w.spin_until(lambda p=player: p.proc.poll() is not None or "subscription(s) matched" in p.text()
                                   or w.player_publishers() == len(KINDS), 60)
                 if player.proc.poll() is None and ok:
                     if "subscription(s) matched" not in player.text():
                         # Old player: no such line. Its publishers are in the graph; it waits for one
                         # subscriber per topic, then --delay 4 s: give matching 1.5 s of those.
-                        w.spin_until(lambda: "subscription(s) matched" in player.text(), 1.5)
+                        w.spin_until(lambda p=player: "subscription(s) matched" in p.text(), 1.5)
                     seen = last_lines(player.text(), 1, "matched") or "publishers in the graph"
                     os.kill(node.proc.pid, signal.SIGSTOP)
                 try:
@@ -482,11 +482,11 @@ def s1_realtime(ctx: Ctx, w: Watcher) -> None:
 
 
 def s2_discovery(ctx: Ctx) -> None:
-    code, grep = ctx.run(["grep", "-n", "-e", VAR, "-e", "_loopback_default()", "rls_uncertainty/node.py",
+    _code, grep = ctx.run(["grep", "-n", "-e", VAR, "-e", "_loopback_default()", "rls_uncertainty/node.py",
                           "rls_uncertainty/player.py"],
                          log="2_grep.log")
     env = {k: v for k, v in ctx.env.items() if k != VAR}
-    code, text = ctx.run([PY, str(HERE / "probe.py"), "discovery", str(ctx.bundled)], env=env, timeout=120,
+    _code, text = ctx.run([PY, str(HERE / "probe.py"), "discovery", str(ctx.bundled)], env=env, timeout=120,
                          log="2_probe.log")
     seen = text.strip().splitlines()[-1] if text.strip() else text
     lines = "; ".join(" ".join(ln.split()) for ln in grep.splitlines()) or "(no match)"
@@ -633,7 +633,7 @@ def s5_flight(ctx: Ctx, copy: Path) -> None:
             or re.findall(r"^(flight recordings not found[^\n]*)", text, re.M)
         why = list(dict.fromkeys(w[:200] for w in why))[:2]
         out.append(f"{label}: exit {code}, {pytest_summary(text)}" + (f" ({' | '.join(why)})" if why else ""))
-    say("5c", f"test_flight_data.py in a copy without ../shared: " + " || ".join(out), results=out)
+    say("5c", "test_flight_data.py in a copy without ../shared: " + " || ".join(out), results=out)
 
 
 def s5_colcon(ctx: Ctx, copy: Path) -> None:
@@ -645,10 +645,10 @@ def s5_colcon(ctx: Ctx, copy: Path) -> None:
     for d in ("build", "install", "log"):
         shutil.rmtree(ws / d, ignore_errors=True)
     t0 = time.monotonic()
-    bcode, btext = ctx.run([colcon, "build", "--event-handlers", "console_direct-"], cwd=ws, env=env, timeout=600,
+    bcode, _btext = ctx.run([colcon, "build", "--event-handlers", "console_direct-"], cwd=ws, env=env, timeout=600,
                            log="5b_colcon_build.log")
     tests = [t for t in ("test/test_package_xml.py", "test/test_flight_data.py") if (copy / t).exists()]
-    tcode, ttext = ctx.run([colcon, "test", "--packages-select", "rls_uncertainty", "--return-code-on-test-failure",
+    tcode, _ttext = ctx.run([colcon, "test", "--packages-select", "rls_uncertainty", "--return-code-on-test-failure",
                             "--event-handlers", "console_direct-", "--pytest-args", *tests], cwd=ws, env=env,
                            timeout=600, log="5b_colcon_test.log")
     xml = ws / "build" / "rls_uncertainty" / "pytest.xml"
@@ -743,10 +743,8 @@ def main() -> int:
             rclpy.try_shutdown()
         for p in CHILDREN:
             if p.poll() is None:
-                try:
+                with contextlib.suppress(ProcessLookupError):
                     os.kill(p.pid, signal.SIGCONT)
-                except ProcessLookupError:
-                    pass
                 p.kill()
                 p.wait(10)
         total = round(time.monotonic() - t_all, 1)
@@ -759,7 +757,7 @@ def main() -> int:
 def git_head(tree: Path) -> str:
     try:
         return subprocess.run(["git", "-C", str(tree), "rev-parse", "--short", "HEAD"], capture_output=True,
-                              text=True, timeout=10).stdout.strip() or "no git"
+                              text=True, timeout=10, check=False).stdout.strip() or "no git"
     except (OSError, subprocess.TimeoutExpired):
         return "no git"
 

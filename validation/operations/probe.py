@@ -12,6 +12,7 @@ variable as the process has it at the moment DDS would start, then stops. No DDS
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import sys
@@ -56,18 +57,14 @@ def discovery(bag: str) -> None:
     from rls_uncertainty import node
 
     node.rclpy.init = probe("node main()")
-    try:
+    with contextlib.suppress(Stop):
         node.main([])
-    except Stop:
-        pass
     os.environ.pop(VAR, None)
     from rls_uncertainty import player
 
     rclpy.init = probe("play()")
-    try:
+    with contextlib.suppress(Stop):
         player.play(bag)
-    except Stop:
-        pass
     print(json.dumps(seen))
 
 
