@@ -107,6 +107,12 @@ class _DataClockDiagnostics:
         elif self.newest_ns - self.previous_ns >= self.period_ns:
             self.snapshot()
 
+    def finish(self) -> None:
+        """The end of the data: one more snapshot, unless data time has not moved since the
+        last one (a snapshot over zero elapsed time would divide message counts by zero)."""
+        if not self.records or self.previous_ns is None or self.newest_ns > self.previous_ns:
+            self.snapshot()
+
     def snapshot(self) -> None:
         pipe, node_cfg = self.pipe, self.node_cfg
         elapsed = (self.newest_ns - (self.previous_ns or self.newest_ns)) * 1e-9
@@ -157,7 +163,7 @@ def run_pipeline(messages: Sequence[tuple[str, int, Stamped]], config: PipelineC
                 _progress(i, total)
         pipe.finish()
         if diag is not None and messages:
-            diag.snapshot()
+            diag.finish()
             result.diagnostics = diag.records
     finally:
         if gc_was_enabled:

@@ -222,3 +222,29 @@ def test_the_progress_bar_is_drawn_only_on_a_terminal(monkeypatch):
     run_pipeline(messages, config, progress=True)
     frames = tty.getvalue()
     assert frames.count("\r") > 10 and frames.endswith("100%\n")
+
+
+def test_the_replays_diagnostics_never_divide_by_zero_elapsed_time():
+    """Messages whose stamps do not advance the data time after the last report (older
+    stamps at the end of a bag) get no report over zero elapsed time: every input rate in
+    every report is that of the data, never a count divided by a vanishing period."""
+    from rls_uncertainty.config import node_config
+
+    params = load_parameters_file("t2")
+    messages, _ = read_inputs(BUNDLED)
+    # Cut the bag at the message where the last 1 s report falls due (the same rule, written
+    # out here), then replay the first second's messages again: older stamps, no data time.
+    newest, previous, cut = None, None, 0
+    for i, (_kind, stamp, _msg) in enumerate(messages):
+        newest = stamp if newest is None else max(newest, stamp)
+        if previous is None:
+            previous = stamp
+        elif newest - previous >= 10**9:
+            previous, cut = newest, i
+    head = messages[: cut + 1]
+    tail = [m for m in messages if m[1] <= messages[0][1] + 10**9]
+    result = run_pipeline([*head, *tail], pipeline_config(params), diagnostics=node_config(params))
+    assert result.diagnostics[-1][0] == max(stamp for _, stamp, _ in head)
+    rates = [float(v) for _, statuses in result.diagnostics for s in statuses for k, v in s.values
+             if k.endswith(".rate_hz")]
+    assert rates and max(rates) < 1000  # the bag's fastest stream is 200 Hz
