@@ -130,6 +130,15 @@ def _pick(per_model: list[np.ndarray]) -> np.ndarray:
     return np.array([per_model[m][c] for m, c in (_WHERE[p] for p in PARAMETERS)])
 
 
+def parameter_cells(runs: int) -> tuple[np.ndarray, np.ndarray]:
+    """Where the Table 3 parameters of every run sit in a bank of ``runs`` x :data:`T2_MODELS`
+    models: ``rows`` and ``cols``, both ``(runs, len(PARAMETERS))``; run ``r``'s parameter
+    ``PARAMETERS[i]`` is ``bank.theta_all()[rows[r, i], cols[r, i]]``."""
+    rows = np.arange(runs)[:, None] * len(T2_MODELS) + np.array([_WHERE[p][0] for p in PARAMETERS])
+    cols = np.broadcast_to(np.array([_WHERE[p][1] for p in PARAMETERS]), rows.shape)
+    return rows, cols
+
+
 def level_inputs(
     level: float, runs: int, *, seed: int = 2016
 ) -> tuple[np.ndarray, list[dict[str, tuple[np.ndarray, np.ndarray]]], list[int], np.ndarray, np.ndarray]:
@@ -190,8 +199,7 @@ def run_level(
     monitor = ConvergenceMonitor(sizes, convergence)
     stamps = np.round(t * 1e9).astype(np.int64)
     model_of = np.array([_WHERE[p][0] for p in PARAMETERS])
-    p_row = np.arange(runs)[:, None] * n_models + model_of  # (runs, 5) bank row of each parameter
-    p_col = np.broadcast_to([_WHERE[p][1] for p in PARAMETERS], p_row.shape)
+    p_row, p_col = parameter_cells(runs)  # (runs, 5) bank row and column of each parameter
     flag_k = np.full((runs, len(PARAMETERS)), -1)
     flag_theta = np.full((runs, len(PARAMETERS)), np.nan)
     flag_se = np.full((runs, len(PARAMETERS)), np.nan)

@@ -19,7 +19,7 @@ import time
 import numpy as np
 
 from rls_uncertainty.estimator import EstimatorBank
-from rls_uncertainty.montecarlo import _WHERE, LEVELS, PARAMETERS, T2_MODELS, level_inputs
+from rls_uncertainty.montecarlo import LEVELS, T2_MODELS, level_inputs, parameter_cells
 
 RUNS = int(sys.argv[1]) if len(sys.argv) > 1 else 250
 OUT = sys.argv[2] if len(sys.argv) > 2 else f"table3_burn_in_{RUNS}.json"
@@ -39,9 +39,7 @@ for level in LEVELS:
     for k in range(N):
         for b in banks.values():
             b.update(X[k], Z[k])
-    rows = [(r * nm + _WHERE[p][0], _WHERE[p][1]) for r in range(RUNS) for p in PARAMETERS]
-    ri = np.array([a for a, _ in rows]).reshape(RUNS, 5)
-    ci = np.array([c for _, c in rows]).reshape(RUNS, 5)
+    ri, ci = parameter_cells(RUNS)
     theta = banks["50"].theta_all()[ri, ci]
     scatter = theta.std(axis=0, ddof=1)
     res = {"N": N, "scatter": scatter.tolist()}

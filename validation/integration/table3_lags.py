@@ -13,7 +13,7 @@ import numpy as np
 
 from rls_uncertainty.estimator import EstimatorBank, batch_estimate
 from rls_uncertainty.estimator.lag_selection import flat_top_lags
-from rls_uncertainty.montecarlo import _WHERE, LEVELS, PARAMETERS, T2_MODELS, level_inputs
+from rls_uncertainty.montecarlo import _WHERE, LEVELS, PARAMETERS, T2_MODELS, level_inputs, parameter_cells
 
 RUNS = int(sys.argv[1]) if len(sys.argv) > 1 else 250
 W0S = (25, 50)
@@ -27,9 +27,7 @@ for level in LEVELS:
     for k in range(N):
         for b in banks.values():
             b.update(X[k], Z[k])
-    rows = [(r * nm + _WHERE[p][0], _WHERE[p][1]) for r in range(RUNS) for p in PARAMETERS]
-    ri = np.array([a for a, _ in rows]).reshape(RUNS, 5)
-    ci = np.array([c for _, c in rows]).reshape(RUNS, 5)
+    ri, ci = parameter_cells(RUNS)
     theta = banks["50"].theta_all()[ri, ci]
     scatter = theta.std(axis=0, ddof=1)
     res = {"scatter": scatter.tolist()}
