@@ -205,33 +205,30 @@ def _play(args: argparse.Namespace) -> int:
                 ack_timeout=args.ack_timeout, report=args.report)
 
 
-def _lags(value: str) -> int | str | None:
-    """simulate and montecarlo --lags: an integer >= 0, 'all' (None) or 'auto'."""
-    if value == "auto":
-        return value
-    if value in ("all", "none", "None"):
-        return None
+def _count_or_word(value: str, words: dict[str, Any], expected: str) -> Any:
+    """An integer >= 0, or the value of one of ``words``; otherwise an argparse error saying
+    what was ``expected``."""
+    if value in words:
+        return words[value]
     try:
         n = int(value)
     except ValueError:
         n = -1
     if n < 0:
-        raise argparse.ArgumentTypeError(f"must be an integer >= 0, 'all' or 'auto', got {value!r}")
+        raise argparse.ArgumentTypeError(f"must be {expected}, got {value!r}")
     return n
+
+
+def _lags(value: str) -> int | str | None:
+    """simulate and montecarlo --lags: an integer >= 0, 'all' (None) or 'auto'."""
+    words = {"auto": "auto", "all": None, "none": None, "None": None}
+    return _count_or_word(value, words, "an integer >= 0, 'all' or 'auto'")
 
 
 def _burn_in(value: str) -> int:
     """--burn-in: an integer >= 0, or 'default' (-1, estimator.residual_burn_in's default: 50 with
     auto lags, 0 with fixed lags); the parameter's upper bound is checked with the others."""
-    if value == "default":
-        return -1
-    try:
-        n = int(value)
-    except ValueError:
-        n = -1
-    if n < 0:
-        raise argparse.ArgumentTypeError(f"must be an integer >= 0 or 'default', got {value!r}")
-    return n
+    return int(_count_or_word(value, {"default": -1}, "an integer >= 0 or 'default'"))
 
 
 def _bank_burn_in(value: int | None) -> int | None:
