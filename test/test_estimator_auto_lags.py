@@ -6,12 +6,12 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from test_estimator_bank import assert_bank_equals_reference, equivalence_problem
+from test_estimator_bank import assert_bank_equals_reference, equivalence_problem, fed_bank_and_references
 from test_estimator_cases import ar1, rel_close, run, wide_scale_problem
 
 from rls_uncertainty.estimator import EstimatorBank, RecursiveEstimator, batch_estimate
 from rls_uncertainty.estimator.lag_selection import flat_top_lags
-from rls_uncertainty.estimator.reference import RecursiveReference, flat_top_lag
+from rls_uncertainty.estimator.reference import flat_top_lag
 
 
 @pytest.mark.parametrize("p0", [None, 100.0])
@@ -27,17 +27,12 @@ def test_auto_bank_equals_the_reference(max_lags, min_lags, burn_in, forgetting,
     prior), without one (the paper) and with 7."""
     X, Z = equivalence_problem(n=160)
     options = dict(residual=residual, p0=p0, max_lags=max_lags, min_lags=min_lags, residual_burn_in=burn_in)
-    bank = EstimatorBank((3, 2), "auto", "truncated", forgetting, **options)
-    refs = [RecursiveReference(s, "auto", "truncated", forgetting, **options) for s in (3, 2)]
     chosen = set()
-    for k in range(len(Z)):
-        bank.update(X[k], Z[k])
-        refs[0].update(X[k, 0], Z[k, 0])
-        refs[1].update(X[k, 1, :2], Z[k, 1])
-        assert list(bank.lags_used) == [r.lags_used() for r in refs], k
+    for bank, refs, k in fed_bank_and_references(X, Z, "auto", "truncated", forgetting, **options):
+        assert list(bank.lags_used) == [r.lags_used() for r in refs], k - 1
         chosen.update(int(L) for L, ready in zip(bank.lags_used, bank.ready, strict=True) if ready)
-        if k % 10 == 9 or k < 15:
-            assert_bank_equals_reference(bank, refs, k + 1)
+        if k % 10 == 0 or k <= 15:
+            assert_bank_equals_reference(bank, refs, k)
     assert len(chosen) >= 2  # the choice moves
 
 

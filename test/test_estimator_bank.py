@@ -181,6 +181,18 @@ OPTIONS = list(itertools.product(
 CHECK_K = (2, 5, 12, 13, 14, 30, 90)  # before initialization, at it, after the window fills
 
 
+def fed_bank_and_references(X, Z, n_lags, window, forgetting, **options):
+    """A bank of two models (3 and 2 parameters) and their reference.py twins, fed the
+    samples of ``X, Z`` one by one: yields ``(bank, refs, k)`` after sample k (from 1)."""
+    bank = EstimatorBank((3, 2), n_lags, window, forgetting, **options)
+    refs = [RecursiveReference(s, n_lags, window, forgetting, **options) for s in (3, 2)]
+    for k in range(len(Z)):
+        bank.update(X[k], Z[k])
+        refs[0].update(X[k, 0], Z[k, 0])
+        refs[1].update(X[k, 1, :2], Z[k, 1])
+        yield bank, refs, k + 1
+
+
 def assert_bank_equals_reference(bank, refs, k, rtol=1e-8):
     """Bank and reference agree to ``rtol`` of each quantity's largest entry, or to the
     rounding floor where the quantity is itself rounding (the residuals of a model that has
@@ -217,15 +229,9 @@ def test_bank_equals_the_reference_for_every_option(window, n_lags, forgetting, 
     errors of the bank equal the literal Eqs. 15-22 of reference.py, before and at exact
     initialization, once the lag window is full, and at the end."""
     X, Z = equivalence_problem()
-    options = dict(residual=residual, p0=p0)
-    bank = EstimatorBank((3, 2), n_lags, window, forgetting, **options)
-    refs = [RecursiveReference(s, n_lags, window, forgetting, **options) for s in (3, 2)]
-    for k in range(len(Z)):
-        bank.update(X[k], Z[k])
-        refs[0].update(X[k, 0], Z[k, 0])
-        refs[1].update(X[k, 1, :2], Z[k, 1])
-        if k + 1 in CHECK_K:
-            assert_bank_equals_reference(bank, refs, k + 1)
+    for bank, refs, k in fed_bank_and_references(X, Z, n_lags, window, forgetting, residual=residual, p0=p0):
+        if k in CHECK_K:
+            assert_bank_equals_reference(bank, refs, k)
     if p0 is None:
         assert refs[0].ready_at > 12 and refs[1].ready_at <= 5
 
@@ -251,14 +257,9 @@ def test_bank_equals_the_reference_with_a_residual_burn_in(window, n_lags, forge
     with a prior); the fixed-lag window's memory and all lags, with and without forgetting."""
     X, Z = equivalence_problem()
     options = dict(residual=residual, p0=p0, residual_burn_in=burn_in, noise_forgetting=noise_forgetting)
-    bank = EstimatorBank((3, 2), n_lags, window, forgetting, **options)
-    refs = [RecursiveReference(s, n_lags, window, forgetting, **options) for s in (3, 2)]
-    for k in range(len(Z)):
-        bank.update(X[k], Z[k])
-        refs[0].update(X[k, 0], Z[k, 0])
-        refs[1].update(X[k, 1, :2], Z[k, 1])
-        assert_bank_equals_reference(bank, refs, k + 1)
-        after = [k + 1 - r.ready_at - burn_in if r.ready else 0 for r in refs]
+    for bank, refs, k in fed_bank_and_references(X, Z, n_lags, window, forgetting, **options):
+        assert_bank_equals_reference(bank, refs, k)
+        after = [k - r.ready_at - burn_in if r.ready else 0 for r in refs]
         expected = [r.n_B if a > 0 else r.n_R for r, a in zip(refs, after, strict=True)]
         np.testing.assert_allclose(bank.n_R, expected, rtol=1e-12)
     assert bank.residual_burn_in == burn_in and not (n_lags is not None and bank._burn_masking)
