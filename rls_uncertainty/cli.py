@@ -139,12 +139,14 @@ def _not_text(name: str, exc: UnicodeDecodeError) -> ConfigError:
 
 
 def _replay_params(args: argparse.Namespace) -> dict[str, Any]:
-    from .config import load_parameters_file, pipeline_config
+    from .config import PARAMETER_NAMES, node_parameters_file, pipeline_config
 
-    try:
-        params = load_parameters_file(args.config) if args.config else {}
-    except UnicodeDecodeError as exc:
-        raise _not_text(args.config, exc) from exc
+    params: dict[str, Any] = {}
+    if args.config:  # read as the node reads it; what it ignores is said once
+        from_file = node_parameters_file(args.config)
+        for note in from_file.warnings:
+            print(f"rls-uncertainty replay: warning: {note}", file=sys.stderr)
+        params = {k: v for k, v in from_file.values.items() if k in PARAMETER_NAMES}
     if args.lags == "auto":
         params["estimator.lag_selection"] = "auto"
     elif args.lags is not None:

@@ -314,3 +314,21 @@ def test_simulate_prints_every_t2_parameter_with_its_true_value(capsys):
         assert float(ratio) == pytest.approx(r, abs=0.005 + 5e-5 * (1 + r) / c + 1e-9)
         if name in T2_TRUE:  # 10% noise: every estimate within a few corrected standard errors
             assert abs(float(est) - T2_TRUE[name]) < 0.5 * abs(T2_TRUE[name]) + 4 * float(se_corr)
+
+
+def test_replay_reads_its_config_as_the_node_does(tmp_path, capsys):
+    """--config takes the sections for the node in any namespace and the wildcard ones; a typo'd
+    section or parameter is refused, and what the node would ignore is one warning line."""
+    (tmp_path / "typo.yaml").write_text("rls_estimatr:\n  ros__parameters:\n    rate: 50.0\n")
+    fails(capsys, ["replay", str(BUNDLED), "--config", str(tmp_path / "typo.yaml"), "--out", str(tmp_path / "r"),
+                   "--quiet"], "no section for node rls_estimator", "did you mean rls_estimator?")
+    (tmp_path / "lag.yaml").write_text("/**:\n  ros__parameters:\n    estimator.lag: 20\n")
+    fails(capsys, ["replay", str(BUNDLED), "--config", str(tmp_path / "lag.yaml"), "--out", str(tmp_path / "r"),
+                   "--quiet"], "unknown parameter 'estimator.lag'", "did you mean estimator.lags?")
+    config = (ROOT / "config" / "t2.yaml").read_text() + "planner:\n  ros__parameters:\n    speed: 3\n"
+    (tmp_path / "multi.yaml").write_text(config)
+    assert cli.main(["replay", str(BUNDLED), "--config", str(tmp_path / "multi.yaml"), "--out", str(tmp_path / "r"),
+                     "--quiet", "--no-plots", "--models", "CZ"]) == 0
+    err = capsys.readouterr().err
+    assert err == f"rls-uncertainty replay: warning: parameter file {tmp_path / 'multi.yaml'}: sections for other " \
+                  "nodes ignored: planner\n"
