@@ -386,6 +386,18 @@ def test_read_inputs_refuses_a_bad_span(start, end, needle):
     assert needle in str(exc.value)
 
 
+def test_a_span_beyond_the_bag_is_refused_with_the_bags_span():
+    """The bundled bag's last message is 11.995 s after its first: an end there is the whole bag,
+    one nanosecond later is outside it."""
+    messages, t0 = read_inputs(BUNDLED, end=11.995)
+    assert len(messages) == 4920 and max(s for _k, s, _m in messages) == t0 + 11_995_000_000
+    for kwargs in ({"end": 11.995000001}, {"end": 300.0}, {"start": 12.0}):
+        with pytest.raises(ConfigError) as exc:
+            read_inputs(BUNDLED, **kwargs)
+        assert str(exc.value).endswith("after the bag's last message: the bag spans 0 to 11.995 s from its start")
+    assert len(read_inputs(BUNDLED, start=11.995)[0]) == 1  # the last IMU message
+
+
 def test_read_inputs_cuts_the_span_it_is_given():
     t0 = read_inputs(BUNDLED)[1]
     messages, _ = read_inputs(BUNDLED, start=2, end=np.float64(3.5))
