@@ -181,7 +181,9 @@ BAD_ARGUMENTS = [
      "end 300 s is after the bag's last message: the bag spans 0 to 11.995 s from its start"),
     (["replay", "{bag}", "--out", "{tmp}/r", "--quiet", "--start", "2", "--end", "12"], "0 to 11.995 s"),
     (["replay", "{bag}", "--out", "{tmp}/r", "--quiet", "--lags", "abc"], "--lags"),
-    (["replay", "{bag}", "--out", "{tmp}/r", "--quiet", "--lags", "-5"], "estimator.lags"),
+    (["replay", "{bag}", "--out", "{tmp}/r", "--quiet", "--lags", "-5"], "--lags"),
+    (["replay", "{bag}", "--out", "{tmp}/r", "--quiet", "--lags", "2.5"], "--lags"),
+    (["montecarlo", "--out", "{tmp}/mc", "--lags", "none"], "--lags"),
     (["replay", "{bag}", "--out", "{tmp}/r", "--quiet", "--forgetting", "nan"], "estimator.forgetting"),
     (["replay", "{bag}", "--out", "{tmp}/r", "--quiet", "--models", "XX"], "'XX'"),
     (["replay", "{bag}", "--out", "{tmp}/r", "--quiet", "--config", "{tmp}/missing.yaml"], "missing.yaml"),
@@ -335,3 +337,35 @@ def test_replay_reads_its_config_as_the_node_does(tmp_path, capsys):
     err = capsys.readouterr().err
     assert err == f"rls-uncertainty replay: warning: parameter file {tmp_path / 'multi.yaml'}: sections for other " \
                   "nodes ignored: planner\n"
+
+
+def test_every_lags_option_gives_the_estimators_lags_form():
+    """simulate, montecarlo and replay read --lags alike: an integer >= 0, 'all' or 'auto', as
+    the estimator's lags option takes them."""
+    parser = cli.build_parser()
+    heads = (["simulate"], ["montecarlo", "--out", "o"], ["replay", "bag", "--out", "o"])
+    for head in heads:
+        for given, lags in (("0", 0), ("50", 50), ("all", "all"), ("auto", "auto")):
+            assert parser.parse_args([*head, "--lags", given]).lags == lags
+
+
+def test_replay_lags_set_the_lag_parameters_whatever_the_file_says(tmp_path):
+    (tmp_path / "auto.yaml").write_text("/**:\n  ros__parameters:\n    estimator.lag_selection: auto\n")
+    parser = cli.build_parser()
+    expected = {"20": {"estimator.lag_selection": "fixed", "estimator.lags": 20},
+                "all": {"estimator.lag_selection": "fixed", "estimator.lags": -1},
+                "auto": {"estimator.lag_selection": "auto"}}
+    for given, want in expected.items():
+        args = parser.parse_args(["replay", "bag", "--out", "o", "--config", str(tmp_path / "auto.yaml"), "--lags",
+                                  given])
+        params = cli._replay_params(args)
+        assert {k: v for k, v in params.items() if k in ("estimator.lag_selection", "estimator.lags")} == want
+
+
+def test_version_is_package_xml_s(capsys):
+    import xml.etree.ElementTree as ET
+
+    version = ET.parse(ROOT / "package.xml").getroot().findtext("version")
+    with pytest.raises(SystemExit) as exc:
+        cli.main(["--version"])
+    assert exc.value.code == 0 and capsys.readouterr().out == f"rls-uncertainty {version}\n"

@@ -135,8 +135,6 @@ def test_manifest_names_the_package_and_its_build_type():
     assert root.get("format") == "3"
     assert root.findtext("name") == PACKAGE
     assert root.findtext("export/build_type") == "ament_python"
-    setup = (ROOT / "setup.py").read_text(encoding="utf-8")
-    assert f'version="{root.findtext("version")}"' in setup, "package.xml and setup.py versions differ"
     assert (ROOT / "resource" / PACKAGE).is_file()
 
 
@@ -189,3 +187,15 @@ TYPES = {"imu": "sensor_msgs/msg/Imu", "srv": "example_interfaces/srv/AddTwoInts
 """
     assert references(source) == {"os", "numpy", "yaml", "importlib", "std_srvs", "sensor_msgs", "example_interfaces"}
     assert references(source, type_names=False) == {"os", "numpy", "yaml", "importlib", "std_srvs"}
+
+
+def test_the_version_is_written_once_in_package_xml():
+    """setup.py reads package.xml's version, and the installed package carries it (what
+    `rls-uncertainty --version` prints)."""
+    from importlib.metadata import version
+
+    written = ET.parse(ROOT / "package.xml").getroot().findtext("version")
+    assert re.fullmatch(r"\d+\.\d+\.\d+", written)
+    setup_py = (ROOT / "setup.py").read_text()
+    assert "version=VERSION" in setup_py and written not in setup_py
+    assert version(PACKAGE) == written
