@@ -333,7 +333,7 @@ PARAMETERS: tuple[ParamSpec, ...] = (
         "how far a stream may run ahead of the slowest one before its old messages expire, s",
         0.1, 60.0,
     ),
-    # Stream timelines (issue 12 items 2 and 5, issue 13): jumps of a stream's stamps, the
+    # Stream timelines: jumps of a stream's stamps, the
     # node's clock, and the count bound of the buffers (sampling.py's docstring has the policy).
     ParamSpec(
         "inputs.max_stamp_jump", 5.0,
@@ -358,7 +358,7 @@ PARAMETERS: tuple[ParamSpec, ...] = (
         "messages buffered per stream at most (2 s at 10 kHz); beyond it the oldest expire",
         10, 10000000,
     ),
-    # Input sanity (issue 12 item 1, issue 13): the body frame the inputs must be stamped in,
+    # Input sanity: the body frame the inputs must be stamped in,
     # and what a measurement of an aircraft in flight can be (aero.PlausibilityLimits says
     # why each default is beyond any aircraft this package targets). A message out of bounds
     # is rejected as implausible_<field>; a sample (interpolated, or qbar from air density) too.
@@ -458,7 +458,7 @@ PARAMETERS: tuple[ParamSpec, ...] = (
     ),
     ParamSpec("diagnostics_period", 1.0, "seconds between /diagnostics messages", 0.05, 60.0),
     ParamSpec("frame_id", "base_link", "frame_id of the ~/sample_stamp header"),
-    # Outputs for consumers and long flights (issues 13 and 14): convergence flags, full
+    # Outputs for consumers and long flights: convergence flags, full
     # covariances, and the window of the /diagnostics levels.
     ParamSpec("convergence.window", 2.0,
               "convergence flags (~/M/converged): seconds of history that must be settled; "

@@ -245,8 +245,8 @@ def test_plausibility_defaults_lie_between_any_flight_and_absurd_values():
     """Each default: beyond what the bundled T-2 maneuver and the three Twin Otter flights
     reach (measured maxima, rounded up: 0.37 rad/s, 15.2 m/s^2, 40.8..74 m/s, |alpha| 0.126,
     |beta| 0.118 rad, 981..2834 Pa, 0.122 rad of surface, 6.6 kN of thrust) by an order of
-    magnitude or more, and below the values of issue 12 (1e100 rad/s, 1e150, 1e-300 Pa,
-    |alpha| near pi). The parameter ranges keep every setting in that band as well."""
+    magnitude or more, and below absurd values a corrupt recording may hold (1e100 rad/s, 1e150,
+    1e-300 Pa, |alpha| near pi). The parameter ranges keep every setting in that band as well."""
     d = PlausibilityLimits()
     flight = {"angular_rate": 0.37, "specific_force": 15.2, "alpha": 0.126, "beta": 0.118, "surface": 0.122,
               "thrust": 6.6e3, "airspeed_max": 74.0, "dynamic_pressure_max": 2834.0}

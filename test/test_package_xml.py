@@ -199,3 +199,38 @@ def test_the_version_is_written_once_in_package_xml():
     setup_py = (ROOT / "setup.py").read_text()
     assert "version=VERSION" in setup_py and written not in setup_py
     assert version(PACKAGE) == written
+
+
+def _requirements(path: Path) -> list[str]:
+    lines = (line.split("#", 1)[0].strip() for line in path.read_text(encoding="utf-8").splitlines())
+    return [line for line in lines if line and not line.startswith("-")]
+
+
+def _canonical(name: str) -> str:
+    return re.sub(r"[-_.]+", "-", name).lower()  # PEP 503
+
+
+def _release(version: str) -> tuple[int, ...]:
+    return tuple(int(x) for x in version.split("."))
+
+
+_COMPARE = {"==": tuple.__eq__, "!=": tuple.__ne__, ">=": tuple.__ge__, "<=": tuple.__le__, ">": tuple.__gt__,
+            "<": tuple.__lt__}
+
+
+def test_the_constraints_pin_every_requirement_within_its_range():
+    """scripts/setup.sh installs constraints.txt's exact versions by default: each requirement of
+    requirements*.txt is pinned there, to a version its range accepts (every version here is
+    numeric: compared as tuples of integers)."""
+    pins = {}
+    for line in _requirements(ROOT / "constraints.txt"):
+        name, sep, version = line.partition("==")
+        assert sep and re.fullmatch(r"\d+(\.\d+)*", version), f"constraints.txt: {line!r} is not NAME==VERSION"
+        pins[_canonical(name)] = _release(version)
+    for path in (ROOT / "requirements.txt", ROOT / "requirements-dev.txt"):
+        for line in _requirements(path):
+            name = re.match(r"[A-Za-z0-9_.-]+", line).group(0)
+            pinned = pins.get(_canonical(name))
+            assert pinned is not None, f"{name} ({path.name}) is not pinned in constraints.txt"
+            for op, version in re.findall(r"(==|!=|>=|<=|>|<)\s*([0-9.]+)", line[len(name):]):
+                assert _COMPARE[op](pinned, _release(version)), f"{name} pinned to {pinned}, outside {line!r}"
