@@ -5,6 +5,7 @@ someone else's machine. No DDS."""
 from __future__ import annotations
 
 import ast
+import itertools
 import re
 import sys
 import xml.etree.ElementTree as ET
@@ -234,3 +235,24 @@ def test_the_constraints_pin_every_requirement_within_its_range():
             assert pinned is not None, f"{name} ({path.name}) is not pinned in constraints.txt"
             for op, version in re.findall(r"(==|!=|>=|<=|>|<)\s*([0-9.]+)", line[len(name):]):
                 assert _COMPARE[op](pinned, _release(version)), f"{name} pinned to {pinned}, outside {line!r}"
+
+
+def test_the_license_file_is_the_one_package_xml_declares():
+    root, _ = manifest()
+    assert root.findtext("license") == "Apache-2.0"
+    text = (ROOT / "LICENSE").read_text(encoding="utf-8")
+    assert text.split()[:4] == ["Apache", "License", "Version", "2.0,"] and "END OF TERMS AND CONDITIONS" in text
+
+
+def test_the_changelog_is_in_the_ros_format_and_names_this_version():
+    """catkin_generate_changelog's layout: the title, then 'Forthcoming' and 'X.Y.Z (YYYY-MM-DD)'
+    sections, each underlined, with bullets; the newest release is package.xml's version."""
+    root, _ = manifest()
+    lines = (ROOT / "CHANGELOG.rst").read_text(encoding="utf-8").splitlines()
+    assert lines[1] == f"Changelog for package {PACKAGE}" and set(lines[0]) == set(lines[2]) == {"^"}
+    headings = [line for line, under in itertools.pairwise(lines)
+                if under and set(under) == {"-"} and len(under) == len(line)]
+    assert headings[0] == "Forthcoming"
+    releases = headings[1:]
+    assert all(re.fullmatch(r"\d+\.\d+\.\d+ \(\d{4}-\d{2}-\d{2}\)", h) for h in releases), releases
+    assert releases[0].split()[0] == root.findtext("version")
