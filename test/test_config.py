@@ -11,6 +11,7 @@ from pathlib import Path
 import pytest
 
 from rls_uncertainty.config import (
+    NODE_NAME,
     PARAMETERS,
     ConfigError,
     EstimatorConfig,
@@ -434,3 +435,18 @@ def test_the_node_starts_with_checked_values_and_logs_each_warning_once(tmp_path
         except subprocess.TimeoutExpired:
             proc.kill()
             proc.wait()
+
+
+def test_what_only_rcl_refuses_is_still_one_line_of_ours_and_exit_status_2():
+    """A remap rule rcl cannot read (the start-up check reads parameters, not topic names): rcl
+    logs its own error line, then the node says why in one line; no traceback."""
+    run = _run_node("-r", "imu:=bad:name")
+    assert run.returncode == 2 and "Traceback" not in run.stderr, run.stderr
+    assert run.stderr.splitlines()[-1].startswith("rls_estimator: invalid configuration: ") and "imu:=bad:name" in \
+        run.stderr.splitlines()[-1]
+
+
+def test_parameter_files_are_matched_against_the_name_the_node_runs_under():
+    from rls_uncertainty import node
+
+    assert NODE_NAME == node.NODE_NAME
