@@ -886,7 +886,7 @@ def node_parameters(sources: Sequence[ParameterFile | ParameterRule], node_name:
         elif a.exact or _ours(a.name):
             raise ConfigError(f"{a.origin}: unknown parameter {a.name!r}{_suggestion(a.name)}")
         else:  # in a wildcard section of a file
-            unknown.setdefault(a.origin.split(", line ")[0], []).append(a.name)
+            unknown.setdefault(a.source, []).append(a.name)
     notes += [f"{where}: parameters that are not this node's ignored (meant for other nodes?): {', '.join(names)}"
               for where, names in unknown.items()]
     return NodeParameters(_checked(values, origins), origins, tuple(notes))

@@ -213,8 +213,9 @@ def _flatten(node: yaml.MappingNode, prefix: str, where: str) -> Iterator[tuple[
             yield name, yaml_value(value, f"{where}: {name}"), _line(key)
 
 
-def _sections(node: yaml.Node, path: list[str], where: str) -> Iterator[Section]:
-    """The sections under ``node``, whose keys so far are ``path`` (namespaces and node)."""
+def _sections(node: yaml.Node, path: list[str], written: list[str], where: str) -> Iterator[Section]:
+    """The sections under ``node``, whose keys so far are ``written``, with the name components
+    ``path`` (namespaces and node)."""
     if not isinstance(node, yaml.MappingNode):
         raise ConfigError(f"{where}: expected a mapping of node names to 'ros__parameters:' (line {_line(node)})")
     for key, value in node.value:
@@ -225,7 +226,7 @@ def _sections(node: yaml.Node, path: list[str], where: str) -> Iterator[Section]
             if bad or not components:
                 raise ConfigError(f"{where}: {name!r} (line {_line(key)}) is not a node name: names hold letters, "
                                   "digits and '_', with '/' between namespaces and '*' or '**' as wildcards")
-            yield from _sections(value, [*path, *components], where)
+            yield from _sections(value, [*path, *components], [*written, name], where)
             continue
         if not path:
             raise ConfigError(f"{where}: 'ros__parameters' (line {_line(key)}) needs a node name above it")
@@ -233,7 +234,7 @@ def _sections(node: yaml.Node, path: list[str], where: str) -> Iterator[Section]
         if not isinstance(value, yaml.MappingNode):
             raise ConfigError(f"{where}: section {pattern} (line {_line(key)}): 'ros__parameters' must be a "
                               "mapping of parameters")
-        yield Section(key="/".join(path), pattern=pattern, line=_line(key),
+        yield Section(key="/".join(written), pattern=pattern, line=_line(key),
                       parameters=tuple(_flatten(value, "", f"{where}: section {pattern}")))
 
 
@@ -251,7 +252,7 @@ def read_parameter_file(path: str | Path) -> ParameterFile:
     except OSError as exc:
         raise ConfigError(f"{where}: cannot be read ({exc.strerror or exc})") from exc
     root = _compose(text, where)
-    return ParameterFile(path, () if root is None else tuple(_sections(root, [], where)))
+    return ParameterFile(path, () if root is None else tuple(_sections(root, [], [], where)))
 
 
 # --------------------------------------------------------------------------- the command line
@@ -288,22 +289,27 @@ class RosArguments:
 
 @dataclass(frozen=True)
 class Assignment:
-    """A value a source gives a parameter, filed under a node ``pattern``; ``exact``: the source
-    names one node (a ``-p`` rule, or a section without wildcards), not every node of a kind."""
+    """A value a source gives a parameter, filed under a node ``pattern``; ``source``: the
+    ``-p`` rule, or the file and section; ``exact``: the source names one node (a ``-p`` rule,
+    or a section without wildcards), not every node of a kind."""
 
     name: str
     value: Any
-    origin: str
+    source: str
+    line: int | None
     pattern: str
     exact: bool
+
+    @property
+    def origin(self) -> str:
+        return self.source if self.line is None else f"{self.source}, line {self.line}"
 
 
 def assignments(source: ParameterFile | ParameterRule) -> list[Assignment]:
     """Every value a ``-p`` rule or a parameter file gives, for whichever node."""
     if isinstance(source, ParameterRule):
-        return [Assignment(source.name, source.value, source.text, source.pattern, True)]
-    return [Assignment(name, value, f"parameter file {source.path}, section {s.key}, line {line}", s.pattern,
-                       not s.wildcard)
+        return [Assignment(source.name, source.value, source.text, None, source.pattern, True)]
+    return [Assignment(name, value, f"parameter file {source.path}, section {s.key}", line, s.pattern, not s.wildcard)
             for s in source.sections for name, value, line in s.parameters]
 
 

@@ -322,7 +322,7 @@ def test_a_section_naming_the_node_refuses_unknown_names(tmp_path):
     for key in ("rls_estimator", "/rls_estimator"):
         path = _file(tmp_path, f"{key}:\n  ros__parameters:\n    estimator:\n      lag: 20\n")
         message = _refused("--params-file", path)
-        assert f"parameter file {path}, section {key.lstrip('/')}, line 4: unknown parameter 'estimator.lag' " \
+        assert f"parameter file {path}, section {key}, line 4: unknown parameter 'estimator.lag' " \
                "(did you mean estimator.lags?)" in message
     path = _file(tmp_path, "x:\n  rls_estimator:\n    ros__parameters:\n      rat: 20.0\n")
     assert "did you mean rate?" in _refused("-r", "__ns:=/x", "--params-file", path)
@@ -337,7 +337,7 @@ def test_a_wildcard_section_refuses_names_of_the_nodes_groups_and_warns_about_ot
                            "    qos_overrides./clock.subscription.depth: 5\n")
     params = _startup("--params-file", path)
     assert params.values == {"estimator.lags": 20, "use_sim_time": True, "qos_overrides./clock.subscription.depth": 5}
-    assert params.warnings == (f"parameter file {path}, section **: parameters that are not this node's ignored "
+    assert params.warnings == (f"parameter file {path}, section /**: parameters that are not this node's ignored "
                                "(meant for other nodes?): speed",)
 
 
