@@ -1,14 +1,19 @@
 """ament_python package: rls_uncertainty."""
 
 from glob import glob
+from pathlib import Path
+from xml.etree import ElementTree
 
 from setuptools import find_packages, setup
 
 PACKAGE = "rls_uncertainty"
+# The version is written once, in package.xml (the ROS convention); `rls-uncertainty --version`
+# prints it from the installed metadata.
+VERSION = ElementTree.parse(Path(__file__).resolve().parent / "package.xml").getroot().findtext("version")
 
 setup(
     name=PACKAGE,
-    version="0.1.0",
+    version=VERSION,
     packages=find_packages(exclude=["test", "test.*"]),
     data_files=[
         ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),

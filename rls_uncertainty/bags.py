@@ -348,6 +348,7 @@ def read_inputs(path: str | Path, topics: dict[str, str] | None = None, *, stric
             if c.msgtype != expected:
                 raise BagError(f"{path}: topic {c.topic} has type {c.msgtype}, expected {expected}")
         t0 = reader.start_time
+        _check_span_in_bag(path, start, end, reader.end_time - 1 - t0)
         lo = None if start is None else t0 + int(round(start * 1e9))
         hi = None if end is None else t0 + int(round(end * 1e9))
         last: dict[str, int] = {}
@@ -377,6 +378,16 @@ def read_inputs(path: str | Path, topics: dict[str, str] | None = None, *, stric
                            f"{'the end' if end is None else f'{end:g} s'} (the bag holds {duration:.1f} s)")
         raise BagError(f"{path}: no input messages (empty bag)")
     return out, t0
+
+
+def _check_span_in_bag(path: Path, start: float | None, end: float | None, last_ns: int) -> None:
+    """``start`` and ``end`` (s from the bag start, compared in ns as the messages are cut) within
+    the bag, whose last message is ``last_ns`` after its first; else a :class:`ConfigError`
+    giving the bag's span."""
+    for name, value in (("start", start), ("end", end)):
+        if value is not None and int(round(value * 1e9)) > last_ns:
+            raise ConfigError(f"{path}: {name} {value:g} s is after the bag's last message: the bag spans 0 to "
+                              f"{last_ns * 1e-9:.9g} s from its start")
 
 
 def _check_span(start: float | None, end: float | None) -> None:

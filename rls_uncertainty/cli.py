@@ -8,6 +8,7 @@ import sys
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any, NoReturn
+from xml.etree import ElementTree
 
 import numpy as np
 
@@ -139,16 +140,18 @@ def _not_text(name: str, exc: UnicodeDecodeError) -> ConfigError:
 
 
 def _replay_params(args: argparse.Namespace) -> dict[str, Any]:
-    from .config import load_parameters_file, pipeline_config
+    from .config import PARAMETER_NAMES, node_parameters_file, pipeline_config
 
-    try:
-        params = load_parameters_file(args.config) if args.config else {}
-    except UnicodeDecodeError as exc:
-        raise _not_text(args.config, exc) from exc
-    if args.lags == "auto":
-        params["estimator.lag_selection"] = "auto"
-    elif args.lags is not None:
-        params["estimator.lags"] = args.lags
+    params: dict[str, Any] = {}
+    if args.config:  # read as the node reads it; what it ignores is said once
+        from_file = node_parameters_file(args.config)
+        for note in from_file.warnings:
+            print(f"rls-uncertainty replay: warning: {note}", file=sys.stderr)
+        params = {k: v for k, v in from_file.values.items() if k in PARAMETER_NAMES}
+    if args.lags is not None:  # --lags decides the lag selection whatever the file said
+        params["estimator.lag_selection"] = "auto" if args.lags == "auto" else "fixed"
+        if args.lags != "auto":
+            params["estimator.lags"] = -1 if args.lags == "all" else args.lags
     if args.max_lags is not None:
         params["estimator.max_lags"] = args.max_lags
     if args.burn_in is not None:
@@ -219,10 +222,10 @@ def _count_or_word(value: str, words: dict[str, Any], expected: str) -> Any:
     return n
 
 
-def _lags(value: str) -> int | str | None:
-    """simulate and montecarlo --lags: an integer >= 0, 'all' (None) or 'auto'."""
-    words = {"auto": "auto", "all": None, "none": None, "None": None}
-    return _count_or_word(value, words, "an integer >= 0, 'all' or 'auto'")
+def _lags(value: str) -> int | str:
+    """--lags of every command, in the form of the estimator's ``lags`` option: an integer
+    >= 0 (L of Eq. 22), 'all' (Eq. 20) or 'auto' (each model's lags from its residuals)."""
+    return _count_or_word(value, {"all": "all", "auto": "auto"}, "an integer >= 0, 'all' or 'auto'")
 
 
 def _burn_in(value: str) -> int:
@@ -238,26 +241,6 @@ def _bank_burn_in(value: int | None) -> int | None:
 
 _BURN_IN_HELP = ("residual burn-in: samples after each model's initialization whose residuals are left out of the "
                  "residual autocorrelation (Eq. 17), or 'default' (50 with --lags auto, 0 otherwise)")
-
-
-def _montecarlo_lags(value: str) -> int | str:
-    """montecarlo --lags: an integer >= 0 or 'auto'."""
-    if value == "auto":
-        return value
-    return _integer(0)(value)
-
-
-def _replay_lags(value: str) -> int | str:
-    """replay --lags: an integer (the parameter's range is checked with the others), 'all' (-1)
-    or 'auto' (estimator.lag_selection auto)."""
-    if value == "auto":
-        return value
-    if value == "all":
-        return -1
-    try:
-        return int(value)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"must be an integer, 'all' or 'auto', got {value!r}") from None
 
 
 def _real(low: float, *, low_open: bool = False, high: float | None = None) -> Callable[[str], float]:
@@ -303,19 +286,14 @@ class _Parser(argparse.ArgumentParser):
 _FORCE_HELP = "replace an existing non-empty output directory (never the input)"
 
 
-def build_parser() -> argparse.ArgumentParser:
-    from .player import DEFAULT_WINDOW  # no ROS import at module level
-
-    parser = _Parser(
-        prog="rls-uncertainty",
-        description="Recursive least squares with colored-residual parameter uncertainty.",
-    )
-    sub = parser.add_subparsers(dest="command", required=True)
+def _add_demo(sub: Any) -> None:
     demo = sub.add_parser("demo", help="the live estimator node on the bundled T-2 bag over DDS")
     demo.add_argument("--rate", type=_real(0.0), default=4.0,
                       help="playback speed factor (default 4; 0 = as fast as possible)")
     demo.set_defaults(func=_demo)
 
+
+def _add_simulate(sub: Any) -> None:
     sim = sub.add_parser("simulate", help="estimate the T-2 derivatives of a simulated maneuver (no ROS)")
     sim.add_argument("--noise", type=_real(0.0), default=20.0, help="band-limited noise, percent (default 20)")
     sim.add_argument("--seed", type=_integer(0), default=250, help="noise seed (default 250)")
@@ -326,18 +304,22 @@ def build_parser() -> argparse.ArgumentParser:
                      help="exponential forgetting factor in (0, 1] (default 1)")
     sim.set_defaults(func=_simulate)
 
+
+def _add_montecarlo(sub: Any) -> None:
     mc = sub.add_parser("montecarlo", help="reproduce Table 3 and Figs. 5-7 of the paper")
     mc.add_argument("--runs", type=_integer(1), default=250, help="runs per noise level (default 250)")
     mc.add_argument("--out", required=True, help="output directory")
     mc.add_argument("--levels", type=_real(0.0), nargs="+", help="noise levels in percent (default 0 5 10 15 20)")
-    mc.add_argument("--lags", type=_montecarlo_lags, default=50,
-                    help="retained lags, or 'auto' (chosen per run and model, at most 50) (default 50)")
+    mc.add_argument("--lags", type=_lags, default=50,
+                    help="retained lags, 'all', or 'auto' (chosen per run and model, at most 50) (default 50)")
     mc.add_argument("--burn-in", type=_burn_in, help=_BURN_IN_HELP)
     mc.add_argument("--jobs", type=_integer(1), default=None, help="processes (default: every core)")
     mc.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
     mc.add_argument("--force", action="store_true", help=_FORCE_HELP)
     mc.set_defaults(func=_montecarlo)
 
+
+def _add_multisine(sub: Any) -> None:
     ms = sub.add_parser("multisine", help="design orthogonal phase-optimized multisine inputs (Eq. 24)")
     ms.add_argument("--period", type=_real(0.0, low_open=True), required=True, help="record length T, s")
     ms.add_argument("--band", type=_real(0.0), nargs=2, required=True, metavar=("LOW", "HIGH"), help="band, Hz")
@@ -349,6 +331,8 @@ def build_parser() -> argparse.ArgumentParser:
     ms.add_argument("--force", action="store_true", help="replace an existing file")
     ms.set_defaults(func=_multisine)
 
+
+def _add_make_bag(sub: Any) -> None:
     mb = sub.add_parser("make-bag", help="write the seeded T-2 maneuver as a bag on the standard input topics")
     mb.add_argument("--out", default="bags/t2_maneuver", help="bag directory (default bags/t2_maneuver)")
     mb.add_argument("--noise", type=_real(0.0), default=20.0, help="band-limited noise, percent (default 20)")
@@ -356,6 +340,8 @@ def build_parser() -> argparse.ArgumentParser:
     mb.add_argument("--force", action="store_true", help=_FORCE_HELP)
     mb.set_defaults(func=_make_bag)
 
+
+def _add_convert(sub: Any) -> None:
     cv = sub.add_parser("convert", help="recorded bag + mapping file -> replay bag on the standard topics")
     cv.add_argument("bag", help="ROS 2 bag (MCAP or sqlite3; directory or file) or ROS 1 bag")
     cv.add_argument("--mapping", required=True, help="mapping YAML (e.g. msg_schemas/fti_msgs/mapping.yaml)")
@@ -364,12 +350,14 @@ def build_parser() -> argparse.ArgumentParser:
     cv.add_argument("--force", action="store_true", help=_FORCE_HELP)
     cv.set_defaults(func=_convert)
 
+
+def _add_replay(sub: Any) -> None:
     rp = sub.add_parser("replay", help="run a replay bag through the node's pipeline offline")
     rp.add_argument("bag", help="replay bag on the standard topics")
     rp.add_argument("--config", help="ROS parameter file, e.g. config/t2.yaml (default: node defaults)")
     rp.add_argument("--out", required=True, help="output directory")
-    rp.add_argument("--lags", type=_replay_lags,
-                    help="override estimator.lags (integer or 'all'), or 'auto' (estimator.lag_selection auto)")
+    rp.add_argument("--lags", type=_lags,
+                    help="override estimator.lags (an integer or 'all'), or 'auto' (estimator.lag_selection auto)")
     rp.add_argument("--max-lags", type=_integer(1), help="override estimator.max_lags (with auto)")
     rp.add_argument("--burn-in", type=_burn_in,
                     help="override estimator.residual_burn_in: samples after each model's initialization whose "
@@ -386,6 +374,10 @@ def build_parser() -> argparse.ArgumentParser:
     rp.add_argument("--quiet", action="store_true", help="no progress bar")
     rp.add_argument("--force", action="store_true", help=_FORCE_HELP)
     rp.set_defaults(func=_replay)
+
+
+def _add_play(sub: Any) -> None:
+    from .player import DEFAULT_WINDOW  # no ROS import at module level
 
     pl = sub.add_parser("play", help="publish a replay bag over DDS with /clock",
                         description="Publish a replay bag over DDS with /clock. Exit status 0 when every reliable "
@@ -409,6 +401,34 @@ def build_parser() -> argparse.ArgumentParser:
     pl.add_argument("--delay", type=_real(0.0), default=0.5,
                     help="seconds between discovery and the first message (default 0.5)")
     pl.set_defaults(func=_play)
+
+
+_SUBCOMMANDS = (_add_demo, _add_simulate, _add_montecarlo, _add_multisine, _add_make_bag, _add_convert, _add_replay,
+                _add_play)
+
+
+def _version() -> str:
+    """The installed package's version, which setup.py reads from package.xml (the one place it
+    is written); from package.xml itself in a source tree that was never installed."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("rls_uncertainty")
+    except PackageNotFoundError:
+        from .config import package_path
+
+        return ElementTree.parse(package_path("package.xml")).getroot().findtext("version", "unknown")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = _Parser(
+        prog="rls-uncertainty",
+        description="Recursive least squares with colored-residual parameter uncertainty.",
+    )
+    parser.add_argument("--version", action="version", version=f"%(prog)s {_version()}")
+    sub = parser.add_subparsers(dest="command", required=True)
+    for add in _SUBCOMMANDS:
+        add(sub)
     return parser
 
 

@@ -33,7 +33,9 @@ from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescri
 from rclpy.clock import Clock, ClockChange, ClockType, JumpThreshold, TimeJump
 from rclpy.duration import Duration
 from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallbacks
+from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException
+from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import QoSHistoryPolicy, QoSProfile, QoSReliabilityPolicy, qos_profile_sensor_data
@@ -41,7 +43,7 @@ from std_msgs.msg import Float64MultiArray, Header
 from std_srvs.srv import SetBool, Trigger
 
 from .cdr import decode
-from .config import PARAMETERS, ConfigError, ParamSpec, node_config, pipeline_config
+from .config import PARAMETERS, ConfigError, ParamSpec, node_config, pipeline_config, startup_parameters
 from .diagnostics import DiagnosticsPolicy, Snapshot, malformed_reason, malformed_warning
 from .estimator.state_file import set_aside
 from .messages import INPUTS, MESSAGE_TYPES, NODE_NAME, feed, message_class
@@ -341,23 +343,51 @@ class EstimatorNode(Node):
         self._diag_pub.publish(arr)
 
 
+def _overrides(values: dict[str, Any]) -> list[Parameter]:
+    """The start-up values checked by :func:`.config.startup_parameters`, as the node declares
+    them: they replace rcl's reading of the same arguments, so the node starts with exactly
+    what was checked (an integer given for a floating-point parameter is that number, as in
+    the replay). rclpy types a parameter by its value, and an empty list has no type: an empty
+    list of names is declared as ``[""]``, which the configuration reads as empty."""
+    return [Parameter(spec.name, value=values[spec.name] if values[spec.name] != [] else [""])
+            for spec in PARAMETERS if spec.name in values]
+
+
+def _refuse(exc: Exception) -> int:
+    """A misconfiguration in one line on stderr; exit status 2."""
+    print(f"{NODE_NAME}: invalid configuration: {' '.join(str(exc).split())}", file=sys.stderr)
+    return 2
+
+
 def main(args: list[str] | None = None) -> int:
     """Console script ``estimator_node`` (``ros2 run rls_uncertainty estimator_node``).
 
+    ``args`` is the command line as ``rclpy.init`` takes it (default ``sys.argv``). Its ROS
+    arguments are checked before rcl reads them (:func:`.config.startup_parameters`, the policy
+    in :mod:`.config`): a misconfiguration is one line and exit status 2, before any DDS.
     DDS discovery follows the environment (``ROS_AUTOMATIC_DISCOVERY_RANGE``, ROS's default
     otherwise): a control room spans machines."""
-    rclpy.init(args=args)
+    argv = list(sys.argv if args is None else args)
+    try:
+        startup = startup_parameters(argv, NODE_NAME)
+    except ConfigError as exc:
+        return _refuse(exc)
+    try:
+        rclpy.init(args=argv)
+    except (_rclpy.RCLError, _rclpy.UnknownROSArgsError) as exc:  # an argument rcl reads differently
+        return _refuse(exc)
     node = None
     code = 0
     try:
-        node = EstimatorNode()
+        node = EstimatorNode(parameter_overrides=_overrides(startup.values))
+        for note in startup.warnings:
+            node.get_logger().warning(note)
         # Everything allocated so far lives for the whole run: keep it out of the cyclic
         # collector, whose full passes otherwise show up as millisecond latency spikes.
         gc.freeze()
         rclpy.spin(node)
-    except ConfigError as exc:
-        print(f"{NODE_NAME}: invalid configuration: {exc}", file=sys.stderr)
-        code = 2
+    except (ConfigError, ParameterException) as exc:
+        code = _refuse(exc)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:

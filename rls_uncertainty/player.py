@@ -44,6 +44,9 @@ if TYPE_CHECKING:
     from rclpy.node import Node
     from rclpy.publisher import Publisher
 
+    from .config import PipelineConfig
+    from .pipeline import SampleOutput
+
 __all__ = ["play", "demo", "bundled_bag", "TopicStats", "DEFAULT_WINDOW"]
 
 # Messages per topic that may wait for acknowledgement: the estimator node's default input
@@ -360,92 +363,130 @@ _REPLAY_DEPTH = 10_000
 _REPLAY_BUFFER_S = 60.0
 
 
+def _start_node(params_path: str) -> tuple[subprocess.Popen[str], str]:
+    """The estimator node for a reliable replay, in a process of its own; and its log file's
+    name. The node writes its log through its own copy of the file descriptor: ours is closed
+    once the node is started; the file stays (delete=False) until the demo succeeds."""
+    import tempfile  # noqa: PLC0415
+
+    with tempfile.NamedTemporaryFile("w+", prefix="rls_demo_node_", suffix=".log", delete=False) as node_log:
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "rls_uncertainty.node", "--ros-args", "--params-file", params_path,
+             "-p", "qos.reliable:=true", "-p", f"qos.depth:={_REPLAY_DEPTH}",
+             "-p", f"inputs.buffer_duration:={_REPLAY_BUFFER_S}"],
+            stdout=node_log, stderr=subprocess.STDOUT, text=True,
+        )
+    return proc, node_log.name
+
+
+def _stop(proc: subprocess.Popen[str]) -> None:
+    proc.send_signal(2)
+    try:
+        proc.wait(15)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+
+
+class _Outputs:
+    """What the demo's listener keeps of the node's outputs: the number of samples published
+    and the latest array of each topic."""
+
+    def __init__(self, node: Node, models: Sequence[str]) -> None:
+        from rclpy.qos import QoSHistoryPolicy, QoSProfile, QoSReliabilityPolicy  # noqa: PLC0415
+
+        self.samples = 0
+        self.latest: dict[str, _ArrayMessage] = {}
+        qos = QoSProfile(depth=1000, reliability=QoSReliabilityPolicy.RELIABLE, history=QoSHistoryPolicy.KEEP_LAST)
+        self.subs = [node.create_subscription(message_class("std_msgs/msg/Header"), f"/{NODE_NAME}/sample_stamp",
+                                              self._count, qos)]
+        array_type = message_class("std_msgs/msg/Float64MultiArray")
+        for model in models:
+            for suffix in ARRAY_OUTPUTS:
+                topic = f"/{NODE_NAME}/{model}/{suffix}"
+
+                def keep(msg: _ArrayMessage, t: str = topic) -> None:
+                    self.latest[t] = msg
+
+                self.subs.append(node.create_subscription(array_type, topic, keep, qos))
+
+    def _count(self, _msg: object) -> None:
+        self.samples += 1
+
+    def arrays(self, model: str) -> list[_ArrayMessage | None]:
+        """The latest estimates, corrected and conventional standard errors of ``model``."""
+        return [self.latest.get(f"/{NODE_NAME}/{model}/{suffix}") for suffix in ARRAY_OUTPUTS]
+
+
+def _spin_for(spin: Callable[[], object], seconds: float, until: Callable[[], bool] = lambda: False) -> None:
+    """Spin for ``seconds`` or until ``until()`` holds."""
+    deadline = time.monotonic() + seconds
+    while not until() and time.monotonic() < deadline:
+        spin()
+
+
 def demo(rate: float = 4.0, params_file: str = "t2") -> int:
     """The live node on the bundled bag: estimates over DDS beside the offline replay."""
     _check_rate(rate)
     _loopback_default()
-    import numpy as np  # noqa: PLC0415
     import rclpy  # noqa: PLC0415
-    from rclpy.qos import QoSHistoryPolicy, QoSProfile, QoSReliabilityPolicy  # noqa: PLC0415
 
     from .bags import read_inputs  # noqa: PLC0415
     from .config import config_dir, load_parameters_file, pipeline_config  # noqa: PLC0415
     from .replay import run_pipeline  # noqa: PLC0415
-    from .report import results_table, rows_from_arrays  # noqa: PLC0415
-    from .simulation import T2_TRUE  # noqa: PLC0415
 
     bag = bundled_bag()
     params_path = str(config_dir() / f"{params_file}.yaml")
     params = {**load_parameters_file(params_path), "inputs.buffer_duration": _REPLAY_BUFFER_S}
     config = pipeline_config(params)
     print(f"starting the estimator node ({params_path}) and playing {bag} over DDS at {rate:g}x ...")
-    import tempfile  # noqa: PLC0415
-
-    # The node writes its log through its own copy of the file descriptor: ours is closed once
-    # the node is started; the file stays (delete=False) until the demo succeeds.
-    with tempfile.NamedTemporaryFile("w+", prefix="rls_demo_node_", suffix=".log", delete=False) as node_log:
-        node_proc = subprocess.Popen(
-            [sys.executable, "-m", "rls_uncertainty.node", "--ros-args", "--params-file", params_path,
-             "-p", "qos.reliable:=true", "-p", f"qos.depth:={_REPLAY_DEPTH}",
-             "-p", f"inputs.buffer_duration:={_REPLAY_BUFFER_S}"],
-            stdout=node_log, stderr=subprocess.STDOUT, text=True,
-        )
+    node_proc, node_log = _start_node(params_path)
     with _player_writer_profile():
         rclpy.init()
         node = rclpy.create_node("rls_demo")
-    latest: dict[str, _ArrayMessage] = {}
-    counts = {"samples": 0}
-    qos = QoSProfile(depth=1000, reliability=QoSReliabilityPolicy.RELIABLE, history=QoSHistoryPolicy.KEEP_LAST)
-    subs = [node.create_subscription(message_class("std_msgs/msg/Header"), f"/{NODE_NAME}/sample_stamp",
-                                     lambda m: counts.__setitem__("samples", counts["samples"] + 1), qos)]
-    array_type = message_class("std_msgs/msg/Float64MultiArray")
-    for m in config.models:
-        for suffix in ARRAY_OUTPUTS:
-            topic = f"/{NODE_NAME}/{m.output}/{suffix}"
-
-            def keep(msg: _ArrayMessage, t: str = topic) -> None:
-                latest[t] = msg
-
-            subs.append(node.create_subscription(array_type, topic, keep, qos))
+    outputs = _Outputs(node, [m.output for m in config.models])
     player = None
     try:
         player = _Publisher(node, bag, clock=False, reliable=True)
         spin = lambda: rclpy.spin_once(node, timeout_sec=0.01)  # noqa: E731
         player.wait_for_subscribers(1, 30.0, spin)
-        deadline = time.monotonic() + 30
-        while any(s.get_publisher_count() < 1 for s in subs) and time.monotonic() < deadline:
-            spin()
-        end = time.monotonic() + 1.0  # discovery is not symmetric: let both sides match
-        while time.monotonic() < end:
-            spin()
+        _spin_for(spin, 30, lambda: all(s.get_publisher_count() >= 1 for s in outputs.subs))
+        _spin_for(spin, 1.0)  # discovery is not symmetric: let both sides match
         player.run(rate, spin)
         offline = run_pipeline(read_inputs(bag)[0], config)
         want = len(offline.outputs)
-        deadline = time.monotonic() + 20
-        while counts["samples"] < want and time.monotonic() < deadline:
-            spin()
-        end = time.monotonic() + 0.5
-        while time.monotonic() < end:
-            spin()
+        _spin_for(spin, 20, lambda: outputs.samples >= want)
+        _spin_for(spin, 0.5)
     finally:
         if player is not None:
             player.close()
         node.destroy_node()
         rclpy.try_shutdown()
-        node_proc.send_signal(2)
-        try:
-            node_proc.wait(15)
-        except subprocess.TimeoutExpired:
-            node_proc.kill()
-    last = offline.outputs[-1]
-    print(f"\nlive node: {counts['samples']} samples published (offline replay: {want})\n")
+        _stop(node_proc)
+    print(f"\nlive node: {outputs.samples} samples published (offline replay: {want})\n")
+    worst = _compare(config, outputs, offline.outputs[-1], node_log)
+    if worst is None:
+        return 1
+    os.unlink(node_log)
+    print("Conventional standard errors assume white residuals (Eq. 13); the corrected ones use the recursive\n"
+          "residual autocorrelation (Eqs. 17-22) and cover the real scatter of the estimates (Table 3).")
+    return 0 if worst < 1e-9 and outputs.samples == want else 1
+
+
+def _compare(config: PipelineConfig, outputs: _Outputs, last: SampleOutput, node_log: str) -> float | None:
+    """Print the live node's last estimates beside the true values and the largest relative
+    difference from the offline replay's last sample (returned; None if a model sent nothing)."""
+    import numpy as np  # noqa: PLC0415
+
+    from .report import results_table, rows_from_arrays  # noqa: PLC0415
+    from .simulation import T2_TRUE  # noqa: PLC0415
+
     rows = []
     worst = 0.0
     for j, m in enumerate(config.models):
-        est, se, sc = (latest.get(f"/{NODE_NAME}/{m.output}/{suffix}") for suffix in ARRAY_OUTPUTS)
+        est, se, sc = outputs.arrays(m.output)
         if est is None or se is None or sc is None:
-            print(f"{m.output}: no estimate received from the node; its log: {node_log.name}")
-            return 1
+            print(f"{m.output}: no estimate received from the node; its log: {node_log}")
+            return None
         names = est.layout.dim[0].label.split(",")
         rows += rows_from_arrays(names, est.data, sc.data, se.data, T2_TRUE)
         n = len(names)
@@ -454,7 +495,4 @@ def demo(rate: float = 4.0, params_file: str = "t2") -> int:
             worst = max(worst, float(np.max(np.abs(np.array(live) - off) / np.abs(off))))
     print(results_table(rows))
     print(f"\nlargest relative difference between the live node and the offline replay: {worst:.1e}")
-    os.unlink(node_log.name)
-    print("Conventional standard errors assume white residuals (Eq. 13); the corrected ones use the recursive\n"
-          "residual autocorrelation (Eqs. 17-22) and cover the real scatter of the estimates (Table 3).")
-    return 0 if worst < 1e-9 and counts["samples"] == want else 1
+    return worst

@@ -176,9 +176,14 @@ BAD_ARGUMENTS = [
      "end (2 s) must be after start (5 s)"),
     (["replay", "{bag}", "--out", "{tmp}/r", "--quiet", "--start", "3", "--end", "3"], "must be after start"),
     (["replay", "{bag}", "--out", "{tmp}/r", "--quiet", "--start", "100"],
-     "from 100 s to the end (the bag holds 12.0 s)"),
+     "start 100 s is after the bag's last message: the bag spans 0 to 11.995 s from its start"),
+    (["replay", "{bag}", "--out", "{tmp}/r", "--quiet", "--end", "300"],
+     "end 300 s is after the bag's last message: the bag spans 0 to 11.995 s from its start"),
+    (["replay", "{bag}", "--out", "{tmp}/r", "--quiet", "--start", "2", "--end", "12"], "0 to 11.995 s"),
     (["replay", "{bag}", "--out", "{tmp}/r", "--quiet", "--lags", "abc"], "--lags"),
-    (["replay", "{bag}", "--out", "{tmp}/r", "--quiet", "--lags", "-5"], "estimator.lags"),
+    (["replay", "{bag}", "--out", "{tmp}/r", "--quiet", "--lags", "-5"], "--lags"),
+    (["replay", "{bag}", "--out", "{tmp}/r", "--quiet", "--lags", "2.5"], "--lags"),
+    (["montecarlo", "--out", "{tmp}/mc", "--lags", "none"], "--lags"),
     (["replay", "{bag}", "--out", "{tmp}/r", "--quiet", "--forgetting", "nan"], "estimator.forgetting"),
     (["replay", "{bag}", "--out", "{tmp}/r", "--quiet", "--models", "XX"], "'XX'"),
     (["replay", "{bag}", "--out", "{tmp}/r", "--quiet", "--config", "{tmp}/missing.yaml"], "missing.yaml"),
@@ -314,3 +319,53 @@ def test_simulate_prints_every_t2_parameter_with_its_true_value(capsys):
         assert float(ratio) == pytest.approx(r, abs=0.005 + 5e-5 * (1 + r) / c + 1e-9)
         if name in T2_TRUE:  # 10% noise: every estimate within a few corrected standard errors
             assert abs(float(est) - T2_TRUE[name]) < 0.5 * abs(T2_TRUE[name]) + 4 * float(se_corr)
+
+
+def test_replay_reads_its_config_as_the_node_does(tmp_path, capsys):
+    """--config takes the sections for the node in any namespace and the wildcard ones; a typo'd
+    section or parameter is refused, and what the node would ignore is one warning line."""
+    (tmp_path / "typo.yaml").write_text("rls_estimatr:\n  ros__parameters:\n    rate: 50.0\n")
+    fails(capsys, ["replay", str(BUNDLED), "--config", str(tmp_path / "typo.yaml"), "--out", str(tmp_path / "r"),
+                   "--quiet"], "no section for node rls_estimator", "did you mean rls_estimator?")
+    (tmp_path / "lag.yaml").write_text("/**:\n  ros__parameters:\n    estimator.lag: 20\n")
+    fails(capsys, ["replay", str(BUNDLED), "--config", str(tmp_path / "lag.yaml"), "--out", str(tmp_path / "r"),
+                   "--quiet"], "unknown parameter 'estimator.lag'", "did you mean estimator.lags?")
+    config = (ROOT / "config" / "t2.yaml").read_text() + "planner:\n  ros__parameters:\n    speed: 3\n"
+    (tmp_path / "multi.yaml").write_text(config)
+    assert cli.main(["replay", str(BUNDLED), "--config", str(tmp_path / "multi.yaml"), "--out", str(tmp_path / "r"),
+                     "--quiet", "--no-plots", "--models", "CZ"]) == 0
+    err = capsys.readouterr().err
+    assert err == f"rls-uncertainty replay: warning: parameter file {tmp_path / 'multi.yaml'}: sections for other " \
+                  "nodes ignored: planner\n"
+
+
+def test_every_lags_option_gives_the_estimators_lags_form():
+    """simulate, montecarlo and replay read --lags alike: an integer >= 0, 'all' or 'auto', as
+    the estimator's lags option takes them."""
+    parser = cli.build_parser()
+    heads = (["simulate"], ["montecarlo", "--out", "o"], ["replay", "bag", "--out", "o"])
+    for head in heads:
+        for given, lags in (("0", 0), ("50", 50), ("all", "all"), ("auto", "auto")):
+            assert parser.parse_args([*head, "--lags", given]).lags == lags
+
+
+def test_replay_lags_set_the_lag_parameters_whatever_the_file_says(tmp_path):
+    (tmp_path / "auto.yaml").write_text("/**:\n  ros__parameters:\n    estimator.lag_selection: auto\n")
+    parser = cli.build_parser()
+    expected = {"20": {"estimator.lag_selection": "fixed", "estimator.lags": 20},
+                "all": {"estimator.lag_selection": "fixed", "estimator.lags": -1},
+                "auto": {"estimator.lag_selection": "auto"}}
+    for given, want in expected.items():
+        args = parser.parse_args(["replay", "bag", "--out", "o", "--config", str(tmp_path / "auto.yaml"), "--lags",
+                                  given])
+        params = cli._replay_params(args)
+        assert {k: v for k, v in params.items() if k in ("estimator.lag_selection", "estimator.lags")} == want
+
+
+def test_version_is_package_xml_s(capsys):
+    import xml.etree.ElementTree as ET
+
+    version = ET.parse(ROOT / "package.xml").getroot().findtext("version")
+    with pytest.raises(SystemExit) as exc:
+        cli.main(["--version"])
+    assert exc.value.code == 0 and capsys.readouterr().out == f"rls-uncertainty {version}\n"

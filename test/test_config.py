@@ -2,10 +2,16 @@
 PipelineConfig built from dotted parameters, and every validation with its reason."""
 
 import dataclasses
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
 
 import pytest
 
 from rls_uncertainty.config import (
+    NODE_NAME,
     PARAMETERS,
     ConfigError,
     EstimatorConfig,
@@ -18,11 +24,13 @@ from rls_uncertainty.config import (
     load_parameters_file,
     parameter_defaults,
     pipeline_config,
+    startup_parameters,
 )
 from rls_uncertainty.differentiation import DifferentiatorConfig
 from rls_uncertainty.estimator import RESIDUALS, WINDOWS
 from rls_uncertainty.surface_mixing import SurfaceMixing
 
+ROOT = Path(__file__).resolve().parents[1]
 T2 = load_aircraft("t2")
 
 
@@ -238,8 +246,8 @@ def test_plausibility_defaults_lie_between_any_flight_and_absurd_values():
     """Each default: beyond what the bundled T-2 maneuver and the three Twin Otter flights
     reach (measured maxima, rounded up: 0.37 rad/s, 15.2 m/s^2, 40.8..74 m/s, |alpha| 0.126,
     |beta| 0.118 rad, 981..2834 Pa, 0.122 rad of surface, 6.6 kN of thrust) by an order of
-    magnitude or more, and below the values of issue 12 (1e100 rad/s, 1e150, 1e-300 Pa,
-    |alpha| near pi). The parameter ranges keep every setting in that band as well."""
+    magnitude or more, and below absurd values a corrupt recording may hold (1e100 rad/s, 1e150,
+    1e-300 Pa, |alpha| near pi). The parameter ranges keep every setting in that band as well."""
     d = PlausibilityLimits()
     flight = {"angular_rate": 0.37, "specific_force": 15.2, "alpha": 0.126, "beta": 0.118, "surface": 0.122,
               "thrust": 6.6e3, "airspeed_max": 74.0, "dynamic_pressure_max": 2834.0}
@@ -256,3 +264,189 @@ def test_plausibility_defaults_lie_between_any_flight_and_absurd_values():
     assert spec["limits.alpha"].high < 0.5 * 3.14159 and spec["limits.beta"].high < 0.5 * 3.14159
     # A dynamic pressure above the one of the top airspeed at sea level (so both limits agree).
     assert d.dynamic_pressure_max >= 0.5 * 1.225 * d.airspeed_max**2
+
+
+# ------------------------------------------------------------------ the node's parameter sources
+def _file(tmp_path, text, name="p.yaml"):
+    path = tmp_path / name
+    path.write_text(text)
+    return str(path)
+
+
+def _startup(*ros_args):
+    return startup_parameters(["estimator_node", "--ros-args", *ros_args])
+
+
+def _refused(*ros_args):
+    with pytest.raises(ConfigError) as exc:
+        _startup(*ros_args)
+    return str(exc.value)
+
+
+@pytest.mark.parametrize("args,needles", [
+    (["-p", "estimator.lags:=-5"], ["parameter 'estimator.lags' must be in [-1, 100000], got -5",
+                                    "(from -p estimator.lags:=-5)"]),
+    (["-p", "rate:=fast"], ["parameter 'rate' must be a finite number, got 'fast'", "(from -p rate:=fast)"]),
+    (["-p", "estimator.window:=hann"], ["must be one of ['truncated', 'bartlett'], got 'hann'"]),
+    (["-p", "differentiator.window:=9.5"], ["parameter 'differentiator.window' must be an integer, got 9.5"]),
+    (["-p", "use_sim_time:=1"], ["parameter 'use_sim_time' must be true or false, got 1"]),
+    (["-p", "estimator.lag:=20"], ["-p estimator.lag:=20: unknown parameter 'estimator.lag' "
+                                   "(did you mean estimator.lags?)"]),
+    (["-p", "colour:=red"], ["unknown parameter 'colour'"]),
+    (["-p", "rls_estimator:estimator.lag:=20"], ["did you mean estimator.lags?"]),
+    (["-p", "aircraft:=concorde"], ["concorde.yaml: no such file"]),
+    (["-p", "inputs.max_gap:=1.0", "-p", "inputs.max_stamp_jump:=0.5"], ["inputs.max_stamp_jump"]),
+    (["--params-file", "missing.yaml"], ["parameter file missing.yaml: no such file"]),
+    (["--foo"], ["unknown ROS argument '--foo'"]),
+])
+def test_a_bad_start_up_parameter_is_refused_naming_it_and_its_source(args, needles):
+    message = _refused(*args)
+    assert all(n in message for n in needles) and "\n" not in message, message
+
+
+def test_an_argument_outside_ros_args_is_refused():
+    with pytest.raises(ConfigError, match="unexpected argument"):
+        startup_parameters(["estimator_node", "-p", "rate:=100.0"])
+    assert startup_parameters(["estimator_node"]).values == {}
+    assert startup_parameters([]).values == {}
+
+
+def test_start_up_values_are_converted_to_the_parameters_types(tmp_path):
+    """An integer for a floating-point parameter is that number, as the replay reads it."""
+    values = _startup("-p", "rate:=100", "-p", "estimator.forgetting:=1", "-p", "models.enabled:=[CZ, Cm]").values
+    assert values == {"rate": 100.0, "estimator.forgetting": 1.0, "models.enabled": ["CZ", "Cm"]}
+    assert type(values["rate"]) is float
+
+
+def test_a_section_naming_the_node_refuses_unknown_names(tmp_path):
+    for key in ("rls_estimator", "/rls_estimator"):
+        path = _file(tmp_path, f"{key}:\n  ros__parameters:\n    estimator:\n      lag: 20\n")
+        message = _refused("--params-file", path)
+        assert f"parameter file {path}, section {key}, line 4: unknown parameter 'estimator.lag' " \
+               "(did you mean estimator.lags?)" in message
+    path = _file(tmp_path, "x:\n  rls_estimator:\n    ros__parameters:\n      rat: 20.0\n")
+    assert "did you mean rate?" in _refused("-r", "__ns:=/x", "--params-file", path)
+
+
+def test_a_wildcard_section_refuses_names_of_the_nodes_groups_and_warns_about_others(tmp_path):
+    assert "unknown parameter 'estimator.lag'" in _refused("--params-file", _file(
+        tmp_path, "/**:\n  ros__parameters:\n    estimator.lag: 20\n"))
+    assert "did you mean aircraft?" in _refused("--params-file", _file(
+        tmp_path, "/**:\n  ros__parameters:\n    aircraf: t2\n"))
+    path = _file(tmp_path, "/**:\n  ros__parameters:\n    estimator.lags: 20\n    speed: 3\n    use_sim_time: true\n"
+                           "    qos_overrides./clock.subscription.depth: 5\n")
+    params = _startup("--params-file", path)
+    assert params.values == {"estimator.lags": 20, "use_sim_time": True, "qos_overrides./clock.subscription.depth": 5}
+    assert params.warnings == (f"parameter file {path}, section /**: parameters that are not this node's ignored "
+                               "(meant for other nodes?): speed",)
+
+
+def test_a_file_with_no_section_for_the_node_is_refused(tmp_path):
+    path = _file(tmp_path, "rls_estimatr:\n  ros__parameters:\n    estimator:\n      lags: 20\n")
+    assert _refused("--params-file", path) == (
+        f"parameter file {path}: no section for node /rls_estimator (it has sections for rls_estimatr; did you mean "
+        "rls_estimator?); name the node (rls_estimator, /NAMESPACE/rls_estimator) or use a wildcard (/**)")
+    # Sections for the node in another namespace, or renamed, do not apply either.
+    path = _file(tmp_path, "/x/rls_estimator:\n  ros__parameters:\n    rate: 20.0\n")
+    assert "no section for node /rls_estimator" in _refused("--params-file", path)
+    assert "no section for node /y/rls_estimator" in _refused("-r", "__ns:=/y", "--params-file", path)
+    assert "no section for node /x/renamed" in _refused("-r", "__ns:=/x", "-r", "__node:=renamed", "--params-file",
+                                                        path)
+    assert _startup("-r", "__ns:=/x", "--params-file", path).values == {"rate": 20.0}
+    assert "no 'NODE: ros__parameters:' section" in _refused("--params-file", _file(tmp_path, "# empty\n"))
+
+
+def test_sections_and_rules_for_other_nodes_are_one_warning_each(tmp_path):
+    path = _file(tmp_path, "rls_estimator:\n  ros__parameters:\n    rate: 20.0\nplanner:\n  ros__parameters:\n"
+                           "    speed: 3\nmapper:\n  ros__parameters:\n    size: 3\n")
+    params = _startup("--params-file", path, "-p", "planner:speed:=4")
+    assert params.values == {"rate": 20.0}
+    assert params.warnings == (f"parameter file {path}: sections for other nodes ignored: planner, mapper",
+                               "-p planner:speed:=4: for node /planner, not /rls_estimator: ignored")
+
+
+def test_the_replay_reads_a_file_as_the_node_in_any_namespace(tmp_path):
+    path = _file(tmp_path, "/x/rls_estimator:\n  ros__parameters:\n    rate: 20\nplanner:\n  ros__parameters:\n"
+                           "    speed: 3\n")
+    with pytest.warns(UserWarning, match="sections for other nodes ignored: planner"):
+        assert load_parameters_file(path) == {"rate": 20.0}
+    path = _file(tmp_path, "rls_estimatr:\n  ros__parameters:\n    rate: 20.0\n")
+    with pytest.raises(ConfigError, match="no section for node rls_estimator"):
+        load_parameters_file(path)
+    path = _file(tmp_path, "rls_estimator:\n  ros__parameters:\n    estimator.lag: 20\n")
+    with pytest.raises(ConfigError, match=r"did you mean estimator\.lags"):
+        load_parameters_file(path)
+
+
+def test_the_value_that_wins_is_the_one_rcl_gives_the_node(tmp_path):
+    """A section naming the node that rcl filed before /** keeps /**'s later values from winning
+    (ros_arguments.in_rcl_order; the rcl oracle is in test_ros_arguments.py)."""
+    path = _file(tmp_path, "/**:\n  ros__parameters:\n    rate: 40.0\nrls_estimator:\n  ros__parameters:\n"
+                           "    rate: 30.0\n")
+    assert _startup("--params-file", path, "-p", "rate:=20.0").values["rate"] == 30.0
+    assert _startup("-p", "rate:=20.0", "--params-file", path).values["rate"] == 30.0
+    assert _startup("--params-file", path, "-p", "rls_estimator:rate:=20.0").values["rate"] == 20.0
+
+
+# ------------------------------------------------------------------ the console script
+def _run_node(*ros_args):
+    return subprocess.run([sys.executable, "-m", "rls_uncertainty.node", "--ros-args", *ros_args],
+                          capture_output=True, text=True, timeout=120, cwd=ROOT)
+
+
+@pytest.mark.parametrize("args,needle", [
+    (["-p", "estimator.lags:=-5"], "parameter 'estimator.lags' must be in [-1, 100000], got -5"),
+    (["-p", "rate:=fast"], "parameter 'rate' must be a finite number, got 'fast'"),
+    (["--params-file", "missing.yaml"], "parameter file missing.yaml: no such file"),
+    (["--params-file", "{malformed}"], "not valid YAML: expected ',' or ']', but got '<stream end>' (line 4"),
+    (["-p", "estimator.lag:=20"], "did you mean estimator.lags?"),
+    (["--params-file", "{section}"], "no section for node /rls_estimator"),
+])
+def test_the_node_refuses_a_misconfiguration_in_one_line_with_exit_status_2(tmp_path, args, needle):
+    files = {"malformed": _file(tmp_path, "rls_estimator:\n  ros__parameters:\n    rate: [1, 2\n", "m.yaml"),
+             "section": _file(tmp_path, "rls_estimatr:\n  ros__parameters:\n    rate: 20.0\n", "s.yaml")}
+    run = _run_node(*(a.format(**files) for a in args))
+    assert run.returncode == 2, run.stderr
+    assert run.stderr.startswith("rls_estimator: invalid configuration: ") and needle in run.stderr, run.stderr
+    assert len(run.stderr.splitlines()) == 1 and run.stdout == ""
+
+
+def test_the_node_starts_with_checked_values_and_logs_each_warning_once(tmp_path):
+    path = _file(tmp_path, "/**:\n  ros__parameters:\n    rate: 100\n    speed: 3\nplanner:\n  ros__parameters:\n"
+                           "    speed: 3\n")
+    log = tmp_path / "node.log"
+    with open(log, "w") as fh:
+        proc = subprocess.Popen([sys.executable, "-m", "rls_uncertainty.node", "--ros-args", "--params-file", path],
+                                stdout=fh, stderr=subprocess.STDOUT, cwd=ROOT)
+    try:
+        deadline = time.monotonic() + 120
+        while log.read_text().count("WARN") < 2 and proc.poll() is None and time.monotonic() < deadline:
+            time.sleep(0.1)
+        text = log.read_text()
+        assert proc.poll() is None, text  # running: an integer rate is the number 100.0
+        assert "at 100 Hz" in text
+        warnings_ = [line for line in text.splitlines() if "WARN" in line]
+        assert len(warnings_) == 2 and "ignored: planner" in warnings_[0] and "ignored (meant for other nodes?): " \
+               "speed" in warnings_[1], text
+    finally:
+        proc.send_signal(signal.SIGINT)
+        try:
+            proc.wait(30)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+
+
+def test_what_only_rcl_refuses_is_still_one_line_of_ours_and_exit_status_2():
+    """A remap rule rcl cannot read (the start-up check reads parameters, not topic names): rcl
+    logs its own error line, then the node says why in one line; no traceback."""
+    run = _run_node("-r", "imu:=bad:name")
+    assert run.returncode == 2 and "Traceback" not in run.stderr, run.stderr
+    assert run.stderr.splitlines()[-1].startswith("rls_estimator: invalid configuration: ") and "imu:=bad:name" in \
+        run.stderr.splitlines()[-1]
+
+
+def test_parameter_files_are_matched_against_the_name_the_node_runs_under():
+    from rls_uncertainty import node
+
+    assert NODE_NAME == node.NODE_NAME

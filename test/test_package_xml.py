@@ -5,6 +5,7 @@ someone else's machine. No DDS."""
 from __future__ import annotations
 
 import ast
+import itertools
 import re
 import sys
 import xml.etree.ElementTree as ET
@@ -135,8 +136,6 @@ def test_manifest_names_the_package_and_its_build_type():
     assert root.get("format") == "3"
     assert root.findtext("name") == PACKAGE
     assert root.findtext("export/build_type") == "ament_python"
-    setup = (ROOT / "setup.py").read_text(encoding="utf-8")
-    assert f'version="{root.findtext("version")}"' in setup, "package.xml and setup.py versions differ"
     assert (ROOT / "resource" / PACKAGE).is_file()
 
 
@@ -189,3 +188,71 @@ TYPES = {"imu": "sensor_msgs/msg/Imu", "srv": "example_interfaces/srv/AddTwoInts
 """
     assert references(source) == {"os", "numpy", "yaml", "importlib", "std_srvs", "sensor_msgs", "example_interfaces"}
     assert references(source, type_names=False) == {"os", "numpy", "yaml", "importlib", "std_srvs"}
+
+
+def test_the_version_is_written_once_in_package_xml():
+    """setup.py reads package.xml's version, and the installed package carries it (what
+    `rls-uncertainty --version` prints)."""
+    from importlib.metadata import version
+
+    written = ET.parse(ROOT / "package.xml").getroot().findtext("version")
+    assert re.fullmatch(r"\d+\.\d+\.\d+", written)
+    setup_py = (ROOT / "setup.py").read_text()
+    assert "version=VERSION" in setup_py and written not in setup_py
+    assert version(PACKAGE) == written
+
+
+def _requirements(path: Path) -> list[str]:
+    lines = (line.split("#", 1)[0].strip() for line in path.read_text(encoding="utf-8").splitlines())
+    return [line for line in lines if line and not line.startswith("-")]
+
+
+def _canonical(name: str) -> str:
+    return re.sub(r"[-_.]+", "-", name).lower()  # PEP 503
+
+
+def _release(version: str) -> tuple[int, ...]:
+    return tuple(int(x) for x in version.split("."))
+
+
+_COMPARE = {"==": tuple.__eq__, "!=": tuple.__ne__, ">=": tuple.__ge__, "<=": tuple.__le__, ">": tuple.__gt__,
+            "<": tuple.__lt__}
+
+
+def test_the_constraints_pin_every_requirement_within_its_range():
+    """scripts/setup.sh installs constraints.txt's exact versions by default: each requirement of
+    requirements*.txt is pinned there, to a version its range accepts (every version here is
+    numeric: compared as tuples of integers)."""
+    pins = {}
+    for line in _requirements(ROOT / "constraints.txt"):
+        name, sep, version = line.partition("==")
+        assert sep and re.fullmatch(r"\d+(\.\d+)*", version), f"constraints.txt: {line!r} is not NAME==VERSION"
+        pins[_canonical(name)] = _release(version)
+    for path in (ROOT / "requirements.txt", ROOT / "requirements-dev.txt"):
+        for line in _requirements(path):
+            name = re.match(r"[A-Za-z0-9_.-]+", line).group(0)
+            pinned = pins.get(_canonical(name))
+            assert pinned is not None, f"{name} ({path.name}) is not pinned in constraints.txt"
+            for op, version in re.findall(r"(==|!=|>=|<=|>|<)\s*([0-9.]+)", line[len(name):]):
+                assert _COMPARE[op](pinned, _release(version)), f"{name} pinned to {pinned}, outside {line!r}"
+
+
+def test_the_license_file_is_the_one_package_xml_declares():
+    root, _ = manifest()
+    assert root.findtext("license") == "Apache-2.0"
+    text = (ROOT / "LICENSE").read_text(encoding="utf-8")
+    assert text.split()[:4] == ["Apache", "License", "Version", "2.0,"] and "END OF TERMS AND CONDITIONS" in text
+
+
+def test_the_changelog_is_in_the_ros_format_and_names_this_version():
+    """catkin_generate_changelog's layout: the title, then 'Forthcoming' and 'X.Y.Z (YYYY-MM-DD)'
+    sections, each underlined, with bullets; the newest release is package.xml's version."""
+    root, _ = manifest()
+    lines = (ROOT / "CHANGELOG.rst").read_text(encoding="utf-8").splitlines()
+    assert lines[1] == f"Changelog for package {PACKAGE}" and set(lines[0]) == set(lines[2]) == {"^"}
+    headings = [line for line, under in itertools.pairwise(lines)
+                if under and set(under) == {"-"} and len(under) == len(line)]
+    assert headings[0] == "Forthcoming"
+    releases = headings[1:]
+    assert all(re.fullmatch(r"\d+\.\d+\.\d+ \(\d{4}-\d{2}-\d{2}\)", h) for h in releases), releases
+    assert releases[0].split()[0] == root.findtext("version")
