@@ -19,7 +19,7 @@ from typing import Any
 
 import yaml
 
-from .aero import PlausibilityLimits
+from .limits import PlausibilityLimits
 from .convergence import ConvergenceConfig
 from .differentiation import DifferentiatorConfig
 from .errors import ConfigError

@@ -26,7 +26,7 @@ or rejected: :class:`Bookkeeping` holds every counter, :meth:`Pipeline.counters`
 (the node's ``/diagnostics``), and a reconfigured pipeline takes over the same object.
 
 Nothing non-finite leaves: a message in another frame than ``inputs.frame_id``, or with a value
-that is non-finite or beyond ``limits.*`` (:class:`.aero.PlausibilityLimits`), is rejected
+that is non-finite or beyond ``limits.*`` (:class:`.limits.PlausibilityLimits`), is rejected
 with its reason; so is a sample that is implausible once formed, or that the estimator refuses
 (``non_finite_regression``); and a model whose outputs are not all finite is withheld from
 :meth:`Pipeline.published` and counted. Every table keyed by what arrives (JointState names,
@@ -268,7 +268,7 @@ class Pipeline:
         return self.bookkeeping.samples_used
 
     # ------------------------------------------------------------------ inputs
-    # Each message is judged on its own first (:class:`.aero.PlausibilityLimits`): a non-finite
+    # Each message is judged on its own first (:class:`.limits.PlausibilityLimits`): a non-finite
     # value is counted by the sampler (``non_finite``), an implausible one is rejected as
     # ``implausible_<field>`` through Sampler.reject_invalid, which knows its stamp.
     def add_imu(self, stamp_ns: int, angular_velocity: Sequence[float],
