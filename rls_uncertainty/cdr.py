@@ -7,7 +7,7 @@ codecs cover exactly:
 
 * decoding ``sensor_msgs/Imu``, ``geometry_msgs/Vector3Stamped``, ``sensor_msgs/FluidPressure``,
   ``sensor_msgs/JointState``, ``geometry_msgs/WrenchStamped`` into light objects with the
-  same field names (what :mod:`.messages` reads), little- and big-endian, so node and replay
+  same field names (what :mod:`.inputs` reads), little- and big-endian, so node and replay
   have one decoding path;
 * encoding ``std_msgs/Header`` and ``std_msgs/Float64MultiArray`` (little endian), the latter
   with the vector layout of the estimates (:func:`encode_float64_multiarray`) or any layout

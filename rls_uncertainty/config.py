@@ -19,12 +19,12 @@ from typing import Any
 
 import yaml
 
-from .limits import PlausibilityLimits
 from .convergence import ConvergenceConfig
 from .differentiation import DifferentiatorConfig
 from .errors import ConfigError
 from .estimator import RESIDUALS, WINDOWS, Residual, Window
 from .estimator.options import AUTO_BURN_IN, MAX_BURN_IN, check_burn_in
+from .limits import PlausibilityLimits
 from .surface_mixing import SURFACES, SurfaceMixing
 
 __all__ = [

@@ -201,7 +201,9 @@ class ConvergenceMonitor:
         """Samples currently in the buffer (at most :attr:`capacity`)."""
         return self._hi - self._lo
 
-    def _none(self) -> tuple[np.ndarray, np.ndarray]:
+    def no_flags(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(flags, model_flags)`` with nothing flagged: what :meth:`update` returns without
+        an anchor, and the flags of an estimator that has no sample yet."""
         return np.zeros(self.shape, dtype=bool), np.zeros(self.shape[0], dtype=bool)
 
     def update(
@@ -236,7 +238,7 @@ class ConvergenceMonitor:
             stamp = None
         if stamp is None or not -_STAMP_LIMIT < stamp < _STAMP_LIMIT:
             self.reset()
-            return self._none()
+            return self.no_flags()
         if self._last is not None and stamp <= self._last:
             self.reset()
         self._last = stamp
@@ -278,7 +280,7 @@ class ConvergenceMonitor:
             a += 1
         self._anchor = a
         if a < self._lo:
-            return self._none()
+            return self.no_flags()
         if a >= self._front:  # front stack empty: rebuild it from rows [a, hi)
             np.maximum.accumulate(self._rows[a:hi][::-1], axis=0, out=self._suffix[a:hi][::-1])
             self._front = hi

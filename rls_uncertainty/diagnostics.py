@@ -45,7 +45,7 @@ from collections import deque
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 
-from .messages import NODE_NAME
+from .outputs import NODE_NAME
 
 __all__ = [
     "OK",

@@ -12,7 +12,8 @@ import pytest
 
 from rls_uncertainty import diagnostics as dg
 from rls_uncertainty.diagnostics import OK, WARN, DiagnosticsPolicy, Snapshot
-from rls_uncertainty.messages import INPUTS, NODE_NAME
+from rls_uncertainty.inputs import STREAMS as INPUTS
+from rls_uncertainty.outputs import NODE_NAME
 
 SEC = 1_000_000_000
 NOW = 1_700_000_000 * SEC

@@ -26,8 +26,9 @@ from std_srvs.srv import SetBool, Trigger
 from rls_uncertainty.bags import read_inputs
 from rls_uncertainty.config import load_parameters_file, pipeline_config
 from rls_uncertainty.estimator.state_file import load_state
-from rls_uncertainty.messages import MESSAGE_TYPES, feed, parse_stamp_label
-from rls_uncertainty.messages import NODE_NAME as NODE
+from rls_uncertainty.inputs import MESSAGE_TYPES, feed
+from rls_uncertainty.outputs import NODE_NAME as NODE
+from rls_uncertainty.outputs import parse_stamp_label
 from rls_uncertainty.pipeline import Pipeline
 from rls_uncertainty.replay import run_pipeline
 

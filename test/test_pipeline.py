@@ -19,6 +19,7 @@ import pytest
 
 from rls_uncertainty.config import load_aircraft, load_parameters_file, pipeline_config
 from rls_uncertainty.differentiation import DifferentiatorConfig, differentiate
+from rls_uncertainty.outputs import OutputLayout
 from rls_uncertainty.pipeline import STREAMS, Pipeline, StateFileError
 from rls_uncertainty.replay import run_pipeline
 from rls_uncertainty.simulation import simulate_sensor_streams
@@ -67,6 +68,11 @@ def apply(pipe, events, surface_names=("elevator_left", "elevator_right", "ailer
         else:
             outs += pipe.add_thrust(stamp, float(v))
     return outs
+
+
+def published(pipe, out):
+    """The rows of ``out`` that leave the pipeline (:meth:`.outputs.OutputLayout.rows`)."""
+    return list(OutputLayout.of(pipe).rows(out))
 
 
 def feed_streams(pipe, st):
@@ -143,7 +149,7 @@ def test_every_sample_and_message_is_accounted_for(t2_run):
         assert s["accepted"] == s["received"]
     assert len(outs) == c["samples_used"]
     for out in outs:
-        for _name, _label, th, se, sc in pipe.published(out):
+        for _j, _name, _names, th, se, sc in published(pipe, out):
             assert np.all(np.isfinite(th)) and np.all(np.isfinite(se)) and np.all(np.isfinite(sc))
 
 
@@ -277,7 +283,7 @@ def test_bad_messages_are_counted_and_never_reach_the_outputs():
     t_used = {(r[0] - syn.t0) // MS for r in pipe.regression}
     assert not t_used & {1000, 1020}
     for out in syn.outs:
-        for _n, _l, th, se, sc in pipe.published(out):
+        for _j, _n, _names, th, se, sc in published(pipe, out):
             assert np.isfinite(th).all() and np.isfinite(se).all() and np.isfinite(sc).all()
 
 
@@ -354,8 +360,8 @@ def test_one_absurd_value_is_rejected_and_changes_nothing_else(case, clean_pitch
     for t, X, z in pipe.regression:
         np.testing.assert_allclose(X, clean[t][1], rtol=0, atol=1e-6)
         np.testing.assert_allclose(z, clean[t][2], rtol=1e-9, atol=1e-12)
-    rows = [row for out in syn.outs for row in pipe.published(out)]
-    assert rows and all(np.isfinite(np.concatenate(r[2:])).all() for r in rows)
+    rows = [row for out in syn.outs for row in published(pipe, out)]
+    assert rows and all(np.isfinite(np.concatenate(r[3:])).all() for r in rows)
     X = np.array([r[1][0, :3] for r in pipe.regression])
     z = np.array([r[2][0] for r in pipe.regression])
     np.testing.assert_allclose(pipe.bank.theta_all()[0, :3], np.linalg.lstsq(X, z, rcond=None)[0], rtol=1e-8)
@@ -441,15 +447,15 @@ def test_a_model_whose_outputs_are_not_finite_is_withheld_and_counted(monkeypatc
     syn.run(1000, 1400)
     new = syn.outs[n_out:]
     assert len(new) == 20
-    published = [row[0] for out in new for row in pipe.published(out)]
-    assert published == ["CZ"] * 20  # Cm withheld, CZ unaffected
+    models = [row.model for out in new for row in published(pipe, out)]
+    assert models == ["CZ"] * 20  # Cm withheld, CZ unaffected
     assert all(not out.ready[1] for out in new)
     assert pipe.counters()["outputs_withheld"] == {"Cm": 20}
     fit = pipe.model_fit(1)
     assert fit["ready"] is False and "withheld" in fit["problem"] and fit["outputs_withheld"] == 20
-    # Even an output built by hand passes published() only with finite rows.
+    # Even an output built by hand leaves (OutputLayout.rows) only with finite rows.
     hand = new[-1]._replace(ready=np.array([True, True]))
-    assert [row[0] for row in pipe.published(hand)] == ["CZ"]
+    assert [row.model for row in published(pipe, hand)] == ["CZ"]
     monkeypatch.undo()
     pipe.reset("service")
     syn.run(1400, 2400)
@@ -467,7 +473,7 @@ def test_r_squared_of_a_constant_output_is_not_reported_as_ok():
     assert fit == {"ready": False, "samples": pipe.bank.k, "problem": "output constant: R^2 undefined",
                    "outputs_withheld": 0}
     assert pipe.model_fit(1)["ready"] and math.isfinite(pipe.model_fit(1)["r_squared"])
-    assert [row[0] for row in pipe.published(syn.outs[-1])] == ["CY", "Cm"]
+    assert [row.model for row in published(pipe, syn.outs[-1])] == ["CY", "Cm"]
 
 
 def test_a_stream_that_stops_skips_its_gap_and_restarts_the_differentiator():
@@ -577,7 +583,7 @@ def test_state_file_with_auto_lags_and_a_residual_burn_in_resumes_and_refuses_an
 def test_pipeline_imports_no_ros():
     import subprocess
 
-    code = "import sys, rls_uncertainty.pipeline, rls_uncertainty.messages; " \
+    code = "import sys, rls_uncertainty.pipeline, rls_uncertainty.inputs, rls_uncertainty.outputs; " \
            "sys.exit(any(m.split('.')[0] in ('rclpy', 'rosbags') for m in sys.modules))"
     assert subprocess.run([sys.executable, "-c", code]).returncode == 0
 
@@ -867,7 +873,7 @@ def test_a_flood_of_unknown_joint_names_keeps_every_table_small():
     sent in every /diagnostics message (74 -> 154 MB, 3.6 MB messages). Now the first 32 names
     are counted by name and the rest under one key; every occurrence is still counted, the
     messages are still used, and memory does not grow with the names."""
-    from rls_uncertainty.pipeline import KEYS_KEPT, OTHER_JOINTS
+    from rls_uncertainty.bookkeeping import KEYS_KEPT, OTHER_JOINTS
 
     pipe = Pipeline(pipeline_config({"models.enabled": ["Cm"], "models.Cm": ["1", "q_hat", "delta_e"]}))
     syn = Synthetic(pipe)
@@ -905,7 +911,7 @@ def test_a_flood_of_unknown_joint_names_keeps_every_table_small():
 
 
 def test_caller_given_rejection_reasons_are_bounded_and_long_keys_cut():
-    from rls_uncertainty.pipeline import KEY_CHARS, KEYS_KEPT, OTHER_REASONS
+    from rls_uncertainty.bookkeeping import KEY_CHARS, KEYS_KEPT, OTHER_REASONS
 
     pipe = pitch_pipeline()
     for k in range(1000):
