@@ -22,7 +22,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from .sampling import StreamCounts
+from .streams import StreamCounts
 
 if TYPE_CHECKING:  # annotations only
     from .estimator import EstimatorBank

@@ -20,7 +20,8 @@ from collections.abc import Sequence
 
 from .bookkeeping import EVIDENCE_ITEMS, KEY_CHARS, KEYS_KEPT, OTHER_JOINTS, OTHER_REASONS, Bookkeeping, count_bounded
 from .limits import PlausibilityLimits
-from .sampling import Sampler, Stream
+from .sampling import Sampler
+from .streams import Stream
 from .surface_mixing import SurfaceMixer, SurfaceMixing
 
 __all__ = ["Intake"]
