@@ -28,7 +28,9 @@ __all__ = ["Intake"]
 
 
 def _names(names: Sequence[str]) -> tuple[tuple[str, ...], int]:
-    """A JointState's names as evidence: the first few, cut, and how many there were."""
+    """A JointState's names as evidence: the first few, cut, and how many there were (with
+    the number of positions and the ``surfaces.*`` fields whose joints are missing, the
+    evidence of ``missing_joint`` and ``mismatched_arrays``)."""
     return tuple(str(n)[:KEY_CHARS] for n in names[:EVIDENCE_ITEMS]), len(names)
 
 
@@ -82,7 +84,8 @@ class Intake:
         if len(positions) != len(names):
             layout = "mismatched_arrays"
         if type(layout) is str:  # unusable at its stamp, like any invalid message: a hole
-            self.book.note("control_surfaces", layout, (*_names(names), len(positions)))
+            missing = tuple(self._mixer.mixing.missing(names)) if layout == "missing_joint" else ()
+            self.book.note("control_surfaces", layout, (*_names(names), len(positions), missing))
             return self._reject(self._surfaces, stamp_ns, layout)
         # A JointLayout from here (mypy does not narrow on `type(x) is str`'s else branch).
         unknown = self.book.unknown_joints

@@ -147,9 +147,11 @@ class PlausibilityLimits:
             return "implausible_thrust"
         return None
 
-    def bound(self, reason: str) -> tuple[str, str]:
-        """``(parameters, bound)`` of an ``implausible_<quantity>`` reason, e.g.
-        ``("limits.alpha", "|alpha| <= 1 rad")``; ``("", "")`` for any other reason."""
+    def bound(self, reason: str, seen: float = math.nan) -> tuple[str, str]:
+        """``(parameter, bound)`` of an ``implausible_<quantity>`` reason, e.g.
+        ``("limits.alpha", "|alpha| <= 1 rad")``; of a range, the side that ``seen`` is beyond
+        (``limits.airspeed_max`` for a value above it; both when unknown). ``("", "")`` for any
+        other reason."""
         if reason not in BOUNDS:
             return "", ""
         names, unit = BOUNDS[reason]
@@ -157,7 +159,8 @@ class PlausibilityLimits:
         if len(names) == 1:
             return f"limits.{names[0]}", f"|{quantity}| <= {getattr(self, names[0]):g} {unit}"
         low, high = (getattr(self, n) for n in names)
-        return f"limits.{names[0]}/{names[1].rsplit('_', 1)[1]}", f"{low:g} <= {quantity} <= {high:g} {unit}"
+        side = names[1] if seen > high else names[0] if seen < low else f"{names[0]}/{names[1].rsplit('_', 1)[1]}"
+        return f"limits.{side}", f"{low:g} <= {quantity} <= {high:g} {unit}"
 
 
 def _all_finite(values: Iterable[float]) -> bool:

@@ -335,6 +335,8 @@ class EstimatorNode(Node):
             for s in self._diagnostics.update(snapshot)
         ]
         self._diag_pub.publish(arr)
+        for line in self._diagnostics.alerts.due():  # a misconfigured data path, throttled
+            self.get_logger().warning(line)
 
 
 def main(args: list[str] | None = None) -> int:

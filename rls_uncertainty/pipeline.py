@@ -47,6 +47,7 @@ from typing import NamedTuple
 import numpy as np
 
 from .aero import RATES, FloatArray, aircraft_sample, coefficients, flight_state, regressors
+from .alerts import explanations
 from .bookkeeping import SAMPLES, Bookkeeping, model_fit
 from .config import PipelineConfig
 from .convergence import ConvergenceMonitor
@@ -446,8 +447,11 @@ class Pipeline:
         return {"converged": bool(model_flags[j]), "converged_parameters": ",".join(names)}
 
     def counters(self) -> dict:
-        """Bookkeeping for diagnostics: messages per stream and samples, with reasons."""
-        return self.bookkeeping.report(len(self._pending))
+        """Bookkeeping for diagnostics: messages per stream and samples, with reasons, and
+        ``explanations``: each reason in the user's terms (:func:`.alerts.explanations`)."""
+        report = self.bookkeeping.report(len(self._pending))
+        report["explanations"] = explanations(self.config, self.bookkeeping)
+        return report
 
     # ------------------------------------------------------------------ persistence
     def save_state(self, path: str | Path) -> None:

@@ -36,6 +36,7 @@ from typing import Any, TextIO
 
 import numpy as np
 
+from .alerts import no_estimate, not_excited
 from .bags import read_inputs, typestore, write_replay
 from .config import NodeConfig, PipelineConfig, node_config, pipeline_config
 from .diagnostics import DiagnosticsPolicy, Snapshot, Status
@@ -50,7 +51,10 @@ __all__ = ["ReplayResult", "run_pipeline", "replay", "output_records", "NODE_NAM
 
 @dataclass
 class ReplayResult:
-    """The pipeline after the run, every published sample and timing."""
+    """The pipeline after the run, every published sample and timing. :attr:`estimates`
+    counts the samples that published an estimate (0: the run estimated nothing, which the
+    command line reports with exit status 1); :attr:`explanations` says, one line each, why a
+    model never produced an estimate (:func:`unestimated`)."""
 
     pipeline: Pipeline
     outputs: list[SampleOutput] = field(default_factory=list)
@@ -60,6 +64,12 @@ class ReplayResult:
     # (stamp_ns, statuses) of the /diagnostics the node would have published, one per
     # diagnostics period of data time (empty unless run_pipeline was given a NodeConfig).
     diagnostics: list[tuple[int, list[Status]]] = field(default_factory=list)
+    explanations: list[str] = field(default_factory=list)
+
+    @property
+    def estimates(self) -> int:
+        """Samples in which at least one model published its estimates."""
+        return sum(1 for out in self.outputs if out.ready.any())
 
     @property
     def speed(self) -> float:
@@ -173,7 +183,31 @@ def run_pipeline(messages: Sequence[tuple[str, int, Stamped]], config: PipelineC
         _progress(total, total)
     if messages:
         result.data_seconds = (messages[-1][1] - messages[0][1]) * 1e-9
+    result.explanations = unestimated(pipe, outs)
     return result
+
+
+def unestimated(pipe: Pipeline, outputs: Sequence[SampleOutput]) -> list[str]:
+    """Why models never produced an estimate over ``outputs``, in the terms of
+    :mod:`.alerts`: one line ``no estimates: <why>`` when the data path used no sample (which
+    stream was rejected and why, expected against received, the parameter to change), else
+    one ``<model>: no estimate: <why>`` per model that never became ready."""
+    ever = np.zeros(len(pipe.models), dtype=bool)
+    for out in outputs:
+        ever |= out.ready
+    if ever.all():
+        return []
+    why = no_estimate(pipe.counters(), pipe.required)
+    if why is not None:
+        return [f"no estimates: {why}"]
+    lines = []
+    for j, (m, n) in enumerate(zip(pipe.models, pipe.sizes, strict=True)):
+        if not ever[j]:
+            # With the regression recorded: the regressors that never moved (the bias aside).
+            X = np.array([x[j, :n] for _t, x, _z in pipe.regression]).reshape(-1, n)
+            constant = [r for i, r in enumerate(m.regressors) if r != "1" and len(X) and np.ptp(X[:, i]) == 0]
+            lines.append(f"{m.output}: no estimate: {not_excited(n, pipe.bank.k, constant)}")
+    return lines
 
 
 def output_records(pipe: Pipeline, outputs: Iterable[SampleOutput], frame_id: str = "base_link",
@@ -266,13 +300,13 @@ def _write_wide_csv(path: Path, pipe: Pipeline, outputs: Iterable[SampleOutput])
 
 
 def summary_table(pipe: Pipeline, outputs: Sequence[SampleOutput]) -> str:
-    """The last sample's estimates of every ready model (:func:`.report.results_table`)."""
-    if not outputs:
-        return "no estimates: no model became ready (check the excitation and the configuration)"
+    """The last sample's estimates of every ready model (:func:`.report.results_table`), then
+    why any model has none (:func:`unestimated`)."""
+    why = unestimated(pipe, outputs)
     rows = []
-    for row in OutputLayout.of(pipe).rows(outputs[-1]):
+    for row in OutputLayout.of(pipe).rows(outputs[-1]) if outputs else ():
         rows += rows_from_arrays(row.names, row.estimates, row.standard_errors_conventional, row.standard_errors)
-    return results_table(rows)
+    return "\n".join(([results_table(rows)] if rows else []) + why)
 
 
 def _plots(out_dir: Path, pipe: Pipeline, outputs: Sequence[SampleOutput]) -> list[Path]:
