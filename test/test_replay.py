@@ -249,3 +249,37 @@ def test_the_replays_diagnostics_never_divide_by_zero_elapsed_time():
     rates = [float(v) for _, statuses in result.diagnostics for s in statuses for k, v in s.values
              if k.endswith(".rate_hz")]
     assert rates and max(rates) < 1000  # the bag's fastest stream is 200 Hz
+
+
+def test_a_run_without_estimates_says_why_and_counts_none(tmp_path, capsys):
+    """The bundled bag without --config: every JointState lacks the default 'elevator' joint.
+    The result counts no estimate (the command exits 1 on it) and the summary names the
+    stream, the reason, the joints expected and received and the parameter to change."""
+    result = replay(BUNDLED, {}, tmp_path / "r", progress=False, plots=False)
+    assert result.estimates == 0
+    names = next(m for kind, _s, m in read_inputs(BUNDLED)[0] if kind == "control_surfaces").name
+    want = ("no estimates: control_surfaces: all 1200 messages rejected (missing_joint): surfaces.elevator expects "
+            f"[elevator], messages carry [{', '.join(names)}]; set surfaces.elevator")
+    assert result.explanations == [want]
+    from rls_uncertainty.replay import summary_table
+
+    assert summary_table(result.pipeline, result.outputs) == want
+    ok = replay(BUNDLED, load_parameters_file("t2"), tmp_path / "ok", progress=False, plots=False)
+    with open(tmp_path / "ok" / "estimates.csv") as fh:
+        assert ok.estimates == len({row["time"] for row in csv.DictReader(fh)}) > 500  # samples with a CSV row
+
+
+def test_models_the_maneuver_never_excites_are_named_with_the_regressors_that_never_moved():
+    """All six models on the longitudinal T-2 maneuver: the lateral ones never initialize; the
+    regressors named constant are those whose inputs are constant in the bag itself."""
+    messages = read_inputs(BUNDLED)[0]
+    params = {**load_parameters_file("t2"), "models.enabled": ["CX", "CY", "CZ", "Cl", "Cm", "Cn"]}
+    result = run_pipeline(messages, pipeline_config(params))
+    assert [line.split(":")[0] for line in result.explanations] == ["CY", "Cl", "Cn"]
+    flat = {"beta": {m.vector.y for k, _s, m in messages if k == "airspeed"},
+            "r_hat": {m.angular_velocity.z for k, _s, m in messages if k == "imu"},
+            "p_hat": {m.angular_velocity.x for k, _s, m in messages if k == "imu"}}
+    assert all(len(values) == 1 for values in flat.values())  # constant in the recording
+    cl = next(line for line in result.explanations if line.startswith("Cl:"))
+    assert "its 6 regressors were not excited independently in 587 samples" in cl
+    assert all(name in cl.split("(")[1].split(" never moved")[0] for name in flat)
