@@ -315,9 +315,10 @@ def test_zero_and_backwards_airspeed_messages_are_rejected_one_by_one():
     assert pipe.bank.k == c["samples_used"] > 80  # of 141 in the clean run
 
 
-# Issue 12's absurd values, one message each, in the middle of a clean run: (stream, ms,
-# value, reason). IMU at 5 ms, air data at 3 + 20 k ms, surfaces at 1 + 10 k ms.
-ISSUE_12 = {
+# Absurd values (a flipped bit, a wrong unit, a crafted message), one message each, in the
+# middle of a clean run: (stream, ms, value, reason). IMU at 5 ms, air data at 3 + 20 k ms,
+# surfaces at 1 + 10 k ms.
+ABSURD = {
     "gyro 1e100 rad/s": ("imu", 1005, ((0.0, 1e100, 0.0), (0.1, 0.0, 9.8)), "implausible_angular_rate"),
     "acceleration 1e150": ("imu", 1005, ((0.0, -0.05, 0.0), (0.1, 0.0, 1e150)), "implausible_specific_force"),
     "surface 1e150": ("control_surfaces", 1011, [1e150, -0.02, 0.04, 0.0], "implausible_surface"),
@@ -337,7 +338,7 @@ def clean_pitch_run():
     return pipe
 
 
-@pytest.mark.parametrize("case", ISSUE_12)
+@pytest.mark.parametrize("case", ABSURD)
 def test_one_absurd_value_is_rejected_and_changes_nothing_else(case, clean_pitch_run):
     """Before: the gyro case published NaN/Inf estimates from then on, the others finite but
     ruined estimates (R^2 of CZ 0.91 -> 0.006 for one 1e150 acceleration on the bundled bag).
@@ -345,7 +346,7 @@ def test_one_absurd_value_is_rejected_and_changes_nothing_else(case, clean_pitch
     the same stamp (the elevator is interpolated over 20 ms instead of 10 ms where its message
     is missing: 1e-6 rad; samples next to the message may be skipped), and the estimates are
     the batch least squares of those samples."""
-    stream, ms, value, reason = ISSUE_12[case]
+    stream, ms, value, reason = ABSURD[case]
     pipe = pitch_pipeline()
     syn = Synthetic(pipe, bad=(stream, ms, value))
     syn.run(0, 3000)
@@ -869,8 +870,8 @@ def test_converted_and_generated_bags_carry_the_default_frame():
 
 # ----------------------------------------------------------------------------- bounded tables
 def test_a_flood_of_unknown_joint_names_keeps_every_table_small():
-    """Issue 12 item 5: 100k distinct unknown JointState names used to add a counter each, all
-    sent in every /diagnostics message (74 -> 154 MB, 3.6 MB messages). Now the first 32 names
+    """100k distinct unknown JointState names once added a counter each, all sent in every
+    /diagnostics message (74 -> 154 MB, 3.6 MB messages). Now the first 32 names
     are counted by name and the rest under one key; every occurrence is still counted, the
     messages are still used, and memory does not grow with the names."""
     from rls_uncertainty.bookkeeping import KEYS_KEPT, OTHER_JOINTS
@@ -936,7 +937,7 @@ def _flip(raw: bytes, value: float, bit: int) -> bytes:
 
 
 def test_a_flipped_bit_in_a_recorded_double_is_counted_and_never_replayed(tmp_path, capsys):
-    """Issue 12: one flipped exponent bit in a recorded pitch rate (-0.111 rad/s at 2.94 s, an
+    """One flipped exponent bit in a recorded pitch rate (-0.111 rad/s at 2.94 s, an
     IMU message on the 50 Hz grid, becomes -2.0e307) made the replay exit 0 with 1780 NaN or
     Inf numbers in its CSV (Cm from then on). Now the message is rejected as
     implausible_angular_rate, the CSV holds only finite numbers, and the summary says so."""
