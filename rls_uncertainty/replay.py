@@ -195,8 +195,8 @@ def unestimated(pipe: Pipeline, outputs: Sequence[SampleOutput]) -> list[str]:
     ever = np.zeros(len(pipe.models), dtype=bool)
     for out in outputs:
         ever |= out.ready
-    if ever.all():
-        return []
+        if ever.all():  # the usual case: every model ready early in the run
+            return []
     why = no_estimate(pipe.counters(), pipe.required)
     if why is not None:
         return [f"no estimates: {why}"]
