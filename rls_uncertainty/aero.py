@@ -4,26 +4,22 @@ Inside this module everything is in aircraft body axes (x forward, y right, z do
 ROS interfaces use the REP-103 body frame (x forward, y left, z up); the conversion happens
 in one place, :func:`rep103_to_aircraft`, which :func:`aircraft_sample` applies to the
 interpolated measurements of one sample. :func:`flight_state` derives airspeed, flow angles
-and dynamic pressure from such a sample; :func:`coefficients` and :func:`regressors` reduce
-it. The control-surface mixing of Eq. 23 is in :mod:`.surface_mixing`.
-
-:class:`PlausibilityLimits` (the ``limits.*`` parameters) bounds what a measurement of an
-aircraft in flight can be: its ``*_rejection`` methods judge one message, and
-:func:`plausibility_rejection` one sample (including what is derived there: flow angles of
-interpolated air data, dynamic pressure from the air density).
+and dynamic pressure from such a sample and judges it (:func:`physics_rejection`, and the
+``limits.*`` parameters of :class:`.limits.PlausibilityLimits`); :func:`coefficients` and
+:func:`regressors` reduce it. The control-surface mixing of Eq. 23 is in :mod:`.surface_mixing`.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable, Mapping, Sequence
-from dataclasses import dataclass, fields
-from typing import TYPE_CHECKING, Any
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import NDArray
 
-from .errors import ConfigError
+from .limits import PlausibilityLimits
 
 if TYPE_CHECKING:  # annotations only: this module imports numpy alone
     from .config import AircraftConfig, ModelConfig
@@ -41,8 +37,6 @@ __all__ = [
     "regressors",
     "regressor_matrix",
     "physics_rejection",
-    "PlausibilityLimits",
-    "plausibility_rejection",
 ]
 
 FloatArray = NDArray[np.float64]
@@ -123,7 +117,7 @@ def flight_state(sample: Sequence[float], rate_dot: FloatArray, air_density: flo
     """A :data:`SAMPLE_FIELDS` vector and its angular accelerations as a :class:`FlightState`
     (``V``, ``alpha = atan2(w, u)``, ``beta = asin(v / V)``; ``qbar = rho V^2 / 2`` when not
     measured), or the reason it cannot be reduced (:func:`physics_rejection`) or is not
-    plausible (:func:`plausibility_rejection`, when ``limits`` are given)."""
+    plausible (:meth:`.limits.PlausibilityLimits.sample_rejection`, when ``limits`` are given)."""
     u, v, w = sample[_U:_W + 1]
     V = math.sqrt(u * u + v * v + w * w)
     if not V > 0.0:
@@ -141,7 +135,7 @@ def flight_state(sample: Sequence[float], rate_dot: FloatArray, air_density: flo
     )
     reason = physics_rejection(state)
     if reason is None and limits is not None:
-        reason = plausibility_rejection(state, limits)
+        reason = limits.sample_rejection(state)
     return reason or state
 
 
@@ -162,128 +156,6 @@ def physics_rejection(state: FlightState) -> str | None:
         return "nonpositive_dynamic_pressure"
     if not (V > 0 if isinstance(V, float) else np.all(np.asarray(V) > 0)):
         return "nonpositive_airspeed"
-    return None
-
-
-@dataclass(frozen=True)
-class PlausibilityLimits:
-    """What no aircraft this package targets (fixed-wing, subsonic: subscale research models
-    to transports) can measure in flight, SI; the ``limits.*`` parameters. Each default lies
-    well beyond any such aircraft yet many orders of magnitude below the overflow of Eqs. 1, 2
-    and the estimator, so an absurd value (a flipped bit, a wrong unit, a crafted message) is
-    rejected with the reason ``implausible_<field>`` instead of reaching the regression.
-
-    ``airspeed_min``/``airspeed_max`` bound the true airspeed ``V`` (m/s); ``alpha`` and
-    ``beta`` bound ``|alpha|`` and ``|beta|`` (rad, below pi/2: ``|alpha|`` near pi is flying
-    backwards); ``angular_rate`` (rad/s) and ``specific_force`` (m/s^2) bound each IMU axis;
-    ``surface`` bounds each mixed control-surface joint and deflection (rad);
-    ``dynamic_pressure_min``/``_max`` bound the dynamic pressure (Pa, measured or
-    ``rho V^2 / 2``); ``thrust`` bounds ``|thrust|`` (N, reverse thrust is negative).
-    """
-
-    airspeed_min: float = 3.0
-    airspeed_max: float = 400.0
-    alpha: float = 1.0
-    beta: float = 0.6
-    angular_rate: float = 20.0
-    specific_force: float = 200.0
-    surface: float = 1.0
-    dynamic_pressure_min: float = 5.0
-    dynamic_pressure_max: float = 1.0e5
-    thrust: float = 2.0e6
-
-    def __post_init__(self) -> None:
-        for f in fields(self):
-            value = getattr(self, f.name)
-            if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) \
-                    or value <= 0:
-                raise ConfigError(f"limits.{f.name} must be a positive number, got {value!r}")
-        for name in ("alpha", "beta"):
-            if getattr(self, name) >= 0.5 * math.pi:
-                raise ConfigError(f"limits.{name} must be below pi/2 rad, got {getattr(self, name)!r}")
-        for name in ("airspeed", "dynamic_pressure"):
-            low, high = getattr(self, f"{name}_min"), getattr(self, f"{name}_max")
-            if not low < high:
-                raise ConfigError(f"limits.{name}_min ({low!r}) must be below limits.{name}_max ({high!r})")
-
-    # One message each. ``non_finite`` when a value is NaN or infinite (checked first, as the
-    # sampler does), else ``implausible_<field>`` for the first value out of its bounds, else
-    # None. Written as chained comparisons, which NaN fails: the usual case costs one test.
-    def imu_rejection(self, angular_velocity: Sequence[float], specific_force: Sequence[float]) -> str | None:
-        """A ``sensor_msgs/Imu``: each body rate (rad/s) and specific force (m/s^2) component."""
-        w, f = self.angular_rate, self.specific_force
-        wx, wy, wz = angular_velocity
-        fx, fy, fz = specific_force
-        if -w <= wx <= w and -w <= wy <= w and -w <= wz <= w and -f <= fx <= f and -f <= fy <= f and -f <= fz <= f:
-            return None
-        if not _all_finite((wx, wy, wz, fx, fy, fz)):
-            return "non_finite"
-        return "implausible_angular_rate" if not (-w <= wx <= w and -w <= wy <= w and -w <= wz <= w) \
-            else "implausible_specific_force"
-
-    def airspeed_rejection(self, velocity: Sequence[float]) -> str | None:
-        """A true-airspeed vector (REP-103, m/s): its magnitude and flow angles."""
-        vx, vy, vz = velocity
-        if not _all_finite((vx, vy, vz)):
-            return "non_finite"
-        u, v, w = vx, -vy, -vz  # aircraft body axes (rep103_to_aircraft)
-        V = math.hypot(u, v, w)  # no overflow: 1e200 stays 1e200, rejected below
-        if not self.airspeed_min <= V <= self.airspeed_max:
-            return "implausible_airspeed"
-        if not abs(math.atan2(w, u)) <= self.alpha:
-            return "implausible_alpha"
-        if not abs(math.asin(max(-1.0, min(1.0, v / V)))) <= self.beta:
-            return "implausible_beta"
-        return None
-
-    def dynamic_pressure_rejection(self, pascal: float) -> str | None:
-        if self.dynamic_pressure_min <= pascal <= self.dynamic_pressure_max:
-            return None
-        return "non_finite" if not math.isfinite(pascal) else "implausible_dynamic_pressure"
-
-    def thrust_rejection(self, newton: float) -> str | None:
-        if -self.thrust <= newton <= self.thrust:
-            return None
-        return "non_finite" if not math.isfinite(newton) else "implausible_thrust"
-
-    def surface_rejection(self, positions: Sequence[float]) -> str | None:
-        """The control-surface joints a deflection is mixed from (rad)."""
-        s = self.surface
-        for x in positions:
-            if not -s <= x <= s:
-                return "non_finite" if not _all_finite(positions) else "implausible_surface"
-        return None
-
-
-def _all_finite(values: Iterable[float]) -> bool:
-    return all(math.isfinite(x) for x in values)
-
-
-def plausibility_rejection(state: FlightState, limits: PlausibilityLimits) -> str | None:
-    """Reason one (scalar, finite: :func:`physics_rejection` first) sample is implausible,
-    ``implausible_<field>``, or ``None``. Messages were judged one by one already; this also
-    covers what only a sample has: flow angles and airspeed of interpolated air data, and
-    ``rho V^2 / 2`` when the dynamic pressure is not measured."""
-    # One sample: every field is a float here (an Any view, as comparisons of float | array
-    # do not type as bool).
-    s: Any = state
-    L = limits
-    if not L.airspeed_min <= s.V <= L.airspeed_max:
-        return "implausible_airspeed"
-    if not abs(s.alpha) <= L.alpha:
-        return "implausible_alpha"
-    if not abs(s.beta) <= L.beta:
-        return "implausible_beta"
-    if not L.dynamic_pressure_min <= s.qbar <= L.dynamic_pressure_max:
-        return "implausible_dynamic_pressure"
-    if not max(abs(s.p), abs(s.q), abs(s.r)) <= L.angular_rate:
-        return "implausible_angular_rate"
-    if not max(abs(s.ax), abs(s.ay), abs(s.az)) <= L.specific_force:
-        return "implausible_specific_force"
-    if not max(abs(s.delta_e), abs(s.delta_a), abs(s.delta_r)) <= L.surface:
-        return "implausible_surface"
-    if not abs(s.thrust) <= L.thrust:
-        return "implausible_thrust"
     return None
 
 

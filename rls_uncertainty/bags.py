@@ -34,7 +34,8 @@ from .aero import rep103_to_aircraft
 from .config import package_path
 from .errors import BagError, ConfigError
 from .files import output_directory
-from .messages import INPUTS, MESSAGE_TYPES, Stamped, stamp_ns
+from .inputs import MESSAGE_TYPES, Stamped, stamp_ns
+from .inputs import STREAMS as INPUTS
 
 if TYPE_CHECKING:  # annotations only: rosbags itself is imported where it is used
     from rosbags.highlevel import AnyReader

@@ -7,7 +7,7 @@ codecs cover exactly:
 
 * decoding ``sensor_msgs/Imu``, ``geometry_msgs/Vector3Stamped``, ``sensor_msgs/FluidPressure``,
   ``sensor_msgs/JointState``, ``geometry_msgs/WrenchStamped`` into light objects with the
-  same field names (what :mod:`.messages` reads), little- and big-endian, so node and replay
+  same field names (what :mod:`.inputs` reads), little- and big-endian, so node and replay
   have one decoding path;
 * encoding ``std_msgs/Header`` and ``std_msgs/Float64MultiArray`` (little endian), the latter
   with the vector layout of the estimates (:func:`encode_float64_multiarray`) or any layout
@@ -25,7 +25,7 @@ messages, byte for byte and field for field.
 from __future__ import annotations
 
 import struct
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import make_dataclass
 from functools import lru_cache
 from typing import Any
@@ -69,35 +69,47 @@ def _vec(values, i):
     return Vector3(values[i], values[i + 1], values[i + 2])
 
 
-def _decoders(order: str) -> dict:
-    """The decoders of one byte order (``"<"`` or ``">"``). Each takes the payload after the
-    4-byte encapsulation header and returns the message. Offsets are aligned inline (they
-    run for every input message)."""
+def _bad_string(buf: bytes, o: int, n: int) -> struct.error:
+    if n == 0 or o + 4 + n > len(buf):
+        return struct.error(f"string at offset {o} declares {n} bytes with NUL, {len(buf) - o - 4} left")
+    return struct.error(f"string at offset {o} is not NUL-terminated")
+
+
+def _not_utf8(o: int, exc: UnicodeDecodeError) -> struct.error:
+    return struct.error(f"string at offset {o} is not UTF-8 ({exc.reason} at byte {exc.start})")
+
+
+def _too_long(buf: bytes, o: int, n: int, what: str) -> struct.error:
+    return struct.error(f"{what} at offset {o} declares {n} elements, {len(buf) - o - 4} bytes left")
+
+
+# The decoders of one byte order (``"<"`` or ``">"``). Each takes the payload after the 4-byte
+# encapsulation header and returns the message. Offsets are aligned inline (they run for
+# every input message). A CDR string at a 4-aligned offset o: its length n including the
+# terminating NUL, then the bytes; n >= 1 and the last byte is NUL.
+def _header_decoder(order: str) -> Callable[[bytes], tuple[Any, int]]:
+    """``std_msgs/Header`` at the start of the payload: the header and the offset after it."""
     time_ = struct.Struct(order + "iI")
     u32 = struct.Struct(order + "I")
-    d2, d3, d6, d37 = (struct.Struct(f"{order}{n}d") for n in (2, 3, 6, 37))
 
-    def bad_string(buf, o, n):
-        if n == 0 or o + 4 + n > len(buf):
-            return struct.error(f"string at offset {o} declares {n} bytes with NUL, {len(buf) - o - 4} left")
-        return struct.error(f"string at offset {o} is not NUL-terminated")
-
-    def not_utf8(o, exc):
-        return struct.error(f"string at offset {o} is not UTF-8 ({exc.reason} at byte {exc.start})")
-
-    # A CDR string at a 4-aligned offset o: its length n including the terminating NUL, then
-    # the bytes; n >= 1 and the last byte is NUL.
     def header(buf):
         sec, nanosec = time_.unpack_from(buf, 0)
         (n,) = u32.unpack_from(buf, 8)
         end = 12 + n
         if n == 0 or end > len(buf) or buf[end - 1]:
-            raise bad_string(buf, 8, n)
+            raise _bad_string(buf, 8, n)
         try:
             frame = buf[12 : end - 1].decode()
         except UnicodeDecodeError as exc:
-            raise not_utf8(8, exc) from None
+            raise _not_utf8(8, exc) from None
         return Header(Time(sec, nanosec), frame), end
+
+    return header
+
+
+def _fixed_decoders(order: str, header: Callable[[bytes], tuple[Any, int]]) -> dict[str, Callable[[bytes], Any]]:
+    """The types whose payload after the header is a fixed block of doubles."""
+    d2, d3, d6, d37 = (struct.Struct(f"{order}{n}d") for n in (2, 3, 6, 37))
 
     def imu(buf):
         h, o = header(buf)
@@ -118,8 +130,17 @@ def _decoders(order: str) -> dict:
         v = d6.unpack_from(buf, (o + 7) & ~7)
         return WrenchStamped(h, Wrench(_vec(v, 0), _vec(v, 3)))
 
-    def too_long(buf, o, n, what):
-        return struct.error(f"{what} at offset {o} declares {n} elements, {len(buf) - o - 4} bytes left")
+    return {
+        "sensor_msgs/msg/Imu": imu,
+        "geometry_msgs/msg/Vector3Stamped": vector3_stamped,
+        "sensor_msgs/msg/FluidPressure": fluid_pressure,
+        "geometry_msgs/msg/WrenchStamped": wrench_stamped,
+    }
+
+
+def _joint_state_decoder(order: str, header: Callable[[bytes], tuple[Any, int]]) -> Callable[[bytes], Any]:
+    """``sensor_msgs/JointState``: a sequence of strings and three sequences of doubles."""
+    u32 = struct.Struct(order + "I")
 
     def doubles(buf, o, what):
         o = (o + 3) & ~3
@@ -127,7 +148,7 @@ def _decoders(order: str) -> dict:
         if n == 0:
             return (), o + 4
         if 8 * n > len(buf) - o - 4:
-            raise too_long(buf, o, n, what)
+            raise _too_long(buf, o, n, what)
         start = (o + 11) & ~7
         return struct.unpack_from(f"{order}{n}d", buf, start), start + 8 * n
 
@@ -137,7 +158,7 @@ def _decoders(order: str) -> dict:
         (count,) = u32.unpack_from(buf, o)
         size = len(buf)
         if 5 * count > size - o - 4:  # each name takes at least 5 bytes
-            raise too_long(buf, o, count, "name")
+            raise _too_long(buf, o, count, "name")
         o += 4
         names = []
         for _ in range(count):
@@ -145,24 +166,24 @@ def _decoders(order: str) -> dict:
             (n,) = u32.unpack_from(buf, o)
             end = o + 4 + n
             if n == 0 or end > size or buf[end - 1]:
-                raise bad_string(buf, o, n)
+                raise _bad_string(buf, o, n)
             try:
                 names.append(buf[o + 4 : end - 1].decode())
             except UnicodeDecodeError as exc:
-                raise not_utf8(o, exc) from None
+                raise _not_utf8(o, exc) from None
             o = end
         position, o = doubles(buf, o, "position")
         velocity, o = doubles(buf, o, "velocity")
         effort, _ = doubles(buf, o, "effort")
         return JointState(h, names, position, velocity, effort)
 
-    return {
-        "sensor_msgs/msg/Imu": imu,
-        "geometry_msgs/msg/Vector3Stamped": vector3_stamped,
-        "sensor_msgs/msg/FluidPressure": fluid_pressure,
-        "sensor_msgs/msg/JointState": joint_state,
-        "geometry_msgs/msg/WrenchStamped": wrench_stamped,
-    }
+    return joint_state
+
+
+def _decoders(order: str) -> dict[str, Callable[[bytes], Any]]:
+    """Every decoder of one byte order (``"<"`` or ``">"``), by message type."""
+    header = _header_decoder(order)
+    return {**_fixed_decoders(order, header), "sensor_msgs/msg/JointState": _joint_state_decoder(order, header)}
 
 
 _LITTLE = _decoders("<")

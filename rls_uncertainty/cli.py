@@ -197,7 +197,8 @@ def _replay(args: argparse.Namespace) -> int:
                   f"missing (stamp gaps) {s['missing']}")
     print(f"{result.n_messages} messages, {result.data_seconds:.1f} s of data in {result.wall_seconds:.2f} s "
           f"({result.speed:.0f}x real time); wrote {args.out}")
-    return 0
+    # No model estimated anything: the summary above says why; a script must not take it for success.
+    return 0 if result.estimates else 1
 
 
 def _play(args: argparse.Namespace) -> int:

@@ -49,12 +49,12 @@ from typing import Any
 
 import yaml
 
-from .aero import PlausibilityLimits
 from .convergence import ConvergenceConfig
 from .differentiation import DifferentiatorConfig
 from .errors import ConfigError
 from .estimator import RESIDUALS, WINDOWS, Residual, Window
 from .estimator.options import AUTO_BURN_IN, MAX_BURN_IN, check_burn_in
+from .limits import PlausibilityLimits
 from .ros_arguments import (
     ParameterFile,
     ParameterRule,
@@ -359,7 +359,7 @@ PARAMETERS: tuple[ParamSpec, ...] = (
         10, 10000000,
     ),
     # Input sanity: the body frame the inputs must be stamped in,
-    # and what a measurement of an aircraft in flight can be (aero.PlausibilityLimits says
+    # and what a measurement of an aircraft in flight can be (limits.PlausibilityLimits says
     # why each default is beyond any aircraft this package targets). A message out of bounds
     # is rejected as implausible_<field>; a sample (interpolated, or qbar from air density) too.
     ParamSpec(
@@ -797,6 +797,8 @@ def node_config(params: dict[str, Any] | None = None) -> NodeConfig:
 # The node's parameters from its ROS sources (``-p`` rules and parameter files, read as rcl reads
 # them by :mod:`.ros_arguments`): the policy of the module docstring.
 
+# The node's name: its parameter sections, its private topics (/rls_estimator/..., see outputs) and
+# its diagnostics ("rls_estimator: ...").
 NODE_NAME = "rls_estimator"
 # Parameters of every ROS 2 node (rclpy declares them), accepted beside the table's.
 ROS_PARAMETERS = {"use_sim_time": False, "start_type_description_service": True}

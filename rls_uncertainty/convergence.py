@@ -1,4 +1,4 @@
-"""When can a recursive estimate be trusted? Per-parameter convergence flags (issue 14).
+"""When can a recursive estimate be trusted? Per-parameter convergence flags.
 
 Grauer and Morelli judge convergence by eye: in Fig. 6 of the paper, "by 6 s ... the
 corrected parameter uncertainty envelope enclosed the observed scatter". Across-run scatter
@@ -201,7 +201,9 @@ class ConvergenceMonitor:
         """Samples currently in the buffer (at most :attr:`capacity`)."""
         return self._hi - self._lo
 
-    def _none(self) -> tuple[np.ndarray, np.ndarray]:
+    def no_flags(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(flags, model_flags)`` with nothing flagged: what :meth:`update` returns without
+        an anchor, and the flags of an estimator that has no sample yet."""
         return np.zeros(self.shape, dtype=bool), np.zeros(self.shape[0], dtype=bool)
 
     def update(
@@ -218,35 +220,49 @@ class ConvergenceMonitor:
         estimate was not finite or its standard error not finite and positive at any sample
         of the window. The returned arrays are new on every call.
         """
-        m, n = self.shape
-        if type(theta) is not np.ndarray or theta.dtype is not _F64:
-            theta = np.asarray(theta, dtype=float)
-        if type(se) is not np.ndarray or se.dtype is not _F64:
-            se = np.asarray(se, dtype=float)
-        if type(ready) is not np.ndarray or ready.dtype is not _BOOL:
-            ready = np.asarray(ready, dtype=bool)
-        if theta.shape != self.shape or se.shape != self.shape or ready.shape != (m,):
-            raise ValueError(
-                f"expected theta and se of shape {self.shape} and ready of shape {(m,)}, "
-                f"got {theta.shape}, {se.shape}, {ready.shape}"
-            )
+        theta, se, ready = self._arrays(theta, se, ready)
         try:
             stamp = int(stamp_ns)
         except (TypeError, ValueError, OverflowError):
             stamp = None
         if stamp is None or not -_STAMP_LIMIT < stamp < _STAMP_LIMIT:
             self.reset()
-            return self._none()
+            return self.no_flags()
         if self._last is not None and stamp <= self._last:
             self.reset()
         self._last = stamp
         key = ready.tobytes()
         if key != self._ready_key:
             self._ready_key = key
-            self._lower = np.where(self._mask[:, :n] & ready[:, None], 0.0, np.nan)
+            self._lower = np.where(self._mask[:, : self.shape[1]] & ready[:, None], 0.0, np.nan)
+        self._append(stamp, theta, se)
+        a = self._advance_anchor(stamp)
+        if a < self._lo:
+            return self.no_flags()
+        return self._flags(stamp, a)
 
-        # Append [theta, se, -theta, -se], se floored at 0 (so the arithmetic below cannot
-        # warn), NaN off the ready models' parameters.
+    def _arrays(self, theta: npt.ArrayLike, se: npt.ArrayLike,
+                ready: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``theta``, ``se`` as float64 ``(M, n_max)`` and ``ready`` as bool ``(M,)`` arrays
+        (as given when they already are), or a ValueError naming the shapes."""
+        if type(theta) is not np.ndarray or theta.dtype is not _F64:
+            theta = np.asarray(theta, dtype=float)
+        if type(se) is not np.ndarray or se.dtype is not _F64:
+            se = np.asarray(se, dtype=float)
+        if type(ready) is not np.ndarray or ready.dtype is not _BOOL:
+            ready = np.asarray(ready, dtype=bool)
+        m = self.shape[0]
+        if theta.shape != self.shape or se.shape != self.shape or ready.shape != (m,):
+            raise ValueError(
+                f"expected theta and se of shape {self.shape} and ready of shape {(m,)}, "
+                f"got {theta.shape}, {se.shape}, {ready.shape}"
+            )
+        return theta, se, ready
+
+    def _append(self, stamp: int, theta: np.ndarray, se: np.ndarray) -> None:
+        """Append the row ``[theta, se, -theta, -se]`` (se floored at 0, so the arithmetic of
+        :meth:`_flags` cannot warn; NaN off the ready models' parameters) to the history and to
+        the back stack's running maximum; the oldest rows beyond the capacity leave it."""
         cap = self.capacity
         if self._hi == 2 * cap:  # move the rows still needed (from the anchor on) to the front
             shift = max(self._anchor, self._lo)
@@ -259,7 +275,7 @@ class ConvergenceMonitor:
             self._lo, self._hi = 0, keep
         i = self._hi
         cur = self._cur
-        th_n, s_n, pos, neg, s = self._cur_views
+        th_n, s_n, pos, neg, _s = self._cur_views
         th_n[...] = theta
         np.maximum(se, self._lower, out=s_n)
         np.negative(pos, out=neg)
@@ -270,15 +286,21 @@ class ConvergenceMonitor:
         if hi - self._lo > cap:
             self._lo = hi - cap
 
-        # Anchor: the newest held sample stamped at or before stamp - T.
+    def _advance_anchor(self, stamp: int) -> int:
+        """The anchor: the newest held sample stamped at or before ``stamp - T`` (below
+        ``_lo`` when there is none)."""
         cut = stamp - self._window_ns
         a = max(self._anchor, self._lo - 1)
-        stamps = self._stamps
+        stamps, hi = self._stamps, self._hi
         while a + 1 < hi and stamps[a + 1] <= cut:
             a += 1
         self._anchor = a
-        if a < self._lo:
-            return self._none()
+        return a
+
+    def _flags(self, stamp: int, a: int) -> tuple[np.ndarray, np.ndarray]:
+        """The four tests of the module docstring over the window from anchor ``a`` to the
+        newest row, as ``(flags, model_flags)``."""
+        hi = self._hi
         if a >= self._front:  # front stack empty: rebuild it from rows [a, hi)
             np.maximum.accumulate(self._rows[a:hi][::-1], axis=0, out=self._suffix[a:hi][::-1])
             self._front = hi
@@ -289,17 +311,18 @@ class ConvergenceMonitor:
         #   theta_x < theta_t + c,   -theta_x < -theta_t + c,   c = k min(se_t, 1e300),
         #   se_x < g se_t,           -se_x < -se_t (1 / g),     g = exp(r (t - t_a)).
         # NaN, an infinite estimate and a zero, negative or infinite se all fail.
-        dt = stamp - stamps[a]
+        dt = stamp - self._stamps[a]
         if dt != self._dt:
             self._dt = dt
             g = math.exp(min(self._rate * dt, _MAX_LOG_GAIN))
             self._gain[1] = g
             self._gain[3] = 1.0 / g
+        s = self._cur_views[4]
         c, c2 = self._lim_views
         np.minimum(s, self._big, out=c)
         np.multiply(c, self._band, out=c)
         c2[...] = c
-        rhs = np.multiply(cur, self._gain, out=self._rhs)
+        rhs = np.multiply(self._cur, self._gain, out=self._rhs)
         np.add(rhs, self._lim, out=rhs)
         np.less(wmax, rhs, out=self._ok)
         # AND of the four tests, eight parameters per 64-bit word.
@@ -309,4 +332,4 @@ class ConvergenceMonitor:
         words &= ok3
         model = words == self._pattern
         model = model[:, 0] if self._words == 1 else model.all(axis=1)
-        return words.view(np.bool_)[:, :n], model
+        return words.view(np.bool_)[:, : self.shape[1]], model

@@ -15,6 +15,9 @@ Three statuses, named ``rls_estimator: ...``:
   ``max(1 s, 2 max_gap)``; with a hint when no publisher matched), or when messages were
   rejected, missing or expired *within the recent window*: one dropped packet warns for
   ``window_s`` seconds, not for the rest of the flight (the cumulative counters stay beside).
+  ERROR when the data path is misconfigured (:mod:`.alerts`: every message of a needed stream
+  rejected, or no sample used for a window although messages arrive): the alerts' texts, which
+  name what was expected, what came and the parameter to change, come first in the message.
 * ``samples``: ``enabled``, ``samples_formed``, ``samples_used``, ``samples_pending``,
   ``samples_rejected.<reason>``, ``resets.<reason>``, ``unknown_joint.<name>``, callback
   latency and CPU percentiles of the period, ``state_file``. Always OK.
@@ -45,7 +48,8 @@ from collections import deque
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 
-from .messages import NODE_NAME
+from .alerts import Alert, AlertPolicy
+from .outputs import NODE_NAME
 
 __all__ = [
     "OK",
@@ -176,7 +180,8 @@ class DiagnosticsPolicy:
     snapshot handed in. ``max_keys`` bounds every table of names.
     """
 
-    def __init__(self, node_name: str = NODE_NAME, window_s: float = 10.0, max_keys: int = MAX_KEYS) -> None:
+    def __init__(self, node_name: str = NODE_NAME, window_s: float = 10.0, max_keys: int = MAX_KEYS,
+                 repeat_s: float = 30.0) -> None:
         if not window_s > 0:
             raise ValueError(f"window_s must be positive, got {window_s!r}")
         if max_keys < 1:
@@ -185,6 +190,9 @@ class DiagnosticsPolicy:
         self.window_s = float(window_s)
         self.max_keys = int(max_keys)
         self.previous: Snapshot | None = None
+        # The misconfiguration alerts (:mod:`.alerts`): first in the inputs status, and the
+        # lines to log (alerts.due()), each at most once per repeat_s seconds.
+        self.alerts = AlertPolicy(repeat_s)
         self._time = 0.0  # steady seconds since the policy started (sum of elapsed_s)
         # (time, {stream: (rejected, missing, expired)}) of earlier snapshots, oldest first;
         # the start counts as a snapshot with every total zero.
@@ -196,7 +204,8 @@ class DiagnosticsPolicy:
         totals = {kind: (sum(s["rejected"].values()), s["missing"], s["expired"])
                   for kind, s in snap.counters["streams"].items()}
         baseline = self._baseline()
-        statuses = [self._inputs(snap, totals, baseline), self._samples(snap)]
+        alerts = self.alerts.update(snap.elapsed_s, snap.counters, snap.required, snap.enabled, self.window_s)
+        statuses = [self._inputs(snap, totals, baseline, alerts), self._samples(snap)]
         statuses += [self._model(name, fit, snap) for name, fit in snap.models]
         self._history.append((self._time, totals))
         self.previous = snap
@@ -224,7 +233,7 @@ class DiagnosticsPolicy:
         return stream["received"] if stream else 0
 
     def _inputs(self, snap: Snapshot, totals: Mapping[str, tuple[int, int, int]],
-                baseline: Mapping[str, tuple[int, int, int]]) -> Status:
+                baseline: Mapping[str, tuple[int, int, int]], alerts: Sequence[Alert]) -> Status:
         period = max(snap.elapsed_s, 1e-9)
         limit = stale_after(snap.max_gap)
         window = f"in the last {self.window_s:g} s"
@@ -265,8 +274,9 @@ class DiagnosticsPolicy:
             if expired:
                 problems.append(f"{kind} expired {expired} {window} (buffered, never used: another stream "
                                 "lagging, or a reset)")
-        level = WARN if problems else OK
-        return self._status("inputs", level, "; ".join(problems) or "all inputs fresh", kv)
+        level = ERROR if alerts else WARN if problems else OK
+        message = "; ".join([a.text for a in alerts] + problems) or "all inputs fresh"
+        return self._status("inputs", level, message, kv)
 
     def _samples(self, snap: Snapshot) -> Status:
         c = snap.counters

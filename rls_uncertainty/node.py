@@ -1,16 +1,15 @@
 """``estimator_node``: the live ROS 2 adapter over :class:`.pipeline.Pipeline`.
 
-The node only converts, schedules and publishes: messages are decoded by :mod:`.cdr` and go
-through :func:`.messages.feed` (the code the offline replay runs), and every completed sample is
-published as ``~/M/estimates``, ``~/M/standard_errors`` (corrected, Eqs. 20/22),
-``~/M/standard_errors_conventional`` (Eq. 13) and ``~/M/converged`` (1/0 per parameter) for
-each ready model M, and on every ``outputs.covariance_decimation``-th grid point
-``~/M/covariance`` and ``~/M/covariance_conventional`` (n x n): each a
-``std_msgs/Float64MultiArray`` whose ``layout.dim[0].label`` names the parameters and whose
-last dim's label is the sample's stamp (:meth:`.pipeline.PublishedArray.dims`), preceded by
-``~/sample_stamp`` (``std_msgs/Header``) carrying the sample's time. ``/diagnostics`` reports
-input rates and ages, the fate of every message and sample, model fit, convergence and
-latency: the statuses are computed by :mod:`.diagnostics` from a snapshot the node takes each
+The node only converts, schedules and publishes: messages of the topics and types of
+:mod:`.inputs` are decoded by :mod:`.cdr` and go through :func:`.inputs.feed` (the code the
+offline replay runs), and every completed sample is published as the messages of
+:mod:`.outputs` (``~/sample_stamp``, then per ready model M ``~/M/estimates``, its standard
+errors, convergence flags and decimated covariances), serialized there: the node publishes the
+bytes :meth:`.outputs.OutputLayout.encode` makes, on the publisher of each topic index.
+``/diagnostics`` reports input rates and ages, the fate of every message and sample, model fit,
+convergence and latency, and a misconfigured data path (every message of a needed stream
+rejected, no sample used) is also logged as a throttled warning: the statuses and the warnings
+are computed by :mod:`.diagnostics` and :mod:`.alerts` from a snapshot the node takes each
 period.
 
 Parameters (declared with descriptions and ranges; see :data:`.config.PARAMETERS`), the
@@ -46,13 +45,13 @@ from .cdr import decode
 from .config import PARAMETERS, ConfigError, ParamSpec, node_config, pipeline_config, startup_parameters
 from .diagnostics import DiagnosticsPolicy, Snapshot, malformed_reason, malformed_warning
 from .estimator.state_file import set_aside
-from .messages import INPUTS, MESSAGE_TYPES, NODE_NAME, feed, message_class
-from .outputs import SAMPLE_STAMP, sample_messages
-from .pipeline import MODEL_OUTPUTS, Pipeline, SampleOutput, StateFileError
+from .inputs import MESSAGE_TYPES, STREAMS, feed, message_class
+from .outputs import HEADER, NODE_NAME, OutputLayout
+from .pipeline import Pipeline, SampleOutput, StateFileError
 
 __all__ = ["EstimatorNode", "main", "NODE_NAME"]
 
-_TYPES = {kind: message_class(MESSAGE_TYPES[kind]) for kind in INPUTS}
+_TYPES = {kind: message_class(MESSAGE_TYPES[kind]) for kind in STREAMS}
 # No QoS-event handlers: rclpy's executor walks every handler on every wait, which cost more
 # CPU than the estimation itself. A QoS mismatch on an input shows in /diagnostics instead
 # (``<stream>.publishers`` is 0 and the stream is reported silent).
@@ -110,15 +109,14 @@ class EstimatorNode(Node):
 
         self._out_qos = QoSProfile(depth=self.node_cfg.depth, reliability=QoSReliabilityPolicy.RELIABLE,
                                    history=QoSHistoryPolicy.KEEP_LAST)
-        self._stamp_pub = self.create_publisher(Header, "~/sample_stamp", self._out_qos, event_callbacks=_NO_EVENTS)
-        self._model_pubs: dict = {}
-        self._make_model_publishers()
+        self._outputs_by_topic: dict[str, Any] = {}  # publishers by relative topic
+        self._make_publishers()
         self._diag_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10, event_callbacks=_NO_EVENTS)
         in_qos = _input_qos(self.node_cfg.reliable, self.node_cfg.depth)
         self._subs = {
             kind: self.create_subscription(_TYPES[kind], self.node_cfg.topics[kind], self._callback(kind), in_qos,
                                            raw=True, event_callbacks=_NO_SUB_EVENTS)
-            for kind in INPUTS
+            for kind in STREAMS
         }
         self.create_service(Trigger, "~/reset", self._on_reset)
         self.create_service(SetBool, "~/enable", self._on_enable)
@@ -140,7 +138,7 @@ class EstimatorNode(Node):
                 else "all" if est.n_lags is None else est.n_lags)
         self.get_logger().info(
             f"estimating {models} at {self.config.rate:g} Hz, {lags} lags, aircraft {self.config.aircraft.name}; "
-            f"inputs {', '.join(self.node_cfg.topics[k] for k in INPUTS)}; {self.state_status}"
+            f"inputs {', '.join(self.node_cfg.topics[k] for k in STREAMS)}; {self.state_status}"
         )
 
     # ------------------------------------------------------------------ parameters
@@ -175,21 +173,24 @@ class EstimatorNode(Node):
             self.get_logger().warning(f"parameters changed ({changed}): {what}")
             self.config = new
             self.pipeline = self.pipeline.reconfigured(new)
-            self._make_model_publishers()
+            self._make_publishers()
 
-    def _make_model_publishers(self) -> None:
-        wanted = {m.output for m in self.config.models}
-        for name in list(self._model_pubs):
-            if name not in wanted:
-                for pub in self._model_pubs.pop(name).values():
-                    self.destroy_publisher(pub)
-        for m in self.config.models:
-            if m.output not in self._model_pubs:
-                self._model_pubs[m.output] = {
-                    suffix: self.create_publisher(Float64MultiArray, f"~/{m.output}/{suffix}", self._out_qos,
-                                                  event_callbacks=_NO_EVENTS)
-                    for suffix in MODEL_OUTPUTS
-                }
+    def _make_publishers(self) -> None:
+        """One publisher per topic of the configuration's :class:`.outputs.OutputLayout`, in
+        its order (``self._pubs[i]`` publishes topic ``i``); publishers of topics that remain
+        are kept, those of models no longer configured destroyed."""
+        self._layout = OutputLayout.of(self.pipeline)
+        old, new = self._outputs_by_topic, {}
+        for topic, msgtype in self._layout.topics:
+            pub = old.pop(topic, None)
+            if pub is None:
+                pub = self.create_publisher(Header if msgtype == HEADER else Float64MultiArray, f"~/{topic}",
+                                            self._out_qos, event_callbacks=_NO_EVENTS)
+            new[topic] = pub
+        for pub in old.values():
+            self.destroy_publisher(pub)
+        self._outputs_by_topic = new
+        self._pubs = [new[topic] for topic, _ in self._layout.topics]
 
     # ------------------------------------------------------------------ data path
     def _callback(self, kind: str) -> Callable[[bytes], None]:
@@ -219,24 +220,19 @@ class EstimatorNode(Node):
 
     def _malformed(self, kind: str, exc: Exception) -> None:
         """Count a message that could not be decoded or fed; log the first one per input."""
-        self.pipeline.reject(kind, malformed_reason(exc))
+        self.pipeline.reject(kind, malformed_reason(exc), str(exc))
         if kind not in self._malformed_logged:
             self._malformed_logged.add(kind)
             self.get_logger().warning(malformed_warning(self._subs[kind].topic_name, exc))
 
     def _publish(self, out: SampleOutput) -> None:
-        """``~/sample_stamp``, then each ready model's arrays
-        (:meth:`.pipeline.Pipeline.published_arrays`). The messages are serialized by
-        :mod:`.cdr` (byte-identical to rosbags' serialization and read back by rclpy, checked
-        in test_cdr.py) and published raw: converting 25 Python messages per sample cost more
-        CPU and latency than the estimation."""
-        pubs = self._model_pubs
-        for topic, _msgtype, raw in sample_messages(self.pipeline, out, self.node_cfg.frame_id):
-            if topic == SAMPLE_STAMP:
-                self._stamp_pub.publish(raw)
-            else:
-                model, suffix = topic.split("/", 1)
-                pubs[model][suffix].publish(raw)
+        """A sample's messages (:meth:`.outputs.OutputLayout.encode`), each on the publisher of
+        its topic index. They are serialized by :mod:`.cdr` (byte-identical to rosbags'
+        serialization and read back by rclpy, checked in test_cdr.py) and published raw:
+        converting 25 Python messages per sample cost more CPU and latency than the estimation."""
+        pubs = self._pubs
+        for index, raw in self._layout.encode(out, self.node_cfg.frame_id):
+            pubs[index].publish(raw)
 
     # ------------------------------------------------------------------ services, time
     def _on_reset(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
@@ -341,6 +337,8 @@ class EstimatorNode(Node):
             for s in self._diagnostics.update(snapshot)
         ]
         self._diag_pub.publish(arr)
+        for line in self._diagnostics.alerts.due():  # a misconfigured data path, throttled
+            self.get_logger().warning(line)
 
 
 def _overrides(values: dict[str, Any]) -> list[Parameter]:

@@ -1,54 +1,178 @@
-"""The node's output messages for one sample, as CDR bytes: one function for every place that
-publishes or records them (the offline replay's ``estimates.mcap``; the node publishes the
-same bytes, checked over DDS in ``test/test_player.py``).
+"""The node's outputs: names, topics, array layouts, stamp labels and their CDR bytes.
 
-Per sample, in this order: ``sample_stamp`` (``std_msgs/Header``), then for each ready model M
-the arrays of :meth:`.pipeline.Pipeline.published_arrays` (``std_msgs/Float64MultiArray``):
-``M/estimates``, ``M/standard_errors`` (corrected), ``M/standard_errors_conventional``,
-``M/converged``, and on decimated samples ``M/covariance`` and ``M/covariance_conventional``
-(parameter names in the label of each parameter axis, the sample time in the label of the last
-dim). Topics are relative to the node (``/rls_estimator/...`` when published). The node
-publishes exactly these bytes. No ROS import: :mod:`.cdr` encodes.
+The node ``rls_estimator`` (:data:`NODE_NAME`) publishes, for every sample the pipeline used
+(a :class:`.pipeline.SampleOutput`), in this order and relative to the node
+(``/rls_estimator/...``):
+
+* ``sample_stamp`` (``std_msgs/Header``): the sample's time, ``frame_id`` the node's
+  ``frame_id`` parameter;
+* per ready model M (:data:`MODEL_OUTPUTS`, each a ``std_msgs/Float64MultiArray``):
+  ``M/estimates``, ``M/standard_errors`` (corrected, Eqs. 20/22),
+  ``M/standard_errors_conventional`` (Eq. 13), ``M/converged`` (1.0/0.0 per parameter), and
+  on the samples whose grid index is a multiple of ``outputs.covariance_decimation``
+  ``M/covariance`` and ``M/covariance_conventional`` (n x n, row-major). Models still
+  initializing, or withheld as non-finite, publish nothing: no NaN leaves.
+
+Every array's ``layout.dim`` (:func:`dims`): one dim per axis labelled with the model's
+parameter names (comma-separated), then ``(stamp label, 1, 1)``: the sample's time as
+``stamp:SEC.NANOSEC`` (:func:`stamp_label`, read back by :func:`parse_stamp_label`), so each
+array pairs with its sample without a second topic. Strides are row-major as ROS defines them.
+
+:class:`OutputLayout` makes a sample's messages as ``(topic index, CDR bytes)`` pairs: the node
+publishes the bytes on its publisher of that index, the offline replay records them in
+``estimates.mcap`` under the same topic: one function, byte-identical outputs (checked over DDS
+in ``test/test_player.py``). No ROS import: :mod:`.cdr` encodes.
 """
 
 from __future__ import annotations
 
-from collections.abc import Iterable
-from typing import TYPE_CHECKING
+import math
+from collections.abc import Iterable, Iterator, Sequence
+from typing import TYPE_CHECKING, NamedTuple
+
+import numpy as np
 
 from .cdr import encode_float64_multiarray, encode_float64_multiarray_dims, encode_header
-from .messages import stamp_label
+from .config import NODE_NAME  # the node's name: private topics /rls_estimator/..., diagnostics "rls_estimator: ..."
 
-if TYPE_CHECKING:
+if TYPE_CHECKING:  # annotations only: the pipeline is the core, this module its edge
     from .pipeline import Pipeline, SampleOutput
 
-__all__ = ["HEADER", "FLOAT64_MULTIARRAY", "SAMPLE_STAMP", "sample_messages", "output_topics"]
+__all__ = [
+    "NODE_NAME", "HEADER", "FLOAT64_MULTIARRAY", "SAMPLE_STAMP", "MODEL_OUTPUTS", "ARRAY_OUTPUTS",
+    "stamp_label", "parse_stamp_label", "dims", "output_topics", "PublishedArray", "Row", "OutputLayout",
+]
 
 HEADER = "std_msgs/msg/Header"
 FLOAT64_MULTIARRAY = "std_msgs/msg/Float64MultiArray"
 SAMPLE_STAMP = "sample_stamp"
+# Every array published per model M as ~/M/<suffix>, in publishing order: three vectors of
+# estimates and standard errors, the convergence flags, then (decimated) the two covariances.
+MODEL_OUTPUTS = ("estimates", "standard_errors", "standard_errors_conventional", "converged", "covariance",
+                 "covariance_conventional")
+ARRAY_OUTPUTS = MODEL_OUTPUTS[:3]  # the estimates and their standard errors
+_PER_MODEL = len(MODEL_OUTPUTS)
 
 
-def sample_messages(pipeline: Pipeline, out: SampleOutput, frame_id: str) -> list[tuple[str, str, bytes]]:
-    """``(relative topic, message type, CDR bytes)`` of every message the node publishes for
-    the :class:`.pipeline.SampleOutput` ``out`` (models still initializing publish nothing)."""
-    stamp = out.stamp_ns
-    sec, nanosec = divmod(stamp, 1_000_000_000)
-    messages = [(SAMPLE_STAMP, HEADER, encode_header(sec, nanosec, frame_id))]
-    when = stamp_label(stamp)
-    for a in pipeline.published_arrays(out):
-        if len(a.shape) == 1:
-            raw = encode_float64_multiarray(a.names, a.data.tolist(), when)
-        else:
-            raw = encode_float64_multiarray_dims(a.dims(when), a.data.tolist())
-        messages.append((f"{a.model}/{a.suffix}", FLOAT64_MULTIARRAY, raw))
-    return messages
+def stamp_label(stamp: int) -> str:
+    """``layout.dim[-1].label`` of every output array: the sample's time (``stamp:SEC.NANOSEC``)."""
+    sec, nanosec = divmod(int(stamp), 1_000_000_000)
+    return f"stamp:{sec}.{nanosec:09d}"
+
+
+def parse_stamp_label(label: str) -> int:
+    """The sample time in nanoseconds from :func:`stamp_label`'s text."""
+    if not label.startswith("stamp:"):
+        raise ValueError(f"not a stamp label: {label!r}")
+    sec, _, nanosec = label[6:].partition(".")
+    return int(sec) * 1_000_000_000 + int(nanosec)
+
+
+def dims(names: str, shape: tuple[int, ...], stamp: str) -> list[tuple[str, int, int]]:
+    """The ``std_msgs/MultiArrayLayout`` dims ``(label, size, stride)`` of an array of
+    ``shape`` over the parameters ``names``, row-major as ROS defines them: one per axis
+    labelled ``names``, then ``(stamp, 1, 1)`` (the stamp is always in the last dim)."""
+    out = [(names, size, 0) for size in shape] + [(stamp, 1, 1)]
+    stride = 1
+    for i in range(len(out) - 1, -1, -1):
+        stride *= out[i][1]
+        out[i] = (out[i][0], out[i][1], stride)
+    return out
 
 
 def output_topics(models: Iterable[str]) -> list[tuple[str, str]]:
     """``(relative topic, message type)`` of every per-sample output of the models named in
     ``models`` (e.g. ``["CZ", "Cm"]``), in publishing order."""
-    from .pipeline import MODEL_OUTPUTS  # noqa: PLC0415 - pipeline imports numpy and the estimator
-
     arrays = [(f"{m}/{suffix}", FLOAT64_MULTIARRAY) for m in models for suffix in MODEL_OUTPUTS]
     return [(SAMPLE_STAMP, HEADER), *arrays]
+
+
+class PublishedArray(NamedTuple):
+    """One array published for a sample: ``~/<model>/<suffix>`` with ``data`` (flat,
+    row-major float64) of ``shape`` ``(n,)`` or ``(n, n)`` over the parameters ``names``
+    (comma-separated, as in ``layout.dim[0].label``)."""
+
+    model: str
+    suffix: str
+    names: str
+    shape: tuple[int, ...]
+    data: np.ndarray
+
+
+class Row(NamedTuple):
+    """One ready model's estimates of a sample (model ``index`` of the configuration)."""
+
+    index: int  # type: ignore[assignment]  # shadows tuple.index; the field name is the API
+    model: str
+    names: tuple[str, ...]
+    estimates: np.ndarray
+    standard_errors: np.ndarray
+    standard_errors_conventional: np.ndarray
+
+
+class OutputLayout:
+    """The outputs of one configuration's ``models``: ``(output name, parameter names)`` in
+    the order of the pipeline's models. :attr:`topics` lists every output topic (index 0
+    ``sample_stamp``, then :data:`MODEL_OUTPUTS` per model); :meth:`encode` gives a sample's
+    messages by topic index."""
+
+    def __init__(self, models: Sequence[tuple[str, Sequence[str]]]) -> None:
+        self.models = [(name, tuple(names)) for name, names in models]
+        self.topics = output_topics(name for name, _ in self.models)
+        # Per model: output name, label, n, vector and matrix shape, index of its first topic.
+        self._per_model = [(name, ",".join(names), len(names), (len(names),), (len(names), len(names)),
+                            1 + _PER_MODEL * j) for j, (name, names) in enumerate(self.models)]
+
+    @classmethod
+    def of(cls, pipeline: Pipeline) -> OutputLayout:
+        return cls([(m.output, m.parameter_names) for m in pipeline.models])
+
+    def arrays(self, out: SampleOutput) -> Iterator[PublishedArray]:
+        """Every array published for a sample, per ready model in the order of
+        :data:`MODEL_OUTPUTS` (the covariances only when ``out.covariance`` is set)."""
+        for _index, array in self._arrays(out):
+            yield array
+
+    def _arrays(self, out: SampleOutput) -> Iterator[tuple[int, PublishedArray]]:
+        """:meth:`arrays` with the index of each one's topic in :attr:`topics`."""
+        cov = out.covariance
+        ready = out.ready.tolist()
+        theta, se, se_conv = out.theta, out.se, out.se_conventional
+        flags = out.converged.astype(np.float64)
+        new = PublishedArray._make
+        for j, (name, label, n, vector, square, first) in enumerate(self._per_model):
+            if not ready[j]:
+                continue
+            yield first, new((name, "estimates", label, vector, theta[j, :n]))
+            yield first + 1, new((name, "standard_errors", label, vector, se[j, :n]))
+            yield first + 2, new((name, "standard_errors_conventional", label, vector, se_conv[j, :n]))
+            yield first + 3, new((name, "converged", label, vector, flags[j, :n]))
+            if cov is not None:
+                yield first + 4, new((name, "covariance", label, square, cov[0, j, :n, :n].ravel()))
+                yield first + 5, new((name, "covariance_conventional", label, square, cov[1, j, :n, :n].ravel()))
+
+    def encode(self, out: SampleOutput, frame_id: str) -> list[tuple[int, bytes]]:
+        """``(index into topics, CDR bytes)`` of every message published for ``out``:
+        ``sample_stamp`` (header ``frame_id``), then each ready model's arrays."""
+        stamp = out.stamp_ns
+        sec, nanosec = divmod(stamp, 1_000_000_000)
+        messages = [(0, encode_header(sec, nanosec, frame_id))]
+        when = stamp_label(stamp)
+        for index, a in self._arrays(out):
+            if len(a.shape) == 1:
+                raw = encode_float64_multiarray(a.names, a.data.tolist(), when)
+            else:
+                raw = encode_float64_multiarray_dims(dims(a.names, a.shape, when), a.data.tolist())
+            messages.append((index, raw))
+        return messages
+
+    def rows(self, out: SampleOutput) -> Iterator[Row]:
+        """Each ready model's estimates and standard errors of ``out`` (what the replay
+        writes). The rows are checked again here: a row with a non-finite value is skipped,
+        so no NaN or infinity ever leaves."""
+        for j, (name, names) in enumerate(self.models):
+            if out.ready[j]:
+                n = len(names)
+                row = out.theta[j, :n], out.se[j, :n], out.se_conventional[j, :n]
+                if all(map(math.isfinite, row[0].tolist() + row[1].tolist() + row[2].tolist())):
+                    yield Row(j, name, names, *row)

@@ -4,8 +4,10 @@ The ROS node, the offline replay and the tests all drive one :class:`Pipeline`, 
 coordinates the modules that do the work:
 
 1. ``add_imu``, ``add_airspeed``, ``add_dynamic_pressure``, ``add_surfaces``, ``add_thrust``
-   take plain stamped numbers in the REP-103 body frame (x forward, y left, z up) and SI.
-   JointState surfaces are mixed into Eq. 23's deflections first (:mod:`.surface_mixing`).
+   take plain stamped numbers in the REP-103 body frame (x forward, y left, z up) and SI, one
+   per input stream of :data:`STREAMS`. :class:`.intake.Intake` judges each message
+   (``limits.*``, ``inputs.frame_id``), mixes JointState surfaces into Eq. 23's deflections
+   (:mod:`.surface_mixing`) and hands it to the sampler.
 2. :mod:`.sampling` buffers the streams, counts every message (accepted, or rejected with a
    reason), and forms samples on the grid ``t_k = k / rate`` by linear interpolation, never
    extrapolating; the pipeline names the streams a sample needs. When the stamps move to a new
@@ -19,68 +21,48 @@ coordinates the modules that do the work:
    (Eqs. 15-22), and each used sample yields a :class:`SampleOutput`: estimates, standard
    errors, per-parameter convergence flags (:mod:`.convergence`, one monitor reset with the
    estimator) and, every ``outputs.covariance_decimation`` grid points, the full covariances.
-   :meth:`Pipeline.published_arrays` lists what the node publishes (and the replay writes).
+   What leaves for ROS is made of it at the edge (:mod:`.outputs`).
 
 Every formed sample ends as used or as rejected with a reason, and every message as accepted
-or rejected: :class:`Bookkeeping` holds every counter, :meth:`Pipeline.counters` reports them
-(the node's ``/diagnostics``), and a reconfigured pipeline takes over the same object.
+or rejected: :class:`.bookkeeping.Bookkeeping` holds every counter and what the refused inputs
+carried, :meth:`Pipeline.counters` reports them (the node's ``/diagnostics``), and a
+reconfigured pipeline takes over the same object.
 
 Nothing non-finite leaves: a message in another frame than ``inputs.frame_id``, or with a value
-that is non-finite or beyond ``limits.*`` (:class:`.aero.PlausibilityLimits`), is rejected
+that is non-finite or beyond ``limits.*`` (:class:`.limits.PlausibilityLimits`), is rejected
 with its reason; so is a sample that is implausible once formed, or that the estimator refuses
-(``non_finite_regression``); and a model whose outputs are not all finite is withheld from
-:meth:`Pipeline.published` and counted. Every table keyed by what arrives (JointState names,
-caller-given rejection reasons) keeps a bounded number of keys.
+(``non_finite_regression``); and a model whose outputs are not all finite is marked not
+``ready`` in its :class:`SampleOutput` and counted.
 """
 
 from __future__ import annotations
 
 import math
-from collections import Counter, deque
-from collections.abc import Iterator, Sequence
-from dataclasses import dataclass, field, replace
+from collections import deque
+from collections.abc import Sequence
+from dataclasses import replace
 from pathlib import Path
 from typing import NamedTuple
 
 import numpy as np
 
 from .aero import RATES, FloatArray, aircraft_sample, coefficients, flight_state, regressors
+from .alerts import explanations
+from .bookkeeping import SAMPLES, Bookkeeping, model_fit
 from .config import PipelineConfig
 from .convergence import ConvergenceMonitor
 from .differentiation import FixedLagDifferentiator
 from .errors import NonFiniteInput, StateFileError
 from .estimator import EstimatorBank
 from .estimator.state_file import EstimatorState, load_state, save_state
-from .messages import ARRAY_OUTPUTS, INPUTS
-from .sampling import Sample, Sampler, Skipped, Stream, StreamCounts
-from .surface_mixing import SURFACES, SurfaceMixer
+from .intake import Intake
+from .sampling import Sample, Sampler, Skipped
+from .surface_mixing import SURFACES
 
-__all__ = [
-    "Pipeline", "SampleOutput", "PublishedArray", "MODEL_OUTPUTS", "Bookkeeping", "STREAMS", "StateFileError",
-    "count_bounded",
-]
+__all__ = ["Pipeline", "SampleOutput", "STREAMS", "StateFileError", "required_streams"]
 
-STREAMS = INPUTS
-# Every array published per model M as ~/M/<suffix> (std_msgs/Float64MultiArray), in the
-# order :meth:`Pipeline.published_arrays` yields them: the three of ARRAY_OUTPUTS, the
-# convergence flags, then (decimated) the two covariance matrices.
-MODEL_OUTPUTS = (*ARRAY_OUTPUTS, "converged", "covariance", "covariance_conventional")
-
-# Bounds of the tables keyed by what arrives (issue 12 item 5): a flood of distinct JointState
-# names or caller-given reasons adds one overflow key, not a key each.
-KEYS_KEPT = 32  # distinct keys per table, the overflow key aside
-KEY_CHARS = 64  # longer keys (a JointState name is any string) are cut to this length
-OTHER_JOINTS = "<others>"  # unknown joints beyond the first KEYS_KEPT names
-OTHER_REASONS = "other"  # rejection reasons beyond the first KEYS_KEPT of a stream
-
-
-def count_bounded(counter: Counter, key: str, other: str, n: int = 1) -> None:
-    """``counter[key] += n`` for at most :data:`KEYS_KEPT` distinct keys (cut to
-    :data:`KEY_CHARS` characters); once the table is full, new keys count under ``other``."""
-    key = key[:KEY_CHARS]
-    if key not in counter and len(counter) - (other in counter) >= KEYS_KEPT:
-        key = other
-    counter[key] += n
+# The input streams, one per ``add_*`` method: inertial data, air data and the optional ones.
+STREAMS = ("imu", "airspeed", "dynamic_pressure", "control_surfaces", "thrust")
 
 
 class SampleOutput(NamedTuple):
@@ -90,7 +72,7 @@ class SampleOutput(NamedTuple):
     ``(M, n_max)`` arrays in the order of ``config.models``; rows of models that are not
     ``ready`` yet (exact initialization still waiting) and the padding are NaN. ``ready`` is
     false too for a model whose estimates or standard errors are not all finite (withheld,
-    counted in ``outputs_withheld``): a ready row is safe to publish.
+    counted in ``outputs_withheld``): a ready row is safe to publish (:mod:`.outputs`).
     ``converged`` ``(M, n_max)`` and ``model_converged`` ``(M,)`` are the
     :class:`.convergence.ConvergenceMonitor` flags (False on padding and models not ready; a
     model is converged when all its parameters are). ``covariance`` is ``None``, or on the
@@ -118,48 +100,36 @@ class SampleOutput(NamedTuple):
         return self.stamp_ns * 1e-9
 
 
-class PublishedArray(NamedTuple):
-    """One array the node publishes for a sample: ``~/<model>/<suffix>`` with ``data`` (flat,
-    row-major float64) of ``shape`` ``(n,)`` or ``(n, n)`` over the parameters ``names``
-    (comma-separated, as in ``layout.dim[0].label``)."""
-
-    model: str
-    suffix: str
-    names: str
-    shape: tuple[int, ...]
-    data: np.ndarray
-
-    def dims(self, stamp: str) -> list[tuple[str, int, int]]:
-        """The ``std_msgs/MultiArrayLayout`` dims ``(label, size, stride)``, row-major as ROS
-        defines them: one per axis labelled with the parameter names, then ``(stamp, 1, 1)``
-        with ``stamp`` the sample's :func:`.messages.stamp_label` (the stamp is always in the
-        last dim)."""
-        dims = [(self.names, size, 0) for size in self.shape] + [(stamp, 1, 1)]
-        stride = 1
-        for i in range(len(dims) - 1, -1, -1):
-            stride *= dims[i][1]
-            dims[i] = (dims[i][0], dims[i][1], stride)
-        return dims
 
 
-def _new_stream_counts() -> dict[str, StreamCounts]:
-    return {name: StreamCounts() for name in STREAMS}
+def required_streams(config: PipelineConfig) -> tuple[str, ...]:
+    """The streams every sample needs: IMU and air data always, the others when the
+    configuration uses them (the order is the order of the rejection checks)."""
+    uses = {r for m in config.models for r in m.regressors}
+    required = ["imu", "airspeed"]
+    if uses & set(SURFACES):
+        required.append("control_surfaces")
+    if config.inputs.use_dynamic_pressure:
+        required.append("dynamic_pressure")
+    if config.inputs.use_thrust and any(m.output == "CX" for m in config.models):
+        required.append("thrust")
+    return tuple(required)
 
 
-@dataclass
-class Bookkeeping:
-    """Every counter of a pipeline, kept across reconfigurations: the messages of each input
-    stream, samples formed, used and rejected (by reason), estimator resets (by reason),
-    JointState joints that no surface uses (by name, at most :data:`KEYS_KEPT`, the rest as
-    :data:`OTHER_JOINTS`) and model outputs withheld because they were not finite (by model)."""
-
-    streams: dict[str, StreamCounts] = field(default_factory=_new_stream_counts)
-    samples_formed: int = 0
-    samples_used: int = 0
-    samples_rejected: Counter = field(default_factory=Counter)
-    resets: Counter = field(default_factory=Counter)
-    unknown_joints: Counter = field(default_factory=Counter)
-    outputs_withheld: Counter = field(default_factory=Counter)
+def symmetric_covariances(c: np.ndarray, real: np.ndarray, real_square: np.ndarray, ready: np.ndarray) -> np.ndarray:
+    """``(2, M, n_max, n_max)`` from :meth:`.estimator.EstimatorBank.covariance_all` ``c``
+    (changed in place): made exactly symmetric (``(C + C')/2``: the products leave
+    rounding-level asymmetry), NaN off the ready models' parameters (``real`` ``(M, n_max)``
+    marks the parameters, ``real_square`` their blocks)."""
+    # A negative variance only at an exact fit (the initialization sample), whose R(0)
+    # comes out as a tiny negative number: zero, as its standard errors are.
+    smallest = np.minimum.reduce(c.diagonal(0, 2, 3), axis=2, where=real, initial=np.inf)
+    c[smallest < 0.0] = 0.0
+    cov = c + c.swapaxes(2, 3)
+    cov *= 0.5
+    # NaN off the ready models' blocks (padding, models not ready or withheld).
+    np.copyto(cov, np.nan, where=~(real_square & ready[:, None, None]))
+    return cov
 
 
 class Pipeline:
@@ -186,39 +156,35 @@ class Pipeline:
         self.enabled = enabled
         self.record = record
         self.regression: list[tuple[int, np.ndarray, np.ndarray]] = []
-        self.bookkeeping = book = bookkeeping if bookkeeping is not None else Bookkeeping()
-        self.required = self._required_streams(config)
+        self.bookkeeping = book = bookkeeping if bookkeeping is not None else Bookkeeping.for_streams(STREAMS)
+        self.required = required_streams(config)
+        inputs = config.inputs
         self.sampler = Sampler(
             STREAMS,
             self.required,
             period_ns=config.period_ns,
-            max_gap_ns=config.inputs.max_gap_ns,
-            buffer_ns=config.inputs.buffer_ns,
-            max_jump_ns=config.inputs.max_stamp_jump_ns,
-            confirm=config.inputs.jump_confirmation,
-            max_buffered=config.inputs.max_buffered,
-            max_clock_ns=config.inputs.max_clock_offset_ns,
+            max_gap_ns=inputs.max_gap_ns,
+            buffer_ns=inputs.buffer_ns,
+            max_jump_ns=inputs.max_stamp_jump_ns,
+            confirm=inputs.jump_confirmation,
+            max_buffered=inputs.max_buffered,
+            max_clock_ns=inputs.max_clock_offset_ns,
             counts=book.streams,
         )
+        self.intake = Intake(self.sampler, config.limits, config.surfaces, book)
         # The caller's clock is compared with the stamps only when inputs.max_clock_offset > 0
         # (the node then sets clock_ns before each message; the offline replay has no clock).
-        self.needs_clock = config.inputs.max_clock_offset_ns > 0
-        streams = self.sampler.streams
-        self._imu, self._airspeed, self._surfaces = streams["imu"], streams["airspeed"], streams["control_surfaces"]
-        self._qbar, self._thrust = streams["dynamic_pressure"], streams["thrust"]
+        self.needs_clock = inputs.max_clock_offset_ns > 0
         # Where the optional streams sit in a sample's values (None: not required).
         where = {name: i for i, name in enumerate(self.required)}
         self._i_qbar = where.get("dynamic_pressure")
         self._i_surfaces = where.get("control_surfaces")
         self._i_thrust = where.get("thrust")
-        self._mixer = SurfaceMixer(config.surfaces)
         self.limits = config.limits
-        self.frame_id = config.inputs.frame_id  # read by messages.feed
+        self.frame_id = inputs.frame_id  # checked by inputs.feed
         self._index = 0
         self._monitor = ConvergenceMonitor(self.sizes, replace(config.convergence, rate_hz=config.rate))
         self._cov_every = config.outputs.covariance_decimation
-        self._published_models = [(m.output, label, n, (n,), (n, n))
-                                  for m, label, n in zip(config.models, self.labels, self.sizes, strict=True)]
         self._period_ns = config.period_ns
         self._new_estimator()
         self._diff = FixedLagDifferentiator(config.differentiator, 1.0 / config.rate, width=3)
@@ -234,20 +200,6 @@ class Pipeline:
         self._real = np.arange(n_max) < np.array(self.sizes)[:, None]  # (M, n_max): not padding
         self._real_square = self._real[:, :, None] & self._real[:, None, :]  # (M, n_max, n_max)
 
-    @staticmethod
-    def _required_streams(config: PipelineConfig) -> tuple[str, ...]:
-        """The streams every sample needs: IMU and air data always, the others when the
-        configuration uses them (the order is the order of the rejection checks)."""
-        uses = {r for m in config.models for r in m.regressors}
-        required = ["imu", "airspeed"]
-        if uses & set(SURFACES):
-            required.append("control_surfaces")
-        if config.inputs.use_dynamic_pressure:
-            required.append("dynamic_pressure")
-        if config.inputs.use_thrust and any(m.output == "CX" for m in config.models):
-            required.append("thrust")
-        return tuple(required)
-
     def _new_estimator(self) -> None:
         c = self.config.estimator
         self.bank = EstimatorBank(
@@ -260,110 +212,49 @@ class Pipeline:
         self._zsq = np.zeros(len(self.sizes))
         self._withheld = np.zeros(len(self.sizes), dtype=bool)  # the last output's, per model
         self._monitor.reset()
-        self._converged = self._monitor._none()  # the newest sample's flags
+        self._converged = self._monitor.no_flags()  # the newest sample's flags
 
     @property
     def samples_used(self) -> int:
         """Samples that reached an estimator, over the pipeline's life (reconfigurations too)."""
         return self.bookkeeping.samples_used
 
-    # ------------------------------------------------------------------ inputs
-    # Each message is judged on its own first (:class:`.aero.PlausibilityLimits`): a non-finite
-    # value is counted by the sampler (``non_finite``), an implausible one is rejected as
-    # ``implausible_<field>`` through Sampler.reject_invalid, which knows its stamp.
+    # ------------------------------------------------------------------ inputs (Intake judges each)
     def add_imu(self, stamp_ns: int, angular_velocity: Sequence[float],
                 linear_acceleration: Sequence[float]) -> list[SampleOutput]:
         """``sensor_msgs/Imu`` in the REP-103 body frame: rad/s and specific force m/s^2."""
-        wx, wy, wz = angular_velocity
-        fx, fy, fz = linear_acceleration
-        values = (wx, wy, wz, fx, fy, fz)
-        reason = self.limits.imu_rejection(angular_velocity, linear_acceleration)
-        if reason is not None:
-            return self._invalid(self._imu, stamp_ns, values, reason)
-        if self.sampler.add(self._imu, int(stamp_ns), values):
-            return self._advance()
-        return []
+        return self._advance() if self.intake.imu(stamp_ns, angular_velocity, linear_acceleration) else []
 
     def add_airspeed(self, stamp_ns: int, velocity: Sequence[float]) -> list[SampleOutput]:
         """True-airspeed vector in the REP-103 body frame, m/s."""
-        vx, vy, vz = velocity
-        reason = self.limits.airspeed_rejection(velocity)
-        if reason is not None:
-            return self._invalid(self._airspeed, stamp_ns, (vx, vy, vz), reason)
-        if self.sampler.add(self._airspeed, int(stamp_ns), (vx, vy, vz)):
-            return self._advance()
-        return []
+        return self._advance() if self.intake.airspeed(stamp_ns, velocity) else []
 
     def add_dynamic_pressure(self, stamp_ns: int, pascal: float) -> list[SampleOutput]:
-        reason = self.limits.dynamic_pressure_rejection(pascal)
-        if reason is not None:
-            return self._invalid(self._qbar, stamp_ns, (pascal,), reason)
-        if self.sampler.add(self._qbar, int(stamp_ns), (pascal,)):
-            return self._advance()
-        return []
+        return self._advance() if self.intake.dynamic_pressure(stamp_ns, pascal) else []
 
     def add_thrust(self, stamp_ns: int, force_x: float) -> list[SampleOutput]:
-        reason = self.limits.thrust_rejection(force_x)
-        if reason is not None:
-            return self._invalid(self._thrust, stamp_ns, (force_x,), reason)
-        if self.sampler.add(self._thrust, int(stamp_ns), (force_x,)):
-            return self._advance()
-        return []
+        return self._advance() if self.intake.thrust(stamp_ns, force_x) else []
 
     def add_surfaces(self, stamp_ns: int, names: Sequence[str], positions: Sequence[float]) -> list[SampleOutput]:
         """``sensor_msgs/JointState`` names and positions (rad), mixed by Eq. 23."""
-        layout = self._mixer.layout(names)
-        if len(positions) != len(names):
-            layout = "mismatched_arrays"
-        if type(layout) is str:  # unusable at its stamp, like any invalid message: a hole
-            return self._invalid(self._surfaces, stamp_ns, (), layout)
-        # A JointLayout from here (mypy does not narrow on `type(x) is str`'s else branch).
-        unknown = self.bookkeeping.unknown_joints
-        for n in layout.unknown:  # type: ignore[union-attr]
-            count_bounded(unknown, n, OTHER_JOINTS)
-        used = [positions[i] for i in layout.used]  # type: ignore[union-attr]
-        reason = self.limits.surface_rejection(used)
-        if reason is not None:
-            return self._invalid(self._surfaces, stamp_ns, tuple(used), reason)
-        de, da, dr = layout.deflections(positions)  # type: ignore[union-attr]
-        if self.sampler.add(self._surfaces, int(stamp_ns), (de, da, dr)):
-            return self._advance()
-        return []
+        return self._advance() if self.intake.surfaces(stamp_ns, names, positions) else []
 
-    def _invalid(self, stream: Stream, stamp_ns: int, values: tuple, reason: str) -> list[SampleOutput]:
-        """A message whose content is refused (a value the limits refuse, a JointState that
-        cannot be mixed): ``non_finite`` goes to the sampler as before, the other reasons are
-        rejected at the message's stamp; either way it is a hole (:mod:`.sampling`)."""
-        if reason == "non_finite":
-            due = self.sampler.add(stream, int(stamp_ns), values, False)
-        else:
-            due = self.sampler.reject_invalid(stream, int(stamp_ns), reason)
-        return self._advance() if due else []
+    def reject_frame(self, stream: str, stamp_ns: int, frame_id: str = "") -> list[SampleOutput]:
+        """Count a message of input ``stream`` whose ``header.frame_id`` (``frame_id``) is not
+        ``inputs.frame_id`` (:func:`.inputs.feed` checks): rejected as ``frame_mismatch``,
+        never used, and like any invalid message it leaves a hole: no sample is interpolated
+        across it."""
+        return self._advance() if self.intake.frame_mismatch(stream, stamp_ns, frame_id) else []
 
-    def reject_frame(self, stream: str, stamp_ns: int) -> list[SampleOutput]:
-        """Count a message of input ``stream`` whose ``header.frame_id`` is not
-        ``inputs.frame_id`` (:func:`.messages.feed` checks): its numbers are in a frame the
-        pipeline cannot convert, so it is rejected as ``frame_mismatch``, never used, and like
-        any invalid message it leaves a hole: no sample is interpolated across it."""
-        return self.reject_invalid(stream, stamp_ns, "frame_mismatch")
-
-    def reject(self, stream: str, reason: str) -> None:
+    def reject(self, stream: str, reason: str, detail: str = "") -> None:
         """Count a message of input ``stream`` that never reached the pipeline's ``add_*``
-        (the node could not decode it). Reasons are the caller's: a stream keeps at most
-        :data:`KEYS_KEPT` distinct ones, later new ones count as :data:`OTHER_REASONS`."""
-        s = self.sampler.streams[stream]
-        rejected = s.counts.rejected
-        reason = reason[:KEY_CHARS]
-        if reason not in rejected and len(rejected) - (OTHER_REASONS in rejected) >= KEYS_KEPT:
-            reason = OTHER_REASONS
-        self.sampler.reject(s, reason)
+        (the node could not decode it; ``detail``: why, kept as evidence)."""
+        self.intake.undecodable(stream, reason, detail)
 
     def reject_invalid(self, stream: str, stamp_ns: int, reason: str) -> list[SampleOutput]:
         """Count a message of input ``stream`` stamped ``stamp_ns`` whose values cannot be
         used (``reason``): no sample is formed across it (:meth:`.sampling.Sampler.reject_invalid`)."""
-        if self.sampler.reject_invalid(self.sampler.streams[stream], int(stamp_ns), reason):
-            return self._advance()
-        return []
+        return self._advance() if self.intake.invalid(stream, stamp_ns, reason) else []
 
     @property
     def clock_ns(self) -> int | None:
@@ -442,6 +333,7 @@ class Pipeline:
         state = flight_state(sample, rate_dot, self.config.inputs.air_density, self.limits)
         if type(state) is str:
             book.samples_rejected[state] += 1
+            book.note(SAMPLES, state, (sample, rate_dot.tolist()))  # (a rejected sample's values)
             return None
         if not self.enabled:
             book.samples_rejected["estimation_disabled"] += 1
@@ -477,7 +369,6 @@ class Pipeline:
                 book.outputs_withheld[self._outputs[j]] += 1
             ready &= ~bad
         self._converged = flags, model_flags = self._monitor.update(t, theta, se, ready)
-        every = self._cov_every
         return SampleOutput(
             stamp_ns=t,
             index=self._index,
@@ -487,60 +378,18 @@ class Pipeline:
             ready=ready,
             converged=flags,
             model_converged=model_flags,
-            covariance=self._covariances(ready) if every and (t // self._period_ns) % every == 0 else None,
+            covariance=self._covariances(t, ready),
             lags=np.where(ready, bank.lags_used, 0),
         )
 
-    def _covariances(self, ready: np.ndarray) -> np.ndarray:
-        """``(2, M, n_max, n_max)``: corrected and conventional covariances of the ready models
-        now, made exactly symmetric (``(C + C')/2``: the products leave rounding-level
-        asymmetry), NaN elsewhere. Computed only on the samples that publish them."""
-        c = self.bank.covariance_all()  # both kinds of every model at once
-        # A negative variance only at an exact fit (the initialization sample), whose R(0)
-        # comes out as a tiny negative number: zero, as its standard errors are.
-        smallest = np.minimum.reduce(c.diagonal(0, 2, 3), axis=2, where=self._real, initial=np.inf)
-        c[smallest < 0.0] = 0.0
-        cov = c + c.swapaxes(2, 3)
-        cov *= 0.5
-        # NaN off the ready models' blocks (padding, models not ready or withheld).
-        np.copyto(cov, np.nan, where=~(self._real_square & ready[:, None, None]))
-        return cov
-
-    def published(self, out: SampleOutput) -> Iterator[tuple[str, str, np.ndarray, np.ndarray, np.ndarray]]:
-        """What the node publishes (and the replay writes) for a sample, per ready model:
-        ``(output, label, estimates, corrected SEs, conventional SEs)``. Models still
-        initializing, and models whose outputs are not all finite (withheld when the output
-        was made, counted in ``outputs_withheld``), yield nothing; the rows are checked again
-        here, so no NaN or infinity ever leaves the pipeline. :meth:`published_arrays` gives
-        every array, the convergence flags and covariances too."""
-        for j, (name, label, n) in enumerate(zip(self._outputs, self.labels, self.sizes, strict=True)):
-            if out.ready[j]:
-                rows = out.theta[j, :n], out.se[j, :n], out.se_conventional[j, :n]
-                if all(map(math.isfinite, rows[0].tolist() + rows[1].tolist() + rows[2].tolist())):
-                    yield name, label, *rows
-
-    def published_arrays(self, out: SampleOutput) -> Iterator[PublishedArray]:
-        """Every array published for a sample, as :class:`PublishedArray`, per ready model in
-        the order of :data:`MODEL_OUTPUTS`: ``estimates``, ``standard_errors``,
-        ``standard_errors_conventional``, ``converged`` (1.0 or 0.0 per parameter; the model
-        is converged when all are 1), and when ``out.covariance`` is set ``covariance`` and
-        ``covariance_conventional`` (n x n, row-major). Models still initializing publish
-        nothing (no NaN leaves the pipeline)."""
-        cov = out.covariance
-        ready = out.ready.tolist()
-        theta, se, se_conv = out.theta, out.se, out.se_conventional
-        flags = out.converged.astype(np.float64)
-        new = PublishedArray._make
-        for j, (name, label, n, vector, square) in enumerate(self._published_models):
-            if not ready[j]:
-                continue
-            yield new((name, "estimates", label, vector, theta[j, :n]))
-            yield new((name, "standard_errors", label, vector, se[j, :n]))
-            yield new((name, "standard_errors_conventional", label, vector, se_conv[j, :n]))
-            yield new((name, "converged", label, vector, flags[j, :n]))
-            if cov is not None:
-                yield new((name, "covariance", label, square, cov[0, j, :n, :n].ravel()))
-                yield new((name, "covariance_conventional", label, square, cov[1, j, :n, :n].ravel()))
+    def _covariances(self, t: int, ready: np.ndarray) -> np.ndarray | None:
+        """The corrected and conventional covariances of the ready models
+        (:func:`symmetric_covariances`) on the grid points that publish them (every
+        ``outputs.covariance_decimation``-th), else None."""
+        every = self._cov_every
+        if not every or (t // self._period_ns) % every:
+            return None
+        return symmetric_covariances(self.bank.covariance_all(), self._real, self._real_square, ready)
 
     # ------------------------------------------------------------------ lifecycle
     def reset(self, reason: str, *, clear_inputs: bool = True) -> None:
@@ -580,42 +429,9 @@ class Pipeline:
 
     # ------------------------------------------------------------------ reporting
     def model_fit(self, j: int) -> dict:
-        """R^2 of model ``j`` (1 - residual variance / output variance) and residual
-        whiteness: the lag-1 autocorrelation coefficient and the fraction of lags whose
-        coefficient lies outside the 2-sigma white-noise bound 2/sqrt(n). ``ready`` is false,
-        with a ``problem``, when R^2 is undefined (constant output) or the model's outputs
-        were withheld as non-finite."""
-        bank = self.bank
+        """Model ``j``'s fit (:func:`.bookkeeping.model_fit`)."""
         withheld = self.bookkeeping.outputs_withheld.get(self._outputs[j], 0)
-        if not bank.ready[j]:
-            return {"ready": False, "samples": bank.k}
-        n = bank.k  # samples since the estimator (re)started
-        mean = self._zsum[j] / n
-        mean_sq = self._zsq[j] / n
-        var_z = mean_sq - mean * mean
-        R = bank.autocorrelation(j)
-        # A constant output (variance at rounding level) leaves R^2 undefined; a non-finite
-        # estimator state (withheld outputs) leaves it NaN: either way the fit is reported as
-        # not ready, with the problem, never as an OK "nan".
-        r2 = 1.0 - R[0] / var_z if var_z > 1e-12 * mean_sq else math.nan
-        if not math.isfinite(r2) or self._withheld[j]:
-            problem = "outputs not finite, withheld" if self._withheld[j] or not np.isfinite(R).all() else \
-                "output constant: R^2 undefined"
-            return {"ready": False, "samples": bank.k, "problem": problem, "outputs_withheld": withheld}
-        rho = R[1:] / R[0] if R[0] > 0 else np.zeros(0)
-        bound = 2.0 / math.sqrt(max(n, 1))
-        return {
-            "ready": True,
-            "samples": bank.k,
-            # The largest lag of Eq. 22 the corrected covariance uses now (at most
-            # estimator.lags; chosen per model with lag_selection auto).
-            "lags": int(bank.lags_used[j]),
-            "r_squared": float(r2),
-            "residual_rho1": float(rho[0]) if rho.size else float("nan"),
-            "lags_outside_2sigma": float(np.mean(np.abs(rho) > bound)) if rho.size else float("nan"),
-            "repairs": int(bank.repairs[j]),
-            "outputs_withheld": withheld,
-        }
+        return model_fit(self.bank, j, self._zsum, self._zsq, bool(self._withheld[j]), withheld)
 
     def model_report(self, j: int) -> dict:
         """What ``/diagnostics`` reports of model ``j`` (node and replay alike): its
@@ -631,18 +447,11 @@ class Pipeline:
         return {"converged": bool(model_flags[j]), "converged_parameters": ",".join(names)}
 
     def counters(self) -> dict:
-        """Bookkeeping for diagnostics: messages per stream and samples, with reasons."""
-        book = self.bookkeeping
-        return {
-            "streams": {name: counts.report() for name, counts in book.streams.items()},
-            "samples_formed": book.samples_formed,
-            "samples_used": book.samples_used,
-            "samples_rejected": dict(book.samples_rejected),
-            "samples_pending": len(self._pending),
-            "resets": dict(book.resets),
-            "unknown_joints": dict(book.unknown_joints),
-            "outputs_withheld": dict(book.outputs_withheld),
-        }
+        """Bookkeeping for diagnostics: messages per stream and samples, with reasons, and
+        ``explanations``: each reason in the user's terms (:func:`.alerts.explanations`)."""
+        report = self.bookkeeping.report(len(self._pending))
+        report["explanations"] = explanations(self.config, self.bookkeeping)
+        return report
 
     # ------------------------------------------------------------------ persistence
     def save_state(self, path: str | Path) -> None:
@@ -664,4 +473,4 @@ class Pipeline:
         self._zsq = state.output_sum_squares
         # The convergence history restarts: flags need window seconds of the resumed estimates.
         self._monitor.reset()
-        self._converged = self._monitor._none()
+        self._converged = self._monitor.no_flags()

@@ -38,7 +38,8 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Protocol
 
 from .errors import BagError, ConfigError
-from .messages import ARRAY_OUTPUTS, NODE_NAME, message_class
+from .inputs import message_class
+from .outputs import ARRAY_OUTPUTS, NODE_NAME
 
 if TYPE_CHECKING:
     from rclpy.node import Node

@@ -1,7 +1,7 @@
 """Offline replay: a replay bag through the node's own pipeline, no DDS, as fast as the CPU
 allows (``rls-uncertainty replay BAG --config CFG --out DIR``).
 
-The messages go through :func:`.messages.feed` into one :class:`.pipeline.Pipeline`, exactly
+The messages go through :func:`.inputs.feed` into one :class:`.pipeline.Pipeline`, exactly
 as in the live node, so the node and the replay give the same numbers. Outputs (written to a
 temporary directory renamed to ``DIR`` only when complete):
 
@@ -13,7 +13,7 @@ temporary directory renamed to ``DIR`` only when complete):
   ``P_se_conventional`` and ``P_converged``, and per model M ``M_lags``: one row per sample,
   cells empty while a model is not ready (for PlotJuggler's CSV loader and spreadsheets);
 * ``estimates.mcap``: every topic the node publishes. Per sample, byte for byte what the node
-  sends (:func:`.outputs.sample_messages`: ``/rls_estimator/sample_stamp``, and per model
+  sends (:meth:`.outputs.OutputLayout.encode`: ``/rls_estimator/sample_stamp``, and per model
   ``/rls_estimator/M/estimates``, ``.../standard_errors``, ``.../standard_errors_conventional``,
   ``.../converged``, decimated ``.../covariance`` and ``.../covariance_conventional``), log
   time = the sample's stamp; and ``/diagnostics`` once per ``diagnostics_period`` of data time
@@ -36,12 +36,13 @@ from typing import Any, TextIO
 
 import numpy as np
 
+from .alerts import no_estimate, not_excited
 from .bags import read_inputs, typestore, write_replay
 from .config import NodeConfig, PipelineConfig, node_config, pipeline_config
 from .diagnostics import DiagnosticsPolicy, Snapshot, Status
 from .files import output_directory
-from .messages import NODE_NAME, Stamped, feed
-from .outputs import sample_messages
+from .inputs import Stamped, feed
+from .outputs import NODE_NAME, OutputLayout
 from .pipeline import Pipeline, SampleOutput
 from .report import results_table, rows_from_arrays
 
@@ -50,7 +51,10 @@ __all__ = ["ReplayResult", "run_pipeline", "replay", "output_records", "NODE_NAM
 
 @dataclass
 class ReplayResult:
-    """The pipeline after the run, every published sample and timing."""
+    """The pipeline after the run, every published sample and timing. :attr:`estimates`
+    counts the samples that published an estimate (0: the run estimated nothing, which the
+    command line reports with exit status 1); :attr:`explanations` says, one line each, why a
+    model never produced an estimate (:func:`unestimated`)."""
 
     pipeline: Pipeline
     outputs: list[SampleOutput] = field(default_factory=list)
@@ -60,6 +64,12 @@ class ReplayResult:
     # (stamp_ns, statuses) of the /diagnostics the node would have published, one per
     # diagnostics period of data time (empty unless run_pipeline was given a NodeConfig).
     diagnostics: list[tuple[int, list[Status]]] = field(default_factory=list)
+    explanations: list[str] = field(default_factory=list)
+
+    @property
+    def estimates(self) -> int:
+        """Samples in which at least one model published its estimates."""
+        return sum(1 for out in self.outputs if out.ready.any())
 
     @property
     def speed(self) -> float:
@@ -173,15 +183,40 @@ def run_pipeline(messages: Sequence[tuple[str, int, Stamped]], config: PipelineC
         _progress(total, total)
     if messages:
         result.data_seconds = (messages[-1][1] - messages[0][1]) * 1e-9
+    result.explanations = unestimated(pipe, outs)
     return result
+
+
+def unestimated(pipe: Pipeline, outputs: Sequence[SampleOutput]) -> list[str]:
+    """Why models never produced an estimate over ``outputs``, in the terms of
+    :mod:`.alerts`: one line ``no estimates: <why>`` when the data path used no sample (which
+    stream was rejected and why, expected against received, the parameter to change), else
+    one ``<model>: no estimate: <why>`` per model that never became ready."""
+    ever = np.zeros(len(pipe.models), dtype=bool)
+    for out in outputs:
+        ever |= out.ready
+        if ever.all():  # the usual case: every model ready early in the run
+            return []
+    why = no_estimate(pipe.counters(), pipe.required)
+    if why is not None:
+        return [f"no estimates: {why}"]
+    lines = []
+    for j, (m, n) in enumerate(zip(pipe.models, pipe.sizes, strict=True)):
+        if not ever[j]:
+            # With the regression recorded: the regressors that never moved (the bias aside).
+            X = np.array([x[j, :n] for _t, x, _z in pipe.regression]).reshape(-1, n)
+            constant = [r for i, r in enumerate(m.regressors) if r != "1" and len(X) and np.ptp(X[:, i]) == 0]
+            lines.append(f"{m.output}: no estimate: {not_excited(n, pipe.bank.k, constant)}")
+    return lines
 
 
 def output_records(pipe: Pipeline, outputs: Iterable[SampleOutput], frame_id: str = "base_link",
                    node: str = NODE_NAME) -> list[tuple[int, str, str, bytes]]:
     """The node's output messages for every sample, as bag records of CDR bytes: exactly what
-    the node publishes (:func:`.outputs.sample_messages`)."""
-    return [(out.stamp_ns, f"/{node}/{topic}", msgtype, data)
-            for out in outputs for topic, msgtype, data in sample_messages(pipe, out, frame_id)]
+    the node publishes (:meth:`.outputs.OutputLayout.encode`)."""
+    layout = OutputLayout.of(pipe)
+    topics = [(f"/{node}/{topic}", msgtype) for topic, msgtype in layout.topics]
+    return [(out.stamp_ns, *topics[index], data) for out in outputs for index, data in layout.encode(out, frame_id)]
 
 
 DIAGNOSTIC_ARRAY = "diagnostic_msgs/msg/DiagnosticArray"
@@ -217,12 +252,12 @@ def _write_csv(path: Path, pipe: Pipeline, outputs: Iterable[SampleOutput]) -> N
     """``estimates.csv``: :data:`CSV_COLUMNS`, one row per sample and parameter of every ready
     model; ``converged`` is the parameter's flag (1/0), ``lags`` the model's lag count of Eq. 22
     behind ``std_error`` (chosen per sample under ``estimator.lag_selection: auto``)."""
+    layout = OutputLayout.of(pipe)
     with open(path, "w") as fh:
         fh.write(",".join(CSV_COLUMNS) + "\n")
         for out in outputs:
             t = _stamp_text(out.stamp_ns)
-            published = zip(pipe.published(out), _names_of(pipe, out), _ready_models(pipe, out), strict=True)
-            for (name, _label, theta, se, se_conv), names, j in published:
+            for j, name, names, theta, se, se_conv in layout.rows(out):
                 lags = int(out.lags[j]) if out.lags is not None else ""
                 flags = out.converged[j, : len(names)].tolist()
                 # (Python floats from tolist: the same repr as float() of each numpy element.)
@@ -264,23 +299,14 @@ def _write_wide_csv(path: Path, pipe: Pipeline, outputs: Iterable[SampleOutput])
             fh.write(",".join(cells) + "\n")
 
 
-def _ready_models(pipe: Pipeline, out: SampleOutput) -> list[int]:
-    return [j for j in range(len(pipe.sizes)) if out.ready[j]]
-
-
-def _names_of(pipe: Pipeline, out: SampleOutput) -> list[tuple[str, ...]]:
-    return [pipe.parameter_names[j] for j in range(len(pipe.sizes)) if out.ready[j]]
-
-
 def summary_table(pipe: Pipeline, outputs: Sequence[SampleOutput]) -> str:
-    """The last sample's estimates of every ready model (:func:`.report.results_table`)."""
-    if not outputs:
-        return "no estimates: no model became ready (check the excitation and the configuration)"
-    last = outputs[-1]
+    """The last sample's estimates of every ready model (:func:`.report.results_table`), then
+    why any model has none (:func:`unestimated`)."""
+    why = unestimated(pipe, outputs)
     rows = []
-    for (_name, _l, theta, se, sc), names in zip(pipe.published(last), _names_of(pipe, last), strict=True):
-        rows += rows_from_arrays(names, theta, sc, se)
-    return results_table(rows)
+    for row in OutputLayout.of(pipe).rows(outputs[-1]) if outputs else ():
+        rows += rows_from_arrays(row.names, row.estimates, row.standard_errors_conventional, row.standard_errors)
+    return "\n".join(([results_table(rows)] if rows else []) + why)
 
 
 def _plots(out_dir: Path, pipe: Pipeline, outputs: Sequence[SampleOutput]) -> list[Path]:

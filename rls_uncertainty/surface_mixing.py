@@ -44,6 +44,17 @@ class SurfaceMixing:
             return self.aileron_right + self.aileron_left
         return ()
 
+    def missing(self, names: Sequence[str]) -> list[tuple[str, tuple[str, ...]]]:
+        """``(surfaces.<field>, its joint names)`` of every field with a joint that ``names``
+        lacks: what makes a message ``missing_joint`` (for a misconfiguration report)."""
+        have = set(names)
+        fields = [("elevator", self.elevator), ("rudder", self.rudder)]
+        if self.aileron_combined:
+            fields.append(("aileron_combined", (self.aileron_combined,)))
+        elif self.aileron_right and self.aileron_left:
+            fields += [("aileron_right", self.aileron_right), ("aileron_left", self.aileron_left)]
+        return [(f"surfaces.{name}", joints) for name, joints in fields if any(j not in have for j in joints)]
+
     def layout(self, names: tuple[str, ...]) -> JointLayout | str:
         """Where each mixed joint sits in a message with these joint ``names``, or why such a
         message cannot be used: ``mismatched_arrays`` (a name twice) or ``missing_joint``."""

@@ -15,11 +15,11 @@ from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.qos import QoSHistoryPolicy, QoSProfile, QoSReliabilityPolicy
 from std_msgs.msg import Float64MultiArray, Header
 
-from rls_uncertainty.messages import INPUTS, MESSAGE_TYPES, NODE_NAME, message_class
-from rls_uncertainty.pipeline import MODEL_OUTPUTS
+from rls_uncertainty.inputs import MESSAGE_TYPES, STREAMS, message_class
+from rls_uncertainty.outputs import MODEL_OUTPUTS, NODE_NAME
 
 ROOT = Path(__file__).resolve().parents[1]
-TYPES = {kind: message_class(MESSAGE_TYPES[kind]) for kind in INPUTS}
+TYPES = {kind: message_class(MESSAGE_TYPES[kind]) for kind in STREAMS}
 RELIABLE = QoSProfile(depth=5000, reliability=QoSReliabilityPolicy.RELIABLE, history=QoSHistoryPolicy.KEEP_LAST)
 
 

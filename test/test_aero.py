@@ -1,5 +1,4 @@
-"""Eq. 1 coefficients, Eq. 2 regressors, frames, the flight state of a sample and the Eq. 23
-surface mixing."""
+"""Eq. 1 coefficients, Eq. 2 regressors, frames and the flight state of a sample."""
 
 import math
 
@@ -9,18 +8,16 @@ import pytest
 from rls_uncertainty.aero import (
     SAMPLE_FIELDS,
     FlightState,
-    PlausibilityLimits,
     aircraft_sample,
     coefficients,
     flight_state,
     physics_rejection,
-    plausibility_rejection,
     regressor_matrix,
     regressors,
     rep103_to_aircraft,
 )
 from rls_uncertainty.config import DEFAULT_MODELS, load_aircraft
-from rls_uncertainty.surface_mixing import JointLayout, SurfaceMixer, SurfaceMixing
+from rls_uncertainty.limits import PlausibilityLimits
 
 T2 = load_aircraft("t2")
 
@@ -111,143 +108,8 @@ def test_a_sample_that_cannot_be_reduced_gives_its_reason(velocity, qbar, reason
     assert flight_state(sample, np.zeros(3), 1.225) == reason
 
 
-def test_aileron_mixing_is_eq_23():
-    mixer = SurfaceMixer(SurfaceMixing(aileron_right=("ar1", "ar2"), aileron_left=("al",), rudder=("r1", "r2")))
-    names = ["ar1", "ar2", "al", "r1", "r2", "elevator"]
-    de, da, dr = mixer.layout(names).deflections([0.1, 0.3, -0.2, 0.01, 0.03, 0.0])
-    assert da == pytest.approx(0.5 * (0.2 - (-0.2)))  # (mean right - mean left) / 2
-    assert dr == pytest.approx(0.02)
-    # The joint order may change from message to message: the mixing follows the names.
-    reordered = ["elevator", "r2", "r1", "al", "ar2", "ar1"]
-    assert mixer.layout(reordered).deflections([0.0, 0.03, 0.01, -0.2, 0.3, 0.1]) == (de, da, dr)
-    assert mixer.layout(names).deflections([0.1, 0.5, -0.2, 0.01, 0.03, 0.0])[1] == pytest.approx(0.5 * (0.3 - (-0.2)))
-    combined = SurfaceMixer(SurfaceMixing(aileron_combined="ail"))
-    assert combined.layout(["ail", "rudder", "elevator"]).deflections([0.07, 0.0, 0.0])[1] == 0.07
-    # Only one aileron side configured: no aileron deflection is formed (and none required).
-    one_side = SurfaceMixer(SurfaceMixing(aileron_left=()))
-    assert one_side.layout(["aileron_right", "rudder", "elevator"]).deflections([0.07, 0.0, 0.01])[1] == 0.0
-    assert one_side.layout(["rudder", "elevator"]).deflections([0.0, 0.01]) == (0.01, 0.0, 0.0)
-
-
-def test_elevator_and_rudder_are_averages_and_other_joints_are_reported():
-    mixing = SurfaceMixing(elevator=("el", "er"), rudder=("ru", "rl"))
-    names = ("flap", "el", "aileron_left", "er", "ru", "aileron_right", "rl", "gear")
-    layout = mixing.layout(names)
-    assert isinstance(layout, JointLayout)
-    assert layout.unknown == ("flap", "gear")
-    positions = [9.0, 0.02, -0.1, 0.04, 0.3, 0.1, 0.1, 9.0]
-    assert layout.deflections(positions) == pytest.approx((0.03, 0.1, 0.2), rel=1e-15)
-
-
-def test_joint_lists_that_cannot_be_mixed_give_their_reason():
-    mixing = SurfaceMixing()
-    assert mixing.layout(("elevator", "rudder", "aileron_left")) == "missing_joint"
-    assert mixing.layout(("elevator", "rudder", "aileron_left", "aileron_right", "rudder")) == "mismatched_arrays"
-    # A deflection that no model needs may be unmapped: nothing is missing then.
-    assert isinstance(SurfaceMixing(rudder=()).layout(("elevator", "aileron_left", "aileron_right")), JointLayout)
-
-
-def test_the_mixer_follows_name_lists_that_change_or_are_reused():
-    mixer = SurfaceMixer(SurfaceMixing())
-    names = ["elevator", "aileron_left", "aileron_right", "rudder"]
-    assert mixer.layout(names).deflections([0.1, 0.2, 0.4, 0.3]) == (0.1, pytest.approx(0.1), 0.3)
-    names.reverse()  # the caller reuses its list object with other contents
-    assert mixer.layout(names).deflections([0.3, 0.4, 0.2, 0.1]) == (0.1, pytest.approx(0.1), 0.3)
-    for k in range(40):  # many different lists: the cache stays bounded and right
-        extra = [f"j{k}", "rudder", "elevator", "aileron_right", "aileron_left"]
-        assert mixer.layout(extra).deflections([5.0, 0.3, 0.1, 0.4, 0.2]) == (0.1, pytest.approx(0.1), 0.3)
-        assert mixer.layout(extra).unknown == (f"j{k}",)
-    assert len(mixer._layouts) <= SurfaceMixer._CACHE_SIZE
-
-
 # ----------------------------------------------------------------------------- plausibility
-LIMITS = PlausibilityLimits()  # 3..400 m/s, |alpha| 1, |beta| 0.6 rad, 20 rad/s, 200 m/s^2, 1 rad, 5..1e5 Pa, 2 MN
-TINY = 5e-324  # the smallest subnormal
-
-
-@pytest.mark.parametrize("gyro, accel, reason", [
-    ((0.1, -0.2, 0.05), (0.5, 0.0, 9.8), None),
-    ((20.0, -20.0, 0.0), (200.0, -200.0, 0.0), None),  # the bounds themselves are plausible
-    ((0.0, 1e100, 0.0), (0.0, 0.0, 9.8), "implausible_angular_rate"),  # issue 12: a gyro of 1e100 rad/s
-    ((0.0, 20.000001, 0.0), (0.0, 0.0, 9.8), "implausible_angular_rate"),
-    ((0.0, 0.0, 0.0), (0.0, 0.0, 1e150), "implausible_specific_force"),  # issue 12: 1e150 m/s^2
-    ((0.0, 0.0, 0.0), (-1.7e308, 0.0, 9.8), "implausible_specific_force"),  # near the largest double
-    ((1e100, 0.0, 0.0), (1e150, 0.0, 0.0), "implausible_angular_rate"),  # the rate is named first
-    ((math.nan, 0.0, 0.0), (0.0, 0.0, 9.8), "non_finite"),
-    ((1e100, 0.0, 0.0), (0.0, -math.inf, 9.8), "non_finite"),  # non-finite before implausible
-    ((-0.0, TINY, -TINY), (0.0, 0.0, 9.8), None),
-])
-def test_imu_messages_beyond_the_limits_are_implausible(gyro, accel, reason):
-    assert LIMITS.imu_rejection(gyro, accel) == reason
-
-
-@pytest.mark.parametrize("velocity, reason", [
-    ((40.0, 0.0, -3.0), None),  # REP-103: w = 3 m/s down in aircraft axes, alpha 0.075 rad
-    ((-40.0, 0.0, 0.0), "implausible_alpha"),  # issue 12: "negative airspeed" is flying backwards
-    ((-40.0, 0.0, -0.1), "implausible_alpha"),  # alpha = 179.9 deg
-    ((0.0, 0.0, 0.0), "implausible_airspeed"),
-    ((2.9, 0.0, 0.0), "implausible_airspeed"),
-    ((400.1, 0.0, 0.0), "implausible_airspeed"),
-    ((1e200, 1e200, 1e200), "implausible_airspeed"),  # |v| would overflow: still a clean reason
-    ((30.0, 0.0, -30.0 * math.tan(1.01)), "implausible_alpha"),  # just beyond 1 rad
-    ((30.0, 0.0, -30.0 * math.tan(0.99)), None),
-    ((30.0, 30.0 * math.tan(0.61), 0.0), "implausible_beta"),  # sideslip 0.61 rad (v = -y: from the left)
-    ((30.0, -30.0 * math.tan(0.59), 0.0), None),
-    ((TINY, 0.0, 0.0), "implausible_airspeed"),
-    ((40.0, math.nan, 0.0), "non_finite"),
-])
-def test_airspeed_messages_with_impossible_speed_or_flow_angles_are_implausible(velocity, reason):
-    assert LIMITS.airspeed_rejection(velocity) == reason
-
-
-@pytest.mark.parametrize("method, value, reason", [
-    ("dynamic_pressure_rejection", 980.0, None),
-    ("dynamic_pressure_rejection", 1e-300, "implausible_dynamic_pressure"),  # issue 12
-    ("dynamic_pressure_rejection", TINY, "implausible_dynamic_pressure"),
-    ("dynamic_pressure_rejection", -0.0, "implausible_dynamic_pressure"),
-    ("dynamic_pressure_rejection", 4.99, "implausible_dynamic_pressure"),
-    ("dynamic_pressure_rejection", 1.01e5, "implausible_dynamic_pressure"),
-    ("dynamic_pressure_rejection", math.inf, "non_finite"),
-    ("thrust_rejection", -3000.0, None),  # reverse thrust
-    ("thrust_rejection", -0.0, None),
-    ("thrust_rejection", 2.1e6, "implausible_thrust"),
-    ("thrust_rejection", -1e150, "implausible_thrust"),
-    ("thrust_rejection", math.nan, "non_finite"),
-])
-def test_scalar_messages_beyond_the_limits_are_implausible(method, value, reason):
-    assert getattr(LIMITS, method)(value) == reason
-
-
-@pytest.mark.parametrize("positions, reason", [
-    ([0.1, -0.3, 0.0], None),
-    ([1e150, 0.0], "implausible_surface"),  # issue 12: a deflection of 1e150
-    ([1e150, -1e150], "implausible_surface"),  # whose Eq. 23 average would be a plausible 0
-    ([0.0, -1.0000001], "implausible_surface"),
-    ([math.nan, 1e150], "non_finite"),
-    ([], None),
-])
-def test_control_surface_joints_beyond_the_limit_are_implausible(positions, reason):
-    assert LIMITS.surface_rejection(positions) == reason
-
-
-@pytest.mark.parametrize("kw, reason", [
-    ({}, None),
-    (dict(V=2.0), "implausible_airspeed"),
-    (dict(V=401.0), "implausible_airspeed"),
-    (dict(alpha=-1.1), "implausible_alpha"),
-    (dict(alpha=math.pi - 0.01), "implausible_alpha"),
-    (dict(beta=0.7), "implausible_beta"),
-    (dict(qbar=1e-300), "implausible_dynamic_pressure"),
-    (dict(qbar=2e5), "implausible_dynamic_pressure"),
-    (dict(r=-21.0), "implausible_angular_rate"),
-    (dict(ay=250.0), "implausible_specific_force"),
-    (dict(delta_r=-1.2), "implausible_surface"),
-    (dict(thrust=3e6), "implausible_thrust"),
-    (dict(V=2.0, thrust=3e6), "implausible_airspeed"),  # the first problem is named
-    (dict(p_dot=1e3), None),  # angular accelerations have no limit (derived, bounded by the rates)
-])
-def test_a_sample_beyond_the_limits_gives_its_reason(kw, reason):
-    assert plausibility_rejection(state(**kw), LIMITS) == reason
+LIMITS = PlausibilityLimits()
 
 
 def test_flight_state_judges_derived_quantities_with_the_limits():
@@ -267,26 +129,3 @@ def test_flight_state_judges_derived_quantities_with_the_limits():
     mid = aircraft_sample(imu, (3.0 * math.cos(a), 0.0, 0.0))
     assert LIMITS.airspeed_rejection((3.0 * math.cos(a), 0.0, 3.0 * math.sin(a))) is None
     assert flight_state(mid, np.zeros(3), 1.225, LIMITS) == "implausible_airspeed"
-
-
-def test_the_used_joints_are_the_mixed_ones():
-    layout = SurfaceMixing(elevator=("el", "er"), rudder=("ru",)).layout(
-        ("flap", "el", "aileron_left", "er", "ru", "aileron_right", "gear"))
-    assert layout.used == (1, 2, 3, 4, 5)
-    combined = SurfaceMixing(aileron_combined="ail").layout(("aileron_left", "ail", "rudder", "elevator"))
-    assert combined.used == (1, 2, 3) and combined.unknown == ("aileron_left",)
-
-
-def test_the_mixer_never_caches_long_name_lists():
-    """A JointState with thousands of names is laid out (and its unknown joints listed) but
-    not kept: the cache holds at most _CACHE_SIZE lists of at most _CACHE_MAX_NAMES names."""
-    mixer = SurfaceMixer(SurfaceMixing())
-    base = ["elevator", "aileron_left", "aileron_right", "rudder"]
-    for k in range(40):
-        names = base + [f"junk{k}_{i}" for i in range(5000)]
-        layout = mixer.layout(names)
-        assert layout.deflections([0.1, 0.2, 0.4, 0.3] + [0.0] * 5000) == (0.1, pytest.approx(0.1), 0.3)
-        assert len(layout.unknown) == 5000
-        assert mixer.layout(names) is layout  # the last list is still recognised
-    assert all(len(key) <= SurfaceMixer._CACHE_MAX_NAMES for key in mixer._layouts)
-    assert len(mixer._layouts) <= SurfaceMixer._CACHE_SIZE

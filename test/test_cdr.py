@@ -17,7 +17,7 @@ from rosbags.serde import SerdeError
 from rosbags.typesys import Stores, get_typestore
 
 from rls_uncertainty import cdr
-from rls_uncertainty.messages import MESSAGE_TYPES
+from rls_uncertainty.inputs import MESSAGE_TYPES
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -185,7 +185,7 @@ def test_messages_serialized_by_rclpy_decode_to_the_same_fields(msgtype):
     with up to 8 bytes after the message (its size estimate pads empty sequences)."""
     from rclpy.serialization import deserialize_message, serialize_message
 
-    from rls_uncertainty.messages import message_class
+    from rls_uncertainty.inputs import message_class
 
     cls = message_class(msgtype)
     longer = 0

@@ -369,3 +369,17 @@ def test_version_is_package_xml_s(capsys):
     with pytest.raises(SystemExit) as exc:
         cli.main(["--version"])
     assert exc.value.code == 0 and capsys.readouterr().out == f"rls-uncertainty {version}\n"
+
+
+def test_replay_with_no_estimate_says_why_and_exits_1(tmp_path, capsys):
+    """The bundled bag has split elevators; the default surfaces.elevator expects one joint named
+    elevator, so every control_surfaces message is refused and no model is ever estimated: the
+    run names the joints on both sides and the parameter, and a script sees exit status 1."""
+    code = cli.main(["replay", str(BUNDLED), "--out", str(tmp_path / "out"), "--quiet", "--no-plots"])
+    out = capsys.readouterr().out
+    assert code == 1
+    assert "surfaces.elevator expects [elevator]" in out and "elevator_left, elevator_right" in out, out
+    # The same bag with its configuration estimates, and exits 0.
+    code = cli.main(["replay", str(BUNDLED), "--config", str(ROOT / "config" / "t2.yaml"),
+                     "--out", str(tmp_path / "ok"), "--quiet", "--no-plots"])
+    assert code == 0

@@ -1,4 +1,4 @@
-"""Convergence flags (issue 14): the monitor against a brute-force implementation of the
+"""Convergence flags: the monitor against a brute-force implementation of the
 criterion, its behaviour on converging and jumping estimates, bounded memory, bad input."""
 
 import math

@@ -12,7 +12,8 @@ import pytest
 
 from rls_uncertainty import diagnostics as dg
 from rls_uncertainty.diagnostics import OK, WARN, DiagnosticsPolicy, Snapshot
-from rls_uncertainty.messages import INPUTS, NODE_NAME
+from rls_uncertainty.inputs import STREAMS as INPUTS
+from rls_uncertainty.outputs import NODE_NAME
 
 SEC = 1_000_000_000
 NOW = 1_700_000_000 * SEC
@@ -282,10 +283,13 @@ def test_statuses_from_a_real_pipeline():
     assert all(s.level == OK for n, s in out.items() if n.startswith("model"))
 
 
-# ------------------------------------------------------------------ levels from a recent window (issue 13)
+# ------------------------------------------------------------------ levels from a recent window
 def _run(policy, periods, *, elapsed=1.0):
-    """Feed one snapshot per entry of ``periods`` (each a counters dict); the inputs statuses."""
-    return [statuses(snapshot(c, elapsed=elapsed), policy)["inputs"] for c in periods]
+    """Feed one snapshot per entry of ``periods`` (each a counters dict) of a pipeline that
+    uses a sample every period (no data-path alert); the inputs statuses."""
+    used = policy.previous.counters["samples_used"] if policy.previous else 0
+    return [statuses(snapshot({**c, "samples_formed": used + i + 1, "samples_used": used + i + 1}, elapsed=elapsed),
+                     policy)["inputs"] for i, c in enumerate(periods)]
 
 
 def test_one_dropped_packet_warns_for_the_window_then_clears_with_the_cumulative_count_kept():
@@ -348,7 +352,7 @@ def test_policy_settings_are_checked(bad):
         DiagnosticsPolicy(**bad)
 
 
-# ------------------------------------------------------------------ bounded size (issue 12 item 5)
+# ------------------------------------------------------------------ bounded size
 def _size(status):
     return len(status.name) + len(status.message) + sum(len(k) + len(v) for k, v in status.values)
 

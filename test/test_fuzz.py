@@ -1,4 +1,4 @@
-"""Property-based fuzzing of the pipeline (issue 12): a valid maneuver, the first 1500 messages
+"""Property-based fuzzing of the pipeline: a valid maneuver, the first 1500 messages
 (3.7 s) of the bundled bag decoded as the node decodes them, with random corruption injected:
 finite extremes (+-1e300, 1e-300, subnormals, -0.0, the largest double), NaN and infinities
 in any field, stamps duplicated, reversed, jumping far ahead, zero or negative, JointState
@@ -25,9 +25,11 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from rls_uncertainty.bags import read_inputs
+from rls_uncertainty.bookkeeping import KEYS_KEPT
 from rls_uncertainty.config import load_parameters_file, pipeline_config
-from rls_uncertainty.messages import feed
-from rls_uncertainty.pipeline import KEYS_KEPT, STREAMS, Pipeline
+from rls_uncertainty.inputs import feed
+from rls_uncertainty.outputs import OutputLayout
+from rls_uncertainty.pipeline import STREAMS, Pipeline
 
 from conftest import ROOT
 
@@ -225,7 +227,7 @@ def test_corrupted_maneuvers_publish_only_finite_numbers_and_account_for_everyth
     c = pipe.counters()
 
     for out in outputs:
-        for _name, _label, theta, se, se_conv in pipe.published(out):
+        for _j, _name, _names, theta, se, se_conv in OutputLayout.of(pipe).rows(out):
             assert np.isfinite(theta).all() and np.isfinite(se).all() and np.isfinite(se_conv).all()
     assert c["outputs_withheld"] == {}
     assert len(outputs) == c["samples_used"]
@@ -259,5 +261,5 @@ def test_the_fuzzing_base_is_a_valid_maneuver(base):
     c = pipe.counters()
     assert all(not s["rejected"] for s in c["streams"].values())
     assert c["samples_used"] > 170
-    published = {row[0] for row in pipe.published(outputs[-1])}
+    published = {row.model for row in OutputLayout.of(pipe).rows(outputs[-1])}
     assert {"CX", "CZ", "Cm"} <= published

@@ -14,8 +14,7 @@ from pathlib import Path
 import pytest
 
 from rls_uncertainty.config import load_parameters_file, pipeline_config
-from rls_uncertainty.messages import NODE_NAME
-from rls_uncertainty.outputs import output_topics
+from rls_uncertainty.outputs import NODE_NAME, output_topics
 
 ROOT = Path(__file__).resolve().parents[1]
 LAYOUTS = ROOT / "layouts"

@@ -10,6 +10,7 @@ import io
 import json
 import math
 import os
+import re
 import subprocess
 import sys
 import zipfile
@@ -26,8 +27,9 @@ from std_srvs.srv import SetBool, Trigger
 from rls_uncertainty.bags import read_inputs
 from rls_uncertainty.config import load_parameters_file, pipeline_config
 from rls_uncertainty.estimator.state_file import load_state
-from rls_uncertainty.messages import MESSAGE_TYPES, feed, parse_stamp_label
-from rls_uncertainty.messages import NODE_NAME as NODE
+from rls_uncertainty.inputs import MESSAGE_TYPES, feed
+from rls_uncertainty.outputs import NODE_NAME as NODE
+from rls_uncertainty.outputs import parse_stamp_label
 from rls_uncertainty.pipeline import Pipeline
 from rls_uncertainty.replay import run_pipeline
 
@@ -324,6 +326,29 @@ def test_malformed_messages_are_counted_and_the_first_of_each_input_logged(tmp_p
     assert f"error: {MESSAGE_TYPES['imu']}: malformed 40-byte payload" in imu_lines[0]  # the first, type and text
     surfaces = [line for line in lines if "malformed message on /control_surfaces" in line]
     assert len(surfaces) == 1 and MESSAGE_TYPES["control_surfaces"] in surfaces[0]
+
+
+def test_a_misconfigured_data_path_is_logged_and_in_diagnostics(tmp_path, tester, bag):
+    """Default parameters (surfaces.elevator expects 'elevator') and the bundled bag (split
+    elevators): every JointState is rejected. The node says so in one WARN line naming the
+    joints expected and received and the parameter to change (once: throttled), and the
+    inputs status carries the same text at level ERROR."""
+    node = NodeProcess(tmp_path, "-p", "qos.reliable:=true", "-p", "qos.depth:=10000", "-p", "diagnostics_period:=0.2")
+    names = next(m for k, _s, m in bag if k == "control_surfaces").name
+    want = (r"control_surfaces: all \d+ messages rejected \(missing_joint\): surfaces.elevator expects \[elevator\], "
+            rf"messages carry \[{', '.join(names)}\]; set surfaces.elevator")
+    try:
+        tester.wait_connected()
+        first = [(k, to_rclpy(k, m)) for k, s, m in bag if s < bag[0][1] + 3 * 10**9]
+        tester.publish_all(first)
+        d = tester.wait_diagnostics(lambda d: d.get(f"{NODE}: inputs", {}).get("control_surfaces.received")
+                                    == str(sum(k == "control_surfaces" for k, _ in first)))
+        inputs = d[f"{NODE}: inputs"]
+        assert inputs["level"] == 2 and re.match(want, inputs["message"]), inputs["message"]
+    finally:
+        assert node.stop() == 0, node.text()
+    warnings = [line for line in node.text().splitlines() if "messages rejected (missing_joint)" in line]
+    assert len(warnings) == 1 and "WARN" in warnings[0] and re.search(want, warnings[0]), node.text()
 
 
 def test_main_leaves_dds_discovery_to_the_environment(monkeypatch):

@@ -1,8 +1,8 @@
-"""What the pipeline hands its consumers beyond estimates and standard errors (issue 14):
+"""What the pipeline hands its consumers beyond estimates and standard errors:
 convergence flags computed in the pipeline (equal to an independent ConvergenceMonitor, reset
 with the estimator), full covariances on decimated samples (equal to bank.covariance at that
-sample), the arrays the node publishes with their row-major layouts, and the configuration
-parameters behind them. No ROS."""
+sample), the arrays and messages the node publishes (rls_uncertainty.outputs) with their
+row-major layouts, and the configuration parameters behind them. No ROS."""
 
 from __future__ import annotations
 
@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from rls_uncertainty.bags import read_inputs
+from rls_uncertainty.cdr import encode_float64_multiarray_dims, encode_header
 from rls_uncertainty.config import (
     PARAMETERS,
     ConfigError,
@@ -22,8 +23,17 @@ from rls_uncertainty.config import (
     pipeline_config,
 )
 from rls_uncertainty.convergence import ConvergenceConfig, ConvergenceMonitor
-from rls_uncertainty.messages import ARRAY_OUTPUTS, feed, parse_stamp_label, stamp_label
-from rls_uncertainty.pipeline import MODEL_OUTPUTS, Pipeline, PublishedArray
+from rls_uncertainty.inputs import feed
+from rls_uncertainty.outputs import (
+    ARRAY_OUTPUTS,
+    MODEL_OUTPUTS,
+    OutputLayout,
+    dims,
+    output_topics,
+    parse_stamp_label,
+    stamp_label,
+)
+from rls_uncertainty.pipeline import Pipeline
 
 from conftest import ROOT
 
@@ -152,16 +162,16 @@ def test_published_arrays_order_shapes_and_values(bag):
     pipe, outs, _ = run(bag, t2())
     seen_cov = 0
     for out in outs:
-        arrays = list(pipe.published_arrays(out))
-        old = list(pipe.published(out))
-        models = [name for name, *_ in old]
+        layout = OutputLayout.of(pipe)
+        arrays = list(layout.arrays(out))
+        rows = list(layout.rows(out))
         per_model = 6 if out.covariance is not None else 4
-        assert len(arrays) == per_model * len(models)
-        for i, (name, label, theta, se, se_conv) in enumerate(old):
+        assert len(arrays) == per_model * len(rows)
+        for i, (j, name, names, theta, se, se_conv) in enumerate(rows):
             mine = arrays[i * per_model:(i + 1) * per_model]
             assert [a.suffix for a in mine] == list(MODEL_OUTPUTS[:per_model])
-            assert {a.model for a in mine} == {name} and {a.names for a in mine} == {label}
-            j = pipe.labels.index(label)
+            assert {a.model for a in mine} == {name} and {a.names for a in mine} == {pipe.labels[j]}
+            assert names == pipe.parameter_names[j]
             n = pipe.sizes[j]
             for a, want in zip(mine[:3], (theta, se, se_conv), strict=True):
                 assert a.shape == (n,) and a.data.dtype == np.float64
@@ -180,14 +190,12 @@ def test_published_arrays_order_shapes_and_values(bag):
 
 def test_layouts_are_row_major_with_the_stamp_last():
     when = stamp_label(1_767_225_600_140_000_000)
-    vec = PublishedArray("CZ", "estimates", "CZ_0,CZ_alpha,CZ_delta_e", (3,), np.zeros(3))
-    assert vec.dims(when) == [("CZ_0,CZ_alpha,CZ_delta_e", 3, 3), (when, 1, 1)]
-    cov = PublishedArray("Cm", "covariance", "a,b,c,d", (4, 4), np.zeros(16))
-    assert cov.dims(when) == [("a,b,c,d", 4, 16), ("a,b,c,d", 4, 4), (when, 1, 1)]
+    assert dims("CZ_0,CZ_alpha,CZ_delta_e", (3,), when) == [("CZ_0,CZ_alpha,CZ_delta_e", 3, 3), (when, 1, 1)]
+    cov = dims("a,b,c,d", (4, 4), when)
+    assert cov == [("a,b,c,d", 4, 16), ("a,b,c,d", 4, 4), (when, 1, 1)]
     # ROS MultiArrayLayout: element (i, j) at data[dim[1].stride * i + j]; stamp in the last dim.
-    dims = cov.dims(when)
-    assert dims[0][2] == dims[0][1] * dims[1][2] and dims[1][2] == dims[1][1] * dims[2][2]
-    assert parse_stamp_label(dims[-1][0]) == 1_767_225_600_140_000_000
+    assert cov[0][2] == cov[0][1] * cov[1][2] and cov[1][2] == cov[1][1] * cov[2][2]
+    assert parse_stamp_label(cov[-1][0]) == 1_767_225_600_140_000_000
 
 
 def test_the_new_parameters_reach_their_fields_with_the_monitors_defaults():
@@ -225,3 +233,27 @@ def test_bad_output_settings_are_refused(params, match):
 def test_bad_diagnostics_window_is_refused():
     with pytest.raises(ConfigError, match="diagnostics_window"):
         node_config({"diagnostics_window": 0.0})
+
+
+def test_each_message_goes_to_its_topic_index_in_publishing_order(bag):
+    """OutputLayout.encode: index 0 is the sample_stamp Header (sec, nanosec, frame), then per
+    ready model its arrays on the topics output_topics lists for that model and suffix, the
+    covariances encoded with the row-major dims (cdr, independently of the index bookkeeping)."""
+    pipe, outs, _ = run(bag, t2())
+    layout = OutputLayout.of(pipe)
+    assert layout.topics == output_topics(["CZ", "Cm"])
+    with_cov = next(o for o in outs if o.covariance is not None and o.ready.all())
+    messages = layout.encode(with_cov, "body")
+    sec, nanosec = divmod(with_cov.stamp_ns, 1_000_000_000)
+    assert messages[0] == (0, encode_header(sec, nanosec, "body"))
+    topics = [layout.topics[i][0] for i, _ in messages[1:]]
+    assert topics == [f"{m}/{s}" for m in ("CZ", "Cm") for s in MODEL_OUTPUTS]
+    n, j = 4, 1
+    cov = with_cov.covariance[0, j, :n, :n]
+    want = encode_float64_multiarray_dims(dims(pipe.labels[j], (n, n), stamp_label(with_cov.stamp_ns)),
+                                          cov.ravel().tolist())
+    assert dict(messages)[output_topics(["CZ", "Cm"]).index(("Cm/covariance", "std_msgs/msg/Float64MultiArray"))] \
+        == want
+    # A model not ready publishes nothing; the stamp still goes out.
+    half = with_cov._replace(ready=np.array([False, True]))
+    assert [layout.topics[i][0].split("/")[0] for i, _ in layout.encode(half, "body")[1:]] == ["Cm"] * 6

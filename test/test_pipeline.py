@@ -19,6 +19,7 @@ import pytest
 
 from rls_uncertainty.config import load_aircraft, load_parameters_file, pipeline_config
 from rls_uncertainty.differentiation import DifferentiatorConfig, differentiate
+from rls_uncertainty.outputs import OutputLayout
 from rls_uncertainty.pipeline import STREAMS, Pipeline, StateFileError
 from rls_uncertainty.replay import run_pipeline
 from rls_uncertainty.simulation import simulate_sensor_streams
@@ -67,6 +68,11 @@ def apply(pipe, events, surface_names=("elevator_left", "elevator_right", "ailer
         else:
             outs += pipe.add_thrust(stamp, float(v))
     return outs
+
+
+def published(pipe, out):
+    """The rows of ``out`` that leave the pipeline (:meth:`.outputs.OutputLayout.rows`)."""
+    return list(OutputLayout.of(pipe).rows(out))
 
 
 def feed_streams(pipe, st):
@@ -143,7 +149,7 @@ def test_every_sample_and_message_is_accounted_for(t2_run):
         assert s["accepted"] == s["received"]
     assert len(outs) == c["samples_used"]
     for out in outs:
-        for _name, _label, th, se, sc in pipe.published(out):
+        for _j, _name, _names, th, se, sc in published(pipe, out):
             assert np.all(np.isfinite(th)) and np.all(np.isfinite(se)) and np.all(np.isfinite(sc))
 
 
@@ -277,7 +283,7 @@ def test_bad_messages_are_counted_and_never_reach_the_outputs():
     t_used = {(r[0] - syn.t0) // MS for r in pipe.regression}
     assert not t_used & {1000, 1020}
     for out in syn.outs:
-        for _n, _l, th, se, sc in pipe.published(out):
+        for _j, _n, _names, th, se, sc in published(pipe, out):
             assert np.isfinite(th).all() and np.isfinite(se).all() and np.isfinite(sc).all()
 
 
@@ -309,9 +315,10 @@ def test_zero_and_backwards_airspeed_messages_are_rejected_one_by_one():
     assert pipe.bank.k == c["samples_used"] > 80  # of 141 in the clean run
 
 
-# Issue 12's absurd values, one message each, in the middle of a clean run: (stream, ms,
-# value, reason). IMU at 5 ms, air data at 3 + 20 k ms, surfaces at 1 + 10 k ms.
-ISSUE_12 = {
+# Absurd values (a flipped bit, a wrong unit, a crafted message), one message each, in the
+# middle of a clean run: (stream, ms, value, reason). IMU at 5 ms, air data at 3 + 20 k ms,
+# surfaces at 1 + 10 k ms.
+ABSURD = {
     "gyro 1e100 rad/s": ("imu", 1005, ((0.0, 1e100, 0.0), (0.1, 0.0, 9.8)), "implausible_angular_rate"),
     "acceleration 1e150": ("imu", 1005, ((0.0, -0.05, 0.0), (0.1, 0.0, 1e150)), "implausible_specific_force"),
     "surface 1e150": ("control_surfaces", 1011, [1e150, -0.02, 0.04, 0.0], "implausible_surface"),
@@ -331,7 +338,7 @@ def clean_pitch_run():
     return pipe
 
 
-@pytest.mark.parametrize("case", ISSUE_12)
+@pytest.mark.parametrize("case", ABSURD)
 def test_one_absurd_value_is_rejected_and_changes_nothing_else(case, clean_pitch_run):
     """Before: the gyro case published NaN/Inf estimates from then on, the others finite but
     ruined estimates (R^2 of CZ 0.91 -> 0.006 for one 1e150 acceleration on the bundled bag).
@@ -339,7 +346,7 @@ def test_one_absurd_value_is_rejected_and_changes_nothing_else(case, clean_pitch
     the same stamp (the elevator is interpolated over 20 ms instead of 10 ms where its message
     is missing: 1e-6 rad; samples next to the message may be skipped), and the estimates are
     the batch least squares of those samples."""
-    stream, ms, value, reason = ISSUE_12[case]
+    stream, ms, value, reason = ABSURD[case]
     pipe = pitch_pipeline()
     syn = Synthetic(pipe, bad=(stream, ms, value))
     syn.run(0, 3000)
@@ -354,8 +361,8 @@ def test_one_absurd_value_is_rejected_and_changes_nothing_else(case, clean_pitch
     for t, X, z in pipe.regression:
         np.testing.assert_allclose(X, clean[t][1], rtol=0, atol=1e-6)
         np.testing.assert_allclose(z, clean[t][2], rtol=1e-9, atol=1e-12)
-    rows = [row for out in syn.outs for row in pipe.published(out)]
-    assert rows and all(np.isfinite(np.concatenate(r[2:])).all() for r in rows)
+    rows = [row for out in syn.outs for row in published(pipe, out)]
+    assert rows and all(np.isfinite(np.concatenate(r[3:])).all() for r in rows)
     X = np.array([r[1][0, :3] for r in pipe.regression])
     z = np.array([r[2][0] for r in pipe.regression])
     np.testing.assert_allclose(pipe.bank.theta_all()[0, :3], np.linalg.lstsq(X, z, rcond=None)[0], rtol=1e-8)
@@ -441,15 +448,15 @@ def test_a_model_whose_outputs_are_not_finite_is_withheld_and_counted(monkeypatc
     syn.run(1000, 1400)
     new = syn.outs[n_out:]
     assert len(new) == 20
-    published = [row[0] for out in new for row in pipe.published(out)]
-    assert published == ["CZ"] * 20  # Cm withheld, CZ unaffected
+    models = [row.model for out in new for row in published(pipe, out)]
+    assert models == ["CZ"] * 20  # Cm withheld, CZ unaffected
     assert all(not out.ready[1] for out in new)
     assert pipe.counters()["outputs_withheld"] == {"Cm": 20}
     fit = pipe.model_fit(1)
     assert fit["ready"] is False and "withheld" in fit["problem"] and fit["outputs_withheld"] == 20
-    # Even an output built by hand passes published() only with finite rows.
+    # Even an output built by hand leaves (OutputLayout.rows) only with finite rows.
     hand = new[-1]._replace(ready=np.array([True, True]))
-    assert [row[0] for row in pipe.published(hand)] == ["CZ"]
+    assert [row.model for row in published(pipe, hand)] == ["CZ"]
     monkeypatch.undo()
     pipe.reset("service")
     syn.run(1400, 2400)
@@ -467,7 +474,7 @@ def test_r_squared_of_a_constant_output_is_not_reported_as_ok():
     assert fit == {"ready": False, "samples": pipe.bank.k, "problem": "output constant: R^2 undefined",
                    "outputs_withheld": 0}
     assert pipe.model_fit(1)["ready"] and math.isfinite(pipe.model_fit(1)["r_squared"])
-    assert [row[0] for row in pipe.published(syn.outs[-1])] == ["CY", "Cm"]
+    assert [row.model for row in published(pipe, syn.outs[-1])] == ["CY", "Cm"]
 
 
 def test_a_stream_that_stops_skips_its_gap_and_restarts_the_differentiator():
@@ -577,7 +584,7 @@ def test_state_file_with_auto_lags_and_a_residual_burn_in_resumes_and_refuses_an
 def test_pipeline_imports_no_ros():
     import subprocess
 
-    code = "import sys, rls_uncertainty.pipeline, rls_uncertainty.messages; " \
+    code = "import sys, rls_uncertainty.pipeline, rls_uncertainty.inputs, rls_uncertainty.outputs; " \
            "sys.exit(any(m.split('.')[0] in ('rclpy', 'rosbags') for m in sys.modules))"
     assert subprocess.run([sys.executable, "-c", code]).returncode == 0
 
@@ -863,11 +870,11 @@ def test_converted_and_generated_bags_carry_the_default_frame():
 
 # ----------------------------------------------------------------------------- bounded tables
 def test_a_flood_of_unknown_joint_names_keeps_every_table_small():
-    """Issue 12 item 5: 100k distinct unknown JointState names used to add a counter each, all
-    sent in every /diagnostics message (74 -> 154 MB, 3.6 MB messages). Now the first 32 names
+    """100k distinct unknown JointState names once added a counter each, all sent in every
+    /diagnostics message (74 -> 154 MB, 3.6 MB messages). Now the first 32 names
     are counted by name and the rest under one key; every occurrence is still counted, the
     messages are still used, and memory does not grow with the names."""
-    from rls_uncertainty.pipeline import KEYS_KEPT, OTHER_JOINTS
+    from rls_uncertainty.bookkeeping import KEYS_KEPT, OTHER_JOINTS
 
     pipe = Pipeline(pipeline_config({"models.enabled": ["Cm"], "models.Cm": ["1", "q_hat", "delta_e"]}))
     syn = Synthetic(pipe)
@@ -905,7 +912,7 @@ def test_a_flood_of_unknown_joint_names_keeps_every_table_small():
 
 
 def test_caller_given_rejection_reasons_are_bounded_and_long_keys_cut():
-    from rls_uncertainty.pipeline import KEY_CHARS, KEYS_KEPT, OTHER_REASONS
+    from rls_uncertainty.bookkeeping import KEY_CHARS, KEYS_KEPT, OTHER_REASONS
 
     pipe = pitch_pipeline()
     for k in range(1000):
@@ -930,7 +937,7 @@ def _flip(raw: bytes, value: float, bit: int) -> bytes:
 
 
 def test_a_flipped_bit_in_a_recorded_double_is_counted_and_never_replayed(tmp_path, capsys):
-    """Issue 12: one flipped exponent bit in a recorded pitch rate (-0.111 rad/s at 2.94 s, an
+    """One flipped exponent bit in a recorded pitch rate (-0.111 rad/s at 2.94 s, an
     IMU message on the 50 Hz grid, becomes -2.0e307) made the replay exit 0 with 1780 NaN or
     Inf numbers in its CSV (Cm from then on). Now the message is rejected as
     implausible_angular_rate, the CSV holds only finite numbers, and the summary says so."""

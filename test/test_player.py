@@ -15,8 +15,8 @@ import rclpy
 
 from rls_uncertainty.bags import read_inputs
 from rls_uncertainty.config import load_parameters_file, node_config, pipeline_config
-from rls_uncertainty.messages import MESSAGE_TYPES, NODE_NAME, message_class
-from rls_uncertainty.outputs import output_topics, sample_messages
+from rls_uncertainty.inputs import MESSAGE_TYPES, message_class
+from rls_uncertainty.outputs import NODE_NAME, OutputLayout, output_topics
 from rls_uncertainty.replay import run_pipeline
 
 from ros_harness import RELIABLE, ROOT, NodeProcess
@@ -45,9 +45,10 @@ def expected():
     offline = run_pipeline(read_inputs(BUNDLED)[0], pipeline_config(params))
     frame = node_config(params).frame_id
     per_topic: dict[str, list[bytes]] = {f"/{NODE_NAME}/{t}": [] for t, _ in output_topics(["CZ", "Cm"])}
+    layout = OutputLayout.of(offline.pipeline)
     for out in offline.outputs:
-        for topic, _type, data in sample_messages(offline.pipeline, out, frame):
-            per_topic[f"/{NODE_NAME}/{topic}"].append(data)
+        for index, data in layout.encode(out, frame):
+            per_topic[f"/{NODE_NAME}/{layout.topics[index][0]}"].append(data)
     assert len(per_topic[f"/{NODE_NAME}/sample_stamp"]) == 591
     return per_topic
 

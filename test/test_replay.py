@@ -49,7 +49,7 @@ def test_replay_writes_identical_outputs_twice_and_matches_the_pipeline(tmp_path
     topics = read_all(tmp_path / "r1" / "estimates.mcap")
     est = topics["/rls_estimator/CZ/estimates"]
     assert est[-1][1].layout.dim[0].label == "CZ_0,CZ_alpha,CZ_delta_e"
-    from rls_uncertainty.messages import parse_stamp_label
+    from rls_uncertainty.outputs import parse_stamp_label
 
     for t, msg in est:  # every array carries its sample time; log time is the same
         assert parse_stamp_label(msg.layout.dim[1].label) == t
@@ -136,7 +136,7 @@ def test_the_wide_csv_holds_the_long_csv_one_row_per_sample(tmp_path):
 
 
 def test_the_replays_mcap_carries_every_topic_the_node_publishes_byte_for_byte(tmp_path):
-    from rls_uncertainty.outputs import output_topics, sample_messages
+    from rls_uncertainty.outputs import OutputLayout, output_topics
 
     params = load_parameters_file("t2")
     result = replay(BUNDLED, params, tmp_path / "r", progress=False, plots=False)
@@ -149,8 +149,9 @@ def test_the_replays_mcap_carries_every_topic_the_node_publishes_byte_for_byte(t
     want_topics = {(f"/rls_estimator/{t}", m) for t, m in output_topics(["CZ", "Cm"])}
     want_topics.add(("/diagnostics", "diagnostic_msgs/msg/DiagnosticArray"))
     assert {(t, s) for t, s, _, _ in got} == want_topics
-    expected = [(f"/rls_estimator/{t}", m, out.stamp_ns, data)
-                for out in result.outputs for t, m, data in sample_messages(result.pipeline, out, "base_link")]
+    layout = OutputLayout.of(result.pipeline)
+    expected = [(f"/rls_estimator/{layout.topics[i][0]}", layout.topics[i][1], out.stamp_ns, data)
+                for out in result.outputs for i, data in layout.encode(out, "base_link")]
     key = lambda r: (r[2], r[0])  # noqa: E731 - the bag is ordered by log time, then topic rank
     assert sorted(r for r in got if r[0] != "/diagnostics") == sorted(expected)
     assert sorted((r for r in got if r[0] != "/diagnostics"), key=key) == sorted(expected, key=key)
@@ -170,7 +171,7 @@ def test_the_replays_diagnostics_report_lags_and_flags_once_per_period_of_data_t
     assert [t for t, _ in diag] == sorted(t for t, _ in diag)
     # Independently: feed the messages one by one; whenever the newest stamp is a period past
     # the previous report, the newest sample so far is what the report must show.
-    from rls_uncertainty.messages import feed
+    from rls_uncertainty.inputs import feed
     from rls_uncertainty.pipeline import Pipeline
 
     pipe = Pipeline(pipeline_config(params))
@@ -248,3 +249,37 @@ def test_the_replays_diagnostics_never_divide_by_zero_elapsed_time():
     rates = [float(v) for _, statuses in result.diagnostics for s in statuses for k, v in s.values
              if k.endswith(".rate_hz")]
     assert rates and max(rates) < 1000  # the bag's fastest stream is 200 Hz
+
+
+def test_a_run_without_estimates_says_why_and_counts_none(tmp_path, capsys):
+    """The bundled bag without --config: every JointState lacks the default 'elevator' joint.
+    The result counts no estimate (the command exits 1 on it) and the summary names the
+    stream, the reason, the joints expected and received and the parameter to change."""
+    result = replay(BUNDLED, {}, tmp_path / "r", progress=False, plots=False)
+    assert result.estimates == 0
+    names = next(m for kind, _s, m in read_inputs(BUNDLED)[0] if kind == "control_surfaces").name
+    want = ("no estimates: control_surfaces: all 1200 messages rejected (missing_joint): surfaces.elevator expects "
+            f"[elevator], messages carry [{', '.join(names)}]; set surfaces.elevator")
+    assert result.explanations == [want]
+    from rls_uncertainty.replay import summary_table
+
+    assert summary_table(result.pipeline, result.outputs) == want
+    ok = replay(BUNDLED, load_parameters_file("t2"), tmp_path / "ok", progress=False, plots=False)
+    with open(tmp_path / "ok" / "estimates.csv") as fh:
+        assert ok.estimates == len({row["time"] for row in csv.DictReader(fh)}) > 500  # samples with a CSV row
+
+
+def test_models_the_maneuver_never_excites_are_named_with_the_regressors_that_never_moved():
+    """All six models on the longitudinal T-2 maneuver: the lateral ones never initialize; the
+    regressors named constant are those whose inputs are constant in the bag itself."""
+    messages = read_inputs(BUNDLED)[0]
+    params = {**load_parameters_file("t2"), "models.enabled": ["CX", "CY", "CZ", "Cl", "Cm", "Cn"]}
+    result = run_pipeline(messages, pipeline_config(params))
+    assert [line.split(":")[0] for line in result.explanations] == ["CY", "Cl", "Cn"]
+    flat = {"beta": {m.vector.y for k, _s, m in messages if k == "airspeed"},
+            "r_hat": {m.angular_velocity.z for k, _s, m in messages if k == "imu"},
+            "p_hat": {m.angular_velocity.x for k, _s, m in messages if k == "imu"}}
+    assert all(len(values) == 1 for values in flat.values())  # constant in the recording
+    cl = next(line for line in result.explanations if line.startswith("Cl:"))
+    assert "its 6 regressors were not excited independently in 587 samples" in cl
+    assert all(name in cl.split("(")[1].split(" never moved")[0] for name in flat)

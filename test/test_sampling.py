@@ -8,7 +8,8 @@ import os
 import numpy as np
 import pytest
 
-from rls_uncertainty.sampling import Restart, Sample, Sampler, Skipped, StreamCounts
+from rls_uncertainty.sampling import Restart, Sample, Sampler, Skipped
+from rls_uncertainty.streams import StreamCounts
 
 MS = 1_000_000
 P = 20 * MS  # 50 Hz grid

@@ -1,36 +1,38 @@
-"""Standard input messages -> plain stamped numbers for the :class:`.pipeline.Pipeline`.
+"""The node's inputs: topics, message types, the fields read, and :func:`feed`.
 
-One function per input topic, duck-typed on the ROS message fields, so the live node (rclpy
-messages) and the offline replay (rosbags messages) run exactly the same code. No arithmetic
-happens here beyond reading fields and the header stamp; no ROS import. :func:`feed` also
-checks ``header.frame_id`` against the pipeline's ``inputs.frame_id``, so node and replay
-reject a message in another frame identically.
+One standard ROS message type per input stream of the pipeline (:data:`.pipeline.STREAMS`),
+subscribed on a topic named after the stream by default (``topics.<stream>``; relative, so a
+replay bag has them under ``/``):
+
+============================  ===================================  =========================================
+stream (default topic)        message type                         fields read
+============================  ===================================  =========================================
+``imu``                       ``sensor_msgs/msg/Imu``              ``angular_velocity`` (rad/s),
+                                                                   ``linear_acceleration`` (m/s^2)
+``airspeed``                  ``geometry_msgs/msg/Vector3Stamped`` ``vector``: true airspeed (m/s)
+``dynamic_pressure``          ``sensor_msgs/msg/FluidPressure``    ``fluid_pressure`` (Pa)
+``control_surfaces``          ``sensor_msgs/msg/JointState``       ``name``, ``position`` (rad)
+``thrust``                    ``geometry_msgs/msg/WrenchStamped``  ``wrench.force.x`` (N)
+============================  ===================================  =========================================
+
+Every message also gives ``header.stamp`` (the sample time) and ``header.frame_id``: vectors
+are in the REP-103 body frame, which the pipeline's ``inputs.frame_id`` names; a message in
+another frame is rejected as ``frame_mismatch`` (:func:`feed`). No arithmetic happens here
+beyond reading fields and the stamp, and no ROS import: the live node (messages decoded by
+:mod:`.cdr`) and the offline replay (rosbags messages) hand every message to the pipeline
+through :func:`feed`, the same code.
 """
 
 from __future__ import annotations
 
 import importlib
-from typing import TYPE_CHECKING, Protocol
+from typing import Any, Protocol
 
-if TYPE_CHECKING:  # annotations only: no import cycle with the pipeline
-    from .pipeline import Pipeline, SampleOutput
+from .pipeline import STREAMS, Pipeline, SampleOutput
 
-__all__ = [
-    "NODE_NAME",
-    "INPUTS",
-    "MESSAGE_TYPES",
-    "ARRAY_OUTPUTS",
-    "message_class",
-    "stamp_ns",
-    "feed",
-    "stamp_label",
-    "parse_stamp_label",
-]
+__all__ = ["STREAMS", "MESSAGE_TYPES", "DEFAULT_TOPICS", "Stamped", "message_class", "stamp_ns", "feed"]
 
-# The node's name: its private topics are /rls_estimator/..., its diagnostics "rls_estimator: ...".
-NODE_NAME = "rls_estimator"
-
-# Standard input topics (relative names; a replay bag uses them under "/") and their types.
+# The ROS message type of each input stream.
 MESSAGE_TYPES = {
     "imu": "sensor_msgs/msg/Imu",
     "airspeed": "geometry_msgs/msg/Vector3Stamped",
@@ -38,9 +40,8 @@ MESSAGE_TYPES = {
     "control_surfaces": "sensor_msgs/msg/JointState",
     "thrust": "geometry_msgs/msg/WrenchStamped",
 }
-INPUTS = tuple(MESSAGE_TYPES)
-# The arrays published per model M as ~/M/<suffix> (std_msgs/Float64MultiArray), in order.
-ARRAY_OUTPUTS = ("estimates", "standard_errors", "standard_errors_conventional")
+# The default topic of each stream (the ``topics.<stream>`` parameters): its name.
+DEFAULT_TOPICS = {stream: stream for stream in STREAMS}
 
 
 class _Time(Protocol):
@@ -78,45 +79,30 @@ def stamp_ns(msg: Stamped) -> int:
     return int(s.sec) * 1_000_000_000 + int(s.nanosec)
 
 
-def stamp_label(stamp: int) -> str:
-    """``layout.dim[1].label`` of every output array: the sample's time, so each array can be
-    paired with its sample without a second topic (``stamp:SEC.NANOSEC``)."""
-    sec, nanosec = divmod(int(stamp), 1_000_000_000)
-    return f"stamp:{sec}.{nanosec:09d}"
-
-
-def parse_stamp_label(label: str) -> int:
-    """The sample time in nanoseconds from :func:`stamp_label`'s text."""
-    if not label.startswith("stamp:"):
-        raise ValueError(f"not a stamp label: {label!r}")
-    sec, _, nanosec = label[6:].partition(".")
-    return int(sec) * 1_000_000_000 + int(nanosec)
-
-
 # The handlers inline stamp_ns (they run for every input message).
-def _imu(p, m):
+def _imu(p: Pipeline, m: Any) -> list[SampleOutput]:
     s = m.header.stamp
     w, a = m.angular_velocity, m.linear_acceleration
     return p.add_imu(int(s.sec) * 1_000_000_000 + int(s.nanosec), (w.x, w.y, w.z), (a.x, a.y, a.z))
 
 
-def _airspeed(p, m):
+def _airspeed(p: Pipeline, m: Any) -> list[SampleOutput]:
     s = m.header.stamp
     v = m.vector
     return p.add_airspeed(int(s.sec) * 1_000_000_000 + int(s.nanosec), (v.x, v.y, v.z))
 
 
-def _dynamic_pressure(p, m):
+def _dynamic_pressure(p: Pipeline, m: Any) -> list[SampleOutput]:
     s = m.header.stamp
     return p.add_dynamic_pressure(int(s.sec) * 1_000_000_000 + int(s.nanosec), m.fluid_pressure)
 
 
-def _surfaces(p, m):
+def _surfaces(p: Pipeline, m: Any) -> list[SampleOutput]:
     s = m.header.stamp
     return p.add_surfaces(int(s.sec) * 1_000_000_000 + int(s.nanosec), m.name, m.position)
 
 
-def _thrust(p, m):
+def _thrust(p: Pipeline, m: Any) -> list[SampleOutput]:
     s = m.header.stamp
     return p.add_thrust(int(s.sec) * 1_000_000_000 + int(s.nanosec), m.wrench.force.x)
 
@@ -136,5 +122,5 @@ def feed(pipeline: Pipeline, kind: str, msg: Stamped) -> list[SampleOutput]:
     is counted as ``frame_mismatch`` instead (:meth:`.pipeline.Pipeline.reject_frame`)."""
     frame = pipeline.frame_id
     if frame and msg.header.frame_id != frame:
-        return pipeline.reject_frame(kind, stamp_ns(msg))
+        return pipeline.reject_frame(kind, stamp_ns(msg), msg.header.frame_id)
     return _FEED[kind](pipeline, msg)
