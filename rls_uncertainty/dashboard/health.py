@@ -132,20 +132,21 @@ class HealthTracker:
 
     def __init__(self, clock=time.monotonic, max_reports: int = 3600) -> None:
         self._clock = clock
-        self._history: deque[tuple[float, dict[str, dict[str, int]]]] = deque(maxlen=max_reports)
+        self._history: deque[tuple[float, dict[str, dict[str, int]], dict[str, dict[str, int]]]] = deque(
+            maxlen=max_reports)
         self.latest: NodeHealth | None = None
         self.received_at: float | None = None
 
     def update(self, health: NodeHealth) -> NodeHealth:
         now = self._clock()
-        totals = {s.name: dict(s.rejected) for s in health.streams}
         window = health.window_s if health.window_s > 0 else 10.0  # NaN compares false
         history = self._history
         while len(history) > 1 and history[1][0] <= now - window:
             history.popleft()
-        # The newest report at least a window old (or the oldest one seen); before any report,
-        # the node's own recent count decides whether its cumulative reasons are recent.
-        base = history[0][1] if history else None
+        # The baseline is the newest report at least a window old. While none is (the first
+        # window after the dashboard started), it is the oldest report, whose own recent
+        # reasons still count; before any report, the node's recent count decides.
+        base = history[0] if history else None
         streams = []
         for s in health.streams:
             recent_total = _int(s.get("recent.rejected", "0"))
@@ -154,10 +155,15 @@ class HealthTracker:
             elif base is None:
                 recent = dict(s.rejected)
             else:
-                before = base.get(s.name, {})
-                recent = {r: n - before.get(r, 0) for r, n in s.rejected.items() if n > before.get(r, 0)}
+                base_time, totals, base_recent = base
+                before = totals.get(s.name, {})
+                recent = dict(base_recent.get(s.name, {})) if base_time > now - window else {}
+                for reason, n in s.rejected.items():
+                    if n > before.get(reason, 0):
+                        recent[reason] = recent.get(reason, 0) + n - before.get(reason, 0)
             streams.append(StreamHealth(s.name, s.values, s.rejected, recent))
-        self._history.append((now, totals))
+        history.append((now, {s.name: dict(s.rejected) for s in streams},
+                        {s.name: dict(s.recent_reasons) for s in streams}))
         self.latest = NodeHealth(health.inputs_level, health.inputs_message, health.window_s, tuple(streams),
                                  health.samples_message, health.samples, health.models)
         self.received_at = now

@@ -6,7 +6,8 @@ Pairing. Every output array carries its sample's time in the label of its last d
 ``estimates``, ``standard_errors`` (corrected, Eqs. 20/22), ``standard_errors_conventional``
 (Eq. 13) and ``converged`` arrays *of the same stamp* have arrived, in whatever order and
 interleaved with other samples: never by arrival. An array whose partners never come (a lost
-message) is dropped after :data:`MAX_PENDING` newer stamps, and counted.
+message) is dropped, and counted, once :data:`MAX_PENDING` later samples of its model have
+completed.
 
 History. Each model keeps its completed samples in columns of bounded size: when
 :data:`HISTORY_CAPACITY` samples are held, every other sample of the older half is dropped,
@@ -92,7 +93,9 @@ class Pairing:
 
     max_pending: int = MAX_PENDING
     dropped: dict[str, int] = field(default_factory=dict)
-    _pending: dict[str, OrderedDict[int, dict[str, ArrayUpdate]]] = field(default_factory=dict)
+    # per model: stamp -> (samples completed when the stamp was first seen, its arrays)
+    _pending: dict[str, OrderedDict[int, tuple[int, dict[str, ArrayUpdate]]]] = field(default_factory=dict)
+    _completed: dict[str, int] = field(default_factory=dict)
 
     def count(self, reason: str, n: int = 1) -> None:
         self.dropped[reason] = self.dropped.get(reason, 0) + n
@@ -108,12 +111,11 @@ class Pairing:
             self.count("non_finite")
             return None
         pending = self._pending.setdefault(update.model, OrderedDict())
-        arrays = pending.get(update.stamp_ns)
-        if arrays is None:
-            arrays = pending[update.stamp_ns] = {}
-            while len(pending) > self.max_pending:
-                _stamp, lost = pending.popitem(last=False)
-                self.count("unpaired", len(lost))
+        completed = self._completed.get(update.model, 0)
+        entry = pending.get(update.stamp_ns)
+        if entry is None:
+            entry = pending[update.stamp_ns] = (completed, {})
+        arrays = entry[1]
         if update.suffix in arrays:
             self.count("duplicate")
             return None
@@ -121,6 +123,14 @@ class Pairing:
         if len(arrays) < len(PAIRED):
             return None
         del pending[update.stamp_ns]
+        self._completed[update.model] = completed = completed + 1
+        # Arrays that have waited while max_pending later samples completed lost a partner.
+        while pending:
+            stamp, (born, lost) = next(iter(pending.items()))
+            if completed - born <= self.max_pending:
+                break
+            del pending[stamp]
+            self.count("unpaired", len(lost))
         names = {a.names for a in arrays.values()}
         if len(names) != 1:
             self.count("mismatched_names", len(arrays))

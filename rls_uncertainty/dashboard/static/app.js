@@ -182,13 +182,13 @@ function drawFit(m) {
   if (!fit) { v.fit.textContent = ""; v.status.textContent = ""; return; }
   if (fit.ready === "True") {
     const r2 = parseFloat(fit.r_squared), rho = parseFloat(fit.residual_rho1), out = parseFloat(fit.lags_outside_2sigma);
-    v.fit.textContent = `R² ${fmt(r2, 3)}   lags ${fit.lags}   residual ρ₁ ${fmt(rho, 2)}`;
+    v.fit.textContent = `R² ${fmt(r2, 3)}  ·  lags ${fit.lags}  ·  residual ρ₁ ${fmt(rho, 2)}`;
     v.autocorr.textContent = `Residual autocorrelation: ${fmt(100 * out, 0)}% of the ${fit.lags} retained lags outside ` +
       "the 2σ white-noise bound. (The full autocorrelation plot, Fig. 5, needs the node to publish it.)";
   } else {
     v.fit.textContent = "";
   }
-  v.status.textContent = fit.message || "";
+  v.status.textContent = fit.ready === "True" ? (fit.converged === "True" ? "converged" : "") : (fit.message || "");
 }
 
 function draw() {
