@@ -8,6 +8,7 @@ const CAP = 20000;           // samples kept per model (the newest half always a
 const MAX_POINTS = 1500;     // points drawn per series
 const DRAW_PERIOD_MS = 200;  // at most five redraws a second
 const LATENCY_KEEP = 20000;  // latency records kept for the measurement (window.rlsLatency)
+const MODEL_ORDER = ["CX", "CY", "CZ", "Cl", "Cm", "Cn"];  // Eq. 2's order; others after, by name
 const GREEK = { alpha: "α", beta: "β", delta: "δ", theta: "θ", phi: "φ", psi: "ψ" };
 
 const params = new URLSearchParams(location.search);
@@ -128,7 +129,9 @@ function viewFor(m) {
     "Residual autocorrelation with the 2σ white-noise bound (Fig. 5): not published by this node version.");
   section.append(head, panels, autocorr);
   const models = document.getElementById("models");
-  const after = [...models.children].find((s) => s.dataset.model > m.name);
+  const rank = (name) => { const i = MODEL_ORDER.indexOf(name); return i < 0 ? MODEL_ORDER.length : i; };
+  const before = (a, b) => rank(a) < rank(b) || (rank(a) === rank(b) && a < b);
+  const after = [...models.children].find((s) => before(m.name, s.dataset.model));
   models.insertBefore(section, after || null);
   m.view = { section, fit, status, autocorr, plots: m.names.map((_, i) => panelFor(m, i, panels)) };
   return m.view;
