@@ -441,7 +441,8 @@ def _add_operator_commands(sub: Any) -> None:
                                                         "a token, generated and printed when not given)")
     db.add_argument("--port", type=_integer(0), default=8080, help="TCP port (default 8080; 0 picks a free one)")
     db.add_argument("--node", default="/rls_estimator", help=node_help)
-    db.add_argument("--replay", metavar="DIR", help="show a finished replay's outputs (rls-uncertainty replay --out DIR)")
+    db.add_argument("--replay", metavar="DIR",
+                    help="show a finished replay's outputs (the --out DIR of rls-uncertainty replay)")
     db.add_argument("--reference", metavar="FILE", help="YAML of reference values by parameter name (CZ_alpha: -3.9)")
     db.add_argument("--token", help="token the page must present (at least 16 characters; default: generated when "
                                     "--host is not loopback)")

@@ -108,7 +108,8 @@ def format_health(node_name: str, h: NodeHealth) -> str:
     lines += _table(header, rows)
     lines.append(f"* in the last {h.window_s:g} s")
     rejected = ", ".join(f"{k[17:]} {v}" for k, v in h.samples.items() if k.startswith("samples_rejected.")) or "none"
-    lines += ["", f"samples: {h.samples_message}; pending {h.samples.get('samples_pending', '0')}; rejected: {rejected}"]
+    pending = h.samples.get("samples_pending", "0")
+    lines += ["", f"samples: {h.samples_message}; pending {pending}; rejected: {rejected}"]
     mrows = []
     for model, v in h.models.items():
         ready = v.get("ready") == "True"
@@ -116,7 +117,7 @@ def format_health(node_name: str, h: NodeHealth) -> str:
         mrows.append([model, "ready" if ready else "initializing", v.get("samples", ""), r2, v.get("lags", "-"),
                       v.get("converged_parameters", "") or ("all" if v.get("converged") == "True" else "-")])
     if mrows:
-        lines += [""] + _table(["model", "state", "samples", "R^2", "lags", "converged"], mrows)
+        lines += ["", *_table(["model", "state", "samples", "R^2", "lags", "converged"], mrows)]
     return "\n".join(lines)
 
 

@@ -152,10 +152,12 @@ def test_recent_rejections_by_reason_are_the_increase_over_the_nodes_window():
     now = [0.0]
     tracker = HealthTracker(clock=lambda: now[0])
     seen = []
-    for t, rejected, recent in ((0, {"non_finite": 3}, 3), (5, {"non_finite": 3, "stamp_jump": 1}, 4),
-                                (12, {"non_finite": 3, "stamp_jump": 2}, 1), (30, {"non_finite": 3, "stamp_jump": 2}, 0)):
+    reports = ((0, {"non_finite": 3}, 3), (5, {"non_finite": 3, "stamp_jump": 1}, 4),
+               (12, {"non_finite": 3, "stamp_jump": 2}, 1), (30, {"non_finite": 3, "stamp_jump": 2}, 0))
+    for t, rejected, recent in reports:
         now[0] = t
-        seen.append(dict(tracker.update(parse_statuses(_inputs(rejected, recent), NODE_NAME)).streams[0].recent_reasons))
+        health = tracker.update(parse_statuses(_inputs(rejected, recent), NODE_NAME))
+        seen.append(dict(health.streams[0].recent_reasons))
     # the first report: the node says all 3 are recent; at 12 s the baseline is the report of
     # 0 s (the newest at least 10 s old); at 30 s nothing is recent.
     assert seen == [{"non_finite": 3}, {"non_finite": 3, "stamp_jump": 1}, {"stamp_jump": 2}, {}]
@@ -177,9 +179,9 @@ def test_the_page_says_which_domain_was_searched_when_no_node_is_seen():
 def test_the_page_says_why_a_seen_node_has_no_samples_from_its_diagnostics():
     hub = _live_hub()
     assert hub.set_graph(True)["state"] == "waiting_diagnostics"
-    statuses = _inputs({"missing_joint": 40}, 40) + [
-        (f"{NODE_NAME}: samples", 0, "0 of 0 samples used", {"samples_formed": "0"}),
-        (f"{NODE_NAME}: model CZ", 0, "initializing: regressors not yet informative", {"ready": "False"})]
+    statuses = [*_inputs({"missing_joint": 40}, 40),
+                (f"{NODE_NAME}: samples", 0, "0 of 0 samples used", {"samples_formed": "0"}),
+                (f"{NODE_NAME}: model CZ", 0, "initializing: regressors not yet informative", {"ready": "False"})]
     statuses[0] = (statuses[0][0], 1, "control_surfaces rejected 40 in the last 10 s", statuses[0][3])
     msg = hub.add_diagnostics(statuses)
     assert msg["state"] == "no_samples"
@@ -256,5 +258,5 @@ def test_a_directory_without_estimates_mcap_is_refused_with_the_reason(tmp_path)
     from rls_uncertainty.dashboard.replay_source import read_replay
     from rls_uncertainty.errors import BagError
 
-    with pytest.raises(BagError, match="no estimates.mcap"):
+    with pytest.raises(BagError, match=r"no estimates\.mcap"):
         read_replay(tmp_path)

@@ -186,8 +186,8 @@ def test_live_page_shows_the_nodes_last_published_values_and_flags_under_a_names
             ({k: len(v) for k, v in recorder.got.items()}, len(recorder.stamps), play.stderr, node.text()[-2000:])
         recorder.spin_until(lambda: False, 1.0)
         stamp, last = recorder.last()
-        _wait(browser, f"""() => {{ const m = window.rlsState.models;
-            return ['CZ', 'Cm'].every(k => m.has(k) && Math.abs(m.get(k).t.at(-1) - {stamp * 1e-9!r}) < 1e-6); }}""", 60)
+        newest = f"m.has(k) && Math.abs(m.get(k).t.at(-1) - {stamp * 1e-9!r}) < 1e-6"
+        _wait(browser, f"() => {{ const m = window.rlsState.models; return ['CZ', 'Cm'].every(k => {newest}); }}", 60)
         time.sleep(0.5)  # one more redraw period
         _expect_shown(_shown(browser), last)
         assert browser.get_attribute("#banner", "data-state") == "running"
@@ -230,7 +230,8 @@ def test_replay_page_shows_the_final_values_of_the_replays_estimates_csv(tmp_pat
                        f" && document.querySelectorAll('.panel .value').length === {len(last)}", 60)
         _wait(browser, "[...document.querySelectorAll('.panel .value')].every(v => v.textContent !== '–')", 30)
         assert browser.text_content("#mode") == "REPLAY"
-        assert [s.get_attribute("data-model") for s in browser.query_selector_all("section.model")] == ["CY", "Cl", "Cn"]
+        sections = browser.query_selector_all("section.model")
+        assert [s.get_attribute("data-model") for s in sections] == ["CY", "Cl", "Cn"]  # Eq. 2's order
         _expect_shown(_shown(browser), last)
         assert browser.query_selector("nav#window button.active").get_attribute("data-window") == "0"  # all
         _shot(browser, tmp_path, "dashboard_replay.png")

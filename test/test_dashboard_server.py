@@ -87,9 +87,10 @@ def test_the_page_and_each_asset_are_served_with_a_strict_content_policy():
 
 @pytest.mark.parametrize("target", [
     "/static/../server.py", "/static/..%2fserver.py", "/static/%2e%2e/%2e%2e/errors.py", "/static/..%5cserver.py",
-    "/static//etc/passwd", "/static/%2fetc%2fpasswd", "/../../../../etc/passwd", "/static/node_modules/uplot/package.json",
-    "/static/index.html/../../app.py", "/static/.", "/static/", "/%2e%2e/rls_uncertainty/cli.py", "/ws/../static/app.js",
-    "/static/uPlot.iife.min.js%00.txt", "/static/app.js?../../server.py",
+    "/static//etc/passwd", "/static/%2fetc%2fpasswd", "/../../../../etc/passwd",
+    "/static/node_modules/uplot/package.json", "/static/index.html/../../app.py", "/static/.", "/static/",
+    "/%2e%2e/rls_uncertainty/cli.py", "/ws/../static/app.js", "/static/uPlot.iife.min.js%00.txt",
+    "/static/app.js?../../server.py",
 ])
 def test_no_file_outside_the_page_assets_is_ever_served(target):
     secrets_on_disk = [b"root:", b"import ", b"def ", b'"name": "uplot"']

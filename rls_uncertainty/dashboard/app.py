@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import asyncio
 import signal
+import socket
 import sys
 from dataclasses import dataclass
 from pathlib import Path
@@ -60,7 +61,7 @@ class _Dispatch:
             arrays.clear()
 
 
-async def _main(options: DashboardOptions, hub: Hub, items: list[tuple] | None, sock) -> None:
+async def _main(options: DashboardOptions, hub: Hub, items: list[tuple] | None, sock: socket.socket) -> None:
     loop = asyncio.get_running_loop()
     stop = asyncio.Event()
     for sig in (signal.SIGINT, signal.SIGTERM):

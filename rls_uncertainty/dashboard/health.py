@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import time
 from collections import deque
-from collections.abc import Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -89,7 +89,7 @@ def _streams(values: Mapping[str, str]) -> tuple[StreamHealth, ...]:
         stream, dot, rest = key.partition(".")
         if not dot:
             continue
-        if rest.startswith("rejected.") or rest.startswith("rejected_other_"):
+        if rest.startswith(("rejected.", "rejected_other_")):
             reason = rest.partition(".")[2] if rest.startswith("rejected.") else rest
             if rest == "rejected_other_reasons":
                 continue  # the number of reasons not shown, not a count of messages
@@ -130,7 +130,7 @@ class HealthTracker:
     """Per-reason recent rejections from successive reports (see the module docstring). The
     window is the node's ``recent_window_s``; history is bounded to the reports inside it."""
 
-    def __init__(self, clock=time.monotonic, max_reports: int = 3600) -> None:
+    def __init__(self, clock: Callable[[], float] = time.monotonic, max_reports: int = 3600) -> None:
         self._clock = clock
         self._history: deque[tuple[float, dict[str, dict[str, int]], dict[str, dict[str, int]]]] = deque(
             maxlen=max_reports)

@@ -7,7 +7,7 @@ ROS graph shows, and it answers with the messages to push. No ROS import, no web
 from __future__ import annotations
 
 import time
-from collections.abc import Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -36,7 +36,7 @@ class Hub:
     """Pairs arrays into samples, keeps each model's history and the node's health, and
     builds the page's messages. ``clock`` gives wall time in ns (for the latency fields)."""
 
-    def __init__(self, source: Source, clock=time.time_ns, capacity: int | None = None) -> None:
+    def __init__(self, source: Source, clock: Callable[[], int] = time.time_ns, capacity: int | None = None) -> None:
         self.source = source
         self.pairing = Pairing()
         self.histories: dict[str, ModelHistory] = {}
@@ -124,7 +124,8 @@ class Hub:
             if health is None:
                 return {"state": "waiting_diagnostics",
                         "text": f"Node {s.node} is running; no sample yet, waiting for its /diagnostics."}
-            text = f"Node {s.node} has published no sample yet: {health.samples_message}; inputs: {health.inputs_message}"
+            text = (f"Node {s.node} has published no sample yet: {health.samples_message}; "
+                    f"inputs: {health.inputs_message}")
             not_ready = [f"{m}: {v.get('message', '')}" for m, v in health.models.items() if v.get("ready") != "True"]
             if not_ready:
                 text += "; " + "; ".join(not_ready)

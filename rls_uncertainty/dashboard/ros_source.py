@@ -13,6 +13,7 @@ subscription would not match them).
 
 from __future__ import annotations
 
+import contextlib
 import os
 import threading
 from collections.abc import Callable
@@ -59,10 +60,8 @@ class RosSource:
 
     def _spin(self) -> None:
         self._look()
-        try:
+        with contextlib.suppress(ExternalShutdownException):
             self.executor.spin()
-        except ExternalShutdownException:
-            pass
 
     def stop(self) -> None:
         self.executor.shutdown(timeout_sec=2.0)
@@ -101,4 +100,5 @@ class RosSource:
                                                                                              None)
             put(("array", model, suffix, msg, published))
 
-        self._subs[topic] = self.node.create_subscription(Float64MultiArray, topic, on_array, qos)
+        # rclpy passes the message info (source timestamp) to a callback of two parameters.
+        self._subs[topic] = self.node.create_subscription(Float64MultiArray, topic, on_array, qos)  # type: ignore[arg-type]

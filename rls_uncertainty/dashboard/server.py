@@ -17,6 +17,7 @@
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import hmac
 import ipaddress
 import json
@@ -119,10 +120,8 @@ class Inbox:
             if self._scheduled:
                 return
             self._scheduled = True
-        try:
+        with contextlib.suppress(RuntimeError):  # the loop closed while the ROS thread stopped
             self._loop.call_soon_threadsafe(self._drain)
-        except RuntimeError:  # the loop closed while the ROS thread stopped
-            pass
 
     def _drain(self) -> None:
         with self._lock:
