@@ -85,7 +85,8 @@ def call(command: str, node_name: str, timeout: float) -> int:
 
 # ------------------------------------------------------------------ status
 def _row(cells: list[str], widths: list[int]) -> str:
-    return "  ".join(c.ljust(w) if i == 0 else c.rjust(w) for i, (c, w) in enumerate(zip(cells, widths, strict=True)))
+    cells = [c.ljust(w) if i == 0 else c.rjust(w) for i, (c, w) in enumerate(zip(cells, widths, strict=True))]
+    return "  ".join(cells).rstrip()
 
 
 def _table(header: list[str], rows: list[list[str]]) -> list[str]:
