@@ -3,6 +3,7 @@
 
     python scripts/make_layouts.py           # (re)write layouts/
     python scripts/make_layouts.py --check   # exit 1 when layouts/ differs from what it would write
+    python scripts/make_layouts.py --namespace /ns --out DIR   # for a node under a namespace
 
 Each configuration config/NAME.yaml gets layouts/NAME.foxglove.json and
 layouts/NAME.plotjuggler.xml: one plot per parameter of every model the configuration
@@ -11,22 +12,33 @@ standard_errors), each curve named after the parameter. Topics and array indices
 the configuration's models, so the layouts follow the models (test/test_layouts.py checks
 that the shipped files equal this script's output). Deterministic: no time, no random ids.
 
-* Foxglove (the app's layout file, "Import from file"): Plot panels of the topics
-  /rls_estimator/M/estimates.data[i], and for the bounds one User Script per model that pairs
+Namespaces. Neither tool resolves a topic name relative to a node: a layout holds absolute
+topic names. The shipped layouts are for the node at the root (/rls_estimator/...);
+``--namespace /ns --out DIR`` writes the same layouts for /ns/rls_estimator/... into DIR
+(the launch file's ``namespace`` argument; ``rls-uncertainty dashboard --node`` follows a
+namespace by itself).
+
+* Foxglove (the app's layout file, "Import from file"): one User Script per model pairs
   /rls_estimator/M/estimates and .../standard_errors of the same sample (the stamp both carry
-  in layout.dim[1].label) and publishes /foxglove_script/rls_M_bounds with {estimate, lower,
-  upper} per parameter.
+  in their last dim's label) and publishes /foxglove_script/rls_M_bounds with a header stamped
+  with that sample time and {estimate, lower, upper} per parameter; the Plot panels draw all
+  three from it against the header stamp, so estimate and bounds are paired by stamp and
+  plotted at the sample's time.
 * PlotJuggler: custom math series (Lua snippets) "P estimate", "P +2sigma", "P -2sigma" on the
   series /rls_estimator/M/estimates/data[i] and /rls_estimator/M/standard_errors/data[i] (live:
   ROS2 Topic Subscriber; recorded: the replay's estimates.mcap). "P estimate", not "P": the
   replay's estimates_wide.csv has a column P, and a custom series of the same name would
-  replace it.
+  replace it. PlotJuggler cannot pair by the stamp: a Float64MultiArray has no header, so it
+  times both arrays by their arrival (publish time in a bag) and a custom series combines the
+  values at the same time; the node publishes a sample's arrays back to back, so they pair
+  unless a message is lost. The replay's estimates_wide.csv holds each sample in one row.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import re
 import sys
 from pathlib import Path
 from xml.sax.saxutils import escape, quoteattr
@@ -38,6 +50,7 @@ from rls_uncertainty.config import load_parameters_file, pipeline_config  # noqa
 from rls_uncertainty.messages import NODE_NAME  # noqa: E402
 
 LAYOUTS = ROOT / "layouts"
+NAMESPACE = ""  # the node's namespace ("" or "/ns"): set by --namespace
 CONFIGS = ("t2", "twin_otter_lateral", "twin_otter_longitudinal")
 SCRIPT_PREFIX = "/foxglove_script"
 COLORS = {"estimate": "#1f77b4", "bound": "#d62728"}
@@ -50,7 +63,7 @@ def models_of(config: str) -> list[tuple[str, list[str]]]:
 
 
 def topic(model: str, suffix: str) -> str:
-    return f"/{NODE_NAME}/{model}/{suffix}"
+    return f"{NAMESPACE}/{NODE_NAME}/{model}/{suffix}"
 
 
 def bound_names(parameter: str) -> tuple[str, str]:
@@ -59,7 +72,7 @@ def bound_names(parameter: str) -> tuple[str, str]:
 
 # ------------------------------------------------------------------ Foxglove
 def bounds_topic(model: str) -> str:
-    return f"{SCRIPT_PREFIX}/rls_{model}_bounds"
+    return f"{SCRIPT_PREFIX}{NAMESPACE}/rls_{model}_bounds"
 
 
 def user_script(model: str, names: list[str]) -> str:
@@ -73,8 +86,9 @@ def user_script(model: str, names: list[str]) -> str:
 import {{ Input }} from "./types";
 
 type Bounds = {{ estimate: number; lower: number; upper: number }};
+type Time = {{ sec: number; nsec: number }};
 type Output = {{
-  stamp: string;
+  header: {{ stamp: Time; frame_id: string }};
 {fields}
 }};
 type Arrays = {{ stamp: string; data: number[] }};
@@ -86,7 +100,14 @@ let estimates: Arrays | undefined;
 let errors: Arrays | undefined;
 
 function arrays(message: {{ layout: {{ dim: {{ label: string }}[] }}; data: ArrayLike<number> }}): Arrays {{
-  return {{ stamp: message.layout.dim[1]?.label ?? "", data: Array.from(message.data) }};
+  const dim = message.layout.dim;
+  return {{ stamp: dim[dim.length - 1]?.label ?? "", data: Array.from(message.data) }};
+}}
+
+// "stamp:SEC.NANOSEC" -> the sample time, so the plots use it (timestampMethod headerStamp).
+function time(label: string): Time {{
+  const [sec, nsec] = label.slice(6).split(".");
+  return {{ sec: Number(sec), nsec: Number(nsec) }};
 }}
 
 function bounds(estimate: number, se: number): Bounds {{
@@ -105,7 +126,7 @@ export default function script(event: Input<"{est}"> | Input<"{se}">): Output | 
   const e = estimates.data;
   const s = errors.data;
   return {{
-    stamp: estimates.stamp,
+    header: {{ stamp: time(estimates.stamp), frame_id: "" }},
 {values}
   }};
 }}
@@ -130,12 +151,10 @@ def foxglove_layout(config: str) -> str:
         for i, name in enumerate(names):
             upper, lower = bound_names(name)
             series = [
-                {"value": f"{topic(model, 'estimates')}.data[{i}]", "enabled": True, "timestampMethod": "receiveTime",
-                 "label": name, "color": COLORS["estimate"]},
-                {"value": f"{bounds_topic(model)}.{name}.upper", "enabled": True, "timestampMethod": "receiveTime",
-                 "label": upper, "color": COLORS["bound"]},
-                {"value": f"{bounds_topic(model)}.{name}.lower", "enabled": True, "timestampMethod": "receiveTime",
-                 "label": lower, "color": COLORS["bound"]},
+                {"value": f"{bounds_topic(model)}.{name}.{field}", "enabled": True, "timestampMethod": "headerStamp",
+                 "label": label, "color": COLORS[kind]}
+                for field, label, kind in (("estimate", name, "estimate"), ("upper", upper, "bound"),
+                                           ("lower", lower, "bound"))
             ]
             panel_id = f"Plot!rls_{name}"
             config_by_id[panel_id] = {
@@ -193,7 +212,9 @@ def plotjuggler_layout(config: str) -> str:
                     + "\n".join(areas) + "\n    </DockSplitter>\n   </Container>\n  </Tab>")
     return f"""<?xml version='1.0' encoding='UTF-8'?>
 <!-- Generated by rls_uncertainty scripts/make_layouts.py from config/{config}.yaml: per parameter the
-     estimate and its corrected +-2 sigma bounds (custom math series on the node's output topics). -->
+     estimate and its corrected +-2 sigma bounds (custom math series on the node's output topics,
+     {NAMESPACE or "no namespace"}). Estimate and standard error are combined by arrival time: PlotJuggler cannot read
+     the sample stamp the arrays carry in their last dim's label. -->
 <root>
  <tabbed_widget name="Main Window" parent="main_window">
 {chr(10).join(tabs)}
@@ -215,30 +236,41 @@ def plotjuggler_layout(config: str) -> str:
 """
 
 
-def generate() -> dict[Path, str]:
-    """Every layout file's path and text."""
-    out = {}
-    for config in CONFIGS:
-        out[LAYOUTS / f"{config}.foxglove.json"] = foxglove_layout(config)
-        out[LAYOUTS / f"{config}.plotjuggler.xml"] = plotjuggler_layout(config)
+def generate(namespace: str = "", directory: Path = LAYOUTS) -> dict[Path, str]:
+    """Every layout file's path (in ``directory``) and text, for the node under ``namespace``."""
+    global NAMESPACE
+    if namespace and not re.fullmatch(r"(/[A-Za-z_][A-Za-z0-9_]*)+", namespace):
+        raise SystemExit(f"--namespace {namespace!r}: expected a ROS namespace such as /ns or /fleet/a1")
+    NAMESPACE, out = namespace, {}
+    try:
+        for config in CONFIGS:
+            out[directory / f"{config}.foxglove.json"] = foxglove_layout(config)
+            out[directory / f"{config}.plotjuggler.xml"] = plotjuggler_layout(config)
+    finally:
+        NAMESPACE = ""
     return out
 
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--check", action="store_true", help="compare instead of writing; exit 1 on a difference")
+    parser.add_argument("--namespace", default="", help="the node's namespace, e.g. /ns (default: none)")
+    parser.add_argument("--out", type=Path, help="directory for the layouts (required with --namespace)")
     args = parser.parse_args(argv)
-    files = generate()
+    if args.namespace and (args.out is None or args.check):
+        parser.error("--namespace writes to --out DIR (the shipped layouts/ are for the root namespace)")
+    out = args.out if args.out is not None else LAYOUTS
+    files = generate(args.namespace, out)
     if args.check:
         stale = [p for p, text in files.items() if not p.is_file() or p.read_text() != text]
         extra = sorted(set(LAYOUTS.glob("*")) - set(files))
         for p in stale + extra:
             print(f"{p.relative_to(ROOT)}: {'not generated by this script' if p in extra else 'out of date'}")
         return 1 if stale or extra else 0
-    LAYOUTS.mkdir(exist_ok=True)
+    out.mkdir(parents=True, exist_ok=True)
     for path, text in files.items():
         path.write_text(text)
-        print(f"wrote {path.relative_to(ROOT)}")
+        print(f"wrote {path}")
     return 0
 
 
