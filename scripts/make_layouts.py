@@ -148,7 +148,7 @@ def foxglove_layout(config: str) -> str:
     user_nodes = {}
     for model, names in models_of(config):
         ids = []
-        for i, name in enumerate(names):
+        for name in names:
             upper, lower = bound_names(name)
             series = [
                 {"value": f"{bounds_topic(model)}.{name}.{field}", "enabled": True, "timestampMethod": "headerStamp",

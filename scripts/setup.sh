@@ -34,3 +34,7 @@ if [ ! -f "$stamp" ] || [ "$(cat "$stamp")" != "$want" ]; then
     || { echo "setup: installation incomplete" >&2; exit 1; }
   echo "$want" > "$stamp"
 fi
+
+# ---- dashboard assets (merge into the new setup): uPlot from the npm registry at the exact
+# version of rls_uncertainty/dashboard/package-lock.json (rls-uncertainty dashboard serves it).
+bash scripts/setup_dashboard.sh
