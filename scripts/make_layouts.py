@@ -151,8 +151,8 @@ def foxglove_layout(config: str, ns: str = "") -> str:
         for name in names:
             upper, lower = bound_names(name)
             series = [
-                {"value": f"{bounds_topic(model, ns)}.{name}.{field}", "enabled": True, "timestampMethod": "headerStamp",
-                 "label": label, "color": COLORS[kind]}
+                {"value": f"{bounds_topic(model, ns)}.{name}.{field}", "enabled": True,
+                 "timestampMethod": "headerStamp", "label": label, "color": COLORS[kind]}
                 for field, label, kind in (("estimate", name, "estimate"), ("upper", upper, "bound"),
                                            ("lower", lower, "bound"))
             ]
