@@ -188,6 +188,45 @@ def test_the_page_says_why_a_seen_node_has_no_samples_from_its_diagnostics():
     assert "control_surfaces rejected 40" in msg["text"] and "CZ: initializing" in msg["text"]
 
 
+def test_the_page_says_when_the_node_it_showed_is_gone():
+    hub = _live_hub()
+    hub.set_graph(True)
+    hub.add_arrays([("CZ", suffix, _msg(",".join(NAMES), _values(10, suffix), stamp_label(10)), None)
+                    for suffix in PAIRED])
+    assert hub.state()["state"] == "running"
+    msg = hub.set_graph(False)
+    assert msg["state"] == "node_lost" and "ROS_DOMAIN_ID=25" in msg["text"] and "last ones" in msg["text"]
+    assert hub.snapshot()["models"]["CZ"]["t"] == [1e-8]  # its last values stay on the page
+
+
+def test_the_inbox_hands_items_from_another_thread_to_the_loop_in_order_and_batches():
+    import asyncio
+    import threading
+
+    from rls_uncertainty.dashboard.server import Inbox
+
+    async def main():
+        got: list[list[int]] = []
+        done = asyncio.Event()
+        loop = asyncio.get_running_loop()
+
+        def handler(items):
+            got.append(items)
+            if items[-1] == 9999:
+                done.set()
+
+        inbox = Inbox(loop, handler)
+        producer = threading.Thread(target=lambda: [inbox.put(k) for k in range(10_000)])
+        producer.start()
+        await asyncio.wait_for(done.wait(), 30)
+        producer.join()
+        return got
+
+    got = asyncio.run(main())
+    assert [k for batch in got for k in batch] == list(range(10_000))
+    assert len(got) < 10_000  # batched: one wake-up per batch, not per item
+
+
 def test_a_hub_sends_samples_as_columns_and_restarts_a_model_whose_time_goes_back():
     hub = _live_hub()
     arrays = [("CZ", suffix, _msg(",".join(NAMES), _values(s, suffix), stamp_label(s)), 99)

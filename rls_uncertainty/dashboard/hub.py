@@ -109,16 +109,20 @@ class Hub:
 
     def state(self) -> dict:
         """What the page says above the panels: ``no_node``, ``waiting_diagnostics``,
-        ``no_samples``, ``running`` or ``replay``, with the text that explains it."""
+        ``no_samples``, ``running``, ``node_lost`` (samples were shown, the node is gone) or
+        ``replay``, with the text that explains it."""
         s = self.source
         health = self.health.latest
         if s.mode == "replay":
             return {"state": "replay", "text": f"replay of {s.replay_dir}: {self.samples_total} samples"}
+        peers = f", ROS_STATIC_PEERS={s.static_peers}" if s.static_peers else ""
+        where = f"ROS_DOMAIN_ID={s.domain} (ROS_AUTOMATIC_DISCOVERY_RANGE={s.discovery_range}{peers})"
+        if self.node_present is False and self.samples_total:
+            return {"state": "node_lost", "text": f"Node {s.node} is no longer seen on {where}: the values shown are "
+                                                  "its last ones."}
         if not self.node_present and not self.samples_total:
-            peers = f", ROS_STATIC_PEERS={s.static_peers}" if s.static_peers else ""
-            text = (f"No node {s.node} seen on ROS_DOMAIN_ID={s.domain} "
-                    f"(ROS_AUTOMATIC_DISCOVERY_RANGE={s.discovery_range}{peers}). Start the estimator node with the "
-                    "same domain and discovery range, or start this dashboard with the node's.")
+            text = (f"No node {s.node} seen on {where}. Start the estimator node with the same domain and discovery "
+                    "range, or start this dashboard with the node's.")
             return {"state": "no_node", "text": text}
         if not self.samples_total:
             if health is None:
