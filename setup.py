@@ -27,7 +27,10 @@ setup(
         (f"share/{PACKAGE}/msg_schemas/fti_msgs/msg", glob("msg_schemas/fti_msgs/msg/*.msg")),
     ],
     # py.typed: the package ships its annotations (PEP 561) to mypy users of rls_uncertainty.
-    package_data={PACKAGE: ["py.typed", "fastdds_player.xml"]},
+    # The dashboard's page, and uPlot's files once scripts/setup_dashboard.sh has installed them.
+    package_data={PACKAGE: ["py.typed", "fastdds_player.xml", "dashboard/static/*",
+                            "dashboard/node_modules/uplot/LICENSE", "dashboard/node_modules/uplot/dist/uPlot.*.css",
+                            "dashboard/node_modules/uplot/dist/uPlot.iife.min.js"]},
     install_requires=["setuptools", "numpy", "scipy", "pyyaml"],
     zip_safe=True,
     maintainer="rls_uncertainty developers",

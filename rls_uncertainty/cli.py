@@ -209,6 +209,26 @@ def _play(args: argparse.Namespace) -> int:
                 ack_timeout=args.ack_timeout, report=args.report)
 
 
+def _dashboard(args: argparse.Namespace) -> int:
+    from .dashboard.app import dashboard_options, run
+
+    return run(dashboard_options(args.host, args.port, args.node, args.replay, args.reference, args.token))
+
+
+def _status(args: argparse.Namespace) -> int:
+    from .dashboard.settings import full_node_name
+    from .operate import status
+
+    return status(full_node_name(args.node), args.once, args.timeout)
+
+
+def _service(args: argparse.Namespace) -> int:
+    from .dashboard.settings import full_node_name
+    from .operate import call
+
+    return call(args.command, full_node_name(args.node), args.timeout)
+
+
 def _count_or_word(value: str, words: dict[str, Any], expected: str) -> Any:
     """An integer >= 0, or the value of one of ``words``; otherwise an argparse error saying
     what was ``expected``."""
@@ -404,8 +424,38 @@ def _add_play(sub: Any) -> None:
     pl.set_defaults(func=_play)
 
 
+def _add_operator_commands(sub: Any) -> None:
+    """dashboard, status, enable, disable, reset (docs/dashboard.md)."""
+    node_help = "the estimator node's full name (default /rls_estimator; e.g. /ns/rls_estimator)"
+    db = sub.add_parser("dashboard", help="control-room web page of a running node's estimates (or of a replay)")
+    db.add_argument("--host", default="127.0.0.1", help="address to listen on (default 127.0.0.1; any other needs "
+                                                        "a token, generated and printed when not given)")
+    db.add_argument("--port", type=_integer(0), default=8080, help="TCP port (default 8080; 0 picks a free one)")
+    db.add_argument("--node", default="/rls_estimator", help=node_help)
+    db.add_argument("--replay", metavar="DIR",
+                    help="show a finished replay's outputs (the --out DIR of rls-uncertainty replay)")
+    db.add_argument("--reference", metavar="FILE", help="YAML of reference values by parameter name (CZ_alpha: -3.9)")
+    db.add_argument("--token", help="token the page must present (at least 16 characters; default: generated when "
+                                    "--host is not loopback)")
+    db.set_defaults(func=_dashboard)
+    st = sub.add_parser("status", help="the node's inputs, samples and models from /diagnostics, refreshed in place")
+    st.add_argument("--once", action="store_true", help="print one report and exit")
+    st.add_argument("--node", default="/rls_estimator", help=node_help)
+    st.add_argument("--timeout", type=_real(0.0, low_open=True), default=5.0,
+                    help="seconds to wait for the node's first report (default 5)")
+    st.set_defaults(func=_status)
+    for name, text in (("enable", "start estimating (~/enable true)"),
+                       ("disable", "stop estimating; samples still counted (~/enable false)"),
+                       ("reset", "restart the estimator and every input state (~/reset)")):
+        sp = sub.add_parser(name, help=text)
+        sp.add_argument("--node", default="/rls_estimator", help=node_help)
+        sp.add_argument("--timeout", type=_real(0.0, low_open=True), default=5.0,
+                        help="seconds to wait for the node to answer (default 5)")
+        sp.set_defaults(func=_service)
+
+
 _SUBCOMMANDS = (_add_demo, _add_simulate, _add_montecarlo, _add_multisine, _add_make_bag, _add_convert, _add_replay,
-                _add_play)
+                _add_play, _add_operator_commands)
 
 
 def _version() -> str:

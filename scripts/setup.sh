@@ -57,3 +57,15 @@ if [ ! -f "$stamp" ] || [ "$(cat "$stamp")" != "$want" ]; then
     || { echo "setup: installation incomplete" >&2; exit 1; }
   echo "$want" > "$stamp"
 fi
+
+# The dashboard's plotting library (uPlot, from the npm registry at the version of
+# rls_uncertainty/dashboard/package-lock.json). Without npm everything else still works and the
+# dashboard says what is missing; CI (RLS_REQUIRE_BROWSER=1, set by .ci/run) requires it and
+# Debian's Chromium for the browser tests (scripts/setup_browser.sh, apt when run as root).
+if ! bash scripts/setup_dashboard.sh; then
+  [ "${RLS_REQUIRE_BROWSER:-0}" = "0" ] || exit 1
+  echo "setup: continuing without the dashboard's assets" >&2
+fi
+if [ "${RLS_REQUIRE_BROWSER:-0}" != "0" ]; then
+  bash scripts/setup_browser.sh
+fi

@@ -123,7 +123,7 @@ def test_node_page_holds_exactly_the_generated_parameter_table():
 
 def test_node_page_documents_every_parameter_topic_and_service():
     from rls_uncertainty.config import PARAMETERS
-    from rls_uncertainty.messages import MESSAGE_TYPES
+    from rls_uncertainty.inputs import MESSAGE_TYPES
     from rls_uncertainty.outputs import output_topics
 
     text = (DOCS / "node.md").read_text()

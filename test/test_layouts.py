@@ -1,13 +1,16 @@
 """The shipped plotting layouts (layouts/, written by scripts/make_layouts.py): each references
 only topics and array elements the node publishes for its configuration's models, names every
-parameter with its estimate and corrected +-2 sigma curves, equals the generator's output, and
-is installed by setup.py. No GUI: what the tools do with the files is not exercised here."""
+parameter with its estimate and corrected +-2 sigma curves, pairs estimate and standard error by
+the sample stamp where the tool can (Foxglove), equals the generator's output, follows a
+namespace when generated for one, and is installed by setup.py. No GUI: what the tools do with
+the files is not exercised here."""
 
 from __future__ import annotations
 
 import importlib.util
 import json
 import re
+import sys
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
@@ -33,8 +36,11 @@ def _models(config: str) -> dict[str, list[str]]:
     return {m.output: list(m.parameter_names) for m in cfg.models}
 
 
+NS = ""  # the namespace the layouts under test were generated for
+
+
 def _node_topics(models) -> set[str]:
-    return {f"/{NODE_NAME}/{t}" for t, _ in output_topics(models)}
+    return {f"{NS}/{NODE_NAME}/{t}" for t, _ in output_topics(models)}
 
 
 def _element(ref: str, models: dict, pattern: str) -> tuple[str, str, int]:
@@ -43,7 +49,7 @@ def _element(ref: str, models: dict, pattern: str) -> tuple[str, str, int]:
     m = re.fullmatch(pattern, ref)
     assert m, f"{ref!r} is not an element of a node output array"
     model, array, index = m.group(1), m.group(2), int(m.group(3))
-    assert f"/{NODE_NAME}/{model}/{array}" in _node_topics(models), ref
+    assert f"{NS}/{NODE_NAME}/{model}/{array}" in _node_topics(models), ref
     assert 0 <= index < len(models[model]), f"{ref}: index beyond {model}'s {len(models[model])} parameters"
     return model, array, index
 
@@ -62,11 +68,22 @@ def test_the_layouts_are_the_generators_output():
     assert _generator().generate() == files  # deterministic
 
 
+@pytest.fixture(params=["", "/fleet/a1"], ids=["shipped", "namespace"])
+def layouts(request, tmp_path, monkeypatch):
+    """The shipped layouts/, and the generator's layouts for a node under a namespace."""
+    monkeypatch.setattr(sys.modules[__name__], "NS", request.param)
+    if not request.param:
+        return LAYOUTS
+    for path, text in _generator().generate(request.param, tmp_path).items():
+        path.write_text(text)
+    return tmp_path
+
+
 @pytest.mark.parametrize("config", CONFIGS)
-def test_the_plotjuggler_layout_plots_every_parameter_from_published_topics(config):
+def test_the_plotjuggler_layout_plots_every_parameter_from_published_topics(config, layouts):
     models = _models(config)
-    root = ET.parse(LAYOUTS / f"{config}.plotjuggler.xml").getroot()
-    pattern = rf"/{NODE_NAME}/(\w+)/(estimates|standard_errors)/data\[(\d+)\]"
+    root = ET.parse(layouts / f"{config}.plotjuggler.xml").getroot()
+    pattern = rf"{NS}/{NODE_NAME}/(\w+)/(estimates|standard_errors)/data\[(\d+)\]"
     snippets = {s.get("name"): s for s in root.iter("snippet")}
     for name, s in snippets.items():
         assert s.get("language") == "LUA"
@@ -92,9 +109,9 @@ def test_the_plotjuggler_layout_plots_every_parameter_from_published_topics(conf
 
 
 @pytest.mark.parametrize("config", CONFIGS)
-def test_the_foxglove_layout_plots_every_parameter_from_published_topics(config):
+def test_the_foxglove_layout_plots_every_parameter_paired_by_stamp_from_published_topics(config, layouts):
     models = _models(config)
-    layout = json.loads((LAYOUTS / f"{config}.foxglove.json").read_text())
+    layout = json.loads((layouts / f"{config}.foxglove.json").read_text())
     assert set(layout) == {"configById", "globalVariables", "userNodes", "playbackConfig", "layout"}
     scripts = {}
     for script in layout["userNodes"].values():
@@ -102,14 +119,16 @@ def test_the_foxglove_layout_plots_every_parameter_from_published_topics(config)
         inputs = json.loads(re.search(r"^export const inputs = (\[.*\]);$", code, re.M).group(1))
         output = re.search(r'^export const output = "(.*)";$', code, re.M).group(1)
         assert set(inputs) <= _node_topics(models), inputs
-        assert output.startswith("/foxglove_script/")
-        model = re.fullmatch(rf"/{NODE_NAME}/(\w+)/estimates", inputs[0]).group(1)
-        assert inputs == [f"/{NODE_NAME}/{model}/estimates", f"/{NODE_NAME}/{model}/standard_errors"]
+        assert output.startswith(f"/foxglove_script{NS}/")
+        model = re.fullmatch(rf"{NS}/{NODE_NAME}/(\w+)/estimates", inputs[0]).group(1)
+        assert inputs == [f"{NS}/{NODE_NAME}/{model}/estimates", f"{NS}/{NODE_NAME}/{model}/standard_errors"]
         # One field per parameter from the same index of both arrays.
         fields = re.findall(r"^    (\w+): bounds\(e\[(\d+)\], s\[(\d+)\]\),$", code, re.M)
         assert [(f, int(i)) for f, i, j in fields if i == j] == [(p, k) for k, p in enumerate(models[model])]
         assert "lower: estimate - 2 * se, upper: estimate + 2 * se" in code
         assert "estimates.stamp !== errors.stamp" in code  # paired by the sample stamp
+        assert "header: { stamp: time(estimates.stamp)" in code  # plotted at the sample's time
+        assert "dim[dim.length - 1]?.label" in code  # the stamp is in the last dim
         scripts[output] = model
     assert sorted(scripts.values()) == sorted(models)
     labels = []
@@ -118,19 +137,29 @@ def test_the_foxglove_layout_plots_every_parameter_from_published_topics(config)
             continue
         for series in panel["paths"]:
             labels.append(series["label"])
-            value = series["value"]
-            m = re.fullmatch(r"(/foxglove_script/\w+)\.(\w+)\.(upper|lower)", value)
-            if m:  # a bound from a user script of this layout
-                model = scripts[m.group(1)]
-                assert m.group(2) in models[model]
-                assert series["label"] == f"{m.group(2)} {'+' if m.group(3) == 'upper' else '-'}2sigma"
-            else:
-                model, _array, i = _element(value, models, rf"/{NODE_NAME}/(\w+)/(estimates)\.data\[(\d+)\]")
-                assert series["label"] == models[model][i]
+            assert series["timestampMethod"] == "headerStamp"
+            m = re.fullmatch(r"(/foxglove_script[\w/]*)\.(\w+)\.(estimate|upper|lower)", series["value"])
+            assert m, series["value"]  # every curve from a user script of this layout
+            model = scripts[m.group(1)]
+            assert m.group(2) in models[model]
+            suffix = {"estimate": "", "upper": " +2sigma", "lower": " -2sigma"}[m.group(3)]
+            assert series["label"] == f"{m.group(2)}{suffix}"
     wanted = [f"{p}{q}" for names in models.values() for p in names for q in ("", " +2sigma", " -2sigma")]
     assert sorted(labels) == sorted(wanted)
     tabs = layout["configById"][layout["layout"]]["tabs"]
     assert [t["title"] for t in tabs] == list(models)
+
+
+def test_the_stamp_label_parser_of_the_foxglove_script_reads_what_the_node_writes():
+    """The script's time() takes "stamp:SEC.NANOSEC" apart as messages.parse_stamp_label does."""
+    from rls_uncertainty.outputs import parse_stamp_label, stamp_label
+
+    code = json.loads((LAYOUTS / "t2.foxglove.json").read_text())["userNodes"]["rls_CZ_bounds"]["sourceCode"]
+    assert 'const [sec, nsec] = label.slice(6).split(".");' in code
+    for stamp in (0, 1_767_225_600_140_000_000, 5_000_000_001):
+        label = stamp_label(stamp)
+        sec, nsec = label[6:].split(".")  # what the script does
+        assert int(sec) * 1_000_000_000 + int(nsec) == parse_stamp_label(label) == stamp
 
 
 def test_setup_installs_the_layouts():

@@ -41,12 +41,18 @@ DEPENDENCY = {
     "ament_index_python": "ament_index_python",
     "launch": "launch",
     "launch_ros": "launch_ros",
+    "aiohttp": "python3-aiohttp",
 }
 # Import roots without a rosdep key (checked in rosdep/python.yaml): package.xml cannot
 # declare them, so its comments must name them (with the pip command in docs/ros_install.md).
 NO_ROSDEP_KEY = {
     "rosbags": "rosbags",
     "mcap": "mcap",
+}
+# Test-only imports without a rosdep key: named in a package.xml comment and pinned in
+# requirements-dev.txt (the tests that use them skip without them, unless told to require them).
+TEST_NO_ROSDEP_KEY = {
+    "playwright": "playwright",
 }
 # Roots that are part of this checkout: the package, the bundled fti_msgs schemas (registered
 # into rosbags' type store from msg_schemas/, never imported), pytest's conftest.
@@ -151,7 +157,14 @@ def test_every_third_party_import_of_the_tests_is_declared():
     local = {p.stem for p in (ROOT / TESTS).glob("*.py")}
     run_or_test = declared(root, "exec_depend", "depend", "test_depend")
     # Imports only: the tests make up interface types of their own (bags of invented messages).
-    problems = _missing(third_party((TESTS,), local, type_names=False), run_or_test, comments, "test_depend")
+    roots = third_party((TESTS,), local, type_names=False)
+    problems = []
+    for name, key in TEST_NO_ROSDEP_KEY.items():
+        roots.pop(name, None)
+        dev = (ROOT / "requirements-dev.txt").read_text(encoding="utf-8")
+        if key not in comments or not re.search(rf"^{re.escape(key)}\b", dev, re.M):
+            problems.append(f"{name} has no rosdep key: name it in a package.xml comment and in requirements-dev.txt")
+    problems += _missing(roots, run_or_test, comments, "test_depend")
     assert not problems, "package.xml misses test dependencies:\n  " + "\n  ".join(problems)
 
 

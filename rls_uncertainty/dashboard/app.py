@@ -1,0 +1,108 @@
+"""``rls-uncertainty dashboard``: the options checked once, the source (live node or finished
+replay) wired to the :class:`.hub.Hub` and the web server, and a clean stop on Ctrl-C or
+SIGTERM (browser pages closed, ROS node destroyed, port released)."""
+
+from __future__ import annotations
+
+import asyncio
+import signal
+import socket
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+from .hub import Hub, Source
+from .server import Broadcaster, Inbox, ServerOptions, asset_table, bind, check_assets, check_options, serve
+from .settings import discovery_environment, full_node_name, load_reference
+
+__all__ = ["DashboardOptions", "dashboard_options", "run"]
+
+
+@dataclass(frozen=True)
+class DashboardOptions:
+    server: ServerOptions
+    node: str
+    replay: Path | None
+    reference: dict[str, float]
+
+
+def dashboard_options(host: str, port: int, node: str, replay: str | None = None, reference: str | None = None,
+                      token: str | None = None) -> DashboardOptions:
+    """Every option checked (ConfigError naming the one to change) before anything starts."""
+    server = check_options(host, port, token)
+    check_assets(asset_table())
+    return DashboardOptions(server, full_node_name(node), Path(replay) if replay else None,
+                            load_reference(reference) if reference else {})
+
+
+class _Dispatch:
+    """Items from a source (live or replay) into the hub, and the hub's messages out."""
+
+    def __init__(self, hub: Hub, broadcaster: Broadcaster) -> None:
+        self.hub = hub
+        self.broadcaster = broadcaster
+
+    def __call__(self, items: list[tuple]) -> None:
+        arrays: list[tuple] = []
+        for item in items:
+            if item[0] == "array":
+                arrays.append(item[1:])
+                continue
+            self._flush(arrays)
+            changed = (self.hub.add_diagnostics(item[1]) if item[0] == "diagnostics"
+                       else self.hub.set_graph(item[1]))
+            if changed is not None:
+                self.broadcaster.send(self.broadcaster.status())
+        self._flush(arrays)
+
+    def _flush(self, arrays: list[tuple]) -> None:
+        if arrays:
+            self.broadcaster.send(self.hub.add_arrays(arrays))
+            arrays.clear()
+
+
+async def _main(options: DashboardOptions, hub: Hub, items: list[tuple] | None, sock: socket.socket) -> None:
+    loop = asyncio.get_running_loop()
+    stop = asyncio.Event()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        loop.add_signal_handler(sig, stop.set)
+    broadcaster = Broadcaster(hub)
+    dispatch = _Dispatch(hub, broadcaster)
+    source = None
+    if items is not None:
+        dispatch(items)
+    else:
+        from .ros_source import RosSource  # noqa: PLC0415 - rclpy only for the live mode
+
+        inbox = Inbox(loop, dispatch)
+        source = RosSource(options.node, inbox.put)
+        source.start()
+    try:
+        await serve(broadcaster, options.server, sock, stop)
+    finally:
+        if source is not None:
+            source.stop()
+    dropped = ", ".join(f"{k} {v}" for k, v in sorted(hub.pairing.dropped.items())) or "none"
+    inbound = ", ".join(f"{k} {v}" for k, v in broadcaster.inbound.items())
+    print(f"dashboard stopped: {hub.samples_total} samples; arrays dropped: {dropped}; from pages: {inbound}; "
+          f"resyncs {broadcaster.resyncs}", file=sys.stderr)
+
+
+def run(options: DashboardOptions) -> int:
+    """Serve until interrupted. The first line on stdout is ``serving http://HOST:PORT/``."""
+    items = None
+    if options.replay is not None:
+        from .replay_source import read_replay  # noqa: PLC0415 - the bag library only for replays
+
+        node, items = read_replay(options.replay)
+        source = Source("replay", node, replay_dir=str(options.replay), reference=options.reference)
+    else:
+        source = Source("live", options.node, reference=options.reference, **discovery_environment())
+    sock = bind(options.server)
+    host, port = options.server.host, sock.getsockname()[1]
+    shown = f"[{host}]" if ":" in host else host
+    print(f"serving http://{shown}:{port}/", flush=True)
+    if options.server.token is not None:
+        print(f"token required: open http://{shown}:{port}/?token={options.server.token}", flush=True)
+    asyncio.run(_main(options, Hub(source), items, sock))
+    return 0

@@ -1,0 +1,206 @@
+"""What the dashboard shows of the estimates, built from the node's output arrays (no ROS, no
+web server: the live subscriber and the replay reader feed the same :class:`Dashboard`).
+
+Pairing. Every output array carries its sample's time in the label of its last dim
+(``stamp:SEC.NANOSEC``, docs/dashboard.md), so a model's sample is complete when its
+``estimates``, ``standard_errors`` (corrected, Eqs. 20/22), ``standard_errors_conventional``
+(Eq. 13) and ``converged`` arrays *of the same stamp* have arrived, in whatever order and
+interleaved with other samples: never by arrival. An array whose partners never come (a lost
+message) is dropped, and counted, once :data:`MAX_PENDING` later samples of its model have
+completed.
+
+History. Each model keeps its completed samples in columns of bounded size: when
+:data:`HISTORY_CAPACITY` samples are held, every other sample of the older half is dropped,
+so the newest half stays at full rate and older data is thinned progressively (memory is
+bounded whatever the flight's length). Only the display is thinned: the node computes every
+sample.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import OrderedDict
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from ..outputs import parse_stamp_label
+
+__all__ = [
+    "PAIRED",
+    "ArrayUpdate",
+    "array_update",
+    "Sample",
+    "ModelHistory",
+    "Pairing",
+    "MAX_PENDING",
+    "HISTORY_CAPACITY",
+]
+
+# The four arrays a sample needs, by suffix of ~/M/<suffix>.
+PAIRED = ("estimates", "standard_errors", "standard_errors_conventional", "converged")
+MAX_PENDING = 64  # stamps per model awaiting their partner arrays
+HISTORY_CAPACITY = 20_000  # samples per model; 200 s at full rate at 50 Hz, older data thinned
+
+
+@dataclass(frozen=True)
+class ArrayUpdate:
+    """One received ``~/M/<suffix>`` array: its parameter names (``layout.dim[0].label``), its
+    values, the sample stamp from its last dim's label, and when it was published (ns since the
+    epoch, DDS source time; None when unknown, as in a replay)."""
+
+    model: str
+    suffix: str
+    names: tuple[str, ...]
+    data: tuple[float, ...]
+    stamp_ns: int
+    published_ns: int | None = None
+
+
+def array_update(model: str, suffix: str, msg: Any, published_ns: int | None = None) -> ArrayUpdate:
+    """An :class:`ArrayUpdate` from a ``std_msgs/Float64MultiArray`` (rclpy's or rosbags'
+    message: read by field name): the names from ``layout.dim[0].label``, the stamp from the
+    last dim's label. ValueError when the layout does not carry them."""
+    dims = msg.layout.dim
+    if len(dims) < 2:
+        raise ValueError(f"{model}/{suffix}: {len(dims)} dims, expected the names and the stamp")
+    names = tuple(str(dims[0].label).split(","))
+    stamp = parse_stamp_label(str(dims[-1].label))
+    return ArrayUpdate(model, suffix, names, tuple(float(x) for x in msg.data), stamp, published_ns)
+
+
+@dataclass(frozen=True)
+class Sample:
+    """A model's complete sample: estimate, corrected and conventional standard errors and
+    convergence flags per parameter, and the publish time of its last array."""
+
+    model: str
+    stamp_ns: int
+    names: tuple[str, ...]
+    estimate: tuple[float, ...]
+    se: tuple[float, ...]
+    se_conventional: tuple[float, ...]
+    converged: tuple[float, ...]
+    published_ns: int | None
+
+
+@dataclass
+class Pairing:
+    """Completes samples from arrays paired by their stamps (see the module docstring).
+    ``dropped`` counts arrays refused, by reason."""
+
+    max_pending: int = MAX_PENDING
+    dropped: dict[str, int] = field(default_factory=dict)
+    # per model: stamp -> (samples completed when the stamp was first seen, its arrays)
+    _pending: dict[str, OrderedDict[int, tuple[int, dict[str, ArrayUpdate]]]] = field(default_factory=dict)
+    _completed: dict[str, int] = field(default_factory=dict)
+
+    def count(self, reason: str, n: int = 1) -> None:
+        self.dropped[reason] = self.dropped.get(reason, 0) + n
+
+    def add(self, update: ArrayUpdate) -> Sample | None:
+        """The sample ``update`` completes, if any."""
+        if update.suffix not in PAIRED:
+            return None
+        if len(update.data) != len(update.names) or not update.names:
+            self.count("bad_layout")
+            return None
+        if not all(math.isfinite(x) for x in update.data):
+            self.count("non_finite")
+            return None
+        pending = self._pending.setdefault(update.model, OrderedDict())
+        completed = self._completed.get(update.model, 0)
+        entry = pending.get(update.stamp_ns)
+        if entry is None:
+            entry = pending[update.stamp_ns] = (completed, {})
+        arrays = entry[1]
+        if update.suffix in arrays:
+            self.count("duplicate")
+            return None
+        arrays[update.suffix] = update
+        if len(arrays) < len(PAIRED):
+            return None
+        del pending[update.stamp_ns]
+        self._completed[update.model] = completed = completed + 1
+        # Arrays that have waited while max_pending later samples completed lost a partner.
+        while pending:
+            stamp, (born, lost) = next(iter(pending.items()))
+            if completed - born <= self.max_pending:
+                break
+            del pending[stamp]
+            self.count("unpaired", len(lost))
+        names = {a.names for a in arrays.values()}
+        if len(names) != 1:
+            self.count("mismatched_names", len(arrays))
+            return None
+        published = [a.published_ns for a in arrays.values() if a.published_ns is not None]
+        return Sample(update.model, update.stamp_ns, update.names, arrays["estimates"].data,
+                      arrays["standard_errors"].data, arrays["standard_errors_conventional"].data,
+                      arrays["converged"].data, max(published) if published else None)
+
+
+class ModelHistory:
+    """A model's samples in columns (time in ns; per parameter estimate, corrected and
+    conventional standard errors, convergence flag), bounded by thinning the older half."""
+
+    def __init__(self, names: Sequence[str], capacity: int = HISTORY_CAPACITY) -> None:
+        if capacity < 4:
+            raise ValueError(f"capacity must be at least 4, got {capacity}")
+        self.names = tuple(names)
+        self.capacity = capacity
+        n = len(self.names)
+        self._t = np.empty(capacity, dtype=np.int64)
+        self._v = np.empty((capacity, 4, n))  # estimate, se, se_conventional, converged
+        self.size = 0
+        self.thinned = 0  # samples dropped from the display history
+
+    def append(self, s: Sample) -> None:
+        if self.size == self.capacity:
+            self._thin()
+        self._t[self.size] = s.stamp_ns
+        self._v[self.size] = (s.estimate, s.se, s.se_conventional, s.converged)
+        self.size += 1
+
+    def _thin(self) -> None:
+        """Drop every other sample of the older half (the oldest sample is kept)."""
+        half = self.size // 2
+        keep = np.r_[np.arange(0, half, 2), np.arange(half, self.size)]
+        k = keep.size
+        self._t[:k] = self._t[keep]
+        self._v[:k] = self._v[keep]
+        self.thinned += self.size - k
+        self.size = k
+
+    @property
+    def last_stamp(self) -> int | None:
+        return int(self._t[self.size - 1]) if self.size else None
+
+    def columns(self, start: int = 0) -> dict:
+        """Samples ``start`` onwards as JSON-ready columns: ``t`` (s), and per quantity one list
+        per parameter."""
+        t = self._t[start:self.size]
+        v = self._v[start:self.size]
+        return {
+            "names": list(self.names),
+            "t": (t * 1e-9).tolist(),
+            "estimate": v[:, 0].T.tolist(),
+            "se": v[:, 1].T.tolist(),
+            "se_conventional": v[:, 2].T.tolist(),
+            "converged": v[:, 3].T.tolist(),
+        }
+
+
+def sample_columns(samples: Sequence[Sample]) -> dict:
+    """Samples of one model (same names) as :meth:`ModelHistory.columns` does."""
+    first = samples[0]
+    n = len(first.names)
+    return {
+        "names": list(first.names),
+        "t": [s.stamp_ns * 1e-9 for s in samples],
+        "estimate": [[s.estimate[i] for s in samples] for i in range(n)],
+        "se": [[s.se[i] for s in samples] for i in range(n)],
+        "se_conventional": [[s.se_conventional[i] for s in samples] for i in range(n)],
+        "converged": [[s.converged[i] for s in samples] for i in range(n)],
+    }

@@ -1,0 +1,104 @@
+"""The dashboard's live source: an rclpy node in its own context, executor and thread that
+subscribes to a running estimator node's outputs and ``/diagnostics`` and hands what arrives
+to the server's event loop (:class:`.server.Inbox`). It only reads: no publisher, no service
+client, no parameter services.
+
+Once a second it looks at the ROS graph: whether the node is there, and which
+``<node>/<M>/<array>`` topics exist (a model's topics appear when the node is configured with
+it), subscribing to each new one. The subscription asks for the reliability and durability the
+node's publisher offers: transient-local publishers (which keep the last sample for late joiners) are read with
+a transient-local subscription, volatile ones with a volatile one (a transient-local
+subscription would not match them).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import threading
+from collections.abc import Callable
+from typing import Any
+
+import rclpy
+from diagnostic_msgs.msg import DiagnosticArray
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.qos import DurabilityPolicy, QoSHistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.signals import SignalHandlerOptions
+from std_msgs.msg import Float64MultiArray
+
+from .health import statuses_of
+from .model import PAIRED
+from .settings import split_node_name
+
+__all__ = ["RosSource"]
+
+GRAPH_PERIOD_S = 1.0
+
+
+class RosSource:
+    """Subscribes to ``node``'s outputs; ``put`` receives, from the executor thread,
+    ``("array", model, suffix, msg, published_ns)``, ``("diagnostics", statuses)`` and
+    ``("graph", node_present)``."""
+
+    def __init__(self, node: str, put: Callable[[tuple], None]) -> None:
+        self.node_name = node
+        self._namespace, self._basename = split_node_name(node)
+        self._put = put
+        self.context = rclpy.Context()
+        rclpy.init(context=self.context, signal_handler_options=SignalHandlerOptions.NO)
+        self.node = rclpy.create_node(f"rls_dashboard_{os.getpid()}", context=self.context,
+                                      start_parameter_services=False, enable_rosout=False)
+        self._subs: dict[str, Any] = {}
+        self.node.create_subscription(DiagnosticArray, "/diagnostics", self._on_diagnostics, 50)
+        self.node.create_timer(GRAPH_PERIOD_S, self._look)
+        self.executor = SingleThreadedExecutor(context=self.context)
+        self.executor.add_node(self.node)
+        self._thread = threading.Thread(target=self._spin, name="rls_dashboard_ros", daemon=True)
+
+    def start(self) -> None:
+        self._thread.start()
+
+    def _spin(self) -> None:
+        self._look()
+        with contextlib.suppress(ExternalShutdownException):
+            self.executor.spin()
+
+    def stop(self) -> None:
+        self.executor.shutdown(timeout_sec=2.0)
+        self.context.try_shutdown()
+        self._thread.join(timeout=5.0)
+        self.node.destroy_node()
+
+    def _on_diagnostics(self, msg: DiagnosticArray) -> None:
+        self._put(("diagnostics", statuses_of(msg)))
+
+    def _look(self) -> None:
+        """The 1 Hz look at the graph: is the node there, which of its arrays exist."""
+        present = (self._basename, self._namespace) in self.node.get_node_names_and_namespaces()
+        prefix = self.node_name.rstrip("/") + "/"
+        for topic, _types in self.node.get_topic_names_and_types():
+            if topic in self._subs or not topic.startswith(prefix):
+                continue
+            parts = topic[len(prefix):].split("/")
+            if len(parts) == 2 and parts[1] in PAIRED:
+                self._subscribe(topic, parts[0], parts[1])
+        self._put(("graph", present))
+
+    def _subscribe(self, topic: str, model: str, suffix: str) -> None:
+        infos = self.node.get_publishers_info_by_topic(topic)
+        if not infos:
+            return  # the publisher went away again; looked at next time
+        durable = all(i.qos_profile.durability == DurabilityPolicy.TRANSIENT_LOCAL for i in infos)
+        reliable = all(i.qos_profile.reliability == ReliabilityPolicy.RELIABLE for i in infos)
+        qos = QoSProfile(depth=50, history=QoSHistoryPolicy.KEEP_LAST,
+                         reliability=ReliabilityPolicy.RELIABLE if reliable else ReliabilityPolicy.BEST_EFFORT,
+                         durability=DurabilityPolicy.TRANSIENT_LOCAL if durable else DurabilityPolicy.VOLATILE)
+        put = self._put
+
+        def on_array(msg: Float64MultiArray, info: Any) -> None:
+            published = info.get("source_timestamp") if isinstance(info, dict) else getattr(info, "source_timestamp",
+                                                                                             None)
+            put(("array", model, suffix, msg, published))
+
+        # rclpy passes the message info (source timestamp) to a callback of two parameters.
+        self._subs[topic] = self.node.create_subscription(Float64MultiArray, topic, on_array, qos)  # type: ignore[arg-type]

@@ -1,0 +1,267 @@
+"""The dashboard in a real browser: headless Chromium (Debian's package, driven by Playwright,
+no browser download) loads the page of `rls-uncertainty dashboard`:
+
+* live: the bundled bag is played to the estimator node (in its own process, under a
+  namespace) while the page is open; the page shows every parameter name the node's arrays
+  carry, its latest values equal the node's last published values to display precision, its
+  convergence badges equal the node's flags;
+* replay: the Twin Otter recording (converted, then replayed) shows the values of the
+  replay's estimates.csv;
+* no node: the page says so, naming the domain and discovery range.
+
+Without Chromium (or Playwright) these tests skip with the reason; under RLS_REQUIRE_BROWSER=1
+they fail instead. Screenshots go to the test's directory, and to $RLS_DASHBOARD_SCREENSHOTS
+when set (docs/images/ was made so)."""
+
+from __future__ import annotations
+
+import csv
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import pytest
+import rclpy
+from rclpy.qos import QoSHistoryPolicy, QoSProfile, QoSReliabilityPolicy
+from std_msgs.msg import Float64MultiArray, Header
+
+from rls_uncertainty.inputs import INPUTS
+from rls_uncertainty.outputs import parse_stamp_label
+from rls_uncertainty.simulation import T2_TRUE
+
+from conftest import FLIGHT_DATA
+from ros_harness import ROOT, NodeProcess
+
+CHROMIUM = os.environ.get("RLS_CHROMIUM", "/usr/bin/chromium")
+REQUIRE = os.environ.get("RLS_REQUIRE_BROWSER", "") not in ("", "0")
+FLAGS = ["--no-sandbox", "--disable-gpu", "--disable-background-networking", "--disable-component-update",
+         "--disable-sync", "--no-first-run"]
+T2 = str(ROOT / "config" / "t2.yaml")
+NS = "/fleet"
+REPLAY_NODE = ("-p", "qos.reliable:=true", "-p", "qos.depth:=10000", "-p", "inputs.buffer_duration:=60.0")
+RELIABLE = QoSProfile(depth=5000, reliability=QoSReliabilityPolicy.RELIABLE, history=QoSHistoryPolicy.KEEP_LAST)
+
+
+def _no_browser(reason: str) -> None:
+    if REQUIRE:
+        pytest.fail(f"{reason}; RLS_REQUIRE_BROWSER is set, so a missing browser fails", pytrace=False)
+    pytest.skip(reason)
+
+
+@pytest.fixture
+def browser(tmp_path):
+    """A fresh headless Chromium page (its own profile directory), closed afterwards."""
+    if not Path(CHROMIUM).is_file():
+        _no_browser(f"no Chromium at {CHROMIUM} (bash scripts/setup_browser.sh installs Debian's chromium)")
+    try:
+        from playwright.sync_api import sync_playwright
+    except ImportError:
+        _no_browser("Playwright is not installed (requirements-dev.txt)")
+    with sync_playwright() as p:
+        context = p.chromium.launch_persistent_context(str(tmp_path / "profile"), executable_path=CHROMIUM,
+                                                       headless=True, args=FLAGS,
+                                                       viewport={"width": 1600, "height": 1000})
+        try:
+            yield context.pages[0] if context.pages else context.new_page()
+        finally:
+            context.close()
+
+
+class Dashboard:
+    """``rls-uncertainty dashboard --port 0 ...`` in its own process; ``url`` from its first line."""
+
+    def __init__(self, *args: str) -> None:
+        self.proc = subprocess.Popen([sys.executable, "-m", "rls_uncertainty.cli", "dashboard", "--port", "0", *args],
+                                     stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=ROOT)
+        lines: list[str] = []
+        reader = threading.Thread(target=lambda: lines.append(self.proc.stdout.readline()), daemon=True)
+        reader.start()
+        reader.join(60)
+        if not lines or not lines[0].startswith("serving http://127.0.0.1:"):
+            self.stop()
+            raise AssertionError(f"dashboard did not start: {lines} {self.proc.stderr.read()}")
+        self.url = lines[0].split()[1]
+
+    def stop(self) -> str:
+        if self.proc.poll() is None:
+            self.proc.send_signal(signal.SIGINT)
+            try:
+                self.proc.wait(30)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait()
+        return self.proc.stderr.read()
+
+
+def _shot(page, tmp_path: Path, name: str) -> Path:
+    path = tmp_path / name
+    page.screenshot(path=str(path), full_page=True)
+    if os.environ.get("RLS_DASHBOARD_SCREENSHOTS"):
+        shutil.copy(path, Path(os.environ["RLS_DASHBOARD_SCREENSHOTS"]) / name)
+    assert path.stat().st_size > 10_000
+    return path
+
+
+def _shown(page) -> dict[str, tuple[str, str]]:
+    """Per parameter panel: (latest value as displayed, convergence badge)."""
+    return page.evaluate("""() => Object.fromEntries([...document.querySelectorAll('.panel')].map(p =>
+        [p.querySelector('.title').textContent,
+         [p.querySelector('.value').textContent, p.querySelector('.badge').dataset.converged]]))""")
+
+
+def _wait(page, js: str, timeout_s: float) -> None:
+    """Poll ``js`` (an expression or a function) in the page until true. Polled from here:
+    Playwright's wait_for_function evaluates strings inside the page, which the page's
+    Content-Security-Policy (no eval) forbids, and the test keeps that policy on."""
+    expression = js if js.lstrip().startswith("()") else f"() => ({js})"
+    deadline = time.monotonic() + timeout_s
+    while not page.evaluate(expression):
+        assert time.monotonic() < deadline, f"page never satisfied {js!r}; banner: {page.text_content('#banner')!r}"
+        time.sleep(0.2)
+
+
+def _expect_shown(shown: dict, last: dict[str, tuple[float, float]]) -> None:
+    """Every parameter shown, its value equal to display precision (4 decimals), its badge."""
+    assert set(shown) == set(last)
+    for name, (value, flag) in last.items():
+        text, badge = shown[name]
+        assert abs(float(text) - value) <= 0.5e-4 + 1e-12, (name, text, value)
+        assert text == f"{value:.4f}" or abs(abs(value * 1e4) % 1 - 0.5) < 1e-6, (name, text, value)
+        assert badge == ("1" if flag == 1.0 else "0"), (name, badge, flag)
+
+
+# ------------------------------------------------------------------ live
+class _Recorder:
+    """The node's estimates and convergence flags, as it publishes them (to know its last values)."""
+
+    def __init__(self, node_name: str, models=("CZ", "Cm")) -> None:
+        self.node = rclpy.create_node("browser_test_recorder")
+        self.got: dict[tuple[str, str], list] = {}
+        self.stamps: list = []
+        self.node.create_subscription(Header, f"{node_name}/sample_stamp", self.stamps.append, RELIABLE)
+        for m in models:
+            for suffix in ("estimates", "converged"):
+                store = self.got.setdefault((m, suffix), [])
+                self.node.create_subscription(Float64MultiArray, f"{node_name}/{m}/{suffix}", store.append, RELIABLE)
+
+    def spin_until(self, condition, timeout: float) -> bool:
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            rclpy.spin_once(self.node, timeout_sec=0.05)
+            if condition():
+                return True
+        return False
+
+    def last(self) -> tuple[int, dict[str, tuple[float, float]]]:
+        out, stamps = {}, set()
+        for m in ("CZ", "Cm"):
+            est, conv = self.got[(m, "estimates")][-1], self.got[(m, "converged")][-1]
+            stamps.add(parse_stamp_label(est.layout.dim[-1].label))
+            assert parse_stamp_label(conv.layout.dim[-1].label) in stamps
+            for name, value, flag in zip(est.layout.dim[0].label.split(","), est.data, conv.data, strict=True):
+                out[name] = (float(value), float(flag))
+        return max(stamps), out
+
+
+def test_live_page_shows_the_nodes_last_published_values_and_flags_under_a_namespace(tmp_path, browser):
+    node_name = f"{NS}/rls_estimator"
+    remaps = [a for kind in INPUTS for a in ("-r", f"{kind}:=/{kind}")]  # the bag's topics are /imu, ...
+    node = NodeProcess(tmp_path, "--params-file", T2, *REPLAY_NODE, "-r", f"__ns:={NS}", *remaps)
+    dashboard = None
+    reference = tmp_path / "reference.yaml"  # the simulation's true values (make-bag's maneuver)
+    reference.write_text("".join(f"{name}: {value!r}\n" for name, value in T2_TRUE.items()))
+    rclpy.init()
+    recorder = _Recorder(node_name)
+    try:
+        dashboard = Dashboard("--node", node_name, "--reference", str(reference))
+        browser.goto(dashboard.url)
+        _wait(browser, "document.getElementById('banner').dataset.state === 'no_samples'", 90)
+        assert node_name in browser.text_content("#node")
+        play = subprocess.run([sys.executable, "-m", "rls_uncertainty.cli", "play", str(ROOT / "bags" / "t2_maneuver"),
+                               "--rate", "1", "--wait", "1"], capture_output=True, text=True, cwd=ROOT, timeout=300)
+        assert play.returncode == 0, play.stderr
+        # The node's last samples: its outputs have stopped coming for 2 s (at real time it may
+        # form a few samples fewer than the offline replay's 591; the page must show its last).
+        assert recorder.spin_until(lambda: len(recorder.stamps) >= 500, 120), \
+            ({k: len(v) for k, v in recorder.got.items()}, play.stderr, node.text()[-2000:])
+        count = -1
+        while count != len(recorder.stamps):
+            count = len(recorder.stamps)
+            recorder.spin_until(lambda: False, 2.0)
+        stamp, last = recorder.last()
+        newest = f"m.has(k) && Math.abs(m.get(k).t.at(-1) - {stamp * 1e-9!r}) < 1e-6"
+        _wait(browser, f"() => {{ const m = window.rlsState.models; return ['CZ', 'Cm'].every(k => {newest}); }}", 60)
+        time.sleep(0.5)  # one more redraw period
+        _expect_shown(_shown(browser), last)
+        assert browser.get_attribute("#banner", "data-state") == "running"
+        refs = browser.evaluate("Object.fromEntries([...document.querySelectorAll('.panel')].map(p => "
+                                "[p.dataset.param, p.querySelector('.ref').textContent]))")
+        assert refs == {name: f"reference {T2_TRUE[name]:.4f}" if name in T2_TRUE else "" for name in last}
+        assert {r.get_attribute("data-stream") for r in browser.query_selector_all("#streams tbody tr")} == set(INPUTS)
+        assert browser.evaluate("window.rlsLatency.length") > 100
+        _shot(browser, tmp_path, "dashboard_live.png")
+    finally:
+        recorder.node.destroy_node()
+        rclpy.try_shutdown()
+        err = dashboard.stop() if dashboard is not None else ""
+        assert node.stop() == 0, node.text()
+    assert "dashboard stopped" in err and "arrays dropped: none" in err, err
+
+
+# ------------------------------------------------------------------ replay
+@pytest.fixture(scope="module")
+def twin_otter_replay(tmp_path_factory):
+    from rls_uncertainty.bags import convert
+    from rls_uncertainty.config import load_parameters_file
+    from rls_uncertainty.replay import replay
+
+    base = tmp_path_factory.mktemp("twin_otter")
+    convert(FLIGHT_DATA / "totter_f1_017", ROOT / "msg_schemas" / "fti_msgs" / "mapping.yaml", base / "bag")
+    replay(base / "bag", load_parameters_file("twin_otter_lateral"), base / "est", progress=False, plots=False)
+    return base / "est"
+
+
+def test_replay_page_shows_the_final_values_of_the_replays_estimates_csv(tmp_path, browser, twin_otter_replay):
+    with open(twin_otter_replay / "estimates.csv", newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    last_time = {}
+    for r in rows:
+        last_time[r["model"]] = r["time"]
+    last = {r["parameter"]: (float(r["estimate"]), float(r["converged"])) for r in rows
+            if r["time"] == last_time[r["model"]]}
+    dashboard = Dashboard("--replay", str(twin_otter_replay))
+    try:
+        browser.goto(dashboard.url)
+        _wait(browser, "document.getElementById('banner').dataset.state === 'replay'"
+                       f" && document.querySelectorAll('.panel .value').length === {len(last)}", 60)
+        _wait(browser, "[...document.querySelectorAll('.panel .value')].every(v => v.textContent !== '–')", 30)
+        assert browser.text_content("#mode") == "REPLAY"
+        sections = browser.query_selector_all("section.model")
+        assert [s.get_attribute("data-model") for s in sections] == ["CY", "Cl", "Cn"]  # Eq. 2's order
+        _expect_shown(_shown(browser), last)
+        assert browser.query_selector("nav#window button.active").get_attribute("data-window") == "0"  # all
+        _shot(browser, tmp_path, "dashboard_replay.png")
+    finally:
+        err = dashboard.stop()
+    assert "dashboard stopped" in err, err
+
+
+# ------------------------------------------------------------------ no node
+def test_without_a_node_the_page_says_which_domain_and_discovery_range_it_searched(tmp_path, browser):
+    dashboard = Dashboard("--node", "/nobody_here/rls_estimator")
+    try:
+        browser.goto(dashboard.url)
+        _wait(browser, "document.getElementById('banner').dataset.state === 'no_node'", 60)
+        text = browser.text_content("#banner")
+        domain = os.environ.get("ROS_DOMAIN_ID") or "0"
+        assert "/nobody_here/rls_estimator" in text and f"ROS_DOMAIN_ID={domain}" in text
+        assert f"ROS_AUTOMATIC_DISCOVERY_RANGE={os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE']}" in text
+        assert browser.query_selector_all(".panel") == []
+        _shot(browser, tmp_path, "dashboard_no_node.png")
+    finally:
+        dashboard.stop()

@@ -1,0 +1,78 @@
+"""`rls-uncertainty status | enable | disable | reset` against the estimator node in its own
+process over DDS (loopback), under a namespace: the services are called and their answers
+printed, the node's state really changes (its /diagnostics say so), the status table shows the
+node's streams and models; with no node, a clear error and exit status 1."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+import time
+
+import pytest
+
+from rls_uncertainty.inputs import INPUTS
+
+from ros_harness import ROOT, NodeProcess
+
+T2 = str(ROOT / "config" / "t2.yaml")
+NODE = "/ops/rls_estimator"
+
+
+def _cli(*args: str, timeout: float = 120.0) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "rls_uncertainty.cli", *args], capture_output=True, text=True,
+                          cwd=ROOT, timeout=timeout)
+
+
+@pytest.fixture
+def node(tmp_path):
+    n = NodeProcess(tmp_path, "--params-file", T2, "-r", "__ns:=/ops")
+    try:
+        yield n
+    finally:
+        assert n.stop() == 0, n.text()
+
+
+def _status_once() -> str:
+    r = _cli("status", "--once", "--node", NODE, "--timeout", "60")
+    assert r.returncode == 0, r.stderr
+    return r.stdout
+
+
+def test_enable_disable_reset_call_the_node_and_print_its_answer(node):
+    r = _cli("disable", "--node", NODE, "--timeout", "60")
+    assert (r.returncode, r.stdout) == (0, f"{NODE}: estimation disabled (samples counted, not used)\n"), r.stderr
+    deadline = time.monotonic() + 60
+    while "estimation disabled" not in (text := _status_once()) and time.monotonic() < deadline:
+        pass
+    assert "estimation disabled" in text  # the node's own samples message says so
+    r = _cli("enable", "--node", NODE, "--timeout", "60")
+    assert (r.returncode, r.stdout) == (0, f"{NODE}: estimation enabled\n"), r.stderr
+    r = _cli("reset", "--node", NODE, "--timeout", "60")
+    assert r.returncode == 0 and r.stdout.startswith(f"{NODE}: estimator and inputs reset"), r.stderr
+    assert "service" in node.text() or "reset" in node.text()
+
+
+def test_status_once_prints_the_streams_and_models_of_the_node(node):
+    text = _status_once()
+    lines = text.splitlines()
+    assert lines[0].startswith(NODE) and "ROS_DOMAIN_ID=" in lines[0]
+    assert lines[1].startswith("inputs: WARN")  # nothing is published to it: its inputs are silent
+    table = {line.split()[0]: line for line in lines if line and line.split()[0] in INPUTS}
+    assert set(table) == set(INPUTS)
+    assert "never received" in table["imu"]
+    models = {line.split()[0]: line.split()[1] for line in lines if line[:3] in ("CZ ", "Cm ")}
+    assert models == {"CZ": "initializing", "Cm": "initializing"}
+
+
+def test_no_node_gives_a_clear_error_and_exit_status_1():
+    for args in (("enable",), ("reset",), ("status", "--once")):
+        r = _cli(*args, "--node", "/nobody/rls_estimator", "--timeout", "1")
+        assert r.returncode == 1, r
+        assert r.stderr.startswith(f"rls-uncertainty {args[0]}: error: no ") and "ROS_DOMAIN_ID=" in r.stderr
+        assert "/nobody/rls_estimator" in r.stderr and r.stdout == ""
+
+
+def test_a_bad_node_name_is_a_usage_error():
+    r = _cli("status", "--node", "/bad name")
+    assert r.returncode == 2 and "--node" in r.stderr and "Traceback" not in r.stderr
