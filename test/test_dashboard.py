@@ -12,6 +12,7 @@ from types import SimpleNamespace
 
 import pytest
 
+from rls_uncertainty.config import NODE_NAME
 from rls_uncertainty.dashboard.health import HealthTracker, parse_statuses
 from rls_uncertainty.dashboard.hub import Hub, Source
 from rls_uncertainty.dashboard.model import (
@@ -25,7 +26,6 @@ from rls_uncertainty.dashboard.model import (
 )
 from rls_uncertainty.dashboard.settings import full_node_name, load_reference
 from rls_uncertainty.errors import ConfigError
-from rls_uncertainty.config import NODE_NAME
 from rls_uncertainty.inputs import INPUTS
 from rls_uncertainty.outputs import stamp_label
 
