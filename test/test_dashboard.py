@@ -26,7 +26,7 @@ from rls_uncertainty.dashboard.model import (
 )
 from rls_uncertainty.dashboard.settings import full_node_name, load_reference
 from rls_uncertainty.errors import ConfigError
-from rls_uncertainty.inputs import INPUTS
+from rls_uncertainty.inputs import STREAMS
 from rls_uncertainty.outputs import stamp_label
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -133,7 +133,7 @@ def test_health_reads_back_what_the_node_diagnostics_policy_writes(bundled_repla
     by_name = {s.name: s for s in statuses}
     inputs = by_name[f"{NODE_NAME}: inputs"]
     assert h.inputs_level == inputs.level and h.inputs_message == inputs.message
-    assert [s.name for s in h.streams] == list(INPUTS)
+    assert [s.name for s in h.streams] == list(STREAMS)
     values = dict(inputs.values)
     for s in h.streams:
         for key in ("rate_hz", "age_s", "received", "accepted", "recent.rejected"):

@@ -30,7 +30,7 @@ import rclpy
 from rclpy.qos import QoSHistoryPolicy, QoSProfile, QoSReliabilityPolicy
 from std_msgs.msg import Float64MultiArray, Header
 
-from rls_uncertainty.inputs import INPUTS
+from rls_uncertainty.inputs import STREAMS
 from rls_uncertainty.outputs import parse_stamp_label
 from rls_uncertainty.simulation import T2_TRUE
 
@@ -170,7 +170,7 @@ class _Recorder:
 
 def test_live_page_shows_the_nodes_last_published_values_and_flags_under_a_namespace(tmp_path, browser):
     node_name = f"{NS}/rls_estimator"
-    remaps = [a for kind in INPUTS for a in ("-r", f"{kind}:=/{kind}")]  # the bag's topics are /imu, ...
+    remaps = [a for kind in STREAMS for a in ("-r", f"{kind}:=/{kind}")]  # the bag's topics are /imu, ...
     node = NodeProcess(tmp_path, "--params-file", T2, *REPLAY_NODE, "-r", f"__ns:={NS}", *remaps)
     dashboard = None
     reference = tmp_path / "reference.yaml"  # the simulation's true values (make-bag's maneuver)
@@ -202,7 +202,7 @@ def test_live_page_shows_the_nodes_last_published_values_and_flags_under_a_names
         refs = browser.evaluate("Object.fromEntries([...document.querySelectorAll('.panel')].map(p => "
                                 "[p.dataset.param, p.querySelector('.ref').textContent]))")
         assert refs == {name: f"reference {T2_TRUE[name]:.4f}" if name in T2_TRUE else "" for name in last}
-        assert {r.get_attribute("data-stream") for r in browser.query_selector_all("#streams tbody tr")} == set(INPUTS)
+        assert {r.get_attribute("data-stream") for r in browser.query_selector_all("#streams tbody tr")} == set(STREAMS)
         assert browser.evaluate("window.rlsLatency.length") > 100
         _shot(browser, tmp_path, "dashboard_live.png")
     finally:

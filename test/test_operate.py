@@ -11,7 +11,7 @@ import time
 
 import pytest
 
-from rls_uncertainty.inputs import INPUTS
+from rls_uncertainty.inputs import STREAMS
 
 from ros_harness import ROOT, NodeProcess
 
@@ -58,8 +58,8 @@ def test_status_once_prints_the_streams_and_models_of_the_node(node):
     lines = text.splitlines()
     assert lines[0].startswith(NODE) and "ROS_DOMAIN_ID=" in lines[0]
     assert lines[1].startswith("inputs: WARN")  # nothing is published to it: its inputs are silent
-    table = {line.split()[0]: line for line in lines if line and line.split()[0] in INPUTS}
-    assert set(table) == set(INPUTS)
+    table = {line.split()[0]: line for line in lines if line and line.split()[0] in STREAMS}
+    assert set(table) == set(STREAMS)
     assert "never received" in table["imu"]
     models = {line.split()[0]: line.split()[1] for line in lines if line[:3] in ("CZ ", "Cm ")}
     assert models == {"CZ": "initializing", "Cm": "initializing"}
