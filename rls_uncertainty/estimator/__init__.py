@@ -107,11 +107,13 @@ from .bank import EstimatorBank
 from .batch import batch_estimate
 from .covariance import nearest_psd
 from .lag_window import lag_weights
-from .options import COVARIANCE_KINDS, RESIDUALS, WINDOWS, CovarianceKind, Residual, Window
+from .options import COVARIANCE_KINDS, RESIDUALS, WINDOWS, CovarianceKind, EstimatorOptions, Lags, Residual, Window
 from .recursive import RecursiveEstimator
 
 __all__ = [
     "EstimatorBank",
+    "EstimatorOptions",
+    "Lags",
     "RecursiveEstimator",
     "EstimatorNotReady",
     "NonFiniteInput",
