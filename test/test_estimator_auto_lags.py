@@ -11,7 +11,7 @@ from test_estimator_cases import ar1, rel_close, run, wide_scale_problem
 
 from rls_uncertainty.estimator import EstimatorBank, EstimatorOptions, RecursiveEstimator, batch_estimate
 from rls_uncertainty.estimator.lag_selection import flat_top_lags
-from rls_uncertainty.estimator.reference import flat_top_lag
+from rls_uncertainty.estimator.reference import RecursiveReference, flat_top_lag
 
 
 @pytest.mark.parametrize("p0", [None, 100.0])
@@ -58,7 +58,7 @@ def test_auto_covariance_is_the_batch_formula_with_the_chosen_lags(forgetting, b
     history (noise-model residuals under forgetting), and lags_used is the rule applied to
     autocorrelation(). With the default residual burn-in (50 samples with auto), after the
     burn-in the history's first k0 + 50 residuals are zeroed and R rescaled to the weight
-    total of the rest (the batch prototype of validation/integration/table3_lags.py), and the
+    total of the rest (the batch formula of the residual burn-in), and the
     rule's n is the count (Kish's size under forgetting) of the samples after it."""
     X, z = wide_scale_problem()
     options = EstimatorOptions(lags="auto", forgetting=forgetting, max_lags=40, residual_burn_in=burn_in)
@@ -106,6 +106,39 @@ def test_white_residuals_get_no_lags_and_colored_ones_get_many():
     L = bank.lags_used
     assert L[0] <= 4 and 16 <= L[1] <= 50 and L[2] == 0
     assert np.all(bank.covariance(2) == 0.0) or np.all(np.abs(bank.covariance(2)) < 1e-20)
+
+
+@pytest.mark.parametrize("min_lags", [0, 3])
+@pytest.mark.parametrize("forgetting", [1.0, 0.99])
+def test_an_exact_fit_gets_min_lags_whatever_its_rounding(min_lags, forgetting):
+    """A model that fits exactly has residuals at rounding level, whose pattern depends on
+    the floating-point kernels of the machine: it gets min_lags at every sample from its
+    initialization, in the bank and in the reference, even with a strongly colored error of
+    1e-8 of its output (R(0) ~ 1e-16 of the output's mean square, below EXACT_FIT = 1e-12),
+    which the rule alone would read as 50 lags; with 1e-4 (1e-8, above it) it does read it.
+    (min_lags as far as the samples behind R allow: right after the residual burn-in, one.)"""
+    rng = np.random.default_rng(8)
+    n = 400
+    X = np.column_stack([np.ones(n), np.sin(0.05 * np.arange(n)), rng.standard_normal(n)])
+    clean = X @ [1.0, 2.0, 3.0]
+    colored = ar1(rng, 0.99, (n,))
+    options = EstimatorOptions(lags="auto", max_lags=50, min_lags=min_lags, forgetting=forgetting)
+    bank = EstimatorBank((3, 3, 3), options)
+    refs = [RecursiveReference(3, options) for _ in range(3)]
+    Z = np.column_stack([clean, clean + 1e-8 * colored, clean + 1e-4 * colored])
+    for k in range(n):
+        bank.update(np.stack([X[k]] * 3), Z[k])
+        for ref, z in zip(refs, Z[k], strict=True):
+            ref.update(X[k], z)
+        if bank.ready.all() and k > 3:
+            L = [r.lags_used() for r in refs]
+            assert list(bank.lags_used) == L, k
+            as_zero = [int(flat_top_lags(np.zeros(bank.n_window), bank.rule_samples[j], cap=50, min_lags=min_lags))
+                       for j in range(2)]  # the rule for R = 0: min_lags, as far as the samples allow
+            assert L[:2] == as_zero and (k < 60 or as_zero == [min_lags] * 2), k
+    assert bank.lags_used[2] >= 40  # the same colored error, visible: many lags
+    R = bank.autocorrelation(1)
+    assert flat_top_lags(R, n, cap=50) == 50  # what the rule alone would choose for model 1
 
 
 def test_edge_cases():

@@ -6,8 +6,9 @@ storage, the burn-in's counts) and computes, at most once per sample and only wh
 * the largest lag ``L`` of Eq. 22 of every model: ``min(lags, k - 1)``, or with
   ``lags="auto"`` Politis' flat-top rule (:func:`.lag_selection.flat_top_lags`) on
   ``R_k(0..max_lags)`` with the rule's sample count (:mod:`.burn_in`). A model that is not
-  ready, and a model that fits exactly (its residuals are rounding, whose pattern means
-  nothing; :func:`exact_fits`), gets ``min_lags`` (as far as the lags held allow);
+  ready, and a model that fits exactly (:func:`exact_fits`: its residuals are rounding,
+  whose pattern depends on the machine's floating-point kernels and means nothing), is
+  given ``R_k(0) = 0`` and so ``min_lags`` (as far as the lags held allow);
 * the corrected and conventional covariances of every model from one computation
   (:class:`.CovarianceEvaluator`), the window's half weights cached while the lags
   held stay the same.
@@ -120,10 +121,11 @@ class Evaluation:
                 held = self._lags.cap - 1
                 largest = max(k - 1, 0) if self._all_lags else min(held, max(k - 1, 0))
                 chosen = np.full(len(self.sizes), largest, dtype=np.int64)
-            else:  # models not ready get R(0) = 0: min_lags (the rule's edge case)
+            else:  # models not ready, and exact fits, get R(0) = 0: min_lags (the rule's edge case)
                 sums = self._lags.lag_sums[:, : min(k, self._lags.cap)]
-                if not self._all_ready:
-                    sums = np.where(self._ready[:, None], sums, 0.0)
+                usable = self._ready & ~self._exact(k, self.weight_totals()) if k else self._ready
+                if not usable.all():
+                    sums = np.where(usable[:, None], sums, 0.0)
                 o = self.options
                 chosen = flat_top_lags(sums, self._burn.rule_samples(k), cap=o.max_lags, min_lags=o.min_lags)
             self._chosen = chosen

@@ -48,17 +48,20 @@ What the paper leaves open is defined here, and the fast bank follows it:
 * **Lag window** ``c_i`` (:func:`.lag_window.lag_weights`): Eq. 20 keeps all lags
   ``i < k``, Eq. 22 lags ``i <= n_tau``; ``bartlett`` weights them by ``1 - i/(n_tau+1)``
   (``n_tau = k - 1`` with all lags).
-* **Automatic lags** (``n_lags="auto"``, truncated window only): ``R_k(i)`` is kept for
+* **Automatic lags** (``lags="auto"``, truncated window only): ``R_k(i)`` is kept for
   ``i <= max_lags`` and, when a covariance is evaluated, ``n_tau = L`` is chosen by Politis'
   flat-top rule (:func:`flat_top_lag`): with ``rho(i) = R_k(i)/R_k(0)``, the threshold
   ``tau = 2 sqrt(log10 n / n)`` and ``K = max(5, ceil(sqrt(log10 n)))``, ``m`` is the smallest
   ``m >= 0`` with ``|rho(m+j)| < tau`` for ``j = 1..K`` and ``L = 2 m``, or ``max_lags`` when
   no such run fits in the lags held; ``L`` is limited to ``[min_lags, min(max_lags, lags
-  held, n - 1)]`` and is ``min_lags`` when ``R_k(0) <= 0`` (an exact fit) or before
-  initialization. ``n`` is ``k``, or under forgetting Kish's effective size
-  ``(sum w)^2 / sum w^2`` of the weights ``w_j = f_R^(k-j)`` of ``R_k(i)``.
+  held, n - 1)]`` and is ``min_lags`` before initialization, when ``R_k(0) <= 0``, and when
+  the model fits exactly (``R_k(0)`` at most ``1e-12`` of the mean square of its output, as
+  for the published covariance below): its residuals are then rounding, whose pattern
+  depends on the machine's floating-point kernels, so ``R_k(i)`` counts as zero. ``n`` is
+  ``k``, or under forgetting Kish's effective size ``(sum w)^2 / sum w^2`` of the weights
+  ``w_j = f_R^(k-j)`` of ``R_k(i)``.
 * **Residual burn-in** (``residual_burn_in`` ``B >= 0``; default ``50`` with
-  ``n_lags="auto"``, else 0). Right after a model's initialization at ``k0`` (``k0 = 0`` with a
+  ``lags="auto"``, else 0). Right after a model's initialization at ``k0`` (``k0 = 0`` with a
   prior) its estimate is still poor and its residuals are large and correlated; Eq. 17 keeps
   them in ``R_k(i)`` for ever. With ``B > 0`` they are left out: for ``k <= k0 + B``,
   ``R_k(i)`` is the paper's (above); from ``k = k0 + B + 1`` on it is Eq. 17 started afresh on
@@ -300,15 +303,24 @@ class RecursiveReference:
             raise EstimatorNotReady(f"not initialized after {self.k} samples")
 
     def lags_used(self) -> int:
-        """``n_tau`` of Eq. 22 at this sample: chosen with ``n_lags="auto"``, else the lags held."""
+        """``n_tau`` of Eq. 22 at this sample: chosen with ``lags="auto"``, else the lags held."""
         if not self.auto:
             return self.largest_lag()
         g, k = self.g, self.k
         if self.B > 0 and self.ready and k > self.ready_at + self.B:
             k -= self.ready_at + self.B  # the samples after the burn-in
         n = k if g == 1.0 else (sum(g**i for i in range(k)) ** 2 / sum(g ** (2 * i) for i in range(k)))
-        R = [self.R[i] if self.ready else 0.0 for i in range(self.largest_lag() + 1)]  # not ready: as R(0) = 0
+        usable = self.ready and not self.exact_fit()  # not ready, or rounding for residuals: as R(0) = 0
+        R = [self.R[i] if usable else 0.0 for i in range(self.largest_lag() + 1)]
         return flat_top_lag(R, n, self.max_lags, self.min_lags)
+
+    def exact_fit(self) -> bool:
+        """The model fits exactly: ``R_k(0)`` is at most ``EXACT_FIT`` (1e-12) of the mean
+        square of the model output ``x_j' theta_k``, weighted as ``Lambda_k(0)``."""
+        output_square = self.theta @ self.Lam[0] @ self.theta  # sum_j f^(2(k-j)) (x_j' theta)^2
+        n_square = sum(self.f ** (2 * (self.k - j)) for j in range(1, self.k + 1))
+        exact: bool = self.R[0] <= EXACT_FIT * output_square / n_square
+        return exact
 
     def weights(self) -> np.ndarray:
         """Lag window ``c_i`` for the lags held (Eqs. 20, 22)."""
@@ -336,9 +348,7 @@ class RecursiveReference:
         """The covariance the estimator publishes: repaired where a diagonal is negative."""
         cov = self.covariance(kind)
         if kind == "corrected" and np.any(np.diag(cov) < 0.0):
-            output_square = self.theta @ self.Lam[0] @ self.theta  # sum_j f^(2(k-j)) (x_j' theta)^2
-            n_square = sum(self.f ** (2 * (self.k - j)) for j in range(1, self.k + 1))
-            if self.R[0] <= EXACT_FIT * output_square / n_square:
+            if self.exact_fit():
                 return np.zeros_like(cov)  # an exact fit: rounding, not indefiniteness
             return nearest_psd(cov)
         return cov
