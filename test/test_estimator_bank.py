@@ -275,8 +275,7 @@ def test_burn_in_covariance_is_the_batch_formula_on_the_residuals_after_it(forge
     """Independent of reference.py: after the burn-in the bank's covariances (40 lags, burn-in
     50) are batch_estimate (Eqs. 8-11) on the recursive residual history with the residuals of
     samples 1..k0+50 zeroed, rescaled from the weight total of all samples to that of the
-    samples after the burn-in (the prototype of validation/integration/table3_lags.py: N/n
-    when f = 1); during the burn-in they are the paper's."""
+    samples after the burn-in (N/n when f = 1); during the burn-in they are the paper's."""
     X, z = wide_scale_problem()
     est = RecursiveEstimator(4, EstimatorOptions(lags=40, forgetting=forgetting, residual_burn_in=50))
     g = est.options.noise_forgetting_used

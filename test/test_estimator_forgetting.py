@@ -10,9 +10,8 @@ multisines), the equation error is AR(1) with correlation time ~4.5 samples (wel
 Asserted for each parameter: mean corrected SE / exact SE in [0.90, 1.10]; 2-SE coverage in
 [0.92, 0.985] (binomial sd 0.9 %); the Monte Carlo std of the estimates within 10 % of the
 exact one (checks the reference). The estimator's own residuals (``noise_forgetting = f``)
-give SE/exact 0.64 (bias) and 0.72-0.80 (multisines), coverage 76-89 %, and fail
-(``xfail(strict=True)``); the default noise model gives 0.96-1.00 and 94-97 % (six seeds;
-docs/estimator.md).
+fail them (``xfail(strict=True)``); the default noise model meets them. The measured figures
+of both: docs/estimator.md.
 """
 
 from __future__ import annotations
