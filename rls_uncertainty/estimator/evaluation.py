@@ -80,6 +80,7 @@ class Evaluation:
         self._evaluator = CovarianceEvaluator(eq13=options.forgetting == 1.0)
         self._covariances: Covariances | None = None  # of the current sample
         self._chosen: IntArray | None = None  # the lags of the current sample (chosen on first use)
+        self._totals: float | FloatArray | None = None  # the weight totals of the current sample
         self._window_key: tuple[int, int] | None = None
         self._window_h = np.zeros(0)
 
@@ -93,7 +94,7 @@ class Evaluation:
         self.new_sample()
 
     def new_sample(self) -> None:
-        self._covariances = self._chosen = None
+        self._covariances = self._chosen = self._totals = None
 
     def saved(self) -> Covariances | None:
         """The covariances evaluated at this sample (None if none were)."""
@@ -104,8 +105,12 @@ class Evaluation:
         self._covariances = saved
 
     def weight_totals(self) -> float | FloatArray:
-        """The weight total of ``R_k(i)``: one float, or one per model after a burn-in (:mod:`.burn_in`)."""
-        return self._burn.weight_totals(*self._counters())
+        """The weight total of ``R_k(i)``: one float, or one per model after a burn-in
+        (:mod:`.burn_in`); computed once per sample."""
+        totals = self._totals
+        if totals is None:
+            totals = self._totals = self._burn.weight_totals(*self._counters())
+        return totals
 
     def theta_all(self) -> FloatArray:
         """Estimates of every model, NaN on padding and models not ready."""
@@ -123,8 +128,12 @@ class Evaluation:
                 chosen = np.full(len(self.sizes), largest, dtype=np.int64)
             else:  # models not ready, and exact fits, get R(0) = 0: min_lags (the rule's edge case)
                 sums = self._lags.lag_sums[:, : min(k, self._lags.cap)]
-                usable = self._ready & ~self._exact(k, self.weight_totals()) if k else self._ready
-                if not usable.all():
+                if self._all_ready:
+                    exact = self._exact(k, self.weight_totals())
+                    if exact.any():
+                        sums = np.where(exact[:, None], 0.0, sums)
+                elif k:
+                    usable = self._ready & ~self._exact(k, self.weight_totals())
                     sums = np.where(usable[:, None], sums, 0.0)
                 o = self.options
                 chosen = flat_top_lags(sums, self._burn.rule_samples(k), cap=o.max_lags, min_lags=o.min_lags)
@@ -136,7 +145,7 @@ class Evaluation:
         cov = self._covariances
         if cov is None:
             lags = self._lags
-            k, n = self._counters()
+            k, _ = self._counters()
             if k < lags.cap:
                 w = k
                 sums, products = lags.lag_sums[:, :w], lags.lag_products[:, :, :w]
@@ -152,7 +161,7 @@ class Evaluation:
             else:
                 largest = k - 1 if self._all_lags else lags.cap - 1
                 h = self._window_h if self._window_key == (largest, w) else self._half_window(largest, w)
-            totals = self._burn.weight_totals(k, n)
+            totals = self.weight_totals()
             cov, repaired = self._evaluator(
                 self._D, self._D_diagonal, sums, h, products, 1.0 / totals,
                 self._cov_scale, self._se_scale, lambda: self._exact(k, totals), self.sizes,
