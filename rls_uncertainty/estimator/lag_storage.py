@@ -1,6 +1,6 @@
 """What a bank keeps per lag: the recent samples and the lag-indexed sums.
 
-For ``M`` models of at most ``n`` parameters and a lag capacity ``cap`` (``n_lags + 1``,
+For ``M`` models of at most ``n`` parameters and a lag capacity ``cap`` (``held + 1``,
 or growing by doubling when all lags are kept):
 
 * **History**, newest first: ``x`` (column-scaled regressors) and ``v`` (residuals of
@@ -49,7 +49,7 @@ from .burn_in import BurnIn
 
 __all__ = ["LagStorage", "GROWTH_START"]
 
-GROWTH_START = 64  # initial lag capacity when all lags are kept (n_lags=None)
+GROWTH_START = 64  # initial lag capacity when all lags are kept (lags="all")
 
 _HISTORY = ("x", "y", "v")
 
