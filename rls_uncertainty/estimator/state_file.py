@@ -70,6 +70,7 @@ _MAX_MODELS, _MAX_PARAMETERS = 64, 64
 _MAX_LAGS = 10_000_000
 _MAX_COUNT = 2**53  # samples: exact as a float
 _GROWTH_START = GROWTH_START  # the lag capacity an all-lags bank starts with, doubled as samples arrive
+_ANOTHER = "saved with another aircraft, model or estimator configuration"
 _META_KEYS = ("format", "fingerprint", "sizes", "options", "bank_counters", "samples_used", "zsum", "zsq")
 _F8, _I8, _B1 = np.dtype("<f8"), np.dtype("<i8"), np.dtype("|b1")
 
@@ -231,13 +232,12 @@ def _check_expected(
         return
     want_sizes, want_options = expect
     if list(sizes) != list(want_sizes):
-        raise _Invalid(f"saved with other models: field 'sizes' is {_short(sizes)}, the configuration has "
-                       f"{_short(want_sizes)}")
+        raise _Invalid(f"{_ANOTHER}: field 'sizes' is {_short(sizes)}, the configuration has {_short(want_sizes)}")
     found, want = options.resolved().as_dict(), want_options.resolved().as_dict()
     for key in want:
         if found[key] != want[key]:
-            raise _Invalid(f"saved with another estimator configuration: field 'options.{key}' is "
-                           f"{_short(found[key])}, the configuration has {_short(want[key])}")
+            raise _Invalid(f"{_ANOTHER}: field 'options.{key}' is {_short(found[key])}, the configuration has "
+                           f"{_short(want[key])}")
 
 
 def _check_counters(raw: Any, options: EstimatorOptions) -> dict[str, Any]:
@@ -393,7 +393,7 @@ def _load_archive(
     _check_expected(sizes, options, expect)
     # Compare as JSON would store it (tuples become lists).
     if meta["fingerprint"] != json.loads(json.dumps(fingerprint)):
-        raise _Invalid("saved with another aircraft, model or estimator configuration")
+        raise _Invalid(_ANOTHER)
     counters = _check_counters(meta["bank_counters"], options)
     samples_used = _int(meta["samples_used"], "samples_used", 0, _MAX_COUNT)
     zsum, zsq = _check_sums(meta, len(sizes))
