@@ -1,13 +1,13 @@
-"""Speed and memory of the recursive estimator (issue: package foundation).
+"""Speed and memory of the recursive estimator.
 
 Prints, in one run on this machine:
   1. per-sample time for the six models of Eq. 2 (3, 4, 3, 6, 4, 4 parameters) at
-     n_lags = 0, 11, 50, 200 and all: the update alone (Eqs. 15-17, 21) and the update plus
+     lags = 0, 11, 50, 200 and all: the update alone (Eqs. 15-17, 21) and the update plus
      every output a node publishes (estimates, corrected and conventional standard errors);
-  2. for n_lags = 50, the cost around k = 1e3, 1e4 and 1e5 (must stay flat) and the memory;
-  2b. forgetting f = 0.98 at 50 lags: the estimator's own residuals (noise_forgetting = f, the
-     formulas before issue 12 item 7) against the default noise model (f_R = 0.99951);
-  2c. n_lags = "auto" (max_lags 50, the lags chosen at every sample) beside n_lags = 50;
+  2. for lags = 50, the cost around k = 1e3, 1e4 and 1e5 (must stay flat) and the memory;
+  2b. forgetting f = 0.98 at 50 lags: the estimator's own residuals (noise_forgetting = f)
+     against the default noise model (f_R = 0.99951; docs/estimator.md);
+  2c. lags = "auto" (max_lags 50, the lags chosen at every sample) beside lags = 50;
   3. the ratio against refitting batch OLS with a HAC covariance (statsmodels, uniform kernel,
      maxlags 50) at every sample of a 600-sample maneuver, six models.
 
@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from rls_uncertainty.estimator import EstimatorBank
+from rls_uncertainty.estimator import EstimatorBank, EstimatorOptions
 
 SIZES = (3, 4, 3, 6, 4, 4)
 RATE = 50.0
@@ -56,9 +56,9 @@ def outputs(bank: EstimatorBank) -> None:
     bank.standard_errors_all("conventional")
 
 
-def per_sample(n_lags, n: int = 3000, warm: int = 300, **options) -> tuple[float, float, float]:
+def per_sample(lags, n: int = 3000, warm: int = 300, **options) -> tuple[float, float, float]:
     X, z = maneuver(n)
-    bank = EstimatorBank(SIZES, n_lags, **options)
+    bank = EstimatorBank(SIZES, EstimatorOptions(lags=lags, **options))
     for k in range(warm):
         bank.update(X[k], z[k])
     t_upd, t_all = [], []
@@ -75,9 +75,9 @@ def per_sample(n_lags, n: int = 3000, warm: int = 300, **options) -> tuple[float
     return float(np.median(t_upd) * 1e6), float(np.median(t_all) * 1e6), float(np.percentile(t_all, 99) * 1e6)
 
 
-def flat_cost(n_lags: int = 50, total: int = 100_000) -> list[tuple[int, float]]:
+def flat_cost(lags: int = 50, total: int = 100_000) -> list[tuple[int, float]]:
     X, z = maneuver(2000)
-    bank = EstimatorBank(SIZES, n_lags)
+    bank = EstimatorBank(SIZES, EstimatorOptions(lags=lags))
     marks = {1_000, 10_000, 100_000}
     out = []
     times = []
@@ -100,7 +100,7 @@ def hac_ratio(n: int = 600, maxlags: int = 50) -> tuple[float, float]:
 
     X, z = maneuver(n)
     t0 = time.perf_counter()
-    bank = EstimatorBank(SIZES, maxlags)
+    bank = EstimatorBank(SIZES, EstimatorOptions(lags=maxlags))
     for k in range(n):
         bank.update(X[k], z[k])
         if bank.ready.all():
@@ -123,14 +123,14 @@ def main() -> None:
     print(f"rls_uncertainty estimator benchmark  (numpy {np.__version__}, {os.cpu_count()} cores, "
           f"OPENBLAS_CORETYPE={os.environ.get('OPENBLAS_CORETYPE', '-')})")
     print("\n1. Six models of Eq. 2 (3,4,3,6,4,4 parameters), median microseconds per sample")
-    print(f"   {'n_lags':>8}{'update':>10}{'update+outputs':>17}{'p99':>9}")
-    for n_lags in (0, 11, 50, 200, None):
-        upd, total, p99 = per_sample(n_lags)
-        print(f"   {('all' if n_lags is None else n_lags)!s:>8}{upd:10.1f}{total:17.1f}{p99:9.1f}")
+    print(f"   {'lags':>8}{'update':>10}{'update+outputs':>17}{'p99':>9}")
+    for lags in (0, 11, 50, 200, "all"):
+        upd, total, p99 = per_sample(lags)
+        print(f"   {lags!s:>8}{upd:10.1f}{total:17.1f}{p99:9.1f}")
     print("   (target: 50 lags, six models, at most 30 us; the paper: ~800 us per sample for two "
           "models in MATLAB)")
 
-    print("\n2. n_lags = 50: median microseconds per sample (update + outputs) around k")
+    print("\n2. lags = 50: median microseconds per sample (update + outputs) around k")
     marks, state_bytes = flat_cost()
     for k, us in marks:
         print(f"   k = {k:>7,}: {us:6.1f} us")
@@ -141,14 +141,14 @@ def main() -> None:
     print(f"   {'R_k(i) from':>26}{'update':>10}{'update+outputs':>17}{'p99':>9}{'state':>8}")
     for label, g in (("own residuals (f_R = f)", 0.98), ("noise model (default f_R)", None)):
         upd, total, p99 = per_sample(50, forgetting=0.98, noise_forgetting=g)
-        kib = sum(a.nbytes for a in EstimatorBank(SIZES, 50, forgetting=0.98, noise_forgetting=g, p0=1.0)
-                  .state()["arrays"].values()) / 1024
+        options = EstimatorOptions(lags=50, forgetting=0.98, noise_forgetting=g, p0=1.0)
+        kib = sum(a.nbytes for a in EstimatorBank(SIZES, options).state()["arrays"].values()) / 1024
         print(f"   {label:>26}{upd:10.1f}{total:17.1f}{p99:9.1f}{kib:8.1f}")
 
-    print("\n2c. Automatic lags (issue 14), median microseconds per sample")
-    print(f"   {'n_lags':>26}{'update':>10}{'update+outputs':>17}{'p99':>9}")
-    for label, n_lags in (("50", 50), ("auto (max_lags 50)", "auto")):
-        upd, total, p99 = per_sample(n_lags)
+    print("\n2c. Automatic lags, median microseconds per sample")
+    print(f"   {'lags':>26}{'update':>10}{'update+outputs':>17}{'p99':>9}")
+    for label, lags in (("50", 50), ("auto (max_lags 50)", "auto")):
+        upd, total, p99 = per_sample(lags)
         print(f"   {label:>26}{upd:10.1f}{total:17.1f}{p99:9.1f}")
 
     print("\n3. 600-sample maneuver, six models, 50 lags: recursive vs refitting batch OLS + HAC "

@@ -26,25 +26,26 @@ def _demo(args: argparse.Namespace) -> int:
 
 def _simulate(args: argparse.Namespace) -> int:
     """Estimator on a seeded simulated T-2 maneuver (Section IV.A), one sample at a time."""
-    from .estimator import EstimatorBank
+    from .estimator import EstimatorBank, EstimatorOptions
     from .report import results_table, rows_from_arrays
     from .simulation import T2_MODELS, T2_TRUE, add_noise, reduce_short_period, simulate_short_period
 
     record = add_noise(simulate_short_period(), args.noise / 100.0, np.random.default_rng(args.seed))
     t, data = reduce_short_period(record)
     models = list(T2_MODELS)
-    bank = EstimatorBank([len(m.regressors) for m in models], args.lags, args.window, args.forgetting,
-                         residual_burn_in=_bank_burn_in(args.burn_in))
+    options = EstimatorOptions(lags=args.lags, window=args.window,
+                               forgetting=args.forgetting, residual_burn_in=_bank_burn_in(args.burn_in))
+    bank = EstimatorBank([len(m.regressors) for m in models], options)
     z = np.empty(len(models))
     for k in range(t.size):
         rows = [data[m.output][0][k] for m in models]
         for j, m in enumerate(models):
             z[j] = data[m.output][1][k]
         bank.update(rows, z)
-    lags = "all" if args.lags is None else args.lags
-    if args.lags == "auto":
+    lags = str(options.lags)
+    if lags == "auto":
         lags = "auto (" + ", ".join(f"{m.output} {L}" for m, L in zip(models, bank.lags_used, strict=True)) + ")"
-    burn = f", residual burn-in {bank.residual_burn_in} samples" if bank.residual_burn_in else ""
+    burn = f", residual burn-in {options.burn_in} samples" if options.burn_in else ""
     print(
         f"T-2 short-period maneuver, {args.noise:g}% band-limited noise (seed {args.seed}), "
         f"{t.size} samples at 50 Hz, {lags} lags, {args.window} window{burn}\n"
@@ -63,19 +64,18 @@ def _simulate(args: argparse.Namespace) -> int:
 
 def _montecarlo(args: argparse.Namespace) -> int:
     """Table 3 of the paper: every noise level, ``--runs`` runs each, on every core."""
-    from .estimator.options import check_burn_in
+    from .estimator import EstimatorOptions
     from .files import output_directory
     from .montecarlo import LEVELS, run_table3, write_outputs
 
     levels = LEVELS if args.levels is None else tuple(x / 100.0 for x in args.levels)
     out = Path(args.out)
+    options = EstimatorOptions(lags=args.lags, residual_burn_in=_bank_burn_in(args.burn_in))
     # The output directory is checked before the runs and appears only when complete.
     with output_directory(out, force=args.force) as tmp:
-        burn_in = _bank_burn_in(args.burn_in)
-        shown = check_burn_in(burn_in, args.lags)
-        print(f"Monte Carlo: {args.runs} runs x {len(levels)} levels, {args.lags} lags, residual burn-in {shown}, "
-              f"{args.jobs or 'all'} processes")
-        results = run_table3(args.runs, levels, n_lags=args.lags, jobs=args.jobs, residual_burn_in=burn_in)
+        print(f"Monte Carlo: {args.runs} runs x {len(levels)} levels, {options.lags} lags, residual burn-in "
+              f"{options.burn_in}, {args.jobs or 'all'} processes")
+        results = run_table3(args.runs, levels, options=options, jobs=args.jobs)
         paths = write_outputs(results, tmp, figures=not args.no_figures)
         table = paths["md"].read_text()
     print(table)

@@ -52,8 +52,7 @@ import yaml
 from .convergence import ConvergenceConfig
 from .differentiation import DifferentiatorConfig
 from .errors import ConfigError
-from .estimator import RESIDUALS, WINDOWS, Residual, Window
-from .estimator.options import AUTO_BURN_IN, MAX_BURN_IN, check_burn_in
+from .estimator.options import AUTO_BURN_IN, MAX_BURN_IN, RESIDUALS, WINDOWS, EstimatorOptions
 from .limits import PlausibilityLimits
 from .ros_arguments import (
     ParameterFile,
@@ -68,7 +67,7 @@ from .surface_mixing import SURFACES, SurfaceMixing
 __all__ = [
     "AircraftConfig",
     "ModelConfig",
-    "EstimatorConfig",
+    "EstimatorOptions",
     "InputConfig",
     "PlausibilityLimits",
     "OutputConfig",
@@ -85,6 +84,7 @@ __all__ = [
     "NodeConfig",
     "parameter_defaults",
     "pipeline_config",
+    "estimator_options",
     "node_config",
     "load_parameters_file",
     "node_parameters_file",
@@ -529,67 +529,6 @@ def _finite(value: Any) -> bool:
 
 
 @dataclass(frozen=True)
-class EstimatorConfig:
-    """Settings of the :class:`.estimator.EstimatorBank` (``estimator.*`` parameters):
-    ``n_lags`` residual autocorrelation lags of Eq. 22 (``None``: all lags, Eq. 20; 0: the
-    conventional covariance, Eq. 13), the lag ``window``, the exponential ``forgetting``
-    factor (1 is the paper) and the ``residual`` used in Eqs. 16-17; ``lag_selection``
-    ``"auto"`` chooses each model's lags up to ``max_lags`` from the data instead of
-    ``n_lags`` (``EstimatorBank(n_lags="auto", max_lags=...)``); ``residual_burn_in``: samples
-    after each model's initialization left out of ``R_k(i)`` (``None``, the parameter's -1:
-    50 with ``lag_selection`` auto, 0 otherwise; :attr:`bank_burn_in` is the value used)."""
-
-    n_lags: int | None = 50
-    window: Window = "truncated"
-    forgetting: float = 1.0
-    residual: Residual = "standardized"
-    lag_selection: str = "fixed"
-    max_lags: int = 50
-    residual_burn_in: int | None = None
-
-    @property
-    def bank_lags(self) -> int | str | None:
-        """The bank's ``n_lags``: ``"auto"`` or the fixed lags."""
-        return "auto" if self.lag_selection == "auto" else self.n_lags
-
-    @property
-    def bank_burn_in(self) -> int:
-        """The bank's ``residual_burn_in`` with the default resolved (50 with auto, else 0)."""
-        return check_burn_in(self.residual_burn_in, self.bank_lags)
-
-    def __post_init__(self) -> None:
-        lags = self.n_lags
-        # The value may come untyped from YAML or a parameter: numpy integers are Integral, not int
-        # (mypy does not relate int to numbers.Integral, hence "unreachable").
-        if lags is not None and (isinstance(lags, bool) or not isinstance(lags, Integral) or lags < 0):  # type: ignore[unreachable]
-            raise ConfigError(f"estimator.lags must be all (-1) or an integer >= 0, got {lags!r}")
-        if self.window not in WINDOWS:
-            raise ConfigError(f"estimator.window must be one of {list(WINDOWS)}, got {self.window!r}")
-        if not (_finite(self.forgetting) and 0.0 < self.forgetting <= 1.0):
-            raise ConfigError(f"estimator.forgetting must be in (0, 1], got {self.forgetting!r}")
-        if self.residual not in RESIDUALS:
-            raise ConfigError(f"estimator.residual must be one of {list(RESIDUALS)}, got {self.residual!r}")
-        if self.lag_selection not in LAG_SELECTIONS:
-            raise ConfigError(
-                f"estimator.lag_selection must be one of {list(LAG_SELECTIONS)}, got {self.lag_selection!r}"
-            )
-        m: object = self.max_lags  # (whatever the parameters held: checked here)
-        if isinstance(m, bool) or not isinstance(m, Integral) or m < 1:
-            raise ConfigError(f"estimator.max_lags must be an integer >= 1, got {m!r}")
-        b: object = self.residual_burn_in
-        if b is not None and (isinstance(b, bool) or not isinstance(b, Integral) or not 0 <= int(b) <= MAX_BURN_IN):
-            raise ConfigError(
-                f"estimator.residual_burn_in must be -1 (the default: {AUTO_BURN_IN} with lag_selection auto, 0 "
-                f"otherwise) or an integer in [0, {MAX_BURN_IN}], got {b!r}"
-            )
-        if self.lag_selection == "auto" and self.window != "truncated":
-            raise ConfigError(
-                "estimator.lag_selection auto needs estimator.window truncated (the rule chooses a "
-                f"truncation point), got {self.window!r}"
-            )
-
-
-@dataclass(frozen=True)
 class InputConfig:
     """How the input streams are used (``inputs.*`` parameters): the dynamic-pressure topic or
     ``0.5 air_density V^2`` (kg/m^3), the thrust topic or zero thrust, the longest gap
@@ -668,7 +607,7 @@ class PipelineConfig:
     aircraft: AircraftConfig
     models: tuple[ModelConfig, ...] = DEFAULT_MODELS
     rate: float = 50.0
-    estimator: EstimatorConfig = EstimatorConfig()
+    estimator: EstimatorOptions = field(default_factory=EstimatorOptions)
     differentiator: DifferentiatorConfig = DifferentiatorConfig()
     inputs: InputConfig = InputConfig()
     surfaces: SurfaceMixing = SurfaceMixing()
@@ -710,18 +649,12 @@ class PipelineConfig:
 
     def fingerprint(self) -> dict:
         """What a saved estimator state must match to be resumed."""
-        e = self.estimator
         return {
             "aircraft": [getattr(self.aircraft, f.name) for f in fields(AircraftConfig)],
             "models": [[m.output, *m.regressors] for m in self.models],
             "rate": self.rate,
-            "n_lags": e.n_lags,
-            "window": e.window,
-            "forgetting": e.forgetting,
-            "residual": e.residual,
-        } | ({"n_lags": "auto", "max_lags": e.max_lags} if e.lag_selection == "auto" else {}) | (
-            {"residual_burn_in": e.bank_burn_in} if e.bank_burn_in else {}
-        )
+            "estimator": self.estimator.resolved().as_dict(),
+        }
 
 
 @dataclass(frozen=True)
@@ -748,28 +681,36 @@ def pipeline_config(params: dict[str, Any] | None = None) -> PipelineConfig:
     if bad:
         raise ConfigError(f"parameter 'models.enabled': unknown model(s) {bad}; known: {list(OUTPUTS)}")
     models = tuple(ModelConfig(out, tuple(v[f"models.{out}"])) for out in enabled)
-    lags = v["estimator.lags"]
     # Lists from YAML or ROS parameters become the tuples SurfaceMixing holds.
     surfaces: dict[str, Any] = {k: tuple(x) if isinstance(x, list) else x for k, x in _section(v, "surfaces").items()}
     return PipelineConfig(
         aircraft=load_aircraft(v["aircraft"]),
         models=models,
         rate=v["rate"],
-        estimator=EstimatorConfig(
-            n_lags=None if lags < 0 else lags,
-            window=v["estimator.window"],
-            forgetting=v["estimator.forgetting"],
-            residual=v["estimator.residual"],
-            lag_selection=v["estimator.lag_selection"],
-            max_lags=v["estimator.max_lags"],
-            residual_burn_in=None if v["estimator.residual_burn_in"] < 0 else v["estimator.residual_burn_in"],
-        ),
+        estimator=estimator_options(v),
         differentiator=DifferentiatorConfig(**_section(v, "differentiator")),
         inputs=InputConfig(**_section(v, "inputs")),
         surfaces=SurfaceMixing(**surfaces),
         limits=PlausibilityLimits(**_section(v, "limits")),
         convergence=ConvergenceConfig(**_section(v, "convergence")),  # rate_hz: the pipeline uses rate
         outputs=OutputConfig(**_section(v, "outputs")),
+    )
+
+
+def estimator_options(values: dict[str, Any]) -> EstimatorOptions:
+    """The ``estimator.*`` parameters as :class:`.estimator.EstimatorOptions`: ``estimator.lags``
+    (-1: ``"all"``), ``estimator.lag_selection`` (``auto``: ``lags="auto"``, up to
+    ``estimator.max_lags``), ``estimator.residual_burn_in`` (-1: the default), ``window``,
+    ``forgetting`` and ``residual`` as they are. Raises :class:`ConfigError` naming the option."""
+    lags = values["estimator.lags"]
+    burn_in = values["estimator.residual_burn_in"]
+    return EstimatorOptions(
+        lags="auto" if values["estimator.lag_selection"] == "auto" else "all" if lags == -1 else lags,
+        window=values["estimator.window"],
+        forgetting=values["estimator.forgetting"],
+        residual=values["estimator.residual"],
+        max_lags=values["estimator.max_lags"],
+        residual_burn_in=None if burn_in == -1 else burn_in,
     )
 
 

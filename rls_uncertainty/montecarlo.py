@@ -23,7 +23,7 @@ import numpy as np
 
 from .convergence import ConvergenceConfig, ConvergenceMonitor
 from .differentiation import DifferentiatorConfig
-from .estimator import EstimatorBank, batch_estimate
+from .estimator import EstimatorBank, EstimatorOptions, Lags, batch_estimate
 from .simulation import T2_MODELS, T2_TRUE, SimulationConfig, add_noise, reduce_short_period, simulate_short_period
 
 __all__ = [
@@ -32,6 +32,7 @@ __all__ = [
     "PAPER_DIFFERENTIATOR",
     "MONTE_CARLO_CONVERGENCE",
     "BEST_FROM",
+    "TABLE3_OPTIONS",
     "LevelResult",
     "level_inputs",
     "run_level",
@@ -75,6 +76,8 @@ LAG_SWEEP = (0, 1, 2, 3, 5, 8, 11, 15, 20, 30, 50, 75, 100, 150, 200, 300, 400, 
 # The node's convergence criterion with its buffer sized for the simulation's 50 Hz.
 MONTE_CARLO_CONVERGENCE = replace(ConvergenceConfig(), rate_hz=SimulationConfig().rate)
 BEST_FROM = SimulationConfig().input_start + 0.5  # s: from here on, the floor of false convergence
+# The estimator of Table 3: 50 lags, the paper's Eq. 17 (no residual burn-in).
+TABLE3_OPTIONS = EstimatorOptions(lags=50)
 
 
 @dataclass
@@ -83,15 +86,15 @@ class LevelResult:
     runs: int
     estimates: np.ndarray  # (runs, 5) final estimates, PARAMETERS order
     se_conventional: np.ndarray  # (runs, 5)
-    se_corrected: np.ndarray  # (runs, 5), n_lags lags
+    se_corrected: np.ndarray  # (runs, 5), the options' lags
     se_corrected_all: np.ndarray  # (runs, 5), all lags
-    se_batch: np.ndarray  # (runs, 5), batch formula (Eqs. 8-11), n_lags lags, batch residuals
+    se_batch: np.ndarray  # (runs, 5), batch formula (Eqs. 8-11), the same lags, batch residuals
     se_batch_all: np.ndarray  # (runs, 5), batch formula, all lags, batch residuals
     time: np.ndarray  # sample times
     history_mean: np.ndarray  # (N, 3): mean CZ_alpha, mean conventional SE, mean corrected SE
     history_scatter: np.ndarray  # (N,): scatter of CZ_alpha over runs
     last_run: dict  # residual autocorrelations and lag sweep of the last run (Figs. 5, 7)
-    # Convergence flags (issue 14), PARAMETERS order; times in s, inf where never flagged.
+    # Convergence flags, PARAMETERS order; times in s, inf where never flagged.
     # Keyword-only (KW_ONLY): the arrays after the configuration's default need no placeholder default.
     _: KW_ONLY
     convergence: ConvergenceConfig = field(default_factory=ConvergenceConfig)
@@ -106,9 +109,18 @@ class LevelResult:
     ensemble_scatter: np.ndarray  # (N, 5) standard deviation of the estimates over runs
     truth_outside: np.ndarray  # (N, 7) fraction of runs with the true value outside +-2 SE
     # (5 parameters, then any parameter of the C_Z / C_m model), each sample
-    lags_used: np.ndarray | None = None  # (runs, 2) final L of C_Z / C_m (n_lags="auto"; else the lags held)
-    n_lags: int | str = 50  # retained lags of se_corrected, or "auto"
-    residual_burn_in: int = 0  # of se_corrected and se_conventional (the bank's, default 50 with auto)
+    lags_used: np.ndarray | None = None  # (runs, 2) final L of C_Z / C_m (chosen with lags="auto")
+    options: EstimatorOptions = TABLE3_OPTIONS  # of se_corrected and se_conventional
+
+    @property
+    def lags(self) -> Lags:
+        """The retained lags of ``se_corrected``: an integer, "all" or "auto"."""
+        return self.options.lags
+
+    @property
+    def residual_burn_in(self) -> int:
+        """The residual burn-in of ``se_corrected`` and ``se_conventional`` (50 with "auto" by default)."""
+        return self.options.burn_in
 
     def summary(self) -> dict[str, dict[str, float]]:
         out = {}
@@ -168,117 +180,145 @@ def level_inputs(
     return t, reductions, sizes, X, Z
 
 
-def run_level(
-    level: float,
-    runs: int,
-    *,
-    n_lags: int | str = 50,
-    seed: int = 2016,
-    convergence: ConvergenceConfig = MONTE_CARLO_CONVERGENCE,
-    residual_burn_in: int | None = None,
-) -> LevelResult:
-    """All runs of one band-limited noise level (fraction, e.g. 0.2). ``n_lags="auto"``: each
-    run's models choose their lags (at most 50); the batch formula then uses each model's
-    final choice. ``residual_burn_in``: the bank's (``None``: its default, 50 samples with
-    ``"auto"``, 0 otherwise); the all-lags comparison bank keeps the paper's Eq. 17.
+class _Tracker:
+    """What :func:`run_level` records at every sample besides the end-of-maneuver results: the
+    Fig. 6 history of C_Z_alpha, and from one :class:`~rls_uncertainty.convergence.
+    ConvergenceMonitor` over every run's models the first flag of each parameter and model
+    (estimate and corrected SE at that moment) and the ensemble mean, mean corrected SE,
+    scatter and truth-outside rates of every Table 3 parameter."""
 
-    Besides the end-of-maneuver results, one :class:`~rls_uncertainty.convergence.
-    ConvergenceMonitor` over every run's models records when each parameter (and each model)
-    is first flagged converged, with the estimate and corrected SE at that moment, and the
-    ensemble mean, mean corrected SE and scatter of every Table 3 parameter at every sample.
-    """
-    t, reductions, sizes, X, Z = level_inputs(level, runs, seed=seed)
-    n_models = len(T2_MODELS)
-    N = t.size
-    bank = EstimatorBank(sizes, n_lags, residual_burn_in=residual_burn_in)
-    bank_all = EstimatorBank(sizes, None)
-    history = np.full((N, 3), np.nan)
-    scatter = np.full(N, np.nan)
-    cz = np.arange(runs) * n_models  # CZ model of each run
-    # Convergence flags of every run's models, advanced with the bank.
-    monitor = ConvergenceMonitor(sizes, convergence)
-    stamps = np.round(t * 1e9).astype(np.int64)
-    model_of = np.array([_WHERE[p][0] for p in PARAMETERS])
-    p_row, p_col = parameter_cells(runs)  # (runs, 5) bank row and column of each parameter
-    flag_k = np.full((runs, len(PARAMETERS)), -1)
-    flag_theta = np.full((runs, len(PARAMETERS)), np.nan)
-    flag_se = np.full((runs, len(PARAMETERS)), np.nan)
-    model_k = np.full((runs, n_models), -1)
-    model_theta = np.full((runs, len(PARAMETERS)), np.nan)
-    model_se = np.full((runs, len(PARAMETERS)), np.nan)
-    ens = np.full((3, N, len(PARAMETERS)), np.nan)  # mean estimate, mean SE, scatter
-    truth = np.array([T2_TRUE[p] for p in PARAMETERS])
-    outside = np.full((N, len(PARAMETERS) + n_models), np.nan)
-    for k in range(N):
-        bank.update(X[k], Z[k])
-        bank_all.update(X[k], Z[k])
+    def __init__(self, t: np.ndarray, runs: int, sizes: list[int], convergence: ConvergenceConfig) -> None:
+        n_models, N, P = len(T2_MODELS), t.size, len(PARAMETERS)
+        self.t, self.runs = t, runs
+        self.monitor = ConvergenceMonitor(sizes, convergence)
+        self.stamps = np.round(t * 1e9).astype(np.int64)
+        self.cz = np.arange(runs) * n_models  # CZ model of each run
+        self.model_of = np.array([_WHERE[p][0] for p in PARAMETERS])
+        self.p_row, self.p_col = parameter_cells(runs)  # (runs, 5) bank row and column of each parameter
+        self.history = np.full((N, 3), np.nan)  # mean CZ_alpha, mean conventional SE, mean corrected SE
+        self.scatter = np.full(N, np.nan)
+        self.flag_k = np.full((runs, P), -1)
+        self.flag_theta, self.flag_se = np.full((runs, P), np.nan), np.full((runs, P), np.nan)
+        self.model_k = np.full((runs, n_models), -1)
+        self.model_theta, self.model_se = np.full((runs, P), np.nan), np.full((runs, P), np.nan)
+        self.ens = np.full((3, N, P), np.nan)  # mean estimate, mean SE, scatter
+        self.truth = np.array([T2_TRUE[p] for p in PARAMETERS])
+        self.outside = np.full((N, P + n_models), np.nan)
+
+    def sample(self, k: int, bank: EstimatorBank) -> None:
+        runs, cz, P = self.runs, self.cz, len(PARAMETERS)
         if bank.ready[cz].all():
             th = bank.theta_all()[cz, 1]
-            history[k] = (th.mean(), bank.standard_errors_all("conventional")[cz, 1].mean(),
-                          bank.standard_errors_all("corrected")[cz, 1].mean())
-            scatter[k] = th.std(ddof=1) if runs > 1 else 0.0
+            self.history[k] = (th.mean(), bank.standard_errors_all("conventional")[cz, 1].mean(),
+                               bank.standard_errors_all("corrected")[cz, 1].mean())
+            self.scatter[k] = th.std(ddof=1) if runs > 1 else 0.0
         theta_k, se_k, ready_k = bank.theta_all(), bank.standard_errors_all("corrected"), bank.ready
-        flags, model_flags = monitor.update(int(stamps[k]), theta_k, se_k, ready_k)
-        th_p, se_p = theta_k[p_row, p_col], se_k[p_row, p_col]
-        new = flags[p_row, p_col] & (flag_k < 0)
-        flag_k[new], flag_theta[new], flag_se[new] = k, th_p[new], se_p[new]
-        new_model = model_flags.reshape(runs, n_models) & (model_k < 0)
-        model_k[new_model] = k
-        new = new_model[:, model_of]
-        model_theta[new], model_se[new] = th_p[new], se_p[new]
+        flags, model_flags = self.monitor.update(int(self.stamps[k]), theta_k, se_k, ready_k)
+        th_p, se_p = theta_k[self.p_row, self.p_col], se_k[self.p_row, self.p_col]
+        new = flags[self.p_row, self.p_col] & (self.flag_k < 0)
+        self.flag_k[new], self.flag_theta[new], self.flag_se[new] = k, th_p[new], se_p[new]
+        new_model = model_flags.reshape(runs, len(T2_MODELS)) & (self.model_k < 0)
+        self.model_k[new_model] = k
+        new = new_model[:, self.model_of]
+        self.model_theta[new], self.model_se[new] = th_p[new], se_p[new]
         if ready_k.all():
-            ens[0, k], ens[1, k] = th_p.mean(axis=0), se_p.mean(axis=0)
-            ens[2, k] = th_p.std(axis=0, ddof=1) if runs > 1 else 0.0
-            out = np.abs(th_p - truth) > 2 * se_p
-            outside[k, : len(PARAMETERS)] = out.mean(axis=0)
-            outside[k, len(PARAMETERS):] = [out[:, model_of == m].any(axis=1).mean() for m in range(n_models)]
+            self.ens[0, k], self.ens[1, k] = th_p.mean(axis=0), se_p.mean(axis=0)
+            self.ens[2, k] = th_p.std(axis=0, ddof=1) if runs > 1 else 0.0
+            out = np.abs(th_p - self.truth) > 2 * se_p
+            self.outside[k, :P] = out.mean(axis=0)
+            self.outside[k, P:] = [out[:, self.model_of == m].any(axis=1).mean() for m in range(len(T2_MODELS))]
 
-    def collect(b: EstimatorBank, kind: str, what: str = "se") -> np.ndarray:
-        rows = []
-        for r in range(runs):
-            per = [b.theta(r * n_models + m) if what == "theta" else b.standard_errors(r * n_models + m, kind)
-                   for m in range(n_models)]
-            rows.append(_pick(per))
-        return np.array(rows)
+    def results(self) -> dict:
+        """The :class:`LevelResult` fields recorded here."""
+        t = self.t
+        return dict(
+            time=t, history_mean=self.history, history_scatter=self.scatter,
+            flag_time=np.where(self.flag_k >= 0, t[self.flag_k], np.inf),
+            flag_theta=self.flag_theta, flag_se=self.flag_se,
+            model_flag_time=np.where(self.model_k >= 0, t[self.model_k], np.inf),
+            model_flag_theta=self.model_theta, model_flag_se=self.model_se,
+            ensemble_mean=self.ens[0], ensemble_se=self.ens[1], ensemble_scatter=self.ens[2],
+            truth_outside=self.outside,
+        )
 
-    lags_used = bank.lags_used.reshape(runs, n_models)
-    batch: dict[int | str | None, list[np.ndarray]] = {n_lags: [], None: []}
+
+def _collect(bank: EstimatorBank, runs: int, kind: str | None) -> np.ndarray:
+    """``(runs, 5)`` final estimates (``kind`` None) or standard errors of the Table 3 parameters."""
+    n_models = len(T2_MODELS)
+    rows = []
+    for r in range(runs):
+        per = [bank.theta(r * n_models + m) if kind is None else bank.standard_errors(r * n_models + m, kind)
+               for m in range(n_models)]
+        rows.append(_pick(per))
+    return np.array(rows)
+
+
+def _batch_standard_errors(
+    reductions: list[dict[str, tuple[np.ndarray, np.ndarray]]], lags_used: np.ndarray, lags: Lags
+) -> tuple[np.ndarray, np.ndarray]:
+    """``(runs, 5)`` batch standard errors (Eqs. 8-11, batch residuals) with ``lags`` (each
+    model's final choice with ``"auto"``) and with all lags."""
+    batch: dict[Lags, list[np.ndarray]] = {lags: [], "all": []}
     for r, data in enumerate(reductions):
-        for lags, rows in batch.items():
+        for key, rows in batch.items():
             per = [
-                # (a key other than "auto" is an int or None, which mypy cannot see through ==)
-                np.sqrt(np.diag(batch_estimate(
-                    *data[m.output], n_lags=lags_used[r, i] if lags == "auto" else lags,  # type: ignore[arg-type]
-                )[2]))
+                np.sqrt(np.diag(batch_estimate(*data[m.output], lags_used[r, i] if key == "auto" else key)[2]))
                 for i, m in enumerate(T2_MODELS)
             ]
             rows.append(_pick(per))
-    # Figs. 5 and 7 for the last run: recursive vs batch autocorrelation of the C_Z residual,
-    # and corrected SE of C_Z_alpha against the number of retained lags.
-    j = (runs - 1) * n_models
+    return np.array(batch[lags]), np.array(batch["all"])
+
+
+def _last_run(bank_all: EstimatorBank, reductions: list[dict[str, tuple[np.ndarray, np.ndarray]]]) -> dict:
+    """Figs. 5 and 7 for the last run: recursive (all lags) against batch autocorrelation of
+    the C_Z residual, and corrected SE of C_Z_alpha against the number of retained lags."""
+    j = (len(reductions) - 1) * len(T2_MODELS)
     Xcz, zcz = reductions[-1]["CZ"]
+    N = zcz.size
     residuals = bank_all.residuals(j)
     v_batch = zcz - Xcz @ np.linalg.lstsq(Xcz, zcz, rcond=None)[0]
     R_batch = np.array([v_batch[i:] @ v_batch[: N - i] for i in range(N)]) / N
     sweep = [(L, float(np.sqrt(batch_estimate(Xcz, zcz, L, residuals=residuals)[2][1, 1])))
              for L in LAG_SWEEP if L < N]
-    last = {"R_recursive": bank_all.autocorrelation(j), "R_batch": R_batch, "lag_sweep": sweep, "N": N}
+    return {"R_recursive": bank_all.autocorrelation(j), "R_batch": R_batch, "lag_sweep": sweep, "N": N}
+
+
+def run_level(
+    level: float,
+    runs: int,
+    *,
+    options: EstimatorOptions = TABLE3_OPTIONS,
+    seed: int = 2016,
+    convergence: ConvergenceConfig = MONTE_CARLO_CONVERGENCE,
+) -> LevelResult:
+    """All runs of one band-limited noise level (fraction, e.g. 0.2) with the estimator
+    ``options`` (default: 50 lags, the paper's). With ``lags="auto"`` each run's models
+    choose their lags and the batch formula uses each model's final choice. A second bank
+    with all lags and the paper's Eq. 17 gives the all-lags comparison and Figs. 5 and 7.
+
+    Besides the end-of-maneuver results, the convergence flags and the ensemble statistics
+    of every sample are recorded (:class:`_Tracker`).
+    """
+    t, reductions, sizes, X, Z = level_inputs(level, runs, seed=seed)
+    bank = EstimatorBank(sizes, options)
+    bank_all = EstimatorBank(sizes, EstimatorOptions(lags="all"))
+    track = _Tracker(t, runs, sizes, convergence)
+    for k in range(t.size):
+        bank.update(X[k], Z[k])
+        bank_all.update(X[k], Z[k])
+        track.sample(k, bank)
+    lags_used = bank.lags_used.reshape(runs, len(T2_MODELS))
+    se_batch, se_batch_all = _batch_standard_errors(reductions, lags_used, options.lags)
     return LevelResult(
         level=level, runs=runs,
-        estimates=collect(bank, "corrected", "theta"),
-        se_conventional=collect(bank, "conventional"),
-        se_corrected=collect(bank, "corrected"),
-        se_corrected_all=collect(bank_all, "corrected"),
-        se_batch=np.array(batch[n_lags]),
-        se_batch_all=np.array(batch[None]),
-        time=t, history_mean=history, history_scatter=scatter, last_run=last,
-        convergence=convergence,
-        flag_time=np.where(flag_k >= 0, t[flag_k], np.inf),
-        flag_theta=flag_theta, flag_se=flag_se,
-        model_flag_time=np.where(model_k >= 0, t[model_k], np.inf),
-        model_flag_theta=model_theta, model_flag_se=model_se,
-        ensemble_mean=ens[0], ensemble_se=ens[1], ensemble_scatter=ens[2], truth_outside=outside,
-        lags_used=lags_used, n_lags=n_lags, residual_burn_in=bank.residual_burn_in,
+        estimates=_collect(bank, runs, None),
+        se_conventional=_collect(bank, runs, "conventional"),
+        se_corrected=_collect(bank, runs, "corrected"),
+        se_corrected_all=_collect(bank_all, runs, "corrected"),
+        se_batch=se_batch, se_batch_all=se_batch_all,
+        last_run=_last_run(bank_all, reductions),
+        convergence=convergence, lags_used=lags_used, options=options,
+        **track.results(),
     )
 
 
@@ -286,24 +326,24 @@ def run_table3(
     runs: int,
     levels: Sequence[float] = LEVELS,
     *,
-    n_lags: int | str = 50,
+    options: EstimatorOptions = TABLE3_OPTIONS,
     jobs: int | None = None,
     progress: Callable[[str], object] = print,
     convergence: ConvergenceConfig = MONTE_CARLO_CONVERGENCE,
-    residual_burn_in: int | None = None,
 ) -> list[LevelResult]:
-    """Run every level, in parallel over ``jobs`` processes (default: every core)."""
+    """Run every level with the estimator ``options``, in parallel over ``jobs`` processes
+    (default: every core)."""
     jobs = jobs or os.cpu_count() or 1
     results: dict[float, LevelResult] = {}
     t0 = time.perf_counter()
     if jobs == 1 or len(levels) == 1:
         for lv in levels:
-            results[lv] = run_level(lv, runs, n_lags=n_lags, convergence=convergence, residual_burn_in=residual_burn_in)
+            results[lv] = run_level(lv, runs, options=options, convergence=convergence)
             progress(f"  level {lv * 100:4.0f}%: {runs} runs done ({time.perf_counter() - t0:5.1f} s)")
     else:
         with ProcessPoolExecutor(max_workers=jobs) as pool:
-            futures = {pool.submit(run_level, lv, runs, n_lags=n_lags, convergence=convergence,
-                                   residual_burn_in=residual_burn_in): lv for lv in levels}
+            futures = {pool.submit(run_level, lv, runs, options=options, convergence=convergence): lv
+                       for lv in levels}
             for i, fut in enumerate(as_completed(futures), 1):
                 lv = futures[fut]
                 results[lv] = fut.result()
@@ -421,7 +461,7 @@ def _convergence_lines(results: list[LevelResult]) -> list[str]:
 
     lines = [
         "",
-        "## Convergence flags (issue 14)",
+        "## Convergence flags",
         "",
         f"Criterion (`rls_uncertainty.convergence`): window T = {cfg.window:g} s, band k = {cfg.band:g} "
         f"corrected SE, SE rate r = {cfg.max_se_rate:g}/s. Flag: median over runs of the first time the "
@@ -468,7 +508,7 @@ def write_outputs(results: list[LevelResult], out: Path, *, figures: bool = True
             for name, row in res.summary().items():
                 w.writerow([f"{res.level:.2f}", name, row["true"], f"{row['mean']:.6g}",
                             f"{row['se_conventional']:.6g}", f"{row['se_corrected']:.6g}", f"{row['scatter']:.6g}"])
-    n_lags = results[0].n_lags
+    lags = results[0].lags
     burn_in = results[0].residual_burn_in
     lines = [
         "# Table 3 reproduction",
@@ -478,7 +518,7 @@ def write_outputs(results: list[LevelResult], out: Path, *, figures: bool = True
         + (f" Residual burn-in {burn_in} samples: R(i) of Eq. 17 from the residuals after each model's "
            f"initialization + {burn_in} (both SE columns)." if burn_in else ""),
         "",
-        f"| level | parameter | true | mean | SE conventional | SE corrected ({n_lags} lags) | scatter | "
+        f"| level | parameter | true | mean | SE conventional | SE corrected ({lags} lags) | scatter | "
         "corrected/scatter | conventional/scatter |",
         "| --- | --- | --- | --- | --- | --- | --- | --- | --- |",
     ]
@@ -509,7 +549,7 @@ def write_outputs(results: list[LevelResult], out: Path, *, figures: bool = True
                 f"{row['se_corrected_all'] / row['se_batch_all']:.3f} | "
                 f"{row['se_corrected'] / row['se_corrected_all']:.3f} |"
             )
-    if n_lags == "auto":
+    if lags == "auto":
         lines += ["", "## Chosen lags (auto), end of maneuver: median [10%-90%] over runs", "",
                   "| level | " + " | ".join(m.output for m in T2_MODELS) + " |",
                   "| --- |" + " --- |" * len(T2_MODELS)]

@@ -134,8 +134,7 @@ class EstimatorNode(Node):
             self.create_timer(self.node_cfg.state_save_period, self.save_state, clock=steady)
         models = ", ".join(f"{m.output}({len(m.regressors)})" for m in self.config.models)
         est = self.config.estimator
-        lags = (f"auto (at most {est.max_lags})" if est.lag_selection == "auto"
-                else "all" if est.n_lags is None else est.n_lags)
+        lags = f"auto (at most {est.max_lags})" if est.lags == "auto" else est.lags
         self.get_logger().info(
             f"estimating {models} at {self.config.rate:g} Hz, {lags} lags, aircraft {self.config.aircraft.name}; "
             f"inputs {', '.join(self.node_cfg.topics[k] for k in STREAMS)}; {self.state_status}"

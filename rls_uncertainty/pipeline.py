@@ -201,11 +201,7 @@ class Pipeline:
         self._real_square = self._real[:, :, None] & self._real[:, None, :]  # (M, n_max, n_max)
 
     def _new_estimator(self) -> None:
-        c = self.config.estimator
-        self.bank = EstimatorBank(
-            self.sizes, c.bank_lags, c.window, c.forgetting, residual=c.residual, max_lags=c.max_lags,
-            residual_burn_in=c.bank_burn_in,
-        )
+        self.bank = EstimatorBank(self.sizes, self.config.estimator)
         self._X = np.zeros((len(self.sizes), self.bank.n_max))
         self._z = np.zeros(len(self.sizes))
         self._zsum = np.zeros(len(self.sizes))  # sums of z and z^2 since the estimator started
@@ -463,9 +459,7 @@ class Pipeline:
         """Continue from :meth:`save_state`. Raises :class:`StateFileError` when the file is
         unreadable, not a valid state or was written with another configuration (every field is
         checked against this pipeline's configuration before anything is allocated)."""
-        c, bank = self.config.estimator, self.bank
-        expect = {"sizes": list(self.sizes), "n_lags": c.bank_lags, "window": c.window, "forgetting": c.forgetting,
-                  "residual": c.residual, "init_condition": bank.init_condition, "residual_burn_in": c.bank_burn_in}
+        expect = (tuple(self.sizes), self.config.estimator)
         state = load_state(path, self.config.fingerprint(), expect=expect)
         self.bank = state.bank
         self.bookkeeping.samples_used = state.samples_used

@@ -383,3 +383,22 @@ def test_replay_with_no_estimate_says_why_and_exits_1(tmp_path, capsys):
     code = cli.main(["replay", str(BUNDLED), "--config", str(ROOT / "config" / "t2.yaml"),
                      "--out", str(tmp_path / "ok"), "--quiet", "--no-plots"])
     assert code == 0
+
+
+def test_lags_and_burn_in_options_map_onto_the_estimator_parameters():
+    parser = cli.build_parser()
+    args = parser.parse_args(["replay", "bag", "--out", "o", "--lags", "auto", "--max-lags", "70"])
+    params = cli._replay_params(args)
+    assert params["estimator.lag_selection"] == "auto" and params["estimator.max_lags"] == 70
+    assert "estimator.lags" not in params
+    assert parser.parse_args(["montecarlo", "--out", "o", "--lags", "auto"]).lags == "auto"
+    assert parser.parse_args(["montecarlo", "--out", "o", "--lags", "7"]).lags == 7
+    assert parser.parse_args(["simulate", "--lags", "auto"]).lags == "auto"
+    # The residual burn-in: replay overrides the parameter ('default' is its -1), simulate and
+    # montecarlo pass it to the bank (not given or 'default': the bank's, 50 with auto).
+    for given, param in ((["--burn-in", "20"], 20), (["--burn-in", "default"], -1), ([], None)):
+        params = cli._replay_params(parser.parse_args(["replay", "bag", "--out", "o", "--lags", "auto", *given]))
+        assert params.get("estimator.residual_burn_in") == param
+    for given, bank in ((["--burn-in", "0"], 0), (["--burn-in", "default"], None), ([], None)):
+        assert cli._bank_burn_in(parser.parse_args(["montecarlo", "--out", "o", *given]).burn_in) == bank
+        assert cli._bank_burn_in(parser.parse_args(["simulate", *given]).burn_in) == bank

@@ -14,7 +14,7 @@ from rls_uncertainty.config import (
     NODE_NAME,
     PARAMETERS,
     ConfigError,
-    EstimatorConfig,
+    EstimatorOptions,
     InputConfig,
     ModelConfig,
     PipelineConfig,
@@ -100,14 +100,15 @@ def test_shipped_parameter_files_are_valid(name):
 
 def test_every_parameter_reaches_its_nested_field():
     """Each pipeline parameter, set to a non-default value, changes exactly the field of the
-    same name in its section (``estimator.lags`` is ``n_lags``, -1 meaning all lags)."""
+    same name in its section (``estimator.lags`` -1 is ``"all"``, ``estimator.lag_selection``
+    auto is ``lags="auto"``: :func:`.config.estimator_options`)."""
     changed = {
         "rate": ("rate", 100.0),
-        "estimator.lags": (("estimator", "n_lags"), 11),
+        "estimator.lags": (("estimator", "lags"), 11),
         "estimator.window": (("estimator", "window"), "bartlett"),
         "estimator.forgetting": (("estimator", "forgetting"), 0.99),
         "estimator.residual": (("estimator", "residual"), "a_priori"),
-        "estimator.lag_selection": (("estimator", "lag_selection"), "auto"),
+        "estimator.lag_selection": (("estimator", "lags"), "auto"),
         "estimator.max_lags": (("estimator", "max_lags"), 80),
         "estimator.residual_burn_in": (("estimator", "residual_burn_in"), 20),
         "differentiator.window": (("differentiator", "window"), 11),
@@ -155,14 +156,14 @@ def test_every_parameter_reaches_its_nested_field():
         # Nothing else changed.
         restored = dataclasses.replace(getattr(cfg, section), **{attr: getattr(getattr(default, section), attr)})
         assert dataclasses.replace(cfg, **{section: restored}) == default, name
-    assert pipeline_config({"estimator.lags": -1}).estimator.n_lags is None
+    assert pipeline_config({"estimator.lags": -1}).estimator.lags == "all"
     assert pipeline_config({"estimator.residual_burn_in": -1}).estimator.residual_burn_in is None
 
 
 def test_defaults_of_the_table_and_the_dataclasses_agree():
     cfg = pipeline_config({})
     d = parameter_defaults()
-    assert cfg.estimator == EstimatorConfig() and cfg.estimator.n_lags == d["estimator.lags"]
+    assert cfg.estimator == EstimatorOptions() and cfg.estimator.lags == d["estimator.lags"]
     assert cfg.differentiator == DifferentiatorConfig()
     assert cfg.inputs == InputConfig()
     assert cfg.surfaces == SurfaceMixing()
@@ -181,15 +182,15 @@ def test_estimator_choices_are_the_estimators_own():
 
 
 @pytest.mark.parametrize("build,match", [
-    (lambda: EstimatorConfig(n_lags=-1), "estimator.lags"),
-    (lambda: EstimatorConfig(n_lags=2.5), "estimator.lags"),
-    (lambda: EstimatorConfig(window="hann"), "estimator.window"),
-    (lambda: EstimatorConfig(forgetting=0.0), "estimator.forgetting"),
-    (lambda: EstimatorConfig(forgetting=1.5), "estimator.forgetting"),
-    (lambda: EstimatorConfig(residual="raw"), "estimator.residual"),
-    (lambda: EstimatorConfig(residual_burn_in=-1), "estimator.residual_burn_in"),
-    (lambda: EstimatorConfig(residual_burn_in=True), "estimator.residual_burn_in"),
-    (lambda: EstimatorConfig(residual_burn_in=7.0), "estimator.residual_burn_in"),
+    (lambda: EstimatorOptions(lags=-1), "estimator.lags"),
+    (lambda: EstimatorOptions(lags=2.5), "estimator.lags"),
+    (lambda: EstimatorOptions(window="hann"), "estimator.window"),
+    (lambda: EstimatorOptions(forgetting=0.0), "estimator.forgetting"),
+    (lambda: EstimatorOptions(forgetting=1.5), "estimator.forgetting"),
+    (lambda: EstimatorOptions(residual="raw"), "estimator.residual"),
+    (lambda: EstimatorOptions(residual_burn_in=-1), "estimator.residual_burn_in"),
+    (lambda: EstimatorOptions(residual_burn_in=True), "estimator.residual_burn_in"),
+    (lambda: EstimatorOptions(residual_burn_in=7.0), "estimator.residual_burn_in"),
     (lambda: InputConfig(max_gap=0.0), "inputs.max_gap"),
     (lambda: InputConfig(air_density=float("nan")), "inputs.air_density"),
     (lambda: InputConfig(buffer_duration=-1.0), "inputs.buffer_duration"),
@@ -219,25 +220,25 @@ def test_fingerprint_is_what_a_state_file_stores():
         "aircraft": [getattr(T2, f.name) for f in dataclasses.fields(T2)],
         "models": [["Cm", "1", "q_hat"]],
         "rate": 50.0,
-        "n_lags": 7,
-        "window": "truncated",
-        "forgetting": 1.0,
-        "residual": "standardized",
+        "estimator": {"lags": 7, "window": "truncated", "forgetting": 1.0, "residual": "standardized", "max_lags": 50,
+                      "min_lags": 0, "residual_burn_in": 0, "noise_forgetting": 1.0, "init_condition": 1e8, "p0": None},
     }
     assert pipeline_config({"inputs.max_gap": 0.5}).fingerprint() == pipeline_config({}).fingerprint()
 
 
-def test_residual_burn_in_defaults_by_lag_selection_and_enters_the_fingerprint_when_used():
+def test_residual_burn_in_defaults_by_lag_selection_and_enters_the_fingerprint_resolved():
     """-1 (None): 50 samples with lag_selection auto, 0 (the paper's Eq. 17) with fixed lags;
-    the burn-in the bank uses is part of the fingerprint unless it is 0 (the layout of the
-    fixed-lag fingerprint stays)."""
+    the fingerprint holds the burn-in the bank uses, so the default and its value agree."""
     fixed, auto = pipeline_config({}), pipeline_config({"estimator.lag_selection": "auto"})
-    assert (fixed.estimator.bank_burn_in, auto.estimator.bank_burn_in) == (0, 50)
-    assert "residual_burn_in" not in fixed.fingerprint() and auto.fingerprint()["residual_burn_in"] == 50
-    assert pipeline_config({"estimator.lag_selection": "auto", "estimator.residual_burn_in": 0}).fingerprint() == {
-        **{k: v for k, v in auto.fingerprint().items() if k != "residual_burn_in"}}
+    assert (fixed.estimator.burn_in, auto.estimator.burn_in) == (0, 50)
+    assert (fixed.fingerprint()["estimator"]["residual_burn_in"], auto.fingerprint()["estimator"]["residual_burn_in"]) \
+        == (0, 50)
+    explicit = pipeline_config({"estimator.lag_selection": "auto", "estimator.residual_burn_in": 50})
+    assert explicit.fingerprint() == auto.fingerprint()
+    assert pipeline_config({"estimator.lag_selection": "auto", "estimator.residual_burn_in": 0}).fingerprint() \
+        != auto.fingerprint()
     twenty = pipeline_config({"estimator.residual_burn_in": 20})
-    assert twenty.estimator.bank_burn_in == 20 and twenty.fingerprint()["residual_burn_in"] == 20
+    assert twenty.estimator.burn_in == 20 and twenty.fingerprint()["estimator"]["residual_burn_in"] == 20
     spec = {p.name: p for p in PARAMETERS}["estimator.residual_burn_in"]
     assert spec.default == -1 and (spec.low, spec.high) == (-1, 100000) and "-1: 50" in spec.description
 

@@ -1,6 +1,6 @@
-"""Automatic lag selection in the estimator (issue 14): ``n_lags="auto"`` chooses each model's
+"""Automatic lag selection in the estimator: ``lags="auto"`` chooses each model's
 L of Eq. 22 by Politis' flat-top rule on its residual autocorrelation at every evaluated
-sample, with the memory of ``n_lags=max_lags``."""
+sample, with the memory of ``lags=max_lags``."""
 
 from __future__ import annotations
 
@@ -9,9 +9,9 @@ import pytest
 from test_estimator_bank import assert_bank_equals_reference, equivalence_problem, fed_bank_and_references
 from test_estimator_cases import ar1, rel_close, run, wide_scale_problem
 
-from rls_uncertainty.estimator import EstimatorBank, RecursiveEstimator, batch_estimate
+from rls_uncertainty.estimator import EstimatorBank, EstimatorOptions, RecursiveEstimator, batch_estimate
 from rls_uncertainty.estimator.lag_selection import flat_top_lags
-from rls_uncertainty.estimator.reference import flat_top_lag
+from rls_uncertainty.estimator.reference import RecursiveReference, flat_top_lag
 
 
 @pytest.mark.parametrize("p0", [None, 100.0])
@@ -26,9 +26,10 @@ def test_auto_bank_equals_the_reference(max_lags, min_lags, burn_in, forgetting,
     default residual burn-in (50 samples: the models initialize at 13 and 2, or 0 with a
     prior), without one (the paper) and with 7."""
     X, Z = equivalence_problem(n=160)
-    options = dict(residual=residual, p0=p0, max_lags=max_lags, min_lags=min_lags, residual_burn_in=burn_in)
+    options = dict(lags="auto", forgetting=forgetting, residual=residual, p0=p0, max_lags=max_lags,
+                   min_lags=min_lags, residual_burn_in=burn_in)
     chosen = set()
-    for bank, refs, k in fed_bank_and_references(X, Z, "auto", "truncated", forgetting, **options):
+    for bank, refs, k in fed_bank_and_references(X, Z, **options):
         assert list(bank.lags_used) == [r.lags_used() for r in refs], k - 1
         chosen.update(int(L) for L, ready in zip(bank.lags_used, bank.ready, strict=True) if ready)
         if k % 10 == 0 or k <= 15:
@@ -57,26 +58,28 @@ def test_auto_covariance_is_the_batch_formula_with_the_chosen_lags(forgetting, b
     history (noise-model residuals under forgetting), and lags_used is the rule applied to
     autocorrelation(). With the default residual burn-in (50 samples with auto), after the
     burn-in the history's first k0 + 50 residuals are zeroed and R rescaled to the weight
-    total of the rest (the batch prototype of validation/integration/table3_lags.py), and the
+    total of the rest (the batch formula of the residual burn-in), and the
     rule's n is the count (Kish's size under forgetting) of the samples after it."""
     X, z = wide_scale_problem()
-    est = RecursiveEstimator(4, "auto", forgetting=forgetting, max_lags=40, residual_burn_in=burn_in)
-    assert est._bank.residual_burn_in == (50 if burn_in is None else 0)
-    g = est._bank.noise_forgetting
-    full = RecursiveEstimator(4, forgetting=forgetting, noise_forgetting=g)  # whole history
+    options = EstimatorOptions(lags="auto", forgetting=forgetting, max_lags=40, residual_burn_in=burn_in)
+    est = RecursiveEstimator(4, options)
+    assert options.burn_in == (50 if burn_in is None else 0)
+    g = options.noise_forgetting_used
+    # the whole history:
+    full = RecursiveEstimator(4, EstimatorOptions(lags="all", forgetting=forgetting, noise_forgetting=g))
     seen = set()
     for k in range(len(z)):
         est.update(X[k], z[k])
         full.update(X[k], z[k])
         if k + 1 not in (30, 41, 42, 100, 250, 600):
             continue
-        end = int(est._bank.ready_at[0]) + est._bank.residual_burn_in  # the last left-out sample
+        end = int(est.bank.ready_at[0]) + options.burn_in  # the last left-out sample
         c = k + 1 - end if burn_in is None and k + 1 > end else k + 1  # samples behind R
         n = c if g == 1.0 else (1 - g**c) * (1 + g) / ((1 - g) * (1 + g**c))
-        assert est._bank.rule_samples[0] == pytest.approx(n, rel=1e-12)
+        assert est.bank.rule_samples[0] == pytest.approx(n, rel=1e-12)
         L = est.lags_used
         seen.add(L)
-        assert L == flat_top_lags(est.autocorrelation(), est._bank.rule_samples[0], cap=40)
+        assert L == flat_top_lags(est.autocorrelation(), est.bank.rule_samples[0], cap=40)
         v = full.noise_residuals()
         scale = 1.0
         if c < k + 1:
@@ -96,7 +99,7 @@ def test_white_residuals_get_no_lags_and_colored_ones_get_many():
     X = np.column_stack([np.ones(n), np.sin(0.05 * np.arange(n)), rng.standard_normal(n)])
     z_white = X @ [1.0, 2.0, 3.0] + 0.1 * rng.standard_normal(n)
     z_ar = X @ [1.0, 2.0, 3.0] + 0.1 * ar1(rng, 0.9, (n,))
-    bank = EstimatorBank((3, 3, 3), "auto", max_lags=50)
+    bank = EstimatorBank((3, 3, 3), EstimatorOptions(lags="auto", max_lags=50))
     Xb = np.stack([X, X, X], axis=1)
     Z = np.column_stack([z_white, z_ar, X @ [1.0, 2.0, 3.0]])  # the third fits exactly
     run(bank, Xb, Z)
@@ -105,36 +108,58 @@ def test_white_residuals_get_no_lags_and_colored_ones_get_many():
     assert np.all(bank.covariance(2) == 0.0) or np.all(np.abs(bank.covariance(2)) < 1e-20)
 
 
-def test_edge_cases_and_refusals():
-    bank = EstimatorBank((2,), "auto", max_lags=10, min_lags=3)
+@pytest.mark.parametrize("min_lags", [0, 3])
+@pytest.mark.parametrize("forgetting", [1.0, 0.99])
+def test_an_exact_fit_gets_min_lags_whatever_its_rounding(min_lags, forgetting):
+    """A model that fits exactly has residuals at rounding level, whose pattern depends on
+    the floating-point kernels of the machine: it gets min_lags at every sample from its
+    initialization, in the bank and in the reference, even with a strongly colored error of
+    1e-8 of its output (R(0) ~ 1e-16 of the output's mean square, below EXACT_FIT = 1e-12),
+    which the rule alone would read as 50 lags; with 1e-4 (1e-8, above it) it does read it.
+    (min_lags as far as the samples behind R allow: right after the residual burn-in, one.)"""
+    rng = np.random.default_rng(8)
+    n = 400
+    X = np.column_stack([np.ones(n), np.sin(0.05 * np.arange(n)), rng.standard_normal(n)])
+    clean = X @ [1.0, 2.0, 3.0]
+    colored = ar1(rng, 0.99, (n,))
+    options = EstimatorOptions(lags="auto", max_lags=50, min_lags=min_lags, forgetting=forgetting)
+    bank = EstimatorBank((3, 3, 3), options)
+    refs = [RecursiveReference(3, options) for _ in range(3)]
+    Z = np.column_stack([clean, clean + 1e-8 * colored, clean + 1e-4 * colored])
+    for k in range(n):
+        bank.update(np.stack([X[k]] * 3), Z[k])
+        for ref, z in zip(refs, Z[k], strict=True):
+            ref.update(X[k], z)
+        if bank.ready.all() and k > 3:
+            L = [r.lags_used() for r in refs]
+            assert list(bank.lags_used) == L, k
+            as_zero = [int(flat_top_lags(np.zeros(bank.n_window), bank.rule_samples[j], cap=50, min_lags=min_lags))
+                       for j in range(2)]  # the rule for R = 0: min_lags, as far as the samples allow
+            assert L[:2] == as_zero and (k < 60 or as_zero == [min_lags] * 2), k
+    assert bank.lags_used[2] >= 40  # the same colored error, visible: many lags
+    R = bank.autocorrelation(1)
+    assert flat_top_lags(R, n, cap=50) == 50  # what the rule alone would choose for model 1
+
+
+def test_edge_cases():
+    bank = EstimatorBank((2,), EstimatorOptions(lags="auto", max_lags=10, min_lags=3))
     assert list(bank.lags_used) == [0]  # no sample: nothing held
     rng = np.random.default_rng(0)
     for _ in range(30):
         bank.update(np.array([[1.0, 0.0]]), rng.standard_normal(1))  # never ready
     assert not bank.ready[0] and list(bank.lags_used) == [3]
     assert np.isnan(bank.standard_errors_all()).all()
-    for kwargs, match in [
-        (dict(window="bartlett"), "truncated"),
-        (dict(max_lags=0), "max_lags"),
-        (dict(max_lags=2.5), "max_lags"),
-        (dict(min_lags=51), "min_lags"),
-        (dict(min_lags=-1), "min_lags"),
-    ]:
-        with pytest.raises(ValueError, match=match):
-            EstimatorBank((2,), "auto", **kwargs)
-    with pytest.raises(ValueError, match="n_lags"):
-        EstimatorBank((2,), "automatic")
     # The residual burn-in defaults to 50 samples with auto, to the paper (0) with fixed lags.
-    assert [EstimatorBank((2,), n).residual_burn_in for n in ("auto", 5, 0, None)] == [50, 0, 0, 0]
-    assert EstimatorBank((2,), "auto", residual_burn_in=0).residual_burn_in == 0
-    fixed = run(EstimatorBank((4,), 7), *(a[:, None] for a in wide_scale_problem()), stop=5)
+    assert [EstimatorOptions(lags=n).burn_in for n in ("auto", 5, 0, "all")] == [50, 0, 0, 0]
+    assert EstimatorOptions(lags="auto", residual_burn_in=0).burn_in == 0
+    fixed = run(EstimatorBank((4,), EstimatorOptions(lags=7)), *(a[:, None] for a in wide_scale_problem()), stop=5)
     assert list(fixed.lags_used) == [4]
 
 
 @pytest.mark.parametrize("forgetting", [1.0, 0.99])
 def test_auto_state_continues_bit_identically_with_the_memory_of_max_lags(forgetting):
-    """state()/from_state() round-trips n_lags="auto", max_lags, min_lags (also while a model
-    waits); the state has exactly the arrays of n_lags=max_lags."""
+    """state()/from_state() round-trips lags="auto", max_lags, min_lags (also while a model
+    waits); the state has exactly the arrays of lags=max_lags."""
     rng = np.random.default_rng(5)
     n = 500
     X = np.zeros((n, 2, 3))
@@ -142,13 +167,13 @@ def test_auto_state_continues_bit_identically_with_the_memory_of_max_lags(forget
     X[:, 1] = np.column_stack([np.ones(n), rng.standard_normal(n), np.where(np.arange(n) < 200, 0.0, 1.0)])
     Z = np.einsum("kmi,mi->km", X, [[1.0, 2.0, 0.0], [0.5, -1.0, 3.0]]) + 0.1 * ar1(rng, 0.8, (2, n)).T
     for stop in (100, 300):
-        a = EstimatorBank((2, 3), "auto", forgetting=forgetting, max_lags=20, min_lags=1)
+        a = EstimatorBank((2, 3), EstimatorOptions(lags="auto", forgetting=forgetting, max_lags=20, min_lags=1))
         run(a, X, Z, stop)
         saved = a.state()
-        fixed = run(EstimatorBank((2, 3), 20, forgetting=forgetting), X, Z, stop).state()
+        fixed = run(EstimatorBank((2, 3), EstimatorOptions(lags=20, forgetting=forgetting)), X, Z, stop).state()
         assert {k: v.shape for k, v in saved["arrays"].items()} == {k: v.shape for k, v in fixed["arrays"].items()}
         b = EstimatorBank.from_state(saved)
-        assert (b.n_lags, b.max_lags, b.min_lags) == ("auto", 20, 1)
+        assert (b.options.lags, b.options.max_lags, b.options.min_lags) == ("auto", 20, 1)
         for k in range(stop, n):
             a.update(X[k], Z[k])
             b.update(X[k], Z[k])
@@ -160,13 +185,13 @@ def test_auto_state_continues_bit_identically_with_the_memory_of_max_lags(forget
 
 # --------------------------------------------------------------------------- configuration, pipeline, CLI
 def test_parameters_reach_the_bank_and_are_validated():
-    from rls_uncertainty.config import ConfigError, EstimatorConfig, pipeline_config
+    from rls_uncertainty.config import ConfigError, pipeline_config
 
     cfg = pipeline_config({"estimator.lag_selection": "auto", "estimator.max_lags": 80})
-    assert cfg.estimator.bank_lags == "auto" and cfg.estimator.max_lags == 80
-    assert cfg.fingerprint()["n_lags"] == "auto" and cfg.fingerprint()["max_lags"] == 80
+    assert cfg.estimator.lags == "auto" and cfg.estimator.max_lags == 80
+    assert cfg.fingerprint()["estimator"]["lags"] == "auto" and cfg.fingerprint()["estimator"]["max_lags"] == 80
     fixed = pipeline_config({"estimator.max_lags": 80})
-    assert fixed.estimator.bank_lags == 50 and "max_lags" not in fixed.fingerprint()
+    assert fixed.estimator.lags == 50 and fixed.estimator.held == 50
     for params, match in [
         ({"estimator.lag_selection": "auto", "estimator.window": "bartlett"}, "truncated"),
         ({"estimator.lag_selection": "sometimes"}, "estimator.lag_selection"),
@@ -175,7 +200,7 @@ def test_parameters_reach_the_bank_and_are_validated():
         with pytest.raises(ConfigError, match=match):
             pipeline_config(params)
     with pytest.raises(ConfigError, match=r"estimator\.max_lags"):
-        EstimatorConfig(max_lags=2.5)
+        EstimatorOptions(max_lags=2.5)
 
 
 def test_pipeline_publishes_the_chosen_lags_per_sample_and_in_the_model_fit():
@@ -188,7 +213,7 @@ def test_pipeline_publishes_the_chosen_lags_per_sample_and_in_the_model_fit():
     st = simulate_sensor_streams(0.2, 250)
     pipe = Pipeline(pipeline_config({**T2_PARAMS, "estimator.lag_selection": "auto"}))
     outs = feed_streams(pipe, st)
-    assert pipe.bank.n_lags == "auto" and pipe.bank.max_lags == 50
+    assert pipe.bank.options.lags == "auto" and pipe.bank.options.max_lags == 50
     lags = np.array([o.lags for o in outs])
     ready = np.array([o.ready for o in outs])
     assert lags.dtype.kind == "i" and np.all(lags[~ready] == 0) and lags.max() <= 50
@@ -200,35 +225,14 @@ def test_pipeline_publishes_the_chosen_lags_per_sample_and_in_the_model_fit():
     assert np.all(outs[-1].lags == 50) and fixed.model_fit(0)["lags"] == 50
 
 
-def test_command_line_lags_auto():
-    from rls_uncertainty import cli
-
-    parser = cli.build_parser()
-    args = parser.parse_args(["replay", "bag", "--out", "o", "--lags", "auto", "--max-lags", "70"])
-    params = cli._replay_params(args)
-    assert params["estimator.lag_selection"] == "auto" and params["estimator.max_lags"] == 70
-    assert "estimator.lags" not in params
-    assert parser.parse_args(["montecarlo", "--out", "o", "--lags", "auto"]).lags == "auto"
-    assert parser.parse_args(["montecarlo", "--out", "o", "--lags", "7"]).lags == 7
-    assert parser.parse_args(["simulate", "--lags", "auto"]).lags == "auto"
-    # The residual burn-in: replay overrides the parameter ('default' is its -1), simulate and
-    # montecarlo pass it to the bank (not given or 'default': the bank's, 50 with auto).
-    for given, param in ((["--burn-in", "20"], 20), (["--burn-in", "default"], -1), ([], None)):
-        params = cli._replay_params(parser.parse_args(["replay", "bag", "--out", "o", "--lags", "auto", *given]))
-        assert params.get("estimator.residual_burn_in") == param
-    for given, bank in ((["--burn-in", "0"], 0), (["--burn-in", "default"], None), ([], None)):
-        assert cli._bank_burn_in(parser.parse_args(["montecarlo", "--out", "o", *given]).burn_in) == bank
-        assert cli._bank_burn_in(parser.parse_args(["simulate", *given]).burn_in) == bank
-
-
 def test_monte_carlo_with_auto_lags_uses_the_default_burn_in(tmp_path):
-    """run_level with n_lags="auto" runs the bank's default residual burn-in (50 samples) unless
+    """run_level with lags="auto" runs the bank's default residual burn-in (50 samples) unless
     told otherwise; the estimates do not depend on it, the standard errors do, and the table
     says which was used."""
     from rls_uncertainty.montecarlo import run_level, write_outputs
 
-    default = run_level(0.0, 3, n_lags="auto")
-    paper = run_level(0.0, 3, n_lags="auto", residual_burn_in=0)
+    default = run_level(0.0, 3, options=EstimatorOptions(lags="auto"))
+    paper = run_level(0.0, 3, options=EstimatorOptions(lags="auto", residual_burn_in=0))
     assert (default.residual_burn_in, paper.residual_burn_in) == (50, 0)
     np.testing.assert_array_equal(default.estimates, paper.estimates)
     assert not np.array_equal(default.se_corrected, paper.se_corrected)

@@ -29,9 +29,9 @@ def test_batch_estimate_is_eq_11_double_sum():
 
 @pytest.mark.parametrize("forgetting", [1.0, 0.97])
 @pytest.mark.parametrize("window", ["truncated", "bartlett"])
-@pytest.mark.parametrize("n_lags", [None, 0, 7])
+@pytest.mark.parametrize("lags", ["all", 0, 7])
 @pytest.mark.parametrize("given_residuals", [False, True])
-def test_batch_estimate_equals_the_papers_matrices(n_lags, window, forgetting, given_residuals):
+def test_batch_estimate_equals_the_papers_matrices(lags, window, forgetting, given_residuals):
     """The blocked Toeplitz evaluation of batch_estimate equals Eq. 8 with the N x N matrix of
     Eq. 9 (reference.batch_reference), weighted, windowed, with or without given residuals."""
     rng = np.random.default_rng(4)
@@ -39,7 +39,7 @@ def test_batch_estimate_equals_the_papers_matrices(n_lags, window, forgetting, g
     X = np.column_stack([np.ones(n), np.sin(0.2 * np.arange(n)), rng.standard_normal(n)])
     z = X @ [0.3, -1.0, 0.5] + ar1(rng, 0.8, (n,))
     v = rng.standard_normal(n) if given_residuals else None
-    fast = batch_estimate(X, z, n_lags, window, residuals=v, forgetting=forgetting)
-    literal = batch_reference(X, z, n_lags, window, forgetting=forgetting, residuals=v)
+    fast = batch_estimate(X, z, lags, window, residuals=v, forgetting=forgetting)
+    literal = batch_reference(X, z, lags, window, forgetting=forgetting, residuals=v)
     for a, b in zip(fast, literal, strict=True):
         rel_close(a, b, 1e-10)

@@ -8,20 +8,21 @@ import numpy as np
 import pytest
 from test_estimator_cases import RATE, ar1, indefinite_problem, rel_close, run, wide_scale_problem
 
-from rls_uncertainty.estimator import EstimatorBank, RecursiveEstimator, batch_estimate
+from rls_uncertainty.estimator import EstimatorBank, EstimatorOptions, RecursiveEstimator, batch_estimate
 
 CHECK_AT = (40, 200, 600)
 
 
 @pytest.mark.parametrize("forgetting", [1.0, 0.98])
 @pytest.mark.parametrize("window", ["truncated", "bartlett"])
-@pytest.mark.parametrize("n_lags", [None, 0, 1, 5, 50])
-def test_recursive_covariance_equals_batch_formula_on_recursive_residuals(n_lags, window, forgetting):
-    """The estimator's own residuals (``noise_forgetting = forgetting``: the paper's formulas
-    and, under forgetting, those before issue 12 item 7)."""
+@pytest.mark.parametrize("lags", ["all", 0, 1, 5, 50])
+def test_recursive_covariance_equals_batch_formula_on_recursive_residuals(lags, window, forgetting):
+    """The estimator's own residuals (``noise_forgetting = forgetting``: the paper's formulas,
+    and under forgetting those that under-report; docs/estimator.md)."""
     X, z = wide_scale_problem()
-    est = RecursiveEstimator(4, n_lags=n_lags, window=window, forgetting=forgetting, noise_forgetting=forgetting)
-    full = RecursiveEstimator(4, forgetting=forgetting)  # keeps the whole residual history
+    options = EstimatorOptions(lags=lags, window=window, forgetting=forgetting, noise_forgetting=forgetting)
+    est = RecursiveEstimator(4, options)
+    full = RecursiveEstimator(4, EstimatorOptions(lags="all", forgetting=forgetting))  # the whole residual history
     for k in range(len(z)):
         est.update(X[k], z[k])
         full.update(X[k], z[k])
@@ -32,25 +33,25 @@ def test_recursive_covariance_equals_batch_formula_on_recursive_residuals(n_lags
         # The ring of the truncated estimator holds the same residuals as the full history.
         np.testing.assert_array_equal(est.residuals(), history[-len(est.residuals()) :])
         theta, cov_conv, cov_corr = batch_estimate(
-            X[: k + 1], z[: k + 1], n_lags, window, residuals=history, forgetting=forgetting
+            X[: k + 1], z[: k + 1], lags, window, residuals=history, forgetting=forgetting
         )
         rel_close(est.theta, theta, 1e-9)
         rel_close(est.covariance("corrected", repair=False), cov_corr, 1e-9)
         rel_close(est.covariance("conventional"), cov_conv, 1e-9)
 
 @pytest.mark.parametrize("window", ["truncated", "bartlett"])
-@pytest.mark.parametrize("n_lags", [1, 5, 50])
-def test_noise_model_covariance_equals_batch_formula_on_noise_model_residuals(n_lags, window):
+@pytest.mark.parametrize("lags", [1, 5, 50])
+def test_noise_model_covariance_equals_batch_formula_on_noise_model_residuals(lags, window):
     """Under forgetting R_k(i) comes from the noise model (RLS with f_R): the corrected and
     conventional covariances are the batch formulas with the f-weighted D, Lambda and the
     f_R-weighted autocorrelation of the noise model's residual history, and the noise
     residual is the standardized innovation of the f_R-weighted batch fit of the samples before."""
     X, z = wide_scale_problem()
     f = 0.98
-    est = RecursiveEstimator(4, n_lags=n_lags, window=window, forgetting=f)
-    f_R = est._bank.noise_forgetting
-    assert f_R == max(f, 1.0 - 1.0 / (40.0 * (n_lags + 1))) > f
-    full = RecursiveEstimator(4, forgetting=f, noise_forgetting=f_R)  # all lags, whole history
+    est = RecursiveEstimator(4, EstimatorOptions(lags=lags, window=window, forgetting=f))
+    f_R = est.options.noise_forgetting_used
+    assert f_R == max(f, 1.0 - 1.0 / (40.0 * (lags + 1))) > f
+    full = RecursiveEstimator(4, EstimatorOptions(lags="all", forgetting=f, noise_forgetting=f_R))  # the whole history
     for k in range(len(z)):
         est.update(X[k], z[k])
         full.update(X[k], z[k])
@@ -61,7 +62,7 @@ def test_noise_model_covariance_equals_batch_formula_on_noise_model_residuals(n_
         np.testing.assert_array_equal(est.noise_residuals(), history[-len(est.noise_residuals()) :])
         np.testing.assert_array_equal(est.residuals(), full.residuals()[-len(est.residuals()) :])
         theta, cov_conv, cov_corr = batch_estimate(
-            X[: k + 1], z[: k + 1], n_lags, window, residuals=history, forgetting=f, noise_forgetting=f_R
+            X[: k + 1], z[: k + 1], lags, window, residuals=history, forgetting=f, noise_forgetting=f_R
         )
         rel_close(est.theta, theta, 1e-9)
         rel_close(est.covariance("corrected", repair=False), cov_corr, 1e-9)
@@ -74,7 +75,7 @@ def test_noise_model_covariance_equals_batch_formula_on_noise_model_residuals(n_
 
 def test_zero_lags_gives_the_conventional_covariance():
     X, z = wide_scale_problem()
-    est = run(RecursiveEstimator(4, n_lags=0), X, z)
+    est = run(RecursiveEstimator(4, EstimatorOptions(lags=0)), X, z)
     rel_close(est.covariance("corrected"), est.covariance("conventional"), 1e-9)
     np.testing.assert_allclose(
         est.standard_errors("corrected"), est.standard_errors("conventional"), rtol=1e-9
@@ -82,7 +83,7 @@ def test_zero_lags_gives_the_conventional_covariance():
 
 def test_corrected_standard_error_grows_with_colored_residuals():
     X, z = wide_scale_problem()
-    est = run(RecursiveEstimator(4, n_lags=50), X, z)
+    est = run(RecursiveEstimator(4, EstimatorOptions(lags=50)), X, z)
     ratio = est.standard_errors("corrected") / est.standard_errors("conventional")
     # The constant and the 0.3 Hz regressor sit where the AR(1) spectrum is high; the
     # white regressor averages the spectrum, which the conventional formula gets right.
@@ -98,7 +99,7 @@ def test_monte_carlo_standard_errors_match_observed_scatter(rho):
     X = np.column_stack([np.ones(n), np.sin(2 * np.pi * 0.4 * t), np.cos(2 * np.pi * 0.9 * t + 0.3)])
     theta = np.array([1.0, 0.5, -0.3])
     Z = (X @ theta)[:, None] + 0.1 * ar1(rng, rho, (runs, n)).T
-    bank = EstimatorBank([3] * runs, n_lags=50)
+    bank = EstimatorBank([3] * runs, EstimatorOptions(lags=50))
     rows = np.ascontiguousarray(np.broadcast_to(X[:, None, :], (n, runs, 3)))
     for k in range(n):
         bank.update(rows[k], Z[k])
@@ -115,8 +116,8 @@ def test_monte_carlo_standard_errors_match_observed_scatter(rho):
 
 def test_truncated_window_can_be_indefinite_and_is_repaired_and_counted():
     X, z = indefinite_problem()
-    est = RecursiveEstimator(2, n_lags=5, window="truncated")
-    full = RecursiveEstimator(2)
+    est = RecursiveEstimator(2, EstimatorOptions(lags=5, window="truncated"))
+    full = RecursiveEstimator(2, EstimatorOptions(lags="all"))
     for k in range(len(z)):
         est.update(X[k], z[k])
         full.update(X[k], z[k])
@@ -134,7 +135,7 @@ def test_truncated_window_can_be_indefinite_and_is_repaired_and_counted():
 
 def test_bartlett_window_stays_positive_semidefinite():
     X, z = indefinite_problem()
-    est = RecursiveEstimator(2, n_lags=5, window="bartlett")
+    est = RecursiveEstimator(2, EstimatorOptions(lags=5, window="bartlett"))
     for k in range(len(z)):
         est.update(X[k], z[k])
         if est.is_ready and k % 25 == 0:
@@ -146,7 +147,7 @@ def test_an_exactly_fitted_model_has_zero_corrected_errors_without_repairs():
     rng = np.random.default_rng(5)
     X = np.column_stack([np.ones(300), rng.standard_normal(300), rng.standard_normal(300)])
     z = X @ np.array([0.3, -1.2, 0.7])  # no noise: residuals are rounding only
-    bank = EstimatorBank([3], 50)
+    bank = EstimatorBank([3], EstimatorOptions(lags=50))
     for k in range(300):
         bank.update(X[k : k + 1], z[k : k + 1])
     se = bank.standard_errors(0, "corrected")
@@ -156,7 +157,7 @@ def test_an_exactly_fitted_model_has_zero_corrected_errors_without_repairs():
     assert bank.repairs[0] == 0
     # A constant output fitted exactly by its bias (the T-2 bag's CX): rounding makes the
     # corrected variances slightly negative; they are zero, not a repair.
-    const = EstimatorBank([3], 50)
+    const = EstimatorBank([3], EstimatorOptions(lags=50))
     for k in range(300):
         const.update(X[k : k + 1], [-0.03])
     assert np.all(const.standard_errors(0, "corrected") == 0.0) or np.all(const.standard_errors(0, "corrected") < 1e-8)
@@ -165,8 +166,8 @@ def test_an_exactly_fitted_model_has_zero_corrected_errors_without_repairs():
 
 
 @pytest.mark.parametrize("forgetting", [1.0, 0.99])
-@pytest.mark.parametrize("n_lags, window", [(None, "truncated"), (5, "truncated"), (20, "bartlett"), (0, "truncated")])
-def test_published_standard_errors_are_the_square_roots_of_the_covariance_diagonals(n_lags, window, forgetting):
+@pytest.mark.parametrize("lags, window", [("all", "truncated"), (5, "truncated"), (20, "bartlett"), (0, "truncated")])
+def test_published_standard_errors_are_the_square_roots_of_the_covariance_diagonals(lags, window, forgetting):
     """standard_errors_all, standard_errors(j), covariance(j) and covariance_all() are one
     computation: the standard errors are exactly (bit for bit) sqrt(max(diag(covariance), 0))
     for both kinds, repaired covariances included, and the bank of six models equals its
@@ -178,7 +179,7 @@ def test_published_standard_errors_are_the_square_roots_of_the_covariance_diagon
     rows[:, 1] = np.column_stack([X, rng.standard_normal(300)])
     rows[:, 2, :2] = X * [1.0, 3.0]
     Z = np.column_stack([z, z + rng.standard_normal(300), 0.5 * z])
-    bank = EstimatorBank((2, 3, 2), n_lags, window, forgetting)
+    bank = EstimatorBank((2, 3, 2), EstimatorOptions(lags=lags, window=window, forgetting=forgetting))
     checked = repaired = 0
     for k in range(300):
         bank.update(rows[k], Z[k])
@@ -200,6 +201,6 @@ def test_published_standard_errors_are_the_square_roots_of_the_covariance_diagon
                 repaired += not np.array_equal(raw, cov)
                 checked += 1
     assert checked == 8 * 2 * 3
-    if n_lags == 5:
+    if lags == 5:
         assert repaired > 0 and bank.repairs.sum() > 0
 

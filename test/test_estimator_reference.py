@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from test_estimator_cases import ar1, indefinite_problem, rel_close
 
-from rls_uncertainty.estimator import EstimatorNotReady
+from rls_uncertainty.estimator import EstimatorNotReady, EstimatorOptions
 from rls_uncertainty.estimator.lag_window import lag_weights
 from rls_uncertainty.estimator.reference import RecursiveReference, batch_reference
 
@@ -27,19 +27,19 @@ def weights(k, f):
 
 # --------------------------------------------------------------------------- batch
 @pytest.mark.parametrize("forgetting", [1.0, 0.95])
-@pytest.mark.parametrize("n_lags, window", [(None, "truncated"), (4, "truncated"), (4, "bartlett"), (0, "truncated")])
-def test_batch_reference_is_eqs_6_10_11_13_14_as_sums(n_lags, window, forgetting):
+@pytest.mark.parametrize("lags, window", [("all", "truncated"), (4, "truncated"), (4, "bartlett"), (0, "truncated")])
+def test_batch_reference_is_eqs_6_10_11_13_14_as_sums(lags, window, forgetting):
     X, z = problem(40)
     N = len(z)
     w = weights(N, forgetting)
-    theta, cov_conv, cov_corr = batch_reference(X, z, n_lags, window, forgetting=forgetting)
+    theta, cov_conv, cov_corr = batch_reference(X, z, lags, window, forgetting=forgetting)
     A = sum(w[j] * np.outer(X[j], X[j]) for j in range(N))
     D = np.linalg.inv(A)
     np.testing.assert_allclose(theta, np.linalg.solve(A, sum(w[j] * X[j] * z[j] for j in range(N))),
                                rtol=1e-10)  # Eq. 6
     v = z - X @ theta  # Eq. 7
     R = [sum(w[j] * v[j] * v[j - i] for j in range(i, N)) / w.sum() for i in range(N)]  # Eq. 10
-    c = lag_weights(N - 1 if n_lags is None else n_lags, window, N)
+    c = lag_weights(N - 1 if lags == "all" else lags, window, N)
     middle = sum(
         w[a] * w[b] * c[abs(a - b)] * R[abs(a - b)] * np.outer(X[a], X[b]) for a in range(N) for b in range(N)
     )  # Eq. 11, weighted
@@ -55,7 +55,7 @@ def test_recursive_reference_is_weighted_least_squares_at_every_sample(forgettin
     """After exact initialization theta_k and D_k are the weighted batch solution (Eq. 6) of
     samples 1..k; before it, there is no estimate."""
     X, z = problem()
-    ref = RecursiveReference(3, 5, forgetting=forgetting)
+    ref = RecursiveReference(3, EstimatorOptions(lags=5, forgetting=forgetting))
     for k in range(1, len(z) + 1):
         ref.update(X[k - 1], z[k - 1])
         if k < 3:
@@ -75,7 +75,7 @@ def test_exact_initialization_waits_for_a_well_conditioned_normal_matrix():
     X = X.copy()
     X[:5, 1:] = 0.0  # no excitation: A_k is singular
     X[5:25, 2] = 2.0 * X[5:25, 1] + 1e-9 * np.arange(20)  # nearly collinear: cond(A) > 1e8
-    ref = RecursiveReference(3, init_condition=1e8)
+    ref = RecursiveReference(3, EstimatorOptions(lags="all", init_condition=1e8))
     for k in range(1, len(z) + 1):
         ref.update(X[k - 1], z[k - 1])
         A = X[:k].T @ X[:k]
@@ -94,7 +94,7 @@ def test_prior_initialization_is_ridge_regression(forgetting):
     """With D_0 = diag(p0): D_k^-1 = f^k D_0^-1 + X'WX and theta_k solves it with X'Wz."""
     X, z = problem()
     p0 = np.array([10.0, 2.0, 0.5])
-    ref = RecursiveReference(3, p0=p0, forgetting=forgetting)
+    ref = RecursiveReference(3, EstimatorOptions(lags="all", p0=p0, forgetting=forgetting))
     for k in range(1, len(z) + 1):
         ref.update(X[k - 1], z[k - 1])
         w = weights(k, forgetting)
@@ -108,7 +108,7 @@ def test_lambda_is_eq_19_with_the_sandwich_weights(forgetting):
     """Eq. 21 accumulates Eq. 19: Lambda_k(i) = sum_j w_(j+i) w_j (x_(j+i) x_j' + x_j x_(j+i)')
     for i > 0 and sum_j w_j^2 x_j x_j' at i = 0 (w_j = f^(k-j), all ones when f = 1)."""
     X, z = problem(30)
-    ref = RecursiveReference(3, forgetting=forgetting)
+    ref = RecursiveReference(3, EstimatorOptions(lags="all", forgetting=forgetting))
     for k in range(len(z)):
         ref.update(X[k], z[k])
     N = len(z)
@@ -129,10 +129,9 @@ def test_residual_kinds_and_the_autocorrelation_of_each(forgetting):
     the signed geometric mean; R_k(i) (Eq. 17) is sum_j w_j v_j v_(j-i) / n_k of the residual
     history; with the standardized residual R_k(0) is the batch fit error variance (Eq. 14)."""
     X, z = problem()
-    refs = {
-        r: RecursiveReference(3, 6, forgetting=forgetting, residual=r, noise_forgetting=forgetting)
-        for r in ("a_priori", "a_posteriori", "standardized")
-    }  # the estimator's own residuals (the noise model: the next test)
+    own = dict(lags=6, forgetting=forgetting, noise_forgetting=forgetting)  # own residuals (noise model: next test)
+    kinds = ("a_priori", "a_posteriori", "standardized")
+    refs = {r: RecursiveReference(3, EstimatorOptions(residual=r, **own)) for r in kinds}
     thetas = [None]
     for k in range(1, len(z) + 1):
         for ref in refs.values():
@@ -163,7 +162,8 @@ def test_noise_model_is_least_squares_weighted_f_R_and_gives_R(noise_forgetting,
     f_R-weighted autocorrelation, and D_k, theta_k stay the f-weighted fit's."""
     X, z = problem()
     f = 0.95
-    ref = RecursiveReference(3, 6, forgetting=f, residual=residual, noise_forgetting=noise_forgetting)
+    ref = RecursiveReference(3, EstimatorOptions(lags=6, forgetting=f, residual=residual,
+                                                 noise_forgetting=noise_forgetting))
     g = ref.g
     assert g == (1.0 - 1.0 / 280.0 if noise_forgetting is None else noise_forgetting) and ref.noise
     for k in range(1, len(z) + 1):
@@ -192,19 +192,19 @@ def test_noise_model_is_least_squares_weighted_f_R_and_gives_R(noise_forgetting,
 
 @pytest.mark.parametrize("forgetting", [1.0, 0.95])
 @pytest.mark.parametrize(
-    "n_lags, window", [(None, "truncated"), (None, "bartlett"), (6, "truncated"), (6, "bartlett"), (0, "truncated")]
+    "lags, window", [("all", "truncated"), ("all", "bartlett"), (6, "truncated"), (6, "bartlett"), (0, "truncated")]
 )
-def test_recursive_covariance_is_eq_11_on_the_recursive_residuals(n_lags, window, forgetting):
+def test_recursive_covariance_is_eq_11_on_the_recursive_residuals(lags, window, forgetting):
     """Eq. 20/22 with R_k of the recursive residual history is the batch covariance of Eq. 8
     (Eq. 11 regrouped as Eq. 18) with those residuals; the conventional one is Eq. 13. Under
     forgetting with lags (a noise model) these are the noise model's residuals, weighted f_R."""
     X, z = problem(50)
-    ref = RecursiveReference(3, n_lags, window, forgetting)
+    ref = RecursiveReference(3, EstimatorOptions(lags=lags, window=window, forgetting=forgetting))
     for k in range(len(z)):
         ref.update(X[k], z[k])
-    assert ref.noise == (forgetting < 1.0 and n_lags is not None)
+    assert ref.noise == (forgetting < 1.0 and lags != "all")
     _, conv, corr = batch_reference(
-        X, z, n_lags, window, forgetting=forgetting, residuals=np.array(ref.u if ref.noise else ref.v),
+        X, z, lags, window, forgetting=forgetting, residuals=np.array(ref.u if ref.noise else ref.v),
         noise_forgetting=ref.g,
     )
     rel_close(ref.covariance("corrected"), corr, 1e-9)
@@ -214,7 +214,7 @@ def test_recursive_covariance_is_eq_11_on_the_recursive_residuals(n_lags, window
 def test_zero_lags_corrected_is_the_conventional_covariance():
     """Eq. 22 with n_tau = 0 is Eq. 13: D Lambda(0) D R(0) = R(0) D when f = 1."""
     X, z = problem()
-    ref = RecursiveReference(3, 0)
+    ref = RecursiveReference(3, EstimatorOptions(lags=0))
     for k in range(len(z)):
         ref.update(X[k], z[k])
     rel_close(ref.covariance("corrected"), ref.covariance("conventional"), 1e-9)
@@ -222,7 +222,7 @@ def test_zero_lags_corrected_is_the_conventional_covariance():
 
 def test_published_covariance_is_repaired_to_the_nearest_positive_semidefinite_matrix():
     X, z = indefinite_problem(300)
-    ref = RecursiveReference(2, 5)
+    ref = RecursiveReference(2, EstimatorOptions(lags=5))
     for k in range(len(z)):
         ref.update(X[k], z[k])
     raw = ref.covariance()
@@ -231,7 +231,7 @@ def test_published_covariance_is_repaired_to_the_nearest_positive_semidefinite_m
     vals, vecs = np.linalg.eigh(0.5 * (raw + raw.T))
     np.testing.assert_allclose(published, (vecs * np.maximum(vals, 0)) @ vecs.T, rtol=1e-12, atol=1e-15)
     np.testing.assert_array_equal(ref.standard_errors(), np.sqrt(np.maximum(np.diag(published), 0)))
-    exact = RecursiveReference(2, 5)
+    exact = RecursiveReference(2, EstimatorOptions(lags=5))
     for k in range(60):
         exact.update(X[k], X[k] @ [0.3, 1.0])  # no noise: an exact fit publishes zero
     assert np.all(exact.published_covariance() == 0.0) or np.min(np.diag(exact.covariance())) >= 0
@@ -240,20 +240,21 @@ def test_published_covariance_is_repaired_to_the_nearest_positive_semidefinite_m
 # --------------------------------------------------------------------------- residual burn-in
 @pytest.mark.parametrize("residual", ["a_priori", "a_posteriori", "standardized"])
 @pytest.mark.parametrize(
-    "n_lags, window, forgetting",
-    [(6, "truncated", 1.0), (None, "bartlett", 1.0), (6, "truncated", 0.95), (None, "truncated", 0.95),
+    "lags, window, forgetting",
+    [(6, "truncated", 1.0), ("all", "bartlett", 1.0), (6, "truncated", 0.95), ("all", "truncated", 0.95),
      (0, "truncated", 0.95)],
 )
-def test_burn_in_is_eq_17_on_the_residuals_after_it(n_lags, window, forgetting, residual):
+def test_burn_in_is_eq_17_on_the_residuals_after_it(lags, window, forgetting, residual):
     """With residual_burn_in B, R_k(i) is the paper's up to k0 + B and afterwards
     sum_{j > k0+B, j-i > k0+B} w_j v_j v_(j-i) / sum_{j > k0+B} w_j (w_j = f_R^(k-j); the noise
     model's residuals under forgetting with lags); the covariances are then Eq. 8 (batch) with
     the residuals of samples 1..k0+B zeroed and Eq. 10 normalised by the weight total of the
-    samples after them (the batch prototype of validation/integration/table3_lags.py)."""
+    samples after them."""
     X, z = problem()
     B = 9
-    ref = RecursiveReference(3, n_lags, window, forgetting, residual=residual, residual_burn_in=B)
-    paper = RecursiveReference(3, n_lags, window, forgetting, residual=residual, residual_burn_in=0)
+    options = dict(lags=lags, window=window, forgetting=forgetting, residual=residual)
+    ref = RecursiveReference(3, EstimatorOptions(residual_burn_in=B, **options))
+    paper = RecursiveReference(3, EstimatorOptions(residual_burn_in=0, **options))
     g = ref.g
     for k in range(1, len(z) + 1):
         ref.update(X[k - 1], z[k - 1])
@@ -266,21 +267,18 @@ def test_burn_in_is_eq_17_on_the_residuals_after_it(n_lags, window, forgetting, 
             continue
         w = weights(k, g)
         v = np.array(ref.u if ref.noise else ref.v)
-        lags = range(ref.largest_lag() + 1)
-        R = [sum(w[j] * v[j] * v[j - i] for j in range(end + i, k)) / w[end:].sum() for i in lags]
-        np.testing.assert_allclose([ref.R[i] for i in lags], R, rtol=1e-9, atol=1e-15)
+        held = range(ref.largest_lag() + 1)
+        R = [sum(w[j] * v[j] * v[j - i] for j in range(end + i, k)) / w[end:].sum() for i in held]
+        np.testing.assert_allclose([ref.R[i] for i in held], R, rtol=1e-9, atol=1e-15)
     assert ref.ready_at == 3 and len(z) > ref.ready_at + B
     v = np.array(ref.u if ref.noise else ref.v)
     v[:end] = 0.0
     scale = w.sum() / w[end:].sum()
-    _, conv, corr = batch_reference(X, z, n_lags, window, forgetting=forgetting, residuals=v, noise_forgetting=g)
+    _, conv, corr = batch_reference(X, z, lags, window, forgetting=forgetting, residuals=v, noise_forgetting=g)
     rel_close(ref.covariance("corrected"), corr * scale, 1e-9)
     rel_close(ref.covariance("conventional"), conv * scale, 1e-9)
 
 
-def test_burn_in_option_is_validated_and_defaults_by_lag_selection():
-    assert RecursiveReference(3, "auto").B == 50 and RecursiveReference(3, 50).B == RecursiveReference(3).B == 0
-    assert RecursiveReference(3, "auto", residual_burn_in=0).B == 0
-    for bad in (-1, 1.5, "10", 10**6):
-        with pytest.raises(ValueError, match="residual_burn_in"):
-            RecursiveReference(3, 5, residual_burn_in=bad)
+def test_burn_in_defaults_by_lag_selection():
+    assert [RecursiveReference(3, EstimatorOptions(lags=lags)).B for lags in ("auto", 50, "all")] == [50, 0, 0]
+    assert RecursiveReference(3, EstimatorOptions(lags="auto", residual_burn_in=0)).B == 0

@@ -6,13 +6,13 @@ import numpy as np
 import pytest
 from test_estimator_cases import run, wide_scale_problem
 
-from rls_uncertainty.estimator import EstimatorBank, RecursiveEstimator
+from rls_uncertainty.estimator import EstimatorBank, EstimatorOptions, RecursiveEstimator
 
 
 def test_snapshot_restore_continues_bit_identically():
     X, z = wide_scale_problem()
-    for n_lags in (None, 50):
-        a = run(RecursiveEstimator(4, n_lags=n_lags, forgetting=0.995), X, z, stop=300)
+    for lags in ("all", 50):
+        a = run(RecursiveEstimator(4, EstimatorOptions(lags=lags, forgetting=0.995)), X, z, stop=300)
         b = RecursiveEstimator.from_state(a.state())
         for k in range(300, len(z)):
             a.update(X[k], z[k])
@@ -33,8 +33,8 @@ def test_snapshot_while_a_model_waits_for_initialization_continues_bit_identical
         [np.ones(n), rng.standard_normal(n), np.where(np.arange(n) < 200, 0.0, rng.standard_normal(n))]
     )
     Z = np.einsum("kmi,mi->km", X, [[1.0, 2.0, 0.0], [0.5, -1.0, 3.0]]) + 0.1 * rng.standard_normal((n, 2))
-    for n_lags in (None, 20):
-        a = EstimatorBank((2, 3), n_lags, forgetting=forgetting)
+    for lags in ("all", 20):
+        a = EstimatorBank((2, 3), EstimatorOptions(lags=lags, forgetting=forgetting))
         for k in range(100):
             a.update(X[k], Z[k])
         assert list(a.ready) == [True, False]
@@ -48,8 +48,8 @@ def test_snapshot_while_a_model_waits_for_initialization_continues_bit_identical
         np.testing.assert_array_equal(a.standard_errors_all("conventional"), b.standard_errors_all("conventional"))
 
 @pytest.mark.parametrize("forgetting", [1.0, 0.99])
-@pytest.mark.parametrize("n_lags", [None, 20, "auto"])
-def test_snapshot_during_and_after_the_residual_burn_in_continues_bit_identically(n_lags, forgetting):
+@pytest.mark.parametrize("lags", ["all", 20, "auto"])
+def test_snapshot_during_and_after_the_residual_burn_in_continues_bit_identically(lags, forgetting):
     """The burn-in is not stored: its end follows from ready_at, the weight totals from k. A
     state taken while a model waits, during its burn-in, at its last sample, while the lag
     window still reaches into it and long after continues bit for bit; the configuration
@@ -60,15 +60,16 @@ def test_snapshot_during_and_after_the_residual_burn_in_continues_bit_identicall
     X[:, 0, :2] = np.column_stack([np.ones(n), rng.standard_normal(n)])
     X[:, 1] = np.column_stack([np.ones(n), rng.standard_normal(n), np.where(np.arange(n) < 60, 0.0, 1.0)])
     Z = np.einsum("kmi,mi->km", X, [[1.0, 2.0, 0.0], [0.5, -1.0, 3.0]]) + 0.1 * rng.standard_normal((n, 2))
-    kw = dict(forgetting=forgetting, residual_burn_in=None if n_lags == "auto" else 30, max_lags=20)
-    B = EstimatorBank((2, 3), n_lags, **kw).residual_burn_in
-    assert B == (50 if n_lags == "auto" else 30)
+    options = EstimatorOptions(lags=lags, forgetting=forgetting, residual_burn_in=None if lags == "auto" else 30,
+                               max_lags=20)
+    B = options.burn_in
+    assert B == (50 if lags == "auto" else 30)
     for stop in (40, 80, 61 + B, 62 + B, 70 + B, 300):  # model 1 initializes at 61
-        a = EstimatorBank((2, 3), n_lags, **kw)
+        a = EstimatorBank((2, 3), options)
         for k in range(stop):
             a.update(X[k], Z[k])
         b = EstimatorBank.from_state(a.state())
-        assert b.residual_burn_in == B and list(a.ready) == [True, stop > 60]
+        assert b.options == options and list(a.ready) == [True, stop > 60]
         for k in range(stop, n):
             a.update(X[k], Z[k])
             b.update(X[k], Z[k])
@@ -79,10 +80,10 @@ def test_snapshot_during_and_after_the_residual_burn_in_continues_bit_identicall
         assert list(a.ready_at) == [2, 61]
 
 
-@pytest.mark.parametrize("n_lags", [5, None])
-def test_snapshot_is_a_copy(n_lags):
+@pytest.mark.parametrize("lags", [5, "all"])
+def test_snapshot_is_a_copy(lags):
     X, z = wide_scale_problem()
-    a = run(RecursiveEstimator(4, n_lags=n_lags), X, z, stop=100)
+    a = run(RecursiveEstimator(4, EstimatorOptions(lags=lags)), X, z, stop=100)
     snap = a.state()
     theta = a.theta.copy()
     frozen = {name: arr.tobytes() for name, arr in snap["arrays"].items()}
@@ -94,10 +95,10 @@ def test_snapshot_is_a_copy(n_lags):
 
 def test_a_state_of_another_format_or_shape_is_refused_by_name():
     X, z = wide_scale_problem()
-    saved = run(RecursiveEstimator(4, n_lags=5), X, z, stop=50).state()
-    assert saved["format"] == EstimatorBank.STATE_FORMAT == 6
-    old = dict(saved, format=5)  # before the residual burn-in
-    with pytest.raises(ValueError, match="state format 5"):
+    saved = run(RecursiveEstimator(4, EstimatorOptions(lags=5)), X, z, stop=50).state()
+    assert saved["format"] == EstimatorBank.STATE_FORMAT == 7
+    old = dict(saved, format=6)  # before the options object
+    with pytest.raises(ValueError, match="state format 6"):
         EstimatorBank.from_state(old)
     bad = dict(saved, arrays=dict(saved["arrays"], lag_sums=np.zeros((1, 5))))
     with pytest.raises(ValueError, match="lag_sums"):
@@ -108,9 +109,9 @@ def test_state_holds_plain_arrays_with_the_residuals_and_history_newest_first():
     """The saved history windows are lag-indexed (entry i is sample k - i) and the residuals
     carry their sign: a restore does not depend on where they sat in the buffers."""
     X, z = wide_scale_problem()
-    est = run(RecursiveEstimator(4, n_lags=5), X, z, stop=50)
+    est = run(RecursiveEstimator(4, EstimatorOptions(lags=5)), X, z, stop=50)
     arrays = est.state()["arrays"]
     assert all(isinstance(a, np.ndarray) for a in arrays.values())
     np.testing.assert_array_equal(arrays["v"][0], est.residuals()[::-1])
-    np.testing.assert_allclose(arrays["x"][0, 0] / est._bank._inv_s[0], X[49], rtol=1e-15)
+    np.testing.assert_allclose(arrays["x"][0, 0] / arrays["inv_s"][0], X[49], rtol=1e-15)
     np.testing.assert_allclose(arrays["lag_sums"][0] / 50, est.autocorrelation(), rtol=1e-15)

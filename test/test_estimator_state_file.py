@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 from rls_uncertainty.errors import StateFileError
-from rls_uncertainty.estimator import EstimatorBank
+from rls_uncertainty.estimator import EstimatorBank, EstimatorOptions
 from rls_uncertainty.estimator.state_file import EstimatorState, load_state, save_state, set_aside, state_layout
 
 FINGERPRINT = {"aircraft": [1.0, 2.0], "models": [["CZ", "1", "alpha", "delta_e"], ["Cm", "1", "q_hat"]], "n_lags": 10}
@@ -24,7 +24,7 @@ FINGERPRINT = {"aircraft": [1.0, 2.0], "models": [["CZ", "1", "alpha", "delta_e"
 
 def fed_bank(n=300, seed=4):
     rng = np.random.default_rng(seed)
-    bank = EstimatorBank((3, 2), 10)
+    bank = EstimatorBank((3, 2), EstimatorOptions(lags=10))
     X = rng.standard_normal((n, 2, 3))
     X[:, 1, 2] = 0.0  # padding of the two-parameter model
     z = rng.standard_normal((n, 2))
@@ -95,7 +95,8 @@ def test_the_file_is_numpy_arrays_and_json_without_pickle(tmp_path):
     assert meta["format"] == EstimatorBank.STATE_FORMAT
     assert meta["fingerprint"] == FINGERPRINT
     assert meta["samples_used"] == 300
-    assert sorted(meta) == ["bank_config", "bank_counters", "fingerprint", "format", "samples_used", "zsq", "zsum"]
+    assert sorted(meta) == ["bank_counters", "fingerprint", "format", "options", "samples_used", "sizes", "zsq", "zsum"]
+    assert meta["sizes"] == [3, 2] and EstimatorOptions.from_dict(meta["options"]) == EstimatorOptions(lags=10)
 
 
 def test_another_configuration_is_refused(tmp_path):
@@ -162,7 +163,7 @@ def test_a_failed_save_leaves_the_previous_file_and_no_temporary(tmp_path):
     assert load_state(path, FINGERPRINT).samples_used == 1
 
 
-# ------------------------------------------------------------------ crafted files (issue 12)
+# ------------------------------------------------------------------ crafted files
 @pytest.mark.parametrize("meta,needle", [
     ([1, 2], "field 'meta' must be a JSON object, found a list of 2 items"),
     ("just text", "field 'meta' must be a JSON object, found str 'just text'"),
@@ -190,23 +191,27 @@ def _with(meta, dotted, value):
 
 
 @pytest.mark.parametrize("dotted,value,needle", [
-    ("bank_config", KeyError, "field 'bank_config' is missing"),
+    ("options", KeyError, "field 'options' is missing"),
     ("bank_counters", "k=3", "field 'bank_counters' must be a JSON object, found str"),
     ("extra", 1, "field 'extra' is not part of a state file"),
-    ("bank_config.sizes", "3,2", "field 'bank_config.sizes' must be a list"),
-    ("bank_config.sizes", [3, 2.5], "field 'bank_config.sizes[1]' must be an integer"),
-    ("bank_config.sizes", [3, 10**9], "field 'bank_config.sizes[1]' must be in [1, 64]"),
-    ("bank_config.sizes", [3], "field 'bank_config.sizes' is [3], the configuration has [3, 2]"),
-    ("bank_config.n_lags", "10", "field 'bank_config.n_lags' must be an integer"),
-    ("bank_config.n_lags", 11, "field 'bank_config.n_lags' is 11, the configuration has 10"),
-    ("bank_config.window", "hann", "field 'bank_config.window' must be one of"),
-    ("bank_config.forgetting", 1.5, "field 'bank_config.forgetting' must be in (0, 1]"),
-    ("bank_config.forgetting", None, "field 'bank_config.forgetting' must be a number"),
-    ("bank_config.init_condition", 0.5, "field 'bank_config.init_condition' must be > 1"),
-    ("bank_config.residual", KeyError, "field 'bank_config.residual' is missing"),
-    ("bank_config.residual_burn_in", KeyError, "field 'bank_config.residual_burn_in' is missing"),
-    ("bank_config.residual_burn_in", -1, "field 'bank_config.residual_burn_in' must be in [0, 100000]"),
-    ("bank_config.residual_burn_in", 2.0, "field 'bank_config.residual_burn_in' must be an integer"),
+    ("sizes", "3,2", "field 'sizes' must be a list"),
+    ("sizes", [3, 2.5], "field 'sizes[1]' must be an integer"),
+    ("sizes", [3, 10**9], "field 'sizes[1]' must be in [1, 64]"),
+    ("sizes", [3], "field 'sizes' is [3], the configuration has [3, 2]"),
+    ("options", [10], "field 'options' is not valid (estimator options must be a mapping"),
+    ("options.lags", "10", "field 'options' is not valid (estimator.lags must be an integer >= 0, 'all' or 'auto', "
+                           "got '10')"),
+    ("options.lags", 11, "field 'options.lags' is 11, the configuration has 10"),
+    ("options.window", "hann", "field 'options' is not valid (estimator.window must be one of"),
+    ("options.forgetting", 1.5, "(estimator.forgetting must be a number in (0, 1], got 1.5)"),
+    ("options.forgetting", None, "(estimator.forgetting must be a number in (0, 1], got None)"),
+    ("options.init_condition", 0.5, "(estimator.init_condition must be a number > 1, got 0.5)"),
+    ("options.residual", KeyError, "field 'options' is not valid (estimator.residual is missing)"),
+    ("options.lag", 10, "field 'options' is not valid (estimator.lag is not an estimator option)"),
+    ("options.residual_burn_in", -1, "(estimator.residual_burn_in must be None"),
+    ("options.residual_burn_in", 2.0, "(estimator.residual_burn_in must be None"),
+    ("options.residual_burn_in", 20, "field 'options.residual_burn_in' is 20, the configuration has 0"),
+    ("options.p0", "x", "(estimator.p0 must be None, a positive number or a sequence of them, got 'x')"),
     ("bank_counters.k", -1, "field 'bank_counters.k' must be in [0, "),
     ("bank_counters.k", True, "field 'bank_counters.k' must be an integer, found bool"),
     ("bank_counters.n_eff", 1e300, "field 'bank_counters.n_eff' must be in [0, k = 300]"),
@@ -220,7 +225,7 @@ def _with(meta, dotted, value):
 ])
 def test_every_meta_field_is_checked_by_type_and_range(tmp_path, dotted, value, needle):
     arrays, meta = contents(saved(tmp_path))
-    expect = {"sizes": [3, 2], "n_lags": 10}  # what the configuration continues with
+    expect = ((3, 2), EstimatorOptions(lags=10))  # what the configuration continues with
     refused(write(tmp_path / "c.npz", _with(meta, dotted, value), arrays), needle, expect=expect)
 
 
@@ -344,7 +349,7 @@ def test_a_header_declaring_a_huge_shape_is_refused_before_reading(tmp_path):
     from the declared entry sizes; and an entry whose npy header lies about its shape is
     refused from the header, before numpy allocates it."""
     arrays, meta = contents(saved(tmp_path))
-    big = _with(meta, "bank_config.n_lags", 10**7 - 1)
+    big = _with(meta, "options.lags", 10**7 - 1)
     big["bank_counters"]["cap"] = 10**7
     fp = {**FINGERPRINT, "n_lags": 10**7 - 1}
     big["fingerprint"] = fp
@@ -393,26 +398,27 @@ def test_a_corrupted_byte_in_an_array_fails_the_crc(tmp_path):
     refused(path, "not a readable state file", "CRC")
 
 
-def test_expect_must_match_the_files_bank_configuration(tmp_path):
+def test_expect_must_match_the_files_sizes_and_options(tmp_path):
     path = saved(tmp_path)
-    assert load_state(path, FINGERPRINT, expect={"sizes": (3, 2), "n_lags": 10, "window": "truncated"}).bank.k == 300
-    refused(path, "field 'bank_config.window' is 'truncated', the configuration has 'bartlett'",
-            expect={"window": "bartlett"})
+    assert load_state(path, FINGERPRINT, expect=((3, 2), EstimatorOptions(lags=10))).bank.k == 300
+    refused(path, "field 'options.window' is 'truncated', the configuration has 'bartlett'",
+            expect=((3, 2), EstimatorOptions(lags=10, window="bartlett")))
+    refused(path, "field 'sizes' is [3, 2], the configuration has [3, 3]", expect=((3, 3), EstimatorOptions(lags=10)))
 
 
 def test_a_state_saved_with_another_residual_burn_in_is_refused(tmp_path):
     """The lag sums of a state with a burn-in are those of the samples after it: a state saved
     with one burn-in is refused under another (the pipeline expects its resolved value)."""
     rng = np.random.default_rng(3)
-    bank = EstimatorBank((3, 2), 10, residual_burn_in=20)
+    bank = EstimatorBank((3, 2), EstimatorOptions(lags=10, residual_burn_in=20))
     for _ in range(100):
         bank.update(rng.standard_normal((2, 3)), rng.standard_normal(2))
     path = tmp_path / "burn.npz"
     save_state(path, EstimatorState(bank, 100, np.zeros(2), np.ones(2)), FINGERPRINT)
-    refused(path, "field 'bank_config.residual_burn_in' is 20, the configuration has 0",
-            expect={"n_lags": 10, "residual_burn_in": 0})
-    state = load_state(path, FINGERPRINT, expect={"n_lags": 10, "residual_burn_in": 20})
-    assert state.bank.residual_burn_in == 20
+    refused(path, "field 'options.residual_burn_in' is 20, the configuration has 0",
+            expect=((3, 2), EstimatorOptions(lags=10)))
+    state = load_state(path, FINGERPRINT, expect=((3, 2), EstimatorOptions(lags=10, residual_burn_in=20)))
+    assert state.bank.options.burn_in == 20
     np.testing.assert_array_equal(state.bank.standard_errors_all(), bank.standard_errors_all())
 
 
@@ -427,32 +433,33 @@ def test_big_endian_arrays_load_and_continue_identically(tmp_path):
 
 
 @pytest.mark.parametrize("kw,n", [
-    (dict(n_lags=10), 5), (dict(n_lags=10), 300), (dict(n_lags=0), 50), (dict(n_lags=None), 40),
-    (dict(n_lags=None), 200), (dict(n_lags=7, forgetting=0.98), 100), (dict(n_lags=5, window="bartlett"), 1),
-    (dict(n_lags="auto", max_lags=8), 120), (dict(n_lags=None, residual_burn_in=30), 100),
+    (dict(lags=10), 5), (dict(lags=10), 300), (dict(lags=0), 50), (dict(lags="all"), 40),
+    (dict(lags="all"), 200), (dict(lags=7, forgetting=0.98), 100), (dict(lags=5, window="bartlett"), 1),
+    (dict(lags="auto", max_lags=8), 120), (dict(lags="all", residual_burn_in=30), 100),
+    (dict(lags=5, forgetting=0.98), 2), (dict(lags=5, p0=10.0), 7),
 ])
 def test_the_layout_table_is_the_estimators_state(kw, n):
-    """state_layout() describes exactly what EstimatorBank.state() writes for the current
-    format (a new estimator layout must be added to the table)."""
+    """state_layout() describes exactly what EstimatorBank.state() writes (also while a model
+    waits, with and without a noise model, with a prior)."""
     rng = np.random.default_rng(1)
-    bank = EstimatorBank((3, 2, 4), **kw)
+    bank = EstimatorBank((3, 2, 4), EstimatorOptions(**kw))
     for _ in range(n):
         bank.update(rng.standard_normal((3, 4)), rng.standard_normal(3))
     s = bank.state()
-    layout = state_layout(s["format"], s["config"], s["counters"], waiting=not s["arrays"]["ready"].all())
-    assert layout is not None, f"state format {s['format']} has no layout in state_file.state_layout"
+    options = EstimatorOptions.from_dict(s["options"])
+    layout = state_layout(tuple(s["sizes"]), options, s["counters"], waiting=not s["arrays"]["ready"].all())
     assert {k: (v.shape, v.dtype) for k, v in s["arrays"].items()} == {
         k: (shape, dtype.newbyteorder("=")) for k, (shape, dtype) in layout.items()}
 
 
 def test_a_state_with_all_lags_round_trips(tmp_path):
     rng = np.random.default_rng(2)
-    bank = EstimatorBank((3, 2), None, forgetting=0.99)
+    bank = EstimatorBank((3, 2), EstimatorOptions(lags="all", forgetting=0.99))
     for _ in range(150):
         bank.update(rng.standard_normal((2, 3)), rng.standard_normal(2))
     path = tmp_path / "all.npz"
     save_state(path, EstimatorState(bank, 150, np.zeros(2), np.ones(2)), FINGERPRINT)
-    state = load_state(path, FINGERPRINT, expect={"sizes": [3, 2], "n_lags": None, "forgetting": 0.99})
+    state = load_state(path, FINGERPRINT, expect=((3, 2), EstimatorOptions(lags="all", forgetting=0.99)))
     assert state.bank.state()["counters"] == bank.state()["counters"]
     assert state.bank.state()["counters"]["cap"] == 256
     np.testing.assert_array_equal(state.bank.standard_errors_all(), bank.standard_errors_all())

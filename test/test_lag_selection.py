@@ -1,4 +1,4 @@
-"""Automatic lag selection (issue 14) against hand-computed values of the published formulas,
+"""Automatic lag selection against hand-computed values of the published formulas,
 literal implementations on raw series, edge cases and monotonic behaviour."""
 
 from __future__ import annotations
@@ -10,7 +10,7 @@ import pytest
 from statsmodels.tsa.stattools import acf
 
 from rls_uncertainty.differentiation import DifferentiatorConfig, derivative_weights
-from rls_uncertainty.estimator import EstimatorBank
+from rls_uncertainty.estimator import EstimatorBank, EstimatorOptions
 from rls_uncertainty.estimator.lag_selection import (
     RULES,
     andrews_lags,
@@ -320,11 +320,11 @@ def test_rule_on_a_bank_residual_autocorrelation():
     ar[0] = e[0]
     for k in range(1, n):
         ar[k] = 0.9 * ar[k - 1] + e[k]
-    bank = EstimatorBank((3, 3), n_lags=50)
+    bank = EstimatorBank((3, 3), EstimatorOptions(lags=50))
     z = np.column_stack([X @ [1.0, 2.0, 3.0] + 0.1 * e, X @ [1.0, 2.0, 3.0] + 0.1 * ar])
     for k in range(n):
         bank.update(np.stack([X[k], X[k]]), z[k])
     R = np.stack([bank.autocorrelation(0), bank.autocorrelation(1)])
-    L = select_lags(R, bank.n_samples, "flat_top", cap=bank.n_lags).lags
+    L = select_lags(R, bank.n_samples, "flat_top", cap=bank.options.held).lags
     assert L[0] <= 4
     assert L[1] >= 20

@@ -568,7 +568,7 @@ def test_state_file_with_auto_lags_and_a_residual_burn_in_resumes_and_refuses_an
     -1 is 50 with auto)."""
     params = {"estimator.lag_selection": "auto", "estimator.residual_burn_in": burn_in}
     pipe = pitch_pipeline(**params)
-    assert pipe.bank.residual_burn_in == (50 if burn_in < 0 else burn_in)
+    assert pipe.bank.options.burn_in == (50 if burn_in < 0 else burn_in)
     Synthetic(pipe).run(0, 3000)
     path = tmp_path / "state.npz"
     pipe.save_state(path)
@@ -613,7 +613,7 @@ def test_reconfiguration_keeps_every_count():
     assert pipe.bookkeeping is book and pipe.sampler.counts == book.streams
     syn.pipe = pipe
     after = pipe.counters()
-    assert pipe.bank.k == 0 and pipe.config.estimator.n_lags == 10
+    assert pipe.bank.k == 0 and pipe.config.estimator.lags == 10
     assert after["resets"] == {"parameters_changed": 1}
     assert after["samples_rejected"]["reset_parameters_changed"] == pending
     assert sum(s["expired"] for s in after["streams"].values()) == buffered

@@ -79,7 +79,7 @@ def test_reduced_monte_carlo_command(tmp_path):
     assert [r["parameter"] for r in conv] == [*PAPER_TABLE3[0.2], "CZ model", "Cm model"]
     for r in conv:
         assert float(r["flagged"]) > 0.9 and 2.0 < float(r["flag_time_median"]) < 12.0, r
-    assert "## Convergence flags (issue 14)" in (tmp_path / "table3.md").read_text()
+    assert "## Convergence flags" in (tmp_path / "table3.md").read_text()
 
 
 def test_recursive_and_batch_corrected_errors_agree_at_the_end():
@@ -123,7 +123,7 @@ def _reference_flags(t, theta, se, ready, config):
 def test_monte_carlo_convergence_outputs_against_an_independent_recomputation(tmp_path):
     """Flag times, estimates at the flag, model flag times, cover times and false-convergence
     rates of a small 20% Monte Carlo, recomputed from the estimator histories."""
-    from rls_uncertainty.estimator import EstimatorBank
+    from rls_uncertainty.estimator import EstimatorBank, EstimatorOptions
     from rls_uncertainty.montecarlo import (
         BEST_FROM,
         MONTE_CARLO_CONVERGENCE,
@@ -137,7 +137,7 @@ def test_monte_carlo_convergence_outputs_against_an_independent_recomputation(tm
     runs = 6
     res = run_level(0.2, runs)
     t, _, sizes, X, Z = level_inputs(0.2, runs)
-    bank = EstimatorBank(sizes, 50)
+    bank = EstimatorBank(sizes, EstimatorOptions(lags=50))
     hist = []
     for k in range(len(t)):
         bank.update(X[k], Z[k])

@@ -8,6 +8,8 @@ is the same quantity written out as the paper's matrices.
 
 from __future__ import annotations
 
+from typing import Literal
+
 import numpy as np
 
 from .lag_window import lag_weights
@@ -19,7 +21,7 @@ __all__ = ["batch_estimate"]
 def batch_estimate(
     X: np.ndarray,
     z: np.ndarray,
-    n_lags: int | None = None,
+    lags: int | Literal["all"] = "all",
     window: str = "truncated",
     residuals: np.ndarray | None = None,
     *,
@@ -30,11 +32,11 @@ def batch_estimate(
 
     Returns ``(theta, cov_conventional, cov_corrected)``: Eq. 6 for ``theta``, Eq. 13-14 for
     the conventional covariance and Eq. 8-11 (the Toeplitz form of Eq. 9 with the sample
-    autocorrelation of Eq. 10, lags beyond ``n_lags`` dropped or Bartlett-weighted) for the
-    corrected one. ``residuals`` replaces ``z - X theta`` in Eq. 10 (for instance the residual
-    history of a recursive estimator). ``forgetting < 1`` gives the exponentially weighted
-    formulas that :class:`~.bank.EstimatorBank` implements recursively (sample ``j`` of
-    ``N`` weighted by ``f^(N-j)``). ``noise_forgetting`` ``f_R`` (default ``forgetting``)
+    autocorrelation of Eq. 10, lags beyond ``lags`` dropped or Bartlett-weighted) for the
+    corrected one (``lags`` an integer, or ``"all"``). ``residuals`` replaces ``z - X theta``
+    in Eq. 10 (for instance the residual history of a recursive estimator). ``forgetting < 1``
+    gives the exponentially weighted formulas that :class:`~.bank.EstimatorBank` implements
+    recursively (sample ``j`` of ``N`` weighted by ``f^(N-j)``). ``noise_forgetting`` ``f_R`` (default ``forgetting``)
     weights the autocorrelation of Eq. 10 by ``f_R^(N-j)`` instead; without given
     ``residuals`` they are then those of the ``f_R``-weighted fit (the batch counterpart of the
     bank's noise model; pass the bank's :meth:`~.bank.EstimatorBank.noise_residuals` history
@@ -62,10 +64,10 @@ def batch_estimate(
         v = z - X @ np.linalg.lstsq(X * sg[:, None], z * sg, rcond=None)[0]
     if v.shape != (N,):
         raise ValueError(f"residuals must have {N} entries, got {v.shape}")
-    L = N - 1 if n_lags is None else min(int(n_lags), N - 1)
+    L = N - 1 if lags == "all" else min(int(lags), N - 1)
     # Eq. 10 (weighted): R(i) = sum_{j>i} w_j v_j v_{j-i} / sum_j w_j (w = f_R^(N-j))
     R = np.array([np.dot(g_wts[i:] * v[i:], v[: N - i]) for i in range(L + 1)]) / g_wts.sum()
-    kernel = R * lag_weights(L if n_lags is None else int(n_lags), window, L + 1)
+    kernel = R * lag_weights(L if lags == "all" else int(lags), window, L + 1)
     Xw = X * wts[:, None]
     if forgetting == 1.0:
         cov_conv = R[0] * D  # Eq. 13 with Eq. 14

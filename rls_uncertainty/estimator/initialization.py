@@ -8,7 +8,7 @@ lagged moments, and continues with Eq. 15. From then on the model works in colum
 units: its regressors are divided by ``s = sqrt(diag(A_k0))``, which keeps ``D`` well
 conditioned when the regressors span orders of magnitude.
 
-With a noise model (forgetting ``f_R``, see :mod:`.bank`) the lagged moments are weighted
+With a noise model (forgetting ``f_R``, ``docs/estimator.md``) the lagged moments are weighted
 ``f_R^(k-j)`` and the lag-0 moments weighted ``f^(k-j)`` are kept beside them: at ``k0`` the
 estimator takes its batch solution from the latter, the noise model the ``f_R``-weighted
 batch solution (in the same scaled units), and ``R_k0(i)`` is formed from the noise model's
@@ -18,13 +18,13 @@ residuals of samples ``1..k0``. ``A_k`` weighted ``f_R`` is at least ``A_k`` wei
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from collections.abc import Mapping, Sequence
 
 import numpy as np
 import numpy.typing as npt
 
-if TYPE_CHECKING:
-    from .bank import EstimatorBank
+from .lag_storage import FloatArray, LagStorage, assign_checked
+from .rls_fit import RlsFit
 
 __all__ = ["ExactInitialization"]
 
@@ -40,7 +40,11 @@ class _Waiting:
 
 
 class ExactInitialization:
-    """Watches the models that wait and initializes each as soon as its data allow it.
+    """Watches the models that wait and initializes each as soon as its data allow it: it
+    writes the model's fits (``fit``, and ``noise`` with a noise model) and its lag storage,
+    and keeps which models are :attr:`ready`, since when (:attr:`ready_at`) and their column
+    scales (:attr:`inv_s`: ``1/s`` on each model's parameters, 0 on padding). With a prior
+    (``prior``) every model is ready from the start, with ``s = 1``.
 
     Only a model whose ``A_k`` has a positive diagonal can be well conditioned. A zero
     diagonal entry (a regressor that has been exactly zero so far, such as a surface that
@@ -48,28 +52,36 @@ class ExactInitialization:
     at until it becomes positive.
     """
 
-    def __init__(self, bank: EstimatorBank) -> None:
-        self.bank = bank
+    def __init__(
+        self, sizes: Sequence[int], init_condition: float, lags: LagStorage, fit: RlsFit, noise: RlsFit | None,
+        *, prior: bool,
+    ) -> None:
+        self.sizes, self.init_condition = tuple(sizes), init_condition
+        self.lags, self.fit, self.noise = lags, fit, noise
+        m, n = len(self.sizes), lags.n
+        self.inv_s = (np.arange(n) < np.array(self.sizes)[:, None]).astype(float)
+        self.ready = np.full(m, prior, dtype=bool)
+        self.ready_at = np.zeros(m, dtype=np.int64)
         self._waiting: list[_Waiting] | None = None  # one per waiting model
 
     def reset(self) -> None:
         """Forget the cached indices (after a model initialized or the arrays changed)."""
         self._waiting = None
 
-    def check(self, w: int) -> None:
-        """Initialize the waiting models whose ``A_k`` allows it (``w`` lags held)."""
-        bank = self.bank
+    def check(self, k: int, w: int) -> bool:
+        """Initialize the waiting models whose ``A_k`` allows it at sample ``k`` (``w`` lags
+        held); True if one was."""
+        lags, ready = self.lags, self.ready
         waiting = self._waiting
         if waiting is None:
             # Flat indices of each waiting model's diag(A_k) in products_y, and its blocker.
-            n1, cap = bank.n_max + 1, bank._lags.cap
+            n1, cap = lags.n + 1, lags.cap
             waiting = self._waiting = [
-                _Waiting(
-                    j, np.array([((j * n1 + a) * cap) * n1 + a for a in range(bank.sizes[j])], dtype=np.intp), None
-                )
-                for j in range(bank.n_models) if not bank._ready[j]
+                _Waiting(j, np.array([((j * n1 + a) * cap) * n1 + a for a in range(s)], dtype=np.intp), None)
+                for j, s in enumerate(self.sizes) if not ready[j]
             ]
-        flat = bank._lags.products_y.reshape(-1)
+        flat = lags.products_y.reshape(-1)
+        done = False
         for entry in waiting:
             blocker = entry.blocker
             if blocker is not None and not flat[blocker] > 0.0:
@@ -80,30 +92,37 @@ class ExactInitialization:
                 entry.blocker = int(entry.diagonal[zero[0]])
                 continue
             entry.blocker = None
-            self.initialize(entry.model, w)  # resets the waiting list on success
+            inv = self.initialize(entry.model, k, w)
+            if inv is not None:
+                j = entry.model
+                self.inv_s[j, : inv.shape[0]] = inv
+                ready[j], self.ready_at[j] = True, k
+                self._waiting = None
+                done = True
+        return done
 
-    def initialize(self, j: int, w: int) -> bool:
-        """Exact initialization of model ``j`` at the current sample, if ``A_k`` allows it and
-        the batch solution is finite. Before it, the model's units are the regressors'."""
-        bank = self.bank
-        lags = bank._lags
-        s_n, n = bank.sizes[j], bank.n_max
-        if bank.k < s_n:
-            return False
+    def initialize(self, j: int, k: int, w: int) -> FloatArray | None:
+        """Exact initialization of model ``j`` at sample ``k``, if ``A_k`` allows it and the
+        batch solution is finite: its ``1/s``, else None. Before it, the model's units are
+        the regressors'."""
+        lags = self.lags
+        s_n, n = self.sizes[j], lags.n
+        if k < s_n:
+            return None
         # P(i) = sum_j f^(k-j) y_j y_(j-i)' of y = (x, z): A_k = X'WX is its lag-0 x block.
         P = lags.products_y[j]
         P0 = P[:, 0, :] if lags.moment0 is None else lags.moment0[j]  # weighted f
         A = P0[:s_n, :s_n]
         s = np.sqrt(np.diag(A))
         if not np.all(s > 0):
-            return False
+            return None
         C = A / np.outer(s, s)
-        if not np.linalg.cond(C) < bank.init_condition:
-            return False
+        if not np.linalg.cond(C) < self.init_condition:
+            return None
         D_scaled = np.linalg.inv(C)
         D_scaled = 0.5 * (D_scaled + D_scaled.T)  # S D S with S = diag(s)
         theta_scaled = D_scaled @ (P0[:s_n, n] / s)  # Eq. 6 (S theta), X'Wz the lag-0 x z moment
-        theta_noise = None
+        theta_noise = noise_residuals = None
         if lags.noise:  # the noise model's batch solution, weighted f_R, in the same units
             D_noise = np.linalg.inv(P[:s_n, 0, :s_n] / np.outer(s, s))
             D_noise = 0.5 * (D_noise + D_noise.T)
@@ -125,23 +144,20 @@ class ExactInitialization:
             held = noise_residuals[lags.ptr : lags.ptr + w]
             finite = finite and np.isfinite(theta_noise).all() and np.isfinite(held).all()
         if not (finite and np.isfinite(residuals[lags.ptr : lags.ptr + w]).all()):
-            return False  # absurd (finite) data so far: the state would not stay finite
-        bank._aug[j, :s_n, :s_n] = D_scaled
-        bank._aug[j, n, :s_n] = theta_scaled
-        bank._inv_s[j, :s_n] = inv[:s_n]
-        lags.lag_sums[j, :w] = lag_sums
-        products = lags.lag_products[j]
-        products *= inv[:, None, None]  # regressors to scaled units
-        products *= inv[None, None, :]
-        history[:, :n] = x_scaled
-        lags.x[j] = x_scaled
-        lags.v[j] = residuals
-        if theta_noise is not None:
-            bank._naug[j, :s_n, :s_n] = D_noise
-            bank._naug[j, n, :s_n] = theta_noise
-            lags.u[j] = noise_residuals
-        bank._ready[j] = True
-        bank._ready_at[j] = bank.k
-        self._waiting = None
-        bank._readiness_changed()
-        return True
+            return None  # absurd (finite) data so far: the state would not stay finite
+        self.fit.set_model(j, D_scaled, theta_scaled)
+        if theta_noise is not None and self.noise is not None:
+            self.noise.set_model(j, D_noise, theta_noise)
+        lags.start_model(j, w, inv, lag_sums, x_scaled, residuals, noise_residuals)
+        return inv[:s_n]
+
+    # ------------------------------------------------------------------ state
+    def arrays(self) -> dict[str, np.ndarray]:
+        """Copies of ``inv_s``, ``ready`` and ``ready_at``."""
+        return {"inv_s": self.inv_s.copy(), "ready": self.ready.copy(), "ready_at": self.ready_at.copy()}
+
+    def load(self, arrays: Mapping[str, npt.ArrayLike]) -> None:
+        """Inverse of :meth:`arrays`; another shape is refused by name."""
+        for name, target in (("inv_s", self.inv_s), ("ready", self.ready), ("ready_at", self.ready_at)):
+            assign_checked(target, arrays[name], name)
+        self.reset()

@@ -35,7 +35,7 @@ Section 3.2 and footnote c. ``m_hat`` is the smallest ``m >= 0`` such that
 ``M = 2 m_hat``. Here ``L = min(2 m_hat, cap)`` with the **truncated** window of Eq. 22
 (weight 1 on lags ``0..L``): the rectangular window is the flat-top family's limit, has no
 bias from the lags it keeps, and, unlike the Bartlett window, lets the anti-correlated lags
-of differentiated noise cancel the lag-0 term (see validation/auto_lags/REPORT.md). When no
+of differentiated noise cancel the lag-0 term (docs/estimator.md). When no
 run of ``K`` insignificant lags fits inside the ``W`` lags held, ``L = cap``.
 
 ``"andrews"`` -- Andrews (1991), "Heteroskedasticity and autocorrelation consistent

@@ -1,6 +1,6 @@
 """What a bank keeps per lag: the recent samples and the lag-indexed sums.
 
-For ``M`` models of at most ``n`` parameters and a lag capacity ``cap`` (``n_lags + 1``,
+For ``M`` models of at most ``n`` parameters and a lag capacity ``cap`` (``held + 1``,
 or growing by doubling when all lags are kept):
 
 * **History**, newest first: ``x`` (column-scaled regressors) and ``v`` (residuals of
@@ -45,9 +45,11 @@ from collections.abc import Mapping
 import numpy as np
 import numpy.typing as npt
 
+from .burn_in import BurnIn
+
 __all__ = ["LagStorage", "GROWTH_START"]
 
-GROWTH_START = 64  # initial lag capacity when all lags are kept (n_lags=None)
+GROWTH_START = 64  # initial lag capacity when all lags are kept (lags="all")
 
 _HISTORY = ("x", "y", "v")
 
@@ -152,6 +154,52 @@ class LagStorage:
         m, n1 = self.m, self.n + 1
         return self.products_y[:, :, :w].reshape(m, n1, w * n1), self.products_y_scratch[:, :, : w * n1]
 
+    def add_sample(self, p: int, w: int, xs_col: FloatArray, y_k: FloatArray, burn: BurnIn, k: int) -> None:
+        """Eqs. 17 and 21 for sample ``k``, whose history and residuals were written to slot
+        ``p`` (``w`` lags held after it): ``xs_col`` is the scaled ``x_k`` as a column, ``y_k``
+        the sample's ``(x_k, z_k)`` (read while a model waits)."""
+        sums, sums_tmp, products, products_tmp = self.full if w == self.cap else self._restricted(w)
+        # Eq. 17 as sums: n_k R_k(i) = f n_(k-1) R_(k-1)(i) + v_k v_(k-i) (with a noise model
+        # f_R and its residuals u_k).
+        g = self.moment_forgetting
+        if g != 1.0:
+            sums *= g
+        series = self.u if self.noise else self.v
+        v_window = series[:, p : p + w]  # v_k, v_(k-1), ...
+        lagged = np.multiply(v_window, v_window[:, :1], out=sums_tmp)  # v_k v_(k-i)
+        if burn.masking:  # some model's window reaches into its burn-in
+            burn.mask(sums, lagged, k, w, self.cap)
+        sums += lagged
+        self._add_products(products, products_tmp, p, w, xs_col, y_k)
+
+    def _add_products(
+        self, products: FloatArray, scratch: FloatArray, p: int, w: int, xs_col: FloatArray, y_k: FloatArray
+    ) -> None:
+        """Eq. 21, one-sided: ``Lambda+_k(i) = f^2 Lambda+_(k-1)(i) + f^i x_k x_(k-i)'``, and
+        while a model waits the lagged moments weighted ``f^(k-j)`` (``f_R^(k-j)`` with a
+        noise model); ``products`` and ``scratch`` are :meth:`by_lag`'s."""
+        m, n = self.m, self.n
+        if self.merged:  # of y = (x, z): Lambda+ and the lagged moments at once
+            y_window = self.y[:, p : p + w].reshape(m, 1, w * (n + 1))  # y_k, y_(k-1), ...
+            products += np.multiply(y_k[:, :, None], y_window, out=scratch)
+            return
+        f = self.forgetting
+        x_window = self.x[:, p : p + w].reshape(m, 1, w * n)  # x_k, x_(k-1), ... (a view)
+        if f == 1.0:
+            products += np.multiply(xs_col, x_window, out=scratch)
+        else:
+            weighted = (x_window.reshape(m, w, n) * self.lag_powers[None, :w, None]).reshape(m, 1, w * n)
+            self.lag_products *= f * f
+            products += np.multiply(xs_col, weighted, out=scratch)
+        if self.waiting:
+            moments, moments_tmp = self.products_y_by_lag(w)
+            if self.moment0 is not None:  # the lag-0 moments weighted f^(k-j)
+                self.moment0 *= f
+                self.moment0 += y_k[:, :, None] * y_k[:, None, :]
+            self.products_y *= self.moment_forgetting
+            y_window = self.y[:, p : p + w].reshape(m, 1, w * (n + 1))
+            moments += np.multiply(y_k[:, :, None], y_window, out=moments_tmp)
+
     def all_initialized(self) -> None:
         """Every model is initialized: ``lag_products`` gets an array of its own and the
         moments are dropped."""
@@ -171,6 +219,23 @@ class LagStorage:
         self.ptr = ptr
         self.full = self._restricted(self.cap)
         self.lag0 = self.lag_products[:, :, 0, :]
+
+    def start_model(
+        self, j: int, w: int, inv: FloatArray, lag_sums: FloatArray, x_scaled: FloatArray, residuals: FloatArray,
+        noise_residuals: FloatArray | None,
+    ) -> None:
+        """Model ``j`` initialized (:mod:`.initialization`; ``w`` lags held): its lag sums of
+        Eq. 10, its lag products and history in the column-scaled units ``x / s`` (``inv`` is
+        ``1/s``, 0 on padding), and its residual histories."""
+        self.lag_sums[j, :w] = lag_sums
+        products = self.lag_products[j]
+        products *= inv[:, None, None]  # regressors to scaled units
+        products *= inv[None, None, :]
+        self.y[j, :, : self.n] = x_scaled
+        self.x[j] = x_scaled
+        self.v[j] = residuals
+        if noise_residuals is not None:
+            self.u[j] = noise_residuals
 
     def window(self, buf: FloatArray, w: int) -> FloatArray:
         """The last ``w`` entries of a history buffer, newest first (a view)."""
@@ -216,9 +281,15 @@ class LagStorage:
                 out["moment0"] = self.moment0.copy()  # type: ignore[union-attr]  # set while waiting with noise
         return out
 
-    def load(self, arrays: Mapping[str, npt.ArrayLike], w: int) -> None:
-        """Inverse of :meth:`arrays` (on freshly allocated storage of the same capacity)."""
+    def lay_out(self, cap: int, waiting: bool, w: int) -> None:
+        """Fresh storage of capacity ``cap`` for a state with ``w`` lags held (``waiting``: some
+        model waits for initialization), its history window placed as :meth:`load` fills it."""
+        self.waiting = waiting
+        self.allocate(cap)
         self.ptr -= w
+
+    def load(self, arrays: Mapping[str, npt.ArrayLike], w: int) -> None:
+        """Inverse of :meth:`arrays`, on storage laid out by :meth:`lay_out`."""
         for name in self.history:
             assign_checked(self.window(getattr(self, name), w), arrays[name], name)
         assign_checked(self.lag_sums, arrays["lag_sums"], "lag_sums")
@@ -230,7 +301,7 @@ class LagStorage:
             assign_checked(self.lag_products, arrays["lag_products"], "lag_products")
 
 
-def assign_checked(target: FloatArray, value: npt.ArrayLike, name: str) -> None:
+def assign_checked(target: np.ndarray, value: npt.ArrayLike, name: str) -> None:
     """``target[...] = value`` for a state field, refusing another shape by name."""
     value = np.asarray(value)
     if value.shape != target.shape:

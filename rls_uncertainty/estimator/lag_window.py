@@ -15,17 +15,17 @@ from .options import check_window
 __all__ = ["lag_weights"]
 
 
-def lag_weights(n_lags: int, window: str, count: int | None = None) -> np.ndarray:
-    """Weights ``c_i`` of lags ``i = 0..count-1`` (default ``count = n_lags + 1``).
+def lag_weights(n_tau: int, window: str, count: int | None = None) -> np.ndarray:
+    """Weights ``c_i`` of lags ``i = 0..count-1`` (default ``count = n_tau + 1``).
 
-    ``n_lags`` is the largest retained lag ``n_tau`` of Eq. 22; lags beyond it get 0.
+    ``n_tau`` is the largest retained lag of Eq. 22; lags beyond it get 0.
     """
     check_window(window)
-    count = n_lags + 1 if count is None else count
+    count = n_tau + 1 if count is None else count
     i = np.arange(count, dtype=float)
     if window == "truncated":
         w = np.ones(count)
     else:
-        w = 1.0 - i / (n_lags + 1.0)
-    w[i > n_lags] = 0.0
+        w = 1.0 - i / (n_tau + 1.0)
+    w[i > n_tau] = 0.0
     return w

@@ -1,44 +1,48 @@
-"""The estimator's choices, defined once, and their validation.
+"""The estimator's options: one frozen object, validated once.
 
-Configuration, ROS parameters and the command line read the choices from here; the fast
-bank (:mod:`.bank`) and the executable specification (:mod:`.reference`) validate their
-arguments with the same function, so both accept exactly the same options.
+:class:`EstimatorOptions` is the only place the options are listed, checked and given their
+defaults. The fast bank (:class:`.bank.EstimatorBank`), the executable specification
+(:class:`.reference.RecursiveReference`), :class:`.recursive.RecursiveEstimator` and the state
+file take it as it is and check nothing again; the configuration maps the ROS parameters onto
+it in one function (:func:`rls_uncertainty.config.estimator_options`). What each option means
+is defined in :mod:`.reference` and tabulated in ``docs/estimator.md``.
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
-from typing import Literal, TypeGuard, get_args
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, fields, replace
+from typing import Any, Literal, get_args
 
 import numpy as np
 
+from ..errors import ConfigError
+
 __all__ = [
+    "EstimatorOptions",
+    "Lags",
     "Window",
     "Residual",
     "CovarianceKind",
     "WINDOWS",
     "RESIDUALS",
     "COVARIANCE_KINDS",
-    "check_window",
-    "check_kind",
-    "check_options",
-    "AUTO",
-    "check_noise_forgetting",
-    "default_noise_forgetting",
-    "NOISE_MEMORY_LAGS",
-    "prior_diagonal",
     "AUTO_BURN_IN",
     "MAX_BURN_IN",
-    "check_burn_in",
+    "NOISE_MEMORY_LAGS",
+    "check_window",
+    "check_kind",
 ]
 
-# Default memory of the noise model under forgetting, in units of n_lags + 1 samples.
+# Default memory of the noise model under forgetting, in units of (lags held + 1) samples.
 NOISE_MEMORY_LAGS = 40.0
-# residual_burn_in: the default with n_lags="auto" (0, the paper, otherwise) and the largest
+# residual_burn_in: the default with lags="auto" (0, the paper, otherwise) and the largest
 # value accepted (samples).
 AUTO_BURN_IN = 50
 MAX_BURN_IN = 100_000
 
+Lags = int | Literal["all", "auto"]
 Window = Literal["truncated", "bartlett"]
 Residual = Literal["standardized", "a_posteriori", "a_priori"]
 CovarianceKind = Literal["corrected", "conventional"]
@@ -47,96 +51,200 @@ RESIDUALS: tuple[Residual, ...] = get_args(Residual)
 COVARIANCE_KINDS: tuple[CovarianceKind, ...] = get_args(CovarianceKind)
 
 
-def check_window(window: str) -> None:
+def check_window(window: object) -> None:
+    """Refuse a lag window other than :data:`WINDOWS` (an argument of the batch formulas)."""
     if window not in WINDOWS:
-        raise ValueError(f"window must be one of {WINDOWS}, got {window!r}")
+        raise ConfigError(f"window must be one of {list(WINDOWS)}, got {window!r}")
 
 
-def check_kind(kind: str) -> None:
+def check_kind(kind: object) -> None:
+    """Refuse a covariance kind other than :data:`COVARIANCE_KINDS` (an argument, not an option)."""
     if kind not in COVARIANCE_KINDS:
-        raise ValueError(f"kind must be one of {COVARIANCE_KINDS}, got {kind!r}")
+        raise ConfigError(f"kind must be one of {list(COVARIANCE_KINDS)}, got {kind!r}")
 
 
-def _is_count(value: object) -> TypeGuard[int | np.integer | float]:
-    return not isinstance(value, (bool, str)) and isinstance(value, (int, np.integer, float)) and int(value) == value
-
-AUTO = "auto"  # n_lags chosen from the data (lag_selection.flat_top_lags)
+def _is_int(value: object) -> bool:
+    return isinstance(value, (int, np.integer)) and not isinstance(value, (bool, np.bool_))
 
 
-def check_options(
-    n_lags: int | str | None, window: str, forgetting: float, residual: str, init_condition: float,
-    *, max_lags: int = 50, min_lags: int = 0,
-) -> None:
-    """Refuse an invalid configuration with a message that names the option."""
-    if n_lags == AUTO:
-        if not (_is_count(max_lags) and max_lags >= 1):
-            raise ValueError(f"max_lags must be an integer >= 1, got {max_lags!r}")
-        if not (_is_count(min_lags) and 0 <= min_lags <= max_lags):
-            raise ValueError(f"min_lags must be an integer in [0, max_lags = {max_lags}], got {min_lags!r}")
-        if window != "truncated":
-            raise ValueError(
-                f"n_lags='auto' needs window='truncated', got {window!r}: the flat-top rule chooses a "
-                "truncation point, and the Bartlett taper cannot let the anti-correlated lags of "
-                "differentiated noise cancel (validation/auto_lags/REPORT.md)"
+def _is_number(value: object) -> bool:
+    return _is_int(value) or isinstance(value, (float, np.floating))
+
+
+def _fail(option: str, expected: str, value: object) -> ConfigError:
+    return ConfigError(f"estimator.{option} must be {expected}, got {value!r}")
+
+
+@dataclass(frozen=True)
+class EstimatorOptions:
+    """How the estimator runs; every field is checked when the object is made.
+
+    ``lags``: the largest lag ``L`` of Eq. 22 (an integer >= 0; 0 is the conventional
+    covariance), ``"all"`` (Eq. 20: memory and time grow with the samples) or ``"auto"`` (each
+    model's ``L`` chosen at every sample by Politis' flat-top rule, from ``min_lags`` to
+    ``max_lags``, with the memory of ``lags=max_lags``). ``window``: ``"truncated"`` (Eq. 22)
+    or ``"bartlett"`` (positive semi-definite; not with ``"auto"``). ``forgetting``: ``0 < f
+    <= 1``, 1 is the paper. ``residual``: the residual of Eqs. 16-17. ``residual_burn_in``:
+    samples after each model's initialization left out of ``R_k(i)`` (``None``: 50 with
+    ``"auto"``, 0 otherwise). ``noise_forgetting``: ``f_R`` of the noise model under
+    forgetting, ``forgetting <= f_R <= 1`` (``None``: the default of
+    :attr:`noise_forgetting_used`). ``init_condition``: exact initialization waits for a
+    column-scaled ``X'X`` better conditioned than this. ``p0``: ``None`` (exact
+    initialization) or the prior ``D_0 = diag(p0)``, ``theta_0 = 0``, a positive scalar or one
+    value per parameter. Definitions: :mod:`.reference`; the table: ``docs/estimator.md``.
+    """
+
+    lags: Lags = 50
+    window: Window = "truncated"
+    forgetting: float = 1.0
+    residual: Residual = "standardized"
+    max_lags: int = 50
+    min_lags: int = 0
+    residual_burn_in: int | None = None
+    noise_forgetting: float | None = None
+    init_condition: float = 1e8
+    p0: float | tuple[float, ...] | None = None
+
+    def __post_init__(self) -> None:
+        self._check_lags()
+        if self.window not in WINDOWS:
+            raise _fail("window", f"one of {list(WINDOWS)}", self.window)
+        if self.lags == "auto" and self.window != "truncated":
+            raise _fail(
+                "window", "'truncated' with automatic lags (the flat-top rule chooses a truncation point; "
+                "the Bartlett taper cannot let the anti-correlated lags of differentiated noise cancel)", self.window,
             )
-    elif n_lags is not None and not (_is_count(n_lags) and n_lags >= 0):
-        raise ValueError(f"n_lags must be None, 'auto' or an integer >= 0, got {n_lags!r}")
-    check_window(window)
-    if not (0.0 < float(forgetting) <= 1.0):
-        raise ValueError(f"forgetting must be in (0, 1], got {forgetting!r}")
-    if residual not in RESIDUALS:
-        raise ValueError(f"residual must be one of {RESIDUALS}, got {residual!r}")
-    if not float(init_condition) > 1.0:
-        raise ValueError(f"init_condition must be > 1, got {init_condition!r}")
+        f = self._number("forgetting", "a number in (0, 1]", lambda x: 0.0 < x <= 1.0)
+        if self.residual not in RESIDUALS:
+            raise _fail("residual", f"one of {list(RESIDUALS)}", self.residual)
+        b: Any = self.residual_burn_in  # (whatever was given: checked here)
+        if b is not None and not (_is_int(b) and 0 <= b <= MAX_BURN_IN):
+            raise _fail("residual_burn_in", f"None (the default: {AUTO_BURN_IN} with automatic lags, 0 otherwise) "
+                        f"or an integer in [0, {MAX_BURN_IN}]", b)
+        self._set("residual_burn_in", None if b is None else int(b))
+        g = self.noise_forgetting
+        if g is not None:
+            if not (_is_number(g) and f <= float(g) <= 1.0):
+                raise _fail("noise_forgetting", f"None or a number in [forgetting, 1] = [{f:g}, 1]", g)
+            self._set("noise_forgetting", float(g))
+        self._number("init_condition", "a number > 1", lambda x: x > 1.0)
+        self._check_p0()
 
+    def _set(self, name: str, value: object) -> None:
+        object.__setattr__(self, name, value)  # the normalised value (frozen dataclass)
 
-def default_noise_forgetting(forgetting: float, n_lags: int | None) -> float:
-    """The default ``f_R`` of the noise model: ``max(f, 1 - 1/(NOISE_MEMORY_LAGS (n_lags + 1)))``,
-    ``f`` itself when ``f = 1`` or all lags are kept (``n_lags=None``).
+    def _number(self, name: str, expected: str, ok: Any) -> float:
+        value = getattr(self, name)
+        if not (_is_number(value) and not math.isnan(value) and ok(float(value))):
+            raise _fail(name, expected, value)
+        self._set(name, float(value))
+        return float(value)
 
-    The noise autocovariance is then averaged over ``40 (n_lags + 1)`` samples (2040 for 50
-    lags, ``f_R = 0.99951``): the noise model's own fit absorbs about ``1/40`` of the lag sum
-    (2.5 % in variance), and the relative spread of the lag sum is about ``sqrt(2/40)``."""
-    f = float(forgetting)
-    if f == 1.0 or n_lags is None:
-        return f
-    return max(f, 1.0 - 1.0 / (NOISE_MEMORY_LAGS * (int(n_lags) + 1)))
+    def _check_lags(self) -> None:
+        lags: Any = self.lags  # (whatever was given: checked here)
+        high = self.max_lags
+        if not (lags in ("all", "auto") if isinstance(lags, str) else _is_int(lags) and lags >= 0):
+            raise _fail("lags", "an integer >= 0, 'all' or 'auto'", lags)
+        if not (_is_int(high) and high >= 1):
+            raise _fail("max_lags", "an integer >= 1", high)
+        if not (_is_int(self.min_lags) and 0 <= self.min_lags <= high):
+            raise _fail("min_lags", f"an integer in [0, max_lags = {high}]", self.min_lags)
+        if not isinstance(lags, str):
+            self._set("lags", int(lags))
+        self._set("max_lags", int(high))
+        self._set("min_lags", int(self.min_lags))
 
+    def _check_p0(self) -> None:
+        p0: Any = self.p0  # (whatever was given: checked here)
+        if p0 is None:
+            return
+        values: list[Any] | None = None
+        if _is_number(p0):
+            values = [p0]
+        elif isinstance(p0, (tuple, list, np.ndarray)):
+            values = list(p0)
+        if not values or not all(_is_number(v) and math.isfinite(v) and v > 0 for v in values):
+            raise _fail("p0", "None, a positive number or a sequence of them", p0)
+        self._set("p0", float(values[0]) if _is_number(p0) else tuple(float(v) for v in values))
 
-def check_noise_forgetting(noise_forgetting: float | None, forgetting: float, n_lags: int | None) -> float:
-    """``f_R`` for the option ``noise_forgetting`` (``None``: :func:`default_noise_forgetting`),
-    refused unless ``forgetting <= f_R <= 1``."""
-    if noise_forgetting is None:
-        return default_noise_forgetting(forgetting, n_lags)
-    g = float(noise_forgetting)
-    if not (float(forgetting) <= g <= 1.0):
-        raise ValueError(
-            f"noise_forgetting must be None or in [forgetting, 1] = [{forgetting}, 1], got {noise_forgetting!r}"
-        )
-    return g
+    # ------------------------------------------------------------------ resolved values
+    @property
+    def auto(self) -> bool:
+        """Lags chosen from the data (``lags="auto"``)."""
+        return self.lags == "auto"
 
+    @property
+    def held(self) -> int | None:
+        """The largest lag held in memory: ``lags``, ``max_lags`` with ``"auto"``, None for all."""
+        if self.lags == "all":
+            return None
+        return self.max_lags if self.lags == "auto" else int(self.lags)
 
-def check_burn_in(residual_burn_in: int | None, n_lags: int | str | None) -> int:
-    """The residual burn-in ``B`` for the option ``residual_burn_in`` (samples after a model's
-    initialization whose residuals are left out of ``R_k(i)``; see :mod:`.reference`):
-    ``None`` takes :data:`AUTO_BURN_IN` (50) with ``n_lags="auto"`` and 0 (the paper's Eq. 17)
-    otherwise; an integer must lie in ``[0, MAX_BURN_IN]``."""
-    if residual_burn_in is None:
-        return AUTO_BURN_IN if n_lags == AUTO else 0
-    if not (_is_count(residual_burn_in) and 0 <= residual_burn_in <= MAX_BURN_IN):
-        raise ValueError(
-            f"residual_burn_in must be None (the default: {AUTO_BURN_IN} with n_lags='auto', 0 otherwise) "
-            f"or an integer in [0, {MAX_BURN_IN}], got {residual_burn_in!r}"
-        )
-    return int(residual_burn_in)
+    @property
+    def burn_in(self) -> int:
+        """The residual burn-in ``B`` used: ``residual_burn_in``, or its default (50 with
+        ``"auto"``, 0, the paper's Eq. 17, otherwise)."""
+        if self.residual_burn_in is None:
+            return AUTO_BURN_IN if self.auto else 0
+        return self.residual_burn_in
 
+    @property
+    def noise_forgetting_used(self) -> float:
+        """``f_R``: ``noise_forgetting``, or by default ``max(f, 1 - 1/(40 (held + 1)))``, and
+        ``f`` itself when ``f = 1`` or all lags are kept (``docs/estimator.md``).
 
-def prior_diagonal(p0: float | Sequence[float], n: int) -> np.ndarray:
-    """The diagonal of the prior dispersion ``D_0 = diag(p0)`` for ``n`` parameters."""
-    p = np.asarray(p0, dtype=float)
-    p = np.full(n, float(p)) if p.ndim == 0 else p.reshape(-1)
-    if p.shape != (n,):
-        raise ValueError(f"p0 must be a scalar or have {n} entries, got {p.shape}")
-    if not np.all(np.isfinite(p)) or np.any(p <= 0):
-        raise ValueError(f"p0 must be positive and finite, got {p0!r}")
-    return p
+        The noise autocovariance is then averaged over ``40 (held + 1)`` samples (2040 for 50
+        lags, ``f_R = 0.99951``): the noise model's own fit absorbs about ``1/40`` of the lag
+        sum, and the relative spread of the lag sum is about ``sqrt(2/40)``."""
+        if self.noise_forgetting is not None:
+            return self.noise_forgetting
+        f, held = self.forgetting, self.held
+        if f == 1.0 or held is None:
+            return f
+        return max(f, 1.0 - 1.0 / (NOISE_MEMORY_LAGS * (held + 1)))
+
+    @property
+    def noise_model(self) -> bool:
+        """``R_k(i)`` comes from the noise model (``f_R != f``, so ``f < 1``)."""
+        return self.noise_forgetting_used != self.forgetting
+
+    def prior(self, n: int) -> np.ndarray | None:
+        """The diagonal of ``D_0 = diag(p0)`` for ``n`` parameters, None for exact initialization."""
+        if self.p0 is None:
+            return None
+        if isinstance(self.p0, float):
+            return np.full(n, self.p0)
+        if len(self.p0) != n:
+            raise ConfigError(f"estimator.p0 must be a number or have {n} entries (the most parameters of a "
+                              f"model), got {len(self.p0)}")
+        return np.array(self.p0)
+
+    def resolved(self) -> EstimatorOptions:
+        """The same options with the defaults resolved (``residual_burn_in``,
+        ``noise_forgetting``): two objects that run the same estimator resolve to equal ones."""
+        return replace(self, residual_burn_in=self.burn_in, noise_forgetting=self.noise_forgetting_used)
+
+    # ------------------------------------------------------------------ state file
+    def as_dict(self) -> dict[str, Any]:
+        """The options as JSON-ready values, as given (:meth:`from_dict` gives back an equal
+        object; compare ``resolved().as_dict()`` to know whether two run the same estimator)."""
+        out = {f.name: getattr(self, f.name) for f in fields(self)}
+        if isinstance(self.p0, tuple):
+            out["p0"] = list(self.p0)
+        return out
+
+    @classmethod
+    def from_dict(cls, values: Mapping[str, Any]) -> EstimatorOptions:
+        """Inverse of :meth:`as_dict`; refuses a missing or unknown key and any invalid value
+        (:class:`ConfigError` naming the option)."""
+        if not isinstance(values, Mapping):
+            raise ConfigError(f"estimator options must be a mapping, got {type(values).__name__}")
+        names = [f.name for f in fields(cls)]
+        missing = [n for n in names if n not in values]
+        if missing:
+            raise ConfigError(f"estimator.{missing[0]} is missing")
+        extra = sorted(str(k) for k in values if k not in names)
+        if extra:
+            raise ConfigError(f"estimator.{extra[0][:40]} is not an estimator option")
+        p0 = values["p0"]
+        return cls(**{**values, "p0": tuple(p0) if isinstance(p0, list) else p0})

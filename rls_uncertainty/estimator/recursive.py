@@ -9,6 +9,7 @@ import numpy as np
 import numpy.typing as npt
 
 from .bank import EstimatorBank
+from .options import EstimatorOptions
 
 __all__ = ["RecursiveEstimator"]
 
@@ -16,19 +17,12 @@ __all__ = ["RecursiveEstimator"]
 class RecursiveEstimator:
     """Recursive least squares for one model, with corrected and conventional covariances.
 
-    ``RecursiveEstimator(n_params, n_lags=None, window="truncated", forgetting=1.0)``;
-    keyword options as for :class:`EstimatorBank`. ``update(x, z)`` processes one sample.
+    ``RecursiveEstimator(n_params, options)`` with :class:`.options.EstimatorOptions` (default
+    ``EstimatorOptions()``), as :class:`EstimatorBank`. ``update(x, z)`` processes one sample.
     """
 
-    def __init__(
-        self,
-        n_params: int,
-        n_lags: int | str | None = None,
-        window: str = "truncated",
-        forgetting: float = 1.0,
-        **options: Any,
-    ) -> None:
-        self._bank = EstimatorBank((int(n_params),), n_lags, window, forgetting, **options)
+    def __init__(self, n_params: int, options: EstimatorOptions | None = None) -> None:
+        self._bank = EstimatorBank((int(n_params),), options)
 
     @classmethod
     def _wrap(cls, bank: EstimatorBank) -> RecursiveEstimator:
@@ -48,12 +42,17 @@ class RecursiveEstimator:
         return self._bank.n_max
 
     @property
-    def n_lags(self) -> int | str | None:
-        return self._bank.n_lags
+    def options(self) -> EstimatorOptions:
+        return self._bank.options
+
+    @property
+    def bank(self) -> EstimatorBank:
+        """The bank of one behind this estimator (its per-model results, :attr:`EstimatorBank.n_R` ...)."""
+        return self._bank
 
     @property
     def lags_used(self) -> int:
-        """The largest lag of Eq. 22 used at this sample (chosen with ``n_lags="auto"``)."""
+        """The largest lag of Eq. 22 used at this sample (chosen with ``lags="auto"``)."""
         return int(self._bank.lags_used[0])
 
     @property
@@ -97,6 +96,6 @@ class RecursiveEstimator:
 
     @classmethod
     def from_state(cls, state: Mapping[str, Any]) -> RecursiveEstimator:
-        if len(state["config"]["sizes"]) != 1:
+        if len(state["sizes"]) != 1:
             raise ValueError("state holds several models: use EstimatorBank.from_state")
         return cls._wrap(EstimatorBank.from_state(state))

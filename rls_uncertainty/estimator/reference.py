@@ -48,17 +48,20 @@ What the paper leaves open is defined here, and the fast bank follows it:
 * **Lag window** ``c_i`` (:func:`.lag_window.lag_weights`): Eq. 20 keeps all lags
   ``i < k``, Eq. 22 lags ``i <= n_tau``; ``bartlett`` weights them by ``1 - i/(n_tau+1)``
   (``n_tau = k - 1`` with all lags).
-* **Automatic lags** (``n_lags="auto"``, truncated window only): ``R_k(i)`` is kept for
+* **Automatic lags** (``lags="auto"``, truncated window only): ``R_k(i)`` is kept for
   ``i <= max_lags`` and, when a covariance is evaluated, ``n_tau = L`` is chosen by Politis'
   flat-top rule (:func:`flat_top_lag`): with ``rho(i) = R_k(i)/R_k(0)``, the threshold
   ``tau = 2 sqrt(log10 n / n)`` and ``K = max(5, ceil(sqrt(log10 n)))``, ``m`` is the smallest
   ``m >= 0`` with ``|rho(m+j)| < tau`` for ``j = 1..K`` and ``L = 2 m``, or ``max_lags`` when
   no such run fits in the lags held; ``L`` is limited to ``[min_lags, min(max_lags, lags
-  held, n - 1)]`` and is ``min_lags`` when ``R_k(0) <= 0`` (an exact fit) or before
-  initialization. ``n`` is ``k``, or under forgetting Kish's effective size
-  ``(sum w)^2 / sum w^2`` of the weights ``w_j = f_R^(k-j)`` of ``R_k(i)``.
+  held, n - 1)]`` and is ``min_lags`` before initialization, when ``R_k(0) <= 0``, and when
+  the model fits exactly (``R_k(0)`` at most ``1e-12`` of the mean square of its output, as
+  for the published covariance below): its residuals are then rounding, whose pattern
+  depends on the machine's floating-point kernels, so ``R_k(i)`` counts as zero. ``n`` is
+  ``k``, or under forgetting Kish's effective size ``(sum w)^2 / sum w^2`` of the weights
+  ``w_j = f_R^(k-j)`` of ``R_k(i)``.
 * **Residual burn-in** (``residual_burn_in`` ``B >= 0``; default ``50`` with
-  ``n_lags="auto"``, else 0). Right after a model's initialization at ``k0`` (``k0 = 0`` with a
+  ``lags="auto"``, else 0). Right after a model's initialization at ``k0`` (``k0 = 0`` with a
   prior) its estimate is still poor and its residuals are large and correlated; Eq. 17 keeps
   them in ``R_k(i)`` for ever. With ``B > 0`` they are left out: for ``k <= k0 + B``,
   ``R_k(i)`` is the paper's (above); from ``k = k0 + B + 1`` on it is Eq. 17 started afresh on
@@ -86,6 +89,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from typing import Literal
 
 import numpy as np
 import numpy.typing as npt
@@ -93,7 +97,7 @@ import numpy.typing as npt
 from ..errors import EstimatorNotReady
 from .covariance import EXACT_FIT, nearest_psd
 from .lag_window import lag_weights
-from .options import check_burn_in, check_kind, check_noise_forgetting, check_options, check_window, prior_diagonal
+from .options import EstimatorOptions, check_kind, check_window
 
 __all__ = ["batch_reference", "RecursiveReference", "flat_top_lag"]
 
@@ -116,7 +120,7 @@ def flat_top_lag(R: Sequence[float], n: float, max_lags: int, min_lags: int = 0)
 def batch_reference(
     X: np.ndarray,
     z: np.ndarray,
-    n_lags: int | None = None,
+    lags: int | Literal["all"] = "all",
     window: str = "truncated",
     *,
     forgetting: float = 1.0,
@@ -146,7 +150,7 @@ def batch_reference(
     R = np.zeros(N)
     for i in range(N):
         R[i] = sum(W_R[i + j, i + j] * v[i + j] * v[j] for j in range(N - i)) / n_N  # Eq. 10
-    n_tau = N - 1 if n_lags is None else int(n_lags)
+    n_tau = N - 1 if lags == "all" else int(lags)
     c = lag_weights(n_tau, window, N)
     E = np.array([[c[abs(a - b)] * R[abs(a - b)] for b in range(N)] for a in range(N)])  # Eq. 9 (22)
     cov_corrected = D @ X.T @ W @ E @ W @ X @ D  # Eq. 8
@@ -159,39 +163,21 @@ def batch_reference(
 
 
 class RecursiveReference:
-    """Eqs. 15-22 for one model, literally (see the module docstring for the options).
+    """Eqs. 15-22 for one model of ``n`` parameters, literally (see the module docstring for
+    the options): ``RecursiveReference(n, options)`` with the :class:`.options.EstimatorOptions`
+    of :class:`~.bank.EstimatorBank`."""
 
-    ``RecursiveReference(n, n_lags=None, window="truncated", forgetting=1.0, *,
-    residual="standardized", p0=None, init_condition=1e8, noise_forgetting=None,
-    max_lags=50, min_lags=0, residual_burn_in=None)``, the arguments of :class:`~.bank.EstimatorBank` for one model of
-    ``n`` parameters.
-    """
-
-    def __init__(
-        self,
-        n: int,
-        n_lags: int | str | None = None,
-        window: str = "truncated",
-        forgetting: float = 1.0,
-        *,
-        residual: str = "standardized",
-        p0: float | Sequence[float] | None = None,
-        init_condition: float = 1e8,
-        noise_forgetting: float | None = None,
-        max_lags: int = 50,
-        min_lags: int = 0,
-        residual_burn_in: int | None = None,
-    ) -> None:
-        check_options(n_lags, window, forgetting, residual, init_condition, max_lags=max_lags, min_lags=min_lags)
-        self.n, self.n_lags, self.window = n, n_lags, window
-        self.f, self.residual, self.init_condition = float(forgetting), residual, float(init_condition)
-        self.auto = n_lags == "auto"
-        self.max_lags, self.min_lags = max_lags, min_lags
-        # n_tau of the memory (not auto: n_lags is an int, which mypy cannot see through self.auto)
-        self.held: int | None = None if n_lags is None else (max_lags if self.auto else n_lags)  # type: ignore[assignment]
-        self.g = check_noise_forgetting(noise_forgetting, forgetting, self.held)  # f_R
+    def __init__(self, n: int, options: EstimatorOptions | None = None) -> None:
+        o = EstimatorOptions() if options is None else options
+        self.n, self.options = n, o
+        self.lags, self.window = o.lags, o.window
+        self.f, self.residual, self.init_condition = o.forgetting, o.residual, o.init_condition
+        self.auto = o.auto
+        self.max_lags, self.min_lags = o.max_lags, o.min_lags
+        self.held = o.held  # n_tau of the memory: lags, max_lags with auto, None for all
+        self.g = o.noise_forgetting_used  # f_R
         self.noise = self.g != self.f  # R(i) from the noise model
-        self.B = check_burn_in(residual_burn_in, n_lags)  # the residual burn-in
+        self.B = o.burn_in  # the residual burn-in
         self.n_B = 0.0  # sum_(j > k0+B) f_R^(k-j) after the burn-in
         self.k = 0
         self.n_k = 0.0  # sum_j f^(k-j)
@@ -206,14 +192,11 @@ class RecursiveReference:
         self.b = np.zeros(n)  # X'Wz before initialization
         self.A_R = np.zeros((n, n))  # X'W_R X and X'W_R z of the noise model before initialization
         self.b_R = np.zeros(n)
-        self.ready = p0 is not None
+        prior = o.prior(n)
+        self.ready = prior is not None
         self.ready_at = 0
-        if p0 is not None:
-            self.D = np.diag(prior_diagonal(p0, n))
-            self.theta = np.zeros(n)
-        else:
-            self.D = np.zeros((n, n))
-            self.theta = np.zeros(n)
+        self.D = np.zeros((n, n)) if prior is None else np.diag(prior)
+        self.theta = np.zeros(n)
         self.D_R, self.theta_R = self.D.copy(), self.theta.copy()  # the noise model
 
     def largest_lag(self) -> int:
@@ -320,23 +303,31 @@ class RecursiveReference:
             raise EstimatorNotReady(f"not initialized after {self.k} samples")
 
     def lags_used(self) -> int:
-        """``n_tau`` of Eq. 22 at this sample: chosen with ``n_lags="auto"``, else the lags held."""
+        """``n_tau`` of Eq. 22 at this sample: chosen with ``lags="auto"``, else the lags held."""
         if not self.auto:
             return self.largest_lag()
         g, k = self.g, self.k
         if self.B > 0 and self.ready and k > self.ready_at + self.B:
             k -= self.ready_at + self.B  # the samples after the burn-in
         n = k if g == 1.0 else (sum(g**i for i in range(k)) ** 2 / sum(g ** (2 * i) for i in range(k)))
-        R = [self.R[i] if self.ready else 0.0 for i in range(self.largest_lag() + 1)]  # not ready: as R(0) = 0
+        usable = self.ready and not self.exact_fit()  # not ready, or rounding for residuals: as R(0) = 0
+        R = [self.R[i] if usable else 0.0 for i in range(self.largest_lag() + 1)]
         return flat_top_lag(R, n, self.max_lags, self.min_lags)
+
+    def exact_fit(self) -> bool:
+        """The model fits exactly: ``R_k(0)`` is at most ``EXACT_FIT`` (1e-12) of the mean
+        square of the model output ``x_j' theta_k``, weighted as ``Lambda_k(0)``."""
+        output_square = self.theta @ self.Lam[0] @ self.theta  # sum_j f^(2(k-j)) (x_j' theta)^2
+        n_square = sum(self.f ** (2 * (self.k - j)) for j in range(1, self.k + 1))
+        exact: bool = self.R[0] <= EXACT_FIT * output_square / n_square
+        return exact
 
     def weights(self) -> np.ndarray:
         """Lag window ``c_i`` for the lags held (Eqs. 20, 22)."""
         held = self.largest_lag() + 1
         if self.auto:
             return lag_weights(self.lags_used(), "truncated", held)
-        # (not auto: n_lags is an int or None, which mypy cannot see through self.auto)
-        return lag_weights(self.k - 1 if self.n_lags is None else self.n_lags, self.window, held)  # type: ignore[arg-type]
+        return lag_weights(self.k - 1 if self.held is None else self.held, self.window, held)
 
     def covariance(self, kind: str = "corrected") -> np.ndarray:
         """Eq. 20 / 22 (``corrected``) or Eq. 13 with Eq. 16 (``conventional``), unrepaired."""
@@ -357,9 +348,7 @@ class RecursiveReference:
         """The covariance the estimator publishes: repaired where a diagonal is negative."""
         cov = self.covariance(kind)
         if kind == "corrected" and np.any(np.diag(cov) < 0.0):
-            output_square = self.theta @ self.Lam[0] @ self.theta  # sum_j f^(2(k-j)) (x_j' theta)^2
-            n_square = sum(self.f ** (2 * (self.k - j)) for j in range(1, self.k + 1))
-            if self.R[0] <= EXACT_FIT * output_square / n_square:
+            if self.exact_fit():
                 return np.zeros_like(cov)  # an exact fit: rounding, not indefiniteness
             return nearest_psd(cov)
         return cov

@@ -6,7 +6,8 @@ One ``.npz`` archive (numpy only, no pickle, entries stored uncompressed): the
 * ``format``: :attr:`EstimatorBank.STATE_FORMAT` (a file of another layout is refused by name);
 * ``fingerprint``: what the state must match to be resumed (aircraft, models, rate and the
   estimator settings; :meth:`.config.PipelineConfig.fingerprint`);
-* ``bank_config``, ``bank_counters``: the rest of the bank's state;
+* ``sizes``, ``options``, ``bank_counters``: the rest of the bank's state (the options as
+  :meth:`.options.EstimatorOptions.as_dict` writes them);
 * ``samples_used``, ``zsum``, ``zsq``: the samples behind the estimates and the running sums
   of each model's output and its square (the R^2 of the model fit).
 
@@ -44,11 +45,12 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import StateFileError
+from ..errors import ConfigError, StateFileError
 from ..files import atomic_file
 from .bank import EstimatorBank
 from .lag_storage import GROWTH_START
-from .options import MAX_BURN_IN, RESIDUALS, WINDOWS
+from .options import EstimatorOptions
+from .state import COUNTERS
 
 __all__ = [
     "EstimatorState",
@@ -68,12 +70,8 @@ _MAX_MODELS, _MAX_PARAMETERS = 64, 64
 _MAX_LAGS = 10_000_000
 _MAX_COUNT = 2**53  # samples: exact as a float
 _GROWTH_START = GROWTH_START  # the lag capacity an all-lags bank starts with, doubled as samples arrive
-_META_KEYS = ("format", "fingerprint", "bank_config", "bank_counters", "samples_used", "zsum", "zsq")
-_BANK_CONFIG_KEYS = (
-    "sizes", "n_lags", "window", "forgetting", "residual", "init_condition", "noise_forgetting", "max_lags",
-    "min_lags", "residual_burn_in",
-)
-_COUNTER_KEYS = ("k", "n_eff", "n_noise", "cap")
+_ANOTHER = "saved with another aircraft, model or estimator configuration"
+_META_KEYS = ("format", "fingerprint", "sizes", "options", "bank_counters", "samples_used", "zsum", "zsq")
 _F8, _I8, _B1 = np.dtype("<f8"), np.dtype("<i8"), np.dtype("|b1")
 
 
@@ -94,7 +92,8 @@ def save_state(path: str | Path, state: EstimatorState, fingerprint: Mapping[str
     meta = {
         "format": EstimatorBank.STATE_FORMAT,
         "fingerprint": fingerprint,
-        "bank_config": bank["config"],
+        "sizes": bank["sizes"],
+        "options": bank["options"],
         "bank_counters": bank["counters"],
         "samples_used": int(state.samples_used),
         "zsum": np.asarray(state.output_sum, dtype=float).tolist(),
@@ -128,30 +127,19 @@ Layout = dict[str, tuple[tuple[int, ...], np.dtype]]
 
 
 def state_layout(
-    state_format: int, config: Mapping[str, Any], counters: Mapping[str, Any], waiting: bool
-) -> Layout | None:
-    """``{entry name: (shape, dtype)}`` of the arrays of a state of ``state_format`` with bank
-    ``config`` and ``counters`` (``waiting``: some model still waits for initialization), as
-    :meth:`EstimatorBank.state` writes them, or ``None`` for another format. The layout is the
-    estimator's own: an empty bank of that configuration is laid out at those counters and
-    asked (nothing is read from the file), so a new estimator layout needs no table here. The
-    caller bounds the size first (:func:`_implied_bytes`)."""
-    if state_format != EstimatorBank.STATE_FORMAT:
-        return None
-    kw = dict(config)
-    bank = EstimatorBank(kw.pop("sizes"), **kw)
-    lags = bank._lags
-    lags.waiting = waiting
-    lags.allocate(int(counters["cap"]))
-    bank.k = int(counters["k"])
-    lags.ptr -= bank.n_window  # the history window, as restoring would place it
-    return {name: (arr.shape, arr.dtype) for name, arr in bank.state()["arrays"].items()}
+    sizes: tuple[int, ...], options: EstimatorOptions, counters: Mapping[str, Any], waiting: bool
+) -> Layout:
+    """``{entry name: (shape, dtype)}`` of the arrays of a state of a bank of ``sizes`` and
+    ``options`` at ``counters`` (``waiting``: some model still waits for initialization), as
+    :meth:`EstimatorBank.state` writes them: the estimator's own layout
+    (:meth:`EstimatorBank.state_layout`), nothing read from the file. The caller bounds the
+    size first (:func:`_implied_bytes`)."""
+    return EstimatorBank.state_layout(sizes, options, counters, waiting)
 
 
-def _implied_bytes(config: Mapping[str, Any], counters: Mapping[str, Any]) -> int:
-    """An upper bound of the memory an empty bank of ``config`` takes at ``counters``' lag
+def _implied_bytes(sizes: tuple[int, ...], counters: Mapping[str, Any]) -> int:
+    """An upper bound of the memory an empty bank of ``sizes`` takes at ``counters``' lag
     capacity (histories, lag sums and products of y = (x, z))."""
-    sizes: list[int] = config["sizes"]
     m, n1, cap = len(sizes), max(sizes) + 1, int(counters["cap"])
     return 8 * m * cap * (2 * n1 * n1 + 4 * 3 * n1 + 4)
 
@@ -220,39 +208,40 @@ def _check_format(meta: Any) -> None:
         )
 
 
-def _check_bank_config(raw: Any, expect: Mapping[str, Any] | None) -> dict[str, Any]:
-    cfg = _object(raw, "bank_config", _BANK_CONFIG_KEYS)
-    sizes = cfg["sizes"]
-    if not isinstance(sizes, list) or not 1 <= len(sizes) <= _MAX_MODELS:
-        raise _fail("bank_config.sizes", f"must be a list of 1 to {_MAX_MODELS} sizes, found {_kind(sizes)}")
-    for i, s in enumerate(sizes):
-        _int(s, f"bank_config.sizes[{i}]", 1, _MAX_PARAMETERS)
-    if cfg["n_lags"] is not None and cfg["n_lags"] != "auto":
-        _int(cfg["n_lags"], "bank_config.n_lags", 0, _MAX_LAGS)
-    max_lags = _int(cfg["max_lags"], "bank_config.max_lags", 1, _MAX_LAGS)
-    _int(cfg["min_lags"], "bank_config.min_lags", 0, max_lags)
-    _int(cfg["residual_burn_in"], "bank_config.residual_burn_in", 0, MAX_BURN_IN)
-    f_noise = _number(cfg["noise_forgetting"], "bank_config.noise_forgetting")
-    if not 0.0 < f_noise <= 1.0:
-        raise _fail("bank_config.noise_forgetting", f"must be in (0, 1], found {f_noise}")
-    if cfg["window"] not in WINDOWS:
-        raise _fail("bank_config.window", f"must be one of {list(WINDOWS)}, found {_kind(cfg['window'])}")
-    if cfg["residual"] not in RESIDUALS:
-        raise _fail("bank_config.residual", f"must be one of {list(RESIDUALS)}, found {_kind(cfg['residual'])}")
-    f = _number(cfg["forgetting"], "bank_config.forgetting")
-    if not 0.0 < f <= 1.0:
-        raise _fail("bank_config.forgetting", f"must be in (0, 1], found {f}")
-    if not _number(cfg["init_condition"], "bank_config.init_condition") > 1.0:
-        raise _fail("bank_config.init_condition", f"must be > 1, found {cfg['init_condition']}")
-    for key, want in (expect or {}).items():
-        found = list(cfg[key]) if key == "sizes" else cfg[key]
-        if found != (list(want) if key == "sizes" else want):
-            raise _fail(f"bank_config.{key}", f"is {_short(found)}, the configuration has {_short(want)}")
-    return cfg
+def _check_sizes(raw: Any) -> tuple[int, ...]:
+    if not isinstance(raw, list) or not 1 <= len(raw) <= _MAX_MODELS:
+        raise _fail("sizes", f"must be a list of 1 to {_MAX_MODELS} sizes, found {_kind(raw)}")
+    return tuple(_int(s, f"sizes[{i}]", 1, _MAX_PARAMETERS) for i, s in enumerate(raw))
 
 
-def _check_counters(raw: Any, cfg: dict[str, Any]) -> dict[str, Any]:
-    c = _object(raw, "bank_counters", _COUNTER_KEYS)
+def _check_options(raw: Any) -> EstimatorOptions:
+    try:
+        options = EstimatorOptions.from_dict(raw)
+    except ConfigError as exc:
+        raise _fail("options", f"is not valid ({str(exc)[:160]})") from None
+    if (options.held or 0) > _MAX_LAGS:
+        raise _fail("options.lags", f"holds {options.held} lags, more than a state file may ({_MAX_LAGS})")
+    return options
+
+
+def _check_expected(
+    sizes: tuple[int, ...], options: EstimatorOptions, expect: tuple[tuple[int, ...], EstimatorOptions] | None
+) -> None:
+    """The file's sizes and options are those of the configuration the caller continues with."""
+    if expect is None:
+        return
+    want_sizes, want_options = expect
+    if list(sizes) != list(want_sizes):
+        raise _Invalid(f"{_ANOTHER}: field 'sizes' is {_short(sizes)}, the configuration has {_short(want_sizes)}")
+    found, want = options.resolved().as_dict(), want_options.resolved().as_dict()
+    for key in want:
+        if found[key] != want[key]:
+            raise _Invalid(f"{_ANOTHER}: field 'options.{key}' is {_short(found[key])}, the configuration has "
+                           f"{_short(want[key])}")
+
+
+def _check_counters(raw: Any, options: EstimatorOptions) -> dict[str, Any]:
+    c = _object(raw, "bank_counters", COUNTERS)
     k = _int(c["k"], "bank_counters.k", 0, _MAX_COUNT)
     n_eff = _number(c["n_eff"], "bank_counters.n_eff")
     if not 0.0 <= n_eff <= k * (1.0 + 1e-9):
@@ -260,13 +249,11 @@ def _check_counters(raw: Any, cfg: dict[str, Any]) -> dict[str, Any]:
     n_noise = _number(c["n_noise"], "bank_counters.n_noise")
     if not 0.0 <= n_noise <= k * (1.0 + 1e-9):
         raise _fail("bank_counters.n_noise", f"must be in [0, k = {k}], found {n_noise}")
-    n_lags = cfg["n_lags"]
-    if n_lags == "auto":
-        n_lags = cfg["max_lags"]
-    want = _all_lags_capacity(k) if n_lags is None else n_lags + 1
+    held = options.held
+    want = _all_lags_capacity(k) if held is None else held + 1
     cap = _int(c["cap"], "bank_counters.cap", 1, 2 * _MAX_COUNT)
     if cap != want:
-        lags = "all lags" if n_lags is None else f"{n_lags} lags"
+        lags = "all lags" if held is None else f"{held} lags"
         raise _fail("bank_counters.cap", f"is {cap}; {lags} after {k} samples hold {want}")
     return c
 
@@ -370,18 +357,10 @@ def _check_values(arrays: dict[str, np.ndarray], k: int) -> None:
             raise _fail(f"arrays.{name}", f"must hold counts in [{low}, {high}]")
 
 
-def _generic_bounds(entries: dict[str, zipfile.ZipInfo], cfg: dict[str, Any], counters: dict[str, Any]) -> None:
-    """For a format without a layout table: no array larger than the largest the configuration
-    implies (M x (n+1) x cap x (n+1) doubles)."""
-    sizes = cfg["sizes"]
-    largest = len(sizes) * (max(sizes) + 1) ** 2 * int(counters["cap"]) * 8 + _NPY_PREAMBLE
-    for name, info in entries.items():
-        if name != "meta" and info.file_size > largest:
-            raise _fail(f"arrays.{name}", f"declares {info.file_size} bytes, more than any array of this "
-                        f"configuration ({largest})")
+Expected = tuple[tuple[int, ...], EstimatorOptions] | None
 
 
-def _load(path: Path, fingerprint: Mapping[str, Any], expect: Mapping[str, Any] | None) -> EstimatorState:
+def _load(path: Path, fingerprint: Mapping[str, Any], expect: Expected) -> EstimatorState:
     try:
         fh = open(path, "rb")  # noqa: SIM115 - closed below, after the zip
     except FileNotFoundError:
@@ -404,75 +383,73 @@ def _load(path: Path, fingerprint: Mapping[str, Any], expect: Mapping[str, Any] 
 
 
 def _load_archive(
-    zf: zipfile.ZipFile, file_size: int, fingerprint: Mapping[str, Any], expect: Mapping[str, Any] | None
+    zf: zipfile.ZipFile, file_size: int, fingerprint: Mapping[str, Any], expect: Expected
 ) -> EstimatorState:
     entries = _entries(zf, file_size)
     meta = _read_meta(zf, entries["meta"])
     _check_format(meta)
     meta = _object(meta, "", _META_KEYS)
+    sizes, options = _check_sizes(meta["sizes"]), _check_options(meta["options"])
+    _check_expected(sizes, options, expect)
     # Compare as JSON would store it (tuples become lists).
     if meta["fingerprint"] != json.loads(json.dumps(fingerprint)):
-        raise _Invalid("saved with another aircraft, model or estimator configuration")
-    cfg = _check_bank_config(meta["bank_config"], expect)
-    counters = _check_counters(meta["bank_counters"], cfg)
+        raise _Invalid(_ANOTHER)
+    counters = _check_counters(meta["bank_counters"], options)
     samples_used = _int(meta["samples_used"], "samples_used", 0, _MAX_COUNT)
-    zsum, zsq = _check_sums(meta, len(cfg["sizes"]))
-
-    names = set(entries) - {"meta"}
-    implied = _implied_bytes(cfg, counters)
+    zsum, zsq = _check_sums(meta, len(sizes))
+    implied = _implied_bytes(sizes, counters)
     if implied > 64 * file_size + (16 << 20):  # the arrays of such a state would be in the file
         raise _fail(
             "bank_counters.cap", f"implies about {implied} bytes of estimator state; the file holds {file_size}"
         )
-    if "ready" not in entries:
-        raise _fail("arrays.ready", "is missing")
-    ready = _read_array(zf, entries["ready"], "arrays.ready", (len(cfg["sizes"]),), np.dtype(bool))
-    layout = state_layout(meta["format"], cfg, counters, waiting=not bool(ready.all()))
-    if layout is None:
-        _generic_bounds(entries, cfg, counters)
-    else:
-        missing, extra = sorted(set(layout) - names), sorted(names - set(layout))
-        if missing:
-            raise _fail(f"arrays.{missing[0]}", "is missing")
-        if extra:
-            raise _fail(f"arrays.{extra[0]}", "is not part of this configuration's state")
-        for name, (want_shape, want_dtype) in layout.items():  # declared sizes, before reading anything
-            nbytes = math.prod(want_shape) * want_dtype.itemsize
-            declared = entries[name].file_size
-            if not nbytes < declared <= nbytes + _NPY_PREAMBLE:
-                raise _fail(f"arrays.{name}", f"declares {declared} bytes; the configuration implies an array "
-                            f"{want_shape} of {nbytes} bytes")
-    arrays = {}
-    for name in sorted(names):
-        shape: tuple[int, ...] | None = None
-        dtype: np.dtype | None = None
-        if layout is not None:
-            shape, dtype = layout[name]
-        arr = _read_array(zf, entries[name], f"arrays.{name}", shape, dtype)
-        if dtype is None and arr.dtype.kind not in "fib":
-            raise _fail(f"arrays.{name}", f"has dtype {arr.dtype.str}, not numbers")
-        arrays[name] = arr
-    _check_values(arrays, counters["k"])
-
+    arrays = _read_arrays(zf, entries, sizes, options, counters)
     try:
         bank = EstimatorBank.from_state(
-            {"format": meta["format"], "config": cfg, "counters": counters, "arrays": arrays}
+            {"format": meta["format"], "sizes": list(sizes), "options": meta["options"], "counters": counters,
+             "arrays": arrays}
         )
     except (KeyError, TypeError, ValueError, IndexError) as exc:  # the second line: the bank's own checks
         raise _Invalid(f"inconsistent estimator state ({str(exc)[:120]})") from None
     return EstimatorState(bank=bank, samples_used=samples_used, output_sum=zsum, output_sum_squares=zsq)
 
 
+def _read_arrays(
+    zf: zipfile.ZipFile, entries: dict[str, zipfile.ZipInfo], sizes: tuple[int, ...], options: EstimatorOptions,
+    counters: dict[str, Any],
+) -> dict[str, np.ndarray]:
+    """The state's arrays: exactly the entries of the configuration's layout, each declared
+    size checked before anything is read, then each header and every value."""
+    names = set(entries) - {"meta"}
+    if "ready" not in entries:
+        raise _fail("arrays.ready", "is missing")
+    ready = _read_array(zf, entries["ready"], "arrays.ready", (len(sizes),), np.dtype(bool))
+    layout = state_layout(sizes, options, counters, waiting=not bool(ready.all()))
+    missing, extra = sorted(set(layout) - names), sorted(names - set(layout))
+    if missing:
+        raise _fail(f"arrays.{missing[0]}", "is missing")
+    if extra:
+        raise _fail(f"arrays.{extra[0]}", "is not part of this configuration's state")
+    for name, (want_shape, want_dtype) in layout.items():  # declared sizes, before reading anything
+        nbytes = math.prod(want_shape) * want_dtype.itemsize
+        declared = entries[name].file_size
+        if not nbytes < declared <= nbytes + _NPY_PREAMBLE:
+            raise _fail(f"arrays.{name}", f"declares {declared} bytes; the configuration implies an array "
+                        f"{want_shape} of {nbytes} bytes")
+    arrays = {name: _read_array(zf, entries[name], f"arrays.{name}", *layout[name]) for name in sorted(names)}
+    _check_values(arrays, counters["k"])
+    return arrays
+
+
 def load_state(
-    path: str | Path, fingerprint: Mapping[str, Any], *, expect: Mapping[str, Any] | None = None
+    path: str | Path, fingerprint: Mapping[str, Any], *, expect: Expected = None
 ) -> EstimatorState:
     """The state saved in ``path``. Raises :class:`StateFileError` naming the file and the
     field when the file is missing, unreadable, not a state file, of another format, saved with
-    another configuration than ``fingerprint``, or inconsistent (see the module docstring).
+    other sizes or options than ``expect`` or another configuration than ``fingerprint``, or
+    inconsistent (see the module docstring).
 
-    ``expect``: the bank configuration the caller will continue with (any of ``sizes``,
-    ``n_lags``, ``window``, ``forgetting``, ``residual``, ``init_condition``,
-    ``residual_burn_in``, ...: the keys of ``bank_config``); the file's must be the same."""
+    ``expect``: ``(sizes, options)`` of the bank the caller will continue with; the file's
+    must be the same (the options with their defaults resolved)."""
     path = Path(path)
     try:
         return _load(path, fingerprint, expect)
