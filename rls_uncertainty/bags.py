@@ -1,5 +1,5 @@
-"""Bag I/O with ``rosbags``: read any recording, map its fields onto the node's standard
-inputs, write deterministic ROS 2 MCAP replays.
+"""Bag I/O: read any recording with ``rosbags``, map its fields onto the node's standard
+inputs, write deterministic ROS 2 MCAP replays with CRCs (:mod:`.mcap_io`).
 
 * :func:`typestore` - the Jazzy types plus the project's ``msg_schemas/`` (``fti_msgs``) and
   any ``--schemas`` directory; schemas embedded in a bag take part automatically.
@@ -9,9 +9,10 @@ inputs, write deterministic ROS 2 MCAP replays.
 * :func:`read_inputs` - the standard-topic messages of a replay, for the offline replay and
   the DDS player.
 
-Replays are ROS 2 bags (storage version 9, MCAP), every message logged at its header stamp,
-ordered by stamp with a stable tie-break (topic, then recorded order): converting the same
-input twice gives byte-identical files. Output is written to a temporary directory that is
+Replays are ROS 2 bags (storage version 9, MCAP with chunk, data and summary CRCs: a damaged
+byte is refused by :func:`.mcap_io.check_mcap_integrity`, which every read runs first), every
+message logged at its header stamp, ordered by stamp with a stable tie-break (topic, then
+recorded order): converting the same input twice gives byte-identical files. Output is written to a temporary directory that is
 renamed only when complete. Every problem raises :class:`BagError` naming the file, the
 topic and what is wrong.
 """
@@ -36,6 +37,7 @@ from .errors import BagError, ConfigError
 from .files import output_directory
 from .inputs import MESSAGE_TYPES, Stamped, stamp_ns
 from .inputs import STREAMS as INPUTS
+from .mcap_io import McapWriter, check_mcap_integrity, write_metadata
 
 if TYPE_CHECKING:  # annotations only: rosbags itself is imported where it is used
     from rosbags.highlevel import AnyReader
@@ -47,6 +49,8 @@ __all__ = [
     "typestore",
     "convert",
     "write_replay",
+    "write_mcap",
+    "check_mcap_integrity",
     "write_t2_bag",
     "read_inputs",
     "load_mapping",
@@ -79,45 +83,6 @@ def typestore(extra_schemas: list[Path] | None = None) -> Typestore:
                 raise BagError(f"{msg}: cannot parse message schema: {exc}") from exc
     store.register(types)
     return store
-
-
-def check_mcap_integrity(path: Path) -> None:
-    """Read every record of an MCAP file with the ``mcap`` library (chunk CRCs checked when
-    present) and compare the message count with the file's summary: a corrupt chunk that a
-    reader would silently cut short is an error naming the file. Chunks are decompressed and
-    walked record by record without building message objects (the replay reads the messages
-    afterwards anyway)."""
-    from mcap.reader import make_reader  # noqa: PLC0415
-    from mcap.records import Chunk, Message  # noqa: PLC0415
-    from mcap.stream_reader import StreamReader, get_chunk_data_stream  # noqa: PLC0415
-
-    message_opcode = 0x05  # MCAP "Message" record
-    try:
-        with open(path, "rb") as fh:
-            summary = make_reader(fh).get_summary()
-            if summary is None or summary.statistics is None:
-                raise BagError(f"{path}: MCAP file has no summary (truncated or still being written)")
-            fh.seek(0)
-            count = 0
-            for record in StreamReader(fh, emit_chunks=True, validate_crcs=True).records:
-                if isinstance(record, Message):
-                    count += 1
-                elif isinstance(record, Chunk):
-                    stream, size = get_chunk_data_stream(record, validate_crc=True)
-                    while stream.count < size:
-                        opcode = stream.read1()
-                        length = stream.read8()
-                        if stream.count + length > size:
-                            raise BagError(f"{path}: corrupt MCAP: a chunk's record runs past its end")
-                        stream.read(length)
-                        count += opcode == message_opcode
-    except BagError:
-        raise
-    except Exception as exc:  # the mcap library raises many types
-        raise BagError(f"{path}: corrupt or truncated MCAP: {exc}") from exc
-    expected = summary.statistics.message_count
-    if count != expected:
-        raise BagError(f"{path}: corrupt MCAP: read {count} of the {expected} messages its summary lists")
 
 
 def _open_reader(path: Path, store: Typestore) -> AnyReader:
@@ -257,17 +222,9 @@ def _standard_message(
     raise ValueError(kind)
 
 
-def write_replay(path: str | Path, records: Sequence[tuple[int, str, str, object]], store: Typestore | None = None,
-                 *, force: bool = False, inputs: tuple[str | Path, ...] = ()) -> Path:
-    """Write ``records`` (``(stamp_ns, topic, msgtype, msg)``, ``msg`` a message or its CDR
-    bytes) as a ROS 2 MCAP bag at ``path`` (a directory), log time = stamp, ordered by stamp
-    with a stable tie-break. Atomic (:func:`.files.output_directory`): the bag appears under
-    ``path`` only when complete; an existing non-empty ``path`` is refused unless ``force``,
-    and ``inputs`` are never overwritten."""
-    from rosbags.rosbag2 import StoragePlugin, Writer  # noqa: PLC0415
-
-    store = store or typestore()
-    path = Path(path)
+def _ordered(records: Sequence[tuple[int, str, str, object]], path: Path) -> tuple[list[_Record], dict[str, int]]:
+    """``records`` as :class:`_Record`, ordered by stamp with a stable tie-break (the standard
+    inputs' order, then topic, then the given order), and each topic's rank."""
     recs = [
         _Record(int(stamp), topic, msgtype, i, msg) for i, (stamp, topic, msgtype, msg) in enumerate(records)
     ]
@@ -280,20 +237,43 @@ def write_replay(path: str | Path, records: Sequence[tuple[int, str, str, object
     for r in recs:
         rank.setdefault(r.topic, _TOPIC_RANK.get(r.topic.strip("/"), len(_TOPIC_RANK)))
     recs.sort(key=lambda r: (r.stamp, rank[r.topic], r.topic, r.seq))
+    return recs, rank
+
+
+def write_mcap(path: str | Path, records: Sequence[tuple[int, str, str, object]],
+               store: Typestore | None = None) -> dict[str, Any]:
+    """Write ``records`` (``(stamp_ns, topic, msgtype, msg)``, ``msg`` a message or its CDR
+    bytes) as one new MCAP file at ``path`` (:class:`.mcap_io.McapWriter`: with CRCs; an
+    existing file is never replaced), log time = stamp, ordered by stamp with a stable
+    tie-break. Returns the rosbag2 bag-file information (for ``metadata.yaml``)."""
+    store = store or typestore()
+    path = Path(path)
+    recs, rank = _ordered(records, path)
+    with McapWriter(path, store) as writer:
+        channels = {}
+        for topic in sorted({r.topic for r in recs}, key=lambda t: (rank[t], t)):
+            msgtype = next(r.msgtype for r in recs if r.topic == topic)
+            channels[topic] = writer.add_connection(topic, msgtype)
+        for r in recs:
+            raw = r.msg if isinstance(r.msg, bytes) else store.serialize_cdr(r.msg, r.msgtype)
+            writer.write(channels[r.topic], r.stamp, bytes(raw))
+    assert writer.info is not None  # (written by close)
+    return writer.info
+
+
+def write_replay(path: str | Path, records: Sequence[tuple[int, str, str, object]], store: Typestore | None = None,
+                 *, force: bool = False, inputs: tuple[str | Path, ...] = ()) -> Path:
+    """Write ``records`` as a ROS 2 bag directory at ``path``: ``NAME.mcap``
+    (:func:`write_mcap`) and rosbag2's ``metadata.yaml``. Atomic
+    (:func:`.files.output_directory`): the bag appears under ``path`` only when complete; an
+    existing non-empty ``path`` is refused unless ``force``, and ``inputs`` are never
+    overwritten."""
+    path = Path(path)
+    if not records:
+        raise BagError(f"{path}: nothing to write (no messages)")
     with output_directory(path, force=force, inputs=inputs) as tmp:
-        name = path.resolve().name
-        bag = tmp / name  # rosbags creates the bag directory itself
-        with Writer(bag, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
-            conns = {}
-            for topic in sorted({r.topic for r in recs}, key=lambda t: (rank[t], t)):
-                msgtype = next(r.msgtype for r in recs if r.topic == topic)
-                conns[topic] = writer.add_connection(topic, msgtype, typestore=store)
-            for r in recs:
-                raw = r.msg if isinstance(r.msg, bytes) else store.serialize_cdr(r.msg, r.msgtype)
-                writer.write(conns[r.topic], r.stamp, raw)
-        for item in bag.iterdir():
-            item.rename(tmp / item.name)
-        bag.rmdir()
+        info = write_mcap(tmp / f"{path.resolve().name}.mcap", records, store)
+        write_metadata(tmp, info)
     return path
 
 

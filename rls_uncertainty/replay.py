@@ -37,7 +37,7 @@ from typing import Any, TextIO
 import numpy as np
 
 from .alerts import no_estimate, not_excited
-from .bags import read_inputs, typestore, write_replay
+from .bags import read_inputs, typestore, write_mcap
 from .config import NodeConfig, PipelineConfig, node_config, pipeline_config
 from .diagnostics import DiagnosticsPolicy, Snapshot, Status
 from .files import output_directory
@@ -388,10 +388,7 @@ def replay(bag: str | Path, params: dict[str, Any], out: str | Path, *, start: f
         records = output_records(result.pipeline, result.outputs, node_config(params).frame_id)
         records += diagnostics_records(result.diagnostics, store)
         if records:
-            write_replay(tmp / "estimates", records, store)
-            (tmp / "estimates" / "estimates.mcap").rename(tmp / "estimates.mcap")
-            (tmp / "estimates" / "metadata.yaml").unlink()
-            (tmp / "estimates").rmdir()
+            write_mcap(tmp / "estimates.mcap", records, store)
         if plots:
             _plots(tmp, result.pipeline, result.outputs)
     return result

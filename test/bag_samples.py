@@ -2,6 +2,7 @@
 directory snapshot."""
 
 import os
+import zlib
 from pathlib import Path
 
 import yaml
@@ -97,3 +98,27 @@ def tree(root: Path) -> dict:
             else:
                 out[rel] = p.read_bytes()
     return out
+
+
+def crcs(path):
+    """Every CRC of an MCAP file, each checked against zlib over the bytes it covers:
+    ``(chunk CRCs, data section CRC, summary CRC)``; asserts that each is valid."""
+    from mcap.records import Chunk, DataEnd, Footer
+    from mcap.stream_reader import StreamReader, get_chunk_data_stream
+
+    data = Path(path).read_bytes()
+    chunk_crcs, data_crc, summary_crc = [], None, None
+    with open(path, "rb") as fh:
+        for record in StreamReader(fh, emit_chunks=True, validate_crcs=True).records:
+            if isinstance(record, Chunk):
+                stream, size = get_chunk_data_stream(record)
+                assert zlib.crc32(stream.read(size)) == record.uncompressed_crc
+                chunk_crcs.append(record.uncompressed_crc)
+            elif isinstance(record, DataEnd):
+                data_crc = record.data_section_crc
+            elif isinstance(record, Footer):
+                summary_crc = record.summary_crc
+                start = record.summary_start
+    assert zlib.crc32(data[: start - 13]) == data_crc  # the data section: up to its DataEnd record
+    assert zlib.crc32(data[start: len(data) - 8 - 4]) == summary_crc  # summary and footer up to its CRC
+    return chunk_crcs, data_crc, summary_crc
