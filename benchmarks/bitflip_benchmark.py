@@ -72,7 +72,7 @@ def replay(bag: Path, out: Path) -> tuple[int, str]:
     cmd = [sys.executable, "-m", "rls_uncertainty.cli", "replay", str(bag), "--config", "t2", "--out", str(out),
            "--no-plots", "--quiet"]
     try:
-        proc = subprocess.run(cmd, capture_output=True, text=True, timeout=300, env=dict(os.environ))
+        proc = subprocess.run(cmd, check=False, capture_output=True, text=True, timeout=300, env=dict(os.environ))
     except subprocess.TimeoutExpired:
         return -1, "timed out after 300 s"
     lines = [line for line in proc.stderr.splitlines() if line.strip()]
