@@ -13,8 +13,8 @@ Replays are ROS 2 bags (storage version 9, MCAP with chunk, data and summary CRC
 byte is refused by :func:`.mcap_io.check_mcap_integrity`, which every read runs first), every
 message logged at its header stamp, ordered by stamp with a stable tie-break (topic, then
 recorded order): converting the same input twice gives byte-identical files. Output is
-written to a temporary directory that is renamed only when complete. Every problem raises :class:`BagError` naming the file, the
-topic and what is wrong.
+written to a temporary directory that is renamed only when complete. Every problem raises
+:class:`BagError` naming the file, the topic and what is wrong.
 """
 
 from __future__ import annotations
