@@ -1,8 +1,11 @@
-"""Small bags and mapping files for the bag-tool tests, the CLI's one-line-error check and a
-directory snapshot."""
+"""Small bags and mapping files for the bag-tool tests, the CLI's one-line-error check, a
+directory snapshot, an MCAP file's CRCs checked against zlib, and a guard against a call that
+blocks."""
 
 import os
+import signal
 import zlib
+from contextlib import contextmanager
 from pathlib import Path
 
 import yaml
@@ -122,3 +125,20 @@ def crcs(path):
     assert zlib.crc32(data[: start - 13]) == data_crc  # the data section: up to its DataEnd record
     assert zlib.crc32(data[start: len(data) - 8 - 4]) == summary_crc  # summary and footer up to its CRC
     return chunk_crcs, data_crc, summary_crc
+
+
+@contextmanager
+def no_hang(seconds: float):
+    """Turn a call that blocks for more than ``seconds`` into a TimeoutError (SIGALRM: main
+    thread only), so a regression that blocks fails the test instead of hanging the run."""
+
+    def expired(_signum, _frame):
+        raise TimeoutError(f"blocked for more than {seconds:g} s")
+
+    previous = signal.signal(signal.SIGALRM, expired)
+    signal.setitimer(signal.ITIMER_REAL, seconds)
+    try:
+        yield
+    finally:
+        signal.setitimer(signal.ITIMER_REAL, 0)
+        signal.signal(signal.SIGALRM, previous)
