@@ -37,7 +37,13 @@ from rclpy.executors import ExternalShutdownException
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.node import Node
 from rclpy.parameter import Parameter
-from rclpy.qos import QoSHistoryPolicy, QoSProfile, QoSReliabilityPolicy, qos_profile_sensor_data
+from rclpy.qos import (
+    QoSDurabilityPolicy,
+    QoSHistoryPolicy,
+    QoSProfile,
+    QoSReliabilityPolicy,
+    qos_profile_sensor_data,
+)
 from std_msgs.msg import Float64MultiArray, Header
 from std_srvs.srv import SetBool, Trigger
 
@@ -104,11 +110,15 @@ class EstimatorNode(Node):
         self._latencies: list[float] = []  # wall time from message to last publish
         self._cpu_times: list[float] = []  # CPU time of the same (without preemption)
         self._malformed_logged: set[str] = set()  # inputs whose first malformed message was logged
-        self._diagnostics = DiagnosticsPolicy(NODE_NAME, window_s=self.node_cfg.diagnostics_window)
+        self._diagnostics = DiagnosticsPolicy(self.get_fully_qualified_name(),
+                                              window_s=self.node_cfg.diagnostics_window)
         self._last_diag = time.monotonic()
 
+        # Transient local: a subscriber that joins late (a dashboard) gets the last qos.depth
+        # samples at once; volatile subscribers match as before. Keep-last bounds the memory.
         self._out_qos = QoSProfile(depth=self.node_cfg.depth, reliability=QoSReliabilityPolicy.RELIABLE,
-                                   history=QoSHistoryPolicy.KEEP_LAST)
+                                   history=QoSHistoryPolicy.KEEP_LAST,
+                                   durability=QoSDurabilityPolicy.TRANSIENT_LOCAL)
         self._outputs_by_topic: dict[str, Any] = {}  # publishers by relative topic
         self._make_publishers()
         self._diag_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10, event_callbacks=_NO_EVENTS)
@@ -334,6 +344,11 @@ class EstimatorNode(Node):
             self._state_claim = None
 
     # ------------------------------------------------------------------ diagnostics
+    def _namesakes(self) -> int:
+        """Other nodes on the ROS graph with this node's fully qualified name."""
+        me = (self.get_name(), self.get_namespace())
+        return max(0, sum(1 for name_ns in self.get_node_names_and_namespaces() if tuple(name_ns) == me) - 1)
+
     def _publish_diagnostics(self) -> None:
         """One :class:`.diagnostics.Snapshot` per period in, one ``DiagnosticArray`` out."""
         now_ns = self.get_clock().now().nanoseconds
@@ -352,6 +367,7 @@ class EstimatorNode(Node):
             state_file=self.state_status,
             latencies_s=self._latencies,
             cpu_times_s=self._cpu_times,
+            namesakes=self._namesakes(),
         )
         self._last_diag = wall
         self._latencies, self._cpu_times = [], []
