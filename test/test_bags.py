@@ -196,8 +196,9 @@ def test_a_damaged_chunk_of_the_bundled_bag_is_refused_naming_it(tmp_path, capsy
 
 def test_random_bit_flips_in_the_bundled_bag_are_all_refused(tmp_path):
     """The issue's experiment, compact: 40 seeded single-bit flips anywhere in the bundled
-    bag's MCAP file. Before the CRCs, 3 of these 40 replayed with other estimates and exit 0
-    (benchmarks/bitflip_benchmark.py replays each; here the check every read runs first)."""
+    bag's MCAP file. Before the CRCs, 3 of 40 such flips (seed 19, on the bag without CRCs)
+    replayed with other estimates and exit 0 (benchmarks/bitflip_benchmark.py replays each;
+    here the check every read runs first)."""
     size = (BUNDLED / "t2_maneuver.mcap").stat().st_size
     rng = random.Random(19)
     passed = []
