@@ -165,6 +165,64 @@ def _rms_variation(x: FloatArray) -> float:
     return float(np.sqrt(np.mean((x - x.mean()) ** 2)))
 
 
+@dataclass(frozen=True)
+class _FineResponse:
+    """The response on the integration grid: elevator ``u``, calm-air outputs ``y`` (d alpha,
+    q, d a_z of Eq. 25b), the gust ``w_g`` and its outputs ``y_gust`` (``None`` in calm air)."""
+
+    t: FloatArray
+    u: FloatArray
+    y: FloatArray
+    gust: FloatArray | None
+    y_gust: FloatArray | None
+
+
+def _fine_response(
+    cfg: SimulationConfig, ac: AircraftConfig, elevator: Multisine, gust: FloatArray | None
+) -> _FineResponse:
+    A, B, C, Dm = _state_space(cfg, ac)
+    n_fine = int(round(cfg.duration * cfg.fine_rate))
+    t_fine = np.arange(n_fine) / cfg.fine_rate
+    tau = t_fine - cfg.input_start
+    on = (tau >= 0) & (tau <= elevator.period)
+    u = np.where(on, elevator(np.clip(tau, 0, elevator.period)), 0.0)
+    _, y, _ = signal.lsim((A, B, C, Dm), u, t_fine)
+    if gust is None:
+        return _FineResponse(t_fine, u, y, None, None)
+    gust = np.asarray(gust, dtype=np.float64)
+    if gust.shape != (n_fine,) or not np.isfinite(gust).all():
+        raise ConfigError(f"gust must be {n_fine} finite samples of w_g on the {cfg.fine_rate:g} Hz "
+                          f"integration grid, got shape {gust.shape}")
+    Bg, Dg = _gust_input(cfg, ac)
+    _, y_gust, _ = signal.lsim((A, Bg, C, Dg), gust / cfg.airspeed, t_fine)
+    return _FineResponse(t_fine, u, y, gust, y_gust)
+
+
+def _sampled(response: _FineResponse, cfg: SimulationConfig, ac: AircraftConfig) -> ShortPeriodRecord:
+    """The record at ``cfg.rate`` from ``cfg.sample_offset`` on."""
+    step = int(round(cfg.fine_rate / cfg.rate))
+    idx = np.arange(int(round(cfg.sample_offset * cfg.fine_rate)), response.t.size, step)
+    u, y = response.u, response.y
+    ct = np.cos(cfg.alpha_trim)
+    # Trim: level flight, so the body-z specific force balances gravity (a_z = -g cos(theta),
+    # with theta = alpha in level flight) plus the perturbation of Eq. 25b.
+    clean = {
+        "delta_e": cfg.delta_e_trim + u[idx],
+        "alpha": cfg.alpha_trim + y[idx, 0],
+        "q": y[idx, 1],
+        "az": -G0 * ct + y[idx, 2],
+    }
+    scale = {k: _rms_variation(v) for k, v in clean.items()}
+    if response.y_gust is not None:
+        for i, name in enumerate(RESPONSES):
+            clean[name] = clean[name] + response.y_gust[idx, i]
+    return ShortPeriodRecord(
+        t=response.t[idx], V=cfg.airspeed, qbar=cfg.qbar, aircraft=ac, config=cfg,
+        noise_free={k: v.copy() for k, v in clean.items()}, noise_scale=scale,
+        gust=None if response.gust is None else response.gust[idx], **clean,
+    )
+
+
 def simulate_short_period(
     cfg: SimulationConfig = SimulationConfig(),
     aircraft: AircraftConfig | None = None,
@@ -179,39 +237,7 @@ def simulate_short_period(
     for calm air. Its response (module docstring) is added to the calm-air response.
     """
     ac = aircraft or load_aircraft("t2")
-    A, B, C, Dm = _state_space(cfg, ac)
-    n_fine = int(round(cfg.duration * cfg.fine_rate))
-    t_fine = np.arange(n_fine) / cfg.fine_rate
-    tau = t_fine - cfg.input_start
-    on = (tau >= 0) & (tau <= elevator.period)
-    u = np.where(on, elevator(np.clip(tau, 0, elevator.period)), 0.0)
-    _, y, _ = signal.lsim((A, B, C, Dm), u, t_fine)
-    step = int(round(cfg.fine_rate / cfg.rate))
-    idx = np.arange(int(round(cfg.sample_offset * cfg.fine_rate)), n_fine, step)
-    ct = np.cos(cfg.alpha_trim)
-    # Trim: level flight, so the body-z specific force balances gravity (a_z = -g cos(theta),
-    # with theta = alpha in level flight) plus the perturbation of Eq. 25b.
-    clean = {
-        "delta_e": cfg.delta_e_trim + u[idx],
-        "alpha": cfg.alpha_trim + y[idx, 0],
-        "q": y[idx, 1],
-        "az": -G0 * ct + y[idx, 2],
-    }
-    scale = {k: _rms_variation(v) for k, v in clean.items()}
-    if gust is not None:
-        gust = np.asarray(gust, dtype=np.float64)
-        if gust.shape != (n_fine,) or not np.isfinite(gust).all():
-            raise ConfigError(f"gust must be {n_fine} finite samples of w_g on the {cfg.fine_rate:g} Hz "
-                              f"integration grid, got shape {gust.shape}")
-        Bg, Dg = _gust_input(cfg, ac)
-        _, y_g, _ = signal.lsim((A, Bg, C, Dg), gust / cfg.airspeed, t_fine)
-        for i, name in enumerate(RESPONSES):
-            clean[name] = clean[name] + y_g[idx, i]
-    return ShortPeriodRecord(
-        t=t_fine[idx], V=cfg.airspeed, qbar=cfg.qbar, aircraft=ac, config=cfg,
-        noise_free={k: v.copy() for k, v in clean.items()}, noise_scale=scale,
-        gust=None if gust is None else gust[idx], **clean,
-    )
+    return _sampled(_fine_response(cfg, ac, elevator, gust), cfg, ac)
 
 
 def _check_band_limited_on(band_limited_on: Collection[str]) -> frozenset[str]:
@@ -367,9 +393,10 @@ def simulate_sensor_streams(
     """
     rng, w = _draws(seed, gust, cfg)
     ac = load_aircraft("t2")
+    response = _fine_response(cfg, ac, T2_TABLE2["elevator"], w)
 
     def stream(rate: float, offset: float) -> tuple[Stamps, ShortPeriodRecord]:
-        rec = simulate_short_period(replace(cfg, rate=rate, sample_offset=offset), ac, gust=w)
+        rec = _sampled(response, replace(cfg, rate=rate, sample_offset=offset), ac)
         noisy = add_noise(rec, band_level, rng, band_limited_on=band_limited_on)
         stamps = start_ns + np.round(rec.t * 1e9).astype(np.int64)
         return stamps, noisy
