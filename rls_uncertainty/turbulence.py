@@ -9,10 +9,11 @@ at ``omega = Omega V`` (rad/s). MIL-F-8785C's Dryden vertical spectrum, one-side
     R_w(tau)     = sigma_w^2 (1 - V |tau| / (2 L_w)) exp(-V |tau| / L_w)
 
 with ``sigma_w`` the RMS vertical gust velocity and ``L_w`` its scale length. Scale length
-(MIL-F-8785C): below 1000 ft above ground ``L_w = h``; from 2000 ft on the isotropic
-medium/high-altitude value ``L_w = 1750 ft / 2 = 875 ft``; in between this module
-interpolates linearly in ``h`` (our choice: the two regions join continuously; the
-specification leaves the band to the user). Intensity at low altitude: ``sigma_w = 0.1 W20``
+(MIL-F-8785C, which writes the spectrum with ``L_w`` as above; MIL-HDBK-1797 writes the same
+spectrum with ``2 L_w``, so its ``2 L_w = h`` is this ``L_w = h``): below 1000 ft above
+ground ``L_w = h``; from 2000 ft on the isotropic medium/high-altitude value ``L_w = 1750
+ft``; in between this module interpolates linearly in ``h`` (our choice: the two regions join
+continuously). Intensity at low altitude: ``sigma_w = 0.1 W20``
 with ``W20`` the wind 20 ft above ground, 15 / 30 / 45 kt for light / moderate / severe
 turbulence (:data:`LOW_ALTITUDE_SIGMA_W`).
 
@@ -52,7 +53,7 @@ FT = 0.3048  # m
 KNOT = 1852.0 / 3600.0  # m/s
 LOW_ALT_TOP = 1000.0 * FT  # m, top of MIL-F-8785C's low-altitude region
 HIGH_ALT_BOTTOM = 2000.0 * FT  # m, bottom of its medium/high-altitude region
-HIGH_ALT_L_W = 1750.0 * FT / 2  # m, Dryden L_w = L_u / 2 with L_u = 1750 ft
+HIGH_ALT_L_W = 1750.0 * FT  # m, L_w of the medium/high-altitude (isotropic) region
 # MIL-F-8785C low altitude: sigma_w = 0.1 W20 (m/s), W20 = 15 / 30 / 45 kt.
 LOW_ALTITUDE_SIGMA_W = {"light": 1.5 * KNOT, "moderate": 3.0 * KNOT, "severe": 4.5 * KNOT}
 
@@ -63,7 +64,7 @@ _H = np.array([math.sqrt(3.0), 1.0 - math.sqrt(3.0)]) / 2.0
 
 def scale_length(height: float) -> float:
     """MIL-F-8785C Dryden ``L_w`` (m) at ``height`` (m above ground): ``h`` up to 1000 ft,
-    875 ft from 2000 ft on, linear in between."""
+    1750 ft from 2000 ft on, linear in between."""
     if not (math.isfinite(height) and height > 0.0):
         raise ConfigError(f"gust height above ground must be a positive number of metres, got {height!r}")
     if height <= LOW_ALT_TOP:

@@ -14,12 +14,12 @@ V = 40.8432  # m/s, the T-2's 134 ft/s
 GUST = DrydenVertical(sigma=1.3, scale_length=290.0)
 
 
-def test_scale_length_is_the_height_below_1000_ft_and_875_ft_from_2000_ft():
+def test_scale_length_is_the_height_below_1000_ft_and_1750_ft_from_2000_ft():
     assert scale_length(100.0) == 100.0
     assert scale_length(1000 * FT) == pytest.approx(1000 * FT)
-    assert scale_length(2000 * FT) == pytest.approx(875 * FT)
-    assert scale_length(10_000.0) == pytest.approx(875 * FT)
-    assert scale_length(1500 * FT) == pytest.approx(937.5 * FT)  # linear in between
+    assert scale_length(2000 * FT) == pytest.approx(1750 * FT)
+    assert scale_length(10_000.0) == pytest.approx(1750 * FT)
+    assert scale_length(1500 * FT) == pytest.approx(1375 * FT)  # linear in between
     eps = 1e-6
     assert scale_length(1000 * FT + eps) == pytest.approx(scale_length(1000 * FT - eps), abs=1e-5)
     for bad in (0.0, -5.0, math.nan, math.inf):
