@@ -50,7 +50,7 @@ from typing import Any
 import yaml
 
 from .convergence import ConvergenceConfig
-from .differentiation import DifferentiatorConfig
+from .differentiation import MAX_ORDER, MAX_WINDOW, MIN_WINDOW, DifferentiatorConfig
 from .errors import ConfigError
 from .estimator import RESIDUALS, WINDOWS, Residual, Window
 from .estimator.options import AUTO_BURN_IN, MAX_BURN_IN, check_burn_in
@@ -306,12 +306,17 @@ PARAMETERS: tuple[ParamSpec, ...] = (
         "estimator.lag_selection auto, 0 (the paper) with fixed lags",
         -1, MAX_BURN_IN,
     ),
-    ParamSpec("differentiator.window", 9, "angular-acceleration differentiator window, samples", 3, 201),
-    ParamSpec("differentiator.order", 3, "local polynomial order of the differentiator", 1, 10),
+    ParamSpec("differentiator.window", 9, "angular-acceleration differentiator window, samples", MIN_WINDOW,
+              MAX_WINDOW),
+    ParamSpec(
+        "differentiator.order", 3,
+        "local polynomial order of the differentiator (below differentiator.window; weights exact at every setting)",
+        1, MAX_ORDER,
+    ),
     ParamSpec(
         "differentiator.lag", 4,
         "differentiator fixed lag, samples (0 = causal); every signal is delayed by it",
-        0, 200,
+        0, MAX_WINDOW - 1,
     ),
     ParamSpec(
         "inputs.use_dynamic_pressure", True,
