@@ -57,7 +57,9 @@ class DifferentiatorConfig:
             if isinstance(value, bool) or not isinstance(value, Integral):
                 raise ConfigError(f"differentiator.{name} must be an integer, got {value!r}")
         if not MIN_WINDOW <= self.window <= MAX_WINDOW:
-            raise ConfigError(f"differentiator.window must be in [{MIN_WINDOW}, {MAX_WINDOW}] samples, got {self.window}")
+            raise ConfigError(
+                f"differentiator.window must be in [{MIN_WINDOW}, {MAX_WINDOW}] samples, got {self.window}"
+            )
         if not 1 <= self.order <= min(MAX_ORDER, self.window - 1):
             raise ConfigError(
                 f"differentiator.order must be in [1, {MAX_ORDER}] and below differentiator.window = {self.window}, "

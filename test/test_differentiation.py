@@ -41,7 +41,7 @@ def _oracle(window: int, order: int, lag: int) -> list[Fraction]:
     weights = []
     for t_unit in range(window):  # the fit of the unit sample e_t: right-hand side V' e_t
         b = [Fraction(tau[t_unit] ** i) for i in range(m)]
-        M = [row[:] + [b[i]] for i, row in enumerate(A)]
+        M = [[*row, b[i]] for i, row in enumerate(A)]
         for k in range(m):
             for i in range(k + 1, m):
                 f = M[i][k] / M[k][k]
