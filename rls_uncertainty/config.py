@@ -429,6 +429,24 @@ PARAMETERS: tuple[ParamSpec, ...] = (
         "thrust); rejected as implausible_thrust",
         1.0, 1.0e8,
     ),
+    ParamSpec(
+        "limits.air_density_min", 0.05,
+        "lowest plausible air density 2 qbar/V^2 implied by the measured dynamic pressure and the true airspeed, "
+        "kg/m^3 (the air at 21 km is 0.07); a sample below is rejected as inconsistent_dynamic_pressure",
+        0.005, 10.0,
+    ),
+    ParamSpec(
+        "limits.air_density_max", 2.0,
+        "highest plausible air density 2 qbar/V^2 implied by the measured dynamic pressure and the true airspeed, "
+        "kg/m^3 (-60 C at 1085 hPa is 1.77); a sample above is rejected as inconsistent_dynamic_pressure",
+        0.01, 100.0,
+    ),
+    ParamSpec(
+        "limits.angular_acceleration", 500.0,
+        "largest plausible change of a body rate between consecutive imu messages over their interval, rad/s^2 "
+        "(a gyro spike of 10 rad/s in one 50 Hz message is 500); rejected as implausible_angular_acceleration",
+        1.0, 1.0e6,
+    ),
     ParamSpec("surfaces.elevator", ["elevator"], "JointState names averaged into the elevator deflection (Eq. 23)"),
     ParamSpec(
         "surfaces.aileron_right", ["aileron_right"],
