@@ -15,9 +15,10 @@ An IMU message is also judged against the one before it: a body rate that change
 is rejected as ``implausible_angular_acceleration``
 (:meth:`.limits.PlausibilityLimits.rate_change_rejection`; :mod:`.limits` says why on the
 messages). The previous message is the newest one passed to the sampler; a refused message
-does not replace it, so the message after a spike is judged against the one before the spike. Messages more than ``inputs.max_gap`` after it, or
-stamped before it (a new timeline), are not compared and become the new reference: a stream
-that really moved is accepted again after at most ``inputs.max_gap``.
+does not replace it, so the message after a spike is judged against the one before the spike.
+Messages more than ``inputs.max_gap`` after it, or stamped before it (a new timeline), are not
+compared and become the new reference: a stream that really moved is accepted again after at
+most ``inputs.max_gap``.
 
 Every method returns whether samples may be due (:meth:`.sampling.Sampler.due`); the pipeline
 then forms them.
