@@ -1,0 +1,154 @@
+"""The corrected covariance of the frequency-domain estimate in closed form (docs/frequency.md,
+Eqs. F6-F8 and F10).
+
+The estimate's error is ``A^-1 Re(X^H E)`` with ``E`` the transformed equation error. For a
+stationary equation error with autocovariance ``R(i)``, truncated after ``L`` lags, its
+covariance is
+
+    cov = A^-1 (1/2) Re(X^H M X + X^H P conj(X)) A^-1,                       (F7)
+
+``M = E[E E^H]``, ``P = E[E E^T]`` (``K x K``), and both are closed forms in the one-sided
+sums ``S+(w) = sum_(i=1..L) R(i) exp(-j w i dt)``, ``S1(w) = sum_(i=1..L) i R(i) exp(-j w i dt)``
+at the grid frequencies and geometric sums over the record (Eq. F8): no sum over samples,
+``O(K L + K^2)`` per model, the same for a record of 3 s or 3 h. :class:`PairGeometry` holds
+what depends only on the grid and the sample count and is shared by all models.
+numpy only.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import numpy.typing as npt
+
+__all__ = ["PairGeometry", "spectral_sums", "pair_matrices", "sandwich", "middle"]
+
+FloatArray = npt.NDArray[np.float64]
+ComplexArray = npt.NDArray[np.complex128]
+
+
+def _one_minus_exp(delta: FloatArray) -> ComplexArray:
+    """``1 - exp(-j delta)`` without cancellation: ``2j sin(delta/2) exp(-j delta/2)``."""
+    out: ComplexArray = 2j * np.sin(delta / 2) * np.exp(-0.5j * delta)
+    return out
+
+
+def _dirichlet(delta: FloatArray, N: int) -> ComplexArray:
+    """``sum_(n=0..N-1) exp(-j delta n)``; ``N`` where ``delta`` is 0."""
+    half = np.sin(delta / 2)
+    zero = half == 0.0
+    ratio = np.sin(N * delta / 2) / np.where(zero, 1.0, half)
+    out: ComplexArray = np.where(zero, float(N), np.exp(-0.5j * (N - 1) * delta) * ratio)
+    return out
+
+
+class PairGeometry:
+    """Factors of Eq. F8 that depend only on the grid (angles ``a_k = w_k dt`` per sample) and
+    the sample count ``N``: ``G_N(a_k -+ a_l)``, ``1 / (1 - exp(-j (a_k -+ a_l)))``,
+    ``exp(-j (a_k -+ a_l) N)`` and ``Gamma_k = G_N(a_k)`` (the transform of a constant)."""
+
+    def __init__(self, angles: FloatArray, N: int) -> None:
+        a = np.asarray(angles, dtype=np.float64)
+        K = a.size
+        minus = a[:, None] - a[None, :]
+        plus = a[:, None] + a[None, :]
+        off = ~np.eye(K, dtype=bool)
+        self.N = int(N)
+        self.diagonal = np.eye(K, dtype=bool)
+        self.g_minus = _dirichlet(minus, N)
+        self.g_plus = _dirichlet(plus, N)
+        inv_minus = np.zeros((K, K), complex)
+        inv_minus[off] = 1.0 / _one_minus_exp(minus[off])
+        self.inv_minus: ComplexArray = inv_minus
+        self.inv_plus: ComplexArray = 1.0 / _one_minus_exp(plus)
+        self.rot_minus: ComplexArray = np.exp(-1j * np.mod(minus * N, 2 * np.pi))
+        self.rot_plus: ComplexArray = np.exp(-1j * np.mod(plus * N, 2 * np.pi))
+        self.gamma: ComplexArray = _dirichlet(a, N)
+
+
+def spectral_sums(R: FloatArray, angles: FloatArray) -> tuple[ComplexArray, ComplexArray]:
+    """``S+`` and ``S1`` (``(M, K)``) of ``R`` (``(M, L+1)``, lags 0..L) at the angles ``a_k``."""
+    lags = np.arange(1, R.shape[1], dtype=np.float64)
+    phase = np.mod(np.multiply.outer(lags, angles), 2 * np.pi)  # (L, K)
+    cos, sin = np.cos(phase), np.sin(phase)
+    r, ir = R[:, 1:], R[:, 1:] * lags
+    plus: ComplexArray = r @ cos - 1j * (r @ sin)
+    first: ComplexArray = ir @ cos - 1j * (ir @ sin)
+    return plus, first
+
+
+def pair_matrices(R: FloatArray, geometry: PairGeometry, angles: FloatArray) -> tuple[ComplexArray, ComplexArray]:
+    """``M / dt^2`` and ``P / dt^2`` of Eq. F8, ``(M, K, K)``, for the transform of
+    ``e_n - e_0`` where ``e`` has the autocovariance ``R(0..L)`` (``(M, L+1)``, ``L <= N - 1``)."""
+    g = geometry
+    plus, first = spectral_sums(R, angles)
+    r0 = R[:, :1]
+    spectrum = r0 + 2.0 * plus.real  # two-sided S(w_l) = R(0) + 2 Re S+(w_l)
+    Sk, Sl = plus[:, :, None], plus[:, None, :]
+    cSk, cSl = Sk.conj(), Sl.conj()
+    # Q(w_k, w_l): e^{-j w_k t_n} e^{+j w_l t_m} R(n - m) summed over the record.
+    M = g.g_minus * spectrum[:, None, :] - g.inv_minus * ((Sl - Sk) + g.rot_minus * (cSk - cSl))
+    M[:, g.diagonal] = g.N * spectrum - 2.0 * first.real  # Q(w_k, w_k): the sums' limit at 0
+    # Q(w_k, -w_l): the pseudo-covariance E[E_k E_l].
+    P = g.g_plus * spectrum[:, None, :] - g.inv_plus * ((cSl - Sk) + g.rot_plus * (cSk - Sl))
+    # The first sample subtracted from every sample: E_k = dt (sum e_n c_kn - e_0 Gamma_k).
+    V = r0 + plus  # sum_(n=0..L) R(n) exp(-j w_k t_n)
+    gam = g.gamma[None, :]
+    M += (r0[:, :, None] * gam[:, :, None] * gam.conj()[:, None, :]
+          - V[:, :, None] * gam.conj()[:, None, :] - gam[:, :, None] * V.conj()[:, None, :])
+    P += (r0[:, :, None] * gam[:, :, None] * gam[:, None, :]
+          - V[:, :, None] * gam[:, None, :] - gam[:, :, None] * V[:, None, :])
+    return M, P
+
+
+def sandwich(X: ComplexArray, M: ComplexArray, P: ComplexArray) -> FloatArray:
+    """``(1/2) Re(X^H M X + X^H P conj(X))`` (Eq. F7's middle), ``X`` ``(M, K, p)``."""
+    XH = np.swapaxes(X.conj(), 1, 2)
+    mid = 0.5 * (XH @ (M @ X) + XH @ (P @ X.conj())).real
+    out: FloatArray = 0.5 * (mid + np.swapaxes(mid, 1, 2))
+    return out
+
+
+def _shared(G: ComplexArray, Y: ComplexArray) -> ComplexArray:
+    """``G @ Y_m`` for every model at once: one ``(K, K) @ (K, M p)`` product."""
+    m, K, p = Y.shape
+    out: ComplexArray = (G @ Y.transpose(1, 0, 2).reshape(K, m * p)).reshape(K, m, p).transpose(1, 0, 2)
+    return out
+
+
+def _inner(left: ComplexArray, right: ComplexArray) -> ComplexArray:
+    """``sum_k left_k right_k'`` per model: ``(M, K, p) x (M, K, p) -> (M, p, p)``."""
+    out: ComplexArray = np.swapaxes(left, 1, 2) @ right
+    return out
+
+
+def middle(R: FloatArray, X: ComplexArray, geometry: PairGeometry, angles: FloatArray) -> FloatArray:
+    """:func:`sandwich` of :func:`pair_matrices` without forming them. Every term of Eq. F8 is
+    ``G o (a b')`` with ``G`` a geometry matrix shared by all models and ``a``, ``b`` per model,
+    and ``X^H (G o a b') Y = sum_k a_k conj(X_k) (G (b o Y))_k``: ten products of a shared
+    ``K x K`` matrix with every model's columns at once, plus the diagonal and rank-one terms.
+    Returns ``(M, p, p)`` (divided by ``dt^2`` like :func:`pair_matrices`)."""
+    g = geometry
+    plus, first = spectral_sums(R, angles)
+    r0 = R[:, :1]
+    spectrum = (r0 + 2.0 * plus.real)[:, :, None]
+    Sp, Sc = plus[:, :, None], plus.conj()[:, :, None]
+    Xc = X.conj()
+    rot_minus, rot_plus = g.inv_minus * g.rot_minus, g.inv_plus * g.rot_plus
+    # X^H M X: g_minus o 1 S' - inv_minus o (1 S+' - S+ 1') - rot_minus o (conj(S+) 1' - 1 conj(S+)').
+    xmx = (_inner(Xc, _shared(g.g_minus, spectrum * X) - _shared(g.inv_minus, Sp * X) + _shared(rot_minus, Sc * X))
+           + _inner(Sp * Xc, _shared(g.inv_minus, X)) - _inner(Sc * Xc, _shared(rot_minus, X))
+           + _inner(Xc, (-2.0 * first.real)[:, :, None] * X))  # diagonal: N S(w_k) - 2 Re S1(w_k)
+    # X^H P conj(X): g_plus o 1 S' - inv_plus o (1 conj(S+)' - S+ 1') - rot_plus o (conj(S+) 1' - 1 S+').
+    xpx = (_inner(Xc, _shared(g.g_plus, spectrum * Xc) - _shared(g.inv_plus, Sc * Xc) + _shared(rot_plus, Sp * Xc))
+           + _inner(Sp * Xc, _shared(g.inv_plus, Xc)) - _inner(Sc * Xc, _shared(rot_plus, Xc)))
+    # The first sample subtracted: r0 Gamma Gamma^H - V Gamma^H - Gamma V^H (and ^T for P).
+    V = r0 + plus
+    xg = np.einsum("mka,k->ma", Xc, g.gamma)  # X^H Gamma
+    xv = np.einsum("mka,mk->ma", Xc, V)  # X^H V
+    outer = np.einsum
+    xmx += (r0[:, :, None] * outer("ma,mb->mab", xg, xg.conj())
+            - outer("ma,mb->mab", xv, xg.conj()) - outer("ma,mb->mab", xg, xv.conj()))
+    xpx += r0[:, :, None] * outer("ma,mb->mab", xg, xg) - outer("ma,mb->mab", xv, xg) - outer("ma,mb->mab", xg, xv)
+    mid = 0.5 * (xmx + xpx).real
+    out: FloatArray = 0.5 * (mid + np.swapaxes(mid, 1, 2))
+    return out
