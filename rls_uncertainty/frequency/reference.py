@@ -52,7 +52,7 @@ def frequency_reference(x: npt.ArrayLike, z: npt.ArrayLike, options: FrequencyOp
     ``z`` ``(N,)``, sampled at ``options.rate_hz``) on ``options``' grid."""
     x = np.asarray(x, dtype=np.float64)
     z = np.asarray(z, dtype=np.float64)
-    N, p = x.shape
+    N, p = int(x.shape[0]), int(x.shape[1])
     dt, f = options.dt, options.frequencies()
     # The first sample subtracted from every signal.
     xt, zt = x - x[0], z - z[0]
