@@ -32,7 +32,7 @@ def test_the_pair_matrices_equal_the_sums_over_every_pair_of_samples(N, L):
     f[3] = f[4] - 1e-3  # two close frequencies: the 1 / (1 - exp(-j delta)) terms
     R = rng.standard_normal((2, L + 1))
     angles = 2 * np.pi * f / RATE
-    M, P = pair_matrices(R, PairGeometry(angles, N), angles)
+    M, P = pair_matrices(R, PairGeometry(angles).at(N))
     for m in range(2):
         M_ref, P_ref = explicit_pairs(R[m], f, N)
         scale = np.abs(M_ref).max()
@@ -46,9 +46,9 @@ def test_the_shared_products_equal_the_explicit_sandwich():
     angles = 2 * np.pi * f / RATE
     R = rng.standard_normal((5, 51))
     X = rng.standard_normal((5, 54, 4)) + 1j * rng.standard_normal((5, 54, 4))
-    geometry = PairGeometry(angles, 173)
-    expected = sandwich(X, *pair_matrices(R, geometry, angles))
-    np.testing.assert_allclose(middle(R, X, geometry, angles), expected, rtol=0, atol=1e-12 * np.abs(expected).max())
+    geometry = PairGeometry(angles).at(173)
+    expected = sandwich(X, *pair_matrices(R, geometry))
+    np.testing.assert_allclose(middle(R, X, geometry), expected, rtol=0, atol=1e-12 * np.abs(expected).max())
 
 
 def test_with_the_true_autocovariance_the_covariance_matches_the_monte_carlo_scatter():
@@ -72,7 +72,7 @@ def test_with_the_true_autocovariance_the_covariance_matches_the_monte_carlo_sca
     errors = (A_inv @ (X.conj().T @ E).real).T  # theta_hat - theta, every run
     R = phi ** np.arange(L + 1) / (1 - phi**2)
     angles = 2 * np.pi * f / RATE
-    cov = A_inv @ (middle(R[None], X[None], PairGeometry(angles, N), angles)[0] / RATE**2) @ A_inv
+    cov = A_inv @ (middle(R[None], X[None], PairGeometry(angles).at(N))[0] / RATE**2) @ A_inv
     observed = errors.var(axis=0, ddof=1)
     np.testing.assert_allclose(np.diag(cov), observed, rtol=0.12)
     # The conventional covariance s^2 A^-1 (s^2 from the residuals over frequency, the points

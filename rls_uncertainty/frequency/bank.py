@@ -69,7 +69,7 @@ class FrequencyBank:
                 "covariance needs more frequencies than parameters (lower f_step or widen f_min..f_max)"
             )
         M, q = len(self.sizes), p_max + 1
-        self._angles = 2.0 * np.pi * self.frequencies / float(options.rate_hz)
+        self._geometry = PairGeometry(2.0 * np.pi * self.frequencies / float(options.rate_hz))
         self._columns: BoolArray = np.arange(q)[None, :] <= np.array(self.sizes)[:, None]  # z and real x
         self._transform = RecursiveFourierTransform(self.frequencies, options.rate_hz, (M, q))
         self._lags = LagSums(M, q, options.n_lags)
@@ -171,8 +171,7 @@ class FrequencyBank:
         C = self._lags.centered()  # (M, lags, q, q)
         R = residual_autocovariance(C, self._columns, N, self.options.dof_correction)
         self._R = R
-        geometry = PairGeometry(self._angles, N)
-        cov: FloatArray = A_inv @ (self.options.dt**2 * middle(R, X, geometry, self._angles)) @ A_inv
+        cov: FloatArray = A_inv @ (self.options.dt**2 * middle(R, X, self._geometry.at(N))) @ A_inv
         output_variance = np.einsum("ma,mab,mb->m", theta, C[:, 0, 1:, 1:], theta) / N
         exact = R[:, 0] <= EXACT_FIT * output_variance
         cov[exact] = 0.0

@@ -32,55 +32,63 @@ def _one_minus_exp(delta: FloatArray) -> ComplexArray:
     return out
 
 
-def _dirichlet(delta: FloatArray, N: int) -> ComplexArray:
-    """``sum_(n=0..N-1) exp(-j delta n)``; ``N`` where ``delta`` is 0."""
-    half = np.sin(delta / 2)
-    zero = half == 0.0
-    ratio = np.sin(N * delta / 2) / np.where(zero, 1.0, half)
-    out: ComplexArray = np.where(zero, float(N), np.exp(-0.5j * (N - 1) * delta) * ratio)
-    return out
-
-
 class PairGeometry:
     """Factors of Eq. F8 that depend only on the grid (angles ``a_k = w_k dt`` per sample) and
-    the sample count ``N``: ``G_N(a_k -+ a_l)``, ``1 / (1 - exp(-j (a_k -+ a_l)))``,
-    ``exp(-j (a_k -+ a_l) N)`` and ``Gamma_k = G_N(a_k)`` (the transform of a constant)."""
+    the sample count ``N``, shared by all models: ``1 / (1 - exp(-j (a_k -+ a_l)))`` (fixed),
+    ``exp(-j (a_k -+ a_l) N)`` (outer products of ``rho_k = exp(-j a_k N)``), the Dirichlet
+    sums ``G_N(a_k -+ a_l) = (1 - exp(-j (a_k -+ a_l) N)) / (1 - exp(-j (a_k -+ a_l)))``
+    (``N`` where ``a_k = a_l``) and ``Gamma_k = G_N(a_k)``, the transform of a constant.
+    :meth:`at` sets the sample count."""
 
-    def __init__(self, angles: FloatArray, N: int) -> None:
+    def __init__(self, angles: FloatArray) -> None:
         a = np.asarray(angles, dtype=np.float64)
         K = a.size
-        minus = a[:, None] - a[None, :]
-        plus = a[:, None] + a[None, :]
-        off = ~np.eye(K, dtype=bool)
-        self.N = int(N)
+        self.angles = a
         self.diagonal = np.eye(K, dtype=bool)
-        self.g_minus = _dirichlet(minus, N)
-        self.g_plus = _dirichlet(plus, N)
+        minus = a[:, None] - a[None, :]
         inv_minus = np.zeros((K, K), complex)
-        inv_minus[off] = 1.0 / _one_minus_exp(minus[off])
+        inv_minus[~self.diagonal] = 1.0 / _one_minus_exp(minus[~self.diagonal])
         self.inv_minus: ComplexArray = inv_minus
-        self.inv_plus: ComplexArray = 1.0 / _one_minus_exp(plus)
-        self.rot_minus: ComplexArray = np.exp(-1j * np.mod(minus * N, 2 * np.pi))
-        self.rot_plus: ComplexArray = np.exp(-1j * np.mod(plus * N, 2 * np.pi))
-        self.gamma: ComplexArray = _dirichlet(a, N)
+        self.inv_plus: ComplexArray = 1.0 / _one_minus_exp(a[:, None] + a[None, :])
+        self.inv_single: ComplexArray = 1.0 / _one_minus_exp(a)
+        self._tables: dict[int, tuple[FloatArray, FloatArray]] = {}
+        self.at(1)
+
+    def lag_table(self, lags: int) -> tuple[FloatArray, FloatArray]:
+        """``cos(a_k i)`` and ``sin(a_k i)`` for ``i = 1..lags``, ``(lags, K)`` (kept per ``lags``)."""
+        if lags not in self._tables:
+            phase = np.mod(np.multiply.outer(np.arange(1, lags + 1, dtype=np.float64), self.angles), 2 * np.pi)
+            self._tables[lags] = (np.cos(phase), np.sin(phase))
+        return self._tables[lags]
+
+    def at(self, N: int) -> PairGeometry:
+        """Set the sample count ``N`` (the record so far); returns ``self``."""
+        self.N = int(N)
+        rho = np.exp(-1j * np.mod(self.angles * N, 2 * np.pi))
+        self.rot_minus: ComplexArray = rho[:, None] * rho.conj()[None, :]
+        self.rot_plus: ComplexArray = rho[:, None] * rho[None, :]
+        self.g_minus: ComplexArray = (1.0 - self.rot_minus) * self.inv_minus
+        self.g_minus[self.diagonal] = float(N)
+        self.g_plus: ComplexArray = (1.0 - self.rot_plus) * self.inv_plus
+        self.gamma: ComplexArray = (1.0 - rho) * self.inv_single
+        return self
 
 
-def spectral_sums(R: FloatArray, angles: FloatArray) -> tuple[ComplexArray, ComplexArray]:
-    """``S+`` and ``S1`` (``(M, K)``) of ``R`` (``(M, L+1)``, lags 0..L) at the angles ``a_k``."""
+def spectral_sums(R: FloatArray, geometry: PairGeometry) -> tuple[ComplexArray, ComplexArray]:
+    """``S+`` and ``S1`` (``(M, K)``) of ``R`` (``(M, L+1)``, lags 0..L) at the grid's angles."""
+    cos, sin = geometry.lag_table(R.shape[1] - 1)
     lags = np.arange(1, R.shape[1], dtype=np.float64)
-    phase = np.mod(np.multiply.outer(lags, angles), 2 * np.pi)  # (L, K)
-    cos, sin = np.cos(phase), np.sin(phase)
     r, ir = R[:, 1:], R[:, 1:] * lags
     plus: ComplexArray = r @ cos - 1j * (r @ sin)
     first: ComplexArray = ir @ cos - 1j * (ir @ sin)
     return plus, first
 
 
-def pair_matrices(R: FloatArray, geometry: PairGeometry, angles: FloatArray) -> tuple[ComplexArray, ComplexArray]:
+def pair_matrices(R: FloatArray, geometry: PairGeometry) -> tuple[ComplexArray, ComplexArray]:
     """``M / dt^2`` and ``P / dt^2`` of Eq. F8, ``(M, K, K)``, for the transform of
     ``e_n - e_0`` where ``e`` has the autocovariance ``R(0..L)`` (``(M, L+1)``, ``L <= N - 1``)."""
     g = geometry
-    plus, first = spectral_sums(R, angles)
+    plus, first = spectral_sums(R, g)
     r0 = R[:, :1]
     spectrum = r0 + 2.0 * plus.real  # two-sided S(w_l) = R(0) + 2 Re S+(w_l)
     Sk, Sl = plus[:, :, None], plus[:, None, :]
@@ -121,14 +129,14 @@ def _inner(left: ComplexArray, right: ComplexArray) -> ComplexArray:
     return out
 
 
-def middle(R: FloatArray, X: ComplexArray, geometry: PairGeometry, angles: FloatArray) -> FloatArray:
+def middle(R: FloatArray, X: ComplexArray, geometry: PairGeometry) -> FloatArray:
     """:func:`sandwich` of :func:`pair_matrices` without forming them. Every term of Eq. F8 is
     ``G o (a b')`` with ``G`` a geometry matrix shared by all models and ``a``, ``b`` per model,
     and ``X^H (G o a b') Y = sum_k a_k conj(X_k) (G (b o Y))_k``: ten products of a shared
     ``K x K`` matrix with every model's columns at once, plus the diagonal and rank-one terms.
     Returns ``(M, p, p)`` (divided by ``dt^2`` like :func:`pair_matrices`)."""
     g = geometry
-    plus, first = spectral_sums(R, angles)
+    plus, first = spectral_sums(R, g)
     r0 = R[:, :1]
     spectrum = (r0 + 2.0 * plus.real)[:, :, None]
     Sp, Sc = plus[:, :, None], plus.conj()[:, :, None]

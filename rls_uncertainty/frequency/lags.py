@@ -22,10 +22,13 @@ numpy only.
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 import numpy.typing as npt
+from numpy.lib.stride_tricks import sliding_window_view
 
-__all__ = ["LagSums", "least_squares_weight", "residual_autocovariance", "dof_correction"]
+__all__ = ["LagSums", "pseudo_inverse", "dof_correction", "residual_autocovariance"]
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -85,21 +88,11 @@ class LagSums:
             a[...] = 0.0
 
 
-def least_squares_weight(C0: FloatArray, columns: npt.NDArray[np.bool_]) -> FloatArray:
-    """``w = (1, -theta)`` of the least-squares fit of ``z`` on ``x`` and a bias over the record,
-    from the centered sums ``C_0`` (``(M, q, q)``): ``theta = B^+ b``, ``B = C_0[x, x]``,
-    ``b = C_0[x, z]``; padded columns (``columns`` false) and regressors without variation get
-    0. The pseudo-inverse (column-scaled, relative cutoff 1e-12) makes the residual the unique
-    least-squares projection even where ``theta`` itself is not determined."""
-    B = pseudo_inverse(C0[:, 1:, 1:], columns[:, 1:])
-    theta = np.einsum("mab,mb->ma", B, C0[:, 1:, 0])
-    w: FloatArray = np.concatenate([np.ones((C0.shape[0], 1)), -theta], axis=1)
-    return w
-
-
 def pseudo_inverse(B: FloatArray, columns: npt.NDArray[np.bool_]) -> FloatArray:
-    """``B^+`` of symmetric ``(M, p, p)`` matrices after scaling to a unit diagonal; rows and
-    columns that are padding or zero on the diagonal are left out (0 in ``B^+``)."""
+    """``B^+`` of symmetric ``(M, p, p)`` matrices after scaling to a unit diagonal (relative
+    cutoff 1e-12); rows and columns that are padding (``columns`` false) or zero on the
+    diagonal are left out (0 in ``B^+``). Where ``B`` is singular the fit's residual is still
+    the unique least-squares projection."""
     d = np.diagonal(B, axis1=1, axis2=2)
     used = columns & (d > 0)
     s = np.where(used, 1.0 / np.sqrt(np.where(used, d, 1.0)), 0.0)
@@ -109,51 +102,53 @@ def pseudo_inverse(B: FloatArray, columns: npt.NDArray[np.bool_]) -> FloatArray:
     return out
 
 
-def dof_correction(R: FloatArray, Cx: FloatArray, B_inv: FloatArray, N: int) -> FloatArray:
-    """The linear map ``D`` of Eq. F10 applied to ``R`` (``(M, L+1)``): what the least-squares
-    fit of the same record (the regressors and the bias) takes out of ``R(i)`` on average,
+def dof_correction(Cx: FloatArray, B_inv: FloatArray, N: int) -> Callable[[FloatArray], FloatArray]:
+    """The linear map ``D`` of Eq. F10 (what the least-squares fit of the same record, the
+    regressors and the bias, takes out of ``R(i)`` on average), for ``R`` ``(M, L+1)``:
 
-        (D R)(i) = [sum_(|l|<=L) R(l) (T(l-i) + T(l+i)) - tr(C^x_i cov(R))
-                    + sum_(|l|<=L) R(l) (T1(l-i) + T1(l+i)) - (N - i) var(R)] / N,
+        (D R)(i) = [2 sum_(|l|<=L) R(l) T(l-i) - tr(C^x_i cov(R))
+                    + 2 sum_(|l|<=L) R(l) T1(l-i) - (N - i) var(R)] / N,
 
-    ``T(j) = tr(B^+ C^x_j)`` (0 beyond ``L``), ``C^x`` the centered regressor lag sums,
-    ``cov(R) = B^+ [R(0) C^x_0 + sum_(l>=1) R(l) (C^x_l + C^x_l')] B^+`` the fit's covariance;
-    the bias (the mean) is the same with ``T1(j) = max(N - |j|, 0) / N`` and
-    ``var(R) = sum_(|l|<=L) (N - |l|) R(l) / N^2``."""
-    M, lags = R.shape
+    ``T(j) = tr(B^+ C^x_j)`` (0 beyond ``L``; even in ``j``), ``C^x`` the centered regressor lag
+    sums, ``cov(R) = B^+ [R(0) C^x_0 + sum_(l>=1) R(l) (C^x_l + C^x_l')] B^+`` the fit's
+    covariance; the bias (the mean, orthogonal to the centered regressors) is the same with
+    ``T1(j) = max(N - |j|, 0) / N`` and ``var(R) = sum_(|l|<=L) (N - |l|) R(l) / N^2``."""
+    M, lags = Cx.shape[:2]
     L = lags - 1
-    T = np.einsum("mab,miba->mi", B_inv, Cx)  # T(j), j = 0..L
-    padded = np.zeros((M, 4 * L + 1))  # T(j) at index j + 2L, j = -2L..2L
-    padded[:, 2 * L : 3 * L + 1] = T
-    padded[:, L : 2 * L + 1] = T[:, ::-1]
-    lag = np.arange(-L, L + 1)[None, :]
-    i = np.arange(lags)[:, None]
-    pair = padded[:, lag - i + 2 * L] + padded[:, lag + i + 2 * L]  # (M, L+1, 2L+1): T(l-i) + T(l+i)
-    two_sided = np.concatenate([R[:, :0:-1], R], axis=1)  # R(|l|), l = -L..L
-    cross = np.einsum("mil,ml->mi", pair, two_sided)
-    both = Cx[:, 1:] + np.swapaxes(Cx[:, 1:], 2, 3)
-    middle = R[:, 0, None, None] * Cx[:, 0] + np.einsum("mi,miab->mab", R[:, 1:], both)
-    cov = B_inv @ middle @ B_inv
-    quad = np.einsum("miab,mba->mi", Cx, cov)
-    # The bias: a regressor of ones, orthogonal to the centered ones.
+    T = np.zeros((M, 4 * L + 1))  # T(j) at index j + 2L, j = -2L..2L
+    T[:, 2 * L : 3 * L + 1] = np.einsum("mab,miba->mi", B_inv, Cx)
+    T[:, L : 2 * L + 1] = T[:, 2 * L : 3 * L + 1][:, ::-1]
+    # Row i holds T(l - i) for l = -L..L: the window starting at index L - i.
+    shifted = sliding_window_view(T, 2 * L + 1, axis=1)[:, L::-1]  # (M, L+1, 2L+1), a view
     gap = np.arange(-2 * L, 2 * L + 1)
-    t1 = np.maximum(N - np.abs(gap), 0) / N  # T1(j) at index j + 2L
-    cross_mean = two_sided @ (t1[lag - i + 2 * L] + t1[lag + i + 2 * L]).T
-    variance = two_sided @ (N - np.abs(lag[0])) / N**2
-    quad_mean = (N - np.arange(lags))[None, :] * variance[:, None]
-    out: FloatArray = (cross - quad + cross_mean - quad_mean) / N
-    return out
+    shifted_mean = sliding_window_view(np.maximum(N - np.abs(gap), 0) / N, 2 * L + 1)[L::-1]  # T1(l - i)
+    weight = (N - np.abs(np.arange(-L, L + 1))) / N**2
+    both = Cx[:, 1:] + np.swapaxes(Cx[:, 1:], 2, 3)
+    count = N - np.arange(lags, dtype=np.float64)
+
+    def apply(R: FloatArray) -> FloatArray:
+        two_sided = np.concatenate([R[:, :0:-1], R], axis=1)  # R(|l|), l = -L..L
+        cross = 2.0 * (np.einsum("mil,ml->mi", shifted, two_sided) + two_sided @ shifted_mean.T)
+        middle = R[:, 0, None, None] * Cx[:, 0] + np.einsum("mi,miab->mab", R[:, 1:], both)
+        quad = np.einsum("miab,mba->mi", Cx, B_inv @ middle @ B_inv)
+        quad_mean = count[None, :] * (two_sided @ weight)[:, None]
+        out: FloatArray = (cross - quad - quad_mean) / N
+        return out
+
+    return apply
 
 
 def residual_autocovariance(C: FloatArray, columns: npt.NDArray[np.bool_], N: int, correct: bool) -> FloatArray:
-    """Eqs. F9-F10: ``R(0..L)`` (``(M, L+1)``) of the residuals of the least-squares fit of the
-    record (with a bias), plus ``D R + D^2 R`` when ``correct`` (the degrees of freedom)."""
-    w = least_squares_weight(C[:, 0], columns)
+    """Eqs. F9-F10: ``R(0..L)`` (``(M, L+1)``) of the residuals of the least-squares fit of ``z``
+    on the regressors and a bias over the record (``theta = B^+ b``, ``B = C_0[x, x]``,
+    ``b = C_0[x, z]``), plus ``D R + D^2 R`` when ``correct`` (the fit's degrees of freedom)."""
+    B_inv = pseudo_inverse(C[:, 0, 1:, 1:], columns[:, 1:])
+    theta = np.einsum("mab,mb->ma", B_inv, C[:, 0, 1:, 0])
+    w = np.concatenate([np.ones((C.shape[0], 1)), -theta], axis=1)
     R0: FloatArray = np.einsum("ma,miab,mb->mi", w, C, w) / N
     if not correct:
         return R0
-    B_inv = pseudo_inverse(C[:, 0, 1:, 1:], columns[:, 1:])
-    Cx = C[:, :, 1:, 1:]
-    R = R0 + dof_correction(R0, Cx, B_inv, N)
-    R = R0 + dof_correction(R, Cx, B_inv, N)
+    D = dof_correction(C[:, :, 1:, 1:], B_inv, N)
+    R1 = R0 + D(R0)
+    R: FloatArray = R0 + D(R1)
     return R
