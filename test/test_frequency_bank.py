@@ -1,6 +1,7 @@
 """FrequencyBank, the recursive estimator, against the literal batch reference at every evaluated
-sample (estimates, both covariances, transforms), and its behaviour at the edges: exact fits,
-evaluation every m samples, refused samples, resets, models that are not ready."""
+sample (estimates, both covariances, transforms), its corrected variance against the one of the
+true noise, and its behaviour at the edges: exact fits, evaluation every m samples, refused
+samples, resets, models that are not ready."""
 
 from __future__ import annotations
 
@@ -10,6 +11,7 @@ import pytest
 from rls_uncertainty.errors import EstimatorNotReady, NonFiniteInput
 from rls_uncertainty.estimator import nearest_psd
 from rls_uncertainty.frequency import FrequencyBank, FrequencyOptions, finite_fourier_transform, frequency_reference
+from rls_uncertainty.frequency.covariance import PairGeometry, middle
 from rls_uncertainty.montecarlo import level_inputs
 
 RATE = 50.0
@@ -31,12 +33,12 @@ def feed(bank: FrequencyBank, x: np.ndarray, z: np.ndarray, start: int = 0, stop
         bank.update(x[k], z[k])
 
 
-@pytest.mark.parametrize("dof_correction", [True, False])
-def test_the_bank_equals_the_batch_reference_at_every_evaluated_sample(t2_run, dof_correction):
+@pytest.mark.parametrize(("dof_correction", "trim"), [(True, 1), (False, 1), (True, 25)])
+def test_the_bank_equals_the_batch_reference_at_every_evaluated_sample(t2_run, dof_correction, trim):
     x, z = t2_run
-    options = FrequencyOptions(rate_hz=RATE, f_max=2.2, dof_correction=dof_correction)
+    options = FrequencyOptions(rate_hz=RATE, f_max=2.2, dof_correction=dof_correction, trim_samples=trim)
     bank = FrequencyBank(SIZES, options)
-    checks = {25, 51, 52, 120, 173, 300, x.shape[0]}
+    checks = {12, 25, 26, 51, 52, 120, 173, 300, x.shape[0]}
     for k in range(x.shape[0]):
         bank.update(x[k], z[k])
         if k + 1 not in checks:
@@ -55,16 +57,17 @@ def test_the_bank_equals_the_batch_reference_at_every_evaluated_sample(t2_run, d
             np.testing.assert_allclose(bank.standard_errors(j), np.sqrt(np.diag(expected)), rtol=1e-9)
 
 
-def test_the_recursive_transforms_equal_the_batch_transform_of_the_record(t2_run):
+@pytest.mark.parametrize("trim", [1, 25])
+def test_the_recursive_transforms_equal_the_batch_transform_of_the_record(t2_run, trim):
     x, z = t2_run
-    options = FrequencyOptions(rate_hz=RATE)
+    options = FrequencyOptions(rate_hz=RATE, trim_samples=trim)
     bank = FrequencyBank(SIZES, options)
     feed(bank, x, z)
     Z, X = bank.transforms()
     f = options.frequencies()
     for j, p in enumerate(SIZES):
-        Zb = finite_fourier_transform(z[:, j] - z[0, j], f, RATE)
-        Xb = finite_fourier_transform(x[:, j, :p] - x[0, j, :p], f, RATE)
+        Zb = finite_fourier_transform(z[:, j] - z[:trim, j].mean(), f, RATE)
+        Xb = finite_fourier_transform(x[:, j, :p] - x[:trim, j, :p].mean(axis=0), f, RATE)
         np.testing.assert_allclose(Z[j], Zb, rtol=0, atol=1e-9 * np.abs(Zb).max())
         np.testing.assert_allclose(X[j, :, :p], Xb, rtol=0, atol=1e-9 * np.abs(Xb).max())
         assert not X[j, :, p:].any()
@@ -147,3 +150,34 @@ def test_a_model_that_is_not_ready_gives_nan_and_refuses_its_estimate(t2_run):
     assert np.isnan(bank.theta_all()[0, 2])  # C_Z's padding
     with pytest.raises(ValueError, match="kind"):
         bank.standard_errors_all("batch")
+
+
+@pytest.mark.parametrize("phi", [0.0, 0.5, -0.5])
+def test_the_corrected_variance_is_unbiased_for_the_true_noise_on_average(phi):
+    # 400 models with the same regressors (one of them a switched-on cosine: energy outside the
+    # grid) and AR(1) equation error of known autocovariance R(i) = 0.01 phi^i / (1 - phi^2).
+    # The mean published corrected variance (R estimated from each model's residuals) against
+    # the variance F7 gives with the true R: within 7 % (about 5 of its standard errors). Without
+    # the degrees-of-freedom correction (F10) the switched-on regressor's is 9-30 % low.
+    rng = np.random.default_rng(5)
+    N, runs = 200, 400
+    t = np.arange(N) / RATE
+    x = np.column_stack([np.sin(2 * np.pi * 0.4 * t + 1) + 0.5 * np.sin(2 * np.pi * 1.1 * t),
+                         np.cos(2 * np.pi * 0.7 * t) * (t > 0.5)])
+    e = rng.standard_normal((N + 200, runs))
+    for k in range(1, N + 200):
+        e[k] += phi * e[k - 1]
+    e = 0.1 * e[200:]
+    mean_variance = {}
+    for correct in (True, False):
+        bank = FrequencyBank((2,) * runs, FrequencyOptions(rate_hz=RATE, f_max=2.0, dof_correction=correct, every=N))
+        for k in range(N):
+            bank.update(np.broadcast_to(x[k], (runs, 2)), x[k] @ [1.5, -0.7] + 0.3 + e[k])
+        mean_variance[correct] = (bank.standard_errors_all() ** 2).mean(axis=0)
+    X = bank.transforms()[1][:1]
+    A_inv = np.linalg.inv((np.swapaxes(X.conj(), 1, 2) @ X).real[0])
+    R = 0.01 * phi ** np.arange(51) / (1 - phi**2)
+    geometry = PairGeometry(2 * np.pi * bank.frequencies / RATE).at(N)
+    truth = np.diag(A_inv @ (middle(R[None], X, geometry)[0] / RATE**2) @ A_inv)
+    np.testing.assert_allclose(mean_variance[True], truth, rtol=0.07)
+    assert mean_variance[False][1] < 0.92 * truth[1]

@@ -14,27 +14,29 @@ from rls_uncertainty.frequency.covariance import PairGeometry, middle, pair_matr
 RATE = 50.0
 
 
-def explicit_pairs(R: np.ndarray, f: np.ndarray, N: int) -> tuple[np.ndarray, np.ndarray]:
-    """E[E E^H] / dt^2 and E[E E^T] / dt^2 for E_k = dt sum_n (e_n - e_0) exp(-j w_k t_n), e with
-    autocovariance R (zero beyond its length), summed over every pair of samples."""
+def explicit_pairs(R: np.ndarray, f: np.ndarray, N: int, trim: int) -> tuple[np.ndarray, np.ndarray]:
+    """E[E E^H] / dt^2 and E[E E^T] / dt^2 for E_k = dt sum_n (e_n - e_bar) exp(-j w_k t_n),
+    e_bar the mean of the first ``trim`` e, e with autocovariance R (zero beyond its length),
+    summed over every pair of samples."""
     c = np.exp(-2j * np.pi * np.outer(f, np.arange(N)) / RATE)
-    c[:, 0] -= c.sum(axis=1)  # the -e_0 of every sample, moved onto sample 0
+    c[:, :trim] -= c.sum(axis=1, keepdims=True) / trim  # the -e_bar of every sample, moved onto the first
     r = np.zeros(N)
     r[: R.size] = R
     T = r[np.abs(np.subtract.outer(np.arange(N), np.arange(N)))]
     return c @ T @ c.conj().T, c @ T @ c.T
 
 
-@pytest.mark.parametrize(("N", "L"), [(30, 6), (7, 6), (50, 0), (40, 39)])
-def test_the_pair_matrices_equal_the_sums_over_every_pair_of_samples(N, L):
+@pytest.mark.parametrize(("N", "L", "trim"), [(30, 6, 1), (7, 6, 1), (50, 0, 1), (40, 39, 1), (30, 6, 4), (30, 6, 30),
+                                             (60, 5, 12), (9, 8, 9)])
+def test_the_pair_matrices_equal_the_sums_over_every_pair_of_samples(N, L, trim):
     rng = np.random.default_rng(N + L)
     f = np.sort(rng.uniform(0.05, 20.0, 9))  # any grid below the Nyquist frequency
     f[3] = f[4] - 1e-3  # two close frequencies: the 1 / (1 - exp(-j delta)) terms
     R = rng.standard_normal((2, L + 1))
     angles = 2 * np.pi * f / RATE
-    M, P = pair_matrices(R, PairGeometry(angles).at(N))
+    M, P = pair_matrices(R, PairGeometry(angles).at(N), trim)
     for m in range(2):
-        M_ref, P_ref = explicit_pairs(R[m], f, N)
+        M_ref, P_ref = explicit_pairs(R[m], f, N, trim)
         scale = np.abs(M_ref).max()
         np.testing.assert_allclose(M[m], M_ref, rtol=0, atol=1e-11 * scale)
         np.testing.assert_allclose(P[m], P_ref, rtol=0, atol=1e-11 * scale)
@@ -47,8 +49,9 @@ def test_the_shared_products_equal_the_explicit_sandwich():
     R = rng.standard_normal((5, 51))
     X = rng.standard_normal((5, 54, 4)) + 1j * rng.standard_normal((5, 54, 4))
     geometry = PairGeometry(angles).at(173)
-    expected = sandwich(X, *pair_matrices(R, geometry))
-    np.testing.assert_allclose(middle(R, X, geometry), expected, rtol=0, atol=1e-12 * np.abs(expected).max())
+    for trim in (1, 25):
+        expected = sandwich(X, *pair_matrices(R, geometry, trim))
+        np.testing.assert_allclose(middle(R, X, geometry, trim), expected, rtol=0, atol=1e-12 * np.abs(expected).max())
 
 
 def test_with_the_true_autocovariance_the_covariance_matches_the_monte_carlo_scatter():

@@ -35,6 +35,7 @@ def test_a_grid_end_that_is_not_a_step_away_is_not_reached():
         (dict(f_step=0.0), "f_step"),
         (dict(f_step=1e-5), "f_step"),  # 140001 frequencies
         (dict(f_max=30.0), "f_max"),  # beyond the Nyquist frequency of 50 Hz
+        (dict(trim_samples=0), "trim_samples"),
         (dict(n_lags=-1), "n_lags"),
         (dict(n_lags=2.5), "n_lags"),
         (dict(every=0), "every"),

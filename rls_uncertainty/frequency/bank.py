@@ -1,9 +1,10 @@
 """The real-time frequency-domain estimator: ``M`` equation-error models on one recursive
 Fourier transform (docs/frequency.md; Morelli, JGCD 23(5), 2000).
 
-Per sample (:meth:`FrequencyBank.update`): the first sample is subtracted from every signal,
-the transforms are advanced (Eq. F2, ``K (p + 1)`` complex multiply-adds per model) and so are
-the lag-product sums (Eq. F9, ``(L + 1) (p + 1)^2``). Every ``every`` samples, when asked
+Per sample (:meth:`FrequencyBank.update`): the first sample is subtracted from every signal
+(the trim, the mean of the first ``trim_samples``, is applied to the transforms when they are
+used, exactly: it is a constant), the transforms are advanced (Eq. F2, ``K (p + 1)`` complex
+multiply-adds per model) and so are the lag-product sums (Eq. F9, ``(L + 1) (p + 1)^2``). Every ``every`` samples, when asked
 (:meth:`FrequencyBank.theta_all` and the others): the complex least-squares solution (F4), the
 conventional covariance (F5), the residual autocovariance of the record's least-squares
 residuals (F9) corrected for the fit's degrees of freedom (F10) and the corrected covariance in
@@ -40,8 +41,8 @@ _KIND_INDEX: dict[str, int] = {kind: i for i, kind in enumerate(COVARIANCE_KINDS
 
 
 class FrequencyBank:
-    """``M`` models ``z = x' theta`` (no bias term: the first sample is subtracted and the grid
-    leaves out 0 Hz) estimated in the frequency domain (docs/frequency.md).
+    """``M`` models ``z = x' theta`` (no bias term: the trim is subtracted and the grid leaves out
+    0 Hz) estimated in the frequency domain (docs/frequency.md).
 
     Parameters
     ----------
@@ -74,6 +75,7 @@ class FrequencyBank:
         self._transform = RecursiveFourierTransform(self.frequencies, options.rate_hz, (M, q))
         self._lags = LagSums(M, q, options.n_lags)
         self._first: FloatArray | None = None
+        self._trim_sum: FloatArray = np.zeros((M, q))  # sum of the first trim_samples samples (first subtracted)
         self._due = False
         self.repairs = 0
         self._theta: FloatArray = np.full((M, p_max), np.nan)
@@ -106,6 +108,8 @@ class FrequencyBank:
         if self._first is None:
             self._first = u.copy()
         u -= self._first
+        if self._lags.n < self.options.trim_samples:
+            self._trim_sum += u
         self._transform.update(u)
         self._lags.update(u)
         if self._lags.n % self.options.every == 0:
@@ -116,6 +120,7 @@ class FrequencyBank:
         self._transform.reset()
         self._lags.reset()
         self._first = None
+        self._trim_sum[...] = 0.0
         self._due = False
         self._theta[...] = np.nan
         self._cov[...] = np.nan
@@ -131,7 +136,7 @@ class FrequencyBank:
         self._due = False
         N = self._lags.n
         self._evaluated_at = N
-        U = self._transform.values  # (M, K, q): transforms of z and x
+        U = self._trimmed()  # (M, K, q): transforms of z and x
         Z, X = U[..., 0], U[..., 1:]
         G = np.einsum("mka,mkb->mab", U.conj(), U).real
         A, b = G[:, 1:, 1:].copy(), G[:, 1:, 0]
@@ -152,6 +157,21 @@ class FrequencyBank:
         self._cov[:, ~ready] = np.nan
         self._ready = ready
 
+    def _trim_count(self) -> int:
+        return min(self._lags.n, self.options.trim_samples)
+
+    def _trimmed(self) -> npt.NDArray[np.complex128]:
+        """The transforms with the trim subtracted (F1): those of ``u - u_0`` (kept recursively)
+        less ``dt (m - u_0) Gamma_k``, ``m`` the mean of the first samples, ``Gamma_k`` the sum of
+        the phasors over the record (the transform of a constant)."""
+        U = self._transform.values
+        if self.options.trim_samples == 1:
+            return U
+        shift = self._trim_sum / max(self._trim_count(), 1)
+        gamma = self._geometry.at(self._lags.n).gamma
+        out: npt.NDArray[np.complex128] = U - self.options.dt * shift[:, None, :] * gamma[None, :, None]
+        return out
+
     def _well_conditioned(self, A: FloatArray) -> BoolArray:
         """Column-scaled ``Re(X^H X)`` of each model (padding: a unit diagonal, which leaves the
         extreme eigenvalues of a unit-diagonal matrix unchanged) below ``init_condition``."""
@@ -171,7 +191,8 @@ class FrequencyBank:
         C = self._lags.centered()  # (M, lags, q, q)
         R = residual_autocovariance(C, self._columns, N, self.options.dof_correction)
         self._R = R
-        cov: FloatArray = A_inv @ (self.options.dt**2 * middle(R, X, self._geometry.at(N))) @ A_inv
+        mid = middle(R, X, self._geometry.at(N), self._trim_count())
+        cov: FloatArray = A_inv @ (self.options.dt**2 * mid) @ A_inv
         output_variance = np.einsum("ma,mab,mb->m", theta, C[:, 0, 1:, 1:], theta) / N
         exact = R[:, 0] <= EXACT_FIT * output_variance
         cov[exact] = 0.0
@@ -237,8 +258,8 @@ class FrequencyBank:
 
     def transforms(self) -> tuple[npt.NDArray[np.complex128], npt.NDArray[np.complex128]]:
         """``(Z, X)``: the transforms ``(M, K)`` and ``(M, K, max(sizes))`` of the outputs and
-        regressors with their first samples subtracted (Eq. F1), copies."""
-        U = self._transform.values
+        regressors with the trim subtracted (Eq. F1), copies."""
+        U = self._trimmed()
         return U[..., 0].copy(), U[..., 1:].copy()
 
     @staticmethod
@@ -254,5 +275,5 @@ class FrequencyBank:
         return {
             "sizes": self.sizes, "rate_hz": o.rate_hz, "frequencies": self.frequencies.size,
             "f_min": float(self.frequencies[0]), "f_max": float(self.frequencies[-1]), "f_step": o.f_step,
-            "n_lags": o.n_lags, "every": o.every, "dof_correction": o.dof_correction,
+            "trim_samples": o.trim_samples, "n_lags": o.n_lags, "every": o.every, "dof_correction": o.dof_correction,
         }

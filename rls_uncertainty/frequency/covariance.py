@@ -20,7 +20,7 @@ from __future__ import annotations
 import numpy as np
 import numpy.typing as npt
 
-__all__ = ["PairGeometry", "spectral_sums", "pair_matrices", "sandwich", "middle"]
+__all__ = ["PairGeometry", "spectral_sums", "trim_terms", "pair_matrices", "sandwich", "middle"]
 
 FloatArray = npt.NDArray[np.float64]
 ComplexArray = npt.NDArray[np.complex128]
@@ -54,6 +54,13 @@ class PairGeometry:
         self._tables: dict[int, tuple[FloatArray, FloatArray]] = {}
         self.at(1)
 
+    def head_phasors(self, count: int) -> ComplexArray:
+        """``exp(-j a_k n)`` for ``n = 0 .. count-1``, ``(K, count)`` (kept for the largest count)."""
+        if getattr(self, "_head", np.zeros((0, 0))).shape[1] < count:
+            self._head: ComplexArray = np.exp(-1j * np.mod(np.multiply.outer(self.angles, np.arange(count)), 2 * np.pi))
+        out: ComplexArray = self._head[:, :count]
+        return out
+
     def lag_table(self, lags: int) -> tuple[FloatArray, FloatArray]:
         """``cos(a_k i)`` and ``sin(a_k i)`` for ``i = 1..lags``, ``(lags, K)`` (kept per ``lags``)."""
         if lags not in self._tables:
@@ -84,9 +91,29 @@ def spectral_sums(R: FloatArray, geometry: PairGeometry) -> tuple[ComplexArray, 
     return plus, first
 
 
-def pair_matrices(R: FloatArray, geometry: PairGeometry) -> tuple[ComplexArray, ComplexArray]:
+def trim_terms(R: FloatArray, geometry: PairGeometry, trim: int) -> tuple[ComplexArray, FloatArray]:
+    """The terms of the trim ``e_bar``, the mean of the first ``trim`` samples' ``e``, subtracted
+    from every sample: ``V_k = E[e_bar sum_n e_n exp(-j a_k n)] = sum_n w_n exp(-j a_k n)`` with
+    ``w_n = (1/trim) sum_(j<trim) R(n - j)`` (``(M, K)``), and ``var(e_bar) = (1/trim) sum_(j<trim) w_j``
+    (``(M,)``). ``trim = 1``, the first sample: ``V_k = R(0) + S+(w_k)``, ``var = R(0)``."""
+    M, lags = R.shape
+    L, N = lags - 1, geometry.N
+    two_sided = np.concatenate([R[:, :0:-1], R], axis=1)  # R(i), i = -L..L
+    # w_n, n = 0 .. trim + L - 1: a box of trim ones against R (n - j from -trim+1 to n).
+    w = np.zeros((M, trim + L))
+    for j in range(trim):
+        w[:, max(0, j - L) : j + L + 1] += two_sided[:, max(0, L - j) :]
+    w /= trim
+    count = min(N, trim + L)
+    V: ComplexArray = w[:, :count] @ geometry.head_phasors(count).T
+    var: FloatArray = w[:, :trim].mean(axis=1)
+    return V, var
+
+
+def pair_matrices(R: FloatArray, geometry: PairGeometry, trim: int = 1) -> tuple[ComplexArray, ComplexArray]:
     """``M / dt^2`` and ``P / dt^2`` of Eq. F8, ``(M, K, K)``, for the transform of
-    ``e_n - e_0`` where ``e`` has the autocovariance ``R(0..L)`` (``(M, L+1)``, ``L <= N - 1``)."""
+    ``e_n - e_bar`` (``e_bar`` the mean of the first ``trim`` samples' ``e``) where ``e`` has the
+    autocovariance ``R(0..L)`` (``(M, L+1)``, ``L <= N - 1``)."""
     g = geometry
     plus, first = spectral_sums(R, g)
     r0 = R[:, :1]
@@ -98,12 +125,13 @@ def pair_matrices(R: FloatArray, geometry: PairGeometry) -> tuple[ComplexArray, 
     M[:, g.diagonal] = g.N * spectrum - 2.0 * first.real  # Q(w_k, w_k): the sums' limit at 0
     # Q(w_k, -w_l): the pseudo-covariance E[E_k E_l].
     P = g.g_plus * spectrum[:, None, :] - g.inv_plus * ((cSl - Sk) + g.rot_plus * (cSk - Sl))
-    # The first sample subtracted from every sample: E_k = dt (sum e_n c_kn - e_0 Gamma_k).
-    V = r0 + plus  # sum_(n=0..L) R(n) exp(-j w_k t_n)
+    # The trim subtracted from every sample: E_k = dt (sum e_n c_kn - e_bar Gamma_k).
+    V, var = trim_terms(R, g, trim)
+    var3 = var[:, None, None]
     gam = g.gamma[None, :]
-    M += (r0[:, :, None] * gam[:, :, None] * gam.conj()[:, None, :]
+    M += (var3 * gam[:, :, None] * gam.conj()[:, None, :]
           - V[:, :, None] * gam.conj()[:, None, :] - gam[:, :, None] * V.conj()[:, None, :])
-    P += (r0[:, :, None] * gam[:, :, None] * gam[:, None, :]
+    P += (var3 * gam[:, :, None] * gam[:, None, :]
           - V[:, :, None] * gam[:, None, :] - gam[:, :, None] * V[:, None, :])
     return M, P
 
@@ -129,7 +157,7 @@ def _inner(left: ComplexArray, right: ComplexArray) -> ComplexArray:
     return out
 
 
-def middle(R: FloatArray, X: ComplexArray, geometry: PairGeometry) -> FloatArray:
+def middle(R: FloatArray, X: ComplexArray, geometry: PairGeometry, trim: int = 1) -> FloatArray:
     """:func:`sandwich` of :func:`pair_matrices` without forming them. Every term of Eq. F8 is
     ``G o (a b')`` with ``G`` a geometry matrix shared by all models and ``a``, ``b`` per model,
     and ``X^H (G o a b') Y = sum_k a_k conj(X_k) (G (b o Y))_k``: ten products of a shared
@@ -149,14 +177,15 @@ def middle(R: FloatArray, X: ComplexArray, geometry: PairGeometry) -> FloatArray
     # X^H P conj(X): g_plus o 1 S' - inv_plus o (1 conj(S+)' - S+ 1') - rot_plus o (conj(S+) 1' - 1 S+').
     xpx = (_inner(Xc, _shared(g.g_plus, spectrum * Xc) - _shared(g.inv_plus, Sc * Xc) + _shared(rot_plus, Sp * Xc))
            + _inner(Sp * Xc, _shared(g.inv_plus, Xc)) - _inner(Sc * Xc, _shared(rot_plus, Xc)))
-    # The first sample subtracted: r0 Gamma Gamma^H - V Gamma^H - Gamma V^H (and ^T for P).
-    V = r0 + plus
+    # The trim subtracted: var Gamma Gamma^H - V Gamma^H - Gamma V^H (and ^T for P).
+    V, var = trim_terms(R, g, trim)
+    var3 = var[:, None, None]
     xg = np.einsum("mka,k->ma", Xc, g.gamma)  # X^H Gamma
     xv = np.einsum("mka,mk->ma", Xc, V)  # X^H V
     outer = np.einsum
-    xmx += (r0[:, :, None] * outer("ma,mb->mab", xg, xg.conj())
+    xmx += (var3 * outer("ma,mb->mab", xg, xg.conj())
             - outer("ma,mb->mab", xv, xg.conj()) - outer("ma,mb->mab", xg, xv.conj()))
-    xpx += r0[:, :, None] * outer("ma,mb->mab", xg, xg) - outer("ma,mb->mab", xv, xg) - outer("ma,mb->mab", xg, xv)
+    xpx += var3 * outer("ma,mb->mab", xg, xg) - outer("ma,mb->mab", xv, xg) - outer("ma,mb->mab", xg, xv)
     mid = 0.5 * (xmx + xpx).real
     out: FloatArray = 0.5 * (mid + np.swapaxes(mid, 1, 2))
     return out

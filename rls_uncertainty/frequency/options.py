@@ -15,7 +15,7 @@ import numpy.typing as npt
 
 from ..errors import ConfigError
 
-__all__ = ["FrequencyOptions", "MAX_FREQUENCIES", "MAX_LAGS"]
+__all__ = ["FrequencyOptions", "MAX_FREQUENCIES", "MAX_LAGS", "MAX_TRIM"]
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -23,6 +23,8 @@ FloatArray = npt.NDArray[np.float64]
 MAX_FREQUENCIES = 1000
 # Largest n_lags: the lag-product sums hold (n_lags + 1) (p + 1)^2 numbers per model.
 MAX_LAGS = 100_000
+# Largest trim_samples: the covariance sums over trim_samples + n_lags samples per evaluation.
+MAX_TRIM = 10_000
 # Tolerance of the grid end: f_max is on the grid when it is within 1e-9 steps of a point.
 _GRID_TOLERANCE = 1e-9
 
@@ -54,6 +56,12 @@ class FrequencyOptions:
         (inclusive, within ``1e-9`` steps). Default 0.1 to 1.5 Hz every 0.04 Hz, the grid of
         NASA SIDPAC's real-time demo. Every frequency must lie below the Nyquist frequency
         ``rate_hz / 2``.
+    trim_samples:
+        The trim subtracted from every signal before the transform: the mean of its first
+        ``trim_samples`` samples (until that many have arrived, of those so far). 1, the
+        default, is the first sample, as SIDPAC's real-time code; a longer steady stretch before
+        the excitation (e.g. 25 samples, the half second before the T-2's input) puts less of
+        one sample's noise into every sample (docs/frequency.md, "The trim").
     n_lags:
         Lags of the residual autocovariance kept in the corrected covariance (the ``n_tau``
         of the paper's Eq. 22); 0 keeps only ``R(0)``.
@@ -73,6 +81,7 @@ class FrequencyOptions:
     f_min: float = 0.1
     f_max: float = 1.5
     f_step: float = 0.04
+    trim_samples: int = 1
     n_lags: int = 50
     every: int = 1
     dof_correction: bool = True
@@ -101,6 +110,7 @@ class FrequencyOptions:
                 f"frequency f_max must stay below the Nyquist frequency rate_hz / 2 = {rate / 2} Hz, "
                 f"the grid reaches {top} Hz"
             )
+        _count("trim_samples", self.trim_samples, 1, MAX_TRIM)
         _count("n_lags", self.n_lags, 0, MAX_LAGS)
         _count("every", self.every, 1, 1_000_000)
         if not isinstance(self.dof_correction, (bool, np.bool_)):

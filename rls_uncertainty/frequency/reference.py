@@ -54,8 +54,9 @@ def frequency_reference(x: npt.ArrayLike, z: npt.ArrayLike, options: FrequencyOp
     z = np.asarray(z, dtype=np.float64)
     N, p = int(x.shape[0]), int(x.shape[1])
     dt, f = options.dt, options.frequencies()
-    # The first sample subtracted from every signal.
-    xt, zt = x - x[0], z - z[0]
+    # The trim, the mean of the first m samples (1: the first sample), subtracted from every signal.
+    m = min(options.trim_samples, N)
+    xt, zt = x - x[:m].mean(axis=0), z - z[:m].mean()
     # F1: c[k, n] = exp(-j w_k t_n); X = dt sum_n x_n c_n.
     c = phasors(f, np.arange(N), options.rate_hz)
     X = dt * c @ xt
@@ -68,11 +69,12 @@ def frequency_reference(x: npt.ArrayLike, z: npt.ArrayLike, options: FrequencyOp
     E = Z - X @ theta
     s2 = float((E.conj() @ E).real) / (f.size - p)
     cov_conventional = s2 * A_inv
-    # F6: theta - theta_true = A^-1 sum_n h_n (e_n - e_0); h_n = g_n, with h_0 = g_0 - sum_n g_n
-    # taking the -e_0 of every sample onto sample 0; g_n = dt Re(X^H c_n).
+    # F6: theta - theta_true = A^-1 sum_n h_n (e_n - e_bar), e_bar the mean of e over the first m
+    # samples; h_n = g_n - (1/m) sum_j g_j for n < m (the -e_bar of every sample moved onto them),
+    # g_n otherwise; g_n = dt Re(X^H c_n).
     g = dt * (X.conj().T @ c).real.T
     h = g.copy()
-    h[0] -= g.sum(axis=0)
+    h[:m] -= g.sum(axis=0) / m
     # F9: the residuals of the least-squares fit of the record with a bias, their
     # autocovariance (Eq. 10), lags 0..L (L <= N - 1).
     lags = min(options.n_lags, N - 1)
