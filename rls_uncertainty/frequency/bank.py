@@ -4,12 +4,12 @@ Fourier transform (docs/frequency.md; Morelli, JGCD 23(5), 2000).
 Per sample (:meth:`FrequencyBank.update`): the first sample is subtracted from every signal
 (the trim, the mean of the first ``trim_samples``, is applied to the transforms when they are
 used, exactly: it is a constant), the transforms are advanced (Eq. F2, ``K (p + 1)`` complex
-multiply-adds per model) and so are the lag-product sums (Eq. F9, ``(L + 1) (p + 1)^2``). Every ``every`` samples, when asked
-(:meth:`FrequencyBank.theta_all` and the others): the complex least-squares solution (F4), the
-conventional covariance (F5), the residual autocovariance of the record's least-squares
-residuals (F9) corrected for the fit's degrees of freedom (F10) and the corrected covariance in
-closed form (F7-F8). Its numbers are
-those of :func:`.reference.frequency_reference` at every sample (the tests hold them together).
+multiply-adds per model) and so are the lag-product sums (Eq. F9, ``(L + 1) (p + 1)^2``).
+Every ``every`` samples, when asked (:meth:`FrequencyBank.theta_all` and the others): the
+complex least-squares solution (F4), the conventional covariance (F5), the residual
+autocovariance of the record's least-squares residuals (F9) corrected for the fit's degrees of
+freedom (F10) and the corrected covariance in closed form (F7-F8). Its numbers are those of
+:func:`.reference.frequency_reference` at every sample (the tests hold them together).
 """
 
 from __future__ import annotations

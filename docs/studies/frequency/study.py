@@ -45,6 +45,7 @@ sys.path.insert(0, str(ROOT))
 from rls_uncertainty.convergence import ConvergenceMonitor  # noqa: E402
 from rls_uncertainty.estimator import EstimatorBank  # noqa: E402
 from rls_uncertainty.frequency import FrequencyBank, FrequencyOptions  # noqa: E402
+from rls_uncertainty.frequency.covariance import PairGeometry, middle  # noqa: E402
 from rls_uncertainty.montecarlo import LEVELS, MONTE_CARLO_CONVERGENCE, level_inputs  # noqa: E402
 from rls_uncertainty.simulation import T2_MODELS, T2_TRUE, SimulationConfig  # noqa: E402
 
@@ -133,8 +134,34 @@ def run_level(level: float, runs: int, grid: tuple[float, float, float], trim: i
         cost["frequency"] += t2 - t1
         tracks["time"].update(k, *out_td)
         tracks["frequency"].update(k, *out_fd)
-    return {"level": level, "runs": runs, "t": t, "tracks": tracks,
+    return {"level": level, "runs": runs, "t": t, "tracks": tracks, "se_true_noise": true_noise_se(fd, X, Z, runs),
             "cost_per_model_sample_us": {m: c / t.size / len(sizes) * 1e6 for m, c in cost.items()}}
+
+
+def true_noise_se(bank: FrequencyBank, X: np.ndarray, Z: np.ndarray, runs: int) -> np.ndarray:
+    """The frequency-domain SE at the end of the record with the *true* equation-error
+    autocovariance in F7-F8 instead of the estimated one, ``(runs, 5)``: the equation error of
+    every run with the true parameters, less its mean over runs at each sample (the bias and
+    the differentiator's error on the clean signals), averaged over runs and samples per lag."""
+    n_models, N = len(T2_MODELS), X.shape[0]
+    L = bank.options.n_lags
+    truth = [np.array([T2_TRUE[p] for p, (mm, _c) in zip(PARAMETERS, CELLS, strict=True) if mm == m])
+             for m in range(n_models)]
+    R = np.zeros((runs * n_models, L + 1))
+    for m in range(n_models):
+        rows = np.arange(runs) * n_models + m
+        e = Z[:, rows] - np.einsum("nra,a->nr", X[:, rows, 1 : 1 + truth[m].size], truth[m])
+        e -= e.mean(axis=1, keepdims=True)
+        R[rows] = [np.sum(e[i:] * e[: N - i]) / (runs * (N - i)) for i in range(L + 1)]
+    _Z, Xf = bank.transforms()
+    A = np.einsum("mka,mkb->mab", Xf.conj(), Xf).real
+    pad = np.all(Xf == 0, axis=1)
+    A[pad[:, :, None] & np.eye(A.shape[1], dtype=bool)] = 1.0
+    A_inv = np.linalg.inv(A)
+    geometry = PairGeometry(2 * np.pi * bank.frequencies / RATE).at(N)
+    cov = A_inv @ (middle(R, Xf, geometry, min(N, bank.options.trim_samples)) / RATE**2) @ A_inv
+    se = np.sqrt(np.clip(np.diagonal(cov, axis1=1, axis2=2), 0, None))
+    return pick(se, runs, 1)
 
 
 def honest_from(t: np.ndarray, ratio: np.ndarray) -> float:
@@ -146,7 +173,8 @@ def honest_from(t: np.ndarray, ratio: np.ndarray) -> float:
 
 
 def summarise(res: dict) -> dict:
-    out: dict = {"level": res["level"], "runs": res["runs"], "cost": res["cost_per_model_sample_us"], "methods": {}}
+    out: dict = {"level": res["level"], "runs": res["runs"], "cost": res["cost_per_model_sample_us"], "methods": {},
+                 "se_true_noise_end": res["se_true_noise"].mean(axis=0).tolist()}
     t = res["t"]
     for method, tr in res["tracks"].items():
         snaps = {}
@@ -220,6 +248,21 @@ def ratio_table(summaries: list[dict]) -> list[str]:
                     r = np.array(d[key]) / np.array(d["scatter"])
                     row.append(f"{r.min():.2f}-{r.max():.2f}")
             lines.append("| " + " | ".join(row) + " |")
+    return lines
+
+
+def true_noise_table(summaries: list[dict]) -> list[str]:
+    lines = ["## End of the maneuver: the frequency-domain SE with the estimated and with the true noise "
+             "autocovariance", "",
+             "SE over scatter. True: F7-F8 with the autocovariance of the runs' true equation error (their "
+             "equation error with the true parameters, less its mean over the runs at each sample). "
+             "Where this is off too, the sandwich itself misses something (errors in variables).", "",
+             "| level | " + " | ".join(PARAMETERS) + " |", "| --- |" + " --- |" * 5]
+    for s in summaries:
+        d = s["methods"]["frequency"]["snapshots"]["end"]
+        cells = [f"{d['se'][i] / d['scatter'][i]:.2f} / {s['se_true_noise_end'][i] / d['scatter'][i]:.2f}"
+                 for i in range(5)]
+        lines.append(f"| {s['level'] * 100:.0f}% | " + " | ".join(cells) + " |")
     return lines
 
 
@@ -411,11 +454,12 @@ def main(argv: list[str] | None = None) -> int:
             summaries.append(summarise(run_level(level, args.runs, grid, args.trim)))
             print(f"level {level * 100:.0f}%: {args.runs} runs in {time.perf_counter() - t0:.0f} s", flush=True)
         cost = {m: float(np.mean([s["cost"][m] for s in summaries])) for m in ("time", "frequency")}
-        lines = [*ratio_table(summaries), "", *convergence_table(summaries), "", *main_table(summaries, grid, args.trim)]
+        lines = [*ratio_table(summaries), "", *true_noise_table(summaries), "", *convergence_table(summaries), "",
+                 *main_table(summaries, grid, args.trim)]
         lines += ["", f"Study loop cost per model and sample (update and all outputs, {2 * args.runs} models at once): "
                   f"time domain {cost['time']:.1f} us, frequency domain {cost['frequency']:.1f} us "
                   "(the node's bank of a few models: benchmarks/frequency_benchmark.py)."]
-        write(args.out, "montecarlo", lines, summaries, header)
+        write(args.out, "montecarlo" if args.trim == 1 else f"montecarlo_trim{args.trim}", lines, summaries, header)
     if args.grids:
         rows = grid_study(args.grid_runs, tuple(args.levels))
         write(args.out, "grids", grid_table(rows, args.grid_runs), rows, header)
