@@ -12,6 +12,7 @@ parameters; frequency domain the same without the bias: 2, 3, 2, 5, 3, 3), 50 la
   3. the evaluation against the number of frequencies (36 to 400);
   4. the memory of each bank's state.
 
+The rows are ``estimator_benchmark.maneuver``'s (multisine-like regressors, AR(1) noise).
 Median (and 99th percentile) over 2000 samples after 300 of warm-up. numpy's BLAS threads as
 the environment sets them (``OPENBLAS_NUM_THREADS``; printed).
 
@@ -29,29 +30,13 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from estimator_benchmark import RATE, SIZES, maneuver  # the time-domain benchmark's six models and rows
+
 from rls_uncertainty.estimator import EstimatorBank
 from rls_uncertainty.frequency import FrequencyBank, FrequencyOptions
 
-SIZES = (3, 4, 3, 6, 4, 4)
-RATE = 50.0
 WARM, SAMPLES = 300, 2000
-
-
-def rows(n: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
-    """Smooth multisine-like regressors (bias column first) and AR(1)-colored outputs."""
-    rng = np.random.default_rng(seed)
-    t = np.arange(n) / RATE
-    X = np.zeros((n, len(SIZES), max(SIZES)))
-    for j, s in enumerate(SIZES):
-        X[:, j, 0] = 1.0
-        for c in range(1, s):
-            X[:, j, c] = np.sin(2 * np.pi * (0.2 + 0.17 * c + 0.05 * j) * t + c + j) + 0.02 * rng.standard_normal(n)
-    e = np.zeros((n, len(SIZES)))
-    w = rng.standard_normal((n, len(SIZES)))
-    for k in range(1, n):
-        e[k] = 0.9 * e[k - 1] + w[k]
-    z = np.einsum("kjc,jc->kj", X, rng.standard_normal((len(SIZES), max(SIZES)))) + 0.01 * e
-    return X, z
 
 
 def timed(step, n: int) -> tuple[float, float]:
@@ -127,7 +112,7 @@ def state_bytes(bank: object) -> int:
 
 def main() -> None:
     print(f"OPENBLAS_NUM_THREADS={os.environ.get('OPENBLAS_NUM_THREADS', '(unset)')}, numpy {np.__version__}")
-    X, z = rows(WARM + SAMPLES)
+    X, z = maneuver(WARM + SAMPLES)
     med, p99 = time_domain(X, z)
     print(f"1. time domain, six models, 50 lags, update + all outputs: {med:7.1f} us (p99 {p99:.1f})")
     grids = {"default 0.1-1.5/0.04 (36)": (0.1, 1.5, 0.04), "T-2 0.2-2.2/0.04 (51)": (0.2, 2.2, 0.04)}
