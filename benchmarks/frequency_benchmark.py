@@ -1,4 +1,4 @@
-"""Cost per sample of the frequency-domain estimator beside the time-domain one (issue 23).
+"""Cost per sample of the frequency-domain estimator beside the time-domain one.
 
 Prints, in one run on this machine, for the six models of Eq. 2 (time domain 3, 4, 3, 6, 4, 4
 parameters; frequency domain the same without the bias: 2, 3, 2, 5, 3, 3), 50 lags:
