@@ -29,7 +29,7 @@ import heapq
 import math
 import numbers
 import struct
-from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
+from collections.abc import Callable, Generator, Iterable, Iterator, Mapping, Sequence
 from pathlib import Path
 from types import TracebackType
 from typing import TYPE_CHECKING, Any, cast
@@ -170,7 +170,7 @@ def content_digest_update(digest: _Hash, topic: str, log_time: int, raw: bytes |
 def _iter_messages(
     path: Path, reader: AnyReader, connections: Sequence[Connection], store: Typestore | None = None,
     fast: bool = False, digest: _Hash | None = None,
-) -> Iterator[tuple[Connection, int, object]]:
+) -> Generator[tuple[Connection, int, object], None, None]:
     """Messages of ``connections`` in log order, deserialized as they are read (``rosbags``
     reads an MCAP one chunk at a time); corruption names the file. ``fast`` decodes the
     standard input types of a ROS 2 bag with :mod:`.cdr`; ``digest`` is updated with every

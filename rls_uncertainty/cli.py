@@ -188,7 +188,7 @@ def _replay(args: argparse.Namespace) -> int:
                     progress=not args.quiet, plots=not args.no_plots, force=args.force, inputs=inputs)
     pipe = result.pipeline
     c = pipe.counters()
-    print(summary_table(pipe, result.outputs))
+    print(summary_table(result))
     rejected = ", ".join(f"{k} {v}" for k, v in sorted(c["samples_rejected"].items())) or "none"
     print(f"\n{c['samples_formed']} samples formed, {c['samples_used']} used; rejected: {rejected}")
     for name, s in c["streams"].items():

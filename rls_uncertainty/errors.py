@@ -17,6 +17,8 @@ __all__ = [
     "OutputPathError",
     "EstimatorNotReady",
     "NonFiniteInput",
+    "UnknownName",
+    "NotComparable",
 ]
 
 
@@ -48,3 +50,13 @@ class EstimatorNotReady(RlsUncertaintyError, RuntimeError):
 class NonFiniteInput(RlsUncertaintyError, ValueError):
     """A regressor or measured output is NaN or infinite, or the update would make the
     estimator state non-finite (the state is unchanged)."""
+
+
+class UnknownName(RlsUncertaintyError, LookupError):
+    """A name (a parameter, a model) asked of a result that does not have it; the message
+    lists the names it has."""
+
+
+class NotComparable(RlsUncertaintyError, ValueError):
+    """Two replays whose outputs cannot be compared sample by sample (another bag, another
+    span, other models or sample times); the message says why."""
