@@ -53,12 +53,15 @@ if TYPE_CHECKING:  # annotations only: rosbags itself is imported where it is us
     from rosbags.rosbag2 import Writer
     from rosbags.typesys.store import Typestore
 
+    from .simulation import SensorStreams
+
 __all__ = [
     "BagError",
     "typestore",
     "convert",
     "write_replay",
     "write_t2_bag",
+    "write_sensor_streams",
     "BagWriter",
     "InputStream",
     "read_inputs",
@@ -379,21 +382,36 @@ def _lift(bag: Path, into: Path) -> None:
     bag.rmdir()
 
 
+def write_sensor_streams(path: str | Path, streams: SensorStreams, *, force: bool = False) -> Path:
+    """A :class:`.simulation.SensorStreams` as a bag on the standard topics at ``path``
+    (atomic, as :func:`write_replay`), written message by message in stamp order: a long
+    recording never sits in memory as messages."""
+    store = typestore()
+    path = Path(path)
+
+    def records(kind: str) -> Iterator[tuple[int, int, str, int]]:
+        stamps = getattr(streams, kind)[0]
+        return ((int(stamps[k]), _rank(kind), kind, k) for k in range(stamps.size))
+
+    with output_directory(path, force=force) as tmp:
+        bag = tmp / path.resolve().name  # rosbags creates the bag directory itself
+        with BagWriter(bag, [(f"/{kind}", MESSAGE_TYPES[kind]) for kind in INPUTS], store) as writer:
+            for stamp, _, kind, k in heapq.merge(*(records(kind) for kind in INPUTS)):
+                values = getattr(streams, kind)[1][k]
+                msg = _standard_message(store, kind, stamp, values, streams.surface_names)
+                writer.add(stamp, f"/{kind}", MESSAGE_TYPES[kind], msg)
+                writer.release()  # the merge gives the records in the bag's order
+        _lift(bag, tmp)
+    return path
+
+
 def write_t2_bag(path: str | Path, band_level: float = 0.2, seed: int = 250, *, force: bool = False) -> Path:
     """The bundled bag: one seeded T-2 maneuver (Section IV.A) on the standard topics, IMU at
     200 Hz, air data at 50 Hz, surfaces at 100 Hz, thrust at 10 Hz
     (:func:`.simulation.simulate_sensor_streams`)."""
     from .simulation import simulate_sensor_streams  # noqa: PLC0415
 
-    store = typestore()
-    s = simulate_sensor_streams(band_level, seed)
-    records = []
-    for kind in INPUTS:
-        stamps, values = getattr(s, kind)
-        for k in range(stamps.size):
-            msg = _standard_message(store, kind, int(stamps[k]), values[k], s.surface_names)
-            records.append((int(stamps[k]), f"/{kind}", MESSAGE_TYPES[kind], msg))
-    return write_replay(path, records, store, force=force)
+    return write_sensor_streams(path, simulate_sensor_streams(band_level, seed), force=force)
 
 
 # ------------------------------------------------------------------------------ reading
