@@ -54,7 +54,8 @@ from .replay_files import ReplayFiles, run_record
 from .report import results_table, rows_from_arrays
 from .results import History, ReplayResult, accounting
 
-__all__ = ["ReplayResult", "run_pipeline", "replay", "summary_table", "unestimated", "NODE_NAME", "PLOT_POINTS"]
+__all__ = ["ReplayResult", "run_pipeline", "replay", "planned_run", "summary_table", "unestimated", "NODE_NAME",
+           "PLOT_POINTS"]
 
 # Samples kept for the plots: at most twice this many, evenly spaced (results.History).
 PLOT_POINTS = 2048
@@ -398,10 +399,18 @@ def replay(bag: str | Path, params: dict[str, Any], out: str | Path, *, start: f
                                   keep_outputs=False, history=History(names, PLOT_POINTS), sink=files)
         pipe = result.pipeline
         assert pipe is not None  # run_pipeline keeps its pipeline
-        bag_record = {"path": str(bag), "input_sha256": stream.digest, "messages_read": stream.read,
-                      "messages_used": result.n_messages, "start": start, "end": end, "strict": strict}
-        record = run_record(bag_record, {**parameter_defaults(), **params}, config, pipe)
+        record = planned_run(params, start=start, end=end, strict=strict)
+        record["bag"] |= {"path": str(bag), "input_sha256": stream.digest, "messages_read": stream.read,
+                          "messages_used": result.n_messages}
         (tmp / "run.json").write_text(json.dumps(record, indent=1, sort_keys=True, default=repr) + "\n")
         if plots and result.history is not None:
             _plots(tmp, pipe, result.history)
     return result
+
+
+def planned_run(params: dict[str, Any], *, start: float | None = None, end: float | None = None,
+                strict: bool = True) -> dict[str, Any]:
+    """The ``run.json`` of a replay with ``params`` over the span, before the bag is read
+    (:func:`.replay_files.run_record`; the replay adds the bag's path and input digest)."""
+    return run_record({"start": start, "end": end, "strict": strict}, {**parameter_defaults(), **params},
+                      pipeline_config(params))

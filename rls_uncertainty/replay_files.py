@@ -39,7 +39,7 @@ if TYPE_CHECKING:  # annotations only
 
     from .config import PipelineConfig
     from .diagnostics import Status
-    from .pipeline import Pipeline, SampleOutput
+    from .pipeline import SampleOutput
 
 __all__ = ["ReplayFiles", "CSV_COLUMNS", "WIDE_QUANTITIES", "wide_columns", "stamp_text", "run_record",
            "RUN_FORMAT", "configuration_digest", "DIAGNOSTIC_ARRAY"]
@@ -73,11 +73,10 @@ def configuration_digest(config: PipelineConfig) -> tuple[dict[str, Any], str]:
     return values, hashlib.sha256(text.encode()).hexdigest()
 
 
-def run_record(bag: dict[str, Any], parameters: dict[str, Any], config: PipelineConfig,
-               pipe: Pipeline) -> dict[str, Any]:
-    """``run.json``: the bag (path, input digest, messages, span, strictness), every parameter
-    as resolved (defaults filled in), the configuration and its digest, and the outputs'
-    models and parameter names."""
+def run_record(bag: dict[str, Any], parameters: dict[str, Any], config: PipelineConfig) -> dict[str, Any]:
+    """``run.json``: the bag (``bag``: path, input digest, messages, span, strictness), every
+    parameter as resolved (defaults filled in), the configuration and its digest, and the
+    outputs' models, parameter names and sample period."""
     values, digest = configuration_digest(config)
     return {
         "format": RUN_FORMAT,
@@ -85,8 +84,8 @@ def run_record(bag: dict[str, Any], parameters: dict[str, Any], config: Pipeline
         "parameters": parameters,
         "configuration": values,
         "configuration_sha256": digest,
-        "models": [m.output for m in pipe.models],
-        "parameter_names": [list(names) for names in pipe.parameter_names],
+        "models": [m.output for m in config.models],
+        "parameter_names": [list(m.parameter_names) for m in config.models],
         "period_ns": config.period_ns,
     }
 
