@@ -19,6 +19,7 @@ __all__ = [
     "NonFiniteInput",
     "UnknownName",
     "NotComparable",
+    "LiveTimeout",
 ]
 
 
@@ -60,3 +61,8 @@ class UnknownName(RlsUncertaintyError, LookupError):
 class NotComparable(RlsUncertaintyError, ValueError):
     """Two replays whose outputs cannot be compared sample by sample (another bag, another
     span, other models or sample times); the message says why."""
+
+
+class LiveTimeout(RlsUncertaintyError, TimeoutError):
+    """A live node under test (:mod:`.testing`) did not do what was waited for in time; the
+    message says what was missing and where the node's log is."""
