@@ -286,3 +286,20 @@ def test_models_the_maneuver_never_excites_are_named_with_the_regressors_that_ne
     cl = next(line for line in result.explanations if line.startswith("Cl:"))
     assert "its 6 regressors were not excited independently in 587 samples" in cl
     assert all(name in cl.split("(")[1].split(" never moved")[0] for name in flat)
+
+
+def test_the_replay_keeps_no_sample_and_plots_from_a_bounded_history(tmp_path, monkeypatch):
+    """The command's result holds no per-sample output: the files are written as the samples
+    come, and the plots read an evenly spaced history of at most 2 x PLOT_POINTS samples."""
+    from rls_uncertainty import replay as replay_module
+
+    monkeypatch.setattr(replay_module, "PLOT_POINTS", 50)
+    result = replay(BUNDLED, load_parameters_file("t2"), tmp_path / "r", progress=False)
+    assert result.outputs == [] and result.diagnostics == []
+    h = result.history
+    assert h.n <= 100 and h.stride == 8 and h.offered == 591  # every used sample offered, every 8th kept
+    with open(tmp_path / "r" / "estimates_wide.csv") as fh:
+        times = [line.split(",", 1)[0] for line in fh][1:]
+    assert [f"{s // 10**9}.{s % 10**9:09d}" for s in h.stamps_ns] == times[::8]
+    assert {p.name for p in (tmp_path / "r").glob("*.png")} == {
+        "CZ_estimates.png", "Cm_estimates.png", "CZ_autocorrelation.png", "Cm_autocorrelation.png"}
