@@ -519,7 +519,7 @@ def test_the_input_stream_reads_what_the_list_holds_and_digests_the_input_messag
              for t, *_ in messages[::7]]
     write_replay(tmp_path / "same", messages + extra, store)
     changed = list(messages)
-    t, topic, msgtype, msg = changed[100]
+    t, topic, msgtype, _msg = changed[100]
     changed[100] = (t, topic, msgtype, _standard_message(store, "thrust", t, 1.0) if topic == "/thrust" else
                     _standard_message(store, "dynamic_pressure", t, 1.0) if topic == "/dynamic_pressure" else
                     _standard_message(store, "airspeed", t, (1.0, 0.0, 0.0)) if topic == "/airspeed" else

@@ -58,9 +58,9 @@ def test_final_gives_the_last_published_values_and_names_what_is_missing():
     assert r.parameters == ("CZ_0", "CZ_alpha", "Cm_0", "Cm_alpha", "Cm_q")
     f = r.final("CZ_alpha")
     assert (f.estimate, f.std_error, f.std_error_conventional, f.converged, f.stamp_ns) == (2.0, 0.2, 0.1, True, 5)
-    with pytest.raises(UnknownName, match="C_m_alpha.*CZ_0, CZ_alpha, Cm_0, Cm_alpha, Cm_q"):
+    with pytest.raises(UnknownName, match=r"C_m_alpha.*CZ_0, CZ_alpha, Cm_0, Cm_alpha, Cm_q"):
         r.final("C_m_alpha")
-    with pytest.raises(EstimatorNotReady, match="Cm_alpha: no estimate in this run.*its 3 regressors"):
+    with pytest.raises(EstimatorNotReady, match=r"Cm_alpha: no estimate in this run.*its 3 regressors"):
         r.final("Cm_alpha")
     with pytest.raises(EstimatorNotReady, match="kept no time histories"):
         r.series("CZ_0")
@@ -71,7 +71,8 @@ def test_a_series_holds_the_samples_in_which_its_model_published():
     _fill(h, 10, ready=lambda i: (i >= 3, i % 2 == 0))
     r = _result(h)
     cz, cm = r.series("CZ_alpha"), r.series("Cm_q")
-    assert np.array_equal(cz.stamps_ns, 1000 + np.arange(3, 10)) and np.array_equal(cz.estimates, 1 + 10 * np.arange(3, 10))
+    assert np.array_equal(cz.stamps_ns, 1000 + np.arange(3, 10))
+    assert np.array_equal(cz.estimates, 1 + 10 * np.arange(3, 10))
     assert np.array_equal(cm.stamps_ns, 1000 + np.arange(0, 10, 2)) and np.array_equal(cm.time, cm.stamps_ns * 1e-9)
     assert np.array_equal(cm.std_errors, (4 + 10 * np.arange(0, 10, 2)) / 10)
     cz.estimates[:] = 0  # the caller's copy
