@@ -427,8 +427,8 @@ def input_topics(topics: dict[str, str] | None = None) -> dict[str, str]:
 
 class InputStream:
     """The standard-input messages of a replay bag, ``(kind, stamp_ns, msg)`` in log order,
-    read from the file while they are iterated (``rosbags`` holds one MCAP chunk at a time):
-    memory does not grow with the bag. Opening checks what the bag's index tells: the input
+    read from the file while they are iterated (``rosbags`` decompresses an MCAP chunk when the
+    log-time order reaches it): memory does not grow with the bag. Opening checks what the bag's index tells: the input
     topics (``topics.*`` parameters, :func:`input_topics`) and their types, and the span
     ``start``/``end`` (s from the bag start; finite, at least 0, ``end`` after ``start``, within
     the bag; else :class:`ConfigError`). Iterating checks each message: a negative header
