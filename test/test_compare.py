@@ -73,6 +73,7 @@ def test_a_changed_parameter_is_different_and_named_with_the_largest_differences
 
 
 def _perturbed(golden, tmp_path, change):
+    """A copy of a replay's outputs with ``change`` applied to its estimates.csv rows."""
     here = tmp_path / "here"
     shutil.copytree(golden, here)
     rows = _rows(golden)
@@ -93,22 +94,31 @@ def test_the_tolerance_is_rtol_of_the_estimate_plus_its_standard_error(golden, t
 
 
 def test_standard_errors_are_compared_as_variances(golden, tmp_path):
-    """Variances carry rounding in proportion to s^2: at an exact fit (a standard error of 0 in
-    the reference) a rounding-level standard error of 1e-5 of s is equal (its variance moved
-    by 1e-10 s^2); the same change of a standard error as large as its estimate is not (its
-    variance moved by more than 2e-5 s^2)."""
+    """Variances carry rounding in proportion to s^2. At an exact fit (a model's first
+    sample) the standard error is rounding: 0 in one run, 1e-5 of s in the other is equal (the
+    variance moved by 1e-10 s^2); the same change of a standard error as large as its
+    estimate is not (its variance moved by more than 2e-5 s^2)."""
     rows = _rows(golden)
-    exact = next(i for i, r in enumerate(rows) if float(r["std_error"]) == 0.0)
+    first = next(i for i, r in enumerate(rows) if r["model"] == "Cm")  # Cm's exact fit
     large = next(i for i, r in enumerate(rows) if float(r["std_error"]) > abs(float(r["estimate"])))
 
-    def at(i):
-        def change(rows):
-            s = abs(float(rows[i]["estimate"])) + float(rows[i]["std_error"])
-            rows[i]["std_error"] = repr(float(rows[i]["std_error"]) + 1e-5 * s)
-        return change
+    def scale(r):
+        return abs(float(r["estimate"])) + float(r["std_error"])
 
-    assert compare_replays(_perturbed(golden, tmp_path / "a", at(exact)), golden).equal
-    cmp = compare_replays(_perturbed(golden, tmp_path / "b", at(large)), golden)
+    def exact(rows):
+        rows[first]["std_error"] = "0.0"
+
+    reference = _perturbed(golden, tmp_path / "ref", exact)
+
+    def rounding(rows):
+        rows[first]["std_error"] = repr(1e-5 * abs(float(rows[first]["estimate"])))
+
+    assert compare_replays(_perturbed(reference, tmp_path / "a", rounding), reference).equal
+
+    def moved(rows):
+        rows[large]["std_error"] = repr(float(rows[large]["std_error"]) + 1e-5 * scale(rows[large]))
+
+    cmp = compare_replays(_perturbed(golden, tmp_path / "b", moved), golden)
     assert not cmp.equal and [d.quantity for d in cmp.worst] == ["std_error"] and cmp.worst[0].excess > 5
 
 
