@@ -18,7 +18,8 @@ temporary directory renamed to ``DIR`` only when complete):
   ``.../converged``, decimated ``.../covariance`` and ``.../covariance_conventional``), log
   time = the sample's stamp; and ``/diagnostics`` once per ``diagnostics_period`` of data time
   from the node's own diagnostics policy (:class:`_DataClockDiagnostics`), which carries each
-  model's lag count and convergence flags;
+  model's lag count, convergence flags and identifiability, with ``/rls_estimator/M/fit`` and
+  ``/rls_estimator/M/identifiability`` at the same times (:func:`.outputs.fit_records`);
 * ``M_estimates.png``: each parameter's history with corrected and conventional 2-sigma
   envelopes, and ``M_autocorrelation.png``: each model's residual autocorrelation.
 Two runs give bit-identical CSV and MCAP files. The progress bar is drawn only on a terminal.
@@ -42,7 +43,7 @@ from .config import NodeConfig, PipelineConfig, node_config, pipeline_config
 from .diagnostics import DiagnosticsPolicy, Snapshot, Status
 from .files import output_directory
 from .inputs import Stamped, feed
-from .outputs import NODE_NAME, OutputLayout
+from .outputs import NODE_NAME, OutputLayout, fit_records
 from .pipeline import Pipeline, SampleOutput
 from .report import results_table, rows_from_arrays
 
@@ -64,6 +65,8 @@ class ReplayResult:
     # (stamp_ns, statuses) of the /diagnostics the node would have published, one per
     # diagnostics period of data time (empty unless run_pipeline was given a NodeConfig).
     diagnostics: list[tuple[int, list[Status]]] = field(default_factory=list)
+    # ~/M/fit and ~/M/identifiability at the same times (outputs.fit_records).
+    fits: list[tuple[int, str, str, bytes]] = field(default_factory=list)
     explanations: list[str] = field(default_factory=list)
 
     @property
@@ -107,6 +110,7 @@ class _DataClockDiagnostics:
         self.newest_ns = 0
         self.seen: set[str] = set()
         self.records: list[tuple[int, list[Status]]] = []
+        self.fits: list[tuple[int, str, str, bytes]] = []
 
     def after(self, kind: str, stamp_ns: int) -> None:
         """Called after each message: a snapshot when a period of data time has passed."""
@@ -140,6 +144,7 @@ class _DataClockDiagnostics:
             state_file="replay: no state file",
         )
         self.records.append((self.newest_ns, self.policy.update(snap)))
+        self.fits += fit_records(pipe, self.newest_ns)
         self.previous_ns = self.newest_ns
 
 
@@ -174,7 +179,7 @@ def run_pipeline(messages: Sequence[tuple[str, int, Stamped]], config: PipelineC
         pipe.finish()
         if diag is not None and messages:
             diag.finish()
-            result.diagnostics = diag.records
+            result.diagnostics, result.fits = diag.records, diag.fits
     finally:
         if gc_was_enabled:
             gc.enable()
@@ -386,7 +391,7 @@ def replay(bag: str | Path, params: dict[str, Any], out: str | Path, *, start: f
         _write_wide_csv(tmp / "estimates_wide.csv", result.pipeline, result.outputs)
         store = typestore()
         records = output_records(result.pipeline, result.outputs, node_config(params).frame_id)
-        records += diagnostics_records(result.diagnostics, store)
+        records += diagnostics_records(result.diagnostics, store) + result.fits
         if records:
             write_replay(tmp / "estimates", records, store)
             (tmp / "estimates" / "estimates.mcap").rename(tmp / "estimates.mcap")

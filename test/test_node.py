@@ -416,12 +416,14 @@ def test_parameters_are_refused_with_reasons_and_changes_reset(tmp_path, tester)
         tester.wait_connected()
         (r,) = _set_parameters(tester, **{"estimator.window": "hann"})
         assert not r.successful and "estimator.window" in r.reason
-        (r,) = _set_parameters(tester, **{"estimator.lags": -5})
+        (r,) = _set_parameters(tester, **{"estimator.lag_span": -5.0})
         assert not r.successful
+        (r,) = _set_parameters(tester, **{"estimator.lag_span": 0.001})  # under one sample at 50 Hz
+        assert not r.successful and "less than one sample" in r.reason
         (r,) = _set_parameters(tester, **{"estimator.forgetting": 1.5})
         assert not r.successful
-        (r,) = _set_parameters(tester, **{"estimator.residual_burn_in": -2})
-        assert not r.successful and "estimator.residual_burn_in" in r.reason
+        (r,) = _set_parameters(tester, **{"estimator.residual_burn_in_span": -2.0})
+        assert not r.successful and "estimator.residual_burn_in_span" in r.reason
         (r,) = _set_parameters(tester, **{"topics.imu": "other_imu"})
         assert not r.successful and "read-only" in r.reason.lower()
         # The node only writes the state file it checked at start-up.
@@ -429,11 +431,11 @@ def test_parameters_are_refused_with_reasons_and_changes_reset(tmp_path, tester)
         assert not r.successful and "read-only" in r.reason.lower()
         (r,) = _set_parameters(tester, **{"differentiator.lag": 12})
         assert not r.successful and "differentiator.lag" in r.reason
-        (r,) = _set_parameters(tester, **{"estimator.lags": 20})
+        (r,) = _set_parameters(tester, **{"estimator.lag_span": 0.4})
         assert r.successful
         d = tester.wait_diagnostics(lambda d: "resets.parameters_changed" in d.get(f"{NODE}: samples", {}))
         assert d[f"{NODE}: samples"]["resets.parameters_changed"] == "1"
-        assert "parameters changed (estimator.lags): estimator reset" in node.text()
+        assert "parameters changed (estimator.lag_span): estimator reset" in node.text()
     finally:
         assert node.stop() == 0
 
@@ -532,7 +534,7 @@ def test_state_file_saves_on_shutdown_and_resumes(tmp_path, tester, bag):
     # Another configuration ignores the file, says so, and keeps it: renamed aside, never
     # overwritten by the fresh state saved at shutdown.
     saved = state.read_bytes()
-    node = _node(tmp_path, "-p", f"state_file:={state}", "-p", "estimator.lags:=7", name="third")
+    node = _node(tmp_path, "-p", f"state_file:={state}", "-p", "estimator.lag_span:=0.14", name="third")
     try:
         tester.wait_connected(outputs=False)
         d = tester.wait_diagnostics(lambda d: f"{NODE}: samples" in d)
@@ -542,7 +544,7 @@ def test_state_file_saves_on_shutdown_and_resumes(tmp_path, tester, bag):
         assert node.stop() == 0
     (aside,) = tmp_path.glob("state.npz.rejected-*")
     assert f"kept as {aside}" in status and aside.read_bytes() == saved
-    assert load_state(state, _t2_config({"estimator.lags": 7}).fingerprint()).samples_used == 0
+    assert load_state(state, _t2_config({"estimator.lag_span": 0.14}).fingerprint()).samples_used == 0
 
 
 def _crafted_state(path):

@@ -122,7 +122,7 @@ def test_a_resumed_state_restarts_the_flags(bag, tmp_path):
 
 
 def test_model_fit_reports_the_lags_in_use(bag):
-    pipe = Pipeline(t2(**{"estimator.lags": 20}))
+    pipe = Pipeline(t2(**{"estimator.lag_span": 0.4}))
     for kind, _s, msg in bag[:300]:
         feed(pipe, kind, msg)
     fit = pipe.model_fit(0)

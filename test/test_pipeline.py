@@ -556,27 +556,27 @@ def test_state_file_resumes_and_refuses_other_configurations(tmp_path):
     pipe.bank.update(row, [0.3])
     resumed.bank.update(row, [0.3])
     np.testing.assert_array_equal(resumed.bank.theta_all(), pipe.bank.theta_all())
-    other = pitch_pipeline(**{"estimator.lags": 10})
+    other = pitch_pipeline(**{"estimator.lag_span": 0.2})
     with pytest.raises(StateFileError, match="another"):
         other.load_state(path)
 
 
-@pytest.mark.parametrize("burn_in", [-1, 20])
+@pytest.mark.parametrize("burn_in", [-1, 0.4])
 def test_state_file_with_auto_lags_and_a_residual_burn_in_resumes_and_refuses_another_burn_in(tmp_path, burn_in):
     """With lag_selection auto (the bank's n_lags is "auto") a pipeline resumes its own state
     file, and a state saved with one residual burn-in is refused under another (the default
-    -1 is 50 with auto)."""
-    params = {"estimator.lag_selection": "auto", "estimator.residual_burn_in": burn_in}
+    -1 is 1 s, 50 samples at 50 Hz, with auto)."""
+    params = {"estimator.lag_selection": "auto", "estimator.residual_burn_in_span": burn_in}
     pipe = pitch_pipeline(**params)
-    assert pipe.bank.options.burn_in == (50 if burn_in < 0 else burn_in)
+    assert pipe.bank.options.burn_in == (50 if burn_in < 0 else 20)
     Synthetic(pipe).run(0, 3000)
     path = tmp_path / "state.npz"
     pipe.save_state(path)
     resumed = pitch_pipeline(**params)
     resumed.load_state(path)
     np.testing.assert_array_equal(resumed.bank.standard_errors_all(), pipe.bank.standard_errors_all())
-    for other_burn_in in (0, 7):
-        other = pitch_pipeline(**{**params, "estimator.residual_burn_in": other_burn_in})
+    for other_burn_in in (0, 0.14):
+        other = pitch_pipeline(**{**params, "estimator.residual_burn_in_span": other_burn_in})
         with pytest.raises(StateFileError, match="another"):
             other.load_state(path)
 
@@ -607,7 +607,8 @@ def test_reconfiguration_keeps_every_count():
     buffered = sum(len(s.stamps) for s in pipe.sampler.streams.values())
     pending = before["samples_pending"]
     assert buffered > 0 and pending > 0
-    new_cfg = pipeline_config({"models.enabled": ["Cm"], "models.Cm": ["1", "q_hat", "delta_e"], "estimator.lags": 10})
+    new_cfg = pipeline_config({"models.enabled": ["Cm"], "models.Cm": ["1", "q_hat", "delta_e"],
+                               "estimator.lag_span": 0.2})
     book = pipe.bookkeeping
     pipe = pipe.reconfigured(new_cfg)
     assert pipe.bookkeeping is book and pipe.sampler.counts == book.streams

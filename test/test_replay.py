@@ -59,7 +59,7 @@ def test_replay_writes_identical_outputs_twice_and_matches_the_pipeline(tmp_path
 
 def test_replay_options_select_span_models_and_lags(tmp_path):
     code = cli.main(["replay", str(BUNDLED), "--config", "t2", "--out", str(tmp_path / "o"), "--models", "CZ",
-                     "--lags", "all", "--start", "1.0", "--end", "9.0", "--no-plots", "--quiet"])
+                     "--lag-span", "all", "--start", "1.0", "--end", "9.0", "--no-plots", "--quiet"])
     assert code == 0
     with open(tmp_path / "o" / "estimates.csv") as fh:
         rows = list(csv.DictReader(fh))

@@ -296,6 +296,13 @@ class EstimatorBank:
         self._require(j)
         return float(self._lags.lag_sums[j, 0] / self.n_R[j])
 
+    def residual_variances(self) -> np.ndarray:
+        """:meth:`residual_variance` of every model at once, a new ``(M,)`` array, NaN for the
+        models that are not :attr:`ready` (one vectorised step: the per-sample fit test of
+        :mod:`rls_uncertainty.identifiability`)."""
+        R0: FloatArray = self._lags.lag_sums[:, 0] / self._eval.weight_totals()
+        return np.where(self._ready, R0, np.nan)
+
     def autocorrelation(self, j: int) -> np.ndarray:
         """Residual autocorrelation ``R_k(i)``, ``i = 0..n_window-1`` (Eq. 17; under
         forgetting that of the noise model's residuals, weighted ``f_R^(k-j)``; after the
