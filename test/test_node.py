@@ -813,3 +813,52 @@ def test_the_consumer_pairing_does_not_depend_on_the_order_across_topics(bag):
     theta = dict(topics["estimates"])
     assert all(rec["estimates"] == theta[s] for e, s, rec in events)
     assert pairing.dropped == 0 and len(pairing.pending) <= pairing.keep
+
+
+def test_fit_topics_reach_a_late_subscriber_and_an_unidentifiable_model_is_said_once(tmp_path, tester, bag):
+    """C_Z given sideslip, which the longitudinal maneuver never moves: the node logs one WARN
+    line naming beta (throttled), its model status says the same, and C_m publishes ~/Cm/fit and
+    ~/Cm/identifiability every period, transient local: a subscriber that joins after the data
+    gets the latest at once, and it holds what the offline pipeline makes of the same messages."""
+    from rclpy.qos import QoSDurabilityPolicy, QoSHistoryPolicy, QoSProfile, QoSReliabilityPolicy
+    from std_msgs.msg import Float64MultiArray
+
+    from rls_uncertainty.bags import typestore
+    from rls_uncertainty.outputs import OutputLayout
+
+    params = tmp_path / "beta.yaml"
+    params.write_text("/**:\n  ros__parameters:\n    models:\n      CZ: ['1', alpha, beta, delta_e]\n"
+                      "    inputs:\n      buffer_duration: 60.0\n")
+    node = _node(tmp_path, "--params-file", str(params))
+    offline = Pipeline(_t2_config({"models.CZ": ["1", "alpha", "beta", "delta_e"], **NO_EXPIRY}))
+    for kind, _s, msg in bag:
+        feed(offline, kind, msg)
+    want = "CZ: regressor beta not excited (std 0 rad in "
+    try:
+        tester.wait_connected()
+        tester.publish_all([(k, to_rclpy(k, m)) for k, _s, m in bag])
+        d = tester.wait_diagnostics(lambda d: d.get(f"{NODE}: samples", {}).get("samples_used")
+                                    == str(offline.bank.k), timeout=60)
+        model = d[f"{NODE}: model CZ"]
+        assert model["level"] == 1 and model["message"].startswith("initializing: regressor beta not excited")
+        tester.wait_diagnostics(lambda d: True)  # one period more: the fit of the last sample is out
+        qos = QoSProfile(depth=1, reliability=QoSReliabilityPolicy.RELIABLE,
+                         durability=QoSDurabilityPolicy.TRANSIENT_LOCAL, history=QoSHistoryPolicy.KEEP_LAST)
+        late = {}
+        for suffix in ("fit", "identifiability"):
+            tester.node.create_subscription(Float64MultiArray, f"/{NODE}/Cm/{suffix}",
+                                            lambda msg, s=suffix: late.__setitem__(s, msg), qos)
+        assert tester.spin_until(lambda: len(late) == 2, 20), node.text()
+    finally:
+        assert node.stop() == 0, node.text()
+    layout, store = OutputLayout.of(offline), typestore()
+    expected = {layout.fit_topics[i][0]: store.deserialize_cdr(raw, "std_msgs/msg/Float64MultiArray")
+                for i, raw in layout.encode_fit(offline)}
+    assert sorted(expected) == ["Cm/fit", "Cm/identifiability"]  # C_Z never initialized: nothing
+    for suffix, msg in late.items():
+        exp = expected[f"Cm/{suffix}"]
+        assert [(d.label, d.size, d.stride) for d in msg.layout.dim] == \
+            [(d.label, d.size, d.stride) for d in exp.layout.dim]
+        np.testing.assert_array_equal(np.array(msg.data), exp.data)  # one machine: bit for bit
+    warnings = [line for line in node.text().splitlines() if want in line]
+    assert len(warnings) == 1 and "WARN" in warnings[0], node.text()

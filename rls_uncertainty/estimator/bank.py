@@ -300,7 +300,8 @@ class EstimatorBank:
         """:meth:`residual_variance` of every model at once, a new ``(M,)`` array, NaN for the
         models that are not :attr:`ready` (one vectorised step: the per-sample fit test of
         :mod:`rls_uncertainty.identifiability`)."""
-        R0: FloatArray = self._lags.lag_sums[:, 0] / self._eval.weight_totals()
+        with np.errstate(divide="ignore", invalid="ignore"):  # no residual yet (a burn-in): 0 / 0
+            R0: FloatArray = self._lags.lag_sums[:, 0] / self._eval.weight_totals()
         return np.where(self._ready, R0, np.nan)
 
     def autocorrelation(self, j: int) -> np.ndarray:
