@@ -487,7 +487,7 @@ PARAMETERS: tuple[ParamSpec, ...] = (
     ParamSpec("convergence.max_se_rate", 0.25,
               "convergence flags: every standard error of the window within a factor exp(max_se_rate x age) of the "
               "current one, 1/s", 0.001, 100.0),
-    ParamSpec("identifiability.max_correlation", 0.999,
+    ParamSpec("identifiability.max_correlation", 0.9998,
               "convergence flags: two parameters whose estimates are correlated beyond this (either sign, from the "
               "corrected covariance) are not identifiable and never flagged", 0.5, 0.999999),
     ParamSpec("identifiability.min_r_squared", 0.5,

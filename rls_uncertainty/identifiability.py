@@ -7,9 +7,9 @@ already holds and two running statistics (nothing is refitted, nothing grows wit
 
 1. **The fit.** ``R^2 = 1 - R_k(0) / var(z)`` (:func:`r_squared`): the fit-error variance of
    Eq. 16 against the output's variance, both since the estimator (re)started (weighted with
-   the forgetting factor). Klein and Morelli's coefficient of determination (Aircraft System
-   Identification, 2006, Sec. 5.2, the fit statistics of linear regression): the fraction of the
-   output's variation the model explains. Below ``min_r_squared`` the model explains nothing
+   the forgetting factor): the coefficient of determination of linear regression (Klein and
+   Morelli, Aircraft System Identification, AIAA 2006, Ch. 5), the fraction of the output's
+   variation the model explains. Below ``min_r_squared`` the model explains nothing
    and none of its parameters is identifiable (sensor noise only, a wrong or inconsistent
    output).
 2. **Excitation.** The standard deviation of each regressor since the start
@@ -24,23 +24,30 @@ already holds and two running statistics (nothing is refitted, nothing grows wit
    zero (an exact fit) from the conventional covariance (Eq. 13), whose correlations are those of
    ``(X'X)^-1``: the data's. Two slopes correlated beyond ``max_correlation`` in magnitude are
    not identifiable: many weighted combinations of the two regressors fit the data equally well
-   (Klein and Morelli Sec. 5.5, "data collinearity"). Pairs with the bias are left out: for
+   (Klein and Morelli Sec. 5.5, "Data Collinearity"). Pairs with the bias are left out: for
    least squares with a bias, the slopes' covariance is that of the centred regressors, the
    standardized form Klein and Morelli assess collinearity in, while the bias-slope correlation
    only says the regressor's mean is large against its variation (test 2 covers that).
 
-**Thresholds.** Klein and Morelli's rule of thumb calls regressors correlated beyond 0.9 in
-magnitude collinear; Belsley's condition indices (Belsley, Kuh and Welsch, Regression
-Diagnostics, 1980, the measure Klein and Morelli use for several regressors) call 30 moderate
-and 100 strong collinearity. For two standardized regressors correlated ``r`` the condition
-index is ``sqrt((1 + r) / (1 - r))``: 0.9 is an index of 4.4, 0.998 of 30, 0.9998 of 100. The
-T-2 maneuver's regressors are correlated through the dynamics (alpha, q and delta_e move
-together in a short-period response): on the Table 3 Monte Carlo their slope estimates reach
-correlations well beyond 0.9 while the corrected standard errors stay honest, so 0.9 would
-withhold flags the estimates deserve. The default ``max_correlation = 0.999`` (a condition
-index of 45, between moderate and strong; a variance inflation of 500) keeps every flag of the
-Monte Carlo and refuses a surface commanded twice (docs/validation.md has the measurements).
-``min_r_squared`` and the resolutions are chosen the same way (docs/validation.md).
+**Thresholds.** Klein and Morelli (Sec. 5.5) assess collinearity from the pairwise correlations
+of the standardized regressors (their Eq. 5.77) and the eigenvalues of their correlation
+matrix; the usual rule of thumb calls a correlation beyond 0.9 in magnitude collinear, and
+Belsley's condition indices (Belsley, Kuh and Welsch, Regression Diagnostics, Wiley 1980) call
+30 moderate and 100 strong collinearity. For two standardized regressors correlated ``r`` the condition
+index is ``sqrt((1 + r) / (1 - r))``: 0.9 is an index of 4.4, 0.998 of 30, 0.9998 of 100.
+Moderate collinearity inflates the variances, and the corrected standard errors carry that: the
+flag stays honest. The test is for what the data cannot separate, strong collinearity:
+``max_correlation = 0.9998`` (an index of 100; a variance inflation of 2500). Measured
+(docs/studies/identifiability/REPORT.md): the T-2 maneuver's regressors are correlated through
+the dynamics (alpha, q and delta_e move together in a short-period response), and on the Table 3
+Monte Carlo the slope estimates reach 0.895 after the flags, so 0.9 would withhold flags the
+estimates deserve; on the Twin Otter lateral maneuver C_l's sideslip and roll-rate estimates
+pass 0.999 for seconds while those estimates are within one standard error of their final
+values; a surface commanded twice gives ``1 - 5e-8``. ``min_r_squared = 0.5``: a model that
+explains less than half of its output's variation is not a model of it (the Monte Carlo's
+models stay above 0.81 after their flags, the Twin Otter's above 0.96 at the end; the
+noise-only and spiking cases are below 0.02). The resolutions are below any sensor's (a 12-bit
+vane over +-30 deg resolves 2.6e-4 rad) and far below the maneuvers' excitation (1e-2 rad).
 
 The statistics restart with the estimator; after a resumed state file the regressor statistics
 start from the resumed samples (the output sums are in the file), so a resumed estimate is
@@ -95,7 +102,7 @@ class IdentifiabilityConfig:
         the same for the nondimensional rates ``p b/2V``, ``q cbar/2V``, ``r b/2V``.
     """
 
-    max_correlation: float = 0.999
+    max_correlation: float = 0.9998
     min_r_squared: float = 0.5
     angle_resolution: float = 1e-4
     rate_resolution: float = 1e-6
@@ -150,6 +157,7 @@ class RegressorStatistics:
         self.samples = 0
         self.mean = np.zeros((m, n))
         self.comoment = np.zeros((m, n, n))
+        self.variance_sums = self.comoment.diagonal(0, 1, 2)  # (a view: weight x variance)
 
     def add(self, x: np.ndarray) -> None:
         """One sample's regressors ``(M, n_max)``."""
@@ -159,14 +167,14 @@ class RegressorStatistics:
         d = x - self.mean
         self.mean += d / w
         # sum_j f^(k-j) (x_j - mean_k)(x_j - mean_k)': f C + (1 - 1/w) d d' (exactly symmetric)
-        self.comoment *= f
+        if f != 1.0:
+            self.comoment *= f
         self.comoment += (1.0 - 1.0 / w) * d[:, :, None] * d[:, None, :]
 
     @property
     def std(self) -> np.ndarray:
         """``(M, n_max)`` standard deviations (0 before any sample)."""
-        var = self.comoment.diagonal(0, 1, 2) / max(self.weight, 1.0)
-        return np.sqrt(np.maximum(var, 0.0))
+        return np.sqrt(np.maximum(self.variance_sums / max(self.weight, 1.0), 0.0))
 
     def correlation(self) -> np.ndarray:
         """``(M, n_max, n_max)`` regressor correlations, 0 where a regressor did not vary."""
@@ -208,12 +216,12 @@ class IdentifiabilityMonitor:
     estimator of forgetting factor ``forgetting``.
 
     Per sample the estimator used: :meth:`add` its regressors ``(M, n_max)`` and outputs
-    ``(M,)``; then :meth:`judge` with the bank and its covariances ``(2, M, n_max, n_max)``
-    (corrected, conventional; NaN off the ready models) gives ``identifiable`` ``(M, n_max)``
-    (False on padding and models not ready), and :meth:`restrict` takes it out of the
-    convergence flags. :meth:`problems` and :meth:`report` say why, from the last judgement.
-    ``output_sum`` and ``output_sum_squares`` (weighted ``f^(k-j)``, the bank's ``n_k``
-    their weight) give R^2 and go into the state file."""
+    ``(M,)``, then :meth:`restrict` takes the parameters that are not identifiable out of the
+    sample's convergence flags. The judgement reads the bank (its corrected and conventional
+    covariances, Eq. 16's ``R_k(0)``) and is made when a flag needs it, else when it is read
+    (:attr:`identifiable`, :meth:`problems`, :meth:`report`): the same numbers either way, at
+    no cost while nothing is flagged. ``output_sum`` and ``output_sum_squares`` (weighted
+    ``f^(k-j)``, the bank's ``n_k`` their weight) give R^2 and go into the state file."""
 
     def __init__(self, regressors: Sequence[Sequence[str]], units: Sequence[Sequence[str | None]],
                  config: IdentifiabilityConfig = IdentifiabilityConfig(), forgetting: float = 1.0) -> None:
@@ -233,6 +241,10 @@ class IdentifiabilityMonitor:
                 self.resolution[j, i] = config.resolution(unit)
         slope = self.real & ~self.bias
         self._pairs = slope[:, :, None] & slope[:, None, :] & ~np.eye(n, dtype=bool)
+        self._variance_floor = self.resolution**2  # NaN for the bias and padding: never flat
+        self._max_square = config.max_correlation**2
+        self._unexplained = 1.0 - config.min_r_squared  # R^2 >= min  <=>  R_k(0) <= (1 - min) var(z)
+        self._nothing = np.zeros((m, n), dtype=bool)
         self.forgetting = float(forgetting)
         self.stats = RegressorStatistics((m, n), forgetting)
         self.reset()
@@ -243,14 +255,13 @@ class IdentifiabilityMonitor:
         m, n = self.shape
         self.output_sum = np.zeros(m)
         self.output_sum_squares = np.zeros(m)
-        self.correlation = np.zeros((m, n, n))
-        self.r_squared = np.full(m, np.nan)
-        self.collinear = np.zeros((m, n), dtype=bool)
-        self.not_excited = np.zeros((m, n), dtype=bool)
-        self.no_fit = np.zeros(m, dtype=bool)
+        self._bank: EstimatorBank | None = None
         self.ready = np.zeros(m, dtype=bool)
-        self.identifiable = np.zeros((m, n), dtype=bool)
-        self.held_back = np.zeros((m, n), dtype=bool)
+        self._judged = True
+        self._covariance = np.zeros((m, n, n))
+        self.collinear = self.not_excited = self._identifiable = self._nothing
+        self.no_fit = np.zeros(m, dtype=bool)
+        self.held_back = self._nothing
 
     def resume(self, output_sum: np.ndarray, output_sum_squares: np.ndarray) -> None:
         """Continue from a state file's output sums; the regressor statistics start afresh."""
@@ -271,34 +282,74 @@ class IdentifiabilityMonitor:
         """R^2 of every model now (:func:`r_squared`), NaN where undefined or not ready."""
         return r_squared(bank.residual_variances(), self.output_sum, self.output_sum_squares, bank.n_eff)
 
-    def judge(self, bank: EstimatorBank, covariance: np.ndarray, ready: np.ndarray) -> np.ndarray:
-        """``identifiable`` ``(M, n_max)`` at this sample (module docstring); ``ready``: the
-        models whose outputs are published."""
-        cfg = self.config
-        corrected, conventional = covariance[0], covariance[1]
-        exact = ~(corrected.diagonal(0, 1, 2) > 0.0).any(axis=1)  # zero corrected variances: an exact fit
-        rho = _correlation(np.where(exact[:, None, None], conventional, corrected))
-        self.correlation = rho
-        self.collinear = ((np.abs(rho) > cfg.max_correlation) & self._pairs).any(axis=2)
-        std = self.stats.std
-        flat = std <= self.resolution  # NaN resolution (bias, padding): False
-        # The bias is confounded with a flat regressor whose mean is off zero.
-        offset = np.any(flat & (np.abs(self.stats.mean) > self.resolution), axis=1, keepdims=True)
-        self.not_excited = flat | (self.bias & offset)
-        self.r_squared = r2 = self.fit(bank)
-        self.no_fit = ~(r2 >= cfg.min_r_squared)  # NaN R^2 (not ready, constant output): no fit
-        self.ready = ready
-        ok = self.real & ready[:, None] & ~self.no_fit[:, None] & ~self.not_excited & ~self.collinear
-        self.identifiable = ok
-        return ok
-
-    def restrict(self, flags: np.ndarray, model_flags: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """The convergence flags ``(M, n_max)``, ``(M,)`` of this sample without the parameters
-        the last :meth:`judge` found not identifiable (a model is flagged when all its
-        parameters still are); :attr:`held_back` keeps the flags taken out."""
-        ok = self.identifiable
+    def restrict(self, flags: np.ndarray, model_flags: np.ndarray, bank: EstimatorBank,
+                 ready: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The convergence flags ``(M, n_max)``, ``(M,)`` of the sample ``bank`` just took
+        without the parameters that are not identifiable (a model is flagged when all its
+        parameters still are); ``ready``: the models whose outputs are published.
+        :attr:`held_back` keeps the flags taken out."""
+        self._bank, self.ready, self._judged = bank, ready, False
+        if not flags.any():
+            self.held_back = self._nothing
+            return flags, model_flags
+        ok = self._judge()
         self.held_back = flags & ~ok
         return flags & ok, model_flags & (ok | ~self.real).all(axis=1)
+
+    def judge(self, bank: EstimatorBank, ready: np.ndarray) -> np.ndarray:
+        """``identifiable`` ``(M, n_max)`` of ``bank``'s current sample (module docstring)."""
+        self._bank, self.ready, self._judged = bank, ready, False
+        return self._judge()
+
+    @property
+    def identifiable(self) -> np.ndarray:
+        """``(M, n_max)``: the parameters identifiable at the last sample (False on padding and
+        models not ready)."""
+        return self._judge()
+
+    @property
+    def correlation(self) -> np.ndarray:
+        """``(M, n_max, n_max)`` correlations of the parameter estimates at the last sample
+        (0 where undefined)."""
+        self._judge()
+        return _correlation(self._covariance)
+
+    @property
+    def r_squared(self) -> np.ndarray:
+        """``(M,)`` R^2 at the last sample (NaN where undefined or not ready)."""
+        return self.fit(self._bank) if self._bank is not None else np.full(self.shape[0], np.nan)
+
+    def _judge(self) -> np.ndarray:
+        """The three tests on the pending sample, once (a few vectorised steps, no division)."""
+        bank = self._bank
+        if self._judged or bank is None:
+            return self._identifiable
+        ready = self.ready
+        both = bank.covariance_all()  # NaN off the ready models' blocks
+        c = both[0]
+        d = c.diagonal(0, 1, 2)
+        if (d <= 0.0).any():  # a ready model whose corrected variances are zero fits exactly:
+            exact = ready & ~(d > 0.0).any(axis=1)  # its correlations are (X'X)^-1's, the conventional's
+            c = np.where(exact[:, None, None], both[1], c)
+            d = c.diagonal(0, 1, 2)
+        self._covariance = c
+        # |rho_ij| > max  <=>  c_ij^2 > max^2 c_ii c_jj  (NaN compares False)
+        self.collinear = ((c * c > self._max_square * (d[:, :, None] * d[:, None, :])) & self._pairs).any(axis=2)
+        stats = self.stats
+        flat = stats.variance_sums <= self._variance_floor * max(stats.weight, 1.0)
+        if flat.any():  # the bias is confounded with a flat regressor whose mean is off zero
+            offset = (flat & (np.abs(stats.mean) > self.resolution)).any(axis=1)
+            flat |= self.bias & offset[:, None]
+        self.not_excited = flat
+        n = max(bank.n_eff, 1e-300)
+        mean_square = self.output_sum_squares / n
+        var = mean_square - np.square(self.output_sum / n)
+        fits = bank.residual_variances() <= self._unexplained * var
+        fits &= var > _CONSTANT_OUTPUT * mean_square  # not ready (R_k(0) NaN) or a constant output: no fit
+        self.no_fit = ~fits
+        ok = self.real & (ready & fits)[:, None] & ~(flat | self.collinear)
+        self._identifiable, self._judged = ok, True
+        return ok
 
     # ------------------------------------------------------------------ reporting
     def problems(self, j: int, named_after: int = 0) -> list[Problem]:
@@ -306,6 +357,7 @@ class IdentifiabilityMonitor:
         fundamental first (empty when they are); for a model not ready, once ``named_after``
         samples have not initialized it, what in the data keeps its regressors from being
         informative (empty when nothing is named)."""
+        self._judge()
         if not self.ready[j]:
             return self._not_ready(j) if self.stats.samples >= max(named_after, 1) else []
         cfg, names, n = self.config, self.regressors[j], len(self.regressors[j])

@@ -230,9 +230,8 @@ class _Tracker:
         untested = flags[self.p_row, self.p_col] & (self.untested_k < 0)
         self.untested_k[untested] = k
         self.untested_model_k[model_flags.reshape(runs, len(T2_MODELS)) & (self.untested_model_k < 0)] = k
-        if ready_k.any():  # the node's tests: a parameter not identifiable is never flagged
-            self.quality.judge(bank, bank.covariance_all(), ready_k)
-            flags, model_flags = self.quality.restrict(flags, model_flags)
+        # The node's tests: a parameter not identifiable is never flagged.
+        flags, model_flags = self.quality.restrict(flags, model_flags, bank, ready_k)
         th_p, se_p = theta_k[self.p_row, self.p_col], se_k[self.p_row, self.p_col]
         new = flags[self.p_row, self.p_col] & (self.flag_k < 0)
         self.flag_k[new], self.flag_theta[new], self.flag_se[new] = k, th_p[new], se_p[new]

@@ -374,9 +374,9 @@ class Pipeline:
             for j in np.flatnonzero(bad):
                 book.outputs_withheld[self._outputs[j]] += 1
             ready &= ~bad
-        cov = symmetric_covariances(bank.covariance_all(), self._real, self._real_square, ready)
-        self._quality.judge(bank, cov, ready)  # a parameter not identifiable is never flagged converged
-        self._converged = flags, model_flags = self._quality.restrict(*self._monitor.update(t, theta, se, ready))
+        flags, model_flags = self._monitor.update(t, theta, se, ready)
+        # A parameter that is not identifiable from the data so far is never flagged converged.
+        self._converged = flags, model_flags = self._quality.restrict(flags, model_flags, bank, ready)
         return SampleOutput(
             stamp_ns=t,
             index=self._index,
@@ -386,15 +386,18 @@ class Pipeline:
             ready=ready,
             converged=flags,
             model_converged=model_flags,
-            covariance=cov if self._publishes_covariance(t) else None,
+            covariance=self._covariances(t, ready),
             lags=np.where(ready, bank.lags_used, 0),
         )
 
-    def _publishes_covariance(self, t: int) -> bool:
-        """Whether the sample at ``t`` carries the covariances (computed every sample for the
-        identifiability tests): every ``outputs.covariance_decimation``-th grid point."""
+    def _covariances(self, t: int, ready: np.ndarray) -> np.ndarray | None:
+        """The corrected and conventional covariances of the ready models
+        (:func:`symmetric_covariances`) on the grid points that publish them (every
+        ``outputs.covariance_decimation``-th), else None."""
         every = self._cov_every
-        return bool(every) and not (t // self._period_ns) % every
+        if not every or (t // self._period_ns) % every:
+            return None
+        return symmetric_covariances(self.bank.covariance_all(), self._real, self._real_square, ready)
 
     # ------------------------------------------------------------------ lifecycle
     def reset(self, reason: str, *, clear_inputs: bool = True) -> None:

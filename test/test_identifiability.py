@@ -45,8 +45,7 @@ def run(x, z, units=(BIAS, ANGLE, ANGLE, ANGLE), config=IdentifiabilityConfig(),
     for k in range(x.shape[0]):
         bank.update(x[k][None, :], z[k : k + 1])
         monitor.add(x[k][None, :], z[k : k + 1])
-        if bank.ready[0]:
-            monitor.judge(bank, bank.covariance_all(), bank.ready)
+        monitor.restrict(np.ones((1, x.shape[1]), dtype=bool), np.ones(1, dtype=bool), bank, bank.ready)
     return bank, monitor
 
 
@@ -155,13 +154,28 @@ def test_a_model_not_ready_names_what_keeps_it_waiting_once_it_waited_long_enoug
     assert (p.kind, set(p.regressors)) == ("correlated", {"r2", "r3"}) and p.figures[0] == pytest.approx(1.0)
 
 
-def test_restrict_takes_the_flags_of_parameters_not_identifiable_out():
-    monitor = IdentifiabilityMonitor([("1", "a", "b"), ("1", "c")], [[BIAS, ANGLE, ANGLE], [BIAS, ANGLE]])
-    monitor.identifiable = np.array([[True, True, False], [True, True, False]])
-    flags = np.array([[True, True, True], [True, True, False]])
-    got, model = monitor.restrict(flags, np.array([True, True]))
-    assert got.tolist() == [[True, True, False], [True, True, False]] and model.tolist() == [False, True]
-    assert monitor.held_back.tolist() == [[False, False, True], [False, False, False]]
+def test_restrict_takes_the_flags_of_parameters_not_identifiable_out_and_judges_only_when_asked():
+    """Two models in one bank: one with a regressor that does not move (its slope and the bias
+    are not identifiable), one healthy. Flags of parameters not identifiable are taken out and
+    kept in held_back; a model keeps its flag only when all its parameters do. With no flag up
+    nothing is judged at the sample, and reading the figures judges the same sample."""
+    x, z = maneuver()
+    flat = x.copy()
+    flat[:, 3] = 0.1 + 5e-5 * np.random.default_rng(4).standard_normal(N)
+    bank = EstimatorBank([4, 4], EstimatorOptions(lags=10))
+    monitor = IdentifiabilityMonitor([("1", "a", "b", "c")] * 2, [[BIAS, ANGLE, ANGLE, ANGLE]] * 2)
+    for k in range(N):
+        X, Z = np.stack([flat[k], x[k]]), np.array([z[k] + 0.3 * flat[k, 3], z[k]])
+        bank.update(X, Z)
+        monitor.add(X, Z)
+    ready = bank.ready
+    got, model = monitor.restrict(np.zeros((2, 4), dtype=bool), np.zeros(2, dtype=bool), bank, ready)
+    assert not got.any() and not model.any() and not monitor.held_back.any() and not monitor._judged
+    assert monitor.identifiable.tolist() == [[False, True, True, False], [True] * 4]  # judged when read
+    flags = np.array([[True, True, False, True], [True, True, True, True]])
+    got, model = monitor.restrict(flags, np.array([True, True]), bank, ready)
+    assert got.tolist() == [[False, True, False, False], [True] * 4] and model.tolist() == [False, True]
+    assert monitor.held_back.tolist() == [[True, False, False, True], [False] * 4]
 
 
 @pytest.mark.parametrize("field,value", [

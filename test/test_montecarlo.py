@@ -42,7 +42,7 @@ def first_flags(level, config):
         tests.add(X[k], Z[k])
         flags, _ = monitor.update(int(round(t[k] * 1e9)), bank.theta_all(), bank.standard_errors_all(), bank.ready)
         untested = np.where(np.isinf(untested) & flags[r, c], t[k], untested)
-        ok = tests.judge(bank, bank.covariance_all(), bank.ready)
+        ok = tests.judge(bank, bank.ready)
         tested = np.where(np.isinf(tested) & (flags & ok)[r, c], t[k], tested)
     return untested, tested
 

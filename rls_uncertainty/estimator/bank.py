@@ -300,8 +300,12 @@ class EstimatorBank:
         """:meth:`residual_variance` of every model at once, a new ``(M,)`` array, NaN for the
         models that are not :attr:`ready` (one vectorised step: the per-sample fit test of
         :mod:`rls_uncertainty.identifiability`)."""
-        with np.errstate(divide="ignore", invalid="ignore"):  # no residual yet (a burn-in): 0 / 0
-            R0: FloatArray = self._lags.lag_sums[:, 0] / self._eval.weight_totals()
+        totals = self._eval.weight_totals()
+        if isinstance(totals, float) and totals > 0.0:
+            R0: FloatArray = self._lags.lag_sums[:, 0] / totals
+        else:  # per model after a burn-in; none yet right after it (0 / 0: NaN)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                R0 = self._lags.lag_sums[:, 0] / totals
         return np.where(self._ready, R0, np.nan)
 
     def autocorrelation(self, j: int) -> np.ndarray:
