@@ -338,8 +338,8 @@ class IdentifiabilityMonitor:
         stats = self.stats
         flat = stats.variance_sums <= self._variance_floor * max(stats.weight, 1.0)
         if flat.any():  # the bias is confounded with a flat regressor whose mean is off zero
-            offset = (flat & (np.abs(stats.mean) > self.resolution)).any(axis=1)
-            flat |= self.bias & offset[:, None]
+            offset = np.any(flat & (np.abs(stats.mean) > self.resolution), axis=1, keepdims=True)
+            flat |= self.bias & offset
         self.not_excited = flat
         n = max(bank.n_eff, 1e-300)
         mean_square = self.output_sum_squares / n
