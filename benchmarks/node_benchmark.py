@@ -220,7 +220,8 @@ def main() -> int:
         node = subprocess.Popen(
             [sys.executable, *os.environ.get("RLS_BENCH_PYFLAGS", "").split(), "-m", "rls_uncertainty.node",
              "--ros-args", "-p", "qos.reliable:=true",
-             "-p", f"rate:={args.rate}", "-p", f"estimator.lag_span:={args.lag_span}", "-p", "surfaces.elevator:=[elevator]",
+             "-p", f"rate:={args.rate}", "-p", f"estimator.lag_span:={args.lag_span}",
+             "-p", "surfaces.elevator:=[elevator]",
              "-p", "qos.depth:=1000"],
             stdout=node_log, stderr=subprocess.STDOUT, cwd=ROOT,
         )

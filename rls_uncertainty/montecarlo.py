@@ -78,6 +78,8 @@ LAG_SWEEP = (0, 1, 2, 3, 5, 8, 11, 15, 20, 30, 50, 75, 100, 150, 200, 300, 400, 
 # The node's convergence criterion with its buffer sized for the simulation's 50 Hz.
 MONTE_CARLO_CONVERGENCE = replace(ConvergenceConfig(), rate_hz=SimulationConfig().rate)
 BEST_FROM = SimulationConfig().input_start + 0.5  # s: from here on, the floor of false convergence
+# The node's identifiability tests of the flags (its defaults).
+NODE_IDENTIFIABILITY = IdentifiabilityConfig()
 # The estimator of Table 3: 50 lags, the paper's Eq. 17 (no residual burn-in).
 TABLE3_OPTIONS = EstimatorOptions(lags=50)
 
@@ -200,7 +202,8 @@ class _Tracker:
         self.t, self.runs = t, runs
         self.monitor = ConvergenceMonitor(sizes, convergence)
         rows = [m.regressors for m in T2_MODELS] * runs
-        self.quality = IdentifiabilityMonitor(rows, [[REGRESSOR_UNITS[r] for r in row] for row in rows], identifiability)
+        units = [[REGRESSOR_UNITS[r] for r in row] for row in rows]
+        self.quality = IdentifiabilityMonitor(rows, units, identifiability)
         self.untested_k = np.full((runs, P), -1)
         self.untested_model_k = np.full((runs, n_models), -1)
         self.stamps = np.round(t * 1e9).astype(np.int64)
@@ -310,7 +313,7 @@ def run_level(
     options: EstimatorOptions = TABLE3_OPTIONS,
     seed: int = 2016,
     convergence: ConvergenceConfig = MONTE_CARLO_CONVERGENCE,
-    identifiability: IdentifiabilityConfig = IdentifiabilityConfig(),
+    identifiability: IdentifiabilityConfig = NODE_IDENTIFIABILITY,
 ) -> LevelResult:
     """All runs of one band-limited noise level (fraction, e.g. 0.2) with the estimator
     ``options`` (default: 50 lags, the paper's). With ``lags="auto"`` each run's models

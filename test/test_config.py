@@ -321,7 +321,8 @@ def _refused(*ros_args):
     (["-p", "estimator.lag_span:=-5.0"], ["parameter 'estimator.lag_span' must be in [-1, 2000], got -5.0",
                                           "(from -p estimator.lag_span:=-5.0)"]),
     (["-p", "estimator.lags:=50"], ["-p estimator.lags:=50: unknown parameter 'estimator.lags' (renamed: "
-                                    "estimator.lag_span, in seconds (lags / rate: 50 lags at 50 Hz = 1.0; -1 all lags))"]),
+                                    "estimator.lag_span, in seconds (lags / rate: 50 lags at 50 Hz = 1.0; "
+                                    "-1 all lags))"]),
     (["-p", "rate:=fast"], ["parameter 'rate' must be a finite number, got 'fast'", "(from -p rate:=fast)"]),
     (["-p", "estimator.window:=hann"], ["must be one of ['truncated', 'bartlett'], got 'hann'"]),
     (["-p", "differentiator.window:=9.5"], ["parameter 'differentiator.window' must be an integer, got 9.5"]),
@@ -369,10 +370,11 @@ def test_a_wildcard_section_refuses_names_of_the_nodes_groups_and_warns_about_ot
         tmp_path, "/**:\n  ros__parameters:\n    estimator.lag: 20\n"))
     assert "did you mean aircraft?" in _refused("--params-file", _file(
         tmp_path, "/**:\n  ros__parameters:\n    aircraf: t2\n"))
-    path = _file(tmp_path, "/**:\n  ros__parameters:\n    estimator.lag_span: 0.4\n    speed: 3\n    use_sim_time: true\n"
-                           "    qos_overrides./clock.subscription.depth: 5\n")
+    path = _file(tmp_path, "/**:\n  ros__parameters:\n    estimator.lag_span: 0.4\n    speed: 3\n"
+                           "    use_sim_time: true\n    qos_overrides./clock.subscription.depth: 5\n")
     params = _startup("--params-file", path)
-    assert params.values == {"estimator.lag_span": 0.4, "use_sim_time": True, "qos_overrides./clock.subscription.depth": 5}
+    assert params.values == {"estimator.lag_span": 0.4, "use_sim_time": True,
+                             "qos_overrides./clock.subscription.depth": 5}
     assert params.warnings == (f"parameter file {path}, section /**: parameters that are not this node's ignored "
                                "(meant for other nodes?): speed",)
 

@@ -37,7 +37,10 @@ def maneuver(seed=0, n=N):
     return x, z
 
 
-def run(x, z, units=(BIAS, ANGLE, ANGLE, ANGLE), config=IdentifiabilityConfig(), forgetting=1.0, names=None):
+DEFAULTS = IdentifiabilityConfig()
+
+
+def run(x, z, units=(BIAS, ANGLE, ANGLE, ANGLE), config=DEFAULTS, forgetting=1.0, names=None):
     """One model through a bank and a monitor, judged at every sample; the last judgement."""
     names = names or tuple(f"r{i}" if u is not BIAS else "1" for i, u in enumerate(units))
     bank = EstimatorBank([x.shape[1]], EstimatorOptions(lags=10, forgetting=forgetting))
@@ -132,7 +135,7 @@ def test_a_model_that_explains_nothing_has_no_identifiable_parameter():
     """Output noise only (the regressors move, the output does not follow): R^2 near 0."""
     x, _ = maneuver()
     z = 0.01 * np.random.default_rng(3).standard_normal(N)
-    bank, monitor = run(x, z)
+    _bank, monitor = run(x, z)
     assert monitor.r_squared[0] < 0.05 and not monitor.identifiable[0].any()
     (p,) = monitor.problems(0)
     assert p.kind == "no_fit" and p.figures[0] == monitor.r_squared[0] and p.limits == (0.5,)

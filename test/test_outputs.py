@@ -306,7 +306,8 @@ def test_fit_and_identifiability_arrays_hold_the_figures_of_independent_computat
         np.testing.assert_allclose(table[:, :n], c / np.sqrt(np.outer(np.diag(c), np.diag(c))), rtol=1e-9, atol=1e-12)
         np.testing.assert_allclose(table[1:, n], X[:, 1:].std(axis=0), rtol=1e-9)
         assert table[0, n] == table[0, n + 1] == 0.0  # the bias: not tested
-        assert table[1:, n + 1].tolist() == [1e-6 if name == "q_hat" else 1e-4 for name in pipe.models[j].regressors[1:]]
+        floors = [1e-6 if name == "q_hat" else 1e-4 for name in pipe.models[j].regressors[1:]]
+        assert table[1:, n + 1].tolist() == floors
         assert table[:, n + 2].tolist() == [1.0] * n
 
 
@@ -314,7 +315,7 @@ def test_nothing_is_encoded_before_a_sample_or_for_a_model_not_ready(bag):
     pipe = Pipeline(t2())
     layout = OutputLayout.of(pipe)
     assert layout.encode_fit(pipe) == []
-    for kind, stamp, msg in bag:
+    for kind, _stamp, msg in bag:
         feed(pipe, kind, msg)
         if pipe.bank.k > 0:
             break

@@ -218,7 +218,7 @@ def test_sensor_noise_without_a_maneuver_explains_nothing_and_nothing_is_flagged
     vel[:, 0], vel[:, 2] = speed * np.cos(a), -speed * np.sin(a)
     st = dataclasses.replace(st, imu=(st.imu[0], imu), control_surfaces=(st.control_surfaces[0], srf),
                              airspeed=(st.airspeed[0], vel))
-    pipe, outs, held = _hostile(st, {})
+    pipe, outs, _held = _hostile(st, {})
     for j, n in enumerate(pipe.sizes):
         X = np.array([r[1][j, :n] for r in pipe.regression])
         z = np.array([r[2][j] for r in pipe.regression])

@@ -38,13 +38,22 @@ from __future__ import annotations
 import argparse
 import math
 import sys
+import tempfile
 from collections.abc import Callable
+from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 
-from rls_uncertainty.config import PARAMETERS, node_config, pipeline_config
+from rls_uncertainty.bags import convert, read_inputs
+from rls_uncertainty.config import PARAMETERS, load_parameters_file, node_config, package_path, pipeline_config
+from rls_uncertainty.convergence import ConvergenceMonitor
 from rls_uncertainty.diagnostics import DiagnosticsPolicy, Snapshot
+from rls_uncertainty.inputs import feed as feed_message
+from rls_uncertainty.montecarlo import PARAMETERS as TABLE3
+from rls_uncertainty.montecarlo import convergence_summary, run_level
 from rls_uncertainty.pipeline import Pipeline
+from rls_uncertainty.replay import run_pipeline
 from rls_uncertainty.simulation import SimulationConfig, simulate_sensor_streams
 
 KINDS = ("imu", "airspeed", "dynamic_pressure", "control_surfaces", "thrust")
@@ -65,8 +74,6 @@ def events_of(st) -> Events:
 
 def with_stream(st, kind: str, values: np.ndarray):
     """``st`` with stream ``kind``'s values replaced."""
-    from dataclasses import replace
-
     stamps, _ = getattr(st, kind)
     return replace(st, **{kind: (stamps, values)})
 
@@ -173,7 +180,8 @@ def run_case(name: str, build: Callable) -> None:
     if last is not None:
         for j, m in enumerate(pipe.models):
             if last.ready[j]:
-                cells = [f"{p} {last.theta[j, i]:+.4g} +- {last.se[j, i]:.3g}{' (converged)' if last.converged[j, i] else ''}"
+                flag = [" (converged)" if f else "" for f in last.converged[j]]
+                cells = [f"{p} {last.theta[j, i]:+.4g} +- {last.se[j, i]:.3g}{flag[i]}"
                          for i, p in enumerate(m.parameter_names)]
                 print(f"- {m.output}: " + ", ".join(cells))
     for s in statuses:
@@ -194,13 +202,10 @@ def run_case(name: str, build: Callable) -> None:
 # ----------------------------------------------------------------------------- the rate
 def rates() -> None:
     """End-of-bag lags and standard errors of the bundled bag at three estimator rates."""
-    from rls_uncertainty.bags import read_inputs
-    from rls_uncertainty.config import load_parameters_file, package_path
-    from rls_uncertainty.replay import run_pipeline
-
     messages = read_inputs(package_path("bags", "t2_maneuver"))[0]
     names = ("CZ_alpha", "CZ_delta_e", "Cm_alpha", "Cm_q", "Cm_delta_e")
-    print("| rate, Hz | lags | lags (C_Z, C_m) | " + " | ".join(f"{n} SE corrected (conventional)" for n in names) + " |")
+    print("| rate, Hz | lags | lags (C_Z, C_m) | " + " | ".join(f"{n} SE corrected (conventional)" for n in names)
+          + " |")
     print("| --- | --- | --- |" + " --- |" * len(names))
     for selection in ("fixed", "auto"):
         for rate in (50.0, 200.0, 1000.0):
@@ -209,8 +214,8 @@ def rates() -> None:
             out, pipe = res.outputs[-1], res.pipeline
             where = {p: (j, i) for j, ps in enumerate(pipe.parameter_names) for i, p in enumerate(ps)}
             cells = [f"{out.se[where[n]]:.4g} ({out.se_conventional[where[n]]:.3g})" for n in names]
-            print(f"| {rate:g} | {selection} | {', '.join(str(int(x)) for x in out.lags)} | " + " | ".join(cells) + " |",
-                  flush=True)
+            lags = ", ".join(str(int(x)) for x in out.lags)
+            print(f"| {rate:g} | {selection} | {lags} | " + " | ".join(cells) + " |", flush=True)
 
 
 # ----------------------------------------------------------------------------- flight data
@@ -221,15 +226,6 @@ FLIGHTS = {"totter_f1_017": ("twin_otter_lateral", {}),
 
 def flight(directory: str, extra: dict) -> None:
     """Flags the tests delayed on the Twin Otter recordings, with the reason and the estimates."""
-    import tempfile
-    from dataclasses import replace
-    from pathlib import Path
-
-    from rls_uncertainty.bags import convert, read_inputs
-    from rls_uncertainty.config import load_parameters_file, package_path
-    from rls_uncertainty.convergence import ConvergenceMonitor
-    from rls_uncertainty.inputs import feed as feed_message
-
     tmp = Path(tempfile.mkdtemp())
     for rec, (cfg, own) in FLIGHTS.items():
         convert(Path(directory) / rec, package_path("msg_schemas", "fti_msgs", "mapping.yaml"), tmp / rec)
@@ -250,7 +246,8 @@ def flight(directory: str, extra: dict) -> None:
                             untested[name] = (t, out.theta[j, i], out.se[j, i], why if not out.converged[j, i] else "")
                         if out.converged[j, i]:
                             tested.setdefault(name, t)
-        final = {n: (out.theta[j, i], out.se[j, i]) for j, ns in enumerate(pipe.parameter_names) for i, n in enumerate(ns)}
+        final = {n: (out.theta[j, i], out.se[j, i])
+                 for j, ns in enumerate(pipe.parameter_names) for i, n in enumerate(ns)}
         delayed = [n for n in untested if tested.get(n) != untested[n][0]]
         print(f"- {rec} ({cfg}, {(out.stamp_ns - t0) * 1e-9:.1f} s): "
               f"{len(untested)} parameters flagged, {len(delayed)} delayed" + (":" if delayed else ""))
@@ -264,10 +261,7 @@ def flight(directory: str, extra: dict) -> None:
 # ----------------------------------------------------------------------------- thresholds
 def sweep(runs: int, levels: tuple[float, ...], grid: list[tuple[float, float]]) -> None:
     """Held-back fraction and flag delay per level for each (max_correlation, min_r_squared)."""
-    from rls_uncertainty.identifiability import IdentifiabilityConfig
-    from rls_uncertainty.montecarlo import PARAMETERS as P
-    from rls_uncertainty.montecarlo import convergence_summary, run_level
-
+    from rls_uncertainty.identifiability import IdentifiabilityConfig  # noqa: PLC0415 - not in older checkouts
     print(f"Table 3 Monte Carlo, seed 7, {runs} runs per level; per level over the five parameters: the largest "
           "fraction of runs held back / the largest delay of the median flag time (s)\n")
     print("| max_correlation | min_r_squared | " + " | ".join(f"{lv * 100:.0f}%" for lv in levels) + " |")
@@ -277,7 +271,7 @@ def sweep(runs: int, levels: tuple[float, ...], grid: list[tuple[float, float]])
         cells = []
         for lv in levels:
             rows = [r for r in convergence_summary(run_level(lv, runs, seed=7, identifiability=cfg))
-                    if r["parameter"] in P]
+                    if r["parameter"] in TABLE3]
             held = max(r["held_back"] for r in rows)
             delay = max(r["flag_time_median"] - r["untested_flag_time_median"] for r in rows)
             cells.append(f"{100 * held:.0f}% / {delay:.2f}" if math.isfinite(delay) else f"{100 * held:.0f}% / never")
