@@ -18,6 +18,12 @@ last ``window_s`` seconds (as the ``/diagnostics`` levels do), and raises an :cl
   arrived and estimation is enabled: the main reason samples were rejected, or why none was
   formed.
 
+**Identifiability.** :func:`identifiability` says why a model's parameters are not identifiable
+(:mod:`.identifiability`: the fit, the excitation of each regressor, the correlation of the
+estimates), naming the regressors and the figure, e.g. ``CZ: delta_e and delta_r correlated
+-0.999998 (their estimates; limit 0.999): not identifiable ...``; :func:`model_alerts` raises it
+when it withholds a convergence flag, or keeps a model from initializing.
+
 The node logs each alert as a WARN at most once per ``repeat_s`` seconds per stream and reason
 (:meth:`AlertPolicy.due`) and puts the texts first in the ``inputs`` status of
 ``/diagnostics`` (level ERROR); the replay reports the same texts for a run in which a model
@@ -40,9 +46,10 @@ from .limits import BOUNDS, message_value, sample_value
 
 if TYPE_CHECKING:  # annotations only
     from .config import PipelineConfig
+    from .identifiability import Problem
 
-__all__ = ["Alert", "AlertPolicy", "explain", "explanations", "no_estimate", "not_excited", "MIN_MESSAGES", "MAX_LINE",
-           "SHOWN"]
+__all__ = ["Alert", "AlertPolicy", "explain", "explanations", "no_estimate", "not_excited", "identifiability",
+           "model_alerts", "MIN_MESSAGES", "MAX_LINE", "SHOWN"]
 
 MIN_MESSAGES = 3  # rejected messages of a stream in the window before "all rejected" is said
 MAX_LINE = 400  # characters of an alert line
@@ -86,13 +93,33 @@ def _g(x: float) -> str:
     return f"{x:.4g}"
 
 
+# What else than a real value a refused one may be, where it is not a unit.
+_SUSPECTS = {
+    "implausible_angular_acceleration": "else look for gyro spikes (a body rate jumped between two consecutive imu "
+                                        "messages)",
+}
+
+
 def _limit(config: PipelineConfig, reason: str, seen: float) -> str:
     """``seen alpha = 1.31 rad, limits.alpha allows |alpha| <= 1 rad; set limits.alpha ...``"""
     parameter, bound = config.limits.bound(reason, seen)
     quantity = reason.removeprefix("implausible_")
     unit = BOUNDS[reason][1] if reason in BOUNDS else ""
     seen_text = f"seen {quantity} = {_g(seen)} {unit}, " if not math.isnan(seen) else ""
-    return f"{seen_text}{parameter} allows {bound}; set {parameter} if that is real, else check the sensor's units"
+    suspect = _SUSPECTS.get(reason, "else check the sensor's units")
+    return f"{seen_text}{parameter} allows {bound}; set {parameter} if that is real, {suspect}"
+
+
+def _inconsistent_dynamic_pressure(config: PipelineConfig, state: Any) -> str:
+    """The dynamic pressure and the airspeed of a refused sample (a FlightState, or None), the
+    density they imply and the bound it is beyond."""
+    seen = math.nan if state is None else sample_value("inconsistent_dynamic_pressure", state)
+    parameter, bound = config.limits.bound("inconsistent_dynamic_pressure", seen)
+    implies = "" if state is None else (f"dynamic pressure {_g(state.qbar)} Pa at true airspeed {_g(state.V)} m/s "
+                                        f"implies an air density 2 qbar/V^2 = {_g(seen)} kg/m^3, ")
+    return (f"{implies}{parameter} allows {bound}: the dynamic_pressure and airspeed streams disagree (a unit? a "
+            f"blocked pitot?); set {parameter} if that is real, or inputs.use_dynamic_pressure false to use "
+            "rho V^2 / 2 with inputs.air_density")
 
 
 def _explain_joints(config: PipelineConfig, reason: str, evidence: Any) -> str:
@@ -136,13 +163,15 @@ def _explain_sample(config: PipelineConfig, reason: str, evidence: Any) -> str:
                 f"more than inputs.buffer_duration = {inputs.buffer_duration:g} s apart: different clocks?)")
     if reason.startswith("invalid_"):
         return f"holes left by rejected {stream} messages"
-    if reason.startswith("implausible_"):
-        seen = math.nan
+    if reason.startswith("implausible_") or reason == "inconsistent_dynamic_pressure":
+        state = None
         if evidence is not None:
             sample, rate_dot = evidence
             state = flight_state(sample, np.asarray(rate_dot), inputs.air_density)
-            seen = sample_value(reason, state) if not isinstance(state, str) else math.nan
-        return _limit(config, reason, seen)
+            state = None if isinstance(state, str) else state
+        if reason == "inconsistent_dynamic_pressure":
+            return _inconsistent_dynamic_pressure(config, state)
+        return _limit(config, reason, math.nan if state is None else sample_value(reason, state))
     if reason.startswith(("nonpositive_", "non_finite")):
         return f"{reason.replace('_', ' ')} in the formed samples (Eq. 1 divides by dynamic pressure and airspeed)"
     if reason == "differentiator_warmup":
@@ -262,6 +291,7 @@ class AlertPolicy:
             raise ValueError(f"repeat_s must be positive, got {repeat_s!r}")
         self.repeat_s = float(repeat_s)
         self.current: list[Alert] = []
+        self.model: list[Alert] = []  # identifiability (model_alerts), logged beside the inputs'
         self._time = 0.0
         self._history: list[tuple[float, _Totals]] = [(0.0, _ZERO)]  # the start: every total zero
         self._logged: dict[tuple[str, str], float] = {}
@@ -284,16 +314,22 @@ class AlertPolicy:
         self.current = alerts
         return alerts
 
+    def models(self, models: Sequence[tuple[str, Mapping]]) -> list[Alert]:
+        """The identifiability alerts of the models' reports (:func:`model_alerts`), logged by
+        :meth:`due` with the others."""
+        self.model = model_alerts(models)
+        return self.model
+
     def due(self) -> list[str]:
         """The current alerts not logged in the last ``repeat_s`` seconds (then marked logged)."""
         lines = []
-        for alert in self.current:
+        for alert in self.current + self.model:
             last = self._logged.get(alert.key)
             if last is None or self._time - last >= self.repeat_s:
                 self._logged[alert.key] = self._time
                 lines.append(alert.text)
         if len(self._logged) > 256:  # keys come from bounded tables; stay bounded anyway
-            self._logged = {a.key: self._logged[a.key] for a in self.current if a.key in self._logged}
+            self._logged = {a.key: self._logged[a.key] for a in self.current + self.model if a.key in self._logged}
         return lines
 
 
@@ -317,3 +353,73 @@ def not_excited(n_regressors: int, samples: int, constant: Sequence[str] = ()) -
     return (f"its {n_regressors} regressors were not excited independently in {samples} samples{which}, so the "
             "estimator never initialized (a maneuver must move each of them; or leave the model out of "
             "models.enabled)")
+
+
+def _correlation_text(r: float) -> str:
+    """A correlation with the digits that tell it from +-1: ``-0.999998``, ``+1 - 2.0e-09``."""
+    if 1.0 - abs(r) >= 5e-7:
+        return f"{r:+.6f}"
+    return f"{'-' if r < 0 else '+'}1 - {1.0 - abs(r):.1e}"
+
+
+def _figure(x: float, unit: str) -> str:
+    return f"{x:.3g} {unit}".rstrip()
+
+
+_RESOLUTION = {"rad": "identifiability.angle_resolution", "": "identifiability.rate_resolution"}
+
+
+def _flat_text(model: str, p: Problem) -> str:
+    """Regressors that did not move, each with its standard deviation, and the floors."""
+    regs = ", ".join(p.regressors)
+    one = len(p.regressors) == 1
+    floors = dict.fromkeys(zip(p.units, p.limits, strict=True))  # in order, once each
+    limits = ", ".join(f"{_RESOLUTION.get(u, 'resolution')} {_figure(x, u)}" for u, x in floors)
+    where = f"in {p.samples} samples since start; {limits}"
+    if one:
+        what = f"regressor {regs} not excited (std {_figure(p.figures[0], p.units[0])} {where})"
+    else:
+        stds = ", ".join(f"{r} {_figure(x, u)}" for r, x, u in zip(p.regressors, p.figures, p.units, strict=True))
+        what = f"regressors {regs} not excited (std {stds} {where})"
+    effect = "the model cannot initialize" if p.kind == "constant" else "not identifiable"
+    return f"{what}: {effect}; move {regs} or leave {'it' if one else 'them'} out of models.{model}"
+
+
+def _problem_text(model: str, p: Problem) -> str:
+    if p.kind == "no_fit":
+        r2, limit = p.figures[0], p.limits[0]
+        if not math.isfinite(r2):
+            return "the output does not vary (R^2 undefined): not identifiable; check the model's output"
+        return (f"no regressor explains the output (R^2 {r2:.3f}, identifiability.min_r_squared {limit:g}): "
+                "not identifiable; excite the model or check its output")
+    if p.kind in ("not_excited", "constant"):
+        return _flat_text(model, p)
+    a, b = p.regressors
+    r = _correlation_text(p.figures[0])
+    if p.kind == "collinear":
+        return (f"{a} and {b} correlated {r} (their estimates; identifiability.max_correlation {p.limits[0]:g}): "
+                f"not identifiable; excite {a} and {b} independently or leave one out of models.{model}")
+    return (f"regressors {a} and {b} correlated {r} in {p.samples} samples: the model cannot initialize; excite "
+            f"them independently or leave one out of models.{model}")
+
+
+def identifiability(model: str, problems: Sequence[Problem]) -> str:
+    """One line: why model ``model``'s parameters are not identifiable (or, for a model not
+    ready, why it cannot initialize), each problem of :meth:`.identifiability.
+    IdentifiabilityMonitor.problems` with its regressors and figure; empty without problems."""
+    if not problems:
+        return ""
+    return _line(f"{model}: " + "; ".join(_problem_text(model, p) for p in problems))
+
+
+def model_alerts(models: Sequence[tuple[str, Mapping]]) -> list[Alert]:
+    """An alert per model whose report (:meth:`.pipeline.Pipeline.model_report`) has a
+    convergence flag held back as not identifiable, or that names why the model cannot
+    initialize: its ``identifiability`` text, one key per model (logged at most once per
+    ``repeat_s`` whatever the figure)."""
+    alerts = []
+    for name, fit in models:
+        text = fit.get("identifiability", "")
+        if text and (fit.get("held_back") or not fit.get("ready")):
+            alerts.append(Alert((f"model {name}", "identifiability"), text))
+    return alerts

@@ -148,14 +148,14 @@ def _replay_params(args: argparse.Namespace) -> dict[str, Any]:
         for note in from_file.warnings:
             print(f"rls-uncertainty replay: warning: {note}", file=sys.stderr)
         params = {k: v for k, v in from_file.values.items() if k in PARAMETER_NAMES}
-    if args.lags is not None:  # --lags decides the lag selection whatever the file said
-        params["estimator.lag_selection"] = "auto" if args.lags == "auto" else "fixed"
-        if args.lags != "auto":
-            params["estimator.lags"] = -1 if args.lags == "all" else args.lags
-    if args.max_lags is not None:
-        params["estimator.max_lags"] = args.max_lags
-    if args.burn_in is not None:
-        params["estimator.residual_burn_in"] = args.burn_in
+    if args.lag_span is not None:  # --lag-span decides the lag selection whatever the file said
+        params["estimator.lag_selection"] = "auto" if args.lag_span == "auto" else "fixed"
+        if args.lag_span != "auto":
+            params["estimator.lag_span"] = args.lag_span
+    if args.max_lag_span is not None:
+        params["estimator.max_lag_span"] = args.max_lag_span
+    if args.burn_in_span is not None:
+        params["estimator.residual_burn_in_span"] = args.burn_in_span
     if args.window:
         params["estimator.window"] = args.window
     if args.forgetting is not None:
@@ -176,19 +176,25 @@ def _yaml_file(name_or_path: str, directory: Path) -> Path:
 
 
 def _replay(args: argparse.Namespace) -> int:
+    from .compare import DEFAULT_ATOL, DEFAULT_RTOL, comparable, compare_replays, read_run
     from .config import config_dir
-    from .replay import replay, summary_table
+    from .replay import planned_run, replay, summary_table
 
     params = _replay_params(args)
     # Files the replay reads besides the bag: never replaced by its output, even with --force.
     inputs = [_yaml_file(args.config, config_dir())] if args.config else []
     if isinstance(params.get("aircraft"), str) and params["aircraft"]:
         inputs.append(_yaml_file(params["aircraft"], config_dir() / "aircraft"))
+    if (args.rtol is not None or args.atol is not None) and not args.compare:
+        raise ConfigError("--rtol and --atol set the tolerance of --compare DIR: give the reference replay's directory")
+    if args.compare:  # what can be checked before the bag is read, is
+        inputs.append(args.compare)
+        comparable(planned_run(params, start=args.start, end=args.end, strict=not args.lenient),
+                   read_run(args.compare), bag=False)
     result = replay(args.bag, params, args.out, start=args.start, end=args.end, strict=not args.lenient,
                     progress=not args.quiet, plots=not args.no_plots, force=args.force, inputs=inputs)
-    pipe = result.pipeline
-    c = pipe.counters()
-    print(summary_table(pipe, result.outputs))
+    c = result.counters()
+    print(summary_table(result))
     rejected = ", ".join(f"{k} {v}" for k, v in sorted(c["samples_rejected"].items())) or "none"
     print(f"\n{c['samples_formed']} samples formed, {c['samples_used']} used; rejected: {rejected}")
     for name, s in c["streams"].items():
@@ -198,7 +204,14 @@ def _replay(args: argparse.Namespace) -> int:
     print(f"{result.n_messages} messages, {result.data_seconds:.1f} s of data in {result.wall_seconds:.2f} s "
           f"({result.speed:.0f}x real time); wrote {args.out}")
     # No model estimated anything: the summary above says why; a script must not take it for success.
-    return 0 if result.estimates else 1
+    if not result.estimates:
+        return 1
+    if args.compare:
+        rtol = DEFAULT_RTOL if args.rtol is None else args.rtol
+        cmp = compare_replays(args.out, args.compare, rtol=rtol, atol=DEFAULT_ATOL if args.atol is None else args.atol)
+        print(cmp.report())
+        return 0 if cmp.equal else 1
+    return 0
 
 
 def _play(args: argparse.Namespace) -> int:
@@ -247,6 +260,43 @@ def _lags(value: str) -> int | str:
     """--lags of every command, in the form of the estimator's ``lags`` option: an integer
     >= 0 (L of Eq. 22), 'all' (Eq. 20) or 'auto' (each model's lags from its residuals)."""
     return _count_or_word(value, {"all": "all", "auto": "auto"}, "an integer >= 0, 'all' or 'auto'")
+
+
+def _lag_span(value: str) -> float | str:
+    """replay's --lag-span, in the form of ``estimator.lag_span``: seconds >= 0 (the lags are
+    seconds x rate), 'all' (-1, Eq. 20) or 'auto' (estimator.lag_selection auto)."""
+    return _seconds_or_word(value, {"all": -1.0, "auto": "auto"}, "a number of seconds >= 0, 'all' or 'auto'")
+
+
+def _burn_in_span(value: str) -> float:
+    """replay's --burn-in-span: seconds >= 0, or 'default' (-1: estimator.residual_burn_in_span's
+    default, 1 s with auto lags, 0 with fixed lags)."""
+    return float(_seconds_or_word(value, {"default": -1.0}, "a number of seconds >= 0 or 'default'"))
+
+
+def _seconds_or_word(value: str, words: dict[str, Any], expected: str) -> Any:
+    """A finite number >= 0, or the value of one of ``words``; otherwise an argparse error."""
+    if value in words:
+        return words[value]
+    try:
+        x = float(value)
+    except ValueError:
+        x = math.nan
+    if not (math.isfinite(x) and x >= 0):
+        raise argparse.ArgumentTypeError(f"must be {expected}, got {value!r}")
+    return x
+
+
+class _Renamed(argparse.Action):
+    """An option that was renamed: using it is a usage error naming the new one."""
+
+    def __init__(self, option_strings: list[str], dest: str, renamed: str = "", **kwargs: Any) -> None:
+        self.renamed = renamed
+        super().__init__(option_strings, dest, help=argparse.SUPPRESS, **kwargs)
+
+    def __call__(self, parser: argparse.ArgumentParser, namespace: argparse.Namespace, values: Any,
+                 option_string: str | None = None) -> None:
+        parser.error(f"{option_string} is now {self.renamed}")
 
 
 def _burn_in(value: str) -> int:
@@ -377,13 +427,19 @@ def _add_replay(sub: Any) -> None:
     rp.add_argument("bag", help="replay bag on the standard topics")
     rp.add_argument("--config", help="ROS parameter file, e.g. config/t2.yaml (default: node defaults)")
     rp.add_argument("--out", required=True, help="output directory")
-    rp.add_argument("--lags", type=_lags,
-                    help="override estimator.lags (an integer or 'all'), or 'auto' (estimator.lag_selection auto)")
-    rp.add_argument("--max-lags", type=_integer(1), help="override estimator.max_lags (with auto)")
-    rp.add_argument("--burn-in", type=_burn_in,
-                    help="override estimator.residual_burn_in: samples after each model's initialization whose "
-                         "residuals are left out of the residual autocorrelation, or 'default' (-1: 50 with auto, "
+    rp.add_argument("--lag-span", type=_lag_span,
+                    help="override estimator.lag_span: seconds of residual autocorrelation kept (lags = seconds x "
+                         "rate), 'all', or 'auto' (estimator.lag_selection auto)")
+    rp.add_argument("--max-lag-span", type=_real(0.0, low_open=True),
+                    help="override estimator.max_lag_span, s (with auto)")
+    rp.add_argument("--burn-in-span", type=_burn_in_span,
+                    help="override estimator.residual_burn_in_span: seconds after each model's initialization whose "
+                         "residuals are left out of the residual autocorrelation, or 'default' (-1: 1 s with auto, "
                          "0 with fixed lags)")
+    for old, new in (("--lags", "--lag-span SECONDS (lags / rate: 50 lags at 50 Hz = 1.0)"),
+                     ("--max-lags", "--max-lag-span SECONDS (max lags / rate)"),
+                     ("--burn-in", "--burn-in-span SECONDS (samples / rate)")):
+        rp.add_argument(old, action=_Renamed, renamed=new)
     rp.add_argument("--window", choices=("truncated", "bartlett"), help="override estimator.window")
     rp.add_argument("--forgetting", type=float, help="override estimator.forgetting")
     rp.add_argument("--models", nargs="+", help="override models.enabled (e.g. CZ Cm)")
@@ -394,6 +450,14 @@ def _add_replay(sub: Any) -> None:
     rp.add_argument("--no-plots", action="store_true")
     rp.add_argument("--quiet", action="store_true", help="no progress bar")
     rp.add_argument("--force", action="store_true", help=_FORCE_HELP)
+    rp.add_argument("--compare", metavar="DIR",
+                    help="compare the outputs with an earlier replay's in DIR sample by sample: exit 0 when equal "
+                         "within the tolerance, 1 when not (the largest differences printed), 2 when the runs are "
+                         "not comparable (another bag, span, models or sample rate)")
+    rp.add_argument("--rtol", type=_real(0.0), metavar="R",
+                    help="--compare's relative tolerance, of |estimate| + its standard error (default 1e-6)")
+    rp.add_argument("--atol", type=_real(0.0), metavar="A",
+                    help="--compare's absolute tolerance, in the units of each derivative (default 0)")
     rp.set_defaults(func=_replay)
 
 

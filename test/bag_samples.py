@@ -2,6 +2,7 @@
 directory snapshot, an MCAP file's CRCs checked against zlib, and a guard against a call that
 blocks."""
 
+import copy
 import os
 import signal
 import zlib
@@ -142,3 +143,19 @@ def no_hang(seconds: float):
     finally:
         signal.setitimer(signal.ITIMER_REAL, 0)
         signal.signal(signal.SIGALRM, previous)
+
+
+def changed_messages(messages, kind, change):
+    """``(kind, stamp, msg)`` messages with ``change(k, copy)`` applied to a copy of the k-th
+    message of ``kind`` (it returns False to keep the original): hostile inputs made from a
+    real recording."""
+    out, k = [], 0
+    for msg_kind, stamp, msg in messages:
+        chosen = msg
+        if msg_kind == kind:
+            new = copy.deepcopy(msg)
+            if change(k, new) is not False:
+                chosen = new
+            k += 1
+        out.append((msg_kind, stamp, chosen))
+    return out

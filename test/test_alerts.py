@@ -8,6 +8,7 @@ from __future__ import annotations
 import math
 
 import pytest
+from bag_samples import changed_messages
 
 from rls_uncertainty.alerts import MAX_LINE, MIN_MESSAGES, SHOWN, AlertPolicy, explain, no_estimate
 from rls_uncertainty.bags import read_inputs
@@ -90,6 +91,48 @@ def test_samples_refused_once_formed_are_explained_with_the_derived_value(bag):
     seen = float(why.split("seen dynamic_pressure = ")[1].split(" Pa")[0])
     assert 0.5 * 0.01 * 30.0**2 < seen < 0.5 * 0.01 * 60.0**2  # rho V^2 / 2 at the T-2's 30-60 m/s
     assert "limits.dynamic_pressure_min allows 100 <= dynamic_pressure <= 100000 Pa" in why
+
+
+def test_a_dynamic_pressure_that_disagrees_with_the_airspeed_names_both_and_the_density(bag):
+    """5 Pa at the bag's airspeed: the text gives both, the density 2 qbar / V^2 they imply
+    (computed here from the values shown) and the parameter that bounds it."""
+    def five_pascal(k, msg):
+        msg.fluid_pressure = 5.0
+
+    pipe, c = run(changed_messages(bag, "dynamic_pressure", five_pascal), T2)
+    text = c["explanations"]["samples"]["inconsistent_dynamic_pressure"]
+    V = float(text.split("at true airspeed ")[1].split(" m/s")[0])
+    rho = float(text.split("2 qbar/V^2 = ")[1].split(" kg/m^3")[0])
+    speeds = [math.hypot(m.vector.x, m.vector.y, m.vector.z) for kind, _s, m in bag if kind == "airspeed"]
+    assert min(speeds) * (1 - 1e-3) <= V <= max(speeds) * (1 + 1e-3)  # shown to 4 digits
+    assert rho == pytest.approx(2 * 5.0 / V**2, rel=1e-3)
+    assert text == (f"dynamic pressure 5 Pa at true airspeed {V:.4g} m/s implies an air density 2 qbar/V^2 = "
+                    f"{rho:.4g} kg/m^3, limits.air_density_min allows 0.05 <= air_density <= 2 kg/m^3: the "
+                    "dynamic_pressure and airspeed streams disagree (a unit? a blocked pitot?); set "
+                    "limits.air_density_min if that is real, or inputs.use_dynamic_pressure false to use rho V^2 / 2 "
+                    "with inputs.air_density")
+    assert no_estimate(c, pipe.required).startswith(
+        f"samples: none of the {c['samples_formed']} samples of the run used (inconsistent_dynamic_pressure ")
+
+
+def test_a_gyro_spike_names_the_angular_acceleration_it_implies(bag):
+    """One pitch-rate message of 19.999 rad/s: the value seen is its change from the message
+    before it over their interval, computed here from the bag."""
+    imu = [(s, m) for kind, s, m in bag if kind == "imu"]
+    k = 1200
+
+    def spike(i, msg):
+        if i != k:
+            return False
+        msg.angular_velocity.y = 19.999
+
+    _pipe, c = run(changed_messages(bag, "imu", spike), T2)
+    (t0, before), (t1, _m) = imu[k - 1], imu[k]
+    seen = (19.999 - before.angular_velocity.y) / ((t1 - t0) * 1e-9)
+    assert c["explanations"]["imu"]["implausible_angular_acceleration"] == (
+        f"seen angular_acceleration = {seen:.4g} rad/s^2, limits.angular_acceleration allows "
+        "|angular_acceleration| <= 500 rad/s^2; set limits.angular_acceleration if that is real, else look for "
+        "gyro spikes (a body rate jumped between two consecutive imu messages)")
 
 
 def test_a_healthy_run_says_nothing(bag):
@@ -185,3 +228,52 @@ def test_the_explanation_of_a_reason_without_evidence_is_still_a_sentence():
     assert explain(config, "imu", "far_from_clock").startswith("stamps more than inputs.max_clock_offset = 0 s")
     assert "inputs.max_gap = 0.25 s" in explain(config, "samples", "gap_airspeed")
     assert explain(config, "imu", "implausible_angular_rate").startswith("limits.angular_rate allows |angular_rate|")
+
+
+# ------------------------------------------------------------------ identifiability
+def test_identifiability_lines_name_the_regressors_the_figure_and_the_parameter():
+    from rls_uncertainty.alerts import identifiability
+    from rls_uncertainty.identifiability import Problem
+
+    collinear = Problem("collinear", ("delta_e", "delta_r"), (-0.99999995,), (0.999,), samples=600)
+    assert identifiability("CZ", [collinear]) == (
+        "CZ: delta_e and delta_r correlated -1 - 5.0e-08 (their estimates; identifiability.max_correlation 0.999): "
+        "not identifiable; excite delta_e and delta_r independently or leave one out of models.CZ")
+    no_fit = Problem("no_fit", (), (0.0031,), (0.5,), samples=600)
+    assert identifiability("Cm", [no_fit]) == (
+        "Cm: no regressor explains the output (R^2 0.003, identifiability.min_r_squared 0.5): not identifiable; "
+        "excite the model or check its output")
+    flat = Problem("constant", ("beta",), (0.0,), (1e-4,), ("rad",), samples=141)
+    assert identifiability("CZ", [flat]) == (
+        "CZ: regressor beta not excited (std 0 rad in 141 samples since start; identifiability.angle_resolution "
+        "0.0001 rad): the model cannot initialize; move beta or leave it out of models.CZ")
+    several = Problem("not_excited", ("beta", "r_hat"), (2e-5, 3e-7), (1e-4, 1e-6), ("rad", ""), samples=90)
+    assert identifiability("Cn", [no_fit, several]) == (
+        "Cn: no regressor explains the output (R^2 0.003, identifiability.min_r_squared 0.5): not identifiable; "
+        "excite the model or check its output; regressors beta, r_hat not excited (std beta 2e-05 rad, r_hat 3e-07 "
+        "in 90 samples since start; identifiability.angle_resolution 0.0001 rad, identifiability.rate_resolution "
+        "1e-06): not identifiable; move beta, r_hat or leave them out of models.Cn")
+    assert identifiability("CZ", []) == ""
+    # An ordinary correlation keeps its digits; a constant output says so.
+    assert "correlated +0.999512 (their" in identifiability("CZ", [Problem("collinear", ("a", "b"), (0.9995123,),
+                                                                             (0.999,))])
+    assert "the output does not vary (R^2 undefined)" in identifiability("CX", [Problem("no_fit", (), (math.nan,),
+                                                                                        (0.5,))])
+
+
+def test_a_model_alert_is_raised_while_a_flag_is_held_back_and_logged_once_per_repeat_period():
+    text = "CZ: delta_e and delta_r correlated -1 - 5.0e-08 (...): not identifiable"
+    held = {"ready": True, "held_back": "CZ_delta_e,CZ_delta_r", "identifiability": text}
+    transient = {"ready": True, "held_back": "", "identifiability": text}  # not identifiable yet, nothing withheld
+    waiting = {"ready": False, "samples": 200, "identifiability": "CY: regressor beta not excited (...)"}
+    policy = AlertPolicy(repeat_s=30.0)
+    counters = run([], T2)[1]
+    lines = []
+    for second in range(70):
+        policy.update(1.0, counters, (), True, 10.0)
+        models = [("CZ", held if second < 65 else transient), ("Cm", {"ready": True}), ("CY", waiting)]
+        assert [a.key for a in policy.models(models)] == [("model CZ", "identifiability"),
+                                                          ("model CY", "identifiability")][0 if second < 65 else 1:]
+        lines += [(second, line) for line in policy.due()]
+    assert lines == [(0, text), (0, waiting["identifiability"]), (30, text), (30, waiting["identifiability"]),
+                     (60, text), (60, waiting["identifiability"])]

@@ -10,7 +10,7 @@ from mcap.reader import make_reader
 from rosbags.highlevel import AnyReader
 
 from rls_uncertainty import mcap_io
-from rls_uncertainty.bags import typestore, write_mcap, write_replay
+from rls_uncertainty.bags import BagWriter, typestore, write_replay
 from rls_uncertainty.cdr import encode_header
 from rls_uncertainty.errors import BagError
 
@@ -21,6 +21,14 @@ def _records(n=24):
     """``n`` header messages on /a and /b, stamps 10 ms apart, given out of order."""
     recs = [(10**18 + 10**7 * k, "/a" if k % 2 else "/b", HEADER, encode_header(10**9, k, f"f{k}")) for k in range(n)]
     return recs[::-1]
+
+
+def write_mcap(path, records):
+    """``records`` as one MCAP file at ``path``, through the package's writer (the one every
+    bag, conversion and replay output goes through)."""
+    with BagWriter(path, sorted({(topic, msgtype) for _, topic, msgtype, _ in records}), typestore()) as writer:
+        for record in records:
+            writer.add(*record)
 
 
 @pytest.fixture

@@ -209,3 +209,166 @@ def test_monte_carlo_convergence_outputs_against_an_independent_recomputation(tm
     for r in written[:5]:
         assert float(r["flag_time_median"]) == pytest.approx(rows[r["parameter"]]["flag_time_median"], rel=1e-5)
         assert float(r["false_convergence"]) == pytest.approx(rows[r["parameter"]]["false_convergence"], abs=1e-6)
+
+
+# --------------------------------------------------------------- turbulence and noise variants
+def _gusty_config(rate):
+    from dataclasses import replace
+
+    from rls_uncertainty.simulation import SimulationConfig
+
+    return replace(SimulationConfig(), rate=rate)
+
+
+def test_turbulent_response_satisfies_the_equations_with_the_aerodynamic_alpha():
+    """Noise-free, 1 kHz, a 1 m/s Dryden gust: with alpha_a the recorded (vane) alpha and
+    alpha = alpha_a - w_g/V the inertial one, the record integrates Eq. 25a with alpha_a in the
+    aerodynamics (trapezoid over the 1 kHz grid, within 1e-4 of each signal's RMS; with the
+    inertial alpha in the aerodynamics instead, q is off by 70 times its RMS) and a_z is Eq. 25b
+    with alpha_a, to rounding."""
+    from scipy.integrate import cumulative_trapezoid
+
+    from rls_uncertainty.simulation import G0, gust_velocity
+    from rls_uncertainty.turbulence import DrydenVertical
+
+    cfg = _gusty_config(1000.0)
+    w = gust_velocity(DrydenVertical(1.0, 290.0), np.random.default_rng(1), cfg)
+    r = simulate_short_period(cfg, gust=w)
+    np.testing.assert_array_equal(r.gust, w)
+    ac, tv, V = r.aircraft, cfg.true, cfg.airspeed
+    qS = cfg.qbar * ac.S
+    alpha_a = r.alpha - cfg.alpha_trim
+    alpha_i = alpha_a - r.gust / V
+    assert np.std(r.gust / V) > np.std(alpha_i) / 2  # the gust is a large part of what the vane reads
+
+    def integrated(rate):
+        return cumulative_trapezoid(rate, r.t, initial=0.0)
+
+    alpha_dot = qS / (ac.mass * V) * (tv["CZ_alpha"] * alpha_a + tv["CZ_delta_e"] * r.delta_e) + r.q
+    assert np.max(np.abs(alpha_i - alpha_i[0] - integrated(alpha_dot))) < 1e-4 * np.std(alpha_i)
+
+    def q_dot(alpha):
+        return qS * ac.cbar / ac.Iyy * (tv["Cm_alpha"] * alpha + ac.cbar / (2 * V) * tv["Cm_q"] * r.q
+                                        + tv["Cm_delta_e"] * r.delta_e)
+
+    assert np.max(np.abs(r.q - r.q[0] - integrated(q_dot(alpha_a)))) < 1e-4 * np.std(r.q)
+    assert np.max(np.abs(r.q - r.q[0] - integrated(q_dot(alpha_i)))) > 10 * np.std(r.q)
+    az = qS / ac.mass * (tv["CZ_alpha"] * alpha_a + tv["CZ_delta_e"] * r.delta_e)
+    np.testing.assert_allclose(r.az + G0 * np.cos(cfg.alpha_trim), az, rtol=0, atol=1e-12)
+
+
+def test_calm_air_is_the_existing_simulation_exactly():
+    """A gust of intensity 0 (or none) gives the calm-air simulation bit for bit: the record
+    (``add_noise(simulate_short_period(), ...)`` with the seed's generator) and the sensor
+    streams, also of a campaign maneuver (its seed from ``campaign_seeds``)."""
+    from rls_uncertainty.simulation import campaign_seeds, simulate_campaign, simulate_maneuver, simulate_sensor_streams
+    from rls_uncertainty.turbulence import DrydenVertical
+
+    calm = DrydenVertical(0.0, 290.0)
+    reference = add_noise(simulate_short_period(), 0.2, np.random.default_rng(7))
+    for gust in (None, calm):
+        rec = simulate_maneuver(0.2, 7, gust=gust)
+        for name, x in reference.signals().items():
+            np.testing.assert_array_equal(getattr(rec, name), x)
+    expected = simulate_sensor_streams(0.2, campaign_seeds(3, 2)[1])
+    for got in (simulate_sensor_streams(0.2, campaign_seeds(3, 2)[1], gust=calm),
+                list(simulate_campaign(2, calm, seed=3))[1]):
+        for kind in ("imu", "airspeed", "dynamic_pressure", "control_surfaces", "thrust"):
+            for a, b in zip(getattr(got, kind), getattr(expected, kind), strict=True):
+                np.testing.assert_array_equal(a, b)
+
+
+def test_campaign_maneuvers_are_deterministic_per_seed_and_differ_from_each_other():
+    from rls_uncertainty.simulation import campaign_seeds, simulate_campaign, simulate_maneuver
+    from rls_uncertainty.turbulence import DrydenVertical
+
+    gust = DrydenVertical(0.8, 290.0)
+    a = list(simulate_campaign(3, gust, seed=11))
+    b = list(simulate_campaign(2, gust, seed=11))  # maneuver i does not depend on the campaign's length
+    for x, y in zip(a[:2], b, strict=True):
+        np.testing.assert_array_equal(x.imu[1], y.imu[1])
+        np.testing.assert_array_equal(x.airspeed[1], y.airspeed[1])
+    alphas = [np.arctan2(-m.airspeed[1][:, 2], m.airspeed[1][:, 0]) for m in a]
+    assert len({round(float(np.std(x)), 9) for x in alphas}) == 3
+    other = next(simulate_campaign(1, gust, seed=12))
+    assert not np.array_equal(other.imu[1], a[0].imu[1])
+    seed = campaign_seeds(11, 1)[0]  # a seed object used twice gives the same maneuver twice
+    first, second = simulate_maneuver(0.2, seed, gust=gust), simulate_maneuver(0.2, seed, gust=gust)
+    np.testing.assert_array_equal(first.alpha, second.alpha)
+    np.testing.assert_array_equal(first.gust, second.gust)
+
+
+def test_gust_does_not_change_the_noise_sequences_or_their_scale():
+    """The sensor noise (record minus its noise-free signals) is the same in calm air and in
+    turbulence: same generator, same calm-air scale (the gust belongs to the air, not to the
+    sensors)."""
+    from rls_uncertainty.simulation import simulate_maneuver
+    from rls_uncertainty.turbulence import DrydenVertical
+
+    calm = simulate_maneuver(0.2, 5)
+    rough = simulate_maneuver(0.2, 5, gust=DrydenVertical(1.5, 290.0))
+    assert rough.gust is not None and calm.gust is None
+    assert rough.noise_scale == calm.noise_scale
+    for name in ("delta_e", "alpha", "q", "az"):
+        noise = getattr(calm, name) - calm.noise_free[name]
+        np.testing.assert_allclose(getattr(rough, name) - rough.noise_free[name], noise, rtol=0,
+                                   atol=1e-12 * max(1.0, np.abs(calm.noise_free[name]).max()))
+    assert np.std(rough.noise_free["alpha"]) > 1.2 * np.std(calm.noise_free["alpha"])
+    np.testing.assert_array_equal(rough.delta_e, calm.delta_e)  # the gust does not move the elevator
+
+
+def test_every_stream_sees_the_same_gust():
+    """Sensor streams in turbulence with negligible noise (SNR 1e12, no band-limited noise):
+    the air data's alpha and the IMU's q and a_z are the noise-free maneuver of the same seed
+    and gust sampled at each stream's rate and offset."""
+    from dataclasses import replace
+
+    from rls_uncertainty.simulation import SimulationConfig, simulate_maneuver, simulate_sensor_streams
+    from rls_uncertainty.turbulence import DrydenVertical
+
+    gust = DrydenVertical(1.0, 290.0)
+    quiet = replace(SimulationConfig(), snr=dict.fromkeys(("delta_e", "alpha", "q", "az"), 1e12))
+    st = simulate_sensor_streams(0.0, 9, cfg=quiet, gust=gust)
+    air = simulate_maneuver(0.0, 9, gust=gust, cfg=replace(quiet, rate=50.0, sample_offset=0.004))
+    imu = simulate_maneuver(0.0, 9, gust=gust, cfg=replace(quiet, rate=200.0))
+    vel = st.airspeed[1]
+    np.testing.assert_allclose(np.arctan2(-vel[:, 2], vel[:, 0]), air.noise_free["alpha"], rtol=0, atol=1e-9)
+    np.testing.assert_allclose(-st.imu[1][:, 1], imu.noise_free["q"], rtol=0, atol=1e-9)
+    np.testing.assert_allclose(-st.imu[1][:, 5], imu.noise_free["az"], rtol=0, atol=1e-9)
+    calm = simulate_maneuver(0.0, 9, cfg=replace(quiet, rate=200.0))
+    assert np.std(imu.noise_free["az"] - calm.noise_free["az"]) > 0.1 * np.std(calm.noise_free["az"])
+
+
+def test_band_limited_noise_on_the_responses_only_leaves_the_elevator_white():
+    """``band_limited_on=RESPONSES``: the same random numbers as the default, so alpha, q and
+    a_z are those of the default variant exactly and the elevator is that of band level 0."""
+    from rls_uncertainty.simulation import RESPONSES
+
+    rec = simulate_short_period()
+    default = add_noise(rec, 0.2, np.random.default_rng(3))
+    variant = add_noise(rec, 0.2, np.random.default_rng(3), band_limited_on=RESPONSES)
+    white = add_noise(rec, 0.0, np.random.default_rng(3))
+    for name in RESPONSES:
+        np.testing.assert_array_equal(getattr(variant, name), getattr(default, name))
+    np.testing.assert_array_equal(variant.delta_e, white.delta_e)
+    assert not np.array_equal(variant.delta_e, default.delta_e)
+
+
+def test_band_limited_on_refuses_unknown_signals():
+    from rls_uncertainty.errors import ConfigError
+
+    rec = simulate_short_period()
+    for bad in (("alpha", "beta"), "alpha"):
+        with pytest.raises(ConfigError, match="band_limited_on"):
+            add_noise(rec, 0.2, np.random.default_rng(0), band_limited_on=bad)
+
+
+def test_gust_on_the_wrong_grid_is_refused():
+    from rls_uncertainty.errors import ConfigError
+
+    with pytest.raises(ConfigError, match="integration grid"):
+        simulate_short_period(gust=np.zeros(100))
+    bad = np.zeros(12000)
+    bad[5] = np.nan
+    with pytest.raises(ConfigError, match="finite"):
+        simulate_short_period(gust=bad)
