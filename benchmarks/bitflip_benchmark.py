@@ -11,7 +11,7 @@ in a process of its own, and sorts the outcome:
 
 Each flip is located in the file's record structure (the MCAP record it falls in: header,
 chunk i, message index, metadata, summary, footer, magic). A bag written with chunk, data
-section and summary CRCs should give no ``changed`` row. Figures: docs/bags.md (integrity).
+section and summary CRCs should give no ``changed`` row. Figures: docs/tools.md (integrity).
 
     .venv/bin/python benchmarks/bitflip_benchmark.py [--flips 40] [--seed 19] [--bag DIR]
 
