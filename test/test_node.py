@@ -610,7 +610,7 @@ def test_a_second_node_with_the_same_name_and_state_file_is_named_and_keeps_off_
         while not state.exists():
             assert time.monotonic() < deadline, first.text()
             time.sleep(0.1)
-        second = _node(tmp_path, *args, "-p", "estimator.lags:=7", name="second")
+        second = _node(tmp_path, *args, "-p", "estimator.lag_span:=0.14", name="second")  # 7 lags at 50 Hz
         assert tester.spin_until(lambda: all(p.get_subscription_count() >= 2 for p in tester.pubs.values()), 30)
         warning = "1 other node(s) named /rls_estimator on the ROS graph: their outputs mix with this node's on "
         for node in (first, second):
@@ -630,10 +630,10 @@ def test_a_second_node_with_the_same_name_and_state_file_is_named_and_keeps_off_
         tester.spin_until(lambda: False, 0.5)
         counts = Counter(s.stamp.sec * 10**9 + s.stamp.nanosec for s in stamps)
         assert len(counts) == n and set(counts.values()) == {2}  # every sample twice
-    finally:
-        if second is not None:
-            assert second.stop() == 0, second.text()
-        assert first.stop() == 0, first.text()
+    finally:  # both stopped whatever happened, before either exit status is judged
+        stopped = [(node, node.stop()) for node in (second, first) if node is not None]
+    for node, code in stopped:
+        assert code == 0, node.text()
     assert "Traceback" not in first.text() + second.text()
     assert sorted(p.name for p in tmp_path.iterdir() if not p.name.endswith(".log")) == ["state.npz"]
     assert load_state(state, _t2_config(NO_EXPIRY).fingerprint()).samples_used == n
