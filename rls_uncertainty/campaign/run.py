@@ -132,7 +132,8 @@ def all_lags_bank(result: ReplayResult) -> EstimatorBank:
 def _rows(name: str, result: ReplayResult, bank_all: EstimatorBank) -> tuple[ParameterResult, ...]:
     pipe = result.pipeline
     assert pipe is not None
-    se_all = bank_all.standard_errors_all("corrected")
+    # (A bank that saw no sample has no standard errors to evaluate.)
+    se_all = bank_all.standard_errors_all("corrected") if bank_all.ready.any() else None
     last_row = pipe.regression[-1][0] if pipe.regression else None
     why = {line.split(":", 1)[0]: line.split(":", 1)[1].strip() for line in result.explanations}
     rows = []
@@ -151,7 +152,7 @@ def _rows(name: str, result: ReplayResult, bank_all: EstimatorBank) -> tuple[Par
                 continue
             # All lags at the sample of the final estimates (the last row, unless the model's
             # last outputs were withheld as non-finite).
-            s_all = float(se_all[j, i]) if final.stamp_ns == last_row else math.nan
+            s_all = float(se_all[j, i]) if se_all is not None and final.stamp_ns == last_row else math.nan
             rows.append(ParameterResult(name, m.output, p, final.estimate, final.std_error_conventional,
                                         final.std_error, s_all, samples, r2, OK))
     return tuple(rows)

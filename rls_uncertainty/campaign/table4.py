@@ -77,7 +77,7 @@ def table4(results: Sequence[ManeuverResult]) -> list[Table4Row]:
 
 def _cell(x: object) -> str:
     if isinstance(x, float):
-        return "" if math.isnan(x) else repr(x)
+        return "" if math.isnan(x) else repr(float(x))
     return str(x)
 
 
