@@ -145,7 +145,7 @@ class DaskCluster:
             futures = client.map(fn, list(args), pure=False, retries=self.retries)
             index = {f.key: i for i, f in enumerate(futures)}
             results: list[T | Lost | None] = [None] * len(args)
-            for finished, fut in enumerate(as_completed(futures), 1):
+            for finished, fut in enumerate(as_completed(futures, loop=client.loop), 1):
                 i = index[fut.key]
                 if fut.status == "error":
                     exc = fut.exception()

@@ -57,7 +57,7 @@ def test_a_failed_maneuver_is_named_and_the_others_still_count(tmp_path):
                                BUNDLED)
     c = campaign_to(tmp_path / "out", maneuvers, settings, LocalProcesses(1), figures=False)
     assert [r.maneuvers for r in c.table] == [2] * 7
-    rows = list(csv.DictReader(open(tmp_path / "out" / "maneuvers.csv")))
+    rows = list(csv.DictReader((tmp_path / "out" / "maneuvers.csv").read_text().splitlines()))
     late = [r for r in rows if r["maneuver"] == "late"]
     assert len(late) == 7 and all(r["status"].startswith("failed: ") and r["estimate"] == "" for r in late)
     assert "late: failed:" in (tmp_path / "out" / "summary.txt").read_text()

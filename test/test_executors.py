@@ -44,7 +44,7 @@ def cluster():
     from distributed import Client, LocalCluster
 
     c = LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1", dashboard_address=None)
-    client = Client(c)
+    client = Client(c, set_as_default=False)  # the executor must work without a default client
     try:
         yield c, client
     finally:
