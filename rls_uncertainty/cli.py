@@ -556,9 +556,9 @@ def _add_estimator_overrides(parser: Any) -> None:
     parser.add_argument("--max-lag-span", type=_real(0.0, low_open=True),
                         help="override estimator.max_lag_span, s (with auto)")
     parser.add_argument("--burn-in-span", type=_burn_in_span,
-                        help="override estimator.residual_burn_in_span: seconds after each model's initialization whose "
-                             "residuals are left out of the residual autocorrelation, or 'default' (-1: 1 s with auto, "
-                             "0 with fixed lags)")
+                        help="override estimator.residual_burn_in_span: seconds after each model's initialization "
+                             "whose residuals are left out of the residual autocorrelation, or 'default' (-1: 1 s "
+                             "with auto, 0 with fixed lags)")
     for old, new in (("--lags", "--lag-span SECONDS (lags / rate: 50 lags at 50 Hz = 1.0)"),
                      ("--max-lags", "--max-lag-span SECONDS (max lags / rate)"),
                      ("--burn-in", "--burn-in-span SECONDS (samples / rate)")):

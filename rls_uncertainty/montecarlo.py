@@ -440,25 +440,10 @@ def convergence_summary(res: LevelResult) -> list[dict]:
     with np.errstate(divide="ignore", invalid="ignore"):
         ratio = res.ensemble_se / res.ensemble_scatter
     truth = np.array([T2_TRUE[p] for p in PARAMETERS])
-
-    def rates(ft, theta, se, cols):
-        hit = np.isfinite(ft)
-        k = np.searchsorted(t, np.where(hit, ft, t[0]))
-        mean = res.ensemble_mean[k][:, cols]
-        th, s = theta[:, cols], se[:, cols]
-        out_truth = (np.abs(th - truth[cols]) > 2 * s).any(axis=1)
-        out_mean = (np.abs(th - mean) > 2 * s).any(axis=1)
-        if not hit.any():
-            return hit, math.nan, math.nan
-        return hit, float(out_truth[hit].mean()), float(out_mean[hit].mean())
-
-    def held(ft: np.ndarray, untested: np.ndarray) -> dict[str, float]:
-        return {"untested_flag_time_median": float(np.median(untested)), "held_back": float(np.mean(ft > untested))}
-
     rows = []
     for i, name in enumerate(PARAMETERS):
         ft = res.flag_time[:, i]
-        hit, false_truth, false_mean = rates(ft, res.flag_theta, res.flag_se, [i])
+        hit, false_truth, false_mean = _flag_rates(res, truth, ft, res.flag_theta, res.flag_se, [i])
         median = float(np.median(ft))
         cover = _cover_time(t, ratio[:, i], 1.0 - d)
         at = np.searchsorted(t, median) if math.isfinite(median) else None
@@ -473,23 +458,51 @@ def convergence_summary(res: LevelResult) -> list[dict]:
             "bias_at_flag_se": float((res.flag_theta[hit, i].mean() - truth[i]) / res.flag_se[hit, i].mean())
             if hit.any() else math.nan,
             "se_over_scatter_at_flag": float(ratio[at, i]) if at is not None else math.nan,
-            **held(ft, res.untested_flag_time[:, i]),
+            **_held(ft, res.untested_flag_time[:, i]),
         })
+    return rows + _model_rows(res, truth)
+
+
+def _flag_rates(res: LevelResult, truth: np.ndarray, ft: np.ndarray, theta: np.ndarray, se: np.ndarray,
+                cols: list[int]) -> tuple[np.ndarray, float, float]:
+    """Which runs were flagged (first flag times ``ft``), and the fractions of those whose
+    true value, or whose ensemble mean at the flag time, lies outside ``theta +- 2 se`` in any
+    of the Table 3 columns ``cols``."""
+    t = res.time
+    hit = np.isfinite(ft)
+    k = np.searchsorted(t, np.where(hit, ft, t[0]))
+    mean = res.ensemble_mean[k][:, cols]
+    th, s = theta[:, cols], se[:, cols]
+    out_truth = (np.abs(th - truth[cols]) > 2 * s).any(axis=1)
+    out_mean = (np.abs(th - mean) > 2 * s).any(axis=1)
+    if not hit.any():
+        return hit, math.nan, math.nan
+    return hit, float(out_truth[hit].mean()), float(out_mean[hit].mean())
+
+
+def _held(ft: np.ndarray, untested: np.ndarray) -> dict[str, float]:
+    """The median first flag time without the identifiability tests and the fraction of runs
+    whose first flag they delayed or withheld."""
+    return {"untested_flag_time_median": float(np.median(untested)), "held_back": float(np.mean(ft > untested))}
+
+
+def _model_rows(res: LevelResult, truth: np.ndarray) -> list[dict]:
+    """:func:`convergence_summary`'s rows of the models (``"CZ model"``, ``"Cm model"``)."""
+    t, rows = res.time, []
     for m, model in enumerate(T2_MODELS):
         cols = [i for i, p in enumerate(PARAMETERS) if _WHERE[p][0] == m]
         ft = res.model_flag_time[:, m]
-        hit, false_truth, false_mean = rates(ft, res.model_flag_theta, res.model_flag_se, cols)
-        median = float(np.median(ft))
+        hit, false_truth, false_mean = _flag_rates(res, truth, ft, res.model_flag_theta, res.model_flag_se, cols)
         outside = (np.abs(res.estimates[:, cols] - truth[cols]) > 2 * res.se_corrected[:, cols]).any(axis=1)
         rows.append({
             "level": res.level, "parameter": f"{model.output} model", "flagged": float(hit.mean()),
-            "flag_time_median": median, "cover_time": math.nan, "cover_time_strict": math.nan,
+            "flag_time_median": float(np.median(ft)), "cover_time": math.nan, "cover_time_strict": math.nan,
             "flag_minus_cover": math.nan, "false_convergence": false_truth, "false_vs_mean": false_mean,
             "truth_outside_end": float(outside.mean()),
             "truth_outside_min": float(np.nanmin(res.truth_outside[t >= BEST_FROM, len(PARAMETERS) + m])),
             "bias_at_flag_se": math.nan,
             "se_over_scatter_at_flag": math.nan,
-            **held(ft, res.untested_model_flag_time[:, m]),
+            **_held(ft, res.untested_model_flag_time[:, m]),
         })
     return rows
 
