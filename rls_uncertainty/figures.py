@@ -28,8 +28,8 @@ if TYPE_CHECKING:  # annotations only
     from .figure_data import FigureData, ModelFinal
     from .results import History
 
-__all__ = ["FORMATS", "REPLAY_FIGURES", "DEFAULT_DPI", "FigureOptions", "figure_formats", "parameter_unit", "parameter_label", "save",
-           "y_limits", "replay_figures", "figure12"]
+__all__ = ["FORMATS", "REPLAY_FIGURES", "DEFAULT_DPI", "FigureOptions", "figure_formats", "parameter_unit",
+           "parameter_label", "save", "y_limits", "replay_figures", "figure12"]
 
 FORMATS = ("png", "svg", "pdf")
 # A replay's figures per model, ``M_<kind>.<format>`` (replay_figures).
