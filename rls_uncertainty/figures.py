@@ -115,7 +115,8 @@ def save(fig: Figure, stem: Path, formats: Sequence[str] = ("png",), dpi: int = 
     try:
         for fmt in options.formats:
             path = stem.with_name(f"{stem.name}.{fmt}")
-            fig.savefig(path, format=fmt, dpi=options.dpi, metadata=_METADATA[fmt])
+            with plt.rc_context(_STYLE):  # svg.hashsalt: the same ids in every run
+                fig.savefig(path, format=fmt, dpi=options.dpi, metadata=_METADATA[fmt])
             written.append(path)
     finally:
         plt.close(fig)
@@ -160,6 +161,7 @@ def figure12(model: str, maneuvers: Sequence[str], parameters: Sequence[str], es
     directory; ``formats``: of :data:`FORMATS`; ``dpi``: PNG resolution; ``title``: the
     campaign's name (default: the model's); ``lags``: how the corrected bars' lags are named
     in the legend (``"50 lags"``). Returns the files written."""
+    options = FigureOptions(tuple(formats), dpi)
     est = np.asarray(estimates, dtype=float)
     bars = [("conventional", np.asarray(se_conventional, dtype=float), "tab:red"),
             (f"corrected, {lags}", np.asarray(se_corrected, dtype=float), "tab:blue")]
@@ -197,7 +199,7 @@ def figure12(model: str, maneuvers: Sequence[str], parameters: Sequence[str], es
             bottom.set_xticks(x[:: max(1, len(x) // 20)])
         bottom.set_xlabel("maneuver" if len(maneuvers) <= 30 else "maneuver index")
         fig.suptitle(f"{title or model}: {model} final estimates over {len(maneuvers)} maneuvers (Fig. 12)")
-    return save(fig, Path(out_dir) / f"{model}_fig12", formats, dpi)
+    return save(fig, Path(out_dir) / f"{model}_fig12", options.formats, options.dpi)
 
 
 def y_limits(t: np.ndarray, theta: np.ndarray, se: np.ndarray, start: float, *, quantile: float = 0.05,
