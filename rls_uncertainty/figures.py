@@ -163,14 +163,16 @@ def figure12(model: str, maneuvers: Sequence[str], parameters: Sequence[str], es
     in the legend (``"50 lags"``). Returns the files written."""
     options = FigureOptions(tuple(formats), dpi)
     est = np.asarray(estimates, dtype=float)
+    arrays = {"estimates": est, "se_conventional": se_conventional, "se_corrected": se_corrected,
+              "se_corrected_all": se_corrected_all}
+    shape = (len(maneuvers), len(parameters))
+    for name, a in arrays.items():
+        if a is not None and np.shape(a) != shape:
+            raise ValueError(f"figure12: {name} must be (maneuvers, parameters) = {shape}, got {np.shape(a)}")
     bars = [("conventional", np.asarray(se_conventional, dtype=float), "tab:red"),
             (f"corrected, {lags}", np.asarray(se_corrected, dtype=float), "tab:blue")]
     if se_corrected_all is not None:
         bars.append(("corrected, all lags", np.asarray(se_corrected_all, dtype=float), "tab:green"))
-    shape = (len(maneuvers), len(parameters))
-    for name, a in [("estimates", est)] + [(b[0], b[1]) for b in bars]:
-        if a.shape != shape:
-            raise ValueError(f"figure12: {name} must be (maneuvers, parameters) = {shape}, got {a.shape}")
     mean, scatter = _ensemble(est)
     plt = _pyplot()
     x = np.arange(len(maneuvers))
