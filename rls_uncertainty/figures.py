@@ -145,22 +145,25 @@ def _ensemble(estimates: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 def figure12(model: str, maneuvers: Sequence[str], parameters: Sequence[str], estimates: Any,
              se_conventional: Any, se_corrected: Any, out_dir: str | Path, *, se_corrected_all: Any = None,
              formats: Sequence[str] = ("png",), dpi: int = DEFAULT_DPI, title: str | None = None,
-             lags: str = "configured lags") -> list[Path]:
+             lags: str = "configured lags", mean: Any = None, scatter: Any = None,
+             stem: str | None = None) -> list[Path]:
     """The paper's Fig. 12 for one model of a campaign: per parameter (one panel each), every
     maneuver's final estimate with its conventional (Eq. 13) and corrected (Eqs. 20/22)
     2-sigma bars side by side (and corrected with all lags when ``se_corrected_all`` is
     given), the mean over the maneuvers (a line) and the observed scatter (a band of mean
     +/- 2 sample standard deviations), y in the parameter's unit.
 
-    ``model``: the model's output (``"CZ"``), used in the file name ``<model>_fig12.<fmt>``
-    and the title; ``maneuvers``: the maneuvers' names (x axis, in this order);
+    ``model``: the model's output (``"CZ"``), used in the title and the file name
+    ``<stem>.<fmt>`` (``stem`` default ``<model>_fig12``); ``maneuvers``: the maneuvers' names (x axis, in this order);
     ``parameters``: the model's parameter names (``CZ_0, CZ_alpha, ...``); ``estimates``,
     ``se_conventional``, ``se_corrected`` and optionally ``se_corrected_all``: arrays
     ``(len(maneuvers), len(parameters))``, NaN where a maneuver has no value (a failed
     maneuver: drawn as a gap and left out of the mean and scatter); ``out_dir``: an existing
     directory; ``formats``: of :data:`FORMATS`; ``dpi``: PNG resolution; ``title``: the
     campaign's name (default: the model's); ``lags``: how the corrected bars' lags are named
-    in the legend (``"50 lags"``). Returns the files written."""
+    in the legend (``"50 lags"``); ``mean`` and ``scatter``: per parameter, the campaign's
+    own (Table 4's), by default computed here over the finite estimates (the mean and the
+    sample standard deviation). Returns the files written."""
     options = FigureOptions(tuple(formats), dpi)
     est = np.asarray(estimates, dtype=float)
     arrays = {"estimates": est, "se_conventional": se_conventional, "se_corrected": se_corrected,
@@ -173,7 +176,9 @@ def figure12(model: str, maneuvers: Sequence[str], parameters: Sequence[str], es
             (f"corrected, {lags}", np.asarray(se_corrected, dtype=float), "tab:blue")]
     if se_corrected_all is not None:
         bars.append(("corrected, all lags", np.asarray(se_corrected_all, dtype=float), "tab:green"))
-    mean, scatter = _ensemble(est)
+    computed = _ensemble(est)
+    mean = computed[0] if mean is None else np.asarray(mean, dtype=float).reshape(len(parameters))
+    scatter = computed[1] if scatter is None else np.asarray(scatter, dtype=float).reshape(len(parameters))
     plt = _pyplot()
     x = np.arange(len(maneuvers))
     offsets = np.linspace(-0.2, 0.2, len(bars)) if len(bars) > 1 else np.zeros(1)
@@ -201,7 +206,7 @@ def figure12(model: str, maneuvers: Sequence[str], parameters: Sequence[str], es
             bottom.set_xticks(x[:: max(1, len(x) // 20)])
         bottom.set_xlabel("maneuver" if len(maneuvers) <= 30 else "maneuver index")
         fig.suptitle(f"{title or model}: {model} final estimates over {len(maneuvers)} maneuvers (Fig. 12)")
-    return save(fig, Path(out_dir) / f"{model}_fig12", options.formats, options.dpi)
+    return save(fig, Path(out_dir) / (stem or f"{model}_fig12"), options.formats, options.dpi)
 
 
 def y_limits(t: np.ndarray, theta: np.ndarray, se: np.ndarray, start: float, *, quantile: float = 0.05,

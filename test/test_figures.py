@@ -358,6 +358,18 @@ def test_figure12_draws_every_maneuver_the_mean_and_the_scatter(tmp_path, captur
             np.testing.assert_allclose(spans, 4 * se[ok, i], rtol=1e-12)
 
 
+def test_figure12_draws_the_mean_and_scatter_it_is_given(tmp_path, capture):
+    est, conv, corr = _campaign()
+    figure12("CZ", [f"m{i}" for i in range(14)], ["CZ_0", "CZ_alpha", "CZ_delta_e"], est, conv, corr, tmp_path,
+             mean=[1.0, 2.0, 3.0], scatter=[0.5, 0.0, 0.25], stem="fig12_CZ", dpi=60)
+    assert (tmp_path / "fig12_CZ.png").is_file()
+    for ax, mean, scatter in zip(capture["fig12_CZ"].get_axes(), (1.0, 2.0, 3.0), (0.5, 0.0, 0.25), strict=True):
+        assert list(_line(ax, "mean").get_ydata()) == [mean, mean]
+        (band,) = [p for p in ax.patches if p.get_label().startswith("mean +/- 2 scatter")]
+        y = band.get_patch_transform().transform(band.get_path().vertices)[:, 1]
+        assert (y.min(), y.max()) == pytest.approx((mean - 2 * scatter, mean + 2 * scatter))
+
+
 def test_figure12_refuses_arrays_of_the_wrong_shape_and_unknown_formats(tmp_path):
     est, conv, corr = _campaign()
     with pytest.raises(ValueError, match="se_corrected must be"):
