@@ -1,13 +1,23 @@
 """Report-grade figures of a replay and of a campaign (matplotlib).
 
-Front ends import this module lazily, when they draw (``replay``, ``campaign``); the numerical
-core never imports it. Every figure is written in each requested format (:func:`save`: PNG at
-``dpi``, 300 by default, SVG and PDF as vectors), with units on every axis
-(:func:`parameter_unit`) and a title that names the maneuver or bag and the model. The
-figures follow the paper's (Grauer & Morelli): Fig. 12 (:func:`figure12`), the final
-estimate of every maneuver of a campaign with conventional (Eq. 13) and corrected (Eqs.
-20/22) 2-sigma bars, the mean and the observed scatter. What each figure shows:
-``docs/tools.md``, "Figures".
+Front ends import this module when they draw (``replay``, ``campaign``); the numerical core
+never imports it, and matplotlib is imported only when a figure is drawn. Every figure is
+written in each requested format (:class:`FigureOptions`: PNG at ``dpi``, 300 by default;
+SVG and PDF as vectors; no dates or random ids, so a run gives the same bytes), with units on
+every axis (:func:`parameter_label`) and a title that names the maneuver or bag and the
+model. The figures follow the paper's (Grauer & Morelli):
+
+* :func:`replay_figures`, per model of a replay: ``M_estimates`` (Figs. 6/13: estimates with
+  corrected Eq. 22 and conventional Eq. 13 2-sigma bands, the excitation onset, the
+  convergence time, y-limits from the excited part, :func:`y_limits`), ``M_fit`` (Figs. 3-4:
+  measured and modelled coefficient, residual, its spectrum), ``M_autocorrelation`` (Figs.
+  5/11: recursive Eq. 17 and batch Eq. 10, the 2-sigma white-noise bound, the retained lags)
+  and ``M_lags`` (Fig. 7: batch corrected standard errors, Eqs. 8-11, against the retained
+  lags), from a :class:`.figure_data.FigureData`;
+* :func:`figure12`, per model of a campaign: every maneuver's final estimate with its
+  conventional and corrected 2-sigma bars, the mean and the observed scatter.
+
+What a reader sees in each: ``docs/tools.md``, "Figures".
 """
 
 from __future__ import annotations
@@ -181,7 +191,7 @@ def figure12(model: str, maneuvers: Sequence[str], parameters: Sequence[str], es
     scatter = computed[1] if scatter is None else np.asarray(scatter, dtype=float).reshape(len(parameters))
     plt = _pyplot()
     x = np.arange(len(maneuvers))
-    offsets = np.linspace(-0.2, 0.2, len(bars)) if len(bars) > 1 else np.zeros(1)
+    offsets = np.linspace(-0.15, 0.15, len(bars))
     with plt.rc_context(_STYLE):
         fig, axes = plt.subplots(len(parameters), 1, figsize=(7, 1.8 * len(parameters) + 0.6), sharex=True,
                                  squeeze=False, layout="constrained")
@@ -197,6 +207,7 @@ def figure12(model: str, maneuvers: Sequence[str], parameters: Sequence[str], es
             ax.set_ylabel(parameter_label(parameters[i]))
         _legend(fig, axes[0, 0], 3)
         bottom = axes[-1, 0]
+        bottom.set_xlim(-0.6, len(maneuvers) - 0.4)
         bottom.set_xticks(x)
         if len(maneuvers) <= 30:  # a maneuver without any estimate is named as such
             none = ~np.isfinite(est).any(axis=1)

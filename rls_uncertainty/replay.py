@@ -23,10 +23,11 @@ stream (:class:`.bags.InputStream`) and the outputs are written sample by sample
   each model's lag count and convergence flags;
 * ``run.json``: the bag's input digest, the span, the parameters and the configuration
   (:func:`.replay_files.run_record`), for ``replay --compare`` (:mod:`.compare`);
-* ``M_estimates.png``: each parameter's history with corrected and conventional 2-sigma
-  envelopes (at most :data:`PLOT_POINTS` evenly spaced samples per run, so a long recording
-  plots in bounded memory), and ``M_autocorrelation.png``: each model's residual
-  autocorrelation.
+* ``summary.txt``: the summary the command prints (:func:`run_summary`);
+* per model ``M``, the figures of :func:`.figures.replay_figures` (``M_estimates``, ``M_fit``,
+  ``M_autocorrelation``, ``M_lags``, in the requested formats), drawn from at most twice
+  :data:`PLOT_POINTS` evenly spaced samples per run and from sums kept as the run goes
+  (:class:`.figure_data.FigureData`), so a long recording plots in bounded memory.
 Two runs give bit-identical CSV and MCAP files. The progress bar is drawn only on a terminal.
 """
 
