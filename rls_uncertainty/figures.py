@@ -22,8 +22,10 @@ What a reader sees in each: ``docs/tools.md``, "Figures".
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+import gc
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, NamedTuple
 
@@ -130,6 +132,9 @@ def save(fig: Figure, stem: Path, formats: Sequence[str] = ("png",), dpi: int = 
             written.append(path)
     finally:
         plt.close(fig)
+        # A figure and its canvas (with the rendered pixels) refer to each other: free them now,
+        # not at the next collection, so a run holds one figure's pixels at a time.
+        gc.collect()
     return written
 
 
@@ -269,12 +274,14 @@ def replay_figures(out_dir: str | Path, title: str, history: History, data: Figu
         k += len(params)
         if not history.ready(j).any():
             continue
-        with _pyplot().rc_context(_STYLE):
-            figures = [("estimates", _estimates(title, model, history, data, t0)),
-                       ("fit", _fit(title, model, data, t0)),
-                       ("autocorrelation", _autocorrelation(title, model, data)),
-                       ("lags", _lag_sweep(title, model, data))]
-        for kind, fig in figures:
+        drawings: dict[str, Callable[[], Figure | None]] = {
+            "estimates": partial(_estimates, title, model, history, data, t0),
+            "fit": partial(_fit, title, model, data, t0),
+            "autocorrelation": partial(_autocorrelation, title, model, data),
+            "lags": partial(_lag_sweep, title, model, data)}
+        for kind, draw in drawings.items():  # one figure in memory at a time
+            with _pyplot().rc_context(_STYLE):
+                fig = draw()
             if fig is not None:
                 written += save(fig, Path(out_dir) / f"{name}_{kind}", options.formats, options.dpi)
     return written

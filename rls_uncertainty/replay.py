@@ -238,12 +238,12 @@ class _Run:
 def run_pipeline(messages: Iterable[tuple[str, int, Stamped]], config: PipelineConfig, *, record: bool = True,
                  progress: bool = False, diagnostics: NodeConfig | None = None, keep_outputs: bool = True,
                  history: History | None = None, sink: Sink | None = None,
-                 figures: FigureData | None = None) -> ReplayResult:
+                 figure_data: FigureData | None = None) -> ReplayResult:
     """Feed ``(kind, stamp, msg)`` messages (a list, or a :class:`.bags.InputStream` read as it
     goes) through a fresh pipeline. ``record`` keeps every regression row
     (``pipeline.regression``); ``keep_outputs`` every :class:`.pipeline.SampleOutput` (and
     report) in the result; ``history`` collects the time histories (:class:`.results.History`);
-    ``sink`` receives each output and report as it is made; ``figures`` collects what the
+    ``sink`` receives each output and report as it is made; ``figure_data`` collects what the
     figures draw besides the histories (:class:`.figure_data.FigureData`, bounded). Without
     the first two, memory does not grow with the run. ``progress`` draws a bar on stderr when stderr is a terminal
     (never carriage-return frames into a log file or a pipe). With ``diagnostics`` (the node's
@@ -276,15 +276,15 @@ def run_pipeline(messages: Iterable[tuple[str, int, Stamped]], config: PipelineC
             outs = feed(pipe, kind, msg)
             for out in outs:
                 run.sample(out)
-            if excitation.watching or figures is not None:
+            if excitation.watching or figure_data is not None:
                 new = rows.take()
-                if figures is not None:
-                    figures.add(pipe, outs, new)
+                if figure_data is not None:
+                    figure_data.add(pipe, outs, new)
                 if excitation.watching:
                     excitation.update(new)
                     if run.ever.all():
                         excitation.watching = False
-                        if figures is None:
+                        if figure_data is None:
                             rows.stop()
             if diag is not None:
                 diag.after(kind, stamp)
@@ -306,8 +306,8 @@ def run_pipeline(messages: Iterable[tuple[str, int, Stamped]], config: PipelineC
     if first is not None:
         result.data_seconds = (newest - first) * 1e-9
     run.finals()
-    if figures is not None:
-        figures.finish(pipe)
+    if figure_data is not None:
+        figure_data.finish(pipe)
     result.explanations = unestimated(pipe, run.ever, excitation)
     result.counter_values = accounting(pipe.counters())
     result.bag_digest = str(getattr(messages, "digest", ""))
@@ -377,7 +377,7 @@ def replay(bag: str | Path, params: dict[str, Any], out: str | Path, *, start: f
         files = ReplayFiles(tmp, config, node_cfg.frame_id, NODE_NAME, typestore())
         with files:
             result = run_pipeline(stream, config, record=False, progress=progress, diagnostics=node_cfg,
-                                  keep_outputs=False, history=History(names, PLOT_POINTS), sink=files, figures=data)
+                                  keep_outputs=False, history=History(names, PLOT_POINTS), sink=files, figure_data=data)
         record = planned_run(params, start=start, end=end, strict=strict)
         record["bag"] |= {"path": str(bag), "input_sha256": stream.digest, "messages_read": stream.read,
                           "messages_used": result.n_messages}

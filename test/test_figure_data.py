@@ -184,7 +184,7 @@ def test_the_figure_data_follows_the_measured_coefficients_of_the_recorded_rows(
     config = pipeline_config(params)
     names = [m.parameter_names for m in config.models]
     data = FigureData([m.output for m in config.models], [m.regressors for m in config.models], names, config.rate)
-    result = run_pipeline(read_inputs(BUNDLED)[0], config, record=True, history=History(names), figures=data)
+    result = run_pipeline(read_inputs(BUNDLED)[0], config, record=True, history=History(names), figure_data=data)
     rows = result.pipeline.regression
     assert data.history.n == len(rows) == 591
     stamps, measured, model = data.coefficient(1)  # Cm

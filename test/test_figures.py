@@ -238,15 +238,24 @@ def test_the_convergence_time_is_where_each_flag_stays_set(t2):
             assert list(x) == [(since[name] - t0) * 1e-9] * 2
 
 
-def test_the_estimates_axes_show_the_final_bands(t2):
-    _, result, drawn = t2
-    for model, names in T2_MODELS:
+def _assert_final_bands_shown(result, drawn) -> list:
+    """Each parameter's final corrected 2-sigma band lies within its axes and fills more
+    than a tenth of them; returns each model's estimate axes."""
+    models = []
+    for model, names in zip(result.models, result.parameter_names, strict=True):
         axes = [ax for ax in drawn[f"{model}_estimates"].get_axes() if ax.get_ylabel()]
         for name, ax in zip(names, axes, strict=True):
             final = result.final(name)
             lo, hi = ax.get_ylim()
             assert lo <= final.estimate - 2 * final.std_error and final.estimate + 2 * final.std_error <= hi
             assert 4 * final.std_error / (hi - lo) > 0.1, name
+        models.append(axes)
+    return models
+
+
+def test_the_estimates_axes_show_the_final_bands(t2):
+    _, result, drawn = t2
+    _assert_final_bands_shown(result, drawn)
 
 
 @pytest.mark.parametrize("lags", [50, "auto"])
@@ -306,17 +315,10 @@ def test_the_twin_otter_final_bands_are_visible(tmp_path, capture, twin_otter_ba
     """The lateral maneuver's aileron starts at about 8.5 s: before it, the Cl estimates swing
     over many times their final band; the axes are set from the excited part."""
     _, result, drawn = _replay(tmp_path, capture, load_parameters_file("twin_otter_lateral"), twin_otter_bag)
-    for model, names in zip(result.models, result.parameter_names, strict=True):
-        axes = [ax for ax in drawn[f"{model}_estimates"].get_axes() if ax.get_ylabel()]
-        for name, ax in zip(names, axes, strict=True):
-            final = result.final(name)
-            lo, hi = ax.get_ylim()
-            assert lo <= final.estimate - 2 * final.std_error and final.estimate + 2 * final.std_error <= hi
-            assert 4 * final.std_error / (hi - lo) > 0.1, name
-        shaded = [p for p in axes[0].patches if p.get_label() == "before excitation"]
-        if model == "Cl":
-            x = shaded[0].get_patch_transform().transform(shaded[0].get_path().vertices)[:, 0]
-            assert 8.0 < x.max() < 9.0  # the aileron's first input
+    axes = dict(zip(result.models, _assert_final_bands_shown(result, drawn), strict=True))
+    (shaded,) = [p for p in axes["Cl"][0].patches if p.get_label() == "before excitation"]
+    x = shaded.get_patch_transform().transform(shaded.get_path().vertices)[:, 0]
+    assert 8.0 < x.max() < 9.0  # the aileron's first input
 
 
 # ------------------------------------------------------------------ Fig. 12
