@@ -274,6 +274,7 @@ def _campaign(args: argparse.Namespace) -> int:
     from .campaign import CampaignSettings, campaign_to, from_bags, load_maneuvers
     from .config import config_dir, node_config, pipeline_config
     from .executors import executor_for
+    from .figures import FigureOptions, figure_formats
 
     params = _replay_params(args, "campaign")
     executor = executor_for(args.scheduler, args.workers)
@@ -287,8 +288,9 @@ def _campaign(args: argparse.Namespace) -> int:
     if args.maneuvers:
         inputs.append(args.maneuvers)
     settings = CampaignSettings(pipeline_config(params), node_config(params).topics, strict=not args.lenient)
+    figures = None if args.no_plots else FigureOptions(figure_formats(args.figures), args.dpi)
     result = campaign_to(args.out, maneuvers, settings, executor, progress=not args.quiet,
-                         figures=not args.no_plots, force=args.force, inputs=inputs)
+                         figures=figures, force=args.force, inputs=inputs)
     print(result.summary(), end="")
     s = result.seconds()
     print(f"{len(maneuvers)} maneuvers in {result.wall_seconds + result.write_seconds:.1f} s "
@@ -529,10 +531,7 @@ def _add_replay(sub: Any) -> None:
     rp.add_argument("--end", type=_real(0.0), help="end, s from the bag start (after --start)")
     rp.add_argument("--lenient", action="store_true",
                     help="pass out-of-order and duplicate stamps to the pipeline (counted like the node does)")
-    rp.add_argument("--no-plots", action="store_true", help="no figures (summary.txt and the data files only)")
-    rp.add_argument("--figures", default="png", metavar="FORMATS",
-                    help="figure formats, comma separated, of png, svg, pdf (default png)")
-    rp.add_argument("--dpi", type=int, default=300, help="PNG resolution, dots per inch (default 300, 50 to 1200)")
+    _add_figure_options(rp, "no figures (summary.txt and the data files only)")
     rp.add_argument("--quiet", action="store_true", help="no progress bar")
     rp.add_argument("--force", action="store_true", help=_FORCE_HELP)
     rp.add_argument("--compare", metavar="DIR",
@@ -544,6 +543,15 @@ def _add_replay(sub: Any) -> None:
     rp.add_argument("--atol", type=_real(0.0), metavar="A",
                     help="--compare's absolute tolerance, in the units of each derivative (default 0)")
     rp.set_defaults(func=_replay)
+
+
+def _add_figure_options(parser: Any, no_plots: str) -> None:
+    """--no-plots, --figures and --dpi of replay and campaign (checked by figures.FigureOptions)."""
+    parser.add_argument("--no-plots", action="store_true", help=no_plots)
+    parser.add_argument("--figures", default="png", metavar="FORMATS",
+                        help="figure formats, comma separated, of png, svg, pdf (default png)")
+    parser.add_argument("--dpi", type=int, default=300,
+                        help="PNG resolution, dots per inch (default 300, 50 to 1200)")
 
 
 def _add_estimator_overrides(parser: Any) -> None:
@@ -586,7 +594,7 @@ def _add_campaign(sub: Any) -> None:
     _add_estimator_overrides(cp)
     cp.add_argument("--lenient", action="store_true",
                     help="pass out-of-order and duplicate stamps to the pipeline (counted like the node does)")
-    cp.add_argument("--no-plots", action="store_true", help="skip the Fig. 12 plots")
+    _add_figure_options(cp, "skip the Fig. 12 plots")
     cp.add_argument("--quiet", action="store_true", help="no progress bar")
     cp.add_argument("--force", action="store_true", help=_FORCE_HELP)
     cp.set_defaults(func=_campaign)

@@ -55,7 +55,7 @@ def test_a_failed_maneuver_is_named_and_the_others_still_count(tmp_path):
     settings = CampaignSettings(pipeline_config(p), node_config(p).topics)
     maneuvers = load_maneuvers(_file(tmp_path, [("good", 0.0, 11.0), ("late", 20.0, 30.0), ("good2", 1.0, 11.9)]),
                                BUNDLED)
-    c = campaign_to(tmp_path / "out", maneuvers, settings, LocalProcesses(1), figures=False)
+    c = campaign_to(tmp_path / "out", maneuvers, settings, LocalProcesses(1), figures=None)
     assert [r.maneuvers for r in c.table] == [2] * 7
     rows = list(csv.DictReader((tmp_path / "out" / "maneuvers.csv").read_text().splitlines()))
     late = [r for r in rows if r["maneuver"] == "late"]
@@ -96,7 +96,7 @@ def test_fig12_gets_each_maneuver_s_values_and_table_4_s_mean_and_scatter(tmp_pa
     p = parameters("t2")
     settings = CampaignSettings(pipeline_config(p), node_config(p).topics)
     c = campaign_to(tmp_path / "o", load_maneuvers(_file(tmp_path, SPANS), BUNDLED), settings, LocalProcesses(1),
-                    figures=False)
+                    figures=None)
     calls = []
     monkeypatch.setattr(figures, "figure12", lambda *a, **k: calls.append((a, k)) or [])
     campaign_figures(tmp_path, c.table, c.results)
@@ -111,3 +111,16 @@ def test_fig12_gets_each_maneuver_s_values_and_table_4_s_mean_and_scatter(tmp_pa
             np.testing.assert_array_equal(se_conv[i], [got[n].se_conventional for n in names])
             np.testing.assert_array_equal(se_corr[i], [got[n].se_corrected for n in names])
             np.testing.assert_array_equal(kw["se_corrected_all"][i], [got[n].se_corrected_all for n in names])
+
+
+def test_campaign_writes_fig12_in_every_format_asked_for(tmp_path, maneuvers_file):
+    """--figures png,svg,pdf gives each model's Fig. 12 in the three formats; --dpi bad is one
+    line naming it, exit 2, nothing written."""
+    out = tmp_path / "o"
+    argv = ["campaign", str(BUNDLED), "--maneuvers", str(maneuvers_file), "--config", "t2", "--out", str(out),
+            "--quiet", "--workers", "1", "--figures", "png,svg,pdf"]
+    assert cli.main(argv) == 0
+    want = {f"fig12_{m}.{f}" for m in ("CZ", "Cm") for f in ("png", "svg", "pdf")}
+    assert {p.name for p in out.glob("fig12_*")} == want
+    assert cli.main([*argv[:-2], "--out", str(tmp_path / "x"), "--dpi", "5"]) == 2
+    assert not (tmp_path / "x").exists()

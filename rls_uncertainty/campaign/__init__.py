@@ -17,6 +17,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from ..executors import Executor, LocalProcesses, Lost
+from ..figures import FigureOptions
 from ..files import output_directory
 from .figure import campaign_figures
 from .maneuvers import Maneuver, from_bags, load_maneuvers
@@ -38,6 +39,8 @@ __all__ = [
     "write_campaign",
     "campaign_to",
 ]
+
+DEFAULT_FIGURES = FigureOptions()  # PNG at print resolution (figures.DEFAULT_DPI)
 
 
 @dataclass
@@ -106,8 +109,10 @@ def run_campaign(maneuvers: Sequence[Maneuver], settings: CampaignSettings, exec
     return CampaignResult(results, table4(results), settings, executor.description, wall)
 
 
-def write_campaign(campaign: CampaignResult, out: Path, *, figures: bool = True) -> dict[str, Path]:
-    """The campaign's files into the directory ``out`` (module docstring)."""
+def write_campaign(campaign: CampaignResult, out: Path, *, figures: FigureOptions | None = DEFAULT_FIGURES,
+                   ) -> dict[str, Path]:
+    """The campaign's files into the directory ``out`` (module docstring); the Fig. 12 plots in
+    the ``figures`` formats (None: none)."""
     lags = campaign.settings.config.estimator.lags
     texts = {
         "maneuvers": ("maneuvers.csv", maneuvers_csv(campaign.results)),
@@ -119,15 +124,17 @@ def write_campaign(campaign: CampaignResult, out: Path, *, figures: bool = True)
     for key, (name, text) in texts.items():
         paths[key] = out / name
         paths[key].write_text(text)
-    if figures:
-        for path in campaign_figures(out, campaign.table, campaign.results, lags=f"{lags} lags"):
+    if figures is not None:
+        for path in campaign_figures(out, campaign.table, campaign.results, formats=figures.formats, dpi=figures.dpi,
+                                     lags=f"{lags} lags"):
             paths[path.stem] = path
     return paths
 
 
 def campaign_to(out: str | Path, maneuvers: Sequence[Maneuver], settings: CampaignSettings,
-                executor: Executor | None = None, *, progress: bool = False, figures: bool = True,
-                force: bool = False, inputs: Iterable[str | Path] = ()) -> CampaignResult:
+                executor: Executor | None = None, *, progress: bool = False,
+                figures: FigureOptions | None = DEFAULT_FIGURES, force: bool = False,
+                inputs: Iterable[str | Path] = ()) -> CampaignResult:
     """:func:`run_campaign` written to ``out`` (:func:`.files.output_directory`: checked
     before the first maneuver runs, complete or absent; never over an input bag or ``inputs``)."""
     bags = sorted({m.bag for m in maneuvers})
