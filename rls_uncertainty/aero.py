@@ -117,13 +117,15 @@ def flight_state(sample: Sequence[float], rate_dot: FloatArray, air_density: flo
     """A :data:`SAMPLE_FIELDS` vector and its angular accelerations as a :class:`FlightState`
     (``V``, ``alpha = atan2(w, u)``, ``beta = asin(v / V)``; ``qbar = rho V^2 / 2`` when not
     measured), or the reason it cannot be reduced (:func:`physics_rejection`) or is not
-    plausible (:meth:`.limits.PlausibilityLimits.sample_rejection`, when ``limits`` are given)."""
+    plausible (:meth:`.limits.PlausibilityLimits.sample_rejection`, when ``limits`` are given;
+    a measured dynamic pressure is also checked against ``V``)."""
     u, v, w = sample[_U:_W + 1]
     V = math.sqrt(u * u + v * v + w * w)
     if not V > 0.0:
         return "nonpositive_airspeed"
     qbar = sample[_QBAR]
-    if math.isnan(qbar):
+    measured = not math.isnan(qbar)
+    if not measured:
         qbar = 0.5 * air_density * V * V
     ax, ay, az, p, q, r = sample[:6]
     de, da, dr, thrust = sample[_DE:]
@@ -135,7 +137,7 @@ def flight_state(sample: Sequence[float], rate_dot: FloatArray, air_density: flo
     )
     reason = physics_rejection(state)
     if reason is None and limits is not None:
-        reason = limits.sample_rejection(state)
+        reason = limits.sample_rejection(state, measured)
     return reason or state
 
 

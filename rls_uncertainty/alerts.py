@@ -86,13 +86,33 @@ def _g(x: float) -> str:
     return f"{x:.4g}"
 
 
+# What else than a real value a refused one may be, where it is not a unit.
+_SUSPECTS = {
+    "implausible_angular_acceleration": "else look for gyro spikes (a body rate jumped between two consecutive imu "
+                                        "messages)",
+}
+
+
 def _limit(config: PipelineConfig, reason: str, seen: float) -> str:
     """``seen alpha = 1.31 rad, limits.alpha allows |alpha| <= 1 rad; set limits.alpha ...``"""
     parameter, bound = config.limits.bound(reason, seen)
     quantity = reason.removeprefix("implausible_")
     unit = BOUNDS[reason][1] if reason in BOUNDS else ""
     seen_text = f"seen {quantity} = {_g(seen)} {unit}, " if not math.isnan(seen) else ""
-    return f"{seen_text}{parameter} allows {bound}; set {parameter} if that is real, else check the sensor's units"
+    suspect = _SUSPECTS.get(reason, "else check the sensor's units")
+    return f"{seen_text}{parameter} allows {bound}; set {parameter} if that is real, {suspect}"
+
+
+def _inconsistent_dynamic_pressure(config: PipelineConfig, state: Any) -> str:
+    """The dynamic pressure and the airspeed of a refused sample (a FlightState, or None), the
+    density they imply and the bound it is beyond."""
+    seen = math.nan if state is None else sample_value("inconsistent_dynamic_pressure", state)
+    parameter, bound = config.limits.bound("inconsistent_dynamic_pressure", seen)
+    implies = "" if state is None else (f"dynamic pressure {_g(state.qbar)} Pa at true airspeed {_g(state.V)} m/s "
+                                        f"implies an air density 2 qbar/V^2 = {_g(seen)} kg/m^3, ")
+    return (f"{implies}{parameter} allows {bound}: the dynamic_pressure and airspeed streams disagree (a unit? a "
+            f"blocked pitot?); set {parameter} if that is real, or inputs.use_dynamic_pressure false to use "
+            "rho V^2 / 2 with inputs.air_density")
 
 
 def _explain_joints(config: PipelineConfig, reason: str, evidence: Any) -> str:
@@ -136,13 +156,15 @@ def _explain_sample(config: PipelineConfig, reason: str, evidence: Any) -> str:
                 f"more than inputs.buffer_duration = {inputs.buffer_duration:g} s apart: different clocks?)")
     if reason.startswith("invalid_"):
         return f"holes left by rejected {stream} messages"
-    if reason.startswith("implausible_"):
-        seen = math.nan
+    if reason.startswith("implausible_") or reason == "inconsistent_dynamic_pressure":
+        state = None
         if evidence is not None:
             sample, rate_dot = evidence
             state = flight_state(sample, np.asarray(rate_dot), inputs.air_density)
-            seen = sample_value(reason, state) if not isinstance(state, str) else math.nan
-        return _limit(config, reason, seen)
+            state = None if isinstance(state, str) else state
+        if reason == "inconsistent_dynamic_pressure":
+            return _inconsistent_dynamic_pressure(config, state)
+        return _limit(config, reason, math.nan if state is None else sample_value(reason, state))
     if reason.startswith(("nonpositive_", "non_finite")):
         return f"{reason.replace('_', ' ')} in the formed samples (Eq. 1 divides by dynamic pressure and airspeed)"
     if reason == "differentiator_warmup":

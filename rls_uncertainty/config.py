@@ -50,7 +50,7 @@ from typing import Any
 import yaml
 
 from .convergence import ConvergenceConfig
-from .differentiation import DifferentiatorConfig
+from .differentiation import MAX_ORDER, MAX_WINDOW, MIN_WINDOW, DifferentiatorConfig
 from .errors import ConfigError
 from .estimator.options import AUTO_BURN_IN, MAX_BURN_IN, RESIDUALS, WINDOWS, EstimatorOptions
 from .limits import PlausibilityLimits
@@ -306,12 +306,17 @@ PARAMETERS: tuple[ParamSpec, ...] = (
         "estimator.lag_selection auto, 0 (the paper) with fixed lags",
         -1, MAX_BURN_IN,
     ),
-    ParamSpec("differentiator.window", 9, "angular-acceleration differentiator window, samples", 3, 201),
-    ParamSpec("differentiator.order", 3, "local polynomial order of the differentiator", 1, 10),
+    ParamSpec("differentiator.window", 9, "angular-acceleration differentiator window, samples", MIN_WINDOW,
+              MAX_WINDOW),
+    ParamSpec(
+        "differentiator.order", 3,
+        "local polynomial order of the differentiator (below differentiator.window; weights exact at every setting)",
+        1, MAX_ORDER,
+    ),
     ParamSpec(
         "differentiator.lag", 4,
         "differentiator fixed lag, samples (0 = causal); every signal is delayed by it",
-        0, 200,
+        0, MAX_WINDOW - 1,
     ),
     ParamSpec(
         "inputs.use_dynamic_pressure", True,
@@ -423,6 +428,24 @@ PARAMETERS: tuple[ParamSpec, ...] = (
         "largest plausible thrust, either sign (reverse thrust), N (above the largest aircraft's total "
         "thrust); rejected as implausible_thrust",
         1.0, 1.0e8,
+    ),
+    ParamSpec(
+        "limits.air_density_min", 0.05,
+        "lowest plausible air density 2 qbar/V^2 implied by the measured dynamic pressure and the true airspeed, "
+        "kg/m^3 (the air at 21 km is 0.07); a sample below is rejected as inconsistent_dynamic_pressure",
+        0.005, 10.0,
+    ),
+    ParamSpec(
+        "limits.air_density_max", 2.0,
+        "highest plausible air density 2 qbar/V^2 implied by the measured dynamic pressure and the true airspeed, "
+        "kg/m^3 (-60 C at 1085 hPa is 1.77); a sample above is rejected as inconsistent_dynamic_pressure",
+        0.01, 100.0,
+    ),
+    ParamSpec(
+        "limits.angular_acceleration", 500.0,
+        "largest plausible change of a body rate between consecutive imu messages over their interval, rad/s^2 "
+        "(a gyro spike of 10 rad/s in one 50 Hz message is 500); rejected as implausible_angular_acceleration",
+        1.0, 1.0e6,
     ),
     ParamSpec("surfaces.elevator", ["elevator"], "JointState names averaged into the elevator deflection (Eq. 23)"),
     ParamSpec(

@@ -10,6 +10,16 @@ non-finite or implausible value, a JointState that cannot be mixed, another fram
 the newest refused message of each kind carried is kept as evidence
 (:meth:`.bookkeeping.Bookkeeping.note`) for the misconfiguration reports of :mod:`.alerts`.
 
+An IMU message is also judged against the one before it: a body rate that changed faster than
+``limits.angular_acceleration`` allows since the previous IMU message passed on (a gyro spike)
+is rejected as ``implausible_angular_acceleration``
+(:meth:`.limits.PlausibilityLimits.rate_change_rejection`; :mod:`.limits` says why on the
+messages). The previous message is the newest one passed to the sampler; a refused message
+does not replace it, so the message after a spike is judged against the one before the spike.
+Messages more than ``inputs.max_gap`` after it, or stamped before it (a new timeline), are not
+compared and become the new reference: a stream that really moved is accepted again after at
+most ``inputs.max_gap``.
+
 Every method returns whether samples may be due (:meth:`.sampling.Sampler.due`); the pipeline
 then forms them.
 """
@@ -47,6 +57,8 @@ class Intake:
         streams = sampler.streams
         self._imu, self._airspeed, self._surfaces = streams["imu"], streams["airspeed"], streams["control_surfaces"]
         self._qbar, self._thrust = streams["dynamic_pressure"], streams["thrust"]
+        self._max_gap_ns = sampler.max_gap_ns
+        self._rates: tuple[int, float, float, float] | None = None  # the previous IMU message: stamp, rates
 
     def imu(self, stamp_ns: int, angular_velocity: Sequence[float], linear_acceleration: Sequence[float]) -> bool:
         """``sensor_msgs/Imu``: body rates (rad/s) and specific force (m/s^2)."""
@@ -56,7 +68,19 @@ class Intake:
         reason = self.limits.imu_rejection(angular_velocity, linear_acceleration)
         if reason is not None:
             return self._invalid(self._imu, stamp_ns, values, reason)
-        return self.sampler.add(self._imu, int(stamp_ns), values)
+        stamp_ns = int(stamp_ns)
+        previous = self._rates
+        if previous is not None:
+            dt_ns = stamp_ns - previous[0]
+            if dt_ns == 0:  # a duplicate stamp (the sampler refuses it): the reference stays
+                return self.sampler.add(self._imu, stamp_ns, values)
+            if 0 < dt_ns <= self._max_gap_ns:
+                change = (wx - previous[1], wy - previous[2], wz - previous[3])
+                reason = self.limits.rate_change_rejection(dt_ns * 1e-9, change)
+                if reason is not None:
+                    return self._invalid(self._imu, stamp_ns, (dt_ns * 1e-9, *change), reason)
+        self._rates = (stamp_ns, wx, wy, wz)
+        return self.sampler.add(self._imu, stamp_ns, values)
 
     def airspeed(self, stamp_ns: int, velocity: Sequence[float]) -> bool:
         """True-airspeed vector, m/s."""
@@ -101,7 +125,8 @@ class Intake:
     def _invalid(self, stream: Stream, stamp_ns: int, values: tuple, reason: str) -> bool:
         """A message whose values are refused: ``non_finite`` goes to the sampler as a value
         hole, the other reasons are rejected at the message's stamp; either way it is a hole
-        (:mod:`.sampling`), and its values are the evidence."""
+        (:mod:`.sampling`), and its values are the evidence (of ``implausible_angular_acceleration``:
+        the interval and the rates' changes, :func:`.limits.message_value`)."""
         self.book.note(stream.name, reason, values)
         if reason == "non_finite":
             return self.sampler.add(stream, int(stamp_ns), values, False)

@@ -8,6 +8,26 @@ pressure is not measured. A value out of bounds is rejected as ``implausible_<qu
 instead of reaching Eqs. 1 and 2; :meth:`PlausibilityLimits.bound` and :func:`message_value` /
 :func:`sample_value` say, for a misconfiguration report, which parameter bounds the quantity
 and what value was seen. Pure Python.
+
+Two checks compare streams or messages rather than one value with its bound, because each
+value can be plausible on its own while the data are not:
+
+* **the air density implied by the measured dynamic pressure and the true airspeed**,
+  ``2 qbar / V^2``, must lie in ``[air_density_min, air_density_max]`` (a sample outside is
+  ``inconsistent_dynamic_pressure``): a dynamic pressure of 5 Pa at 40 m/s implies 0.006
+  kg/m^3, the air at 37 km. It catches a dynamic pressure in another unit (hPa, kPa, psi for
+  Pa), a blocked or disconnected pitot, a stream that does not belong with the airspeed. (It
+  cannot tell an equivalent airspeed from the true one: both agree with sea-level density.
+  Without a dynamic-pressure stream, ``qbar = rho V^2 / 2`` agrees by construction.)
+* **the angular acceleration implied by two consecutive IMU messages**, each body rate's
+  change over their interval, must stay within ``angular_acceleration``
+  (:meth:`PlausibilityLimits.rate_change_rejection`, called by :class:`.intake.Intake`; a
+  message beyond it is ``implausible_angular_acceleration``): a gyro spike of 19.999 rad/s
+  passes ``angular_rate`` but implies 1000 rad/s^2 for one 50 Hz interval, which no airframe
+  can do. The check is on the messages, before the differentiator: a spike refused there
+  leaves a hole (no sample is interpolated across it), where a bound on the differentiated
+  rates would miss the spike's own sample (the centred differentiator's middle weight is 0)
+  and reject only its neighbours, after the spike had entered the regression.
 """
 
 from __future__ import annotations
@@ -32,7 +52,11 @@ BOUNDS: dict[str, tuple[tuple[str, ...], str]] = {
     "implausible_surface": (("surface",), "rad"),
     "implausible_dynamic_pressure": (("dynamic_pressure_min", "dynamic_pressure_max"), "Pa"),
     "implausible_thrust": (("thrust",), "N"),
+    "implausible_angular_acceleration": (("angular_acceleration",), "rad/s^2"),
+    "inconsistent_dynamic_pressure": (("air_density_min", "air_density_max"), "kg/m^3"),
 }
+# The quantity a reason's bound is on, where it is not the reason's own ``implausible_<quantity>``.
+_QUANTITY = {"inconsistent_dynamic_pressure": "air_density"}
 
 
 @dataclass(frozen=True)
@@ -49,6 +73,21 @@ class PlausibilityLimits:
     ``surface`` bounds each mixed control-surface joint and deflection (rad);
     ``dynamic_pressure_min``/``_max`` bound the dynamic pressure (Pa, measured or
     ``rho V^2 / 2``); ``thrust`` bounds ``|thrust|`` (N, reverse thrust is negative).
+
+    ``air_density_min``/``_max`` (kg/m^3) bound the density ``2 qbar / V^2`` that a measured
+    dynamic pressure and the true airspeed imply. 0.05 lies below the air at 21 km (0.07 at
+    70,000 ft, ISA), the ceiling of the highest-flying subsonic aircraft (U-2, ER-2; transports
+    and business jets stop near 15.5 km, 0.18); 2.0 lies above the densest air at any airfield
+    (-60 C at 1085 hPa: 1.77) with room for a pitot's impact pressure read as the dynamic
+    pressure (up to 9 % more at Mach 0.6). A sensor's calibration error is well inside;
+    a unit or a stream that does not belong is not.
+
+    ``angular_acceleration`` (rad/s^2) bounds each body rate's change between consecutive IMU
+    messages divided by their interval. 500 is about 10 times what a subscale research model
+    reaches with full controls (the NASA T-2 at 45 m/s: 20 rad/s^2 in pitch with
+    ``C_m_delta_e`` = -1.83, about 45 in roll; transports reach a few) and leaves room for
+    gyro noise at 1 kHz (the change of two samples of 0.005 rad/s noise: 7 rad/s^2 rms); it
+    refuses any jump above 10 rad/s between 50 Hz messages, above 2.5 rad/s at 200 Hz.
     """
 
     airspeed_min: float = 3.0
@@ -61,6 +100,9 @@ class PlausibilityLimits:
     dynamic_pressure_min: float = 5.0
     dynamic_pressure_max: float = 1.0e5
     thrust: float = 2.0e6
+    air_density_min: float = 0.05
+    air_density_max: float = 2.0
+    angular_acceleration: float = 500.0
 
     def __post_init__(self) -> None:
         for f in fields(self):
@@ -71,7 +113,7 @@ class PlausibilityLimits:
         for name in ("alpha", "beta"):
             if getattr(self, name) >= 0.5 * math.pi:
                 raise ConfigError(f"limits.{name} must be below pi/2 rad, got {getattr(self, name)!r}")
-        for name in ("airspeed", "dynamic_pressure"):
+        for name in ("airspeed", "dynamic_pressure", "air_density"):
             low, high = getattr(self, f"{name}_min"), getattr(self, f"{name}_max")
             if not low < high:
                 raise ConfigError(f"limits.{name}_min ({low!r}) must be below limits.{name}_max ({high!r})")
@@ -115,6 +157,17 @@ class PlausibilityLimits:
             return None
         return "non_finite" if not math.isfinite(newton) else "implausible_thrust"
 
+    def rate_change_rejection(self, dt_s: float, change: Sequence[float]) -> str | None:
+        """Two consecutive IMU messages ``dt_s`` seconds apart whose body rates differ by
+        ``change`` (rad/s, per axis): ``implausible_angular_acceleration`` when a change
+        exceeds ``angular_acceleration * dt_s``. (The rates themselves were judged finite and
+        within ``angular_rate`` first.)"""
+        a = self.angular_acceleration * dt_s
+        for d in change:
+            if not -a <= d <= a:
+                return "implausible_angular_acceleration"
+        return None
+
     def surface_rejection(self, positions: Sequence[float]) -> str | None:
         """The control-surface joints a deflection is mixed from (rad)."""
         s = self.surface
@@ -123,11 +176,13 @@ class PlausibilityLimits:
                 return "non_finite" if not _all_finite(positions) else "implausible_surface"
         return None
 
-    def sample_rejection(self, state: Any) -> str | None:
+    def sample_rejection(self, state: Any, qbar_measured: bool = False) -> str | None:
         """Reason one formed sample (a scalar :class:`.aero.FlightState` whose values are all
         finite) is implausible, ``implausible_<field>``, or ``None``. Messages were judged one
         by one already; this also covers what only a sample has: flow angles and airspeed of
-        interpolated air data, and ``rho V^2 / 2`` when the dynamic pressure is not measured."""
+        interpolated air data, ``rho V^2 / 2`` when the dynamic pressure is not measured, and
+        when it is (``qbar_measured``), its agreement with the airspeed:
+        ``inconsistent_dynamic_pressure`` when ``2 qbar / V^2`` is not a plausible air density."""
         s = state
         if not self.airspeed_min <= s.V <= self.airspeed_max:
             return "implausible_airspeed"
@@ -137,6 +192,8 @@ class PlausibilityLimits:
             return "implausible_beta"
         if not self.dynamic_pressure_min <= s.qbar <= self.dynamic_pressure_max:
             return "implausible_dynamic_pressure"
+        if qbar_measured and not self.air_density_min * s.V * s.V <= 2.0 * s.qbar <= self.air_density_max * s.V * s.V:
+            return "inconsistent_dynamic_pressure"
         if not max(abs(s.p), abs(s.q), abs(s.r)) <= self.angular_rate:
             return "implausible_angular_rate"
         if not max(abs(s.ax), abs(s.ay), abs(s.az)) <= self.specific_force:
@@ -155,7 +212,7 @@ class PlausibilityLimits:
         if reason not in BOUNDS:
             return "", ""
         names, unit = BOUNDS[reason]
-        quantity = reason.removeprefix("implausible_")
+        quantity = _QUANTITY.get(reason, reason.removeprefix("implausible_"))
         if len(names) == 1:
             return f"limits.{names[0]}", f"|{quantity}| <= {getattr(self, names[0]):g} {unit}"
         low, high = (getattr(self, n) for n in names)
@@ -183,7 +240,9 @@ def message_value(reason: str, values: Sequence[float]) -> float:
     """The value of an ``implausible_<quantity>`` message that its bound refused: the
     message's values as the pipeline judged them (IMU ``(wx, wy, wz, fx, fy, fz)``, the
     airspeed vector, the dynamic pressure, the thrust, or the mixed joints' positions); the
-    largest magnitude for a per-axis bound. NaN when the reason is not a bound's."""
+    largest magnitude for a per-axis bound; of ``implausible_angular_acceleration`` the values
+    are ``(dt_s, dwx, dwy, dwz)`` (:meth:`PlausibilityLimits.rate_change_rejection`'s). NaN when
+    the reason is not a bound's."""
     if reason in ("implausible_airspeed", "implausible_alpha", "implausible_beta") and len(values) == 3:
         V, alpha, beta = _air_data(*values)
         return {"implausible_airspeed": V, "implausible_alpha": alpha, "implausible_beta": beta}[reason]
@@ -195,6 +254,8 @@ def message_value(reason: str, values: Sequence[float]) -> float:
         return _largest(values)
     if reason in ("implausible_dynamic_pressure", "implausible_thrust") and values:
         return values[0]
+    if reason == "implausible_angular_acceleration" and len(values) == 4:
+        return _largest(values[1:]) / values[0] if values[0] > 0 else math.nan
     return math.nan
 
 
@@ -211,6 +272,7 @@ def sample_value(reason: str, state: Any) -> float:
         "implausible_specific_force": lambda: _largest((s.ax, s.ay, s.az)),
         "implausible_surface": lambda: _largest((s.delta_e, s.delta_a, s.delta_r)),
         "implausible_thrust": lambda: s.thrust,
+        "inconsistent_dynamic_pressure": lambda: 2.0 * s.qbar / (s.V * s.V),
     }
     get = quantities.get(reason)
     return float(get()) if get is not None else math.nan

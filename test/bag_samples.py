@@ -1,6 +1,7 @@
 """Small bags and mapping files for the bag-tool tests, the CLI's one-line-error check and a
 directory snapshot."""
 
+import copy
 import os
 from pathlib import Path
 
@@ -96,4 +97,20 @@ def tree(root: Path) -> dict:
                 out[rel] = "dir"
             else:
                 out[rel] = p.read_bytes()
+    return out
+
+
+def changed_messages(messages, kind, change):
+    """``(kind, stamp, msg)`` messages with ``change(k, copy)`` applied to a copy of the k-th
+    message of ``kind`` (it returns False to keep the original): hostile inputs made from a
+    real recording."""
+    out, k = [], 0
+    for msg_kind, stamp, msg in messages:
+        chosen = msg
+        if msg_kind == kind:
+            new = copy.deepcopy(msg)
+            if change(k, new) is not False:
+                chosen = new
+            k += 1
+        out.append((msg_kind, stamp, chosen))
     return out

@@ -129,3 +129,17 @@ def test_flight_state_judges_derived_quantities_with_the_limits():
     mid = aircraft_sample(imu, (3.0 * math.cos(a), 0.0, 0.0))
     assert LIMITS.airspeed_rejection((3.0 * math.cos(a), 0.0, 3.0 * math.sin(a))) is None
     assert flight_state(mid, np.zeros(3), 1.225, LIMITS) == "implausible_airspeed"
+
+
+def test_a_measured_dynamic_pressure_is_judged_against_the_airspeed_a_computed_one_is_not():
+    """At 25 m/s: 9.4 Pa measured implies 0.03 kg/m^3, below limits.air_density_min (0.05):
+    inconsistent; the same 9.4 Pa computed from inputs.air_density = 0.03 is what the user
+    said the air is, and is used. 383 Pa measured (1.225 kg/m^3) is consistent."""
+    imu = (0.0, -0.1, 0.0, 0.3, 0.0, 9.8)
+    velocity = (25.0, 0.0, 0.0)
+    qbar = 0.5 * 0.03 * 25.0**2
+    assert flight_state(aircraft_sample(imu, velocity, qbar), np.zeros(3), 1.225, LIMITS) == \
+        "inconsistent_dynamic_pressure"
+    computed = flight_state(aircraft_sample(imu, velocity), np.zeros(3), 0.03, LIMITS)
+    assert isinstance(computed, FlightState) and computed.qbar == pytest.approx(qbar, rel=1e-15)
+    assert isinstance(flight_state(aircraft_sample(imu, velocity, 383.0), np.zeros(3), 0.03, LIMITS), FlightState)

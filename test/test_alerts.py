@@ -8,6 +8,7 @@ from __future__ import annotations
 import math
 
 import pytest
+from bag_samples import changed_messages
 
 from rls_uncertainty.alerts import MAX_LINE, MIN_MESSAGES, SHOWN, AlertPolicy, explain, no_estimate
 from rls_uncertainty.bags import read_inputs
@@ -90,6 +91,48 @@ def test_samples_refused_once_formed_are_explained_with_the_derived_value(bag):
     seen = float(why.split("seen dynamic_pressure = ")[1].split(" Pa")[0])
     assert 0.5 * 0.01 * 30.0**2 < seen < 0.5 * 0.01 * 60.0**2  # rho V^2 / 2 at the T-2's 30-60 m/s
     assert "limits.dynamic_pressure_min allows 100 <= dynamic_pressure <= 100000 Pa" in why
+
+
+def test_a_dynamic_pressure_that_disagrees_with_the_airspeed_names_both_and_the_density(bag):
+    """5 Pa at the bag's airspeed: the text gives both, the density 2 qbar / V^2 they imply
+    (computed here from the values shown) and the parameter that bounds it."""
+    def five_pascal(k, msg):
+        msg.fluid_pressure = 5.0
+
+    pipe, c = run(changed_messages(bag, "dynamic_pressure", five_pascal), T2)
+    text = c["explanations"]["samples"]["inconsistent_dynamic_pressure"]
+    V = float(text.split("at true airspeed ")[1].split(" m/s")[0])
+    rho = float(text.split("2 qbar/V^2 = ")[1].split(" kg/m^3")[0])
+    speeds = [math.hypot(m.vector.x, m.vector.y, m.vector.z) for kind, _s, m in bag if kind == "airspeed"]
+    assert min(speeds) * (1 - 1e-3) <= V <= max(speeds) * (1 + 1e-3)  # shown to 4 digits
+    assert rho == pytest.approx(2 * 5.0 / V**2, rel=1e-3)
+    assert text == (f"dynamic pressure 5 Pa at true airspeed {V:.4g} m/s implies an air density 2 qbar/V^2 = "
+                    f"{rho:.4g} kg/m^3, limits.air_density_min allows 0.05 <= air_density <= 2 kg/m^3: the "
+                    "dynamic_pressure and airspeed streams disagree (a unit? a blocked pitot?); set "
+                    "limits.air_density_min if that is real, or inputs.use_dynamic_pressure false to use rho V^2 / 2 "
+                    "with inputs.air_density")
+    assert no_estimate(c, pipe.required).startswith(
+        f"samples: none of the {c['samples_formed']} samples of the run used (inconsistent_dynamic_pressure ")
+
+
+def test_a_gyro_spike_names_the_angular_acceleration_it_implies(bag):
+    """One pitch-rate message of 19.999 rad/s: the value seen is its change from the message
+    before it over their interval, computed here from the bag."""
+    imu = [(s, m) for kind, s, m in bag if kind == "imu"]
+    k = 1200
+
+    def spike(i, msg):
+        if i != k:
+            return False
+        msg.angular_velocity.y = 19.999
+
+    _pipe, c = run(changed_messages(bag, "imu", spike), T2)
+    (t0, before), (t1, _m) = imu[k - 1], imu[k]
+    seen = (19.999 - before.angular_velocity.y) / ((t1 - t0) * 1e-9)
+    assert c["explanations"]["imu"]["implausible_angular_acceleration"] == (
+        f"seen angular_acceleration = {seen:.4g} rad/s^2, limits.angular_acceleration allows "
+        "|angular_acceleration| <= 500 rad/s^2; set limits.angular_acceleration if that is real, else look for "
+        "gyro spikes (a body rate jumped between two consecutive imu messages)")
 
 
 def test_a_healthy_run_says_nothing(bag):

@@ -139,6 +139,9 @@ def test_every_parameter_reaches_its_nested_field():
         "limits.dynamic_pressure_min": (("limits", "dynamic_pressure_min"), 50.0),
         "limits.dynamic_pressure_max": (("limits", "dynamic_pressure_max"), 5000.0),
         "limits.thrust": (("limits", "thrust"), 1000.0),
+        "limits.air_density_min": (("limits", "air_density_min"), 0.3),
+        "limits.air_density_max": (("limits", "air_density_max"), 1.5),
+        "limits.angular_acceleration": (("limits", "angular_acceleration"), 100.0),
     }
     sections = {"rate", "estimator", "differentiator", "inputs", "surfaces", "limits"}
     pipeline_params = [p.name for p in PARAMETERS if p.name.split(".")[0] in sections]
@@ -261,10 +264,17 @@ def test_plausibility_defaults_lie_between_any_flight_and_absurd_values():
         p = spec[f"limits.{f.name}"]
         assert p.default == getattr(d, f.name) and p.low <= p.default <= p.high
         assert p.high < 1e9 and p.low > 1e-3, p.name
-        assert f"implausible_{f.name.removesuffix('_min').removesuffix('_max')}" in p.description
+        quantity = f.name.removesuffix("_min").removesuffix("_max")
+        reason = "inconsistent_dynamic_pressure" if quantity == "air_density" else f"implausible_{quantity}"
+        assert reason in p.description, p.name
     assert spec["limits.alpha"].high < 0.5 * 3.14159 and spec["limits.beta"].high < 0.5 * 3.14159
     # A dynamic pressure above the one of the top airspeed at sea level (so both limits agree).
     assert d.dynamic_pressure_max >= 0.5 * 1.225 * d.airspeed_max**2
+    # The densities the flights imply (2 qbar / V^2: 1.001..1.035 for the Twin Otter, 1.177 for
+    # the T-2) well inside; the bundled bag's angular accelerations (2.7 rad/s^2 at most between
+    # IMU messages; the Twin Otter's 2.6) two orders of magnitude below the bound.
+    assert d.air_density_min <= 1.0 / 10 and d.air_density_max >= 1.18 * 1.5
+    assert d.angular_acceleration >= 100 * 2.7
 
 
 # ------------------------------------------------------------------ the node's parameter sources

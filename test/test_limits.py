@@ -7,6 +7,7 @@ import math
 import pytest
 
 from rls_uncertainty.aero import FlightState
+from rls_uncertainty.errors import ConfigError
 from rls_uncertainty.limits import BOUNDS, PlausibilityLimits, message_value, sample_value
 
 
@@ -100,10 +101,44 @@ def test_control_surface_joints_beyond_the_limit_are_implausible(positions, reas
     (dict(delta_r=-1.2), "implausible_surface"),
     (dict(thrust=3e6), "implausible_thrust"),
     (dict(V=2.0, thrust=3e6), "implausible_airspeed"),  # the first problem is named
-    (dict(p_dot=1e3), None),  # angular accelerations have no limit (derived, bounded by the rates)
+    (dict(p_dot=1e3), None),  # derived accelerations: the messages' rate changes are bounded (Intake)
+    (dict(qbar=5.0), None),  # 0.006 kg/m^3 at 40 m/s, but qbar is not measured: rho V^2 / 2 agrees by construction
 ])
 def test_a_sample_beyond_the_limits_gives_its_reason(kw, reason):
     assert LIMITS.sample_rejection(state(**kw)) == reason
+
+
+@pytest.mark.parametrize("kw, reason", [
+    ({}, None),  # 980 Pa at 40 m/s: 1.225 kg/m^3
+    (dict(qbar=5.0), "inconsistent_dynamic_pressure"),  # 0.006 kg/m^3: the air at 37 km
+    (dict(qbar=0.5 * 0.05 * 1600.0), None),  # the bounds themselves are consistent
+    (dict(qbar=0.5 * 2.0 * 1600.0), None),
+    (dict(qbar=0.5 * 0.0499 * 1600.0), "inconsistent_dynamic_pressure"),
+    (dict(qbar=0.5 * 2.01 * 1600.0), "inconsistent_dynamic_pressure"),
+    (dict(qbar=980.0 / 100.0), "inconsistent_dynamic_pressure"),  # hPa given for Pa
+    (dict(qbar=4.0), "implausible_dynamic_pressure"),  # beyond its own bound: named first
+])
+def test_a_measured_dynamic_pressure_must_agree_with_the_airspeed(kw, reason):
+    assert LIMITS.sample_rejection(state(**kw), qbar_measured=True) == reason
+
+
+@pytest.mark.parametrize("dt, change, reason", [
+    (0.02, (0.1, -0.2, 0.05), None),
+    (0.02, (0.0, 10.0, 0.0), None),  # 500 rad/s^2: the bound itself is plausible
+    (0.02, (0.0, 10.001, 0.0), "implausible_angular_acceleration"),
+    (0.02, (0.0, 0.0, -19.999), "implausible_angular_acceleration"),  # a spike at 50 Hz: 1000 rad/s^2
+    (0.005, (2.6, 0.0, 0.0), "implausible_angular_acceleration"),  # 520 rad/s^2 at 200 Hz
+    (0.25, (0.0, 40.0, 0.0), None),  # from -20 to +20 rad/s over 0.25 s: 160 rad/s^2
+])
+def test_a_rate_change_between_imu_messages_beyond_the_limit_is_implausible(dt, change, reason):
+    assert LIMITS.rate_change_rejection(dt, change) == reason
+
+
+def test_the_density_range_and_the_angular_acceleration_are_checked_once_here():
+    with pytest.raises(ConfigError, match=r"limits\.air_density_min"):
+        PlausibilityLimits(air_density_min=2.5)
+    with pytest.raises(ConfigError, match=r"limits\.angular_acceleration"):
+        PlausibilityLimits(angular_acceleration=0.0)
 
 
 @pytest.mark.parametrize("reason, parameter, bound", [
@@ -111,6 +146,8 @@ def test_a_sample_beyond_the_limits_gives_its_reason(kw, reason):
     ("implausible_airspeed", "limits.airspeed_min/max", "3 <= airspeed <= 400 m/s"),
     ("implausible_dynamic_pressure", "limits.dynamic_pressure_min/max", "5 <= dynamic_pressure <= 100000 Pa"),
     ("implausible_thrust", "limits.thrust", "|thrust| <= 2e+06 N"),
+    ("implausible_angular_acceleration", "limits.angular_acceleration", "|angular_acceleration| <= 500 rad/s^2"),
+    ("inconsistent_dynamic_pressure", "limits.air_density_min/max", "0.05 <= air_density <= 2 kg/m^3"),
     ("missing_joint", "", ""),
 ])
 def test_each_implausible_reason_names_the_parameter_that_bounds_it(reason, parameter, bound):
@@ -118,13 +155,16 @@ def test_each_implausible_reason_names_the_parameter_that_bounds_it(reason, para
 
 
 def test_every_bound_names_fields_that_exist_and_every_refusal_has_a_bound():
-    """BOUNDS covers each implausible_<quantity> the limits can return, with real fields."""
+    """BOUNDS covers each implausible_<quantity> (and inconsistent_dynamic_pressure) the limits
+    can return, with real fields."""
     names = {f for f, _ in BOUNDS.values() for f in f}
     assert names <= set(PlausibilityLimits.__dataclass_fields__)
     refusals = {LIMITS.imu_rejection((99.0, 0, 0), (0, 0, 0)), LIMITS.imu_rejection((0, 0, 0), (999.0, 0, 0)),
                 LIMITS.airspeed_rejection((1.0, 0, 0)), LIMITS.airspeed_rejection((-40.0, 0, 0)),
                 LIMITS.airspeed_rejection((30.0, 30.0, 0.0)), LIMITS.dynamic_pressure_rejection(1.0),
-                LIMITS.thrust_rejection(1e9), LIMITS.surface_rejection([2.0])}
+                LIMITS.thrust_rejection(1e9), LIMITS.surface_rejection([2.0]),
+                LIMITS.rate_change_rejection(0.01, (0.0, 19.0, 0.0)),
+                LIMITS.sample_rejection(state(qbar=5.0), qbar_measured=True)}
     assert refusals == set(BOUNDS)
 
 
@@ -137,6 +177,7 @@ def test_every_bound_names_fields_that_exist_and_every_refusal_has_a_bound():
     ("implausible_dynamic_pressure", (2.0,), 2.0),
     ("implausible_thrust", (-3e6,), -3e6),
     ("implausible_surface", (0.1, -1.5), 1.5),
+    ("implausible_angular_acceleration", (0.02, 0.0, 19.9, -0.5), 995.0),  # (interval, changes)
 ])
 def test_the_value_seen_in_a_refused_message_is_the_bounded_quantity(reason, values, seen):
     assert message_value(reason, values) == pytest.approx(seen, rel=1e-15)
@@ -145,4 +186,5 @@ def test_the_value_seen_in_a_refused_message_is_the_bounded_quantity(reason, val
 def test_the_value_seen_in_a_refused_sample_is_the_bounded_quantity():
     assert sample_value("implausible_alpha", state(alpha=1.3)) == 1.3
     assert sample_value("implausible_angular_rate", state(q=-30.0)) == 30.0
+    assert sample_value("inconsistent_dynamic_pressure", state(qbar=5.0, V=40.0)) == 2.0 * 5.0 / 1600.0
     assert math.isnan(sample_value("gap_imu", state()))

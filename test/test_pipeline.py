@@ -16,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from bag_samples import changed_messages
 
 from rls_uncertainty.config import load_aircraft, load_parameters_file, pipeline_config
 from rls_uncertainty.differentiation import DifferentiatorConfig, differentiate
@@ -968,3 +969,69 @@ def test_a_flipped_bit_in_a_recorded_double_is_counted_and_never_replayed(tmp_pa
     assert len(rows) > 1000
     values = np.array([[float(r[k]) for k in ("estimate", "std_error", "std_error_conventional")] for r in rows])
     assert np.isfinite(values).all()
+
+
+# ----------------------------------------------------------------------------- consistency across streams
+
+def _final(result):
+    """Final estimates, corrected SEs and R^2 of each model of a replay."""
+    pipe, last = result.pipeline, result.outputs[-1]
+    return last.theta, last.se, [pipe.model_fit(j)["r_squared"] for j in range(len(pipe.models))]
+
+
+def test_a_dynamic_pressure_inconsistent_with_the_airspeed_is_never_estimated(bundled_messages):
+    """Before: dynamic pressure messages of 5 Pa (plus 1e-9 Pa steps) with the bag's 30-60 m/s
+    airspeed gave C_Z_alpha -708, flagged converged. 2 qbar / V^2 is then at most 0.011
+    kg/m^3, below limits.air_density_min: every sample is inconsistent_dynamic_pressure, none
+    reaches the estimator. The clean bag (1.18 kg/m^3) loses none."""
+    clean = run_pipeline(bundled_messages, _t2_config(), record=False).pipeline.counters()
+    assert "inconsistent_dynamic_pressure" not in clean["samples_rejected"]
+
+    def five_pascal(k, msg):
+        msg.fluid_pressure = 5.0 + k * 1e-9
+
+    messages = changed_messages(bundled_messages, "dynamic_pressure", five_pascal)
+    result = run_pipeline(messages, _t2_config(), record=False)
+    c = result.pipeline.counters()
+    assert c["samples_used"] == 0 and not any(out.ready.any() for out in result.outputs)
+    assert c["samples_rejected"]["inconsistent_dynamic_pressure"] == clean["samples_used"]
+    assert all(not s["rejected"] for s in c["streams"].values())  # every message is plausible on its own
+    # A density just inside the range is used: 0.06 kg/m^3 (the air at 20 km) for every sample.
+    V = {stamp: math.hypot(m.vector.x, m.vector.y, m.vector.z) for kind, stamp, m in bundled_messages
+         if kind == "airspeed"}
+
+    def thin_air(k, msg):
+        msg.fluid_pressure = 0.5 * 0.06 * V[msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec] ** 2
+
+    thin = run_pipeline(changed_messages(bundled_messages, "dynamic_pressure", thin_air), _t2_config(), record=False)
+    assert thin.pipeline.counters()["samples_used"] == clean["samples_used"]
+
+
+def test_gyro_spikes_never_reach_the_estimator(bundled_messages):
+    """Before: a pitch rate of 19.999 rad/s (just inside limits.angular_rate) in one IMU
+    message every 0.5 s, each on a 50 Hz grid point, gave C_m R^2 0.000 and C_m_q -0.03
+    against -40.7 on the clean bag (true -53.25), every parameter flagged converged. Each
+    spike implies about 4000 rad/s^2 over its 5 ms interval: it is rejected as
+    implausible_angular_acceleration and leaves a hole, the message after it is judged
+    against the one before it and used. The estimates then stay within two corrected SEs of
+    the clean bag's (fewer samples: about 9 around each hole), and R^2 within 0.01."""
+    clean = run_pipeline(bundled_messages, _t2_config(), record=False)
+
+    def spike(k, msg):
+        if k < 100 or k % 100:
+            return False
+        msg.angular_velocity.y = 19.999
+
+    spiked = run_pipeline(changed_messages(bundled_messages, "imu", spike), _t2_config(), record=True)
+    c = spiked.pipeline.counters()
+    assert c["streams"]["imu"]["rejected"] == {"implausible_angular_acceleration": 23}
+    assert c["samples_rejected"]["invalid_imu"] == 23
+    q_hat = np.array([X[1, 2] for _t, X, _z in spiked.pipeline.regression])  # Cm's q_hat column
+    # No spike in any regression row: one would give q_hat >= 19.999 cbar / (2 x 60 m/s) = 0.046
+    # (the clean bag's pitch rates stay within 0.14 rad/s, q_hat within 0.0007).
+    assert np.abs(q_hat).max() < 0.002
+    theta, _se, r2 = _final(spiked)
+    theta0, se0, r20 = _final(clean)
+    real = np.isfinite(theta0)
+    assert (np.abs(theta - theta0)[real] < 2 * se0[real]).all()
+    np.testing.assert_allclose(r2, r20, atol=0.01)
