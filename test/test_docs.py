@@ -161,6 +161,61 @@ def test_every_docs_page_is_reachable_from_the_readme():
     assert not unreachable, unreachable
 
 
+# `module.name` or `rls_uncertainty.module.name` in backticks, optionally called: `outputs.parse_stamp_label()`.
+_CODE_REF = re.compile(r"`(?:rls_uncertainty\.)?([A-Za-z_][\w.]*\.[A-Za-z_]\w*)(?:\(\))?`")
+_FILE_SUFFIXES = {"py", "csv", "md", "yaml", "json", "png", "npz", "mcap", "xml", "txt", "rst", "toml", "sh", "msg"}
+
+
+def _package_modules() -> dict[str, Path]:
+    """Dotted name (relative to the package) -> file, for every module of rls_uncertainty."""
+    package = ROOT / "rls_uncertainty"
+    out = {}
+    for path in sorted(package.rglob("*.py")):
+        if "node_modules" in path.parts or path.name == "__init__.py" and path.parent == package:
+            continue
+        parts = path.relative_to(package).with_suffix("").parts
+        out[".".join(parts[:-1] if parts[-1] == "__init__" else parts)] = path
+    return out
+
+
+def test_every_name_of_the_package_the_docs_cite_exists():
+    """A backticked `module.name` (`outputs.parse_stamp_label`, `config.PARAMETERS`,
+    `pipeline.Pipeline.counters`) whose head is a module of the package names something that
+    module has: a renamed or removed function shows here, not in a reader's traceback. ROS
+    parameter names (`estimator.lags`, `limits.angular_rate`) and file names are not code."""
+    import importlib
+
+    from rls_uncertainty.config import PARAMETERS
+
+    parameters = {p.name for p in PARAMETERS}
+    modules = _package_modules()
+    missing = []
+    for page in _pages():
+        for dotted in _CODE_REF.findall(page.read_text()):
+            parts = dotted.split(".")
+            if dotted in parameters or parts[-1] in _FILE_SUFFIXES:
+                continue
+            heads = [i for i in range(len(parts), 0, -1) if ".".join(parts[:i]) in modules]
+            if not heads:
+                continue
+            obj = importlib.import_module("rls_uncertainty." + ".".join(parts[: heads[0]]))
+            for attribute in parts[heads[0]:]:
+                if not hasattr(obj, attribute):
+                    missing.append(f"{page.relative_to(ROOT)}: {dotted}")
+                    break
+                obj = getattr(obj, attribute)
+    assert not missing, missing
+
+
+def test_architecture_page_names_every_module_of_the_package():
+    """docs/architecture.md's module table has a line for every module (a subpackage's modules
+    by name in its line), so a new module is placed on the map when it is added."""
+    text = (DOCS / "architecture.md").read_text()
+    unnamed = [name for name in _package_modules()
+               if f"`{name}.py`" not in text and f"`{name}/`" not in text and f"`{name.rpartition('.')[2]}`" not in text]
+    assert not unnamed, unnamed
+
+
 def _studies() -> list[Path]:
     return sorted(p for p in STUDIES.iterdir() if p.is_dir())
 
