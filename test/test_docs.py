@@ -171,7 +171,7 @@ def _package_modules() -> dict[str, Path]:
     package = ROOT / "rls_uncertainty"
     out = {}
     for path in sorted(package.rglob("*.py")):
-        if "node_modules" in path.parts or path.name == "__init__.py" and path.parent == package:
+        if "node_modules" in path.parts or (path.name == "__init__.py" and path.parent == package):
             continue
         parts = path.relative_to(package).with_suffix("").parts
         out[".".join(parts[:-1] if parts[-1] == "__init__" else parts)] = path
@@ -211,8 +211,11 @@ def test_architecture_page_names_every_module_of_the_package():
     """docs/architecture.md's module table has a line for every module (a subpackage's modules
     by name in its line), so a new module is placed on the map when it is added."""
     text = (DOCS / "architecture.md").read_text()
-    unnamed = [name for name in _package_modules()
-               if f"`{name}.py`" not in text and f"`{name}/`" not in text and f"`{name.rpartition('.')[2]}`" not in text]
+    unnamed = []
+    for name in _package_modules():
+        spellings = (f"`{name}.py`", f"`{name}/`", f"`{name.rpartition('.')[2]}`")
+        if not any(spelling in text for spelling in spellings):
+            unnamed.append(name)
     assert not unnamed, unnamed
 
 
@@ -244,13 +247,9 @@ def test_studies_use_only_public_names_of_the_package(study):
 
 @pytest.mark.parametrize("study", _studies(), ids=lambda p: p.name)
 def test_studies_run_in_quick_mode(study):
-    """Each study's --quick mode runs to its results table (the studies are written against
-    the estimator's options object; until the package has it there is nothing to run)."""
-    from rls_uncertainty.estimator import options
-
-    if not hasattr(options, "EstimatorOptions"):
-        pytest.skip("rls_uncertainty.estimator.options.EstimatorOptions does not exist yet")
+    """Each study's --quick mode runs against the current package and prints its results (a
+    table, or the counts of a sweep): a study whose script no longer runs is caught here."""
     run = subprocess.run([sys.executable, str(study / "study.py"), "--quick"], capture_output=True, text=True,
                          timeout=600, cwd=ROOT)
     assert run.returncode == 0, run.stderr[-2000:]
-    assert "|" in run.stdout  # a results table
+    assert any(char.isdigit() for char in run.stdout), run.stdout[-2000:]  # results, not silence
