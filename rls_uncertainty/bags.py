@@ -6,8 +6,14 @@ inputs, write deterministic ROS 2 MCAP replays.
 * :func:`convert` - a recording plus a mapping file (``msg_schemas/fti_msgs/mapping.yaml``
   is the one for the shared Twin Otter recordings) to a replay on the standard topics.
 * :func:`write_t2_bag` - the bundled seeded T-2 maneuver on the standard topics.
-* :func:`read_inputs` - the standard-topic messages of a replay, for the offline replay and
-  the DDS player.
+* :class:`InputStream` - the standard-topic messages of a replay, read as a stream for the
+  offline replay (:func:`read_inputs`: the same as a list, for small bags and tests).
+* :class:`BagWriter` - a bag written record by record (:func:`write_replay`, :func:`convert`
+  and the replay's ``estimates.mcap``).
+
+Reading and writing stream: messages are read one MCAP chunk at a time in log-time order,
+and written as they come, so memory does not grow with the recording (what a writer holds
+back to keep its output ordered is said with each writer).
 
 Replays are ROS 2 bags (storage version 9, MCAP), every message logged at its header stamp,
 ordered by stamp with a stable tie-break (topic, then recorded order): converting the same
@@ -18,12 +24,14 @@ topic and what is wrong.
 
 from __future__ import annotations
 
+import hashlib
+import heapq
 import math
 import numbers
 import struct
-from collections.abc import Callable, Iterator, Mapping, Sequence
-from dataclasses import dataclass
+from collections.abc import Callable, Generator, Iterable, Iterator, Mapping, Sequence
 from pathlib import Path
+from types import TracebackType
 from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
@@ -38,9 +46,14 @@ from .inputs import MESSAGE_TYPES, Stamped, stamp_ns
 from .inputs import STREAMS as INPUTS
 
 if TYPE_CHECKING:  # annotations only: rosbags itself is imported where it is used
+    from hashlib import _Hash
+
     from rosbags.highlevel import AnyReader
     from rosbags.interfaces import Connection
+    from rosbags.rosbag2 import Writer
     from rosbags.typesys.store import Typestore
+
+    from .simulation import SensorStreams
 
 __all__ = [
     "BagError",
@@ -48,6 +61,9 @@ __all__ = [
     "convert",
     "write_replay",
     "write_t2_bag",
+    "write_sensor_streams",
+    "BagWriter",
+    "InputStream",
     "read_inputs",
     "load_mapping",
     "schema_dir",
@@ -146,11 +162,22 @@ def _has_schema(msgtype: str, store: Typestore, reader: AnyReader) -> bool:
     return not (len(fields_[1]) == 1 and fields_[1][0][0] == "structure_needs_at_least_one_member")
 
 
+def content_digest_update(digest: _Hash, topic: str, log_time: int, raw: bytes | memoryview) -> None:
+    """Add one message to a bag's content digest: its topic, log time and serialized bytes,
+    each delimited, so that two bags holding the same messages have the same digest whatever
+    their storage, chunking, compression or other topics."""
+    digest.update(f"{topic}\0{log_time}\0{len(raw)}\0".encode())
+    digest.update(raw)
+
+
 def _iter_messages(
-    path: Path, reader: AnyReader, connections: Sequence[Connection], store: Typestore | None = None, fast: bool = False
-) -> Iterator[tuple[Connection, int, object]]:
-    """Messages of ``connections`` in log order, deserialized; corruption names the file.
-    ``fast`` decodes the standard input types of a ROS 2 bag with :mod:`.cdr`."""
+    path: Path, reader: AnyReader, connections: Sequence[Connection], store: Typestore | None = None,
+    fast: bool = False, digest: _Hash | None = None,
+) -> Generator[tuple[Connection, int, object], None, None]:
+    """Messages of ``connections`` in log order, deserialized as they are read (``rosbags``
+    reads an MCAP one chunk at a time); corruption names the file. ``fast`` decodes the
+    standard input types of a ROS 2 bag with :mod:`.cdr`; ``digest`` is updated with every
+    message read (:func:`content_digest_update`)."""
     it = reader.messages(connections=connections)
     fast = fast and getattr(reader, "is2", False)
     while True:
@@ -160,6 +187,8 @@ def _iter_messages(
             return
         except Exception as exc:  # a corrupt bag raises many types
             raise BagError(f"{path}: corrupt or truncated bag: {exc}") from exc
+        if digest is not None:
+            content_digest_update(digest, conn.topic, t, raw)
         if fast and conn.msgtype in cdr.DECODABLE:
             try:
                 msg = cdr.decode(conn.msgtype, raw)
@@ -189,13 +218,76 @@ def _iter_messages(
 _TOPIC_RANK = {kind: i for i, kind in enumerate(INPUTS)}
 
 
-@dataclass(frozen=True)
-class _Record:
-    stamp: int
-    topic: str
-    msgtype: str
-    seq: int
-    msg: object
+def _rank(topic: str) -> int:
+    """Where a topic's messages go among those of one stamp: the standard inputs in the
+    order of :data:`.inputs.STREAMS`, then every other topic (by name)."""
+    return _TOPIC_RANK.get(topic.strip("/"), len(_TOPIC_RANK))
+
+
+def _check_log_time(path: Path, stamp: int, topic: str) -> None:
+    if not 0 <= stamp < 2**64:
+        raise BagError(f"{path}: topic {topic}: stamp {stamp} ns cannot be a log time (0 to 2^64 - 1 ns)")
+
+
+class BagWriter:
+    """A ROS 2 bag (storage version 9, MCAP) written as its records arrive, at ``path`` (a
+    directory that must not exist; callers make it atomic with :func:`.files.output_directory`).
+
+    ``topics``: every ``(topic, msgtype)`` the bag holds, its connections in the order of
+    :func:`_rank`, then name. :meth:`add` queues a record (``msg`` a message, serialized
+    now, or its CDR bytes); :meth:`release` writes the queued records stamped before a time
+    that the caller knows no later record precedes, and :meth:`close` the rest. The file is
+    ordered by stamp, then topic rank, then topic, then the order of :meth:`add`: exactly what
+    one sort of all the records gives (:func:`write_replay`), in memory bounded by what the
+    caller holds back. Log time = stamp."""
+
+    def __init__(self, path: Path, topics: Sequence[tuple[str, str]], store: Typestore) -> None:
+        from rosbags.rosbag2 import StoragePlugin, Writer  # noqa: PLC0415
+
+        self.path, self.store = Path(path), store
+        self._types = dict(topics)
+        self._writer: Writer = Writer(self.path, version=9, storage_plugin=StoragePlugin.MCAP)
+        self._writer.open()
+        self._conns = {topic: self._writer.add_connection(topic, self._types[topic], typestore=store)
+                       for topic in sorted(self._types, key=lambda t: (_rank(t), t))}
+        self._queue: list[tuple[int, int, str, int, bytes | memoryview]] = []
+        self._added = 0
+        self.written = 0
+
+    def add(self, stamp: int, topic: str, msgtype: str, msg: object) -> None:
+        """Queue one record; a stamp that cannot be a log time is a :class:`BagError`."""
+        _check_log_time(self.path, stamp, topic)
+        raw = msg if isinstance(msg, (bytes, memoryview)) else self.store.serialize_cdr(msg, msgtype)
+        heapq.heappush(self._queue, (stamp, _rank(topic), topic, self._added, raw))
+        self._added += 1
+
+    def release(self, before_ns: int | None = None) -> None:
+        """Write every queued record stamped before ``before_ns`` (all of them: None)."""
+        queue, write, conns = self._queue, self._writer.write, self._conns
+        while queue and (before_ns is None or queue[0][0] < before_ns):
+            stamp, _, topic, _, raw = heapq.heappop(queue)
+            write(conns[topic], stamp, raw)
+            self.written += 1
+
+    @property
+    def queued(self) -> int:
+        """Records added and not written yet."""
+        return len(self._queue)
+
+    def close(self) -> None:
+        """Write what is queued and finish the file (``metadata.yaml`` beside it)."""
+        self.release()
+        self._writer.close()
+
+    def __enter__(self) -> BagWriter:
+        return self
+
+    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
+                 tb: TracebackType | None) -> None:
+        if exc_type is None:
+            self.close()
+        else:  # the caller's output directory is discarded: only the file handle matters
+            self._writer.__exit__(exc_type, exc, tb)
 
 
 def _mk(
@@ -257,43 +349,59 @@ def _standard_message(
     raise ValueError(kind)
 
 
-def write_replay(path: str | Path, records: Sequence[tuple[int, str, str, object]], store: Typestore | None = None,
+def write_replay(path: str | Path, records: Iterable[tuple[int, str, str, object]], store: Typestore | None = None,
                  *, force: bool = False, inputs: tuple[str | Path, ...] = ()) -> Path:
     """Write ``records`` (``(stamp_ns, topic, msgtype, msg)``, ``msg`` a message or its CDR
     bytes) as a ROS 2 MCAP bag at ``path`` (a directory), log time = stamp, ordered by stamp
-    with a stable tie-break. Atomic (:func:`.files.output_directory`): the bag appears under
-    ``path`` only when complete; an existing non-empty ``path`` is refused unless ``force``,
-    and ``inputs`` are never overwritten."""
-    from rosbags.rosbag2 import StoragePlugin, Writer  # noqa: PLC0415
-
+    with a stable tie-break (:class:`BagWriter`; the records are all held, for the sort).
+    Atomic (:func:`.files.output_directory`): the bag appears under ``path`` only when
+    complete; an existing non-empty ``path`` is refused unless ``force``, and ``inputs`` are
+    never overwritten."""
     store = store or typestore()
     path = Path(path)
-    recs = [
-        _Record(int(stamp), topic, msgtype, i, msg) for i, (stamp, topic, msgtype, msg) in enumerate(records)
-    ]
+    recs = list(records)
     if not recs:
         raise BagError(f"{path}: nothing to write (no messages)")
-    bad = next((r for r in recs if not 0 <= r.stamp < 2**64), None)
-    if bad is not None:
-        raise BagError(f"{path}: topic {bad.topic}: stamp {bad.stamp} ns cannot be a log time (0 to 2^64 - 1 ns)")
-    rank: dict[str, int] = {}
-    for r in recs:
-        rank.setdefault(r.topic, _TOPIC_RANK.get(r.topic.strip("/"), len(_TOPIC_RANK)))
-    recs.sort(key=lambda r: (r.stamp, rank[r.topic], r.topic, r.seq))
+    topics: dict[str, str] = {}
+    for stamp, topic, msgtype, _msg in recs:
+        _check_log_time(path, int(stamp), topic)
+        topics.setdefault(topic, msgtype)
     with output_directory(path, force=force, inputs=inputs) as tmp:
-        name = path.resolve().name
-        bag = tmp / name  # rosbags creates the bag directory itself
-        with Writer(bag, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
-            conns = {}
-            for topic in sorted({r.topic for r in recs}, key=lambda t: (rank[t], t)):
-                msgtype = next(r.msgtype for r in recs if r.topic == topic)
-                conns[topic] = writer.add_connection(topic, msgtype, typestore=store)
-            for r in recs:
-                raw = r.msg if isinstance(r.msg, bytes) else store.serialize_cdr(r.msg, r.msgtype)
-                writer.write(conns[r.topic], r.stamp, raw)
-        for item in bag.iterdir():
-            item.rename(tmp / item.name)
-        bag.rmdir()
+        bag = tmp / path.resolve().name  # rosbags creates the bag directory itself
+        with BagWriter(bag, list(topics.items()), store) as writer:
+            for stamp, topic, msgtype, msg in recs:
+                writer.add(int(stamp), topic, msgtype, msg)
+        _lift(bag, tmp)
+    return path
+
+
+def _lift(bag: Path, into: Path) -> None:
+    """Move the files of the bag directory ``bag`` up into ``into`` and remove ``bag``."""
+    for item in bag.iterdir():
+        item.rename(into / item.name)
+    bag.rmdir()
+
+
+def write_sensor_streams(path: str | Path, streams: SensorStreams, *, force: bool = False) -> Path:
+    """A :class:`.simulation.SensorStreams` as a bag on the standard topics at ``path``
+    (atomic, as :func:`write_replay`), written message by message in stamp order: a long
+    recording never sits in memory as messages."""
+    store = typestore()
+    path = Path(path)
+
+    def records(kind: str) -> Iterator[tuple[int, int, str, int]]:
+        stamps = getattr(streams, kind)[0]
+        return ((int(stamps[k]), _rank(kind), kind, k) for k in range(stamps.size))
+
+    with output_directory(path, force=force) as tmp:
+        bag = tmp / path.resolve().name  # rosbags creates the bag directory itself
+        with BagWriter(bag, [(f"/{kind}", MESSAGE_TYPES[kind]) for kind in INPUTS], store) as writer:
+            for stamp, _, kind, k in heapq.merge(*(records(kind) for kind in INPUTS)):
+                values = getattr(streams, kind)[1][k]
+                msg = _standard_message(store, kind, stamp, values, streams.surface_names)
+                writer.add(stamp, f"/{kind}", MESSAGE_TYPES[kind], msg)
+                writer.release()  # the merge gives the records in the bag's order
+        _lift(bag, tmp)
     return path
 
 
@@ -303,15 +411,7 @@ def write_t2_bag(path: str | Path, band_level: float = 0.2, seed: int = 250, *, 
     (:func:`.simulation.simulate_sensor_streams`)."""
     from .simulation import simulate_sensor_streams  # noqa: PLC0415
 
-    store = typestore()
-    s = simulate_sensor_streams(band_level, seed)
-    records = []
-    for kind in INPUTS:
-        stamps, values = getattr(s, kind)
-        for k in range(stamps.size):
-            msg = _standard_message(store, kind, int(stamps[k]), values[k], s.surface_names)
-            records.append((int(stamps[k]), f"/{kind}", MESSAGE_TYPES[kind], msg))
-    return write_replay(path, records, store, force=force)
+    return write_sensor_streams(path, simulate_sensor_streams(band_level, seed), force=force)
 
 
 # ------------------------------------------------------------------------------ reading
@@ -325,39 +425,85 @@ def input_topics(topics: dict[str, str] | None = None) -> dict[str, str]:
     return out
 
 
-def read_inputs(path: str | Path, topics: dict[str, str] | None = None, *, strict: bool = True,
-                start: float | None = None, end: float | None = None) -> tuple[list[tuple[str, int, Stamped]], int]:
-    """Standard-input messages of a replay bag in log order: a list of ``(kind, stamp_ns,
-    msg)`` and the bag's start time. ``strict`` refuses a topic whose header stamps do not
-    increase or differ from the log time; ``start``/``end`` (s from the bag start) cut the
-    span (finite, at least 0, ``end`` after ``start``; else :class:`ConfigError`)."""
-    path = Path(path)
-    _check_span(start, end)
-    store = typestore()
-    wanted = input_topics(topics)
-    by_topic = {v: k for k, v in wanted.items()}
-    reader = _open_reader(path, store)
-    try:
-        conns = [c for c in reader.connections if c.topic in by_topic]
+class InputStream:
+    """The standard-input messages of a replay bag, ``(kind, stamp_ns, msg)`` in log order,
+    read from the file while they are iterated (``rosbags`` decompresses an MCAP chunk when the
+    log-time order reaches it): memory does not grow with the bag. Opening checks what the bag's index tells: the input
+    topics (``topics.*`` parameters, :func:`input_topics`) and their types, and the span
+    ``start``/``end`` (s from the bag start; finite, at least 0, ``end`` after ``start``, within
+    the bag; else :class:`ConfigError`). Iterating checks each message: a negative header
+    stamp, and with ``strict`` a topic whose header stamps do not increase, is a
+    :class:`BagError`; messages outside the span are read and skipped; a bag with no input
+    message in the span is a :class:`BagError` at the end.
+
+    Iterable once; the bag is closed at the end of the iteration, by :meth:`close` or by
+    ``with``. :attr:`t0` is the bag's start (ns), :attr:`total` the input messages its index
+    lists (the span aside), :attr:`digest` (once iterated) the SHA-256 of every input-topic
+    message of the bag (:func:`content_digest_update`), and :attr:`read` the messages read."""
+
+    def __init__(self, path: str | Path, topics: dict[str, str] | None = None, *, strict: bool = True,
+                 start: float | None = None, end: float | None = None) -> None:
+        self.path = path = Path(path)
+        _check_span(start, end)
+        self.strict = strict
+        self.store = store = typestore()
+        wanted = input_topics(topics)
+        self._kinds = {v: k for k, v in wanted.items()}
+        self._reader = reader = _open_reader(path, store)
+        self._open = True
+        try:
+            self._conns = self._input_connections()
+            self.t0 = t0 = reader.start_time
+            self.end_ns = reader.end_time
+            _check_span_in_bag(path, start, end, reader.end_time - 1 - t0)
+        except BaseException:
+            self.close()
+            raise
+        self.start, self.end = start, end
+        self._lo = None if start is None else t0 + int(round(start * 1e9))
+        self._hi = None if end is None else t0 + int(round(end * 1e9))
+        self.total = sum(int(getattr(c, "msgcount", 0) or 0) for c in self._conns)
+        self._digest = hashlib.sha256()
+        self.read = 0
+        self._used = False
+
+    def _input_connections(self) -> list[Connection]:
+        """The bag's connections on input topics, each of its input's type."""
+        path, reader, kinds = self.path, self._reader, self._kinds
+        conns = [c for c in reader.connections if c.topic in kinds]
         if not conns:
             raise BagError(
-                f"{path}: none of the input topics {sorted(by_topic)} is in the bag "
+                f"{path}: none of the input topics {sorted(kinds)} is in the bag "
                 f"(it has {sorted({c.topic for c in reader.connections}) or 'no topics'})"
             )
         for c in conns:
-            expected = MESSAGE_TYPES[by_topic[c.topic]]
+            expected = MESSAGE_TYPES[kinds[c.topic]]
             if c.msgtype != expected:
                 raise BagError(f"{path}: topic {c.topic} has type {c.msgtype}, expected {expected}")
-        t0 = reader.start_time
-        _check_span_in_bag(path, start, end, reader.end_time - 1 - t0)
-        lo = None if start is None else t0 + int(round(start * 1e9))
-        hi = None if end is None else t0 + int(round(end * 1e9))
+        return conns
+
+    @property
+    def digest(self) -> str:
+        """Hex SHA-256 of the input-topic messages read so far (all of them once iterated)."""
+        return self._digest.hexdigest()
+
+    def __iter__(self) -> Iterator[tuple[str, int, Stamped]]:
+        if self._used:
+            raise BagError(f"{self.path}: an input stream is read once; open the bag again")
+        self._used = True
+        try:
+            yield from self._messages()
+        finally:
+            self.close()
+
+    def _messages(self) -> Iterator[tuple[str, int, Stamped]]:
+        path, kinds, lo, hi, strict = self.path, self._kinds, self._lo, self._hi, self.strict
         last: dict[str, int] = {}
-        out: list[tuple[str, int, Stamped]] = []
-        seen = 0
-        for conn, _t, raw_msg in _iter_messages(path, reader, conns, store, fast=True):
-            seen += 1
-            msg = cast(Stamped, raw_msg)  # the input types (checked above) all carry a header
+        used = 0
+        for conn, _t, raw_msg in _iter_messages(path, self._reader, self._conns, self.store, fast=True,
+                                                digest=self._digest):
+            self.read += 1
+            msg = cast(Stamped, raw_msg)  # the input types (checked on opening) all carry a header
             stamp = stamp_ns(msg)
             if stamp < 0:
                 raise BagError(f"{path}: topic {conn.topic}: negative header stamp ({stamp} ns, before 1970)")
@@ -369,16 +515,35 @@ def read_inputs(path: str | Path, topics: dict[str, str] | None = None, *, stric
                 last[conn.topic] = stamp
             if (lo is not None and stamp < lo) or (hi is not None and stamp > hi):
                 continue
-            out.append((by_topic[conn.topic], stamp, msg))
-        duration = (reader.end_time - t0) * 1e-9
-    finally:
-        reader.close()
-    if not out:
-        if seen:
-            raise BagError(f"{path}: no input messages from {start or 0:g} s to "
-                           f"{'the end' if end is None else f'{end:g} s'} (the bag holds {duration:.1f} s)")
-        raise BagError(f"{path}: no input messages (empty bag)")
-    return out, t0
+            used += 1
+            yield kinds[conn.topic], stamp, msg
+        if not used:
+            if self.read:
+                raise BagError(f"{path}: no input messages from {self.start or 0:g} s to "
+                               f"{'the end' if self.end is None else f'{self.end:g} s'} (the bag holds "
+                               f"{(self.end_ns - self.t0) * 1e-9:.1f} s)")
+            raise BagError(f"{path}: no input messages (empty bag)")
+
+    def close(self) -> None:
+        """Close the bag (once; again does nothing)."""
+        if self._open:
+            self._open = False
+            self._reader.close()
+
+    def __enter__(self) -> InputStream:
+        return self
+
+    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
+                 tb: TracebackType | None) -> None:
+        self.close()
+
+
+def read_inputs(path: str | Path, topics: dict[str, str] | None = None, *, strict: bool = True,
+                start: float | None = None, end: float | None = None) -> tuple[list[tuple[str, int, Stamped]], int]:
+    """The messages of :class:`InputStream` as a list, and the bag's start time: every
+    message in memory at once, for small bags and tests (the replay streams)."""
+    with InputStream(path, topics, strict=strict, start=start, end=end) as stream:
+        return list(stream), stream.t0
 
 
 def _check_span_in_bag(path: Path, start: float | None, end: float | None, last_ns: int) -> None:
@@ -626,57 +791,123 @@ def _mapped_values(kind: str, spec: dict, msg: object, where: str) -> float | Se
     raise ValueError(kind)
 
 
+class _StampBounds:
+    """While a recording is read in log order: the least header stamp any message still to
+    come can carry. Each topic's header stamps increase (:func:`_header_stamp` refuses the
+    rest), so a topic's next stamp exceeds its last; a topic not seen yet starts at its first
+    message's stamp (read ahead once per topic); a topic whose every message was read (the
+    bag's index counts them) bounds nothing. Records stamped below the bound can be written:
+    the writer holds back only what the topics' stamp skew spans."""
+
+    def __init__(self, src: Path, reader: AnyReader, conns: Sequence[Connection], store: Typestore) -> None:
+        self.left: dict[str, int | None] = {}
+        self.bound: dict[str, int] = {}
+        for topic in sorted({c.topic for c in conns}):
+            mine = [c for c in conns if c.topic == topic]
+            counts = [int(getattr(c, "msgcount", 0) or 0) for c in mine]
+            self.left[topic] = sum(counts) if all(counts) else None  # None: not indexed, never done
+            self.bound[topic] = self._first_stamp(src, reader, mine, store)
+
+    @staticmethod
+    def _first_stamp(src: Path, reader: AnyReader, conns: Sequence[Connection], store: Typestore) -> int:
+        """The header stamp of the first message of ``conns``; 0 (no bound) when there is none
+        or it cannot be read (the reading proper then says why)."""
+        it = _iter_messages(src, reader, conns, store)
+        try:
+            return stamp_ns(cast(Stamped, next(it)[2]))
+        except (StopIteration, AttributeError, TypeError, BagError):
+            return 0
+        finally:
+            it.close()
+
+    def after(self, topic: str, stamp: int) -> int | None:
+        """The bound once ``topic``'s message stamped ``stamp`` is read (None: no message left)."""
+        left = self.left[topic]
+        if left is not None:
+            self.left[topic] = left = left - 1
+        if left is not None and left <= 0:
+            self.bound.pop(topic, None)
+        else:
+            self.bound[topic] = stamp + 1
+        return min(self.bound.values()) if self.bound else None
+
+
+def _header_stamp(src: Path, topic: str, msg: object, last: dict[str, int]) -> int:
+    """A recorded message's header stamp, refused when missing, negative or not after the
+    previous one of its topic (``last``, updated)."""
+    try:
+        stamp = stamp_ns(cast(Stamped, msg))  # any type: one without a header raises below
+    except AttributeError as exc:
+        raise BagError(f"{src}: topic {topic}: message has no header stamp") from exc
+    if stamp < 0:
+        raise BagError(f"{src}: topic {topic}: negative header stamp ({stamp} ns, before 1970); "
+                       "a replay bag logs every message at its stamp")
+    prev = last.get(topic)
+    if prev is not None and stamp <= prev:
+        what = "duplicate" if stamp == prev else "non-monotonic"
+        raise BagError(f"{src}: topic {topic}: {what} header stamps ({prev} then {stamp} ns)")
+    last[topic] = stamp
+    return stamp
+
+
+def _mapped_connections(src: Path, mapping: str | Path, spec: dict, reader: AnyReader,
+                        store: Typestore) -> list[Connection]:
+    """The recording's connections on the mapped topics; a mapped topic missing from the
+    recording, or a type without a schema, is a :class:`BagError`."""
+    topics = {c.topic: c for c in reader.connections}
+    for kind, s in spec.items():
+        if s["topic"] not in topics:
+            raise BagError(
+                f"{src}: topic {s['topic']} (mapped to {kind} in {mapping}) is not in the bag; "
+                f"it has {sorted(topics)}"
+            )
+    wanted = sorted({s["topic"] for s in spec.values()})
+    conns = [c for c in reader.connections if c.topic in wanted]
+    for c in conns:
+        if not _has_schema(c.msgtype, store, reader):
+            raise BagError(f"{src}: topic {c.topic}: type {c.msgtype} has no schema (not embedded in the bag, "
+                           "not in msg_schemas/ or --schemas)")
+    return conns
+
+
+def _convert_messages(src: Path, spec: dict, reader: AnyReader, conns: Sequence[Connection], store: Typestore,
+                      writer: BagWriter) -> dict[str, int]:
+    """Every mapped message as standard inputs into ``writer``, released as the stamps allow
+    (:class:`_StampBounds`); the messages per standard topic."""
+    kinds_of = {c.topic: [k for k, s in spec.items() if s["topic"] == c.topic] for c in conns}
+    bounds = _StampBounds(src, reader, conns, store)
+    last: dict[str, int] = {}
+    counts: dict[str, int] = {}
+    for conn, _t, msg in _iter_messages(src, reader, conns, store):
+        stamp = _header_stamp(src, conn.topic, msg, last)
+        for kind in kinds_of[conn.topic]:
+            values = _mapped_values(kind, spec[kind], msg, f"{src}: topic {conn.topic} ({kind})")
+            names = list(spec[kind]["joints"]) if kind == "control_surfaces" else None
+            topic = f"/{kind}"
+            writer.add(stamp, topic, MESSAGE_TYPES[kind], _standard_message(store, kind, stamp, values, names))
+            counts[topic] = counts.get(topic, 0) + 1
+        writer.release(bounds.after(conn.topic, stamp))
+    if not counts:
+        raise BagError(f"{src}: the mapped topics hold no messages (empty bag)")
+    return counts
+
+
 def convert(src: str | Path, mapping: str | Path, out: str | Path, schemas: list[Path] | None = None, *,
             force: bool = False) -> dict:
-    """Recording + mapping file -> replay bag on the standard topics. Returns message counts
-    per standard topic. Raises :class:`BagError` on any problem, leaving no output."""
+    """Recording + mapping file -> replay bag on the standard topics, read and written as a
+    stream (:class:`BagWriter`, :class:`_StampBounds`). Returns message counts per standard
+    topic. Raises :class:`BagError` on any problem, leaving no output."""
     src, out = Path(src), Path(out)
     spec = load_mapping(mapping)
     store = typestore(schemas)
     reader = _open_reader(src, store)
-    records = []
     try:
-        topics = {c.topic: c for c in reader.connections}
-        for kind, s in spec.items():
-            if s["topic"] not in topics:
-                raise BagError(
-                    f"{src}: topic {s['topic']} (mapped to {kind} in {mapping}) is not in the bag; "
-                    f"it has {sorted(topics)}"
-                )
-        wanted = sorted({s["topic"] for s in spec.values()})
-        conns = [c for c in reader.connections if c.topic in wanted]
-        for c in conns:
-            if not _has_schema(c.msgtype, store, reader):
-                raise BagError(f"{src}: topic {c.topic}: type {c.msgtype} has no schema (not embedded in the bag, "
-                               "not in msg_schemas/ or --schemas)")
-        kinds_of = {t: [k for k, s in spec.items() if s["topic"] == t] for t in wanted}
-        last: dict[str, int] = {}
-        for conn, _t, msg in _iter_messages(src, reader, conns, store):
-            try:
-                stamp = stamp_ns(cast(Stamped, msg))  # any type: one without a header raises below
-            except AttributeError as exc:
-                raise BagError(f"{src}: topic {conn.topic}: message has no header stamp") from exc
-            if stamp < 0:
-                raise BagError(f"{src}: topic {conn.topic}: negative header stamp ({stamp} ns, before 1970); "
-                               "a replay bag logs every message at its stamp")
-            prev = last.get(conn.topic)
-            if prev is not None and stamp <= prev:
-                what = "duplicate" if stamp == prev else "non-monotonic"
-                raise BagError(f"{src}: topic {conn.topic}: {what} header stamps ({prev} then {stamp} ns)")
-            last[conn.topic] = stamp
-            for kind in kinds_of[conn.topic]:
-                where = f"{src}: topic {conn.topic} ({kind})"
-                values = _mapped_values(kind, spec[kind], msg, where)
-                names = list(spec[kind]["joints"]) if kind == "control_surfaces" else None
-                records.append(
-                    (stamp, f"/{kind}", MESSAGE_TYPES[kind], _standard_message(store, kind, stamp, values, names))
-                )
+        conns = _mapped_connections(src, mapping, spec, reader, store)
+        with output_directory(out, force=force, inputs=(src, mapping)) as tmp:
+            bag = tmp / out.resolve().name  # rosbags creates the bag directory itself
+            with BagWriter(bag, [(f"/{kind}", MESSAGE_TYPES[kind]) for kind in spec], store) as writer:
+                counts = _convert_messages(src, spec, reader, conns, store, writer)
+            _lift(bag, tmp)
     finally:
         reader.close()
-    if not records:
-        raise BagError(f"{src}: the mapped topics hold no messages (empty bag)")
-    write_replay(out, records, store, force=force, inputs=(src, mapping))
-    counts: dict[str, int] = {}
-    for _s, topic, _m, _msg in records:
-        counts[topic] = counts.get(topic, 0) + 1
     return counts

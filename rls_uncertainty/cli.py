@@ -176,19 +176,25 @@ def _yaml_file(name_or_path: str, directory: Path) -> Path:
 
 
 def _replay(args: argparse.Namespace) -> int:
+    from .compare import DEFAULT_ATOL, DEFAULT_RTOL, comparable, compare_replays, read_run
     from .config import config_dir
-    from .replay import replay, summary_table
+    from .replay import planned_run, replay, summary_table
 
     params = _replay_params(args)
     # Files the replay reads besides the bag: never replaced by its output, even with --force.
     inputs = [_yaml_file(args.config, config_dir())] if args.config else []
     if isinstance(params.get("aircraft"), str) and params["aircraft"]:
         inputs.append(_yaml_file(params["aircraft"], config_dir() / "aircraft"))
+    if (args.rtol is not None or args.atol is not None) and not args.compare:
+        raise ConfigError("--rtol and --atol set the tolerance of --compare DIR: give the reference replay's directory")
+    if args.compare:  # what can be checked before the bag is read, is
+        inputs.append(args.compare)
+        comparable(planned_run(params, start=args.start, end=args.end, strict=not args.lenient),
+                   read_run(args.compare), bag=False)
     result = replay(args.bag, params, args.out, start=args.start, end=args.end, strict=not args.lenient,
                     progress=not args.quiet, plots=not args.no_plots, force=args.force, inputs=inputs)
-    pipe = result.pipeline
-    c = pipe.counters()
-    print(summary_table(pipe, result.outputs))
+    c = result.counters()
+    print(summary_table(result))
     rejected = ", ".join(f"{k} {v}" for k, v in sorted(c["samples_rejected"].items())) or "none"
     print(f"\n{c['samples_formed']} samples formed, {c['samples_used']} used; rejected: {rejected}")
     for name, s in c["streams"].items():
@@ -198,7 +204,14 @@ def _replay(args: argparse.Namespace) -> int:
     print(f"{result.n_messages} messages, {result.data_seconds:.1f} s of data in {result.wall_seconds:.2f} s "
           f"({result.speed:.0f}x real time); wrote {args.out}")
     # No model estimated anything: the summary above says why; a script must not take it for success.
-    return 0 if result.estimates else 1
+    if not result.estimates:
+        return 1
+    if args.compare:
+        rtol = DEFAULT_RTOL if args.rtol is None else args.rtol
+        cmp = compare_replays(args.out, args.compare, rtol=rtol, atol=DEFAULT_ATOL if args.atol is None else args.atol)
+        print(cmp.report())
+        return 0 if cmp.equal else 1
+    return 0
 
 
 def _play(args: argparse.Namespace) -> int:
@@ -394,6 +407,14 @@ def _add_replay(sub: Any) -> None:
     rp.add_argument("--no-plots", action="store_true")
     rp.add_argument("--quiet", action="store_true", help="no progress bar")
     rp.add_argument("--force", action="store_true", help=_FORCE_HELP)
+    rp.add_argument("--compare", metavar="DIR",
+                    help="compare the outputs with an earlier replay's in DIR sample by sample: exit 0 when equal "
+                         "within the tolerance, 1 when not (the largest differences printed), 2 when the runs are "
+                         "not comparable (another bag, span, models or sample rate)")
+    rp.add_argument("--rtol", type=_real(0.0), metavar="R",
+                    help="--compare's relative tolerance, of |estimate| + its standard error (default 1e-6)")
+    rp.add_argument("--atol", type=_real(0.0), metavar="A",
+                    help="--compare's absolute tolerance, in the units of each derivative (default 0)")
     rp.set_defaults(func=_replay)
 
 

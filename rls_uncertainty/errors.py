@@ -17,6 +17,9 @@ __all__ = [
     "OutputPathError",
     "EstimatorNotReady",
     "NonFiniteInput",
+    "UnknownName",
+    "NotComparable",
+    "LiveTimeout",
 ]
 
 
@@ -48,3 +51,18 @@ class EstimatorNotReady(RlsUncertaintyError, RuntimeError):
 class NonFiniteInput(RlsUncertaintyError, ValueError):
     """A regressor or measured output is NaN or infinite, or the update would make the
     estimator state non-finite (the state is unchanged)."""
+
+
+class UnknownName(RlsUncertaintyError, LookupError):
+    """A name (a parameter, a model) asked of a result that does not have it; the message
+    lists the names it has."""
+
+
+class NotComparable(RlsUncertaintyError, ValueError):
+    """Two replays whose outputs cannot be compared sample by sample (another bag, another
+    span, other models or sample times); the message says why."""
+
+
+class LiveTimeout(RlsUncertaintyError, TimeoutError):
+    """A live node under test (:mod:`.testing`) did not do what was waited for in time; the
+    message says what was missing and where the node's log is."""

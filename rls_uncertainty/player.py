@@ -431,7 +431,7 @@ def demo(rate: float = 4.0, params_file: str = "t2") -> int:
     _loopback_default()
     import rclpy  # noqa: PLC0415
 
-    from .bags import read_inputs  # noqa: PLC0415
+    from .bags import InputStream  # noqa: PLC0415
     from .config import config_dir, load_parameters_file, pipeline_config  # noqa: PLC0415
     from .replay import run_pipeline  # noqa: PLC0415
 
@@ -453,7 +453,8 @@ def demo(rate: float = 4.0, params_file: str = "t2") -> int:
         _spin_for(spin, 30, lambda: all(s.get_publisher_count() >= 1 for s in outputs.subs))
         _spin_for(spin, 1.0)  # discovery is not symmetric: let both sides match
         player.run(rate, spin)
-        offline = run_pipeline(read_inputs(bag)[0], config)
+        with InputStream(bag) as stream:
+            offline = run_pipeline(stream, config, record=False)
         want = len(offline.outputs)
         _spin_for(spin, 20, lambda: outputs.samples >= want)
         _spin_for(spin, 0.5)

@@ -2,8 +2,10 @@
 allows (``rls-uncertainty replay BAG --config CFG --out DIR``).
 
 The messages go through :func:`.inputs.feed` into one :class:`.pipeline.Pipeline`, exactly
-as in the live node, so the node and the replay give the same numbers. Outputs (written to a
-temporary directory renamed to ``DIR`` only when complete):
+as in the live node, so the node and the replay give the same numbers. The bag is read as a
+stream (:class:`.bags.InputStream`) and the outputs are written sample by sample
+(:class:`.replay_files.ReplayFiles`): memory does not grow with the recording. Outputs
+(written to a temporary directory renamed to ``DIR`` only when complete):
 
 * ``estimates.csv``: ``time,model,parameter,estimate,std_error,std_error_conventional,
   converged,lags``, one row per sample and parameter of every ready model (time in s, the
@@ -16,65 +18,57 @@ temporary directory renamed to ``DIR`` only when complete):
   sends (:meth:`.outputs.OutputLayout.encode`: ``/rls_estimator/sample_stamp``, and per model
   ``/rls_estimator/M/estimates``, ``.../standard_errors``, ``.../standard_errors_conventional``,
   ``.../converged``, decimated ``.../covariance`` and ``.../covariance_conventional``), log
-  time = the sample's stamp; and ``/diagnostics`` once per ``diagnostics_period`` of data time
-  from the node's own diagnostics policy (:class:`_DataClockDiagnostics`), which carries each
-  model's lag count and convergence flags;
+  time = the sample's stamp; and ``/diagnostics`` once per ``diagnostics_period`` of data
+  time from the node's own diagnostics policy (:class:`_DataClockDiagnostics`), which carries
+  each model's lag count and convergence flags;
+* ``run.json``: the bag's input digest, the span, the parameters and the configuration
+  (:func:`.replay_files.run_record`), for ``replay --compare`` (:mod:`.compare`);
 * ``M_estimates.png``: each parameter's history with corrected and conventional 2-sigma
-  envelopes, and ``M_autocorrelation.png``: each model's residual autocorrelation.
+  envelopes (at most :data:`PLOT_POINTS` evenly spaced samples per run, so a long recording
+  plots in bounded memory), and ``M_autocorrelation.png``: each model's residual
+  autocorrelation.
 Two runs give bit-identical CSV and MCAP files. The progress bar is drawn only on a terminal.
 """
 
 from __future__ import annotations
 
 import gc
+import json
 import sys
 import time
-from collections.abc import Iterable, Sequence
-from dataclasses import dataclass, field
+from collections.abc import Callable, Iterable, Sequence, Sized
 from pathlib import Path
-from typing import Any, TextIO
+from typing import Any, Protocol, TextIO
 
 import numpy as np
 
 from .alerts import no_estimate, not_excited
-from .bags import read_inputs, typestore, write_replay
-from .config import NodeConfig, PipelineConfig, node_config, pipeline_config
+from .bags import InputStream, typestore
+from .config import NodeConfig, PipelineConfig, node_config, parameter_defaults, pipeline_config
 from .diagnostics import DiagnosticsPolicy, Snapshot, Status
 from .files import output_directory
 from .inputs import Stamped, feed
 from .outputs import NODE_NAME, OutputLayout
 from .pipeline import Pipeline, SampleOutput
+from .replay_files import ReplayFiles, run_record
 from .report import results_table, rows_from_arrays
+from .results import History, ReplayResult, accounting
 
-__all__ = ["ReplayResult", "run_pipeline", "replay", "output_records", "NODE_NAME"]
+__all__ = ["ReplayResult", "run_pipeline", "replay", "planned_run", "summary_table", "unestimated", "NODE_NAME",
+           "PLOT_POINTS"]
+
+# Samples kept for the plots: at most twice this many, evenly spaced (results.History).
+PLOT_POINTS = 2048
 
 
-@dataclass
-class ReplayResult:
-    """The pipeline after the run, every published sample and timing. :attr:`estimates`
-    counts the samples that published an estimate (0: the run estimated nothing, which the
-    command line reports with exit status 1); :attr:`explanations` says, one line each, why a
-    model never produced an estimate (:func:`unestimated`)."""
+class Sink(Protocol):
+    """What :func:`run_pipeline` hands each output to as the run goes (the replay's files)."""
 
-    pipeline: Pipeline
-    outputs: list[SampleOutput] = field(default_factory=list)
-    n_messages: int = 0
-    wall_seconds: float = 0.0
-    data_seconds: float = 0.0
-    # (stamp_ns, statuses) of the /diagnostics the node would have published, one per
-    # diagnostics period of data time (empty unless run_pipeline was given a NodeConfig).
-    diagnostics: list[tuple[int, list[Status]]] = field(default_factory=list)
-    explanations: list[str] = field(default_factory=list)
+    def sample(self, out: SampleOutput) -> None: ...
 
-    @property
-    def estimates(self) -> int:
-        """Samples in which at least one model published its estimates."""
-        return sum(1 for out in self.outputs if out.ready.any())
+    def diagnostics(self, stamp_ns: int, statuses: list[Status]) -> None: ...
 
-    @property
-    def speed(self) -> float:
-        """Multiples of real time."""
-        return self.data_seconds / self.wall_seconds if self.wall_seconds > 0 else float("inf")
+    def after(self, newest_ns: int) -> None: ...
 
 
 def _is_terminal(stream: TextIO) -> bool:
@@ -97,16 +91,18 @@ class _DataClockDiagnostics:
     newest message stamp), one :class:`.diagnostics.Snapshot` of the pipeline into the same
     :class:`.diagnostics.DiagnosticsPolicy` the node uses. Data time stands in for the node's
     clock and steady time; a stream counts one publisher once its first message is read (a
-    bag has no DDS matching); latencies and the state file do not apply."""
+    bag has no DDS matching); latencies and the state file do not apply. Each report goes to
+    ``emit(stamp_ns, statuses)`` as it is made."""
 
-    def __init__(self, pipe: Pipeline, config: PipelineConfig, node_cfg: NodeConfig) -> None:
-        self.pipe, self.config, self.node_cfg = pipe, config, node_cfg
+    def __init__(self, pipe: Pipeline, config: PipelineConfig, node_cfg: NodeConfig,
+                 emit: Callable[[int, list[Status]], None]) -> None:
+        self.pipe, self.config, self.node_cfg, self.emit = pipe, config, node_cfg, emit
         self.policy = DiagnosticsPolicy(NODE_NAME, window_s=node_cfg.diagnostics_window)
         self.period_ns = max(1, round(node_cfg.diagnostics_period * 1e9))
         self.previous_ns: int | None = None
         self.newest_ns = 0
         self.seen: set[str] = set()
-        self.records: list[tuple[int, list[Status]]] = []
+        self.reports = 0
 
     def after(self, kind: str, stamp_ns: int) -> None:
         """Called after each message: a snapshot when a period of data time has passed."""
@@ -120,7 +116,7 @@ class _DataClockDiagnostics:
     def finish(self) -> None:
         """The end of the data: one more snapshot, unless data time has not moved since the
         last one (a snapshot over zero elapsed time would divide message counts by zero)."""
-        if not self.records or self.previous_ns is None or self.newest_ns > self.previous_ns:
+        if not self.reports or self.previous_ns is None or self.newest_ns > self.previous_ns:
             self.snapshot()
 
     def snapshot(self) -> None:
@@ -139,259 +135,282 @@ class _DataClockDiagnostics:
             enabled=pipe.enabled,
             state_file="replay: no state file",
         )
-        self.records.append((self.newest_ns, self.policy.update(snap)))
+        self.emit(self.newest_ns, self.policy.update(snap))
+        self.reports += 1
         self.previous_ns = self.newest_ns
 
 
-def run_pipeline(messages: Sequence[tuple[str, int, Stamped]], config: PipelineConfig, *, record: bool = True,
-                 progress: bool = False, diagnostics: NodeConfig | None = None) -> ReplayResult:
-    """Feed ``(kind, stamp, msg)`` messages through a fresh pipeline; keep every output.
-    ``progress`` draws a bar on stderr when stderr is a terminal (never carriage-return
-    frames into a log file or a pipe). With ``diagnostics`` (the node's settings), also keep
-    the node's ``/diagnostics`` statuses once per diagnostics period of data time, and once
-    at the end (:attr:`ReplayResult.diagnostics`)."""
-    progress = progress and _is_terminal(sys.stderr)
+class _Excitation:
+    """Which regressors of each model moved over the run, for :func:`unestimated`: the
+    extremes of every regression row, read from ``pipe.regression`` after each message
+    (and dropped there unless the caller keeps the rows). Watching stops once every model
+    has published: then nothing needs explaining."""
+
+    def __init__(self, pipe: Pipeline, keep_rows: bool) -> None:
+        self.pipe, self.keep_rows = pipe, keep_rows
+        self.low = np.full((len(pipe.sizes), pipe.bank.n_max), np.inf)
+        self.high = -self.low
+        self.seen = 0
+        self.watching = True
+        pipe.record = True
+
+    def update(self) -> None:
+        rows = self.pipe.regression
+        if len(rows) < self.seen:  # the pipeline restarted and dropped its rows
+            self.seen = 0
+        for _t, X, _z in rows[self.seen:]:
+            np.minimum(self.low, X, out=self.low)
+            np.maximum(self.high, X, out=self.high)
+        if self.keep_rows:
+            self.seen = len(rows)
+        else:
+            rows.clear()
+
+    def stop(self) -> None:
+        self.watching = False
+        self.pipe.record = self.keep_rows
+
+    def constant(self, j: int) -> list[str]:
+        """Model ``j``'s regressors (the bias aside) that never moved over the samples used."""
+        m, n = self.pipe.models[j], self.pipe.sizes[j]
+        lo, hi = self.low[j, :n], self.high[j, :n]
+        return [r for i, r in enumerate(m.regressors) if r != "1" and np.isfinite(lo[i]) and lo[i] == hi[i]]
+
+
+class _Run:
+    """One run's bookkeeping of outputs: what the :class:`.results.ReplayResult` keeps, what
+    each model published last, and the sink that writes them."""
+
+    def __init__(self, pipe: Pipeline, result: ReplayResult, keep_outputs: bool, sink: Sink | None) -> None:
+        self.pipe, self.result, self.keep_outputs, self.sink = pipe, result, keep_outputs, sink
+        self.ever = np.zeros(len(pipe.sizes), dtype=bool)
+        self.last: list[SampleOutput | None] = [None] * len(pipe.sizes)
+        self.real = np.arange(pipe.bank.n_max) < np.array(pipe.sizes)[:, None]
+
+    def sample(self, out: SampleOutput) -> None:
+        result = self.result
+        ready = out.ready
+        if ready.any():
+            result.estimates += 1
+            self.ever |= ready
+            for j in np.flatnonzero(ready).tolist():
+                self.last[j] = out
+        if result.history is not None:
+            result.history.add(out, self.real)
+        if self.keep_outputs:
+            result.outputs.append(out)
+        result.last_output = out
+        if self.sink is not None:
+            self.sink.sample(out)
+
+    def diagnostics(self, stamp_ns: int, statuses: list[Status]) -> None:
+        if self.keep_outputs:
+            self.result.diagnostics.append((stamp_ns, statuses))
+        if self.sink is not None:
+            self.sink.diagnostics(stamp_ns, statuses)
+
+    def finals(self) -> None:
+        """Each model's last published values into the result."""
+        for j, out in enumerate(self.last):
+            if out is not None:
+                n = self.pipe.sizes[j]
+                self.result.published(out.stamp_ns, j, out.theta[j, :n], out.se[j, :n], out.se_conventional[j, :n],
+                                      out.converged[j, :n])
+
+
+def run_pipeline(messages: Iterable[tuple[str, int, Stamped]], config: PipelineConfig, *, record: bool = True,
+                 progress: bool = False, diagnostics: NodeConfig | None = None, keep_outputs: bool = True,
+                 history: History | None = None, sink: Sink | None = None) -> ReplayResult:
+    """Feed ``(kind, stamp, msg)`` messages (a list, or a :class:`.bags.InputStream` read as it
+    goes) through a fresh pipeline. ``record`` keeps every regression row
+    (``pipeline.regression``); ``keep_outputs`` every :class:`.pipeline.SampleOutput` (and
+    report) in the result; ``history`` collects the time histories (:class:`.results.History`);
+    ``sink`` receives each output and report as it is made. Without the first two, memory
+    does not grow with the run. ``progress`` draws a bar on stderr when stderr is a terminal
+    (never carriage-return frames into a log file or a pipe). With ``diagnostics`` (the node's
+    settings), the node's ``/diagnostics`` statuses once per diagnostics period of data time,
+    and once at the end."""
+    total = len(messages) if isinstance(messages, Sized) else int(getattr(messages, "total", 0))
+    progress = progress and total > 0 and _is_terminal(sys.stderr)
     pipe = Pipeline(config, record=record)
-    result = ReplayResult(pipe, n_messages=len(messages))
-    total = len(messages)
+    result = ReplayResult(tuple(m.output for m in config.models), tuple(map(tuple, pipe.parameter_names)),
+                          history=history, pipeline=pipe)
+    run = _Run(pipe, result, keep_outputs, sink)
+    excitation = _Excitation(pipe, keep_rows=record)
+    diag = _DataClockDiagnostics(pipe, config, diagnostics, run.diagnostics) if diagnostics is not None else None
     step = max(1, total // 50)
+    first: int | None = None
+    newest = 0
+    n = 0
     t0 = time.perf_counter()
-    outs = result.outputs
-    diag = _DataClockDiagnostics(pipe, config, diagnostics) if diagnostics is not None else None
     # The loop allocates many small objects and no reference cycles: pausing the cyclic
-    # garbage collector saves its repeated passes over the messages already read (about 6%).
+    # garbage collector saves its repeated passes over the objects it keeps (about 6%).
     gc_was_enabled = gc.isenabled()
     gc.disable()
     try:
-        for i, (kind, stamp, msg) in enumerate(messages):
-            produced = feed(pipe, kind, msg)
-            if produced:
-                outs.extend(produced)
+        for kind, stamp, msg in messages:
+            if first is None:
+                first = newest = stamp
+            elif stamp > newest:
+                newest = stamp
+            for out in feed(pipe, kind, msg):
+                run.sample(out)
+            if excitation.watching:
+                excitation.update()
+                if run.ever.all():
+                    excitation.stop()
             if diag is not None:
                 diag.after(kind, stamp)
-            if progress and (i % step == 0):
-                _progress(i, total)
+            if sink is not None:
+                sink.after(newest)
+            n += 1
+            if progress and n % step == 0:
+                _progress(min(n, total), total)
         pipe.finish()
-        if diag is not None and messages:
+        if diag is not None and n:
             diag.finish()
-            result.diagnostics = diag.records
     finally:
         if gc_was_enabled:
             gc.enable()
     result.wall_seconds = time.perf_counter() - t0
     if progress:
         _progress(total, total)
-    if messages:
-        result.data_seconds = (messages[-1][1] - messages[0][1]) * 1e-9
-    result.explanations = unestimated(pipe, outs)
+    result.n_messages = n
+    if first is not None:
+        result.data_seconds = (newest - first) * 1e-9
+    run.finals()
+    result.explanations = unestimated(pipe, run.ever, excitation)
+    result.counter_values = accounting(pipe.counters())
+    result.bag_digest = str(getattr(messages, "digest", ""))
     return result
 
 
-def unestimated(pipe: Pipeline, outputs: Sequence[SampleOutput]) -> list[str]:
-    """Why models never produced an estimate over ``outputs``, in the terms of
-    :mod:`.alerts`: one line ``no estimates: <why>`` when the data path used no sample (which
-    stream was rejected and why, expected against received, the parameter to change), else
-    one ``<model>: no estimate: <why>`` per model that never became ready."""
-    ever = np.zeros(len(pipe.models), dtype=bool)
-    for out in outputs:
-        ever |= out.ready
-        if ever.all():  # the usual case: every model ready early in the run
-            return []
+def unestimated(pipe: Pipeline, ever: np.ndarray, excitation: _Excitation | None = None) -> list[str]:
+    """Why models never produced an estimate (``ever``: per model, whether it published), in
+    the terms of :mod:`.alerts`: one line ``no estimates: <why>`` when the data path used no
+    sample (which stream was rejected and why, expected against received, the parameter to
+    change), else one ``<model>: no estimate: <why>`` per model that never became ready, with
+    the regressors that never moved when ``excitation`` watched them."""
+    if ever.all():
+        return []
     why = no_estimate(pipe.counters(), pipe.required)
     if why is not None:
         return [f"no estimates: {why}"]
-    lines = []
-    for j, (m, n) in enumerate(zip(pipe.models, pipe.sizes, strict=True)):
-        if not ever[j]:
-            # With the regression recorded: the regressors that never moved (the bias aside).
-            X = np.array([x[j, :n] for _t, x, _z in pipe.regression]).reshape(-1, n)
-            constant = [r for i, r in enumerate(m.regressors) if r != "1" and len(X) and np.ptp(X[:, i]) == 0]
-            lines.append(f"{m.output}: no estimate: {not_excited(n, pipe.bank.k, constant)}")
-    return lines
+    return [f"{m.output}: no estimate: {not_excited(n, pipe.bank.k, excitation.constant(j) if excitation else [])}"
+            for j, (m, n) in enumerate(zip(pipe.models, pipe.sizes, strict=True)) if not ever[j]]
 
 
-def output_records(pipe: Pipeline, outputs: Iterable[SampleOutput], frame_id: str = "base_link",
-                   node: str = NODE_NAME) -> list[tuple[int, str, str, bytes]]:
-    """The node's output messages for every sample, as bag records of CDR bytes: exactly what
-    the node publishes (:meth:`.outputs.OutputLayout.encode`)."""
-    layout = OutputLayout.of(pipe)
-    topics = [(f"/{node}/{topic}", msgtype) for topic, msgtype in layout.topics]
-    return [(out.stamp_ns, *topics[index], data) for out in outputs for index, data in layout.encode(out, frame_id)]
-
-
-DIAGNOSTIC_ARRAY = "diagnostic_msgs/msg/DiagnosticArray"
-
-
-def diagnostics_records(diagnostics: Iterable[tuple[int, list[Status]]], store: Any) -> list[tuple[int, str, str, Any]]:
-    """``/diagnostics`` bag records (``rosbags`` messages of ``store``) of the statuses a
-    replay kept (:attr:`ReplayResult.diagnostics`), stamped with the data time."""
-    types = store.types
-    header, stamp_t = types["std_msgs/msg/Header"], types["builtin_interfaces/msg/Time"]
-    array_t, status_t = types[DIAGNOSTIC_ARRAY], types["diagnostic_msgs/msg/DiagnosticStatus"]
-    key_value = types["diagnostic_msgs/msg/KeyValue"]
-    records = []
-    for stamp_ns, statuses in diagnostics:
-        sec, nanosec = divmod(stamp_ns, 1_000_000_000)
-        msg = array_t(
-            header=header(stamp=stamp_t(sec=sec, nanosec=nanosec), frame_id=""),
-            status=[status_t(level=s.level, name=s.name, message=s.message, hardware_id=s.hardware_id,
-                             values=[key_value(key=k, value=v) for k, v in s.values]) for s in statuses],
-        )
-        records.append((stamp_ns, "/diagnostics", DIAGNOSTIC_ARRAY, msg))
-    return records
-
-
-def _stamp_text(stamp_ns: int) -> str:
-    return f"{stamp_ns // 10**9}.{stamp_ns % 10**9:09d}"
-
-
-CSV_COLUMNS = ("time", "model", "parameter", "estimate", "std_error", "std_error_conventional", "converged", "lags")
-
-
-def _write_csv(path: Path, pipe: Pipeline, outputs: Iterable[SampleOutput]) -> None:
-    """``estimates.csv``: :data:`CSV_COLUMNS`, one row per sample and parameter of every ready
-    model; ``converged`` is the parameter's flag (1/0), ``lags`` the model's lag count of Eq. 22
-    behind ``std_error`` (chosen per sample under ``estimator.lag_selection: auto``)."""
-    layout = OutputLayout.of(pipe)
-    with open(path, "w") as fh:
-        fh.write(",".join(CSV_COLUMNS) + "\n")
-        for out in outputs:
-            t = _stamp_text(out.stamp_ns)
-            for j, name, names, theta, se, se_conv in layout.rows(out):
-                lags = int(out.lags[j]) if out.lags is not None else ""
-                flags = out.converged[j, : len(names)].tolist()
-                # (Python floats from tolist: the same repr as float() of each numpy element.)
-                for p, a, b, c, f in zip(names, theta.tolist(), se.tolist(), se_conv.tolist(), flags, strict=True):
-                    fh.write(f"{t},{name},{p},{a!r},{b!r},{c!r},{int(f)},{lags}\n")
-
-
-# Columns of the wide CSV per parameter P: P (estimate), P_se (corrected), P_se_conventional,
-# P_converged (1.0/0.0); and per model M, after its parameters, M_lags.
-WIDE_QUANTITIES = (("", "theta"), ("_se", "se"), ("_se_conventional", "se_conventional"), ("_converged", "converged"))
-
-
-def wide_columns(pipe: Pipeline) -> list[str]:
-    """The wide CSV's header: ``time`` then, per model, every quantity of each parameter and
-    the model's lag count."""
-    columns = ["time"]
-    for m, names in zip(pipe.models, pipe.parameter_names, strict=True):
-        columns += [f"{p}{suffix}" for p in names for suffix, _ in WIDE_QUANTITIES] + [f"{m.output}_lags"]
-    return columns
-
-
-def _write_wide_csv(path: Path, pipe: Pipeline, outputs: Iterable[SampleOutput]) -> None:
-    """``estimates_wide.csv``: one row per sample, one column per parameter and quantity
-    (:func:`wide_columns`), empty where the model is not ready yet. Comma separated, a header
-    row and a numeric time column (s): what PlotJuggler's CSV loader reads as is."""
-    sizes = pipe.sizes
-    with open(path, "w") as fh:
-        fh.write(",".join(wide_columns(pipe)) + "\n")
-        for out in outputs:
-            cells = [_stamp_text(out.stamp_ns)]
-            arrays = [np.asarray(getattr(out, field), dtype=np.float64) for _, field in WIDE_QUANTITIES]
-            for j, n in enumerate(sizes):
-                if out.ready[j]:
-                    rows = [a[j, :n].tolist() for a in arrays]  # Python floats: repr as float()
-                    cells += [repr(row[i]) for i in range(n) for row in rows]
-                    cells.append(str(int(out.lags[j])) if out.lags is not None else "")
-                else:
-                    cells += [""] * (n * len(arrays) + 1)
-            fh.write(",".join(cells) + "\n")
-
-
-def summary_table(pipe: Pipeline, outputs: Sequence[SampleOutput]) -> str:
-    """The last sample's estimates of every ready model (:func:`.report.results_table`), then
-    why any model has none (:func:`unestimated`)."""
-    why = unestimated(pipe, outputs)
+def summary_table(result: ReplayResult) -> str:
+    """The last sample's estimates of every model ready in it (:func:`.report.results_table`),
+    then why any model has none (:attr:`.results.ReplayResult.explanations`)."""
     rows = []
-    for row in OutputLayout.of(pipe).rows(outputs[-1]) if outputs else ():
-        rows += rows_from_arrays(row.names, row.estimates, row.standard_errors_conventional, row.standard_errors)
-    return "\n".join(([results_table(rows)] if rows else []) + why)
+    last, pipe = result.last_output, result.pipeline
+    if last is not None and pipe is not None:
+        for row in OutputLayout.of(pipe).rows(last):
+            rows += rows_from_arrays(row.names, row.estimates, row.standard_errors_conventional, row.standard_errors)
+    return "\n".join(([results_table(rows)] if rows else []) + result.explanations)
 
 
-def _plots(out_dir: Path, pipe: Pipeline, outputs: Sequence[SampleOutput]) -> list[Path]:
+def _plots(out_dir: Path, pipe: Pipeline, history: History) -> list[Path]:
+    """Each model's estimates with both 2-sigma envelopes over the samples ``history`` kept,
+    and its residual autocorrelation at the end of the run."""
     import matplotlib  # noqa: PLC0415
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt  # noqa: PLC0415
 
     written: list[Path] = []
-    if not outputs:
+    if not history.n:
         return written
-    t0 = outputs[0].stamp_ns
-    t = np.array([(o.stamp_ns - t0) * 1e-9 for o in outputs])
+    stamps = history.stamps_ns
+    t = (stamps - stamps[0]) * 1e-9
+    k = 0
     for j, m in enumerate(pipe.models):
         names = pipe.parameter_names[j]
-        th = np.array([o.theta[j, : len(names)] for o in outputs])
-        se = np.array([o.se[j, : len(names)] for o in outputs])
-        sc = np.array([o.se_conventional[j, : len(names)] for o in outputs])
-        if np.all(np.isnan(th)):
+        columns = [history.column(k + i) for i in range(len(names))]
+        k += len(names)
+        if all(np.all(np.isnan(c[0])) for c in columns):
             continue
-        fig, axes = plt.subplots(len(names), 1, figsize=(7, 1.9 * len(names)), sharex=True, squeeze=False)
-        for i, ax in enumerate(axes[:, 0]):
-            ax.plot(t, th[:, i], "k", lw=1, label="estimate")
-            ax.fill_between(t, th[:, i] - 2 * se[:, i], th[:, i] + 2 * se[:, i], color="tab:blue", alpha=0.25,
-                            label="2 sigma corrected")
-            ax.plot(t, th[:, i] - 2 * sc[:, i], "r--", lw=0.8, label="2 sigma conventional")
-            ax.plot(t, th[:, i] + 2 * sc[:, i], "r--", lw=0.8)
-            ax.set_ylabel(names[i])
-            fin = np.isfinite(th[:, i])
-            if fin.sum() > 10:  # ignore the first estimates right after initialization
-                k0 = int(np.flatnonzero(fin)[0]) + (int(fin.sum()) // 10)
-                lo = np.nanmin(th[k0:, i] - 3 * se[k0:, i])
-                hi = np.nanmax(th[k0:, i] + 3 * se[k0:, i])
-                if np.isfinite(lo) and np.isfinite(hi) and hi > lo:
-                    ax.set_ylim(lo, hi)
-        axes[0, 0].legend(loc="upper right", fontsize=7)
-        axes[-1, 0].set_xlabel("time from first estimate, s")
-        fig.suptitle(f"{m.output}: estimates with 2-sigma bounds")
-        fig.tight_layout()
-        path = out_dir / f"{m.output}_estimates.png"
-        fig.savefig(path, dpi=90, metadata={"Software": None})
-        plt.close(fig)
-        written.append(path)
+        written.append(_estimates_plot(plt, out_dir / f"{m.output}_estimates.png", m.output, names, t, columns))
         if pipe.bank.ready[j]:
-            R = pipe.bank.autocorrelation(j)
-            n = pipe.bank.k
-            fig, ax = plt.subplots(figsize=(6, 3))
-            ax.stem(np.arange(R.size), R / R[0], basefmt=" ")
-            bound = 2 / np.sqrt(n)
-            ax.axhline(bound, color="r", ls="--", lw=0.8)
-            ax.axhline(-bound, color="r", ls="--", lw=0.8, label="2 sigma white-noise bound")
-            ax.set_xlabel("lag, samples")
-            ax.set_ylabel("R(i) / R(0)")
-            ax.set_title(f"{m.output}: residual autocorrelation (Eq. 17) after {n} samples")
-            ax.legend(fontsize=7)
-            fig.tight_layout()
-            path = out_dir / f"{m.output}_autocorrelation.png"
-            fig.savefig(path, dpi=90, metadata={"Software": None})
-            plt.close(fig)
-            written.append(path)
+            written.append(_autocorrelation_plot(plt, out_dir / f"{m.output}_autocorrelation.png", m.output,
+                                                 pipe.bank.autocorrelation(j), pipe.bank.k))
     return written
+
+
+def _estimates_plot(plt: Any, path: Path, model: str, names: Sequence[str], t: np.ndarray,
+                    columns: Sequence[tuple[np.ndarray, ...]]) -> Path:
+    fig, axes = plt.subplots(len(names), 1, figsize=(7, 1.9 * len(names)), sharex=True, squeeze=False)
+    for i, ax in enumerate(axes[:, 0]):
+        th, se, sc = columns[i][:3]
+        ax.plot(t, th, "k", lw=1, label="estimate")
+        ax.fill_between(t, th - 2 * se, th + 2 * se, color="tab:blue", alpha=0.25, label="2 sigma corrected")
+        ax.plot(t, th - 2 * sc, "r--", lw=0.8, label="2 sigma conventional")
+        ax.plot(t, th + 2 * sc, "r--", lw=0.8)
+        ax.set_ylabel(names[i])
+        fin = np.isfinite(th)
+        if fin.sum() > 10:  # ignore the first estimates right after initialization
+            k0 = int(np.flatnonzero(fin)[0]) + (int(fin.sum()) // 10)
+            lo = np.nanmin(th[k0:] - 3 * se[k0:])
+            hi = np.nanmax(th[k0:] + 3 * se[k0:])
+            if np.isfinite(lo) and np.isfinite(hi) and hi > lo:
+                ax.set_ylim(lo, hi)
+    axes[0, 0].legend(loc="upper right", fontsize=7)
+    axes[-1, 0].set_xlabel("time from first estimate, s")
+    fig.suptitle(f"{model}: estimates with 2-sigma bounds")
+    fig.tight_layout()
+    fig.savefig(path, dpi=90, metadata={"Software": None})
+    plt.close(fig)
+    return path
+
+
+def _autocorrelation_plot(plt: Any, path: Path, model: str, R: np.ndarray, n: int) -> Path:
+    fig, ax = plt.subplots(figsize=(6, 3))
+    ax.stem(np.arange(R.size), R / R[0], basefmt=" ")
+    bound = 2 / np.sqrt(n)
+    ax.axhline(bound, color="r", ls="--", lw=0.8)
+    ax.axhline(-bound, color="r", ls="--", lw=0.8, label="2 sigma white-noise bound")
+    ax.set_xlabel("lag, samples")
+    ax.set_ylabel("R(i) / R(0)")
+    ax.set_title(f"{model}: residual autocorrelation (Eq. 17) after {n} samples")
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=90, metadata={"Software": None})
+    plt.close(fig)
+    return path
 
 
 def replay(bag: str | Path, params: dict[str, Any], out: str | Path, *, start: float | None = None,
            end: float | None = None, strict: bool = True, progress: bool = True, plots: bool = True,
            force: bool = False, inputs: Iterable[str | Path] = ()) -> ReplayResult:
-    """Run a replay bag through the pipeline and write the outputs to ``out``
-    (:func:`.files.output_directory`: complete or absent; an existing non-empty ``out`` only
-    with ``force``; never over the input bag or the other ``inputs``, such as the parameter
-    file)."""
+    """Run a replay bag through the pipeline, reading it and writing the outputs to ``out``
+    as it goes (:func:`.files.output_directory`: complete or absent; an existing non-empty
+    ``out`` only with ``force``; never over the input bag or the other ``inputs``, such as the
+    parameter file). The result keeps no per-sample outputs, and the time histories only
+    decimated for the plots (:data:`PLOT_POINTS`)."""
     config = pipeline_config(params)
-    topics = node_config(params).topics
-    with output_directory(out, force=force, inputs=(bag, *inputs)) as tmp:
-        messages, _t0 = read_inputs(bag, topics, strict=strict, start=start, end=end)
-        result = run_pipeline(messages, config, progress=progress, diagnostics=node_config(params))
-        _write_csv(tmp / "estimates.csv", result.pipeline, result.outputs)
-        _write_wide_csv(tmp / "estimates_wide.csv", result.pipeline, result.outputs)
-        store = typestore()
-        records = output_records(result.pipeline, result.outputs, node_config(params).frame_id)
-        records += diagnostics_records(result.diagnostics, store)
-        if records:
-            write_replay(tmp / "estimates", records, store)
-            (tmp / "estimates" / "estimates.mcap").rename(tmp / "estimates.mcap")
-            (tmp / "estimates" / "metadata.yaml").unlink()
-            (tmp / "estimates").rmdir()
-        if plots:
-            _plots(tmp, result.pipeline, result.outputs)
+    node_cfg = node_config(params)
+    names = [m.parameter_names for m in config.models]
+    with output_directory(out, force=force, inputs=(bag, *inputs)) as tmp, \
+            InputStream(bag, node_cfg.topics, strict=strict, start=start, end=end) as stream:
+        files = ReplayFiles(tmp, config, node_cfg.frame_id, NODE_NAME, typestore())
+        with files:
+            result = run_pipeline(stream, config, record=False, progress=progress, diagnostics=node_cfg,
+                                  keep_outputs=False, history=History(names, PLOT_POINTS), sink=files)
+        pipe = result.pipeline
+        assert pipe is not None  # run_pipeline keeps its pipeline
+        record = planned_run(params, start=start, end=end, strict=strict)
+        record["bag"] |= {"path": str(bag), "input_sha256": stream.digest, "messages_read": stream.read,
+                          "messages_used": result.n_messages}
+        (tmp / "run.json").write_text(json.dumps(record, indent=1, sort_keys=True, default=repr) + "\n")
+        if plots and result.history is not None:
+            _plots(tmp, pipe, result.history)
     return result
+
+
+def planned_run(params: dict[str, Any], *, start: float | None = None, end: float | None = None,
+                strict: bool = True) -> dict[str, Any]:
+    """The ``run.json`` of a replay with ``params`` over the span, before the bag is read
+    (:func:`.replay_files.run_record`; the replay adds the bag's path and input digest)."""
+    return run_record({"start": start, "end": end, "strict": strict}, {**parameter_defaults(), **params},
+                      pipeline_config(params))

@@ -480,3 +480,110 @@ def test_an_array_of_text_as_field_is_one_line(tmp_path, capsys):
     spec["control_surfaces"]["joints"] = {"elevator": "position"}
     convert(src, write_mapping(tmp_path, spec), tmp_path / "o")
     assert [list(m.position) for _t, m in read_all(tmp_path / "o")["/control_surfaces"]] == [[pytest.approx(0.3)]] * 5
+
+
+# ----------------------------------------------------------------------------- streaming
+def _input_digest(path):
+    """SHA-256 of the input topics' messages (topic, log time, bytes), read independently."""
+    import hashlib
+
+    from rosbags.highlevel import AnyReader
+
+    digest = hashlib.sha256()
+    with AnyReader([Path(path)], default_typestore=typestore()) as reader:
+        conns = [c for c in reader.connections if c.topic.strip("/") in INPUT_NAMES]
+        for conn, t, raw in reader.messages(connections=conns):
+            digest.update(f"{conn.topic}\0{t}\0{len(raw)}\0".encode() + bytes(raw))
+    return digest.hexdigest()
+
+
+INPUT_NAMES = ("imu", "airspeed", "dynamic_pressure", "control_surfaces", "thrust")
+
+
+def test_the_input_stream_reads_what_the_list_holds_and_digests_the_input_messages(tmp_path):
+    from rls_uncertainty.bags import InputStream
+
+    listed, t0 = read_inputs(BUNDLED)
+    with InputStream(BUNDLED) as stream:
+        assert stream.t0 == t0 and stream.total == 4920
+        streamed = [(k, s, m.header.frame_id) for k, s, m in stream]
+        assert stream.read == 4920 and stream.digest == _input_digest(BUNDLED)
+    assert streamed == [(k, s, m.header.frame_id) for k, s, m in listed]
+    with pytest.raises(BagError, match="read once"):
+        list(stream)
+    # The same input messages beside another topic, in other chunks: the same digest; one
+    # message changed: another.
+    store = typestore()
+    messages = [(t, topic, m.__msgtype__, m) for topic, ms in read_all(BUNDLED).items() for t, m in ms]
+    extra = [(t, "/other", "std_msgs/msg/String", store.types["std_msgs/msg/String"](data="x" * 5000))
+             for t, *_ in messages[::7]]
+    write_replay(tmp_path / "same", messages + extra, store)
+    changed = list(messages)
+    t, topic, msgtype, _msg = changed[100]
+    changed[100] = (t, topic, msgtype, _standard_message(store, "thrust", t, 1.0) if topic == "/thrust" else
+                    _standard_message(store, "dynamic_pressure", t, 1.0) if topic == "/dynamic_pressure" else
+                    _standard_message(store, "airspeed", t, (1.0, 0.0, 0.0)) if topic == "/airspeed" else
+                    _standard_message(store, "imu", t, (1, 0, 0, 0, 0, 9.8)))
+    write_replay(tmp_path / "changed", changed, store)
+    for path, same in ((tmp_path / "same", True), (tmp_path / "changed", False)):
+        with InputStream(path) as s:
+            for _ in s:
+                pass
+            assert (s.digest == _input_digest(BUNDLED)) is same
+
+
+def test_a_bag_writer_fed_in_pieces_writes_what_one_sort_writes(tmp_path):
+    """Records arrive out of order by at most 40 ms; the writer is told after each arrival that
+    nothing earlier than the next unarrived stamp will come. Its file equals write_replay's of
+    the records in their order of arrival, which sorts them all at once (ties of stamp and
+    topic keep that order); it never holds more than the disorder spans."""
+    from rls_uncertainty.bags import BagWriter
+
+    store = typestore()
+    rng = np.random.default_rng(3)
+    stamps = np.arange(2000) * 5_000_000  # 200 Hz
+    topics = rng.choice(["/imu", "/airspeed", "/diagnostics_like"], stamps.size)
+    records = [(int(s), str(tp), "std_msgs/msg/String", store.types["std_msgs/msg/String"](data=f"{i}"))
+               for i, (s, tp) in enumerate(zip(stamps, topics, strict=True))]
+    records += [(int(s), "/imu", "std_msgs/msg/String", store.types["std_msgs/msg/String"](data="tie"))
+                for s in stamps[::50]]  # ties on one topic: their order of arrival stands
+    arrival = sorted(range(len(records)), key=lambda i: records[i][0] + rng.integers(0, 40_000_000))
+    write_replay(tmp_path / "sorted" / "bag", [records[i] for i in arrival], store)
+    topics_ = sorted({(r[1], r[2]) for r in records})
+    queued = []
+    bag = tmp_path / "streamed" / "bag"  # the same name: the file records it
+    with BagWriter(bag, topics_, store) as writer:
+        for n, i in enumerate(arrival):
+            writer.add(*records[i])
+            pending = [records[j][0] for j in arrival[n + 1:]]
+            writer.release(min(pending) if pending else None)
+            queued.append(writer.queued)
+    assert (bag / "bag.mcap").read_bytes() == (tmp_path / "sorted" / "bag" / "bag.mcap").read_bytes()
+    assert max(queued) <= 40 * 3  # 40 ms at 200 Hz plus the ties, not the whole bag
+
+
+def test_convert_writes_as_it_reads_holding_back_only_the_stamp_skew(tmp_path, monkeypatch):
+    """A recording whose IMU header stamps lag their log time by 0.3 s and whose air data do
+    not: the converted bag is in stamp order (rewriting it with write_replay, which sorts every
+    record, changes no byte), and the writer never held more than about the skew's records."""
+    from rls_uncertainty.bags import BagWriter
+
+    n, skew = 600, 300_000_000
+    imu = [10**18 + k * 20_000_000 - skew for k in range(n)]
+    src = fti_bag(tmp_path, "skewed", imu_stamps_ns=imu)
+    held = []
+    release = BagWriter.release
+
+    def watched(self, before_ns=None):
+        held.append(self.queued)
+        release(self, before_ns)
+
+    monkeypatch.setattr(BagWriter, "release", watched)
+    out = tmp_path / "out"
+    assert convert(src, write_mapping(tmp_path), out) == {"/imu": n, "/airspeed": n}
+    monkeypatch.undo()
+    msgs = read_all(out)
+    again = [(t, topic, m.__msgtype__, m) for topic, ms in msgs.items() for t, m in ms]
+    write_replay(tmp_path / "again" / "out", again)
+    assert (out / "out.mcap").read_bytes() == (tmp_path / "again" / "out" / "out.mcap").read_bytes()
+    assert max(held) <= 2 * (skew // 20_000_000) + 4  # 15 messages of skew per topic, not 1200

@@ -51,7 +51,7 @@ def _setup(command, tmp_path):
 
 def _expected_outputs(command, out):
     if command == "replay":
-        return {"estimates.csv", "estimates_wide.csv", "estimates.mcap"}
+        return {"estimates.csv", "estimates_wide.csv", "estimates.mcap", "run.json"}
     return {f"{out.name}.mcap", "metadata.yaml"}
 
 

@@ -29,13 +29,14 @@ def test_replay_writes_identical_outputs_twice_and_matches_the_pipeline(tmp_path
         rows = list(csv.DictReader(fh))
     assert list(rows[0]) == ["time", "model", "parameter", "estimate", "std_error", "std_error_conventional",
                              "converged", "lags"]
-    # One row per sample and parameter of every ready model.
-    n_rows = sum(int(sum(n for n, r in zip(r1.pipeline.sizes, o.ready, strict=True) if r)) for o in r1.outputs)
-    assert len(rows) == n_rows
-    # The CSV's last values are the pipeline's, fed message by message independently here.
+    # The CSV's values are the pipeline's, fed message by message from a list here.
     messages, _ = read_inputs(BUNDLED)
     again = run_pipeline(messages, pipeline_config(params))
     last = again.outputs[-1]
+    # One row per sample and parameter of every ready model.
+    n_rows = sum(int(sum(n for n, r in zip(r1.pipeline.sizes, o.ready, strict=True) if r)) for o in again.outputs)
+    assert len(rows) == n_rows
+    assert r1.estimates == again.estimates and r1.last_output.stamp_ns == last.stamp_ns
     final = {r["parameter"]: r for r in rows if float(r["time"]) == last.stamp_ns * 1e-9}
     for j, names in enumerate(again.pipeline.parameter_names):
         for i, name in enumerate(names):
@@ -100,7 +101,8 @@ def test_the_wide_csv_holds_the_long_csv_one_row_per_sample(tmp_path):
     """estimates_wide.csv: a header row, a numeric time column, one column per parameter and
     quantity, comma separated, empty cells while a model is not ready: what PlotJuggler's CSV
     loader reads (it skips empty cells); every number equals estimates.csv's."""
-    result = replay(BUNDLED, load_parameters_file("t2"), tmp_path / "r", progress=False, plots=False)
+    replay(BUNDLED, load_parameters_file("t2"), tmp_path / "r", progress=False, plots=False)
+    result = run_pipeline(read_inputs(BUNDLED)[0], pipeline_config(load_parameters_file("t2")))
     lines = (tmp_path / "r" / "estimates_wide.csv").read_text().splitlines()
     header = lines[0].split(",")
     quantities = ("", "_se", "_se_conventional", "_converged")
@@ -139,7 +141,8 @@ def test_the_replays_mcap_carries_every_topic_the_node_publishes_byte_for_byte(t
     from rls_uncertainty.outputs import OutputLayout, output_topics
 
     params = load_parameters_file("t2")
-    result = replay(BUNDLED, params, tmp_path / "r", progress=False, plots=False)
+    replay(BUNDLED, params, tmp_path / "r", progress=False, plots=False)
+    result = run_pipeline(read_inputs(BUNDLED)[0], pipeline_config(params))
     from mcap.reader import make_reader
 
     with open(tmp_path / "r" / "estimates.mcap", "rb") as fh:
@@ -263,7 +266,7 @@ def test_a_run_without_estimates_says_why_and_counts_none(tmp_path, capsys):
     assert result.explanations == [want]
     from rls_uncertainty.replay import summary_table
 
-    assert summary_table(result.pipeline, result.outputs) == want
+    assert summary_table(result) == want
     ok = replay(BUNDLED, load_parameters_file("t2"), tmp_path / "ok", progress=False, plots=False)
     with open(tmp_path / "ok" / "estimates.csv") as fh:
         assert ok.estimates == len({row["time"] for row in csv.DictReader(fh)}) > 500  # samples with a CSV row
@@ -283,3 +286,20 @@ def test_models_the_maneuver_never_excites_are_named_with_the_regressors_that_ne
     cl = next(line for line in result.explanations if line.startswith("Cl:"))
     assert "its 6 regressors were not excited independently in 587 samples" in cl
     assert all(name in cl.split("(")[1].split(" never moved")[0] for name in flat)
+
+
+def test_the_replay_keeps_no_sample_and_plots_from_a_bounded_history(tmp_path, monkeypatch):
+    """The command's result holds no per-sample output: the files are written as the samples
+    come, and the plots read an evenly spaced history of at most 2 x PLOT_POINTS samples."""
+    from rls_uncertainty import replay as replay_module
+
+    monkeypatch.setattr(replay_module, "PLOT_POINTS", 50)
+    result = replay(BUNDLED, load_parameters_file("t2"), tmp_path / "r", progress=False)
+    assert result.outputs == [] and result.diagnostics == []
+    h = result.history
+    assert h.n <= 100 and h.stride == 8 and h.offered == 591  # every used sample offered, every 8th kept
+    with open(tmp_path / "r" / "estimates_wide.csv") as fh:
+        times = [line.split(",", 1)[0] for line in fh][1:]
+    assert [f"{s // 10**9}.{s % 10**9:09d}" for s in h.stamps_ns] == times[::8]
+    assert {p.name for p in (tmp_path / "r").glob("*.png")} == {
+        "CZ_estimates.png", "Cm_estimates.png", "CZ_autocorrelation.png", "Cm_autocorrelation.png"}

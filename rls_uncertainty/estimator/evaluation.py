@@ -81,6 +81,7 @@ class Evaluation:
         self._covariances: Covariances | None = None  # of the current sample
         self._chosen: IntArray | None = None  # the lags of the current sample (chosen on first use)
         self._totals: float | FloatArray | None = None  # the weight totals of the current sample
+        self._exact_fits: BoolArray | None = None  # exact_fits() of the current sample
         self._window_key: tuple[int, int] | None = None
         self._window_h = np.zeros(0)
 
@@ -94,7 +95,7 @@ class Evaluation:
         self.new_sample()
 
     def new_sample(self) -> None:
-        self._covariances = self._chosen = self._totals = None
+        self._covariances = self._chosen = self._totals = self._exact_fits = None
 
     def saved(self) -> Covariances | None:
         """The covariances evaluated at this sample (None if none were)."""
@@ -179,8 +180,14 @@ class Evaluation:
         return self._window_h
 
     def _exact(self, k: int, totals: float | FloatArray) -> BoolArray:
-        lags = self._lags
-        return exact_fits(lags.lag_sums, self._theta, self._theta_row, lags.lag0, totals, self.options.forgetting, k)
+        """:func:`exact_fits` at this sample, computed once (the lag choice and the evaluator's
+        repair both ask)."""
+        exact = self._exact_fits
+        if exact is None:
+            lags = self._lags
+            exact = self._exact_fits = exact_fits(
+                lags.lag_sums, self._theta, self._theta_row, lags.lag0, totals, self.options.forgetting, k)
+        return exact
 
     def standard_errors(self, kind: str) -> FloatArray:
         """The published standard errors of every model, ``(M, n_max)``."""

@@ -1,0 +1,145 @@
+"""Cost per sample of the frequency-domain estimator beside the time-domain one.
+
+Prints, in one run on this machine, for the six models of Eq. 2 (time domain 3, 4, 3, 6, 4, 4
+parameters; frequency domain the same without the bias: 2, 3, 2, 5, 3, 3), 50 lags:
+
+  1. the time-domain EstimatorBank: update plus every output a node publishes (estimates,
+     corrected and conventional standard errors);
+  2. the FrequencyBank on the default grid (0.1-1.5 Hz every 0.04 Hz, 36 frequencies) and on
+     the T-2 grid (0.2-2.2 Hz, 51): the update alone (transform and lag sums), and update plus
+     all outputs when they are evaluated every sample, every 5 and every 50 samples
+     (``every``; the mean per sample over a whole period);
+  3. the evaluation against the number of frequencies (36 to 400);
+  4. the memory of each bank's state.
+
+The rows are ``estimator_benchmark.maneuver``'s (multisine-like regressors, AR(1) noise).
+Median (and 99th percentile) over 2000 samples after 300 of warm-up. numpy's BLAS threads as
+the environment sets them (``OPENBLAS_NUM_THREADS``; printed).
+
+Run: .venv/bin/python benchmarks/frequency_benchmark.py
+"""
+
+from __future__ import annotations
+
+import gc
+import os
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from estimator_benchmark import RATE, SIZES, maneuver  # the time-domain benchmark's six models and rows
+
+from rls_uncertainty.estimator import EstimatorBank
+from rls_uncertainty.frequency import FrequencyBank, FrequencyOptions
+
+WARM, SAMPLES = 300, 2000
+
+
+def timed(step, n: int) -> tuple[float, float]:
+    """Median and 99th percentile (us) of ``step(k)`` over samples ``WARM .. WARM + n``."""
+    times = []
+    gc.disable()
+    try:
+        for k in range(WARM, WARM + n):
+            t0 = time.perf_counter()
+            step(k)
+            times.append(time.perf_counter() - t0)
+    finally:
+        gc.enable()
+    return float(np.median(times) * 1e6), float(np.percentile(times, 99) * 1e6)
+
+
+def time_domain(X: np.ndarray, z: np.ndarray) -> tuple[float, float]:
+    bank = EstimatorBank(SIZES, 50)
+    for k in range(WARM):
+        bank.update(X[k], z[k])
+
+    def step(k: int) -> None:
+        bank.update(X[k], z[k])
+        bank.theta_all()
+        bank.standard_errors_all("corrected")
+        bank.standard_errors_all("conventional")
+
+    return timed(step, SAMPLES)
+
+
+def frequency_bank(options: FrequencyOptions, X: np.ndarray, z: np.ndarray) -> FrequencyBank:
+    bank = FrequencyBank([s - 1 for s in SIZES], options)
+    for k in range(WARM):
+        bank.update(X[k, :, 1:], z[k])
+    bank.theta_all()
+    return bank
+
+
+def frequency_domain(options: FrequencyOptions, X: np.ndarray, z: np.ndarray, outputs: bool) -> tuple[float, float]:
+    bank = frequency_bank(options, X, z)
+
+    def step(k: int) -> None:
+        bank.update(X[k, :, 1:], z[k])
+        if outputs:
+            bank.theta_all()
+            bank.standard_errors_all("corrected")
+            bank.standard_errors_all("conventional")
+
+    if options.every == 1:
+        return timed(step, SAMPLES)
+    t0 = time.perf_counter()  # amortised: every period has one evaluation
+    for k in range(WARM, WARM + SAMPLES):
+        step(k)
+    mean = (time.perf_counter() - t0) / SAMPLES * 1e6
+    return mean, float("nan")
+
+
+def state_bytes(bank: object) -> int:
+    seen, total, todo = set(), 0, [bank]
+    while todo:
+        obj = todo.pop()
+        if id(obj) in seen:
+            continue
+        seen.add(id(obj))
+        if isinstance(obj, np.ndarray):
+            total += obj.nbytes
+        elif hasattr(obj, "__dict__"):
+            todo.extend(vars(obj).values())
+        elif isinstance(obj, (list, tuple, dict)):
+            todo.extend(obj.values() if isinstance(obj, dict) else obj)
+    return total
+
+
+def main() -> None:
+    print(f"OPENBLAS_NUM_THREADS={os.environ.get('OPENBLAS_NUM_THREADS', '(unset)')}, numpy {np.__version__}")
+    X, z = maneuver(WARM + SAMPLES)
+    med, p99 = time_domain(X, z)
+    print(f"1. time domain, six models, 50 lags, update + all outputs: {med:7.1f} us (p99 {p99:.1f})")
+    grids = {"default 0.1-1.5/0.04 (36)": (0.1, 1.5, 0.04), "T-2 0.2-2.2/0.04 (51)": (0.2, 2.2, 0.04)}
+    print("2. frequency domain, six models, 50 lags (us per sample):")
+    for label, (lo, hi, step) in grids.items():
+        base = FrequencyOptions(rate_hz=RATE, f_min=lo, f_max=hi, f_step=step)
+        upd = frequency_domain(base, X, z, outputs=False)
+        line = f"   {label:28s} update {upd[0]:6.1f}"
+        for every in (1, 5, 50):
+            opts = FrequencyOptions(rate_hz=RATE, f_min=lo, f_max=hi, f_step=step, every=every)
+            med, p99 = frequency_domain(opts, X, z, outputs=True)
+            line += f" | every {every:2d}: {med:7.1f}" + (f" (p99 {p99:.0f})" if every == 1 else "")
+        print(line)
+    print("3. frequency domain, update + outputs every sample against the number of frequencies:")
+    for K in (36, 100, 200, 400):
+        opts = FrequencyOptions(rate_hz=RATE, f_min=0.1, f_max=0.1 + (K - 1) * 0.05, f_step=0.05)
+        med, _ = frequency_domain(opts, X, z, outputs=True)
+        print(f"   K = {K:3d}: {med:8.1f} us")
+    td = EstimatorBank(SIZES, 50)
+    fd = FrequencyBank([s - 1 for s in SIZES], FrequencyOptions(rate_hz=RATE, f_min=0.2, f_max=2.2))
+    for k in range(200):
+        td.update(X[k], z[k])
+        fd.update(X[k, :, 1:], z[k])
+    fd.theta_all()
+    print(f"4. state memory, six models, 50 lags: time domain {state_bytes(td) / 1024:.0f} KiB, "
+          f"frequency domain (51 frequencies) {state_bytes(fd) / 1024:.0f} KiB")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,279 @@
+"""The real-time frequency-domain estimator: ``M`` equation-error models on one recursive
+Fourier transform (docs/frequency.md; Morelli, JGCD 23(5), 2000).
+
+Per sample (:meth:`FrequencyBank.update`): the first sample is subtracted from every signal
+(the trim, the mean of the first ``trim_samples``, is applied to the transforms when they are
+used, exactly: it is a constant), the transforms are advanced (Eq. F2, ``K (p + 1)`` complex
+multiply-adds per model) and so are the lag-product sums (Eq. F9, ``(L + 1) (p + 1)^2``).
+Every ``every`` samples, when asked (:meth:`FrequencyBank.theta_all` and the others): the
+complex least-squares solution (F4), the conventional covariance (F5), the residual
+autocovariance of the record's least-squares residuals (F9) corrected for the fit's degrees of
+freedom (F10) and the corrected covariance in closed form (F7-F8). Its numbers are those of
+:func:`.reference.frequency_reference` at every sample (the tests hold them together).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from ..errors import ConfigError, EstimatorNotReady, NonFiniteInput
+from ..estimator import COVARIANCE_KINDS, nearest_psd
+from .covariance import PairGeometry, middle
+from .lags import LagSums, residual_autocovariance
+from .options import FrequencyOptions
+from .transform import RecursiveFourierTransform
+
+__all__ = ["FrequencyBank", "EXACT_FIT", "LARGEST_INPUT"]
+
+FloatArray = npt.NDArray[np.float64]
+BoolArray = npt.NDArray[np.bool_]
+
+# An exact fit: R(0) at most this fraction of the variance of the model output x' theta. Its
+# corrected covariance is rounding of either sign and is published as zero.
+EXACT_FIT = 1e-12
+# Inputs beyond this magnitude are refused: their products in the lag sums would overflow.
+LARGEST_INPUT = 1e100
+_KIND_INDEX: dict[str, int] = {kind: i for i, kind in enumerate(COVARIANCE_KINDS)}  # corrected 0, conventional 1
+
+
+class FrequencyBank:
+    """``M`` models ``z = x' theta`` (no bias term: the trim is subtracted and the grid leaves out
+    0 Hz) estimated in the frequency domain (docs/frequency.md).
+
+    Parameters
+    ----------
+    sizes:
+        Number of regressors of each model, without the bias (``"1"``) column of Eq. 2:
+        e.g. ``(2, 3)`` for the T-2's ``C_Z`` (``alpha, delta_e``) and ``C_m`` (``alpha,
+        q_hat, delta_e``).
+    options:
+        :class:`~.options.FrequencyOptions` (grid, lags, evaluation interval).
+
+    :meth:`update` takes ``X`` ``(M, max(sizes))`` (model ``j``'s regressors in its first
+    ``sizes[j]`` columns) and ``z`` ``(M,)``, one row per sample at ``options.rate_hz``.
+    """
+
+    def __init__(self, sizes: Sequence[int], options: FrequencyOptions) -> None:
+        self.sizes = tuple(int(s) for s in sizes)
+        if not self.sizes or min(self.sizes) < 1:
+            raise ValueError(f"every model needs at least one regressor, got sizes={self.sizes}")
+        self.options = options
+        self.frequencies = options.frequencies()
+        K, p_max = self.frequencies.size, max(self.sizes)
+        if K <= p_max:
+            raise ConfigError(
+                f"frequency grid has {K} frequencies, a model has {p_max} regressors: the conventional "
+                "covariance needs more frequencies than parameters (lower f_step or widen f_min..f_max)"
+            )
+        M, q = len(self.sizes), p_max + 1
+        self._geometry = PairGeometry(2.0 * np.pi * self.frequencies / float(options.rate_hz))
+        self._columns: BoolArray = np.arange(q)[None, :] <= np.array(self.sizes)[:, None]  # z and real x
+        self._transform = RecursiveFourierTransform(self.frequencies, options.rate_hz, (M, q))
+        self._lags = LagSums(M, q, options.n_lags)
+        self._first: FloatArray | None = None
+        self._trim_sum: FloatArray = np.zeros((M, q))  # sum of the first trim_samples samples (first subtracted)
+        self._due = False
+        self.repairs = 0
+        self._theta: FloatArray = np.full((M, p_max), np.nan)
+        self._cov: FloatArray = np.full((2, M, p_max, p_max), np.nan)
+        self._R: FloatArray = np.full((M, 1), np.nan)
+        self._ready: BoolArray = np.zeros(M, dtype=bool)
+        self._evaluated_at = 0
+
+    # ------------------------------------------------------------------ per sample
+    @property
+    def n_samples(self) -> int:
+        """Samples taken since the start or the last :meth:`reset`."""
+        return self._lags.n
+
+    def update(self, X: npt.ArrayLike, z: npt.ArrayLike) -> None:
+        """Add one sample of every model (Eqs. F2, F9). A non-finite or too large value of a
+        model's regressors or output raises :class:`NonFiniteInput` and leaves the state as it
+        was (the sample is not counted: the transform's time runs on accepted samples)."""
+        M, q = self._columns.shape
+        u = np.zeros((M, q))
+        u[:, 0] = np.asarray(z, dtype=np.float64).reshape(M)
+        u[:, 1:] = np.asarray(X, dtype=np.float64).reshape(M, q - 1)
+        u[~self._columns] = 0.0
+        bad = ~(np.abs(u) <= LARGEST_INPUT).all(axis=1)
+        if bad.any():
+            raise NonFiniteInput(
+                f"frequency estimator: models {np.flatnonzero(bad).tolist()} have a non-finite regressor or "
+                f"output, or one beyond {LARGEST_INPUT:g}; sample refused"
+            )
+        if self._first is None:
+            self._first = u.copy()
+        u -= self._first
+        if self._lags.n < self.options.trim_samples:
+            self._trim_sum += u
+        self._transform.update(u)
+        self._lags.update(u)
+        if self._lags.n % self.options.every == 0:
+            self._due = True
+
+    def reset(self) -> None:
+        """Start a new record: transforms, lag sums and results cleared."""
+        self._transform.reset()
+        self._lags.reset()
+        self._first = None
+        self._trim_sum[...] = 0.0
+        self._due = False
+        self._theta[...] = np.nan
+        self._cov[...] = np.nan
+        self._R = np.full((len(self.sizes), 1), np.nan)
+        self._ready[...] = False
+        self._evaluated_at = 0
+
+    # ------------------------------------------------------------------ evaluation
+    def _evaluate(self) -> None:
+        """Estimates and both covariances at the current sample (Eqs. F4-F10), if due."""
+        if not self._due:
+            return
+        self._due = False
+        N = self._lags.n
+        self._evaluated_at = N
+        U = self._trimmed()  # (M, K, q): transforms of z and x
+        Z, X = U[..., 0], U[..., 1:]
+        G = np.einsum("mka,mkb->mab", U.conj(), U).real
+        A, b = G[:, 1:, 1:].copy(), G[:, 1:, 0]
+        pad = ~self._columns[:, 1:]
+        A[pad[:, :, None] & np.eye(A.shape[1], dtype=bool)] = 1.0  # padded parameters: theta = 0
+        ready = self._well_conditioned(A) if N >= 2 else np.zeros(len(self.sizes), dtype=bool)
+        A[~ready] = np.eye(A.shape[1])
+        A_inv = np.linalg.inv(A)
+        A_inv[pad[:, :, None] | pad[:, None, :]] = 0.0
+        theta = np.einsum("mab,mb->ma", A_inv, b)
+        # Eq. F5: s^2 = sum_k |Z_k - X_k theta|^2 / (K - p).
+        E = Z - np.einsum("mka,ma->mk", X, theta)
+        s2 = (E.real**2 + E.imag**2).sum(axis=1) / (self.frequencies.size - np.array(self.sizes))
+        conventional = s2[:, None, None] * A_inv
+        corrected = self._corrected(X, A_inv, theta, N)
+        self._theta = np.where(ready[:, None] & ~pad, theta, np.nan)
+        self._cov[0], self._cov[1] = corrected, conventional
+        self._cov[:, ~ready] = np.nan
+        self._ready = ready
+
+    def _trim_count(self) -> int:
+        return min(self._lags.n, self.options.trim_samples)
+
+    def _trimmed(self) -> npt.NDArray[np.complex128]:
+        """The transforms with the trim subtracted (F1): those of ``u - u_0`` (kept recursively)
+        less ``dt (m - u_0) Gamma_k``, ``m`` the mean of the first samples, ``Gamma_k`` the sum of
+        the phasors over the record (the transform of a constant)."""
+        U = self._transform.values
+        if self.options.trim_samples == 1:
+            return U
+        shift = self._trim_sum / max(self._trim_count(), 1)
+        gamma = self._geometry.at(self._lags.n).gamma
+        out: npt.NDArray[np.complex128] = U - self.options.dt * shift[:, None, :] * gamma[None, :, None]
+        return out
+
+    def _well_conditioned(self, A: FloatArray) -> BoolArray:
+        """Column-scaled ``Re(X^H X)`` of each model (padding: a unit diagonal, which leaves the
+        extreme eigenvalues of a unit-diagonal matrix unchanged) below ``init_condition``."""
+        d = np.diagonal(A, axis1=1, axis2=2)
+        positive = np.all(d > 0, axis=1) & np.all(np.isfinite(A), axis=(1, 2))
+        s = 1.0 / np.sqrt(np.where(positive[:, None] & (d > 0), d, 1.0))
+        scaled = A * s[:, :, None] * s[:, None, :]
+        scaled[~positive] = np.eye(A.shape[1])
+        eig = np.linalg.eigvalsh(scaled)
+        ok: BoolArray = positive & (eig[:, 0] * self.options.init_condition > eig[:, -1])
+        return ok
+
+    def _corrected(self, X: npt.NDArray[np.complex128], A_inv: FloatArray, theta: FloatArray, N: int) -> FloatArray:
+        """Eqs. F7-F10: the residual autocovariance over the record (least-squares residuals,
+        corrected for the fit's degrees of freedom), the closed-form sandwich; repaired to
+        positive semi-definite where a variance came out negative."""
+        C = self._lags.centered()  # (M, lags, q, q)
+        R = residual_autocovariance(C, self._columns, N, self.options.dof_correction)
+        self._R = R
+        mid = middle(R, X, self._geometry.at(N), self._trim_count())
+        cov: FloatArray = A_inv @ (self.options.dt**2 * mid) @ A_inv
+        output_variance = np.einsum("ma,mab,mb->m", theta, C[:, 0, 1:, 1:], theta) / N
+        exact = R[:, 0] <= EXACT_FIT * output_variance
+        cov[exact] = 0.0
+        repaired = False
+        for j, p in enumerate(self.sizes):
+            if not exact[j] and np.diag(cov[j, :p, :p]).min() < 0.0:
+                cov[j, :p, :p] = nearest_psd(cov[j, :p, :p])
+                repaired = True
+        self.repairs += repaired
+        return cov
+
+    # ------------------------------------------------------------------ results
+    @property
+    def evaluated_at(self) -> int:
+        """The sample count of the results returned now (the last multiple of ``every``)."""
+        self._evaluate()
+        return self._evaluated_at
+
+    @property
+    def ready(self) -> BoolArray:
+        """Models with an estimate (at the last evaluation)."""
+        self._evaluate()
+        return self._ready.copy()
+
+    def _require(self, j: int) -> None:
+        if not self.ready[j]:
+            raise EstimatorNotReady(f"frequency model {j} is not ready ({self.n_samples} samples)")
+
+    def theta_all(self) -> FloatArray:
+        """Estimates ``(M, max(sizes))``; NaN for padding and models not ready."""
+        self._evaluate()
+        return self._theta.copy()
+
+    def theta(self, j: int) -> FloatArray:
+        self._require(j)
+        return self._theta[j, : self.sizes[j]].copy()
+
+    def standard_errors_all(self, kind: str = "corrected") -> FloatArray:
+        """Square roots of the covariance diagonals ``(M, max(sizes))``: ``"corrected"`` (Eq. F7)
+        or ``"conventional"`` (Eq. F5); NaN for padding and models not ready."""
+        index = self._kind(kind)
+        self._evaluate()
+        diag = np.diagonal(self._cov[index], axis1=1, axis2=2)
+        se: FloatArray = np.where(self._columns[:, 1:], np.sqrt(np.clip(diag, 0.0, None)), np.nan)
+        return se
+
+    def standard_errors(self, j: int, kind: str = "corrected") -> FloatArray:
+        self._require(j)
+        return self.standard_errors_all(kind)[j, : self.sizes[j]].copy()
+
+    def covariance(self, j: int, kind: str = "corrected") -> FloatArray:
+        """Parameter covariance of model ``j`` (``sizes[j]`` square)."""
+        index = self._kind(kind)
+        self._require(j)
+        p = self.sizes[j]
+        return self._cov[index, j, :p, :p].copy()
+
+    def autocorrelation(self, j: int) -> FloatArray:
+        """``R(0..L)`` behind the corrected covariance of model ``j`` (Eqs. F9-F10)."""
+        self._require(j)
+        out: FloatArray = self._R[j].copy()
+        return out
+
+    def transforms(self) -> tuple[npt.NDArray[np.complex128], npt.NDArray[np.complex128]]:
+        """``(Z, X)``: the transforms ``(M, K)`` and ``(M, K, max(sizes))`` of the outputs and
+        regressors with the trim subtracted (Eq. F1), copies."""
+        U = self._trimmed()
+        return U[..., 0].copy(), U[..., 1:].copy()
+
+    @staticmethod
+    def _kind(kind: str) -> int:
+        index = _KIND_INDEX.get(kind)
+        if index is None:
+            raise ValueError(f"kind must be one of {COVARIANCE_KINDS}, got {kind!r}")
+        return index
+
+    def describe(self) -> dict[str, Any]:
+        """The configuration, for logs and reports."""
+        o = self.options
+        return {
+            "sizes": self.sizes, "rate_hz": o.rate_hz, "frequencies": self.frequencies.size,
+            "f_min": float(self.frequencies[0]), "f_max": float(self.frequencies[-1]), "f_step": o.f_step,
+            "trim_samples": o.trim_samples, "n_lags": o.n_lags, "every": o.every, "dof_correction": o.dof_correction,
+        }

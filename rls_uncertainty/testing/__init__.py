@@ -1,0 +1,35 @@
+"""Bag-replay integration tests as a product (docs/testing.md): the estimator's results in a
+test's terms, in process or from the live node.
+
+* :func:`replay_bag` - a bag through the same pipeline as ``rls-uncertainty replay``, in this
+  process, no file written: a :class:`ReplayResult`.
+* :class:`ReplayResult` - :meth:`~ReplayResult.final` (a parameter's last estimate and both
+  standard errors), :meth:`~ReplayResult.series` (its time history as numpy arrays),
+  :meth:`~ReplayResult.counters` (message and sample accounting), :attr:`~ReplayResult.parameters`.
+* :class:`EstimatorProcess` and :func:`play_to_node` - the estimator node in its own process
+  on a private ROS domain, a bag played to it with acknowledgements, its outputs collected as
+  a :class:`ReplayResult` (ROS needed; rclpy is imported only then).
+* pytest fixtures over them: ``-p rls_uncertainty.testing.plugin``, or
+  ``pytest_plugins = ["rls_uncertainty.testing.plugin"]`` in a ``conftest.py``
+  (:mod:`.plugin`).
+
+Importing this module imports neither rclpy nor pytest.
+"""
+
+from ..player import bundled_bag
+from ..results import Final, ReplayResult, Series
+from .live import REPLAY_PARAMETERS, EstimatorProcess, LiveTimeout, play_to_node
+from .offline import parameters, replay_bag
+
+__all__ = [
+    "replay_bag",
+    "parameters",
+    "ReplayResult",
+    "Final",
+    "Series",
+    "EstimatorProcess",
+    "play_to_node",
+    "LiveTimeout",
+    "REPLAY_PARAMETERS",
+    "bundled_bag",
+]

@@ -1,0 +1,285 @@
+"""The live node under test: the estimator node in a process of its own on a private ROS
+domain (:class:`EstimatorProcess`), a bag played to it with ``play``'s flow control, and its
+outputs collected as a :class:`..results.ReplayResult` (:func:`play_to_node`).
+
+Delivery is lossless: the player never has more than a window of messages per topic that
+the node's reliable subscriptions have not acknowledged (:mod:`..player`), and the node runs
+with :data:`REPLAY_PARAMETERS` (reliable inputs, a deep queue, a long input buffer), as for
+``rls-uncertainty demo``. The node's outputs are paired by the stamp every array carries
+(:func:`..outputs.parse_stamp_label`). The run is complete when the node's ``/diagnostics``
+report every message the player published as received, the samples it used have all been
+received here, and every model it reports ready has published for the last of them.
+
+rclpy is imported when a node is started or played to, not with this module. The domain
+isolates the test's DDS traffic; discovery follows ``ROS_AUTOMATIC_DISCOVERY_RANGE`` as
+everywhere in the package (set it to ``LOCALHOST`` in CI).
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Callable, Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..bags import input_topics
+from ..config import node_config, pipeline_config
+from ..errors import BagError, LiveTimeout
+from ..outputs import NODE_NAME, SAMPLE_STAMP, parse_stamp_label
+from ..results import History, ReplayResult, accounting
+
+__all__ = ["REPLAY_PARAMETERS", "EstimatorProcess", "LiveTimeout", "play_to_node"]
+
+# The node's settings for a lossless replay (docs/tools.md, "play"): reliable inputs with a
+# queue deeper than any window the player leaves unacknowledged, an input buffer long enough
+# that a node behind its slow streams never expires their messages, and reports every 0.2 s
+# (the end of a run is read from them). A test's own parameters take precedence.
+REPLAY_PARAMETERS: dict[str, Any] = {"qos.reliable": True, "qos.depth": 10_000, "inputs.buffer_duration": 60.0,
+                                     "diagnostics_period": 0.2}
+_VECTORS = ("estimates", "standard_errors", "standard_errors_conventional", "converged")
+
+
+def _nested(params: Mapping[str, Any]) -> dict[str, Any]:
+    """Dotted parameter names as the nested mapping of a ROS 2 parameter file."""
+    out: dict[str, Any] = {}
+    for name, value in params.items():
+        *path, leaf = name.split(".")
+        d = out
+        for part in path:
+            d = d.setdefault(part, {})
+        d[leaf] = value
+    return out
+
+
+class EstimatorProcess:
+    """``python -m rls_uncertainty.node`` with ``parameters`` (dotted names; over
+    :data:`REPLAY_PARAMETERS`) written to ``directory/NAME.yaml``, on ROS domain ``domain``,
+    its output in ``directory/NAME.log``. :meth:`stop` ends it (SIGINT, then SIGKILL after
+    ``timeout``); use it in a ``finally`` (the fixtures do)."""
+
+    def __init__(self, parameters: Mapping[str, Any], *, domain: int, directory: str | Path,
+                 name: str = "estimator") -> None:
+        import yaml  # noqa: PLC0415 - only for the parameter file
+
+        self.parameters = {**REPLAY_PARAMETERS, **parameters}
+        self.config = pipeline_config(self.parameters)  # a bad parameter is said here, not in the node's log
+        self.node_config = node_config(self.parameters)
+        self.domain = int(domain)
+        directory = Path(directory)
+        self.params_file = directory / f"{name}.yaml"
+        self.params_file.write_text(yaml.safe_dump({"/**": {"ros__parameters": _nested(self.parameters)}}))
+        self.log_file = directory / f"{name}.log"
+        env = {**os.environ, "ROS_DOMAIN_ID": str(self.domain)}
+        with open(self.log_file, "w") as log:  # the child writes through its own descriptor
+            self.proc = subprocess.Popen(
+                [sys.executable, "-m", "rls_uncertainty.node", "--ros-args", "--params-file", str(self.params_file)],
+                stdout=log, stderr=subprocess.STDOUT, env=env)
+
+    @property
+    def running(self) -> bool:
+        return self.proc.poll() is None
+
+    def log(self) -> str:
+        """What the node wrote so far."""
+        return self.log_file.read_text(errors="replace")
+
+    def stop(self, timeout: float = 15.0) -> int | None:
+        """End the node (its exit status; None if it had to be killed)."""
+        if self.proc.poll() is None:
+            self.proc.send_signal(signal.SIGINT)
+            try:
+                self.proc.wait(timeout)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait()
+                return None
+        return self.proc.returncode
+
+
+def _counters(statuses: Sequence[tuple[str, int, str, Mapping[str, str]]]) -> dict[str, Any]:
+    """:func:`..results.accounting`'s form of the node's ``/diagnostics`` (its ``inputs`` and
+    ``samples`` statuses)."""
+    from ..dashboard.health import parse_statuses  # noqa: PLC0415 - the reader of the node's keys
+
+    health = parse_statuses(statuses, NODE_NAME)
+    if health is None:
+        return {}
+    streams = {s.name: {"received": int(s.get("received", "0")), "accepted": int(s.get("accepted", "0")),
+                        "rejected": dict(s.rejected), "expired": int(s.get("expired", "0")),
+                        "missing": int(s.get("missing", "0")), "newest_stamp_ns": None} for s in health.streams}
+    v = health.samples
+
+    def table(prefix: str) -> dict[str, int]:
+        return {k[len(prefix):]: int(n) for k, n in v.items() if k.startswith(prefix)}
+
+    return accounting({"streams": streams, "samples_formed": int(v.get("samples_formed", "0")),
+                       "samples_used": int(v.get("samples_used", "0")),
+                       "samples_pending": int(v.get("samples_pending", "0")),
+                       "samples_rejected": table("samples_rejected."), "resets": table("resets.")})
+
+
+class _Outputs:
+    """The node's sample stamps, vector outputs (by model and kind, by stamp) and newest
+    ``/diagnostics``, as they arrive on ``node``."""
+
+    def __init__(self, node: Any, models: Sequence[str]) -> None:
+        from diagnostic_msgs.msg import DiagnosticArray  # noqa: PLC0415
+        from rclpy.qos import QoSHistoryPolicy, QoSProfile, QoSReliabilityPolicy  # noqa: PLC0415
+        from std_msgs.msg import Float64MultiArray, Header  # noqa: PLC0415
+
+        qos = QoSProfile(depth=10_000, reliability=QoSReliabilityPolicy.RELIABLE, history=QoSHistoryPolicy.KEEP_LAST)
+        self.stamps: list[int] = []
+        self.arrays: dict[tuple[str, str], dict[int, tuple[float, ...]]] = {}
+        self.diagnostics: list[tuple[str, int, str, dict[str, str]]] = []
+        self.reports = 0
+        self.subs = [node.create_subscription(Header, f"/{NODE_NAME}/{SAMPLE_STAMP}", self._stamp, qos)]
+        for model in models:
+            for kind in _VECTORS:
+                store = self.arrays.setdefault((model, kind), {})
+                self.subs.append(node.create_subscription(
+                    Float64MultiArray, f"/{NODE_NAME}/{model}/{kind}",
+                    lambda msg, s=store: s.__setitem__(parse_stamp_label(msg.layout.dim[-1].label), tuple(msg.data)),
+                    qos))
+        self.diag_sub = node.create_subscription(DiagnosticArray, "/diagnostics", self._diagnostics, 10)
+
+    def _stamp(self, msg: Any) -> None:
+        self.stamps.append(int(msg.stamp.sec) * 1_000_000_000 + int(msg.stamp.nanosec))
+
+    def _diagnostics(self, msg: Any) -> None:
+        from ..dashboard.health import statuses_of  # noqa: PLC0415
+
+        statuses = statuses_of(msg)
+        if any(name.startswith(f"{NODE_NAME}: ") for name, *_ in statuses):
+            self.diagnostics = statuses
+            self.reports += 1
+
+    def matched(self) -> bool:
+        """Every output subscription matched the node's publisher."""
+        return all(s.get_publisher_count() >= 1 for s in self.subs)
+
+    def inputs_seen(self, streams: Sequence[str]) -> bool:
+        """The node's newest report counts a publisher on each of ``streams``."""
+        values = {k: v for name, _l, _m, kv in self.diagnostics if name == f"{NODE_NAME}: inputs"
+                  for k, v in kv.items()}
+        return all(int(values.get(f"{s}.publishers", "0")) >= 1 for s in streams)
+
+
+def _wait(spin: Callable[[], None], condition: Callable[[], bool], timeout: float, what: Callable[[], str],
+          node: EstimatorProcess) -> None:
+    deadline = time.monotonic() + timeout
+    while not condition():
+        if not node.running:
+            raise LiveTimeout(f"the estimator node exited ({node.proc.returncode}) while waiting for {what()}; "
+                              f"its log: {node.log_file}\n{node.log()[-2000:]}")
+        if time.monotonic() > deadline:
+            raise LiveTimeout(f"no {what()} within {timeout:g} s; the node's log: {node.log_file}")
+        spin()
+
+
+def _complete(out: _Outputs, published: Mapping[str, int], models: Sequence[str]) -> Callable[[], bool]:
+    """The run's end (module docstring): every published input counted as received, every
+    used sample's stamp here, and the arrays of the last sample from every ready model."""
+
+    def done() -> bool:
+        counters = _counters(out.diagnostics)
+        if not counters:
+            return False
+        streams = counters["streams"]
+        if any(streams.get(kind, {}).get("received", -1) != n for kind, n in published.items()):
+            return False
+        if len(out.stamps) < counters["samples_used"]:
+            return False
+        last = out.stamps[-1] if out.stamps else None
+        ready = {name.split("model ", 1)[1] for name, _l, _m, kv in out.diagnostics
+                 if name.startswith(f"{NODE_NAME}: model ") and kv.get("ready") == "True"}
+        return all(last in out.arrays[(m, kind)] for m in models if m in ready for kind in _VECTORS)
+
+    return done
+
+
+def _result(out: _Outputs, params: Mapping[str, Any], published: Mapping[str, int], wall: float,
+            data_seconds: float) -> ReplayResult:
+    """The collected outputs as a :class:`..results.ReplayResult`, sample by sample."""
+    config = pipeline_config(dict(params))
+    names = [m.parameter_names for m in config.models]
+    models = [m.output for m in config.models]
+    history = History(names)
+    result = ReplayResult(tuple(models), tuple(map(tuple, names)), history=history,
+                          n_messages=sum(published.values()), wall_seconds=wall, data_seconds=data_seconds)
+    width = sum(map(len, names))
+    for stamp in out.stamps:
+        values = np.full((4, width), np.nan)
+        ready = np.zeros(len(models), dtype=bool)
+        k = 0
+        for j, (model, n) in enumerate(zip(models, map(len, names), strict=True)):
+            rows = [out.arrays[(model, kind)].get(stamp) for kind in _VECTORS]
+            if all(r is not None and len(r) == n for r in rows):
+                values[:, k:k + n] = rows
+                ready[j] = True
+                part = values[:, k:k + n]
+                result.published(stamp, j, part[0], part[1], part[2], part[3] > 0.5)
+            k += n
+        result.estimates += bool(ready.any())
+        history.append(stamp, values[0], values[1], values[2], values[3] > 0.5, ready)
+    result.counter_values = _counters(out.diagnostics)
+    ever = {model for j, model in enumerate(models) if history.ready(j).any()}
+    prefix = f"{NODE_NAME}: model "
+    result.explanations = [f"{name[len(prefix):]}: no estimate: {message}" for name, _l, message, _kv in out.diagnostics
+                           if name.startswith(prefix) and name[len(prefix):] not in ever]
+    return result
+
+
+def play_to_node(bag: str | Path, node: EstimatorProcess, *, rate: float = 0.0, timeout: float = 120.0,
+                 window: int = 100) -> ReplayResult:
+    """Play ``bag`` to the running ``node`` with acknowledgements (``rate`` times real time;
+    0: as fast as the acknowledgements allow) and collect its outputs until the run is
+    complete (module docstring) or ``timeout`` seconds pass at any one step
+    (:class:`LiveTimeout`, naming what was missing and the node's log)."""
+    import rclpy  # noqa: PLC0415
+    from rclpy.executors import SingleThreadedExecutor  # noqa: PLC0415
+
+    from ..player import NotAcknowledged, _player_writer_profile, _Publisher  # noqa: PLC0415
+
+    models = [m.output for m in node.config.models]
+    context = rclpy.Context()
+    with _player_writer_profile():
+        rclpy.init(context=context, domain_id=node.domain)
+        ros = rclpy.create_node("rls_testing_player", context=context)
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(ros)
+    player = None
+    try:
+        out = _Outputs(ros, models)
+        player = _Publisher(ros, Path(bag), clock=False, reliable=True, window=window)
+        kinds = {topic: kind for kind, topic in input_topics(node.node_config.topics).items() if topic in player.pubs}
+        if not kinds:
+            raise BagError(f"{bag}: none of the node's input topics {sorted(input_topics(node.node_config.topics))}")
+
+        def spin() -> None:
+            executor.spin_once(timeout_sec=0.01)
+
+        matched = lambda: out.matched() and out.inputs_seen(list(kinds.values()))  # noqa: E731
+        _wait(spin, matched, timeout, lambda: "discovery of the node's inputs and outputs", node)
+        t0 = time.monotonic()
+        try:
+            player.run(rate, spin, ack_timeout=timeout)
+        except NotAcknowledged as exc:
+            raise LiveTimeout(f"{exc}; the node's log: {node.log_file}") from exc
+        published = {kinds[t]: s.published for t, s in player.stats.items() if t in kinds}
+        _wait(spin, _complete(out, published, models), timeout,
+              lambda: f"complete outputs (published {published}; the node reports {out.reports} times)", node)
+        wall = time.monotonic() - t0
+        span = (player.reader.end_time - player.reader.start_time) * 1e-9
+        return _result(out, node.parameters, published, wall, span)
+    finally:
+        if player is not None:
+            player.close()
+        executor.shutdown()
+        ros.destroy_node()
+        rclpy.try_shutdown(context=context)

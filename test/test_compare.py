@@ -1,0 +1,185 @@
+"""replay --compare (rls_uncertainty/compare.py): a replay against a reference replay sample by
+sample. Equal within the tolerance (also under another OpenBLAS kernel), different with the
+largest differences named (a changed parameter; values moved by hand across the tolerance's
+edge), not comparable with the reason (another bag, span, models, rate, no run record)."""
+
+import csv
+import json
+import os
+import shutil
+import subprocess
+import sys
+
+import pytest
+from bag_samples import fails
+
+from rls_uncertainty import cli
+from rls_uncertainty.compare import DEFAULT_RTOL, comparable, compare_replays, read_run
+from rls_uncertainty.config import load_parameters_file
+from rls_uncertainty.errors import NotComparable
+from rls_uncertainty.replay import replay
+
+from conftest import ROOT
+
+BUNDLED = ROOT / "bags" / "t2_maneuver"
+
+
+@pytest.fixture(scope="module")
+def golden(tmp_path_factory):
+    out = tmp_path_factory.mktemp("golden") / "golden"
+    replay(BUNDLED, load_parameters_file("t2"), out, progress=False, plots=False)
+    return out
+
+
+def _rows(directory):
+    with open(directory / "estimates.csv", newline="") as fh:
+        return list(csv.DictReader(fh))
+
+
+def _write_rows(directory, rows):
+    with open(directory / "estimates.csv", "w", newline="") as fh:
+        w = csv.DictWriter(fh, fieldnames=list(rows[0]))
+        w.writeheader()
+        w.writerows(rows)
+
+
+def test_an_unchanged_replay_is_equal(golden, tmp_path, capsys):
+    assert cli.main(["replay", str(BUNDLED), "--config", "t2", "--out", str(tmp_path / "r"), "--no-plots", "--quiet",
+                     "--compare", str(golden)]) == 0
+    out = capsys.readouterr().out
+    n = len(_rows(golden))
+    assert f"equal: {5 * n} values ({n} samples x parameters) within rtol 1e-06" in out
+    assert "the largest difference is 0 of its tolerance" in out
+
+
+def test_a_changed_parameter_is_different_and_named_with_the_largest_differences(golden, tmp_path, capsys):
+    assert cli.main(["replay", str(BUNDLED), "--config", "t2", "--forgetting", "0.9999", "--out",
+                     str(tmp_path / "r"), "--no-plots", "--quiet", "--compare", str(golden)]) == 1
+    out = capsys.readouterr().out
+    assert "configuration differs from the reference's: estimator.forgetting: 0.9999 here, 1.0 in the reference" in out
+    assert "DIFFERENT" in out
+    # The listed values are the two CSVs' own, at the time given.
+    new, old = _rows(tmp_path / "r"), _rows(golden)
+    t0 = int(new[0]["time"].replace(".", ""))
+    listed = [line.split() for line in out.splitlines() if line.split()[2:3] == ["estimate"]]
+    assert len(listed) == 10
+    for parameter, time, _q, value, reference, excess in listed:
+        at = [i for i, r in enumerate(new) if r["parameter"] == parameter
+              and abs((int(r["time"].replace(".", "")) - t0) * 1e-9 - float(time)) < 6e-4]
+        assert len(at) == 1 and new[at[0]]["estimate"] == value and old[at[0]]["estimate"] == reference
+        s = abs(float(reference)) + float(old[at[0]]["std_error"])
+        assert float(excess) == pytest.approx(abs(float(value) - float(reference)) / (DEFAULT_RTOL * s), rel=1e-2)
+        assert float(excess) > 1000
+
+
+def _perturbed(golden, tmp_path, change):
+    """A copy of a replay's outputs with ``change`` applied to its estimates.csv rows."""
+    here = tmp_path / "here"
+    shutil.copytree(golden, here)
+    rows = _rows(golden)
+    change(rows)
+    _write_rows(here, rows)
+    return here
+
+
+@pytest.mark.parametrize("factor,equal", [(0.5, True), (2.0, False)])
+def test_the_tolerance_is_rtol_of_the_estimate_plus_its_standard_error(golden, tmp_path, factor, equal):
+    def change(rows):
+        r = rows[-1]
+        s = abs(float(r["estimate"])) + float(r["std_error"])
+        r["estimate"] = repr(float(r["estimate"]) + factor * DEFAULT_RTOL * s)
+
+    cmp = compare_replays(_perturbed(golden, tmp_path, change), golden)
+    assert cmp.equal is equal and cmp.largest == pytest.approx(factor, rel=1e-6)
+
+
+def test_standard_errors_are_compared_as_variances(golden, tmp_path):
+    """Variances carry rounding in proportion to s^2. At an exact fit (a model's first
+    sample) the standard error is rounding: 0 in one run, 1e-5 of s in the other is equal (the
+    variance moved by 1e-10 s^2); the same change of a standard error as large as its
+    estimate is not (its variance moved by more than 2e-5 s^2)."""
+    rows = _rows(golden)
+    first = next(i for i, r in enumerate(rows) if r["model"] == "Cm")  # Cm's exact fit
+    large = next(i for i, r in enumerate(rows) if float(r["std_error"]) > abs(float(r["estimate"])))
+
+    def scale(r):
+        return abs(float(r["estimate"])) + float(r["std_error"])
+
+    def exact(rows):
+        rows[first]["std_error"] = "0.0"
+
+    reference = _perturbed(golden, tmp_path / "ref", exact)
+
+    def rounding(rows):
+        rows[first]["std_error"] = repr(1e-5 * abs(float(rows[first]["estimate"])))
+
+    assert compare_replays(_perturbed(reference, tmp_path / "a", rounding), reference).equal
+
+    def moved(rows):
+        rows[large]["std_error"] = repr(float(rows[large]["std_error"]) + 1e-5 * scale(rows[large]))
+
+    cmp = compare_replays(_perturbed(golden, tmp_path / "b", moved), golden)
+    assert not cmp.equal and [d.quantity for d in cmp.worst] == ["std_error"] and cmp.worst[0].excess > 5
+
+
+def test_flags_lag_counts_and_missing_samples_differ(golden, tmp_path):
+    def change(rows):
+        rows[100]["converged"] = "1" if rows[100]["converged"] == "0" else "0"
+        rows[200]["lags"] = str(int(rows[200]["lags"]) + 1)
+        del rows[300]
+
+    cmp = compare_replays(_perturbed(golden, tmp_path, change), golden)
+    assert not cmp.equal and cmp.beyond == 2 and (cmp.only_here, cmp.only_there) == (0, 1)
+    assert [d.quantity for d in cmp.categorical] == ["converged", "lags"]
+    assert "only in the reference" in cmp.report()
+
+
+def test_another_bag_span_models_or_rate_is_not_comparable(golden, tmp_path, capsys):
+    other = tmp_path / "seed7"
+    assert cli.main(["make-bag", "--seed", "7", "--out", str(other)]) == 0
+    base = ["--config", "t2", "--no-plots", "--quiet", "--compare", str(golden)]
+    fails(capsys, ["replay", str(other), "--out", str(tmp_path / "a"), *base], "another bag: its input messages differ")
+    fails(capsys, ["replay", str(BUNDLED), "--out", str(tmp_path / "b"), "--end", "9", *base], "another span: end 9.0")
+    fails(capsys, ["replay", str(BUNDLED), "--out", str(tmp_path / "c"), "--models", "CZ", *base],
+          "other models: CZ (CZ_0 CZ_alpha CZ_delta_e) here; CZ (CZ_0 CZ_alpha CZ_delta_e), Cm (")
+    # What can be checked before the bag is read is: no output for these.
+    assert not (tmp_path / "b").exists() and not (tmp_path / "c").exists()
+    run = read_run(golden)
+    faster = {**run, "period_ns": run["period_ns"] // 2}
+    with pytest.raises(NotComparable, match="another sample rate: rate 100 Hz here, 50 Hz in the reference"):
+        comparable(faster, run)
+    (tmp_path / "empty").mkdir()
+    fails(capsys, ["replay", str(BUNDLED), "--out", str(tmp_path / "d"), "--config", "t2", "--compare",
+                   str(tmp_path / "empty")], "no run.json")
+
+
+def test_the_tolerances_need_a_reference(tmp_path, capsys):
+    fails(capsys, ["replay", str(BUNDLED), "--out", str(tmp_path / "r"), "--rtol", "1e-3"], "--rtol and --atol")
+
+
+def test_the_reference_is_never_the_output(golden, tmp_path, capsys):
+    copy = tmp_path / "g"
+    shutil.copytree(golden, copy)
+    before = (copy / "estimates.csv").read_bytes()
+    fails(capsys, ["replay", str(BUNDLED), "--config", "t2", "--out", str(copy), "--force", "--compare", str(copy)],
+          str(copy))
+    assert (copy / "estimates.csv").read_bytes() == before
+
+
+def test_the_run_record_names_the_bag_span_and_configuration(golden):
+    run = json.loads((golden / "run.json").read_text())
+    assert run["bag"]["messages_read"] == run["bag"]["messages_used"] == 4920
+    assert run["bag"]["start"] is None and run["bag"]["strict"] is True and len(run["bag"]["input_sha256"]) == 64
+    assert run["parameters"]["estimator.lags"] == 50 and run["parameters"]["topics.imu"] == "imu"
+    assert run["models"] == ["CZ", "Cm"] and run["period_ns"] == 20_000_000
+
+
+def test_another_openblas_kernel_is_equal_within_the_default_tolerance(golden, tmp_path):
+    """The reference was made with this machine's kernels; Prescott's (any x86-64 CPU has them)
+    round differently (on this machine the CSVs differ in their last bits), within 1e-6."""
+    env = {**os.environ, "OPENBLAS_CORETYPE": "Prescott"}
+    run = subprocess.run([sys.executable, "-m", "rls_uncertainty.cli", "replay", str(BUNDLED), "--config", "t2",
+                          "--out", str(tmp_path / "r"), "--no-plots", "--quiet", "--compare", str(golden)],
+                         env=env, capture_output=True, text=True, timeout=300)
+    assert run.returncode == 0, run.stdout + run.stderr
+    assert "equal:" in run.stdout

@@ -1,0 +1,58 @@
+"""The live node under test (rls_uncertainty/testing/live.py): the estimator node in its own
+process on a private domain (43-49: this machine's sessions use 42-49), the bundled bag played
+to it with acknowledgements, its outputs paired by stamp: bit-identical, sample by sample, to
+the in-process replay with the same parameters (one machine); failures name what was missing
+and the node's log."""
+
+import os
+
+import numpy as np
+import pytest
+
+from rls_uncertainty.errors import ConfigError, LiveTimeout
+from rls_uncertainty.testing import REPLAY_PARAMETERS, EstimatorProcess, parameters, play_to_node, replay_bag
+from rls_uncertainty.testing.plugin import domains
+
+from conftest import ROOT
+
+BUNDLED = ROOT / "bags" / "t2_maneuver"
+DOMAIN = domains("43-49", os.environ.get("ROS_DOMAIN_ID"))[0]
+
+
+def test_the_live_node_publishes_what_the_replay_computes_sample_by_sample(tmp_path):
+    node = EstimatorProcess(parameters("t2"), domain=DOMAIN, directory=tmp_path)
+    try:
+        live = play_to_node(BUNDLED, node)
+    finally:
+        assert node.stop() == 0, node.log()
+    assert node.parameters == {**REPLAY_PARAMETERS, **parameters("t2")}
+    offline = replay_bag(BUNDLED, node.parameters)
+    assert live.parameters == offline.parameters and live.estimates == offline.estimates > 500
+    for name in offline.parameters:
+        for got, want in zip(live.series(name), offline.series(name), strict=True):
+            assert np.array_equal(got, want), name  # bit for bit: one machine, one pipeline
+        assert live.final(name) == offline.final(name)
+    got, want = live.counters(), offline.counters()
+    # The node never reaches the end of the data: its last samples wait for their derivative
+    # (pending); the replay counts them as end_of_data.
+    assert got["samples_pending"] == want["samples_rejected"].pop("end_of_data")
+    got["samples_pending"] = 0
+    assert got == want
+    assert live.n_messages == 4920 and live.data_seconds == pytest.approx(11.995)
+
+
+def test_a_bad_parameter_is_refused_before_a_node_starts(tmp_path):
+    with pytest.raises(ConfigError, match=r"estimator\.lags"):
+        EstimatorProcess({"estimator.lags": -5}, domain=DOMAIN, directory=tmp_path)
+    assert not list(tmp_path.glob("*.log"))
+
+
+def test_a_node_that_dies_is_named_with_its_log(tmp_path):
+    node = EstimatorProcess(parameters("t2"), domain=DOMAIN, directory=tmp_path)
+    node.proc.kill()
+    node.proc.wait()
+    try:
+        with pytest.raises(LiveTimeout, match=f"estimator node exited.*{tmp_path}"):
+            play_to_node(BUNDLED, node, timeout=60)
+    finally:
+        node.stop()
