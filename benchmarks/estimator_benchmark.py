@@ -8,6 +8,8 @@ Prints, in one run on this machine:
   2b. forgetting f = 0.98 at 50 lags: the estimator's own residuals (noise_forgetting = f)
      against the default noise model (f_R = 0.99951; docs/estimator.md);
   2c. lags = "auto" (max_lags 50, the lags chosen at every sample) beside lags = 50;
+  2d. the lag window follows time (estimator.lag_span 1 s): 50 lags at 50 Hz, 200 at 200 Hz,
+     1000 at 1 kHz: per-sample time, CPU share of one core at that rate, and state memory;
   3. the ratio against refitting batch OLS with a HAC covariance (statsmodels, uniform kernel,
      maxlags 50) at every sample of a 600-sample maneuver, six models.
 
@@ -73,6 +75,15 @@ def per_sample(lags, n: int = 3000, warm: int = 300, **options) -> tuple[float, 
         t_all.append(t2 - t0)
     gc.enable()
     return float(np.median(t_upd) * 1e6), float(np.median(t_all) * 1e6), float(np.percentile(t_all, 99) * 1e6)
+
+
+def _filled(lags: int) -> EstimatorBank:
+    """A bank of ``lags`` lags that holds all of them (its state at full size)."""
+    X, z = maneuver(lags + 100)
+    bank = EstimatorBank(SIZES, EstimatorOptions(lags=lags))
+    for k in range(lags + 100):
+        bank.update(X[k], z[k])
+    return bank
 
 
 def flat_cost(lags: int = 50, total: int = 100_000) -> list[tuple[int, float]]:
@@ -150,6 +161,14 @@ def main() -> None:
     for label, lags in (("50", 50), ("auto (max_lags 50)", "auto")):
         upd, total, p99 = per_sample(lags)
         print(f"   {label:>26}{upd:10.1f}{total:17.1f}{p99:9.1f}")
+
+    print("\n2d. estimator.lag_span 1 s at the estimator rate: median microseconds per sample, share of one core")
+    print(f"   {'rate, lags':>14}{'update':>10}{'update+outputs':>17}{'p99':>9}{'core':>8}{'state':>11}")
+    for rate in (50, 200, 1000):
+        upd, total, p99 = per_sample(rate, n=2 * rate + 1500, warm=rate + 100)
+        kib = sum(a.nbytes for a in _filled(rate).state()["arrays"].values()) / 1024
+        print(f"   {f'{rate} Hz, {rate}':>14}{upd:10.1f}{total:17.1f}{p99:9.1f}{total * rate / 1e4:7.1f}%"
+              f"{kib:8.0f} KiB")
 
     print("\n3. 600-sample maneuver, six models, 50 lags: recursive vs refitting batch OLS + HAC "
           "(statsmodels, uniform kernel) at every sample")

@@ -195,7 +195,7 @@ def main() -> int:
     ap.add_argument("--air-rate", type=float, default=100.0)
     ap.add_argument("--rate", type=float, default=50.0, help="estimator rate, Hz")
     ap.add_argument("--duration", type=float, default=20.0)
-    ap.add_argument("--lags", type=int, default=50)
+    ap.add_argument("--lag-span", type=float, default=1.0, help="estimator.lag_span, s (1.0: 50 lags at 50 Hz)")
     ap.add_argument("--no-baseline", action="store_true", help="skip the echo-node latency baseline")
     ap.add_argument("--publisher", action="store_true", help=argparse.SUPPRESS)
     ap.add_argument("--echo", action="store_true", help=argparse.SUPPRESS)
@@ -220,7 +220,8 @@ def main() -> int:
         node = subprocess.Popen(
             [sys.executable, *os.environ.get("RLS_BENCH_PYFLAGS", "").split(), "-m", "rls_uncertainty.node",
              "--ros-args", "-p", "qos.reliable:=true",
-             "-p", f"rate:={args.rate}", "-p", f"estimator.lags:={args.lags}", "-p", "surfaces.elevator:=[elevator]",
+             "-p", f"rate:={args.rate}", "-p", f"estimator.lag_span:={args.lag_span}",
+             "-p", "surfaces.elevator:=[elevator]",
              "-p", "qos.depth:=1000"],
             stdout=node_log, stderr=subprocess.STDOUT, cwd=ROOT,
         )
@@ -288,7 +289,7 @@ def main() -> int:
     n_in = log.shape[0]
     samples = diag.get("rls_estimator: samples", {})
     print(f"node benchmark: IMU {args.imu_rate:g} Hz, air data and surfaces {args.air_rate:g} Hz, estimates "
-          f"{args.rate:g} Hz, six models, {args.lags} lags, {args.duration:g} s")
+          f"{args.rate:g} Hz, six models, {args.lag_span:g} s of lags, {args.duration:g} s")
     print(f"  input messages published        {n_in}")
     print(f"  samples completed by the inputs  {expected}")
     print(f"  sample stamps received           {count['stamps']}  (dropped: {expected - count['stamps']}; "

@@ -18,6 +18,12 @@ last ``window_s`` seconds (as the ``/diagnostics`` levels do), and raises an :cl
   arrived and estimation is enabled: the main reason samples were rejected, or why none was
   formed.
 
+**Identifiability.** :func:`identifiability` says why a model's parameters are not identifiable
+(:mod:`.identifiability`: the fit, the excitation of each regressor, the correlation of the
+estimates), naming the regressors and the figure, e.g. ``CZ: delta_e and delta_r correlated
+-0.999998 (their estimates; limit 0.999): not identifiable ...``; :func:`model_alerts` raises it
+when it withholds a convergence flag, or keeps a model from initializing.
+
 The node logs each alert as a WARN at most once per ``repeat_s`` seconds per stream and reason
 (:meth:`AlertPolicy.due`) and puts the texts first in the ``inputs`` status of
 ``/diagnostics`` (level ERROR); the replay reports the same texts for a run in which a model
@@ -40,9 +46,10 @@ from .limits import BOUNDS, message_value, sample_value
 
 if TYPE_CHECKING:  # annotations only
     from .config import PipelineConfig
+    from .identifiability import Problem
 
-__all__ = ["Alert", "AlertPolicy", "explain", "explanations", "no_estimate", "not_excited", "MIN_MESSAGES", "MAX_LINE",
-           "SHOWN"]
+__all__ = ["Alert", "AlertPolicy", "explain", "explanations", "no_estimate", "not_excited", "identifiability",
+           "model_alerts", "MIN_MESSAGES", "MAX_LINE", "SHOWN"]
 
 MIN_MESSAGES = 3  # rejected messages of a stream in the window before "all rejected" is said
 MAX_LINE = 400  # characters of an alert line
@@ -284,6 +291,7 @@ class AlertPolicy:
             raise ValueError(f"repeat_s must be positive, got {repeat_s!r}")
         self.repeat_s = float(repeat_s)
         self.current: list[Alert] = []
+        self.model: list[Alert] = []  # identifiability (model_alerts), logged beside the inputs'
         self._time = 0.0
         self._history: list[tuple[float, _Totals]] = [(0.0, _ZERO)]  # the start: every total zero
         self._logged: dict[tuple[str, str], float] = {}
@@ -306,16 +314,22 @@ class AlertPolicy:
         self.current = alerts
         return alerts
 
+    def models(self, models: Sequence[tuple[str, Mapping]]) -> list[Alert]:
+        """The identifiability alerts of the models' reports (:func:`model_alerts`), logged by
+        :meth:`due` with the others."""
+        self.model = model_alerts(models)
+        return self.model
+
     def due(self) -> list[str]:
         """The current alerts not logged in the last ``repeat_s`` seconds (then marked logged)."""
         lines = []
-        for alert in self.current:
+        for alert in self.current + self.model:
             last = self._logged.get(alert.key)
             if last is None or self._time - last >= self.repeat_s:
                 self._logged[alert.key] = self._time
                 lines.append(alert.text)
         if len(self._logged) > 256:  # keys come from bounded tables; stay bounded anyway
-            self._logged = {a.key: self._logged[a.key] for a in self.current if a.key in self._logged}
+            self._logged = {a.key: self._logged[a.key] for a in self.current + self.model if a.key in self._logged}
         return lines
 
 
@@ -339,3 +353,73 @@ def not_excited(n_regressors: int, samples: int, constant: Sequence[str] = ()) -
     return (f"its {n_regressors} regressors were not excited independently in {samples} samples{which}, so the "
             "estimator never initialized (a maneuver must move each of them; or leave the model out of "
             "models.enabled)")
+
+
+def _correlation_text(r: float) -> str:
+    """A correlation with the digits that tell it from +-1: ``-0.999998``, ``+1 - 2.0e-09``."""
+    if 1.0 - abs(r) >= 5e-7:
+        return f"{r:+.6f}"
+    return f"{'-' if r < 0 else '+'}1 - {1.0 - abs(r):.1e}"
+
+
+def _figure(x: float, unit: str) -> str:
+    return f"{x:.3g} {unit}".rstrip()
+
+
+_RESOLUTION = {"rad": "identifiability.angle_resolution", "": "identifiability.rate_resolution"}
+
+
+def _flat_text(model: str, p: Problem) -> str:
+    """Regressors that did not move, each with its standard deviation, and the floors."""
+    regs = ", ".join(p.regressors)
+    one = len(p.regressors) == 1
+    floors = dict.fromkeys(zip(p.units, p.limits, strict=True))  # in order, once each
+    limits = ", ".join(f"{_RESOLUTION.get(u, 'resolution')} {_figure(x, u)}" for u, x in floors)
+    where = f"in {p.samples} samples since start; {limits}"
+    if one:
+        what = f"regressor {regs} not excited (std {_figure(p.figures[0], p.units[0])} {where})"
+    else:
+        stds = ", ".join(f"{r} {_figure(x, u)}" for r, x, u in zip(p.regressors, p.figures, p.units, strict=True))
+        what = f"regressors {regs} not excited (std {stds} {where})"
+    effect = "the model cannot initialize" if p.kind == "constant" else "not identifiable"
+    return f"{what}: {effect}; move {regs} or leave {'it' if one else 'them'} out of models.{model}"
+
+
+def _problem_text(model: str, p: Problem) -> str:
+    if p.kind == "no_fit":
+        r2, limit = p.figures[0], p.limits[0]
+        if not math.isfinite(r2):
+            return "the output does not vary (R^2 undefined): not identifiable; check the model's output"
+        return (f"no regressor explains the output (R^2 {r2:.3f}, identifiability.min_r_squared {limit:g}): "
+                "not identifiable; excite the model or check its output")
+    if p.kind in ("not_excited", "constant"):
+        return _flat_text(model, p)
+    a, b = p.regressors
+    r = _correlation_text(p.figures[0])
+    if p.kind == "collinear":
+        return (f"{a} and {b} correlated {r} (their estimates; identifiability.max_correlation {p.limits[0]:g}): "
+                f"not identifiable; excite {a} and {b} independently or leave one out of models.{model}")
+    return (f"regressors {a} and {b} correlated {r} in {p.samples} samples: the model cannot initialize; excite "
+            f"them independently or leave one out of models.{model}")
+
+
+def identifiability(model: str, problems: Sequence[Problem]) -> str:
+    """One line: why model ``model``'s parameters are not identifiable (or, for a model not
+    ready, why it cannot initialize), each problem of :meth:`.identifiability.
+    IdentifiabilityMonitor.problems` with its regressors and figure; empty without problems."""
+    if not problems:
+        return ""
+    return _line(f"{model}: " + "; ".join(_problem_text(model, p) for p in problems))
+
+
+def model_alerts(models: Sequence[tuple[str, Mapping]]) -> list[Alert]:
+    """An alert per model whose report (:meth:`.pipeline.Pipeline.model_report`) has a
+    convergence flag held back as not identifiable, or that names why the model cannot
+    initialize: its ``identifiability`` text, one key per model (logged at most once per
+    ``repeat_s`` whatever the figure)."""
+    alerts = []
+    for name, fit in models:
+        text = fit.get("identifiability", "")
+        if text and (fit.get("held_back") or not fit.get("ready")):
+            alerts.append(Alert((f"model {name}", "identifiability"), text))
+    return alerts

@@ -10,7 +10,7 @@ limit), so that a misconfiguration can be reported in the user's terms (:mod:`.a
 Every table keyed by what arrives keeps a bounded number of keys.
 
 :func:`model_fit` is the fit of one model that ``/diagnostics`` and the replay report: R^2
-and the residual whiteness from the autocorrelation of Eq. 17.
+(:mod:`.identifiability`) and the residual whiteness from the autocorrelation of Eq. 17.
 """
 
 from __future__ import annotations
@@ -96,25 +96,21 @@ class Bookkeeping:
         }
 
 
-def model_fit(bank: EstimatorBank, j: int, output_sum: np.ndarray, output_sum_squares: np.ndarray,
-              withheld_now: bool, withheld: int) -> dict:
-    """R^2 of model ``j`` of ``bank`` (1 - residual variance / output variance, with the
-    output's sum and sum of squares since the estimator started) and residual whiteness: the
-    lag-1 autocorrelation coefficient and the fraction of lags whose coefficient lies outside
-    the 2-sigma white-noise bound 2/sqrt(n) (Eq. 17's R). ``ready`` is false, with a
-    ``problem``, when R^2 is undefined (constant output) or the model's outputs were withheld
-    as non-finite (``withheld_now``: the newest sample's; ``withheld``: how many so far)."""
+def model_fit(bank: EstimatorBank, j: int, r2: float, withheld_now: bool, withheld: int) -> dict:
+    """Model ``j`` of ``bank``'s fit: ``r2``, its R^2 (:meth:`.identifiability.
+    IdentifiabilityMonitor.fit`: 1 - residual variance / output variance, both since the
+    estimator started) and the residual whiteness: the lag-1 autocorrelation coefficient and
+    the fraction of lags whose coefficient lies outside the 2-sigma white-noise bound 2/sqrt(n)
+    (Eq. 17's R). ``ready`` is false, with a ``problem``, when R^2 is undefined (NaN: a constant
+    output) or the model's outputs were withheld as non-finite (``withheld_now``: the newest
+    sample's; ``withheld``: how many so far)."""
     if not bank.ready[j]:
         return {"ready": False, "samples": bank.k}
     n = bank.k  # samples since the estimator (re)started
-    mean = output_sum[j] / n
-    mean_sq = output_sum_squares[j] / n
-    var_z = mean_sq - mean * mean
     R = bank.autocorrelation(j)
     # A constant output (variance at rounding level) leaves R^2 undefined; a non-finite
     # estimator state (withheld outputs) leaves it NaN: either way the fit is reported as
     # not ready, with the problem, never as an OK "nan".
-    r2 = 1.0 - R[0] / var_z if var_z > 1e-12 * mean_sq else math.nan
     if not math.isfinite(r2) or withheld_now:
         problem = "outputs not finite, withheld" if withheld_now or not np.isfinite(R).all() else \
             "output constant: R^2 undefined"

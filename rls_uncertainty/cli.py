@@ -148,14 +148,14 @@ def _replay_params(args: argparse.Namespace) -> dict[str, Any]:
         for note in from_file.warnings:
             print(f"rls-uncertainty replay: warning: {note}", file=sys.stderr)
         params = {k: v for k, v in from_file.values.items() if k in PARAMETER_NAMES}
-    if args.lags is not None:  # --lags decides the lag selection whatever the file said
-        params["estimator.lag_selection"] = "auto" if args.lags == "auto" else "fixed"
-        if args.lags != "auto":
-            params["estimator.lags"] = -1 if args.lags == "all" else args.lags
-    if args.max_lags is not None:
-        params["estimator.max_lags"] = args.max_lags
-    if args.burn_in is not None:
-        params["estimator.residual_burn_in"] = args.burn_in
+    if args.lag_span is not None:  # --lag-span decides the lag selection whatever the file said
+        params["estimator.lag_selection"] = "auto" if args.lag_span == "auto" else "fixed"
+        if args.lag_span != "auto":
+            params["estimator.lag_span"] = args.lag_span
+    if args.max_lag_span is not None:
+        params["estimator.max_lag_span"] = args.max_lag_span
+    if args.burn_in_span is not None:
+        params["estimator.residual_burn_in_span"] = args.burn_in_span
     if args.window:
         params["estimator.window"] = args.window
     if args.forgetting is not None:
@@ -260,6 +260,43 @@ def _lags(value: str) -> int | str:
     """--lags of every command, in the form of the estimator's ``lags`` option: an integer
     >= 0 (L of Eq. 22), 'all' (Eq. 20) or 'auto' (each model's lags from its residuals)."""
     return _count_or_word(value, {"all": "all", "auto": "auto"}, "an integer >= 0, 'all' or 'auto'")
+
+
+def _lag_span(value: str) -> float | str:
+    """replay's --lag-span, in the form of ``estimator.lag_span``: seconds >= 0 (the lags are
+    seconds x rate), 'all' (-1, Eq. 20) or 'auto' (estimator.lag_selection auto)."""
+    return _seconds_or_word(value, {"all": -1.0, "auto": "auto"}, "a number of seconds >= 0, 'all' or 'auto'")
+
+
+def _burn_in_span(value: str) -> float:
+    """replay's --burn-in-span: seconds >= 0, or 'default' (-1: estimator.residual_burn_in_span's
+    default, 1 s with auto lags, 0 with fixed lags)."""
+    return float(_seconds_or_word(value, {"default": -1.0}, "a number of seconds >= 0 or 'default'"))
+
+
+def _seconds_or_word(value: str, words: dict[str, Any], expected: str) -> Any:
+    """A finite number >= 0, or the value of one of ``words``; otherwise an argparse error."""
+    if value in words:
+        return words[value]
+    try:
+        x = float(value)
+    except ValueError:
+        x = math.nan
+    if not (math.isfinite(x) and x >= 0):
+        raise argparse.ArgumentTypeError(f"must be {expected}, got {value!r}")
+    return x
+
+
+class _Renamed(argparse.Action):
+    """An option that was renamed: using it is a usage error naming the new one."""
+
+    def __init__(self, option_strings: list[str], dest: str, renamed: str = "", **kwargs: Any) -> None:
+        self.renamed = renamed
+        super().__init__(option_strings, dest, help=argparse.SUPPRESS, **kwargs)
+
+    def __call__(self, parser: argparse.ArgumentParser, namespace: argparse.Namespace, values: Any,
+                 option_string: str | None = None) -> None:
+        parser.error(f"{option_string} is now {self.renamed}")
 
 
 def _burn_in(value: str) -> int:
@@ -390,13 +427,19 @@ def _add_replay(sub: Any) -> None:
     rp.add_argument("bag", help="replay bag on the standard topics")
     rp.add_argument("--config", help="ROS parameter file, e.g. config/t2.yaml (default: node defaults)")
     rp.add_argument("--out", required=True, help="output directory")
-    rp.add_argument("--lags", type=_lags,
-                    help="override estimator.lags (an integer or 'all'), or 'auto' (estimator.lag_selection auto)")
-    rp.add_argument("--max-lags", type=_integer(1), help="override estimator.max_lags (with auto)")
-    rp.add_argument("--burn-in", type=_burn_in,
-                    help="override estimator.residual_burn_in: samples after each model's initialization whose "
-                         "residuals are left out of the residual autocorrelation, or 'default' (-1: 50 with auto, "
+    rp.add_argument("--lag-span", type=_lag_span,
+                    help="override estimator.lag_span: seconds of residual autocorrelation kept (lags = seconds x "
+                         "rate), 'all', or 'auto' (estimator.lag_selection auto)")
+    rp.add_argument("--max-lag-span", type=_real(0.0, low_open=True),
+                    help="override estimator.max_lag_span, s (with auto)")
+    rp.add_argument("--burn-in-span", type=_burn_in_span,
+                    help="override estimator.residual_burn_in_span: seconds after each model's initialization whose "
+                         "residuals are left out of the residual autocorrelation, or 'default' (-1: 1 s with auto, "
                          "0 with fixed lags)")
+    for old, new in (("--lags", "--lag-span SECONDS (lags / rate: 50 lags at 50 Hz = 1.0)"),
+                     ("--max-lags", "--max-lag-span SECONDS (max lags / rate)"),
+                     ("--burn-in", "--burn-in-span SECONDS (samples / rate)")):
+        rp.add_argument(old, action=_Renamed, renamed=new)
     rp.add_argument("--window", choices=("truncated", "bartlett"), help="override estimator.window")
     rp.add_argument("--forgetting", type=float, help="override estimator.forgetting")
     rp.add_argument("--models", nargs="+", help="override models.enabled (e.g. CZ Cm)")

@@ -52,7 +52,8 @@ import yaml
 from .convergence import ConvergenceConfig
 from .differentiation import MAX_ORDER, MAX_WINDOW, MIN_WINDOW, DifferentiatorConfig
 from .errors import ConfigError
-from .estimator.options import AUTO_BURN_IN, MAX_BURN_IN, RESIDUALS, WINDOWS, EstimatorOptions
+from .estimator.options import MAX_BURN_IN, RESIDUALS, WINDOWS, EstimatorOptions, Lags
+from .identifiability import ANGLE, BIAS, NONDIMENSIONAL, IdentifiabilityConfig
 from .limits import PlausibilityLimits
 from .ros_arguments import (
     ParameterFile,
@@ -132,6 +133,12 @@ REGRESSORS = {
     "p_hat": "p b / 2V",
     "q_hat": "q cbar / 2V",
     "r_hat": "r b / 2V",
+}
+# The unit of each regressor, for the excitation test of :mod:`.identifiability`: flow angles and
+# surface deflections in rad, the nondimensional rates, and the bias (not tested).
+REGRESSOR_UNITS: dict[str, str | None] = {
+    "1": BIAS, "alpha": ANGLE, "beta": ANGLE, "delta_e": ANGLE, "delta_a": ANGLE, "delta_r": ANGLE,
+    "p_hat": NONDIMENSIONAL, "q_hat": NONDIMENSIONAL, "r_hat": NONDIMENSIONAL,
 }
 OUTPUTS = ("CX", "CY", "CZ", "Cl", "Cm", "Cn")
 _PARAM_SUFFIX = {"1": "0", "p_hat": "p", "q_hat": "q", "r_hat": "r"}
@@ -254,6 +261,15 @@ class ParamSpec:
 
 _EQ2 = {m.output: list(m.regressors) for m in DEFAULT_MODELS}
 LAG_SELECTIONS = ("fixed", "auto")
+# residual_burn_in_span's default with automatic lags, s (AUTO_BURN_IN samples at the paper's 50 Hz).
+AUTO_BURN_IN_SPAN = 1.0
+MAX_LAGS = 100_000  # the most lags a span may ask for (the memory of Eq. 22's lag products)
+# Parameters renamed when the lag window began to follow time: said when an old file names them.
+RENAMED = {
+    "estimator.lags": "estimator.lag_span, in seconds (lags / rate: 50 lags at 50 Hz = 1.0; -1 all lags)",
+    "estimator.max_lags": "estimator.max_lag_span, in seconds (max_lags / rate)",
+    "estimator.residual_burn_in": "estimator.residual_burn_in_span, in seconds (samples / rate; -1 the default)",
+}
 
 PARAMETERS: tuple[ParamSpec, ...] = (
     ParamSpec("rate", 50.0, "estimator sample rate, Hz; input streams are interpolated to it", 1.0, 1000.0),
@@ -267,9 +283,11 @@ PARAMETERS: tuple[ParamSpec, ...] = (
         for out in OUTPUTS
     ),
     ParamSpec(
-        "estimator.lags", 50,
-        "residual autocorrelation lags kept (Eq. 22); -1 keeps all lags (Eq. 20), 0 is the conventional covariance",
-        -1, 100000,
+        "estimator.lag_span", 1.0,
+        "time span of the residual autocorrelation kept in the corrected covariance (Eq. 22), s: lags = lag_span x "
+        "rate (1.0 s: the paper's 50 lags at 50 Hz), so the standard errors do not depend on the rate; -1 keeps all "
+        "lags (Eq. 20), 0 is the conventional covariance",
+        -1.0, 2000.0,
     ),
     ParamSpec(
         "estimator.window", "truncated",
@@ -289,22 +307,22 @@ PARAMETERS: tuple[ParamSpec, ...] = (
     ),
     ParamSpec(
         "estimator.lag_selection", "fixed",
-        "fixed: estimator.lags lags; auto: each model's lags chosen from its residual autocorrelation at every sample "
-        "(Politis flat-top rule, truncated window only), up to estimator.max_lags",
+        "fixed: estimator.lag_span; auto: each model's lags chosen from its residual autocorrelation at every sample "
+        "(Politis flat-top rule, truncated window only), up to estimator.max_lag_span",
         choices=LAG_SELECTIONS,
     ),
     ParamSpec(
-        "estimator.max_lags", 50,
-        "with estimator.lag_selection auto: the most lags the rule may choose, and the memory kept (as "
-        "estimator.lags of that value)",
-        1, 100000,
+        "estimator.max_lag_span", 1.0,
+        "with estimator.lag_selection auto: the longest lag span the rule may choose, and the memory kept (as "
+        "estimator.lag_span of that value), s",
+        0.001, 2000.0,
     ),
     ParamSpec(
-        "estimator.residual_burn_in", -1,
-        "samples after each model's initialization whose residuals are left out of the residual autocorrelation "
-        f"(Eq. 17; the first residuals, while the estimate is still poor, inflate it); -1: {AUTO_BURN_IN} with "
-        "estimator.lag_selection auto, 0 (the paper) with fixed lags",
-        -1, MAX_BURN_IN,
+        "estimator.residual_burn_in_span", -1.0,
+        "time after each model's initialization whose residuals are left out of the residual autocorrelation "
+        f"(Eq. 17; the first residuals, while the estimate is still poor, inflate it), s; -1: {AUTO_BURN_IN_SPAN:g} s "
+        "with estimator.lag_selection auto, 0 (the paper) with fixed lags",
+        -1.0, 2000.0,
     ),
     ParamSpec("differentiator.window", 9, "angular-acceleration differentiator window, samples", MIN_WINDOW,
               MAX_WINDOW),
@@ -492,6 +510,17 @@ PARAMETERS: tuple[ParamSpec, ...] = (
     ParamSpec("convergence.max_se_rate", 0.25,
               "convergence flags: every standard error of the window within a factor exp(max_se_rate x age) of the "
               "current one, 1/s", 0.001, 100.0),
+    ParamSpec("identifiability.max_correlation", 0.9998,
+              "convergence flags: two parameters whose estimates are correlated beyond this (either sign, from the "
+              "corrected covariance) are not identifiable and never flagged", 0.5, 0.999999),
+    ParamSpec("identifiability.min_r_squared", 0.5,
+              "convergence flags: a model whose R^2 is below this explains nothing; none of its parameters is "
+              "flagged", 0.0, 0.99),
+    ParamSpec("identifiability.angle_resolution", 1.0e-4,
+              "convergence flags: a flow angle or surface regressor whose standard deviation since the start is at "
+              "most this is not excited and its parameter never flagged, rad", 0.0, 0.1),
+    ParamSpec("identifiability.rate_resolution", 1.0e-6,
+              "the same for the nondimensional rates p b/2V, q cbar/2V, r b/2V", 0.0, 0.01),
     ParamSpec("outputs.covariance_decimation", 10,
               "publish ~/M/covariance and ~/M/covariance_conventional for samples whose grid index (stamp x rate) "
               "is a multiple of this; 0 = never", 0, 100000),
@@ -539,7 +568,7 @@ def _check_value(spec: ParamSpec, value: Any) -> Any:
 def _validated(params: dict[str, Any]) -> dict[str, Any]:
     unknown = sorted(set(params) - set(PARAMETER_NAMES) - {"use_sim_time"})
     if unknown:
-        raise ConfigError(f"unknown parameter(s) {unknown}")
+        raise ConfigError(f"unknown parameter(s) {unknown}{_suggestion(unknown[0])}")
     values = parameter_defaults()
     for name, value in params.items():
         if name in PARAMETER_NAMES:
@@ -637,6 +666,7 @@ class PipelineConfig:
     limits: PlausibilityLimits = PlausibilityLimits()
     # Consumers' outputs (not part of the fingerprint: they do not change the estimator state).
     convergence: ConvergenceConfig = field(default_factory=ConvergenceConfig)
+    identifiability: IdentifiabilityConfig = field(default_factory=IdentifiabilityConfig)
     outputs: OutputConfig = OutputConfig()
 
     def __post_init__(self) -> None:
@@ -716,24 +746,60 @@ def pipeline_config(params: dict[str, Any] | None = None) -> PipelineConfig:
         surfaces=SurfaceMixing(**surfaces),
         limits=PlausibilityLimits(**_section(v, "limits")),
         convergence=ConvergenceConfig(**_section(v, "convergence")),  # rate_hz: the pipeline uses rate
+        identifiability=IdentifiabilityConfig(**_section(v, "identifiability")),
         outputs=OutputConfig(**_section(v, "outputs")),
     )
 
 
+def _span_samples(name: str, span: float, rate: float, most: int) -> int:
+    """``span`` seconds at ``rate`` Hz as a sample count, rounded (half up); a positive span of
+    less than half a sample, or one of more than ``most`` samples, is refused naming ``name``."""
+    n = math.floor(span * rate + 0.5)
+    if n < 1:
+        raise ConfigError(f"parameter {name!r} = {span:g} s is less than one sample at rate {rate:g} Hz "
+                          f"({1 / rate:g} s); give at least {0.5 / rate:g} s, or 0")
+    if n > most:
+        raise ConfigError(f"parameter {name!r} = {span:g} s at rate {rate:g} Hz is {n} samples; at most {most} are "
+                          f"held: shorten {name} or lower rate")
+    return n
+
+
+def _lag_count(values: dict[str, Any]) -> Lags:
+    """``estimator.lag_span`` as the estimator's ``lags``: -1 all, 0 none, else seconds x rate."""
+    span = values["estimator.lag_span"]
+    if span == -1.0:
+        return "all"
+    if span == 0.0:
+        return 0
+    if span < 0:
+        raise ConfigError(f"parameter 'estimator.lag_span' must be -1 (all lags), 0 (the conventional covariance) or "
+                          f"a positive number of seconds, got {span!r}")
+    return _span_samples("estimator.lag_span", span, values["rate"], MAX_LAGS)
+
+
 def estimator_options(values: dict[str, Any]) -> EstimatorOptions:
-    """The ``estimator.*`` parameters as :class:`.estimator.EstimatorOptions`: ``estimator.lags``
-    (-1: ``"all"``), ``estimator.lag_selection`` (``auto``: ``lags="auto"``, up to
-    ``estimator.max_lags``), ``estimator.residual_burn_in`` (-1: the default), ``window``,
-    ``forgetting`` and ``residual`` as they are. Raises :class:`ConfigError` naming the option."""
-    lags = values["estimator.lags"]
-    burn_in = values["estimator.residual_burn_in"]
+    """The ``estimator.*`` parameters as :class:`.estimator.EstimatorOptions`. The lag window
+    follows time, not samples (``docs/estimator.md``): ``estimator.lag_span`` seconds are
+    ``lags = lag_span x rate`` (-1: ``"all"``, 0: none), ``estimator.max_lag_span`` the
+    ``max_lags`` of ``estimator.lag_selection: auto`` (``lags="auto"``), and
+    ``estimator.residual_burn_in_span`` the ``residual_burn_in`` (-1: ``AUTO_BURN_IN_SPAN`` s
+    with auto, 0 with fixed lags); ``window``, ``forgetting`` and ``residual`` as they are.
+    Raises :class:`ConfigError` naming the parameter."""
+    rate = values["rate"]
+    auto = values["estimator.lag_selection"] == "auto"
+    burn_in = values["estimator.residual_burn_in_span"]
+    if burn_in == -1.0:
+        burn_in = AUTO_BURN_IN_SPAN if auto else 0.0
+    elif burn_in < 0:
+        raise ConfigError(f"parameter 'estimator.residual_burn_in_span' must be -1 (the default) or a number of "
+                          f"seconds >= 0, got {burn_in!r}")
     return EstimatorOptions(
-        lags="auto" if values["estimator.lag_selection"] == "auto" else "all" if lags == -1 else lags,
+        lags="auto" if auto else _lag_count(values),
         window=values["estimator.window"],
         forgetting=values["estimator.forgetting"],
         residual=values["estimator.residual"],
-        max_lags=values["estimator.max_lags"],
-        residual_burn_in=None if burn_in == -1 else burn_in,
+        max_lags=_span_samples("estimator.max_lag_span", values["estimator.max_lag_span"], rate, MAX_LAGS),
+        residual_burn_in=_span_samples("estimator.residual_burn_in_span", burn_in, rate, MAX_BURN_IN) if burn_in else 0,
     )
 
 
@@ -781,6 +847,8 @@ class NodeParameters:
 
 
 def _suggestion(name: str) -> str:
+    if name in RENAMED:
+        return f" (renamed: {RENAMED[name]})"
     close = difflib.get_close_matches(name, [*PARAMETER_NAMES, *ROS_PARAMETERS], n=1, cutoff=0.75)
     return f" (did you mean {close[0]}?)" if close else ""
 

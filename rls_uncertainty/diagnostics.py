@@ -22,8 +22,13 @@ Three statuses, named ``rls_estimator: ...``:
   ``samples_rejected.<reason>``, ``resets.<reason>``, ``unknown_joint.<name>``, callback
   latency and CPU percentiles of the period, ``state_file``. Always OK.
 * ``model M``: the model fit, and the convergence flags when the node hands them in
-  (``converged``, ``converged_parameters``); OK when ready, and while initializing OK until
-  the first sample is used, WARN after (the regressors are not informative).
+  (``converged``, ``converged_parameters``) with the identifiability figures
+  (:mod:`.identifiability`: ``identifiable``, ``not_identifiable``, ``held_back``,
+  ``max_parameter_correlation``, ``excitation.<regressor>``); OK when ready, WARN while a
+  parameter's convergence flag is held back as not identifiable (the message says why, naming
+  the regressors and the figure); while initializing OK until the first sample is used, WARN
+  after (naming the regressor that does not move, or the two that move together, once
+  ``convergence.window`` of samples has not initialized the model).
 
 **The window.** The policy keeps, per snapshot, the steady time (the sum of ``elapsed_s``)
 and each stream's rejected, missing and expired totals. The recent counts are the current
@@ -205,6 +210,7 @@ class DiagnosticsPolicy:
                   for kind, s in snap.counters["streams"].items()}
         baseline = self._baseline()
         alerts = self.alerts.update(snap.elapsed_s, snap.counters, snap.required, snap.enabled, self.window_s)
+        self.alerts.models(snap.models)  # identifiability, logged with the alerts
         statuses = [self._inputs(snap, totals, baseline, alerts), self._samples(snap)]
         statuses += [self._model(name, fit, snap) for name, fit in snap.models]
         self._history.append((self._time, totals))
@@ -308,6 +314,7 @@ class DiagnosticsPolicy:
         return self._status("samples", OK, message, kv)
 
     def _model(self, name: str, fit: Mapping, snap: Snapshot) -> Status:
+        why = fit.get("identifiability", "")
         if fit["ready"]:
             text = f"R^2 {fit['r_squared']:.3f}, residual lag-1 correlation {fit['residual_rho1']:.2f}"
             if "converged" in fit:
@@ -317,8 +324,10 @@ class DiagnosticsPolicy:
                     text += f"; converged: {fit['converged_parameters']}"
                 else:
                     text += "; not converged"
-            level = OK
+            if why:  # not identifiable: WARN while it holds a convergence flag back
+                text += f"; {why.removeprefix(name + ': ')}"
+            level = WARN if fit.get("held_back") else OK
         else:
-            text = "initializing: regressors not yet informative"
+            text = f"initializing: {why.removeprefix(name + ': ') or 'regressors not yet informative'}"
             level = OK if snap.counters["samples_used"] == 0 else WARN
         return self._status(f"model {name}", level, text, list(fit.items()))

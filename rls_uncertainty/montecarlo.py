@@ -21,9 +21,11 @@ from pathlib import Path
 
 import numpy as np
 
+from .config import REGRESSOR_UNITS
 from .convergence import ConvergenceConfig, ConvergenceMonitor
 from .differentiation import DifferentiatorConfig
 from .estimator import EstimatorBank, EstimatorOptions, Lags, batch_estimate
+from .identifiability import IdentifiabilityConfig, IdentifiabilityMonitor
 from .simulation import T2_MODELS, T2_TRUE, SimulationConfig, add_noise, reduce_short_period, simulate_short_period
 
 __all__ = [
@@ -76,6 +78,8 @@ LAG_SWEEP = (0, 1, 2, 3, 5, 8, 11, 15, 20, 30, 50, 75, 100, 150, 200, 300, 400, 
 # The node's convergence criterion with its buffer sized for the simulation's 50 Hz.
 MONTE_CARLO_CONVERGENCE = replace(ConvergenceConfig(), rate_hz=SimulationConfig().rate)
 BEST_FROM = SimulationConfig().input_start + 0.5  # s: from here on, the floor of false convergence
+# The node's identifiability tests of the flags (its defaults).
+NODE_IDENTIFIABILITY = IdentifiabilityConfig()
 # The estimator of Table 3: 50 lags, the paper's Eq. 17 (no residual burn-in).
 TABLE3_OPTIONS = EstimatorOptions(lags=50)
 
@@ -98,7 +102,10 @@ class LevelResult:
     # Keyword-only (KW_ONLY): the arrays after the configuration's default need no placeholder default.
     _: KW_ONLY
     convergence: ConvergenceConfig = field(default_factory=ConvergenceConfig)
+    identifiability: IdentifiabilityConfig = field(default_factory=IdentifiabilityConfig)
     flag_time: np.ndarray  # (runs, 5) first time each parameter is flagged
+    untested_flag_time: np.ndarray  # (runs, 5) the same without the identifiability tests
+    untested_model_flag_time: np.ndarray  # (runs, 2)
     flag_theta: np.ndarray  # (runs, 5) estimate at that time (NaN if never)
     flag_se: np.ndarray  # (runs, 5) corrected SE at that time
     model_flag_time: np.ndarray  # (runs, 2) first time C_Z / C_m has every parameter flagged
@@ -183,14 +190,22 @@ def level_inputs(
 class _Tracker:
     """What :func:`run_level` records at every sample besides the end-of-maneuver results: the
     Fig. 6 history of C_Z_alpha, and from one :class:`~rls_uncertainty.convergence.
-    ConvergenceMonitor` over every run's models the first flag of each parameter and model
-    (estimate and corrected SE at that moment) and the ensemble mean, mean corrected SE,
-    scatter and truth-outside rates of every Table 3 parameter."""
+    ConvergenceMonitor` over every run's models, less what the node's identifiability tests take
+    out (:class:`~rls_uncertainty.identifiability.IdentifiabilityMonitor`), the first flag of
+    each parameter and model (estimate and corrected SE at that moment; and the first flag
+    without the tests) and the ensemble mean, mean corrected SE, scatter and truth-outside rates
+    of every Table 3 parameter."""
 
-    def __init__(self, t: np.ndarray, runs: int, sizes: list[int], convergence: ConvergenceConfig) -> None:
+    def __init__(self, t: np.ndarray, runs: int, sizes: list[int], convergence: ConvergenceConfig,
+                 identifiability: IdentifiabilityConfig) -> None:
         n_models, N, P = len(T2_MODELS), t.size, len(PARAMETERS)
         self.t, self.runs = t, runs
         self.monitor = ConvergenceMonitor(sizes, convergence)
+        rows = [m.regressors for m in T2_MODELS] * runs
+        units = [[REGRESSOR_UNITS[r] for r in row] for row in rows]
+        self.quality = IdentifiabilityMonitor(rows, units, identifiability)
+        self.untested_k = np.full((runs, P), -1)
+        self.untested_model_k = np.full((runs, n_models), -1)
         self.stamps = np.round(t * 1e9).astype(np.int64)
         self.cz = np.arange(runs) * n_models  # CZ model of each run
         self.model_of = np.array([_WHERE[p][0] for p in PARAMETERS])
@@ -205,8 +220,9 @@ class _Tracker:
         self.truth = np.array([T2_TRUE[p] for p in PARAMETERS])
         self.outside = np.full((N, P + n_models), np.nan)
 
-    def sample(self, k: int, bank: EstimatorBank) -> None:
+    def sample(self, k: int, bank: EstimatorBank, x: np.ndarray, z: np.ndarray) -> None:
         runs, cz, P = self.runs, self.cz, len(PARAMETERS)
+        self.quality.add(x, z)
         if bank.ready[cz].all():
             th = bank.theta_all()[cz, 1]
             self.history[k] = (th.mean(), bank.standard_errors_all("conventional")[cz, 1].mean(),
@@ -214,6 +230,11 @@ class _Tracker:
             self.scatter[k] = th.std(ddof=1) if runs > 1 else 0.0
         theta_k, se_k, ready_k = bank.theta_all(), bank.standard_errors_all("corrected"), bank.ready
         flags, model_flags = self.monitor.update(int(self.stamps[k]), theta_k, se_k, ready_k)
+        untested = flags[self.p_row, self.p_col] & (self.untested_k < 0)
+        self.untested_k[untested] = k
+        self.untested_model_k[model_flags.reshape(runs, len(T2_MODELS)) & (self.untested_model_k < 0)] = k
+        # The node's tests: a parameter not identifiable is never flagged.
+        flags, model_flags = self.quality.restrict(flags, model_flags, bank, ready_k)
         th_p, se_p = theta_k[self.p_row, self.p_col], se_k[self.p_row, self.p_col]
         new = flags[self.p_row, self.p_col] & (self.flag_k < 0)
         self.flag_k[new], self.flag_theta[new], self.flag_se[new] = k, th_p[new], se_p[new]
@@ -234,6 +255,8 @@ class _Tracker:
         return dict(
             time=t, history_mean=self.history, history_scatter=self.scatter,
             flag_time=np.where(self.flag_k >= 0, t[self.flag_k], np.inf),
+            untested_flag_time=np.where(self.untested_k >= 0, t[self.untested_k], np.inf),
+            untested_model_flag_time=np.where(self.untested_model_k >= 0, t[self.untested_model_k], np.inf),
             flag_theta=self.flag_theta, flag_se=self.flag_se,
             model_flag_time=np.where(self.model_k >= 0, t[self.model_k], np.inf),
             model_flag_theta=self.model_theta, model_flag_se=self.model_se,
@@ -290,6 +313,7 @@ def run_level(
     options: EstimatorOptions = TABLE3_OPTIONS,
     seed: int = 2016,
     convergence: ConvergenceConfig = MONTE_CARLO_CONVERGENCE,
+    identifiability: IdentifiabilityConfig = NODE_IDENTIFIABILITY,
 ) -> LevelResult:
     """All runs of one band-limited noise level (fraction, e.g. 0.2) with the estimator
     ``options`` (default: 50 lags, the paper's). With ``lags="auto"`` each run's models
@@ -302,11 +326,11 @@ def run_level(
     t, reductions, sizes, X, Z = level_inputs(level, runs, seed=seed)
     bank = EstimatorBank(sizes, options)
     bank_all = EstimatorBank(sizes, EstimatorOptions(lags="all"))
-    track = _Tracker(t, runs, sizes, convergence)
+    track = _Tracker(t, runs, sizes, convergence, identifiability)
     for k in range(t.size):
         bank.update(X[k], Z[k])
         bank_all.update(X[k], Z[k])
-        track.sample(k, bank)
+        track.sample(k, bank, X[k], Z[k])
     lags_used = bank.lags_used.reshape(runs, len(T2_MODELS))
     se_batch, se_batch_all = _batch_standard_errors(reductions, lags_used, options.lags)
     return LevelResult(
@@ -317,7 +341,7 @@ def run_level(
         se_corrected_all=_collect(bank_all, runs, "corrected"),
         se_batch=se_batch, se_batch_all=se_batch_all,
         last_run=_last_run(bank_all, reductions),
-        convergence=convergence, lags_used=lags_used, options=options,
+        convergence=convergence, identifiability=identifiability, lags_used=lags_used, options=options,
         **track.results(),
     )
 
@@ -383,7 +407,10 @@ def convergence_summary(res: LevelResult) -> list[dict]:
       elevator input) on -- the false-convergence rate of the best time to flag every run
       at once, chosen in hindsight: a floor for any flag; ``bias_at_flag_se``: (mean
       estimate at the flag - true value) / mean SE at the flag; ``se_over_scatter_at_flag``:
-      mean SE / scatter at the median flag time.
+      mean SE / scatter at the median flag time;
+    - ``untested_flag_time_median``: the median first flag time without the identifiability tests
+      (:mod:`.identifiability`); ``held_back``: the fraction of runs whose first flag the tests
+      delayed or withheld.
 
     For a model the flag time is the first time all its parameters are flagged, and a false
     convergence is any of its Table 3 parameters outside.
@@ -405,6 +432,9 @@ def convergence_summary(res: LevelResult) -> list[dict]:
             return hit, math.nan, math.nan
         return hit, float(out_truth[hit].mean()), float(out_mean[hit].mean())
 
+    def held(ft: np.ndarray, untested: np.ndarray) -> dict[str, float]:
+        return {"untested_flag_time_median": float(np.median(untested)), "held_back": float(np.mean(ft > untested))}
+
     rows = []
     for i, name in enumerate(PARAMETERS):
         ft = res.flag_time[:, i]
@@ -423,6 +453,7 @@ def convergence_summary(res: LevelResult) -> list[dict]:
             "bias_at_flag_se": float((res.flag_theta[hit, i].mean() - truth[i]) / res.flag_se[hit, i].mean())
             if hit.any() else math.nan,
             "se_over_scatter_at_flag": float(ratio[at, i]) if at is not None else math.nan,
+            **held(ft, res.untested_flag_time[:, i]),
         })
     for m, model in enumerate(T2_MODELS):
         cols = [i for i, p in enumerate(PARAMETERS) if _WHERE[p][0] == m]
@@ -438,6 +469,7 @@ def convergence_summary(res: LevelResult) -> list[dict]:
             "truth_outside_min": float(np.nanmin(res.truth_outside[t >= BEST_FROM, len(PARAMETERS) + m])),
             "bias_at_flag_se": math.nan,
             "se_over_scatter_at_flag": math.nan,
+            **held(ft, res.untested_model_flag_time[:, m]),
         })
     return rows
 
@@ -445,7 +477,7 @@ def convergence_summary(res: LevelResult) -> list[dict]:
 CONVERGENCE_COLUMNS = (
     "level", "parameter", "flagged", "flag_time_median", "cover_time", "cover_time_strict", "flag_minus_cover",
     "false_convergence", "false_vs_mean", "truth_outside_end", "truth_outside_min", "bias_at_flag_se",
-    "se_over_scatter_at_flag",
+    "se_over_scatter_at_flag", "untested_flag_time_median", "held_back",
 )
 
 
@@ -471,11 +503,13 @@ def _convergence_lines(results: list[LevelResult]) -> list[str]:
         "outside +-2 corrected SE at the flag time; vs mean: the same against the ensemble mean at that time "
         "(calibration alone, no estimator bias). Outside at end: all runs, truth outside +-2 SE at the end of the "
         f"maneuver; best: the least such fraction at any time from {BEST_FROM:g} s on (flagging every run at the "
-        "best time, chosen in hindsight: a floor for any flag). Bias: (mean estimate - true) / mean SE at the flag.",
+        "best time, chosen in hindsight: a floor for any flag). Bias: (mean estimate - true) / mean SE at the flag. "
+        "Held back: runs whose first flag the identifiability tests delayed or withheld (in brackets: the median "
+        "flag time without them).",
         "",
         "| level | parameter | flagged | flag, s | cover, s (strict) | flag - cover, s | false | false vs mean "
-        "| truth outside: end / best | bias at flag, SE | SE/scatter at flag |",
-        "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |",
+        "| truth outside: end / best | bias at flag, SE | SE/scatter at flag | held back |",
+        "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |",
     ]
     for res in results:
         for row in convergence_summary(res):
@@ -491,6 +525,7 @@ def _convergence_lines(results: list[LevelResult]) -> list[str]:
                 + f"{pct(row['truth_outside_end'])} / {pct(row['truth_outside_min'])} | "
                 + ("- | - |" if model else
                    f"{row['bias_at_flag_se']:+.2f} | {row['se_over_scatter_at_flag']:.2f} |")
+                + f" {pct(row['held_back'])} ({sec(row['untested_flag_time_median'])}) |"
             )
     return lines
 

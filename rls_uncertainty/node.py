@@ -7,7 +7,8 @@ offline replay runs), and every completed sample is published as the messages of
 errors, convergence flags and decimated covariances), serialized there: the node publishes the
 bytes :meth:`.outputs.OutputLayout.encode` makes, on the publisher of each topic index.
 ``/diagnostics`` reports input rates and ages, the fate of every message and sample, model fit,
-convergence and latency, and a misconfigured data path (every message of a needed stream
+identifiability, convergence and latency (and ``~/M/fit``, ``~/M/identifiability`` follow each
+period), and a misconfigured data path (every message of a needed stream
 rejected, no sample used) is also logged as a throttled warning: the statuses and the warnings
 are computed by :mod:`.diagnostics` and :mod:`.alerts` from a snapshot the node takes each
 period.
@@ -37,7 +38,7 @@ from rclpy.executors import ExternalShutdownException
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.node import Node
 from rclpy.parameter import Parameter
-from rclpy.qos import QoSHistoryPolicy, QoSProfile, QoSReliabilityPolicy, qos_profile_sensor_data
+from rclpy.qos import QoSDurabilityPolicy, QoSHistoryPolicy, QoSProfile, QoSReliabilityPolicy, qos_profile_sensor_data
 from std_msgs.msg import Float64MultiArray, Header
 from std_srvs.srv import SetBool, Trigger
 
@@ -110,6 +111,10 @@ class EstimatorNode(Node):
         self._out_qos = QoSProfile(depth=self.node_cfg.depth, reliability=QoSReliabilityPolicy.RELIABLE,
                                    history=QoSHistoryPolicy.KEEP_LAST)
         self._outputs_by_topic: dict[str, Any] = {}  # publishers by relative topic
+        # ~/M/fit and ~/M/identifiability, once per diagnostics period: the latest kept for late joiners.
+        self._fit_qos = QoSProfile(depth=1, reliability=QoSReliabilityPolicy.RELIABLE,
+                                   durability=QoSDurabilityPolicy.TRANSIENT_LOCAL, history=QoSHistoryPolicy.KEEP_LAST)
+        self._fit_by_topic: dict[str, Any] = {}
         self._make_publishers()
         self._diag_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10, event_callbacks=_NO_EVENTS)
         in_qos = _input_qos(self.node_cfg.reliable, self.node_cfg.depth)
@@ -134,7 +139,7 @@ class EstimatorNode(Node):
             self.create_timer(self.node_cfg.state_save_period, self.save_state, clock=steady)
         models = ", ".join(f"{m.output}({len(m.regressors)})" for m in self.config.models)
         est = self.config.estimator
-        lags = f"auto (at most {est.max_lags})" if est.lags == "auto" else est.lags
+        lags = f"auto (at most {est.max_lags})" if est.lags == "auto" else est.lags  # (samples: lag_span x rate)
         self.get_logger().info(
             f"estimating {models} at {self.config.rate:g} Hz, {lags} lags, aircraft {self.config.aircraft.name}; "
             f"inputs {', '.join(self.node_cfg.topics[k] for k in STREAMS)}; {self.state_status}"
@@ -190,6 +195,20 @@ class EstimatorNode(Node):
             self.destroy_publisher(pub)
         self._outputs_by_topic = new
         self._pubs = [new[topic] for topic, _ in self._layout.topics]
+        self._make_fit_publishers()
+
+    def _make_fit_publishers(self) -> None:
+        """The per-period publishers of :attr:`.outputs.OutputLayout.fit_topics`, kept, made
+        or destroyed as :meth:`_make_publishers` does."""
+        old, new = self._fit_by_topic, {}
+        for topic, _msgtype in self._layout.fit_topics:
+            pub = old.pop(topic, None)
+            new[topic] = pub or self.create_publisher(Float64MultiArray, f"~/{topic}", self._fit_qos,
+                                                      event_callbacks=_NO_EVENTS)
+        for pub in old.values():
+            self.destroy_publisher(pub)
+        self._fit_by_topic = new
+        self._fit_pubs = [new[topic] for topic, _ in self._layout.fit_topics]
 
     # ------------------------------------------------------------------ data path
     def _callback(self, kind: str) -> Callable[[bytes], None]:
@@ -336,6 +355,8 @@ class EstimatorNode(Node):
             for s in self._diagnostics.update(snapshot)
         ]
         self._diag_pub.publish(arr)
+        for index, raw in self._layout.encode_fit(self.pipeline):  # ~/M/fit, ~/M/identifiability
+            self._fit_pubs[index].publish(raw)
         for line in self._diagnostics.alerts.due():  # a misconfigured data path, throttled
             self.get_logger().warning(line)
 

@@ -18,6 +18,24 @@ parameter names (comma-separated), then ``(stamp label, 1, 1)``: the sample's ti
 ``stamp:SEC.NANOSEC`` (:func:`stamp_label`, read back by :func:`parse_stamp_label`), so each
 array pairs with its sample without a second topic. Strides are row-major as ROS defines them.
 
+Once per ``diagnostics_period`` (the node's steady clock; the replay's data time), per model
+whose fit is ready (:data:`FIT_OUTPUTS`, reliable, transient local, depth 1: a display that
+joins late gets the latest at once; :meth:`OutputLayout.encode_fit`):
+
+* ``M/fit``: ``[r_squared, samples, bound_2sigma, rho_1 ... rho_L]``, ``dim[0]`` labelled
+  ``r_squared,samples,bound_2sigma,rho_1,...,rho_L`` (L written out) of size and stride
+  ``3 + L``: R^2, the samples since the estimator started (``n``), the white-noise bound
+  ``2 / sqrt(n)`` and the residual autocorrelation coefficients ``rho_i = R(i) / R(0)`` (Eq. 17)
+  at the ``L`` lags in use (at most :data:`FIT_LAGS_SHOWN`: with all lags kept, the first ones);
+* ``M/identifiability``: an ``n x (n + 3)`` row-major matrix, one row per parameter:
+  the correlations of its estimate with each parameter's (the corrected covariance, Eqs.
+  20/22), its regressor's standard deviation since the start, the resolution that is tested
+  against (both 0 for the bias, which is not tested) and 1.0/0.0 identifiable
+  (:mod:`.identifiability`); ``dim[0]`` labelled with the parameter names, ``dim[1]`` with the
+  parameter names then ``excitation,resolution,identifiable``.
+
+Both carry the stamp label of the newest sample the estimator used in their last dim.
+
 :class:`OutputLayout` makes a sample's messages as ``(topic index, CDR bytes)`` pairs: the node
 publishes the bytes on its publisher of that index, the offline replay records them in
 ``estimates.mcap`` under the same topic: one function, byte-identical outputs (checked over DDS
@@ -39,8 +57,9 @@ if TYPE_CHECKING:  # annotations only: the pipeline is the core, this module its
     from .pipeline import Pipeline, SampleOutput
 
 __all__ = [
-    "NODE_NAME", "HEADER", "FLOAT64_MULTIARRAY", "SAMPLE_STAMP", "MODEL_OUTPUTS", "ARRAY_OUTPUTS",
-    "stamp_label", "parse_stamp_label", "dims", "output_topics", "PublishedArray", "Row", "OutputLayout",
+    "NODE_NAME", "HEADER", "FLOAT64_MULTIARRAY", "SAMPLE_STAMP", "MODEL_OUTPUTS", "ARRAY_OUTPUTS", "FIT_OUTPUTS",
+    "FIT_LAGS_SHOWN", "stamp_label", "parse_stamp_label", "dims", "output_topics", "fit_topics", "PublishedArray",
+    "Row", "OutputLayout", "fit_records",
 ]
 
 HEADER = "std_msgs/msg/Header"
@@ -52,6 +71,9 @@ MODEL_OUTPUTS = ("estimates", "standard_errors", "standard_errors_conventional",
                  "covariance_conventional")
 ARRAY_OUTPUTS = MODEL_OUTPUTS[:3]  # the estimates and their standard errors
 _PER_MODEL = len(MODEL_OUTPUTS)
+# Published per model M as ~/M/<suffix> once per diagnostics period (module docstring).
+FIT_OUTPUTS = ("fit", "identifiability")
+FIT_LAGS_SHOWN = 1000  # autocorrelation coefficients in ~/M/fit at most (estimator.lag_span -1 keeps every lag)
 
 
 def stamp_label(stamp: int) -> str:
@@ -87,6 +109,12 @@ def output_topics(models: Iterable[str]) -> list[tuple[str, str]]:
     return [(SAMPLE_STAMP, HEADER), *arrays]
 
 
+def fit_topics(models: Iterable[str]) -> list[tuple[str, str]]:
+    """``(relative topic, message type)`` of the per-period outputs of ``models``
+    (:data:`FIT_OUTPUTS`), in publishing order."""
+    return [(f"{m}/{suffix}", FLOAT64_MULTIARRAY) for m in models for suffix in FIT_OUTPUTS]
+
+
 class PublishedArray(NamedTuple):
     """One array published for a sample: ``~/<model>/<suffix>`` with ``data`` (flat,
     row-major float64) of ``shape`` ``(n,)`` or ``(n, n)`` over the parameters ``names``
@@ -119,6 +147,7 @@ class OutputLayout:
     def __init__(self, models: Sequence[tuple[str, Sequence[str]]]) -> None:
         self.models = [(name, tuple(names)) for name, names in models]
         self.topics = output_topics(name for name, _ in self.models)
+        self.fit_topics = fit_topics(name for name, _ in self.models)
         # Per model: output name, label, n, vector and matrix shape, index of its first topic.
         self._per_model = [(name, ",".join(names), len(names), (len(names),), (len(names), len(names)),
                             1 + _PER_MODEL * j) for j, (name, names) in enumerate(self.models)]
@@ -176,3 +205,61 @@ class OutputLayout:
                 row = out.theta[j, :n], out.se[j, :n], out.se_conventional[j, :n]
                 if all(map(math.isfinite, row[0].tolist() + row[1].tolist() + row[2].tolist())):
                     yield Row(j, name, names, *row)
+
+    # ------------------------------------------------------------------ once per period
+    def encode_fit(self, pipe: Pipeline) -> list[tuple[int, bytes]]:
+        """``(index into fit_topics, CDR bytes)`` of ``M/fit`` and ``M/identifiability`` of
+        each model whose fit is ready (module docstring); nothing before the first sample or
+        where a figure is not finite."""
+        stamp = pipe.last_stamp_ns
+        if stamp is None:
+            return []
+        when = stamp_label(stamp)
+        out = []
+        for j, (_name, names) in enumerate(self.models):
+            arrays = _fit_arrays(pipe, j, names, when)
+            if arrays is not None:
+                out += [(len(FIT_OUTPUTS) * j + i, encode_float64_multiarray_dims(d, data.tolist()))
+                        for i, (d, data) in enumerate(arrays)]
+        return out
+
+
+_Arrays = list[tuple[list[tuple[str, int, int]], np.ndarray]]
+
+
+def _fit_arrays(pipe: Pipeline, j: int, names: tuple[str, ...], when: str) -> _Arrays | None:
+    """The dims and data of model ``j``'s ``fit`` and ``identifiability`` arrays, or None."""
+    fit = pipe.model_fit(j)
+    if not fit["ready"]:
+        return None
+    bank, quality = pipe.bank, pipe.identifiability
+    n_samples = bank.k
+    R = bank.autocorrelation(j)
+    lags = min(int(bank.lags_used[j]), FIT_LAGS_SHOWN, R.size - 1)
+    rho = R[1 : lags + 1] / R[0] if R[0] > 0 else np.zeros(lags)
+    fit_data = np.concatenate([[fit["r_squared"], n_samples, 2.0 / math.sqrt(max(n_samples, 1))], rho])
+    n = len(names)
+    cols = n + 3
+    table = np.zeros((n, cols))
+    table[:, :n] = quality.correlation[j, :n, :n]
+    bias = quality.bias[j, :n]
+    table[:, n] = np.where(bias, 0.0, quality.stats.std[j, :n])
+    table[:, n + 1] = np.where(bias, 0.0, quality.resolution[j, :n])
+    table[:, n + 2] = quality.identifiable[j, :n]
+    if not (np.isfinite(fit_data).all() and np.isfinite(table).all()):
+        return None
+    label = ",".join(names)
+    fit_label = f"r_squared,samples,bound_2sigma{',rho_1,...,rho_' + str(lags) if lags else ''}"
+    return [
+        ([(fit_label, fit_data.size, fit_data.size), (when, 1, 1)], fit_data),
+        ([(label, n, n * cols), (f"{label},excitation,resolution,identifiable", cols, cols), (when, 1, 1)],
+         table.ravel()),
+    ]
+
+
+def fit_records(pipe: Pipeline, log_ns: int, node: str = NODE_NAME) -> list[tuple[int, str, str, bytes]]:
+    """The node's per-period outputs (:meth:`OutputLayout.encode_fit`) as bag records of CDR
+    bytes logged at ``log_ns``: what the replay writes beside its ``/diagnostics``."""
+    layout = OutputLayout.of(pipe)
+    return [(log_ns, f"/{node}/{layout.fit_topics[i][0]}", FLOAT64_MULTIARRAY, raw)
+            for i, raw in layout.encode_fit(pipe)]

@@ -47,14 +47,15 @@ from typing import NamedTuple
 import numpy as np
 
 from .aero import RATES, FloatArray, aircraft_sample, coefficients, flight_state, regressors
-from .alerts import explanations
+from .alerts import explanations, identifiability
 from .bookkeeping import SAMPLES, Bookkeeping, model_fit
-from .config import PipelineConfig
+from .config import REGRESSOR_UNITS, PipelineConfig
 from .convergence import ConvergenceMonitor
 from .differentiation import FixedLagDifferentiator
 from .errors import NonFiniteInput, StateFileError
 from .estimator import EstimatorBank
 from .estimator.state_file import EstimatorState, load_state, save_state
+from .identifiability import IdentifiabilityMonitor
 from .intake import Intake
 from .sampling import Sample, Sampler, Skipped
 from .surface_mixing import SURFACES
@@ -184,6 +185,13 @@ class Pipeline:
         self.frame_id = inputs.frame_id  # checked by inputs.feed
         self._index = 0
         self._monitor = ConvergenceMonitor(self.sizes, replace(config.convergence, rate_hz=config.rate))
+        # Identifiability (the fit, excitation, collinearity) takes its flags out of the monitor's.
+        rows = [m.regressors for m in config.models]
+        self._x_names = [name for names in rows for name in names]
+        self._quality = IdentifiabilityMonitor(rows, [[REGRESSOR_UNITS[r] for r in row] for row in rows],
+                                               config.identifiability, config.estimator.forgetting)
+        self._named_after = math.ceil(config.convergence.window * config.rate)  # samples before a cause is named
+        self.last_stamp_ns: int | None = None  # the newest sample the estimator used
         self._cov_every = config.outputs.covariance_decimation
         self._period_ns = config.period_ns
         self._new_estimator()
@@ -193,8 +201,6 @@ class Pipeline:
         self._outputs = [m.output for m in config.models]
         # Where each model's regressors go in the (M, n_max) regression matrix, flattened.
         n_max = self.bank.n_max
-        rows = [m.regressors for m in config.models]
-        self._x_names = [name for names in rows for name in names]
         self._x_index = np.array([j * n_max + i for j, names in enumerate(rows) for i in range(len(names))],
                                  dtype=np.intp)
         self._real = np.arange(n_max) < np.array(self.sizes)[:, None]  # (M, n_max): not padding
@@ -204,11 +210,15 @@ class Pipeline:
         self.bank = EstimatorBank(self.sizes, self.config.estimator)
         self._X = np.zeros((len(self.sizes), self.bank.n_max))
         self._z = np.zeros(len(self.sizes))
-        self._zsum = np.zeros(len(self.sizes))  # sums of z and z^2 since the estimator started
-        self._zsq = np.zeros(len(self.sizes))
+        self._quality.reset()  # its output sums (R^2) and regressor statistics restart too
         self._withheld = np.zeros(len(self.sizes), dtype=bool)  # the last output's, per model
         self._monitor.reset()
         self._converged = self._monitor.no_flags()  # the newest sample's flags
+
+    @property
+    def identifiability(self) -> IdentifiabilityMonitor:
+        """The identifiability figures of the newest sample (:mod:`.identifiability`)."""
+        return self._quality
 
     @property
     def samples_used(self) -> int:
@@ -347,8 +357,8 @@ class Pipeline:
             book.samples_rejected["non_finite_regression"] += 1
             return None
         book.samples_used += 1
-        self._zsum += z
-        self._zsq += z * z
+        self._quality.add(X, z)
+        self.last_stamp_ns = t
         if self.record:
             self.regression.append((t, X.copy(), z.copy()))
         bank = self.bank
@@ -364,7 +374,9 @@ class Pipeline:
             for j in np.flatnonzero(bad):
                 book.outputs_withheld[self._outputs[j]] += 1
             ready &= ~bad
-        self._converged = flags, model_flags = self._monitor.update(t, theta, se, ready)
+        flags, model_flags = self._monitor.update(t, theta, se, ready)
+        # A parameter that is not identifiable from the data so far is never flagged converged.
+        self._converged = flags, model_flags = self._quality.restrict(flags, model_flags, bank, ready)
         return SampleOutput(
             stamp_ns=t,
             index=self._index,
@@ -427,13 +439,19 @@ class Pipeline:
     def model_fit(self, j: int) -> dict:
         """Model ``j``'s fit (:func:`.bookkeeping.model_fit`)."""
         withheld = self.bookkeeping.outputs_withheld.get(self._outputs[j], 0)
-        return model_fit(self.bank, j, self._zsum, self._zsq, bool(self._withheld[j]), withheld)
+        r2 = float(self._quality.fit(self.bank)[j])
+        return model_fit(self.bank, j, r2, bool(self._withheld[j]), withheld)
 
     def model_report(self, j: int) -> dict:
         """What ``/diagnostics`` reports of model ``j`` (node and replay alike): its
-        :meth:`model_fit` and, once it is ready, its newest :meth:`convergence` flags."""
-        fit = self.model_fit(j)
-        return {**fit, **self.convergence(j)} if fit["ready"] else fit
+        :meth:`model_fit`, once it is ready its newest :meth:`convergence` flags and
+        identifiability figures, and ``identifiability``: why parameters are not identifiable, or
+        why the model cannot initialize (:func:`.alerts.identifiability`), when that is so."""
+        fit, quality = self.model_fit(j), self._quality
+        why = identifiability(self._outputs[j], quality.problems(j, self._named_after))
+        if fit["ready"]:
+            fit = {**fit, **self.convergence(j), **quality.report(j, self.parameter_names[j])}
+        return {**fit, "identifiability": why} if why else fit
 
     def convergence(self, j: int) -> dict:
         """The newest sample's convergence flags of model ``j`` for diagnostics: ``converged``
@@ -452,7 +470,8 @@ class Pipeline:
     # ------------------------------------------------------------------ persistence
     def save_state(self, path: str | Path) -> None:
         """Write the estimator state (:mod:`.state_file`) so a restarted node resumes."""
-        state = EstimatorState(self.bank, self.bookkeeping.samples_used, self._zsum, self._zsq)
+        quality = self._quality
+        state = EstimatorState(self.bank, self.bookkeeping.samples_used, quality.output_sum, quality.output_sum_squares)
         save_state(path, state, self.config.fingerprint())
 
     def load_state(self, path: str | Path) -> None:
@@ -463,8 +482,7 @@ class Pipeline:
         state = load_state(path, self.config.fingerprint(), expect=expect)
         self.bank = state.bank
         self.bookkeeping.samples_used = state.samples_used
-        self._zsum = state.output_sum
-        self._zsq = state.output_sum_squares
+        self._quality.resume(state.output_sum, state.output_sum_squares)
         # The convergence history restarts: flags need window seconds of the resumed estimates.
         self._monitor.reset()
         self._converged = self._monitor.no_flags()

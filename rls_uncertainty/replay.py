@@ -20,7 +20,8 @@ stream (:class:`.bags.InputStream`) and the outputs are written sample by sample
   ``.../converged``, decimated ``.../covariance`` and ``.../covariance_conventional``), log
   time = the sample's stamp; and ``/diagnostics`` once per ``diagnostics_period`` of data
   time from the node's own diagnostics policy (:class:`_DataClockDiagnostics`), which carries
-  each model's lag count and convergence flags;
+  each model's lag count, convergence flags and identifiability, with ``/rls_estimator/M/fit``
+  and ``/rls_estimator/M/identifiability`` at the same times (:func:`.outputs.fit_records`);
 * ``run.json``: the bag's input digest, the span, the parameters and the configuration
   (:func:`.replay_files.run_record`), for ``replay --compare`` (:mod:`.compare`);
 * ``M_estimates.png``: each parameter's history with corrected and conventional 2-sigma
@@ -48,7 +49,7 @@ from .config import NodeConfig, PipelineConfig, node_config, parameter_defaults,
 from .diagnostics import DiagnosticsPolicy, Snapshot, Status
 from .files import output_directory
 from .inputs import Stamped, feed
-from .outputs import NODE_NAME, OutputLayout
+from .outputs import NODE_NAME, OutputLayout, fit_records
 from .pipeline import Pipeline, SampleOutput
 from .replay_files import ReplayFiles, run_record
 from .report import results_table, rows_from_arrays
@@ -66,7 +67,7 @@ class Sink(Protocol):
 
     def sample(self, out: SampleOutput) -> None: ...
 
-    def diagnostics(self, stamp_ns: int, statuses: list[Status]) -> None: ...
+    def diagnostics(self, stamp_ns: int, statuses: list[Status], fits: list[tuple[int, str, str, bytes]]) -> None: ...
 
     def after(self, newest_ns: int) -> None: ...
 
@@ -206,8 +207,8 @@ class _Run:
     def diagnostics(self, stamp_ns: int, statuses: list[Status]) -> None:
         if self.keep_outputs:
             self.result.diagnostics.append((stamp_ns, statuses))
-        if self.sink is not None:
-            self.sink.diagnostics(stamp_ns, statuses)
+        if self.sink is not None:  # with the node's per-period ~/M/fit and ~/M/identifiability
+            self.sink.diagnostics(stamp_ns, statuses, fit_records(self.pipe, stamp_ns))
 
     def finals(self) -> None:
         """Each model's last published values into the result."""

@@ -157,12 +157,14 @@ class _Mcap:
     def __init__(self, directory: Path, layout: OutputLayout, frame_id: str, node: str, store: Typestore) -> None:
         self.directory, self.layout, self.frame_id, self.store = directory, layout, frame_id, store
         self.topics = [(f"/{node}/{topic}", msgtype) for topic, msgtype in layout.topics]
+        self.fit_topics = [(f"/{node}/{topic}", msgtype) for topic, msgtype in layout.fit_topics]
         self.writer: BagWriter | None = None
         self.newest_sample: int | None = None  # stamp of the newest sample written
 
     def _open(self) -> BagWriter:
         if self.writer is None:
-            self.writer = BagWriter(self.directory / "estimates", [*self.topics, ("/diagnostics", DIAGNOSTIC_ARRAY)],
+            self.writer = BagWriter(self.directory / "estimates",
+                                    [*self.topics, *self.fit_topics, ("/diagnostics", DIAGNOSTIC_ARRAY)],
                                     self.store)
         return self.writer
 
@@ -172,8 +174,11 @@ class _Mcap:
             writer.add(stamp, *topics[index], data)
         self.newest_sample = stamp
 
-    def diagnostics(self, stamp_ns: int, statuses: list[Status]) -> None:
-        self._open().add(stamp_ns, "/diagnostics", DIAGNOSTIC_ARRAY, _diagnostic_array(self.store, stamp_ns, statuses))
+    def diagnostics(self, stamp_ns: int, statuses: list[Status], fits: list[tuple[int, str, str, bytes]]) -> None:
+        writer = self._open()
+        writer.add(stamp_ns, "/diagnostics", DIAGNOSTIC_ARRAY, _diagnostic_array(self.store, stamp_ns, statuses))
+        for log_ns, topic, msgtype, raw in fits:
+            writer.add(log_ns, topic, msgtype, raw)
 
     def after(self, newest_ns: int) -> None:
         """Write what no later record can precede: a later sample comes after the newest one,
@@ -207,8 +212,8 @@ class ReplayFiles:
         self.wide.sample(out)
         self.mcap.sample(out)
 
-    def diagnostics(self, stamp_ns: int, statuses: list[Status]) -> None:
-        self.mcap.diagnostics(stamp_ns, statuses)
+    def diagnostics(self, stamp_ns: int, statuses: list[Status], fits: list[tuple[int, str, str, bytes]]) -> None:
+        self.mcap.diagnostics(stamp_ns, statuses, fits)
 
     def after(self, newest_ns: int) -> None:
         self.mcap.after(newest_ns)

@@ -228,3 +228,52 @@ def test_the_explanation_of_a_reason_without_evidence_is_still_a_sentence():
     assert explain(config, "imu", "far_from_clock").startswith("stamps more than inputs.max_clock_offset = 0 s")
     assert "inputs.max_gap = 0.25 s" in explain(config, "samples", "gap_airspeed")
     assert explain(config, "imu", "implausible_angular_rate").startswith("limits.angular_rate allows |angular_rate|")
+
+
+# ------------------------------------------------------------------ identifiability
+def test_identifiability_lines_name_the_regressors_the_figure_and_the_parameter():
+    from rls_uncertainty.alerts import identifiability
+    from rls_uncertainty.identifiability import Problem
+
+    collinear = Problem("collinear", ("delta_e", "delta_r"), (-0.99999995,), (0.999,), samples=600)
+    assert identifiability("CZ", [collinear]) == (
+        "CZ: delta_e and delta_r correlated -1 - 5.0e-08 (their estimates; identifiability.max_correlation 0.999): "
+        "not identifiable; excite delta_e and delta_r independently or leave one out of models.CZ")
+    no_fit = Problem("no_fit", (), (0.0031,), (0.5,), samples=600)
+    assert identifiability("Cm", [no_fit]) == (
+        "Cm: no regressor explains the output (R^2 0.003, identifiability.min_r_squared 0.5): not identifiable; "
+        "excite the model or check its output")
+    flat = Problem("constant", ("beta",), (0.0,), (1e-4,), ("rad",), samples=141)
+    assert identifiability("CZ", [flat]) == (
+        "CZ: regressor beta not excited (std 0 rad in 141 samples since start; identifiability.angle_resolution "
+        "0.0001 rad): the model cannot initialize; move beta or leave it out of models.CZ")
+    several = Problem("not_excited", ("beta", "r_hat"), (2e-5, 3e-7), (1e-4, 1e-6), ("rad", ""), samples=90)
+    assert identifiability("Cn", [no_fit, several]) == (
+        "Cn: no regressor explains the output (R^2 0.003, identifiability.min_r_squared 0.5): not identifiable; "
+        "excite the model or check its output; regressors beta, r_hat not excited (std beta 2e-05 rad, r_hat 3e-07 "
+        "in 90 samples since start; identifiability.angle_resolution 0.0001 rad, identifiability.rate_resolution "
+        "1e-06): not identifiable; move beta, r_hat or leave them out of models.Cn")
+    assert identifiability("CZ", []) == ""
+    # An ordinary correlation keeps its digits; a constant output says so.
+    assert "correlated +0.999512 (their" in identifiability("CZ", [Problem("collinear", ("a", "b"), (0.9995123,),
+                                                                             (0.999,))])
+    assert "the output does not vary (R^2 undefined)" in identifiability("CX", [Problem("no_fit", (), (math.nan,),
+                                                                                        (0.5,))])
+
+
+def test_a_model_alert_is_raised_while_a_flag_is_held_back_and_logged_once_per_repeat_period():
+    text = "CZ: delta_e and delta_r correlated -1 - 5.0e-08 (...): not identifiable"
+    held = {"ready": True, "held_back": "CZ_delta_e,CZ_delta_r", "identifiability": text}
+    transient = {"ready": True, "held_back": "", "identifiability": text}  # not identifiable yet, nothing withheld
+    waiting = {"ready": False, "samples": 200, "identifiability": "CY: regressor beta not excited (...)"}
+    policy = AlertPolicy(repeat_s=30.0)
+    counters = run([], T2)[1]
+    lines = []
+    for second in range(70):
+        policy.update(1.0, counters, (), True, 10.0)
+        models = [("CZ", held if second < 65 else transient), ("Cm", {"ready": True}), ("CY", waiting)]
+        assert [a.key for a in policy.models(models)] == [("model CZ", "identifiability"),
+                                                          ("model CY", "identifiability")][0 if second < 65 else 1:]
+        lines += [(second, line) for line in policy.due()]
+    assert lines == [(0, text), (0, waiting["identifiability"]), (30, text), (30, waiting["identifiability"]),
+                     (60, text), (60, waiting["identifiability"])]

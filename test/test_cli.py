@@ -158,8 +158,11 @@ BAD_ARGUMENTS = [
     (["montecarlo", "--out", "{tmp}/mc", "--jobs", "0"], "--jobs"),
     (["montecarlo", "--out", "{tmp}/mc", "--burn-in", "-1"], "--burn-in"),
     (["simulate", "--burn-in", "few"], "--burn-in"),
-    (["replay", "{bag}", "--out", "{tmp}/r", "--quiet", "--burn-in", "2.5"], "--burn-in"),
-    (["replay", "{bag}", "--out", "{tmp}/r", "--quiet", "--burn-in", "100001"], "estimator.residual_burn_in"),
+    (["replay", "{bag}", "--out", "{tmp}/r", "--quiet", "--burn-in-span", "few"], "--burn-in-span"),
+    (["replay", "{bag}", "--out", "{tmp}/r", "--quiet", "--burn-in-span", "2001"],
+     "estimator.residual_burn_in_span"),
+    (["replay", "{bag}", "--out", "{tmp}/r", "--quiet", "--burn-in", "20"],
+     "--burn-in is now --burn-in-span SECONDS (samples / rate)"),
     (["multisine", "--period", "nan", "--band", "0.2", "2", "--inputs", "3", "--out", "{tmp}/ms.csv"], "--period"),
     (["multisine", "--period", "12", "--band", "2", "0.2", "--inputs", "3", "--out", "{tmp}/ms.csv"], "band"),
     (["multisine", "--period", "12", "--band", "0.2", "2", "--inputs", "0", "--out", "{tmp}/ms.csv"], "--inputs"),
@@ -180,9 +183,14 @@ BAD_ARGUMENTS = [
     (["replay", "{bag}", "--out", "{tmp}/r", "--quiet", "--end", "300"],
      "end 300 s is after the bag's last message: the bag spans 0 to 11.995 s from its start"),
     (["replay", "{bag}", "--out", "{tmp}/r", "--quiet", "--start", "2", "--end", "12"], "0 to 11.995 s"),
-    (["replay", "{bag}", "--out", "{tmp}/r", "--quiet", "--lags", "abc"], "--lags"),
-    (["replay", "{bag}", "--out", "{tmp}/r", "--quiet", "--lags", "-5"], "--lags"),
-    (["replay", "{bag}", "--out", "{tmp}/r", "--quiet", "--lags", "2.5"], "--lags"),
+    (["replay", "{bag}", "--out", "{tmp}/r", "--quiet", "--lag-span", "abc"], "--lag-span"),
+    (["replay", "{bag}", "--out", "{tmp}/r", "--quiet", "--lag-span", "-5"], "--lag-span"),
+    (["replay", "{bag}", "--out", "{tmp}/r", "--quiet", "--lag-span", "0.001"],
+     "'estimator.lag_span' = 0.001 s is less than one sample at rate 50 Hz"),
+    (["replay", "{bag}", "--out", "{tmp}/r", "--quiet", "--lags", "50"],
+     "--lags is now --lag-span SECONDS (lags / rate: 50 lags at 50 Hz = 1.0)"),
+    (["replay", "{bag}", "--out", "{tmp}/r", "--quiet", "--max-lags", "50"], "--max-lags is now --max-lag-span"),
+    (["replay", "{bag}", "--out", "{tmp}/r", "--quiet", "--max-lag-span", "0"], "--max-lag-span"),
     (["montecarlo", "--out", "{tmp}/mc", "--lags", "none"], "--lags"),
     (["replay", "{bag}", "--out", "{tmp}/r", "--quiet", "--forgetting", "nan"], "estimator.forgetting"),
     (["replay", "{bag}", "--out", "{tmp}/r", "--quiet", "--models", "XX"], "'XX'"),
@@ -329,7 +337,7 @@ def test_replay_reads_its_config_as_the_node_does(tmp_path, capsys):
                    "--quiet"], "no section for node rls_estimator", "did you mean rls_estimator?")
     (tmp_path / "lag.yaml").write_text("/**:\n  ros__parameters:\n    estimator.lag: 20\n")
     fails(capsys, ["replay", str(BUNDLED), "--config", str(tmp_path / "lag.yaml"), "--out", str(tmp_path / "r"),
-                   "--quiet"], "unknown parameter 'estimator.lag'", "did you mean estimator.lags?")
+                   "--quiet"], "unknown parameter 'estimator.lag'", "did you mean estimator.lag_span?")
     config = (ROOT / "config" / "t2.yaml").read_text() + "planner:\n  ros__parameters:\n    speed: 3\n"
     (tmp_path / "multi.yaml").write_text(config)
     assert cli.main(["replay", str(BUNDLED), "--config", str(tmp_path / "multi.yaml"), "--out", str(tmp_path / "r"),
@@ -340,26 +348,28 @@ def test_replay_reads_its_config_as_the_node_does(tmp_path, capsys):
 
 
 def test_every_lags_option_gives_the_estimators_lags_form():
-    """simulate, montecarlo and replay read --lags alike: an integer >= 0, 'all' or 'auto', as
-    the estimator's lags option takes them."""
+    """simulate and montecarlo (the paper's fixed 50 Hz) read --lags as the estimator's lags
+    option takes them: an integer >= 0, 'all' or 'auto'; replay's --lag-span is in seconds, as
+    estimator.lag_span (-1 for 'all')."""
     parser = cli.build_parser()
-    heads = (["simulate"], ["montecarlo", "--out", "o"], ["replay", "bag", "--out", "o"])
-    for head in heads:
+    for head in (["simulate"], ["montecarlo", "--out", "o"]):
         for given, lags in (("0", 0), ("50", 50), ("all", "all"), ("auto", "auto")):
             assert parser.parse_args([*head, "--lags", given]).lags == lags
+    for given, span in (("0", 0.0), ("1", 1.0), ("0.25", 0.25), ("all", -1.0), ("auto", "auto")):
+        assert parser.parse_args(["replay", "bag", "--out", "o", "--lag-span", given]).lag_span == span
 
 
-def test_replay_lags_set_the_lag_parameters_whatever_the_file_says(tmp_path):
+def test_replay_lag_span_sets_the_lag_parameters_whatever_the_file_says(tmp_path):
     (tmp_path / "auto.yaml").write_text("/**:\n  ros__parameters:\n    estimator.lag_selection: auto\n")
     parser = cli.build_parser()
-    expected = {"20": {"estimator.lag_selection": "fixed", "estimator.lags": 20},
-                "all": {"estimator.lag_selection": "fixed", "estimator.lags": -1},
+    expected = {"0.4": {"estimator.lag_selection": "fixed", "estimator.lag_span": 0.4},
+                "all": {"estimator.lag_selection": "fixed", "estimator.lag_span": -1.0},
                 "auto": {"estimator.lag_selection": "auto"}}
     for given, want in expected.items():
-        args = parser.parse_args(["replay", "bag", "--out", "o", "--config", str(tmp_path / "auto.yaml"), "--lags",
+        args = parser.parse_args(["replay", "bag", "--out", "o", "--config", str(tmp_path / "auto.yaml"), "--lag-span",
                                   given])
         params = cli._replay_params(args)
-        assert {k: v for k, v in params.items() if k in ("estimator.lag_selection", "estimator.lags")} == want
+        assert {k: v for k, v in params.items() if k in ("estimator.lag_selection", "estimator.lag_span")} == want
 
 
 def test_version_is_package_xml_s(capsys):
@@ -387,18 +397,18 @@ def test_replay_with_no_estimate_says_why_and_exits_1(tmp_path, capsys):
 
 def test_lags_and_burn_in_options_map_onto_the_estimator_parameters():
     parser = cli.build_parser()
-    args = parser.parse_args(["replay", "bag", "--out", "o", "--lags", "auto", "--max-lags", "70"])
+    args = parser.parse_args(["replay", "bag", "--out", "o", "--lag-span", "auto", "--max-lag-span", "1.4"])
     params = cli._replay_params(args)
-    assert params["estimator.lag_selection"] == "auto" and params["estimator.max_lags"] == 70
-    assert "estimator.lags" not in params
+    assert params["estimator.lag_selection"] == "auto" and params["estimator.max_lag_span"] == 1.4
+    assert "estimator.lag_span" not in params
     assert parser.parse_args(["montecarlo", "--out", "o", "--lags", "auto"]).lags == "auto"
     assert parser.parse_args(["montecarlo", "--out", "o", "--lags", "7"]).lags == 7
     assert parser.parse_args(["simulate", "--lags", "auto"]).lags == "auto"
     # The residual burn-in: replay overrides the parameter ('default' is its -1), simulate and
     # montecarlo pass it to the bank (not given or 'default': the bank's, 50 with auto).
-    for given, param in ((["--burn-in", "20"], 20), (["--burn-in", "default"], -1), ([], None)):
-        params = cli._replay_params(parser.parse_args(["replay", "bag", "--out", "o", "--lags", "auto", *given]))
-        assert params.get("estimator.residual_burn_in") == param
+    for given, param in ((["--burn-in-span", "0.4"], 0.4), (["--burn-in-span", "default"], -1.0), ([], None)):
+        params = cli._replay_params(parser.parse_args(["replay", "bag", "--out", "o", "--lag-span", "auto", *given]))
+        assert params.get("estimator.residual_burn_in_span") == param
     for given, bank in ((["--burn-in", "0"], 0), (["--burn-in", "default"], None), ([], None)):
         assert cli._bank_burn_in(parser.parse_args(["montecarlo", "--out", "o", *given]).burn_in) == bank
         assert cli._bank_burn_in(parser.parse_args(["simulate", *given]).burn_in) == bank

@@ -170,7 +170,7 @@ def test_the_run_record_names_the_bag_span_and_configuration(golden):
     run = json.loads((golden / "run.json").read_text())
     assert run["bag"]["messages_read"] == run["bag"]["messages_used"] == 4920
     assert run["bag"]["start"] is None and run["bag"]["strict"] is True and len(run["bag"]["input_sha256"]) == 64
-    assert run["parameters"]["estimator.lags"] == 50 and run["parameters"]["topics.imu"] == "imu"
+    assert run["parameters"]["estimator.lag_span"] == 1.0 and run["parameters"]["topics.imu"] == "imu"
     assert run["models"] == ["CZ", "Cm"] and run["period_ns"] == 20_000_000
 
 

@@ -2,10 +2,12 @@
 PipelineConfig built from dotted parameters, and every validation with its reason."""
 
 import dataclasses
+import math
 import signal
 import subprocess
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import pytest
@@ -28,6 +30,7 @@ from rls_uncertainty.config import (
 )
 from rls_uncertainty.differentiation import DifferentiatorConfig
 from rls_uncertainty.estimator import RESIDUALS, WINDOWS
+from rls_uncertainty.identifiability import IdentifiabilityConfig
 from rls_uncertainty.surface_mixing import SurfaceMixing
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -66,10 +69,17 @@ def test_models_are_configuration():
 
 @pytest.mark.parametrize("params,match", [
     ({"estimator.window": "hann"}, "estimator.window"),
-    ({"estimator.lags": -2}, "estimator.lags"),
-    ({"estimator.residual_burn_in": -2}, "estimator.residual_burn_in"),
-    ({"estimator.residual_burn_in": 2.5}, "estimator.residual_burn_in"),
-    ({"estimator.residual_burn_in": 100001}, "estimator.residual_burn_in"),
+    ({"estimator.lag_span": -2}, "estimator.lag_span"),
+    ({"estimator.lag_span": -0.5}, "estimator.lag_span"),  # in range, but neither -1, 0 nor a span
+    ({"estimator.lag_span": 0.001}, "less than one sample at rate 50 Hz"),
+    ({"estimator.lag_span": 200.0, "rate": 1000.0}, "at most 100000 are held"),
+    ({"estimator.max_lag_span": 0.005}, "estimator.max_lag_span"),
+    ({"estimator.residual_burn_in_span": -2}, "estimator.residual_burn_in_span"),
+    ({"estimator.residual_burn_in_span": -0.5}, "estimator.residual_burn_in_span"),
+    ({"estimator.residual_burn_in_span": 2001}, "estimator.residual_burn_in_span"),
+    ({"estimator.lags": 50}, r"renamed: estimator.lag_span, in seconds \(lags / rate"),
+    ({"identifiability.max_correlation": 1.0}, "identifiability.max_correlation"),
+    ({"identifiability.min_r_squared": -0.1}, "identifiability.min_r_squared"),
     ({"rate": 0.0}, "rate"),
     ({"rate": "fast"}, "rate"),
     ({"models.enabled": ["CQ"]}, "unknown model"),
@@ -100,17 +110,18 @@ def test_shipped_parameter_files_are_valid(name):
 
 def test_every_parameter_reaches_its_nested_field():
     """Each pipeline parameter, set to a non-default value, changes exactly the field of the
-    same name in its section (``estimator.lags`` -1 is ``"all"``, ``estimator.lag_selection``
-    auto is ``lags="auto"``: :func:`.config.estimator_options`)."""
+    same name in its section; the estimator's time spans are samples at the rate
+    (``estimator.lag_span`` 0.22 s is 11 lags at 50 Hz, -1 is ``"all"``;
+    ``estimator.lag_selection`` auto is ``lags="auto"``: :func:`.config.estimator_options`)."""
     changed = {
         "rate": ("rate", 100.0),
-        "estimator.lags": (("estimator", "lags"), 11),
+        "estimator.lag_span": (("estimator", "lags"), 11),
         "estimator.window": (("estimator", "window"), "bartlett"),
         "estimator.forgetting": (("estimator", "forgetting"), 0.99),
         "estimator.residual": (("estimator", "residual"), "a_priori"),
         "estimator.lag_selection": (("estimator", "lags"), "auto"),
-        "estimator.max_lags": (("estimator", "max_lags"), 80),
-        "estimator.residual_burn_in": (("estimator", "residual_burn_in"), 20),
+        "estimator.max_lag_span": (("estimator", "max_lags"), 80),
+        "estimator.residual_burn_in_span": (("estimator", "residual_burn_in"), 20),
         "differentiator.window": (("differentiator", "window"), 11),
         "differentiator.order": (("differentiator", "order"), 2),
         "differentiator.lag": (("differentiator", "lag"), 5),
@@ -142,31 +153,53 @@ def test_every_parameter_reaches_its_nested_field():
         "limits.air_density_min": (("limits", "air_density_min"), 0.3),
         "limits.air_density_max": (("limits", "air_density_max"), 1.5),
         "limits.angular_acceleration": (("limits", "angular_acceleration"), 100.0),
+        "identifiability.max_correlation": (("identifiability", "max_correlation"), 0.99),
+        "identifiability.min_r_squared": (("identifiability", "min_r_squared"), 0.25),
+        "identifiability.angle_resolution": (("identifiability", "angle_resolution"), 1e-3),
+        "identifiability.rate_resolution": (("identifiability", "rate_resolution"), 1e-5),
     }
-    sections = {"rate", "estimator", "differentiator", "inputs", "surfaces", "limits"}
+    sections = {"rate", "estimator", "differentiator", "inputs", "surfaces", "limits", "identifiability"}
     pipeline_params = [p.name for p in PARAMETERS if p.name.split(".")[0] in sections]
     assert sorted(changed) == sorted(pipeline_params)
+    given = {"estimator.lag_span": 0.22, "estimator.max_lag_span": 1.6, "estimator.residual_burn_in_span": 0.4}
     default = pipeline_config({})
     for name, (where, value) in changed.items():
-        cfg = pipeline_config({name: value})
-        if isinstance(where, str):
-            assert getattr(cfg, where) == value
-            assert dataclasses.replace(cfg, **{where: getattr(default, where)}) == default
+        cfg = pipeline_config({name: given.get(name, value)})
+        if isinstance(where, str):  # the rate: the estimator's spans are samples at it
+            assert getattr(cfg, where) == value and (cfg.estimator.lags, cfg.estimator.max_lags) == (100, 100)
+            assert dataclasses.replace(cfg, **{where: getattr(default, where)}, estimator=default.estimator) == default
             continue
         section, attr = where
         got = getattr(getattr(cfg, section), attr)
         assert got == (tuple(value) if isinstance(value, list) else value), name
         # Nothing else changed.
         restored = dataclasses.replace(getattr(cfg, section), **{attr: getattr(getattr(default, section), attr)})
+        if name == "estimator.lag_selection":  # residual_burn_in_span -1: 1 s with auto, 0 with fixed lags
+            restored = dataclasses.replace(restored, residual_burn_in=0)
         assert dataclasses.replace(cfg, **{section: restored}) == default, name
-    assert pipeline_config({"estimator.lags": -1}).estimator.lags == "all"
-    assert pipeline_config({"estimator.residual_burn_in": -1}).estimator.residual_burn_in is None
+    assert pipeline_config({"estimator.lag_span": -1}).estimator.lags == "all"
+    assert pipeline_config({"estimator.lag_span": 0}).estimator.lags == 0
+    assert pipeline_config({"estimator.residual_burn_in_span": -1}).estimator.residual_burn_in == 0
+
+
+@pytest.mark.parametrize("rate", [20.0, 50.0, 200.0, 1000.0])
+def test_the_lag_window_follows_time_not_samples(rate):
+    """The estimator's lags, automatic-lag cap and burn-in are the configured spans at the rate
+    (rounded half up): the same seconds of residual autocorrelation at every rate."""
+    est = pipeline_config({"rate": rate}).estimator
+    assert est.lags == round(rate) and est.residual_burn_in == 0  # 1 s: the paper's 50 lags at 50 Hz
+    auto = pipeline_config({"rate": rate, "estimator.lag_selection": "auto", "estimator.max_lag_span": 0.25})
+    assert (auto.estimator.max_lags, auto.estimator.burn_in) == (math.floor(0.25 * rate + 0.5), round(rate))
+    half = pipeline_config({"rate": rate, "estimator.lag_span": 0.5, "estimator.residual_burn_in_span": 0.1})
+    assert (half.estimator.lags, half.estimator.burn_in) == (math.floor(0.5 * rate + 0.5), math.floor(0.1 * rate + 0.5))
 
 
 def test_defaults_of_the_table_and_the_dataclasses_agree():
     cfg = pipeline_config({})
     d = parameter_defaults()
-    assert cfg.estimator == EstimatorOptions() and cfg.estimator.lags == d["estimator.lags"]
+    assert cfg.estimator == replace(EstimatorOptions(), residual_burn_in=0)
+    assert cfg.estimator.lags == d["estimator.lag_span"] * d["rate"]
+    assert cfg.identifiability == IdentifiabilityConfig()
     assert cfg.differentiator == DifferentiatorConfig()
     assert cfg.inputs == InputConfig()
     assert cfg.surfaces == SurfaceMixing()
@@ -218,7 +251,7 @@ def test_the_dataclasses_refuse_invalid_values_when_built_directly(build, match)
 
 def test_fingerprint_is_what_a_state_file_stores():
     """The state file compares this dict as saved: its keys and layout must stay."""
-    cfg = pipeline_config({"models.enabled": ["Cm"], "models.Cm": ["1", "q_hat"], "estimator.lags": 7})
+    cfg = pipeline_config({"models.enabled": ["Cm"], "models.Cm": ["1", "q_hat"], "estimator.lag_span": 0.14})
     assert cfg.fingerprint() == {
         "aircraft": [getattr(T2, f.name) for f in dataclasses.fields(T2)],
         "models": [["Cm", "1", "q_hat"]],
@@ -230,20 +263,20 @@ def test_fingerprint_is_what_a_state_file_stores():
 
 
 def test_residual_burn_in_defaults_by_lag_selection_and_enters_the_fingerprint_resolved():
-    """-1 (None): 50 samples with lag_selection auto, 0 (the paper's Eq. 17) with fixed lags;
-    the fingerprint holds the burn-in the bank uses, so the default and its value agree."""
+    """-1: 1 s (50 samples at 50 Hz) with lag_selection auto, 0 (the paper's Eq. 17) with fixed
+    lags; the fingerprint holds the burn-in the bank uses, so the default and its value agree."""
     fixed, auto = pipeline_config({}), pipeline_config({"estimator.lag_selection": "auto"})
     assert (fixed.estimator.burn_in, auto.estimator.burn_in) == (0, 50)
     assert (fixed.fingerprint()["estimator"]["residual_burn_in"], auto.fingerprint()["estimator"]["residual_burn_in"]) \
         == (0, 50)
-    explicit = pipeline_config({"estimator.lag_selection": "auto", "estimator.residual_burn_in": 50})
+    explicit = pipeline_config({"estimator.lag_selection": "auto", "estimator.residual_burn_in_span": 1.0})
     assert explicit.fingerprint() == auto.fingerprint()
-    assert pipeline_config({"estimator.lag_selection": "auto", "estimator.residual_burn_in": 0}).fingerprint() \
+    assert pipeline_config({"estimator.lag_selection": "auto", "estimator.residual_burn_in_span": 0}).fingerprint() \
         != auto.fingerprint()
-    twenty = pipeline_config({"estimator.residual_burn_in": 20})
+    twenty = pipeline_config({"estimator.residual_burn_in_span": 0.4})
     assert twenty.estimator.burn_in == 20 and twenty.fingerprint()["estimator"]["residual_burn_in"] == 20
-    spec = {p.name: p for p in PARAMETERS}["estimator.residual_burn_in"]
-    assert spec.default == -1 and (spec.low, spec.high) == (-1, 100000) and "-1: 50" in spec.description
+    spec = {p.name: p for p in PARAMETERS}["estimator.residual_burn_in_span"]
+    assert spec.default == -1 and (spec.low, spec.high) == (-1, 2000) and "-1: 1 s" in spec.description
 
 
 def test_plausibility_defaults_lie_between_any_flight_and_absurd_values():
@@ -295,16 +328,19 @@ def _refused(*ros_args):
 
 
 @pytest.mark.parametrize("args,needles", [
-    (["-p", "estimator.lags:=-5"], ["parameter 'estimator.lags' must be in [-1, 100000], got -5",
-                                    "(from -p estimator.lags:=-5)"]),
+    (["-p", "estimator.lag_span:=-5.0"], ["parameter 'estimator.lag_span' must be in [-1, 2000], got -5.0",
+                                          "(from -p estimator.lag_span:=-5.0)"]),
+    (["-p", "estimator.lags:=50"], ["-p estimator.lags:=50: unknown parameter 'estimator.lags' (renamed: "
+                                    "estimator.lag_span, in seconds (lags / rate: 50 lags at 50 Hz = 1.0; "
+                                    "-1 all lags))"]),
     (["-p", "rate:=fast"], ["parameter 'rate' must be a finite number, got 'fast'", "(from -p rate:=fast)"]),
     (["-p", "estimator.window:=hann"], ["must be one of ['truncated', 'bartlett'], got 'hann'"]),
     (["-p", "differentiator.window:=9.5"], ["parameter 'differentiator.window' must be an integer, got 9.5"]),
     (["-p", "use_sim_time:=1"], ["parameter 'use_sim_time' must be true or false, got 1"]),
     (["-p", "estimator.lag:=20"], ["-p estimator.lag:=20: unknown parameter 'estimator.lag' "
-                                   "(did you mean estimator.lags?)"]),
+                                   "(did you mean estimator.lag_span?)"]),
     (["-p", "colour:=red"], ["unknown parameter 'colour'"]),
-    (["-p", "rls_estimator:estimator.lag:=20"], ["did you mean estimator.lags?"]),
+    (["-p", "rls_estimator:estimator.lag:=20"], ["did you mean estimator.lag_span?"]),
     (["-p", "aircraft:=concorde"], ["concorde.yaml: no such file"]),
     (["-p", "inputs.max_gap:=1.0", "-p", "inputs.max_stamp_jump:=0.5"], ["inputs.max_stamp_jump"]),
     (["--params-file", "missing.yaml"], ["parameter file missing.yaml: no such file"]),
@@ -334,7 +370,7 @@ def test_a_section_naming_the_node_refuses_unknown_names(tmp_path):
         path = _file(tmp_path, f"{key}:\n  ros__parameters:\n    estimator:\n      lag: 20\n")
         message = _refused("--params-file", path)
         assert f"parameter file {path}, section {key}, line 4: unknown parameter 'estimator.lag' " \
-               "(did you mean estimator.lags?)" in message
+               "(did you mean estimator.lag_span?)" in message
     path = _file(tmp_path, "x:\n  rls_estimator:\n    ros__parameters:\n      rat: 20.0\n")
     assert "did you mean rate?" in _refused("-r", "__ns:=/x", "--params-file", path)
 
@@ -344,10 +380,11 @@ def test_a_wildcard_section_refuses_names_of_the_nodes_groups_and_warns_about_ot
         tmp_path, "/**:\n  ros__parameters:\n    estimator.lag: 20\n"))
     assert "did you mean aircraft?" in _refused("--params-file", _file(
         tmp_path, "/**:\n  ros__parameters:\n    aircraf: t2\n"))
-    path = _file(tmp_path, "/**:\n  ros__parameters:\n    estimator.lags: 20\n    speed: 3\n    use_sim_time: true\n"
-                           "    qos_overrides./clock.subscription.depth: 5\n")
+    path = _file(tmp_path, "/**:\n  ros__parameters:\n    estimator.lag_span: 0.4\n    speed: 3\n"
+                           "    use_sim_time: true\n    qos_overrides./clock.subscription.depth: 5\n")
     params = _startup("--params-file", path)
-    assert params.values == {"estimator.lags": 20, "use_sim_time": True, "qos_overrides./clock.subscription.depth": 5}
+    assert params.values == {"estimator.lag_span": 0.4, "use_sim_time": True,
+                             "qos_overrides./clock.subscription.depth": 5}
     assert params.warnings == (f"parameter file {path}, section /**: parameters that are not this node's ignored "
                                "(meant for other nodes?): speed",)
 
@@ -385,7 +422,7 @@ def test_the_replay_reads_a_file_as_the_node_in_any_namespace(tmp_path):
     with pytest.raises(ConfigError, match="no section for node rls_estimator"):
         load_parameters_file(path)
     path = _file(tmp_path, "rls_estimator:\n  ros__parameters:\n    estimator.lag: 20\n")
-    with pytest.raises(ConfigError, match=r"did you mean estimator\.lags"):
+    with pytest.raises(ConfigError, match=r"did you mean estimator\.lag_span"):
         load_parameters_file(path)
 
 
@@ -406,11 +443,11 @@ def _run_node(*ros_args):
 
 
 @pytest.mark.parametrize("args,needle", [
-    (["-p", "estimator.lags:=-5"], "parameter 'estimator.lags' must be in [-1, 100000], got -5"),
+    (["-p", "estimator.lag_span:=-5.0"], "parameter 'estimator.lag_span' must be in [-1, 2000], got -5.0"),
     (["-p", "rate:=fast"], "parameter 'rate' must be a finite number, got 'fast'"),
     (["--params-file", "missing.yaml"], "parameter file missing.yaml: no such file"),
     (["--params-file", "{malformed}"], "not valid YAML: expected ',' or ']', but got '<stream end>' (line 4"),
-    (["-p", "estimator.lag:=20"], "did you mean estimator.lags?"),
+    (["-p", "estimator.lag:=20"], "did you mean estimator.lag_span?"),
     (["--params-file", "{section}"], "no section for node /rls_estimator"),
 ])
 def test_the_node_refuses_a_misconfiguration_in_one_line_with_exit_status_2(tmp_path, args, needle):

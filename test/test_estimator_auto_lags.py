@@ -187,15 +187,15 @@ def test_auto_state_continues_bit_identically_with_the_memory_of_max_lags(forget
 def test_parameters_reach_the_bank_and_are_validated():
     from rls_uncertainty.config import ConfigError, pipeline_config
 
-    cfg = pipeline_config({"estimator.lag_selection": "auto", "estimator.max_lags": 80})
+    cfg = pipeline_config({"estimator.lag_selection": "auto", "estimator.max_lag_span": 1.6})
     assert cfg.estimator.lags == "auto" and cfg.estimator.max_lags == 80
     assert cfg.fingerprint()["estimator"]["lags"] == "auto" and cfg.fingerprint()["estimator"]["max_lags"] == 80
-    fixed = pipeline_config({"estimator.max_lags": 80})
+    fixed = pipeline_config({"estimator.max_lag_span": 1.6})
     assert fixed.estimator.lags == 50 and fixed.estimator.held == 50
     for params, match in [
         ({"estimator.lag_selection": "auto", "estimator.window": "bartlett"}, "truncated"),
         ({"estimator.lag_selection": "sometimes"}, "estimator.lag_selection"),
-        ({"estimator.max_lags": 0}, "estimator.max_lags"),
+        ({"estimator.max_lag_span": 0}, "estimator.max_lag_span"),
     ]:
         with pytest.raises(ConfigError, match=match):
             pipeline_config(params)

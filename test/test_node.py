@@ -416,12 +416,14 @@ def test_parameters_are_refused_with_reasons_and_changes_reset(tmp_path, tester)
         tester.wait_connected()
         (r,) = _set_parameters(tester, **{"estimator.window": "hann"})
         assert not r.successful and "estimator.window" in r.reason
-        (r,) = _set_parameters(tester, **{"estimator.lags": -5})
+        (r,) = _set_parameters(tester, **{"estimator.lag_span": -5.0})
         assert not r.successful
+        (r,) = _set_parameters(tester, **{"estimator.lag_span": 0.001})  # under one sample at 50 Hz
+        assert not r.successful and "less than one sample" in r.reason
         (r,) = _set_parameters(tester, **{"estimator.forgetting": 1.5})
         assert not r.successful
-        (r,) = _set_parameters(tester, **{"estimator.residual_burn_in": -2})
-        assert not r.successful and "estimator.residual_burn_in" in r.reason
+        (r,) = _set_parameters(tester, **{"estimator.residual_burn_in_span": -2.0})
+        assert not r.successful and "estimator.residual_burn_in_span" in r.reason
         (r,) = _set_parameters(tester, **{"topics.imu": "other_imu"})
         assert not r.successful and "read-only" in r.reason.lower()
         # The node only writes the state file it checked at start-up.
@@ -429,11 +431,11 @@ def test_parameters_are_refused_with_reasons_and_changes_reset(tmp_path, tester)
         assert not r.successful and "read-only" in r.reason.lower()
         (r,) = _set_parameters(tester, **{"differentiator.lag": 12})
         assert not r.successful and "differentiator.lag" in r.reason
-        (r,) = _set_parameters(tester, **{"estimator.lags": 20})
+        (r,) = _set_parameters(tester, **{"estimator.lag_span": 0.4})
         assert r.successful
         d = tester.wait_diagnostics(lambda d: "resets.parameters_changed" in d.get(f"{NODE}: samples", {}))
         assert d[f"{NODE}: samples"]["resets.parameters_changed"] == "1"
-        assert "parameters changed (estimator.lags): estimator reset" in node.text()
+        assert "parameters changed (estimator.lag_span): estimator reset" in node.text()
     finally:
         assert node.stop() == 0
 
@@ -532,7 +534,7 @@ def test_state_file_saves_on_shutdown_and_resumes(tmp_path, tester, bag):
     # Another configuration ignores the file, says so, and keeps it: renamed aside, never
     # overwritten by the fresh state saved at shutdown.
     saved = state.read_bytes()
-    node = _node(tmp_path, "-p", f"state_file:={state}", "-p", "estimator.lags:=7", name="third")
+    node = _node(tmp_path, "-p", f"state_file:={state}", "-p", "estimator.lag_span:=0.14", name="third")
     try:
         tester.wait_connected(outputs=False)
         d = tester.wait_diagnostics(lambda d: f"{NODE}: samples" in d)
@@ -542,7 +544,7 @@ def test_state_file_saves_on_shutdown_and_resumes(tmp_path, tester, bag):
         assert node.stop() == 0
     (aside,) = tmp_path.glob("state.npz.rejected-*")
     assert f"kept as {aside}" in status and aside.read_bytes() == saved
-    assert load_state(state, _t2_config({"estimator.lags": 7}).fingerprint()).samples_used == 0
+    assert load_state(state, _t2_config({"estimator.lag_span": 0.14}).fingerprint()).samples_used == 0
 
 
 def _crafted_state(path):
@@ -811,3 +813,52 @@ def test_the_consumer_pairing_does_not_depend_on_the_order_across_topics(bag):
     theta = dict(topics["estimates"])
     assert all(rec["estimates"] == theta[s] for e, s, rec in events)
     assert pairing.dropped == 0 and len(pairing.pending) <= pairing.keep
+
+
+def test_fit_topics_reach_a_late_subscriber_and_an_unidentifiable_model_is_said_once(tmp_path, tester, bag):
+    """C_Z given sideslip, which the longitudinal maneuver never moves: the node logs one WARN
+    line naming beta (throttled), its model status says the same, and C_m publishes ~/Cm/fit and
+    ~/Cm/identifiability every period, transient local: a subscriber that joins after the data
+    gets the latest at once, and it holds what the offline pipeline makes of the same messages."""
+    from rclpy.qos import QoSDurabilityPolicy, QoSHistoryPolicy, QoSProfile, QoSReliabilityPolicy
+    from std_msgs.msg import Float64MultiArray
+
+    from rls_uncertainty.bags import typestore
+    from rls_uncertainty.outputs import OutputLayout
+
+    params = tmp_path / "beta.yaml"
+    params.write_text("/**:\n  ros__parameters:\n    models:\n      CZ: ['1', alpha, beta, delta_e]\n"
+                      "    inputs:\n      buffer_duration: 60.0\n")
+    node = _node(tmp_path, "--params-file", str(params))
+    offline = Pipeline(_t2_config({"models.CZ": ["1", "alpha", "beta", "delta_e"], **NO_EXPIRY}))
+    for kind, _s, msg in bag:
+        feed(offline, kind, msg)
+    want = "CZ: regressor beta not excited (std 0 rad in "
+    try:
+        tester.wait_connected()
+        tester.publish_all([(k, to_rclpy(k, m)) for k, _s, m in bag])
+        d = tester.wait_diagnostics(lambda d: d.get(f"{NODE}: samples", {}).get("samples_used")
+                                    == str(offline.bank.k), timeout=60)
+        model = d[f"{NODE}: model CZ"]
+        assert model["level"] == 1 and model["message"].startswith("initializing: regressor beta not excited")
+        tester.wait_diagnostics(lambda d: True)  # one period more: the fit of the last sample is out
+        qos = QoSProfile(depth=1, reliability=QoSReliabilityPolicy.RELIABLE,
+                         durability=QoSDurabilityPolicy.TRANSIENT_LOCAL, history=QoSHistoryPolicy.KEEP_LAST)
+        late = {}
+        for suffix in ("fit", "identifiability"):
+            tester.node.create_subscription(Float64MultiArray, f"/{NODE}/Cm/{suffix}",
+                                            lambda msg, s=suffix: late.__setitem__(s, msg), qos)
+        assert tester.spin_until(lambda: len(late) == 2, 20), node.text()
+    finally:
+        assert node.stop() == 0, node.text()
+    layout, store = OutputLayout.of(offline), typestore()
+    expected = {layout.fit_topics[i][0]: store.deserialize_cdr(raw, "std_msgs/msg/Float64MultiArray")
+                for i, raw in layout.encode_fit(offline)}
+    assert sorted(expected) == ["Cm/fit", "Cm/identifiability"]  # C_Z never initialized: nothing
+    for suffix, msg in late.items():
+        exp = expected[f"Cm/{suffix}"]
+        assert [(d.label, d.size, d.stride) for d in msg.layout.dim] == \
+            [(d.label, d.size, d.stride) for d in exp.layout.dim]
+        np.testing.assert_array_equal(np.array(msg.data), exp.data)  # one machine: bit for bit
+    warnings = [line for line in node.text().splitlines() if want in line]
+    assert len(warnings) == 1 and "WARN" in warnings[0], node.text()

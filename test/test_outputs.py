@@ -122,7 +122,7 @@ def test_a_resumed_state_restarts_the_flags(bag, tmp_path):
 
 
 def test_model_fit_reports_the_lags_in_use(bag):
-    pipe = Pipeline(t2(**{"estimator.lags": 20}))
+    pipe = Pipeline(t2(**{"estimator.lag_span": 0.4}))
     for kind, _s, msg in bag[:300]:
         feed(pipe, kind, msg)
     fit = pipe.model_fit(0)
@@ -257,3 +257,66 @@ def test_each_message_goes_to_its_topic_index_in_publishing_order(bag):
     # A model not ready publishes nothing; the stamp still goes out.
     half = with_cov._replace(ready=np.array([False, True]))
     assert [layout.topics[i][0].split("/")[0] for i, _ in layout.encode(half, "body")[1:]] == ["Cm"] * 6
+
+
+# ------------------------------------------------------------------ ~/M/fit and ~/M/identifiability
+def test_fit_and_identifiability_arrays_hold_the_figures_of_independent_computations(bag):
+    """encode_fit after the bundled bag, decoded with rosbags: per model, ~/M/fit carries R^2 (a
+    batch least-squares fit of the recorded regression: the standardized residual makes Eq. 16
+    the batch fit-error variance), the samples, 2/sqrt(n) and R(i)/R(0) at the lags in use;
+    ~/M/identifiability the correlations of the corrected covariance, the regressors' standard
+    deviations (numpy over the recorded regression) with their resolutions, and the flags; both
+    labelled as docs/node.md says, with the newest sample's stamp last."""
+    from rls_uncertainty.bags import typestore
+    from rls_uncertainty.outputs import FIT_OUTPUTS, fit_topics
+
+    pipe = Pipeline(t2(), record=True)
+    for kind, _stamp, msg in bag:
+        feed(pipe, kind, msg)
+    layout = OutputLayout.of(pipe)
+    assert layout.fit_topics == fit_topics(["CZ", "Cm"]) == [("CZ/fit", "std_msgs/msg/Float64MultiArray"),
+                                                             ("CZ/identifiability", "std_msgs/msg/Float64MultiArray"),
+                                                             ("Cm/fit", "std_msgs/msg/Float64MultiArray"),
+                                                             ("Cm/identifiability", "std_msgs/msg/Float64MultiArray")]
+    store = typestore()
+    messages = {layout.fit_topics[i][0]: store.deserialize_cdr(raw, "std_msgs/msg/Float64MultiArray")
+                for i, raw in layout.encode_fit(pipe)}
+    assert sorted(messages) == sorted(f"{m}/{s}" for m in ("CZ", "Cm") for s in FIT_OUTPUTS)
+    stamp = stamp_label(pipe.regression[-1][0])
+    n_samples = len(pipe.regression)
+    for j, (model, names) in enumerate(zip(("CZ", "Cm"), pipe.parameter_names, strict=True)):
+        n = len(names)
+        X = np.array([r[1][j, :n] for r in pipe.regression])
+        z = np.array([r[2][j] for r in pipe.regression])
+        residual = z - X @ np.linalg.lstsq(X, z, rcond=None)[0]
+        fit = messages[f"{model}/fit"]
+        L = int(pipe.bank.lags_used[j])
+        assert [(d.label, d.size, d.stride) for d in fit.layout.dim] == [
+            (f"r_squared,samples,bound_2sigma,rho_1,...,rho_{L}", 3 + L, 3 + L), (stamp, 1, 1)]
+        assert fit.data[0] == pytest.approx(1.0 - residual @ residual / np.sum((z - z.mean()) ** 2), rel=1e-9)
+        assert fit.data[1] == n_samples and fit.data[2] == pytest.approx(2.0 / np.sqrt(n_samples), rel=1e-15)
+        R = pipe.bank.autocorrelation(j)
+        np.testing.assert_array_equal(fit.data[3:], R[1 : L + 1] / R[0])
+        ident = messages[f"{model}/identifiability"]
+        label = ",".join(names)
+        assert [(d.label, d.size, d.stride) for d in ident.layout.dim] == [
+            (label, n, n * (n + 3)), (f"{label},excitation,resolution,identifiable", n + 3, n + 3), (stamp, 1, 1)]
+        table = ident.data.reshape(n, n + 3)
+        c = pipe.bank.covariance(j, "corrected")
+        np.testing.assert_allclose(table[:, :n], c / np.sqrt(np.outer(np.diag(c), np.diag(c))), rtol=1e-9, atol=1e-12)
+        np.testing.assert_allclose(table[1:, n], X[:, 1:].std(axis=0), rtol=1e-9)
+        assert table[0, n] == table[0, n + 1] == 0.0  # the bias: not tested
+        floors = [1e-6 if name == "q_hat" else 1e-4 for name in pipe.models[j].regressors[1:]]
+        assert table[1:, n + 1].tolist() == floors
+        assert table[:, n + 2].tolist() == [1.0] * n
+
+
+def test_nothing_is_encoded_before_a_sample_or_for_a_model_not_ready(bag):
+    pipe = Pipeline(t2())
+    layout = OutputLayout.of(pipe)
+    assert layout.encode_fit(pipe) == []
+    for kind, _stamp, msg in bag:
+        feed(pipe, kind, msg)
+        if pipe.bank.k > 0:
+            break
+    assert not pipe.bank.ready.any() and layout.encode_fit(pipe) == []

@@ -8,6 +8,7 @@ test_differentiation). No ROS, no DDS (bags through rosbags)."""
 
 import copy
 import csv
+import dataclasses
 import math
 import struct
 import sys
@@ -152,6 +153,91 @@ def test_every_sample_and_message_is_accounted_for(t2_run):
     for out in outs:
         for _j, _name, _names, th, se, sc in published(pipe, out):
             assert np.all(np.isfinite(th)) and np.all(np.isfinite(se)) and np.all(np.isfinite(sc))
+
+
+# ----------------------------------------------------------------------------- identifiability
+def test_the_clean_maneuver_keeps_every_flag_the_monitor_gives(t2_run):
+    """On the seeded T-2 maneuver every parameter is identifiable once its estimate settles: the
+    published flags are, sample by sample, those of a convergence monitor run independently on
+    the published estimates, and every parameter ends flagged."""
+    from rls_uncertainty.convergence import ConvergenceMonitor
+
+    _st, pipe, outs = t2_run
+    monitor = ConvergenceMonitor(pipe.sizes, dataclasses.replace(pipe.config.convergence, rate_hz=pipe.config.rate))
+    for out in outs:
+        flags, model_flags = monitor.update(out.stamp_ns, out.theta, out.se, out.ready)
+        assert np.array_equal(out.converged, flags) and np.array_equal(out.model_converged, model_flags)
+    assert outs[-1].model_converged.all()
+    assert all(pipe.model_report(j)["identifiable"] for j in range(2))
+
+
+def _hostile(streams, params):
+    """Feed ``streams`` message by message; the outputs, and whether a flag was ever held back."""
+    pipe = Pipeline(pipeline_config({**T2_PARAMS, **params}), record=True)
+    outs, held = [], np.zeros((2, 4), dtype=bool)
+    for event in in_stamp_order(stream_events(streams)):
+        outs += apply(pipe, [event], streams.surface_names)
+        held |= pipe.identifiability.held_back
+    pipe.finish()
+    return pipe, outs, held
+
+
+def test_a_surface_commanded_twice_is_never_flagged_and_the_reason_names_both():
+    """Rudder = elevator + 1e-6 rad of noise, with a C_Z model on both: the batch regressors make
+    (X'X)^-1 correlate the two slopes at -1 to within 1e-3; the estimates are published with
+    their (huge) standard errors but never flagged converged, although the estimates settle
+    (the monitor would flag them), and the model report says why."""
+    st = simulate_sensor_streams(0.2, 250)
+    srf = st.control_surfaces[1].copy()
+    srf[:, 4] = srf[:, 0] + np.random.default_rng(19).normal(0.0, 1e-6, srf.shape[0])
+    st = dataclasses.replace(st, control_surfaces=(st.control_surfaces[0], srf))
+    pipe, outs, held = _hostile(st, {"models.CZ": ["1", "alpha", "delta_e", "delta_r"]})
+    X = np.array([r[1][0] for r in pipe.regression])
+    inverse = np.linalg.inv(X.T @ X)
+    assert inverse[2, 3] / np.sqrt(inverse[2, 2] * inverse[3, 3]) < -0.999
+    assert outs[-1].ready[0] and np.all(outs[-1].se[0] > 0)
+    assert not any(out.converged[0, 2:4].any() for out in outs) and held[0, 2:4].all()
+    report = pipe.model_report(0)
+    assert report["not_identifiable"] == "CZ_delta_e,CZ_delta_r" and not report["converged"]
+    assert report["identifiability"].startswith("CZ: delta_e and delta_r correlated -")
+    assert pipe.model_report(1)["identifiable"] and outs[-1].model_converged[1]
+
+
+def test_sensor_noise_without_a_maneuver_explains_nothing_and_nothing_is_flagged():
+    """Trim plus white sensor noise: a batch fit of the recorded regression explains under 5 % of
+    either output, and no parameter is ever flagged."""
+    st = simulate_sensor_streams(0.2, 250)
+    rng = np.random.default_rng(7)
+    imu = st.imu[1].copy()
+    imu[:, 1] = 0.002 * rng.standard_normal(imu.shape[0])
+    imu[:, 5] = np.median(imu[:, 5]) + 0.02 * rng.standard_normal(imu.shape[0])
+    srf = st.control_surfaces[1].copy()
+    srf[:, 0] = srf[:, 1] = 0.0005 * rng.standard_normal(srf.shape[0])
+    vel = st.airspeed[1].copy()
+    a = np.median(np.arctan2(-vel[:, 2], vel[:, 0])) + 0.001 * rng.standard_normal(vel.shape[0])
+    speed = np.hypot(vel[:, 0], vel[:, 2])
+    vel[:, 0], vel[:, 2] = speed * np.cos(a), -speed * np.sin(a)
+    st = dataclasses.replace(st, imu=(st.imu[0], imu), control_surfaces=(st.control_surfaces[0], srf),
+                             airspeed=(st.airspeed[0], vel))
+    pipe, outs, _held = _hostile(st, {})
+    for j, n in enumerate(pipe.sizes):
+        X = np.array([r[1][j, :n] for r in pipe.regression])
+        z = np.array([r[2][j] for r in pipe.regression])
+        residual = z - X @ np.linalg.lstsq(X, z, rcond=None)[0]
+        r2 = 1.0 - residual @ residual / np.sum((z - z.mean()) ** 2)
+        assert r2 < 0.05 and pipe.model_fit(j)["r_squared"] == pytest.approx(r2, rel=1e-6, abs=1e-9)
+        assert "no regressor explains the output" in pipe.model_report(j)["identifiability"]
+    assert not any(out.converged.any() for out in outs)
+
+
+def test_a_regressor_that_never_moves_is_named():
+    """C_Z with sideslip on a longitudinal maneuver (beta = 0 throughout): the model never
+    initializes, and its report names beta and its standard deviation."""
+    pipe, outs, _held = _hostile(simulate_sensor_streams(0.2, 250), {"models.CZ": ["1", "alpha", "beta", "delta_e"]})
+    assert not any(out.ready[0] for out in outs)
+    report = pipe.model_report(0)
+    assert not report["ready"] and report["identifiability"].startswith(
+        "CZ: regressor beta not excited (std 0 rad in 591 samples since start")
 
 
 # ----------------------------------------------------------------------------- synthetic input
@@ -557,27 +643,27 @@ def test_state_file_resumes_and_refuses_other_configurations(tmp_path):
     pipe.bank.update(row, [0.3])
     resumed.bank.update(row, [0.3])
     np.testing.assert_array_equal(resumed.bank.theta_all(), pipe.bank.theta_all())
-    other = pitch_pipeline(**{"estimator.lags": 10})
+    other = pitch_pipeline(**{"estimator.lag_span": 0.2})
     with pytest.raises(StateFileError, match="another"):
         other.load_state(path)
 
 
-@pytest.mark.parametrize("burn_in", [-1, 20])
+@pytest.mark.parametrize("burn_in", [-1, 0.4])
 def test_state_file_with_auto_lags_and_a_residual_burn_in_resumes_and_refuses_another_burn_in(tmp_path, burn_in):
     """With lag_selection auto (the bank's n_lags is "auto") a pipeline resumes its own state
     file, and a state saved with one residual burn-in is refused under another (the default
-    -1 is 50 with auto)."""
-    params = {"estimator.lag_selection": "auto", "estimator.residual_burn_in": burn_in}
+    -1 is 1 s, 50 samples at 50 Hz, with auto)."""
+    params = {"estimator.lag_selection": "auto", "estimator.residual_burn_in_span": burn_in}
     pipe = pitch_pipeline(**params)
-    assert pipe.bank.options.burn_in == (50 if burn_in < 0 else burn_in)
+    assert pipe.bank.options.burn_in == (50 if burn_in < 0 else 20)
     Synthetic(pipe).run(0, 3000)
     path = tmp_path / "state.npz"
     pipe.save_state(path)
     resumed = pitch_pipeline(**params)
     resumed.load_state(path)
     np.testing.assert_array_equal(resumed.bank.standard_errors_all(), pipe.bank.standard_errors_all())
-    for other_burn_in in (0, 7):
-        other = pitch_pipeline(**{**params, "estimator.residual_burn_in": other_burn_in})
+    for other_burn_in in (0, 0.14):
+        other = pitch_pipeline(**{**params, "estimator.residual_burn_in_span": other_burn_in})
         with pytest.raises(StateFileError, match="another"):
             other.load_state(path)
 
@@ -608,7 +694,8 @@ def test_reconfiguration_keeps_every_count():
     buffered = sum(len(s.stamps) for s in pipe.sampler.streams.values())
     pending = before["samples_pending"]
     assert buffered > 0 and pending > 0
-    new_cfg = pipeline_config({"models.enabled": ["Cm"], "models.Cm": ["1", "q_hat", "delta_e"], "estimator.lags": 10})
+    new_cfg = pipeline_config({"models.enabled": ["Cm"], "models.Cm": ["1", "q_hat", "delta_e"],
+                               "estimator.lag_span": 0.2})
     book = pipe.bookkeeping
     pipe = pipe.reconfigured(new_cfg)
     assert pipe.bookkeeping is book and pipe.sampler.counts == book.streams

@@ -60,7 +60,7 @@ def test_replay_writes_identical_outputs_twice_and_matches_the_pipeline(tmp_path
 
 def test_replay_options_select_span_models_and_lags(tmp_path):
     code = cli.main(["replay", str(BUNDLED), "--config", "t2", "--out", str(tmp_path / "o"), "--models", "CZ",
-                     "--lags", "all", "--start", "1.0", "--end", "9.0", "--no-plots", "--quiet"])
+                     "--lag-span", "all", "--start", "1.0", "--end", "9.0", "--no-plots", "--quiet"])
     assert code == 0
     with open(tmp_path / "o" / "estimates.csv") as fh:
         rows = list(csv.DictReader(fh))
@@ -138,7 +138,7 @@ def test_the_wide_csv_holds_the_long_csv_one_row_per_sample(tmp_path):
 
 
 def test_the_replays_mcap_carries_every_topic_the_node_publishes_byte_for_byte(tmp_path):
-    from rls_uncertainty.outputs import OutputLayout, output_topics
+    from rls_uncertainty.outputs import OutputLayout, fit_topics, output_topics
 
     params = load_parameters_file("t2")
     replay(BUNDLED, params, tmp_path / "r", progress=False, plots=False)
@@ -149,15 +149,20 @@ def test_the_replays_mcap_carries_every_topic_the_node_publishes_byte_for_byte(t
         reader = make_reader(fh)
         got = [(ch.topic, sch.name, msg.log_time, msg.data)
                for sch, ch, msg in reader.iter_messages(log_time_order=False)]
-    want_topics = {(f"/rls_estimator/{t}", m) for t, m in output_topics(["CZ", "Cm"])}
+    want_topics = {(f"/rls_estimator/{t}", m) for t, m in output_topics(["CZ", "Cm"]) + fit_topics(["CZ", "Cm"])}
     want_topics.add(("/diagnostics", "diagnostic_msgs/msg/DiagnosticArray"))
     assert {(t, s) for t, s, _, _ in got} == want_topics
     layout = OutputLayout.of(result.pipeline)
     expected = [(f"/rls_estimator/{layout.topics[i][0]}", layout.topics[i][1], out.stamp_ns, data)
                 for out in result.outputs for i, data in layout.encode(out, "base_link")]
     key = lambda r: (r[2], r[0])  # noqa: E731 - the bag is ordered by log time, then topic rank
-    assert sorted(r for r in got if r[0] != "/diagnostics") == sorted(expected)
-    assert sorted((r for r in got if r[0] != "/diagnostics"), key=key) == sorted(expected, key=key)
+    per_sample = [r for r in got if r[0] != "/diagnostics" and not r[0].endswith(("/fit", "/identifiability"))]
+    assert sorted(per_sample) == sorted(expected)
+    assert sorted(per_sample, key=key) == sorted(expected, key=key)
+    # ~/M/fit and ~/M/identifiability once per model at every /diagnostics time (its period of data time).
+    diagnostics = sorted(r[2] for r in got if r[0] == "/diagnostics")
+    for topic, _ in fit_topics(["CZ", "Cm"]):
+        assert sorted(r[2] for r in got if r[0] == f"/rls_estimator/{topic}") == diagnostics, topic
 
 
 def test_the_replays_diagnostics_report_lags_and_flags_once_per_period_of_data_time(tmp_path):

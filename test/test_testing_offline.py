@@ -48,7 +48,7 @@ def test_replay_bag_gives_every_sample_of_the_pipeline(listed):
 
 def test_overrides_name_parameters_with_dots_or_double_underscores():
     a = replay_bag(BUNDLED, "t2", estimator__lags=20, models__enabled=["Cm"])
-    b = replay_bag(BUNDLED, {**load_parameters_file("t2"), "estimator.lags": 20, "models.enabled": ["Cm"]})
+    b = replay_bag(BUNDLED, {**load_parameters_file("t2"), "estimator.lag_span": 0.4, "models.enabled": ["Cm"]})
     assert a.parameters == b.parameters == ("Cm_0", "Cm_alpha", "Cm_q", "Cm_delta_e")
     assert a.final("Cm_q") == b.final("Cm_q") != replay_bag(BUNDLED, "t2").final("Cm_q")
     assert parameters(None, {"rate": 25.0}) == {"rate": 25.0}
@@ -57,7 +57,7 @@ def test_overrides_name_parameters_with_dots_or_double_underscores():
 @pytest.mark.parametrize("config,overrides,needle", [
     ("t2", {"estimator__lag": 5}, "unknown parameter(s) ['estimator.lag']"),
     ({"estimatr.lags": 5}, {}, "estimatr.lags"),
-    ("t2", {"estimator__lags": -5}, "estimator.lags"),
+    ("t2", {"estimator__lag_span": -5}, "estimator.lag_span"),
     ("no_such_file", {}, "no_such_file"),
 ])
 def test_a_bad_parameter_is_refused_before_any_bag_is_read(config, overrides, needle):

@@ -296,6 +296,18 @@ class EstimatorBank:
         self._require(j)
         return float(self._lags.lag_sums[j, 0] / self.n_R[j])
 
+    def residual_variances(self) -> np.ndarray:
+        """:meth:`residual_variance` of every model at once, a new ``(M,)`` array, NaN for the
+        models that are not :attr:`ready` (one vectorised step: the per-sample fit test of
+        :mod:`rls_uncertainty.identifiability`)."""
+        totals = self._eval.weight_totals()
+        if isinstance(totals, float) and totals > 0.0:
+            R0: FloatArray = self._lags.lag_sums[:, 0] / totals
+        else:  # per model after a burn-in; none yet right after it (0 / 0: NaN)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                R0 = self._lags.lag_sums[:, 0] / totals
+        return np.where(self._ready, R0, np.nan)
+
     def autocorrelation(self, j: int) -> np.ndarray:
         """Residual autocorrelation ``R_k(i)``, ``i = 0..n_window-1`` (Eq. 17; under
         forgetting that of the noise model's residuals, weighted ``f_R^(k-j)``; after the

@@ -1,5 +1,5 @@
 """The automatic lag count and the residual burn-in (``estimator.lag_selection: auto``,
-``estimator.residual_burn_in``) against fixed lags. Report: REPORT.md beside this file.
+``estimator.residual_burn_in_span``) against fixed lags. Report: REPORT.md beside this file.
 
 Part 1, the paper's Table 3 Monte Carlo (Section IV.A; the seeds of ``rls-uncertainty
 montecarlo``): every run's C_Z and C_m models go through one bank per variant, and at the end
@@ -46,11 +46,11 @@ VARIANTS = {
 AUTO, FIXED = "auto (default burn-in 50)", "50 lags (the paper)"
 # replay options of each variant in part 2
 REPLAYS = {
-    "auto": ["--lags", "auto"],
-    "auto, burn-in 0": ["--lags", "auto", "--burn-in", "0"],
-    "50 lags": ["--lags", "50"],
-    "all lags": ["--lags", "all"],
-    "auto, max 100": ["--lags", "auto", "--max-lags", "100"],
+    "auto": ["--lag-span", "auto"],
+    "auto, burn-in 0": ["--lag-span", "auto", "--burn-in-span", "0"],
+    "50 lags": ["--lag-span", "1.0"],
+    "all lags": ["--lag-span", "all"],
+    "auto, max 100": ["--lag-span", "auto", "--max-lag-span", "2.0"],
 }
 RECORDINGS = ("totter_f1_017", "totter_f1_014")
 
