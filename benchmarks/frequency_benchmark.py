@@ -33,7 +33,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from estimator_benchmark import RATE, SIZES, maneuver  # the time-domain benchmark's six models and rows
 
-from rls_uncertainty.estimator import EstimatorBank
+from rls_uncertainty.estimator import EstimatorBank, EstimatorOptions
 from rls_uncertainty.frequency import FrequencyBank, FrequencyOptions
 
 WARM, SAMPLES = 300, 2000
@@ -54,7 +54,7 @@ def timed(step, n: int) -> tuple[float, float]:
 
 
 def time_domain(X: np.ndarray, z: np.ndarray) -> tuple[float, float]:
-    bank = EstimatorBank(SIZES, 50)
+    bank = EstimatorBank(SIZES, EstimatorOptions(lags=50))
     for k in range(WARM):
         bank.update(X[k], z[k])
 
@@ -131,7 +131,7 @@ def main() -> None:
         opts = FrequencyOptions(rate_hz=RATE, f_min=0.1, f_max=0.1 + (K - 1) * 0.05, f_step=0.05)
         med, _ = frequency_domain(opts, X, z, outputs=True)
         print(f"   K = {K:3d}: {med:8.1f} us")
-    td = EstimatorBank(SIZES, 50)
+    td = EstimatorBank(SIZES, EstimatorOptions(lags=50))
     fd = FrequencyBank([s - 1 for s in SIZES], FrequencyOptions(rate_hz=RATE, f_min=0.2, f_max=2.2))
     for k in range(200):
         td.update(X[k], z[k])

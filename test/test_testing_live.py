@@ -42,8 +42,8 @@ def test_the_live_node_publishes_what_the_replay_computes_sample_by_sample(tmp_p
 
 
 def test_a_bad_parameter_is_refused_before_a_node_starts(tmp_path):
-    with pytest.raises(ConfigError, match=r"estimator\.lags"):
-        EstimatorProcess({"estimator.lags": -5}, domain=DOMAIN, directory=tmp_path)
+    with pytest.raises(ConfigError, match=r"estimator\.lag_span"):
+        EstimatorProcess({"estimator.lag_span": -5}, domain=DOMAIN, directory=tmp_path)
     assert not list(tmp_path.glob("*.log"))
 
 
