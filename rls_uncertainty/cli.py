@@ -238,9 +238,11 @@ def _yaml_file(name_or_path: str, directory: Path) -> Path:
 def _replay(args: argparse.Namespace) -> int:
     from .compare import DEFAULT_ATOL, DEFAULT_RTOL, comparable, compare_replays, read_run
     from .config import config_dir
-    from .replay import planned_run, replay, summary_table
+    from .figures import FigureOptions, figure_formats
+    from .replay import planned_run, replay, run_summary
 
     params = _replay_params(args)
+    figures = FigureOptions(figure_formats(args.figures), args.dpi)
     # Files the replay reads besides the bag: never replaced by its output, even with --force.
     inputs = [_yaml_file(args.config, config_dir())] if args.config else []
     if isinstance(params.get("aircraft"), str) and params["aircraft"]:
@@ -252,17 +254,10 @@ def _replay(args: argparse.Namespace) -> int:
         comparable(planned_run(params, start=args.start, end=args.end, strict=not args.lenient),
                    read_run(args.compare), bag=False)
     result = replay(args.bag, params, args.out, start=args.start, end=args.end, strict=not args.lenient,
-                    progress=not args.quiet, plots=not args.no_plots, force=args.force, inputs=inputs)
-    c = result.counters()
-    print(summary_table(result))
-    rejected = ", ".join(f"{k} {v}" for k, v in sorted(c["samples_rejected"].items())) or "none"
-    print(f"\n{c['samples_formed']} samples formed, {c['samples_used']} used; rejected: {rejected}")
-    for name, s in c["streams"].items():
-        if s["rejected"] or s["expired"] or s["missing"]:
-            print(f"  {name}: {s['received']} received, rejected {s['rejected']}, expired {s['expired']}, "
-                  f"missing (stamp gaps) {s['missing']}")
-    print(f"{result.n_messages} messages, {result.data_seconds:.1f} s of data in {result.wall_seconds:.2f} s "
-          f"({result.speed:.0f}x real time); wrote {args.out}")
+                    progress=not args.quiet, plots=not args.no_plots, figures=figures, force=args.force,
+                    inputs=inputs)
+    print(run_summary(result))
+    print(f"read in {result.wall_seconds:.2f} s ({result.speed:.0f}x real time); wrote {args.out}")
     # No model estimated anything: the summary above says why; a script must not take it for success.
     if not result.estimates:
         return 1
@@ -534,7 +529,10 @@ def _add_replay(sub: Any) -> None:
     rp.add_argument("--end", type=_real(0.0), help="end, s from the bag start (after --start)")
     rp.add_argument("--lenient", action="store_true",
                     help="pass out-of-order and duplicate stamps to the pipeline (counted like the node does)")
-    rp.add_argument("--no-plots", action="store_true")
+    rp.add_argument("--no-plots", action="store_true", help="no figures (summary.txt and the data files only)")
+    rp.add_argument("--figures", default="png", metavar="FORMATS",
+                    help="figure formats, comma separated, of png, svg, pdf (default png)")
+    rp.add_argument("--dpi", type=int, default=300, help="PNG resolution, dots per inch (default 300, 50 to 1200)")
     rp.add_argument("--quiet", action="store_true", help="no progress bar")
     rp.add_argument("--force", action="store_true", help=_FORCE_HELP)
     rp.add_argument("--compare", metavar="DIR",

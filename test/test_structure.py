@@ -28,7 +28,8 @@ CORE = (
     "rls_uncertainty.turbulence", "rls_uncertainty.multisine", "rls_uncertainty.montecarlo",
     "rls_uncertainty.sampling", "rls_uncertainty.streams", "rls_uncertainty.timelines",
     "rls_uncertainty.intake", "rls_uncertainty.surface_mixing", "rls_uncertainty.bookkeeping",
-    "rls_uncertainty.alerts", "rls_uncertainty.pipeline", "rls_uncertainty.frequency", "rls_uncertainty.results",
+    "rls_uncertainty.alerts", "rls_uncertainty.pipeline", "rls_uncertainty.frequency",
+    "rls_uncertainty.results", "rls_uncertainty.figure_data",
 )
 
 
