@@ -13,7 +13,7 @@ import yaml
 
 from rls_uncertainty import cli
 from rls_uncertainty.campaign import CampaignSettings, campaign_to, load_maneuvers
-from rls_uncertainty.campaign.figure import figure12
+from rls_uncertainty.campaign.figure import campaign_figures
 from rls_uncertainty.config import node_config, pipeline_config
 from rls_uncertainty.executors import LocalProcesses
 from rls_uncertainty.testing import parameters, replay_bag
@@ -87,30 +87,27 @@ def test_misuse_is_one_error_line_before_anything_runs(tmp_path, capsys, argv, n
     assert needle in err and err.count("\n") == 1 and not (tmp_path / "o").exists()
 
 
-def test_figure12_draws_each_maneuver_with_both_bars_and_the_scatter_band(tmp_path):
-    import matplotlib.pyplot as plt
+def test_fig12_gets_each_maneuver_s_values_and_table_4_s_mean_and_scatter(tmp_path, monkeypatch):
+    """campaign_figures hands figures.figure12 (tested in test_figures.py) every maneuver's
+    estimate and three standard errors per parameter, in campaign order, and Table 4's mean and
+    scatter, one call per model."""
+    from rls_uncertainty import figures
 
     p = parameters("t2")
     settings = CampaignSettings(pipeline_config(p), node_config(p).topics)
     c = campaign_to(tmp_path / "o", load_maneuvers(_file(tmp_path, SPANS), BUNDLED), settings, LocalProcesses(1),
                     figures=False)
-    rows = [r for r in c.table if r.model == "Cm"]
-    saved = {}
-    real_close = plt.close
-    plt.close = lambda fig: saved.setdefault("fig", fig)  # keep the figure to read it back
-    try:
-        figure12(tmp_path / "f.png", "Cm", rows, c.results)
-    finally:
-        plt.close = real_close
-    fig = saved["fig"]
-    axes = fig.axes
-    assert (tmp_path / "f.png").stat().st_size > 0 and [a.get_ylabel() for a in axes] == [r.parameter for r in rows]
-    for ax, row in zip(axes, rows, strict=True):
-        band = ax.patches[0]  # axhspan: a rectangle in data units along y
-        assert band.get_y() == pytest.approx(row.mean - 2 * row.scatter)
-        assert band.get_y() + band.get_height() == pytest.approx(row.mean + 2 * row.scatter)
-        corrected = ax.containers[0]  # errorbar: corrected first, then conventional
-        centres = corrected.lines[0].get_ydata()
-        est = [r.estimate for res in c.results for r in res.rows if r.parameter == row.parameter]
-        np.testing.assert_array_equal(centres, est)
-    real_close(fig)
+    calls = []
+    monkeypatch.setattr(figures, "figure12", lambda *a, **k: calls.append((a, k)) or [])
+    campaign_figures(tmp_path, c.table, c.results)
+    assert [a[0] for a, _k in calls] == ["CZ", "Cm"]
+    for (model, maneuvers, names, est, se_conv, se_corr, _out), kw in calls:
+        rows = [r for r in c.table if r.model == model]
+        assert list(maneuvers) == [res.name for res in c.results] and list(names) == [r.parameter for r in rows]
+        assert kw["mean"] == [r.mean for r in rows] and kw["scatter"] == [r.scatter for r in rows]
+        for i, res in enumerate(c.results):
+            got = {r.parameter: r for r in res.rows}
+            np.testing.assert_array_equal(est[i], [got[n].estimate for n in names])
+            np.testing.assert_array_equal(se_conv[i], [got[n].se_conventional for n in names])
+            np.testing.assert_array_equal(se_corr[i], [got[n].se_corrected for n in names])
+            np.testing.assert_array_equal(kw["se_corrected_all"][i], [got[n].se_corrected_all for n in names])

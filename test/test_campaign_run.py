@@ -1,7 +1,7 @@
 """campaign/run.py: one maneuver through the replay's pipeline with the configured lags and,
 on the same regression rows, with all lags. The configured-lags values are the replay's
 (testing.replay_bag) bit for bit, and the all-lags standard errors those of a replay
-configured with all lags (estimator.lags -1): two independent paths through the same
+configured with all lags (estimator.lag_span -1): two independent paths through the same
 estimator on one machine. No ROS."""
 
 from __future__ import annotations
@@ -36,7 +36,7 @@ def test_a_maneuver_gives_the_replays_estimates_and_the_all_lags_replays_errors(
     start, end = span
     res = run_maneuver((Maneuver("m", str(BUNDLED), start, end), settings))
     replay = replay_bag(BUNDLED, "t2", start=start, end=end)
-    every_lag = replay_bag(BUNDLED, "t2", start=start, end=end, estimator__lags=-1)
+    every_lag = replay_bag(BUNDLED, "t2", start=start, end=end, estimator__lag_span=-1)
     assert [r.parameter for r in res.rows] == list(replay.parameters)
     fit = {m: replay.pipeline.model_fit(j) for j, m in enumerate(replay.models)}
     for row in res.rows:

@@ -120,7 +120,7 @@ def write_campaign(campaign: CampaignResult, out: Path, *, figures: bool = True)
         paths[key] = out / name
         paths[key].write_text(text)
     if figures:
-        for path in campaign_figures(out, campaign.table, campaign.results):
+        for path in campaign_figures(out, campaign.table, campaign.results, lags=f"{lags} lags"):
             paths[path.stem] = path
     return paths
 
