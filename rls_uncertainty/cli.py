@@ -162,6 +162,8 @@ def _replay_params(args: argparse.Namespace) -> dict[str, Any]:
         params["estimator.forgetting"] = args.forgetting
     if args.models:
         params["models.enabled"] = list(args.models)
+    if args.method:
+        params["estimator.method"] = args.method
     try:
         pipeline_config(params)  # every setting checked and the aircraft file read before any output
     except UnicodeDecodeError as exc:
@@ -443,6 +445,9 @@ def _add_replay(sub: Any) -> None:
     rp.add_argument("--window", choices=("truncated", "bartlett"), help="override estimator.window")
     rp.add_argument("--forgetting", type=float, help="override estimator.forgetting")
     rp.add_argument("--models", nargs="+", help="override models.enabled (e.g. CZ Cm)")
+    rp.add_argument("--method", choices=("time", "frequency", "both"),
+                    help="override estimator.method: time-domain estimates (estimates.csv), frequency-domain ones "
+                         "(estimates_frequency.csv) or both")
     rp.add_argument("--start", type=_real(0.0), help="start, s from the bag start")
     rp.add_argument("--end", type=_real(0.0), help="end, s from the bag start (after --start)")
     rp.add_argument("--lenient", action="store_true",
