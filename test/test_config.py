@@ -570,9 +570,9 @@ def test_frequency_settings_are_refused_naming_the_parameter(params, match):
 
 
 def test_a_pipeline_config_built_directly_keeps_method_and_options_in_agreement():
-    with pytest.raises(ConfigError, match="estimator.method both needs frequency options"):
+    with pytest.raises(ConfigError, match=r"estimator\.method both needs frequency options"):
         PipelineConfig(aircraft=T2, method="both")
-    with pytest.raises(ConfigError, match="estimator.method time needs frequency options exactly"):
+    with pytest.raises(ConfigError, match=r"estimator\.method time needs frequency options exactly"):
         PipelineConfig(aircraft=T2, frequency=FrequencyOptions(rate_hz=50.0))
-    with pytest.raises(ConfigError, match="frequency options at 100.0 Hz for a pipeline at rate 50.0 Hz"):
+    with pytest.raises(ConfigError, match=r"frequency options at 100\.0 Hz for a pipeline at rate 50\.0 Hz"):
         PipelineConfig(aircraft=T2, method="both", frequency=FrequencyOptions(rate_hz=100.0))
