@@ -150,11 +150,11 @@ def main() -> None:
 
 def pipeline_costs() -> None:
     """Section 5: microseconds per sample used through the whole pipeline, per method."""
-    import tempfile  # noqa: PLC0415 - section 5 only
+    import tempfile
 
-    from rls_uncertainty.bags import convert, read_inputs  # noqa: PLC0415
-    from rls_uncertainty.config import load_parameters_file, pipeline_config  # noqa: PLC0415
-    from rls_uncertainty.replay import run_pipeline  # noqa: PLC0415
+    from rls_uncertainty.bags import convert, read_inputs
+    from rls_uncertainty.config import load_parameters_file, pipeline_config
+    from rls_uncertainty.replay import run_pipeline
 
     variants = {"time": {}, "both": {"estimator.method": "both"}, "both, every 5": {
         "estimator.method": "both", "frequency.every": 5}, "frequency": {"estimator.method": "frequency"}}
