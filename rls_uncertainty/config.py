@@ -20,7 +20,7 @@ line naming the parameter, the reason and where the value came from, exit status
 * a parameter the node does not know (``estimator.lag``), given with ``-p`` (with no node
   prefix or this node's) or in a file section that names this node (``rls_estimator:``,
   ``/NAMESPACE/rls_estimator:``), with the closest known name as a suggestion
-  (``did you mean estimator.lags?``);
+  (``did you mean estimator.lag_span?``);
 * an unknown parameter in a wildcard section (``/**:``, ``/*:``) when it can only be meant for
   this node: in one of its groups (``estimator.``, ``inputs.``, ``limits.``, ...) or close to
   one of its names;

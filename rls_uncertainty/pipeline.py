@@ -63,7 +63,7 @@ from .intake import Intake
 from .sampling import Sample, Sampler, Skipped
 from .surface_mixing import SURFACES
 
-__all__ = ["Pipeline", "SampleOutput", "STREAMS", "StateFileError", "required_streams"]
+__all__ = ["Pipeline", "SampleOutput", "STREAMS", "StateFileError", "required_streams", "sampler_for"]
 
 # The input streams, one per ``add_*`` method: inertial data, air data and the optional ones.
 STREAMS = ("imu", "airspeed", "dynamic_pressure", "control_surfaces", "thrust")
@@ -139,6 +139,24 @@ def symmetric_covariances(c: np.ndarray, real: np.ndarray, real_square: np.ndarr
     return cov
 
 
+def sampler_for(config: PipelineConfig, required: Sequence[str], book: Bookkeeping) -> Sampler:
+    """The :class:`.sampling.Sampler` of a configuration: its grid, gap, buffer and timeline
+    settings (``inputs.*``), the streams every sample needs, and the bookkeeping's counters."""
+    inputs = config.inputs
+    return Sampler(
+        STREAMS,
+        tuple(required),
+        period_ns=config.period_ns,
+        max_gap_ns=inputs.max_gap_ns,
+        buffer_ns=inputs.buffer_ns,
+        max_jump_ns=inputs.max_stamp_jump_ns,
+        confirm=inputs.jump_confirmation,
+        max_buffered=inputs.max_buffered,
+        max_clock_ns=inputs.max_clock_offset_ns,
+        counts=book.streams,
+    )
+
+
 class Pipeline:
     """Sample formation, differentiation, aero reduction and estimation for one configuration.
 
@@ -166,18 +184,7 @@ class Pipeline:
         self.bookkeeping = book = bookkeeping if bookkeeping is not None else Bookkeeping.for_streams(STREAMS)
         self.required = required_streams(config)
         inputs = config.inputs
-        self.sampler = Sampler(
-            STREAMS,
-            self.required,
-            period_ns=config.period_ns,
-            max_gap_ns=inputs.max_gap_ns,
-            buffer_ns=inputs.buffer_ns,
-            max_jump_ns=inputs.max_stamp_jump_ns,
-            confirm=inputs.jump_confirmation,
-            max_buffered=inputs.max_buffered,
-            max_clock_ns=inputs.max_clock_offset_ns,
-            counts=book.streams,
-        )
+        self.sampler = sampler_for(config, self.required, book)
         self.intake = Intake(self.sampler, config.limits, config.surfaces, book)
         # The caller's clock is compared with the stamps only when inputs.max_clock_offset > 0
         # (the node then sets clock_ns before each message; the offline replay has no clock).

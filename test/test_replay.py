@@ -11,6 +11,7 @@ from bag_samples import fails, read_all
 from rls_uncertainty import cli
 from rls_uncertainty.bags import read_inputs
 from rls_uncertainty.config import load_parameters_file, pipeline_config
+from rls_uncertainty.figures import REPLAY_FIGURES
 from rls_uncertainty.replay import replay, run_pipeline
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -24,7 +25,7 @@ def test_replay_writes_identical_outputs_twice_and_matches_the_pipeline(tmp_path
     for name in ("estimates.csv", "estimates.mcap"):
         assert (tmp_path / "r1" / name).read_bytes() == (tmp_path / "r2" / name).read_bytes()
     assert {p.name for p in (tmp_path / "r1").glob("*.png")} == {
-        "CZ_estimates.png", "Cm_estimates.png", "CZ_autocorrelation.png", "Cm_autocorrelation.png"}
+        f"{m}_{kind}.png" for m in ("CZ", "Cm") for kind in REPLAY_FIGURES}
     with open(tmp_path / "r1" / "estimates.csv") as fh:
         rows = list(csv.DictReader(fh))
     assert list(rows[0]) == ["time", "model", "parameter", "estimate", "std_error", "std_error_conventional",
@@ -307,7 +308,7 @@ def test_the_replay_keeps_no_sample_and_plots_from_a_bounded_history(tmp_path, m
         times = [line.split(",", 1)[0] for line in fh][1:]
     assert [f"{s // 10**9}.{s % 10**9:09d}" for s in h.stamps_ns] == times[::8]
     assert {p.name for p in (tmp_path / "r").glob("*.png")} == {
-        "CZ_estimates.png", "Cm_estimates.png", "CZ_autocorrelation.png", "Cm_autocorrelation.png"}
+        f"{m}_{kind}.png" for m in ("CZ", "Cm") for kind in REPLAY_FIGURES}
 
 
 # ------------------------------------------------------------------ the frequency-domain estimates

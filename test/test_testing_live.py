@@ -68,8 +68,8 @@ def test_the_live_nodes_frequency_domain_topics_are_the_replays_bit_for_bit(tmp_
 
 
 def test_a_bad_parameter_is_refused_before_a_node_starts(tmp_path):
-    with pytest.raises(ConfigError, match=r"estimator\.lags"):
-        EstimatorProcess({"estimator.lags": -5}, domain=DOMAIN, directory=tmp_path)
+    with pytest.raises(ConfigError, match=r"estimator\.lag_span"):
+        EstimatorProcess({"estimator.lag_span": -5}, domain=DOMAIN, directory=tmp_path)
     assert not list(tmp_path.glob("*.log"))
 
 
