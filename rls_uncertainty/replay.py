@@ -257,6 +257,19 @@ class _Run:
                                       f.converged[j, :n], method="frequency")
 
 
+def _new_result(pipe: Pipeline, history: History | None) -> ReplayResult:
+    """The result of a run of ``pipe``: its models and parameters, the methods it publishes and,
+    with the frequency domain, its parameters and a history like ``history``."""
+    config = pipe.config
+    result = ReplayResult(tuple(m.output for m in config.models), tuple(map(tuple, pipe.parameter_names)),
+                          history=history, pipeline=pipe, methods=config.published_methods)
+    if config.frequency is not None:
+        result.frequency_parameter_names = names = tuple(m.frequency_parameter_names for m in config.models)
+        if history is not None:
+            result.frequency_history = History(names, history.capacity)
+    return result
+
+
 def run_pipeline(messages: Iterable[tuple[str, int, Stamped]], config: PipelineConfig, *, record: bool = True,
                  progress: bool = False, diagnostics: NodeConfig | None = None, keep_outputs: bool = True,
                  history: History | None = None, sink: Sink | None = None,
@@ -276,12 +289,7 @@ def run_pipeline(messages: Iterable[tuple[str, int, Stamped]], config: PipelineC
     total = len(messages) if isinstance(messages, Sized) else int(getattr(messages, "total", 0))
     progress = progress and total > 0 and _is_terminal(sys.stderr)
     pipe = Pipeline(config, record=record)
-    result = ReplayResult(tuple(m.output for m in config.models), tuple(map(tuple, pipe.parameter_names)),
-                          history=history, pipeline=pipe, methods=config.published_methods)
-    if config.frequency is not None:
-        result.frequency_parameter_names = names = tuple(m.frequency_parameter_names for m in config.models)
-        if history is not None:
-            result.frequency_history = History(names, history.capacity)
+    result = _new_result(pipe, history)
     run = _Run(pipe, result, keep_outputs, sink)
     rows = _Rows(pipe, keep=record)
     excitation = _Excitation(pipe)
