@@ -222,6 +222,8 @@ def _replay_params(args: argparse.Namespace, command: str = "replay") -> dict[st
         params["estimator.forgetting"] = args.forgetting
     if args.models:
         params["models.enabled"] = list(args.models)
+    if getattr(args, "method", None):  # replay only
+        params["estimator.method"] = args.method
     try:
         pipeline_config(params)  # every setting checked and the aircraft file read before any output
     except UnicodeDecodeError as exc:
@@ -527,6 +529,9 @@ def _add_replay(sub: Any) -> None:
     rp.add_argument("--config", help="ROS parameter file, e.g. config/t2.yaml (default: node defaults)")
     rp.add_argument("--out", required=True, help="output directory")
     _add_estimator_overrides(rp)
+    rp.add_argument("--method", choices=("time", "frequency", "both"),
+                    help="override estimator.method: time-domain estimates (estimates.csv), frequency-domain ones "
+                         "(estimates_frequency.csv) or both")
     rp.add_argument("--start", type=_real(0.0), help="start, s from the bag start")
     rp.add_argument("--end", type=_real(0.0), help="end, s from the bag start (after --start)")
     rp.add_argument("--lenient", action="store_true",

@@ -197,24 +197,40 @@ class _Excitation:
 
 class _Run:
     """One run's bookkeeping of outputs: what the :class:`.results.ReplayResult` keeps, what
-    each model published last, and the sink that writes them."""
+    each model published last (per method), and the sink that writes them. ``ever``: per
+    model, whether it published (its time-domain estimates, or with ``estimator.method:
+    frequency`` its frequency-domain ones)."""
 
     def __init__(self, pipe: Pipeline, result: ReplayResult, keep_outputs: bool, sink: Sink | None) -> None:
         self.pipe, self.result, self.keep_outputs, self.sink = pipe, result, keep_outputs, sink
+        self.time = pipe.config.publishes_time
         self.ever = np.zeros(len(pipe.sizes), dtype=bool)
         self.last: list[SampleOutput | None] = [None] * len(pipe.sizes)
+        self.last_frequency: list[SampleOutput | None] = [None] * len(pipe.sizes)
         self.real = np.arange(pipe.bank.n_max) < np.array(pipe.sizes)[:, None]
 
     def sample(self, out: SampleOutput) -> None:
         result = self.result
-        ready = out.ready
+        ready = out.ready if self.time else np.zeros_like(out.ready)
         if ready.any():
-            result.estimates += 1
             self.ever |= ready
             for j in np.flatnonzero(ready).tolist():
                 self.last[j] = out
-        if result.history is not None:
+        if result.history is not None and self.time:
             result.history.add(out, self.real)
+        f = out.frequency
+        if f is not None:
+            if f.ready.any():
+                for j in np.flatnonzero(f.ready).tolist():
+                    self.last_frequency[j] = out
+                if not self.time:
+                    self.ever |= f.ready
+            if result.frequency_history is not None:
+                real = self.pipe.frequency.real  # type: ignore[union-attr]  # out.frequency: the path exists
+                result.frequency_history.append(out.stamp_ns, f.theta[real], f.se[real], f.se_conventional[real],
+                                                f.converged[real], f.ready, f.lags)
+        if ready.any() or (f is not None and f.ready.any()):
+            result.estimates += 1
         if self.keep_outputs:
             result.outputs.append(out)
         result.last_output = out
@@ -234,6 +250,24 @@ class _Run:
                 n = self.pipe.sizes[j]
                 self.result.published(out.stamp_ns, j, out.theta[j, :n], out.se[j, :n], out.se_conventional[j, :n],
                                       out.converged[j, :n])
+        for j, out in enumerate(self.last_frequency):
+            if out is not None and out.frequency is not None:
+                f, n = out.frequency, len(self.result.frequency_parameter_names[j])
+                self.result.published(out.stamp_ns, j, f.theta[j, :n], f.se[j, :n], f.se_conventional[j, :n],
+                                      f.converged[j, :n], method="frequency")
+
+
+def _new_result(pipe: Pipeline, history: History | None) -> ReplayResult:
+    """The result of a run of ``pipe``: its models and parameters, the methods it publishes and,
+    with the frequency domain, its parameters and a history like ``history``."""
+    config = pipe.config
+    result = ReplayResult(tuple(m.output for m in config.models), tuple(map(tuple, pipe.parameter_names)),
+                          history=history, pipeline=pipe, methods=config.published_methods)
+    if config.frequency is not None:
+        result.frequency_parameter_names = names = tuple(m.frequency_parameter_names for m in config.models)
+        if history is not None:
+            result.frequency_history = History(names, history.capacity)
+    return result
 
 
 def run_pipeline(messages: Iterable[tuple[str, int, Stamped]], config: PipelineConfig, *, record: bool = True,
@@ -246,15 +280,16 @@ def run_pipeline(messages: Iterable[tuple[str, int, Stamped]], config: PipelineC
     report) in the result; ``history`` collects the time histories (:class:`.results.History`);
     ``sink`` receives each output and report as it is made; ``figure_data`` collects what the
     figures draw besides the histories (:class:`.figure_data.FigureData`, bounded). Without
-    the first two, memory does not grow with the run. ``progress`` draws a bar on stderr when stderr is a terminal
+    the first two, memory does not grow with the run. With ``estimator.method`` ``frequency``
+    or ``both`` the result keeps the frequency-domain estimates too (in a history like
+    ``history``, when given). ``progress`` draws a bar on stderr when stderr is a terminal
     (never carriage-return frames into a log file or a pipe). With ``diagnostics`` (the node's
     settings), the node's ``/diagnostics`` statuses once per diagnostics period of data time,
     and once at the end."""
     total = len(messages) if isinstance(messages, Sized) else int(getattr(messages, "total", 0))
     progress = progress and total > 0 and _is_terminal(sys.stderr)
     pipe = Pipeline(config, record=record)
-    result = ReplayResult(tuple(m.output for m in config.models), tuple(map(tuple, pipe.parameter_names)),
-                          history=history, pipeline=pipe)
+    result = _new_result(pipe, history)
     run = _Run(pipe, result, keep_outputs, sink)
     rows = _Rows(pipe, keep=record)
     excitation = _Excitation(pipe)
@@ -332,13 +367,21 @@ def unestimated(pipe: Pipeline, ever: np.ndarray, excitation: _Excitation | None
 
 def summary_table(result: ReplayResult) -> str:
     """The last sample's estimates of every model ready in it (:func:`.report.results_table`),
-    then why any model has none (:attr:`.results.ReplayResult.explanations`)."""
+    then the frequency-domain ones last published, when the run published them, then why any
+    model has none (:attr:`.results.ReplayResult.explanations`)."""
     rows = []
     last, pipe = result.last_output, result.pipeline
     if last is not None and pipe is not None:
         for row in OutputLayout.of(pipe).rows(last):
             rows += rows_from_arrays(row.names, row.estimates, row.standard_errors_conventional, row.standard_errors)
-    return "\n".join(([results_table(rows)] if rows else []) + result.explanations)
+    tables = [results_table(rows)] if rows else []
+    finals = result.finals("frequency") if "frequency" in result.methods else {}
+    if finals:
+        names, values = list(finals), list(finals.values())
+        frequency = rows_from_arrays(names, [f.estimate for f in values], [f.std_error_conventional for f in values],
+                                     [f.std_error for f in values])
+        tables.append("frequency domain (docs/frequency.md):\n" + results_table(frequency))
+    return "\n".join(tables + result.explanations)
 
 
 def run_summary(result: ReplayResult) -> str:

@@ -132,7 +132,7 @@ def test_node_page_documents_every_parameter_topic_and_service():
     assert not missing, f"parameters not in docs/node.md: {missing}"
     for topic, msgtype in MESSAGE_TYPES.items():
         assert f"| `{topic}` | `{msgtype.replace('/msg/', '/')}` | in" in body, topic
-    for topic, msgtype in output_topics(["M"]) + fit_topics(["M"]):
+    for topic, msgtype in output_topics(["M"], frequency=True) + fit_topics(["M"]):
         assert f"| `~/{topic}` | `{msgtype.replace('/msg/', '/')}` | out" in body, topic
     for name in ("/diagnostics", "~/reset", "~/enable", "state_file", "use_sim_time"):
         assert name in body, name

@@ -29,6 +29,7 @@ CORE = (
     "rls_uncertainty.sampling", "rls_uncertainty.streams", "rls_uncertainty.timelines",
     "rls_uncertainty.intake", "rls_uncertainty.surface_mixing", "rls_uncertainty.bookkeeping",
     "rls_uncertainty.alerts", "rls_uncertainty.pipeline", "rls_uncertainty.frequency",
+    "rls_uncertainty.frequency_path",
     "rls_uncertainty.results", "rls_uncertainty.figure_data", "rls_uncertainty.identifiability",
     "rls_uncertainty.campaign.table4",
 )
