@@ -1,5 +1,5 @@
-"""Bag I/O with ``rosbags``: read any recording, map its fields onto the node's standard
-inputs, write deterministic ROS 2 MCAP replays.
+"""Bag I/O: read any recording with ``rosbags``, map its fields onto the node's standard
+inputs, write deterministic ROS 2 MCAP replays with CRCs (:mod:`.mcap_io`).
 
 * :func:`typestore` - the Jazzy types plus the project's ``msg_schemas/`` (``fti_msgs``) and
   any ``--schemas`` directory; schemas embedded in a bag take part automatically.
@@ -10,18 +10,20 @@ inputs, write deterministic ROS 2 MCAP replays.
   one replay bag each (``make-bag --campaign N``).
 * :class:`InputStream` - the standard-topic messages of a replay, read as a stream for the
   offline replay (:func:`read_inputs`: the same as a list, for small bags and tests).
-* :class:`BagWriter` - a bag written record by record (:func:`write_replay`, :func:`convert`
-  and the replay's ``estimates.mcap``).
+* :class:`BagWriter` - a bag's MCAP file written record by record, with CRCs
+  (:class:`.mcap_io.McapWriter`): :func:`write_replay`, :func:`convert`,
+  :func:`write_sensor_streams` and the replay's ``estimates.mcap``.
 
 Reading and writing stream: messages are read one MCAP chunk at a time in log-time order,
 and written as they come, so memory does not grow with the recording (what a writer holds
 back to keep its output ordered is said with each writer).
 
-Replays are ROS 2 bags (storage version 9, MCAP), every message logged at its header stamp,
-ordered by stamp with a stable tie-break (topic, then recorded order): converting the same
-input twice gives byte-identical files. Output is written to a temporary directory that is
-renamed only when complete. Every problem raises :class:`BagError` naming the file, the
-topic and what is wrong.
+Replays are ROS 2 bags (storage version 9, MCAP with chunk, data and summary CRCs: a damaged
+byte is refused by :func:`.mcap_io.check_mcap_integrity`, which every read runs first), every
+message logged at its header stamp, ordered by stamp with a stable tie-break (topic, then
+recorded order): converting the same input twice gives byte-identical files. Output is
+written to a temporary directory that is renamed only when complete. Every problem raises
+:class:`BagError` naming the file, the topic and what is wrong.
 """
 
 from __future__ import annotations
@@ -32,6 +34,7 @@ import math
 import numbers
 import struct
 from collections.abc import Callable, Generator, Iterable, Iterator, Mapping, Sequence
+from contextlib import contextmanager
 from pathlib import Path
 from types import TracebackType
 from typing import TYPE_CHECKING, Any, cast
@@ -46,13 +49,13 @@ from .errors import BagError, ConfigError
 from .files import output_directory
 from .inputs import MESSAGE_TYPES, Stamped, stamp_ns
 from .inputs import STREAMS as INPUTS
+from .mcap_io import McapWriter, check_mcap_integrity, write_metadata
 
 if TYPE_CHECKING:  # annotations only: rosbags itself is imported where it is used
     from hashlib import _Hash
 
     from rosbags.highlevel import AnyReader
     from rosbags.interfaces import Connection
-    from rosbags.rosbag2 import Writer
     from rosbags.typesys.store import Typestore
 
     from .simulation import SensorStreams
@@ -63,6 +66,7 @@ __all__ = [
     "typestore",
     "convert",
     "write_replay",
+    "check_mcap_integrity",
     "write_t2_bag",
     "write_campaign_bags",
     "write_sensor_streams",
@@ -99,45 +103,6 @@ def typestore(extra_schemas: list[Path] | None = None) -> Typestore:
                 raise BagError(f"{msg}: cannot parse message schema: {exc}") from exc
     store.register(types)
     return store
-
-
-def check_mcap_integrity(path: Path) -> None:
-    """Read every record of an MCAP file with the ``mcap`` library (chunk CRCs checked when
-    present) and compare the message count with the file's summary: a corrupt chunk that a
-    reader would silently cut short is an error naming the file. Chunks are decompressed and
-    walked record by record without building message objects (the replay reads the messages
-    afterwards anyway)."""
-    from mcap.reader import make_reader  # noqa: PLC0415
-    from mcap.records import Chunk, Message  # noqa: PLC0415
-    from mcap.stream_reader import StreamReader, get_chunk_data_stream  # noqa: PLC0415
-
-    message_opcode = 0x05  # MCAP "Message" record
-    try:
-        with open(path, "rb") as fh:
-            summary = make_reader(fh).get_summary()
-            if summary is None or summary.statistics is None:
-                raise BagError(f"{path}: MCAP file has no summary (truncated or still being written)")
-            fh.seek(0)
-            count = 0
-            for record in StreamReader(fh, emit_chunks=True, validate_crcs=True).records:
-                if isinstance(record, Message):
-                    count += 1
-                elif isinstance(record, Chunk):
-                    stream, size = get_chunk_data_stream(record, validate_crc=True)
-                    while stream.count < size:
-                        opcode = stream.read1()
-                        length = stream.read8()
-                        if stream.count + length > size:
-                            raise BagError(f"{path}: corrupt MCAP: a chunk's record runs past its end")
-                        stream.read(length)
-                        count += opcode == message_opcode
-    except BagError:
-        raise
-    except Exception as exc:  # the mcap library raises many types
-        raise BagError(f"{path}: corrupt or truncated MCAP: {exc}") from exc
-    expected = summary.statistics.message_count
-    if count != expected:
-        raise BagError(f"{path}: corrupt MCAP: read {count} of the {expected} messages its summary lists")
 
 
 def _open_reader(path: Path, store: Typestore) -> AnyReader:
@@ -234,8 +199,9 @@ def _check_log_time(path: Path, stamp: int, topic: str) -> None:
 
 
 class BagWriter:
-    """A ROS 2 bag (storage version 9, MCAP) written as its records arrive, at ``path`` (a
-    directory that must not exist; callers make it atomic with :func:`.files.output_directory`).
+    """One MCAP file of a ROS 2 bag (storage version 9) written as its records arrive, at
+    ``path`` (a new file, :class:`.mcap_io.McapWriter`: with CRCs; callers make it atomic with
+    :func:`.files.output_directory`, and :func:`_bag_directory` adds ``metadata.yaml``).
 
     ``topics``: every ``(topic, msgtype)`` the bag holds, its connections in the order of
     :func:`_rank`, then name. :meth:`add` queues a record (``msg`` a message, serialized
@@ -243,20 +209,19 @@ class BagWriter:
     that the caller knows no later record precedes, and :meth:`close` the rest. The file is
     ordered by stamp, then topic rank, then topic, then the order of :meth:`add`: exactly what
     one sort of all the records gives (:func:`write_replay`), in memory bounded by what the
-    caller holds back. Log time = stamp."""
+    caller holds back (and the one chunk :class:`.mcap_io.McapWriter` builds). Log time =
+    stamp. :attr:`info` (once closed) is the rosbag2 bag-file information."""
 
     def __init__(self, path: Path, topics: Sequence[tuple[str, str]], store: Typestore) -> None:
-        from rosbags.rosbag2 import StoragePlugin, Writer  # noqa: PLC0415
-
         self.path, self.store = Path(path), store
         self._types = dict(topics)
-        self._writer: Writer = Writer(self.path, version=9, storage_plugin=StoragePlugin.MCAP)
-        self._writer.open()
-        self._conns = {topic: self._writer.add_connection(topic, self._types[topic], typestore=store)
+        self._writer = McapWriter(self.path, store)
+        self._conns = {topic: self._writer.add_connection(topic, self._types[topic])
                        for topic in sorted(self._types, key=lambda t: (_rank(t), t))}
         self._queue: list[tuple[int, int, str, int, bytes | memoryview]] = []
         self._added = 0
         self.written = 0
+        self.info: dict[str, Any] | None = None
 
     def add(self, stamp: int, topic: str, msgtype: str, msg: object) -> None:
         """Queue one record; a stamp that cannot be a log time is a :class:`BagError`."""
@@ -270,7 +235,7 @@ class BagWriter:
         queue, write, conns = self._queue, self._writer.write, self._conns
         while queue and (before_ns is None or queue[0][0] < before_ns):
             stamp, _, topic, _, raw = heapq.heappop(queue)
-            write(conns[topic], stamp, raw)
+            write(conns[topic], stamp, raw if isinstance(raw, bytes) else bytes(raw))
             self.written += 1
 
     @property
@@ -279,9 +244,9 @@ class BagWriter:
         return len(self._queue)
 
     def close(self) -> None:
-        """Write what is queued and finish the file (``metadata.yaml`` beside it)."""
+        """Write what is queued and finish the file (its summary, CRCs and :attr:`info`)."""
         self.release()
-        self._writer.close()
+        self.info = self._writer.close()
 
     def __enter__(self) -> BagWriter:
         return self
@@ -290,8 +255,22 @@ class BagWriter:
                  tb: TracebackType | None) -> None:
         if exc_type is None:
             self.close()
-        else:  # the caller's output directory is discarded: only the file handle matters
-            self._writer.__exit__(exc_type, exc, tb)
+        else:  # the unfinished file is removed (the caller's output directory is discarded)
+            self._writer.abort()
+
+
+@contextmanager
+def _bag_directory(path: Path, topics: Sequence[tuple[str, str]], store: Typestore, *, force: bool,
+                   inputs: tuple[str | Path, ...] = ()) -> Iterator[BagWriter]:
+    """A ROS 2 bag directory at ``path``, atomic (:func:`.files.output_directory`: complete or
+    absent; an existing non-empty ``path`` only with ``force``, never over ``inputs``):
+    ``NAME.mcap`` written by the :class:`BagWriter` this yields, then rosbag2's
+    ``metadata.yaml`` (:func:`.mcap_io.write_metadata`)."""
+    with output_directory(path, force=force, inputs=inputs) as tmp:
+        with BagWriter(tmp / f"{path.resolve().name}.mcap", topics, store) as writer:
+            yield writer
+        assert writer.info is not None  # (set by close)
+        write_metadata(tmp, writer.info)
 
 
 def _mk(
@@ -356,11 +335,11 @@ def _standard_message(
 def write_replay(path: str | Path, records: Iterable[tuple[int, str, str, object]], store: Typestore | None = None,
                  *, force: bool = False, inputs: tuple[str | Path, ...] = ()) -> Path:
     """Write ``records`` (``(stamp_ns, topic, msgtype, msg)``, ``msg`` a message or its CDR
-    bytes) as a ROS 2 MCAP bag at ``path`` (a directory), log time = stamp, ordered by stamp
-    with a stable tie-break (:class:`BagWriter`; the records are all held, for the sort).
-    Atomic (:func:`.files.output_directory`): the bag appears under ``path`` only when
-    complete; an existing non-empty ``path`` is refused unless ``force``, and ``inputs`` are
-    never overwritten."""
+    bytes) as a ROS 2 MCAP bag at ``path`` (a directory: ``NAME.mcap`` with CRCs and
+    ``metadata.yaml``), log time = stamp, ordered by stamp with a stable tie-break
+    (:class:`BagWriter`; the records are all held, for the sort). Atomic
+    (:func:`_bag_directory`): the bag appears under ``path`` only when complete; an existing
+    non-empty ``path`` is refused unless ``force``, and ``inputs`` are never overwritten."""
     store = store or typestore()
     path = Path(path)
     recs = list(records)
@@ -370,20 +349,10 @@ def write_replay(path: str | Path, records: Iterable[tuple[int, str, str, object
     for stamp, topic, msgtype, _msg in recs:
         _check_log_time(path, int(stamp), topic)
         topics.setdefault(topic, msgtype)
-    with output_directory(path, force=force, inputs=inputs) as tmp:
-        bag = tmp / path.resolve().name  # rosbags creates the bag directory itself
-        with BagWriter(bag, list(topics.items()), store) as writer:
-            for stamp, topic, msgtype, msg in recs:
-                writer.add(int(stamp), topic, msgtype, msg)
-        _lift(bag, tmp)
+    with _bag_directory(path, list(topics.items()), store, force=force, inputs=inputs) as writer:
+        for stamp, topic, msgtype, msg in recs:
+            writer.add(int(stamp), topic, msgtype, msg)
     return path
-
-
-def _lift(bag: Path, into: Path) -> None:
-    """Move the files of the bag directory ``bag`` up into ``into`` and remove ``bag``."""
-    for item in bag.iterdir():
-        item.rename(into / item.name)
-    bag.rmdir()
 
 
 def write_sensor_streams(path: str | Path, streams: SensorStreams, *, force: bool = False) -> Path:
@@ -397,15 +366,12 @@ def write_sensor_streams(path: str | Path, streams: SensorStreams, *, force: boo
         stamps = getattr(streams, kind)[0]
         return ((int(stamps[k]), _rank(kind), kind, k) for k in range(stamps.size))
 
-    with output_directory(path, force=force) as tmp:
-        bag = tmp / path.resolve().name  # rosbags creates the bag directory itself
-        with BagWriter(bag, [(f"/{kind}", MESSAGE_TYPES[kind]) for kind in INPUTS], store) as writer:
-            for stamp, _, kind, k in heapq.merge(*(records(kind) for kind in INPUTS)):
-                values = getattr(streams, kind)[1][k]
-                msg = _standard_message(store, kind, stamp, values, streams.surface_names)
-                writer.add(stamp, f"/{kind}", MESSAGE_TYPES[kind], msg)
-                writer.release()  # the merge gives the records in the bag's order
-        _lift(bag, tmp)
+    with _bag_directory(path, [(f"/{kind}", MESSAGE_TYPES[kind]) for kind in INPUTS], store, force=force) as writer:
+        for stamp, _, kind, k in heapq.merge(*(records(kind) for kind in INPUTS)):
+            values = getattr(streams, kind)[1][k]
+            msg = _standard_message(store, kind, stamp, values, streams.surface_names)
+            writer.add(stamp, f"/{kind}", MESSAGE_TYPES[kind], msg)
+            writer.release()  # the merge gives the records in the bag's order
     return path
 
 
@@ -948,11 +914,9 @@ def convert(src: str | Path, mapping: str | Path, out: str | Path, schemas: list
     reader = _open_reader(src, store)
     try:
         conns = _mapped_connections(src, mapping, spec, reader, store)
-        with output_directory(out, force=force, inputs=(src, mapping)) as tmp:
-            bag = tmp / out.resolve().name  # rosbags creates the bag directory itself
-            with BagWriter(bag, [(f"/{kind}", MESSAGE_TYPES[kind]) for kind in spec], store) as writer:
-                counts = _convert_messages(src, spec, reader, conns, store, writer)
-            _lift(bag, tmp)
+        with _bag_directory(out, [(f"/{kind}", MESSAGE_TYPES[kind]) for kind in spec], store, force=force,
+                            inputs=(src, mapping)) as writer:
+            counts = _convert_messages(src, spec, reader, conns, store, writer)
     finally:
         reader.close()
     return counts

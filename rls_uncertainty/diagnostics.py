@@ -6,7 +6,10 @@ only the node knows (its clock, matched publishers, the period, callback latenci
 :meth:`DiagnosticsPolicy.update` turns it into :class:`Status` records: name, level, message and
 ordered key-values. The node only converts them into a ``diagnostic_msgs/DiagnosticArray``.
 
-Three statuses, named ``rls_estimator: ...``:
+Three statuses, named ``<node>: ...`` (:func:`status_prefix`: ``rls_estimator: inputs`` for the
+node in the root namespace, as always, and the fully qualified name under a namespace,
+``/ns/rls_estimator: inputs``, so two namespaced nodes never share a status name on
+``/diagnostics``; ``hardware_id`` is the same ``<node>``):
 
 * ``inputs``: ``recent_window_s``, then per stream ``required``, ``publishers``, ``rate_hz``,
   ``age_s``, the cumulative ``received``, ``accepted``, ``expired``, ``missing``, the counts of
@@ -20,7 +23,11 @@ Three statuses, named ``rls_estimator: ...``:
   name what was expected, what came and the parameter to change, come first in the message.
 * ``samples``: ``enabled``, ``samples_formed``, ``samples_used``, ``samples_pending``,
   ``samples_rejected.<reason>``, ``resets.<reason>``, ``unknown_joint.<name>``, callback
-  latency and CPU percentiles of the period, ``state_file``. Always OK.
+  latency and CPU percentiles of the period, ``state_file``, ``nodes_with_this_name``. OK, or
+  ERROR while another node with this node's fully qualified name is on the ROS graph (its
+  outputs then mix with this node's on the same topics: every consumer receives each sample
+  from both): the text first in the message, and logged as a warning (throttled like the
+  alerts).
 * ``model M``: the model fit, and the convergence flags when the node hands them in
   (``converged``, ``converged_parameters``) with the identifiability figures
   (:mod:`.identifiability`: ``identifiable``, ``not_identifiable``, ``held_back``,
@@ -41,7 +48,7 @@ rejected samples, resets, unknown joints) shows at most ``max_keys`` entries, th
 counts first, then ``<table>_other_names`` and ``<table>_other_count`` for the rest; a name
 is cut to :data:`MAX_NAME` characters (with a hash, so keys stay unique) and unprintable
 characters become ``?``; a value is cut to :data:`MAX_VALUE` characters. The ``inputs`` status
-holds at most ``1 + 5 (13 + max_keys)`` key-values, ``samples`` at most ``10 + 3 (2 +
+holds at most ``1 + 5 (13 + max_keys)`` key-values, ``samples`` at most ``11 + 3 (2 +
 max_keys)``.
 """
 
@@ -68,6 +75,8 @@ __all__ = [
     "percentile",
     "malformed_reason",
     "malformed_warning",
+    "status_prefix",
+    "namesake_alert",
     "MAX_KEYS",
     "MAX_NAME",
     "MAX_VALUE",
@@ -103,7 +112,8 @@ class Snapshot:
     with, simulated under ``use_sim_time``), the steady time since the previous snapshot
     (``elapsed_s``), the publishers matched per input and the resolved topic names, the QoS
     choice, the wall and CPU times of the callbacks that produced outputs in the period, the
-    state-file status and whether estimation is enabled.
+    state-file status, whether estimation is enabled and how many other nodes on the graph
+    carry this node's fully qualified name (``namesakes``).
     """
 
     counters: Mapping
@@ -119,6 +129,28 @@ class Snapshot:
     state_file: str
     latencies_s: Sequence[float] = field(default_factory=tuple)
     cpu_times_s: Sequence[float] = field(default_factory=tuple)
+    namesakes: int = 0  # other nodes on the ROS graph with this node's fully qualified name
+
+
+def status_prefix(node: str) -> str:
+    """What every status of ``node`` (a fully qualified name, or a name in the root namespace)
+    is named after: the bare name in the root namespace (``rls_estimator``, the form consumers
+    have always matched), the fully qualified name under a namespace (``/ns/rls_estimator``)."""
+    full = node if node.startswith("/") else f"/{node}"
+    namespace, _, name = full.rpartition("/")
+    return full if namespace else name
+
+
+def namesake_alert(node: str, namesakes: int) -> Alert | None:
+    """The alert while ``namesakes`` other nodes carry ``node``'s fully qualified name."""
+    if namesakes <= 0:
+        return None
+    full = node if node.startswith("/") else f"/{node}"
+    return Alert(("graph", "namesake"), (
+        f"{namesakes} other node(s) named {full} on the ROS graph: their outputs mix with this node's on "
+        f"{full}/..., so every consumer receives each sample {namesakes + 1} times, and {full}/reset and "
+        f"{full}/enable reach any of them; start each node with its own name or namespace "
+        "(--ros-args -r __node:=NAME or -r __ns:=/NAMESPACE)"))
 
 
 def stale_after(max_gap: float) -> float:
@@ -182,7 +214,9 @@ class DiagnosticsPolicy:
     Stateful: input rates are the received-count differences between consecutive snapshots
     over ``elapsed_s`` (the first period counts from zero), and levels come from the counts of
     the last ``window_s`` seconds (see the module docstring). :attr:`previous` is the last
-    snapshot handed in. ``max_keys`` bounds every table of names.
+    snapshot handed in. ``max_keys`` bounds every table of names. ``node_name``: the node's
+    fully qualified name (or its name in the root namespace), which names the statuses
+    (:func:`status_prefix`).
     """
 
     def __init__(self, node_name: str = NODE_NAME, window_s: float = 10.0, max_keys: int = MAX_KEYS,
@@ -210,8 +244,11 @@ class DiagnosticsPolicy:
                   for kind, s in snap.counters["streams"].items()}
         baseline = self._baseline()
         alerts = self.alerts.update(snap.elapsed_s, snap.counters, snap.required, snap.enabled, self.window_s)
+        namesake = namesake_alert(self.node_name, snap.namesakes)
+        if namesake is not None:  # logged with the alerts (AlertPolicy.due), shown in the samples status
+            self.alerts.current = [*alerts, namesake]
         self.alerts.models(snap.models)  # identifiability, logged with the alerts
-        statuses = [self._inputs(snap, totals, baseline, alerts), self._samples(snap)]
+        statuses = [self._inputs(snap, totals, baseline, alerts), self._samples(snap, namesake)]
         statuses += [self._model(name, fit, snap) for name, fit in snap.models]
         self._history.append((self._time, totals))
         self.previous = snap
@@ -229,8 +266,9 @@ class DiagnosticsPolicy:
             t = str(v)
             return t if len(t) <= MAX_VALUE else t[: MAX_VALUE - 3] + "..."
 
-        return Status(f"{self.node_name}: {name}", level, text(message), tuple((k, text(v)) for k, v in values),
-                      hardware_id=self.node_name)
+        prefix = status_prefix(self.node_name)
+        return Status(f"{prefix}: {name}", level, text(message), tuple((k, text(v)) for k, v in values),
+                      hardware_id=prefix)
 
     def _received_before(self, kind: str) -> int:
         if self.previous is None:
@@ -284,7 +322,7 @@ class DiagnosticsPolicy:
         message = "; ".join([a.text for a in alerts] + problems) or "all inputs fresh"
         return self._status("inputs", level, message, kv)
 
-    def _samples(self, snap: Snapshot) -> Status:
+    def _samples(self, snap: Snapshot, namesake: Alert | None = None) -> Status:
         c = snap.counters
         kv: list[tuple[str, object]] = [
             ("enabled", snap.enabled),
@@ -307,10 +345,12 @@ class DiagnosticsPolicy:
                     ("processing_cpu_ms.p50", _ms(percentile(cpu, 0.5))),
                     ("processing_cpu_ms.p99", _ms(percentile(cpu, 0.99))),
                 ]
-        kv.append(("state_file", snap.state_file))
+        kv += [("state_file", snap.state_file), ("nodes_with_this_name", 1 + max(snap.namesakes, 0))]
         message = f"{c['samples_used']} of {c['samples_formed']} samples used"
         if not snap.enabled:
             message += "; estimation disabled"
+        if namesake is not None:
+            return self._status("samples", ERROR, f"{namesake.text}; {message}", kv)
         return self._status("samples", OK, message, kv)
 
     def _model(self, name: str, fit: Mapping, snap: Snapshot) -> Status:

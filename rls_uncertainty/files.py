@@ -5,6 +5,17 @@
   written through), given the replaced file's permissions (a new file those of ``open``),
   flushed and fsync'ed, then renamed over the target, and the directory is fsync'ed. On any
   failure the temporary file is removed and the target is untouched.
+* :func:`temporaries` lists the temporary files :func:`atomic_file` leaves when a write is
+  interrupted (a crash, a kill): exactly its own name pattern ``.NAME.<16 hex digits>.tmp``
+  beside ``NAME`` (and ``.NAME.<8 of [a-z0-9_]>.tmp``, the names versions up to 0.1.0 made with
+  ``tempfile.mkstemp``), regular files only, so a caller that holds the target's lock may
+  remove them.
+* :class:`FileLock` is an exclusive lock on a lock file beside a target (``.NAME.lock``, never
+  renamed): ``flock``, so the operating system releases it when its process ends, however it
+  ends. It is taken without waiting; the holder's process id is written in it, for the message
+  of the process that finds it taken. Its holder removes it when done, and a taker checks
+  that the file it locked is still the one at the path, so removing it never lets two
+  processes hold it.
 * :func:`output_directory` builds an output directory (a bag, a replay's results) in a new
   temporary directory beside it and renames it into place only when complete. It refuses an
   output that would destroy data the command did not create: an existing file, a non-empty
@@ -15,7 +26,11 @@
 
 from __future__ import annotations
 
+import errno
+import fcntl
 import os
+import re
+import secrets
 import shutil
 import stat
 import tempfile
@@ -26,7 +41,10 @@ from typing import IO
 
 from .errors import OutputPathError
 
-__all__ = ["atomic_file", "output_directory"]
+__all__ = ["atomic_file", "temporaries", "FileLock", "output_directory"]
+
+# atomic_file's temporary names beside NAME, and those of versions up to 0.1.0 (tempfile.mkstemp).
+_TEMPORARY = r"\.{name}\.(?:[0-9a-f]{{16}}|[a-z0-9_]{{8}})\.tmp"
 
 
 def _fsync_directory(directory: Path) -> None:
@@ -59,12 +77,39 @@ def _new_file_mode(target: Path) -> int:
     return 0o666 & ~_umask()
 
 
+def _new_temporary(target: Path, directory: Path) -> tuple[int, Path]:
+    """A new temporary file ``.NAME.<16 hex digits>.tmp`` beside ``target``, created
+    exclusively (never a file or link that is there already), and its descriptor."""
+    flags = os.O_RDWR | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW | getattr(os, "O_CLOEXEC", 0)
+    for _ in range(100):
+        tmp = directory / f".{target.name}.{secrets.token_hex(8)}.tmp"
+        try:
+            return os.open(tmp, flags, 0o600), tmp
+        except FileExistsError:
+            continue
+    raise FileExistsError(errno.EEXIST, f"no free temporary name beside {target}")
+
+
+def temporaries(path: str | os.PathLike[str]) -> list[Path]:
+    """The temporary files an interrupted :func:`atomic_file` of ``path`` left beside it: its
+    name pattern only, regular files only (no link, directory or anything else), sorted."""
+    target = Path(path)
+    directory = target.parent if str(target.parent) else Path(".")
+    pattern = re.compile(_TEMPORARY.format(name=re.escape(target.name)))
+    found = []
+    with suppress(FileNotFoundError, NotADirectoryError), os.scandir(directory) as entries:
+        for entry in entries:
+            if pattern.fullmatch(entry.name) and entry.is_file(follow_symlinks=False):
+                found.append(directory / entry.name)
+    return sorted(found)
+
+
 @contextmanager
 def atomic_file(path: str | os.PathLike[str]) -> Iterator[IO[bytes]]:
     """Yield a binary file whose content replaces ``path`` atomically when the block ends."""
     target = Path(path)
     directory = target.parent if str(target.parent) else Path(".")
-    fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=directory)
+    fd, tmp = _new_temporary(target, directory)
     try:
         with os.fdopen(fd, "wb") as fh:
             os.fchmod(fh.fileno(), _new_file_mode(target))
@@ -77,6 +122,67 @@ def atomic_file(path: str | os.PathLike[str]) -> Iterator[IO[bytes]]:
             os.unlink(tmp)
         raise
     _fsync_directory(directory)
+
+
+class FileLock:
+    """An exclusive lock on ``.NAME.lock`` beside ``path``, taken at construction without
+    waiting (see the module docstring); :meth:`release` (or the end of the process) frees it.
+
+    Raises :class:`BlockingIOError` when another process holds it (its ``strerror`` says
+    ``held by process PID``, as the lock file says), and :class:`OSError` when the lock file
+    cannot be made or is not a regular file. The lock file is opened
+    without following a link and without waiting (a FIFO planted at its name cannot block)."""
+
+    def __init__(self, path: str | os.PathLike[str]) -> None:
+        target = Path(path)
+        self.path = target.with_name(f".{target.name}.lock")
+        flags = os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW | os.O_NONBLOCK | getattr(os, "O_CLOEXEC", 0)
+        for _ in range(100):
+            fd = os.open(self.path, flags, 0o666 & ~_umask())
+            try:
+                if not stat.S_ISREG(os.fstat(fd).st_mode):
+                    raise OSError(errno.EINVAL, "the lock file is not a regular file", str(self.path))
+                try:
+                    fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+                except BlockingIOError:
+                    holder = os.pread(fd, 32, 0).decode("ascii", "replace").strip()
+                    who = f"process {holder}" if holder.isdigit() else "another process"
+                    raise BlockingIOError(errno.EWOULDBLOCK, f"held by {who}", str(self.path)) from None
+                if self._same_file(fd):
+                    os.ftruncate(fd, 0)
+                    os.pwrite(fd, f"{os.getpid()}\n".encode(), 0)
+                    self._fd: int | None = fd
+                    return
+            except BaseException:
+                os.close(fd)
+                raise
+            os.close(fd)  # its holder removed it after we opened it: lock the new one
+        raise OSError(errno.EAGAIN, "the lock file keeps being replaced", str(self.path))
+
+    def _same_file(self, fd: int) -> bool:
+        """Whether the locked file is still the one at :attr:`path`."""
+        try:
+            st = os.stat(self.path, follow_symlinks=False)
+        except FileNotFoundError:
+            return False
+        mine = os.fstat(fd)
+        return (st.st_dev, st.st_ino) == (mine.st_dev, mine.st_ino)
+
+    @property
+    def held(self) -> bool:
+        return self._fd is not None
+
+    def release(self) -> None:
+        """Remove the lock file (while still holding it) and free the lock; idempotent."""
+        fd, self._fd = self._fd, None
+        if fd is None:
+            return
+        try:
+            if self._same_file(fd):
+                with suppress(OSError):
+                    os.unlink(self.path)
+        finally:
+            os.close(fd)
 
 
 def _inside(path: Path, other: Path) -> bool:

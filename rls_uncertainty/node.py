@@ -45,7 +45,7 @@ from std_srvs.srv import SetBool, Trigger
 from .cdr import decode
 from .config import PARAMETERS, ConfigError, ParamSpec, node_config, pipeline_config, startup_parameters
 from .diagnostics import DiagnosticsPolicy, Snapshot, malformed_reason, malformed_warning
-from .estimator.state_file import set_aside
+from .estimator.state_file import StateFileClaim, claim, set_aside
 from .inputs import MESSAGE_TYPES, STREAMS, feed, message_class
 from .outputs import HEADER, NODE_NAME, OutputLayout
 from .pipeline import Pipeline, SampleOutput, StateFileError
@@ -105,11 +105,15 @@ class EstimatorNode(Node):
         self._latencies: list[float] = []  # wall time from message to last publish
         self._cpu_times: list[float] = []  # CPU time of the same (without preemption)
         self._malformed_logged: set[str] = set()  # inputs whose first malformed message was logged
-        self._diagnostics = DiagnosticsPolicy(NODE_NAME, window_s=self.node_cfg.diagnostics_window)
+        self._diagnostics = DiagnosticsPolicy(self.get_fully_qualified_name(),
+                                              window_s=self.node_cfg.diagnostics_window)
         self._last_diag = time.monotonic()
 
+        # Transient local: a subscriber that joins late (a dashboard) gets the last qos.depth
+        # samples at once; volatile subscribers match as before. Keep-last bounds the memory.
         self._out_qos = QoSProfile(depth=self.node_cfg.depth, reliability=QoSReliabilityPolicy.RELIABLE,
-                                   history=QoSHistoryPolicy.KEEP_LAST)
+                                   history=QoSHistoryPolicy.KEEP_LAST,
+                                   durability=QoSDurabilityPolicy.TRANSIENT_LOCAL)
         self._outputs_by_topic: dict[str, Any] = {}  # publishers by relative topic
         # ~/M/fit and ~/M/identifiability, once per diagnostics period: the latest kept for late joiners.
         self._fit_qos = QoSProfile(depth=1, reliability=QoSReliabilityPolicy.RELIABLE,
@@ -142,7 +146,8 @@ class EstimatorNode(Node):
         lags = f"auto (at most {est.max_lags})" if est.lags == "auto" else est.lags  # (samples: lag_span x rate)
         self.get_logger().info(
             f"estimating {models} at {self.config.rate:g} Hz, {lags} lags, aircraft {self.config.aircraft.name}; "
-            f"inputs {', '.join(self.node_cfg.topics[k] for k in STREAMS)}; {self.state_status}"
+            f"inputs {', '.join(self.node_cfg.topics[k] for k in STREAMS)}; "
+            + (f"{self.state_status.partition(':')[0]} (above)" if self._state_said else self.state_status)
         )
 
     # ------------------------------------------------------------------ parameters
@@ -289,13 +294,30 @@ class EstimatorNode(Node):
 
     # ------------------------------------------------------------------ state file
     def _load_state(self) -> None:
-        """Resume from ``state_file`` when it holds this configuration's state. A file that
-        exists but cannot be used (corrupt, crafted, another configuration's) is renamed aside
-        (:func:`.estimator.state_file.set_aside`) so that the fresh state saved later never replaces it;
-        if it cannot be moved, nothing is saved this run."""
+        """Resume from ``state_file`` when it holds this configuration's state. The file is
+        claimed first (:func:`.estimator.state_file.claim`): one that is not a regular file,
+        or that another process holds, is refused in one line and the node runs without a
+        state file. A file that exists but cannot be used (corrupt, crafted, another
+        configuration's) is renamed aside (:func:`.estimator.state_file.set_aside`) so that
+        the fresh state saved later never replaces it; if it cannot be moved, nothing is saved
+        this run."""
         path = self._state_path = self.node_cfg.state_file
+        self._state_claim: StateFileClaim | None = None
+        self._state_said = False  # a problem with the file is logged once; the start-up line points to it
         if not path:
             return
+        try:
+            self._state_claim = claim(path)
+        except StateFileError as exc:
+            self._state_path = ""
+            self.state_status = f"state file refused: {exc}; running without a state file"
+            self.get_logger().error(self.state_status)
+            self._state_said = True
+            return
+        if self._state_claim.removed:
+            names = ", ".join(p.name for p in self._state_claim.removed)
+            self.get_logger().info(f"removed {len(self._state_claim.removed)} temporary file(s) of interrupted "
+                                   f"saves of {path}: {names}")
         if not os.path.lexists(path):
             self.state_status = f"state file {path} not found: starting fresh"
             return
@@ -310,12 +332,15 @@ class EstimatorNode(Node):
             aside = set_aside(path)
         except OSError as exc:
             self._state_path = ""
+            self.release_state_file()
             self.state_status = (f"state file ignored: {reason}; it could not be moved aside ({exc}), so it is "
                                  "left as it is and no state is saved this run")
             self.get_logger().error(self.state_status)
+            self._state_said = True
             return
         self.state_status = f"state file ignored: {reason}; kept as {aside}; a fresh state will be saved to {path}"
         self.get_logger().warning(self.state_status)
+        self._state_said = True
 
     def save_state(self) -> None:
         path = self._state_path
@@ -325,7 +350,18 @@ class EstimatorNode(Node):
             except OSError as exc:
                 self.get_logger().error(f"cannot save state to {path}: {exc}")
 
+    def release_state_file(self) -> None:
+        """Free the state file's lock (after the last save)."""
+        if self._state_claim is not None:
+            self._state_claim.release()
+            self._state_claim = None
+
     # ------------------------------------------------------------------ diagnostics
+    def _namesakes(self) -> int:
+        """Other nodes on the ROS graph with this node's fully qualified name."""
+        me = (self.get_name(), self.get_namespace())
+        return max(0, sum(1 for name_ns in self.get_node_names_and_namespaces() if tuple(name_ns) == me) - 1)
+
     def _publish_diagnostics(self) -> None:
         """One :class:`.diagnostics.Snapshot` per period in, one ``DiagnosticArray`` out."""
         now_ns = self.get_clock().now().nanoseconds
@@ -344,6 +380,7 @@ class EstimatorNode(Node):
             state_file=self.state_status,
             latencies_s=self._latencies,
             cpu_times_s=self._cpu_times,
+            namesakes=self._namesakes(),
         )
         self._last_diag = wall
         self._latencies, self._cpu_times = [], []
@@ -411,6 +448,7 @@ def main(args: list[str] | None = None) -> int:
     finally:
         if node is not None:
             node.save_state()
+            node.release_state_file()
             node.destroy_node()
         rclpy.try_shutdown()
     return code

@@ -25,7 +25,7 @@ from rclpy.node import Node
 from std_srvs.srv import SetBool, Trigger
 
 from .dashboard.health import LEVELS, HealthTracker, NodeHealth, parse_statuses, statuses_of
-from .dashboard.settings import split_node_name, where
+from .dashboard.settings import where
 
 __all__ = ["call", "status", "format_health", "SERVICES"]
 
@@ -126,12 +126,11 @@ def status(node_name: str, once: bool, timeout: float, out: TextIO = sys.stdout,
            until: Callable[[], bool] | None = None) -> int:
     """Print the node's reports as they come (in place on a terminal) until Ctrl-C (or
     ``until()``); with ``once`` the first one."""
-    _ns, basename = split_node_name(node_name)
     tracker = HealthTracker()
     reports: list[NodeHealth] = []
 
     def on_diagnostics(msg: DiagnosticArray) -> None:
-        parsed = parse_statuses(statuses_of(msg), basename)
+        parsed = parse_statuses(statuses_of(msg), node_name)
         if parsed is not None:
             reports.append(tracker.update(parsed))
 

@@ -172,9 +172,32 @@ class _Publisher:
         for topic, pub in self.pubs.items():
             self.stats[topic].saw(pub.get_subscription_count())
 
+    def check_types(self) -> None:
+        """Refuse to play when a subscription the ROS graph shows on a bag topic takes another
+        type than the bag's: DDS never matches them, so its node would receive nothing.
+        Raises :class:`BagError` naming every such topic, the bag's type and the subscriber's."""
+        deadline = time.monotonic() + 2.0  # DDS may list a subscription before its node's name
+        while True:
+            wrong, unnamed = [], False
+            for topic, s in self.stats.items():
+                for info in self.node.get_subscriptions_info_by_topic(topic):
+                    if info.topic_type != s.msgtype:
+                        known = not info.node_name.startswith("_NODE_NAME_UNKNOWN")
+                        unnamed |= not known
+                        who = f"{info.node_namespace.rstrip('/')}/{info.node_name}" if known else "a subscriber"
+                        wrong.append(f"topic {topic}: the bag holds {s.msgtype}, {who} subscribes with "
+                                     f"{info.topic_type}")
+            if not (wrong and unnamed and time.monotonic() < deadline):
+                break
+            time.sleep(0.1)
+        if wrong:
+            raise BagError(f"{self.path}: {'; '.join(sorted(set(wrong)))} (a subscriber of another type never "
+                           "receives a message); nothing was played")
+
     def wait_for_subscribers(self, n: int, timeout: float, spin: Callable[[], None] | None = None) -> None:
         deadline = time.monotonic() + timeout
         while n and any(p.get_subscription_count() < n for p in self.pubs.values()):
+            self.check_types()  # a subscriber of another type never matches: say so, not "no subscriber"
             if time.monotonic() > deadline:
                 missing = [t for t, p in self.pubs.items() if p.get_subscription_count() < n]
                 raise BagError(f"{self.path}: no subscriber on {missing} after {timeout:g} s")
@@ -294,7 +317,9 @@ def play(bag: str | Path, *, rate: float = 1.0, clock: bool = True, reliable: bo
     """Publish ``bag`` ``loops`` times; ``rate`` is the speed factor (0 = as fast as the
     acknowledgements allow). Waits for ``wait_for_subscribers`` subscribers on every topic
     first. Returns a process exit code: 0 when every reliable subscriber acknowledged every
-    message, 1 when not (what was not delivered is printed)."""
+    message, 1 when not (what was not delivered is printed). Raises :class:`BagError` before
+    anything is published when a subscriber on a bag topic takes another type than the bag
+    holds (:meth:`_Publisher.check_types`, checked while waiting and before the first message)."""
     _check_rate(rate)
     # Checked at run time whatever the annotations say: callers from Python may pass anything.
     integers: tuple[tuple[str, object, int], ...] = (
@@ -316,9 +341,11 @@ def play(bag: str | Path, *, rate: float = 1.0, clock: bool = True, reliable: bo
         player.wait_for_subscribers(wait_for_subscribers, wait_timeout)
         player.count_subscribers()
         lo, hi = (f(s.subscribers_max for s in player.stats.values()) for f in (min, max))
+        player.check_types()
         print(f"playing {bag}: {lo if lo == hi else f'{lo}-{hi}'} subscription(s) matched per topic; first message "
               f"in {start_delay:g} s", file=sys.stderr, flush=True)
         time.sleep(start_delay)
+        player.check_types()  # the subscribers discovered meanwhile
         t0 = time.monotonic()
         failure = None
         try:

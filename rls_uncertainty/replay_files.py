@@ -16,7 +16,7 @@ directory:
 * ``estimates.mcap``: every topic the node publishes, byte for byte what the node sends
   (:meth:`.outputs.OutputLayout.encode`), log time = the sample's stamp, and the
   ``/diagnostics`` reports at their data time; ordered by log time, then topic
-  (:class:`.bags.BagWriter`), holding back only the records a later one could precede: those
+  (:class:`.bags.BagWriter`: with CRCs), holding back only the records a later one could precede: those
   after the newest sample or the newest message;
 * ``run.json`` (:func:`run_record`): what a later ``replay --compare`` checks before
   comparing (:mod:`.compare`): the bag's input content digest, the span, the parameters and
@@ -177,7 +177,7 @@ class _Mcap:
 
     def _open(self) -> BagWriter:
         if self.writer is None:
-            self.writer = BagWriter(self.directory / "estimates",
+            self.writer = BagWriter(self.directory / "estimates.mcap",
                                     [*self.topics, *self.fit_topics, ("/diagnostics", DIAGNOSTIC_ARRAY)],
                                     self.store)
         return self.writer
@@ -204,10 +204,6 @@ class _Mcap:
     def close(self) -> None:
         if self.writer is not None:
             self.writer.close()
-            bag = self.directory / "estimates"
-            (bag / "estimates.mcap").rename(self.directory / "estimates.mcap")
-            (bag / "metadata.yaml").unlink()
-            bag.rmdir()
 
 
 class ReplayFiles:

@@ -1,8 +1,12 @@
-"""Small bags and mapping files for the bag-tool tests, the CLI's one-line-error check and a
-directory snapshot."""
+"""Small bags and mapping files for the bag-tool tests, the CLI's one-line-error check, a
+directory snapshot, an MCAP file's CRCs checked against zlib, and a guard against a call that
+blocks."""
 
 import copy
 import os
+import signal
+import zlib
+from contextlib import contextmanager
 from pathlib import Path
 
 import yaml
@@ -98,6 +102,47 @@ def tree(root: Path) -> dict:
             else:
                 out[rel] = p.read_bytes()
     return out
+
+
+def crcs(path):
+    """Every CRC of an MCAP file, each checked against zlib over the bytes it covers:
+    ``(chunk CRCs, data section CRC, summary CRC)``; asserts that each is valid."""
+    from mcap.records import Chunk, DataEnd, Footer
+    from mcap.stream_reader import StreamReader, get_chunk_data_stream
+
+    data = Path(path).read_bytes()
+    chunk_crcs, data_crc, summary_crc = [], None, None
+    with open(path, "rb") as fh:
+        for record in StreamReader(fh, emit_chunks=True, validate_crcs=True).records:
+            if isinstance(record, Chunk):
+                stream, size = get_chunk_data_stream(record)
+                assert zlib.crc32(stream.read(size)) == record.uncompressed_crc
+                chunk_crcs.append(record.uncompressed_crc)
+            elif isinstance(record, DataEnd):
+                data_crc = record.data_section_crc
+            elif isinstance(record, Footer):
+                summary_crc = record.summary_crc
+                start = record.summary_start
+    assert zlib.crc32(data[: start - 13]) == data_crc  # the data section: up to its DataEnd record
+    assert zlib.crc32(data[start: len(data) - 8 - 4]) == summary_crc  # summary and footer up to its CRC
+    return chunk_crcs, data_crc, summary_crc
+
+
+@contextmanager
+def no_hang(seconds: float):
+    """Turn a call that blocks for more than ``seconds`` into a TimeoutError (SIGALRM: main
+    thread only), so a regression that blocks fails the test instead of hanging the run."""
+
+    def expired(_signum, _frame):
+        raise TimeoutError(f"blocked for more than {seconds:g} s")
+
+    previous = signal.signal(signal.SIGALRM, expired)
+    signal.setitimer(signal.ITIMER_REAL, seconds)
+    try:
+        yield
+    finally:
+        signal.setitimer(signal.ITIMER_REAL, 0)
+        signal.signal(signal.SIGALRM, previous)
 
 
 def changed_messages(messages, kind, change):

@@ -144,10 +144,44 @@ def test_health_reads_back_what_the_node_diagnostics_policy_writes(bundled_repla
     assert parse_statuses(tuples, "other_node") is None
 
 
-def _inputs(rejected: dict[str, int], recent: int, window: float = 10.0):
+def _inputs(rejected: dict[str, int], recent: int, window: float = 10.0, prefix: str = NODE_NAME):
     values = {"recent_window_s": f"{window:g}", "imu.received": "100", "imu.recent.rejected": str(recent)}
     values.update({f"imu.rejected.{r}": str(n) for r, n in rejected.items()})
-    return [(f"{NODE_NAME}: inputs", 1 if recent else 0, "", values)]
+    return [(f"{prefix}: inputs", 1 if recent else 0, "", values)]
+
+
+def _snapshot(enabled: bool):
+    """What a fresh node with the t2 configuration hands its diagnostics policy."""
+    from rls_uncertainty.config import load_parameters_file, pipeline_config
+    from rls_uncertainty.diagnostics import Snapshot
+    from rls_uncertainty.pipeline import Pipeline
+
+    pipe = Pipeline(pipeline_config(load_parameters_file("t2")))
+    return Snapshot(counters=pipe.counters(), models=[(m.output, pipe.model_report(j)) for j, m in
+                                                      enumerate(pipe.config.models)],
+                    required=tuple(pipe.required), max_gap=0.1, now_ns=0, elapsed_s=1.0,
+                    publishers=dict.fromkeys(STREAMS, 1), topics={k: f"/{k}" for k in STREAMS}, reliable=True,
+                    enabled=enabled, state_file="no state file")
+
+
+def test_statuses_of_namespaced_nodes_are_told_apart():
+    """Three nodes named rls_estimator (root, /a, /b) report on one /diagnostics: each
+    consumer reads its own node's statuses, named by the node's policy."""
+    from rls_uncertainty.diagnostics import DiagnosticsPolicy
+
+    arrays = []
+    for node, enabled in (("/rls_estimator", True), ("/a/rls_estimator", False), ("/b/rls_estimator", True)):
+        statuses = DiagnosticsPolicy(node).update(_snapshot(enabled))
+        assert {s.hardware_id for s in statuses} == {node.lstrip("/") if node.count("/") == 1 else node}
+        arrays += [(s.name, s.level, s.message, dict(s.values)) for s in statuses]
+    names = [name for name, *_ in arrays]
+    assert len(set(names)) == len(names)  # no two statuses share a name
+    assert {n.partition(":")[0] for n in names} == {"rls_estimator", "/a/rls_estimator", "/b/rls_estimator"}
+    for node, enabled in (("/rls_estimator", True), ("rls_estimator", True), ("/a/rls_estimator", False),
+                          ("/b/rls_estimator", True)):
+        health = parse_statuses(arrays, node)
+        assert health.samples["enabled"] == str(enabled), node
+    assert parse_statuses(arrays, "/c/rls_estimator") is None
 
 
 def test_recent_rejections_by_reason_are_the_increase_over_the_nodes_window():
@@ -181,9 +215,10 @@ def test_the_page_says_which_domain_was_searched_when_no_node_is_seen():
 def test_the_page_says_why_a_seen_node_has_no_samples_from_its_diagnostics():
     hub = _live_hub()
     assert hub.set_graph(True)["state"] == "waiting_diagnostics"
-    statuses = [*_inputs({"missing_joint": 40}, 40),
-                (f"{NODE_NAME}: samples", 0, "0 of 0 samples used", {"samples_formed": "0"}),
-                (f"{NODE_NAME}: model CZ", 0, "initializing: regressors not yet informative", {"ready": "False"})]
+    ns = "/ns/rls_estimator"  # a namespaced node names its statuses with its full name
+    statuses = [*_inputs({"missing_joint": 40}, 40, prefix=ns),
+                (f"{ns}: samples", 0, "0 of 0 samples used", {"samples_formed": "0"}),
+                (f"{ns}: model CZ", 0, "initializing: regressors not yet informative", {"ready": "False"})]
     statuses[0] = (statuses[0][0], 1, "control_surfaces rejected 40 in the last 10 s", statuses[0][3])
     msg = hub.add_diagnostics(statuses)
     assert msg["state"] == "no_samples"

@@ -36,11 +36,11 @@ def counters(streams=None, formed=0, used=0, pending=0, samples_rejected=None, r
 
 
 def snapshot(c=None, *, models=(), required=REQUIRED, max_gap=0.25, now=NOW, elapsed=1.0, publishers=None,
-             reliable=False, enabled=True, state="no state file", latencies=(), cpu=()):
+             reliable=False, enabled=True, state="no state file", latencies=(), cpu=(), namesakes=0):
     return Snapshot(counters=c or counters(), models=list(models), required=required, max_gap=max_gap, now_ns=now,
                     elapsed_s=elapsed, publishers=dict.fromkeys(INPUTS, 1) | dict(publishers or {}),
                     topics={k: f"/{k}" for k in INPUTS}, reliable=reliable, enabled=enabled, state_file=state,
-                    latencies_s=list(latencies), cpu_times_s=list(cpu))
+                    latencies_s=list(latencies), cpu_times_s=list(cpu), namesakes=namesakes)
 
 
 def statuses(snap, policy=None):
@@ -77,6 +77,40 @@ def test_statuses_are_inputs_samples_then_one_per_model_named_after_the_node():
     for s in out:  # every value is text, keys unique
         assert all(isinstance(k, str) and isinstance(v, str) for k, v in s.values)
         assert len({k for k, _ in s.values}) == len(s.values)
+
+
+@pytest.mark.parametrize("node,prefix", [
+    ("rls_estimator", "rls_estimator"), ("/rls_estimator", "rls_estimator"), ("/my_name", "my_name"),
+    ("/ns/rls_estimator", "/ns/rls_estimator"), ("/a/b/rls_estimator", "/a/b/rls_estimator"),
+])
+def test_a_node_under_a_namespace_names_its_statuses_with_its_full_name(node, prefix):
+    """The root namespace keeps the names consumers have always matched; two namespaced
+    nodes never share a status name on /diagnostics."""
+    assert dg.status_prefix(node) == prefix
+    out = DiagnosticsPolicy(node).update(snapshot(models=[("CZ", {"ready": False, "samples": 0})]))
+    assert [s.name for s in out] == [f"{prefix}: {n}" for n in ("inputs", "samples", "model CZ")]
+    assert {s.hardware_id for s in out} == {prefix}
+
+
+def test_another_node_with_the_full_name_is_an_error_and_a_throttled_warning():
+    policy = DiagnosticsPolicy("/ns/rls_estimator")
+    want = ("1 other node(s) named /ns/rls_estimator on the ROS graph: their outputs mix with this node's on "
+            "/ns/rls_estimator/..., so every consumer receives each sample 2 times, and /ns/rls_estimator/reset and "
+            "/ns/rls_estimator/enable reach any of them; start each node with its own name or namespace "
+            "(--ros-args -r __node:=NAME or -r __ns:=/NAMESPACE)")
+    logged = []
+    for t in range(70):  # one period a second; the other node stays 60 s
+        out = {s.name: s for s in policy.update(snapshot(c=counters(formed=10, used=10), namesakes=int(t < 60)))}
+        samples = out["/ns/rls_estimator: samples"]
+        logged.append(policy.alerts.due())
+        if t < 60:
+            assert (samples.level, samples.message) == (dg.ERROR, f"{want}; 10 of 10 samples used")
+            assert values(samples)["nodes_with_this_name"] == "2"
+        else:
+            assert (samples.level, samples.message) == (OK, "10 of 10 samples used")
+        assert out["/ns/rls_estimator: inputs"].level == OK  # the inputs are fine
+    assert [t for t, lines in enumerate(logged) if lines] == [0, 30]  # once per repeat_s (30 s)
+    assert logged[0] == [want]
 
 
 def test_input_keys_per_stream_in_order_with_rejections_sorted():
@@ -185,7 +219,7 @@ def test_sample_keys_in_order_and_sorted_reasons():
                         ("samples_pending", "4"), ("samples_rejected.differentiator_warmup", "5"),
                         ("samples_rejected.gap_airspeed", "15"), ("resets.parameters_changed", "2"),
                         ("resets.service", "1"), ("unknown_joint.canard", "1"), ("unknown_joint.flap", "3"),
-                        ("state_file", "resumed from /tmp/s.npz (5 samples)"))
+                        ("state_file", "resumed from /tmp/s.npz (5 samples)"), ("nodes_with_this_name", "1"))
 
 
 def test_disabled_estimation_is_said_and_stays_ok():
@@ -203,8 +237,8 @@ def test_latency_percentiles_are_observed_values():
     assert (v["latency_ms.p50"], v["latency_ms.p99"], v["latency_ms.max"]) == ("51.000", "100.000", "100.000")
     assert (v["processing_cpu_ms.p50"], v["processing_cpu_ms.p99"]) == ("5.100", "10.000")
     keys = [k for k, _ in statuses(snapshot(latencies=lat, cpu=cpu))["samples"].values]
-    assert keys[-6:] == ["latency_ms.p50", "latency_ms.p99", "latency_ms.max", "processing_cpu_ms.p50",
-                         "processing_cpu_ms.p99", "state_file"]
+    assert keys[-7:] == ["latency_ms.p50", "latency_ms.p99", "latency_ms.max", "processing_cpu_ms.p50",
+                         "processing_cpu_ms.p99", "state_file", "nodes_with_this_name"]
 
 
 @pytest.mark.parametrize("lat,p50,p99", [
@@ -369,7 +403,7 @@ def test_every_status_stays_bounded_whatever_arrives():
     out = statuses(snapshot(c, state="x" * 100_000))
     inputs, samples = out["inputs"], out["samples"]
     assert len(inputs.values) <= 1 + 5 * (13 + dg.MAX_KEYS)
-    assert len(samples.values) <= 10 + 3 * (2 + dg.MAX_KEYS)
+    assert len(samples.values) <= 11 + 3 * (2 + dg.MAX_KEYS)
     assert _size(inputs) < 20_000 and _size(samples) < 10_000
     for s in (inputs, samples):
         assert len({k for k, _ in s.values}) == len(s.values)  # keys unique

@@ -8,16 +8,28 @@ allocated; a refused file can be set aside without overwriting anything."""
 import io
 import json
 import os
+import socket
+import stat
+import subprocess
+import sys
 import tracemalloc
 import zipfile
 from datetime import UTC, datetime
 
 import numpy as np
 import pytest
+from bag_samples import no_hang
 
 from rls_uncertainty.errors import StateFileError
 from rls_uncertainty.estimator import EstimatorBank, EstimatorOptions
-from rls_uncertainty.estimator.state_file import EstimatorState, load_state, save_state, set_aside, state_layout
+from rls_uncertainty.estimator.state_file import (
+    EstimatorState,
+    claim,
+    load_state,
+    save_state,
+    set_aside,
+    state_layout,
+)
 
 FINGERPRINT = {"aircraft": [1.0, 2.0], "models": [["CZ", "1", "alpha", "delta_e"], ["Cm", "1", "q_hat"]], "n_lags": 10}
 
@@ -529,3 +541,90 @@ def test_set_aside_without_hard_links_still_keeps_every_file(tmp_path, monkeypat
     moved = set_aside(path, now)
     assert moved.name.endswith("-1") and moved.read_text() == "new"
     assert (tmp_path / "state.npz.rejected-20260304T050607Z").read_text() == "old"
+
+
+# ----------------------------------------------------------------------------- claim
+def tree(root):
+    """Every entry of a flat directory without opening anything but regular files: name ->
+    (file type, inode, bytes of a regular file)."""
+    out = {}
+    for p in sorted(root.iterdir()):
+        st = os.lstat(p)
+        out[p.name] = (stat.S_IFMT(st.st_mode), st.st_ino, p.read_bytes() if stat.S_ISREG(st.st_mode) else None)
+    return out
+
+
+def _special(tmp_path, kind):
+    """A state_file path that is not a regular file (a character device where mknod is allowed)."""
+    path = tmp_path / "state.npz"
+    if kind == "fifo":
+        os.mkfifo(path)
+    elif kind == "directory":
+        path.mkdir()
+    elif kind == "socket":
+        sock = socket.socket(socket.AF_UNIX)
+        sock.bind(str(path))
+        sock.close()
+    else:
+        try:
+            os.mknod(path, 0o600 | 0o020000, os.makedev(1, 3))  # a copy of /dev/null, never the real one
+        except PermissionError:
+            pytest.skip("creating a device needs privileges this run does not have")
+    return path
+
+
+@pytest.mark.parametrize("kind,named", [("fifo", "a FIFO"), ("directory", "a directory"), ("socket", "a socket"),
+                                        ("device", "a character device")])
+def test_a_state_file_that_is_not_a_regular_file_is_refused_at_once_and_left_alone(tmp_path, kind, named):
+    path = _special(tmp_path, kind)
+    before = tree(tmp_path)
+    with no_hang(10), pytest.raises(StateFileError) as err:
+        claim(path)
+    assert str(err.value) == (f"{path}: is {named}, not a regular file (it is not opened, renamed or replaced); "
+                              "set state_file to a file's path")
+    with no_hang(10), pytest.raises(StateFileError, match="not a readable state file"):
+        load_state(path, FINGERPRINT)  # reading never waits either (a FIFO swapped in after the claim)
+    assert tree(tmp_path) == before  # no lock file, nothing renamed
+
+
+_CLAIM = """
+import sys, time
+from rls_uncertainty.estimator.state_file import claim
+c = claim(sys.argv[1])
+print(len(c.removed), flush=True)
+time.sleep(120)
+"""
+
+
+def test_a_state_file_in_use_is_refused_and_its_temporaries_kept_until_its_user_stops(tmp_path):
+    path = saved(tmp_path)
+    temporary = tmp_path / f".{path.name}.{'e' * 16}.tmp"
+    holder = subprocess.Popen([sys.executable, "-c", _CLAIM, str(path)], stdout=subprocess.PIPE, text=True)
+    try:
+        assert holder.stdout.readline() == "0\n"
+        temporary.write_bytes(b"the live user's save in progress")
+        before = tree(tmp_path)
+        with pytest.raises(StateFileError) as err:
+            claim(path)
+        assert str(err.value) == (f"{path}: in use: its lock {tmp_path / ('.' + path.name + '.lock')} is held by "
+                                  f"process {holder.pid} (another node estimating with it); give each node its own "
+                                  "state_file")
+        assert tree(tmp_path) == before  # nothing renamed, removed or written
+    finally:
+        holder.kill()
+        holder.wait(60)
+        holder.stdout.close()
+    mine = claim(path)  # the user is gone: its temporary is a leftover
+    assert mine.removed == [temporary] and not temporary.exists()
+    assert load_state(path, FINGERPRINT).samples_used == 300
+    mine.release()
+    assert sorted(p.name for p in tmp_path.iterdir()) == [path.name]
+
+
+def test_a_state_file_whose_lock_cannot_be_made_is_refused_in_one_line(tmp_path):
+    path = tmp_path / "missing" / "state.npz"
+    with pytest.raises(StateFileError) as err:
+        claim(path)
+    lock = path.parent / ".state.npz.lock"
+    assert str(err.value) == f"{path}: cannot take its lock {lock} (No such file or directory)"
+    assert not path.parent.exists()

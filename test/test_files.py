@@ -1,16 +1,20 @@
 """Writing outputs without losing data (rls_uncertainty/files.py): output directories that
-appear only when complete and never replace an input, and atomic single files."""
+appear only when complete and never replace an input, atomic single files, the temporaries an
+interrupted write leaves, and the lock beside a file."""
 
 import os
-import tempfile
+import signal
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
+from bag_samples import no_hang
 from bag_samples import tree as _tree
 
 from rls_uncertainty import files
 from rls_uncertainty.errors import OutputPathError
-from rls_uncertainty.files import atomic_file, output_directory
+from rls_uncertainty.files import FileLock, atomic_file, output_directory, temporaries
 
 
 def _write(out: Path, name="result.txt", data=b"new"):
@@ -211,13 +215,13 @@ def test_atomic_file_never_writes_through_a_planted_symlink(tmp_path, monkeypatc
     victim = tmp_path / "victim.txt"
     victim.write_bytes(b"victim")
     path = tmp_path / "STATE"
-    planted = ["STATE.tmp", ".STATE.tmp", "STATE.npz.tmp", ".STATE.planted.tmp"]
+    planted = ["STATE.tmp", ".STATE.tmp", "STATE.npz.tmp", f".STATE.{'0' * 16}.tmp"]
     for name in planted:
         (tmp_path / name).symlink_to(victim)
     # Make the temporary-name generator offer the planted name first, then a fresh one:
     # exclusive creation must skip it rather than open it.
-    names = iter(["planted", "fresh"])
-    monkeypatch.setattr(tempfile, "_get_candidate_names", lambda: names)
+    names = iter(["0" * 16, "1" * 16])
+    monkeypatch.setattr(files.secrets, "token_hex", lambda n: next(names))
     with atomic_file(path) as fh:
         fh.write(b"state")
     assert victim.read_bytes() == b"victim"
@@ -301,3 +305,105 @@ def test_the_output_directory_gets_the_permissions_of_mkdir(tmp_path):
     finally:
         os.umask(old_mask)
     assert oct(os.stat(tmp_path / "out").st_mode & 0o777) == oct(0o755)  # not mkdtemp's 0700
+
+
+# ----------------------------------------------------------------------- temporaries, lock
+def _run(code: str, *args: str) -> subprocess.Popen:
+    return subprocess.Popen([sys.executable, "-c", code, *args], stdout=subprocess.PIPE, text=True)
+
+
+_KILLED_WRITE = """
+import os, signal, sys
+from rls_uncertainty.files import atomic_file
+with atomic_file(sys.argv[1]) as fh:
+    fh.write(b"half a state")
+    fh.flush()
+    os.kill(os.getpid(), signal.SIGKILL)
+"""
+
+
+def test_temporaries_are_exactly_what_an_interrupted_write_leaves(tmp_path):
+    target = tmp_path / "state.npz"
+    for _ in range(2):  # two writes killed in the middle
+        assert _run(_KILLED_WRITE, str(target)).wait(60) == -signal.SIGKILL
+    left = sorted(p for p in tmp_path.iterdir())
+    assert len(left) == 2 and not target.exists()
+    others = [".state.npz.tmp", ".state.npz.notours.tmp", f".other.npz.{'a' * 16}.tmp", f"state.npz.{'a' * 16}.tmp",
+              f".state.npz.{'A' * 16}.tmp"]
+    for name in others:
+        (tmp_path / name).write_bytes(b"not ours")
+    (tmp_path / f".state.npz.{'b' * 16}.tmp").symlink_to(tmp_path / "elsewhere")
+    (tmp_path / f".state.npz.{'c' * 16}.tmp").mkdir()
+    (tmp_path / ".state.npz.abcd_123.tmp").write_bytes(b"an older version's (tempfile.mkstemp)")
+    assert temporaries(target) == sorted([*left, tmp_path / ".state.npz.abcd_123.tmp"])
+    assert temporaries(tmp_path / "missing" / "state.npz") == []
+
+
+_HOLD = """
+import sys, time
+from rls_uncertainty.files import FileLock
+lock = FileLock(sys.argv[1])
+print("held", flush=True)
+time.sleep(120)
+"""
+
+
+def test_a_lock_held_by_another_process_is_refused_with_its_pid_and_freed_when_it_dies(tmp_path):
+    target = tmp_path / "state.npz"
+    holder = _run(_HOLD, str(target))
+    try:
+        assert holder.stdout.readline() == "held\n"
+        with pytest.raises(BlockingIOError) as err:
+            FileLock(target)
+        assert err.value.filename == str(tmp_path / ".state.npz.lock")
+        assert err.value.strerror == f"held by process {holder.pid}"
+    finally:
+        holder.kill()
+        holder.wait(60)
+        holder.stdout.close()
+    lock = FileLock(target)  # the system freed it with the process; its file stayed
+    assert lock.held and (tmp_path / ".state.npz.lock").read_text() == f"{os.getpid()}\n"
+    with pytest.raises(BlockingIOError):
+        FileLock(target)  # one holder, even within one process
+    lock.release()
+    lock.release()
+    assert not lock.held and sorted(tmp_path.iterdir()) == []
+
+
+def test_a_lock_removed_by_its_holder_while_another_takes_it_is_taken_again(tmp_path, monkeypatch):
+    """The holder removes the lock file as it releases it, between another process's open
+    and its flock: the other locks a file no longer at the path, sees that, and locks anew."""
+    target = tmp_path / "state.npz"
+    first = FileLock(target)
+    real_flock = files.fcntl.flock
+    calls = []
+
+    def flock(fd, op):
+        calls.append(fd)
+        if len(calls) == 1:
+            first.release()  # the old holder lets go just after our open
+        return real_flock(fd, op)
+
+    monkeypatch.setattr(files.fcntl, "flock", flock)
+    second = FileLock(target)
+    monkeypatch.undo()
+    assert len(calls) == 2 and second.held
+    with pytest.raises(BlockingIOError):
+        FileLock(target)  # the file at the path is the one the second holds
+    second.release()
+
+
+@pytest.mark.parametrize("kind", ["fifo", "symlink", "directory"])
+def test_a_lock_path_that_is_not_a_regular_file_is_refused_without_blocking(tmp_path, kind):
+    target = tmp_path / "state.npz"
+    lock = tmp_path / ".state.npz.lock"
+    if kind == "fifo":
+        os.mkfifo(lock)
+    elif kind == "symlink":
+        lock.symlink_to(tmp_path / "elsewhere")
+    else:
+        lock.mkdir()
+    with no_hang(10), pytest.raises(OSError) as err:
+        FileLock(target)
+    assert not isinstance(err.value, (BlockingIOError, TimeoutError))
+    assert not (tmp_path / "elsewhere").exists() and sorted(p.name for p in tmp_path.iterdir()) == [lock.name]

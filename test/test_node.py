@@ -11,9 +11,12 @@ import json
 import math
 import os
 import re
+import stat
 import subprocess
 import sys
+import time
 import zipfile
+from collections import Counter
 
 import numpy as np
 import pytest
@@ -583,6 +586,120 @@ def test_a_refused_state_file_is_kept_and_the_node_starts(tmp_path, tester):
     assert "Traceback" not in node.text() and "kept as" in node.text()
     assert victim.read_text() == "precious" and aside.read_bytes() == crafted
     assert not state.is_symlink() and load_state(state, _t2_config(NO_EXPIRY).fingerprint()).samples_used > 20
+
+
+def _wait_text(node, needle, timeout=60.0):
+    deadline = time.monotonic() + timeout
+    while needle not in node.text():
+        assert time.monotonic() < deadline, f"{needle!r} never logged:\n{node.text()}"
+        time.sleep(0.1)
+
+
+def test_a_second_node_with_the_same_name_and_state_file_is_named_and_keeps_off_the_file(tmp_path, tester, bag):
+    """Two nodes /rls_estimator on one domain: each warns and reports ERROR; a consumer does
+    receive every sample twice; the second refuses the first's state file in one line (the
+    lock) instead of renaming it aside, and the file keeps the first's configuration."""
+    state = tmp_path / "state.npz"
+    lock = tmp_path / ".state.npz.lock"
+    args = ["-p", f"state_file:={state}", "-p", "state_save_period:=0.5", *_ros_params(NO_EXPIRY)]
+    first = _node(tmp_path, *args, name="first")
+    second = None
+    try:
+        tester.wait_connected()
+        deadline = time.monotonic() + 30
+        while not state.exists():
+            assert time.monotonic() < deadline, first.text()
+            time.sleep(0.1)
+        second = _node(tmp_path, *args, "-p", "estimator.lag_span:=0.14", name="second")  # 7 lags at 50 Hz
+        assert tester.spin_until(lambda: all(p.get_subscription_count() >= 2 for p in tester.pubs.values()), 30)
+        warning = "1 other node(s) named /rls_estimator on the ROS graph: their outputs mix with this node's on "
+        for node in (first, second):
+            _wait_text(node, warning)
+        assert ("[ERROR] [" in second.text() and f"state file refused: {state}: in use: its lock {lock} is held by "
+                f"process {first.proc.pid} (another node estimating with it); give each node its own state_file; "
+                "running without a state file" in second.text())
+        d = tester.wait_diagnostics(lambda d: d.get(f"{NODE}: samples", {}).get("level") == 2)
+        assert d[f"{NODE}: samples"]["message"].startswith(warning)
+        assert d[f"{NODE}: samples"]["nodes_with_this_name"] == "2"
+        half = bag[: len(bag) // 4]
+        n = len(run_pipeline(half, _t2_config(NO_EXPIRY)).outputs)
+        tester.spin_until(lambda: False, 1.0)  # the second node's outputs matched too
+        tester.publish_all([(k, to_rclpy(k, m)) for k, _s, m in half])
+        stamps = tester.outputs[f"/{NODE}/sample_stamp"]
+        assert tester.spin_until(lambda: len(stamps) >= 2 * n, 60)
+        tester.spin_until(lambda: False, 0.5)
+        counts = Counter(s.stamp.sec * 10**9 + s.stamp.nanosec for s in stamps)
+        assert len(counts) == n and set(counts.values()) == {2}  # every sample twice
+    finally:  # both stopped whatever happened, before either exit status is judged
+        stopped = [(node, node.stop()) for node in (second, first) if node is not None]
+    for node, code in stopped:
+        assert code == 0, node.text()
+    assert "Traceback" not in first.text() + second.text()
+    assert sorted(p.name for p in tmp_path.iterdir() if not p.name.endswith(".log")) == ["state.npz"]
+    assert load_state(state, _t2_config(NO_EXPIRY).fingerprint()).samples_used == n
+
+
+def test_a_state_file_that_is_a_fifo_is_refused_at_once_and_the_node_runs(tmp_path, tester):
+    fifo = tmp_path / "state.npz"
+    os.mkfifo(fifo)
+    node = _node(tmp_path, "-p", f"state_file:={fifo}", *_ros_params(NO_EXPIRY))
+    try:
+        tester.wait_connected()  # start-up used to block in open() here, for ever
+        d = tester.wait_diagnostics(lambda d: f"{NODE}: samples" in d)
+        refused = (f"state file refused: {fifo}: is a FIFO, not a regular file (it is not opened, renamed or "
+                   "replaced); set state_file to a file's path; running without a state file")
+        assert d[f"{NODE}: samples"]["state_file"] == refused
+        tester.publish_all(_synthetic(10**18, 3.0, bad=False))
+        est = _arrays(tester, "CZ", "estimates")
+        assert tester.spin_until(lambda: len(est) > 20), node.text()
+    finally:
+        assert node.stop() == 0, node.text()
+    said = [line for line in node.text().splitlines() if "[ERROR]" in line or "[WARN]" in line]
+    assert len(said) == 1 and said[0].startswith("[ERROR]") and said[0].endswith(f"[{NODE}]: {refused}"), said
+    assert node.text().count(refused) == 1 and stat.S_ISFIFO(os.lstat(fifo).st_mode)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["node.log", "state.npz"]
+
+
+def test_a_late_subscriber_gets_the_latest_sample_at_once_and_volatile_ones_still_match(tmp_path, tester, bag):
+    """Outputs are transient local: a display that joins after the node published gets the
+    newest sample without waiting for the next; the tester's volatile subscribers match and
+    receive every sample as before."""
+    from rclpy.qos import QoSDurabilityPolicy, QoSHistoryPolicy, QoSProfile, QoSReliabilityPolicy
+    from std_msgs.msg import Float64MultiArray, Header
+
+    node = _node(tmp_path, *_ros_params(NO_EXPIRY))
+    late = None
+    try:
+        tester.wait_connected()
+        part = bag[: len(bag) // 3]
+        offline = run_pipeline(part, _t2_config(NO_EXPIRY)).outputs
+        tester.publish_all([(k, to_rclpy(k, m)) for k, _s, m in part])
+        stamps = tester.outputs[f"/{NODE}/sample_stamp"]
+        assert tester.spin_until(lambda: len(stamps) >= len(offline), 60)
+        assert [s.stamp.sec * 10**9 + s.stamp.nanosec for s in stamps] == [o.stamp_ns for o in offline]
+        late = rclpy.create_node("late_display")
+        qos = QoSProfile(depth=1, history=QoSHistoryPolicy.KEEP_LAST, reliability=QoSReliabilityPolicy.RELIABLE,
+                         durability=QoSDurabilityPolicy.TRANSIENT_LOCAL)
+        got: dict[str, list] = {"stamp": [], "estimates": []}
+        late.create_subscription(Header, f"/{NODE}/sample_stamp", got["stamp"].append, qos)
+        late.create_subscription(Float64MultiArray, f"/{NODE}/CZ/estimates", got["estimates"].append, qos)
+        last_cz = [o for o in offline if o.ready[0]][-1]
+
+        def newest_arrived():
+            return (got["stamp"] and got["estimates"] and _stamp(got["estimates"][-1]) == last_cz.stamp_ns
+                    and got["stamp"][-1].stamp.sec * 10**9 + got["stamp"][-1].stamp.nanosec == offline[-1].stamp_ns)
+
+        deadline = time.monotonic() + 30  # no new sample is published meanwhile: only the kept ones arrive
+        while not newest_arrived() and time.monotonic() < deadline:
+            rclpy.spin_once(late, timeout_sec=0.1)
+        assert newest_arrived(), f"the late subscriber got {len(got['stamp'])} stamps, not the newest"
+        np.testing.assert_array_equal(np.array(got["estimates"][-1].data), last_cz.theta[0, :3])
+        kept = [s.stamp.sec * 10**9 + s.stamp.nanosec for s in got["stamp"]]
+        assert kept == sorted(set(kept)) and set(kept) <= {o.stamp_ns for o in offline}
+    finally:
+        if late is not None:
+            late.destroy_node()
+        assert node.stop() == 0, node.text()
 
 
 def test_sim_time_backwards_jump_resets(tmp_path, tester):

@@ -174,6 +174,45 @@ def test_play_says_what_a_stopped_subscriber_did_not_acknowledge_and_exits_1(tmp
         assert node.stop() == 0, node.text()
 
 
+def _swapped_bag(tmp_path):
+    """The bundled bag with the IMU and airspeed messages on each other's topics: the right
+    topic names with the wrong types."""
+    from rosbags.highlevel import AnyReader
+
+    from rls_uncertainty.bags import typestore, write_replay
+
+    swap = {"/imu": "/airspeed", "/airspeed": "/imu"}
+    with AnyReader([BUNDLED], default_typestore=typestore()) as reader:
+        records = [(t, swap.get(c.topic, c.topic), c.msgtype, bytes(raw)) for c, t, raw in reader.messages()]
+    return write_replay(tmp_path / "swapped", records)
+
+
+@pytest.mark.parametrize("wait", [False, True], ids=["no_wait", "wait_1"])
+def test_play_refuses_a_bag_whose_types_differ_from_the_subscribers_and_exits_2(tmp_path, recorder, wait):
+    bag = _swapped_bag(tmp_path)
+    node = NodeProcess(tmp_path, "--params-file", T2, *REPLAY_NODE)
+    try:
+        recorder.wait_connected()
+        args = ["--wait", "1"] if wait else ["--delay", "5"]  # without waiting: time for discovery
+        t0 = time.monotonic()
+        player = subprocess.run([sys.executable, "-m", "rls_uncertainty.cli", "play", str(bag), "--rate", "0", *args],
+                                capture_output=True, text=True, cwd=ROOT, timeout=120)
+        assert player.returncode == 2, player
+        lines = player.stderr.splitlines()
+        assert lines[-1] == (
+            f"rls-uncertainty play: error: {bag}: topic /airspeed: the bag holds sensor_msgs/msg/Imu, /{NODE_NAME} "
+            f"subscribes with geometry_msgs/msg/Vector3Stamped; topic /imu: the bag holds "
+            f"geometry_msgs/msg/Vector3Stamped, /{NODE_NAME} subscribes with sensor_msgs/msg/Imu (a subscriber of "
+            "another type never receives a message); nothing was played")
+        # Before it, at most the line announcing the first message (discovery still under way).
+        assert all(line.startswith(f"playing {bag}: ") for line in lines[:-1]) and len(lines) <= 2, lines
+        assert time.monotonic() - t0 < 30  # said at once, not after --wait's 30 s timeout
+        recorder.spin_until(lambda: False, 1.0)
+        assert not any(recorder.got.values())  # nothing was published, so the node published nothing
+    finally:
+        assert node.stop() == 0, node.text()
+
+
 @pytest.mark.parametrize("sim_time", [True, False], ids=["use_sim_time+clock", "wall_time-no_clock"])
 def test_a_bag_played_three_times_gives_three_result_sets_equal_to_the_offline_replay(tmp_path, recorder, expected,
                                                                                        sim_time):

@@ -18,6 +18,8 @@ from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
+from ..diagnostics import status_prefix
+
 __all__ = ["statuses_of", "StatusTuple", "StreamHealth", "NodeHealth", "parse_statuses", "HealthTracker", "LEVELS"]
 
 # (name, level 0..3, message, key-values) of one diagnostic_msgs/DiagnosticStatus.
@@ -99,10 +101,12 @@ def _streams(values: Mapping[str, str]) -> tuple[StreamHealth, ...]:
     return tuple(StreamHealth(name, fields[name], rejected.get(name, {})) for name in fields)
 
 
-def parse_statuses(statuses: Iterable[StatusTuple], node_basename: str) -> NodeHealth | None:
-    """The node's report among ``statuses`` (those named ``"<node_basename>: ..."``), or None
-    when the array holds no ``inputs`` status of that node."""
-    prefix = f"{node_basename}: "
+def parse_statuses(statuses: Iterable[StatusTuple], node: str) -> NodeHealth | None:
+    """The report of ``node`` (its fully qualified name) among ``statuses``: those named
+    ``"<prefix>: ..."`` (:func:`..diagnostics.status_prefix`: the bare name in the root
+    namespace, the full name under one), or None when the array holds no ``inputs`` status of
+    that node."""
+    prefix = f"{status_prefix(node)}: "
     inputs = samples = None
     models: dict[str, dict[str, str]] = {}
     for name, level, message, values in statuses:

@@ -46,7 +46,6 @@ class Hub:
         self.history_resets = 0
         self._capacity = capacity
         self._clock = clock
-        self.node_basename = source.node.rsplit("/", 1)[-1]
 
     # ------------------------------------------------------------------ inputs
     def add_arrays(self, arrays: Iterable[tuple[str, str, Any, int | None]]) -> dict | None:
@@ -84,7 +83,7 @@ class Hub:
 
     def add_diagnostics(self, statuses: Iterable[StatusTuple]) -> dict | None:
         """Feed one ``/diagnostics`` array; the ``health`` message when it held the node's report."""
-        parsed = parse_statuses(statuses, self.node_basename)
+        parsed = parse_statuses(statuses, self.source.node)
         if parsed is None:
             return None
         self.health.update(parsed)

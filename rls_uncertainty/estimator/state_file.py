@@ -15,6 +15,15 @@ It is written with :func:`rls_uncertainty.files.atomic_file` (a fresh exclusive 
 directory, fsync'ed, then renamed), so a crash never leaves half a file and a planted
 temporary name or symlink is never written through.
 
+**One user at a time.** A process that keeps a state file (the node) first claims it
+(:func:`claim`): ``state_file`` must be a regular file or absent (a FIFO, a device, a directory or a socket
+is refused without being opened: opening a FIFO blocks, and renaming a device aside would
+take it from the system); the lock beside it (:class:`rls_uncertainty.files.FileLock`,
+``.NAME.lock``) is taken without waiting, so a second process refuses the file instead of
+renaming it aside or overwriting it; then, holding the lock, the temporaries of interrupted
+saves (:func:`rls_uncertainty.files.temporaries`: ``.NAME.<16 hex digits>.tmp``) are removed:
+no live process can be writing them.
+
 **Reading never trusts the file.** :func:`load_state` checks, in this order and before
 anything is allocated from the file's declarations: the archive (a regular file, a zip of at
 most :data:`MAX_ENTRIES` ``.npy`` entries, none compressed or encrypted, their declared sizes
@@ -25,8 +34,8 @@ exactly the names the state layout has, each entry's declared size equal to what
 configuration and counters imply, each ``.npy`` header's dtype and shape as expected, every
 float finite and every counter in range. Any failure is one :class:`StateFileError` whose
 text names the file and the field. :meth:`EstimatorBank.from_state` checks shapes again (a
-second line). :func:`set_aside` renames a refused file out of the way without overwriting
-anything, so the node never replaces a file it could not use.
+second line). :func:`set_aside` renames a refused (regular) file out of the way without
+overwriting anything, so the node never replaces a file it could not use.
 """
 
 from __future__ import annotations
@@ -46,7 +55,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import ConfigError, StateFileError
-from ..files import atomic_file
+from ..files import FileLock, atomic_file, temporaries
 from .bank import EstimatorBank
 from .lag_storage import GROWTH_START
 from .options import EstimatorOptions
@@ -54,6 +63,8 @@ from .state import COUNTERS
 
 __all__ = [
     "EstimatorState",
+    "StateFileClaim",
+    "claim",
     "save_state",
     "load_state",
     "set_aside",
@@ -362,15 +373,17 @@ Expected = tuple[tuple[int, ...], EstimatorOptions] | None
 
 def _load(path: Path, fingerprint: Mapping[str, Any], expect: Expected) -> EstimatorState:
     try:
-        fh = open(path, "rb")  # noqa: SIM115 - closed below, after the zip
+        # Without waiting: a FIFO put here after the caller's claim cannot block the read.
+        fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | os.O_NOCTTY | getattr(os, "O_CLOEXEC", 0))
     except FileNotFoundError:
         raise _Invalid("no such state file") from None
     except OSError as exc:
         raise _Invalid(f"not a readable state file ({exc.strerror or exc})") from None
-    with fh:
-        st = os.fstat(fh.fileno())
-        if not stat.S_ISREG(st.st_mode):
-            raise _Invalid("not a readable state file (not a regular file)")
+    st = os.fstat(fd)
+    if not stat.S_ISREG(st.st_mode):
+        os.close(fd)
+        raise _Invalid(f"not a readable state file ({_file_kind(st.st_mode)}, not a regular file)")
+    with os.fdopen(fd, "rb") as fh:
         try:
             zf = zipfile.ZipFile(fh)
         except (zipfile.BadZipFile, zipfile.LargeZipFile, ValueError, OSError, EOFError) as exc:
@@ -455,6 +468,63 @@ def load_state(
         return _load(path, fingerprint, expect)
     except _Invalid as exc:
         raise StateFileError(f"{path}: {exc}") from None
+
+
+_KINDS = ((stat.S_ISDIR, "a directory"), (stat.S_ISFIFO, "a FIFO"), (stat.S_ISCHR, "a character device"),
+          (stat.S_ISBLK, "a block device"), (stat.S_ISSOCK, "a socket"))
+
+
+def _file_kind(mode: int) -> str:
+    return next((name for test, name in _KINDS if test(mode)), "not a regular file")
+
+
+@dataclass
+class StateFileClaim:
+    """A process's hold on its state file (:func:`claim`): the lock, and the temporaries of
+    interrupted saves it removed."""
+
+    path: Path
+    lock: FileLock
+    removed: list[Path]
+
+    def release(self) -> None:
+        """Free the lock (after the last save)."""
+        self.lock.release()
+
+
+def claim(path: str | Path) -> StateFileClaim:
+    """Take ``path`` for this process (see the module docstring): a regular file or none
+    (never opened here), its lock taken, stale temporaries removed. Raises
+    :class:`StateFileError`, one line naming the file, when it is not a regular file, when
+    another process holds it, or when its lock file cannot be made (a missing or read-only
+    directory): nothing is renamed, removed or written then."""
+    path = Path(path)
+    try:
+        st = os.stat(path)
+    except FileNotFoundError:
+        pass  # absent (or a dangling link): the load says so
+    except OSError as exc:
+        raise StateFileError(f"{path}: cannot be examined ({exc.strerror or exc})") from None
+    else:
+        if not stat.S_ISREG(st.st_mode):
+            raise StateFileError(f"{path}: is {_file_kind(st.st_mode)}, not a regular file (it is not opened, "
+                                 "renamed or replaced); set state_file to a file's path")
+    try:
+        lock = FileLock(path)
+    except BlockingIOError as exc:
+        raise StateFileError(f"{path}: in use: its lock {exc.filename} is {exc.strerror} (another node "
+                             "estimating with it); give each node its own state_file") from None
+    except OSError as exc:
+        where = exc.filename or path
+        raise StateFileError(f"{path}: cannot take its lock {where} ({exc.strerror or exc})") from None
+    removed = []
+    for tmp in temporaries(path):
+        try:
+            tmp.unlink()
+        except OSError:
+            continue  # gone already, or not ours to remove: it stays, harmless
+        removed.append(tmp)
+    return StateFileClaim(path, lock, removed)
 
 
 def set_aside(path: str | Path, now: datetime | None = None) -> Path:

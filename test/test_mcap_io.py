@@ -1,0 +1,148 @@
+"""MCAP files (rls_uncertainty/mcap_io.py): what the package writes carries chunk, data and
+summary CRCs that the mcap library and zlib agree on, reads back through rosbags as written,
+and any damaged byte of it is refused with the damaged part named. No DDS."""
+
+import struct
+
+import pytest
+from bag_samples import crcs
+from mcap.reader import make_reader
+from rosbags.highlevel import AnyReader
+
+from rls_uncertainty import mcap_io
+from rls_uncertainty.bags import BagWriter, typestore, write_replay
+from rls_uncertainty.cdr import encode_header
+from rls_uncertainty.errors import BagError
+
+HEADER = "std_msgs/msg/Header"
+
+
+def _records(n=24):
+    """``n`` header messages on /a and /b, stamps 10 ms apart, given out of order."""
+    recs = [(10**18 + 10**7 * k, "/a" if k % 2 else "/b", HEADER, encode_header(10**9, k, f"f{k}")) for k in range(n)]
+    return recs[::-1]
+
+
+def write_mcap(path, records):
+    """``records`` as one MCAP file at ``path``, through the package's writer (the one every
+    bag, conversion and replay output goes through)."""
+    with BagWriter(path, sorted({(topic, msgtype) for _, topic, msgtype, _ in records}), typestore()) as writer:
+        for record in records:
+            writer.add(*record)
+
+
+@pytest.fixture
+def small_chunks(monkeypatch):
+    """Chunks of about 300 bytes: a small bag of several chunks."""
+    monkeypatch.setattr(mcap_io, "CHUNK_SIZE", 300)
+
+
+def test_written_files_carry_chunk_data_and_summary_crcs(tmp_path, small_chunks):
+    write_mcap(tmp_path / "x.mcap", _records())
+    chunk_crcs, data_crc, summary_crc = crcs(tmp_path / "x.mcap")
+    assert len(chunk_crcs) > 2 and all(chunk_crcs) and data_crc and summary_crc
+    mcap_io.check_mcap_integrity(tmp_path / "x.mcap")
+
+
+def test_rosbags_reads_back_what_was_written_in_stamp_order(tmp_path, small_chunks):
+    recs = _records()
+    write_replay(tmp_path / "bag", recs)
+    assert sorted(p.name for p in (tmp_path / "bag").iterdir()) == ["bag.mcap", "metadata.yaml"]
+    want = sorted((t, topic, raw) for t, topic, _type, raw in recs)
+    for source in (tmp_path / "bag", tmp_path / "bag" / "bag.mcap"):  # the directory, and the file alone
+        with AnyReader([source], default_typestore=typestore()) as reader:
+            got = [(t, c.topic, bytes(raw)) for c, t, raw in reader.messages()]
+            assert {c.topic: c.msgcount for c in reader.connections} == {"/a": 12, "/b": 12}
+            assert {c.msgtype for c in reader.connections} == {HEADER}
+        assert got == want
+    with open(tmp_path / "bag" / "bag.mcap", "rb") as fh:
+        reader = make_reader(fh)
+        assert reader.get_header().profile == "ros2"
+        summary = reader.get_summary()
+        assert {s.encoding for s in summary.schemas.values()} == {"ros2msg"}
+        assert {(c.message_encoding, c.metadata["offered_qos_profiles"]) for c in summary.channels.values()} == {
+            ("cdr", "[]")}
+        assert [m.name for m in reader.iter_metadata()] == ["rosbag2"]
+
+
+def test_every_bit_flip_of_a_written_bag_is_refused(tmp_path, small_chunks):
+    """One flipped bit in each byte (bit = byte offset mod 8): header, chunks, message
+    indexes, metadata, data end, summary, footer and both magics are all covered."""
+    write_mcap(tmp_path / "x.mcap", _records(12))
+    data = (tmp_path / "x.mcap").read_bytes()
+    damaged = tmp_path / "damaged.mcap"
+    passed = []
+    for offset in range(len(data)):
+        flipped = bytearray(data)
+        flipped[offset] ^= 1 << (offset % 8)
+        damaged.write_bytes(bytes(flipped))
+        try:
+            mcap_io.check_mcap_integrity(damaged)
+        except BagError as exc:
+            assert str(exc).startswith(f"{damaged}: ") and "\n" not in str(exc)
+        else:
+            passed.append(offset)
+    assert passed == [], f"{len(passed)} of {len(data)} damaged copies passed, at bytes {passed[:20]}"
+
+
+def test_a_damaged_chunk_is_named_by_number_offset_and_topics(tmp_path, small_chunks):
+    write_mcap(tmp_path / "x.mcap", _records())
+    data = bytearray((tmp_path / "x.mcap").read_bytes())
+    with open(tmp_path / "x.mcap", "rb") as fh:
+        index = make_reader(fh).get_summary().chunk_indexes
+    second = index[1].chunk_start_offset
+    data[second + index[1].chunk_length - 5] ^= 0x10  # inside the chunk's records
+    (tmp_path / "x.mcap").write_bytes(bytes(data))
+    with pytest.raises(BagError) as err:
+        mcap_io.check_mcap_integrity(tmp_path / "x.mcap")
+    assert str(err.value).startswith(f"{tmp_path / 'x.mcap'}: corrupt MCAP: chunk 2 of {len(index)} at byte "
+                                     f"{second} (/a, /b) fails its CRC (stored ")
+
+
+def test_a_chunk_header_that_disagrees_with_the_summary_is_named(tmp_path, small_chunks):
+    write_mcap(tmp_path / "x.mcap", _records())
+    data = bytearray((tmp_path / "x.mcap").read_bytes())
+    with open(tmp_path / "x.mcap", "rb") as fh:
+        first = make_reader(fh).get_summary().chunk_indexes[0]
+    # The chunk record: opcode, length, then message_start_time (uint64).
+    start = first.chunk_start_offset + 9
+    data[start: start + 8] = struct.pack("<Q", first.message_start_time + 1)
+    (tmp_path / "x.mcap").write_bytes(bytes(data))
+    with pytest.raises(BagError, match=r"chunk 1 of \d+ at byte \d+ \(/[ab].*\): its start time \(\d+\) disagrees "
+                                       r"with the summary's chunk index"):
+        mcap_io.check_mcap_integrity(tmp_path / "x.mcap")
+
+
+def test_files_of_writers_without_crcs_are_checked_as_far_as_they_go(tmp_path):
+    """CRC 0 means "not computed" (the MCAP specification): such a file passes, and damage
+    inside a chunk's payload goes unseen; its structure is still checked."""
+    from mcap.writer import CompressionType, Writer
+
+    path = tmp_path / "other.mcap"
+    with open(path, "wb") as fh:
+        w = Writer(fh, compression=CompressionType.NONE, enable_crcs=False)
+        w.start(profile="ros2")
+        channel = w.register_channel("/a", "cdr", w.register_schema(HEADER, "ros2msg", b"x"))
+        for k in range(5):
+            w.add_message(channel, log_time=k, data=encode_header(1, k, "payload"), publish_time=k)
+        w.finish()
+    mcap_io.check_mcap_integrity(path)
+    data = path.read_bytes()
+    at = data.index(b"payload")
+    path.write_bytes(data[:at] + b"P" + data[at + 1:])
+    mcap_io.check_mcap_integrity(path)
+    path.write_bytes(data[: len(data) // 2])
+    with pytest.raises(BagError, match="no MCAP magic at its end"):
+        mcap_io.check_mcap_integrity(path)
+
+
+def test_the_writer_never_replaces_a_file_and_removes_an_unfinished_one(tmp_path):
+    existing = tmp_path / "x.mcap"
+    existing.write_bytes(b"precious")
+    with pytest.raises(FileExistsError):
+        write_mcap(existing, _records())
+    assert existing.read_bytes() == b"precious"
+    with pytest.raises(RuntimeError), mcap_io.McapWriter(tmp_path / "y.mcap", typestore()) as w:
+        w.write(w.add_connection("/a", HEADER), 1, encode_header(0, 1, ""))
+        raise RuntimeError("interrupted")
+    assert not (tmp_path / "y.mcap").exists()
