@@ -6,10 +6,9 @@ runs them (:meth:`Executor.run`) and returns the results in the order of the arg
 whichever process finished first, so every sum the caller forms over them is the same
 whatever ran them.
 
-* :class:`LocalProcesses` - ``workers`` processes of this machine (``concurrent.futures``;
-  every core by default). A worker process that dies (killed, out of memory) breaks the pool:
-  the jobs it had not finished are run again in a new pool, at most :data:`ATTEMPTS` times
-  in all.
+* :class:`LocalProcesses` - ``workers`` processes of this machine (every core by default),
+  each fed through a pipe of its own. A worker process that dies (killed, out of memory) is
+  replaced and its job runs again, at most :data:`ATTEMPTS` times in all.
 * :class:`DaskCluster` - the cluster whose scheduler listens at ``address``
   (``tcp://host:8786``). Dask runs a job again on another worker when its worker dies,
   until the scheduler's ``allowed-failures`` is reached; the job is then lost. The function
@@ -24,11 +23,12 @@ exception raised by the job itself is re-raised (jobs catch their own input erro
 
 from __future__ import annotations
 
+import contextlib
+import multiprocessing
 import os
 from collections.abc import Callable, Sequence
-from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
-from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
+from multiprocessing import connection
 from typing import Any, Protocol, TypeVar
 
 from .errors import ConfigError, SchedulerUnreachable
@@ -37,8 +37,8 @@ __all__ = ["ATTEMPTS", "Lost", "Executor", "LocalProcesses", "DaskCluster", "exe
 
 T = TypeVar("T")
 A = TypeVar("A")
-# Runs of a job in local processes before it is given up as lost (a pool broken by a dead
-# worker makes every unfinished job of the pool try again).
+# Runs of a job in local processes before it is given up as lost (its worker process died in
+# each; the other workers' jobs are not affected).
 ATTEMPTS = 3
 DEFAULT_TIMEOUT = 10.0  # s, to reach a scheduler
 
@@ -62,9 +62,51 @@ class Executor(Protocol):
     def run(self, fn: Callable[[A], T], args: Sequence[A], done: Done | None = None) -> list[T | Lost]: ...
 
 
+class _Worker:
+    """One local worker process with its own pipe: no queue or lock is shared between
+    workers, so one that dies (killed, out of memory) cannot leave the others blocked (a
+    killed :class:`concurrent.futures.ProcessPoolExecutor` worker can die holding its
+    shared call queue's lock)."""
+
+    def __init__(self, fn: Callable[[Any], Any]) -> None:
+        ctx = multiprocessing.get_context()
+        self.conn, child = ctx.Pipe()
+        self.proc = ctx.Process(target=_serve, args=(child, fn), daemon=True)
+        self.proc.start()
+        child.close()
+        self.job: int | None = None  # the index of the job it runs, None while idle
+
+    def give(self, i: int, arg: Any) -> None:
+        self.job = i
+        self.conn.send((i, arg))
+
+    def stop(self) -> None:
+        """Ask it to end, then make sure it has (a worker of a failed run is killed)."""
+        with contextlib.suppress(OSError):  # it is gone already
+            self.conn.send(None)
+        self.proc.join(timeout=5.0)
+        if self.proc.is_alive():
+            self.proc.kill()
+            self.proc.join()
+        self.conn.close()
+
+
+def _serve(conn: Any, fn: Callable[[Any], Any]) -> None:
+    """A worker's loop: ``(index, argument)`` in, ``(index, ok, result or exception)`` out,
+    until ``None``."""
+    while (item := conn.recv()) is not None:
+        i, arg = item
+        try:
+            conn.send((i, True, fn(arg)))
+        except Exception as exc:  # noqa: BLE001 - the job's own error, re-raised by the caller
+            conn.send((i, False, exc))
+
+
 class LocalProcesses:
     """``workers`` processes of this machine (default: every core); one job runs in this
-    process when there is a single job or a single worker."""
+    process when there is a single job or a single worker. A job whose worker process dies
+    runs again in a new worker, at most :data:`ATTEMPTS` times in all, then comes back as
+    :class:`Lost`."""
 
     def __init__(self, workers: int | None = None) -> None:
         if workers is not None and not (type(workers) is int and workers >= 1):
@@ -73,42 +115,49 @@ class LocalProcesses:
         self.description = f"{self.workers} local process{'es' if self.workers > 1 else ''}"
 
     def run(self, fn: Callable[[A], T], args: Sequence[A], done: Done | None = None) -> list[T | Lost]:
-        results: list[T | Lost | None] = [None] * len(args)
+        results: list[Any] = [None] * len(args)
         if self.workers == 1 or len(args) <= 1:
             for i, a in enumerate(args):
                 results[i] = fn(a)
                 if done is not None:
                     done(i + 1, len(args))
-            return results  # type: ignore[return-value]  # every slot filled
-        pending = list(range(len(args)))
-        finished = 0
-        for attempt in range(1, ATTEMPTS + 1):
-            broken: list[int] = []
-            with ProcessPoolExecutor(max_workers=min(self.workers, len(pending))) as pool:
-                futures: dict[Future[T], int] = {pool.submit(fn, args[i]): i for i in pending}
-                waiting = set(futures)
-                while waiting:
-                    ready, waiting = wait(waiting, return_when=FIRST_COMPLETED)
-                    for fut in ready:
-                        i = futures[fut]
-                        try:
-                            results[i] = fut.result()
-                        except BrokenProcessPool:
-                            broken.append(i)
+            return results
+        pending, runs, finished = list(range(len(args))), [0] * len(args), 0
+        workers = [_Worker(fn) for _ in range(min(self.workers, len(args)))]
+        try:
+            while pending or any(w.job is not None for w in workers):
+                for w in workers:
+                    if w.job is None and pending:
+                        i = pending.pop(0)
+                        runs[i] += 1
+                        w.give(i, args[i])
+                busy = [w for w in workers if w.job is not None]
+                ready = set(connection.wait([w.conn for w in busy] + [w.proc.sentinel for w in busy]))
+                for k, w in enumerate(workers):
+                    if w.job is None or not (w.conn in ready or w.proc.sentinel in ready):
+                        continue
+                    i = w.job
+                    try:
+                        _j, ok, value = w.conn.recv()
+                    except (EOFError, OSError):  # the worker died with the job
+                        w.job = None
+                        w.stop()
+                        workers[k] = _Worker(fn)
+                        if runs[i] < ATTEMPTS:
+                            pending.insert(0, i)
                             continue
-                        finished += 1
-                        if done is not None:
-                            done(finished, len(args))
-            if not broken:
-                break
-            pending = sorted(broken)
-            if attempt == ATTEMPTS:
-                for i in pending:
-                    results[i] = Lost(f"its worker process died in each of {ATTEMPTS} attempts")
+                        ok, value = True, Lost(f"its worker process died in each of {ATTEMPTS} attempts")
+                    w.job = None
+                    if not ok:
+                        raise value
+                    results[i] = value
                     finished += 1
                     if done is not None:
                         done(finished, len(args))
-        return results  # type: ignore[return-value]  # every slot filled
+        finally:
+            for w in workers:
+                w.stop()
+        return results
 
 
 class DaskCluster:
