@@ -12,9 +12,11 @@ started after the node shows the latest values at once) are read with a transien
 subscription, volatile ones with a volatile one (a transient-local subscription would not
 match them).
 
-The arrays are taken serialized and decoded by :mod:`...cdr` (about 3 us a message where
-rclpy's generic deserializer takes about 17 us; benchmarks/dashboard_benchmark.py measures the
-dashboard's CPU); a payload that is not a ``Float64MultiArray`` is handed on as None and counted.
+CPU (docs/dashboard.md, measured with benchmarks/dashboard_benchmark.py): rclpy's executor
+costs tens of microseconds per message, about 1,250 arrays a second with six models. The
+arrays are taken serialized and decoded by :mod:`...cdr` (about 3 us where rclpy's generic
+deserializer takes about 17 us); a payload that is not a ``Float64MultiArray`` is handed on as
+None and counted.
 """
 
 from __future__ import annotations
@@ -28,6 +30,7 @@ from typing import Any
 
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
+from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.qos import DurabilityPolicy, QoSHistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
@@ -41,6 +44,9 @@ from .settings import split_node_name
 __all__ = ["RosSource"]
 
 GRAPH_PERIOD_S = 1.0
+# No QoS-event handlers on the subscriptions: rclpy's executor walks each one at every wait
+# (about 20 us of the 80 us an array cost); the QoS asked for is the publisher's anyway.
+_NO_EVENTS = SubscriptionEventCallbacks(use_default_callbacks=False)
 
 
 class RosSource:
@@ -57,7 +63,8 @@ class RosSource:
         self.node = rclpy.create_node(f"rls_dashboard_{os.getpid()}", context=self.context,
                                       start_parameter_services=False, enable_rosout=False)
         self._subs: dict[str, Any] = {}
-        self.node.create_subscription(DiagnosticArray, "/diagnostics", self._on_diagnostics, 50)
+        self.node.create_subscription(DiagnosticArray, "/diagnostics", self._on_diagnostics, 50,
+                                      event_callbacks=_NO_EVENTS)
         self.node.create_timer(GRAPH_PERIOD_S, self._look)
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
@@ -115,4 +122,4 @@ class RosSource:
         # rclpy passes the message info (source timestamp) to a callback of two parameters;
         # raw=True hands over the serialized bytes.
         self._subs[topic] = self.node.create_subscription(Float64MultiArray, topic, on_array, qos,  # type: ignore[arg-type]
-                                                          raw=True)
+                                                          raw=True, event_callbacks=_NO_EVENTS)
