@@ -300,6 +300,10 @@ def test_the_page_says_why_a_seen_node_has_no_samples_from_its_diagnostics():
     msg = hub.add_diagnostics(statuses)
     assert msg["state"] == "no_samples"
     assert "control_surfaces rejected 40" in msg["text"] and "CZ: initializing" in msg["text"]
+    # A node that used samples before the dashboard joined, with outputs not kept for it.
+    statuses[1] = (f"{NODE_NAME}: samples", 0, "591 of 599 samples used", {"samples_used": "591"})
+    msg = hub.add_diagnostics(statuses)
+    assert msg["state"] == "no_samples" and "has used 591 samples, none received here yet" in msg["text"]
 
 
 def test_the_page_says_when_the_node_it_showed_is_gone():
@@ -351,6 +355,23 @@ def test_a_hub_sends_samples_as_columns_and_restarts_a_model_whose_time_goes_bac
     assert hub.history_resets == 1 and hub.histories[(TIME_DOMAIN, "CZ")].size == 1
     assert hub.snapshot()["methods"][TIME_DOMAIN]["CZ"]["t"] == [5e-9]
     assert hub.add_arrays([(_key("estimates"), None, None)]) == [] and hub.pairing.dropped == {"undecodable": 1}
+
+
+def test_a_sample_completed_after_a_newer_one_is_dropped_and_counted_not_taken_for_a_restart():
+    """A late joiner's burst of kept samples may complete a sample after a newer one (a late
+    partner array): it is dropped and counted, the history stays; a sample older than the
+    pairing window is a restart (a looped replay), as before."""
+    hub = _live_hub()
+    stamps = [1000 + 10 * k for k in range(MAX_PENDING + 5)]
+    hub.add_arrays(_arrays(stamps[:-2]))
+    (msg,) = hub.add_arrays(_arrays([stamps[-1], stamps[-2]]))  # the newer completes first
+    assert msg["models"]["CZ"]["t"] == [stamps[-1] * 1e-9]
+    assert hub.pairing.dropped == {"out_of_order": 1} and hub.history_resets == 0
+    assert hub.histories[(TIME_DOMAIN, "CZ")].last_stamp == stamps[-1]
+    hub.add_arrays(_arrays([stamps[-1]]))  # a duplicate of the newest
+    assert hub.pairing.dropped == {"out_of_order": 2} and hub.history_resets == 0
+    hub.add_arrays(_arrays([stamps[-MAX_PENDING - 3]]))  # behind the window: time went back
+    assert hub.history_resets == 1 and hub.histories[(TIME_DOMAIN, "CZ")].size == 1
 
 
 # ------------------------------------------------------------------ options

@@ -255,15 +255,14 @@ def _wait_for_stamp(page, stamp: int) -> None:
 def test_a_dashboard_started_after_the_node_shows_its_latest_values_at_once(tmp_path, browser):
     """The bag is played to the node first; the dashboard starts afterwards and gets the node's
     last samples and fits from the outputs kept for late joiners (transient local): the page
-    shows the node's last published values and flags, and only the few samples the node kept
-    (its history starts when it joined)."""
+    shows the node's last published values, flags, autocorrelation and identifiability."""
     node = NodeProcess(tmp_path, "--params-file", T2, *REPLAY_NODE)
     dashboard = None
     rclpy.init()
     recorder = _Recorder("/rls_estimator")
     try:
         play = subprocess.run([sys.executable, "-m", "rls_uncertainty.cli", "play", str(ROOT / "bags" / "t2_maneuver"),
-                               "--rate", "4", "--wait", "1"], capture_output=True, text=True, cwd=ROOT, timeout=300)
+                               "--rate", "1", "--wait", "1"], capture_output=True, text=True, cwd=ROOT, timeout=300)
         assert play.returncode == 0, play.stderr
         recorder.wait_quiet(500)
         stamp, last = recorder.last()
@@ -272,8 +271,6 @@ def test_a_dashboard_started_after_the_node_shows_its_latest_values_at_once(tmp_
         _wait_for_stamp(browser, stamp)
         _expect_shown(_shown(browser), last)
         _expect_fits(browser, recorder.last_fits())
-        kept = browser.evaluate("['CZ', 'Cm'].map(k => window.rlsState.models.get(k).methods.time.t.length)")
-        assert all(1 <= n <= 50 for n in kept), kept  # the subscription's depth, not the whole maneuver
         assert browser.get_attribute("#banner", "data-state") == "running"
     finally:
         recorder.node.destroy_node()

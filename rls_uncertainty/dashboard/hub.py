@@ -16,7 +16,7 @@ from typing import Any
 
 from .fit import Fit, Identifiability, fit_of, identifiability_of, quality_json
 from .health import HealthTracker, StatusTuple, parse_statuses
-from .model import FIT_ARRAYS, ArrayKey, ModelHistory, Pairing, Sample, array_update, sample_columns
+from .model import FIT_ARRAYS, MAX_PENDING, ArrayKey, ModelHistory, Pairing, Sample, array_update, sample_columns
 
 __all__ = ["Source", "Hub"]
 
@@ -80,8 +80,7 @@ class Hub:
                 self.pairing.count("bad_layout")
                 continue
             s = self.pairing.add(update)
-            if s is not None:
-                self._store(s)
+            if s is not None and self._store(s):
                 done.setdefault((s.method, s.model), []).append(s)
         return self._samples_messages(done) + [self._quality(k) for k in dict.fromkeys(changed)]
 
@@ -89,8 +88,8 @@ class Hub:
         """Feed complete samples (a replay's ``estimates.csv``); their ``samples`` messages."""
         done: dict[tuple[str, str], list[Sample]] = {}
         for s in samples:
-            self._store(s)
-            done.setdefault((s.method, s.model), []).append(s)
+            if self._store(s):
+                done.setdefault((s.method, s.model), []).append(s)
         return self._samples_messages(done)
 
     def _samples_messages(self, done: Mapping[tuple[str, str], list[Sample]]) -> list[dict]:
@@ -130,19 +129,29 @@ class Hub:
                 out.append(message)
         return out
 
-    def _store(self, s: Sample) -> None:
+    def _store(self, s: Sample) -> bool:
+        """Keep ``s`` in its model's history; False when it is dropped (and counted) as a
+        sample completed after a newer one: a late partner array among the newest
+        :data:`.model.MAX_PENDING` samples (a late joiner's burst of kept samples), or a
+        duplicate."""
         which = (s.method, s.model)
         h = self.histories.get(which)
+        if h is not None and h.names == s.names and h.last_stamp is not None and s.stamp_ns <= h.last_stamp:
+            floor = h.stamp_from_end(MAX_PENDING)
+            if floor is not None and s.stamp_ns >= floor:
+                self.pairing.count("out_of_order")
+                return False
         if h is None or h.names != s.names or (h.last_stamp is not None and s.stamp_ns <= h.last_stamp):
-            # A new model, another set of parameters, or time going back (a node reset, a
-            # looped replay): the display history restarts for this model (the page does the
-            # same when it sees the time go back).
+            # A new model, another set of parameters, or time going back further than the
+            # pairing window (a looped replay): the display history restarts for this model
+            # (the page does the same when it sees the time go back).
             if h is not None:
                 self.history_resets += 1
             h = self.histories[which] = (ModelHistory(s.names) if self._capacity is None
                                          else ModelHistory(s.names, self._capacity))
         h.append(s)
         self.samples_total += 1
+        return True
 
     def replay_finished(self, error: str = "") -> dict:
         """The replay file has been read (to its end, or up to ``error``); the ``health`` message."""
@@ -200,6 +209,11 @@ class Hub:
             if health is None:
                 return {"state": "waiting_diagnostics",
                         "text": f"Node {s.node} is running; no sample yet, waiting for its /diagnostics."}
+            used = health.samples.get("samples_used", "0")
+            if used not in ("", "0"):  # it published before this dashboard joined
+                return {"state": "no_samples",
+                        "text": f"Node {s.node} has used {used} samples, none received here yet: its outputs do not "
+                                "keep samples for late joiners (volatile), so the page starts with its next sample."}
             text = (f"Node {s.node} has published no sample yet: {health.samples_message}; "
                     f"inputs: {health.inputs_message}")
             not_ready = [f"{m}: {v.get('message', '')}" for m, v in health.models.items() if v.get("ready") != "True"]

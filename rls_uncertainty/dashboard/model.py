@@ -216,6 +216,10 @@ class ModelHistory:
     def last_stamp(self) -> int | None:
         return int(self._t[self.size - 1]) if self.size else None
 
+    def stamp_from_end(self, k: int) -> int | None:
+        """The stamp of the ``k``-th newest sample (the oldest when fewer are held)."""
+        return int(self._t[max(0, self.size - k)]) if self.size else None
+
     def columns(self, start: int = 0) -> dict:
         """Samples ``start`` onwards as JSON-ready columns: ``t`` (s), and per quantity one list
         per parameter."""

@@ -44,6 +44,8 @@ from .settings import split_node_name
 __all__ = ["RosSource"]
 
 GRAPH_PERIOD_S = 1.0
+DEPTH = 50  # queue of each subscription of a volatile publisher (1 s of samples at 50 Hz)
+DURABLE_DEPTH = 1000  # of a transient-local one: 20 s at 50 Hz, ten times the node's default qos.depth
 # No QoS-event handlers on the subscriptions: rclpy's executor walks each one at every wait
 # (about 20 us of the 80 us an array cost); the QoS asked for is the publisher's anyway.
 _NO_EVENTS = SubscriptionEventCallbacks(use_default_callbacks=False)
@@ -105,7 +107,10 @@ class RosSource:
             return  # the publisher went away again; looked at next time
         durable = all(i.qos_profile.durability == DurabilityPolicy.TRANSIENT_LOCAL for i in infos)
         reliable = all(i.qos_profile.reliability == ReliabilityPolicy.RELIABLE for i in infos)
-        qos = QoSProfile(depth=50, history=QoSHistoryPolicy.KEEP_LAST,
+        # A late joiner takes the samples the node kept at once (discovery does not tell their
+        # number): up to DURABLE_DEPTH, so that each array's queue keeps the same window and
+        # the arrays of a sample find their partners.
+        qos = QoSProfile(depth=DURABLE_DEPTH if durable else DEPTH, history=QoSHistoryPolicy.KEEP_LAST,
                          reliability=ReliabilityPolicy.RELIABLE if reliable else ReliabilityPolicy.BEST_EFFORT,
                          durability=DurabilityPolicy.TRANSIENT_LOCAL if durable else DurabilityPolicy.VOLATILE)
         put = self._put
