@@ -236,7 +236,7 @@ def test_why_a_parameter_is_not_identifiable_is_read_from_the_published_figures_
                           diagnostics=node_config(params))
     pipe = result.pipeline
     layout = OutputLayout.of(pipe)
-    hub = _live_hub()
+    hub = Hub(Source("live", f"/{NODE_NAME}"))  # the replay's statuses are the root node's
     hub.add_diagnostics([(st.name, st.level, st.message, dict(st.values)) for st in result.diagnostics[-1][1]])
     arrays = [(ArrayKey(TIME_DOMAIN, *layout.fit_topics[i][0].split("/")), decode(FLOAT64_MULTIARRAY, raw), None)
               for i, raw in layout.encode_fit(pipe)]
@@ -301,7 +301,7 @@ def test_the_page_says_why_a_seen_node_has_no_samples_from_its_diagnostics():
     assert msg["state"] == "no_samples"
     assert "control_surfaces rejected 40" in msg["text"] and "CZ: initializing" in msg["text"]
     # A node that used samples before the dashboard joined, with outputs not kept for it.
-    statuses[1] = (f"{NODE_NAME}: samples", 0, "591 of 599 samples used", {"samples_used": "591"})
+    statuses[1] = (statuses[1][0], 0, "591 of 599 samples used", {"samples_used": "591"})
     msg = hub.add_diagnostics(statuses)
     assert msg["state"] == "no_samples" and "has used 591 samples, none received here yet" in msg["text"]
 
