@@ -90,6 +90,20 @@ def test_an_array_whose_partners_never_come_is_dropped_and_counted_not_paired_wi
     assert pairing.dropped == {"unpaired": 1}
 
 
+def test_a_late_joiners_burst_of_kept_samples_one_array_after_the_other_pairs_up():
+    """A transient-local late joiner receives every kept sample of one array, then of the next:
+    each array's messages in order, far more than MAX_PENDING stamps apart from their partners.
+    Every sample completes, in stamp order, nothing is dropped; waiting stamps are bounded."""
+    stamps = [1_000_000_000 + 20_000_000 * k for k in range(5 * MAX_PENDING)]
+    pairing = Pairing()
+    done = [s for suffix in PAIRED for stamp in stamps if (s := pairing.add(_update(stamp, suffix))) is not None]
+    assert [s.stamp_ns for s in done] == stamps and pairing.dropped == {}
+    bounded = Pairing(max_stamps=10)
+    for stamp in stamps[:25]:
+        bounded.add(_update(stamp, "estimates"))  # partners that never come
+    assert bounded.dropped == {"unpaired": 15} and len(bounded._pending[(TIME_DOMAIN, "CZ")]) == 10
+
+
 def test_refused_arrays_are_counted_by_reason():
     pairing = Pairing()
     bad = ArrayUpdate("CZ", "estimates", NAMES, (1.0, float("nan"), 2.0), 1)

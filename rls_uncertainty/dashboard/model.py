@@ -12,8 +12,8 @@ Pairing. Every output array carries its sample's time in the label of its last d
 ``estimates``, ``standard_errors`` (corrected, Eqs. 20/22), ``standard_errors_conventional``
 (Eq. 13) and ``converged`` arrays *of the same stamp* have arrived, in whatever order and
 interleaved with other samples: never by arrival. An array whose partners never come (a lost
-message) is dropped, and counted, once :data:`MAX_PENDING` later samples of its model have
-completed.
+message) is dropped, and counted, once :data:`MAX_PENDING` samples of newer stamps of its
+model have completed.
 
 History. Each model keeps its completed samples in columns of bounded size: when
 :data:`HISTORY_CAPACITY` samples are held, every other sample of the older half is dropped,
@@ -47,6 +47,7 @@ __all__ = [
     "ModelHistory",
     "Pairing",
     "MAX_PENDING",
+    "MAX_WAITING",
     "HISTORY_CAPACITY",
 ]
 
@@ -57,7 +58,8 @@ PAIRED = ("estimates", "standard_errors", "standard_errors_conventional", "conve
 FIT_ARRAYS = ("fit", "identifiability")
 SHOWN = PAIRED + FIT_ARRAYS  # every array the dashboard subscribes to
 TIME_DOMAIN = "time"  # the method of ~/M/<array>: recursive least squares (Eqs. 9-22)
-MAX_PENDING = 64  # stamps per model awaiting their partner arrays
+MAX_PENDING = 64  # newer samples completed before a stamp's missing partner arrays count as lost
+MAX_WAITING = 4096  # stamps per model awaiting partners (a late joiner's burst of kept samples)
 HISTORY_CAPACITY = 20_000  # samples per model; 200 s at full rate at 50 Hz, older data thinned
 
 
@@ -124,16 +126,28 @@ class Sample:
 
 
 @dataclass
+class _Pending:
+    """A stamp's arrays so far, and how many samples of newer stamps completed since."""
+
+    arrays: dict[str, ArrayUpdate] = field(default_factory=dict)
+    overtaken: int = 0
+
+
+@dataclass
 class Pairing:
     """Completes samples from arrays paired by their stamps (see the module docstring).
-    ``dropped`` counts arrays refused, by reason."""
+    ``dropped`` counts arrays refused, by reason.
+
+    A stamp's arrays wait for their partners as long as fewer than ``max_pending`` samples of
+    *newer* stamps have completed: each array's messages come in order, so partners that did
+    not come before that many newer samples were lost. Counting newer samples, not all
+    samples, lets a late joiner's burst (every kept sample of one array, then of the next)
+    pair up. At most ``max_stamps`` stamps wait per model; beyond, the oldest are dropped."""
 
     max_pending: int = MAX_PENDING
+    max_stamps: int = MAX_WAITING
     dropped: dict[str, int] = field(default_factory=dict)
-    # per (method, model): stamp -> (samples completed when the stamp was first seen, its arrays)
-    _pending: dict[tuple[str, str], OrderedDict[int, tuple[int, dict[str, ArrayUpdate]]]] = field(
-        default_factory=dict)
-    _completed: dict[tuple[str, str], int] = field(default_factory=dict)
+    _pending: dict[tuple[str, str], OrderedDict[int, _Pending]] = field(default_factory=dict)
 
     def count(self, reason: str, n: int = 1) -> None:
         self.dropped[reason] = self.dropped.get(reason, 0) + n
@@ -148,13 +162,13 @@ class Pairing:
         if not all(math.isfinite(x) for x in update.data):
             self.count("non_finite")
             return None
-        which = (update.method, update.model)
-        pending = self._pending.setdefault(which, OrderedDict())
-        completed = self._completed.get(which, 0)
+        pending = self._pending.setdefault((update.method, update.model), OrderedDict())
         entry = pending.get(update.stamp_ns)
         if entry is None:
-            entry = pending[update.stamp_ns] = (completed, {})
-        arrays = entry[1]
+            entry = pending[update.stamp_ns] = _Pending()
+            while len(pending) > self.max_stamps:
+                self.count("unpaired", len(pending.popitem(last=False)[1].arrays))
+        arrays = entry.arrays
         if update.suffix in arrays:
             self.count("duplicate")
             return None
@@ -162,14 +176,12 @@ class Pairing:
         if len(arrays) < len(PAIRED):
             return None
         del pending[update.stamp_ns]
-        self._completed[which] = completed = completed + 1
-        # Arrays that have waited while max_pending later samples completed lost a partner.
-        while pending:
-            stamp, (born, lost) = next(iter(pending.items()))
-            if completed - born <= self.max_pending:
-                break
-            del pending[stamp]
-            self.count("unpaired", len(lost))
+        for stamp in [s for s, e in pending.items() if s < update.stamp_ns]:
+            waiting = pending[stamp]
+            waiting.overtaken += 1
+            if waiting.overtaken > self.max_pending:  # its partners were lost
+                del pending[stamp]
+                self.count("unpaired", len(waiting.arrays))
         names = {a.names for a in arrays.values()}
         if len(names) != 1:
             self.count("mismatched_names", len(arrays))
