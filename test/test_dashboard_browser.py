@@ -112,6 +112,15 @@ def _shot(page, tmp_path: Path, name: str) -> Path:
     return path
 
 
+def _shot_of(page, selector: str, tmp_path: Path, name: str) -> None:
+    """A screenshot of one element of the page (as _shot)."""
+    path = tmp_path / name
+    page.locator(selector).screenshot(path=str(path))
+    if os.environ.get("RLS_DASHBOARD_SCREENSHOTS"):
+        shutil.copy(path, Path(os.environ["RLS_DASHBOARD_SCREENSHOTS"]) / name)
+    assert path.stat().st_size > 10_000
+
+
 def _shown(page) -> dict[str, tuple[str, str]]:
     """Per parameter panel: (latest value as displayed, convergence badge)."""
     return page.evaluate("""() => Object.fromEntries([...document.querySelectorAll('.panel')].map(p =>
@@ -327,6 +336,7 @@ def test_replay_page_shows_the_final_values_of_the_replays_estimates_csv(tmp_pat
                 assert (text, tag) == (f"not identifiable: model explains nothing (R^2 {r2:.3f})", True), name
             else:
                 assert text.startswith("identifiable") and not tag, name
+        _shot_of(browser, "section.model[data-model='Cm']", tmp_path, "dashboard_held_back.png")
         assert browser.query_selector("nav#window button.active").get_attribute("data-window") == "0"  # all
         _shot(browser, tmp_path, "dashboard_replay.png")
     finally:
