@@ -10,7 +10,12 @@ parameters; frequency domain the same without the bias: 2, 3, 2, 5, 3, 3), 50 la
      all outputs when they are evaluated every sample, every 5 and every 50 samples
      (``every``; the mean per sample over a whole period);
   3. the evaluation against the number of frequencies (36 to 400);
-  4. the memory of each bank's state.
+  4. the memory of each bank's state;
+  5. the whole pipeline (``replay.run_pipeline``: sampling, differentiation, aerodynamics, both
+     estimators, convergence, identifiability) per sample used, with ``estimator.method`` time,
+     both and frequency (``frequency.every`` 1 and 5), on the bundled T-2 bag (``config/t2.yaml``:
+     2 models, 51 frequencies) and, when ``../shared/flight_data`` is there, the Twin Otter
+     lateral recording f1_017 (3 models, 36 frequencies); best of three runs (wall time).
 
 The rows are ``estimator_benchmark.maneuver``'s (multisine-like regressors, AR(1) noise).
 Median (and 99th percentile) over 2000 samples after 300 of warm-up. numpy's BLAS threads as
@@ -33,8 +38,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from estimator_benchmark import RATE, SIZES, maneuver  # the time-domain benchmark's six models and rows
 
-from rls_uncertainty.estimator import EstimatorBank
+from rls_uncertainty.estimator import EstimatorBank, EstimatorOptions
 from rls_uncertainty.frequency import FrequencyBank, FrequencyOptions
+
+ROOT = Path(__file__).resolve().parents[1]
 
 WARM, SAMPLES = 300, 2000
 
@@ -54,7 +61,7 @@ def timed(step, n: int) -> tuple[float, float]:
 
 
 def time_domain(X: np.ndarray, z: np.ndarray) -> tuple[float, float]:
-    bank = EstimatorBank(SIZES, 50)
+    bank = EstimatorBank(SIZES, EstimatorOptions(lags=50))
     for k in range(WARM):
         bank.update(X[k], z[k])
 
@@ -131,7 +138,7 @@ def main() -> None:
         opts = FrequencyOptions(rate_hz=RATE, f_min=0.1, f_max=0.1 + (K - 1) * 0.05, f_step=0.05)
         med, _ = frequency_domain(opts, X, z, outputs=True)
         print(f"   K = {K:3d}: {med:8.1f} us")
-    td = EstimatorBank(SIZES, 50)
+    td = EstimatorBank(SIZES, EstimatorOptions(lags=50))
     fd = FrequencyBank([s - 1 for s in SIZES], FrequencyOptions(rate_hz=RATE, f_min=0.2, f_max=2.2))
     for k in range(200):
         td.update(X[k], z[k])
@@ -141,5 +148,35 @@ def main() -> None:
           f"frequency domain (51 frequencies) {state_bytes(fd) / 1024:.0f} KiB")
 
 
+def pipeline_costs() -> None:
+    """Section 5: microseconds per sample used through the whole pipeline, per method."""
+    import tempfile
+
+    from rls_uncertainty.bags import convert, read_inputs
+    from rls_uncertainty.config import load_parameters_file, pipeline_config
+    from rls_uncertainty.replay import run_pipeline
+
+    variants = {"time": {}, "both": {"estimator.method": "both"}, "both, every 5": {
+        "estimator.method": "both", "frequency.every": 5}, "frequency": {"estimator.method": "frequency"}}
+    data = ROOT.parent / "shared" / "flight_data" / "totter_f1_017"
+    with tempfile.TemporaryDirectory(prefix="freq_bench_") as work:
+        cases = {"T-2 bag, config/t2.yaml": (ROOT / "bags" / "t2_maneuver", "t2")}
+        if data.exists():
+            convert(data, ROOT / "msg_schemas" / "fti_msgs" / "mapping.yaml", Path(work) / "f1_017")
+            cases["Twin Otter f1_017, twin_otter_lateral"] = (Path(work) / "f1_017", "twin_otter_lateral")
+        print("5. the pipeline per sample used (us, best of 3; sampling to outputs, no files):")
+        for label, (bag, config_name) in cases.items():
+            messages, _ = read_inputs(bag)
+            line = f"   {label:38s}"
+            for name, extra in variants.items():
+                config = pipeline_config({**load_parameters_file(config_name), **extra})
+                best = min(run_pipeline(messages, config, record=False, keep_outputs=False).wall_seconds
+                           for _ in range(3))
+                used = run_pipeline(messages, config, record=False, keep_outputs=False).counters()["samples_used"]
+                line += f" | {name}: {best / used * 1e6:6.0f}"
+            print(line)
+
+
 if __name__ == "__main__":
     main()
+    pipeline_costs()

@@ -121,7 +121,7 @@ def model_fit(bank: EstimatorBank, j: int, r2: float, withheld_now: bool, withhe
         "ready": True,
         "samples": bank.k,
         # The largest lag of Eq. 22 the corrected covariance uses now (at most
-        # estimator.lags; chosen per model with automatic lags).
+        # the lag span times the rate; chosen per model with automatic lags).
         "lags": int(bank.lags_used[j]),
         "r_squared": float(r2),
         "residual_rho1": float(rho[0]) if rho.size else float("nan"),

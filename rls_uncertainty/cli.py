@@ -65,17 +65,20 @@ def _simulate(args: argparse.Namespace) -> int:
 def _montecarlo(args: argparse.Namespace) -> int:
     """Table 3 of the paper: every noise level, ``--runs`` runs each, on every core."""
     from .estimator import EstimatorOptions
+    from .executors import executor_for
     from .files import output_directory
     from .montecarlo import LEVELS, run_table3, write_outputs
 
     levels = LEVELS if args.levels is None else tuple(x / 100.0 for x in args.levels)
     out = Path(args.out)
     options = EstimatorOptions(lags=args.lags, residual_burn_in=_bank_burn_in(args.burn_in))
+    executor = executor_for(args.scheduler, args.jobs, "--jobs")
     # The output directory is checked before the runs and appears only when complete.
     with output_directory(out, force=args.force) as tmp:
         print(f"Monte Carlo: {args.runs} runs x {len(levels)} levels, {options.lags} lags, residual burn-in "
-              f"{options.burn_in}, {args.jobs or 'all'} processes")
-        results = run_table3(args.runs, levels, options=options, jobs=args.jobs)
+              f"{options.burn_in}, band-limited noise on {_noise_on_name(args.noise_on)}, {executor.description}")
+        results = run_table3(args.runs, levels, options=options, executor=executor,
+                             band_limited_on=_noise_on(args.noise_on))
         paths = write_outputs(results, tmp, figures=not args.no_figures)
         table = paths["md"].read_text()
     print(table)
@@ -115,11 +118,68 @@ def _multisine(args: argparse.Namespace) -> int:
     return 0
 
 
+def _gust(value: str) -> float:
+    """--gust-intensity: sigma_w in m/s (a number >= 0) or light / moderate / severe
+    (MIL-F-8785C low altitude, :data:`.turbulence.LOW_ALTITUDE_SIGMA_W`)."""
+    from .turbulence import LOW_ALTITUDE_SIGMA_W
+
+    if value in LOW_ALTITUDE_SIGMA_W:
+        return LOW_ALTITUDE_SIGMA_W[value]
+    try:
+        return _real(0.0)(value)
+    except argparse.ArgumentTypeError:
+        raise argparse.ArgumentTypeError(f"must be sigma_w in m/s (a number >= 0) or one of "
+                                         f"{', '.join(LOW_ALTITUDE_SIGMA_W)}, got {value!r}") from None
+
+
+def _noise_on(value: str | None) -> tuple[str, ...]:
+    """--noise-on: the signals carrying the band-limited noise, 'all' four or the 'responses'
+    (None: the simulation's default)."""
+    from .simulation import BAND_LIMITED_ON, RESPONSES, SIGNALS
+
+    return BAND_LIMITED_ON if value is None else {"all": SIGNALS, "responses": RESPONSES}[value]
+
+
+def _noise_on_name(value: str | None) -> str:
+    """The name of --noise-on's value (the default's too)."""
+    from .simulation import RESPONSES
+
+    return value or ("responses" if _noise_on(value) == RESPONSES else "all")
+
+
+_NOISE_ON_HELP = ("measured signals carrying the band-limited noise: 'all' (elevator, alpha, q, a_z) or 'responses' "
+                  "(alpha, q, a_z) (default: the simulation's, docs/validation.md, Table 3)")
+
+
+def _make_campaign(args: argparse.Namespace) -> int:
+    """make-bag --campaign N: N seeded T-2 maneuvers in Dryden turbulence, one bag each."""
+    from .bags import write_campaign_bags
+    from .simulation import SimulationConfig
+    from .turbulence import DrydenVertical, scale_length
+
+    if args.gust_intensity is None:
+        raise ConfigError("--campaign needs --gust-intensity (sigma_w in m/s, or light, moderate or severe)")
+    gust = DrydenVertical(args.gust_intensity, scale_length(SimulationConfig().altitude))
+    paths = write_campaign_bags(args.out, args.campaign, gust, band_level=args.noise / 100.0,
+                                band_limited_on=_noise_on(args.noise_on), seed=args.seed, force=args.force)
+    print(f"wrote {len(paths)} replay bags to {args.out}: T-2 maneuvers in Dryden vertical gusts sigma_w "
+          f"{gust.sigma:.3g} m/s, L_w {gust.scale_length:.0f} m, {args.noise:g}% band-limited noise on "
+          f"{_noise_on_name(args.noise_on)}, seed {args.seed} (settings in {Path(args.out) / 'campaign.yaml'})")
+    return 0
+
+
 def _make_bag(args: argparse.Namespace) -> int:
     """Write the seeded T-2 maneuver on the node's standard input topics."""
     from .bags import write_t2_bag
 
-    path = write_t2_bag(args.out, args.noise / 100.0, args.seed, force=args.force)
+    if args.campaign is not None:
+        return _make_campaign(args)
+    if args.gust_intensity is not None:
+        raise ConfigError("--gust-intensity sets the turbulence of a simulated campaign: give --campaign N")
+    from .simulation import SIGNALS
+
+    on = SIGNALS if args.noise_on is None else _noise_on(args.noise_on)  # the bundled bag's: all four
+    path = write_t2_bag(args.out, args.noise / 100.0, args.seed, force=args.force, band_limited_on=on)
     size = sum(f.stat().st_size for f in path.iterdir())
     print(f"wrote {path} ({size / 1e6:.2f} MB): T-2 maneuver, {args.noise:g}% band-limited noise, seed {args.seed}")
     return 0
@@ -139,14 +199,14 @@ def _not_text(name: str, exc: UnicodeDecodeError) -> ConfigError:
     return ConfigError(f"{name}: not UTF-8 text (byte {exc.start})")
 
 
-def _replay_params(args: argparse.Namespace) -> dict[str, Any]:
+def _replay_params(args: argparse.Namespace, command: str = "replay") -> dict[str, Any]:
     from .config import PARAMETER_NAMES, node_parameters_file, pipeline_config
 
     params: dict[str, Any] = {}
     if args.config:  # read as the node reads it; what it ignores is said once
         from_file = node_parameters_file(args.config)
         for note in from_file.warnings:
-            print(f"rls-uncertainty replay: warning: {note}", file=sys.stderr)
+            print(f"rls-uncertainty {command}: warning: {note}", file=sys.stderr)
         params = {k: v for k, v in from_file.values.items() if k in PARAMETER_NAMES}
     if args.lag_span is not None:  # --lag-span decides the lag selection whatever the file said
         params["estimator.lag_selection"] = "auto" if args.lag_span == "auto" else "fixed"
@@ -162,6 +222,8 @@ def _replay_params(args: argparse.Namespace) -> dict[str, Any]:
         params["estimator.forgetting"] = args.forgetting
     if args.models:
         params["models.enabled"] = list(args.models)
+    if getattr(args, "method", None):  # replay only
+        params["estimator.method"] = args.method
     try:
         pipeline_config(params)  # every setting checked and the aircraft file read before any output
     except UnicodeDecodeError as exc:
@@ -178,9 +240,11 @@ def _yaml_file(name_or_path: str, directory: Path) -> Path:
 def _replay(args: argparse.Namespace) -> int:
     from .compare import DEFAULT_ATOL, DEFAULT_RTOL, comparable, compare_replays, read_run
     from .config import config_dir
-    from .replay import planned_run, replay, summary_table
+    from .figures import FigureOptions, figure_formats
+    from .replay import planned_run, replay, run_summary
 
     params = _replay_params(args)
+    figures = FigureOptions(figure_formats(args.figures), args.dpi)
     # Files the replay reads besides the bag: never replaced by its output, even with --force.
     inputs = [_yaml_file(args.config, config_dir())] if args.config else []
     if isinstance(params.get("aircraft"), str) and params["aircraft"]:
@@ -192,17 +256,10 @@ def _replay(args: argparse.Namespace) -> int:
         comparable(planned_run(params, start=args.start, end=args.end, strict=not args.lenient),
                    read_run(args.compare), bag=False)
     result = replay(args.bag, params, args.out, start=args.start, end=args.end, strict=not args.lenient,
-                    progress=not args.quiet, plots=not args.no_plots, force=args.force, inputs=inputs)
-    c = result.counters()
-    print(summary_table(result))
-    rejected = ", ".join(f"{k} {v}" for k, v in sorted(c["samples_rejected"].items())) or "none"
-    print(f"\n{c['samples_formed']} samples formed, {c['samples_used']} used; rejected: {rejected}")
-    for name, s in c["streams"].items():
-        if s["rejected"] or s["expired"] or s["missing"]:
-            print(f"  {name}: {s['received']} received, rejected {s['rejected']}, expired {s['expired']}, "
-                  f"missing (stamp gaps) {s['missing']}")
-    print(f"{result.n_messages} messages, {result.data_seconds:.1f} s of data in {result.wall_seconds:.2f} s "
-          f"({result.speed:.0f}x real time); wrote {args.out}")
+                    progress=not args.quiet, plots=not args.no_plots, figures=figures, force=args.force,
+                    inputs=inputs)
+    print(run_summary(result))
+    print(f"read in {result.wall_seconds:.2f} s ({result.speed:.0f}x real time); wrote {args.out}")
     # No model estimated anything: the summary above says why; a script must not take it for success.
     if not result.estimates:
         return 1
@@ -212,6 +269,37 @@ def _replay(args: argparse.Namespace) -> int:
         print(cmp.report())
         return 0 if cmp.equal else 1
     return 0
+
+
+def _campaign(args: argparse.Namespace) -> int:
+    """Many maneuvers through the replay's pipeline into Table 4 and Fig. 12 (docs/campaign.md)."""
+    from .campaign import CampaignSettings, campaign_to, from_bags, load_maneuvers
+    from .config import config_dir, node_config, pipeline_config
+    from .executors import executor_for
+    from .figures import FigureOptions, figure_formats
+
+    params = _replay_params(args, "campaign")
+    executor = executor_for(args.scheduler, args.workers)
+    if args.maneuvers:
+        if len(args.inputs) != 1:
+            raise ConfigError(f"--maneuvers cuts one recording into maneuvers; got {len(args.inputs)} INPUTs")
+        maneuvers = load_maneuvers(args.maneuvers, args.inputs[0])
+    else:
+        maneuvers = from_bags(args.inputs)
+    inputs = [_yaml_file(args.config, config_dir())] if args.config else []
+    if args.maneuvers:
+        inputs.append(args.maneuvers)
+    settings = CampaignSettings(pipeline_config(params), node_config(params).topics, strict=not args.lenient)
+    figures = None if args.no_plots else FigureOptions(figure_formats(args.figures), args.dpi)
+    result = campaign_to(args.out, maneuvers, settings, executor, progress=not args.quiet,
+                         figures=figures, force=args.force, inputs=inputs)
+    print(result.summary(), end="")
+    s = result.seconds()
+    print(f"{len(maneuvers)} maneuvers in {result.wall_seconds + result.write_seconds:.1f} s "
+          f"({result.per_minute:.0f} per minute) on {result.executor}; worker time: read {s.get('read', 0):.1f} s, "
+          f"pipeline {s.get('pipeline', 0):.1f} s, all lags {s.get('all_lags', 0):.1f} s; writing "
+          f"{result.write_seconds:.1f} s; wrote {args.out}")
+    return 0 if any(res.problem is None for res in result.results) else 1
 
 
 def _play(args: argparse.Namespace) -> int:
@@ -384,7 +472,10 @@ def _add_montecarlo(sub: Any) -> None:
     mc.add_argument("--lags", type=_lags, default=50,
                     help="retained lags, 'all', or 'auto' (chosen per run and model, at most 50) (default 50)")
     mc.add_argument("--burn-in", type=_burn_in, help=_BURN_IN_HELP)
-    mc.add_argument("--jobs", type=_integer(1), default=None, help="processes (default: every core)")
+    mc.add_argument("--jobs", type=_integer(1), default=None, help="local processes (default: every core)")
+    mc.add_argument("--scheduler", metavar="ADDRESS",
+                    help="run the levels on the Dask cluster whose scheduler listens at ADDRESS (tcp://host:8786)")
+    mc.add_argument("--noise-on", choices=("all", "responses"), help=_NOISE_ON_HELP)
     mc.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
     mc.add_argument("--force", action="store_true", help=_FORCE_HELP)
     mc.set_defaults(func=_montecarlo)
@@ -408,6 +499,16 @@ def _add_make_bag(sub: Any) -> None:
     mb.add_argument("--out", default="bags/t2_maneuver", help="bag directory (default bags/t2_maneuver)")
     mb.add_argument("--noise", type=_real(0.0), default=20.0, help="band-limited noise, percent (default 20)")
     mb.add_argument("--seed", type=_integer(0), default=250, help="noise seed (default 250)")
+    mb.add_argument("--campaign", type=_integer(1), metavar="N",
+                    help="write N maneuvers flown in turbulence, one replay bag each, into --out (a campaign for "
+                         "rls-uncertainty campaign; docs/campaign.md)")
+    mb.add_argument("--gust-intensity", type=_gust, metavar="SIGMA_W",
+                    help="with --campaign: RMS vertical gust in m/s, or light, moderate, severe (MIL-F-8785C low "
+                         "altitude: 0.77, 1.54, 2.31 m/s)")
+    mb.add_argument("--noise-on", choices=("all", "responses"),
+                    help="measured signals carrying the band-limited noise: 'all' (elevator, alpha, q, a_z) or "
+                         "'responses' (alpha, q, a_z) (default: all for one maneuver, the bundled bag's; with "
+                         "--campaign the simulation's, responses: docs/validation.md, Table 3)")
     mb.add_argument("--force", action="store_true", help=_FORCE_HELP)
     mb.set_defaults(func=_make_bag)
 
@@ -427,27 +528,15 @@ def _add_replay(sub: Any) -> None:
     rp.add_argument("bag", help="replay bag on the standard topics")
     rp.add_argument("--config", help="ROS parameter file, e.g. config/t2.yaml (default: node defaults)")
     rp.add_argument("--out", required=True, help="output directory")
-    rp.add_argument("--lag-span", type=_lag_span,
-                    help="override estimator.lag_span: seconds of residual autocorrelation kept (lags = seconds x "
-                         "rate), 'all', or 'auto' (estimator.lag_selection auto)")
-    rp.add_argument("--max-lag-span", type=_real(0.0, low_open=True),
-                    help="override estimator.max_lag_span, s (with auto)")
-    rp.add_argument("--burn-in-span", type=_burn_in_span,
-                    help="override estimator.residual_burn_in_span: seconds after each model's initialization whose "
-                         "residuals are left out of the residual autocorrelation, or 'default' (-1: 1 s with auto, "
-                         "0 with fixed lags)")
-    for old, new in (("--lags", "--lag-span SECONDS (lags / rate: 50 lags at 50 Hz = 1.0)"),
-                     ("--max-lags", "--max-lag-span SECONDS (max lags / rate)"),
-                     ("--burn-in", "--burn-in-span SECONDS (samples / rate)")):
-        rp.add_argument(old, action=_Renamed, renamed=new)
-    rp.add_argument("--window", choices=("truncated", "bartlett"), help="override estimator.window")
-    rp.add_argument("--forgetting", type=float, help="override estimator.forgetting")
-    rp.add_argument("--models", nargs="+", help="override models.enabled (e.g. CZ Cm)")
+    _add_estimator_overrides(rp)
+    rp.add_argument("--method", choices=("time", "frequency", "both"),
+                    help="override estimator.method: time-domain estimates (estimates.csv), frequency-domain ones "
+                         "(estimates_frequency.csv) or both")
     rp.add_argument("--start", type=_real(0.0), help="start, s from the bag start")
     rp.add_argument("--end", type=_real(0.0), help="end, s from the bag start (after --start)")
     rp.add_argument("--lenient", action="store_true",
                     help="pass out-of-order and duplicate stamps to the pipeline (counted like the node does)")
-    rp.add_argument("--no-plots", action="store_true")
+    _add_figure_options(rp, "no figures (summary.txt and the data files only)")
     rp.add_argument("--quiet", action="store_true", help="no progress bar")
     rp.add_argument("--force", action="store_true", help=_FORCE_HELP)
     rp.add_argument("--compare", metavar="DIR",
@@ -459,6 +548,61 @@ def _add_replay(sub: Any) -> None:
     rp.add_argument("--atol", type=_real(0.0), metavar="A",
                     help="--compare's absolute tolerance, in the units of each derivative (default 0)")
     rp.set_defaults(func=_replay)
+
+
+def _add_figure_options(parser: Any, no_plots: str) -> None:
+    """--no-plots, --figures and --dpi of replay and campaign (checked by figures.FigureOptions)."""
+    parser.add_argument("--no-plots", action="store_true", help=no_plots)
+    parser.add_argument("--figures", default="png", metavar="FORMATS",
+                        help="figure formats, comma separated, of png, svg, pdf (default png)")
+    parser.add_argument("--dpi", type=int, default=300,
+                        help="PNG resolution, dots per inch (default 300, 50 to 1200)")
+
+
+def _add_estimator_overrides(parser: Any) -> None:
+    """The estimator and model options ``replay`` and ``campaign`` share (over --config)."""
+    parser.add_argument("--lag-span", type=_lag_span,
+                        help="override estimator.lag_span: seconds of residual autocorrelation kept (lags = seconds x "
+                             "rate), 'all', or 'auto' (estimator.lag_selection auto)")
+    parser.add_argument("--max-lag-span", type=_real(0.0, low_open=True),
+                        help="override estimator.max_lag_span, s (with auto)")
+    parser.add_argument("--burn-in-span", type=_burn_in_span,
+                        help="override estimator.residual_burn_in_span: seconds after each model's initialization "
+                             "whose residuals are left out of the residual autocorrelation, or 'default' (-1: 1 s "
+                             "with auto, 0 with fixed lags)")
+    for old, new in (("--lags", "--lag-span SECONDS (lags / rate: 50 lags at 50 Hz = 1.0)"),
+                     ("--max-lags", "--max-lag-span SECONDS (max lags / rate)"),
+                     ("--burn-in", "--burn-in-span SECONDS (samples / rate)")):
+        parser.add_argument(old, action=_Renamed, renamed=new)
+    parser.add_argument("--window", choices=("truncated", "bartlett"), help="override estimator.window")
+    parser.add_argument("--forgetting", type=float, help="override estimator.forgetting")
+    parser.add_argument("--models", nargs="+", help="override models.enabled (e.g. CZ Cm)")
+
+
+def _add_campaign(sub: Any) -> None:
+    cp = sub.add_parser("campaign", help="many maneuvers through the replay's pipeline into Table 4 and Fig. 12",
+                        description="Every maneuver through the replay's pipeline with the configured lags and with "
+                                    "all lags; writes maneuvers.csv, table4.csv, table4.md, summary.txt and "
+                                    "fig12_<model>.png to --out. Exit status 0 when some maneuver was estimated, 1 "
+                                    "when none was, 2 on bad input or an unreachable scheduler.")
+    cp.add_argument("inputs", nargs="+", metavar="INPUT",
+                    help="replay bags, one per maneuver; or one recording cut by --maneuvers")
+    cp.add_argument("--config", help="ROS parameter file, e.g. config/t2.yaml (default: node defaults)")
+    cp.add_argument("--out", required=True, help="output directory")
+    cp.add_argument("--maneuvers", metavar="FILE",
+                    help="YAML 'maneuvers:' list of {name, start, end} (s from the recording's start) cutting the "
+                         "one INPUT into maneuvers")
+    cp.add_argument("--scheduler", metavar="ADDRESS",
+                    help="run on the Dask cluster whose scheduler listens at ADDRESS (tcp://host:8786); its workers "
+                         "must read the INPUT paths (default: local processes)")
+    cp.add_argument("--workers", type=_integer(1), help="local worker processes (default: every core)")
+    _add_estimator_overrides(cp)
+    cp.add_argument("--lenient", action="store_true",
+                    help="pass out-of-order and duplicate stamps to the pipeline (counted like the node does)")
+    _add_figure_options(cp, "skip the Fig. 12 plots")
+    cp.add_argument("--quiet", action="store_true", help="no progress bar")
+    cp.add_argument("--force", action="store_true", help=_FORCE_HELP)
+    cp.set_defaults(func=_campaign)
 
 
 def _add_play(sub: Any) -> None:
@@ -519,7 +663,7 @@ def _add_operator_commands(sub: Any) -> None:
 
 
 _SUBCOMMANDS = (_add_demo, _add_simulate, _add_montecarlo, _add_multisine, _add_make_bag, _add_convert, _add_replay,
-                _add_play, _add_operator_commands)
+                _add_campaign, _add_play, _add_operator_commands)
 
 
 def _version() -> str:

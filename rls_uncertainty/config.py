@@ -20,7 +20,7 @@ line naming the parameter, the reason and where the value came from, exit status
 * a parameter the node does not know (``estimator.lag``), given with ``-p`` (with no node
   prefix or this node's) or in a file section that names this node (``rls_estimator:``,
   ``/NAMESPACE/rls_estimator:``), with the closest known name as a suggestion
-  (``did you mean estimator.lags?``);
+  (``did you mean estimator.lag_span?``);
 * an unknown parameter in a wildcard section (``/**:``, ``/*:``) when it can only be meant for
   this node: in one of its groups (``estimator.``, ``inputs.``, ``limits.``, ...) or close to
   one of its names;
@@ -53,6 +53,8 @@ from .convergence import ConvergenceConfig
 from .differentiation import MAX_ORDER, MAX_WINDOW, MIN_WINDOW, DifferentiatorConfig
 from .errors import ConfigError
 from .estimator.options import MAX_BURN_IN, RESIDUALS, WINDOWS, EstimatorOptions, Lags
+from .frequency.options import MAX_LAGS as FREQUENCY_MAX_LAGS
+from .frequency.options import MAX_TRIM, FrequencyOptions
 from .identifiability import ANGLE, BIAS, NONDIMENSIONAL, IdentifiabilityConfig
 from .limits import PlausibilityLimits
 from .ros_arguments import (
@@ -86,6 +88,9 @@ __all__ = [
     "parameter_defaults",
     "pipeline_config",
     "estimator_options",
+    "frequency_options",
+    "METHODS",
+    "BIAS_REGRESSOR",
     "node_config",
     "load_parameters_file",
     "node_parameters_file",
@@ -141,6 +146,7 @@ REGRESSOR_UNITS: dict[str, str | None] = {
     "p_hat": NONDIMENSIONAL, "q_hat": NONDIMENSIONAL, "r_hat": NONDIMENSIONAL,
 }
 OUTPUTS = ("CX", "CY", "CZ", "Cl", "Cm", "Cn")
+BIAS_REGRESSOR = "1"  # the bias regressor of Eq. 2
 _PARAM_SUFFIX = {"1": "0", "p_hat": "p", "q_hat": "q", "r_hat": "r"}
 
 
@@ -168,6 +174,13 @@ class ModelConfig:
     def parameter_names(self) -> tuple[str, ...]:
         """``CZ_0, CZ_alpha, CZ_delta_e``: the output, then the regressor (bias as ``0``)."""
         return tuple(f"{self.output}_{_PARAM_SUFFIX.get(r, r)}" for r in self.regressors)
+
+    @property
+    def frequency_parameter_names(self) -> tuple[str, ...]:
+        """The parameters the frequency-domain method estimates: :attr:`parameter_names`
+        without the bias (``CZ_alpha, CZ_delta_e``), whose regressor ``"1"`` the trim removes
+        (docs/frequency.md, F1)."""
+        return tuple(p for r, p in zip(self.regressors, self.parameter_names, strict=True) if r != BIAS_REGRESSOR)
 
 
 DEFAULT_MODELS = (
@@ -261,6 +274,8 @@ class ParamSpec:
 
 _EQ2 = {m.output: list(m.regressors) for m in DEFAULT_MODELS}
 LAG_SELECTIONS = ("fixed", "auto")
+# estimator.method: which estimates are published (docs/frequency.md, "In the node").
+METHODS = ("time", "frequency", "both")
 # residual_burn_in_span's default with automatic lags, s (AUTO_BURN_IN samples at the paper's 50 Hz).
 AUTO_BURN_IN_SPAN = 1.0
 MAX_LAGS = 100_000  # the most lags a span may ask for (the memory of Eq. 22's lag products)
@@ -323,6 +338,39 @@ PARAMETERS: tuple[ParamSpec, ...] = (
         f"(Eq. 17; the first residuals, while the estimate is still poor, inflate it), s; -1: {AUTO_BURN_IN_SPAN:g} s "
         "with estimator.lag_selection auto, 0 (the paper) with fixed lags",
         -1.0, 2000.0,
+    ),
+    ParamSpec(
+        "estimator.method", "time",
+        "estimates published: time (recursive least squares, ~/M/estimates ...), frequency (equation error on a "
+        "recursive Fourier transform, ~/M/frequency/estimates ...) or both (docs/frequency.md)",
+        choices=METHODS,
+    ),
+    ParamSpec("frequency.f_min", 0.1, "frequency-domain method: lowest frequency of the grid, Hz", 1e-6, 1000.0),
+    ParamSpec(
+        "frequency.f_max", 1.5,
+        "frequency-domain method: highest frequency of the grid (included when a whole number of f_step from "
+        "f_min), Hz; below rate / 2",
+        1e-6, 1000.0,
+    ),
+    ParamSpec("frequency.f_step", 0.04, "frequency-domain method: grid step, Hz (at most 1000 frequencies)", 1e-6,
+              1000.0),
+    ParamSpec(
+        "frequency.trim_span", 0.0,
+        "frequency-domain method: the trim subtracted from every signal is the mean of the samples of this first "
+        "span, s (steady flight before the excitation); 0: the first sample",
+        0.0, 200.0,
+    ),
+    ParamSpec(
+        "frequency.lag_span", 1.0,
+        "frequency-domain method: time span of the residual autocorrelation kept in the corrected covariance, s "
+        "(lags = lag_span x rate); 0 keeps R(0) only",
+        0.0, 2000.0,
+    ),
+    ParamSpec(
+        "frequency.every", 1,
+        "frequency-domain method: estimates and standard errors computed and published every this many samples "
+        "(the transform advances every sample)",
+        1, 1000000,
     ),
     ParamSpec("differentiator.window", 9, "angular-acceleration differentiator window, samples", MIN_WINDOW,
               MAX_WINDOW),
@@ -668,10 +716,14 @@ class PipelineConfig:
     convergence: ConvergenceConfig = field(default_factory=ConvergenceConfig)
     identifiability: IdentifiabilityConfig = field(default_factory=IdentifiabilityConfig)
     outputs: OutputConfig = OutputConfig()
+    # estimator.method and, unless it is "time", the frequency-domain estimator's options.
+    method: str = "time"
+    frequency: FrequencyOptions | None = None
 
     def __post_init__(self) -> None:
         if not (_finite(self.rate) and self.rate > 0):
             raise ConfigError(f"rate must be a positive number, got {self.rate!r}")
+        self._check_method()
         held = math.ceil(self.convergence.window * self.rate) + 2
         if held > self.convergence.max_samples:
             raise ConfigError(
@@ -695,6 +747,40 @@ class PipelineConfig:
                 f"inputs.max_gap ({self.inputs.max_gap} s) is shorter than one estimator sample "
                 f"(1/rate = {1 / self.rate:g} s)"
             )
+
+    def _check_method(self) -> None:
+        """``method`` and ``frequency`` agree, and every model has a parameter the frequency
+        domain estimates, on a grid with more frequencies than parameters (F5)."""
+        if self.method not in METHODS:
+            raise ConfigError(f"estimator.method must be one of {list(METHODS)}, got {self.method!r}")
+        if (self.method == "time") != (self.frequency is None):
+            raise ConfigError(f"estimator.method {self.method} needs frequency options exactly when it is not 'time'")
+        if self.frequency is None:
+            return
+        if self.frequency.rate_hz != self.rate:
+            raise ConfigError(f"frequency options at {self.frequency.rate_hz} Hz for a pipeline at rate {self.rate} Hz")
+        for m in self.models:
+            if not m.frequency_parameter_names:
+                raise ConfigError(f"model {m.output} has no regressor but the bias '1', which the frequency-domain "
+                                  f"method does not estimate (estimator.method: {self.method}): give models."
+                                  f"{m.output} a regressor, leave it out of models.enabled or use "
+                                  "estimator.method: time")
+        grid = self.frequency.frequencies().size
+        most = max(len(m.frequency_parameter_names) for m in self.models)
+        if grid <= most:
+            raise ConfigError(f"the frequency grid (frequency.f_min .. f_max every f_step) has {grid} frequencies, a "
+                              f"model {most} frequency-domain parameters: it needs more frequencies (lower "
+                              "frequency.f_step or widen the band)")
+
+    @property
+    def publishes_time(self) -> bool:
+        """``estimator.method`` publishes the time-domain estimates (``time``, ``both``)."""
+        return self.method != "frequency"
+
+    @property
+    def published_methods(self) -> tuple[str, ...]:
+        """The estimates ``estimator.method`` publishes: ``("time",)``, ``("frequency",)`` or both."""
+        return ("time",) * self.publishes_time + ("frequency",) * (self.frequency is not None)
 
     @property
     def period_ns(self) -> int:
@@ -748,6 +834,8 @@ def pipeline_config(params: dict[str, Any] | None = None) -> PipelineConfig:
         convergence=ConvergenceConfig(**_section(v, "convergence")),  # rate_hz: the pipeline uses rate
         identifiability=IdentifiabilityConfig(**_section(v, "identifiability")),
         outputs=OutputConfig(**_section(v, "outputs")),
+        method=v["estimator.method"],
+        frequency=frequency_options(v),
     )
 
 
@@ -800,6 +888,28 @@ def estimator_options(values: dict[str, Any]) -> EstimatorOptions:
         residual=values["estimator.residual"],
         max_lags=_span_samples("estimator.max_lag_span", values["estimator.max_lag_span"], rate, MAX_LAGS),
         residual_burn_in=_span_samples("estimator.residual_burn_in_span", burn_in, rate, MAX_BURN_IN) if burn_in else 0,
+    )
+
+
+def frequency_options(values: dict[str, Any]) -> FrequencyOptions | None:
+    """The ``frequency.*`` parameters as :class:`.frequency.FrequencyOptions`, or None when
+    ``estimator.method`` is ``time`` (then they are not used, and a grid the rate cannot carry
+    is not refused). The spans follow time: ``frequency.trim_span`` seconds are the
+    ``trim_samples`` averaged as trim (0: the first sample), ``frequency.lag_span`` the
+    ``n_lags`` (0: none); the grid is in Hz, ``frequency.every`` in samples. Raises
+    :class:`ConfigError` naming the parameter."""
+    if values["estimator.method"] == "time":
+        return None
+    rate = values["rate"]
+    trim, lags = values["frequency.trim_span"], values["frequency.lag_span"]
+    return FrequencyOptions(
+        rate_hz=rate,
+        f_min=values["frequency.f_min"],
+        f_max=values["frequency.f_max"],
+        f_step=values["frequency.f_step"],
+        trim_samples=_span_samples("frequency.trim_span", trim, rate, MAX_TRIM) if trim else 1,
+        n_lags=_span_samples("frequency.lag_span", lags, rate, FREQUENCY_MAX_LAGS) if lags else 0,
+        every=values["frequency.every"],
     )
 
 

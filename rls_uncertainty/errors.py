@@ -20,6 +20,8 @@ __all__ = [
     "UnknownName",
     "NotComparable",
     "LiveTimeout",
+    "SchedulerUnreachable",
+    "WorkerLost",
 ]
 
 
@@ -66,3 +68,12 @@ class NotComparable(RlsUncertaintyError, ValueError):
 class LiveTimeout(RlsUncertaintyError, TimeoutError):
     """A live node under test (:mod:`.testing`) did not do what was waited for in time; the
     message says what was missing and where the node's log is."""
+
+
+class SchedulerUnreachable(RlsUncertaintyError, ConnectionError):
+    """The Dask scheduler given with ``--scheduler`` did not answer in time; the message gives
+    the address and the timeout."""
+
+
+class WorkerLost(RlsUncertaintyError, RuntimeError):
+    """A job that no worker finished (its worker died in every attempt); the message names it."""

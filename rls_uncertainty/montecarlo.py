@@ -12,10 +12,8 @@ from __future__ import annotations
 
 import csv
 import math
-import os
 import time
-from collections.abc import Callable, Sequence
-from concurrent.futures import ProcessPoolExecutor, as_completed
+from collections.abc import Callable, Collection, Sequence
 from dataclasses import KW_ONLY, dataclass, field, replace
 from pathlib import Path
 
@@ -24,9 +22,20 @@ import numpy as np
 from .config import REGRESSOR_UNITS
 from .convergence import ConvergenceConfig, ConvergenceMonitor
 from .differentiation import DifferentiatorConfig
+from .errors import WorkerLost
 from .estimator import EstimatorBank, EstimatorOptions, Lags, batch_estimate
+from .executors import Executor, LocalProcesses, Lost
 from .identifiability import IdentifiabilityConfig, IdentifiabilityMonitor
-from .simulation import T2_MODELS, T2_TRUE, SimulationConfig, add_noise, reduce_short_period, simulate_short_period
+from .simulation import (
+    BAND_LIMITED_ON,
+    SIGNALS,
+    T2_MODELS,
+    T2_TRUE,
+    SimulationConfig,
+    add_noise,
+    reduce_short_period,
+    simulate_short_period,
+)
 
 __all__ = [
     "LEVELS",
@@ -118,6 +127,7 @@ class LevelResult:
     # (5 parameters, then any parameter of the C_Z / C_m model), each sample
     lags_used: np.ndarray | None = None  # (runs, 2) final L of C_Z / C_m (chosen with lags="auto")
     options: EstimatorOptions = TABLE3_OPTIONS  # of se_corrected and se_conventional
+    band_limited_on: tuple[str, ...] = BAND_LIMITED_ON  # the measured signals with band-limited noise (add_noise)
 
     @property
     def lags(self) -> Lags:
@@ -159,9 +169,10 @@ def parameter_cells(runs: int) -> tuple[np.ndarray, np.ndarray]:
 
 
 def level_inputs(
-    level: float, runs: int, *, seed: int = 2016
+    level: float, runs: int, *, seed: int = 2016, band_limited_on: Collection[str] = BAND_LIMITED_ON
 ) -> tuple[np.ndarray, list[dict[str, tuple[np.ndarray, np.ndarray]]], list[int], np.ndarray, np.ndarray]:
-    """Regressors and outputs of every run of one noise level, as the bank takes them.
+    """Regressors and outputs of every run of one noise level, as the bank takes them, with
+    the band-limited noise on the signals ``band_limited_on`` (:func:`.simulation.add_noise`).
 
     Returns ``(t, reductions, sizes, X, Z)``: sample times (N,), each run's reduced data
     (``{"CZ": (X, z), "Cm": (X, z)}``), the model sizes (run ``r``'s C_Z model is bank row
@@ -171,7 +182,8 @@ def level_inputs(
     reductions = []
     for run in range(runs):
         rng = np.random.default_rng([seed, int(round(level * 1000)), run])
-        t, data = reduce_short_period(add_noise(clean, level, rng), PAPER_DIFFERENTIATOR)
+        t, data = reduce_short_period(add_noise(clean, level, rng, band_limited_on=band_limited_on),
+                                      PAPER_DIFFERENTIATOR)
         reductions.append(data)
     sizes = [len(m.regressors) for m in T2_MODELS] * runs
     n_models = len(T2_MODELS)
@@ -314,16 +326,18 @@ def run_level(
     seed: int = 2016,
     convergence: ConvergenceConfig = MONTE_CARLO_CONVERGENCE,
     identifiability: IdentifiabilityConfig = NODE_IDENTIFIABILITY,
+    band_limited_on: Collection[str] = BAND_LIMITED_ON,
 ) -> LevelResult:
     """All runs of one band-limited noise level (fraction, e.g. 0.2) with the estimator
-    ``options`` (default: 50 lags, the paper's). With ``lags="auto"`` each run's models
+    ``options`` (default: 50 lags, the paper's), the band-limited noise on the signals
+    ``band_limited_on`` (:func:`.simulation.add_noise`). With ``lags="auto"`` each run's models
     choose their lags and the batch formula uses each model's final choice. A second bank
     with all lags and the paper's Eq. 17 gives the all-lags comparison and Figs. 5 and 7.
 
     Besides the end-of-maneuver results, the convergence flags and the ensemble statistics
     of every sample are recorded (:class:`_Tracker`).
     """
-    t, reductions, sizes, X, Z = level_inputs(level, runs, seed=seed)
+    t, reductions, sizes, X, Z = level_inputs(level, runs, seed=seed, band_limited_on=band_limited_on)
     bank = EstimatorBank(sizes, options)
     bank_all = EstimatorBank(sizes, EstimatorOptions(lags="all"))
     track = _Tracker(t, runs, sizes, convergence, identifiability)
@@ -342,8 +356,15 @@ def run_level(
         se_batch=se_batch, se_batch_all=se_batch_all,
         last_run=_last_run(bank_all, reductions),
         convergence=convergence, identifiability=identifiability, lags_used=lags_used, options=options,
+        band_limited_on=tuple(s for s in SIGNALS if s in set(band_limited_on)),
         **track.results(),
     )
+
+
+def _level(job: tuple[float, int, EstimatorOptions, ConvergenceConfig, tuple[str, ...]]) -> LevelResult:
+    """:func:`run_level` of one job of :func:`run_table3` (a picklable top-level function)."""
+    level, runs, options, convergence, band_limited_on = job
+    return run_level(level, runs, options=options, convergence=convergence, band_limited_on=band_limited_on)
 
 
 def run_table3(
@@ -354,26 +375,25 @@ def run_table3(
     jobs: int | None = None,
     progress: Callable[[str], object] = print,
     convergence: ConvergenceConfig = MONTE_CARLO_CONVERGENCE,
+    band_limited_on: Collection[str] = BAND_LIMITED_ON,
+    executor: Executor | None = None,
 ) -> list[LevelResult]:
-    """Run every level with the estimator ``options``, in parallel over ``jobs`` processes
-    (default: every core)."""
-    jobs = jobs or os.cpu_count() or 1
-    results: dict[float, LevelResult] = {}
+    """Run every level with the estimator ``options`` and the band-limited noise on
+    ``band_limited_on``, one job per level on ``executor`` (default: ``jobs`` local
+    processes, every core by default; or a Dask cluster, :mod:`.executors`). A level no worker
+    finished is a :class:`.errors.WorkerLost`."""
+    executor = executor or LocalProcesses(jobs)
     t0 = time.perf_counter()
-    if jobs == 1 or len(levels) == 1:
-        for lv in levels:
-            results[lv] = run_level(lv, runs, options=options, convergence=convergence)
-            progress(f"  level {lv * 100:4.0f}%: {runs} runs done ({time.perf_counter() - t0:5.1f} s)")
-    else:
-        with ProcessPoolExecutor(max_workers=jobs) as pool:
-            futures = {pool.submit(run_level, lv, runs, options=options, convergence=convergence): lv
-                       for lv in levels}
-            for i, fut in enumerate(as_completed(futures), 1):
-                lv = futures[fut]
-                results[lv] = fut.result()
-                progress(f"  [{i}/{len(levels)}] level {lv * 100:4.0f}%: {runs} runs done "
-                         f"({time.perf_counter() - t0:5.1f} s)")
-    return [results[lv] for lv in levels]
+    on = tuple(band_limited_on)
+
+    def done(i: int, n: int) -> None:
+        progress(f"  [{i}/{n}] levels done, {runs} runs each ({time.perf_counter() - t0:5.1f} s)")
+
+    results = executor.run(_level, [(lv, runs, options, convergence, on) for lv in levels], done)
+    lost = [f"{lv * 100:g}%: {r.why}" for lv, r in zip(levels, results, strict=True) if isinstance(r, Lost)]
+    if lost:
+        raise WorkerLost(f"Monte Carlo level(s) not computed: {'; '.join(lost)}")
+    return [r for r in results if not isinstance(r, Lost)]
 
 
 def _cover_time(t: np.ndarray, ratio: np.ndarray, threshold: float) -> float:
@@ -420,25 +440,10 @@ def convergence_summary(res: LevelResult) -> list[dict]:
     with np.errstate(divide="ignore", invalid="ignore"):
         ratio = res.ensemble_se / res.ensemble_scatter
     truth = np.array([T2_TRUE[p] for p in PARAMETERS])
-
-    def rates(ft, theta, se, cols):
-        hit = np.isfinite(ft)
-        k = np.searchsorted(t, np.where(hit, ft, t[0]))
-        mean = res.ensemble_mean[k][:, cols]
-        th, s = theta[:, cols], se[:, cols]
-        out_truth = (np.abs(th - truth[cols]) > 2 * s).any(axis=1)
-        out_mean = (np.abs(th - mean) > 2 * s).any(axis=1)
-        if not hit.any():
-            return hit, math.nan, math.nan
-        return hit, float(out_truth[hit].mean()), float(out_mean[hit].mean())
-
-    def held(ft: np.ndarray, untested: np.ndarray) -> dict[str, float]:
-        return {"untested_flag_time_median": float(np.median(untested)), "held_back": float(np.mean(ft > untested))}
-
     rows = []
     for i, name in enumerate(PARAMETERS):
         ft = res.flag_time[:, i]
-        hit, false_truth, false_mean = rates(ft, res.flag_theta, res.flag_se, [i])
+        hit, false_truth, false_mean = _flag_rates(res, truth, ft, res.flag_theta, res.flag_se, [i])
         median = float(np.median(ft))
         cover = _cover_time(t, ratio[:, i], 1.0 - d)
         at = np.searchsorted(t, median) if math.isfinite(median) else None
@@ -453,23 +458,51 @@ def convergence_summary(res: LevelResult) -> list[dict]:
             "bias_at_flag_se": float((res.flag_theta[hit, i].mean() - truth[i]) / res.flag_se[hit, i].mean())
             if hit.any() else math.nan,
             "se_over_scatter_at_flag": float(ratio[at, i]) if at is not None else math.nan,
-            **held(ft, res.untested_flag_time[:, i]),
+            **_held(ft, res.untested_flag_time[:, i]),
         })
+    return rows + _model_rows(res, truth)
+
+
+def _flag_rates(res: LevelResult, truth: np.ndarray, ft: np.ndarray, theta: np.ndarray, se: np.ndarray,
+                cols: list[int]) -> tuple[np.ndarray, float, float]:
+    """Which runs were flagged (first flag times ``ft``), and the fractions of those whose
+    true value, or whose ensemble mean at the flag time, lies outside ``theta +- 2 se`` in any
+    of the Table 3 columns ``cols``."""
+    t = res.time
+    hit = np.isfinite(ft)
+    k = np.searchsorted(t, np.where(hit, ft, t[0]))
+    mean = res.ensemble_mean[k][:, cols]
+    th, s = theta[:, cols], se[:, cols]
+    out_truth = (np.abs(th - truth[cols]) > 2 * s).any(axis=1)
+    out_mean = (np.abs(th - mean) > 2 * s).any(axis=1)
+    if not hit.any():
+        return hit, math.nan, math.nan
+    return hit, float(out_truth[hit].mean()), float(out_mean[hit].mean())
+
+
+def _held(ft: np.ndarray, untested: np.ndarray) -> dict[str, float]:
+    """The median first flag time without the identifiability tests and the fraction of runs
+    whose first flag they delayed or withheld."""
+    return {"untested_flag_time_median": float(np.median(untested)), "held_back": float(np.mean(ft > untested))}
+
+
+def _model_rows(res: LevelResult, truth: np.ndarray) -> list[dict]:
+    """:func:`convergence_summary`'s rows of the models (``"CZ model"``, ``"Cm model"``)."""
+    t, rows = res.time, []
     for m, model in enumerate(T2_MODELS):
         cols = [i for i, p in enumerate(PARAMETERS) if _WHERE[p][0] == m]
         ft = res.model_flag_time[:, m]
-        hit, false_truth, false_mean = rates(ft, res.model_flag_theta, res.model_flag_se, cols)
-        median = float(np.median(ft))
+        hit, false_truth, false_mean = _flag_rates(res, truth, ft, res.model_flag_theta, res.model_flag_se, cols)
         outside = (np.abs(res.estimates[:, cols] - truth[cols]) > 2 * res.se_corrected[:, cols]).any(axis=1)
         rows.append({
             "level": res.level, "parameter": f"{model.output} model", "flagged": float(hit.mean()),
-            "flag_time_median": median, "cover_time": math.nan, "cover_time_strict": math.nan,
+            "flag_time_median": float(np.median(ft)), "cover_time": math.nan, "cover_time_strict": math.nan,
             "flag_minus_cover": math.nan, "false_convergence": false_truth, "false_vs_mean": false_mean,
             "truth_outside_end": float(outside.mean()),
             "truth_outside_min": float(np.nanmin(res.truth_outside[t >= BEST_FROM, len(PARAMETERS) + m])),
             "bias_at_flag_se": math.nan,
             "se_over_scatter_at_flag": math.nan,
-            **held(ft, res.untested_model_flag_time[:, m]),
+            **_held(ft, res.untested_model_flag_time[:, m]),
         })
     return rows
 
@@ -549,7 +582,8 @@ def write_outputs(results: list[LevelResult], out: Path, *, figures: bool = True
         "# Table 3 reproduction",
         "",
         f"{results[0].runs} runs per level; end-of-maneuver values. Each cell: ours / paper. "
-        "SE = mean standard error over runs; scatter = standard deviation of the estimates."
+        "SE = mean standard error over runs; scatter = standard deviation of the estimates. "
+        f"Band-limited noise on {', '.join(results[0].band_limited_on)} (docs/validation.md)."
         + (f" Residual burn-in {burn_in} samples: R(i) of Eq. 17 from the residuals after each model's "
            f"initialization + {burn_in} (both SE columns)." if burn_in else ""),
         "",

@@ -11,7 +11,15 @@ The node ``rls_estimator`` (:data:`NODE_NAME`) publishes, for every sample the p
   ``M/standard_errors_conventional`` (Eq. 13), ``M/converged`` (1.0/0.0 per parameter), and
   on the samples whose grid index is a multiple of ``outputs.covariance_decimation``
   ``M/covariance`` and ``M/covariance_conventional`` (n x n, row-major). Models still
-  initializing, or withheld as non-finite, publish nothing: no NaN leaves.
+  initializing, or withheld as non-finite, publish nothing: no NaN leaves. (Not with
+  ``estimator.method: frequency``, which publishes the frequency-domain arrays only.)
+* with ``estimator.method`` ``frequency`` or ``both``, per model M ready in the frequency
+  domain on the samples where it publishes (every ``frequency.every``-th,
+  :mod:`.frequency_path`; :data:`FREQUENCY_OUTPUTS`): ``M/frequency/estimates``,
+  ``M/frequency/standard_errors`` (corrected, docs/frequency.md F7-F10),
+  ``M/frequency/standard_errors_conventional`` (F5) and ``M/frequency/converged``, over the
+  model's parameters without the bias (:attr:`.config.ModelConfig.frequency_parameter_names`:
+  the frequency-domain method does not estimate it), labelled and stamped as the others.
 
 Every array's ``layout.dim`` (:func:`dims`): one dim per axis labelled with the model's
 parameter names (comma-separated), then ``(stamp label, 1, 1)``: the sample's time as
@@ -54,10 +62,12 @@ from .cdr import encode_float64_multiarray, encode_float64_multiarray_dims, enco
 from .config import NODE_NAME  # the node's name: private topics /rls_estimator/..., diagnostics "rls_estimator: ..."
 
 if TYPE_CHECKING:  # annotations only: the pipeline is the core, this module its edge
+    from .config import PipelineConfig
     from .pipeline import Pipeline, SampleOutput
 
 __all__ = [
-    "NODE_NAME", "HEADER", "FLOAT64_MULTIARRAY", "SAMPLE_STAMP", "MODEL_OUTPUTS", "ARRAY_OUTPUTS", "FIT_OUTPUTS",
+    "NODE_NAME", "HEADER", "FLOAT64_MULTIARRAY", "SAMPLE_STAMP", "MODEL_OUTPUTS", "ARRAY_OUTPUTS", "FREQUENCY",
+    "FREQUENCY_OUTPUTS", "FIT_OUTPUTS",
     "FIT_LAGS_SHOWN", "stamp_label", "parse_stamp_label", "dims", "output_topics", "fit_topics", "PublishedArray",
     "Row", "OutputLayout", "fit_records",
 ]
@@ -70,6 +80,9 @@ SAMPLE_STAMP = "sample_stamp"
 MODEL_OUTPUTS = ("estimates", "standard_errors", "standard_errors_conventional", "converged", "covariance",
                  "covariance_conventional")
 ARRAY_OUTPUTS = MODEL_OUTPUTS[:3]  # the estimates and their standard errors
+# With estimator.method frequency or both, per model M as ~/M/frequency/<suffix>: the vectors.
+FREQUENCY = "frequency"
+FREQUENCY_OUTPUTS = MODEL_OUTPUTS[:4]
 _PER_MODEL = len(MODEL_OUTPUTS)
 # Published per model M as ~/M/<suffix> once per diagnostics period (module docstring).
 FIT_OUTPUTS = ("fit", "identifiability")
@@ -102,10 +115,15 @@ def dims(names: str, shape: tuple[int, ...], stamp: str) -> list[tuple[str, int,
     return out
 
 
-def output_topics(models: Iterable[str]) -> list[tuple[str, str]]:
+def output_topics(models: Iterable[str], *, time: bool = True, frequency: bool = False) -> list[tuple[str, str]]:
     """``(relative topic, message type)`` of every per-sample output of the models named in
-    ``models`` (e.g. ``["CZ", "Cm"]``), in publishing order."""
-    arrays = [(f"{m}/{suffix}", FLOAT64_MULTIARRAY) for m in models for suffix in MODEL_OUTPUTS]
+    ``models`` (e.g. ``["CZ", "Cm"]``), in publishing order: the time-domain arrays
+    (:data:`MODEL_OUTPUTS`) unless ``time`` is false, then with ``frequency`` the
+    frequency-domain ones (:data:`FREQUENCY_OUTPUTS`)."""
+    models = list(models)
+    arrays = [(f"{m}/{suffix}", FLOAT64_MULTIARRAY) for m in models for suffix in MODEL_OUTPUTS] if time else []
+    if frequency:
+        arrays += [(f"{m}/{FREQUENCY}/{suffix}", FLOAT64_MULTIARRAY) for m in models for suffix in FREQUENCY_OUTPUTS]
     return [(SAMPLE_STAMP, HEADER), *arrays]
 
 
@@ -140,21 +158,36 @@ class Row(NamedTuple):
 
 class OutputLayout:
     """The outputs of one configuration's ``models``: ``(output name, parameter names)`` in
-    the order of the pipeline's models. :attr:`topics` lists every output topic (index 0
-    ``sample_stamp``, then :data:`MODEL_OUTPUTS` per model); :meth:`encode` gives a sample's
-    messages by topic index."""
+    the order of the pipeline's models; ``frequency``: per model, the parameters of its
+    frequency-domain outputs (None: none published); ``time``: whether the time-domain arrays
+    are published. :attr:`topics` lists every output topic (index 0 ``sample_stamp``, then
+    :data:`MODEL_OUTPUTS` per model, then :data:`FREQUENCY_OUTPUTS` per model);
+    :meth:`encode` gives a sample's messages by topic index."""
 
-    def __init__(self, models: Sequence[tuple[str, Sequence[str]]]) -> None:
+    def __init__(self, models: Sequence[tuple[str, Sequence[str]]],
+                 frequency: Sequence[Sequence[str]] | None = None, *, time: bool = True) -> None:
         self.models = [(name, tuple(names)) for name, names in models]
-        self.topics = output_topics(name for name, _ in self.models)
+        self.time = time
+        self.frequency_models = None if frequency is None else \
+            [(name, tuple(names)) for (name, _), names in zip(self.models, frequency, strict=True)]
+        self.topics = output_topics([name for name, _ in self.models], time=time, frequency=frequency is not None)
         self.fit_topics = fit_topics(name for name, _ in self.models)
         # Per model: output name, label, n, vector and matrix shape, index of its first topic.
         self._per_model = [(name, ",".join(names), len(names), (len(names),), (len(names), len(names)),
-                            1 + _PER_MODEL * j) for j, (name, names) in enumerate(self.models)]
+                            1 + _PER_MODEL * j) for j, (name, names) in enumerate(self.models)] if time else []
+        first = 1 + len(self._per_model) * _PER_MODEL
+        self._per_frequency = [(name, ",".join(names), len(names), (len(names),), first + len(FREQUENCY_OUTPUTS) * j)
+                               for j, (name, names) in enumerate(self.frequency_models or [])]
+
+    @classmethod
+    def for_config(cls, config: PipelineConfig) -> OutputLayout:
+        """The outputs of a configuration (its ``estimator.method`` decides which)."""
+        frequency = [m.frequency_parameter_names for m in config.models] if config.frequency is not None else None
+        return cls([(m.output, m.parameter_names) for m in config.models], frequency, time=config.publishes_time)
 
     @classmethod
     def of(cls, pipeline: Pipeline) -> OutputLayout:
-        return cls([(m.output, m.parameter_names) for m in pipeline.models])
+        return cls.for_config(pipeline.config)
 
     def arrays(self, out: SampleOutput) -> Iterator[PublishedArray]:
         """Every array published for a sample, per ready model in the order of
@@ -179,6 +212,16 @@ class OutputLayout:
             if cov is not None:
                 yield first + 4, new((name, "covariance", label, square, cov[0, j, :n, :n].ravel()))
                 yield first + 5, new((name, "covariance_conventional", label, square, cov[1, j, :n, :n].ravel()))
+        f = out.frequency
+        if f is None or not self._per_frequency:
+            return
+        ready = f.ready.tolist()
+        flags = f.converged.astype(np.float64)
+        for j, (name, label, n, vector, first) in enumerate(self._per_frequency):
+            if ready[j]:
+                for k, (suffix, values) in enumerate(zip(FREQUENCY_OUTPUTS, (f.theta, f.se, f.se_conventional, flags),
+                                                         strict=True)):
+                    yield first + k, new((name, f"{FREQUENCY}/{suffix}", label, vector, values[j, :n]))
 
     def encode(self, out: SampleOutput, frame_id: str) -> list[tuple[int, bytes]]:
         """``(index into topics, CDR bytes)`` of every message published for ``out``:
@@ -196,15 +239,18 @@ class OutputLayout:
         return messages
 
     def rows(self, out: SampleOutput) -> Iterator[Row]:
-        """Each ready model's estimates and standard errors of ``out`` (what the replay
-        writes). The rows are checked again here: a row with a non-finite value is skipped,
-        so no NaN or infinity ever leaves."""
-        for j, (name, names) in enumerate(self.models):
-            if out.ready[j]:
-                n = len(names)
-                row = out.theta[j, :n], out.se[j, :n], out.se_conventional[j, :n]
-                if all(map(math.isfinite, row[0].tolist() + row[1].tolist() + row[2].tolist())):
-                    yield Row(j, name, names, *row)
+        """Each ready model's time-domain estimates and standard errors of ``out`` (what the
+        replay writes; none when they are not published). The rows are checked again here: a
+        row with a non-finite value is skipped, so no NaN or infinity ever leaves."""
+        if self.time:
+            yield from _rows(self.models, out.ready, out.theta, out.se, out.se_conventional)
+
+    def frequency_rows(self, out: SampleOutput) -> Iterator[Row]:
+        """:meth:`rows` of the frequency-domain results (over the parameters without the bias),
+        on the samples where they are published."""
+        f = out.frequency
+        if f is not None and self.frequency_models is not None:
+            yield from _rows(self.frequency_models, f.ready, f.theta, f.se, f.se_conventional)
 
     # ------------------------------------------------------------------ once per period
     def encode_fit(self, pipe: Pipeline) -> list[tuple[int, bytes]]:
@@ -222,6 +268,16 @@ class OutputLayout:
                 out += [(len(FIT_OUTPUTS) * j + i, encode_float64_multiarray_dims(d, data.tolist()))
                         for i, (d, data) in enumerate(arrays)]
         return out
+
+
+def _rows(models: list[tuple[str, tuple[str, ...]]], ready: np.ndarray, theta: np.ndarray, se: np.ndarray,
+          se_conventional: np.ndarray) -> Iterator[Row]:
+    for j, (name, names) in enumerate(models):
+        if ready[j]:
+            n = len(names)
+            row = theta[j, :n], se[j, :n], se_conventional[j, :n]
+            if all(map(math.isfinite, row[0].tolist() + row[1].tolist() + row[2].tolist())):
+                yield Row(j, name, names, *row)
 
 
 _Arrays = list[tuple[list[tuple[str, int, int]], np.ndarray]]

@@ -21,7 +21,9 @@ coordinates the modules that do the work:
    (Eqs. 15-22), and each used sample yields a :class:`SampleOutput`: estimates, standard
    errors, per-parameter convergence flags (:mod:`.convergence`, one monitor reset with the
    estimator) and, every ``outputs.covariance_decimation`` grid points, the full covariances.
-   What leaves for ROS is made of it at the edge (:mod:`.outputs`).
+   What leaves for ROS is made of it at the edge (:mod:`.outputs`). With ``estimator.method``
+   ``frequency`` or ``both`` the same rows also feed the frequency-domain estimator
+   (:mod:`.frequency_path`), whose results ride in :attr:`SampleOutput.frequency`.
 
 Every formed sample ends as used or as rejected with a reason, and every message as accepted
 or rejected: :class:`.bookkeeping.Bookkeeping` holds every counter and what the refused inputs
@@ -55,12 +57,13 @@ from .differentiation import FixedLagDifferentiator
 from .errors import NonFiniteInput, StateFileError
 from .estimator import EstimatorBank
 from .estimator.state_file import EstimatorState, load_state, save_state
+from .frequency_path import FrequencyOutput, FrequencyPath
 from .identifiability import IdentifiabilityMonitor
 from .intake import Intake
 from .sampling import Sample, Sampler, Skipped
 from .surface_mixing import SURFACES
 
-__all__ = ["Pipeline", "SampleOutput", "STREAMS", "StateFileError", "required_streams"]
+__all__ = ["Pipeline", "SampleOutput", "STREAMS", "StateFileError", "required_streams", "sampler_for"]
 
 # The input streams, one per ``add_*`` method: inertial data, air data and the optional ones.
 STREAMS = ("imu", "airspeed", "dynamic_pressure", "control_surfaces", "thrust")
@@ -82,7 +85,9 @@ class SampleOutput(NamedTuple):
     (:meth:`.estimator.EstimatorBank.covariance`, the corrected one repaired to positive
     semi-definite; symmetrized), NaN off the ready models' parameters.
     ``lags`` ``(M,)`` ints: the largest lag of Eq. 22 behind each corrected SE (chosen per
-    sample with ``estimator.lag_selection: auto``), 0 for models not ready.
+    sample with ``estimator.lag_selection: auto``), 0 for models not ready. ``frequency``: with
+    ``estimator.method`` ``frequency`` or ``both``, on the samples where the frequency-domain
+    estimator publishes, its :class:`.frequency_path.FrequencyOutput`; else None.
     """
 
     stamp_ns: int
@@ -95,6 +100,7 @@ class SampleOutput(NamedTuple):
     model_converged: np.ndarray
     covariance: np.ndarray | None = None
     lags: np.ndarray | None = None
+    frequency: FrequencyOutput | None = None
 
     @property
     def time(self) -> float:
@@ -133,6 +139,24 @@ def symmetric_covariances(c: np.ndarray, real: np.ndarray, real_square: np.ndarr
     return cov
 
 
+def sampler_for(config: PipelineConfig, required: Sequence[str], book: Bookkeeping) -> Sampler:
+    """The :class:`.sampling.Sampler` of a configuration: its grid, gap, buffer and timeline
+    settings (``inputs.*``), the streams every sample needs, and the bookkeeping's counters."""
+    inputs = config.inputs
+    return Sampler(
+        STREAMS,
+        tuple(required),
+        period_ns=config.period_ns,
+        max_gap_ns=inputs.max_gap_ns,
+        buffer_ns=inputs.buffer_ns,
+        max_jump_ns=inputs.max_stamp_jump_ns,
+        confirm=inputs.jump_confirmation,
+        max_buffered=inputs.max_buffered,
+        max_clock_ns=inputs.max_clock_offset_ns,
+        counts=book.streams,
+    )
+
+
 class Pipeline:
     """Sample formation, differentiation, aero reduction and estimation for one configuration.
 
@@ -160,18 +184,7 @@ class Pipeline:
         self.bookkeeping = book = bookkeeping if bookkeeping is not None else Bookkeeping.for_streams(STREAMS)
         self.required = required_streams(config)
         inputs = config.inputs
-        self.sampler = Sampler(
-            STREAMS,
-            self.required,
-            period_ns=config.period_ns,
-            max_gap_ns=inputs.max_gap_ns,
-            buffer_ns=inputs.buffer_ns,
-            max_jump_ns=inputs.max_stamp_jump_ns,
-            confirm=inputs.jump_confirmation,
-            max_buffered=inputs.max_buffered,
-            max_clock_ns=inputs.max_clock_offset_ns,
-            counts=book.streams,
-        )
+        self.sampler = sampler_for(config, self.required, book)
         self.intake = Intake(self.sampler, config.limits, config.surfaces, book)
         # The caller's clock is compared with the stamps only when inputs.max_clock_offset > 0
         # (the node then sets clock_ns before each message; the offline replay has no clock).
@@ -214,6 +227,8 @@ class Pipeline:
         self._withheld = np.zeros(len(self.sizes), dtype=bool)  # the last output's, per model
         self._monitor.reset()
         self._converged = self._monitor.no_flags()  # the newest sample's flags
+        # estimator.method frequency or both: the frequency-domain estimator on the same rows.
+        self.frequency = FrequencyPath(self.config) if self.config.frequency is not None else None
 
     @property
     def identifiability(self) -> IdentifiabilityMonitor:
@@ -351,7 +366,10 @@ class Pipeline:
         X, z = self._X, self._z
         X.flat[self._x_index] = [reg[name] for name in self._x_names]
         z[:] = [coef[name] for name in self._outputs]
+        freq = self.frequency
         try:
+            if freq is not None:
+                freq.check(X, z)  # a row either estimator refuses is used by neither
             self.bank.update(X, z)
         except NonFiniteInput:  # the row, or the state it would make, is not finite: unchanged
             book.samples_rejected["non_finite_regression"] += 1
@@ -368,8 +386,8 @@ class Pipeline:
         se_conv = bank.standard_errors_all("conventional")
         ready = bank.ready
         # The last guard: a ready model with a non-finite estimate or SE is withheld, counted.
-        bad = ready & (self._real & ~(np.isfinite(theta) & np.isfinite(se) & np.isfinite(se_conv))).any(axis=1)
-        self._withheld = bad
+        self._withheld = bad = ready & (self._real & ~(np.isfinite(theta) & np.isfinite(se)
+                                                       & np.isfinite(se_conv))).any(axis=1)
         if bad.any():
             for j in np.flatnonzero(bad):
                 book.outputs_withheld[self._outputs[j]] += 1
@@ -377,18 +395,10 @@ class Pipeline:
         flags, model_flags = self._monitor.update(t, theta, se, ready)
         # A parameter that is not identifiable from the data so far is never flagged converged.
         self._converged = flags, model_flags = self._quality.restrict(flags, model_flags, bank, ready)
-        return SampleOutput(
-            stamp_ns=t,
-            index=self._index,
-            theta=theta,
-            se=se,
-            se_conventional=se_conv,
-            ready=ready,
-            converged=flags,
-            model_converged=model_flags,
-            covariance=self._covariances(t, ready),
-            lags=np.where(ready, bank.lags_used, 0),
-        )
+        frequency = None if freq is None else freq.add(t, book.outputs_withheld, self._quality)
+        return SampleOutput(stamp_ns=t, index=self._index, theta=theta, se=se, se_conventional=se_conv, ready=ready,
+                            converged=flags, model_converged=model_flags, covariance=self._covariances(t, ready),
+                            lags=np.where(ready, bank.lags_used, 0), frequency=frequency)
 
     def _covariances(self, t: int, ready: np.ndarray) -> np.ndarray | None:
         """The corrected and conventional covariances of the ready models

@@ -360,7 +360,7 @@ def bundled_bag() -> Path:
 _REPLAY_DEPTH = 10_000
 # And a long input buffer: a node that falls behind takes about one message per topic per
 # executor round, so its slow streams run seconds ahead of the IMU; with the default 2 s their
-# messages would expire (README, play).
+# messages would expire (docs/tools.md, play).
 _REPLAY_BUFFER_S = 60.0
 
 

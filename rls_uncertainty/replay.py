@@ -24,10 +24,11 @@ stream (:class:`.bags.InputStream`) and the outputs are written sample by sample
   and ``/rls_estimator/M/identifiability`` at the same times (:func:`.outputs.fit_records`);
 * ``run.json``: the bag's input digest, the span, the parameters and the configuration
   (:func:`.replay_files.run_record`), for ``replay --compare`` (:mod:`.compare`);
-* ``M_estimates.png``: each parameter's history with corrected and conventional 2-sigma
-  envelopes (at most :data:`PLOT_POINTS` evenly spaced samples per run, so a long recording
-  plots in bounded memory), and ``M_autocorrelation.png``: each model's residual
-  autocorrelation.
+* ``summary.txt``: the summary the command prints (:func:`run_summary`);
+* per model ``M``, the figures of :func:`.figures.replay_figures` (``M_estimates``, ``M_fit``,
+  ``M_autocorrelation``, ``M_lags``, in the requested formats), drawn from at most twice
+  :data:`PLOT_POINTS` evenly spaced samples per run and from sums kept as the run goes
+  (:class:`.figure_data.FigureData`), so a long recording plots in bounded memory.
 Two runs give bit-identical CSV and MCAP files. The progress bar is drawn only on a terminal.
 """
 
@@ -37,9 +38,9 @@ import gc
 import json
 import sys
 import time
-from collections.abc import Callable, Iterable, Sequence, Sized
+from collections.abc import Callable, Iterable, Sized
 from pathlib import Path
-from typing import Any, Protocol, TextIO
+from typing import TYPE_CHECKING, Any, Protocol, TextIO
 
 import numpy as np
 
@@ -47,6 +48,7 @@ from .alerts import no_estimate, not_excited
 from .bags import InputStream, typestore
 from .config import NodeConfig, PipelineConfig, node_config, parameter_defaults, pipeline_config
 from .diagnostics import DiagnosticsPolicy, Snapshot, Status
+from .figure_data import FigureData
 from .files import output_directory
 from .inputs import Stamped, feed
 from .outputs import NODE_NAME, OutputLayout, fit_records
@@ -55,8 +57,11 @@ from .replay_files import ReplayFiles, run_record
 from .report import results_table, rows_from_arrays
 from .results import History, ReplayResult, accounting
 
-__all__ = ["ReplayResult", "run_pipeline", "replay", "planned_run", "summary_table", "unestimated", "NODE_NAME",
-           "PLOT_POINTS"]
+if TYPE_CHECKING:  # annotations only: the figures are drawn on demand
+    from .figures import FigureOptions
+
+__all__ = ["ReplayResult", "run_pipeline", "replay", "planned_run", "summary_table", "run_summary", "unestimated",
+           "NODE_NAME", "PLOT_POINTS"]
 
 # Samples kept for the plots: at most twice this many, evenly spaced (results.History).
 PLOT_POINTS = 2048
@@ -141,35 +146,47 @@ class _DataClockDiagnostics:
         self.previous_ns = self.newest_ns
 
 
-class _Excitation:
-    """Which regressors of each model moved over the run, for :func:`unestimated`: the
-    extremes of every regression row, read from ``pipe.regression`` after each message
-    (and dropped there unless the caller keeps the rows). Watching stops once every model
-    has published: then nothing needs explaining."""
+class _Rows:
+    """The pipeline's regression rows (``pipe.regression``), taken after each message by
+    whoever reads them (the excitation watch, the figures' data); dropped once taken unless
+    the caller keeps them (``keep``)."""
 
-    def __init__(self, pipe: Pipeline, keep_rows: bool) -> None:
-        self.pipe, self.keep_rows = pipe, keep_rows
-        self.low = np.full((len(pipe.sizes), pipe.bank.n_max), np.inf)
-        self.high = -self.low
+    def __init__(self, pipe: Pipeline, keep: bool) -> None:
+        self.pipe, self.keep = pipe, keep
         self.seen = 0
-        self.watching = True
         pipe.record = True
 
-    def update(self) -> None:
+    def take(self) -> list[tuple[int, np.ndarray, np.ndarray]]:
         rows = self.pipe.regression
         if len(rows) < self.seen:  # the pipeline restarted and dropped its rows
             self.seen = 0
-        for _t, X, _z in rows[self.seen:]:
-            np.minimum(self.low, X, out=self.low)
-            np.maximum(self.high, X, out=self.high)
-        if self.keep_rows:
+        new = rows[self.seen:]
+        if self.keep:
             self.seen = len(rows)
         else:
             rows.clear()
+        return new
 
     def stop(self) -> None:
-        self.watching = False
-        self.pipe.record = self.keep_rows
+        """No reader needs rows any longer: the pipeline records them only if kept."""
+        self.pipe.record = self.keep
+
+
+class _Excitation:
+    """Which regressors of each model moved over the run, for :func:`unestimated`: the
+    extremes of every regression row. Watching stops once every model has published: then
+    nothing needs explaining."""
+
+    def __init__(self, pipe: Pipeline) -> None:
+        self.pipe = pipe
+        self.low = np.full((len(pipe.sizes), pipe.bank.n_max), np.inf)
+        self.high = -self.low
+        self.watching = True
+
+    def update(self, rows: list[tuple[int, np.ndarray, np.ndarray]]) -> None:
+        for _t, X, _z in rows:
+            np.minimum(self.low, X, out=self.low)
+            np.maximum(self.high, X, out=self.high)
 
     def constant(self, j: int) -> list[str]:
         """Model ``j``'s regressors (the bias aside) that never moved over the samples used."""
@@ -180,24 +197,40 @@ class _Excitation:
 
 class _Run:
     """One run's bookkeeping of outputs: what the :class:`.results.ReplayResult` keeps, what
-    each model published last, and the sink that writes them."""
+    each model published last (per method), and the sink that writes them. ``ever``: per
+    model, whether it published (its time-domain estimates, or with ``estimator.method:
+    frequency`` its frequency-domain ones)."""
 
     def __init__(self, pipe: Pipeline, result: ReplayResult, keep_outputs: bool, sink: Sink | None) -> None:
         self.pipe, self.result, self.keep_outputs, self.sink = pipe, result, keep_outputs, sink
+        self.time = pipe.config.publishes_time
         self.ever = np.zeros(len(pipe.sizes), dtype=bool)
         self.last: list[SampleOutput | None] = [None] * len(pipe.sizes)
+        self.last_frequency: list[SampleOutput | None] = [None] * len(pipe.sizes)
         self.real = np.arange(pipe.bank.n_max) < np.array(pipe.sizes)[:, None]
 
     def sample(self, out: SampleOutput) -> None:
         result = self.result
-        ready = out.ready
+        ready = out.ready if self.time else np.zeros_like(out.ready)
         if ready.any():
-            result.estimates += 1
             self.ever |= ready
             for j in np.flatnonzero(ready).tolist():
                 self.last[j] = out
-        if result.history is not None:
+        if result.history is not None and self.time:
             result.history.add(out, self.real)
+        f = out.frequency
+        if f is not None:
+            if f.ready.any():
+                for j in np.flatnonzero(f.ready).tolist():
+                    self.last_frequency[j] = out
+                if not self.time:
+                    self.ever |= f.ready
+            if result.frequency_history is not None:
+                real = self.pipe.frequency.real  # type: ignore[union-attr]  # out.frequency: the path exists
+                result.frequency_history.append(out.stamp_ns, f.theta[real], f.se[real], f.se_conventional[real],
+                                                f.converged[real], f.ready, f.lags)
+        if ready.any() or (f is not None and f.ready.any()):
+            result.estimates += 1
         if self.keep_outputs:
             result.outputs.append(out)
         result.last_output = out
@@ -217,27 +250,49 @@ class _Run:
                 n = self.pipe.sizes[j]
                 self.result.published(out.stamp_ns, j, out.theta[j, :n], out.se[j, :n], out.se_conventional[j, :n],
                                       out.converged[j, :n])
+        for j, out in enumerate(self.last_frequency):
+            if out is not None and out.frequency is not None:
+                f, n = out.frequency, len(self.result.frequency_parameter_names[j])
+                self.result.published(out.stamp_ns, j, f.theta[j, :n], f.se[j, :n], f.se_conventional[j, :n],
+                                      f.converged[j, :n], method="frequency")
+
+
+def _new_result(pipe: Pipeline, history: History | None) -> ReplayResult:
+    """The result of a run of ``pipe``: its models and parameters, the methods it publishes and,
+    with the frequency domain, its parameters and a history like ``history``."""
+    config = pipe.config
+    result = ReplayResult(tuple(m.output for m in config.models), tuple(map(tuple, pipe.parameter_names)),
+                          history=history, pipeline=pipe, methods=config.published_methods)
+    if config.frequency is not None:
+        result.frequency_parameter_names = names = tuple(m.frequency_parameter_names for m in config.models)
+        if history is not None:
+            result.frequency_history = History(names, history.capacity)
+    return result
 
 
 def run_pipeline(messages: Iterable[tuple[str, int, Stamped]], config: PipelineConfig, *, record: bool = True,
                  progress: bool = False, diagnostics: NodeConfig | None = None, keep_outputs: bool = True,
-                 history: History | None = None, sink: Sink | None = None) -> ReplayResult:
+                 history: History | None = None, sink: Sink | None = None,
+                 figure_data: FigureData | None = None) -> ReplayResult:
     """Feed ``(kind, stamp, msg)`` messages (a list, or a :class:`.bags.InputStream` read as it
     goes) through a fresh pipeline. ``record`` keeps every regression row
     (``pipeline.regression``); ``keep_outputs`` every :class:`.pipeline.SampleOutput` (and
     report) in the result; ``history`` collects the time histories (:class:`.results.History`);
-    ``sink`` receives each output and report as it is made. Without the first two, memory
-    does not grow with the run. ``progress`` draws a bar on stderr when stderr is a terminal
+    ``sink`` receives each output and report as it is made; ``figure_data`` collects what the
+    figures draw besides the histories (:class:`.figure_data.FigureData`, bounded). Without
+    the first two, memory does not grow with the run. With ``estimator.method`` ``frequency``
+    or ``both`` the result keeps the frequency-domain estimates too (in a history like
+    ``history``, when given). ``progress`` draws a bar on stderr when stderr is a terminal
     (never carriage-return frames into a log file or a pipe). With ``diagnostics`` (the node's
     settings), the node's ``/diagnostics`` statuses once per diagnostics period of data time,
     and once at the end."""
     total = len(messages) if isinstance(messages, Sized) else int(getattr(messages, "total", 0))
     progress = progress and total > 0 and _is_terminal(sys.stderr)
     pipe = Pipeline(config, record=record)
-    result = ReplayResult(tuple(m.output for m in config.models), tuple(map(tuple, pipe.parameter_names)),
-                          history=history, pipeline=pipe)
+    result = _new_result(pipe, history)
     run = _Run(pipe, result, keep_outputs, sink)
-    excitation = _Excitation(pipe, keep_rows=record)
+    rows = _Rows(pipe, keep=record)
+    excitation = _Excitation(pipe)
     diag = _DataClockDiagnostics(pipe, config, diagnostics, run.diagnostics) if diagnostics is not None else None
     step = max(1, total // 50)
     first: int | None = None
@@ -254,12 +309,19 @@ def run_pipeline(messages: Iterable[tuple[str, int, Stamped]], config: PipelineC
                 first = newest = stamp
             elif stamp > newest:
                 newest = stamp
-            for out in feed(pipe, kind, msg):
+            outs = feed(pipe, kind, msg)
+            for out in outs:
                 run.sample(out)
-            if excitation.watching:
-                excitation.update()
-                if run.ever.all():
-                    excitation.stop()
+            if excitation.watching or figure_data is not None:
+                new = rows.take()
+                if figure_data is not None:
+                    figure_data.add(pipe, outs, new)
+                if excitation.watching:
+                    excitation.update(new)
+                    if run.ever.all():
+                        excitation.watching = False
+                        if figure_data is None:
+                            rows.stop()
             if diag is not None:
                 diag.after(kind, stamp)
             if sink is not None:
@@ -280,6 +342,8 @@ def run_pipeline(messages: Iterable[tuple[str, int, Stamped]], config: PipelineC
     if first is not None:
         result.data_seconds = (newest - first) * 1e-9
     run.finals()
+    if figure_data is not None:
+        figure_data.finish(pipe)
     result.explanations = unestimated(pipe, run.ever, excitation)
     result.counter_values = accounting(pipe.counters())
     result.bag_digest = str(getattr(messages, "digest", ""))
@@ -303,109 +367,70 @@ def unestimated(pipe: Pipeline, ever: np.ndarray, excitation: _Excitation | None
 
 def summary_table(result: ReplayResult) -> str:
     """The last sample's estimates of every model ready in it (:func:`.report.results_table`),
-    then why any model has none (:attr:`.results.ReplayResult.explanations`)."""
+    then the frequency-domain ones last published, when the run published them, then why any
+    model has none (:attr:`.results.ReplayResult.explanations`)."""
     rows = []
     last, pipe = result.last_output, result.pipeline
     if last is not None and pipe is not None:
         for row in OutputLayout.of(pipe).rows(last):
             rows += rows_from_arrays(row.names, row.estimates, row.standard_errors_conventional, row.standard_errors)
-    return "\n".join(([results_table(rows)] if rows else []) + result.explanations)
+    tables = [results_table(rows)] if rows else []
+    finals = result.finals("frequency") if "frequency" in result.methods else {}
+    if finals:
+        names, values = list(finals), list(finals.values())
+        frequency = rows_from_arrays(names, [f.estimate for f in values], [f.std_error_conventional for f in values],
+                                     [f.std_error for f in values])
+        tables.append("frequency domain (docs/frequency.md):\n" + results_table(frequency))
+    return "\n".join(tables + result.explanations)
 
 
-def _plots(out_dir: Path, pipe: Pipeline, history: History) -> list[Path]:
-    """Each model's estimates with both 2-sigma envelopes over the samples ``history`` kept,
-    and its residual autocorrelation at the end of the run."""
-    import matplotlib  # noqa: PLC0415
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt  # noqa: PLC0415
-
-    written: list[Path] = []
-    if not history.n:
-        return written
-    stamps = history.stamps_ns
-    t = (stamps - stamps[0]) * 1e-9
-    k = 0
-    for j, m in enumerate(pipe.models):
-        names = pipe.parameter_names[j]
-        columns = [history.column(k + i) for i in range(len(names))]
-        k += len(names)
-        if all(np.all(np.isnan(c[0])) for c in columns):
-            continue
-        written.append(_estimates_plot(plt, out_dir / f"{m.output}_estimates.png", m.output, names, t, columns))
-        if pipe.bank.ready[j]:
-            written.append(_autocorrelation_plot(plt, out_dir / f"{m.output}_autocorrelation.png", m.output,
-                                                 pipe.bank.autocorrelation(j), pipe.bank.k))
-    return written
-
-
-def _estimates_plot(plt: Any, path: Path, model: str, names: Sequence[str], t: np.ndarray,
-                    columns: Sequence[tuple[np.ndarray, ...]]) -> Path:
-    fig, axes = plt.subplots(len(names), 1, figsize=(7, 1.9 * len(names)), sharex=True, squeeze=False)
-    for i, ax in enumerate(axes[:, 0]):
-        th, se, sc = columns[i][:3]
-        ax.plot(t, th, "k", lw=1, label="estimate")
-        ax.fill_between(t, th - 2 * se, th + 2 * se, color="tab:blue", alpha=0.25, label="2 sigma corrected")
-        ax.plot(t, th - 2 * sc, "r--", lw=0.8, label="2 sigma conventional")
-        ax.plot(t, th + 2 * sc, "r--", lw=0.8)
-        ax.set_ylabel(names[i])
-        fin = np.isfinite(th)
-        if fin.sum() > 10:  # ignore the first estimates right after initialization
-            k0 = int(np.flatnonzero(fin)[0]) + (int(fin.sum()) // 10)
-            lo = np.nanmin(th[k0:] - 3 * se[k0:])
-            hi = np.nanmax(th[k0:] + 3 * se[k0:])
-            if np.isfinite(lo) and np.isfinite(hi) and hi > lo:
-                ax.set_ylim(lo, hi)
-    axes[0, 0].legend(loc="upper right", fontsize=7)
-    axes[-1, 0].set_xlabel("time from first estimate, s")
-    fig.suptitle(f"{model}: estimates with 2-sigma bounds")
-    fig.tight_layout()
-    fig.savefig(path, dpi=90, metadata={"Software": None})
-    plt.close(fig)
-    return path
-
-
-def _autocorrelation_plot(plt: Any, path: Path, model: str, R: np.ndarray, n: int) -> Path:
-    fig, ax = plt.subplots(figsize=(6, 3))
-    ax.stem(np.arange(R.size), R / R[0], basefmt=" ")
-    bound = 2 / np.sqrt(n)
-    ax.axhline(bound, color="r", ls="--", lw=0.8)
-    ax.axhline(-bound, color="r", ls="--", lw=0.8, label="2 sigma white-noise bound")
-    ax.set_xlabel("lag, samples")
-    ax.set_ylabel("R(i) / R(0)")
-    ax.set_title(f"{model}: residual autocorrelation (Eq. 17) after {n} samples")
-    ax.legend(fontsize=7)
-    fig.tight_layout()
-    fig.savefig(path, dpi=90, metadata={"Software": None})
-    plt.close(fig)
-    return path
+def run_summary(result: ReplayResult) -> str:
+    """What the command prints and writes to ``summary.txt``: :func:`summary_table`, then the
+    sample accounting, the streams that lost messages, and the messages and data seconds
+    read (the wall-clock speed, which varies between runs, is printed only)."""
+    c = result.counters()
+    rejected = ", ".join(f"{k} {v}" for k, v in sorted(c["samples_rejected"].items())) or "none"
+    lines = [summary_table(result), "", f"{c['samples_formed']} samples formed, {c['samples_used']} used; "
+             f"rejected: {rejected}"]
+    for name, s in c["streams"].items():
+        if s["rejected"] or s["expired"] or s["missing"]:
+            lines.append(f"  {name}: {s['received']} received, rejected {s['rejected']}, expired {s['expired']}, "
+                         f"missing (stamp gaps) {s['missing']}")
+    lines.append(f"{result.n_messages} messages, {result.data_seconds:.1f} s of data")
+    return "\n".join(lines)
 
 
 def replay(bag: str | Path, params: dict[str, Any], out: str | Path, *, start: float | None = None,
            end: float | None = None, strict: bool = True, progress: bool = True, plots: bool = True,
-           force: bool = False, inputs: Iterable[str | Path] = ()) -> ReplayResult:
+           figures: FigureOptions | None = None, force: bool = False,
+           inputs: Iterable[str | Path] = ()) -> ReplayResult:
     """Run a replay bag through the pipeline, reading it and writing the outputs to ``out``
     as it goes (:func:`.files.output_directory`: complete or absent; an existing non-empty
     ``out`` only with ``force``; never over the input bag or the other ``inputs``, such as the
-    parameter file). The result keeps no per-sample outputs, and the time histories only
-    decimated for the plots (:data:`PLOT_POINTS`)."""
+    parameter file), then ``summary.txt`` (:func:`run_summary`) and, with ``plots``, the
+    figures (:func:`.figures.replay_figures`, in the formats and resolution of ``figures``).
+    The result keeps no per-sample outputs, and the time histories only decimated for the
+    plots (:data:`PLOT_POINTS`)."""
     config = pipeline_config(params)
     node_cfg = node_config(params)
     names = [m.parameter_names for m in config.models]
+    data = FigureData([m.output for m in config.models], [m.regressors for m in config.models], names, config.rate,
+                      PLOT_POINTS) if plots else None
     with output_directory(out, force=force, inputs=(bag, *inputs)) as tmp, \
             InputStream(bag, node_cfg.topics, strict=strict, start=start, end=end) as stream:
         files = ReplayFiles(tmp, config, node_cfg.frame_id, NODE_NAME, typestore())
         with files:
             result = run_pipeline(stream, config, record=False, progress=progress, diagnostics=node_cfg,
-                                  keep_outputs=False, history=History(names, PLOT_POINTS), sink=files)
-        pipe = result.pipeline
-        assert pipe is not None  # run_pipeline keeps its pipeline
+                                  keep_outputs=False, history=History(names, PLOT_POINTS), sink=files, figure_data=data)
         record = planned_run(params, start=start, end=end, strict=strict)
         record["bag"] |= {"path": str(bag), "input_sha256": stream.digest, "messages_read": stream.read,
                           "messages_used": result.n_messages}
         (tmp / "run.json").write_text(json.dumps(record, indent=1, sort_keys=True, default=repr) + "\n")
-        if plots and result.history is not None:
-            _plots(tmp, pipe, result.history)
+        (tmp / "summary.txt").write_text(run_summary(result) + "\n")
+        if data is not None and result.history is not None:
+            from .figures import replay_figures  # noqa: PLC0415 - drawing (matplotlib) only when asked
+
+            replay_figures(tmp, Path(bag).name, result.history, data, figures)
     return result
 
 

@@ -7,7 +7,12 @@ directory:
 * ``estimates.csv`` (:data:`CSV_COLUMNS`): one row per sample and parameter of every ready
   model;
 * ``estimates_wide.csv`` (:func:`wide_columns`): one row per sample, one column per parameter
-  and quantity, cells empty while a model is not ready;
+  and quantity, cells empty while a model is not ready (these two only when the time-domain
+  estimates are published: ``estimator.method`` ``time`` or ``both``);
+* ``estimates_frequency.csv`` (with ``estimator.method`` ``frequency`` or ``both``): the
+  columns of ``estimates.csv``, one row per parameter of every model ready in the frequency
+  domain on each sample where it publishes (:mod:`.frequency_path`), over the parameters
+  without the bias; ``lags`` are those of its residual autocovariance;
 * ``estimates.mcap``: every topic the node publishes, byte for byte what the node sends
   (:meth:`.outputs.OutputLayout.encode`), log time = the sample's stamp, and the
   ``/diagnostics`` reports at their data time; ordered by log time, then topic
@@ -93,19 +98,28 @@ def run_record(bag: dict[str, Any], parameters: dict[str, Any], config: Pipeline
 class _Csv:
     """``estimates.csv``: :data:`CSV_COLUMNS`, one row per sample and parameter of every ready
     model; ``converged`` is the parameter's flag (1/0), ``lags`` the model's lag count of Eq. 22
-    behind ``std_error`` (chosen per sample under ``estimator.lag_selection: auto``)."""
+    behind ``std_error`` (chosen per sample under ``estimator.lag_selection: auto``). With
+    ``frequency``, ``estimates_frequency.csv``: the same of the frequency-domain results."""
 
-    def __init__(self, path: Path, layout: OutputLayout) -> None:
-        self.layout = layout
+    def __init__(self, path: Path, layout: OutputLayout, frequency: bool = False) -> None:
+        self.layout, self.frequency = layout, frequency
         self.fh: IO[str] = open(path, "w")  # noqa: SIM115 - closed by ReplayFiles.close
         self.fh.write(",".join(CSV_COLUMNS) + "\n")
 
     def sample(self, out: SampleOutput) -> None:
         t = stamp_text(out.stamp_ns)
         write = self.fh.write
-        for j, name, names, theta, se, se_conv in self.layout.rows(out):
-            lags = int(out.lags[j]) if out.lags is not None else ""
-            flags = out.converged[j, : len(names)].tolist()
+        f = out.frequency
+        lag_counts: np.ndarray | None
+        if self.frequency:
+            if f is None:
+                return
+            rows, converged, lag_counts = self.layout.frequency_rows(out), f.converged, f.lags
+        else:
+            rows, converged, lag_counts = self.layout.rows(out), out.converged, out.lags
+        for j, name, names, theta, se, se_conv in rows:
+            lags = int(lag_counts[j]) if lag_counts is not None else ""
+            flags = converged[j, : len(names)].tolist()
             # (Python floats from tolist: the same repr as float() of each numpy element.)
             for p, a, b, c, f in zip(names, theta.tolist(), se.tolist(), se_conv.tolist(), flags, strict=True):
                 write(f"{t},{name},{p},{a!r},{b!r},{c!r},{int(f)},{lags}\n")
@@ -202,14 +216,17 @@ class ReplayFiles:
     :func:`.files.output_directory`, which discards the directory)."""
 
     def __init__(self, directory: Path, config: PipelineConfig, frame_id: str, node: str, store: Typestore) -> None:
-        layout = OutputLayout([(m.output, m.parameter_names) for m in config.models])
-        self.csv = _Csv(directory / "estimates.csv", layout)
-        self.wide = _WideCsv(directory / "estimates_wide.csv", config)
+        layout = OutputLayout.for_config(config)
+        self.csvs: list[_Csv | _WideCsv] = []
+        if config.publishes_time:
+            self.csvs += [_Csv(directory / "estimates.csv", layout), _WideCsv(directory / "estimates_wide.csv", config)]
+        if config.frequency is not None:
+            self.csvs.append(_Csv(directory / "estimates_frequency.csv", layout, frequency=True))
         self.mcap = _Mcap(directory, layout, frame_id, node, store)
 
     def sample(self, out: SampleOutput) -> None:
-        self.csv.sample(out)
-        self.wide.sample(out)
+        for csv in self.csvs:
+            csv.sample(out)
         self.mcap.sample(out)
 
     def diagnostics(self, stamp_ns: int, statuses: list[Status], fits: list[tuple[int, str, str, bytes]]) -> None:
@@ -219,8 +236,8 @@ class ReplayFiles:
         self.mcap.after(newest_ns)
 
     def close(self) -> None:
-        self.csv.fh.close()
-        self.wide.fh.close()
+        for csv in self.csvs:
+            csv.fh.close()
         self.mcap.close()
 
     def __enter__(self) -> ReplayFiles:
@@ -231,7 +248,7 @@ class ReplayFiles:
         if exc_type is None:
             self.close()
         else:
-            self.csv.fh.close()
-            self.wide.fh.close()
+            for csv in self.csvs:
+                csv.fh.close()
             if self.mcap.writer is not None:
                 self.mcap.writer.__exit__(exc_type, exc, tb)

@@ -10,6 +10,10 @@ A :class:`ReplayResult` is what :func:`.replay.run_pipeline` returns (the offlin
 * :meth:`ReplayResult.series`: a parameter's time history as numpy arrays, one element per
   sample in which its model published (kept when the run was asked to keep a
   :class:`History`);
+* both for the frequency-domain estimates too (``method="frequency"``; with
+  ``estimator.method`` ``frequency`` or ``both``, :attr:`ReplayResult.methods`): over the
+  parameters without the bias (:attr:`ReplayResult.frequency_parameter_names`), their
+  corrected (docs/frequency.md F7-F10) and conventional (F5) standard errors;
 * :meth:`ReplayResult.counters`: the message and sample accounting (:func:`accounting`).
 
 Memory: :class:`History` keeps every sample, or with a ``capacity`` at most twice that many
@@ -32,7 +36,10 @@ if TYPE_CHECKING:  # annotations only: this module does not need the pipeline to
     from .diagnostics import Status
     from .pipeline import Pipeline, SampleOutput
 
-__all__ = ["Final", "Series", "History", "ReplayResult", "accounting"]
+__all__ = ["Final", "Series", "History", "ReplayResult", "accounting", "METHODS"]
+
+# The estimates a run can hold: the time-domain (recursive least squares) and the frequency-domain ones.
+METHODS = ("time", "frequency")
 
 
 class Final(NamedTuple):
@@ -195,7 +202,13 @@ class ReplayResult:
     explanations: list[str] = field(default_factory=list)
     counter_values: dict[str, Any] = field(default_factory=dict)
     bag_digest: str = ""
+    # The methods whose estimates the run published (estimator.method), and the frequency
+    # domain's parameters (without the bias) and history.
+    methods: tuple[str, ...] = ("time",)
+    frequency_parameter_names: tuple[tuple[str, ...], ...] = ()
+    frequency_history: History | None = None
     _last: dict[str, Final] = field(default_factory=dict, repr=False)
+    _last_frequency: dict[str, Final] = field(default_factory=dict, repr=False)
 
     @property
     def parameters(self) -> tuple[str, ...]:
@@ -207,36 +220,67 @@ class ReplayResult:
         """Multiples of real time."""
         return self.data_seconds / self.wall_seconds if self.wall_seconds > 0 else float("inf")
 
-    def _where(self, parameter: str) -> tuple[int, int]:
-        """(model index, column in the flat parameter order) of ``parameter``."""
+    def _where(self, parameter: str, method: str = "time") -> tuple[int, int]:
+        """(model index, column in the flat parameter order) of ``parameter`` among the
+        ``method``'s parameters; the method must be one the run published."""
+        if method not in METHODS:
+            raise ValueError(f"method must be one of {METHODS}, got {method!r}")
+        self._where_in(self.parameter_names, parameter)  # an unknown name is said as such
+        if method not in self.methods:
+            raise EstimatorNotReady(f"this run published no {method}-domain estimates (estimator.method: "
+                                    f"{'both' if len(self.methods) > 1 else self.methods[0]})")
+        if method == "time":
+            return self._where_in(self.parameter_names, parameter)
+        if not any(parameter in names for names in self.frequency_parameter_names):
+            raise UnknownName(f"{parameter} is a bias, which the frequency-domain method does not estimate; its "
+                              f"parameters: {', '.join(p for names in self.frequency_parameter_names for p in names)}")
+        return self._where_in(self.frequency_parameter_names, parameter)
+
+    def _where_in(self, parameter_names: tuple[tuple[str, ...], ...], parameter: str) -> tuple[int, int]:
         k = 0
-        for j, names in enumerate(self.parameter_names):
+        for j, names in enumerate(parameter_names):
             if parameter in names:
                 return j, k + names.index(parameter)
             k += len(names)
         raise UnknownName(f"no parameter {parameter!r} in this run; its parameters: {', '.join(self.parameters)}")
 
     def published(self, stamp_ns: int, j: int, theta: Sequence[float] | np.ndarray, se: Sequence[float] | np.ndarray,
-                  se_conventional: Sequence[float] | np.ndarray, converged: Sequence[bool] | np.ndarray) -> None:
-        """Model ``j`` published at ``stamp_ns``: its parameters' final values so far."""
-        for i, p in enumerate(self.parameter_names[j]):
-            self._last[p] = Final(float(theta[i]), float(se[i]), float(se_conventional[i]), bool(converged[i]),
-                                  int(stamp_ns))
+                  se_conventional: Sequence[float] | np.ndarray, converged: Sequence[bool] | np.ndarray,
+                  method: str = "time") -> None:
+        """Model ``j`` published at ``stamp_ns`` (its ``method``-domain estimates): its
+        parameters' final values so far."""
+        names, last = (self.parameter_names, self._last) if method == "time" else \
+            (self.frequency_parameter_names, self._last_frequency)
+        for i, p in enumerate(names[j]):
+            last[p] = Final(float(theta[i]), float(se[i]), float(se_conventional[i]), bool(converged[i]), int(stamp_ns))
 
-    def final(self, parameter: str) -> Final:
-        """The last published estimate of ``parameter`` with both standard errors.
-        :class:`.errors.UnknownName` for a name not in :attr:`parameters`,
-        :class:`.errors.EstimatorNotReady` when its model never published."""
-        self._where(parameter)  # an unknown name is said as such
-        if parameter not in self._last:
+    def final(self, parameter: str, method: str = "time") -> Final:
+        """The last published estimate of ``parameter`` with both standard errors, of the
+        time-domain estimator or (``method="frequency"``) the frequency-domain one.
+        :class:`.errors.UnknownName` for a name not in :attr:`parameters` (or, in the frequency
+        domain, a bias), :class:`.errors.EstimatorNotReady` when its model never published or
+        the run did not publish that method's estimates."""
+        self._where(parameter, method)
+        last = self._last if method == "time" else self._last_frequency
+        if parameter not in last:
             why = "; ".join(self.explanations) or "its model never produced an estimate"
-            raise EstimatorNotReady(f"{parameter}: no estimate in this run ({why})")
-        return self._last[parameter]
+            what = "estimate" if method == "time" else "frequency-domain estimate"
+            raise EstimatorNotReady(f"{parameter}: no {what} in this run ({why})")
+        return last[parameter]
 
-    def series(self, parameter: str) -> Series:
-        """``parameter``'s history over the kept samples in which its model published."""
-        j, k = self._where(parameter)
-        h = self.history
+    def finals(self, method: str = "time") -> dict[str, Final]:
+        """:meth:`final` of every parameter whose model published (``method``'s estimates), in
+        the order of the models."""
+        names = self.parameter_names if method == "time" else self.frequency_parameter_names
+        last = self._last if method == "time" else self._last_frequency
+        return {p: last[p] for row in names for p in row if p in last}
+
+    def series(self, parameter: str, method: str = "time") -> Series:
+        """``parameter``'s history over the kept samples in which its model published, of the
+        time-domain estimates or (``method="frequency"``) the frequency-domain ones (those
+        samples where they were published: every ``frequency.every``-th)."""
+        j, k = self._where(parameter, method)
+        h = self.history if method == "time" else self.frequency_history
         if h is None:
             raise EstimatorNotReady("this run kept no time histories (testing.replay_bag keeps them; so does "
                                     "run_pipeline given a History)")

@@ -51,7 +51,7 @@ def _setup(command, tmp_path):
 
 def _expected_outputs(command, out):
     if command == "replay":
-        return {"estimates.csv", "estimates_wide.csv", "estimates.mcap", "run.json"}
+        return {"estimates.csv", "estimates_wide.csv", "estimates.mcap", "run.json", "summary.txt"}
     return {f"{out.name}.mcap", "metadata.yaml"}
 
 
@@ -197,6 +197,9 @@ BAD_ARGUMENTS = [
     (["replay", "{bag}", "--out", "{tmp}/r", "--quiet", "--config", "{tmp}/missing.yaml"], "missing.yaml"),
     (["replay", "{tmp}/missing_bag", "--out", "{tmp}/r", "--quiet"], "no such bag"),
     (["replay", "{bag}", "--quiet"], "--out"),
+    (["replay", "{bag}", "--out", "{tmp}/r", "--quiet", "--figures", "png,gif"], "--figures"),
+    (["replay", "{bag}", "--out", "{tmp}/r", "--quiet", "--dpi", "20"], "--dpi"),
+    (["replay", "{bag}", "--out", "{tmp}/r", "--quiet", "--dpi", "high"], "--dpi"),
     (["play", "{bag}", "--rate", "-1"], "--rate"),
     (["play", "{bag}", "--rate", "nan"], "--rate"),
     (["play", "{bag}", "--delay", "-1"], "--delay"),

@@ -21,6 +21,7 @@ from rls_uncertainty.config import (
     ModelConfig,
     PipelineConfig,
     PlausibilityLimits,
+    frequency_options,
     load_aircraft,
     load_models,
     load_parameters_file,
@@ -30,6 +31,7 @@ from rls_uncertainty.config import (
 )
 from rls_uncertainty.differentiation import DifferentiatorConfig
 from rls_uncertainty.estimator import RESIDUALS, WINDOWS
+from rls_uncertainty.frequency import FrequencyOptions
 from rls_uncertainty.identifiability import IdentifiabilityConfig
 from rls_uncertainty.surface_mixing import SurfaceMixing
 
@@ -159,7 +161,8 @@ def test_every_parameter_reaches_its_nested_field():
         "identifiability.rate_resolution": (("identifiability", "rate_resolution"), 1e-5),
     }
     sections = {"rate", "estimator", "differentiator", "inputs", "surfaces", "limits", "identifiability"}
-    pipeline_params = [p.name for p in PARAMETERS if p.name.split(".")[0] in sections]
+    # (estimator.method and the frequency.* parameters: test_every_frequency_parameter_reaches_its_option)
+    pipeline_params = [p.name for p in PARAMETERS if p.name.split(".")[0] in sections and p.name != "estimator.method"]
     assert sorted(changed) == sorted(pipeline_params)
     given = {"estimator.lag_span": 0.22, "estimator.max_lag_span": 1.6, "estimator.residual_burn_in_span": 0.4}
     default = pipeline_config({})
@@ -498,3 +501,78 @@ def test_parameter_files_are_matched_against_the_name_the_node_runs_under():
     from rls_uncertainty import node
 
     assert NODE_NAME == node.NODE_NAME
+
+
+def test_every_frequency_parameter_reaches_its_option():
+    """``estimator.method`` frequency or both builds :class:`FrequencyOptions` from the
+    ``frequency.*`` parameters (the spans are samples at the rate, rounded: 0.5 s trim at 50 Hz
+    is 25 samples, 0 the first sample; 0.3 s of lags 15); ``time`` builds none and ignores them,
+    so a grid beyond a low rate's Nyquist frequency does not stop a time-domain user."""
+    default = pipeline_config({})
+    assert (default.method, default.frequency, default.published_methods) == ("time", None, ("time",))
+    both = pipeline_config({"estimator.method": "both"})
+    assert both.published_methods == ("time", "frequency")
+    assert both.frequency == FrequencyOptions(rate_hz=50.0)  # the defaults of the table are the options'
+    assert pipeline_config({"estimator.method": "frequency"}).published_methods == ("frequency",)
+    changed = {
+        "frequency.f_min": ("f_min", 0.2, 0.2),
+        "frequency.f_max": ("f_max", 2.2, 2.2),
+        "frequency.f_step": ("f_step", 0.05, 0.05),
+        "frequency.trim_span": ("trim_samples", 0.5, 25),
+        "frequency.lag_span": ("n_lags", 0.3, 15),
+        "frequency.every": ("every", 5, 5),
+    }
+    assert sorted(changed) == sorted(p.name for p in PARAMETERS if p.name.startswith("frequency."))
+    for name, (attr, value, want) in changed.items():
+        cfg = pipeline_config({"estimator.method": "both", name: value})
+        assert cfg.frequency is not None and getattr(cfg.frequency, attr) == want, name
+        assert replace(cfg.frequency, **{attr: getattr(both.frequency, attr)}) == both.frequency, name
+    assert pipeline_config({"estimator.method": "both", "frequency.lag_span": 0.0}).frequency.n_lags == 0
+    assert pipeline_config({"estimator.method": "both", "rate": 100.0}).frequency.rate_hz == 100.0
+    low = {"rate": 2.0, "inputs.max_gap": 1.0}  # Nyquist 1 Hz: the default grid reaches 1.5 Hz
+    assert pipeline_config(low).frequency is None
+    with pytest.raises(ConfigError, match=r"frequency\.f_max must stay below the Nyquist frequency rate / 2 = 1\.0"):
+        pipeline_config({**low, "estimator.method": "frequency"})
+    values = {**parameter_defaults(), "estimator.method": "both", "frequency.trim_span": 0.001}
+    with pytest.raises(ConfigError, match=r"'frequency\.trim_span' = 0\.001 s is less than one sample"):
+        frequency_options(values)
+
+
+def test_t2_file_sets_the_grid_of_table_2_and_the_twin_otter_files_keep_the_default():
+    """config/t2.yaml: 0.2-2.2 Hz every 0.04 Hz (Table 2's multisines; docs/frequency.md) and
+    the half second before the input as trim; the Twin Otter files the default grid."""
+    t2 = pipeline_config({**load_parameters_file("t2"), "estimator.method": "both"}).frequency
+    assert (t2.f_min, t2.f_max, t2.f_step, t2.trim_samples, t2.n_lags) == (0.2, 2.2, 0.04, 25, 50)
+    assert t2.frequencies().size == 51
+    for name in ("twin_otter_lateral", "twin_otter_longitudinal"):
+        cfg = pipeline_config({**load_parameters_file(name), "estimator.method": "both"})
+        # The default grid; 1 s of lags at the recording's rate (9752ed20: 100 Hz).
+        assert cfg.frequency == FrequencyOptions(rate_hz=cfg.rate, n_lags=round(cfg.rate)), name
+
+
+@pytest.mark.parametrize(
+    ("params", "match"),
+    [
+        ({"estimator.method": "fourier"}, r"'estimator\.method' must be one of \['time', 'frequency', 'both'\]"),
+        ({"estimator.method": "both", "models.enabled": ["CX"], "models.CX": ["1"]},
+         r"model CX has no regressor but the bias '1'.*models\.CX.*estimator\.method: time"),
+        ({"estimator.method": "both", "frequency.f_min": 0.5, "frequency.f_max": 0.6},
+         r"grid .* has 3 frequencies, a model 5 frequency-domain parameters.*frequency\.f_step"),
+        ({"estimator.method": "frequency", "frequency.f_step": 1e-4}, r"frequency\.f_step .* more than 1000"),
+        ({"estimator.method": "frequency", "frequency.f_max": 0.05}, r"frequency\.f_max must be >= f_min"),
+        ({"estimator.method": "frequency", "frequency.trim_span": 250.0}, r"'frequency\.trim_span' must be in"),
+        ({"estimator.method": "frequency", "frequency.every": 0}, r"'frequency\.every' must be in"),
+    ],
+)
+def test_frequency_settings_are_refused_naming_the_parameter(params, match):
+    with pytest.raises(ConfigError, match=match):
+        pipeline_config(params)
+
+
+def test_a_pipeline_config_built_directly_keeps_method_and_options_in_agreement():
+    with pytest.raises(ConfigError, match=r"estimator\.method both needs frequency options"):
+        PipelineConfig(aircraft=T2, method="both")
+    with pytest.raises(ConfigError, match=r"estimator\.method time needs frequency options exactly"):
+        PipelineConfig(aircraft=T2, frequency=FrequencyOptions(rate_hz=50.0))
+    with pytest.raises(ConfigError, match=r"frequency options at 100\.0 Hz for a pipeline at rate 50\.0 Hz"):
+        PipelineConfig(aircraft=T2, method="both", frequency=FrequencyOptions(rate_hz=100.0))

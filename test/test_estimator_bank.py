@@ -477,3 +477,14 @@ def test_numpy_126_vecdot_fallback_gives_the_same_standard_errors(monkeypatch):
     np.testing.assert_allclose(alt.standard_errors(), ref.standard_errors(), rtol=1e-12)
     np.testing.assert_allclose(alt.standard_errors("conventional"), ref.standard_errors("conventional"), rtol=1e-12)
     np.testing.assert_allclose(alt.theta, ref.theta, rtol=1e-12)
+
+
+@pytest.mark.parametrize("lags", [0, 50, "all", "auto"])
+def test_a_bank_that_has_seen_no_sample_reports_nan_standard_errors_and_no_estimates(lags):
+    """Before the first sample no model is ready: every published array is NaN (never an
+    IndexError from an empty lag window)."""
+    bank = EstimatorBank((3, 4), EstimatorOptions(lags=lags))
+    for kind in ("corrected", "conventional"):
+        se = bank.standard_errors_all(kind)
+        assert se.shape == (2, 4) and np.isnan(se).all()
+    assert np.isnan(bank.theta_all()).all() and not bank.ready.any()

@@ -44,7 +44,7 @@ def test_a_grid_end_that_is_not_a_step_away_is_not_reached():
     ],
 )
 def test_an_invalid_option_is_refused_naming_it(change, option):
-    with pytest.raises(ConfigError, match=rf"frequency {option}"):
+    with pytest.raises(ConfigError, match=rf"frequency\.{option}"):
         FrequencyOptions(**{"rate_hz": 50.0, **change})
 
 

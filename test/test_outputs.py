@@ -320,3 +320,54 @@ def test_nothing_is_encoded_before_a_sample_or_for_a_model_not_ready(bag):
         if pipe.bank.k > 0:
             break
     assert not pipe.bank.ready.any() and layout.encode_fit(pipe) == []
+
+
+# ------------------------------------------------------------------ ~/M/frequency/*
+def test_the_frequency_domain_arrays_follow_the_time_domain_ones_without_the_bias(bag):
+    """estimator.method both: per sample, after every model's time-domain arrays, per model ready
+    in the frequency domain its estimates, corrected and conventional SEs and flags on
+    ~/M/frequency/..., labelled with the parameters without the bias and stamped with the sample
+    (cdr, independently of the index bookkeeping); a model not ready there publishes nothing."""
+    from rls_uncertainty.cdr import encode_float64_multiarray
+    from rls_uncertainty.outputs import FREQUENCY_OUTPUTS
+
+    pipe, outs, _ = run(bag, t2(**{"estimator.method": "both"}))
+    layout = OutputLayout.of(pipe)
+    topics = output_topics(["CZ", "Cm"], frequency=True)
+    assert layout.topics == topics
+    assert [t for t, _ in topics[13:]] == [f"{m}/frequency/{s}" for m in ("CZ", "Cm") for s in FREQUENCY_OUTPUTS]
+    labels = ("CZ_alpha,CZ_delta_e", "Cm_alpha,Cm_q,Cm_delta_e")
+    published = 0
+    for out in outs:
+        f = out.frequency
+        messages = dict(layout.encode(out, "base_link"))
+        for j, (model, label) in enumerate(zip(("CZ", "Cm"), labels, strict=True)):
+            n = len(label.split(","))
+            for suffix, values in zip(FREQUENCY_OUTPUTS, (f.theta, f.se, f.se_conventional,
+                                                          f.converged.astype(float)), strict=True):
+                index = topics.index((f"{model}/frequency/{suffix}", "std_msgs/msg/Float64MultiArray"))
+                if f.ready[j]:
+                    assert np.isfinite(values[j, :n]).all()
+                    want = encode_float64_multiarray(label, values[j, :n].tolist(), stamp_label(out.stamp_ns))
+                    assert messages[index] == want
+                    published += 1
+                else:
+                    assert index not in messages
+        names = {a.names for a in layout.arrays(out) if a.suffix.startswith("frequency/")}
+        assert names <= set(labels)
+        assert [r.names for r in layout.frequency_rows(out)] == [
+            tuple(label.split(",")) for j, label in enumerate(labels) if f.ready[j]]
+    assert published > 8 * 500
+
+
+def test_frequency_only_publishes_no_time_domain_arrays_and_every_n_only_on_its_samples(bag):
+    pipe, outs, _ = run(bag, t2(**{"estimator.method": "frequency", "frequency.every": 4}))
+    layout = OutputLayout.of(pipe)
+    assert layout.topics == output_topics(["CZ", "Cm"], time=False, frequency=True)
+    assert not list(layout.rows(outs[-1]))
+    for out in outs:
+        messages = layout.encode(out, "base_link")
+        assert messages[0][0] == 0  # the sample stamp, every sample
+        topics = {layout.topics[i][0] for i, _ in messages[1:]}
+        assert all("/frequency/" in t for t in topics)
+        assert bool(topics) == (out.index % 4 == 0 and out.frequency.ready.any())

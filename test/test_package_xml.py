@@ -48,6 +48,7 @@ DEPENDENCY = {
 NO_ROSDEP_KEY = {
     "rosbags": "rosbags",
     "mcap": "mcap",
+    "distributed": "distributed",
 }
 # Test-only imports without a rosdep key: named in a package.xml comment and pinned in
 # requirements-dev.txt (the tests that use them skip without them, unless told to require them).

@@ -11,6 +11,7 @@ from bag_samples import fails, read_all
 from rls_uncertainty import cli
 from rls_uncertainty.bags import read_inputs
 from rls_uncertainty.config import load_parameters_file, pipeline_config
+from rls_uncertainty.figures import REPLAY_FIGURES
 from rls_uncertainty.replay import replay, run_pipeline
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -24,7 +25,7 @@ def test_replay_writes_identical_outputs_twice_and_matches_the_pipeline(tmp_path
     for name in ("estimates.csv", "estimates.mcap"):
         assert (tmp_path / "r1" / name).read_bytes() == (tmp_path / "r2" / name).read_bytes()
     assert {p.name for p in (tmp_path / "r1").glob("*.png")} == {
-        "CZ_estimates.png", "Cm_estimates.png", "CZ_autocorrelation.png", "Cm_autocorrelation.png"}
+        f"{m}_{kind}.png" for m in ("CZ", "Cm") for kind in REPLAY_FIGURES}
     with open(tmp_path / "r1" / "estimates.csv") as fh:
         rows = list(csv.DictReader(fh))
     assert list(rows[0]) == ["time", "model", "parameter", "estimate", "std_error", "std_error_conventional",
@@ -307,4 +308,66 @@ def test_the_replay_keeps_no_sample_and_plots_from_a_bounded_history(tmp_path, m
         times = [line.split(",", 1)[0] for line in fh][1:]
     assert [f"{s // 10**9}.{s % 10**9:09d}" for s in h.stamps_ns] == times[::8]
     assert {p.name for p in (tmp_path / "r").glob("*.png")} == {
-        "CZ_estimates.png", "Cm_estimates.png", "CZ_autocorrelation.png", "Cm_autocorrelation.png"}
+        f"{m}_{kind}.png" for m in ("CZ", "Cm") for kind in REPLAY_FIGURES}
+
+
+# ------------------------------------------------------------------ the frequency-domain estimates
+def test_estimates_frequency_csv_holds_the_frequency_domain_results_with_the_columns_of_estimates_csv(tmp_path):
+    """estimator.method both: estimates_frequency.csv has estimates.csv's columns, one row per
+    sample and parameter (without the bias) of every model ready in the frequency domain, the
+    values exactly the pipeline's (repr), and the MCAP carries ~/M/frequency/* byte for byte
+    what the layout encodes; estimates.csv is unchanged by the method."""
+    from mcap.reader import make_reader
+
+    from rls_uncertainty.outputs import OutputLayout, fit_topics, output_topics
+    from rls_uncertainty.replay_files import CSV_COLUMNS
+
+    params = {**load_parameters_file("t2"), "estimator.method": "both"}
+    replay(BUNDLED, params, tmp_path / "both", progress=False, plots=False)
+    replay(BUNDLED, load_parameters_file("t2"), tmp_path / "time", progress=False, plots=False)
+    assert (tmp_path / "both" / "estimates.csv").read_bytes() == (tmp_path / "time" / "estimates.csv").read_bytes()
+    assert not (tmp_path / "time" / "estimates_frequency.csv").exists()
+    result = run_pipeline(read_inputs(BUNDLED)[0], pipeline_config(params))
+    with open(tmp_path / "both" / "estimates_frequency.csv") as fh:
+        reader = csv.reader(fh)
+        assert tuple(next(reader)) == CSV_COLUMNS
+        rows = list(reader)
+    want = []
+    for out in result.outputs:
+        f = out.frequency
+        for j, names in enumerate(m.frequency_parameter_names for m in result.pipeline.models):
+            if f.ready[j]:
+                want += [[f"{out.stamp_ns // 10**9}.{out.stamp_ns % 10**9:09d}", ("CZ", "Cm")[j], p,
+                          repr(float(f.theta[j, i])), repr(float(f.se[j, i])), repr(float(f.se_conventional[j, i])),
+                          str(int(f.converged[j, i])), str(int(f.lags[j]))] for i, p in enumerate(names)]
+    assert rows == want and len(rows) > 2500
+    assert {r[2] for r in rows} == {"CZ_alpha", "CZ_delta_e", "Cm_alpha", "Cm_q", "Cm_delta_e"}
+    assert {r[7] for r in rows[-5:]} == {"50"}
+    with open(tmp_path / "both" / "estimates.mcap", "rb") as fh:
+        got = [(ch.topic, msg.log_time, msg.data) for _s, ch, msg in make_reader(fh).iter_messages()
+               if "/frequency/" in ch.topic]
+    layout = OutputLayout.of(result.pipeline)
+    expected = [(f"/rls_estimator/{layout.topics[i][0]}", out.stamp_ns, data)
+                for out in result.outputs for i, data in layout.encode(out, "base_link")
+                if "/frequency/" in layout.topics[i][0]]
+    assert sorted(got) == sorted(expected)
+    assert len(got) == 4 * sum(int(out.frequency.ready.sum()) for out in result.outputs)  # four arrays per model
+    with open(tmp_path / "both" / "estimates.mcap", "rb") as fh:
+        topics = {(ch.topic, sch.name) for sch, ch, _m in make_reader(fh).iter_messages()}
+    assert topics >= {(f"/rls_estimator/{t}", m) for t, m in output_topics(["CZ", "Cm"], frequency=True)
+                      + fit_topics(["CZ", "Cm"])}
+
+
+def test_frequency_only_writes_no_time_domain_files_and_counts_its_estimates(tmp_path, capsys):
+    code = cli.main(["replay", str(BUNDLED), "--config", "t2", "--out", str(tmp_path / "o"), "--method", "frequency",
+                     "--no-plots", "--quiet"])
+    assert code == 0  # estimates were published: the frequency-domain ones
+    names = {p.name for p in (tmp_path / "o").iterdir()}
+    assert "estimates_frequency.csv" in names and not names & {"estimates.csv", "estimates_wide.csv"}
+    out = capsys.readouterr().out
+    assert out.startswith("frequency domain (docs/frequency.md):")
+    assert "Cm_q" in out and "Cm_0" not in out
+    from rls_uncertainty.replay_files import CSV_COLUMNS
+
+    with open(tmp_path / "o" / "estimates_frequency.csv") as fh:
+        assert tuple(next(csv.reader(fh))) == CSV_COLUMNS

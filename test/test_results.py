@@ -92,3 +92,46 @@ def test_the_accounting_keeps_the_counts_and_drops_the_rest():
     r = ReplayResult(("CZ",), NAMES[:1], counter_values=got)
     r.counters()["streams"]["imu"]["received"] = 0  # a copy
     assert r.counters()["streams"]["imu"]["received"] == 3
+
+
+FREQUENCY_NAMES = (("CZ_alpha",), ("Cm_alpha", "Cm_q"))
+
+
+def test_the_frequency_domain_estimates_are_asked_for_by_method_and_kept_apart():
+    h, hf = History(NAMES), History(FREQUENCY_NAMES)
+    _fill(h, 4)
+    for i in range(2):  # published every other sample
+        values = np.array([100.0, 200.0, 300.0]) + i
+        hf.append(1000 + 2 * i, values, values / 10, values / 20, values > 250, np.array([True, i == 1]))
+    r = ReplayResult(("CZ", "Cm"), NAMES, history=h, methods=("time", "frequency"),
+                     frequency_parameter_names=FREQUENCY_NAMES, frequency_history=hf)
+    r.published(5, 0, [1.0, 2.0], [0.1, 0.2], [0.05, 0.1], [False, True])
+    r.published(6, 0, [9.0], [0.9], [0.8], [True], method="frequency")
+    assert r.final("CZ_alpha") == (2.0, 0.2, 0.1, True, 5)
+    assert r.final("CZ_alpha", method="frequency") == (9.0, 0.9, 0.8, True, 6)
+    assert r.finals("frequency") == {"CZ_alpha": r.final("CZ_alpha", "frequency")}
+    assert list(r.finals()) == ["CZ_0", "CZ_alpha"]
+    with pytest.raises(EstimatorNotReady, match="Cm_q: no frequency-domain estimate in this run"):
+        r.final("Cm_q", method="frequency")
+    with pytest.raises(UnknownName, match="CZ_0 is a bias, which the frequency-domain method does not estimate"):
+        r.final("CZ_0", method="frequency")
+    with pytest.raises(UnknownName, match="no parameter 'Cm_r'"):
+        r.series("Cm_r", method="frequency")
+    with pytest.raises(ValueError, match="method must be one of"):
+        r.final("CZ_alpha", method="fourier")
+    s = r.series("Cm_q", method="frequency")
+    assert s.stamps_ns.tolist() == [1002] and s.estimates.tolist() == [301.0]
+    assert r.series("CZ_alpha", method="frequency").estimates.tolist() == [100.0, 101.0]
+    assert r.series("CZ_alpha").estimates.tolist() == [1.0, 11.0, 21.0, 31.0]
+
+
+def test_a_method_the_run_did_not_publish_is_named():
+    time_only = _result()
+    with pytest.raises(EstimatorNotReady, match=r"no frequency-domain estimates \(estimator.method: time\)"):
+        time_only.final("CZ_alpha", method="frequency")
+    frequency_only = ReplayResult(("CZ", "Cm"), NAMES, methods=("frequency",),
+                                  frequency_parameter_names=FREQUENCY_NAMES)
+    with pytest.raises(EstimatorNotReady, match=r"no time-domain estimates \(estimator.method: frequency\)"):
+        frequency_only.series("CZ_alpha")
+    with pytest.raises(UnknownName, match="no parameter 'Cx'"):  # an unknown name first
+        frequency_only.final("Cx")

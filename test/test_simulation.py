@@ -340,18 +340,23 @@ def test_every_stream_sees_the_same_gust():
 
 
 def test_band_limited_noise_on_the_responses_only_leaves_the_elevator_white():
-    """``band_limited_on=RESPONSES``: the same random numbers as the default, so alpha, q and
-    a_z are those of the default variant exactly and the elevator is that of band level 0."""
-    from rls_uncertainty.simulation import RESPONSES
+    """``band_limited_on=RESPONSES`` (the default): the same random numbers as the noise on
+    all four signals, so alpha, q and a_z are those of that variant exactly and the elevator is
+    that of band level 0."""
+    from rls_uncertainty.simulation import BAND_LIMITED_ON, RESPONSES, SIGNALS
 
     rec = simulate_short_period()
-    default = add_noise(rec, 0.2, np.random.default_rng(3))
+    four = add_noise(rec, 0.2, np.random.default_rng(3), band_limited_on=SIGNALS)
     variant = add_noise(rec, 0.2, np.random.default_rng(3), band_limited_on=RESPONSES)
     white = add_noise(rec, 0.0, np.random.default_rng(3))
     for name in RESPONSES:
-        np.testing.assert_array_equal(getattr(variant, name), getattr(default, name))
+        np.testing.assert_array_equal(getattr(variant, name), getattr(four, name))
     np.testing.assert_array_equal(variant.delta_e, white.delta_e)
-    assert not np.array_equal(variant.delta_e, default.delta_e)
+    assert not np.array_equal(variant.delta_e, four.delta_e)
+    assert BAND_LIMITED_ON == RESPONSES
+    default = add_noise(rec, 0.2, np.random.default_rng(3))
+    for name in SIGNALS:
+        np.testing.assert_array_equal(getattr(default, name), getattr(variant, name))
 
 
 def test_band_limited_on_refuses_unknown_signals():

@@ -41,9 +41,35 @@ def test_the_live_node_publishes_what_the_replay_computes_sample_by_sample(tmp_p
     assert live.n_messages == 4920 and live.data_seconds == pytest.approx(11.995)
 
 
+def test_the_live_nodes_frequency_domain_topics_are_the_replays_bit_for_bit(tmp_path):
+    """estimator.method both, estimates every 3 samples: the node's ~/M/frequency/* arrays, paired
+    by their stamps, are the in-process replay's frequency-domain series (and its time-domain
+    ones still are), bit for bit on one machine."""
+    params = parameters("t2", {"estimator.method": "both", "frequency.every": 3})
+    node = EstimatorProcess(params, domain=DOMAIN, directory=tmp_path)
+    try:
+        live = play_to_node(BUNDLED, node)
+    finally:
+        assert node.stop() == 0, node.log()
+    offline = replay_bag(BUNDLED, node.parameters)
+    assert live.methods == offline.methods == ("time", "frequency")
+    assert live.frequency_parameter_names == offline.frequency_parameter_names
+    assert live.estimates == offline.estimates > 500
+    for name in offline.parameters:
+        for got, want in zip(live.series(name), offline.series(name), strict=True):
+            assert np.array_equal(got, want), name
+    for names in offline.frequency_parameter_names:
+        for name in names:
+            want = offline.series(name, method="frequency")
+            assert len(want.stamps_ns) > 150 and np.all(np.diff(want.stamps_ns) == 3 * 20_000_000)
+            for got, expected in zip(live.series(name, method="frequency"), want, strict=True):
+                assert np.array_equal(got, expected), name
+            assert live.final(name, method="frequency") == offline.final(name, method="frequency")
+
+
 def test_a_bad_parameter_is_refused_before_a_node_starts(tmp_path):
-    with pytest.raises(ConfigError, match=r"estimator\.lags"):
-        EstimatorProcess({"estimator.lags": -5}, domain=DOMAIN, directory=tmp_path)
+    with pytest.raises(ConfigError, match=r"estimator\.lag_span"):
+        EstimatorProcess({"estimator.lag_span": -5}, domain=DOMAIN, directory=tmp_path)
     assert not list(tmp_path.glob("*.log"))
 
 

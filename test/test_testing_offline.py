@@ -47,7 +47,7 @@ def test_replay_bag_gives_every_sample_of_the_pipeline(listed):
 
 
 def test_overrides_name_parameters_with_dots_or_double_underscores():
-    a = replay_bag(BUNDLED, "t2", estimator__lags=20, models__enabled=["Cm"])
+    a = replay_bag(BUNDLED, "t2", estimator__lag_span=0.4, models__enabled=["Cm"])
     b = replay_bag(BUNDLED, {**load_parameters_file("t2"), "estimator.lag_span": 0.4, "models.enabled": ["Cm"]})
     assert a.parameters == b.parameters == ("Cm_0", "Cm_alpha", "Cm_q", "Cm_delta_e")
     assert a.final("Cm_q") == b.final("Cm_q") != replay_bag(BUNDLED, "t2").final("Cm_q")

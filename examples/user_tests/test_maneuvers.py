@@ -31,7 +31,7 @@ def test_the_same_check_in_process_without_ros():
 
 
 def test_every_message_is_used_and_the_flags_hold_once_converged(rls_estimator, rls_play):
-    node = rls_estimator("t2", estimator__lags=40)
+    node = rls_estimator("t2", estimator__lag_span=0.8)
     result = rls_play(bundled_bag(), node)
     counters = result.counters()
     assert all(s["received"] == s["accepted"] > 0 for s in counters["streams"].values())

@@ -1,5 +1,5 @@
 """The node's ``/diagnostics`` read back for display: input streams, samples and model fit
-(:mod:`..diagnostics` writes them; its docstring and README "Diagnostics" list the keys). Used
+(:mod:`..diagnostics` writes them; its docstring and docs/node.md "Diagnostics" list the keys). Used
 by the dashboard and by ``rls-uncertainty status``. No ROS import: a status is handed in as
 ``(name, level, message, {key: value})``.
 

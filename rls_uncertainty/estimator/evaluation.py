@@ -148,7 +148,7 @@ class Evaluation:
             lags = self._lags
             k, _ = self._counters()
             if k < lags.cap:
-                w = k
+                w = max(k, 1)  # (before the first sample: lag 0 only, all zero; no model is ready)
                 sums, products = lags.lag_sums[:, :w], lags.lag_products[:, :, :w]
             else:
                 w = lags.cap
@@ -160,11 +160,11 @@ class Evaluation:
                 h = (np.arange(w) <= L[:, None]).astype(float)
                 h[:, 0] = 0.5
             else:
-                largest = k - 1 if self._all_lags else lags.cap - 1
+                largest = max(k - 1, 0) if self._all_lags else lags.cap - 1
                 h = self._window_h if self._window_key == (largest, w) else self._half_window(largest, w)
             totals = self.weight_totals()
             cov, repaired = self._evaluator(
-                self._D, self._D_diagonal, sums, h, products, 1.0 / totals,
+                self._D, self._D_diagonal, sums, h, products, 1.0 / totals if k else 1.0,  # (k = 0: all NaN)
                 self._cov_scale, self._se_scale, lambda: self._exact(k, totals), self.sizes,
             )
             if repaired:

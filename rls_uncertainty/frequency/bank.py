@@ -94,6 +94,12 @@ class FrequencyBank:
         """Add one sample of every model (Eqs. F2, F9). A non-finite or too large value of a
         model's regressors or output raises :class:`NonFiniteInput` and leaves the state as it
         was (the sample is not counted: the transform's time runs on accepted samples)."""
+        self.add(self.check(X, z))
+
+    def check(self, X: npt.ArrayLike, z: npt.ArrayLike) -> FloatArray:
+        """The sample as :meth:`add` takes it, ``(M, 1 + max(sizes))``: each model's output,
+        then its regressors, zero padding; :class:`NonFiniteInput` for a value :meth:`update`
+        refuses. Nothing changes: a caller that feeds another estimator too checks here first."""
         M, q = self._columns.shape
         u = np.zeros((M, q))
         u[:, 0] = np.asarray(z, dtype=np.float64).reshape(M)
@@ -105,6 +111,10 @@ class FrequencyBank:
                 f"frequency estimator: models {np.flatnonzero(bad).tolist()} have a non-finite regressor or "
                 f"output, or one beyond {LARGEST_INPUT:g}; sample refused"
             )
+        return u
+
+    def add(self, u: FloatArray) -> None:
+        """Add a sample :meth:`check` returned (Eqs. F2, F9); ``u`` is consumed."""
         if self._first is None:
             self._first = u.copy()
         u -= self._first

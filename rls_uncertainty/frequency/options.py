@@ -1,8 +1,10 @@
 """The frequency-domain estimator's options, defined and validated once.
 
 :class:`FrequencyOptions` is frozen and checks itself in its constructor; a bad value raises
-:class:`~rls_uncertainty.errors.ConfigError` naming the option. Nothing downstream re-checks
-it. The frequency grid of the recursive Fourier transform is :meth:`FrequencyOptions.frequencies`.
+:class:`~rls_uncertainty.errors.ConfigError` naming the option as the node's parameter
+(``frequency.f_max``; :func:`rls_uncertainty.config.frequency_options` maps the parameters).
+Nothing downstream re-checks it. The frequency grid of the recursive Fourier transform is
+:meth:`FrequencyOptions.frequencies`.
 """
 
 from __future__ import annotations
@@ -31,16 +33,16 @@ _GRID_TOLERANCE = 1e-9
 
 def _number(name: str, value: object) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
-        raise ConfigError(f"frequency {name} must be a number, got {value!r}")
+        raise ConfigError(f"frequency.{name} must be a number, got {value!r}")
     out = float(value)
     if not math.isfinite(out):
-        raise ConfigError(f"frequency {name} must be finite, got {value!r}")
+        raise ConfigError(f"frequency.{name} must be finite, got {value!r}")
     return out
 
 
 def _count(name: str, value: object, low: int, high: int) -> int:
     if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or not low <= int(value) <= high:
-        raise ConfigError(f"frequency {name} must be an integer in [{low}, {high}], got {value!r}")
+        raise ConfigError(f"frequency.{name} must be an integer in [{low}, {high}], got {value!r}")
     return int(value)
 
 
@@ -91,32 +93,32 @@ class FrequencyOptions:
         rate = _number("rate_hz", self.rate_hz)
         f_min, f_max, step = (_number(n, getattr(self, n)) for n in ("f_min", "f_max", "f_step"))
         if rate <= 0:
-            raise ConfigError(f"frequency rate_hz must be positive, got {self.rate_hz!r}")
+            raise ConfigError(f"frequency.rate_hz must be positive, got {self.rate_hz!r}")
         if f_min <= 0:
-            raise ConfigError(f"frequency f_min must be positive (the transform drops the bias at 0 Hz), got {f_min!r}")
+            raise ConfigError(f"frequency.f_min must be positive (the transform drops the bias at 0 Hz), got {f_min!r}")
         if f_max < f_min:
-            raise ConfigError(f"frequency f_max must be >= f_min = {f_min}, got {f_max!r}")
+            raise ConfigError(f"frequency.f_max must be >= f_min = {f_min}, got {f_max!r}")
         if step <= 0:
-            raise ConfigError(f"frequency f_step must be positive, got {step!r}")
+            raise ConfigError(f"frequency.f_step must be positive, got {step!r}")
         count = math.floor((f_max - f_min) / step + _GRID_TOLERANCE) + 1
         if count > MAX_FREQUENCIES:
             raise ConfigError(
-                f"frequency f_step {step} gives {count} frequencies from {f_min} to {f_max} Hz, more than "
+                f"frequency.f_step {step} gives {count} frequencies from {f_min} to {f_max} Hz, more than "
                 f"{MAX_FREQUENCIES}; raise f_step or narrow the band"
             )
         top = f_min + (count - 1) * step
         if top >= rate / 2:
             raise ConfigError(
-                f"frequency f_max must stay below the Nyquist frequency rate_hz / 2 = {rate / 2} Hz, "
+                f"frequency.f_max must stay below the Nyquist frequency rate / 2 = {rate / 2} Hz, "
                 f"the grid reaches {top} Hz"
             )
         _count("trim_samples", self.trim_samples, 1, MAX_TRIM)
         _count("n_lags", self.n_lags, 0, MAX_LAGS)
         _count("every", self.every, 1, 1_000_000)
         if not isinstance(self.dof_correction, (bool, np.bool_)):
-            raise ConfigError(f"frequency dof_correction must be true or false, got {self.dof_correction!r}")
+            raise ConfigError(f"frequency.dof_correction must be true or false, got {self.dof_correction!r}")
         if not _number("init_condition", self.init_condition) > 1.0:
-            raise ConfigError(f"frequency init_condition must be > 1, got {self.init_condition!r}")
+            raise ConfigError(f"frequency.init_condition must be > 1, got {self.init_condition!r}")
 
     def frequencies(self) -> FloatArray:
         """The grid in Hz, ``f_min + k f_step``."""

@@ -8,7 +8,10 @@ with :data:`REPLAY_PARAMETERS` (reliable inputs, a deep queue, a long input buff
 ``rls-uncertainty demo``. The node's outputs are paired by the stamp every array carries
 (:func:`..outputs.parse_stamp_label`). The run is complete when the node's ``/diagnostics``
 report every message the player published as received, the samples it used have all been
-received here, and every model it reports ready has published for the last of them.
+received here, and every model it reports ready has published for the last of them (with
+``estimator.method`` ``frequency`` or ``both``: every model that published frequency-domain
+arrays has published them for the last sample due, the samples used being counted from the
+start: a run with a reset in it is not waited for correctly).
 
 rclpy is imported when a node is started or played to, not with this module. The domain
 isolates the test's DDS traffic; discovery follows ``ROS_AUTOMATIC_DISCOVERY_RANGE`` as
@@ -31,7 +34,7 @@ import numpy as np
 from ..bags import input_topics
 from ..config import node_config, pipeline_config
 from ..errors import BagError, LiveTimeout
-from ..outputs import NODE_NAME, SAMPLE_STAMP, parse_stamp_label
+from ..outputs import FREQUENCY, FREQUENCY_OUTPUTS, NODE_NAME, SAMPLE_STAMP, parse_stamp_label
 from ..results import History, ReplayResult, accounting
 
 __all__ = ["REPLAY_PARAMETERS", "EstimatorProcess", "LiveTimeout", "play_to_node"]
@@ -43,6 +46,7 @@ __all__ = ["REPLAY_PARAMETERS", "EstimatorProcess", "LiveTimeout", "play_to_node
 REPLAY_PARAMETERS: dict[str, Any] = {"qos.reliable": True, "qos.depth": 10_000, "inputs.buffer_duration": 60.0,
                                      "diagnostics_period": 0.2}
 _VECTORS = ("estimates", "standard_errors", "standard_errors_conventional", "converged")
+_FREQUENCY_VECTORS = tuple(f"{FREQUENCY}/{kind}" for kind in FREQUENCY_OUTPUTS)
 
 
 def _nested(params: Mapping[str, Any]) -> dict[str, Any]:
@@ -128,7 +132,7 @@ class _Outputs:
     """The node's sample stamps, vector outputs (by model and kind, by stamp) and newest
     ``/diagnostics``, as they arrive on ``node``."""
 
-    def __init__(self, node: Any, models: Sequence[str]) -> None:
+    def __init__(self, node: Any, models: Sequence[str], kinds: Sequence[str] = _VECTORS) -> None:
         from diagnostic_msgs.msg import DiagnosticArray  # noqa: PLC0415
         from rclpy.qos import QoSHistoryPolicy, QoSProfile, QoSReliabilityPolicy  # noqa: PLC0415
         from std_msgs.msg import Float64MultiArray, Header  # noqa: PLC0415
@@ -140,7 +144,7 @@ class _Outputs:
         self.reports = 0
         self.subs = [node.create_subscription(Header, f"/{NODE_NAME}/{SAMPLE_STAMP}", self._stamp, qos)]
         for model in models:
-            for kind in _VECTORS:
+            for kind in kinds:
                 store = self.arrays.setdefault((model, kind), {})
                 self.subs.append(node.create_subscription(
                     Float64MultiArray, f"/{NODE_NAME}/{model}/{kind}",
@@ -182,9 +186,12 @@ def _wait(spin: Callable[[], None], condition: Callable[[], bool], timeout: floa
         spin()
 
 
-def _complete(out: _Outputs, published: Mapping[str, int], models: Sequence[str]) -> Callable[[], bool]:
+def _complete(out: _Outputs, published: Mapping[str, int], models: Sequence[str], time_domain: bool,
+              every: int | None) -> Callable[[], bool]:
     """The run's end (module docstring): every published input counted as received, every
-    used sample's stamp here, and the arrays of the last sample from every ready model."""
+    used sample's stamp here, and the arrays of the last sample from every ready model (the
+    time-domain ones when ``time_domain``; the frequency-domain ones, published every
+    ``every`` samples, when it is not None)."""
 
     def done() -> bool:
         counters = _counters(out.diagnostics)
@@ -198,9 +205,40 @@ def _complete(out: _Outputs, published: Mapping[str, int], models: Sequence[str]
         last = out.stamps[-1] if out.stamps else None
         ready = {name.split("model ", 1)[1] for name, _l, _m, kv in out.diagnostics
                  if name.startswith(f"{NODE_NAME}: model ") and kv.get("ready") == "True"}
-        return all(last in out.arrays[(m, kind)] for m in models if m in ready for kind in _VECTORS)
+        if time_domain and not all(last in out.arrays[(m, kind)] for m in models if m in ready for kind in _VECTORS):
+            return False
+        if every is None or len(out.stamps) < every:
+            return True
+        due = out.stamps[len(out.stamps) // every * every - 1]
+        return all(due in out.arrays[(m, kind)] for m in models if out.arrays[(m, _FREQUENCY_VECTORS[0])]
+                   for kind in _FREQUENCY_VECTORS)
 
     return done
+
+
+def _collect(out: _Outputs, result: ReplayResult, method: str, history: History, kinds: Sequence[str]) -> set[int]:
+    """The ``method``'s arrays of every sample stamp into ``history`` and the result's finals;
+    the stamps at which some model published."""
+    names = result.parameter_names if method == "time" else result.frequency_parameter_names
+    width = sum(map(len, names))
+    some: set[int] = set()
+    for stamp in out.stamps:
+        values = np.full((4, width), np.nan)
+        ready = np.zeros(len(result.models), dtype=bool)
+        k = 0
+        for j, (model, n) in enumerate(zip(result.models, map(len, names), strict=True)):
+            rows = [out.arrays[(model, kind)].get(stamp) for kind in kinds]
+            if all(r is not None and len(r) == n for r in rows):
+                values[:, k:k + n] = rows
+                ready[j] = True
+                part = values[:, k:k + n]
+                result.published(stamp, j, part[0], part[1], part[2], part[3] > 0.5, method=method)
+            k += n
+        if ready.any():
+            some.add(stamp)
+        if method == "time" or ready.any():  # the frequency domain publishes on some samples only
+            history.append(stamp, values[0], values[1], values[2], values[3] > 0.5, ready)
+    return some
 
 
 def _result(out: _Outputs, params: Mapping[str, Any], published: Mapping[str, int], wall: float,
@@ -211,24 +249,17 @@ def _result(out: _Outputs, params: Mapping[str, Any], published: Mapping[str, in
     models = [m.output for m in config.models]
     history = History(names)
     result = ReplayResult(tuple(models), tuple(map(tuple, names)), history=history,
-                          n_messages=sum(published.values()), wall_seconds=wall, data_seconds=data_seconds)
-    width = sum(map(len, names))
-    for stamp in out.stamps:
-        values = np.full((4, width), np.nan)
-        ready = np.zeros(len(models), dtype=bool)
-        k = 0
-        for j, (model, n) in enumerate(zip(models, map(len, names), strict=True)):
-            rows = [out.arrays[(model, kind)].get(stamp) for kind in _VECTORS]
-            if all(r is not None and len(r) == n for r in rows):
-                values[:, k:k + n] = rows
-                ready[j] = True
-                part = values[:, k:k + n]
-                result.published(stamp, j, part[0], part[1], part[2], part[3] > 0.5)
-            k += n
-        result.estimates += bool(ready.any())
-        history.append(stamp, values[0], values[1], values[2], values[3] > 0.5, ready)
+                          n_messages=sum(published.values()), wall_seconds=wall, data_seconds=data_seconds,
+                          methods=config.published_methods)
+    stamps = _collect(out, result, "time", history, _VECTORS) if config.publishes_time else set()
+    if config.frequency is not None:
+        result.frequency_parameter_names = tuple(m.frequency_parameter_names for m in config.models)
+        result.frequency_history = History(result.frequency_parameter_names)
+        stamps |= _collect(out, result, "frequency", result.frequency_history, _FREQUENCY_VECTORS)
+    result.estimates = len(stamps)
     result.counter_values = _counters(out.diagnostics)
-    ever = {model for j, model in enumerate(models) if history.ready(j).any()}
+    shown = history if config.publishes_time else result.frequency_history
+    ever = {model for j, model in enumerate(models) if shown is not None and shown.ready(j).any()}
     prefix = f"{NODE_NAME}: model "
     result.explanations = [f"{name[len(prefix):]}: no estimate: {message}" for name, _l, message, _kv in out.diagnostics
                            if name.startswith(prefix) and name[len(prefix):] not in ever]
@@ -246,7 +277,10 @@ def play_to_node(bag: str | Path, node: EstimatorProcess, *, rate: float = 0.0, 
 
     from ..player import NotAcknowledged, _player_writer_profile, _Publisher  # noqa: PLC0415
 
-    models = [m.output for m in node.config.models]
+    config = node.config
+    models = [m.output for m in config.models]
+    arrays = (_VECTORS if config.publishes_time else ()) + (_FREQUENCY_VECTORS if config.frequency is not None else ())
+    every = config.frequency.every if config.frequency is not None else None
     context = rclpy.Context()
     with _player_writer_profile():
         rclpy.init(context=context, domain_id=node.domain)
@@ -255,7 +289,7 @@ def play_to_node(bag: str | Path, node: EstimatorProcess, *, rate: float = 0.0, 
     executor.add_node(ros)
     player = None
     try:
-        out = _Outputs(ros, models)
+        out = _Outputs(ros, models, arrays)
         player = _Publisher(ros, Path(bag), clock=False, reliable=True, window=window)
         kinds = {topic: kind for kind, topic in input_topics(node.node_config.topics).items() if topic in player.pubs}
         if not kinds:
@@ -272,7 +306,7 @@ def play_to_node(bag: str | Path, node: EstimatorProcess, *, rate: float = 0.0, 
         except NotAcknowledged as exc:
             raise LiveTimeout(f"{exc}; the node's log: {node.log_file}") from exc
         published = {kinds[t]: s.published for t, s in player.stats.items() if t in kinds}
-        _wait(spin, _complete(out, published, models), timeout,
+        _wait(spin, _complete(out, published, models, config.publishes_time, every), timeout,
               lambda: f"complete outputs (published {published}; the node reports {out.reports} times)", node)
         wall = time.monotonic() - t0
         span = (player.reader.end_time - player.reader.start_time) * 1e-9

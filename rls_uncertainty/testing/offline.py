@@ -22,8 +22,8 @@ Config = str | Path | Mapping[str, Any] | None
 def parameters(config: Config = None, overrides: Mapping[str, Any] | None = None) -> dict[str, Any]:
     """The node parameters a test names: ``config`` is a parameter file (a path, or a name
     of the package's ``config/`` directory such as ``"t2"``), a mapping of dotted parameter
-    names (``{"estimator.lags": 20}``) or None (the node's defaults); ``overrides`` replace
-    single parameters, their names with dots or with ``__`` for each dot (``estimator__lags``:
+    names (``{"estimator.lag_span": 0.4}``) or None (the node's defaults); ``overrides`` replace
+    single parameters, their names with dots or with ``__`` for each dot (``estimator__lag_span``:
     the form Python keywords allow). Every value is checked as the node checks it: an unknown
     name or a bad value is a :class:`..errors.ConfigError` naming the parameter."""
     if config is None:
@@ -36,8 +36,8 @@ def parameters(config: Config = None, overrides: Mapping[str, Any] | None = None
         params[name.replace("__", ".")] = value
     unknown = sorted(set(params) - set(PARAMETER_NAMES))
     if unknown:
-        raise ConfigError(f"unknown parameter(s) {unknown}; names are the node's (estimator.lags), or with __ for "
-                          "each dot as keywords (estimator__lags)")
+        raise ConfigError(f"unknown parameter(s) {unknown}; names are the node's (estimator.lag_span), or with __ "
+                          "for each dot as keywords (estimator__lag_span)")
     pipeline_config(params)  # every value checked here, before any bag is read
     node_config(params)
     return params
@@ -47,7 +47,7 @@ def replay_bag(bag: str | Path, config: Config = None, *, start: float | None = 
                strict: bool = True, **overrides: Any) -> ReplayResult:
     """``bag`` (a replay bag on the standard topics) through the node's pipeline in this
     process, with the parameters of :func:`parameters` (``config`` and the keyword
-    ``overrides``, ``estimator__lags=20`` for ``estimator.lags``). ``start``/``end`` (s from
+    ``overrides``, ``estimator__lag_span=0.4`` for ``estimator.lag_span``). ``start``/``end`` (s from
     the bag start) and ``strict`` are ``replay``'s ``--start``/``--end``/``--lenient``. Every
     sample's estimates are kept (:meth:`..results.ReplayResult.series`); the messages are read
     as a stream."""

@@ -13,7 +13,7 @@ Three measures per setting, at a 50 Hz sample interval:
 * **resolved sine**: a sine at the frequency where the Taylor-remainder bound ``B(w) =
   sum |c_i| (w |t_i|)^(order+1) / (order+1)!`` equals 1e-4 w (the window resolves it to
   0.01 %; test_differentiation.py derives it); a setting fails when the error exceeds 0.1 %;
-* **the issue's sine**: ``sin(pi t)`` (0.5 Hz, unit amplitude), derivative at phase 0 (true
+* **a slow sine**: ``sin(pi t)`` (0.5 Hz, unit amplitude), derivative at phase 0 (true
   pi); a setting fails when it is off by more than 0.1 %. Exact weights can fail here too:
   a low-order fit over a long window does not follow the sine (truncation, not arithmetic);
   the sweep counts those apart (the exact weights' error is then the least-squares fit's own).

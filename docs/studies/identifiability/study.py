@@ -2,7 +2,8 @@
 and the thresholds on a tuning set of the Table 3 Monte Carlo. Report: REPORT.md beside this
 file.
 
-``--cases``: each hostile input of issue 19, built from the seeded T-2 maneuver of the bundled
+``--cases``: each hostile input (a surface commanded twice, no maneuver, a constant regressor,
+gyro spikes, an inconsistent dynamic pressure), built from the seeded T-2 maneuver of the bundled
 bag (``simulation.simulate_sensor_streams(0.2, 250)``), fed message by message through the
 node's pipeline; every second of data the node's own diagnostics policy takes a snapshot, as
 the node and the replay do. Printed per case: the final estimates with their corrected

@@ -1,0 +1,46 @@
+"""make-bag --campaign (bags.write_campaign_bags): a simulated campaign of replay bags, each
+the seeded maneuver simulation.simulate_campaign gives, with its settings in campaign.yaml.
+No ROS."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import yaml
+
+from rls_uncertainty import cli
+from rls_uncertainty.bags import read_inputs, write_campaign_bags
+from rls_uncertainty.errors import ConfigError
+from rls_uncertainty.simulation import RESPONSES, campaign_seeds, simulate_sensor_streams
+from rls_uncertainty.turbulence import LOW_ALTITUDE_SIGMA_W, DrydenVertical
+
+
+def test_each_bag_holds_its_seeded_maneuver_in_turbulence(tmp_path):
+    gust = DrydenVertical(LOW_ALTITUDE_SIGMA_W["severe"], 389.0)
+    paths = write_campaign_bags(tmp_path / "c", 2, gust, band_level=0.1, band_limited_on=RESPONSES, seed=7)
+    assert [p.name for p in paths] == ["m001", "m002"]
+    manifest = yaml.safe_load((tmp_path / "c" / "campaign.yaml").read_text())
+    assert manifest["maneuvers"] == 2 and manifest["seed"] == 7 and manifest["gust_sigma_w_m_s"] == gust.sigma
+    assert manifest["band_limited_on"] == list(RESPONSES) and manifest["bags"] == ["m001", "m002"]
+    want = simulate_sensor_streams(0.1, campaign_seeds(7, 2)[1], gust=gust, band_limited_on=RESPONSES)
+    messages, _ = read_inputs(paths[1])
+    imu = [(stamp, m) for kind, stamp, m in messages if kind == "imu"]
+    assert [s for s, _ in imu] == want.imu[0].tolist()
+    got = np.array([[m.angular_velocity.y, m.linear_acceleration.z] for _, m in imu])
+    np.testing.assert_array_equal(got, want.imu[1][:, [1, 5]])
+
+
+def test_the_command_needs_an_intensity_and_takes_a_word_or_a_number(tmp_path, capsys):
+    assert cli.main(["make-bag", "--campaign", "2", "--out", str(tmp_path / "c")]) == 2
+    assert "--campaign needs --gust-intensity" in capsys.readouterr().err
+    assert cli.main(["make-bag", "--gust-intensity", "light", "--out", str(tmp_path / "c")]) == 2
+    assert "give --campaign N" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        cli.main(["make-bag", "--campaign", "1", "--gust-intensity", "stormy", "--out", str(tmp_path / "c")])
+    assert "light, moderate, severe" in capsys.readouterr().err
+    assert cli.main(["make-bag", "--campaign", "1", "--gust-intensity", "1.2", "--noise", "5", "--out",
+                     str(tmp_path / "c")]) == 0
+    manifest = yaml.safe_load((tmp_path / "c" / "campaign.yaml").read_text())
+    assert manifest["gust_sigma_w_m_s"] == 1.2 and manifest["band_limited_on"] == list(RESPONSES)
+    with pytest.raises(ConfigError, match="--campaign"):
+        write_campaign_bags(tmp_path / "d", 0, DrydenVertical(1.0, 300.0))
