@@ -85,6 +85,18 @@ def _not_utf8(o: int, exc: UnicodeDecodeError) -> struct.error:
     return struct.error(f"string at offset {o} is not UTF-8 ({exc.reason} at byte {exc.start})")
 
 
+def _read_string(buf: bytes, o: int, u32: struct.Struct) -> tuple[str, int]:
+    """The CDR string at the 4-aligned offset ``o`` and the offset after it."""
+    (n,) = u32.unpack_from(buf, o)
+    end = o + 4 + n
+    if n == 0 or end > len(buf) or buf[end - 1]:
+        raise _bad_string(buf, o, n)
+    try:
+        return buf[o + 4 : end - 1].decode(), end
+    except UnicodeDecodeError as exc:
+        raise _not_utf8(o, exc) from None
+
+
 def _too_long(buf: bytes, o: int, n: int, what: str) -> struct.error:
     return struct.error(f"{what} at offset {o} declares {n} elements, {len(buf) - o - 4} bytes left")
 
@@ -168,16 +180,8 @@ def _joint_state_decoder(order: str, header: Callable[[bytes], tuple[Any, int]])
         o += 4
         names = []
         for _ in range(count):
-            o = (o + 3) & ~3
-            (n,) = u32.unpack_from(buf, o)
-            end = o + 4 + n
-            if n == 0 or end > size or buf[end - 1]:
-                raise _bad_string(buf, o, n)
-            try:
-                names.append(buf[o + 4 : end - 1].decode())
-            except UnicodeDecodeError as exc:
-                raise _not_utf8(o, exc) from None
-            o = end
+            name, o = _read_string(buf, (o + 3) & ~3, u32)
+            names.append(name)
         position, o = doubles(buf, o, "position")
         velocity, o = doubles(buf, o, "velocity")
         effort, _ = doubles(buf, o, "effort")
@@ -199,16 +203,8 @@ def _multiarray_decoder(order: str) -> Callable[[bytes], Any]:
         o = 4
         dims = []
         for _ in range(count):
+            label, o = _read_string(buf, (o + 3) & ~3, u32)
             o = (o + 3) & ~3
-            (n,) = u32.unpack_from(buf, o)
-            end = o + 4 + n
-            if n == 0 or end > size or buf[end - 1]:
-                raise _bad_string(buf, o, n)
-            try:
-                label = buf[o + 4 : end - 1].decode()
-            except UnicodeDecodeError as exc:
-                raise _not_utf8(o, exc) from None
-            o = (end + 3) & ~3
             dims.append(MultiArrayDimension(label, *dim_tail.unpack_from(buf, o)))
             o += 8
         o = (o + 3) & ~3

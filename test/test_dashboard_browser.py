@@ -247,11 +247,17 @@ def test_live_page_shows_the_nodes_last_published_values_and_flags_under_a_names
         assert browser.evaluate("window.rlsLatency.length") > 100
         _shot(browser, tmp_path, "dashboard_live.png")
     finally:
-        recorder.node.destroy_node()
-        rclpy.try_shutdown()
-        err = dashboard.stop() if dashboard is not None else ""
-        assert node.stop() == 0, node.text()
+        err = _stop(recorder, dashboard, node)
     assert "dashboard stopped" in err and "arrays dropped: none" in err, err
+
+
+def _stop(recorder: _Recorder, dashboard: Dashboard | None, node: NodeProcess) -> str:
+    """Stop what a live test started; the dashboard's stderr."""
+    recorder.node.destroy_node()
+    rclpy.try_shutdown()
+    err = dashboard.stop() if dashboard is not None else ""
+    assert node.stop() == 0, node.text()
+    return err
 
 
 def _wait_for_stamp(page, stamp: int) -> None:
@@ -282,10 +288,7 @@ def test_a_dashboard_started_after_the_node_shows_its_latest_values_at_once(tmp_
         _expect_fits(browser, recorder.last_fits())
         assert browser.get_attribute("#banner", "data-state") == "running"
     finally:
-        recorder.node.destroy_node()
-        rclpy.try_shutdown()
-        err = dashboard.stop() if dashboard is not None else ""
-        assert node.stop() == 0, node.text()
+        err = _stop(recorder, dashboard, node)
     assert "dashboard stopped" in err and "arrays dropped: none" in err, err
 
 
