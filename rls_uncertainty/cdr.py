@@ -8,7 +8,8 @@ codecs cover exactly:
 * decoding ``sensor_msgs/Imu``, ``geometry_msgs/Vector3Stamped``, ``sensor_msgs/FluidPressure``,
   ``sensor_msgs/JointState``, ``geometry_msgs/WrenchStamped`` into light objects with the
   same field names (what :mod:`.inputs` reads), little- and big-endian, so node and replay
-  have one decoding path;
+  have one decoding path; and ``std_msgs/Float64MultiArray``, the node's outputs as the
+  dashboard reads them (live and from a replay's ``estimates.mcap``);
 * encoding ``std_msgs/Header`` and ``std_msgs/Float64MultiArray`` (little endian), the latter
   with the vector layout of the estimates (:func:`encode_float64_multiarray`) or any layout
   (:func:`encode_float64_multiarray_dims`: the covariance matrices).
@@ -32,9 +33,11 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["decode", "encode_header", "encode_float64_multiarray", "encode_float64_multiarray_dims", "DECODABLE"]
+__all__ = ["decode", "encode_header", "encode_float64_multiarray", "encode_float64_multiarray_dims", "DECODABLE",
+           "FLOAT64_MULTIARRAY"]
 
 _LE_HEADER = b"\x00\x01\x00\x00"
+FLOAT64_MULTIARRAY = "std_msgs/msg/Float64MultiArray"
 _TIME = struct.Struct("<iI")
 _U32 = struct.Struct("<I")
 
@@ -59,6 +62,9 @@ FluidPressure = _message("FluidPressure", "header fluid_pressure variance")
 Wrench = _message("Wrench", "force torque")
 WrenchStamped = _message("WrenchStamped", "header wrench")
 JointState = _message("JointState", "header name position velocity effort")
+MultiArrayDimension = _message("MultiArrayDimension", "label size stride")
+MultiArrayLayout = _message("MultiArrayLayout", "dim data_offset")
+Float64MultiArray = _message("Float64MultiArray", "layout data")
 
 
 def _align(offset: int, size: int) -> int:
@@ -77,6 +83,18 @@ def _bad_string(buf: bytes, o: int, n: int) -> struct.error:
 
 def _not_utf8(o: int, exc: UnicodeDecodeError) -> struct.error:
     return struct.error(f"string at offset {o} is not UTF-8 ({exc.reason} at byte {exc.start})")
+
+
+def _read_string(buf: bytes, o: int, u32: struct.Struct) -> tuple[str, int]:
+    """The CDR string at the 4-aligned offset ``o`` and the offset after it."""
+    (n,) = u32.unpack_from(buf, o)
+    end = o + 4 + n
+    if n == 0 or end > len(buf) or buf[end - 1]:
+        raise _bad_string(buf, o, n)
+    try:
+        return buf[o + 4 : end - 1].decode(), end
+    except UnicodeDecodeError as exc:
+        raise _not_utf8(o, exc) from None
 
 
 def _too_long(buf: bytes, o: int, n: int, what: str) -> struct.error:
@@ -162,16 +180,8 @@ def _joint_state_decoder(order: str, header: Callable[[bytes], tuple[Any, int]])
         o += 4
         names = []
         for _ in range(count):
-            o = (o + 3) & ~3
-            (n,) = u32.unpack_from(buf, o)
-            end = o + 4 + n
-            if n == 0 or end > size or buf[end - 1]:
-                raise _bad_string(buf, o, n)
-            try:
-                names.append(buf[o + 4 : end - 1].decode())
-            except UnicodeDecodeError as exc:
-                raise _not_utf8(o, exc) from None
-            o = end
+            name, o = _read_string(buf, (o + 3) & ~3, u32)
+            names.append(name)
         position, o = doubles(buf, o, "position")
         velocity, o = doubles(buf, o, "velocity")
         effort, _ = doubles(buf, o, "effort")
@@ -180,15 +190,43 @@ def _joint_state_decoder(order: str, header: Callable[[bytes], tuple[Any, int]])
     return joint_state
 
 
+def _multiarray_decoder(order: str) -> Callable[[bytes], Any]:
+    """``std_msgs/Float64MultiArray``: a sequence of dims (a string, two uint32), the uint32
+    ``data_offset`` and a sequence of doubles (``data``, a tuple)."""
+    u32, dim_tail = struct.Struct(order + "I"), struct.Struct(order + "II")
+
+    def multiarray(buf):
+        size = len(buf)
+        (count,) = u32.unpack_from(buf, 0)
+        if 16 * count > size - 4:  # each dim takes at least 16 bytes (length, NUL, padding, size, stride)
+            raise _too_long(buf, 0, count, "dim")
+        o = 4
+        dims = []
+        for _ in range(count):
+            label, o = _read_string(buf, (o + 3) & ~3, u32)
+            o = (o + 3) & ~3
+            dims.append(MultiArrayDimension(label, *dim_tail.unpack_from(buf, o)))
+            o += 8
+        o = (o + 3) & ~3
+        data_offset, n = dim_tail.unpack_from(buf, o)
+        if 8 * n > size - o - 8:
+            raise _too_long(buf, o + 4, n, "data")
+        data = struct.unpack_from(f"{order}{n}d", buf, (o + 15) & ~7) if n else ()
+        return Float64MultiArray(MultiArrayLayout(dims, data_offset), data)
+
+    return multiarray
+
+
 def _decoders(order: str) -> dict[str, Callable[[bytes], Any]]:
     """Every decoder of one byte order (``"<"`` or ``">"``), by message type."""
     header = _header_decoder(order)
-    return {**_fixed_decoders(order, header), "sensor_msgs/msg/JointState": _joint_state_decoder(order, header)}
+    return {**_fixed_decoders(order, header), "sensor_msgs/msg/JointState": _joint_state_decoder(order, header),
+            FLOAT64_MULTIARRAY: _multiarray_decoder(order)}
 
 
 _LITTLE = _decoders("<")
 _BIG = _decoders(">")
-DECODABLE = frozenset(_LITTLE)
+DECODABLE = frozenset(_LITTLE)  # the inputs' types and FLOAT64_MULTIARRAY
 
 
 def decode(msgtype: str, raw: bytes | memoryview) -> Any:

@@ -2,7 +2,8 @@
 
 * ``rls-uncertainty status [--once] [--node NAME]``: the node's ``/diagnostics`` as a terminal
   table (streams with rate, age, counts and the reasons of recent rejections; samples;
-  models), redrawn in place at each report; ``--once`` prints one and exits;
+  models, the parameters whose convergence flag is held back as not identifiable and why),
+  redrawn in place at each report; ``--once`` prints one and exits;
 * ``rls-uncertainty enable | disable | reset [--node NAME]``: calls ``~/enable``
   (``std_srvs/SetBool``) or ``~/reset`` (``std_srvs/Trigger``) and prints the node's answer.
 
@@ -116,9 +117,12 @@ def format_health(node_name: str, h: NodeHealth) -> str:
         ready = v.get("ready") == "True"
         r2 = f"{float(v['r_squared']):.3f}" if ready and "r_squared" in v else "-"
         mrows.append([model, "ready" if ready else "initializing", v.get("samples", ""), r2, v.get("lags", "-"),
-                      v.get("converged_parameters", "") or ("all" if v.get("converged") == "True" else "-")])
+                      v.get("converged_parameters", "") or ("all" if v.get("converged") == "True" else "-"),
+                      v.get("held_back", "") or "-"])
     if mrows:
-        lines += ["", *_table(["model", "state", "samples", "R^2", "lags", "converged"], mrows)]
+        lines += ["", *_table(["model", "state", "samples", "R^2", "lags", "converged", "held back"], mrows)]
+    # Why a flag is held back, or a model cannot initialize: the node's own words.
+    lines += [f"  {v['identifiability']}" for v in h.models.values() if v.get("identifiability")]
     return "\n".join(lines)
 
 

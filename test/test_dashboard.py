@@ -18,10 +18,13 @@ from rls_uncertainty.dashboard.hub import Hub, Source
 from rls_uncertainty.dashboard.model import (
     MAX_PENDING,
     PAIRED,
+    TIME_DOMAIN,
+    ArrayKey,
     ArrayUpdate,
     ModelHistory,
     Pairing,
     Sample,
+    array_key,
     array_update,
 )
 from rls_uncertainty.dashboard.settings import full_node_name, load_reference
@@ -46,6 +49,16 @@ def _msg(names: str, data, *labels: str):
     """A Float64MultiArray as rclpy and rosbags present it (read by field name)."""
     dims = [SimpleNamespace(label=label, size=1, stride=1) for label in (names, *labels)]
     return SimpleNamespace(layout=SimpleNamespace(dim=dims, data_offset=0), data=list(data))
+
+
+def _key(suffix: str, model: str = "CZ") -> ArrayKey:
+    return ArrayKey(TIME_DOMAIN, model, suffix)
+
+
+def _arrays(stamps, published=None, model: str = "CZ"):
+    """The four paired arrays of each stamp, as the hub takes them."""
+    return [(_key(suffix, model), _msg(",".join(NAMES), _values(s, suffix), stamp_label(s)), published)
+            for s in stamps for suffix in PAIRED]
 
 
 # ------------------------------------------------------------------ pairing
@@ -77,6 +90,20 @@ def test_an_array_whose_partners_never_come_is_dropped_and_counted_not_paired_wi
     assert pairing.dropped == {"unpaired": 1}
 
 
+def test_a_late_joiners_burst_of_kept_samples_one_array_after_the_other_pairs_up():
+    """A transient-local late joiner receives every kept sample of one array, then of the next:
+    each array's messages in order, far more than MAX_PENDING stamps apart from their partners.
+    Every sample completes, in stamp order, nothing is dropped; waiting stamps are bounded."""
+    stamps = [1_000_000_000 + 20_000_000 * k for k in range(5 * MAX_PENDING)]
+    pairing = Pairing()
+    done = [s for suffix in PAIRED for stamp in stamps if (s := pairing.add(_update(stamp, suffix))) is not None]
+    assert [s.stamp_ns for s in done] == stamps and pairing.dropped == {}
+    bounded = Pairing(max_stamps=10)
+    for stamp in stamps[:25]:
+        bounded.add(_update(stamp, "estimates"))  # partners that never come
+    assert bounded.dropped == {"unpaired": 15} and len(bounded._pending[(TIME_DOMAIN, "CZ")]) == 10
+
+
 def test_refused_arrays_are_counted_by_reason():
     pairing = Pairing()
     bad = ArrayUpdate("CZ", "estimates", NAMES, (1.0, float("nan"), 2.0), 1)
@@ -92,12 +119,19 @@ def test_refused_arrays_are_counted_by_reason():
 
 def test_array_update_reads_names_and_stamp_from_the_layout_the_node_writes():
     stamp = 1_767_225_600_140_000_000
-    u = array_update("Cm", "estimates", _msg("Cm_0,Cm_q", [1.5, -40.0], stamp_label(stamp)), 7)
+    u = array_update(_key("estimates", "Cm"), _msg("Cm_0,Cm_q", [1.5, -40.0], stamp_label(stamp)), 7)
     assert (u.names, u.data, u.stamp_ns, u.published_ns) == (("Cm_0", "Cm_q"), (1.5, -40.0), stamp, 7)
     for msg in (_msg("Cm_0", [1.0]), _msg("Cm_0", [1.0], "time:1.0")):
         msg.layout.dim = msg.layout.dim[:1] if len(msg.layout.dim) == 1 else msg.layout.dim
         with pytest.raises(ValueError):
-            array_update("Cm", "estimates", msg)
+            array_update(_key("estimates", "Cm"), msg)
+
+
+def test_topics_under_the_node_map_to_the_method_model_and_array_shown():
+    assert array_key("CZ/estimates") == ArrayKey(TIME_DOMAIN, "CZ", "estimates")
+    assert array_key("Cm/identifiability") == ArrayKey(TIME_DOMAIN, "Cm", "identifiability")
+    for other in ("CZ/covariance", "sample_stamp", "CZ", "/estimates", "CZ/estimates/x", "CZ/frequency/estimates"):
+        assert array_key(other) is None, other
 
 
 # ------------------------------------------------------------------ history
@@ -199,6 +233,98 @@ def test_recent_rejections_by_reason_are_the_increase_over_the_nodes_window():
     assert seen == [{"non_finite": 3}, {"non_finite": 3, "stamp_jump": 1}, {"stamp_jump": 2}, {}]
 
 
+# ------------------------------------------------------------------ fit and identifiability
+def _hostile_streams(case: str):
+    """The seeded T-2 maneuver made hostile (as test_pipeline's cases): ``collinear`` rudder =
+    elevator + 1e-6 rad; ``flat`` rudder at 0.01 rad +- 5e-5 (under the 1e-4 rad resolution, off
+    zero); ``noise`` trim plus sensor noise (the regressors move a little, the outputs follow
+    nothing)."""
+    import dataclasses
+
+    import numpy as np
+
+    from rls_uncertainty.simulation import simulate_sensor_streams
+
+    st = simulate_sensor_streams(0.2, 250)
+    rng = np.random.default_rng(19)
+    srf = st.control_surfaces[1].copy()
+    if case == "collinear":
+        srf[:, 4] = srf[:, 0] + rng.normal(0.0, 1e-6, srf.shape[0])
+    elif case == "flat":
+        srf[:, 4] = 0.01 + rng.normal(0.0, 5e-5, srf.shape[0])
+    else:
+        imu = st.imu[1].copy()
+        imu[:, 1] = 0.002 * rng.standard_normal(imu.shape[0])
+        imu[:, 5] = np.median(imu[:, 5]) + 0.02 * rng.standard_normal(imu.shape[0])
+        srf[:, 0] = srf[:, 1] = 0.0005 * rng.standard_normal(srf.shape[0])
+        vel = st.airspeed[1].copy()
+        a = np.median(np.arctan2(-vel[:, 2], vel[:, 0])) + 0.001 * rng.standard_normal(vel.shape[0])
+        speed = np.hypot(vel[:, 0], vel[:, 2])
+        vel[:, 0], vel[:, 2] = speed * np.cos(a), -speed * np.sin(a)
+        st = dataclasses.replace(st, imu=(st.imu[0], imu), airspeed=(st.airspeed[0], vel))
+    return dataclasses.replace(st, control_surfaces=(st.control_surfaces[0], srf))
+
+
+@pytest.mark.parametrize("case", ["collinear", "flat", "noise"])
+def test_why_a_parameter_is_not_identifiable_is_read_from_the_published_figures_as_the_node_judged_it(case, tmp_path):
+    """The node's own arrays (its encoder after a run of the node's pipeline on a hostile
+    bag) and /diagnostics into the hub: each parameter's reason names what the node's
+    identifiability monitor found (its problems, not the arrays), and the figures it shows."""
+    from rls_uncertainty.bags import read_inputs, write_sensor_streams
+    from rls_uncertainty.cdr import FLOAT64_MULTIARRAY, decode
+    from rls_uncertainty.config import load_parameters_file, node_config, pipeline_config
+    from rls_uncertainty.outputs import FIT_OUTPUTS, OutputLayout
+    from rls_uncertainty.replay import run_pipeline
+
+    params = load_parameters_file("t2")
+    if case != "noise":  # the rudder in C_Z (the T-2 maneuver does not move it otherwise)
+        params["models.CZ"] = ["1", "alpha", "delta_e", "delta_r"]
+    bag = write_sensor_streams(tmp_path / "bag", _hostile_streams(case))
+    result = run_pipeline(read_inputs(bag)[0], pipeline_config(params), record=False,
+                          diagnostics=node_config(params))
+    pipe = result.pipeline
+    layout = OutputLayout.of(pipe)
+    hub = Hub(Source("live", f"/{NODE_NAME}"))  # the replay's statuses are the root node's
+    hub.add_diagnostics([(st.name, st.level, st.message, dict(st.values)) for st in result.diagnostics[-1][1]])
+    arrays = [(ArrayKey(TIME_DOMAIN, *layout.fit_topics[i][0].split("/")), decode(FLOAT64_MULTIARRAY, raw), None)
+              for i, raw in layout.encode_fit(pipe)]
+    assert {a[0].suffix for a in arrays} == set(FIT_OUTPUTS)
+    quality = {q["model"]: q for q in hub.add_arrays(arrays)}
+    assert set(quality) == {"CZ", "Cm"}  # both models ready
+    monitor = pipe.identifiability
+    for j, (model, names) in enumerate(layout.models):
+        params_shown = quality[model]["parameters"]
+        assert list(params_shown) == list(names)
+        assert [p["identifiable"] for p in params_shown.values()] == monitor.identifiable[j, :len(names)].tolist()
+        problems = monitor.problems(j)
+        kinds = {p.kind for p in problems}
+        reasons = {name: p["reason"] for name, p in params_shown.items() if not p["identifiable"]}
+        if not problems:
+            assert reasons == {}
+            continue
+        if "no_fit" in kinds:
+            r2 = problems[0].figures[0]
+            assert set(reasons) == set(names)
+            flat = {f"{model}_{r}" for p in problems if p.kind == "not_excited" for r in p.regressors}
+            for name, text in reasons.items():
+                assert text == (f"model explains nothing (R^2 {r2:.3f})" if name not in flat else text), name
+            assert quality[model]["fit"]["r_squared"] == pytest.approx(r2, rel=1e-12)
+        for p in problems:
+            if p.kind == "not_excited":
+                for r, std, res in zip(p.regressors, p.figures, p.limits, strict=True):
+                    assert reasons[f"{model}_{r}"] == f"not excited (std {std:.2g}, resolution {res:.2g})"
+                if "no_fit" not in kinds and not monitor.identifiable[j, 0]:  # the bias, its mean off zero
+                    flat = ", ".join(f"{model}_{r}" for r in p.regressors)
+                    assert reasons[f"{model}_0"] == f"confounded with {flat} (not excited, off zero)"
+            elif p.kind == "collinear":
+                a, b = (f"{model}_{r}" for r in p.regressors)
+                assert reasons[a] == f"correlated {p.figures[0]:.4f} with {b}"
+                assert reasons[b] == f"correlated {p.figures[0]:.4f} with {a}"
+        assert quality[model]["node_text"] == pipe.model_report(j)["identifiability"]
+    expected = {"collinear": {"collinear"}, "flat": {"not_excited"}, "noise": {"no_fit"}}[case]
+    assert {p.kind for j in range(len(layout.models)) for p in monitor.problems(j)} == expected
+
+
 # ------------------------------------------------------------------ the page's states
 def _live_hub():
     return Hub(Source("live", "/ns/rls_estimator", domain="25", discovery_range="LOCALHOST"))
@@ -223,17 +349,20 @@ def test_the_page_says_why_a_seen_node_has_no_samples_from_its_diagnostics():
     msg = hub.add_diagnostics(statuses)
     assert msg["state"] == "no_samples"
     assert "control_surfaces rejected 40" in msg["text"] and "CZ: initializing" in msg["text"]
+    # A node that used samples before the dashboard joined, with outputs not kept for it.
+    statuses[1] = (statuses[1][0], 0, "591 of 599 samples used", {"samples_used": "591"})
+    msg = hub.add_diagnostics(statuses)
+    assert msg["state"] == "no_samples" and "has used 591 samples, none received here yet" in msg["text"]
 
 
 def test_the_page_says_when_the_node_it_showed_is_gone():
     hub = _live_hub()
     hub.set_graph(True)
-    hub.add_arrays([("CZ", suffix, _msg(",".join(NAMES), _values(10, suffix), stamp_label(10)), None)
-                    for suffix in PAIRED])
+    hub.add_arrays(_arrays([10]))
     assert hub.state()["state"] == "running"
     msg = hub.set_graph(False)
     assert msg["state"] == "node_lost" and "ROS_DOMAIN_ID=25" in msg["text"] and "last ones" in msg["text"]
-    assert hub.snapshot()["models"]["CZ"]["t"] == [1e-8]  # its last values stay on the page
+    assert hub.snapshot()["methods"][TIME_DOMAIN]["CZ"]["t"] == [1e-8]  # its last values stay on the page
 
 
 def test_the_inbox_hands_items_from_another_thread_to_the_loop_in_order_and_batches():
@@ -266,17 +395,32 @@ def test_the_inbox_hands_items_from_another_thread_to_the_loop_in_order_and_batc
 
 def test_a_hub_sends_samples_as_columns_and_restarts_a_model_whose_time_goes_back():
     hub = _live_hub()
-    arrays = [("CZ", suffix, _msg(",".join(NAMES), _values(s, suffix), stamp_label(s)), 99)
-              for s in (10, 20) for suffix in PAIRED]
-    msg = hub.add_arrays(arrays)
-    assert msg["type"] == "samples" and msg["published_ns"] == 99
+    (msg,) = hub.add_arrays(_arrays([10, 20], published=99))
+    assert msg["type"] == "samples" and msg["method"] == TIME_DOMAIN and msg["published_ns"] == 99
     cols = msg["models"]["CZ"]
     assert cols["names"] == list(NAMES) and cols["t"] == [1e-8, 2e-8]
     assert cols["se"][1] == [_values(10, "standard_errors")[1], _values(20, "standard_errors")[1]]
-    hub.add_arrays([("CZ", suffix, _msg(",".join(NAMES), _values(5, suffix), stamp_label(5)), None)
-                    for suffix in PAIRED])
-    assert hub.history_resets == 1 and hub.histories["CZ"].size == 1
-    assert hub.snapshot()["models"]["CZ"]["t"] == [5e-9]
+    hub.add_arrays(_arrays([5]))
+    assert hub.history_resets == 1 and hub.histories[(TIME_DOMAIN, "CZ")].size == 1
+    assert hub.snapshot()["methods"][TIME_DOMAIN]["CZ"]["t"] == [5e-9]
+    assert hub.add_arrays([(_key("estimates"), None, None)]) == [] and hub.pairing.dropped == {"undecodable": 1}
+
+
+def test_a_sample_completed_after_a_newer_one_is_dropped_and_counted_not_taken_for_a_restart():
+    """A late joiner's burst of kept samples may complete a sample after a newer one (a late
+    partner array): it is dropped and counted, the history stays; a sample older than the
+    pairing window is a restart (a looped replay), as before."""
+    hub = _live_hub()
+    stamps = [1000 + 10 * k for k in range(MAX_PENDING + 5)]
+    hub.add_arrays(_arrays(stamps[:-2]))
+    (msg,) = hub.add_arrays(_arrays([stamps[-1], stamps[-2]]))  # the newer completes first
+    assert msg["models"]["CZ"]["t"] == [stamps[-1] * 1e-9]
+    assert hub.pairing.dropped == {"out_of_order": 1} and hub.history_resets == 0
+    assert hub.histories[(TIME_DOMAIN, "CZ")].last_stamp == stamps[-1]
+    hub.add_arrays(_arrays([stamps[-1]]))  # a duplicate of the newest
+    assert hub.pairing.dropped == {"out_of_order": 2} and hub.history_resets == 0
+    hub.add_arrays(_arrays([stamps[-MAX_PENDING - 3]]))  # behind the window: time went back
+    assert hub.history_resets == 1 and hub.histories[(TIME_DOMAIN, "CZ")].size == 1
 
 
 # ------------------------------------------------------------------ options
@@ -300,39 +444,172 @@ def test_reference_values_are_a_mapping_of_names_to_finite_numbers(tmp_path):
 
 
 # ------------------------------------------------------------------ replay
-def test_a_finished_replay_is_shown_with_the_values_of_its_estimates_csv(tmp_path):
+@pytest.fixture(scope="module")
+def t2_replay(tmp_path_factory):
     from rls_uncertainty.config import load_parameters_file
-    from rls_uncertainty.dashboard.replay_source import read_replay
     from rls_uncertainty.replay import replay
 
-    out = tmp_path / "est"
+    out = tmp_path_factory.mktemp("t2") / "est"
     replay(ROOT / "bags" / "t2_maneuver", load_parameters_file("t2"), out, progress=False, plots=False)
-    node, items = read_replay(out)
-    assert node == f"/{NODE_NAME}"
-    hub = Hub(Source("replay", node, replay_dir=str(out)))
-    hub.add_arrays([i[1:] for i in items if i[0] == "array"])
-    for i in items:
-        if i[0] == "diagnostics":
-            hub.add_diagnostics(i[1])
-    with open(out / "estimates.csv", newline="") as fh:
-        rows = list(csv.DictReader(fh))
-    for model, h in hub.histories.items():
+    return out
+
+
+def _read(directory, hub_capacity=None, deliver=None):
+    """Read a replay directory through the dashboard's own path (source thread -> event loop
+    -> dispatch -> hub), to its end; the hub and the batches as delivered."""
+    import asyncio
+
+    from rls_uncertainty.dashboard.app import _Dispatch
+    from rls_uncertainty.dashboard.replay_source import open_replay
+    from rls_uncertainty.dashboard.server import Broadcaster
+
+    source = open_replay(directory)
+    hub = Hub(Source("replay", source.node, replay_dir=str(directory), replay_file=source.file),
+              capacity=hub_capacity)
+    dispatch = _Dispatch(hub, Broadcaster(hub))
+    batches: list[int] = []
+
+    async def main():
+        done = asyncio.Event()
+
+        def handle(items):
+            batches.append(len(items))
+            if deliver is not None:
+                deliver(items)
+            dispatch(items)
+            if items[-1][0] == "replay_done":
+                done.set()
+
+        source.start(asyncio.get_running_loop().call_soon_threadsafe, handle)
+        try:
+            await asyncio.wait_for(done.wait(), 120)
+        finally:
+            source.stop()
+
+    asyncio.run(main())
+    return hub, batches
+
+
+def _csv_rows(path):
+    with open(path, newline="") as fh:
+        return list(csv.DictReader(fh))
+
+
+def _expect_csv(hub, rows):
+    """Every sample of every model equals the CSV's rows (the same doubles: CSV writes repr)."""
+    assert {m for _method, m in hub.histories} == {r["model"] for r in rows}
+    for (method, model), h in hub.histories.items():
+        assert method == TIME_DOMAIN
         cols = h.columns()
         mine = [r for r in rows if r["model"] == model]
         assert len(cols["t"]) * len(cols["names"]) == len(mine)  # every sample, none thinned
-        last = mine[-len(cols["names"]):]
-        for i, r in enumerate(last):
+        n = len(cols["names"])
+        for k, r in enumerate(mine):
+            i, sample = k % n, k // n
             assert r["parameter"] == cols["names"][i]
-            assert float(r["estimate"]) == pytest.approx(cols["estimate"][i][-1], rel=1e-12, abs=1e-15)
-            assert float(r["std_error"]) == pytest.approx(cols["se"][i][-1], rel=1e-12, abs=1e-15)
-            assert float(r["std_error_conventional"]) == pytest.approx(cols["se_conventional"][i][-1], rel=1e-12)
-            assert float(r["converged"]) == cols["converged"][i][-1]
-    assert hub.state()["state"] == "replay" and hub.health.latest is not None
+            assert float(r["time"]) == pytest.approx(cols["t"][sample], abs=5e-7)  # s since 1970: ulp 2.4e-7
+            assert float(r["estimate"]) == cols["estimate"][i][sample]
+            assert float(r["std_error"]) == cols["se"][i][sample]
+            assert float(r["std_error_conventional"]) == cols["se_conventional"][i][sample]
+            assert float(r["converged"]) == cols["converged"][i][sample]
 
 
-def test_a_directory_without_estimates_mcap_is_refused_with_the_reason(tmp_path):
-    from rls_uncertainty.dashboard.replay_source import read_replay
+def _last_fits(path):
+    """The last ~/M/fit and ~/M/identifiability of an estimates.mcap, read with rosbags."""
+    from rosbags.highlevel import AnyReader
+
+    from rls_uncertainty.bags import typestore
+
+    last = {}
+    with AnyReader([path], default_typestore=typestore()) as reader:
+        conns = [c for c in reader.connections if c.topic.endswith(("/fit", "/identifiability"))]
+        for conn, _t, raw in reader.messages(connections=conns):
+            last[tuple(conn.topic.rsplit("/", 2)[1:])] = reader.deserialize(raw, conn.msgtype)
+    return last
+
+
+def test_a_finished_replay_is_read_as_a_stream_with_every_sample_of_its_estimates_csv_and_its_fits(t2_replay):
+    hub, _batches = _read(t2_replay)
+    assert hub.source.node == f"/{NODE_NAME}" and hub.source.replay_file == "estimates.mcap"
+    _expect_csv(hub, _csv_rows(t2_replay / "estimates.csv"))
+    assert hub.state()["state"] == "replay" and hub.health.latest is not None and hub.pairing.dropped == {}
+    last = _last_fits(t2_replay / "estimates.mcap")
+    assert {m for m, _suffix in last} == {"CZ", "Cm"}
+    for (model, suffix), msg in last.items():
+        if suffix == "fit":
+            fit = hub.fits[(TIME_DOMAIN, model)]
+            assert [fit.r_squared, fit.samples, fit.bound_2sigma, *fit.rho] == msg.data.tolist()
+        else:
+            table = hub.tables[(TIME_DOMAIN, model)]
+            n = len(table.names)
+            rows = msg.data.reshape(n, n + 3)
+            assert table.names == tuple(msg.layout.dim[0].label.split(","))
+            assert [list(r) for r in table.correlation] == rows[:, :n].tolist()
+            assert list(table.excitation) == rows[:, n].tolist() and list(table.identifiable) == [True] * n
+    quality = {q["model"]: q for q in hub.snapshot()["quality"]}
+    for model in ("CZ", "Cm"):  # the seeded T-2 maneuver identifies every parameter
+        assert all(p["identifiable"] and p["reason"] == "" for p in quality[model]["parameters"].values())
+        assert quality[model]["fit"]["r_squared"] == hub.fits[(TIME_DOMAIN, model)].r_squared
+
+
+def test_the_replay_reader_stays_a_bounded_number_of_batches_ahead_of_the_page(t2_replay, monkeypatch):
+    """Memory does not grow with the recording: the reading thread waits while IN_FLIGHT
+    batches are not handled yet (a slow event loop), instead of queueing the file."""
+    import time as _time
+
+    from rls_uncertainty.dashboard import replay_source
+
+    monkeypatch.setattr(replay_source, "BATCH", 100)
+    produced = [0]
+    ahead = []
+    original = replay_source.ReplaySource.__init__
+
+    def counting_init(self, directory, file, node, items):
+        def counted():
+            for item in items():
+                produced[0] += 1
+                yield item
+        original(self, directory, file, node, counted)
+
+    monkeypatch.setattr(replay_source.ReplaySource, "__init__", counting_init)
+    consumed = [0]
+
+    def slow(items):
+        consumed[0] += len(items)
+        ahead.append(produced[0] - consumed[0])
+        _time.sleep(0.01)  # slower than the reader: without the wait it would run through the file
+
+    hub, batches = _read(t2_replay, deliver=slow)
+    assert len(batches) > 40 and max(ahead) <= (replay_source.IN_FLIGHT + 1) * 100
+    _expect_csv(hub, _csv_rows(t2_replay / "estimates.csv"))
+
+
+def test_a_replay_directory_with_only_estimates_csv_is_shown_and_says_what_is_missing(t2_replay, tmp_path):
+    only = tmp_path / "csv_only"
+    only.mkdir()
+    (only / "estimates.csv").write_bytes((t2_replay / "estimates.csv").read_bytes())
+    hub, _ = _read(only)
+    rows = _csv_rows(only / "estimates.csv")
+    _expect_csv(hub, rows)
+    state = hub.state()
+    assert state["state"] == "replay" and "from estimates.csv (no estimates.mcap" in state["text"]
+    assert not hub.fits and hub.health.latest is None
+    # A damaged row ends the reading there, named; the samples before it stay shown.
+    lines = (only / "estimates.csv").read_text().splitlines(keepends=True)
+    lines[100] = lines[100].replace(lines[100].split(",")[3], "nan", 1)
+    (only / "estimates.csv").write_text("".join(lines))
+    hub, _ = _read(only)
+    state = hub.state()
+    assert state["state"] == "replay_error" and "estimates.csv: line 101: not a row of estimates.csv" in state["text"]
+    assert 0 < hub.samples_total < len({(r["time"], r["model"]) for r in rows})
+
+
+def test_a_directory_without_replay_outputs_is_refused_with_the_reason(tmp_path):
+    from rls_uncertainty.dashboard.replay_source import open_replay
     from rls_uncertainty.errors import BagError
 
-    with pytest.raises(BagError, match=r"no estimates\.mcap"):
-        read_replay(tmp_path)
+    with pytest.raises(BagError, match=r"no estimates\.mcap or estimates\.csv"):
+        open_replay(tmp_path)
+    (tmp_path / "estimates.csv").write_text("a,b\n1,2\n")
+    with pytest.raises(BagError, match=r"not the estimates\.csv of rls-uncertainty replay"):
+        open_replay(tmp_path)

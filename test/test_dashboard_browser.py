@@ -4,9 +4,14 @@ no browser download) loads the page of `rls-uncertainty dashboard`:
 * live: the bundled bag is played to the estimator node (in its own process, under a
   namespace) while the page is open; the page shows every parameter name the node's arrays
   carry, its latest values equal the node's last published values to display precision, its
-  convergence badges equal the node's flags;
-* replay: the Twin Otter recording (converted, then replayed) shows the values of the
-  replay's estimates.csv;
+  convergence badges equal the node's flags, each model's residual autocorrelation and R^2
+  those of the node's last ``~/M/fit`` and each parameter's identifiability the node's last
+  ``~/M/identifiability``;
+* late joiner: the dashboard is started after the bag was played; the page shows the node's
+  last published values and fit at once (the outputs keep their last samples for late joiners);
+* replay: the Twin Otter recording (converted, then replayed with all six models) shows the
+  values of the replay's estimates.csv, and the model the node holds back (C_m explains too
+  little of its output on this lateral maneuver) says why on every parameter;
 * no node: the page says so, naming the domain and discovery range.
 
 Without Chromium (or Playwright) these tests skip with the reason; under RLS_REQUIRE_BROWSER=1
@@ -107,6 +112,15 @@ def _shot(page, tmp_path: Path, name: str) -> Path:
     return path
 
 
+def _shot_of(page, selector: str, tmp_path: Path, name: str) -> None:
+    """A screenshot of one element of the page (as _shot)."""
+    path = tmp_path / name
+    page.locator(selector).screenshot(path=str(path))
+    if os.environ.get("RLS_DASHBOARD_SCREENSHOTS"):
+        shutil.copy(path, Path(os.environ["RLS_DASHBOARD_SCREENSHOTS"]) / name)
+    assert path.stat().st_size > 10_000
+
+
 def _shown(page) -> dict[str, tuple[str, str]]:
     """Per parameter panel: (latest value as displayed, convergence badge)."""
     return page.evaluate("""() => Object.fromEntries([...document.querySelectorAll('.panel')].map(p =>
@@ -145,7 +159,7 @@ class _Recorder:
         self.stamps: list = []
         self.node.create_subscription(Header, f"{node_name}/sample_stamp", self.stamps.append, RELIABLE)
         for m in models:
-            for suffix in ("estimates", "converged"):
+            for suffix in ("estimates", "converged", "fit", "identifiability"):
                 store = self.got.setdefault((m, suffix), [])
                 self.node.create_subscription(Float64MultiArray, f"{node_name}/{m}/{suffix}", store.append, RELIABLE)
 
@@ -167,6 +181,39 @@ class _Recorder:
                 out[name] = (float(value), float(flag))
         return max(stamps), out
 
+    def wait_quiet(self, count: int, timeout: float = 120.0) -> None:
+        """Until at least ``count`` samples came and the node's outputs have stopped for 2 s."""
+        assert self.spin_until(lambda: len(self.stamps) >= count, timeout), {k: len(v) for k, v in self.got.items()}
+        deadline = time.monotonic() + timeout
+        n = -1
+        fits = [(m, s) for m in ("CZ", "Cm") for s in ("fit", "identifiability")]
+        while n != len(self.stamps) or not all(self.got[k] for k in fits):
+            assert time.monotonic() < deadline, {k: len(v) for k, v in self.got.items()}
+            n = len(self.stamps)
+            self.spin_until(lambda: False, 2.0)
+
+    def last_fits(self) -> dict[str, tuple[list[float], list[bool]]]:
+        """Per model: the last ~/M/fit's data and the last ~/M/identifiability's flags."""
+        out = {}
+        for m in ("CZ", "Cm"):
+            fit, table = self.got[(m, "fit")][-1], self.got[(m, "identifiability")][-1]
+            n = len(table.layout.dim[0].label.split(","))
+            out[m] = (list(fit.data), [table.data[i * (n + 3) + n + 2] == 1.0 for i in range(n)])
+        return out
+
+
+def _expect_fits(page, fits: dict[str, tuple[list[float], list[bool]]]) -> None:
+    """The page's autocorrelation, R^2 and identifiability are the node's last ones."""
+    for model, (fit, identifiable) in fits.items():
+        shown = page.evaluate(f"window.rlsState.models.get('{model}').quality.time.fit")
+        assert [shown["r_squared"], shown["samples"], shown["bound_2sigma"], *shown["rho"]] == fit
+        text = page.text_content(f"section.model[data-model='{model}'] .fit")
+        assert text.startswith(f"R² {fit[0]:.3f}  ·  {len(fit) - 3} lags"), text
+        flags = page.evaluate(f"[...document.querySelectorAll(\"section.model[data-model='{model}'] .ident\")]"
+                              ".map(e => e.dataset.identifiable)")
+        assert flags == ["1" if ok else "0" for ok in identifiable]
+        assert page.evaluate(f"!!document.querySelector(\"section.model[data-model='{model}'] .acf-chart canvas\")")
+
 
 def test_live_page_shows_the_nodes_last_published_values_and_flags_under_a_namespace(tmp_path, browser):
     node_name = f"{NS}/rls_estimator"
@@ -187,17 +234,11 @@ def test_live_page_shows_the_nodes_last_published_values_and_flags_under_a_names
         assert play.returncode == 0, play.stderr
         # The node's last samples: its outputs have stopped coming for 2 s (at real time it may
         # form a few samples fewer than the offline replay's 591; the page must show its last).
-        assert recorder.spin_until(lambda: len(recorder.stamps) >= 500, 120), \
-            ({k: len(v) for k, v in recorder.got.items()}, play.stderr, node.text()[-2000:])
-        count = -1
-        while count != len(recorder.stamps):
-            count = len(recorder.stamps)
-            recorder.spin_until(lambda: False, 2.0)
+        recorder.wait_quiet(500)
         stamp, last = recorder.last()
-        newest = f"m.has(k) && Math.abs(m.get(k).t.at(-1) - {stamp * 1e-9!r}) < 1e-6"
-        _wait(browser, f"() => {{ const m = window.rlsState.models; return ['CZ', 'Cm'].every(k => {newest}); }}", 60)
-        time.sleep(0.5)  # one more redraw period
+        _wait_for_stamp(browser, stamp)
         _expect_shown(_shown(browser), last)
+        _expect_fits(browser, recorder.last_fits())
         assert browser.get_attribute("#banner", "data-state") == "running"
         refs = browser.evaluate("Object.fromEntries([...document.querySelectorAll('.panel')].map(p => "
                                 "[p.dataset.param, p.querySelector('.ref').textContent]))")
@@ -206,10 +247,48 @@ def test_live_page_shows_the_nodes_last_published_values_and_flags_under_a_names
         assert browser.evaluate("window.rlsLatency.length") > 100
         _shot(browser, tmp_path, "dashboard_live.png")
     finally:
-        recorder.node.destroy_node()
-        rclpy.try_shutdown()
-        err = dashboard.stop() if dashboard is not None else ""
-        assert node.stop() == 0, node.text()
+        err = _stop(recorder, dashboard, node)
+    assert "dashboard stopped" in err and "arrays dropped: none" in err, err
+
+
+def _stop(recorder: _Recorder, dashboard: Dashboard | None, node: NodeProcess) -> str:
+    """Stop what a live test started; the dashboard's stderr."""
+    recorder.node.destroy_node()
+    rclpy.try_shutdown()
+    err = dashboard.stop() if dashboard is not None else ""
+    assert node.stop() == 0, node.text()
+    return err
+
+
+def _wait_for_stamp(page, stamp: int) -> None:
+    """Until the page holds the sample of ``stamp`` (ns) for both models, and one redraw more."""
+    newest = f"m.has(k) && m.get(k).methods.time && Math.abs(m.get(k).methods.time.t.at(-1) - {stamp * 1e-9!r}) < 1e-6"
+    _wait(page, f"() => {{ const m = window.rlsState.models; return ['CZ', 'Cm'].every(k => {newest}); }}", 60)
+    time.sleep(0.5)  # one more redraw period
+
+
+def test_a_dashboard_started_after_the_node_shows_its_latest_values_at_once(tmp_path, browser):
+    """The bag is played to the node first; the dashboard starts afterwards and gets the node's
+    last samples and fits from the outputs kept for late joiners (transient local): the page
+    shows the node's last published values, flags, autocorrelation and identifiability."""
+    node = NodeProcess(tmp_path, "--params-file", T2, *REPLAY_NODE)
+    dashboard = None
+    rclpy.init()
+    recorder = _Recorder("/rls_estimator")
+    try:
+        play = subprocess.run([sys.executable, "-m", "rls_uncertainty.cli", "play", str(ROOT / "bags" / "t2_maneuver"),
+                               "--rate", "1", "--wait", "1"], capture_output=True, text=True, cwd=ROOT, timeout=300)
+        assert play.returncode == 0, play.stderr
+        recorder.wait_quiet(300)  # on a busy machine the node forms fewer than the replay's 591
+        stamp, last = recorder.last()
+        dashboard = Dashboard()
+        browser.goto(dashboard.url)
+        _wait_for_stamp(browser, stamp)
+        _expect_shown(_shown(browser), last)
+        _expect_fits(browser, recorder.last_fits())
+        assert browser.get_attribute("#banner", "data-state") == "running"
+    finally:
+        err = _stop(recorder, dashboard, node)
     assert "dashboard stopped" in err and "arrays dropped: none" in err, err
 
 
@@ -222,7 +301,8 @@ def twin_otter_replay(tmp_path_factory):
 
     base = tmp_path_factory.mktemp("twin_otter")
     convert(FLIGHT_DATA / "totter_f1_017", ROOT / "msg_schemas" / "fti_msgs" / "mapping.yaml", base / "bag")
-    replay(base / "bag", load_parameters_file("twin_otter_lateral"), base / "est", progress=False, plots=False)
+    params = {**load_parameters_file("twin_otter_lateral"), "models.enabled": ["CX", "CY", "CZ", "Cl", "Cm", "Cn"]}
+    replay(base / "bag", params, base / "est", progress=False, plots=False)
     return base / "est"
 
 
@@ -242,13 +322,51 @@ def test_replay_page_shows_the_final_values_of_the_replays_estimates_csv(tmp_pat
         _wait(browser, "[...document.querySelectorAll('.panel .value')].every(v => v.textContent !== '–')", 30)
         assert browser.text_content("#mode") == "REPLAY"
         sections = browser.query_selector_all("section.model")
-        assert [s.get_attribute("data-model") for s in sections] == ["CY", "Cl", "Cn"]  # Eq. 2's order
+        assert [s.get_attribute("data-model") for s in sections] == ["CX", "CY", "CZ", "Cl", "Cm", "Cn"]  # Eq. 2
         _expect_shown(_shown(browser), last)
+        # What the replay's last /diagnostics holds back, each parameter says why (the lateral
+        # maneuver leaves C_m's R^2 under identifiability.min_r_squared).
+        held = _last_held_back(twin_otter_replay / "estimates.mcap")
+        assert held["Cm"] == ["Cm_0", "Cm_alpha", "Cm_q", "Cm_delta_e"]
+        assert not any(held[m] for m in ("CX", "CY", "CZ", "Cl", "Cn"))
+        _wait(browser, "document.querySelectorAll('.panel.held-back').length === 4", 30)
+        shown = browser.evaluate("Object.fromEntries([...document.querySelectorAll('.panel')].map(p => "
+                                 "[p.dataset.param, [p.querySelector('.ident').textContent, "
+                                 "!p.querySelector('.held-tag').hidden]]))")
+        r2 = float(held["Cm:r_squared"][0])
+        for name, (text, tag) in shown.items():
+            if name.startswith("Cm_"):
+                assert (text, tag) == (f"not identifiable: model explains nothing (R^2 {r2:.3f})", True), name
+            else:
+                assert text.startswith("identifiable") and not tag, name
+        _shot_of(browser, "section.model[data-model='Cm']", tmp_path, "dashboard_held_back.png")
         assert browser.query_selector("nav#window button.active").get_attribute("data-window") == "0"  # all
         _shot(browser, tmp_path, "dashboard_replay.png")
     finally:
         err = dashboard.stop()
     assert "dashboard stopped" in err, err
+
+
+def _last_held_back(path: Path) -> dict[str, list[str]]:
+    """Per model, the parameters held back in the last /diagnostics of an estimates.mcap (and
+    ``M:r_squared``), read with rosbags."""
+    from rosbags.highlevel import AnyReader
+
+    from rls_uncertainty.bags import typestore
+
+    last = None
+    with AnyReader([path], default_typestore=typestore()) as reader:
+        conns = [c for c in reader.connections if c.topic == "/diagnostics"]
+        for conn, _t, raw in reader.messages(connections=conns):
+            last = reader.deserialize(raw, conn.msgtype)
+    out: dict[str, list[str]] = {}
+    for status in last.status:
+        if ": model " in status.name:
+            model = status.name.rsplit(" ", 1)[1]
+            values = {kv.key: kv.value for kv in status.values}
+            out[model] = [p for p in values.get("held_back", "").split(",") if p]
+            out[f"{model}:r_squared"] = [values["r_squared"]]
+    return out
 
 
 # ------------------------------------------------------------------ no node

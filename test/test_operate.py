@@ -65,6 +65,29 @@ def test_status_once_prints_the_streams_and_models_of_the_node(node):
     assert models == {"CZ": "initializing", "Cm": "initializing"}
 
 
+def test_the_status_table_names_the_parameters_held_back_and_why():
+    """The model rows of one report as the node writes them (its keys, docs/node.md): the
+    parameters whose flag is held back, and the node's reason below the table."""
+    from rls_uncertainty.dashboard.health import parse_statuses
+    from rls_uncertainty.operate import format_health
+
+    why = ("Cm: no regressor explains the output (R^2 0.493, identifiability.min_r_squared 0.5): not identifiable; "
+           "excite the model or check its output")
+    statuses = [("rls_estimator: inputs", 0, "all inputs fresh", {"recent_window_s": "10"}),
+                ("rls_estimator: samples", 0, "992 of 1000 samples used", {"samples_pending": "4"}),
+                ("rls_estimator: model Cl", 0, "R^2 0.984", {"ready": "True", "samples": "992", "r_squared": "0.98447",
+                                                             "lags": "50", "converged": "True", "held_back": ""}),
+                ("rls_estimator: model Cm", 1, f"R^2 0.493; {why}",
+                 {"ready": "True", "samples": "992", "r_squared": "0.49316", "lags": "50", "converged": "False",
+                  "converged_parameters": "", "held_back": "Cm_0,Cm_alpha,Cm_q,Cm_delta_e", "identifiability": why})]
+    lines = format_health("/rls_estimator", parse_statuses(statuses, "rls_estimator")).splitlines()
+    header = next(i for i, line in enumerate(lines) if line.startswith("model "))
+    assert lines[header].split()[-2:] == ["held", "back"]
+    assert lines[header + 1].split() == ["Cl", "ready", "992", "0.984", "50", "all", "-"]
+    assert lines[header + 2].split() == ["Cm", "ready", "992", "0.493", "50", "-", "Cm_0,Cm_alpha,Cm_q,Cm_delta_e"]
+    assert lines[header + 3] == f"  {why}" and len(lines) == header + 4
+
+
 def test_no_node_gives_a_clear_error_and_exit_status_1():
     for args in (("enable",), ("reset",), ("status", "--once")):
         r = _cli(*args, "--node", "/nobody/rls_estimator", "--timeout", "1")

@@ -10,10 +10,16 @@ import socket
 import sys
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from .hub import Hub, Source
+from .model import Sample
 from .server import Broadcaster, Inbox, ServerOptions, asset_table, bind, check_assets, check_options, serve
 from .settings import discovery_environment, full_node_name, load_reference
+
+if TYPE_CHECKING:  # annotations only: rclpy and the bag library are imported where they are used
+    from .replay_source import ReplaySource
+    from .ros_source import RosSource
 
 __all__ = ["DashboardOptions", "dashboard_options", "run"]
 
@@ -36,7 +42,8 @@ def dashboard_options(host: str, port: int, node: str, replay: str | None = None
 
 
 class _Dispatch:
-    """Items from a source (live or replay) into the hub, and the hub's messages out."""
+    """Items from a source (live or replay) into the hub, and the hub's messages out. Arrays and
+    samples in a row are handed to the hub together (one ``samples`` message per batch)."""
 
     def __init__(self, hub: Hub, broadcaster: Broadcaster) -> None:
         self.hub = hub
@@ -44,33 +51,53 @@ class _Dispatch:
 
     def __call__(self, items: list[tuple]) -> None:
         arrays: list[tuple] = []
+        samples: list[Sample] = []
         for item in items:
-            if item[0] == "array":
+            kind = item[0]
+            if kind == "array":
                 arrays.append(item[1:])
-                continue
-            self._flush(arrays)
-            changed = (self.hub.add_diagnostics(item[1]) if item[0] == "diagnostics"
-                       else self.hub.set_graph(item[1]))
-            if changed is not None:
-                self.broadcaster.send(self.broadcaster.status())
-        self._flush(arrays)
+            elif kind == "sample":
+                samples.append(item[1])
+            else:
+                self._flush(arrays, samples)
+                self._other(item)
+        self._flush(arrays, samples)
 
-    def _flush(self, arrays: list[tuple]) -> None:
-        if arrays:
-            self.broadcaster.send(self.hub.add_arrays(arrays))
-            arrays.clear()
+    def _other(self, item: tuple) -> None:
+        hub, send = self.hub, self.broadcaster.send
+        if item[0] == "diagnostics":
+            if hub.add_diagnostics(item[1]) is not None:
+                send(self.broadcaster.status())
+                for message in hub.quality_updates():
+                    send(message)
+        elif item[0] == "graph":
+            if hub.set_graph(item[1]) is not None:
+                send(self.broadcaster.status())
+        elif item[0] == "replay_done":
+            hub.replay_finished(item[1])
+            send(self.broadcaster.status())
+            if item[1]:
+                print(f"rls-uncertainty dashboard: {item[1]}", file=sys.stderr, flush=True)
+
+    def _flush(self, arrays: list[tuple], samples: list[Sample]) -> None:
+        for message in [*(self.hub.add_arrays(arrays) if arrays else []),
+                        *(self.hub.add_samples(samples) if samples else [])]:
+            self.broadcaster.send(message)
+        arrays.clear()
+        samples.clear()
 
 
-async def _main(options: DashboardOptions, hub: Hub, items: list[tuple] | None, sock: socket.socket) -> None:
+async def _main(options: DashboardOptions, hub: Hub, replay: ReplaySource | None, sock: socket.socket) -> None:
     loop = asyncio.get_running_loop()
     stop = asyncio.Event()
     for sig in (signal.SIGINT, signal.SIGTERM):
         loop.add_signal_handler(sig, stop.set)
     broadcaster = Broadcaster(hub)
     dispatch = _Dispatch(hub, broadcaster)
-    source = None
-    if items is not None:
-        dispatch(items)
+    source: ReplaySource | RosSource
+    if replay is not None:
+        source = replay
+        replay.start(loop.call_soon_threadsafe, dispatch)
     else:
         from .ros_source import RosSource  # noqa: PLC0415 - rclpy only for the live mode
 
@@ -80,8 +107,7 @@ async def _main(options: DashboardOptions, hub: Hub, items: list[tuple] | None, 
     try:
         await serve(broadcaster, options.server, sock, stop)
     finally:
-        if source is not None:
-            source.stop()
+        source.stop()
     dropped = ", ".join(f"{k} {v}" for k, v in sorted(hub.pairing.dropped.items())) or "none"
     inbound = ", ".join(f"{k} {v}" for k, v in broadcaster.inbound.items())
     print(f"dashboard stopped: {hub.samples_total} samples; arrays dropped: {dropped}; from pages: {inbound}; "
@@ -90,12 +116,13 @@ async def _main(options: DashboardOptions, hub: Hub, items: list[tuple] | None, 
 
 def run(options: DashboardOptions) -> int:
     """Serve until interrupted. The first line on stdout is ``serving http://HOST:PORT/``."""
-    items = None
+    replay = None
     if options.replay is not None:
-        from .replay_source import read_replay  # noqa: PLC0415 - the bag library only for replays
+        from .replay_source import open_replay  # noqa: PLC0415 - the bag library only for replays
 
-        node, items = read_replay(options.replay)
-        source = Source("replay", node, replay_dir=str(options.replay), reference=options.reference)
+        replay = open_replay(options.replay)
+        source = Source("replay", replay.node, replay_dir=str(options.replay), reference=options.reference,
+                        replay_file=replay.file)
     else:
         source = Source("live", options.node, reference=options.reference, **discovery_environment())
     sock = bind(options.server)
@@ -104,5 +131,5 @@ def run(options: DashboardOptions) -> int:
     print(f"serving http://{shown}:{port}/", flush=True)
     if options.server.token is not None:
         print(f"token required: open http://{shown}:{port}/?token={options.server.token}", flush=True)
-    asyncio.run(_main(options, Hub(source), items, sock))
+    asyncio.run(_main(options, Hub(source), replay, sock))
     return 0

@@ -2,6 +2,9 @@
 protocol is in docs/dashboard.md). One :class:`Hub` per server, used from the server's event
 loop only: the live subscriber and the replay reader hand it arrays, diagnostics and what the
 ROS graph shows, and it answers with the messages to push. No ROS import, no web server.
+
+Everything estimated is kept per estimation method (:data:`.model.TIME_DOMAIN` today) and
+model, so a second method's results sit beside the first's without mixing.
 """
 
 from __future__ import annotations
@@ -11,8 +14,9 @@ from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
+from .fit import Fit, Identifiability, fit_of, identifiability_of, quality_json
 from .health import HealthTracker, StatusTuple, parse_statuses
-from .model import ModelHistory, Pairing, Sample, array_update, sample_columns
+from .model import FIT_ARRAYS, MAX_PENDING, ArrayKey, ModelHistory, Pairing, Sample, array_update, sample_columns
 
 __all__ = ["Source", "Hub"]
 
@@ -21,7 +25,8 @@ __all__ = ["Source", "Hub"]
 class Source:
     """What the page is told about where the data comes from: ``mode`` ``live`` or
     ``replay``, the node's full name, and for live mode the ROS domain and discovery range
-    (from the environment, as DDS reads them); for replay mode the directory."""
+    (from the environment, as DDS reads them); for replay mode the directory and the file
+    read (``estimates.mcap``, or ``estimates.csv`` alone)."""
 
     mode: str
     node: str
@@ -30,6 +35,7 @@ class Source:
     static_peers: str = ""
     replay_dir: str = ""
     reference: Mapping[str, float] = field(default_factory=dict)
+    replay_file: str = ""
 
 
 class Hub:
@@ -39,7 +45,12 @@ class Hub:
     def __init__(self, source: Source, clock: Callable[[], int] = time.time_ns, capacity: int | None = None) -> None:
         self.source = source
         self.pairing = Pairing()
-        self.histories: dict[str, ModelHistory] = {}
+        self.histories: dict[tuple[str, str], ModelHistory] = {}  # by (method, model)
+        self.fits: dict[tuple[str, str], Fit] = {}
+        self.tables: dict[tuple[str, str], Identifiability] = {}
+        self._quality_sent: dict[tuple[str, str], dict] = {}
+        self.replay_done = False
+        self.replay_error = ""
         self.health = HealthTracker()
         self.node_present: bool | None = None  # None: not looked yet
         self.samples_total = 0
@@ -48,38 +59,103 @@ class Hub:
         self._clock = clock
 
     # ------------------------------------------------------------------ inputs
-    def add_arrays(self, arrays: Iterable[tuple[str, str, Any, int | None]]) -> dict | None:
-        """Feed ``(model, suffix, Float64MultiArray, published_ns)`` tuples (rclpy or rosbags
-        messages); the ``samples`` message of the samples they completed (or None)."""
-        done: dict[str, list[Sample]] = {}
-        for model, suffix, msg, published_ns in arrays:
+    def add_arrays(self, arrays: Iterable[tuple[ArrayKey, Any, int | None]]) -> list[dict]:
+        """Feed ``(key, Float64MultiArray, published_ns)`` tuples (rclpy, rosbags or
+        :mod:`...cdr` messages; None for a payload that could not be decoded); the messages of
+        what they completed: ``samples`` per method, ``quality`` per model whose fit or
+        identifiability came."""
+        done: dict[tuple[str, str], list[Sample]] = {}
+        changed: list[tuple[str, str]] = []
+        for key, msg, published_ns in arrays:
+            if msg is None:
+                self.pairing.count("undecodable")
+                continue
             try:
-                update = array_update(model, suffix, msg, published_ns)
+                if key.suffix in FIT_ARRAYS:
+                    changed.append(self._add_fit(key, msg))
+                    continue
+                update = array_update(key, msg, published_ns)
             except ValueError:
                 self.pairing.count("bad_layout")
                 continue
             s = self.pairing.add(update)
-            if s is not None:
-                self._store(s)
-                done.setdefault(s.model, []).append(s)
-        if not done:
-            return None
-        published = [s.published_ns for ss in done.values() for s in ss if s.published_ns is not None]
-        return {"type": "samples", "models": {m: sample_columns(ss) for m, ss in done.items()},
-                "published_ns": max(published) if published else None, "sent_ns": self._clock()}
+            if s is not None and self._store(s):
+                done.setdefault((s.method, s.model), []).append(s)
+        return self._samples_messages(done) + [self._quality(k) for k in dict.fromkeys(changed)]
 
-    def _store(self, s: Sample) -> None:
-        h = self.histories.get(s.model)
+    def add_samples(self, samples: Iterable[Sample]) -> list[dict]:
+        """Feed complete samples (a replay's ``estimates.csv``); their ``samples`` messages."""
+        done: dict[tuple[str, str], list[Sample]] = {}
+        for s in samples:
+            if self._store(s):
+                done.setdefault((s.method, s.model), []).append(s)
+        return self._samples_messages(done)
+
+    def _samples_messages(self, done: Mapping[tuple[str, str], list[Sample]]) -> list[dict]:
+        out = []
+        for method in dict.fromkeys(m for m, _ in done):
+            mine = {model: ss for (m, model), ss in done.items() if m == method}
+            published = [s.published_ns for ss in mine.values() for s in ss if s.published_ns is not None]
+            out.append({"type": "samples", "method": method,
+                        "models": {model: sample_columns(ss) for model, ss in mine.items()},
+                        "published_ns": max(published) if published else None, "sent_ns": self._clock()})
+        return out
+
+    def _add_fit(self, key: ArrayKey, msg: Any) -> tuple[str, str]:
+        """Keep the newest ``fit`` or ``identifiability`` of a model (ValueError: bad layout)."""
+        which = (key.method, key.model)
+        if key.suffix == "fit":
+            self.fits[which] = fit_of(msg)
+        else:
+            self.tables[which] = identifiability_of(msg)
+        return which
+
+    def _quality(self, which: tuple[str, str]) -> dict:
+        method, model = which
+        health = self.health.latest
+        message = quality_json(method, model, self.fits.get(which), self.tables.get(which),
+                               health.models.get(model) if health is not None else None)
+        self._quality_sent[which] = message
+        return message
+
+    def quality_updates(self) -> list[dict]:
+        """The ``quality`` messages that the newest ``/diagnostics`` changed (the node's text
+        decides one case of :func:`.fit.reasons`)."""
+        out = []
+        for which, sent in list(self._quality_sent.items()):
+            message = self._quality(which)
+            if message != sent:
+                out.append(message)
+        return out
+
+    def _store(self, s: Sample) -> bool:
+        """Keep ``s`` in its model's history; False when it is dropped (and counted) as a
+        sample completed after a newer one: a late partner array among the newest
+        :data:`.model.MAX_PENDING` samples (a late joiner's burst of kept samples), or a
+        duplicate."""
+        which = (s.method, s.model)
+        h = self.histories.get(which)
+        if h is not None and h.names == s.names and h.last_stamp is not None and s.stamp_ns <= h.last_stamp:
+            floor = h.stamp_from_end(MAX_PENDING)
+            if floor is not None and s.stamp_ns >= floor:
+                self.pairing.count("out_of_order")
+                return False
         if h is None or h.names != s.names or (h.last_stamp is not None and s.stamp_ns <= h.last_stamp):
-            # A new model, another set of parameters, or time going back (a node reset, a
-            # looped replay): the display history restarts for this model (the page does the
-            # same when it sees the time go back).
+            # A new model, another set of parameters, or time going back further than the
+            # pairing window (a looped replay): the display history restarts for this model
+            # (the page does the same when it sees the time go back).
             if h is not None:
                 self.history_resets += 1
-            h = self.histories[s.model] = (ModelHistory(s.names) if self._capacity is None
-                                           else ModelHistory(s.names, self._capacity))
+            h = self.histories[which] = (ModelHistory(s.names) if self._capacity is None
+                                         else ModelHistory(s.names, self._capacity))
         h.append(s)
         self.samples_total += 1
+        return True
+
+    def replay_finished(self, error: str = "") -> dict:
+        """The replay file has been read (to its end, or up to ``error``); the ``health`` message."""
+        self.replay_done, self.replay_error = True, error
+        return self.status()
 
     def add_diagnostics(self, statuses: Iterable[StatusTuple]) -> dict | None:
         """Feed one ``/diagnostics`` array; the ``health`` message when it held the node's report."""
@@ -104,16 +180,21 @@ class Hub:
                 "replay_dir": s.replay_dir, "reference": dict(s.reference)}
 
     def snapshot(self) -> dict:
-        return {"type": "snapshot", "models": {m: h.columns() for m, h in self.histories.items()}}
+        methods: dict[str, dict] = {}
+        for (method, model), h in self.histories.items():
+            methods.setdefault(method, {})[model] = h.columns()
+        return {"type": "snapshot", "methods": methods, "quality": list(self._quality_sent.values())}
 
     def state(self) -> dict:
         """What the page says above the panels: ``no_node``, ``waiting_diagnostics``,
-        ``no_samples``, ``running``, ``node_lost`` (samples were shown, the node is gone) or
-        ``replay``, with the text that explains it."""
+        ``no_samples``, ``running``, ``node_lost`` (samples were shown, the node is gone), or
+        ``replay_reading``, ``replay`` (read to its end), ``replay_error``, with the text that
+        explains it."""
         s = self.source
         health = self.health.latest
         if s.mode == "replay":
-            return {"state": "replay", "text": f"replay of {s.replay_dir}: {self.samples_total} samples"}
+            state = "replay_error" if self.replay_error else "replay" if self.replay_done else "replay_reading"
+            return {"state": state, "text": self._replay_text()}
         peers = f", ROS_STATIC_PEERS={s.static_peers}" if s.static_peers else ""
         where = f"ROS_DOMAIN_ID={s.domain} (ROS_AUTOMATIC_DISCOVERY_RANGE={s.discovery_range}{peers})"
         if self.node_present is False and self.samples_total:
@@ -127,6 +208,11 @@ class Hub:
             if health is None:
                 return {"state": "waiting_diagnostics",
                         "text": f"Node {s.node} is running; no sample yet, waiting for its /diagnostics."}
+            used = health.samples.get("samples_used", "0")
+            if used not in ("", "0"):  # it published before this dashboard joined
+                return {"state": "no_samples",
+                        "text": f"Node {s.node} has used {used} samples, none received here yet: its outputs do not "
+                                "keep samples for late joiners (volatile), so the page starts with its next sample."}
             text = (f"Node {s.node} has published no sample yet: {health.samples_message}; "
                     f"inputs: {health.inputs_message}")
             not_ready = [f"{m}: {v.get('message', '')}" for m, v in health.models.items() if v.get("ready") != "True"]
@@ -134,6 +220,19 @@ class Hub:
                 text += "; " + "; ".join(not_ready)
             return {"state": "no_samples", "text": text}
         return {"state": "running", "text": f"{s.node}: {self.samples_total} samples received"}
+
+    def _replay_text(self) -> str:
+        s = self.source
+        where = f"{s.replay_dir}/{s.replay_file}"
+        if self.replay_error:
+            return f"replay {where}: {self.samples_total} samples, then {self.replay_error}"
+        if not self.replay_done:
+            return f"reading replay {where}: {self.samples_total} samples so far"
+        text = f"replay of {s.replay_dir}: {self.samples_total} samples"
+        if s.replay_file == "estimates.csv":
+            text += (" from estimates.csv (no estimates.mcap: no fit, identifiability or input health, which "
+                     "rls-uncertainty replay writes into estimates.mcap)")
+        return text
 
     def status(self) -> dict:
         health = self.health.latest

@@ -1,13 +1,19 @@
 """What the dashboard shows of the estimates, built from the node's output arrays (no ROS, no
-web server: the live subscriber and the replay reader feed the same :class:`Dashboard`).
+web server: the live subscriber and the replay reader feed the same :class:`.hub.Hub`).
+
+Topics. :func:`array_key` names what a topic under the node carries: the estimation method
+(``time``: the recursive least squares of the paper, ``~/M/<array>``), the model and the array.
+It is the one place that maps topics to methods: a second method's topics (the frequency-domain
+estimator's) get their own method name here, and everything downstream (pairing, histories, the
+page) keeps the methods apart.
 
 Pairing. Every output array carries its sample's time in the label of its last dim
 (``stamp:SEC.NANOSEC``, docs/dashboard.md), so a model's sample is complete when its
 ``estimates``, ``standard_errors`` (corrected, Eqs. 20/22), ``standard_errors_conventional``
 (Eq. 13) and ``converged`` arrays *of the same stamp* have arrived, in whatever order and
 interleaved with other samples: never by arrival. An array whose partners never come (a lost
-message) is dropped, and counted, once :data:`MAX_PENDING` later samples of its model have
-completed.
+message) is dropped, and counted, once :data:`MAX_PENDING` samples of newer stamps of its
+model have completed.
 
 History. Each model keeps its completed samples in columns of bounded size: when
 :data:`HISTORY_CAPACITY` samples are held, every other sample of the older half is dropped,
@@ -22,7 +28,7 @@ import math
 from collections import OrderedDict
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -30,26 +36,56 @@ from ..outputs import parse_stamp_label
 
 __all__ = [
     "PAIRED",
+    "FIT_ARRAYS",
+    "SHOWN",
+    "TIME_DOMAIN",
+    "ArrayKey",
+    "array_key",
     "ArrayUpdate",
     "array_update",
     "Sample",
     "ModelHistory",
     "Pairing",
     "MAX_PENDING",
+    "MAX_WAITING",
     "HISTORY_CAPACITY",
 ]
 
 # The four arrays a sample needs, by suffix of ~/M/<suffix>.
 PAIRED = ("estimates", "standard_errors", "standard_errors_conventional", "converged")
-MAX_PENDING = 64  # stamps per model awaiting their partner arrays
+# Published once per diagnostics period (docs/node.md#fit-and-identifiability): Fig. 5's
+# residual autocorrelation with R^2, and the parameters' identifiability.
+FIT_ARRAYS = ("fit", "identifiability")
+SHOWN = PAIRED + FIT_ARRAYS  # every array the dashboard subscribes to
+TIME_DOMAIN = "time"  # the method of ~/M/<array>: recursive least squares (Eqs. 9-22)
+MAX_PENDING = 64  # newer samples completed before a stamp's missing partner arrays count as lost
+MAX_WAITING = 4096  # stamps per model awaiting partners (a late joiner's burst of kept samples)
 HISTORY_CAPACITY = 20_000  # samples per model; 200 s at full rate at 50 Hz, older data thinned
+
+
+class ArrayKey(NamedTuple):
+    """What a topic under the node carries: ``method`` (:data:`TIME_DOMAIN`), ``model`` and
+    ``suffix`` (one of :data:`SHOWN`)."""
+
+    method: str
+    model: str
+    suffix: str
+
+
+def array_key(relative: str) -> ArrayKey | None:
+    """The :class:`ArrayKey` of a topic relative to the node (``CZ/estimates``), or None for a
+    topic the dashboard does not show."""
+    parts = relative.split("/")
+    if len(parts) == 2 and parts[0] and parts[1] in SHOWN:
+        return ArrayKey(TIME_DOMAIN, parts[0], parts[1])
+    return None
 
 
 @dataclass(frozen=True)
 class ArrayUpdate:
     """One received ``~/M/<suffix>`` array: its parameter names (``layout.dim[0].label``), its
-    values, the sample stamp from its last dim's label, and when it was published (ns since the
-    epoch, DDS source time; None when unknown, as in a replay)."""
+    values, the sample stamp from its last dim's label, when it was published (ns since the
+    epoch, DDS source time; None when unknown, as in a replay) and the estimation method."""
 
     model: str
     suffix: str
@@ -57,24 +93,26 @@ class ArrayUpdate:
     data: tuple[float, ...]
     stamp_ns: int
     published_ns: int | None = None
+    method: str = TIME_DOMAIN
 
 
-def array_update(model: str, suffix: str, msg: Any, published_ns: int | None = None) -> ArrayUpdate:
-    """An :class:`ArrayUpdate` from a ``std_msgs/Float64MultiArray`` (rclpy's or rosbags'
-    message: read by field name): the names from ``layout.dim[0].label``, the stamp from the
-    last dim's label. ValueError when the layout does not carry them."""
+def array_update(key: ArrayKey, msg: Any, published_ns: int | None = None) -> ArrayUpdate:
+    """An :class:`ArrayUpdate` from a ``std_msgs/Float64MultiArray`` (rclpy's, rosbags' or
+    :mod:`...cdr`'s message: read by field name): the names from ``layout.dim[0].label``, the
+    stamp from the last dim's label. ValueError when the layout does not carry them."""
     dims = msg.layout.dim
     if len(dims) < 2:
-        raise ValueError(f"{model}/{suffix}: {len(dims)} dims, expected the names and the stamp")
+        raise ValueError(f"{key.model}/{key.suffix}: {len(dims)} dims, expected the names and the stamp")
     names = tuple(str(dims[0].label).split(","))
     stamp = parse_stamp_label(str(dims[-1].label))
-    return ArrayUpdate(model, suffix, names, tuple(float(x) for x in msg.data), stamp, published_ns)
+    return ArrayUpdate(key.model, key.suffix, names, tuple(float(x) for x in msg.data), stamp, published_ns,
+                       key.method)
 
 
 @dataclass(frozen=True)
 class Sample:
     """A model's complete sample: estimate, corrected and conventional standard errors and
-    convergence flags per parameter, and the publish time of its last array."""
+    convergence flags per parameter, the publish time of its last array, the method."""
 
     model: str
     stamp_ns: int
@@ -84,18 +122,32 @@ class Sample:
     se_conventional: tuple[float, ...]
     converged: tuple[float, ...]
     published_ns: int | None
+    method: str = TIME_DOMAIN
+
+
+@dataclass
+class _Pending:
+    """A stamp's arrays so far, and how many samples of newer stamps completed since."""
+
+    arrays: dict[str, ArrayUpdate] = field(default_factory=dict)
+    overtaken: int = 0
 
 
 @dataclass
 class Pairing:
     """Completes samples from arrays paired by their stamps (see the module docstring).
-    ``dropped`` counts arrays refused, by reason."""
+    ``dropped`` counts arrays refused, by reason.
+
+    A stamp's arrays wait for their partners as long as fewer than ``max_pending`` samples of
+    *newer* stamps have completed: each array's messages come in order, so partners that did
+    not come before that many newer samples were lost. Counting newer samples, not all
+    samples, lets a late joiner's burst (every kept sample of one array, then of the next)
+    pair up. At most ``max_stamps`` stamps wait per model; beyond, the oldest are dropped."""
 
     max_pending: int = MAX_PENDING
+    max_stamps: int = MAX_WAITING
     dropped: dict[str, int] = field(default_factory=dict)
-    # per model: stamp -> (samples completed when the stamp was first seen, its arrays)
-    _pending: dict[str, OrderedDict[int, tuple[int, dict[str, ArrayUpdate]]]] = field(default_factory=dict)
-    _completed: dict[str, int] = field(default_factory=dict)
+    _pending: dict[tuple[str, str], OrderedDict[int, _Pending]] = field(default_factory=dict)
 
     def count(self, reason: str, n: int = 1) -> None:
         self.dropped[reason] = self.dropped.get(reason, 0) + n
@@ -110,12 +162,13 @@ class Pairing:
         if not all(math.isfinite(x) for x in update.data):
             self.count("non_finite")
             return None
-        pending = self._pending.setdefault(update.model, OrderedDict())
-        completed = self._completed.get(update.model, 0)
+        pending = self._pending.setdefault((update.method, update.model), OrderedDict())
         entry = pending.get(update.stamp_ns)
         if entry is None:
-            entry = pending[update.stamp_ns] = (completed, {})
-        arrays = entry[1]
+            entry = pending[update.stamp_ns] = _Pending()
+            while len(pending) > self.max_stamps:
+                self.count("unpaired", len(pending.popitem(last=False)[1].arrays))
+        arrays = entry.arrays
         if update.suffix in arrays:
             self.count("duplicate")
             return None
@@ -123,14 +176,12 @@ class Pairing:
         if len(arrays) < len(PAIRED):
             return None
         del pending[update.stamp_ns]
-        self._completed[update.model] = completed = completed + 1
-        # Arrays that have waited while max_pending later samples completed lost a partner.
-        while pending:
-            stamp, (born, lost) = next(iter(pending.items()))
-            if completed - born <= self.max_pending:
-                break
-            del pending[stamp]
-            self.count("unpaired", len(lost))
+        for stamp in [s for s, e in pending.items() if s < update.stamp_ns]:
+            waiting = pending[stamp]
+            waiting.overtaken += 1
+            if waiting.overtaken > self.max_pending:  # its partners were lost
+                del pending[stamp]
+                self.count("unpaired", len(waiting.arrays))
         names = {a.names for a in arrays.values()}
         if len(names) != 1:
             self.count("mismatched_names", len(arrays))
@@ -138,7 +189,7 @@ class Pairing:
         published = [a.published_ns for a in arrays.values() if a.published_ns is not None]
         return Sample(update.model, update.stamp_ns, update.names, arrays["estimates"].data,
                       arrays["standard_errors"].data, arrays["standard_errors_conventional"].data,
-                      arrays["converged"].data, max(published) if published else None)
+                      arrays["converged"].data, max(published) if published else None, update.method)
 
 
 class ModelHistory:
@@ -176,6 +227,10 @@ class ModelHistory:
     @property
     def last_stamp(self) -> int | None:
         return int(self._t[self.size - 1]) if self.size else None
+
+    def stamp_from_end(self, k: int) -> int | None:
+        """The stamp of the ``k``-th newest sample (the oldest when fewer are held)."""
+        return int(self._t[max(0, self.size - k)]) if self.size else None
 
     def columns(self, start: int = 0) -> dict:
         """Samples ``start`` onwards as JSON-ready columns: ``t`` (s), and per quantity one list

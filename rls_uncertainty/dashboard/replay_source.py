@@ -1,50 +1,225 @@
 """The dashboard's replay source: a finished ``rls-uncertainty replay`` output directory, read
-from its ``estimates.mcap`` (the node's own messages, byte for byte, and its ``/diagnostics``;
-see :mod:`..replay`), in log order, as the same items the live source hands over."""
+as a stream in its own thread and handed to the server's event loop in batches, like the live
+source's items (memory bounded by the hub's histories whatever the flight's length).
+
+* ``estimates.mcap`` (the node's own messages, byte for byte, with its ``/diagnostics`` and the
+  per-period ``~/M/fit`` and ``~/M/identifiability``; see :mod:`..replay_files`) is read one
+  chunk at a time in log order (``rosbags``), the arrays decoded by :mod:`..cdr`;
+* a directory with ``estimates.csv`` only (an older replay, or its MCAP removed) is read row by
+  row: the estimates, standard errors and flags, without the fit, identifiability or input
+  health that only the MCAP holds (the page says so).
+
+:func:`open_replay` checks what can be checked before the server starts (the directory, the
+MCAP's integrity and topics, the CSV's header) and raises :class:`..errors.BagError` naming the
+file and the problem; a problem met while reading (a malformed CSV row) ends the reading, and
+the page and the log say where.
+"""
 
 from __future__ import annotations
 
+import contextlib
+import csv
+import math
+import struct
+import threading
+from collections.abc import Callable, Iterator
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 from ..bags import check_mcap_integrity, typestore
+from ..cdr import FLOAT64_MULTIARRAY, decode
 from ..errors import BagError
+from ..replay_files import CSV_COLUMNS
 from .health import statuses_of
-from .model import PAIRED
+from .model import TIME_DOMAIN, ArrayKey, Sample, array_key
 
-__all__ = ["read_replay"]
+if TYPE_CHECKING:
+    from rosbags.highlevel import AnyReader
+
+__all__ = ["ReplaySource", "open_replay", "BATCH"]
+
+BATCH = 2000  # items handed to the event loop at once
+IN_FLIGHT = 2  # batches handed over and not yet handled: the reader waits beyond
 
 
-def read_replay(directory: str | Path) -> tuple[str, list[tuple]]:
-    """``(node name, items)`` of a replay directory: ``("array", model, suffix, msg, None)``
-    and ``("diagnostics", statuses)`` in log order. BagError when it holds no readable
-    ``estimates.mcap``."""
+class ReplaySource:
+    """A replay directory being read: :attr:`node` (the node whose topics it holds; empty for
+    a CSV), :attr:`file` (``estimates.mcap`` or ``estimates.csv``). :meth:`start` reads it in a
+    thread and calls ``deliver(items)`` on the event loop; the last item is ``("replay_done",
+    error)`` (error empty when read to the end)."""
+
+    def __init__(self, directory: Path, file: str, node: str, items: Callable[[], Iterator[tuple]]) -> None:
+        self.directory, self.file, self.node = directory, file, node
+        self._items = items
+        self._stop = threading.Event()
+        self._slots = threading.Semaphore(IN_FLIGHT)
+        self._thread: threading.Thread | None = None
+
+    def start(self, call_soon_threadsafe: Callable[..., Any], deliver: Callable[[list[tuple]], None]) -> None:
+        def handle(batch: list[tuple]) -> None:
+            try:
+                deliver(batch)
+            finally:
+                self._slots.release()
+
+        def hand(batch: list[tuple]) -> bool:
+            while not self._slots.acquire(timeout=0.2):
+                if self._stop.is_set():
+                    return False
+            try:
+                call_soon_threadsafe(handle, batch)
+            except RuntimeError:  # the loop closed: the server stopped
+                return False
+            return True
+
+        def run() -> None:
+            batch: list[tuple] = []
+            error = ""
+            try:
+                for item in self._items():
+                    if self._stop.is_set():
+                        return
+                    batch.append(item)
+                    if len(batch) >= BATCH:
+                        if not hand(batch):
+                            return
+                        batch = []
+            except BagError as exc:
+                error = str(exc)
+            hand([*batch, ("replay_done", error)])
+
+        self._thread = threading.Thread(target=run, name="rls_dashboard_replay", daemon=True)
+        self._thread.start()
+
+    def stop(self) -> None:
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout=10.0)
+
+
+def open_replay(directory: str | Path) -> ReplaySource:
+    """The :class:`ReplaySource` of a replay output directory (module docstring)."""
+    directory = Path(directory)
+    mcap, table = directory / "estimates.mcap", directory / "estimates.csv"
+    if mcap.is_file():
+        return _open_mcap(directory, mcap)
+    if table.is_file():
+        return _open_csv(directory, table)
+    raise BagError(f"{directory}: no estimates.mcap or estimates.csv (the output directory of rls-uncertainty replay)")
+
+
+# ------------------------------------------------------------------ estimates.mcap
+def _open_reader(path: Path) -> AnyReader:
     from rosbags.highlevel import AnyReader  # noqa: PLC0415 - the bag library only for replays
 
-    path = Path(directory) / "estimates.mcap"
-    if not path.is_file():
-        raise BagError(f"{directory}: no estimates.mcap (the output directory of rls-uncertainty replay)")
     check_mcap_integrity(path)
-    items: list[tuple] = []
-    node = ""
     try:
-        with AnyReader([path], default_typestore=typestore()) as reader:
-            arrays = {}
-            for c in reader.connections:
-                parts = c.topic.rsplit("/", 2)
-                if len(parts) == 3 and parts[2] in PAIRED and c.msgtype == "std_msgs/msg/Float64MultiArray":
-                    arrays[c.id] = (parts[1], parts[2])
-                    node = parts[0]
-            wanted = [c for c in reader.connections if c.id in arrays or c.topic == "/diagnostics"]
-            for conn, _t, raw in reader.messages(connections=wanted):
-                msg = reader.deserialize(raw, conn.msgtype)
-                if conn.id in arrays:
-                    items.append(("array", *arrays[conn.id], msg, None))
-                else:
-                    items.append(("diagnostics", statuses_of(msg)))
-    except BagError:
-        raise
+        reader = AnyReader([path], default_typestore=typestore())
+        reader.open()
     except Exception as exc:  # rosbags raises many types for a corrupt file
         raise BagError(f"{path}: cannot read: {exc}") from exc
+    return reader
+
+
+def _shown(reader: AnyReader) -> tuple[str, dict[int, ArrayKey]]:
+    """The node and the connections of the arrays the dashboard shows (by connection id)."""
+    keys: dict[int, ArrayKey] = {}
+    node = ""
+    for c in reader.connections:
+        head, _, model_array = c.topic.rpartition("/")
+        head, _, model = head.rpartition("/")
+        key = array_key(f"{model}/{model_array}") if head else None
+        if key is not None and c.msgtype == FLOAT64_MULTIARRAY:
+            keys[c.id] = key
+            node = head
+    return node, keys
+
+
+def _open_mcap(directory: Path, path: Path) -> ReplaySource:
+    reader = _open_reader(path)
+    try:
+        node, keys = _shown(reader)
+    finally:
+        reader.close()
     if not node:
         raise BagError(f"{path}: holds no estimates (no ~/M/estimates topic)")
-    return node, items
+
+    def items() -> Iterator[tuple]:
+        reader = _open_reader(path)
+        try:
+            wanted = [c for c in reader.connections if c.id in keys or c.topic == "/diagnostics"]
+            for conn, _t, raw in reader.messages(connections=wanted):
+                key = keys.get(conn.id)
+                if key is None:
+                    yield ("diagnostics", statuses_of(reader.deserialize(raw, conn.msgtype)))
+                    continue
+                try:
+                    msg = decode(FLOAT64_MULTIARRAY, raw)
+                except struct.error:
+                    msg = None
+                yield ("array", key, msg, None)
+        except BagError:
+            raise
+        except Exception as exc:  # rosbags raises many types for a corrupt file
+            raise BagError(f"{path}: cannot read: {exc}") from exc
+        finally:
+            with contextlib.suppress(Exception):
+                reader.close()
+
+    return ReplaySource(directory, path.name, node, items)
+
+
+# ------------------------------------------------------------------ estimates.csv
+def _open_csv(directory: Path, path: Path) -> ReplaySource:
+    try:
+        with open(path, newline="", encoding="utf-8") as fh:
+            header = next(csv.reader(fh), [])
+    except (OSError, UnicodeDecodeError, csv.Error) as exc:
+        raise BagError(f"{path}: cannot read: {exc}") from exc
+    if tuple(header[: len(CSV_COLUMNS)]) != CSV_COLUMNS:
+        raise BagError(f"{path}: not the estimates.csv of rls-uncertainty replay (columns {', '.join(CSV_COLUMNS)})")
+
+    def items() -> Iterator[tuple]:
+        try:
+            with open(path, newline="", encoding="utf-8") as fh:
+                rows = csv.reader(fh)
+                next(rows)
+                yield from _csv_samples(path, rows)
+        except (OSError, UnicodeDecodeError, csv.Error) as exc:
+            raise BagError(f"{path}: cannot read: {exc}") from exc
+
+    return ReplaySource(directory, path.name, "", items)
+
+
+def _csv_samples(path: Path, rows: Iterator[list[str]]) -> Iterator[tuple]:
+    """``("sample", Sample)`` of consecutive rows of one time and model (one row per parameter)."""
+    group: list[tuple[int, str, str, tuple[float, ...]]] = []
+    for line, row in enumerate(rows, start=2):
+        try:
+            parsed = _csv_row(row)
+        except (ValueError, IndexError) as exc:
+            raise BagError(f"{path}: line {line}: not a row of estimates.csv ({exc})") from exc
+        if group and parsed[:2] != group[0][:2]:
+            yield ("sample", _csv_sample(group))
+            group = []
+        group.append(parsed)
+    if group:
+        yield ("sample", _csv_sample(group))
+
+
+def _csv_row(row: list[str]) -> tuple[int, str, str, tuple[float, ...]]:
+    """``(stamp_ns, model, parameter, (estimate, std_error, std_error_conventional, converged))``."""
+    sec, dot, nanosec = row[0].partition(".")
+    if not sec.isdigit() or (dot and not nanosec.isdigit()) or len(nanosec) > 9:
+        raise ValueError(f"time {row[0]!r}")
+    values = tuple(float(x) for x in row[3:7])
+    if len(values) != 4 or not all(math.isfinite(x) for x in values):
+        raise ValueError(f"values {row[3:7]!r}")
+    return int(sec) * 1_000_000_000 + int(nanosec.ljust(9, "0")), row[1], row[2], values
+
+
+def _csv_sample(rows: list[tuple[int, str, str, tuple[float, ...]]]) -> Sample:
+    stamp, model = rows[0][:2]
+    estimate, se, se_conventional, converged = (tuple(r[3][i] for r in rows) for i in range(4))
+    return Sample(model, stamp, tuple(r[2] for r in rows), estimate, se, se_conventional, converged, None,
+                  TIME_DOMAIN)

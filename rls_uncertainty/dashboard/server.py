@@ -42,6 +42,7 @@ STATIC = HERE / "static"
 VENDOR = HERE / "node_modules" / "uplot"
 MAX_INBOUND = 1024  # bytes of one message from the page; longer ones are dropped and counted
 CLIENT_QUEUE = 256  # messages waiting for one page; beyond, the page is resynchronized
+COALESCE_S = 0.005  # items arriving within this of the first are handed to the loop together (Inbox)
 TOKEN_COOKIE = "rls_dashboard_token"
 _TYPES = {".html": "text/html", ".js": "text/javascript", ".css": "text/css", ".txt": "text/plain"}
 _CSP = ("default-src 'none'; script-src 'self'; style-src 'self'; img-src 'self' data:; connect-src 'self'; "
@@ -100,16 +101,22 @@ def check_assets(table: dict[str, tuple[Path, str]]) -> None:
 
 
 class Inbox:
-    """Hands items from other threads (the ROS executor) to the event loop in batches: one
-    wake-up per batch, at most ``maxlen`` items waiting (older ones dropped and counted)."""
+    """Hands items from other threads (the ROS executor) to the event loop in batches: at most
+    ``maxlen`` items waiting (older ones dropped and counted in :attr:`overflow`), and one
+    wake-up of the loop per ``coalesce_s`` at most. Waking the loop is a write to its
+    self-pipe made from the other thread; waking it for each of the ~1,250 arrays a second of
+    six models took a quarter of the dashboard's CPU (benchmarks/dashboard_benchmark.py). The
+    node publishes a sample's arrays back to back, so a few milliseconds gather a sample's
+    arrays of every model into one batch, one ``samples`` message to the page."""
 
     def __init__(self, loop: asyncio.AbstractEventLoop, handler: Callable[[list], None],
-                 maxlen: int = 200_000) -> None:
+                 maxlen: int = 200_000, coalesce_s: float = COALESCE_S) -> None:
         self._loop = loop
         self._handler = handler
         self._items: deque = deque(maxlen=maxlen)
         self._lock = threading.Lock()
         self._scheduled = False
+        self._coalesce_s = coalesce_s
         self.overflow = 0
 
     def put(self, item: Any) -> None:
@@ -121,7 +128,7 @@ class Inbox:
                 return
             self._scheduled = True
         with contextlib.suppress(RuntimeError):  # the loop closed while the ROS thread stopped
-            self._loop.call_soon_threadsafe(self._drain)
+            self._loop.call_soon_threadsafe(self._loop.call_later, self._coalesce_s, self._drain)
 
     def _drain(self) -> None:
         with self._lock:
@@ -244,7 +251,9 @@ def make_app(broadcaster: Broadcaster, options: ServerOptions, port: int,
         return send_file(name)
 
     async def websocket(request: web.Request) -> web.WebSocketResponse:
-        ws = web.WebSocketResponse(max_msg_size=64 * 1024, heartbeat=20.0)
+        # No per-message compression: deflating each small JSON message cost a tenth of the
+        # dashboard's CPU, for ~100 kB/s that any network carries.
+        ws = web.WebSocketResponse(max_msg_size=64 * 1024, heartbeat=20.0, compress=False)
         await ws.prepare(request)
         client = _Client(ws)
         broadcaster.clients.add(client)

@@ -39,43 +39,61 @@ function typeset(name) {
 function fmt(x, digits) { return Number.isFinite(x) ? x.toFixed(digits) : "–"; }
 
 // ------------------------------------------------------------------ data
-function newModel(name, names) {
-  const n = names.length;
-  const cols = () => Array.from({ length: n }, () => []);
-  return { name, names, t: [], estimate: cols(), se: cols(), se_conventional: cols(), converged: cols(),
-           view: null, fit: null };
-}
+// state.models: model name -> { name, methods: { method: history }, quality: { method: quality
+// message }, view }. The panels draw the estimates of PRIMARY (the recursive least squares of
+// ~/M/...); a second estimation method's history and quality sit beside it under its own name.
+const PRIMARY = "time";
+const QUANTITIES = ["estimate", "se", "se_conventional", "converged"];
 
-function thin(m) {
-  const half = Math.floor(m.t.length / 2);
-  const keep = (arr) => arr.filter((_, i) => i >= half || i % 2 === 0);
-  m.t = keep(m.t);
-  for (const q of ["estimate", "se", "se_conventional", "converged"]) m[q] = m[q].map(keep);
-}
-
-function appendColumns(name, cols, replace) {
+function modelFor(name) {
   let m = state.models.get(name);
-  const sameNames = m && m.names.join(",") === cols.names.join(",");
-  const goesBack = m && m.t.length && cols.t.length && cols.t[0] <= m.t[m.t.length - 1];
-  if (!m || !sameNames || goesBack || replace) {
-    const old = m;
-    m = newModel(name, cols.names);
-    if (old && sameNames) m.view = old.view; else if (old) removeView(old);
-    state.models.set(name, m);
+  if (!m) { m = { name, methods: {}, quality: {}, view: null }; state.models.set(name, m); }
+  return m;
+}
+
+function newHistory(names) {
+  const cols = () => names.map(() => []);
+  return { names, t: [], estimate: cols(), se: cols(), se_conventional: cols(), converged: cols() };
+}
+
+function thin(h) {
+  const half = Math.floor(h.t.length / 2);
+  const keep = (arr) => arr.filter((_, i) => i >= half || i % 2 === 0);
+  h.t = keep(h.t);
+  for (const q of QUANTITIES) h[q] = h[q].map(keep);
+}
+
+function appendColumns(method, name, cols, replace) {
+  const m = modelFor(name);
+  let h = m.methods[method];
+  const sameNames = h && h.names.join(",") === cols.names.join(",");
+  const goesBack = h && h.t.length && cols.t.length && cols.t[0] <= h.t[h.t.length - 1];
+  if (!h || !sameNames || goesBack || replace) {
+    h = m.methods[method] = newHistory(cols.names);
+    if (method === PRIMARY && !sameNames) removeView(m);
   }
-  for (let k = 0; k < cols.t.length; k++) m.t.push(cols.t[k]);
-  for (const q of ["estimate", "se", "se_conventional", "converged"]) {
-    cols[q].forEach((values, i) => { for (const v of values) m[q][i].push(v); });
-  }
-  while (m.t.length > CAP) thin(m);
+  for (let k = 0; k < cols.t.length; k++) h.t.push(cols.t[k]);
+  for (const q of QUANTITIES) cols[q].forEach((values, i) => { for (const v of values) h[q][i].push(v); });
+  while (h.t.length > CAP) thin(h);
+  state.dirty = true;
+}
+
+function setQuality(msg) {
+  modelFor(msg.model).quality[msg.method] = msg;
   state.dirty = true;
 }
 
 // ------------------------------------------------------------------ views
-function removeView(m) { if (m.view) { m.view.section.remove(); m.view.plots.forEach((p) => p.u.destroy()); } }
+function removeView(m) {
+  if (!m.view) return;
+  m.view.section.remove();
+  m.view.plots.forEach((p) => p.u.destroy());
+  if (m.view.acf) m.view.acf.destroy();
+  m.view = null;
+}
 
-function panelFor(m, i, container) {
-  const name = m.names[i];
+function panelFor(m, names, i, container) {
+  const name = names[i];
   const panel = el("div", "panel");
   panel.dataset.param = name;
   const head = el("div", "panel-head");
@@ -84,16 +102,21 @@ function panelFor(m, i, container) {
   left.append(title);
   const ts = typeset(name);
   if (ts) { left.append(" "); left.append(ts); }
+  const tags = el("span", "tags");
+  const held = el("span", "held-tag", "HELD BACK");
+  held.hidden = true;
   const badge = el("span", "badge", "not converged");
   badge.dataset.converged = "0";
-  head.append(left, badge);
+  tags.append(held, badge);
+  head.append(left, tags);
   const readout = el("div", "readout");
   const value = el("span", "value", "–");
   const se = el("span", "se");
   const ref = el("span", "ref");
   readout.append(value, se, ref);
+  const ident = el("div", "ident");
   const chart = el("div", "chart");
-  panel.append(head, readout, chart);
+  panel.append(head, readout, ident, chart);
   container.append(panel);
   const reference = state.reference[name];
   if (reference !== undefined) ref.textContent = "reference " + fmt(reference, 4);
@@ -113,10 +136,30 @@ function panelFor(m, i, container) {
     axes: [{ stroke: "#8b96a5", grid: { stroke: "#2a313c" } }, { stroke: "#8b96a5", grid: { stroke: "#2a313c" }, size: 70 }],
   };
   const u = new uPlot(opts, series.map(() => []), chart);
-  return { panel, badge, value, se, u, chart, reference };
+  return { name, panel, badge, held, value, se, ident, u, chart, reference };
 }
 
-function viewFor(m) {
+// The residual autocorrelation at the retained lags with the 2σ white-noise bound (Fig. 5).
+function acfChart(container) {
+  const bars = uPlot.paths.bars({ size: [0.6, 12] });
+  const series = [
+    {},
+    { label: "ρ inside ±2σ", stroke: "#4fc3f7", fill: "rgba(79,195,247,0.6)", paths: bars, points: { show: false } },
+    { label: "ρ outside ±2σ", stroke: "#ffb74d", fill: "rgba(255,183,77,0.8)", paths: bars, points: { show: false } },
+    { label: "+2σ", stroke: "#e0e0e0", width: 1, dash: [6, 4], points: { show: false } },
+    { label: "−2σ", stroke: "#e0e0e0", width: 1, dash: [6, 4], points: { show: false } },
+  ];
+  const opts = {
+    width: Math.max(container.clientWidth || 600, 300), height: 170, series, legend: { show: false },
+    scales: { x: { time: false }, y: { range: (u, lo, hi) => [Math.min(-0.2, lo), Math.max(1, hi)] } },
+    cursor: { drag: { x: false, y: false } },
+    axes: [{ stroke: "#8b96a5", grid: { stroke: "#2a313c" }, label: "lag (samples)", labelSize: 18, size: 36 },
+           { stroke: "#8b96a5", grid: { stroke: "#2a313c" }, size: 70 }],
+  };
+  return new uPlot(opts, series.map(() => []), container);
+}
+
+function viewFor(m, names) {
   if (m.view) return m.view;
   const section = el("section", "model");
   section.dataset.model = m.name;
@@ -125,15 +168,19 @@ function viewFor(m) {
   const status = el("span", "status");
   head.append(el("span", "name", m.name), fit, status);
   const panels = el("div", "panels");
-  const autocorr = el("div", "autocorr",
-    "Residual autocorrelation with the 2σ white-noise bound (Fig. 5): not published by this node version.");
-  section.append(head, panels, autocorr);
+  const acfBox = el("div", "autocorr");
+  const acfTitle = el("div", "acf-title", "Residual autocorrelation at the retained lags, 2σ white-noise bound (Fig. 5)");
+  const acfChartBox = el("div", "acf-chart");
+  const why = el("div", "why");
+  acfBox.append(acfTitle, acfChartBox, why);
+  section.append(head, panels, acfBox);
   const models = document.getElementById("models");
   const rank = (name) => { const i = MODEL_ORDER.indexOf(name); return i < 0 ? MODEL_ORDER.length : i; };
   const before = (a, b) => rank(a) < rank(b) || (rank(a) === rank(b) && a < b);
   const after = [...models.children].find((s) => before(m.name, s.dataset.model));
   models.insertBefore(section, after || null);
-  m.view = { section, fit, status, autocorr, plots: m.names.map((_, i) => panelFor(m, i, panels)) };
+  m.view = { section, fit, status, acfBox, acfChartBox, acfTitle, why, acf: null,
+             plots: names.map((_, i) => panelFor(m, names, i, panels)) };
   return m.view;
 }
 
@@ -155,13 +202,14 @@ function drawnIndices(t) {
 }
 
 function drawModel(m) {
-  const v = viewFor(m);
-  if (!m.t.length) return;
-  const idx = drawnIndices(m.t);
-  const x = idx.map((k) => m.t[k]);
-  const last = m.t.length - 1;
+  const h = m.methods[PRIMARY];
+  if (!h || !h.t.length) return;
+  const v = viewFor(m, h.names);
+  const idx = drawnIndices(h.t);
+  const x = idx.map((k) => h.t[k]);
+  const last = h.t.length - 1;
   v.plots.forEach((p, i) => {
-    const est = m.estimate[i], se = m.se[i], sc = m.se_conventional[i];
+    const est = h.estimate[i], se = h.se[i], sc = h.se_conventional[i];
     const data = [x, idx.map((k) => est[k]), idx.map((k) => est[k] + 2 * se[k]), idx.map((k) => est[k] - 2 * se[k]),
                   idx.map((k) => est[k] + 2 * sc[k]), idx.map((k) => est[k] - 2 * sc[k])];
     if (p.reference !== undefined) data.push(x.map(() => p.reference));
@@ -172,26 +220,51 @@ function drawModel(m) {
     p.se.textContent = "";
     p.se.append("SE " + fmt(se[last], 4) + " ");
     p.se.append(el("span", "conv", "(conv. " + fmt(sc[last], 4) + ")"));
-    const converged = m.converged[i][last] === 1 ? "1" : "0";
+    const converged = h.converged[i][last] === 1 ? "1" : "0";
     p.badge.dataset.converged = converged;
     p.badge.textContent = converged === "1" ? "CONVERGED" : "not converged";
     p.panel.classList.toggle("converged", converged === "1");
   });
 }
 
-function drawFit(m) {
-  const v = viewFor(m);
-  const fit = state.health && state.health.models ? state.health.models[m.name] : null;
-  if (!fit) { v.fit.textContent = ""; v.status.textContent = ""; return; }
-  if (fit.ready === "True") {
-    const r2 = parseFloat(fit.r_squared), rho = parseFloat(fit.residual_rho1), out = parseFloat(fit.lags_outside_2sigma);
-    v.fit.textContent = `R² ${fmt(r2, 3)}  ·  lags ${fit.lags}  ·  residual ρ₁ ${fmt(rho, 2)}`;
-    v.autocorr.textContent = `Residual autocorrelation: ${fmt(100 * out, 0)}% of the ${fit.lags} retained lags outside ` +
-      "the 2σ white-noise bound. (The full autocorrelation plot, Fig. 5, needs the node to publish it.)";
-  } else {
-    v.fit.textContent = "";
+// Per parameter: identifiable or why not (from ~/M/identifiability), held back from
+// "converged" by the node (its /diagnostics); per model: R², Fig. 5 and the node's words.
+function drawQuality(m) {
+  if (!m.view) return;
+  const v = m.view;
+  const q = m.quality[PRIMARY];
+  const diag = state.health && state.health.models ? state.health.models[m.name] : null;
+  const held = new Set(diag && diag.held_back ? diag.held_back.split(",").filter(Boolean) : []);
+  for (const p of v.plots) {
+    const info = q && q.parameters ? q.parameters[p.name] : null;
+    p.held.hidden = !held.has(p.name);
+    p.panel.classList.toggle("held-back", held.has(p.name));
+    if (!info) { p.ident.textContent = ""; p.ident.dataset.identifiable = ""; continue; }
+    p.ident.dataset.identifiable = info.identifiable ? "1" : "0";
+    if (info.identifiable) {
+      p.ident.textContent = "identifiable" + (info.partner ? `  ·  ρ ${fmt(info.correlation, 2)} with ${info.partner}` : "");
+    } else {
+      p.ident.textContent = "not identifiable: " + info.reason;
+    }
   }
-  v.status.textContent = fit.ready === "True" ? (fit.converged === "True" ? "converged" : "") : (fit.message || "");
+  const fit = q ? q.fit : null;
+  if (fit) {
+    v.fit.textContent = `R² ${fmt(fit.r_squared, 3)}  ·  ${fit.rho.length} lags  ·  ` +
+      `${fmt(100 * fit.outside, 0)}% outside ±2σ (${fmt(fit.bound_2sigma, 3)})`;
+    v.acfBox.dataset.shown = "1";
+    if (!v.acf) v.acf = acfChart(v.acfChartBox);
+    const lags = fit.rho.map((_, i) => i + 1);
+    const b = fit.bound_2sigma;
+    const width = Math.max(v.acfChartBox.clientWidth, 300);
+    if (width !== v.acf.width) v.acf.setSize({ width, height: 170 });
+    v.acf.setData([lags, fit.rho.map((r) => (Math.abs(r) <= b ? r : null)), fit.rho.map((r) => (Math.abs(r) > b ? r : null)),
+                   lags.map(() => b), lags.map(() => -b)]);
+  } else if (diag && diag.ready === "True") {  // a node without ~/M/fit: its diagnostics' figures
+    v.fit.textContent = `R² ${fmt(parseFloat(diag.r_squared), 3)}  ·  lags ${diag.lags}  ·  residual ρ₁ ` +
+      fmt(parseFloat(diag.residual_rho1), 2);
+  }
+  v.why.textContent = q && q.node_text ? q.node_text : (diag && diag.identifiability) || "";
+  v.status.textContent = diag ? (diag.ready === "True" ? (diag.converged === "True" ? "converged" : "") : (diag.message || "")) : "";
 }
 
 function draw() {
@@ -199,8 +272,9 @@ function draw() {
   let newest = -Infinity;
   for (const m of state.models.values()) {
     drawModel(m);
-    drawFit(m);
-    if (m.t.length) newest = Math.max(newest, m.t[m.t.length - 1]);
+    drawQuality(m);
+    const h = m.methods[PRIMARY];
+    if (h && h.t.length) newest = Math.max(newest, h.t[h.t.length - 1]);
   }
   if (Number.isFinite(newest)) {
     const d = new Date(newest * 1000);
@@ -268,14 +342,19 @@ function onMessage(msg) {
   } else if (msg.type === "snapshot") {
     for (const m of state.models.values()) removeView(m);
     state.models.clear();
-    for (const [name, cols] of Object.entries(msg.models)) appendColumns(name, cols, true);
+    for (const [method, models] of Object.entries(msg.methods)) {
+      for (const [name, cols] of Object.entries(models)) appendColumns(method, name, cols, true);
+    }
+    for (const q of msg.quality) setQuality(q);
   } else if (msg.type === "samples") {
     const received = performance.timeOrigin + performance.now();
-    for (const [name, cols] of Object.entries(msg.models)) appendColumns(name, cols, false);
+    for (const [name, cols] of Object.entries(msg.models)) appendColumns(msg.method, name, cols, false);
     if (window.rlsLatency.length < LATENCY_KEEP) {
       window.rlsLatency.push({ published_ns: msg.published_ns, sent_ns: msg.sent_ns, received_ms: received,
                                stamp: Math.max(...Object.values(msg.models).map((c) => c.t[c.t.length - 1])) });
     }
+  } else if (msg.type === "quality") {
+    setQuality(msg);
   } else if (msg.type === "health") {
     drawHealth(msg);
   }
