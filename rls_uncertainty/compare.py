@@ -19,6 +19,11 @@ parameter's magnitude plus its uncertainty at that sample), the values are equal
   which is ``|a - b| <= (s / a)(atol + rtol * s)`` where the variance is resolved;
 * convergence flags and lag counts: identical.
 
+Both methods' results are compared (``estimator.method``): ``estimates.csv`` (time domain) and
+``estimates_frequency.csv`` (frequency domain; its parameters listed as ``P [frequency]``), each
+where the run wrote it; a file that only one of the runs has counts all its rows as found in
+that run only.
+
 The defaults (:data:`DEFAULT_RTOL`, :data:`DEFAULT_ATOL`) and their derivation are in
 docs/testing.md. Memory: both files are read row by row.
 """
@@ -46,6 +51,8 @@ DEFAULT_RTOL = 1e-6
 # Absolute tolerance, in the units of each derivative: none beyond the relative one.
 DEFAULT_ATOL = 0.0
 _SHOWN = 10  # differences listed
+# The files compared: per estimation method, its estimates file and how its parameters are listed.
+RESULT_FILES = (("estimates.csv", "{}"), ("estimates_frequency.csv", "{} [frequency]"))
 
 
 class Difference(NamedTuple):
@@ -135,8 +142,8 @@ def read_run(directory: str | Path) -> dict[str, Any]:
         raise NotComparable(f"{path}: unreadable: {exc}") from exc
     if not isinstance(run, dict) or run.get("format") != RUN_FORMAT:
         raise NotComparable(f"{path}: not a run record of this version ({RUN_FORMAT!r} expected)")
-    if not (Path(directory) / "estimates.csv").is_file():
-        raise NotComparable(f"{directory}: no estimates.csv")
+    if not any((Path(directory) / name).is_file() for name, _ in RESULT_FILES):
+        raise NotComparable(f"{directory}: no {' or '.join(name for name, _ in RESULT_FILES)}")
     return run
 
 
@@ -187,10 +194,13 @@ def _stamp(text: str) -> int:
     return int(sec) * 1_000_000_000 + int(nanosec.ljust(9, "0"))
 
 
-def _rows(fh: IO[str], order: dict[str, int]) -> Iterator[tuple[tuple[int, int], dict[str, str]]]:
-    """``((stamp, parameter index), row)`` of an ``estimates.csv``, in the file's order."""
+def _rows(fh: IO[str], order: dict[str, int], label: str) -> Iterator[tuple[tuple[int, int], dict[str, str]]]:
+    """``((stamp, parameter index), row)`` of an ``estimates.csv``, in the file's order, the
+    parameter named by ``label`` (:data:`RESULT_FILES`)."""
     for row in csv.DictReader(fh):
-        yield (_stamp(row["time"]), order.get(row["parameter"], -1)), row
+        key = (_stamp(row["time"]), order.get(row["parameter"], -1))
+        row["parameter"] = label.format(row["parameter"])
+        yield key, row
 
 
 def _check(cmp: Comparison, key: tuple[int, int], here: dict[str, str], there: dict[str, str]) -> None:
@@ -214,16 +224,22 @@ def _check(cmp: Comparison, key: tuple[int, int], here: dict[str, str], there: d
     cmp.rows += 1
 
 
-def compare_replays(here_dir: str | Path, there_dir: str | Path, *, rtol: float = DEFAULT_RTOL,
-                    atol: float = DEFAULT_ATOL) -> Comparison:
-    """This replay's outputs (``here_dir``) against a reference replay's (``there_dir``):
-    :class:`Comparison`, or :class:`.errors.NotComparable` saying why they cannot be."""
-    here, there = read_run(here_dir), read_run(there_dir)
-    cmp = Comparison(rtol, atol, Path(there_dir), notes=comparable(here, there))
-    order = {p: i for i, p in enumerate(p for names in here["parameter_names"] for p in names)}
-    with open(Path(here_dir) / "estimates.csv", newline="") as fh_a, \
-            open(Path(there_dir) / "estimates.csv", newline="") as fh_b:
-        rows_a, rows_b = _rows(fh_a, order), _rows(fh_b, order)
+def _one_side(cmp: Comparison, path: Path, order: dict[str, int], label: str, *, here: bool) -> None:
+    """A results file only one of the runs wrote: every row of it is unmatched."""
+    with open(path, newline="") as fh:
+        rows = sum(1 for _ in _rows(fh, order, label))
+    if here:
+        cmp.only_here += rows
+    else:
+        cmp.only_there += rows
+    if rows:
+        cmp.unmatched.append(f"{path.name} ({rows} rows) only in {'this run' if here else 'the reference'}")
+
+
+def _compare_file(cmp: Comparison, path_a: Path, path_b: Path, order: dict[str, int], label: str) -> None:
+    """Pair the rows of two runs' results files by sample and parameter (:func:`_check`)."""
+    with open(path_a, newline="") as fh_a, open(path_b, newline="") as fh_b:
+        rows_a, rows_b = _rows(fh_a, order, label), _rows(fh_b, order, label)
         a, b = next(rows_a, None), next(rows_b, None)
         while a is not None or b is not None:
             if a is not None and cmp.first_ns is None:
@@ -242,4 +258,20 @@ def compare_replays(here_dir: str | Path, there_dir: str | Path, *, rtol: float 
             else:
                 _check(cmp, a[0], a[1], b[1])
                 a, b = next(rows_a, None), next(rows_b, None)
+
+
+def compare_replays(here_dir: str | Path, there_dir: str | Path, *, rtol: float = DEFAULT_RTOL,
+                    atol: float = DEFAULT_ATOL) -> Comparison:
+    """This replay's outputs (``here_dir``) against a reference replay's (``there_dir``), both
+    methods' results files (:data:`RESULT_FILES`): :class:`Comparison`, or
+    :class:`.errors.NotComparable` saying why they cannot be."""
+    here, there = read_run(here_dir), read_run(there_dir)
+    cmp = Comparison(rtol, atol, Path(there_dir), notes=comparable(here, there))
+    order = {p: i for i, p in enumerate(p for names in here["parameter_names"] for p in names)}
+    for name, label in RESULT_FILES:
+        path_a, path_b = Path(here_dir) / name, Path(there_dir) / name
+        if path_a.is_file() and path_b.is_file():
+            _compare_file(cmp, path_a, path_b, order, label)
+        elif path_a.is_file() or path_b.is_file():
+            _one_side(cmp, path_a if path_a.is_file() else path_b, order, label, here=path_a.is_file())
     return cmp

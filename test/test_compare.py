@@ -183,3 +183,48 @@ def test_another_openblas_kernel_is_equal_within_the_default_tolerance(golden, t
                          env=env, capture_output=True, text=True, timeout=300)
     assert run.returncode == 0, run.stdout + run.stderr
     assert "equal:" in run.stdout
+
+
+@pytest.fixture(scope="module")
+def golden_both(tmp_path_factory):
+    out = tmp_path_factory.mktemp("golden_both") / "golden"
+    replay(BUNDLED, {**load_parameters_file("t2"), "estimator.method": "both"}, out, progress=False, plots=False)
+    return out
+
+
+def _count(path):
+    with open(path, newline="") as fh:
+        return sum(1 for _ in csv.DictReader(fh))
+
+
+def test_both_methods_results_are_compared(golden_both, tmp_path, capsys):
+    assert cli.main(["replay", str(BUNDLED), "--config", "t2", "--method", "both", "--out", str(tmp_path / "r"),
+                     "--no-plots", "--quiet", "--compare", str(golden_both)]) == 0
+    n = _count(golden_both / "estimates.csv") + _count(golden_both / "estimates_frequency.csv")
+    assert _count(golden_both / "estimates_frequency.csv") > 0
+    assert f"equal: {5 * n} values ({n} samples x parameters)" in capsys.readouterr().out
+
+
+def test_a_frequency_domain_value_beyond_the_tolerance_is_named_with_its_method(golden_both, tmp_path):
+    here = tmp_path / "here"
+    shutil.copytree(golden_both, here)
+    with open(golden_both / "estimates_frequency.csv", newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    r = rows[len(rows) // 2]
+    s = abs(float(r["estimate"])) + float(r["std_error"])
+    r["estimate"] = repr(float(r["estimate"]) + 3 * DEFAULT_RTOL * s)
+    with open(here / "estimates_frequency.csv", "w", newline="") as fh:
+        w = csv.DictWriter(fh, fieldnames=list(rows[0]))
+        w.writeheader()
+        w.writerows(rows)
+    cmp = compare_replays(here, golden_both)
+    assert not cmp.equal and cmp.beyond == 1 and cmp.largest == pytest.approx(3, rel=1e-6)
+    assert [(d.parameter, d.quantity) for d in cmp.worst] == [(f"{r['parameter']} [frequency]", "estimate")]
+
+
+def test_a_method_only_one_run_has_is_a_difference_with_its_rows_counted(golden, golden_both, tmp_path):
+    cmp = compare_replays(golden_both, golden)
+    assert not cmp.equal and cmp.beyond == 0 and cmp.only_there == 0
+    assert cmp.only_here == _count(golden_both / "estimates_frequency.csv") > 0
+    assert any(note.startswith("estimator.method: 'both' here, 'time' in the reference") for note in cmp.notes)
+    assert f"estimates_frequency.csv ({cmp.only_here} rows) only in this run" in cmp.report()
