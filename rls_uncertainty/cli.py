@@ -222,7 +222,7 @@ def _replay_params(args: argparse.Namespace, command: str = "replay") -> dict[st
         params["estimator.forgetting"] = args.forgetting
     if args.models:
         params["models.enabled"] = list(args.models)
-    if getattr(args, "method", None):  # replay only
+    if getattr(args, "method", None):  # replay and campaign
         params["estimator.method"] = args.method
     try:
         pipeline_config(params)  # every setting checked and the aircraft file read before any output
@@ -529,9 +529,7 @@ def _add_replay(sub: Any) -> None:
     rp.add_argument("--config", help="ROS parameter file, e.g. config/t2.yaml (default: node defaults)")
     rp.add_argument("--out", required=True, help="output directory")
     _add_estimator_overrides(rp)
-    rp.add_argument("--method", choices=("time", "frequency", "both"),
-                    help="override estimator.method: time-domain estimates (estimates.csv), frequency-domain ones "
-                         "(estimates_frequency.csv) or both")
+    _add_method(rp, "time-domain estimates (estimates.csv), frequency-domain ones (estimates_frequency.csv) or both")
     rp.add_argument("--start", type=_real(0.0), help="start, s from the bag start")
     rp.add_argument("--end", type=_real(0.0), help="end, s from the bag start (after --start)")
     rp.add_argument("--lenient", action="store_true",
@@ -579,6 +577,11 @@ def _add_estimator_overrides(parser: Any) -> None:
     parser.add_argument("--models", nargs="+", help="override models.enabled (e.g. CZ Cm)")
 
 
+def _add_method(parser: Any, what: str) -> None:
+    """--method of replay and campaign (estimator.method, checked with the configuration)."""
+    parser.add_argument("--method", choices=("time", "frequency", "both"), help=f"override estimator.method: {what}")
+
+
 def _add_campaign(sub: Any) -> None:
     cp = sub.add_parser("campaign", help="many maneuvers through the replay's pipeline into Table 4 and Fig. 12",
                         description="Every maneuver through the replay's pipeline with the configured lags and with "
@@ -597,6 +600,8 @@ def _add_campaign(sub: Any) -> None:
                          "must read the INPUT paths (default: local processes)")
     cp.add_argument("--workers", type=_integer(1), help="local worker processes (default: every core)")
     _add_estimator_overrides(cp)
+    _add_method(cp, "the time-domain estimates, the frequency-domain ones or both (rows of their own, method "
+                    "frequency, in every output)")
     cp.add_argument("--lenient", action="store_true",
                     help="pass out-of-order and duplicate stamps to the pipeline (counted like the node does)")
     _add_figure_options(cp, "skip the Fig. 12 plots")

@@ -15,7 +15,8 @@ model. The figures follow the paper's (Grauer & Morelli):
   and ``M_lags`` (Fig. 7: batch corrected standard errors, Eqs. 8-11, against the retained
   lags), from a :class:`.figure_data.FigureData`;
 * :func:`figure12`, per model of a campaign: every maneuver's final estimate with its
-  conventional and corrected 2-sigma bars, the mean and the observed scatter.
+  conventional and corrected 2-sigma bars, the mean and the observed scatter (and, when given,
+  the frequency-domain estimates with their corrected bars and mean).
 
 What a reader sees in each: ``docs/tools.md``, "Figures".
 """
@@ -139,9 +140,13 @@ def save(fig: Figure, stem: Path, formats: Sequence[str] = ("png",), dpi: int = 
 
 
 def _legend(fig: Figure, ax: Any, ncol: int) -> None:
-    """The legend of ``ax``'s lines once, below the panels (constrained layout makes room)."""
-    handles, labels = ax.get_legend_handles_labels()
-    fig.legend(handles, labels, loc="outside lower center", ncol=ncol, frameon=False)
+    """The legend of ``ax``'s lines once, below the panels (constrained layout makes room);
+    ``ax`` a sequence of axes: each label once, from the first panel that has it."""
+    found: dict[str, Any] = {}
+    for one in np.ravel(ax) if isinstance(ax, (np.ndarray, list, tuple)) else [ax]:
+        for handle, label in zip(*one.get_legend_handles_labels(), strict=True):
+            found.setdefault(label, handle)
+    fig.legend(list(found.values()), list(found), loc="outside lower center", ncol=ncol, frameon=False)
 
 
 def _ensemble(estimates: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -161,7 +166,8 @@ def figure12(model: str, maneuvers: Sequence[str], parameters: Sequence[str], es
              se_conventional: Any, se_corrected: Any, out_dir: str | Path, *, se_corrected_all: Any = None,
              formats: Sequence[str] = ("png",), dpi: int = DEFAULT_DPI, title: str | None = None,
              lags: str = "configured lags", mean: Any = None, scatter: Any = None,
-             stem: str | None = None) -> list[Path]:
+             stem: str | None = None, frequency: tuple[Any, Any] | None = None, frequency_mean: Any = None,
+             ) -> list[Path]:
     """The paper's Fig. 12 for one model of a campaign: per parameter (one panel each), every
     maneuver's final estimate with its conventional (Eq. 13) and corrected (Eqs. 20/22)
     2-sigma bars side by side (and corrected with all lags when ``se_corrected_all`` is
@@ -178,51 +184,73 @@ def figure12(model: str, maneuvers: Sequence[str], parameters: Sequence[str], es
     campaign's name (default: the model's); ``lags``: how the corrected bars' lags are named
     in the legend (``"50 lags"``); ``mean`` and ``scatter``: per parameter, the campaign's
     own (Table 4's), by default computed here over the finite estimates (the mean and the
-    sample standard deviation). Returns the files written."""
+    sample standard deviation). ``frequency``: the frequency-domain estimates and corrected
+    standard errors, ``(estimates, se_corrected)`` of the same shape (NaN for the bias, which
+    that method does not estimate), drawn beside the others in their own colour, with their
+    mean per parameter ``frequency_mean`` (a dashed line) when given. Returns the files
+    written."""
     options = FigureOptions(tuple(formats), dpi)
     est = np.asarray(estimates, dtype=float)
     arrays = {"estimates": est, "se_conventional": se_conventional, "se_corrected": se_corrected,
               "se_corrected_all": se_corrected_all}
+    if frequency is not None:
+        arrays |= {"frequency estimates": frequency[0], "frequency se_corrected": frequency[1]}
     shape = (len(maneuvers), len(parameters))
     for name, a in arrays.items():
         if a is not None and np.shape(a) != shape:
             raise ValueError(f"figure12: {name} must be (maneuvers, parameters) = {shape}, got {np.shape(a)}")
-    bars = [("conventional", np.asarray(se_conventional, dtype=float), "tab:red"),
-            (f"corrected, {lags}", np.asarray(se_corrected, dtype=float), "tab:blue")]
+    bars = [("conventional", est, np.asarray(se_conventional, dtype=float), "tab:red"),
+            (f"corrected, {lags}", est, np.asarray(se_corrected, dtype=float), "tab:blue")]
     if se_corrected_all is not None:
-        bars.append(("corrected, all lags", np.asarray(se_corrected_all, dtype=float), "tab:green"))
+        bars.append(("corrected, all lags", est, np.asarray(se_corrected_all, dtype=float), "tab:green"))
+    if frequency is not None:
+        bars.append(("frequency domain, corrected", np.asarray(frequency[0], dtype=float),
+                     np.asarray(frequency[1], dtype=float), "tab:purple"))
     computed = _ensemble(est)
     mean = computed[0] if mean is None else np.asarray(mean, dtype=float).reshape(len(parameters))
     scatter = computed[1] if scatter is None else np.asarray(scatter, dtype=float).reshape(len(parameters))
+    f_mean = None if frequency_mean is None else np.asarray(frequency_mean, dtype=float).reshape(len(parameters))
     plt = _pyplot()
-    x = np.arange(len(maneuvers))
-    offsets = np.linspace(-0.15, 0.15, len(bars))
     with plt.rc_context(_STYLE):
         fig, axes = plt.subplots(len(parameters), 1, figsize=(7, 1.8 * len(parameters) + 0.6), sharex=True,
                                  squeeze=False, layout="constrained")
         for i, ax in enumerate(axes[:, 0]):
-            if np.isfinite(scatter[i]):
-                ax.axhspan(mean[i] - 2 * scatter[i], mean[i] + 2 * scatter[i], color="0.85", lw=0,
-                           label="mean +/- 2 scatter")
-            if np.isfinite(mean[i]):
-                ax.axhline(mean[i], color="k", lw=0.8, label="mean")
-            for (label, se, color), dx in zip(bars, offsets, strict=True):
-                ax.errorbar(x + dx, est[:, i], yerr=2 * se[:, i], fmt="o", ms=2.5, color=color, elinewidth=1,
-                            capsize=2, label=f"2 sigma {label}")
+            _fig12_panel(ax, bars, i, mean[i], scatter[i], None if f_mean is None else f_mean[i])
             ax.set_ylabel(parameter_label(parameters[i]))
-        _legend(fig, axes[0, 0], 3)
-        bottom = axes[-1, 0]
-        bottom.set_xlim(-0.6, len(maneuvers) - 0.4)
-        bottom.set_xticks(x)
-        if len(maneuvers) <= 30:  # a maneuver without any estimate is named as such
-            none = ~np.isfinite(est).any(axis=1)
-            bottom.set_xticklabels([f"{m} (none)" if n else m for m, n in zip(maneuvers, none, strict=True)],
-                                   rotation=60, ha="right")
-        else:  # too many names to read: the index (the order of the given names)
-            bottom.set_xticks(x[:: max(1, len(x) // 20)])
-        bottom.set_xlabel("maneuver" if len(maneuvers) <= 30 else "maneuver index")
+        _legend(fig, axes[:, 0], 3)
+        _fig12_maneuvers(axes[-1, 0], maneuvers, est)
         fig.suptitle(f"{title or model}: {model} final estimates over {len(maneuvers)} maneuvers (Fig. 12)")
     return save(fig, Path(out_dir) / (stem or f"{model}_fig12"), options.formats, options.dpi)
+
+
+def _fig12_panel(ax: Any, bars: Sequence[tuple[str, np.ndarray, np.ndarray, str]], i: int, mean: float,
+                 scatter: float, frequency_mean: float | None) -> None:
+    """Parameter ``i``'s panel of Fig. 12: the band, the mean(s) and each kind of bars, side by side."""
+    x = np.arange(bars[0][1].shape[0])
+    if np.isfinite(scatter):
+        ax.axhspan(mean - 2 * scatter, mean + 2 * scatter, color="0.85", lw=0, label="mean +/- 2 scatter")
+    if np.isfinite(mean):
+        ax.axhline(mean, color="k", lw=0.8, label="mean")
+    if frequency_mean is not None and np.isfinite(frequency_mean):
+        ax.axhline(frequency_mean, color="tab:purple", lw=0.8, ls="--", label="frequency-domain mean")
+    offsets = np.linspace(-0.15, 0.15, len(bars)) if len(bars) <= 3 else np.linspace(-0.24, 0.24, len(bars))
+    for (label, est, se, color), dx in zip(bars, offsets, strict=True):
+        ax.errorbar(x + dx, est[:, i], yerr=2 * se[:, i], fmt="o", ms=2.5, color=color, elinewidth=1, capsize=2,
+                    label=f"2 sigma {label}")
+
+
+def _fig12_maneuvers(bottom: Any, maneuvers: Sequence[str], est: np.ndarray) -> None:
+    """Fig. 12's x axis: the maneuvers' names (or, for many, their index)."""
+    x = np.arange(len(maneuvers))
+    bottom.set_xlim(-0.6, len(maneuvers) - 0.4)
+    bottom.set_xticks(x)
+    if len(maneuvers) <= 30:  # a maneuver without any estimate is named as such
+        none = ~np.isfinite(est).any(axis=1)
+        bottom.set_xticklabels([f"{m} (none)" if n else m for m, n in zip(maneuvers, none, strict=True)],
+                               rotation=60, ha="right")
+    else:  # too many names to read: the index (the order of the given names)
+        bottom.set_xticks(x[:: max(1, len(x) // 20)])
+    bottom.set_xlabel("maneuver" if len(maneuvers) <= 30 else "maneuver index")
 
 
 def y_limits(t: np.ndarray, theta: np.ndarray, se: np.ndarray, start: float, *, quantile: float = 0.05,

@@ -7,11 +7,12 @@ estimator on one machine. No ROS."""
 from __future__ import annotations
 
 import math
+from dataclasses import fields
 from pathlib import Path
 
 import pytest
 
-from rls_uncertainty.campaign import MANEUVER_COLUMNS, CampaignSettings, Maneuver
+from rls_uncertainty.campaign import MANEUVER_COLUMNS, CampaignSettings, Maneuver, ParameterResult
 from rls_uncertainty.campaign.run import run_maneuver
 from rls_uncertainty.config import node_config, pipeline_config
 from rls_uncertainty.testing import parameters, replay_bag
@@ -27,8 +28,9 @@ def settings():
 
 
 def test_columns_are_the_documented_ones():
-    assert MANEUVER_COLUMNS == ("maneuver", "model", "parameter", "estimate", "se_conventional", "se_corrected",
-                                "se_corrected_all", "samples", "r_squared", "status")
+    assert MANEUVER_COLUMNS == ("maneuver", "model", "parameter", "method", "estimate", "se_conventional",
+                                "se_corrected", "se_corrected_all", "samples", "r_squared", "status")
+    assert set(MANEUVER_COLUMNS) == {f.name for f in fields(ParameterResult)}  # every field is written
 
 
 @pytest.mark.parametrize("span", [(None, None), (1.0, 11.5)])

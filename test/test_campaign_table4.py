@@ -60,13 +60,13 @@ def test_the_csv_files_hold_every_value_at_full_precision():
     rows = list(csv.reader(io.StringIO(maneuvers_csv(results))))
     assert tuple(rows[0]) == MANEUVER_COLUMNS and len(rows) == 1 + 8
     first = results[0].rows[0]
-    assert float(rows[1][3]) == first.estimate and rows[1][9] == "ok"
-    assert rows[3][3] == "" and rows[3][9] == "failed: no such bag"  # a failed maneuver: empty cells
+    assert float(rows[1][4]) == first.estimate and rows[1][3] == "time" and rows[1][10] == "ok"
+    assert rows[3][4] == "" and rows[3][10] == "failed: no such bag"  # a failed maneuver: empty cells
     t4 = list(csv.reader(io.StringIO(table4_csv(table4(results)))))
     assert tuple(t4[0]) == TABLE4_COLUMNS
-    assert TABLE4_COLUMNS[:8] == ("model", "parameter", "maneuvers", "mean", "se_conventional", "se_corrected_all",
-                                  "se_corrected", "scatter")
-    assert float(t4[1][3]) == table4(results)[0].mean
+    assert TABLE4_COLUMNS[:9] == ("model", "parameter", "method", "maneuvers", "mean", "se_conventional",
+                                  "se_corrected_all", "se_corrected", "scatter")
+    assert float(t4[1][4]) == table4(results)[0].mean and t4[1][2] == "time"
 
 
 def test_the_markdown_and_the_summary_name_the_maneuvers_not_used():

@@ -372,6 +372,43 @@ def test_figure12_draws_the_mean_and_scatter_it_is_given(tmp_path, capture):
         assert (y.min(), y.max()) == pytest.approx((mean - 2 * scatter, mean + 2 * scatter))
 
 
+def test_figure12_draws_the_frequency_domain_estimates_beside_the_others(tmp_path, capture):
+    """frequency=(estimates, se_corrected): a fourth set of bars, in its own colour and legend
+    entry, at the frequency-domain estimates with 2-sigma half-lengths, offset from the
+    time-domain ones; its mean a dashed line; no bar for the bias (NaN), which still leaves the
+    legend complete (taken over every panel)."""
+    est, conv, corr = _campaign()
+    rng = np.random.default_rng(9)
+    f_est = est + rng.normal(0, 0.01, est.shape)
+    f_se = 2.5 * conv
+    f_est[:, 0] = f_se[:, 0] = np.nan  # the bias: not estimated in the frequency domain
+    f_mean = [np.nan, 2.0, 3.0]
+    figure12("CZ", [f"m{i}" for i in range(14)], ["CZ_0", "CZ_alpha", "CZ_delta_e"], est, conv, corr, tmp_path,
+             se_corrected_all=corr, dpi=60, lags="50 lags", frequency=(f_est, f_se), frequency_mean=f_mean)
+    fig = capture["CZ_fig12"]
+    axes = fig.get_axes()
+    for i, ax in enumerate(axes):
+        bars = {c.get_label(): c for c in ax.containers}
+        assert len(bars) == 4
+        line, _caps, (segments,) = bars["2 sigma frequency domain, corrected"].lines
+        np.testing.assert_array_equal(line.get_ydata(), f_est[:, i])
+        assert line.get_color() == "tab:purple"
+        time_x = bars["2 sigma conventional"].lines[0].get_xdata()
+        assert len(set(np.round(line.get_xdata() - time_x, 12))) == 1 and (line.get_xdata() > time_x).all()
+        spans = np.array([s[1, 1] - s[0, 1] for s in segments.get_segments() if len(s)])
+        if i == 0:
+            assert spans.size == 0 and not [ln for ln in ax.get_lines() if ln.get_label() == "frequency-domain mean"]
+            continue
+        np.testing.assert_allclose(spans, 4 * f_se[:, i], rtol=1e-12)
+        assert list(_line(ax, "frequency-domain mean").get_ydata()) == [f_mean[i], f_mean[i]]
+    (legend,) = fig.legends
+    labels = [t.get_text() for t in legend.get_texts()]
+    assert "frequency-domain mean" in labels and "2 sigma frequency domain, corrected" in labels
+    with pytest.raises(ValueError, match="frequency estimates must be"):
+        figure12("CZ", [f"m{i}" for i in range(14)], ["CZ_0", "CZ_alpha", "CZ_delta_e"], est, conv, corr, tmp_path,
+                 frequency=(f_est[:3], f_se))
+
+
 def test_figure12_refuses_arrays_of_the_wrong_shape_and_unknown_formats(tmp_path):
     est, conv, corr = _campaign()
     with pytest.raises(ValueError, match="se_corrected must be"):

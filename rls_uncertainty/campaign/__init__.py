@@ -6,6 +6,8 @@ with the configured lags and, on the same regression rows, with all lags (:mod:`
 local worker processes or on a Dask cluster (:mod:`..executors`); the results, in maneuver
 order, make Table 4 (:mod:`.table4`) and Fig. 12 (:mod:`.figure`). Written to ``--out``:
 ``maneuvers.csv``, ``table4.csv``, ``table4.md``, ``summary.txt`` and ``fig12_<model>.png``.
+With ``estimator.method`` ``frequency`` or ``both`` every file shows the frequency-domain
+estimates too, in rows (or bars) of their own beside the time-domain ones (``method``).
 """
 
 from __future__ import annotations
@@ -16,6 +18,7 @@ from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from ..config import PipelineConfig
 from ..executors import Executor, LocalProcesses, Lost
 from ..figures import FigureOptions
 from ..files import output_directory
@@ -73,7 +76,15 @@ class CampaignResult:
 
     def summary(self) -> str:
         """The printed summary (``summary.txt``)."""
-        return summary_text(self.table, self.results, self.settings.config.estimator.lags)
+        return summary_text(self.table, self.results, _lags(self.settings.config))
+
+
+def _lags(config: PipelineConfig) -> object:
+    """The lags behind the corrected standard errors the tables name: the time domain's
+    (Eq. 22), or with only the frequency-domain estimates theirs (``frequency.lag_span``)."""
+    if config.publishes_time or config.frequency is None:
+        return config.estimator.lags
+    return config.frequency.n_lags
 
 
 class _Bar:
@@ -113,7 +124,8 @@ def write_campaign(campaign: CampaignResult, out: Path, *, figures: FigureOption
                    ) -> dict[str, Path]:
     """The campaign's files into the directory ``out`` (module docstring); the Fig. 12 plots in
     the ``figures`` formats (None: none)."""
-    lags = campaign.settings.config.estimator.lags
+    config = campaign.settings.config
+    lags = _lags(config)
     texts = {
         "maneuvers": ("maneuvers.csv", maneuvers_csv(campaign.results)),
         "table4_csv": ("table4.csv", table4_csv(campaign.table)),
@@ -125,8 +137,9 @@ def write_campaign(campaign: CampaignResult, out: Path, *, figures: FigureOption
         paths[key] = out / name
         paths[key].write_text(text)
     if figures is not None:
+        frequency_lags = f"{config.frequency.n_lags} lags" if config.frequency is not None else ""
         for path in campaign_figures(out, campaign.table, campaign.results, formats=figures.formats, dpi=figures.dpi,
-                                     lags=f"{lags} lags"):
+                                     lags=f"{lags} lags", frequency_lags=frequency_lags):
             paths[path.stem] = path
     return paths
 

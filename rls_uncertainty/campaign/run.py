@@ -8,10 +8,18 @@ then go into a second :class:`..estimator.EstimatorBank` with every lag (Eq. 20,
 standard errors belong to the same estimates. The rows since the pipeline's last restart are
 the ones its estimator saw, so the two banks agree sample for sample.
 
+With ``estimator.method`` ``frequency`` or ``both`` the same run also carries the
+frequency-domain estimator (:mod:`..frequency_path`): its last published estimates and
+standard errors become rows of their own (``method`` ``frequency``, over the parameters
+without the bias), bit for bit the last rows of the replay's ``estimates_frequency.csv``.
+The all-lags bank belongs to the time domain: it runs only when the time-domain estimates are
+published (``time``, ``both``).
+
 A maneuver's end-of-maneuver values become :class:`ParameterResult` rows (``maneuvers.csv``),
-one per parameter of every configured model: ``status`` ``ok``, ``no estimate: <why>`` (the
-model never became identifiable: too short, not excited) or ``failed: <why>`` (the bag could not
-be read). The failure of one maneuver is its own rows' status, never the campaign's.
+one per parameter of every configured model and published method (per parameter the
+time-domain row, then the frequency-domain one): ``status`` ``ok``, ``no estimate: <why>``
+(the model never became identifiable: too short, not excited) or ``failed: <why>`` (the bag
+could not be read). The failure of one maneuver is its own rows' status, never the campaign's.
 """
 
 from __future__ import annotations
@@ -19,11 +27,11 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Iterable, Iterator, Mapping
-from dataclasses import dataclass, field, fields, replace
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 from ..bags import InputStream
-from ..config import PipelineConfig
+from ..config import ModelConfig, PipelineConfig
 from ..errors import RlsUncertaintyError
 from ..estimator import EstimatorBank
 from ..inputs import Stamped
@@ -49,10 +57,15 @@ class CampaignSettings:
 
 @dataclass(frozen=True)
 class ParameterResult:
-    """A row of ``maneuvers.csv``: one parameter's end-of-maneuver values. ``se_corrected``
-    is the corrected standard error with the configured lags (Eq. 22), ``se_corrected_all``
-    with all lags (Eq. 20), ``se_conventional`` Eq. 13; ``samples`` those the model's
-    estimator used, ``r_squared`` its fit; NaN where the maneuver gave none."""
+    """A row of ``maneuvers.csv``: one parameter's end-of-maneuver values of one ``method``.
+    Time domain (``"time"``): ``se_corrected`` is the corrected standard error with the
+    configured lags (Eq. 22), ``se_corrected_all`` with all lags (Eq. 20), ``se_conventional``
+    Eq. 13; ``samples`` those the model's estimator used, ``r_squared`` its fit. Frequency
+    domain (``"frequency"``): ``se_corrected`` the corrected standard error the node publishes
+    (docs/frequency.md F7-F10, ``frequency.lag_span``), ``se_conventional`` F5,
+    ``se_corrected_all`` NaN (all lags is a time-domain variant), ``samples`` those behind the
+    frequency-domain record's last evaluation, ``r_squared`` NaN (the frequency-domain
+    estimator has no R^2 of its own). NaN where the maneuver gave none."""
 
     maneuver: str
     model: str
@@ -64,13 +77,16 @@ class ParameterResult:
     samples: int
     r_squared: float
     status: str
+    method: str = "time"
 
     @property
     def ok(self) -> bool:
         return self.status == OK
 
 
-MANEUVER_COLUMNS = tuple(f.name for f in fields(ParameterResult))
+# maneuvers.csv's columns (every field of ParameterResult), the method beside the parameter.
+MANEUVER_COLUMNS = ("maneuver", "model", "parameter", "method", "estimate", "se_conventional", "se_corrected",
+                    "se_corrected_all", "samples", "r_squared", "status")
 
 
 @dataclass(frozen=True)
@@ -109,11 +125,18 @@ class _TimedStream:
             self.seconds += time.perf_counter() - t0
 
 
+def _methods(config: PipelineConfig, model: ModelConfig, parameter: str) -> list[str]:
+    """The methods with a row for ``parameter`` of ``model``: those published, the frequency
+    domain but for the bias."""
+    return [m for m in config.published_methods
+            if m == "time" or parameter in model.frequency_parameter_names]
+
+
 def failed_result(maneuver: str, config: PipelineConfig, status: str) -> ManeuverResult:
-    """Rows of a maneuver that produced nothing: every parameter with ``status``."""
+    """Rows of a maneuver that produced nothing: every parameter and method with ``status``."""
     nan = math.nan
-    rows = tuple(ParameterResult(maneuver, m.output, p, nan, nan, nan, nan, 0, nan, status)
-                 for m in config.models for p in m.parameter_names)
+    rows = tuple(ParameterResult(maneuver, m.output, p, nan, nan, nan, nan, 0, nan, status, method)
+                 for m in config.models for p in m.parameter_names for method in _methods(config, m, p))
     return ManeuverResult(maneuver, rows)
 
 
@@ -129,32 +152,61 @@ def all_lags_bank(result: ReplayResult) -> EstimatorBank:
     return bank
 
 
-def _rows(name: str, result: ReplayResult, bank_all: EstimatorBank) -> tuple[ParameterResult, ...]:
+def _no_estimate(result: ReplayResult, model: str, method: str) -> str:
+    """Why ``model`` has no ``method``-domain estimate: the run's explanation (which concerns
+    the method that decides when a model counts as estimated, the time domain unless only the
+    frequency domain is published), else a general line."""
+    why = {line.split(":", 1)[0]: line.split(":", 1)[1].strip() for line in result.explanations}
+    reason = why.get(model) or why.get("no estimates")
+    if reason is None:
+        what = "its model" if method == "time" else "its frequency-domain estimator"
+        return f"no estimate: {what} never became ready"
+    return reason if reason.startswith("no estimate") else f"no estimate: {reason}"
+
+
+def _frequency_row(name: str, result: ReplayResult, model: str, parameter: str, samples: int) -> ParameterResult:
+    """``parameter``'s last published frequency-domain values (as ``estimates_frequency.csv``
+    wrote them last)."""
+    nan = math.nan
+    try:
+        final = result.final(parameter, "frequency")
+    except RlsUncertaintyError:
+        return ParameterResult(name, model, parameter, nan, nan, nan, nan, samples, nan,
+                               _no_estimate(result, model, "frequency"), "frequency")
+    return ParameterResult(name, model, parameter, final.estimate, final.std_error_conventional, final.std_error, nan,
+                           samples, nan, OK, "frequency")
+
+
+def _rows(name: str, result: ReplayResult, bank_all: EstimatorBank | None) -> tuple[ParameterResult, ...]:
+    """The maneuver's rows: per model and parameter, its time-domain row (with ``bank_all``)
+    and its frequency-domain one (when the run published them)."""
     pipe = result.pipeline
     assert pipe is not None
     # (A bank that saw no sample has no standard errors to evaluate.)
-    se_all = bank_all.standard_errors_all("corrected") if bank_all.ready.any() else None
+    se_all = bank_all.standard_errors_all("corrected") if bank_all is not None and bank_all.ready.any() else None
     last_row = pipe.regression[-1][0] if pipe.regression else None
-    why = {line.split(":", 1)[0]: line.split(":", 1)[1].strip() for line in result.explanations}
+    freq_samples = pipe.frequency.bank.evaluated_at if pipe.frequency is not None else 0
     rows = []
     for j, m in enumerate(pipe.models):
         fit = pipe.model_fit(j)
         samples = int(fit.get("samples", 0))
         r2 = float(fit.get("r_squared", math.nan))
         for i, p in enumerate(pipe.parameter_names[j]):
-            try:
-                final = result.final(p)
-            except RlsUncertaintyError:
-                reason = why.get(m.output) or why.get("no estimates") or "no estimate: its model never became ready"
-                status = reason if reason.startswith("no estimate") else f"no estimate: {reason}"
-                rows.append(ParameterResult(name, m.output, p, math.nan, math.nan, math.nan, math.nan, samples,
-                                            r2, status))
-                continue
-            # All lags at the sample of the final estimates (the last row, unless the model's
-            # last outputs were withheld as non-finite).
-            s_all = float(se_all[j, i]) if se_all is not None and final.stamp_ns == last_row else math.nan
-            rows.append(ParameterResult(name, m.output, p, final.estimate, final.std_error_conventional,
-                                        final.std_error, s_all, samples, r2, OK))
+            for method in _methods(pipe.config, m, p):
+                if method == "frequency":
+                    rows.append(_frequency_row(name, result, m.output, p, freq_samples))
+                    continue
+                try:
+                    final = result.final(p)
+                except RlsUncertaintyError:
+                    rows.append(ParameterResult(name, m.output, p, math.nan, math.nan, math.nan, math.nan, samples,
+                                                r2, _no_estimate(result, m.output, "time")))
+                    continue
+                # All lags at the sample of the final estimates (the last row, unless the model's
+                # last outputs were withheld as non-finite).
+                s_all = float(se_all[j, i]) if se_all is not None and final.stamp_ns == last_row else math.nan
+                rows.append(ParameterResult(name, m.output, p, final.estimate, final.std_error_conventional,
+                                            final.std_error, s_all, samples, r2, OK))
     return tuple(rows)
 
 
@@ -172,7 +224,7 @@ def run_maneuver(job: tuple[Maneuver, CampaignSettings]) -> ManeuverResult:
             timed = _TimedStream(stream)
             result = run_pipeline(timed, config, record=True, keep_outputs=False)
         t1 = time.perf_counter()
-        bank_all = all_lags_bank(result)
+        bank_all = all_lags_bank(result) if config.publishes_time else None
     except (RlsUncertaintyError, OSError) as exc:
         return failed_result(maneuver.name, config, f"failed: {' '.join(str(exc).split())}")
     rows = _rows(maneuver.name, result, bank_all)

@@ -8,6 +8,12 @@ predicted standard error over the scatter says how well it predicts the spread: 
 ideal, and the paper finds about 1/4 for the conventional and 1/2 to 1 for the corrected ones
 on 14 flight-test maneuvers in turbulence (Table 4).
 
+With the frequency-domain estimates (``estimator.method`` ``frequency`` or ``both``) each
+method has its own rows, the frequency domain's after the time domain's of the same parameter:
+its mean, the means of its conventional (F5) and corrected (F7-F10) standard errors (no all-lags
+one) and the scatter of its estimates, so the two predictions of the same spread sit side by
+side.
+
 The sums run over the maneuvers in their campaign order, whatever process computed them, so
 the table is the same from every executor.
 """
@@ -18,7 +24,7 @@ import csv
 import io
 import math
 from collections.abc import Sequence
-from dataclasses import astuple, dataclass, fields
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -29,7 +35,8 @@ __all__ = ["Table4Row", "TABLE4_COLUMNS", "table4", "maneuvers_csv", "table4_csv
 
 @dataclass(frozen=True)
 class Table4Row:
-    """One parameter's line of Table 4 (module docstring); ``maneuvers`` counts those used."""
+    """One parameter's line of Table 4 for one ``method`` (module docstring); ``maneuvers``
+    counts those used."""
 
     model: str
     parameter: str
@@ -39,6 +46,7 @@ class Table4Row:
     se_corrected_all: float
     se_corrected: float
     scatter: float
+    method: str = "time"
 
     def over_scatter(self, se: float) -> float:
         """``se`` / the scatter (NaN when the scatter is zero or not defined)."""
@@ -52,18 +60,20 @@ class Table4Row:
 
 
 RATIO_COLUMNS = ("conventional_over_scatter", "corrected_all_over_scatter", "corrected_over_scatter")
-TABLE4_COLUMNS = (*(f.name for f in fields(Table4Row)), *RATIO_COLUMNS)
+# table4.csv's columns: every field of Table4Row, the method beside the parameter, then the ratios.
+_VALUES = ("maneuvers", "mean", "se_conventional", "se_corrected_all", "se_corrected", "scatter")
+TABLE4_COLUMNS = ("model", "parameter", "method", *_VALUES, *RATIO_COLUMNS)
 
 
 def table4(results: Sequence[ManeuverResult]) -> list[Table4Row]:
-    """Table 4 over ``results`` (the campaign's maneuvers, in order), one row per parameter in
-    the order the models and parameters first appear."""
-    by_parameter: dict[tuple[str, str], list[ParameterResult]] = {}
+    """Table 4 over ``results`` (the campaign's maneuvers, in order), one row per parameter and
+    method in the order they first appear (per parameter: time, then frequency domain)."""
+    by_parameter: dict[tuple[str, str, str], list[ParameterResult]] = {}
     for res in results:
         for row in res.rows:
-            by_parameter.setdefault((row.model, row.parameter), []).append(row)
+            by_parameter.setdefault((row.model, row.parameter, row.method), []).append(row)
     out = []
-    for (model, parameter), rows in by_parameter.items():
+    for (model, parameter, method), rows in by_parameter.items():
         used = [r for r in rows if r.ok]
         v = np.array([(r.estimate, r.se_conventional, r.se_corrected_all, r.se_corrected) for r in used],
                      dtype=float).reshape(-1, 4)
@@ -71,7 +81,7 @@ def table4(results: Sequence[ManeuverResult]) -> list[Table4Row]:
         mean = v.mean(axis=0) if n else np.full(4, math.nan)
         scatter = float(np.std(v[:, 0], ddof=1)) if n > 1 else math.nan
         out.append(Table4Row(model, parameter, n, float(mean[0]), float(mean[1]), float(mean[2]), float(mean[3]),
-                             scatter))
+                             scatter, method))
     return out
 
 
@@ -82,14 +92,14 @@ def _cell(x: object) -> str:
 
 
 def maneuvers_csv(results: Sequence[ManeuverResult]) -> str:
-    """``maneuvers.csv``: :data:`.run.MANEUVER_COLUMNS`, one row per maneuver and parameter
-    (full precision; empty cells where a maneuver gave no value)."""
+    """``maneuvers.csv``: :data:`.run.MANEUVER_COLUMNS`, one row per maneuver, parameter and
+    method (full precision; empty cells where a maneuver gave no value)."""
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
     w.writerow(MANEUVER_COLUMNS)
     for res in results:
         for row in res.rows:
-            w.writerow([_cell(x) for x in astuple(row)])
+            w.writerow([_cell(getattr(row, c)) for c in MANEUVER_COLUMNS])
     return buf.getvalue()
 
 
@@ -99,7 +109,8 @@ def table4_csv(rows: Sequence[Table4Row]) -> str:
     w = csv.writer(buf, lineterminator="\n")
     w.writerow(TABLE4_COLUMNS)
     for row in rows:
-        w.writerow([_cell(x) for x in (*astuple(row), *row.ratios)])
+        w.writerow([_cell(x) for x in (row.model, row.parameter, row.method, *(getattr(row, c) for c in _VALUES),
+                                       *row.ratios)])
     return buf.getvalue()
 
 
@@ -108,10 +119,12 @@ def _num(x: float, digits: int = 4) -> str:
 
 
 def _failures(results: Sequence[ManeuverResult]) -> list[str]:
-    """One line per maneuver with a model not estimated: its name and why."""
+    """One line per maneuver with a model not estimated: its name, the model (and the method,
+    when not the time domain) and why."""
     lines = []
     for res in results:
-        bad = {(r.model, r.status) for r in res.rows if not r.ok}
+        bad = {(r.model if r.method == "time" else f"{r.model} ({r.method} domain)", r.status)
+               for r in res.rows if not r.ok}
         if res.problem is not None:
             lines.append(f"{res.name}: {res.problem}")
         else:
@@ -119,9 +132,16 @@ def _failures(results: Sequence[ManeuverResult]) -> list[str]:
     return lines
 
 
+def _by_method(rows: Sequence[Table4Row]) -> bool:
+    """Whether the table has rows of another method than the time domain's (then a method
+    column says which; a time-domain table is as it always was)."""
+    return any(r.method != "time" for r in rows)
+
+
 def table4_markdown(rows: Sequence[Table4Row], results: Sequence[ManeuverResult], lags: object) -> str:
     """``table4.md``: Table 4 with the ratios to the scatter, and the maneuvers not used."""
     n = len(results)
+    method = _by_method(rows)
     lines = [
         "# Table 4: mean estimation results over the campaign's maneuvers",
         "",
@@ -129,15 +149,22 @@ def table4_markdown(rows: Sequence[Table4Row], results: Sequence[ManeuverResult]
         "used; scatter: sample standard deviation of their estimates (Section IV.B). "
         + ("A scatter from few maneuvers is itself uncertain: its relative standard error is about "
            "1/sqrt(2 (n - 1)) for n maneuvers." if n < 30 else ""),
+    ]
+    if method:
+        lines += ["", "Method `frequency`: the frequency-domain estimates (docs/frequency.md), their conventional "
+                  "(F5) and corrected (F7-F10, frequency.lag_span) standard errors; all lags is time-domain only."]
+    lines += [
         "",
-        f"| model | parameter | maneuvers | mean | SE conventional | SE corrected, all lags | SE corrected, {lags} "
-        "lags | scatter | conventional / scatter | corrected all / scatter | corrected / scatter |",
-        "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |",
+        f"| model | parameter |{' method |' * method} maneuvers | mean | SE conventional | SE corrected, all lags | "
+        f"SE corrected, {lags} lags | scatter | conventional / scatter | corrected all / scatter | corrected / "
+        "scatter |",
+        "| --- | --- |" + " --- |" * (9 + method),
     ]
     for r in rows:
         ratios = " | ".join(_num(x, 3) for x in r.ratios)
-        lines.append(f"| {r.model} | {r.parameter} | {r.maneuvers} | {_num(r.mean)} | {_num(r.se_conventional, 3)} | "
-                     f"{_num(r.se_corrected_all, 3)} | {_num(r.se_corrected, 3)} | {_num(r.scatter, 3)} | {ratios} |")
+        lines.append(f"| {r.model} | {r.parameter} |{f' {r.method} |' * method} {r.maneuvers} | {_num(r.mean)} | "
+                     f"{_num(r.se_conventional, 3)} | {_num(r.se_corrected_all, 3)} | {_num(r.se_corrected, 3)} | "
+                     f"{_num(r.scatter, 3)} | {ratios} |")
     failures = _failures(results)
     if failures:
         lines += ["", "Maneuvers (or models) not used:", ""] + [f"- {line}" for line in failures]
@@ -145,13 +172,16 @@ def table4_markdown(rows: Sequence[Table4Row], results: Sequence[ManeuverResult]
 
 
 def summary_text(rows: Sequence[Table4Row], results: Sequence[ManeuverResult], lags: object) -> str:
-    """The printed summary (also ``summary.txt``): Table 4 as aligned text, then the
-    maneuvers not used and why."""
-    head = ("parameter", "n", "mean", "SE conv", "SE all", f"SE {lags}", "scatter", "conv/sc", "all/sc", f"{lags}/sc")
-    body = [(r.parameter, str(r.maneuvers), _num(r.mean), _num(r.se_conventional, 3), _num(r.se_corrected_all, 3),
-             _num(r.se_corrected, 3), _num(r.scatter, 3), *(_num(x, 3) for x in r.ratios)) for r in rows]
+    """The printed summary (also ``summary.txt``): Table 4 as aligned text (with a method
+    column when the frequency domain has rows), then the maneuvers not used and why."""
+    method = _by_method(rows)
+    head = ("parameter", *("method",) * method, "n", "mean", "SE conv", "SE all", f"SE {lags}", "scatter", "conv/sc",
+            "all/sc", f"{lags}/sc")
+    body = [(r.parameter, *(r.method,) * method, str(r.maneuvers), _num(r.mean), _num(r.se_conventional, 3),
+             _num(r.se_corrected_all, 3), _num(r.se_corrected, 3), _num(r.scatter, 3), *(_num(x, 3) for x in r.ratios))
+            for r in rows]
     widths = [max(len(str(c)) for c in col) for col in zip(head, *body, strict=True)]
-    fmt = "  ".join(f"{{:<{w}}}" if i == 0 else f"{{:>{w}}}" for i, w in enumerate(widths))
+    fmt = "  ".join(f"{{:<{w}}}" if i <= method else f"{{:>{w}}}" for i, w in enumerate(widths))
     lines = [fmt.format(*head), fmt.format(*("-" * w for w in widths))] + [fmt.format(*b) for b in body]
     used = sum(1 for res in results if res.problem is None)
     lines += ["", f"{used} of {len(results)} maneuvers used (SE: mean over them; scatter: standard deviation of "
