@@ -541,9 +541,9 @@ def _csv_rows(path):
 def _expect_csv(hub, rows, method=TIME_DOMAIN):
     """Every sample of every model of ``method`` equals the CSV's rows (the same doubles: CSV
     writes repr)."""
-    assert {m for mine, m in hub.histories if mine == method} == {r["model"] for r in rows}
-    for (mine, model), h in hub.histories.items():
-        if mine != method:
+    assert {m for which, m in hub.histories if which == method} == {r["model"] for r in rows}
+    for (which, model), h in hub.histories.items():
+        if which != method:
             continue
         cols = h.columns()
         mine = [r for r in rows if r["model"] == model]
