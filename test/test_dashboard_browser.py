@@ -438,7 +438,7 @@ def test_a_replay_of_both_methods_shows_the_frequency_domain_beside_the_time_dom
             for name, series, last in drawn:
                 assert series == 1 + 5 + 3, name  # x; time: estimate, 2 corrected, 2 conventional; frequency: 3
                 assert last == (held[name] if name in freq_rows else None), name
-        legend = browser.evaluate("[...document.querySelectorAll('section.model .legend-item')].map(e => e.textContent)")
+        legend = browser.evaluate("[...document.querySelectorAll('.model .legend-item')].map(e => e.textContent)")
         assert legend == ["time domain (RLS)", "frequency domain"] * 2
         _shot(browser, tmp_path, "dashboard_both_methods.png")
     finally:
