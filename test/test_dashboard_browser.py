@@ -14,7 +14,8 @@ no browser download) loads the page of `rls-uncertainty dashboard`:
   little of its output on this lateral maneuver) says why on every parameter;
 * both methods: a replay of ``--method both`` shows, beside each time-domain value, the
   frequency-domain one of estimates_frequency.csv (matched by name; the bias is not estimated
-  in the frequency domain), in the same plots, with a legend;
+  in the frequency domain), in the same plots, with a legend; so does a live node started with
+  ``estimator.method both`` (its last published frequency-domain values);
 * no node: the page says so, naming the domain and discovery range.
 
 Without Chromium (or Playwright) these tests skip with the reason; under RLS_REQUIRE_BROWSER=1
@@ -290,6 +291,56 @@ def test_a_dashboard_started_after_the_node_shows_its_latest_values_at_once(tmp_
         _expect_shown(_shown(browser), last)
         _expect_fits(browser, recorder.last_fits())
         assert browser.get_attribute("#banner", "data-state") == "running"
+    finally:
+        err = _stop(recorder, dashboard, node)
+    assert "dashboard stopped" in err and "arrays dropped: none" in err, err
+
+
+def test_a_live_node_publishing_both_methods_shows_its_last_frequency_domain_values(tmp_path, browser):
+    """A node with ``estimator.method both``: after the bag was played, the dashboard (a late
+    joiner, from the outputs kept for it) shows beside the time domain's values the node's last
+    published frequency-domain estimates and flags, matched by name."""
+    node = NodeProcess(tmp_path, "--params-file", T2, *REPLAY_NODE, "-p", "estimator.method:=both")
+    dashboard = None
+    rclpy.init()
+    recorder = _Recorder("/rls_estimator")
+    frequency: dict[tuple[str, str], list] = {}
+    for m in ("CZ", "Cm"):
+        for suffix in ("estimates", "converged"):
+            store = frequency.setdefault((m, suffix), [])
+            recorder.node.create_subscription(Float64MultiArray, f"/rls_estimator/{m}/frequency/{suffix}",
+                                              store.append, RELIABLE)
+    try:
+        play = subprocess.run([sys.executable, "-m", "rls_uncertainty.cli", "play", str(ROOT / "bags" / "t2_maneuver"),
+                               "--rate", "1", "--wait", "1"], capture_output=True, text=True, cwd=ROOT, timeout=300)
+        assert play.returncode == 0, play.stderr
+        recorder.wait_quiet(300)
+        assert all(frequency.values()), {k: len(v) for k, v in frequency.items()}
+        stamp, last = recorder.last()
+        last_frequency, frequency_stamps = {}, {}
+        for m in ("CZ", "Cm"):
+            est, conv = frequency[(m, "estimates")][-1], frequency[(m, "converged")][-1]
+            assert est.layout.dim[-1].label == conv.layout.dim[-1].label
+            frequency_stamps[m] = parse_stamp_label(est.layout.dim[-1].label) * 1e-9
+            for name, value, flag in zip(est.layout.dim[0].label.split(","), est.data, conv.data, strict=True):
+                last_frequency[name] = (float(value), float(flag))
+        assert set(last_frequency) == set(last) - {"CZ_0", "Cm_0"}  # no bias in the frequency domain
+        dashboard = Dashboard()
+        browser.goto(dashboard.url)
+        _wait_for_stamp(browser, stamp)
+        # The frequency domain's last samples held, and drawn (a redraw clears ``dirty``).
+        held = " && ".join(f"Math.abs(m.get('{k}').methods.frequency.t.at(-1) - {t!r}) < 1e-6"
+                           for k, t in frequency_stamps.items())
+        _wait(browser, "() => { const m = window.rlsState.models; return ['CZ', 'Cm'].every(k => m.get(k).methods"
+                       f".frequency) && {held} && !window.rlsState.dirty; }}", 60)
+        _expect_shown(_shown(browser), last)
+        shown = browser.evaluate("""() => Object.fromEntries([...document.querySelectorAll('.panel')].map(p => {
+            const r = p.querySelector('.readout.alt[data-method="frequency"]');
+            return [p.dataset.param, [r.querySelector('.alt-value').textContent,
+                                      r.querySelector('.alt-badge').dataset.converged]];
+        }))""")
+        _expect_shown({n: v for n, v in shown.items() if n in last_frequency}, last_frequency)
+        assert shown["CZ_0"][0] == shown["Cm_0"][0] == "–"
     finally:
         err = _stop(recorder, dashboard, node)
     assert "dashboard stopped" in err and "arrays dropped: none" in err, err
