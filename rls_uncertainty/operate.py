@@ -2,8 +2,9 @@
 
 * ``rls-uncertainty status [--once] [--node NAME]``: the node's ``/diagnostics`` as a terminal
   table (streams with rate, age, counts and the reasons of recent rejections; samples;
-  models, the parameters whose convergence flag is held back as not identifiable and why),
-  redrawn in place at each report; ``--once`` prints one and exits;
+  models, the parameters whose convergence flag is held back as not identifiable and why; which
+  estimation methods' estimates the node publishes, from the ROS graph's topics), redrawn in
+  place at each report; ``--once`` prints one and exits;
 * ``rls-uncertainty enable | disable | reset [--node NAME]``: calls ``~/enable``
   (``std_srvs/SetBool``) or ``~/reset`` (``std_srvs/Trigger``) and prints the node's answer.
 
@@ -16,7 +17,7 @@ from __future__ import annotations
 
 import sys
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from typing import Any, TextIO
 
 import rclpy
@@ -26,9 +27,10 @@ from rclpy.node import Node
 from std_srvs.srv import SetBool, Trigger
 
 from .dashboard.health import LEVELS, HealthTracker, NodeHealth, parse_statuses, statuses_of
+from .dashboard.model import METHODS, array_key
 from .dashboard.settings import where
 
-__all__ = ["call", "status", "format_health", "SERVICES"]
+__all__ = ["call", "status", "format_health", "published_methods", "SERVICES"]
 
 # command -> (service relative to the node, type, request data)
 SERVICES: dict[str, tuple[str, Any, bool | None]] = {
@@ -37,6 +39,8 @@ SERVICES: dict[str, tuple[str, Any, bool | None]] = {
     "reset": ("reset", Trigger, None),
 }
 _CLEAR = "\x1b[H\x1b[2J"
+# How the status names each estimation method (rls_uncertainty.dashboard.model.METHODS).
+METHOD_TEXT = {"time": "time domain (RLS, ~/M/estimates)", "frequency": "frequency domain (~/M/frequency/estimates)"}
 
 
 def _fail(command: str, text: str) -> int:
@@ -95,8 +99,19 @@ def _table(header: list[str], rows: list[list[str]]) -> list[str]:
     return [_row(header, widths), *(_row(r, widths) for r in rows)]
 
 
-def format_health(node_name: str, h: NodeHealth) -> str:
-    """The status table of one report."""
+def published_methods(topics: Iterable[str], node_name: str) -> list[str]:
+    """The estimation methods (:data:`.dashboard.model.METHODS`) whose ``estimates`` topic
+    ``node_name`` has among ``topics`` (the graph's topic names; the node creates its
+    publishers at start, before any sample)."""
+    prefix = node_name.rstrip("/") + "/"
+    found = {key.method for t in topics if t.startswith(prefix)
+             and (key := array_key(t[len(prefix):])) is not None and key.suffix == "estimates"}
+    return [m for m in METHODS if m in found]
+
+
+def format_health(node_name: str, h: NodeHealth, methods: Iterable[str] = ()) -> str:
+    """The status table of one report; ``methods``: the estimation methods the node publishes
+    (:func:`published_methods`; none: not said)."""
     lines = [f"{node_name}  ({where()})  {time.strftime('%H:%M:%S')}",
              f"inputs: {LEVELS.get(h.inputs_level, h.inputs_level)}  {h.inputs_message}", ""]
     rows = []
@@ -112,6 +127,9 @@ def format_health(node_name: str, h: NodeHealth) -> str:
     rejected = ", ".join(f"{k[17:]} {v}" for k, v in h.samples.items() if k.startswith("samples_rejected.")) or "none"
     pending = h.samples.get("samples_pending", "0")
     lines += ["", f"samples: {h.samples_message}; pending {pending}; rejected: {rejected}"]
+    methods = list(methods)
+    if methods:
+        lines.append("estimates published: " + ", ".join(METHOD_TEXT.get(m, m) for m in methods))
     mrows = []
     for model, v in h.models.items():
         ready = v.get("ready") == "True"
@@ -151,7 +169,8 @@ def status(node_name: str, once: bool, timeout: float, out: TextIO = sys.stdout,
                         return _fail("status", f"no /diagnostics from {node_name} within {timeout:g} s ({where()}): "
                                                "is the node running, with the same domain and discovery range?")
                     continue
-                text = format_health(node_name, reports[-1])
+                topics = [t for t, _types in session.node.get_topic_names_and_types()]
+                text = format_health(node_name, reports[-1], published_methods(topics, node_name))
                 reports.clear()
                 shown += 1
                 out.write((_CLEAR if live else ("\n" if shown > 1 else "")) + text + "\n")

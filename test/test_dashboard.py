@@ -16,6 +16,7 @@ from rls_uncertainty.config import NODE_NAME
 from rls_uncertainty.dashboard.health import HealthTracker, parse_statuses
 from rls_uncertainty.dashboard.hub import Hub, Source
 from rls_uncertainty.dashboard.model import (
+    FREQUENCY_DOMAIN,
     MAX_PENDING,
     PAIRED,
     TIME_DOMAIN,
@@ -26,6 +27,7 @@ from rls_uncertainty.dashboard.model import (
     Sample,
     array_key,
     array_update,
+    split_topic,
 )
 from rls_uncertainty.dashboard.settings import full_node_name, load_reference
 from rls_uncertainty.errors import ConfigError
@@ -130,8 +132,49 @@ def test_array_update_reads_names_and_stamp_from_the_layout_the_node_writes():
 def test_topics_under_the_node_map_to_the_method_model_and_array_shown():
     assert array_key("CZ/estimates") == ArrayKey(TIME_DOMAIN, "CZ", "estimates")
     assert array_key("Cm/identifiability") == ArrayKey(TIME_DOMAIN, "Cm", "identifiability")
-    for other in ("CZ/covariance", "sample_stamp", "CZ", "/estimates", "CZ/estimates/x", "CZ/frequency/estimates"):
+    for suffix in PAIRED:  # the frequency-domain estimator's arrays (docs/frequency.md)
+        assert array_key(f"CZ/frequency/{suffix}") == ArrayKey(FREQUENCY_DOMAIN, "CZ", suffix)
+    for other in ("CZ/covariance", "sample_stamp", "CZ", "/estimates", "CZ/estimates/x", "CZ/frequency/fit",
+                  "CZ/frequency/identifiability", "CZ/frequency/covariance", "/frequency/estimates",
+                  "CZ/frequency/estimates/x", "CZ/frequenc/estimates"):
         assert array_key(other) is None, other
+    # A bag's absolute topics, whose node is not known beforehand.
+    assert split_topic("/ns/rls_estimator/CZ/frequency/converged") == (
+        "/ns/rls_estimator", ArrayKey(FREQUENCY_DOMAIN, "CZ", "converged"))
+    assert split_topic("/rls_estimator/Cm/estimates") == ("/rls_estimator", ArrayKey(TIME_DOMAIN, "Cm", "estimates"))
+    for other in ("/rls_estimator/CZ/covariance", "/rls_estimator/sample_stamp", "/CZ/estimates", "CZ/estimates"):
+        assert split_topic(other) is None, other
+
+
+def test_the_hub_keeps_the_two_methods_of_a_model_apart():
+    """The same model's time- and frequency-domain arrays of the same stamps (the frequency
+    domain's over the parameters without the bias) complete separate samples and histories,
+    each holding its own arrays' values, and the page's messages name the method."""
+    hub = Hub(Source("live", "/rls_estimator"))
+    stamps = [1_000_000_000 + 20_000_000 * k for k in range(5)]
+    f_names = NAMES[1:]
+
+    def f_values(stamp, suffix):
+        return tuple(-v for v in _values(stamp, suffix)[1:])
+
+    arrays = []
+    for s in stamps:  # interleaved as the node publishes them: time domain, then frequency domain
+        arrays += _arrays([s])
+        arrays += [(ArrayKey(FREQUENCY_DOMAIN, "CZ", suffix), _msg(",".join(f_names), f_values(s, suffix),
+                                                                   stamp_label(s)), None) for suffix in PAIRED]
+    messages = hub.add_arrays(arrays)
+    assert hub.pairing.dropped == {}
+    assert set(hub.histories) == {(TIME_DOMAIN, "CZ"), (FREQUENCY_DOMAIN, "CZ")}
+    for method, names, values in ((TIME_DOMAIN, NAMES, _values), (FREQUENCY_DOMAIN, f_names, f_values)):
+        cols = hub.histories[(method, "CZ")].columns()
+        assert cols["names"] == list(names) and cols["t"] == [s * 1e-9 for s in stamps]
+        for quantity, suffix in zip(("estimate", "se", "se_conventional", "converged"), PAIRED, strict=True):
+            assert [list(c) for c in zip(*cols[quantity], strict=True)] == [list(values(s, suffix)) for s in stamps]
+    assert {m["method"] for m in messages if m["type"] == "samples"} == {TIME_DOMAIN, FREQUENCY_DOMAIN}
+    snapshot = hub.snapshot()["methods"]
+    assert snapshot[FREQUENCY_DOMAIN]["CZ"]["names"] == list(f_names)
+    assert snapshot[TIME_DOMAIN]["CZ"]["names"] == list(NAMES)
+    assert hub.history_resets == 0 and hub.samples_total == 2 * len(stamps)
 
 
 # ------------------------------------------------------------------ history
@@ -495,11 +538,13 @@ def _csv_rows(path):
         return list(csv.DictReader(fh))
 
 
-def _expect_csv(hub, rows):
-    """Every sample of every model equals the CSV's rows (the same doubles: CSV writes repr)."""
-    assert {m for _method, m in hub.histories} == {r["model"] for r in rows}
-    for (method, model), h in hub.histories.items():
-        assert method == TIME_DOMAIN
+def _expect_csv(hub, rows, method=TIME_DOMAIN):
+    """Every sample of every model of ``method`` equals the CSV's rows (the same doubles: CSV
+    writes repr)."""
+    assert {m for which, m in hub.histories if which == method} == {r["model"] for r in rows}
+    for (which, model), h in hub.histories.items():
+        if which != method:
+            continue
         cols = h.columns()
         mine = [r for r in rows if r["model"] == model]
         assert len(cols["t"]) * len(cols["names"]) == len(mine)  # every sample, none thinned
@@ -608,8 +653,67 @@ def test_a_directory_without_replay_outputs_is_refused_with_the_reason(tmp_path)
     from rls_uncertainty.dashboard.replay_source import open_replay
     from rls_uncertainty.errors import BagError
 
-    with pytest.raises(BagError, match=r"no estimates\.mcap or estimates\.csv"):
+    with pytest.raises(BagError, match=r"no estimates\.mcap, estimates\.csv or estimates_frequency\.csv"):
         open_replay(tmp_path)
     (tmp_path / "estimates.csv").write_text("a,b\n1,2\n")
     with pytest.raises(BagError, match=r"not the estimates\.csv of rls-uncertainty replay"):
         open_replay(tmp_path)
+
+
+# ------------------------------------------------------------------ both methods
+@pytest.fixture(scope="module")
+def t2_both(tmp_path_factory):
+    """The bundled bag replayed with both estimators (estimator.method both)."""
+    from rls_uncertainty.config import load_parameters_file
+    from rls_uncertainty.replay import replay
+
+    out = tmp_path_factory.mktemp("t2_both") / "est"
+    replay(ROOT / "bags" / "t2_maneuver", {**load_parameters_file("t2"), "estimator.method": "both"}, out,
+           progress=False, plots=False)
+    return out
+
+
+def _expect_frequency_csv(hub, directory):
+    """The frequency-domain histories equal estimates_frequency.csv, read here with the csv
+    module: per model the parameters without the bias, every sample of the file."""
+    rows = _csv_rows(directory / "estimates_frequency.csv")
+    assert rows and not any(r["parameter"].endswith("_0") for r in rows)  # no bias in the frequency domain
+    _expect_csv(hub, rows, FREQUENCY_DOMAIN)
+    for model in {r["model"] for r in rows}:  # and the last values, as the page shows them
+        last_time = max(r["time"] for r in rows if r["model"] == model)
+        last = {r["parameter"]: r for r in rows if r["model"] == model and r["time"] == last_time}
+        cols = hub.histories[(FREQUENCY_DOMAIN, model)].columns()
+        assert cols["names"] == list(last)
+        for i, name in enumerate(cols["names"]):
+            assert cols["estimate"][i][-1] == float(last[name]["estimate"])
+            assert cols["se"][i][-1] == float(last[name]["std_error"])
+
+
+def test_a_replay_of_both_methods_shows_each_methods_estimates_as_its_csv_has_them(t2_both, tmp_path):
+    hub, _ = _read(t2_both)  # estimates.mcap: ~/M/... and ~/M/frequency/...
+    assert hub.source.replay_file == "estimates.mcap" and hub.pairing.dropped == {}
+    assert {method for method, _ in hub.histories} == {TIME_DOMAIN, FREQUENCY_DOMAIN}
+    _expect_csv(hub, _csv_rows(t2_both / "estimates.csv"))
+    _expect_frequency_csv(hub, t2_both)
+    assert not any(method == FREQUENCY_DOMAIN for method, _ in hub.fits)  # fits are the time domain's
+    # The CSV files alone: both read, merged in time order.
+    only = tmp_path / "csv_only"
+    only.mkdir()
+    for name in ("estimates.csv", "estimates_frequency.csv"):
+        (only / name).write_bytes((t2_both / name).read_bytes())
+    hub, _ = _read(only)
+    assert hub.source.replay_file == "estimates.csv and estimates_frequency.csv"
+    _expect_csv(hub, _csv_rows(only / "estimates.csv"))
+    _expect_frequency_csv(hub, only)
+    assert "from estimates.csv and estimates_frequency.csv (no estimates.mcap" in hub.state()["text"]
+    # A frequency-only replay (estimator.method frequency writes no estimates.csv).
+    (only / "estimates.csv").unlink()
+    hub, _ = _read(only)
+    assert {method for method, _ in hub.histories} == {FREQUENCY_DOMAIN}
+    _expect_frequency_csv(hub, only)
+    # A damaged row of the frequency file is named, with its file.
+    lines = (only / "estimates_frequency.csv").read_text().splitlines(keepends=True)
+    lines[50] = lines[50].replace(lines[50].split(",")[3], "inf", 1)
+    (only / "estimates_frequency.csv").write_text("".join(lines))
+    hub, _ = _read(only)
+    assert "estimates_frequency.csv: line 51: not a row of estimates_frequency.csv" in hub.state()["text"]

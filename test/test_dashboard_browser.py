@@ -12,6 +12,10 @@ no browser download) loads the page of `rls-uncertainty dashboard`:
 * replay: the Twin Otter recording (converted, then replayed with all six models) shows the
   values of the replay's estimates.csv, and the model the node holds back (C_m explains too
   little of its output on this lateral maneuver) says why on every parameter;
+* both methods: a replay of ``--method both`` shows, beside each time-domain value, the
+  frequency-domain one of estimates_frequency.csv (matched by name; the bias is not estimated
+  in the frequency domain), in the same plots, with a legend; so does a live node started with
+  ``estimator.method both`` (its last published frequency-domain values);
 * no node: the page says so, naming the domain and discovery range.
 
 Without Chromium (or Playwright) these tests skip with the reason; under RLS_REQUIRE_BROWSER=1
@@ -292,6 +296,56 @@ def test_a_dashboard_started_after_the_node_shows_its_latest_values_at_once(tmp_
     assert "dashboard stopped" in err and "arrays dropped: none" in err, err
 
 
+def test_a_live_node_publishing_both_methods_shows_its_last_frequency_domain_values(tmp_path, browser):
+    """A node with ``estimator.method both``: after the bag was played, the dashboard (a late
+    joiner, from the outputs kept for it) shows beside the time domain's values the node's last
+    published frequency-domain estimates and flags, matched by name."""
+    node = NodeProcess(tmp_path, "--params-file", T2, *REPLAY_NODE, "-p", "estimator.method:=both")
+    dashboard = None
+    rclpy.init()
+    recorder = _Recorder("/rls_estimator")
+    frequency: dict[tuple[str, str], list] = {}
+    for m in ("CZ", "Cm"):
+        for suffix in ("estimates", "converged"):
+            store = frequency.setdefault((m, suffix), [])
+            recorder.node.create_subscription(Float64MultiArray, f"/rls_estimator/{m}/frequency/{suffix}",
+                                              store.append, RELIABLE)
+    try:
+        play = subprocess.run([sys.executable, "-m", "rls_uncertainty.cli", "play", str(ROOT / "bags" / "t2_maneuver"),
+                               "--rate", "1", "--wait", "1"], capture_output=True, text=True, cwd=ROOT, timeout=300)
+        assert play.returncode == 0, play.stderr
+        recorder.wait_quiet(300)
+        assert all(frequency.values()), {k: len(v) for k, v in frequency.items()}
+        stamp, last = recorder.last()
+        last_frequency, frequency_stamps = {}, {}
+        for m in ("CZ", "Cm"):
+            est, conv = frequency[(m, "estimates")][-1], frequency[(m, "converged")][-1]
+            assert est.layout.dim[-1].label == conv.layout.dim[-1].label
+            frequency_stamps[m] = parse_stamp_label(est.layout.dim[-1].label) * 1e-9
+            for name, value, flag in zip(est.layout.dim[0].label.split(","), est.data, conv.data, strict=True):
+                last_frequency[name] = (float(value), float(flag))
+        assert set(last_frequency) == set(last) - {"CZ_0", "Cm_0"}  # no bias in the frequency domain
+        dashboard = Dashboard()
+        browser.goto(dashboard.url)
+        _wait_for_stamp(browser, stamp)
+        # The frequency domain's last samples held, and drawn (a redraw clears ``dirty``).
+        held = " && ".join(f"Math.abs(m.get('{k}').methods.frequency.t.at(-1) - {t!r}) < 1e-6"
+                           for k, t in frequency_stamps.items())
+        _wait(browser, "() => { const m = window.rlsState.models; return ['CZ', 'Cm'].every(k => m.get(k).methods"
+                       f".frequency) && {held} && !window.rlsState.dirty; }}", 60)
+        _expect_shown(_shown(browser), last)
+        shown = browser.evaluate("""() => Object.fromEntries([...document.querySelectorAll('.panel')].map(p => {
+            const r = p.querySelector('.readout.alt[data-method="frequency"]');
+            return [p.dataset.param, [r.querySelector('.alt-value').textContent,
+                                      r.querySelector('.alt-badge').dataset.converged]];
+        }))""")
+        _expect_shown({n: v for n, v in shown.items() if n in last_frequency}, last_frequency)
+        assert shown["CZ_0"][0] == shown["Cm_0"][0] == "–"
+    finally:
+        err = _stop(recorder, dashboard, node)
+    assert "dashboard stopped" in err and "arrays dropped: none" in err, err
+
+
 # ------------------------------------------------------------------ replay
 @pytest.fixture(scope="module")
 def twin_otter_replay(tmp_path_factory):
@@ -367,6 +421,80 @@ def _last_held_back(path: Path) -> dict[str, list[str]]:
             out[model] = [p for p in values.get("held_back", "").split(",") if p]
             out[f"{model}:r_squared"] = [values["r_squared"]]
     return out
+
+
+# ------------------------------------------------------------------ both methods
+def _last_rows(path: Path) -> dict[str, dict[str, str]]:
+    """Per parameter, its row of the last time of its model in a replay CSV (csv module)."""
+    with open(path, newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    last_time = {}
+    for r in rows:
+        last_time[r["model"]] = r["time"]
+    return {r["parameter"]: r for r in rows if r["time"] == last_time[r["model"]]}
+
+
+def _expect_value(text: str, value: str) -> None:
+    """A value shown with 4 decimals is the CSV's (to display precision)."""
+    assert abs(float(text) - float(value)) <= 0.5e-4 + 1e-12, (text, value)
+
+
+def test_a_replay_of_both_methods_shows_the_frequency_domain_beside_the_time_domain(tmp_path, browser):
+    """``rls-uncertainty replay --method both``: every panel shows the time domain's last values
+    and, matched by name, the frequency domain's (estimate, corrected and conventional SE,
+    flag) as in estimates_frequency.csv; the bias, which the frequency domain does not
+    estimate, says so; the frequency domain's history is drawn in the same plot."""
+    out = tmp_path / "both"
+    run = subprocess.run([sys.executable, "-m", "rls_uncertainty.cli", "replay", str(ROOT / "bags" / "t2_maneuver"),
+                          "--config", T2, "--method", "both", "--out", str(out), "--no-plots", "--quiet"],
+                         capture_output=True, text=True, cwd=ROOT, timeout=300)
+    assert run.returncode == 0, run.stderr
+    time_rows, freq_rows = _last_rows(out / "estimates.csv"), _last_rows(out / "estimates_frequency.csv")
+    assert set(freq_rows) < set(time_rows) and {"CZ_0", "Cm_0"} == set(time_rows) - set(freq_rows)
+    dashboard = Dashboard("--replay", str(out))
+    try:
+        browser.goto(dashboard.url)
+        _wait(browser, "document.getElementById('banner').dataset.state === 'replay'"
+                       f" && document.querySelectorAll('.panel .alt-value').length === {len(time_rows)}"
+                       " && [...document.querySelectorAll('.panel .alt-se')].every(v => v.textContent !== '')", 60)
+        _expect_shown(_shown(browser), {n: (float(r["estimate"]), float(r["converged"])) for n, r in time_rows.items()})
+        rows = browser.evaluate("""() => Object.fromEntries([...document.querySelectorAll('.panel')].map(p => {
+            const r = p.querySelector('.readout.alt[data-method="frequency"]');
+            return [p.dataset.param, [r.querySelector('.method').textContent, r.querySelector('.alt-value').textContent,
+                    r.querySelector('.alt-se').textContent, r.querySelector('.alt-badge').dataset.converged,
+                    r.querySelector('.alt-badge').hidden,
+                    p.querySelector('.readout[data-method="time"] .method').textContent]];
+        }))""")
+        for name, (label, value, se, flag, hidden, time_label) in rows.items():
+            assert (label, time_label) == ("frequency domain", "time domain (RLS)"), name
+            if name not in freq_rows:  # the bias: not a frequency-domain parameter
+                assert (value, se, hidden) == ("–", "not estimated", True), name
+                continue
+            r = freq_rows[name]
+            _expect_value(value, r["estimate"])
+            corrected, conventional = se.removeprefix("SE ").removesuffix(")").split(" (conv. ")
+            _expect_value(corrected, r["std_error"])
+            _expect_value(conventional, r["std_error_conventional"])
+            assert (flag, hidden) == ("1" if float(r["converged"]) == 1.0 else "0", False), name
+        # The page holds the CSV's very doubles (the MCAP's arrays), and draws them: per
+        # panel the frequency domain's estimate and band beside the time domain's, its newest
+        # point the last estimate (none for the bias).
+        for model in ("CZ", "Cm"):
+            held = browser.evaluate(f"(() => {{ const h = window.rlsState.models.get('{model}').methods.frequency; "
+                                    "return Object.fromEntries(h.names.map((n, i) => [n, h.estimate[i].at(-1)])); "
+                                    "})()")
+            assert held == {n: float(r["estimate"]) for n, r in freq_rows.items() if r["model"] == model}
+            drawn = browser.evaluate(f"window.rlsState.models.get('{model}').view.plots.map(p => [p.name, "
+                                     "p.u.series.length, p.u.data[p.slots.frequency].filter(v => v !== null).at(-1)])")
+            for name, series, last in drawn:
+                assert series == 1 + 5 + 3, name  # x; time: estimate, 2 corrected, 2 conventional; frequency: 3
+                assert last == (held[name] if name in freq_rows else None), name
+        legend = browser.evaluate("[...document.querySelectorAll('.model .legend-item')].map(e => e.textContent)")
+        assert legend == ["time domain (RLS)", "frequency domain"] * 2
+        _shot(browser, tmp_path, "dashboard_both_methods.png")
+    finally:
+        err = dashboard.stop()
+    assert "dashboard stopped" in err and "arrays dropped: none" in err, err
 
 
 # ------------------------------------------------------------------ no node

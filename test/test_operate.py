@@ -88,6 +88,38 @@ def test_the_status_table_names_the_parameters_held_back_and_why():
     assert lines[header + 3] == f"  {why}" and len(lines) == header + 4
 
 
+def test_the_status_says_which_estimation_methods_the_node_publishes():
+    from rls_uncertainty.dashboard.health import parse_statuses
+    from rls_uncertainty.operate import format_health, published_methods
+
+    topics = ["/ops/rls_estimator/CZ/estimates", "/ops/rls_estimator/CZ/frequency/estimates",
+              "/ops/rls_estimator/Cm/frequency/converged", "/other/rls_estimator/Cm/estimates", "/diagnostics"]
+    assert published_methods(topics, NODE) == ["time", "frequency"]
+    assert published_methods(topics[1:], NODE) == ["frequency"]  # estimator.method frequency
+    assert published_methods(topics[2:], NODE) == []  # no estimates topic of this node: not said
+    statuses = [("rls_estimator: inputs", 0, "all inputs fresh", {"recent_window_s": "10"}),
+                ("rls_estimator: samples", 0, "no sample yet", {})]
+    health = parse_statuses(statuses, "rls_estimator")
+    assert "estimates published" not in format_health(NODE, health)
+    lines = format_health(NODE, health, ["time", "frequency"]).splitlines()
+    assert ("estimates published: time domain (RLS, ~/M/estimates), frequency domain (~/M/frequency/estimates)"
+            in lines)
+
+
+def test_status_of_a_node_publishing_both_methods_says_so(tmp_path):
+    """A node started with estimator.method both: the status names both methods (read from the
+    ROS graph once its topics are discovered)."""
+    n = NodeProcess(tmp_path, "--params-file", T2, "-r", "__ns:=/ops",
+                    "-p", "estimator.method:=both")
+    try:
+        deadline = time.monotonic() + 90
+        expected = "estimates published: time domain (RLS, ~/M/estimates), frequency domain (~/M/frequency/estimates)"
+        while expected not in (text := _status_once()):
+            assert time.monotonic() < deadline, text
+    finally:
+        assert n.stop() == 0, n.text()
+
+
 def test_no_node_gives_a_clear_error_and_exit_status_1():
     for args in (("enable",), ("reset",), ("status", "--once")):
         r = _cli(*args, "--node", "/nobody/rls_estimator", "--timeout", "1")

@@ -3,8 +3,9 @@ protocol is in docs/dashboard.md). One :class:`Hub` per server, used from the se
 loop only: the live subscriber and the replay reader hand it arrays, diagnostics and what the
 ROS graph shows, and it answers with the messages to push. No ROS import, no web server.
 
-Everything estimated is kept per estimation method (:data:`.model.TIME_DOMAIN` today) and
-model, so a second method's results sit beside the first's without mixing.
+Everything estimated is kept per estimation method (:data:`.model.METHODS`: the time domain's
+recursive least squares and the frequency domain's estimator) and model, so the two methods'
+results sit side by side without mixing.
 """
 
 from __future__ import annotations
@@ -26,7 +27,8 @@ class Source:
     """What the page is told about where the data comes from: ``mode`` ``live`` or
     ``replay``, the node's full name, and for live mode the ROS domain and discovery range
     (from the environment, as DDS reads them); for replay mode the directory and the file
-    read (``estimates.mcap``, or ``estimates.csv`` alone)."""
+    read (``estimates.mcap``, or the CSV files: ``estimates.csv`` and/or
+    ``estimates_frequency.csv``)."""
 
     mode: str
     node: str
@@ -84,7 +86,7 @@ class Hub:
         return self._samples_messages(done) + [self._quality(k) for k in dict.fromkeys(changed)]
 
     def add_samples(self, samples: Iterable[Sample]) -> list[dict]:
-        """Feed complete samples (a replay's ``estimates.csv``); their ``samples`` messages."""
+        """Feed complete samples (a replay's CSV files); their ``samples`` messages."""
         done: dict[tuple[str, str], list[Sample]] = {}
         for s in samples:
             if self._store(s):
@@ -229,8 +231,8 @@ class Hub:
         if not self.replay_done:
             return f"reading replay {where}: {self.samples_total} samples so far"
         text = f"replay of {s.replay_dir}: {self.samples_total} samples"
-        if s.replay_file == "estimates.csv":
-            text += (" from estimates.csv (no estimates.mcap: no fit, identifiability or input health, which "
+        if s.replay_file.endswith(".csv"):
+            text += (f" from {s.replay_file} (no estimates.mcap: no fit, identifiability or input health, which "
                      "rls-uncertainty replay writes into estimates.mcap)")
         return text
 

@@ -2,10 +2,10 @@
 web server: the live subscriber and the replay reader feed the same :class:`.hub.Hub`).
 
 Topics. :func:`array_key` names what a topic under the node carries: the estimation method
-(``time``: the recursive least squares of the paper, ``~/M/<array>``), the model and the array.
-It is the one place that maps topics to methods: a second method's topics (the frequency-domain
-estimator's) get their own method name here, and everything downstream (pairing, histories, the
-page) keeps the methods apart.
+(``time``: the recursive least squares of the paper, ``~/M/<array>``; ``frequency``: the
+frequency-domain estimator of docs/frequency.md, ``~/M/frequency/<array>`` for the four paired
+arrays), the model and the array. It is the one place that maps topics to methods: everything
+downstream (pairing, histories, the page) keeps the methods apart.
 
 Pairing. Every output array carries its sample's time in the label of its last dim
 (``stamp:SEC.NANOSEC``, docs/dashboard.md), so a model's sample is complete when its
@@ -39,8 +39,11 @@ __all__ = [
     "FIT_ARRAYS",
     "SHOWN",
     "TIME_DOMAIN",
+    "FREQUENCY_DOMAIN",
+    "METHODS",
     "ArrayKey",
     "array_key",
+    "split_topic",
     "ArrayUpdate",
     "array_update",
     "Sample",
@@ -58,14 +61,16 @@ PAIRED = ("estimates", "standard_errors", "standard_errors_conventional", "conve
 FIT_ARRAYS = ("fit", "identifiability")
 SHOWN = PAIRED + FIT_ARRAYS  # every array the dashboard subscribes to
 TIME_DOMAIN = "time"  # the method of ~/M/<array>: recursive least squares (Eqs. 9-22)
+FREQUENCY_DOMAIN = "frequency"  # of ~/M/frequency/<array>: equation error in the frequency domain (docs/frequency.md)
+METHODS = (TIME_DOMAIN, FREQUENCY_DOMAIN)
 MAX_PENDING = 64  # newer samples completed before a stamp's missing partner arrays count as lost
 MAX_WAITING = 4096  # stamps per model awaiting partners (a late joiner's burst of kept samples)
 HISTORY_CAPACITY = 20_000  # samples per model; 200 s at full rate at 50 Hz, older data thinned
 
 
 class ArrayKey(NamedTuple):
-    """What a topic under the node carries: ``method`` (:data:`TIME_DOMAIN`), ``model`` and
-    ``suffix`` (one of :data:`SHOWN`)."""
+    """What a topic under the node carries: ``method`` (one of :data:`METHODS`), ``model`` and
+    ``suffix`` (one of :data:`SHOWN`; of :data:`PAIRED` for :data:`FREQUENCY_DOMAIN`)."""
 
     method: str
     model: str
@@ -74,10 +79,27 @@ class ArrayKey(NamedTuple):
 
 def array_key(relative: str) -> ArrayKey | None:
     """The :class:`ArrayKey` of a topic relative to the node (``CZ/estimates``), or None for a
-    topic the dashboard does not show."""
+    topic the dashboard does not show. ``M/frequency/<suffix>`` is the frequency-domain method's
+    (only the paired arrays: it publishes no fit or identifiability)."""
     parts = relative.split("/")
     if len(parts) == 2 and parts[0] and parts[1] in SHOWN:
         return ArrayKey(TIME_DOMAIN, parts[0], parts[1])
+    if len(parts) == 3 and parts[0] and parts[1] == FREQUENCY_DOMAIN and parts[2] in PAIRED:
+        return ArrayKey(FREQUENCY_DOMAIN, parts[0], parts[2])
+    return None
+
+
+def split_topic(topic: str) -> tuple[str, ArrayKey] | None:
+    """``(node, key)`` of an absolute topic of a node's shown arrays
+    (``/ns/rls_estimator/CZ/frequency/estimates``: ``/ns/rls_estimator`` and the key), for a
+    reader that does not know the node's name (a bag); None for any other topic. The
+    frequency-domain form is tried first, so its ``frequency`` is never taken for a model."""
+    parts = topic.split("/")
+    for depth in (3, 2):
+        if len(parts) > depth + 1:
+            key = array_key("/".join(parts[-depth:]))
+            if key is not None:
+                return "/".join(parts[:-depth]), key
     return None
 
 

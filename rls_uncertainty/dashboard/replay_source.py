@@ -5,9 +5,12 @@ source's items (memory bounded by the hub's histories whatever the flight's leng
 * ``estimates.mcap`` (the node's own messages, byte for byte, with its ``/diagnostics`` and the
   per-period ``~/M/fit`` and ``~/M/identifiability``; see :mod:`..replay_files`) is read one
   chunk at a time in log order (``rosbags``), the arrays decoded by :mod:`..cdr`;
-* a directory with ``estimates.csv`` only (an older replay, or its MCAP removed) is read row by
-  row: the estimates, standard errors and flags, without the fit, identifiability or input
-  health that only the MCAP holds (the page says so).
+  The frequency-domain arrays (``~/M/frequency/...``, ``estimator.method`` ``frequency`` or
+  ``both``) are in it too, and kept apart by :func:`.model.array_key`;
+* a directory with ``estimates.csv`` and/or ``estimates_frequency.csv`` only (an older replay,
+  or its MCAP removed) is read row by row, both files merged in time order: the estimates,
+  standard errors and flags, without the fit, identifiability or input health that only the
+  MCAP holds (the page says so).
 
 :func:`open_replay` checks what can be checked before the server starts (the directory, the
 MCAP's integrity and topics, the CSV's header) and raises :class:`..errors.BagError` naming the
@@ -19,6 +22,7 @@ from __future__ import annotations
 
 import contextlib
 import csv
+import heapq
 import math
 import struct
 import threading
@@ -31,7 +35,7 @@ from ..cdr import FLOAT64_MULTIARRAY, decode
 from ..errors import BagError
 from ..replay_files import CSV_COLUMNS
 from .health import statuses_of
-from .model import TIME_DOMAIN, ArrayKey, Sample, array_key
+from .model import FREQUENCY_DOMAIN, TIME_DOMAIN, ArrayKey, Sample, split_topic
 
 if TYPE_CHECKING:
     from rosbags.highlevel import AnyReader
@@ -39,12 +43,14 @@ if TYPE_CHECKING:
 __all__ = ["ReplaySource", "open_replay", "BATCH"]
 
 BATCH = 2000  # items handed to the event loop at once
+# The replay's CSV of each method (rls_uncertainty.replay_files), in the order they are named.
+CSV_FILES = {TIME_DOMAIN: "estimates.csv", FREQUENCY_DOMAIN: "estimates_frequency.csv"}
 IN_FLIGHT = 2  # batches handed over and not yet handled: the reader waits beyond
 
 
 class ReplaySource:
     """A replay directory being read: :attr:`node` (the node whose topics it holds; empty for
-    a CSV), :attr:`file` (``estimates.mcap`` or ``estimates.csv``). :meth:`start` reads it in a
+    a CSV), :attr:`file` (``estimates.mcap``, or the CSV files read). :meth:`start` reads it in a
     thread and calls ``deliver(items)`` on the event loop; the last item is ``("replay_done",
     error)`` (error empty when read to the end)."""
 
@@ -100,12 +106,14 @@ class ReplaySource:
 def open_replay(directory: str | Path) -> ReplaySource:
     """The :class:`ReplaySource` of a replay output directory (module docstring)."""
     directory = Path(directory)
-    mcap, table = directory / "estimates.mcap", directory / "estimates.csv"
+    mcap = directory / "estimates.mcap"
     if mcap.is_file():
         return _open_mcap(directory, mcap)
-    if table.is_file():
-        return _open_csv(directory, table)
-    raise BagError(f"{directory}: no estimates.mcap or estimates.csv (the output directory of rls-uncertainty replay)")
+    tables = {method: directory / name for method, name in CSV_FILES.items() if (directory / name).is_file()}
+    if tables:
+        return _open_csv(directory, tables)
+    raise BagError(f"{directory}: no estimates.mcap, estimates.csv or estimates_frequency.csv (the output directory "
+                   "of rls-uncertainty replay)")
 
 
 # ------------------------------------------------------------------ estimates.mcap
@@ -123,16 +131,11 @@ def _open_reader(path: Path) -> AnyReader:
 
 def _shown(reader: AnyReader) -> tuple[str, dict[int, ArrayKey]]:
     """The node and the connections of the arrays the dashboard shows (by connection id)."""
-    keys: dict[int, ArrayKey] = {}
-    node = ""
-    for c in reader.connections:
-        head, _, model_array = c.topic.rpartition("/")
-        head, _, model = head.rpartition("/")
-        key = array_key(f"{model}/{model_array}") if head else None
-        if key is not None and c.msgtype == FLOAT64_MULTIARRAY:
-            keys[c.id] = key
-            node = head
-    return node, keys
+    found = [(split, c.id) for c in reader.connections
+             if c.msgtype == FLOAT64_MULTIARRAY and (split := split_topic(c.topic)) is not None]
+    nodes = [node for (node, key), _ in found if key.suffix == "estimates"]
+    node = nodes[0] if nodes else ""  # one node's outputs in a replay's estimates.mcap
+    return node, {cid: key for (n, key), cid in found if n == node}
 
 
 def _open_mcap(directory: Path, path: Path) -> ReplaySource:
@@ -142,7 +145,7 @@ def _open_mcap(directory: Path, path: Path) -> ReplaySource:
     finally:
         reader.close()
     if not node:
-        raise BagError(f"{path}: holds no estimates (no ~/M/estimates topic)")
+        raise BagError(f"{path}: holds no estimates (no ~/M/estimates or ~/M/frequency/estimates topic)")
 
     def items() -> Iterator[tuple]:
         reader = _open_reader(path)
@@ -170,41 +173,53 @@ def _open_mcap(directory: Path, path: Path) -> ReplaySource:
 
 
 # ------------------------------------------------------------------ estimates.csv
-def _open_csv(directory: Path, path: Path) -> ReplaySource:
+def _check_header(path: Path) -> None:
     try:
         with open(path, newline="", encoding="utf-8") as fh:
             header = next(csv.reader(fh), [])
     except (OSError, UnicodeDecodeError, csv.Error) as exc:
         raise BagError(f"{path}: cannot read: {exc}") from exc
     if tuple(header[: len(CSV_COLUMNS)]) != CSV_COLUMNS:
-        raise BagError(f"{path}: not the estimates.csv of rls-uncertainty replay (columns {', '.join(CSV_COLUMNS)})")
+        raise BagError(f"{path}: not the {path.name} of rls-uncertainty replay (columns {', '.join(CSV_COLUMNS)})")
+
+
+def _csv_items(path: Path, method: str) -> Iterator[tuple]:
+    try:
+        with open(path, newline="", encoding="utf-8") as fh:
+            rows = csv.reader(fh)
+            next(rows)
+            yield from _csv_samples(path, rows, method)
+    except (OSError, UnicodeDecodeError, csv.Error) as exc:
+        raise BagError(f"{path}: cannot read: {exc}") from exc
+
+
+def _open_csv(directory: Path, tables: dict[str, Path]) -> ReplaySource:
+    """The CSV files of ``tables`` (method -> path), merged in time order (each is in time
+    order), so both methods' histories grow together while the page reads."""
+    for path in tables.values():
+        _check_header(path)
 
     def items() -> Iterator[tuple]:
-        try:
-            with open(path, newline="", encoding="utf-8") as fh:
-                rows = csv.reader(fh)
-                next(rows)
-                yield from _csv_samples(path, rows)
-        except (OSError, UnicodeDecodeError, csv.Error) as exc:
-            raise BagError(f"{path}: cannot read: {exc}") from exc
+        yield from heapq.merge(*(_csv_items(path, method) for method, path in tables.items()),
+                               key=lambda item: item[1].stamp_ns)
 
-    return ReplaySource(directory, path.name, "", items)
+    return ReplaySource(directory, " and ".join(p.name for p in tables.values()), "", items)
 
 
-def _csv_samples(path: Path, rows: Iterator[list[str]]) -> Iterator[tuple]:
+def _csv_samples(path: Path, rows: Iterator[list[str]], method: str) -> Iterator[tuple]:
     """``("sample", Sample)`` of consecutive rows of one time and model (one row per parameter)."""
     group: list[tuple[int, str, str, tuple[float, ...]]] = []
     for line, row in enumerate(rows, start=2):
         try:
             parsed = _csv_row(row)
         except (ValueError, IndexError) as exc:
-            raise BagError(f"{path}: line {line}: not a row of estimates.csv ({exc})") from exc
+            raise BagError(f"{path}: line {line}: not a row of {path.name} ({exc})") from exc
         if group and parsed[:2] != group[0][:2]:
-            yield ("sample", _csv_sample(group))
+            yield ("sample", _csv_sample(group, method))
             group = []
         group.append(parsed)
     if group:
-        yield ("sample", _csv_sample(group))
+        yield ("sample", _csv_sample(group, method))
 
 
 def _csv_row(row: list[str]) -> tuple[int, str, str, tuple[float, ...]]:
@@ -218,8 +233,8 @@ def _csv_row(row: list[str]) -> tuple[int, str, str, tuple[float, ...]]:
     return int(sec) * 1_000_000_000 + int(nanosec.ljust(9, "0")), row[1], row[2], values
 
 
-def _csv_sample(rows: list[tuple[int, str, str, tuple[float, ...]]]) -> Sample:
+def _csv_sample(rows: list[tuple[int, str, str, tuple[float, ...]]], method: str) -> Sample:
     stamp, model = rows[0][:2]
     estimate, se, se_conventional, converged = (tuple(r[3][i] for r in rows) for i in range(4))
     return Sample(model, stamp, tuple(r[2] for r in rows), estimate, se, se_conventional, converged, None,
-                  TIME_DOMAIN)
+                  method)

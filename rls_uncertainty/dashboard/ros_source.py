@@ -4,8 +4,10 @@ to the server's event loop (:class:`.server.Inbox`). It only reads: no publisher
 client, no parameter services.
 
 Once a second it looks at the ROS graph: whether the node is there, and which
-``<node>/<M>/<array>`` topics exist (a model's topics appear when the node is configured with
-it; :func:`.model.array_key` says which are shown), subscribing to each new one. The
+``<node>/<M>/<array>`` and ``<node>/<M>/frequency/<array>`` topics exist (a model's topics
+appear when the node is configured with it, the frequency-domain ones with
+``estimator.method`` ``frequency`` or ``both``; :func:`.model.array_key` says which are shown
+and of which method), subscribing to each new one. The
 subscription asks for the reliability and durability the node's publisher offers:
 transient-local publishers (which keep their last samples for late joiners, so a dashboard
 started after the node shows the latest values at once) are read with a transient-local

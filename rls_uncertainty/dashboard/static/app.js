@@ -40,10 +40,19 @@ function fmt(x, digits) { return Number.isFinite(x) ? x.toFixed(digits) : "–";
 
 // ------------------------------------------------------------------ data
 // state.models: model name -> { name, methods: { method: history }, quality: { method: quality
-// message }, view }. The panels draw the estimates of PRIMARY (the recursive least squares of
-// ~/M/...); a second estimation method's history and quality sit beside it under its own name.
-const PRIMARY = "time";
+// message }, view }. Methods (docs/dashboard.md, "Two estimation methods"): "time", the
+// recursive least squares of ~/M/..., and "frequency", the frequency-domain estimator of
+// ~/M/frequency/... (no bias parameter). A model's panels show every method present, matched by
+// parameter name; the first present (time domain when there) is drawn as before, with its
+// conventional bounds; another is drawn beside it in its own colour with its corrected band.
+const QUALITY_METHOD = "time";  // fit, autocorrelation and identifiability: the time domain's
 const QUANTITIES = ["estimate", "se", "se_conventional", "converged"];
+const METHODS = {
+  time: { label: "time domain (RLS)", stroke: "#4fc3f7", edge: "rgba(79,195,247,0.6)", fill: "rgba(79,195,247,0.20)" },
+  frequency: { label: "frequency domain", stroke: "#f06292", edge: "rgba(240,98,146,0.6)", fill: "rgba(240,98,146,0.16)" },
+};
+const METHOD_ORDER = Object.keys(METHODS);
+const methodStyle = (k) => METHODS[k] || { label: k, stroke: "#aed581", edge: "rgba(174,213,129,0.6)", fill: "rgba(174,213,129,0.16)" };
 
 function modelFor(name) {
   let m = state.models.get(name);
@@ -68,10 +77,7 @@ function appendColumns(method, name, cols, replace) {
   let h = m.methods[method];
   const sameNames = h && h.names.join(",") === cols.names.join(",");
   const goesBack = h && h.t.length && cols.t.length && cols.t[0] <= h.t[h.t.length - 1];
-  if (!h || !sameNames || goesBack || replace) {
-    h = m.methods[method] = newHistory(cols.names);
-    if (method === PRIMARY && !sameNames) removeView(m);
-  }
+  if (!h || !sameNames || goesBack || replace) h = m.methods[method] = newHistory(cols.names);
   for (let k = 0; k < cols.t.length; k++) h.t.push(cols.t[k]);
   for (const q of QUANTITIES) cols[q].forEach((values, i) => { for (const v of values) h[q][i].push(v); });
   while (h.t.length > CAP) thin(h);
@@ -83,6 +89,17 @@ function setQuality(msg) {
   state.dirty = true;
 }
 
+// What a model's view shows: its methods with samples (time domain first) and the parameters,
+// the first method's in its order, then any only another method has. A change rebuilds the view.
+function layoutOf(m) {
+  const rank = (k) => { const i = METHOD_ORDER.indexOf(k); return i < 0 ? METHOD_ORDER.length : i; };
+  const methods = Object.keys(m.methods).filter((k) => m.methods[k].t.length).sort((a, b) => rank(a) - rank(b) || (a < b ? -1 : 1));
+  if (!methods.length) return null;
+  const names = [...m.methods[methods[0]].names];
+  for (const k of methods.slice(1)) for (const n of m.methods[k].names) if (!names.includes(n)) names.push(n);
+  return { methods, names, key: methods.join("+") + ":" + names.join(",") };
+}
+
 // ------------------------------------------------------------------ views
 function removeView(m) {
   if (!m.view) return;
@@ -92,9 +109,46 @@ function removeView(m) {
   m.view = null;
 }
 
-function panelFor(m, names, i, container) {
-  const name = names[i];
-  const panel = el("div", "panel");
+// One readout row per method: the first method's is the panel's large readout (and the head's
+// badge its flag); another's a row under it, labelled with its method and colour.
+function readoutRow(method, first, labelled, badge) {
+  const row = el("div", first ? "readout" : "readout alt");
+  row.dataset.method = method;
+  const style = methodStyle(method);
+  if (labelled) {
+    row.append(el("span", "method", style.label));
+  }
+  const value = el("span", first ? "value" : "alt-value", "–");
+  const se = el("span", first ? "se" : "alt-se");
+  row.append(value, se);
+  if (!first) { badge = el("span", "alt-badge", "not converged"); badge.dataset.converged = "0"; row.append(badge); }
+  return { row, value, se, badge };
+}
+
+function chartSeries(methods, reference) {
+  const series = [{}];
+  const slots = {};
+  const bands = [];
+  methods.forEach((k, j) => {
+    const s = methodStyle(k);
+    const label = j ? s.label + " " : "";
+    slots[k] = series.length;
+    // Another method's estimate is drawn thinner, over the first's: where they agree both show.
+    series.push({ label: label + "estimate", stroke: s.stroke, width: j ? 1.25 : 2, spanGaps: true },
+                { label: label + "+2σ corrected", stroke: s.edge, width: 1, spanGaps: true },
+                { label: label + "−2σ corrected", stroke: s.edge, width: 1, spanGaps: true });
+    bands.push({ series: [slots[k] + 1, slots[k] + 2], fill: s.fill });
+    if (j === 0) {
+      series.push({ label: "+2σ conventional", stroke: "#ffb74d", width: 1, dash: [6, 4], spanGaps: true },
+                  { label: "−2σ conventional", stroke: "#ffb74d", width: 1, dash: [6, 4], spanGaps: true });
+    }
+  });
+  if (reference !== undefined) series.push({ label: "reference", stroke: "#e0e0e0", width: 1, dash: [2, 3] });
+  return { series, slots, bands };
+}
+
+function panelFor(m, layout, name, container) {
+  const panel = el("div", layout.methods.length > 1 ? "panel two" : "panel");
   panel.dataset.param = name;
   const head = el("div", "panel-head");
   const title = el("span", "title", name);
@@ -109,34 +163,26 @@ function panelFor(m, names, i, container) {
   badge.dataset.converged = "0";
   tags.append(held, badge);
   head.append(left, tags);
-  const readout = el("div", "readout");
-  const value = el("span", "value", "–");
-  const se = el("span", "se");
+  const labelled = layout.methods.length > 1;
+  const rows = {};
+  layout.methods.forEach((k, j) => { rows[k] = readoutRow(k, j === 0, labelled, badge); });
+  const first = rows[layout.methods[0]].row;
   const ref = el("span", "ref");
-  readout.append(value, se, ref);
+  first.append(ref);
   const ident = el("div", "ident");
   const chart = el("div", "chart");
-  panel.append(head, readout, ident, chart);
+  panel.append(head, ...layout.methods.map((k) => rows[k].row), ident, chart);
   container.append(panel);
   const reference = state.reference[name];
   if (reference !== undefined) ref.textContent = "reference " + fmt(reference, 4);
-  const series = [
-    {},
-    { label: "estimate", stroke: "#4fc3f7", width: 2 },
-    { label: "+2σ corrected", stroke: "rgba(79,195,247,0.6)", width: 1 },
-    { label: "−2σ corrected", stroke: "rgba(79,195,247,0.6)", width: 1 },
-    { label: "+2σ conventional", stroke: "#ffb74d", width: 1, dash: [6, 4] },
-    { label: "−2σ conventional", stroke: "#ffb74d", width: 1, dash: [6, 4] },
-  ];
-  if (reference !== undefined) series.push({ label: "reference", stroke: "#e0e0e0", width: 1, dash: [2, 3] });
+  const { series, slots, bands } = chartSeries(layout.methods, reference);
   const opts = {
-    width: Math.max(chart.clientWidth || 420, 300), height: 190, series, legend: { show: false },
-    bands: [{ series: [2, 3], fill: "rgba(79,195,247,0.20)" }],
+    width: Math.max(chart.clientWidth || 420, 300), height: 190, series, legend: { show: false }, bands,
     scales: { x: { time: true } }, cursor: { drag: { x: false, y: false } },
     axes: [{ stroke: "#8b96a5", grid: { stroke: "#2a313c" } }, { stroke: "#8b96a5", grid: { stroke: "#2a313c" }, size: 70 }],
   };
   const u = new uPlot(opts, series.map(() => []), chart);
-  return { name, panel, badge, held, value, se, ident, u, chart, reference };
+  return { name, panel, badge, held, rows, slots, ident, u, chart, reference };
 }
 
 // The residual autocorrelation at the retained lags with the 2σ white-noise bound (Fig. 5).
@@ -159,7 +205,20 @@ function acfChart(container) {
   return new uPlot(opts, series.map(() => []), container);
 }
 
-function viewFor(m, names) {
+// Which colour is which method, in the model's head, when it is not the time domain alone.
+function methodLegend(methods) {
+  const legend = el("span", "legend");
+  for (const k of methods) {
+    const item = el("span", "legend-item");
+    item.dataset.method = k;
+    item.append(el("span", "swatch"), methodStyle(k).label);
+    legend.append(item);
+  }
+  legend.append(el("span", "dim", "· shaded: corrected ±2σ · dashed: conventional ±2σ, " + methodStyle(methods[0]).label));
+  return legend;
+}
+
+function viewFor(m, layout) {
   if (m.view) return m.view;
   const section = el("section", "model");
   section.dataset.model = m.name;
@@ -167,6 +226,7 @@ function viewFor(m, names) {
   const fit = el("span", "fit");
   const status = el("span", "status");
   head.append(el("span", "name", m.name), fit, status);
+  if (layout.methods.length > 1 || layout.methods[0] !== "time") head.append(methodLegend(layout.methods));
   const panels = el("div", "panels");
   const acfBox = el("div", "autocorr");
   const acfTitle = el("div", "acf-title", "Residual autocorrelation at the retained lags, 2σ white-noise bound (Fig. 5)");
@@ -179,8 +239,8 @@ function viewFor(m, names) {
   const before = (a, b) => rank(a) < rank(b) || (rank(a) === rank(b) && a < b);
   const after = [...models.children].find((s) => before(m.name, s.dataset.model));
   models.insertBefore(section, after || null);
-  m.view = { section, fit, status, acfBox, acfChartBox, acfTitle, why, acf: null,
-             plots: names.map((_, i) => panelFor(m, names, i, panels)) };
+  m.view = { key: layout.key, section, fit, status, acfBox, acfChartBox, acfTitle, why, acf: null,
+             plots: layout.names.map((name) => panelFor(m, layout, name, panels)) };
   return m.view;
 }
 
@@ -190,10 +250,11 @@ function lowerBound(arr, x) {
   return lo;
 }
 
-// Indices of the samples drawn: those in the window, strided to MAX_POINTS, the newest always in.
-function drawnIndices(t) {
+// Indices of the samples drawn: those in the window ending at `end`, strided to MAX_POINTS,
+// the newest always in.
+function drawnIndices(t, end) {
   const n = t.length;
-  const start = state.windowS ? lowerBound(t, t[n - 1] - state.windowS) : 0;
+  const start = state.windowS ? lowerBound(t, end - state.windowS) : 0;
   const stride = Math.max(1, Math.ceil((n - start) / MAX_POINTS));
   const idx = [];
   for (let k = start; k < n; k += stride) idx.push(k);
@@ -201,29 +262,66 @@ function drawnIndices(t) {
   return idx;
 }
 
-function drawModel(m) {
-  const h = m.methods[PRIMARY];
-  if (!h || !h.t.length) return;
-  const v = viewFor(m, h.names);
-  const idx = drawnIndices(h.t);
-  const x = idx.map((k) => h.t[k]);
+// The drawn samples of every method on one time axis: x (sorted, each time once) and, per
+// method, its drawn indices and their positions in x (a method's values are null elsewhere).
+function commonAxis(m, methods) {
+  const end = Math.max(...methods.map((k) => m.methods[k].t.at(-1)));
+  const drawn = methods.map((k) => { const h = m.methods[k]; return { k, h, idx: drawnIndices(h.t, end) }; });
+  if (drawn.length === 1) {
+    const d = drawn[0];
+    d.pos = d.idx.map((_, j) => j);
+    return { x: d.idx.map((k) => d.h.t[k]), drawn };
+  }
+  const x = [...new Set(drawn.flatMap((d) => d.idx.map((k) => d.h.t[k])))].sort((a, b) => a - b);
+  for (const d of drawn) d.pos = d.idx.map((k) => lowerBound(x, d.h.t[k]));
+  return { x, drawn };
+}
+
+function showReadout(row, h, i, primary) {
   const last = h.t.length - 1;
-  v.plots.forEach((p, i) => {
-    const est = h.estimate[i], se = h.se[i], sc = h.se_conventional[i];
-    const data = [x, idx.map((k) => est[k]), idx.map((k) => est[k] + 2 * se[k]), idx.map((k) => est[k] - 2 * se[k]),
-                  idx.map((k) => est[k] + 2 * sc[k]), idx.map((k) => est[k] - 2 * sc[k])];
+  if (i < 0) {  // a parameter this method does not estimate (the frequency domain's bias)
+    row.value.textContent = "–";
+    row.se.textContent = "not estimated";
+    row.badge.hidden = !primary;
+    return false;
+  }
+  row.value.textContent = fmt(h.estimate[i][last], 4);
+  row.se.textContent = "";
+  row.se.append("SE " + fmt(h.se[i][last], 4) + " ");
+  row.se.append(el("span", "conv", "(conv. " + fmt(h.se_conventional[i][last], 4) + ")"));
+  const converged = h.converged[i][last] === 1 ? "1" : "0";
+  row.badge.hidden = false;
+  row.badge.dataset.converged = converged;
+  row.badge.textContent = converged === "1" ? "CONVERGED" : "not converged";
+  return converged === "1";
+}
+
+function drawModel(m) {
+  const layout = layoutOf(m);
+  if (!layout) return;
+  if (m.view && m.view.key !== layout.key) removeView(m);
+  const v = viewFor(m, layout);
+  const { x, drawn } = commonAxis(m, layout.methods);
+  const column = (d, values, f) => {
+    const out = new Array(x.length).fill(null);
+    if (values) d.idx.forEach((k, j) => { out[d.pos[j]] = f(k); });
+    return out;
+  };
+  v.plots.forEach((p) => {
+    const data = [x];
+    drawn.forEach((d, j) => {
+      const i = d.h.names.indexOf(p.name);
+      const est = d.h.estimate[i], se = d.h.se[i], sc = d.h.se_conventional[i];
+      data.push(column(d, est, (k) => est[k]), column(d, est, (k) => est[k] + 2 * se[k]),
+                column(d, est, (k) => est[k] - 2 * se[k]));
+      if (j === 0) data.push(column(d, est, (k) => est[k] + 2 * sc[k]), column(d, est, (k) => est[k] - 2 * sc[k]));
+      const converged = showReadout(p.rows[d.k], d.h, i, j === 0);
+      if (j === 0) p.panel.classList.toggle("converged", converged);
+    });
     if (p.reference !== undefined) data.push(x.map(() => p.reference));
     const width = Math.max(p.chart.clientWidth, 300);
     if (width !== p.u.width) p.u.setSize({ width, height: 190 });
     p.u.setData(data);
-    p.value.textContent = fmt(est[last], 4);
-    p.se.textContent = "";
-    p.se.append("SE " + fmt(se[last], 4) + " ");
-    p.se.append(el("span", "conv", "(conv. " + fmt(sc[last], 4) + ")"));
-    const converged = h.converged[i][last] === 1 ? "1" : "0";
-    p.badge.dataset.converged = converged;
-    p.badge.textContent = converged === "1" ? "CONVERGED" : "not converged";
-    p.panel.classList.toggle("converged", converged === "1");
   });
 }
 
@@ -232,7 +330,7 @@ function drawModel(m) {
 function drawQuality(m) {
   if (!m.view) return;
   const v = m.view;
-  const q = m.quality[PRIMARY];
+  const q = m.quality[QUALITY_METHOD];
   const diag = state.health && state.health.models ? state.health.models[m.name] : null;
   const held = new Set(diag && diag.held_back ? diag.held_back.split(",").filter(Boolean) : []);
   for (const p of v.plots) {
@@ -273,8 +371,7 @@ function draw() {
   for (const m of state.models.values()) {
     drawModel(m);
     drawQuality(m);
-    const h = m.methods[PRIMARY];
-    if (h && h.t.length) newest = Math.max(newest, h.t[h.t.length - 1]);
+    for (const h of Object.values(m.methods)) if (h.t.length) newest = Math.max(newest, h.t[h.t.length - 1]);
   }
   if (Number.isFinite(newest)) {
     const d = new Date(newest * 1000);
