@@ -82,8 +82,9 @@ class SampleOutput(NamedTuple):
     model is converged when all its parameters are). ``covariance`` is ``None``, or on the
     samples whose grid index is a multiple of ``outputs.covariance_decimation`` the
     ``(2, M, n_max, n_max)`` corrected (``[0]``) and conventional (``[1]``) covariances
-    (:meth:`.estimator.EstimatorBank.covariance`, the corrected one repaired to positive
-    semi-definite; symmetrized), NaN off the ready models' parameters.
+    (:meth:`.estimator.EstimatorBank.covariance`: a corrected one with a negative variance
+    repaired to its nearest positive semi-definite matrix, zero for an exact fit; symmetrized),
+    NaN off the ready models' parameters.
     ``lags`` ``(M,)`` ints: the largest lag of Eq. 22 behind each corrected SE (chosen per
     sample with ``estimator.lag_selection: auto``), 0 for models not ready. ``frequency``: with
     ``estimator.method`` ``frequency`` or ``both``, on the samples where the frequency-domain

@@ -140,7 +140,10 @@ def test_covariances_on_decimated_grid_points_equal_the_banks(bag, every):
     due = [o for o in outs if (o.stamp_ns // period) % every == 0]
     assert [o.covariance is not None for o in outs] == [(o.stamp_ns // period) % every == 0 for o in outs]
     assert checked > len(due)  # both models, most samples
-    for o in due:
+    assert len(outs) == pipe.bank.k  # output i is the bank's sample k = i + 1
+    for k, o in enumerate(outs, 1):
+        if o.covariance is None:
+            continue
         for j, n in enumerate(pipe.sizes):
             cov = o.covariance
             if not o.ready[j]:
@@ -149,7 +152,11 @@ def test_covariances_on_decimated_grid_points_equal_the_banks(bag, every):
             np.testing.assert_allclose(np.sqrt(np.diag(cov[0, j, :n, :n])), o.se[j, :n], rtol=1e-9)
             np.testing.assert_allclose(np.sqrt(np.diag(cov[1, j, :n, :n])), o.se_conventional[j, :n], rtol=1e-9)
             np.testing.assert_array_equal(cov[:, j, :n, :n], cov[:, j, :n, :n].swapaxes(-1, -2))
-            assert np.linalg.eigvalsh(cov[0, j, :n, :n]).min() >= -1e-12 * np.abs(cov[0, j, :n, :n]).max()
+            # Positive semi-definite but for rounding, where the fit has degrees of freedom: with
+            # k = n samples the residuals are rounding, and so is the matrix built from them
+            # (its smallest eigenvalue differs in sign between OpenBLAS kernels).
+            if k > n:
+                assert np.linalg.eigvalsh(cov[0, j, :n, :n]).min() >= -1e-12 * np.abs(cov[0, j, :n, :n]).max()
             assert np.isnan(cov[:, j, n:]).all() and np.isnan(cov[:, j, :, n:]).all()
 
 
