@@ -408,6 +408,15 @@ def test_the_page_says_when_the_node_it_showed_is_gone():
     assert hub.snapshot()["methods"][TIME_DOMAIN]["CZ"]["t"] == [1e-8]  # its last values stay on the page
 
 
+def test_samples_that_arrive_before_discovery_names_the_node_are_running_not_lost():
+    hub = _live_hub()
+    hub.set_graph(False)  # its name not discovered yet (a busy machine), its samples already here
+    hub.add_arrays(_arrays([10]))
+    assert hub.state()["state"] == "running"
+    hub.set_graph(True)
+    assert hub.set_graph(False)["state"] == "node_lost"
+
+
 def test_the_inbox_hands_items_from_another_thread_to_the_loop_in_order_and_batches():
     import asyncio
     import threading

@@ -55,6 +55,9 @@ class Hub:
         self.replay_error = ""
         self.health = HealthTracker()
         self.node_present: bool | None = None  # None: not looked yet
+        # Whether discovery has ever shown the node: its samples can arrive before its name
+        # does (a busy machine), which is not a node lost.
+        self.node_seen = False
         self.samples_total = 0
         self.history_resets = 0
         self._capacity = capacity
@@ -172,6 +175,7 @@ class Hub:
         if node_present == self.node_present:
             return None
         self.node_present = node_present
+        self.node_seen = self.node_seen or node_present
         return self.status()
 
     # ------------------------------------------------------------------ page messages
@@ -199,7 +203,7 @@ class Hub:
             return {"state": state, "text": self._replay_text()}
         peers = f", ROS_STATIC_PEERS={s.static_peers}" if s.static_peers else ""
         where = f"ROS_DOMAIN_ID={s.domain} (ROS_AUTOMATIC_DISCOVERY_RANGE={s.discovery_range}{peers})"
-        if self.node_present is False and self.samples_total:
+        if self.node_present is False and self.node_seen and self.samples_total:
             return {"state": "node_lost", "text": f"Node {s.node} is no longer seen on {where}: the values shown are "
                                                   "its last ones."}
         if not self.node_present and not self.samples_total:
