@@ -540,7 +540,7 @@ def _add_replay(sub: Any) -> None:
     rp.add_argument("--compare", metavar="DIR",
                     help="compare the outputs with an earlier replay's in DIR sample by sample: exit 0 when equal "
                          "within the tolerance, 1 when not (the largest differences printed), 2 when the runs are "
-                         "not comparable (another bag, span, models or sample rate)")
+                         "not comparable (another bag, span, models, sample rate or no estimation method in common)")
     rp.add_argument("--rtol", type=_real(0.0), metavar="R",
                     help="--compare's relative tolerance, of |estimate| + its standard error (default 1e-6)")
     rp.add_argument("--atol", type=_real(0.0), metavar="A",

@@ -5,7 +5,9 @@ across CPUs (docs/testing.md, "Comparing replays").
 Two replays are *comparable* when they read the same input messages (the bag's input content
 digest, :class:`.bags.InputStream`) over the same span and strictness, with the same models,
 parameter names and sample rate: then their ``estimates.csv`` rows pair one to one by
-sample time and parameter. Anything else raises :class:`.errors.NotComparable`, saying why.
+sample time and parameter; and at least one estimation method in common (``estimator.method``:
+a time-domain run and a frequency-domain one have no results file to pair). Anything else
+raises :class:`.errors.NotComparable`, saying why.
 Other configuration changes (a lag count, a forgetting factor) leave them comparable: the
 comparison then shows what they changed, and the differing parameters are named.
 
@@ -179,10 +181,25 @@ def comparable(here: dict[str, Any], there: dict[str, Any], *, bag: bool = True)
     if here["period_ns"] != there["period_ns"]:
         raise NotComparable(f"another sample rate: rate {1e9 / here['period_ns']:g} Hz here, "
                             f"{1e9 / there['period_ns']:g} Hz in the reference: the samples fall at other times")
+    methods = (_methods(here), _methods(there))
+    if not methods[0] & methods[1]:
+        raise NotComparable(f"no estimation method in common: estimator.method {_method(here)!r} here "
+                            f"({', '.join(sorted(methods[0]))}), {_method(there)!r} in the reference "
+                            f"({', '.join(sorted(methods[1]))}): no results file to compare")
     notes = _differences(here.get("parameters", {}), there.get("parameters", {}))
     if not notes and here.get("configuration_sha256") != there.get("configuration_sha256"):
         notes = _differences(here.get("configuration", {}), there.get("configuration", {}))
     return notes
+
+
+def _method(run: dict[str, Any]) -> str:
+    return str(run.get("parameters", {}).get("estimator.method", "time"))
+
+
+def _methods(run: dict[str, Any]) -> set[str]:
+    """The results files a run with its ``estimator.method`` writes (:data:`RESULT_FILES`)."""
+    method = _method(run)
+    return {name for name, _ in RESULT_FILES if method == "both" or (method == "frequency") == ("frequency" in name)}
 
 
 def _models(run: dict[str, Any]) -> str:

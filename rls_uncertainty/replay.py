@@ -344,25 +344,52 @@ def run_pipeline(messages: Iterable[tuple[str, int, Stamped]], config: PipelineC
     run.finals()
     if figure_data is not None:
         figure_data.finish(pipe)
-    result.explanations = unestimated(pipe, run.ever, excitation)
+    result.explanations = unestimated(pipe, run.ever, excitation,
+                                      np.array([f is not None for f in run.last_frequency]))
     result.counter_values = accounting(pipe.counters())
     result.bag_digest = str(getattr(messages, "digest", ""))
     return result
 
 
-def unestimated(pipe: Pipeline, ever: np.ndarray, excitation: _Excitation | None = None) -> list[str]:
+def unestimated(pipe: Pipeline, ever: np.ndarray, excitation: _Excitation | None = None,
+                frequency_ever: np.ndarray | None = None) -> list[str]:
     """Why models never produced an estimate (``ever``: per model, whether it published), in
     the terms of :mod:`.alerts`: one line ``no estimates: <why>`` when the data path used no
     sample (which stream was rejected and why, expected against received, the parameter to
     change), else one ``<model>: no estimate: <why>`` per model that never became ready, with
-    the regressors that never moved when ``excitation`` watched them."""
-    if ever.all():
-        return []
-    why = no_estimate(pipe.counters(), pipe.required)
-    if why is not None:
-        return [f"no estimates: {why}"]
-    return [f"{m.output}: no estimate: {not_excited(n, pipe.bank.k, excitation.constant(j) if excitation else [])}"
-            for j, (m, n) in enumerate(zip(pipe.models, pipe.sizes, strict=True)) if not ever[j]]
+    the regressors that never moved when ``excitation`` watched them; with ``estimator.method:
+    frequency`` the frequency-domain estimator's reason. With ``both``, ``frequency_ever`` (per
+    model, whether its frequency-domain estimates were published) adds one
+    ``<model> (frequency domain): no estimate: <why>`` per model that has none."""
+    lines: list[str] = []
+    if not ever.all():
+        why = no_estimate(pipe.counters(), pipe.required)
+        if why is not None:
+            return [f"no estimates: {why}"]
+        if pipe.config.publishes_time:
+            constant = excitation.constant if excitation else (lambda j: [])
+            lines = [f"{m.output}: no estimate: {not_excited(n, pipe.bank.k, constant(j))}"
+                     for j, (m, n) in enumerate(zip(pipe.models, pipe.sizes, strict=True)) if not ever[j]]
+        else:
+            lines = [f"{m.output}: no estimate: {_frequency_unready(pipe, j)}"
+                     for j, m in enumerate(pipe.models) if not ever[j]]
+    if pipe.config.publishes_time and frequency_ever is not None and pipe.frequency is not None:
+        lines += [f"{m.output} (frequency domain): no estimate: {_frequency_unready(pipe, j)}"
+                  for j, m in enumerate(pipe.models) if not frequency_ever[j]]
+    return lines
+
+
+def _frequency_unready(pipe: Pipeline, j: int) -> str:
+    """Why model ``j``'s frequency-domain estimator never published: never evaluated (fewer
+    samples than ``frequency.every``), or its regressors not independent on the grid."""
+    path = pipe.frequency
+    assert path is not None  # estimator.method frequency or both
+    bank = path.bank
+    if bank.evaluated_at == 0:
+        return (f"the frequency-domain estimator is evaluated every frequency.every = {path.every} samples and "
+                f"took {bank.n_samples} (lower frequency.every)")
+    return (f"its {path.sizes[j]} frequency-domain regressors were not excited independently on the grid "
+            f"(frequency.f_min .. f_max) in {bank.n_samples} samples (the maneuver must excite that band)")
 
 
 def summary_table(result: ReplayResult) -> str:

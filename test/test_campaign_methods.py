@@ -204,3 +204,21 @@ def test_a_bad_method_is_one_line_naming_the_option(tmp_path, capsys):
     with pytest.raises(SystemExit) as exc:
         cli.main(["campaign", str(BUNDLED), "--method", "fourier", "--out", str(tmp_path / "o")])
     assert exc.value.code == 2 and "--method" in capsys.readouterr().err and not (tmp_path / "o").exists()
+
+
+def test_a_frequency_domain_that_never_published_says_why():
+    """frequency.every longer than the maneuver: the frequency domain never evaluates. The replay
+    and the campaign's rows say so, not that the regressors were not excited (the time
+    domain's reason) nor nothing (with both methods)."""
+    from rls_uncertainty.testing import replay_bag
+
+    why = ("no estimate: the frequency-domain estimator is evaluated every frequency.every = 100000 samples and "
+           "took 591 (lower frequency.every)")
+    for method, label in (("frequency", "CZ"), ("both", "CZ (frequency domain)")):
+        result = replay_bag(BUNDLED, "t2", estimator__method=method, frequency__every=100000)
+        assert result.explanations == [f"{label}: {why}", f"{label.replace('CZ', 'Cm')}: {why}"]
+        p = parameters("t2", {"estimator.method": method, "frequency.every": 100000})
+        rows = run_maneuver((Maneuver("m", str(BUNDLED)), CampaignSettings(pipeline_config(p),
+                                                                           node_config(p).topics))).rows
+        assert [r.status for r in rows if r.method == "frequency"] == [why] * 5
+        assert all(r.status == "ok" for r in rows if r.method == "time")

@@ -228,3 +228,19 @@ def test_a_method_only_one_run_has_is_a_difference_with_its_rows_counted(golden,
     assert cmp.only_here == _count(golden_both / "estimates_frequency.csv") > 0
     assert any(note.startswith("estimator.method: 'both' here, 'time' in the reference") for note in cmp.notes)
     assert f"estimates_frequency.csv ({cmp.only_here} rows) only in this run" in cmp.report()
+
+
+def test_runs_with_no_estimation_method_in_common_are_not_comparable(golden, tmp_path, capsys):
+    # A frequency-domain replay against a time-domain reference: no results file to pair, said
+    # before the bag is read (not "DIFFERENT: 0 of 0 values").
+    fails(capsys, ["replay", str(BUNDLED), "--config", "t2", "--method", "frequency", "--out", str(tmp_path / "f"),
+                   "--no-plots", "--quiet", "--compare", str(golden)],
+          "no estimation method in common: estimator.method 'frequency' here (estimates_frequency.csv), "
+          "'time' in the reference (estimates.csv)")
+    assert not (tmp_path / "f").exists()
+    run = read_run(golden)
+    frequency = {**run, "parameters": {**run["parameters"], "estimator.method": "frequency"}}
+    both = {**run, "parameters": {**run["parameters"], "estimator.method": "both"}}
+    with pytest.raises(NotComparable, match=r"'time' here \(estimates\.csv\), 'frequency' in the reference"):
+        comparable(run, frequency)
+    assert comparable(frequency, both) and comparable(run, both)  # a method in common: comparable, noted

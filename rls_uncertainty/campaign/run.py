@@ -153,11 +153,12 @@ def all_lags_bank(result: ReplayResult) -> EstimatorBank:
 
 
 def _no_estimate(result: ReplayResult, model: str, method: str) -> str:
-    """Why ``model`` has no ``method``-domain estimate: the run's explanation (which concerns
-    the method that decides when a model counts as estimated, the time domain unless only the
-    frequency domain is published), else a general line."""
+    """Why ``model`` has no ``method``-domain estimate: the run's explanation (its
+    ``(frequency domain)`` line with both methods, :func:`.replay.unestimated`), else a
+    general line."""
     why = {line.split(":", 1)[0]: line.split(":", 1)[1].strip() for line in result.explanations}
-    reason = why.get(model) or why.get("no estimates")
+    own = why.get(f"{model} (frequency domain)") if method == "frequency" else None
+    reason = own or why.get(model) or why.get("no estimates")
     if reason is None:
         what = "its model" if method == "time" else "its frequency-domain estimator"
         return f"no estimate: {what} never became ready"
