@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
 import sys
 from collections.abc import Callable
 from pathlib import Path
@@ -700,7 +701,15 @@ def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
-        return int(args.func(args) or 0)
+        code = int(args.func(args) or 0)
+        sys.stdout.flush()  # here, so that a reader gone (below) is seen here
+        return code
+    except BrokenPipeError:
+        # Whatever read the output stopped reading (`| head`): the command's files are
+        # written; nothing more to say, and nothing more can be printed. Python's own exit
+        # flush must not fail again on the closed pipe.
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 1
     except (RlsUncertaintyError, OSError) as exc:
         # The package's own errors and file-system problems are the user's to fix; anything
         # else is a bug and shows its traceback. One line, whatever the message holds.

@@ -415,3 +415,19 @@ def test_lags_and_burn_in_options_map_onto_the_estimator_parameters():
     for given, bank in ((["--burn-in", "0"], 0), (["--burn-in", "default"], None), ([], None)):
         assert cli._bank_burn_in(parser.parse_args(["montecarlo", "--out", "o", *given]).burn_in) == bank
         assert cli._bank_burn_in(parser.parse_args(["simulate", *given]).burn_in) == bank
+
+
+def test_a_reader_that_stops_reading_ends_the_command_quietly(tmp_path):
+    """``rls-uncertainty ... | head``: the output's reader gone is exit status 1 and no error
+    line or traceback (the files are written all the same)."""
+    import subprocess
+    import sys
+
+    read, write = os.pipe()
+    os.close(read)  # the reader is gone before anything is printed
+    try:
+        done = subprocess.run([sys.executable, "-m", "rls_uncertainty.cli", "simulate", "--seed", "1"], stdout=write,
+                              stderr=subprocess.PIPE, text=True, timeout=300)
+    finally:
+        os.close(write)
+    assert (done.returncode, done.stderr) == (1, "")

@@ -408,6 +408,14 @@ def test_the_page_says_when_the_node_it_showed_is_gone():
     assert hub.snapshot()["methods"][TIME_DOMAIN]["CZ"]["t"] == [1e-8]  # its last values stay on the page
 
 
+def test_the_samples_counted_are_the_nodes_not_its_models_arrays():
+    hub = _live_hub()
+    hub.set_graph(True)
+    hub.add_arrays(_arrays(range(1, 11)) + _arrays(range(3, 11), model="Cm"))  # Cm ready two samples later
+    assert hub.samples_total == 18
+    assert hub.state()["text"].endswith(": 10 samples received")
+
+
 def test_samples_that_arrive_before_discovery_names_the_node_are_running_not_lost():
     hub = _live_hub()
     hub.set_graph(False)  # its name not discovered yet (a busy machine), its samples already here

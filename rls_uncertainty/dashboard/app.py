@@ -110,7 +110,7 @@ async def _main(options: DashboardOptions, hub: Hub, replay: ReplaySource | None
         source.stop()
     dropped = ", ".join(f"{k} {v}" for k, v in sorted(hub.pairing.dropped.items())) or "none"
     inbound = ", ".join(f"{k} {v}" for k, v in broadcaster.inbound.items())
-    print(f"dashboard stopped: {hub.samples_total} samples; arrays dropped: {dropped}; from pages: {inbound}; "
+    print(f"dashboard stopped: {hub.samples_shown} samples; arrays dropped: {dropped}; from pages: {inbound}; "
           f"resyncs {broadcaster.resyncs}", file=sys.stderr)
 
 

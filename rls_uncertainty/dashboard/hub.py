@@ -58,7 +58,8 @@ class Hub:
         # Whether discovery has ever shown the node: its samples can arrive before its name
         # does (a busy machine), which is not a node lost.
         self.node_seen = False
-        self.samples_total = 0
+        self.samples_total = 0  # complete samples of every model and method
+        self._samples_by: dict[tuple[str, str], int] = {}  # per (method, model)
         self.history_resets = 0
         self._capacity = capacity
         self._clock = clock
@@ -155,7 +156,14 @@ class Hub:
                                          else ModelHistory(s.names, self._capacity))
         h.append(s)
         self.samples_total += 1
+        self._samples_by[which] = self._samples_by.get(which, 0) + 1
         return True
+
+    @property
+    def samples_shown(self) -> int:
+        """The node's samples the page has received: those of its model and method received
+        most (every model and method of a sample is one sample, as the node counts them)."""
+        return max(self._samples_by.values(), default=0)
 
     def replay_finished(self, error: str = "") -> dict:
         """The replay file has been read (to its end, or up to ``error``); the ``health`` message."""
@@ -225,16 +233,16 @@ class Hub:
             if not_ready:
                 text += "; " + "; ".join(not_ready)
             return {"state": "no_samples", "text": text}
-        return {"state": "running", "text": f"{s.node}: {self.samples_total} samples received"}
+        return {"state": "running", "text": f"{s.node}: {self.samples_shown} samples received"}
 
     def _replay_text(self) -> str:
         s = self.source
         where = f"{s.replay_dir}/{s.replay_file}"
         if self.replay_error:
-            return f"replay {where}: {self.samples_total} samples, then {self.replay_error}"
+            return f"replay {where}: {self.samples_shown} samples, then {self.replay_error}"
         if not self.replay_done:
-            return f"reading replay {where}: {self.samples_total} samples so far"
-        text = f"replay of {s.replay_dir}: {self.samples_total} samples"
+            return f"reading replay {where}: {self.samples_shown} samples so far"
+        text = f"replay of {s.replay_dir}: {self.samples_shown} samples"
         if s.replay_file.endswith(".csv"):
             text += (f" from {s.replay_file} (no estimates.mcap: no fit, identifiability or input health, which "
                      "rls-uncertainty replay writes into estimates.mcap)")
