@@ -416,6 +416,30 @@ def test_the_samples_counted_are_the_nodes_not_its_models_arrays():
     assert hub.state()["text"].endswith(": 10 samples received")
 
 
+def test_the_first_samples_turn_the_banner_to_running_at_once():
+    """A late joiner hears the node's diagnostics ("none received here yet") before its kept
+    samples: the samples themselves change the banner, not the next diagnostics a second later."""
+    from rls_uncertainty.dashboard.app import _Dispatch
+    from rls_uncertainty.dashboard.server import Broadcaster
+
+    hub = _live_hub()
+    sent: list[dict] = []
+    broadcaster = Broadcaster(hub)
+    broadcaster.send = sent.append
+    dispatch = _Dispatch(hub, broadcaster)
+    dispatch([("graph", True)])
+    ns = "/ns/rls_estimator"
+    dispatch([("diagnostics", [*_inputs({}, 40, prefix=ns),
+                               (f"{ns}: samples", 0, "591 of 599 samples used", {"samples_used": "591"})])])
+    assert sent[-1]["state"] == "no_samples"
+    sent.clear()
+    dispatch([("array", *a) for a in _arrays([10])])
+    assert [m["type"] for m in sent] == ["samples", "health"] and sent[-1]["state"] == "running"
+    sent.clear()
+    dispatch([("array", *a) for a in _arrays([11])])  # no change of state: no health message
+    assert [m["type"] for m in sent] == ["samples"]
+
+
 def test_samples_that_arrive_before_discovery_names_the_node_are_running_not_lost():
     hub = _live_hub()
     hub.set_graph(False)  # its name not discovered yet (a busy machine), its samples already here

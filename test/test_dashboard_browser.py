@@ -209,6 +209,11 @@ class _Recorder:
 def _expect_fits(page, fits: dict[str, tuple[list[float], list[bool]]]) -> None:
     """The page's autocorrelation, R^2 and identifiability are the node's last ones."""
     for model, (fit, identifiable) in fits.items():
+        # A model's fit comes in its own message, after or before its samples: wait for it (and
+        # its drawing) until it is the node's last, then compare.
+        js = (f"() => {{ const q = window.rlsState.models.get('{model}').quality; const f = q && q.time && q.time.fit;"
+              f" return !!f && f.r_squared === {fit[0]!r} && f.samples === {fit[1]!r} && !window.rlsState.dirty; }}")
+        _wait(page, js, 60)
         shown = page.evaluate(f"window.rlsState.models.get('{model}').quality.time.fit")
         assert [shown["r_squared"], shown["samples"], shown["bound_2sigma"], *shown["rho"]] == fit
         text = page.text_content(f"section.model[data-model='{model}'] .fit")
@@ -264,11 +269,18 @@ def _stop(recorder: _Recorder, dashboard: Dashboard | None, node: NodeProcess) -
     return err
 
 
+def _wait_for_times(page, times: dict[str, float]) -> None:
+    """Until the page holds each model's time-domain sample of ``times[model]`` (s) as its
+    newest, and has drawn it (a redraw clears ``dirty``; the page's script runs between
+    evaluations, never during one)."""
+    newest = " && ".join(f"m.has('{k}') && m.get('{k}').methods.time && "
+                         f"Math.abs(m.get('{k}').methods.time.t.at(-1) - {t!r}) < 1e-6" for k, t in times.items())
+    _wait(page, f"() => {{ const m = window.rlsState.models; return {newest} && !window.rlsState.dirty; }}", 60)
+
+
 def _wait_for_stamp(page, stamp: int) -> None:
-    """Until the page holds the sample of ``stamp`` (ns) for both models, and one redraw more."""
-    newest = f"m.has(k) && m.get(k).methods.time && Math.abs(m.get(k).methods.time.t.at(-1) - {stamp * 1e-9!r}) < 1e-6"
-    _wait(page, f"() => {{ const m = window.rlsState.models; return ['CZ', 'Cm'].every(k => {newest}); }}", 60)
-    time.sleep(0.5)  # one more redraw period
+    """:func:`_wait_for_times` of ``stamp`` (ns) for both models."""
+    _wait_for_times(page, {"CZ": stamp * 1e-9, "Cm": stamp * 1e-9})
 
 
 def test_a_dashboard_started_after_the_node_shows_its_latest_values_at_once(tmp_path, browser):
@@ -374,6 +386,8 @@ def test_replay_page_shows_the_final_values_of_the_replays_estimates_csv(tmp_pat
         _wait(browser, "document.getElementById('banner').dataset.state === 'replay'"
                        f" && document.querySelectorAll('.panel .value').length === {len(last)}", 60)
         _wait(browser, "[...document.querySelectorAll('.panel .value')].every(v => v.textContent !== '–')", 30)
+        # The banner can say the replay was read before the page has drawn its last samples.
+        _wait_for_times(browser, {m: float(t) for m, t in last_time.items()})
         assert browser.text_content("#mode") == "REPLAY"
         sections = browser.query_selector_all("section.model")
         assert [s.get_attribute("data-model") for s in sections] == ["CX", "CY", "CZ", "Cl", "Cm", "Cn"]  # Eq. 2

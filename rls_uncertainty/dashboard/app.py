@@ -80,11 +80,16 @@ class _Dispatch:
                 print(f"rls-uncertainty dashboard: {item[1]}", file=sys.stderr, flush=True)
 
     def _flush(self, arrays: list[tuple], samples: list[Sample]) -> None:
+        if not (arrays or samples):
+            return
+        before = self.hub.state()["state"]
         for message in [*(self.hub.add_arrays(arrays) if arrays else []),
                         *(self.hub.add_samples(samples) if samples else [])]:
             self.broadcaster.send(message)
         arrays.clear()
         samples.clear()
+        if self.hub.state()["state"] != before:  # the first samples: "running" at once, not at the next diagnostics
+            self.broadcaster.send(self.broadcaster.status())
 
 
 async def _main(options: DashboardOptions, hub: Hub, replay: ReplaySource | None, sock: socket.socket) -> None:
