@@ -58,8 +58,7 @@ class Hub:
         # Whether discovery has ever shown the node: its samples can arrive before its name
         # does (a busy machine), which is not a node lost.
         self.node_seen = False
-        self.samples_total = 0  # complete samples of every model and method
-        self._samples_by: dict[tuple[str, str], int] = {}  # per (method, model)
+        self._samples_by: dict[tuple[str, str], int] = {}  # complete samples per (method, model)
         self.history_resets = 0
         self._capacity = capacity
         self._clock = clock
@@ -155,9 +154,13 @@ class Hub:
             h = self.histories[which] = (ModelHistory(s.names) if self._capacity is None
                                          else ModelHistory(s.names, self._capacity))
         h.append(s)
-        self.samples_total += 1
         self._samples_by[which] = self._samples_by.get(which, 0) + 1
         return True
+
+    @property
+    def samples_total(self) -> int:
+        """Complete samples received, of every model and method."""
+        return sum(self._samples_by.values())
 
     @property
     def samples_shown(self) -> int:
