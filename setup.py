@@ -28,7 +28,7 @@ setup(
     ],
     # py.typed: the package ships its annotations (PEP 561) to mypy users of rls_uncertainty.
     # The dashboard's page, and uPlot's files once scripts/setup_dashboard.sh has installed them.
-    package_data={PACKAGE: ["py.typed", "fastdds_player.xml", "dashboard/static/*",
+    package_data={PACKAGE: ["py.typed", "ros/fastdds_player.xml", "dashboard/static/*",
                             "dashboard/node_modules/uplot/LICENSE", "dashboard/node_modules/uplot/dist/uPlot.*.css",
                             "dashboard/node_modules/uplot/dist/uPlot.iife.min.js"]},
     install_requires=["setuptools", "numpy", "scipy", "pyyaml"],
@@ -41,7 +41,7 @@ setup(
     entry_points={
         "console_scripts": [
             "rls-uncertainty = rls_uncertainty.cli:main",
-            "estimator_node = rls_uncertainty.node:main",
+            "estimator_node = rls_uncertainty.ros.node:main",
         ],
     },
 )

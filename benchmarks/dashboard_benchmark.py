@@ -150,8 +150,8 @@ def main() -> int:
     from playwright.sync_api import sync_playwright
 
     models = "[" + ",".join(args.models) + "]"
-    node = subprocess.Popen([sys.executable, "-m", "rls_uncertainty.node", "--ros-args", "--params-file", args.config,
-                             *REPLAY_NODE, "-p", f"models.enabled:={models}"],
+    node = subprocess.Popen([sys.executable, "-m", "rls_uncertainty.ros.node", "--ros-args",
+                             "--params-file", args.config, *REPLAY_NODE, "-p", f"models.enabled:={models}"],
                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, cwd=ROOT)
     dashboard, url = start_dashboard()
     try:

@@ -152,9 +152,9 @@ def pipeline_costs() -> None:
     """Section 5: microseconds per sample used through the whole pipeline, per method."""
     import tempfile
 
-    from rls_uncertainty.bags import convert, read_inputs
-    from rls_uncertainty.config import load_parameters_file, pipeline_config
-    from rls_uncertainty.replay import run_pipeline
+    from rls_uncertainty.offline.bags import convert, read_inputs
+    from rls_uncertainty.offline.replay import run_pipeline
+    from rls_uncertainty.settings.config import load_parameters_file, pipeline_config
 
     variants = {"time": {}, "both": {"estimator.method": "both"}, "both, every 5": {
         "estimator.method": "both", "frequency.every": 5}, "frequency": {"estimator.method": "frequency"}}

@@ -218,7 +218,7 @@ def main() -> int:
     # The child writes node.log through its own descriptor: ours is closed once it has started.
     with open(tmp / "node.log", "w") as node_log:
         node = subprocess.Popen(
-            [sys.executable, *os.environ.get("RLS_BENCH_PYFLAGS", "").split(), "-m", "rls_uncertainty.node",
+            [sys.executable, *os.environ.get("RLS_BENCH_PYFLAGS", "").split(), "-m", "rls_uncertainty.ros.node",
              "--ros-args", "-p", "qos.reliable:=true",
              "-p", f"rate:={args.rate}", "-p", f"estimator.lag_span:={args.lag_span}",
              "-p", "surfaces.elevator:=[elevator]",

@@ -52,8 +52,8 @@ def make_bag(path: Path, minutes: float) -> None:
 
 
 def _make(path: str, minutes: str) -> None:
-    from rls_uncertainty.bags import write_sensor_streams
-    from rls_uncertainty.simulation import SimulationConfig, simulate_sensor_streams
+    from rls_uncertainty.offline.bags import write_sensor_streams
+    from rls_uncertainty.simulation.t2 import SimulationConfig, simulate_sensor_streams
 
     streams = simulate_sensor_streams(cfg=replace(SimulationConfig(), duration=60.0 * float(minutes)))
     write_sensor_streams(path, streams)

@@ -8,7 +8,7 @@ and covariance, paired by the sample stamp every array carries.
 
 Each ``std_msgs/Float64MultiArray`` of the node names its parameters in ``layout.dim[0].label``
 and carries its sample's time in the label of its last dim (``stamp:SEC.NANOSEC``, parsed by
-``rls_uncertainty.outputs.parse_stamp_label``), so arrays are paired by stamp, never by
+``rls_uncertainty.datapath.outputs.parse_stamp_label``), so arrays are paired by stamp, never by
 arrival order (DDS keeps each topic's order, not the order across topics). ``~/M/covariance``
 comes only every ``outputs.covariance_decimation`` samples, an ``n x n`` row-major array
 (``dim[0]`` rows, ``dim[1]`` columns): it is paired with the estimates of its own stamp,
@@ -31,7 +31,7 @@ from rclpy.node import Node
 from rclpy.qos import QoSHistoryPolicy, QoSProfile, QoSReliabilityPolicy
 from std_msgs.msg import Float64MultiArray
 
-from rls_uncertainty.outputs import parse_stamp_label
+from rls_uncertainty.datapath.outputs import parse_stamp_label
 
 VECTORS = ("estimates", "standard_errors", "converged")
 KINDS = (*VECTORS, "covariance")

@@ -20,7 +20,7 @@ __all__ = ["main"]
 
 def _demo(args: argparse.Namespace) -> int:
     """The live node on the bundled bag over DDS, beside the offline replay."""
-    from .player import demo
+    from .ros.player import demo
 
     return demo(rate=args.rate)
 
@@ -28,8 +28,8 @@ def _demo(args: argparse.Namespace) -> int:
 def _simulate(args: argparse.Namespace) -> int:
     """Estimator on a seeded simulated T-2 maneuver (Section IV.A), one sample at a time."""
     from .estimator import EstimatorBank, EstimatorOptions
-    from .report import results_table, rows_from_arrays
-    from .simulation import T2_MODELS, T2_TRUE, add_noise, reduce_short_period, simulate_short_period
+    from .offline.report import results_table, rows_from_arrays
+    from .simulation.t2 import T2_MODELS, T2_TRUE, add_noise, reduce_short_period, simulate_short_period
 
     record = add_noise(simulate_short_period(), args.noise / 100.0, np.random.default_rng(args.seed))
     t, data = reduce_short_period(record)
@@ -68,7 +68,7 @@ def _montecarlo(args: argparse.Namespace) -> int:
     from .estimator import EstimatorOptions
     from .executors import executor_for
     from .files import output_directory
-    from .montecarlo import LEVELS, run_table3, write_outputs
+    from .simulation.montecarlo import LEVELS, run_table3, write_outputs
 
     levels = LEVELS if args.levels is None else tuple(x / 100.0 for x in args.levels)
     out = Path(args.out)
@@ -91,7 +91,7 @@ def _montecarlo(args: argparse.Namespace) -> int:
 def _multisine(args: argparse.Namespace) -> int:
     """Design orthogonal phase-optimized multisines and write their input table (CSV)."""
     from .files import atomic_file
-    from .multisine import design_multisines, relative_peak_factor
+    from .simulation.multisine import design_multisines, relative_peak_factor
 
     names = tuple(args.names) if args.names else tuple(f"input{i + 1}" for i in range(args.inputs))
     if len(names) != args.inputs:
@@ -122,7 +122,7 @@ def _multisine(args: argparse.Namespace) -> int:
 def _gust(value: str) -> float:
     """--gust-intensity: sigma_w in m/s (a number >= 0) or light / moderate / severe
     (MIL-F-8785C low altitude, :data:`.turbulence.LOW_ALTITUDE_SIGMA_W`)."""
-    from .turbulence import LOW_ALTITUDE_SIGMA_W
+    from .simulation.turbulence import LOW_ALTITUDE_SIGMA_W
 
     if value in LOW_ALTITUDE_SIGMA_W:
         return LOW_ALTITUDE_SIGMA_W[value]
@@ -136,14 +136,14 @@ def _gust(value: str) -> float:
 def _noise_on(value: str | None) -> tuple[str, ...]:
     """--noise-on: the signals carrying the band-limited noise, 'all' four or the 'responses'
     (None: the simulation's default)."""
-    from .simulation import BAND_LIMITED_ON, RESPONSES, SIGNALS
+    from .simulation.t2 import BAND_LIMITED_ON, RESPONSES, SIGNALS
 
     return BAND_LIMITED_ON if value is None else {"all": SIGNALS, "responses": RESPONSES}[value]
 
 
 def _noise_on_name(value: str | None) -> str:
     """The name of --noise-on's value (the default's too)."""
-    from .simulation import RESPONSES
+    from .simulation.t2 import RESPONSES
 
     return value or ("responses" if _noise_on(value) == RESPONSES else "all")
 
@@ -154,9 +154,9 @@ _NOISE_ON_HELP = ("measured signals carrying the band-limited noise: 'all' (elev
 
 def _make_campaign(args: argparse.Namespace) -> int:
     """make-bag --campaign N: N seeded T-2 maneuvers in Dryden turbulence, one bag each."""
-    from .bags import write_campaign_bags
-    from .simulation import SimulationConfig
-    from .turbulence import DrydenVertical, scale_length
+    from .offline.bags import write_campaign_bags
+    from .simulation.t2 import SimulationConfig
+    from .simulation.turbulence import DrydenVertical, scale_length
 
     if args.gust_intensity is None:
         raise ConfigError("--campaign needs --gust-intensity (sigma_w in m/s, or light, moderate or severe)")
@@ -171,13 +171,13 @@ def _make_campaign(args: argparse.Namespace) -> int:
 
 def _make_bag(args: argparse.Namespace) -> int:
     """Write the seeded T-2 maneuver on the node's standard input topics."""
-    from .bags import write_t2_bag
+    from .offline.bags import write_t2_bag
 
     if args.campaign is not None:
         return _make_campaign(args)
     if args.gust_intensity is not None:
         raise ConfigError("--gust-intensity sets the turbulence of a simulated campaign: give --campaign N")
-    from .simulation import SIGNALS
+    from .simulation.t2 import SIGNALS
 
     on = SIGNALS if args.noise_on is None else _noise_on(args.noise_on)  # the bundled bag's: all four
     path = write_t2_bag(args.out, args.noise / 100.0, args.seed, force=args.force, band_limited_on=on)
@@ -187,7 +187,7 @@ def _make_bag(args: argparse.Namespace) -> int:
 
 
 def _convert(args: argparse.Namespace) -> int:
-    from .bags import convert
+    from .offline.bags import convert
 
     counts = convert(args.bag, args.mapping, args.out, schemas=args.schemas, force=args.force)
     for topic, n in counts.items():
@@ -201,7 +201,7 @@ def _not_text(name: str, exc: UnicodeDecodeError) -> ConfigError:
 
 
 def _replay_params(args: argparse.Namespace, command: str = "replay") -> dict[str, Any]:
-    from .config import PARAMETER_NAMES, node_parameters_file, pipeline_config
+    from .settings.config import PARAMETER_NAMES, node_parameters_file, pipeline_config
 
     params: dict[str, Any] = {}
     if args.config:  # read as the node reads it; what it ignores is said once
@@ -239,10 +239,10 @@ def _yaml_file(name_or_path: str, directory: Path) -> Path:
 
 
 def _replay(args: argparse.Namespace) -> int:
-    from .compare import DEFAULT_ATOL, DEFAULT_RTOL, comparable, compare_replays, read_run
-    from .config import config_dir
-    from .figures import FigureOptions, figure_formats
-    from .replay import planned_run, replay, run_summary
+    from .offline.compare import DEFAULT_ATOL, DEFAULT_RTOL, comparable, compare_replays, read_run
+    from .offline.figures import FigureOptions, figure_formats
+    from .offline.replay import planned_run, replay, run_summary
+    from .settings.config import config_dir
 
     params = _replay_params(args)
     figures = FigureOptions(figure_formats(args.figures), args.dpi)
@@ -275,9 +275,9 @@ def _replay(args: argparse.Namespace) -> int:
 def _campaign(args: argparse.Namespace) -> int:
     """Many maneuvers through the replay's pipeline into Table 4 and Fig. 12 (docs/campaign.md)."""
     from .campaign import CampaignSettings, campaign_to, from_bags, load_maneuvers
-    from .config import config_dir, node_config, pipeline_config
     from .executors import executor_for
-    from .figures import FigureOptions, figure_formats
+    from .offline.figures import FigureOptions, figure_formats
+    from .settings.config import config_dir, node_config, pipeline_config
 
     params = _replay_params(args, "campaign")
     executor = executor_for(args.scheduler, args.workers)
@@ -304,7 +304,7 @@ def _campaign(args: argparse.Namespace) -> int:
 
 
 def _play(args: argparse.Namespace) -> int:
-    from .player import play
+    from .ros.player import play
 
     return play(args.bag, rate=args.rate, clock=not args.no_clock, reliable=not args.best_effort,
                 wait_for_subscribers=args.wait, start_delay=args.delay, loops=args.loop, window=args.window,
@@ -319,14 +319,14 @@ def _dashboard(args: argparse.Namespace) -> int:
 
 def _status(args: argparse.Namespace) -> int:
     from .dashboard.settings import full_node_name
-    from .operate import status
+    from .ros.operate import status
 
     return status(full_node_name(args.node), args.once, args.timeout)
 
 
 def _service(args: argparse.Namespace) -> int:
     from .dashboard.settings import full_node_name
-    from .operate import call
+    from .ros.operate import call
 
     return call(args.command, full_node_name(args.node), args.timeout)
 
@@ -612,7 +612,7 @@ def _add_campaign(sub: Any) -> None:
 
 
 def _add_play(sub: Any) -> None:
-    from .player import DEFAULT_WINDOW  # no ROS import at module level
+    from .ros.player import DEFAULT_WINDOW  # no ROS import at module level
 
     pl = sub.add_parser("play", help="publish a replay bag over DDS with /clock",
                         description="Publish a replay bag over DDS with /clock. Exit status 0 when every reliable "
@@ -680,7 +680,7 @@ def _version() -> str:
     try:
         return version("rls_uncertainty")
     except PackageNotFoundError:
-        from .config import package_path
+        from .settings.config import package_path
 
         return ElementTree.parse(package_path("package.xml")).getroot().findtext("version", "unknown")
 

@@ -12,7 +12,7 @@ from pathlib import Path
 import yaml
 
 from rls_uncertainty import cli
-from rls_uncertainty.bags import _standard_message, typestore
+from rls_uncertainty.offline.bags import _standard_message, typestore
 
 
 def read_all(path):

@@ -15,8 +15,8 @@ from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.qos import QoSHistoryPolicy, QoSProfile, QoSReliabilityPolicy
 from std_msgs.msg import Float64MultiArray, Header
 
-from rls_uncertainty.inputs import MESSAGE_TYPES, STREAMS, message_class
-from rls_uncertainty.outputs import MODEL_OUTPUTS, NODE_NAME
+from rls_uncertainty.datapath.inputs import MESSAGE_TYPES, STREAMS, message_class
+from rls_uncertainty.datapath.outputs import MODEL_OUTPUTS, NODE_NAME
 
 ROOT = Path(__file__).resolve().parents[1]
 TYPES = {kind: message_class(MESSAGE_TYPES[kind]) for kind in STREAMS}
@@ -24,13 +24,13 @@ RELIABLE = QoSProfile(depth=5000, reliability=QoSReliabilityPolicy.RELIABLE, his
 
 
 class NodeProcess:
-    """``python -m rls_uncertainty.node --ros-args ...`` with its output in a log file."""
+    """``python -m rls_uncertainty.ros.node --ros-args ...`` with its output in a log file."""
 
     def __init__(self, tmp_path: Path, *ros_args: str, name: str = "node") -> None:
         self.log = tmp_path / f"{name}.log"
         self._fh = open(self.log, "w")  # noqa: SIM115 - the child process writes to it; closed in stop()
         self.proc = subprocess.Popen(
-            [sys.executable, "-m", "rls_uncertainty.node", "--ros-args", *ros_args],
+            [sys.executable, "-m", "rls_uncertainty.ros.node", "--ros-args", *ros_args],
             stdout=self._fh, stderr=subprocess.STDOUT, cwd=ROOT, env=dict(os.environ),
         )
 

@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from rls_uncertainty.aero import (
+from rls_uncertainty.aero.coefficients import (
     SAMPLE_FIELDS,
     FlightState,
     aircraft_sample,
@@ -16,8 +16,8 @@ from rls_uncertainty.aero import (
     regressors,
     rep103_to_aircraft,
 )
-from rls_uncertainty.config import DEFAULT_MODELS, load_aircraft
-from rls_uncertainty.limits import PlausibilityLimits
+from rls_uncertainty.datapath.limits import PlausibilityLimits
+from rls_uncertainty.settings.config import DEFAULT_MODELS, load_aircraft
 
 T2 = load_aircraft("t2")
 

@@ -1,4 +1,4 @@
-"""Loud misconfiguration (rls_uncertainty.alerts): the texts name what was expected, what came
+"""Loud misconfiguration (rls_uncertainty.datapath.alerts): the texts name what was expected, what came
 and the parameter to change, computed from real pipeline runs; the policy says them when a
 needed stream is all rejected or no sample is used for a window, at most once per repeat
 period, and never for a healthy or deliberately disabled pipeline. No ROS."""
@@ -10,11 +10,11 @@ import math
 import pytest
 from bag_samples import changed_messages
 
-from rls_uncertainty.alerts import MAX_LINE, MIN_MESSAGES, SHOWN, AlertPolicy, explain, no_estimate
-from rls_uncertainty.bags import read_inputs
-from rls_uncertainty.config import load_parameters_file, pipeline_config
-from rls_uncertainty.inputs import feed
-from rls_uncertainty.pipeline import Pipeline
+from rls_uncertainty.datapath.alerts import MAX_LINE, MIN_MESSAGES, SHOWN, AlertPolicy, explain, no_estimate
+from rls_uncertainty.datapath.inputs import feed
+from rls_uncertainty.datapath.pipeline import Pipeline
+from rls_uncertainty.offline.bags import read_inputs
+from rls_uncertainty.settings.config import load_parameters_file, pipeline_config
 
 from conftest import ROOT
 
@@ -232,8 +232,8 @@ def test_the_explanation_of_a_reason_without_evidence_is_still_a_sentence():
 
 # ------------------------------------------------------------------ identifiability
 def test_identifiability_lines_name_the_regressors_the_figure_and_the_parameter():
-    from rls_uncertainty.alerts import identifiability
-    from rls_uncertainty.identifiability import Problem
+    from rls_uncertainty.datapath.alerts import identifiability
+    from rls_uncertainty.datapath.identifiability import Problem
 
     collinear = Problem("collinear", ("delta_e", "delta_r"), (-0.99999995,), (0.999,), samples=600)
     assert identifiability("CZ", [collinear]) == (

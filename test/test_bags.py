@@ -1,4 +1,4 @@
-"""Bag I/O (rls_uncertainty/bags.py): the bundled T-2 bag, `convert` with the fti_msgs
+"""Bag I/O (rls_uncertainty/offline/bags.py): the bundled T-2 bag, `convert` with the fti_msgs
 mapping, reading replay bags, and every bad bag or mapping ending in a one-line error with
 no output left behind. No DDS."""
 
@@ -14,8 +14,8 @@ import yaml
 from bag_samples import SMALL_MAPPING, crcs, fails, fti_bag, read_all, tree, write_mapping
 
 from rls_uncertainty import cli
-from rls_uncertainty.bags import _standard_message, convert, read_inputs, typestore, write_replay
 from rls_uncertainty.errors import BagError, ConfigError
+from rls_uncertainty.offline.bags import _standard_message, convert, read_inputs, typestore, write_replay
 
 from conftest import FLIGHT_DATA
 
@@ -561,7 +561,7 @@ INPUT_NAMES = ("imu", "airspeed", "dynamic_pressure", "control_surfaces", "thrus
 
 
 def test_the_input_stream_reads_what_the_list_holds_and_digests_the_input_messages(tmp_path):
-    from rls_uncertainty.bags import InputStream
+    from rls_uncertainty.offline.bags import InputStream
 
     listed, t0 = read_inputs(BUNDLED)
     with InputStream(BUNDLED) as stream:
@@ -597,7 +597,7 @@ def test_a_bag_writer_fed_in_pieces_writes_what_one_sort_writes(tmp_path):
     nothing earlier than the next unarrived stamp will come. Its file equals write_replay's of
     the records in their order of arrival, which sorts them all at once (ties of stamp and
     topic keep that order); it never holds more than the disorder spans."""
-    from rls_uncertainty.bags import BagWriter
+    from rls_uncertainty.offline.bags import BagWriter
 
     store = typestore()
     rng = np.random.default_rng(3)
@@ -627,7 +627,7 @@ def test_convert_writes_as_it_reads_holding_back_only_the_stamp_skew(tmp_path, m
     """A recording whose IMU header stamps lag their log time by 0.3 s and whose air data do
     not: the converted bag is in stamp order (rewriting it with write_replay, which sorts every
     record, changes no byte), and the writer never held more than about the skew's records."""
-    from rls_uncertainty.bags import BagWriter
+    from rls_uncertainty.offline.bags import BagWriter
 
     n, skew = 600, 300_000_000
     imu = [10**18 + k * 20_000_000 - skew for k in range(n)]

@@ -1,12 +1,12 @@
-"""The pipeline's counters and evidence (rls_uncertainty.bookkeeping): bounded tables whatever
+"""The pipeline's counters and evidence (rls_uncertainty.datapath.bookkeeping): bounded tables whatever
 arrives, and the report the diagnostics and the replay read."""
 
 from __future__ import annotations
 
 from collections import Counter
 
-from rls_uncertainty.bookkeeping import _EVIDENCE_KEYS, KEY_CHARS, KEYS_KEPT, Bookkeeping, count_bounded
-from rls_uncertainty.pipeline import STREAMS
+from rls_uncertainty.datapath.bookkeeping import _EVIDENCE_KEYS, KEY_CHARS, KEYS_KEPT, Bookkeeping, count_bounded
+from rls_uncertainty.datapath.pipeline import STREAMS
 
 
 def test_evidence_keeps_the_newest_per_pair_and_a_bounded_number_of_pairs():

@@ -14,8 +14,8 @@ import yaml
 from rls_uncertainty import cli
 from rls_uncertainty.campaign import CampaignSettings, campaign_to, load_maneuvers
 from rls_uncertainty.campaign.figure import campaign_figures
-from rls_uncertainty.config import node_config, pipeline_config
 from rls_uncertainty.executors import LocalProcesses
+from rls_uncertainty.settings.config import node_config, pipeline_config
 from rls_uncertainty.testing import parameters, replay_bag
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -91,8 +91,7 @@ def test_fig12_gets_each_maneuver_s_values_and_table_4_s_mean_and_scatter(tmp_pa
     """campaign_figures hands figures.figure12 (tested in test_figures.py) every maneuver's
     estimate and three standard errors per parameter, in campaign order, and Table 4's mean and
     scatter, one call per model."""
-    from rls_uncertainty import figures
-
+    from rls_uncertainty.offline import figures
     p = parameters("t2")
     settings = CampaignSettings(pipeline_config(p), node_config(p).topics)
     c = campaign_to(tmp_path / "o", load_maneuvers(_file(tmp_path, SPANS), BUNDLED), settings, LocalProcesses(1),

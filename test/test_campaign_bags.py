@@ -9,10 +9,10 @@ import pytest
 import yaml
 
 from rls_uncertainty import cli
-from rls_uncertainty.bags import read_inputs, write_campaign_bags
 from rls_uncertainty.errors import ConfigError
-from rls_uncertainty.simulation import RESPONSES, campaign_seeds, simulate_sensor_streams
-from rls_uncertainty.turbulence import LOW_ALTITUDE_SIGMA_W, DrydenVertical
+from rls_uncertainty.offline.bags import read_inputs, write_campaign_bags
+from rls_uncertainty.simulation.t2 import RESPONSES, campaign_seeds, simulate_sensor_streams
+from rls_uncertainty.simulation.turbulence import LOW_ALTITUDE_SIGMA_W, DrydenVertical
 
 
 def test_each_bag_holds_its_seeded_maneuver_in_turbulence(tmp_path):

@@ -19,8 +19,8 @@ from rls_uncertainty import cli
 from rls_uncertainty.campaign import CampaignSettings, Maneuver, campaign_to, from_bags
 from rls_uncertainty.campaign.figure import campaign_figures
 from rls_uncertainty.campaign.run import run_maneuver
-from rls_uncertainty.config import node_config, pipeline_config
 from rls_uncertainty.executors import LocalProcesses
+from rls_uncertainty.settings.config import node_config, pipeline_config
 from rls_uncertainty.testing import parameters
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -143,8 +143,7 @@ def test_method_time_gives_the_time_rows_of_both_without_a_method_column_in_the_
 
 
 def test_fig12_gets_the_frequency_domain_values_beside_the_time_domain_ones(bags, tmp_path, monkeypatch):
-    from rls_uncertainty import figures
-
+    from rls_uncertainty.offline import figures
     p = parameters("t2", {"estimator.method": "both"})
     settings = CampaignSettings(pipeline_config(p), node_config(p).topics)
     c = campaign_to(tmp_path / "o", from_bags(bags), settings, LocalProcesses(1), figures=None)
@@ -169,8 +168,7 @@ def test_fig12_gets_the_frequency_domain_values_beside_the_time_domain_ones(bags
 
 
 def test_with_the_frequency_domain_alone_fig12_and_the_rows_are_its_own(bags, tmp_path, monkeypatch):
-    from rls_uncertainty import figures
-
+    from rls_uncertainty.offline import figures
     p = parameters("t2", {"estimator.method": "frequency"})
     settings = CampaignSettings(pipeline_config(p), node_config(p).topics)
     c = campaign_to(tmp_path / "o", from_bags(bags[:2]), settings, LocalProcesses(1), figures=None)

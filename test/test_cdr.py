@@ -1,4 +1,4 @@
-"""rls_uncertainty.cdr against rosbags (and rclpy): thousands of seeded random messages of every
+"""rls_uncertainty.datapath.cdr against rosbags (and rclpy): thousands of seeded random messages of every
 type it decodes (the inputs' and Float64MultiArray, the outputs the dashboard reads), in both
 byte orders, field for field with floats compared bit for bit; its
 encoders byte for byte; truncated and garbage payloads refused exactly when rosbags refuses
@@ -17,8 +17,8 @@ import pytest
 from rosbags.serde import SerdeError
 from rosbags.typesys import Stores, get_typestore
 
-from rls_uncertainty import cdr
-from rls_uncertainty.inputs import MESSAGE_TYPES
+from rls_uncertainty.datapath import cdr
+from rls_uncertainty.datapath.inputs import MESSAGE_TYPES
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -192,7 +192,7 @@ def test_messages_serialized_by_rclpy_decode_to_the_same_fields(msgtype):
     with up to 8 bytes after the message (its size estimate pads empty sequences)."""
     from rclpy.serialization import deserialize_message, serialize_message
 
-    from rls_uncertainty.inputs import message_class
+    from rls_uncertainty.datapath.inputs import message_class
 
     cls = message_class(msgtype)
     longer = 0

@@ -246,8 +246,7 @@ def test_bad_text_in_parameter_and_aircraft_files_is_one_line(tmp_path, capsys):
 
 
 def test_the_player_functions_refuse_bad_numbers_before_starting_dds():
-    from rls_uncertainty import player
-
+    from rls_uncertainty.ros import player
     for kwargs in ({"rate": math.nan}, {"rate": -1.0}, {"rate": math.inf}, {"start_delay": -0.5},
                    {"wait_for_subscribers": -1}, {"wait_timeout": math.nan}, {"loops": 0}, {"loops": True},
                    {"window": 0}, {"ack_timeout": -1.0}, {"ack_timeout": math.inf}):
@@ -262,8 +261,7 @@ def test_play_leaves_dds_discovery_to_the_environment(monkeypatch):
     `play` starts DDS with the caller's environment, whatever it is."""
     import rclpy
 
-    from rls_uncertainty import player
-
+    from rls_uncertainty.ros import player
     class Started(Exception):
         pass
 
@@ -286,13 +284,13 @@ def test_play_leaves_dds_discovery_to_the_environment(monkeypatch):
 
 # ------------------------------------------------------------------ programming errors
 WORKERS = [
-    ("rls_uncertainty.replay.replay", ["replay", "{bag}", "--out", "{tmp}/r", "--quiet"]),
-    ("rls_uncertainty.bags.convert", ["convert", "{bag}", "--mapping", "m.yaml", "--out", "{tmp}/c"]),
-    ("rls_uncertainty.bags.write_t2_bag", ["make-bag", "--out", "{tmp}/b"]),
-    ("rls_uncertainty.multisine.design_multisines",
+    ("rls_uncertainty.offline.replay.replay", ["replay", "{bag}", "--out", "{tmp}/r", "--quiet"]),
+    ("rls_uncertainty.offline.bags.convert", ["convert", "{bag}", "--mapping", "m.yaml", "--out", "{tmp}/c"]),
+    ("rls_uncertainty.offline.bags.write_t2_bag", ["make-bag", "--out", "{tmp}/b"]),
+    ("rls_uncertainty.simulation.multisine.design_multisines",
      ["multisine", "--period", "12", "--band", "0.2", "2", "--inputs", "2", "--out", "{tmp}/m.csv"]),
-    ("rls_uncertainty.player.play", ["play", "{bag}"]),
-    ("rls_uncertainty.player.demo", ["demo"]),
+    ("rls_uncertainty.ros.player.play", ["play", "{bag}"]),
+    ("rls_uncertainty.ros.player.demo", ["demo"]),
 ]
 
 
@@ -313,7 +311,7 @@ def test_a_programming_error_keeps_its_traceback(tmp_path, capsys, monkeypatch, 
 
 # ------------------------------------------------------------------ simulate
 def test_simulate_prints_every_t2_parameter_with_its_true_value(capsys):
-    from rls_uncertainty.simulation import T2_MODELS, T2_TRUE
+    from rls_uncertainty.simulation.t2 import T2_MODELS, T2_TRUE
 
     assert cli.main(["simulate", "--noise", "10", "--seed", "3"]) == 0
     lines = capsys.readouterr().out.splitlines()

@@ -1,4 +1,4 @@
-"""replay --compare (rls_uncertainty/compare.py): a replay against a reference replay sample by
+"""replay --compare (rls_uncertainty/offline/compare.py): a replay against a reference replay sample by
 sample. Equal within the tolerance (also under another OpenBLAS kernel), different with the
 largest differences named (a changed parameter; values moved by hand across the tolerance's
 edge), not comparable with the reason (another bag, span, models, rate, no run record)."""
@@ -14,10 +14,10 @@ import pytest
 from bag_samples import fails
 
 from rls_uncertainty import cli
-from rls_uncertainty.compare import DEFAULT_RTOL, comparable, compare_replays, read_run
-from rls_uncertainty.config import load_parameters_file
 from rls_uncertainty.errors import NotComparable
-from rls_uncertainty.replay import replay
+from rls_uncertainty.offline.compare import DEFAULT_RTOL, comparable, compare_replays, read_run
+from rls_uncertainty.offline.replay import replay
+from rls_uncertainty.settings.config import load_parameters_file
 
 from conftest import ROOT
 

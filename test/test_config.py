@@ -12,7 +12,12 @@ from pathlib import Path
 
 import pytest
 
-from rls_uncertainty.config import (
+from rls_uncertainty.aero.differentiation import DifferentiatorConfig
+from rls_uncertainty.aero.surface_mixing import SurfaceMixing
+from rls_uncertainty.datapath.identifiability import IdentifiabilityConfig
+from rls_uncertainty.estimator import RESIDUALS, WINDOWS
+from rls_uncertainty.frequency import FrequencyOptions
+from rls_uncertainty.settings.config import (
     NODE_NAME,
     PARAMETERS,
     ConfigError,
@@ -29,11 +34,6 @@ from rls_uncertainty.config import (
     pipeline_config,
     startup_parameters,
 )
-from rls_uncertainty.differentiation import DifferentiatorConfig
-from rls_uncertainty.estimator import RESIDUALS, WINDOWS
-from rls_uncertainty.frequency import FrequencyOptions
-from rls_uncertainty.identifiability import IdentifiabilityConfig
-from rls_uncertainty.surface_mixing import SurfaceMixing
 
 ROOT = Path(__file__).resolve().parents[1]
 T2 = load_aircraft("t2")
@@ -441,7 +441,7 @@ def test_the_value_that_wins_is_the_one_rcl_gives_the_node(tmp_path):
 
 # ------------------------------------------------------------------ the console script
 def _run_node(*ros_args):
-    return subprocess.run([sys.executable, "-m", "rls_uncertainty.node", "--ros-args", *ros_args],
+    return subprocess.run([sys.executable, "-m", "rls_uncertainty.ros.node", "--ros-args", *ros_args],
                           capture_output=True, text=True, timeout=120, cwd=ROOT)
 
 
@@ -467,7 +467,7 @@ def test_the_node_starts_with_checked_values_and_logs_each_warning_once(tmp_path
                            "    speed: 3\n")
     log = tmp_path / "node.log"
     with open(log, "w") as fh:
-        proc = subprocess.Popen([sys.executable, "-m", "rls_uncertainty.node", "--ros-args", "--params-file", path],
+        proc = subprocess.Popen([sys.executable, "-m", "rls_uncertainty.ros.node", "--ros-args", "--params-file", path],
                                 stdout=fh, stderr=subprocess.STDOUT, cwd=ROOT)
     try:
         deadline = time.monotonic() + 120
@@ -498,8 +498,7 @@ def test_what_only_rcl_refuses_is_still_one_line_of_ours_and_exit_status_2():
 
 
 def test_parameter_files_are_matched_against_the_name_the_node_runs_under():
-    from rls_uncertainty import node
-
+    from rls_uncertainty.ros import node
     assert NODE_NAME == node.NODE_NAME
 
 

@@ -7,7 +7,7 @@ import warnings
 import numpy as np
 import pytest
 
-from rls_uncertainty.convergence import ConvergenceConfig, ConvergenceMonitor
+from rls_uncertainty.datapath.convergence import ConvergenceConfig, ConvergenceMonitor
 from rls_uncertainty.errors import ConfigError, RlsUncertaintyError
 
 

@@ -12,7 +12,6 @@ from types import SimpleNamespace
 
 import pytest
 
-from rls_uncertainty.config import NODE_NAME
 from rls_uncertainty.dashboard.health import HealthTracker, parse_statuses
 from rls_uncertainty.dashboard.hub import Hub, Source
 from rls_uncertainty.dashboard.model import (
@@ -30,9 +29,10 @@ from rls_uncertainty.dashboard.model import (
     split_topic,
 )
 from rls_uncertainty.dashboard.settings import full_node_name, load_reference
+from rls_uncertainty.datapath.inputs import STREAMS
+from rls_uncertainty.datapath.outputs import stamp_label
 from rls_uncertainty.errors import ConfigError
-from rls_uncertainty.inputs import STREAMS
-from rls_uncertainty.outputs import stamp_label
+from rls_uncertainty.settings.config import NODE_NAME
 
 ROOT = Path(__file__).resolve().parents[1]
 NAMES = ("CZ_0", "CZ_alpha", "CZ_delta_e")
@@ -194,9 +194,9 @@ def test_history_is_bounded_and_keeps_the_newest_half_at_full_rate():
 # ------------------------------------------------------------------ diagnostics read back
 @pytest.fixture(scope="module")
 def bundled_replay():
-    from rls_uncertainty.bags import read_inputs
-    from rls_uncertainty.config import load_parameters_file, node_config, pipeline_config
-    from rls_uncertainty.replay import run_pipeline
+    from rls_uncertainty.offline.bags import read_inputs
+    from rls_uncertainty.offline.replay import run_pipeline
+    from rls_uncertainty.settings.config import load_parameters_file, node_config, pipeline_config
 
     params = load_parameters_file("t2")
     messages = read_inputs(ROOT / "bags" / "t2_maneuver")[0]
@@ -229,9 +229,9 @@ def _inputs(rejected: dict[str, int], recent: int, window: float = 10.0, prefix:
 
 def _snapshot(enabled: bool):
     """What a fresh node with the t2 configuration hands its diagnostics policy."""
-    from rls_uncertainty.config import load_parameters_file, pipeline_config
-    from rls_uncertainty.diagnostics import Snapshot
-    from rls_uncertainty.pipeline import Pipeline
+    from rls_uncertainty.datapath.pipeline import Pipeline
+    from rls_uncertainty.ros.diagnostics import Snapshot
+    from rls_uncertainty.settings.config import load_parameters_file, pipeline_config
 
     pipe = Pipeline(pipeline_config(load_parameters_file("t2")))
     return Snapshot(counters=pipe.counters(), models=[(m.output, pipe.model_report(j)) for j, m in
@@ -244,7 +244,7 @@ def _snapshot(enabled: bool):
 def test_statuses_of_namespaced_nodes_are_told_apart():
     """Three nodes named rls_estimator (root, /a, /b) report on one /diagnostics: each
     consumer reads its own node's statuses, named by the node's policy."""
-    from rls_uncertainty.diagnostics import DiagnosticsPolicy
+    from rls_uncertainty.ros.diagnostics import DiagnosticsPolicy
 
     arrays = []
     for node, enabled in (("/rls_estimator", True), ("/a/rls_estimator", False), ("/b/rls_estimator", True)):
@@ -286,7 +286,7 @@ def _hostile_streams(case: str):
 
     import numpy as np
 
-    from rls_uncertainty.simulation import simulate_sensor_streams
+    from rls_uncertainty.simulation.t2 import simulate_sensor_streams
 
     st = simulate_sensor_streams(0.2, 250)
     rng = np.random.default_rng(19)
@@ -313,11 +313,11 @@ def test_why_a_parameter_is_not_identifiable_is_read_from_the_published_figures_
     """The node's own arrays (its encoder after a run of the node's pipeline on a hostile
     bag) and /diagnostics into the hub: each parameter's reason names what the node's
     identifiability monitor found (its problems, not the arrays), and the figures it shows."""
-    from rls_uncertainty.bags import read_inputs, write_sensor_streams
-    from rls_uncertainty.cdr import FLOAT64_MULTIARRAY, decode
-    from rls_uncertainty.config import load_parameters_file, node_config, pipeline_config
-    from rls_uncertainty.outputs import FIT_OUTPUTS, OutputLayout
-    from rls_uncertainty.replay import run_pipeline
+    from rls_uncertainty.datapath.cdr import FLOAT64_MULTIARRAY, decode
+    from rls_uncertainty.datapath.outputs import FIT_OUTPUTS, OutputLayout
+    from rls_uncertainty.offline.bags import read_inputs, write_sensor_streams
+    from rls_uncertainty.offline.replay import run_pipeline
+    from rls_uncertainty.settings.config import load_parameters_file, node_config, pipeline_config
 
     params = load_parameters_file("t2")
     if case != "noise":  # the rudder in C_Z (the T-2 maneuver does not move it otherwise)
@@ -530,8 +530,8 @@ def test_reference_values_are_a_mapping_of_names_to_finite_numbers(tmp_path):
 # ------------------------------------------------------------------ replay
 @pytest.fixture(scope="module")
 def t2_replay(tmp_path_factory):
-    from rls_uncertainty.config import load_parameters_file
-    from rls_uncertainty.replay import replay
+    from rls_uncertainty.offline.replay import replay
+    from rls_uncertainty.settings.config import load_parameters_file
 
     out = tmp_path_factory.mktemp("t2") / "est"
     replay(ROOT / "bags" / "t2_maneuver", load_parameters_file("t2"), out, progress=False, plots=False)
@@ -604,7 +604,7 @@ def _last_fits(path):
     """The last ~/M/fit and ~/M/identifiability of an estimates.mcap, read with rosbags."""
     from rosbags.highlevel import AnyReader
 
-    from rls_uncertainty.bags import typestore
+    from rls_uncertainty.offline.bags import typestore
 
     last = {}
     with AnyReader([path], default_typestore=typestore()) as reader:
@@ -705,8 +705,8 @@ def test_a_directory_without_replay_outputs_is_refused_with_the_reason(tmp_path)
 @pytest.fixture(scope="module")
 def t2_both(tmp_path_factory):
     """The bundled bag replayed with both estimators (estimator.method both)."""
-    from rls_uncertainty.config import load_parameters_file
-    from rls_uncertainty.replay import replay
+    from rls_uncertainty.offline.replay import replay
+    from rls_uncertainty.settings.config import load_parameters_file
 
     out = tmp_path_factory.mktemp("t2_both") / "est"
     replay(ROOT / "bags" / "t2_maneuver", {**load_parameters_file("t2"), "estimator.method": "both"}, out,

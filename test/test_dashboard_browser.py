@@ -39,9 +39,9 @@ import rclpy
 from rclpy.qos import QoSHistoryPolicy, QoSProfile, QoSReliabilityPolicy
 from std_msgs.msg import Float64MultiArray, Header
 
-from rls_uncertainty.inputs import STREAMS
-from rls_uncertainty.outputs import parse_stamp_label
-from rls_uncertainty.simulation import T2_TRUE
+from rls_uncertainty.datapath.inputs import STREAMS
+from rls_uncertainty.datapath.outputs import parse_stamp_label
+from rls_uncertainty.simulation.t2 import T2_TRUE
 
 from conftest import FLIGHT_DATA
 from ros_harness import ROOT, NodeProcess
@@ -361,9 +361,9 @@ def test_a_live_node_publishing_both_methods_shows_its_last_frequency_domain_val
 # ------------------------------------------------------------------ replay
 @pytest.fixture(scope="module")
 def twin_otter_replay(tmp_path_factory):
-    from rls_uncertainty.bags import convert
-    from rls_uncertainty.config import load_parameters_file
-    from rls_uncertainty.replay import replay
+    from rls_uncertainty.offline.bags import convert
+    from rls_uncertainty.offline.replay import replay
+    from rls_uncertainty.settings.config import load_parameters_file
 
     base = tmp_path_factory.mktemp("twin_otter")
     convert(FLIGHT_DATA / "totter_f1_017", ROOT / "msg_schemas" / "fti_msgs" / "mapping.yaml", base / "bag")
@@ -420,7 +420,7 @@ def _last_held_back(path: Path) -> dict[str, list[str]]:
     ``M:r_squared``), read with rosbags."""
     from rosbags.highlevel import AnyReader
 
-    from rls_uncertainty.bags import typestore
+    from rls_uncertainty.offline.bags import typestore
 
     last = None
     with AnyReader([path], default_typestore=typestore()) as reader:

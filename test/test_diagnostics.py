@@ -10,10 +10,10 @@ from pathlib import Path
 
 import pytest
 
-from rls_uncertainty import diagnostics as dg
-from rls_uncertainty.diagnostics import OK, WARN, DiagnosticsPolicy, Snapshot
-from rls_uncertainty.inputs import STREAMS as INPUTS
-from rls_uncertainty.outputs import NODE_NAME
+from rls_uncertainty.datapath.inputs import STREAMS as INPUTS
+from rls_uncertainty.datapath.outputs import NODE_NAME
+from rls_uncertainty.ros import diagnostics as dg
+from rls_uncertainty.ros.diagnostics import OK, WARN, DiagnosticsPolicy, Snapshot
 
 SEC = 1_000_000_000
 NOW = 1_700_000_000 * SEC
@@ -62,7 +62,7 @@ def test_levels_are_the_diagnostic_msgs_levels():
 
 
 def test_the_module_imports_no_ros_package():
-    code = ("import sys, rls_uncertainty.diagnostics; "
+    code = ("import sys, rls_uncertainty.ros.diagnostics; "
             "print(sorted(m for m in sys.modules if m.split('.')[0] in ('rclpy', 'diagnostic_msgs', 'rosbags')))")
     root = Path(__file__).resolve().parents[1]
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=root)
@@ -293,8 +293,8 @@ def test_malformed_reason_and_warning_name_topic_type_and_text():
 
 # ------------------------------------------------------------------ with a real pipeline
 def test_statuses_from_a_real_pipeline():
-    from rls_uncertainty.config import load_parameters_file, pipeline_config
-    from rls_uncertainty.pipeline import Pipeline
+    from rls_uncertainty.datapath.pipeline import Pipeline
+    from rls_uncertainty.settings.config import load_parameters_file, pipeline_config
 
     config = pipeline_config(load_parameters_file("t2"))
     p = Pipeline(config)

@@ -7,7 +7,7 @@ from fractions import Fraction
 import numpy as np
 import pytest
 
-from rls_uncertainty.differentiation import (
+from rls_uncertainty.aero.differentiation import (
     MAX_ORDER,
     MAX_WINDOW,
     MIN_WINDOW,

@@ -185,7 +185,7 @@ def test_auto_state_continues_bit_identically_with_the_memory_of_max_lags(forget
 
 # --------------------------------------------------------------------------- configuration, pipeline, CLI
 def test_parameters_reach_the_bank_and_are_validated():
-    from rls_uncertainty.config import ConfigError, pipeline_config
+    from rls_uncertainty.settings.config import ConfigError, pipeline_config
 
     cfg = pipeline_config({"estimator.lag_selection": "auto", "estimator.max_lag_span": 1.6})
     assert cfg.estimator.lags == "auto" and cfg.estimator.max_lags == 80
@@ -206,9 +206,9 @@ def test_parameters_reach_the_bank_and_are_validated():
 def test_pipeline_publishes_the_chosen_lags_per_sample_and_in_the_model_fit():
     from test_pipeline import T2_PARAMS, feed_streams
 
-    from rls_uncertainty.config import pipeline_config
-    from rls_uncertainty.pipeline import Pipeline
-    from rls_uncertainty.simulation import simulate_sensor_streams
+    from rls_uncertainty.datapath.pipeline import Pipeline
+    from rls_uncertainty.settings.config import pipeline_config
+    from rls_uncertainty.simulation.t2 import simulate_sensor_streams
 
     st = simulate_sensor_streams(0.2, 250)
     pipe = Pipeline(pipeline_config({**T2_PARAMS, "estimator.lag_selection": "auto"}))
@@ -229,7 +229,7 @@ def test_monte_carlo_with_auto_lags_uses_the_default_burn_in(tmp_path):
     """run_level with lags="auto" runs the bank's default residual burn-in (50 samples) unless
     told otherwise; the estimates do not depend on it, the standard errors do, and the table
     says which was used."""
-    from rls_uncertainty.montecarlo import run_level, write_outputs
+    from rls_uncertainty.simulation.montecarlo import run_level, write_outputs
 
     default = run_level(0.0, 3, options=EstimatorOptions(lags="auto"))
     paper = run_level(0.0, 3, options=EstimatorOptions(lags="auto", residual_burn_in=0))

@@ -1,4 +1,4 @@
-"""What the replay's figures draw from (rls_uncertainty/figure_data.py), against independent
+"""What the replay's figures draw from (rls_uncertainty/offline/figure_data.py), against independent
 computations: the batch formula of estimator.batch on the stored rows, scipy's Welch
 spectrum, closed forms on synthetic signals, and the replay's own CSV. No DDS.
 
@@ -14,16 +14,16 @@ import numpy as np
 import pytest
 from scipy import signal
 
-from rls_uncertainty.config import load_parameters_file, pipeline_config
 from rls_uncertainty.estimator.batch import batch_estimate
-from rls_uncertainty.figure_data import (
+from rls_uncertainty.offline.figure_data import (
     FigureData,
     FitStatistics,
     LaggedProducts,
     WelchSpectrum,
     excitation_start,
 )
-from rls_uncertainty.replay import replay
+from rls_uncertainty.offline.replay import replay
+from rls_uncertainty.settings.config import load_parameters_file, pipeline_config
 
 ROOT = Path(__file__).resolve().parents[1]
 BUNDLED = ROOT / "bags" / "t2_maneuver"
@@ -149,12 +149,10 @@ def _converged_from_csv(path: Path) -> tuple[dict[str, int], dict[str, int]]:
 
 
 def test_the_figure_data_of_a_replay_matches_its_csv_and_stays_bounded(tmp_path, monkeypatch):
-    from rls_uncertainty import replay as replay_module
-
+    from rls_uncertainty.offline import replay as replay_module
     monkeypatch.setattr(replay_module, "PLOT_POINTS", 40)
     captured = {}
-    from rls_uncertainty import figures
-
+    from rls_uncertainty.offline import figures
     monkeypatch.setattr(figures, "replay_figures", lambda out, title, history, data, options: captured.update(
         data=data, history=history) or [])
     replay(BUNDLED, load_parameters_file("t2"), tmp_path / "r", progress=False)
@@ -176,9 +174,9 @@ def test_the_figure_data_of_a_replay_matches_its_csv_and_stays_bounded(tmp_path,
 def test_the_figure_data_follows_the_measured_coefficients_of_the_recorded_rows():
     """With every regression row recorded (run_pipeline(record=True)), the kept measured
     coefficients are the rows' z and the modelled ones x' theta of the sample's estimate."""
-    from rls_uncertainty.bags import read_inputs
-    from rls_uncertainty.replay import run_pipeline
-    from rls_uncertainty.results import History
+    from rls_uncertainty.offline.bags import read_inputs
+    from rls_uncertainty.offline.replay import run_pipeline
+    from rls_uncertainty.offline.results import History
 
     params = load_parameters_file("t2")
     config = pipeline_config(params)

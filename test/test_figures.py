@@ -1,4 +1,4 @@
-"""The report figures (rls_uncertainty/figures.py): files in every requested format, units on
+"""The report figures (rls_uncertainty/offline/figures.py): files in every requested format, units on
 every axis, y-limits from the excited part, the convergence time and the retained lags where
 the run's own outputs put them, Fig. 7 against the batch formula, Fig. 12 against its inputs.
 The figures are read back from the matplotlib objects the module drew (captured as they are
@@ -16,12 +16,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from rls_uncertainty import figures
-from rls_uncertainty.bags import convert, read_inputs
-from rls_uncertainty.config import load_parameters_file, pipeline_config
 from rls_uncertainty.errors import ConfigError
 from rls_uncertainty.estimator.batch import batch_estimate
-from rls_uncertainty.figures import (
+from rls_uncertainty.offline import figures
+from rls_uncertainty.offline.bags import convert, read_inputs
+from rls_uncertainty.offline.figures import (
     REPLAY_FIGURES,
     FigureOptions,
     figure12,
@@ -30,7 +29,8 @@ from rls_uncertainty.figures import (
     parameter_unit,
     y_limits,
 )
-from rls_uncertainty.replay import replay, run_pipeline
+from rls_uncertainty.offline.replay import replay, run_pipeline
+from rls_uncertainty.settings.config import load_parameters_file, pipeline_config
 
 from conftest import FLIGHT_DATA, ROOT
 

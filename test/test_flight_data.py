@@ -11,10 +11,10 @@ import sys
 import numpy as np
 import pytest
 
-from rls_uncertainty.bags import convert, read_inputs
-from rls_uncertainty.config import load_parameters_file, pipeline_config
 from rls_uncertainty.estimator import batch_estimate
-from rls_uncertainty.replay import run_pipeline
+from rls_uncertainty.offline.bags import convert, read_inputs
+from rls_uncertainty.offline.replay import run_pipeline
+from rls_uncertainty.settings.config import load_parameters_file, pipeline_config
 
 from conftest import FLIGHT_DATA, ROOT
 

@@ -12,7 +12,7 @@ from rls_uncertainty.errors import EstimatorNotReady, NonFiniteInput
 from rls_uncertainty.estimator import nearest_psd
 from rls_uncertainty.frequency import FrequencyBank, FrequencyOptions, finite_fourier_transform, frequency_reference
 from rls_uncertainty.frequency.covariance import PairGeometry, middle
-from rls_uncertainty.montecarlo import level_inputs
+from rls_uncertainty.simulation.montecarlo import level_inputs
 
 RATE = 50.0
 SIZES = (2, 3)  # the T-2's C_Z (alpha, delta_e) and C_m (alpha, q_hat, delta_e)

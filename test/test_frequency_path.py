@@ -1,4 +1,4 @@
-"""The frequency-domain estimator in the pipeline (rls_uncertainty/frequency_path.py): it takes
+"""The frequency-domain estimator in the pipeline (rls_uncertainty/datapath/frequency_path.py): it takes
 the time-domain estimator's rows without the bias columns (any order of the regressors), gives
 exactly what a FrequencyBank fed those rows gives, publishes every `frequency.every` samples
 with that sample's stamp, leaves the time-domain numbers untouched, refuses a row for both
@@ -14,15 +14,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from rls_uncertainty.bags import read_inputs
-from rls_uncertainty.config import load_parameters_file, pipeline_config
-from rls_uncertainty.convergence import ConvergenceMonitor
+from rls_uncertainty.datapath.convergence import ConvergenceMonitor
+from rls_uncertainty.datapath.frequency_path import FrequencyPath
+from rls_uncertainty.datapath.inputs import feed
+from rls_uncertainty.datapath.pipeline import Pipeline
 from rls_uncertainty.errors import NonFiniteInput
 from rls_uncertainty.frequency import FrequencyBank
-from rls_uncertainty.frequency_path import FrequencyPath
-from rls_uncertainty.inputs import feed
-from rls_uncertainty.pipeline import Pipeline
-from rls_uncertainty.replay import run_pipeline
+from rls_uncertainty.offline.bags import read_inputs
+from rls_uncertainty.offline.replay import run_pipeline
+from rls_uncertainty.settings.config import load_parameters_file, pipeline_config
 
 ROOT = Path(__file__).resolve().parents[1]
 BUNDLED = ROOT / "bags" / "t2_maneuver"

@@ -24,12 +24,12 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from rls_uncertainty.bags import read_inputs
-from rls_uncertainty.bookkeeping import KEYS_KEPT
-from rls_uncertainty.config import load_parameters_file, pipeline_config
-from rls_uncertainty.inputs import feed
-from rls_uncertainty.outputs import OutputLayout
-from rls_uncertainty.pipeline import STREAMS, Pipeline
+from rls_uncertainty.datapath.bookkeeping import KEYS_KEPT
+from rls_uncertainty.datapath.inputs import feed
+from rls_uncertainty.datapath.outputs import OutputLayout
+from rls_uncertainty.datapath.pipeline import STREAMS, Pipeline
+from rls_uncertainty.offline.bags import read_inputs
+from rls_uncertainty.settings.config import load_parameters_file, pipeline_config
 
 from conftest import ROOT
 

@@ -1,4 +1,4 @@
-"""Identifiability (rls_uncertainty.identifiability): the running regressor statistics against
+"""Identifiability (rls_uncertainty.datapath.identifiability): the running regressor statistics against
 numpy's batch formulas, R^2 against a batch least-squares fit, the parameter correlations
 against the bank's own covariance, and each test of a parameter (fit, excitation,
 collinearity) on data built to pass or fail it, with what is said of a model not ready.
@@ -12,9 +12,7 @@ import sys
 import numpy as np
 import pytest
 
-from rls_uncertainty.errors import ConfigError
-from rls_uncertainty.estimator import EstimatorBank, EstimatorOptions
-from rls_uncertainty.identifiability import (
+from rls_uncertainty.datapath.identifiability import (
     ANGLE,
     BIAS,
     NONDIMENSIONAL,
@@ -23,6 +21,8 @@ from rls_uncertainty.identifiability import (
     RegressorStatistics,
     r_squared,
 )
+from rls_uncertainty.errors import ConfigError
+from rls_uncertainty.estimator import EstimatorBank, EstimatorOptions
 
 N = 600
 
@@ -191,7 +191,7 @@ def test_invalid_thresholds_are_refused_naming_the_parameter(field, value):
 
 
 def test_the_module_imports_numpy_only():
-    code = "import sys, rls_uncertainty.identifiability; " \
+    code = "import sys, rls_uncertainty.datapath.identifiability; " \
            "print(sorted({m.split('.')[0] for m in sys.modules} & {'rclpy', 'rosbags', 'yaml', 'scipy', 'mcap'}))"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "[]"

@@ -1,4 +1,4 @@
-"""The node's input contract (rls_uncertainty.inputs): one message type and default topic per
+"""The node's input contract (rls_uncertainty.datapath.inputs): one message type and default topic per
 pipeline stream, the defaults the configuration uses, and feed(): the fields read, the
 frame check. No ROS."""
 
@@ -6,9 +6,9 @@ from __future__ import annotations
 
 from types import SimpleNamespace as NS
 
-from rls_uncertainty.config import node_config
-from rls_uncertainty.inputs import DEFAULT_TOPICS, MESSAGE_TYPES, feed, stamp_ns
-from rls_uncertainty.pipeline import STREAMS
+from rls_uncertainty.datapath.inputs import DEFAULT_TOPICS, MESSAGE_TYPES, feed, stamp_ns
+from rls_uncertainty.datapath.pipeline import STREAMS
+from rls_uncertainty.settings.config import node_config
 
 
 class Recorder:

@@ -1,5 +1,5 @@
 """Each input message judged on its own and against the previous IMU message
-(rls_uncertainty.intake): a body rate that changes faster than limits.angular_acceleration
+(rls_uncertainty.datapath.intake): a body rate that changes faster than limits.angular_acceleration
 allows is a gyro spike, refused with its reason and evidence, and the stream goes on against
 the message before it. Pure Python: the intake, a sampler and the bookkeeping, no pipeline."""
 
@@ -8,11 +8,11 @@ import math
 import numpy as np
 import pytest
 
-from rls_uncertainty.bookkeeping import Bookkeeping
-from rls_uncertainty.intake import Intake
-from rls_uncertainty.limits import PlausibilityLimits, message_value
-from rls_uncertainty.sampling import Sampler
-from rls_uncertainty.surface_mixing import SurfaceMixing
+from rls_uncertainty.aero.surface_mixing import SurfaceMixing
+from rls_uncertainty.datapath.bookkeeping import Bookkeeping
+from rls_uncertainty.datapath.intake import Intake
+from rls_uncertainty.datapath.limits import PlausibilityLimits, message_value
+from rls_uncertainty.datapath.sampling import Sampler
 
 STREAMS = ("imu", "airspeed", "dynamic_pressure", "control_surfaces", "thrust")
 MS = 1_000_000

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from statsmodels.tsa.stattools import acf
 
-from rls_uncertainty.differentiation import DifferentiatorConfig, derivative_weights
+from rls_uncertainty.aero.differentiation import DifferentiatorConfig, derivative_weights
 from rls_uncertainty.estimator import EstimatorBank, EstimatorOptions
 from rls_uncertainty.estimator.lag_selection import (
     RULES,

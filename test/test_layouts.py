@@ -16,8 +16,8 @@ from pathlib import Path
 
 import pytest
 
-from rls_uncertainty.config import load_parameters_file, pipeline_config
-from rls_uncertainty.outputs import NODE_NAME, output_topics
+from rls_uncertainty.datapath.outputs import NODE_NAME, output_topics
+from rls_uncertainty.settings.config import load_parameters_file, pipeline_config
 
 ROOT = Path(__file__).resolve().parents[1]
 LAYOUTS = ROOT / "layouts"
@@ -152,7 +152,7 @@ def test_the_foxglove_layout_plots_every_parameter_paired_by_stamp_from_publishe
 
 def test_the_stamp_label_parser_of_the_foxglove_script_reads_what_the_node_writes():
     """The script's time() takes "stamp:SEC.NANOSEC" apart as messages.parse_stamp_label does."""
-    from rls_uncertainty.outputs import parse_stamp_label, stamp_label
+    from rls_uncertainty.datapath.outputs import parse_stamp_label, stamp_label
 
     code = json.loads((LAYOUTS / "t2.foxglove.json").read_text())["userNodes"]["rls_CZ_bounds"]["sourceCode"]
     assert 'const [sec, nsec] = label.slice(6).split(".");' in code

@@ -1,4 +1,4 @@
-"""The ``limits.*`` parameters (rls_uncertainty.limits): each message and each sample beyond
+"""The ``limits.*`` parameters (rls_uncertainty.datapath.limits): each message and each sample beyond
 them is refused with its reason, and a misconfiguration report can name the parameter that
 bounds a quantity and the value seen."""
 
@@ -6,9 +6,9 @@ import math
 
 import pytest
 
-from rls_uncertainty.aero import FlightState
+from rls_uncertainty.aero.coefficients import FlightState
+from rls_uncertainty.datapath.limits import BOUNDS, PlausibilityLimits, message_value, sample_value
 from rls_uncertainty.errors import ConfigError
-from rls_uncertainty.limits import BOUNDS, PlausibilityLimits, message_value, sample_value
 
 
 def state(**kw):

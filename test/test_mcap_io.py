@@ -1,4 +1,4 @@
-"""MCAP files (rls_uncertainty/mcap_io.py): what the package writes carries chunk, data and
+"""MCAP files (rls_uncertainty/offline/mcap_io.py): what the package writes carries chunk, data and
 summary CRCs that the mcap library and zlib agree on, reads back through rosbags as written,
 and any damaged byte of it is refused with the damaged part named. No DDS."""
 
@@ -9,10 +9,10 @@ from bag_samples import crcs
 from mcap.reader import make_reader
 from rosbags.highlevel import AnyReader
 
-from rls_uncertainty import mcap_io
-from rls_uncertainty.bags import BagWriter, typestore, write_replay
-from rls_uncertainty.cdr import encode_header
+from rls_uncertainty.datapath.cdr import encode_header
 from rls_uncertainty.errors import BagError
+from rls_uncertainty.offline import mcap_io
+from rls_uncertainty.offline.bags import BagWriter, typestore, write_replay
 
 HEADER = "std_msgs/msg/Header"
 

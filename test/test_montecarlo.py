@@ -1,5 +1,5 @@
 """The Table 3 Monte Carlo's convergence flags with the node's identifiability tests
-(rls_uncertainty.montecarlo): the flags it reports are those of an independent convergence
+(rls_uncertainty.simulation.montecarlo): the flags it reports are those of an independent convergence
 monitor less what an independent identifiability monitor takes out, and the held-back
 statistics count exactly the runs whose first flag the tests delayed. No ROS.
 
@@ -13,12 +13,12 @@ import numpy as np
 import pytest
 
 from rls_uncertainty import cli
-from rls_uncertainty.config import REGRESSOR_UNITS
-from rls_uncertainty.convergence import ConvergenceMonitor
+from rls_uncertainty.datapath.convergence import ConvergenceMonitor
+from rls_uncertainty.datapath.identifiability import IdentifiabilityConfig, IdentifiabilityMonitor
 from rls_uncertainty.estimator import EstimatorBank
 from rls_uncertainty.executors import LocalProcesses
-from rls_uncertainty.identifiability import IdentifiabilityConfig, IdentifiabilityMonitor
-from rls_uncertainty.montecarlo import (
+from rls_uncertainty.settings.config import REGRESSOR_UNITS
+from rls_uncertainty.simulation.montecarlo import (
     MONTE_CARLO_CONVERGENCE,
     PARAMETERS,
     TABLE3_OPTIONS,
@@ -28,7 +28,7 @@ from rls_uncertainty.montecarlo import (
     run_level,
     run_table3,
 )
-from rls_uncertainty.simulation import BAND_LIMITED_ON, RESPONSES, SIGNALS, T2_MODELS
+from rls_uncertainty.simulation.t2 import BAND_LIMITED_ON, RESPONSES, SIGNALS, T2_MODELS
 
 RUNS = 6
 

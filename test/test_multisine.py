@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from rls_uncertainty.multisine import T2_TABLE2, design_multisines, relative_peak_factor
+from rls_uncertainty.simulation.multisine import T2_TABLE2, design_multisines, relative_peak_factor
 
 
 @pytest.mark.parametrize("name, rpf", [("elevator", 1.03), ("aileron", 1.15), ("rudder", 1.14)])

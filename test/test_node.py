@@ -27,14 +27,14 @@ from rcl_interfaces.srv import SetParameters
 from rosgraph_msgs.msg import Clock
 from std_srvs.srv import SetBool, Trigger
 
-from rls_uncertainty.bags import read_inputs
-from rls_uncertainty.config import load_parameters_file, pipeline_config
+from rls_uncertainty.datapath.inputs import MESSAGE_TYPES, feed
+from rls_uncertainty.datapath.outputs import NODE_NAME as NODE
+from rls_uncertainty.datapath.outputs import parse_stamp_label
+from rls_uncertainty.datapath.pipeline import Pipeline
 from rls_uncertainty.estimator.state_file import load_state
-from rls_uncertainty.inputs import MESSAGE_TYPES, feed
-from rls_uncertainty.outputs import NODE_NAME as NODE
-from rls_uncertainty.outputs import parse_stamp_label
-from rls_uncertainty.pipeline import Pipeline
-from rls_uncertainty.replay import run_pipeline
+from rls_uncertainty.offline.bags import read_inputs
+from rls_uncertainty.offline.replay import run_pipeline
+from rls_uncertainty.settings.config import load_parameters_file, pipeline_config
 
 from ros_harness import ROOT, NodeProcess, RosTester, to_rclpy
 
@@ -357,8 +357,7 @@ def test_a_misconfigured_data_path_is_logged_and_in_diagnostics(tmp_path, tester
 def test_main_leaves_dds_discovery_to_the_environment(monkeypatch):
     """No DDS here: rclpy.init is replaced by a probe that records the discovery range main()
     starts rclpy with, then stops main()."""
-    from rls_uncertainty import node as node_module
-
+    from rls_uncertainty.ros import node as node_module
     seen = []
 
     class Probe(Exception):
@@ -743,7 +742,7 @@ def test_node_module_is_the_console_script():
     code = ("import importlib.metadata as m; "
             "print([e.value for e in m.entry_points(group='console_scripts') if e.name == 'estimator_node'])")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
-    assert "rls_uncertainty.node:main" in out.stdout
+    assert "rls_uncertainty.ros.node:main" in out.stdout
 
 
 def test_play_command_drives_the_live_node_to_the_replay_numbers(tmp_path, tester, bag):
@@ -940,8 +939,8 @@ def test_fit_topics_reach_a_late_subscriber_and_an_unidentifiable_model_is_said_
     from rclpy.qos import QoSDurabilityPolicy, QoSHistoryPolicy, QoSProfile, QoSReliabilityPolicy
     from std_msgs.msg import Float64MultiArray
 
-    from rls_uncertainty.bags import typestore
-    from rls_uncertainty.outputs import OutputLayout
+    from rls_uncertainty.datapath.outputs import OutputLayout
+    from rls_uncertainty.offline.bags import typestore
 
     params = tmp_path / "beta.yaml"
     params.write_text("/**:\n  ros__parameters:\n    models:\n      CZ: ['1', alpha, beta, delta_e]\n"

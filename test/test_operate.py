@@ -11,7 +11,7 @@ import time
 
 import pytest
 
-from rls_uncertainty.inputs import STREAMS
+from rls_uncertainty.datapath.inputs import STREAMS
 
 from ros_harness import ROOT, NodeProcess
 
@@ -69,7 +69,7 @@ def test_the_status_table_names_the_parameters_held_back_and_why():
     """The model rows of one report as the node writes them (its keys, docs/node.md): the
     parameters whose flag is held back, and the node's reason below the table."""
     from rls_uncertainty.dashboard.health import parse_statuses
-    from rls_uncertainty.operate import format_health
+    from rls_uncertainty.ros.operate import format_health
 
     why = ("Cm: no regressor explains the output (R^2 0.493, identifiability.min_r_squared 0.5): not identifiable; "
            "excite the model or check its output")
@@ -90,7 +90,7 @@ def test_the_status_table_names_the_parameters_held_back_and_why():
 
 def test_the_status_says_which_estimation_methods_the_node_publishes():
     from rls_uncertainty.dashboard.health import parse_statuses
-    from rls_uncertainty.operate import format_health, published_methods
+    from rls_uncertainty.ros.operate import format_health, published_methods
 
     topics = ["/ops/rls_estimator/CZ/estimates", "/ops/rls_estimator/CZ/frequency/estimates",
               "/ops/rls_estimator/Cm/frequency/converged", "/other/rls_estimator/Cm/estimates", "/diagnostics"]

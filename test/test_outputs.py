@@ -1,7 +1,7 @@
 """What the pipeline hands its consumers beyond estimates and standard errors:
 convergence flags computed in the pipeline (equal to an independent ConvergenceMonitor, reset
 with the estimator), full covariances on decimated samples (equal to bank.covariance at that
-sample), the arrays and messages the node publishes (rls_uncertainty.outputs) with their
+sample), the arrays and messages the node publishes (rls_uncertainty.datapath.outputs) with their
 row-major layouts, and the configuration parameters behind them. No ROS."""
 
 from __future__ import annotations
@@ -11,20 +11,10 @@ import dataclasses
 import numpy as np
 import pytest
 
-from rls_uncertainty.bags import read_inputs
-from rls_uncertainty.cdr import encode_float64_multiarray_dims, encode_header
-from rls_uncertainty.config import (
-    PARAMETERS,
-    ConfigError,
-    OutputConfig,
-    load_parameters_file,
-    node_config,
-    parameter_defaults,
-    pipeline_config,
-)
-from rls_uncertainty.convergence import ConvergenceConfig, ConvergenceMonitor
-from rls_uncertainty.inputs import feed
-from rls_uncertainty.outputs import (
+from rls_uncertainty.datapath.cdr import encode_float64_multiarray_dims, encode_header
+from rls_uncertainty.datapath.convergence import ConvergenceConfig, ConvergenceMonitor
+from rls_uncertainty.datapath.inputs import feed
+from rls_uncertainty.datapath.outputs import (
     ARRAY_OUTPUTS,
     MODEL_OUTPUTS,
     OutputLayout,
@@ -33,7 +23,17 @@ from rls_uncertainty.outputs import (
     parse_stamp_label,
     stamp_label,
 )
-from rls_uncertainty.pipeline import Pipeline
+from rls_uncertainty.datapath.pipeline import Pipeline
+from rls_uncertainty.offline.bags import read_inputs
+from rls_uncertainty.settings.config import (
+    PARAMETERS,
+    ConfigError,
+    OutputConfig,
+    load_parameters_file,
+    node_config,
+    parameter_defaults,
+    pipeline_config,
+)
 
 from conftest import ROOT
 
@@ -274,8 +274,8 @@ def test_fit_and_identifiability_arrays_hold_the_figures_of_independent_computat
     ~/M/identifiability the correlations of the corrected covariance, the regressors' standard
     deviations (numpy over the recorded regression) with their resolutions, and the flags; both
     labelled as docs/node.md says, with the newest sample's stamp last."""
-    from rls_uncertainty.bags import typestore
-    from rls_uncertainty.outputs import FIT_OUTPUTS, fit_topics
+    from rls_uncertainty.datapath.outputs import FIT_OUTPUTS, fit_topics
+    from rls_uncertainty.offline.bags import typestore
 
     pipe = Pipeline(t2(), record=True)
     for kind, _stamp, msg in bag:
@@ -335,8 +335,8 @@ def test_the_frequency_domain_arrays_follow_the_time_domain_ones_without_the_bia
     in the frequency domain its estimates, corrected and conventional SEs and flags on
     ~/M/frequency/..., labelled with the parameters without the bias and stamped with the sample
     (cdr, independently of the index bookkeeping); a model not ready there publishes nothing."""
-    from rls_uncertainty.cdr import encode_float64_multiarray
-    from rls_uncertainty.outputs import FREQUENCY_OUTPUTS
+    from rls_uncertainty.datapath.cdr import encode_float64_multiarray
+    from rls_uncertainty.datapath.outputs import FREQUENCY_OUTPUTS
 
     pipe, outs, _ = run(bag, t2(**{"estimator.method": "both"}))
     layout = OutputLayout.of(pipe)

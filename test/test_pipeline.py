@@ -19,13 +19,13 @@ import numpy as np
 import pytest
 from bag_samples import changed_messages
 
-from rls_uncertainty.config import load_aircraft, load_parameters_file, pipeline_config
-from rls_uncertainty.differentiation import DifferentiatorConfig, differentiate
-from rls_uncertainty.outputs import OutputLayout
-from rls_uncertainty.pipeline import STREAMS, Pipeline, StateFileError
-from rls_uncertainty.replay import run_pipeline
-from rls_uncertainty.simulation import simulate_sensor_streams
-from rls_uncertainty.surface_mixing import SurfaceMixing
+from rls_uncertainty.aero.differentiation import DifferentiatorConfig, differentiate
+from rls_uncertainty.aero.surface_mixing import SurfaceMixing
+from rls_uncertainty.datapath.outputs import OutputLayout
+from rls_uncertainty.datapath.pipeline import STREAMS, Pipeline, StateFileError
+from rls_uncertainty.offline.replay import run_pipeline
+from rls_uncertainty.settings.config import load_aircraft, load_parameters_file, pipeline_config
+from rls_uncertainty.simulation.t2 import simulate_sensor_streams
 
 T2 = load_aircraft("t2")
 T2_PARAMS = {"models.enabled": ["CZ", "Cm"], "surfaces.elevator": ["elevator_left", "elevator_right"]}
@@ -160,7 +160,7 @@ def test_the_clean_maneuver_keeps_every_flag_the_monitor_gives(t2_run):
     """On the seeded T-2 maneuver every parameter is identifiable once its estimate settles: the
     published flags are, sample by sample, those of a convergence monitor run independently on
     the published estimates, and every parameter ends flagged."""
-    from rls_uncertainty.convergence import ConvergenceMonitor
+    from rls_uncertainty.datapath.convergence import ConvergenceMonitor
 
     _st, pipe, outs = t2_run
     monitor = ConvergenceMonitor(pipe.sizes, dataclasses.replace(pipe.config.convergence, rate_hz=pipe.config.rate))
@@ -671,7 +671,8 @@ def test_state_file_with_auto_lags_and_a_residual_burn_in_resumes_and_refuses_an
 def test_pipeline_imports_no_ros():
     import subprocess
 
-    code = "import sys, rls_uncertainty.pipeline, rls_uncertainty.inputs, rls_uncertainty.outputs; " \
+    code = "import sys, rls_uncertainty.datapath.pipeline, rls_uncertainty.datapath.inputs, " \
+           "rls_uncertainty.datapath.outputs; " \
            "sys.exit(any(m.split('.')[0] in ('rclpy', 'rosbags') for m in sys.modules))"
     assert subprocess.run([sys.executable, "-c", code]).returncode == 0
 
@@ -880,8 +881,8 @@ def test_messages_far_from_the_clock_are_rejected_when_a_clock_is_given():
 
 @pytest.fixture(scope="module")
 def bundled_messages():
-    """The bundled bag's messages, decoded by rls_uncertainty.cdr as the node decodes them."""
-    from rls_uncertainty.bags import read_inputs
+    """The bundled bag's messages, decoded by rls_uncertainty.datapath.cdr as the node decodes them."""
+    from rls_uncertainty.offline.bags import read_inputs
 
     return read_inputs(BUNDLED)[0]
 
@@ -945,8 +946,8 @@ def test_converted_and_generated_bags_carry_the_default_frame():
     """bags.convert and the bundled bag's generator build every input with one header
     builder: its frame is the default inputs.frame_id (the real conversions are checked in
     the report: the three Twin Otter flights convert to base_link on every topic)."""
-    from rls_uncertainty.bags import _standard_message, typestore
-    from rls_uncertainty.config import parameter_defaults
+    from rls_uncertainty.offline.bags import _standard_message, typestore
+    from rls_uncertainty.settings.config import parameter_defaults
 
     store = typestore()
     values = {"imu": [0.0] * 6, "airspeed": [40.0, 0.0, 0.0], "dynamic_pressure": 900.0,
@@ -962,7 +963,7 @@ def test_a_flood_of_unknown_joint_names_keeps_every_table_small():
     /diagnostics message (74 -> 154 MB, 3.6 MB messages). Now the first 32 names
     are counted by name and the rest under one key; every occurrence is still counted, the
     messages are still used, and memory does not grow with the names."""
-    from rls_uncertainty.bookkeeping import KEYS_KEPT, OTHER_JOINTS
+    from rls_uncertainty.datapath.bookkeeping import KEYS_KEPT, OTHER_JOINTS
 
     pipe = Pipeline(pipeline_config({"models.enabled": ["Cm"], "models.Cm": ["1", "q_hat", "delta_e"]}))
     syn = Synthetic(pipe)
@@ -1000,7 +1001,7 @@ def test_a_flood_of_unknown_joint_names_keeps_every_table_small():
 
 
 def test_caller_given_rejection_reasons_are_bounded_and_long_keys_cut():
-    from rls_uncertainty.bookkeeping import KEY_CHARS, KEYS_KEPT, OTHER_REASONS
+    from rls_uncertainty.datapath.bookkeeping import KEY_CHARS, KEYS_KEPT, OTHER_REASONS
 
     pipe = pitch_pipeline()
     for k in range(1000):
@@ -1032,8 +1033,8 @@ def test_a_flipped_bit_in_a_recorded_double_is_counted_and_never_replayed(tmp_pa
     from rosbags.highlevel import AnyReader
 
     from rls_uncertainty import cli
-    from rls_uncertainty.bags import write_replay
-    from rls_uncertainty.cdr import decode
+    from rls_uncertainty.datapath.cdr import decode
+    from rls_uncertainty.offline.bags import write_replay
 
     records, flipped = [], None
     with AnyReader([BUNDLED]) as reader:

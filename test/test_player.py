@@ -13,11 +13,11 @@ import time
 import pytest
 import rclpy
 
-from rls_uncertainty.bags import read_inputs
-from rls_uncertainty.config import load_parameters_file, node_config, pipeline_config
-from rls_uncertainty.inputs import MESSAGE_TYPES, message_class
-from rls_uncertainty.outputs import NODE_NAME, OutputLayout, output_topics
-from rls_uncertainty.replay import run_pipeline
+from rls_uncertainty.datapath.inputs import MESSAGE_TYPES, message_class
+from rls_uncertainty.datapath.outputs import NODE_NAME, OutputLayout, output_topics
+from rls_uncertainty.offline.bags import read_inputs
+from rls_uncertainty.offline.replay import run_pipeline
+from rls_uncertainty.settings.config import load_parameters_file, node_config, pipeline_config
 
 from ros_harness import RELIABLE, ROOT, NodeProcess
 
@@ -179,7 +179,7 @@ def _swapped_bag(tmp_path):
     topic names with the wrong types."""
     from rosbags.highlevel import AnyReader
 
-    from rls_uncertainty.bags import typestore, write_replay
+    from rls_uncertainty.offline.bags import typestore, write_replay
 
     swap = {"/imu": "/airspeed", "/airspeed": "/imu"}
     with AnyReader([BUNDLED], default_typestore=typestore()) as reader:
@@ -251,7 +251,7 @@ def test_the_player_names_its_fast_heartbeat_profile_only_while_dds_starts_and_o
     replaces a profile file the caller named."""
     import xml.etree.ElementTree as ET
 
-    from rls_uncertainty.player import PLAYER_PROFILE, _player_writer_profile
+    from rls_uncertainty.ros.player import PLAYER_PROFILE, _player_writer_profile
 
     env: dict[str, str] = {"OTHER": "1"}
     with _player_writer_profile(env) as used:

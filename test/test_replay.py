@@ -1,4 +1,4 @@
-"""The offline replay (rls_uncertainty/replay.py): outputs, determinism, agreement with the
+"""The offline replay (rls_uncertainty/offline/replay.py): outputs, determinism, agreement with the
 pipeline, options, and no partial output on failure. No DDS."""
 
 import csv
@@ -9,10 +9,10 @@ import numpy as np
 from bag_samples import fails, read_all
 
 from rls_uncertainty import cli
-from rls_uncertainty.bags import read_inputs
-from rls_uncertainty.config import load_parameters_file, pipeline_config
-from rls_uncertainty.figures import REPLAY_FIGURES
-from rls_uncertainty.replay import replay, run_pipeline
+from rls_uncertainty.offline.bags import read_inputs
+from rls_uncertainty.offline.figures import REPLAY_FIGURES
+from rls_uncertainty.offline.replay import replay, run_pipeline
+from rls_uncertainty.settings.config import load_parameters_file, pipeline_config
 
 ROOT = Path(__file__).resolve().parents[1]
 BUNDLED = ROOT / "bags" / "t2_maneuver"
@@ -51,7 +51,7 @@ def test_replay_writes_identical_outputs_twice_and_matches_the_pipeline(tmp_path
     topics = read_all(tmp_path / "r1" / "estimates.mcap")
     est = topics["/rls_estimator/CZ/estimates"]
     assert est[-1][1].layout.dim[0].label == "CZ_0,CZ_alpha,CZ_delta_e"
-    from rls_uncertainty.outputs import parse_stamp_label
+    from rls_uncertainty.datapath.outputs import parse_stamp_label
 
     for t, msg in est:  # every array carries its sample time; log time is the same
         assert parse_stamp_label(msg.layout.dim[1].label) == t
@@ -139,7 +139,7 @@ def test_the_wide_csv_holds_the_long_csv_one_row_per_sample(tmp_path):
 
 
 def test_the_replays_mcap_carries_every_topic_the_node_publishes_byte_for_byte(tmp_path):
-    from rls_uncertainty.outputs import OutputLayout, fit_topics, output_topics
+    from rls_uncertainty.datapath.outputs import OutputLayout, fit_topics, output_topics
 
     params = load_parameters_file("t2")
     replay(BUNDLED, params, tmp_path / "r", progress=False, plots=False)
@@ -180,8 +180,8 @@ def test_the_replays_diagnostics_report_lags_and_flags_once_per_period_of_data_t
     assert [t for t, _ in diag] == sorted(t for t, _ in diag)
     # Independently: feed the messages one by one; whenever the newest stamp is a period past
     # the previous report, the newest sample so far is what the report must show.
-    from rls_uncertainty.inputs import feed
-    from rls_uncertainty.pipeline import Pipeline
+    from rls_uncertainty.datapath.inputs import feed
+    from rls_uncertainty.datapath.pipeline import Pipeline
 
     pipe = Pipeline(pipeline_config(params))
     newest, due, previous, expected = None, None, None, []
@@ -238,7 +238,7 @@ def test_the_replays_diagnostics_never_divide_by_zero_elapsed_time():
     """Messages whose stamps do not advance the data time after the last report (older
     stamps at the end of a bag) get no report over zero elapsed time: every input rate in
     every report is that of the data, never a count divided by a vanishing period."""
-    from rls_uncertainty.config import node_config
+    from rls_uncertainty.settings.config import node_config
 
     params = load_parameters_file("t2")
     messages, _ = read_inputs(BUNDLED)
@@ -270,7 +270,7 @@ def test_a_run_without_estimates_says_why_and_counts_none(tmp_path, capsys):
     want = ("no estimates: control_surfaces: all 1200 messages rejected (missing_joint): surfaces.elevator expects "
             f"[elevator], messages carry [{', '.join(names)}]; set surfaces.elevator")
     assert result.explanations == [want]
-    from rls_uncertainty.replay import summary_table
+    from rls_uncertainty.offline.replay import summary_table
 
     assert summary_table(result) == want
     ok = replay(BUNDLED, load_parameters_file("t2"), tmp_path / "ok", progress=False, plots=False)
@@ -297,8 +297,7 @@ def test_models_the_maneuver_never_excites_are_named_with_the_regressors_that_ne
 def test_the_replay_keeps_no_sample_and_plots_from_a_bounded_history(tmp_path, monkeypatch):
     """The command's result holds no per-sample output: the files are written as the samples
     come, and the plots read an evenly spaced history of at most 2 x PLOT_POINTS samples."""
-    from rls_uncertainty import replay as replay_module
-
+    from rls_uncertainty.offline import replay as replay_module
     monkeypatch.setattr(replay_module, "PLOT_POINTS", 50)
     result = replay(BUNDLED, load_parameters_file("t2"), tmp_path / "r", progress=False)
     assert result.outputs == [] and result.diagnostics == []
@@ -319,8 +318,8 @@ def test_estimates_frequency_csv_holds_the_frequency_domain_results_with_the_col
     what the layout encodes; estimates.csv is unchanged by the method."""
     from mcap.reader import make_reader
 
-    from rls_uncertainty.outputs import OutputLayout, fit_topics, output_topics
-    from rls_uncertainty.replay_files import CSV_COLUMNS
+    from rls_uncertainty.datapath.outputs import OutputLayout, fit_topics, output_topics
+    from rls_uncertainty.offline.replay_files import CSV_COLUMNS
 
     params = {**load_parameters_file("t2"), "estimator.method": "both"}
     replay(BUNDLED, params, tmp_path / "both", progress=False, plots=False)
@@ -367,7 +366,7 @@ def test_frequency_only_writes_no_time_domain_files_and_counts_its_estimates(tmp
     out = capsys.readouterr().out
     assert out.startswith("frequency domain (docs/frequency.md):")
     assert "Cm_q" in out and "Cm_0" not in out
-    from rls_uncertainty.replay_files import CSV_COLUMNS
+    from rls_uncertainty.offline.replay_files import CSV_COLUMNS
 
     with open(tmp_path / "o" / "estimates_frequency.csv") as fh:
         assert tuple(next(csv.reader(fh))) == CSV_COLUMNS

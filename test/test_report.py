@@ -1,10 +1,10 @@
-"""The one results table of simulate, replay and demo (rls_uncertainty/report.py)."""
+"""The one results table of simulate, replay and demo (rls_uncertainty/offline/report.py)."""
 
 import math
 
 import pytest
 
-from rls_uncertainty.report import ResultRow, results_table, rows_from_arrays
+from rls_uncertainty.offline.report import ResultRow, results_table, rows_from_arrays
 
 
 def test_the_demo_lines_of_the_readme_are_reproduced_exactly():

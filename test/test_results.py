@@ -1,11 +1,11 @@
-"""What a run produced (rls_uncertainty/results.py): the bounded, evenly spaced history, a
+"""What a run produced (rls_uncertainty/offline/results.py): the bounded, evenly spaced history, a
 parameter's final values and series, and the errors that name what is missing. No ROS."""
 
 import numpy as np
 import pytest
 
 from rls_uncertainty.errors import EstimatorNotReady, UnknownName
-from rls_uncertainty.results import History, ReplayResult, accounting
+from rls_uncertainty.offline.results import History, ReplayResult, accounting
 
 NAMES = (("CZ_0", "CZ_alpha"), ("Cm_0", "Cm_alpha", "Cm_q"))
 

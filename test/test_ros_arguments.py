@@ -1,5 +1,5 @@
 """The ROS 2 command line and parameter files read as rcl reads them
-(rls_uncertainty/ros_arguments.py). The oracle is rcl itself: the same arguments are given to
+(rls_uncertainty/settings/ros_arguments.py). The oracle is rcl itself: the same arguments are given to
 rclpy.init and a node that declares whatever it is given shows what rcl made of them (one
 context per case, closed in a finally; no messages are exchanged)."""
 
@@ -11,7 +11,7 @@ from rclpy.impl.implementation_singleton import rclpy_implementation
 from rclpy.node import Node
 
 from rls_uncertainty.errors import ConfigError
-from rls_uncertainty.ros_arguments import (
+from rls_uncertainty.settings.ros_arguments import (
     ParameterFile,
     ParameterRule,
     in_rcl_order,

@@ -1,4 +1,4 @@
-"""Stream buffers, the sample grid and message accounting (rls_uncertainty.sampling), against
+"""Stream buffers, the sample grid and message accounting (rls_uncertainty.datapath.sampling), against
 independent computations: numpy's interpolation on random stamps, grids and counts worked
 out by hand. Generic streams: nothing here knows about aircraft."""
 
@@ -8,8 +8,8 @@ import os
 import numpy as np
 import pytest
 
-from rls_uncertainty.sampling import Restart, Sample, Sampler, Skipped
-from rls_uncertainty.streams import StreamCounts
+from rls_uncertainty.datapath.sampling import Restart, Sample, Sampler, Skipped
+from rls_uncertainty.datapath.streams import StreamCounts
 
 MS = 1_000_000
 P = 20 * MS  # 50 Hz grid

@@ -8,8 +8,8 @@ import pytest
 from scipy import signal
 
 from rls_uncertainty.cli import main
-from rls_uncertainty.montecarlo import PAPER_TABLE3
-from rls_uncertainty.simulation import (
+from rls_uncertainty.simulation.montecarlo import PAPER_TABLE3
+from rls_uncertainty.simulation.t2 import (
     T2_TRUE,
     add_noise,
     reduce_short_period,
@@ -36,7 +36,7 @@ def test_noise_free_regression_recovers_the_true_values():
 
 def test_short_period_mode_near_1_1_hz():
     rec = simulate_short_period()
-    from rls_uncertainty.simulation import _state_space
+    from rls_uncertainty.simulation.t2 import _state_space
 
     A = _state_space(rec.config, rec.aircraft)[0]
     wn = np.abs(np.linalg.eigvals(A)[0]) / (2 * np.pi)
@@ -88,7 +88,7 @@ def test_recursive_and_batch_corrected_errors_agree_at_the_end():
     Criterion 2% at 50 lags (the Table 3 configuration; 250 runs measure at most 1.7%, these
     seeded 20 runs at most 1.2%); all lags within 6% (250 runs: at most 5.2%, C_m_alpha);
     50 lags within 15% of all lags."""
-    from rls_uncertainty.montecarlo import run_level
+    from rls_uncertainty.simulation.montecarlo import run_level
 
     res = run_level(0.2, 20)
     s = res.summary()
@@ -124,7 +124,7 @@ def test_monte_carlo_convergence_outputs_against_an_independent_recomputation(tm
     """Flag times, estimates at the flag, model flag times, cover times and false-convergence
     rates of a small 20% Monte Carlo, recomputed from the estimator histories."""
     from rls_uncertainty.estimator import EstimatorBank, EstimatorOptions
-    from rls_uncertainty.montecarlo import (
+    from rls_uncertainty.simulation.montecarlo import (
         BEST_FROM,
         MONTE_CARLO_CONVERGENCE,
         PARAMETERS,
@@ -215,7 +215,7 @@ def test_monte_carlo_convergence_outputs_against_an_independent_recomputation(tm
 def _gusty_config(rate):
     from dataclasses import replace
 
-    from rls_uncertainty.simulation import SimulationConfig
+    from rls_uncertainty.simulation.t2 import SimulationConfig
 
     return replace(SimulationConfig(), rate=rate)
 
@@ -228,8 +228,8 @@ def test_turbulent_response_satisfies_the_equations_with_the_aerodynamic_alpha()
     with alpha_a, to rounding."""
     from scipy.integrate import cumulative_trapezoid
 
-    from rls_uncertainty.simulation import G0, gust_velocity
-    from rls_uncertainty.turbulence import DrydenVertical
+    from rls_uncertainty.simulation.t2 import G0, gust_velocity
+    from rls_uncertainty.simulation.turbulence import DrydenVertical
 
     cfg = _gusty_config(1000.0)
     w = gust_velocity(DrydenVertical(1.0, 290.0), np.random.default_rng(1), cfg)
@@ -261,8 +261,13 @@ def test_calm_air_is_the_existing_simulation_exactly():
     """A gust of intensity 0 (or none) gives the calm-air simulation bit for bit: the record
     (``add_noise(simulate_short_period(), ...)`` with the seed's generator) and the sensor
     streams, also of a campaign maneuver (its seed from ``campaign_seeds``)."""
-    from rls_uncertainty.simulation import campaign_seeds, simulate_campaign, simulate_maneuver, simulate_sensor_streams
-    from rls_uncertainty.turbulence import DrydenVertical
+    from rls_uncertainty.simulation.t2 import (
+        campaign_seeds,
+        simulate_campaign,
+        simulate_maneuver,
+        simulate_sensor_streams,
+    )
+    from rls_uncertainty.simulation.turbulence import DrydenVertical
 
     calm = DrydenVertical(0.0, 290.0)
     reference = add_noise(simulate_short_period(), 0.2, np.random.default_rng(7))
@@ -279,8 +284,8 @@ def test_calm_air_is_the_existing_simulation_exactly():
 
 
 def test_campaign_maneuvers_are_deterministic_per_seed_and_differ_from_each_other():
-    from rls_uncertainty.simulation import campaign_seeds, simulate_campaign, simulate_maneuver
-    from rls_uncertainty.turbulence import DrydenVertical
+    from rls_uncertainty.simulation.t2 import campaign_seeds, simulate_campaign, simulate_maneuver
+    from rls_uncertainty.simulation.turbulence import DrydenVertical
 
     gust = DrydenVertical(0.8, 290.0)
     a = list(simulate_campaign(3, gust, seed=11))
@@ -302,8 +307,8 @@ def test_gust_does_not_change_the_noise_sequences_or_their_scale():
     """The sensor noise (record minus its noise-free signals) is the same in calm air and in
     turbulence: same generator, same calm-air scale (the gust belongs to the air, not to the
     sensors)."""
-    from rls_uncertainty.simulation import simulate_maneuver
-    from rls_uncertainty.turbulence import DrydenVertical
+    from rls_uncertainty.simulation.t2 import simulate_maneuver
+    from rls_uncertainty.simulation.turbulence import DrydenVertical
 
     calm = simulate_maneuver(0.2, 5)
     rough = simulate_maneuver(0.2, 5, gust=DrydenVertical(1.5, 290.0))
@@ -323,8 +328,8 @@ def test_every_stream_sees_the_same_gust():
     and gust sampled at each stream's rate and offset."""
     from dataclasses import replace
 
-    from rls_uncertainty.simulation import SimulationConfig, simulate_maneuver, simulate_sensor_streams
-    from rls_uncertainty.turbulence import DrydenVertical
+    from rls_uncertainty.simulation.t2 import SimulationConfig, simulate_maneuver, simulate_sensor_streams
+    from rls_uncertainty.simulation.turbulence import DrydenVertical
 
     gust = DrydenVertical(1.0, 290.0)
     quiet = replace(SimulationConfig(), snr=dict.fromkeys(("delta_e", "alpha", "q", "az"), 1e12))
@@ -343,7 +348,7 @@ def test_band_limited_noise_on_the_responses_only_leaves_the_elevator_white():
     """``band_limited_on=RESPONSES`` (the default): the same random numbers as the noise on
     all four signals, so alpha, q and a_z are those of that variant exactly and the elevator is
     that of band level 0."""
-    from rls_uncertainty.simulation import BAND_LIMITED_ON, RESPONSES, SIGNALS
+    from rls_uncertainty.simulation.t2 import BAND_LIMITED_ON, RESPONSES, SIGNALS
 
     rec = simulate_short_period()
     four = add_noise(rec, 0.2, np.random.default_rng(3), band_limited_on=SIGNALS)

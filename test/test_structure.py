@@ -23,15 +23,9 @@ MAX_FUNCTION_LINES = 80
 # plots), never rclpy, a ROS message package, a bag or a web library.
 NUMERICAL = {"numpy", "scipy"}
 CORE = (
-    "rls_uncertainty.estimator", "rls_uncertainty.aero", "rls_uncertainty.limits",
-    "rls_uncertainty.differentiation", "rls_uncertainty.convergence", "rls_uncertainty.simulation",
-    "rls_uncertainty.turbulence", "rls_uncertainty.multisine", "rls_uncertainty.montecarlo",
-    "rls_uncertainty.sampling", "rls_uncertainty.streams", "rls_uncertainty.timelines",
-    "rls_uncertainty.intake", "rls_uncertainty.surface_mixing", "rls_uncertainty.bookkeeping",
-    "rls_uncertainty.alerts", "rls_uncertainty.pipeline", "rls_uncertainty.frequency",
-    "rls_uncertainty.frequency_path",
-    "rls_uncertainty.results", "rls_uncertainty.figure_data", "rls_uncertainty.identifiability",
-    "rls_uncertainty.campaign.table4",
+    "rls_uncertainty.estimator", "rls_uncertainty.frequency", "rls_uncertainty.aero",
+    "rls_uncertainty.simulation", "rls_uncertainty.datapath", "rls_uncertainty.offline.results",
+    "rls_uncertainty.offline.figure_data", "rls_uncertainty.campaign.table4",
 )
 
 

@@ -1,9 +1,9 @@
-"""Eq. 23 surface mixing (rls_uncertainty.surface_mixing): JointState names and positions to
+"""Eq. 23 surface mixing (rls_uncertainty.aero.surface_mixing): JointState names and positions to
 the deflections of Eq. 2, the reasons a name list cannot be mixed, and the bounded layout cache."""
 
 import pytest
 
-from rls_uncertainty.surface_mixing import JointLayout, SurfaceMixer, SurfaceMixing
+from rls_uncertainty.aero.surface_mixing import JointLayout, SurfaceMixer, SurfaceMixing
 
 
 def test_aileron_mixing_is_eq_23():

@@ -5,10 +5,10 @@ names them, or with __ for the dots. No ROS."""
 import numpy as np
 import pytest
 
-from rls_uncertainty.bags import read_inputs
-from rls_uncertainty.config import load_parameters_file, pipeline_config
 from rls_uncertainty.errors import ConfigError
-from rls_uncertainty.replay import run_pipeline
+from rls_uncertainty.offline.bags import read_inputs
+from rls_uncertainty.offline.replay import run_pipeline
+from rls_uncertainty.settings.config import load_parameters_file, pipeline_config
 from rls_uncertainty.testing import parameters, replay_bag
 
 from conftest import ROOT

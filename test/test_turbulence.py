@@ -8,7 +8,7 @@ import pytest
 from scipy import integrate, signal
 
 from rls_uncertainty.errors import ConfigError
-from rls_uncertainty.turbulence import FT, KNOT, LOW_ALTITUDE_SIGMA_W, DrydenVertical, scale_length
+from rls_uncertainty.simulation.turbulence import FT, KNOT, LOW_ALTITUDE_SIGMA_W, DrydenVertical, scale_length
 
 V = 40.8432  # m/s, the T-2's 134 ft/s
 GUST = DrydenVertical(sigma=1.3, scale_length=290.0)

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from rls_uncertainty.bags import convert, schema_dir
+from rls_uncertainty.offline.bags import convert, schema_dir
 
 ROOT = Path(__file__).resolve().parents[2]
 FLIGHT_DATA = Path(os.environ.get("RLS_FLIGHT_DATA") or ROOT.parent / "shared" / "flight_data")

@@ -56,7 +56,7 @@ def campaign_figures(out: Path, rows: Sequence[Table4Row], results: Sequence[Man
     time-domain values with the frequency-domain ones beside them when the campaign has both,
     the frequency-domain ones alone when it has only those (``frequency_lags``: how their
     corrected bars' lags are named)."""
-    from ..figures import DEFAULT_DPI, figure12  # noqa: PLC0415 - matplotlib only when drawing
+    from ..offline.figures import DEFAULT_DPI, figure12  # noqa: PLC0415 - matplotlib only when drawing
 
     written: list[Path] = []
     for model in dict.fromkeys(r.model for r in rows):

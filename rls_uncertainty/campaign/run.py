@@ -30,13 +30,13 @@ from collections.abc import Iterable, Iterator, Mapping
 from dataclasses import dataclass, field, replace
 from typing import Any
 
-from ..bags import InputStream
-from ..config import ModelConfig, PipelineConfig
+from ..datapath.inputs import Stamped
 from ..errors import RlsUncertaintyError
 from ..estimator import EstimatorBank
-from ..inputs import Stamped
-from ..replay import run_pipeline
-from ..results import ReplayResult
+from ..offline.bags import InputStream
+from ..offline.replay import run_pipeline
+from ..offline.results import ReplayResult
+from ..settings.config import ModelConfig, PipelineConfig
 from .maneuvers import Maneuver
 
 __all__ = ["CampaignSettings", "ParameterResult", "ManeuverResult", "MANEUVER_COLUMNS", "run_maneuver",

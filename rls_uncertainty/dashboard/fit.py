@@ -35,7 +35,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from ..outputs import parse_stamp_label
+from ..datapath.outputs import parse_stamp_label
 
 __all__ = ["Fit", "Identifiability", "fit_of", "identifiability_of", "reasons", "quality_json", "NO_FIT_PARAMETER"]
 

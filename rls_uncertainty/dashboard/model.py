@@ -32,7 +32,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from ..outputs import parse_stamp_label
+from ..datapath.outputs import parse_stamp_label
 
 __all__ = [
     "PAIRED",

@@ -30,10 +30,10 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from ..bags import check_mcap_integrity, typestore
-from ..cdr import FLOAT64_MULTIARRAY, decode
+from ..datapath.cdr import FLOAT64_MULTIARRAY, decode
 from ..errors import BagError
-from ..replay_files import CSV_COLUMNS
+from ..offline.bags import check_mcap_integrity, typestore
+from ..offline.replay_files import CSV_COLUMNS
 from .health import statuses_of
 from .model import FREQUENCY_DOMAIN, TIME_DOMAIN, ArrayKey, Sample, split_topic
 
@@ -43,7 +43,7 @@ if TYPE_CHECKING:
 __all__ = ["ReplaySource", "open_replay", "BATCH"]
 
 BATCH = 2000  # items handed to the event loop at once
-# The replay's CSV of each method (rls_uncertainty.replay_files), in the order they are named.
+# The replay's CSV of each method (rls_uncertainty.offline.replay_files), in the order they are named.
 CSV_FILES = {TIME_DOMAIN: "estimates.csv", FREQUENCY_DOMAIN: "estimates_frequency.csv"}
 IN_FLIGHT = 2  # batches handed over and not yet handled: the reader waits beyond
 

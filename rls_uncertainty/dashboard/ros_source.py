@@ -38,7 +38,7 @@ from rclpy.qos import DurabilityPolicy, QoSHistoryPolicy, QoSProfile, Reliabilit
 from rclpy.signals import SignalHandlerOptions
 from std_msgs.msg import Float64MultiArray
 
-from ..cdr import FLOAT64_MULTIARRAY, decode
+from ..datapath.cdr import FLOAT64_MULTIARRAY, decode
 from .health import statuses_of
 from .model import ArrayKey, array_key
 from .settings import split_node_name

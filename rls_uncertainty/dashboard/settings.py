@@ -11,8 +11,8 @@ from pathlib import Path
 
 import yaml
 
-from ..config import NODE_NAME
 from ..errors import ConfigError
+from ..settings.config import NODE_NAME
 
 __all__ = ["DEFAULT_NODE", "full_node_name", "split_node_name", "discovery_environment", "where", "load_reference"]
 

@@ -299,7 +299,7 @@ class EstimatorBank:
     def residual_variances(self) -> np.ndarray:
         """:meth:`residual_variance` of every model at once, a new ``(M,)`` array, NaN for the
         models that are not :attr:`ready` (one vectorised step: the per-sample fit test of
-        :mod:`rls_uncertainty.identifiability`)."""
+        :mod:`rls_uncertainty.datapath.identifiability`)."""
         totals = self._eval.weight_totals()
         if isinstance(totals, float) and totals > 0.0:
             R0: FloatArray = self._lags.lag_sums[:, 0] / totals

@@ -4,7 +4,7 @@
 defaults. The fast bank (:class:`.bank.EstimatorBank`), the executable specification
 (:class:`.reference.RecursiveReference`), :class:`.recursive.RecursiveEstimator` and the state
 file take it as it is and check nothing again; the configuration maps the ROS parameters onto
-it in one function (:func:`rls_uncertainty.config.estimator_options`). What each option means
+it in one function (:func:`rls_uncertainty.settings.config.estimator_options`). What each option means
 is defined in :mod:`.reference` and tabulated in ``docs/estimator.md``.
 """
 

@@ -2,7 +2,7 @@
 
 :class:`FrequencyOptions` is frozen and checks itself in its constructor; a bad value raises
 :class:`~rls_uncertainty.errors.ConfigError` naming the option as the node's parameter
-(``frequency.f_max``; :func:`rls_uncertainty.config.frequency_options` maps the parameters).
+(``frequency.f_max``; :func:`rls_uncertainty.settings.config.frequency_options` maps the parameters).
 Nothing downstream re-checks it. The frequency grid of the recursive Fourier transform is
 :meth:`FrequencyOptions.frequencies`.
 """

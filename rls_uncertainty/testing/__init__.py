@@ -16,8 +16,8 @@ test's terms, in process or from the live node.
 Importing this module imports neither rclpy nor pytest.
 """
 
-from ..player import bundled_bag
-from ..results import Final, ReplayResult, Series
+from ..offline.results import Final, ReplayResult, Series
+from ..ros.player import bundled_bag
 from .live import REPLAY_PARAMETERS, EstimatorProcess, LiveTimeout, play_to_node
 from .offline import parameters, replay_bag
 

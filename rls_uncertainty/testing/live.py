@@ -31,11 +31,11 @@ from typing import Any
 
 import numpy as np
 
-from ..bags import input_topics
-from ..config import node_config, pipeline_config
+from ..datapath.outputs import FREQUENCY, FREQUENCY_OUTPUTS, NODE_NAME, SAMPLE_STAMP, parse_stamp_label
 from ..errors import BagError, LiveTimeout
-from ..outputs import FREQUENCY, FREQUENCY_OUTPUTS, NODE_NAME, SAMPLE_STAMP, parse_stamp_label
-from ..results import History, ReplayResult, accounting
+from ..offline.bags import input_topics
+from ..offline.results import History, ReplayResult, accounting
+from ..settings.config import node_config, pipeline_config
 
 __all__ = ["REPLAY_PARAMETERS", "EstimatorProcess", "LiveTimeout", "play_to_node"]
 
@@ -62,7 +62,7 @@ def _nested(params: Mapping[str, Any]) -> dict[str, Any]:
 
 
 class EstimatorProcess:
-    """``python -m rls_uncertainty.node`` with ``parameters`` (dotted names; over
+    """``python -m rls_uncertainty.ros.node`` with ``parameters`` (dotted names; over
     :data:`REPLAY_PARAMETERS`) written to ``directory/NAME.yaml``, on ROS domain ``domain``,
     its output in ``directory/NAME.log``. :meth:`stop` ends it (SIGINT, then SIGKILL after
     ``timeout``); use it in a ``finally`` (the fixtures do)."""
@@ -82,7 +82,8 @@ class EstimatorProcess:
         env = {**os.environ, "ROS_DOMAIN_ID": str(self.domain)}
         with open(self.log_file, "w") as log:  # the child writes through its own descriptor
             self.proc = subprocess.Popen(
-                [sys.executable, "-m", "rls_uncertainty.node", "--ros-args", "--params-file", str(self.params_file)],
+                [sys.executable, "-m", "rls_uncertainty.ros.node", "--ros-args",
+                 "--params-file", str(self.params_file)],
                 stdout=log, stderr=subprocess.STDOUT, env=env)
 
     @property
@@ -275,7 +276,7 @@ def play_to_node(bag: str | Path, node: EstimatorProcess, *, rate: float = 0.0, 
     import rclpy  # noqa: PLC0415
     from rclpy.executors import SingleThreadedExecutor  # noqa: PLC0415
 
-    from ..player import NotAcknowledged, _player_writer_profile, _Publisher  # noqa: PLC0415
+    from ..ros.player import NotAcknowledged, _player_writer_profile, _Publisher  # noqa: PLC0415
 
     config = node.config
     models = [m.output for m in config.models]

@@ -8,11 +8,11 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-from ..bags import InputStream
-from ..config import PARAMETER_NAMES, load_parameters_file, node_config, pipeline_config
 from ..errors import ConfigError
-from ..replay import run_pipeline
-from ..results import History, ReplayResult
+from ..offline.bags import InputStream
+from ..offline.replay import run_pipeline
+from ..offline.results import History, ReplayResult
+from ..settings.config import PARAMETER_NAMES, load_parameters_file, node_config, pipeline_config
 
 __all__ = ["parameters", "replay_bag"]
 

@@ -31,7 +31,7 @@ from typing import Any
 import pytest
 
 from ..errors import ConfigError
-from ..results import ReplayResult
+from ..offline.results import ReplayResult
 from .live import EstimatorProcess, play_to_node
 from .offline import Config, parameters
 

@@ -32,7 +32,7 @@ import yaml
 
 from rls_uncertainty.estimator import EstimatorBank
 from rls_uncertainty.estimator.options import EstimatorOptions
-from rls_uncertainty.montecarlo import LEVELS, PARAMETERS, level_inputs, parameter_cells
+from rls_uncertainty.simulation.montecarlo import LEVELS, PARAMETERS, level_inputs, parameter_cells
 
 ROOT = Path(__file__).resolve().parents[3]
 BAND = (0.8, 1.25)  # the honest-enough range of corrected SE / scatter used throughout

@@ -35,8 +35,8 @@ from dataclasses import replace
 
 import numpy as np
 
-from rls_uncertainty.convergence import ConvergenceConfig, ConvergenceMonitor
-from rls_uncertainty.montecarlo import LEVELS, MONTE_CARLO_CONVERGENCE, convergence_summary, run_level
+from rls_uncertainty.datapath.convergence import ConvergenceConfig, ConvergenceMonitor
+from rls_uncertainty.simulation.montecarlo import LEVELS, MONTE_CARLO_CONVERGENCE, convergence_summary, run_level
 
 SEED = 7
 # (window T in s, band k in corrected SE, max_se_rate r in 1/s); the first is the default

@@ -1,6 +1,6 @@
 """The differentiator over its whole declared range: every (window, order, lag) that the
 ``differentiator.*`` parameters accept, with the package's weights (exact rationals rounded
-once, :func:`rls_uncertainty.differentiation.derivative_weights`) beside the construction they
+once, :func:`rls_uncertainty.aero.differentiation.derivative_weights`) beside the construction they
 replaced (the pseudo-inverse of the unscaled Vandermonde matrix of the sample offsets, three
 lines below). Report: REPORT.md beside this file.
 
@@ -30,7 +30,13 @@ import time
 
 import numpy as np
 
-from rls_uncertainty.differentiation import MAX_ORDER, MAX_WINDOW, MIN_WINDOW, DifferentiatorConfig, derivative_weights
+from rls_uncertainty.aero.differentiation import (
+    MAX_ORDER,
+    MAX_WINDOW,
+    MIN_WINDOW,
+    DifferentiatorConfig,
+    derivative_weights,
+)
 
 DT = 0.02
 EPS = float(np.finfo(float).eps)

@@ -10,7 +10,7 @@ Uses public names of the package only:
   regression rows, sample by sample. Mean estimate, mean standard errors and observed scatter
   1, 2, 3, 5 and 7 s after the elevator input starts and at the end of the maneuver; the time
   from which the mean SE over the scatter stays in [0.8, 1.25]; the convergence flags of
-  :class:`~rls_uncertainty.convergence.ConvergenceMonitor` on both (``--grid``: the grid).
+  :class:`~rls_uncertainty.datapath.convergence.ConvergenceMonitor` on both (``--grid``: the grid).
 * **Grids** (``--grids``): candidate grids covering Table 2's multisines, and trims, for
   ``config/t2.yaml``.
 * **Twin Otter** (``--flight``): the three recordings through the node's pipeline
@@ -45,13 +45,13 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[3]
 sys.path.insert(0, str(ROOT))
 
-from rls_uncertainty.config import load_parameters_file, pipeline_config  # noqa: E402
-from rls_uncertainty.convergence import ConvergenceMonitor  # noqa: E402
+from rls_uncertainty.datapath.convergence import ConvergenceMonitor  # noqa: E402
 from rls_uncertainty.estimator import EstimatorBank  # noqa: E402
 from rls_uncertainty.frequency import FrequencyBank, FrequencyOptions  # noqa: E402
 from rls_uncertainty.frequency.covariance import PairGeometry, middle  # noqa: E402
-from rls_uncertainty.montecarlo import LEVELS, MONTE_CARLO_CONVERGENCE, level_inputs  # noqa: E402
-from rls_uncertainty.simulation import T2_MODELS, T2_TRUE, SimulationConfig  # noqa: E402
+from rls_uncertainty.settings.config import load_parameters_file, pipeline_config  # noqa: E402
+from rls_uncertainty.simulation.montecarlo import LEVELS, MONTE_CARLO_CONVERGENCE, level_inputs  # noqa: E402
+from rls_uncertainty.simulation.t2 import T2_MODELS, T2_TRUE, SimulationConfig  # noqa: E402
 
 RATE = SimulationConfig().rate
 INPUT_START = SimulationConfig().input_start
@@ -293,7 +293,7 @@ def convergence_table(summaries: list[dict]) -> list[str]:
         "",
         "Honest from: the time after the input start from which the mean corrected SE over the scatter "
         "stays in [0.8, 1.25] to the end. Flag: median time (after the input start) of the first "
-        "convergence flag of `rls_uncertainty.convergence` (the node's criterion, 50 Hz buffer); "
+        "convergence flag of `rls_uncertainty.datapath.convergence` (the node's criterion, 50 Hz buffer); "
         "flagged: runs flagged at some time; false: flagged runs whose true value lies outside "
         "+-2 corrected SE at the flag.",
         "",
@@ -397,7 +397,7 @@ def flight(name: str, data: Path, work: Path) -> dict:
     """Both methods through the real replay (``estimator.method: both``, the recording's
     parameter file): each parameter's last published estimate and SEs, and when it was first
     flagged converged."""
-    from rls_uncertainty.bags import convert  # noqa: PLC0415 - flight part only
+    from rls_uncertainty.offline.bags import convert  # noqa: PLC0415 - flight part only
     from rls_uncertainty.testing import replay_bag  # noqa: PLC0415
 
     config_name, extra = RECORDINGS[name]

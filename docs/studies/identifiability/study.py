@@ -46,16 +46,16 @@ from pathlib import Path
 
 import numpy as np
 
-from rls_uncertainty.bags import convert, read_inputs
-from rls_uncertainty.config import PARAMETERS, load_parameters_file, node_config, package_path, pipeline_config
-from rls_uncertainty.convergence import ConvergenceMonitor
-from rls_uncertainty.diagnostics import DiagnosticsPolicy, Snapshot
-from rls_uncertainty.inputs import feed as feed_message
-from rls_uncertainty.montecarlo import PARAMETERS as TABLE3
-from rls_uncertainty.montecarlo import convergence_summary, run_level
-from rls_uncertainty.pipeline import Pipeline
-from rls_uncertainty.replay import run_pipeline
-from rls_uncertainty.simulation import SimulationConfig, simulate_sensor_streams
+from rls_uncertainty.datapath.convergence import ConvergenceMonitor
+from rls_uncertainty.datapath.inputs import feed as feed_message
+from rls_uncertainty.datapath.pipeline import Pipeline
+from rls_uncertainty.offline.bags import convert, read_inputs
+from rls_uncertainty.offline.replay import run_pipeline
+from rls_uncertainty.ros.diagnostics import DiagnosticsPolicy, Snapshot
+from rls_uncertainty.settings.config import PARAMETERS, load_parameters_file, node_config, package_path, pipeline_config
+from rls_uncertainty.simulation.montecarlo import PARAMETERS as TABLE3
+from rls_uncertainty.simulation.montecarlo import convergence_summary, run_level
+from rls_uncertainty.simulation.t2 import SimulationConfig, simulate_sensor_streams
 
 KINDS = ("imu", "airspeed", "dynamic_pressure", "control_surfaces", "thrust")
 SURFACE_NAMES = ("elevator_left", "elevator_right", "aileron_left", "aileron_right", "rudder")
@@ -262,7 +262,7 @@ def flight(directory: str, extra: dict) -> None:
 # ----------------------------------------------------------------------------- thresholds
 def sweep(runs: int, levels: tuple[float, ...], grid: list[tuple[float, float]]) -> None:
     """Held-back fraction and flag delay per level for each (max_correlation, min_r_squared)."""
-    from rls_uncertainty.identifiability import IdentifiabilityConfig  # noqa: PLC0415 - not in older checkouts
+    from rls_uncertainty.datapath.identifiability import IdentifiabilityConfig  # noqa: PLC0415 - not in older checkouts
     print(f"Table 3 Monte Carlo, seed 7, {runs} runs per level; per level over the five parameters: the largest "
           "fraction of runs held back / the largest delay of the median flag time (s)\n")
     print("| max_correlation | min_r_squared | " + " | ".join(f"{lv * 100:.0f}%" for lv in levels) + " |")

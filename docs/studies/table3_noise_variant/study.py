@@ -29,7 +29,7 @@ import numpy as np
 
 from rls_uncertainty.estimator import EstimatorBank
 from rls_uncertainty.estimator.options import EstimatorOptions
-from rls_uncertainty.montecarlo import (
+from rls_uncertainty.simulation.montecarlo import (
     LEVELS,
     PAPER_DIFFERENTIATOR,
     PAPER_TABLE3,
@@ -37,7 +37,7 @@ from rls_uncertainty.montecarlo import (
     level_inputs,
     parameter_cells,
 )
-from rls_uncertainty.simulation import (
+from rls_uncertainty.simulation.t2 import (
     RESPONSES,
     SIGNALS,
     T2_MODELS,

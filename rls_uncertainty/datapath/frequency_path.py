@@ -1,0 +1,128 @@
+"""The frequency-domain estimator beside the pipeline's time-domain one (numpy only).
+
+With ``estimator.method: frequency`` or ``both`` (:attr:`.config.PipelineConfig.method`) the
+pipeline hands every regression row it gives the time-domain estimator to one
+:class:`FrequencyPath` as well (docs/frequency.md, "In the node"):
+
+* **The rows.** The same samples, in the same order: a row the frequency-domain estimator
+  would refuse (:meth:`.frequency.FrequencyBank.check`) is refused before either estimator
+  takes it, so both hold the same record. The bias regressor ``"1"`` is left out (the trim
+  removes it, F1): the frequency-domain parameters of a model are its
+  :attr:`.config.ModelConfig.frequency_parameter_names`. Samples are taken as consecutive,
+  across a dropout too, as the time-domain estimator's lag products take them (the transform's
+  clock counts the samples used).
+* **When it publishes.** Estimates and both standard errors are computed on the samples whose
+  count since the start (or the last restart) is a multiple of ``frequency.every``, and a
+  :class:`FrequencyOutput` is made for those samples only, stamped with that sample's time:
+  with ``every > 1`` the numbers belong to the sample they are published with, nothing is
+  repeated in between.
+* **Convergence.** A second :class:`.convergence.ConvergenceMonitor` on the frequency-domain
+  estimates and corrected standard errors, fed the published samples; a parameter the data
+  cannot identify (:class:`.identifiability.IdentifiabilityMonitor`, judged on the same
+  sample from the time-domain fit) is never flagged.
+* **Nothing non-finite leaves.** A model whose estimates or standard errors are not all finite
+  is marked not ready in that output and counted (``outputs_withheld`` under ``M/frequency``).
+
+A new path is made whenever the time-domain estimator restarts (``~/reset``, a new timeline, a
+new configuration). Its state is not saved in the state file: a node resumed from one starts a new
+frequency-domain record.
+"""
+
+from __future__ import annotations
+
+from collections import Counter
+from dataclasses import replace
+from typing import TYPE_CHECKING, NamedTuple
+
+import numpy as np
+
+from ..frequency import FrequencyBank
+from ..settings.config import BIAS_REGRESSOR
+from .convergence import ConvergenceMonitor
+
+if TYPE_CHECKING:  # annotations only
+    from ..settings.config import PipelineConfig
+    from .identifiability import IdentifiabilityMonitor
+
+__all__ = ["FrequencyOutput", "FrequencyPath", "WITHHELD_SUFFIX"]
+
+# outputs_withheld counts a model's withheld frequency-domain outputs under "<model>/frequency".
+WITHHELD_SUFFIX = "/frequency"
+
+
+class FrequencyOutput(NamedTuple):
+    """The frequency-domain results of one sample, ``(M, q_max)`` arrays over each model's
+    :attr:`.config.ModelConfig.frequency_parameter_names` (padding NaN or False):
+    ``theta``, ``se`` (corrected, docs/frequency.md F7-F10), ``se_conventional`` (F5),
+    ``ready`` ``(M,)`` (false too where a value was not finite: withheld), ``converged`` and
+    ``model_converged`` (the second monitor's flags), ``lags`` ``(M,)``: the lags of the
+    residual autocovariance behind ``se`` (``frequency.lag_span``, fewer while the record is
+    shorter; 0 for models not ready)."""
+
+    theta: np.ndarray
+    se: np.ndarray
+    se_conventional: np.ndarray
+    ready: np.ndarray
+    converged: np.ndarray
+    model_converged: np.ndarray
+    lags: np.ndarray
+
+
+class FrequencyPath:
+    """The frequency-domain estimator of a pipeline's models (module docstring). ``config``
+    must have ``frequency`` options (``estimator.method`` not ``time``)."""
+
+    def __init__(self, config: PipelineConfig) -> None:
+        options = config.frequency
+        if options is None:
+            raise ValueError("the frequency path needs frequency options (estimator.method: frequency or both)")
+        self.outputs = [m.output for m in config.models]
+        self.parameter_names = [m.frequency_parameter_names for m in config.models]
+        self.sizes = [len(names) for names in self.parameter_names]
+        self.bank = FrequencyBank(self.sizes, options)
+        self.every, self.n_lags = options.every, options.n_lags
+        rows = [m.regressors for m in config.models]
+        n_max, q = max(map(len, rows)), max(self.sizes)
+        # Where each frequency-domain regressor sits in the time-domain row (M, n_max), flattened,
+        # and where it goes in this path's (M, q): the regressors of Eq. 2 without the bias.
+        self._take = np.array([j * n_max + i for j, row in enumerate(rows) for i, r in enumerate(row)
+                               if r != BIAS_REGRESSOR], dtype=np.intp)
+        self._put = np.array([j * q + k for j, size in enumerate(self.sizes) for k in range(size)], dtype=np.intp)
+        self._X = np.zeros((len(rows), q))
+        self.real = np.arange(q) < np.array(self.sizes)[:, None]  # (M, q): not padding
+        self._monitor = ConvergenceMonitor(self.sizes, replace(config.convergence, rate_hz=config.rate))
+        self._row: np.ndarray | None = None
+
+    def check(self, X: np.ndarray, z: np.ndarray) -> None:
+        """Take the time-domain regression row ``X`` ``(M, n_max)``, ``z`` ``(M,)``, or raise
+        :class:`.errors.NonFiniteInput` (nothing changes); :meth:`add` then uses it."""
+        self._X.flat[self._put] = X.flat[self._take]
+        self._row = self.bank.check(self._X, z)
+
+    def add(self, stamp_ns: int, withheld: Counter, quality: IdentifiabilityMonitor) -> FrequencyOutput | None:
+        """Advance by the row :meth:`check` took; on the samples that publish (every
+        ``frequency.every``-th) the results, else None. ``withheld`` counts the models whose
+        results were not finite; ``quality`` has judged the same sample."""
+        row, self._row = self._row, None
+        if row is None:
+            raise RuntimeError("FrequencyPath.add without a checked row")
+        bank = self.bank
+        bank.add(row)
+        if bank.n_samples % self.every:
+            return None
+        theta = bank.theta_all()
+        se = bank.standard_errors_all("corrected")
+        se_conv = bank.standard_errors_all("conventional")
+        ready = bank.ready
+        bad = ready & (self.real & ~(np.isfinite(theta) & np.isfinite(se) & np.isfinite(se_conv))).any(axis=1)
+        for j in np.flatnonzero(bad).tolist():
+            withheld[self.outputs[j] + WITHHELD_SUFFIX] += 1
+        ready &= ~bad
+        flags, model_flags = self._monitor.update(stamp_ns, theta, se, ready)
+        if flags.any():  # a parameter the data cannot identify is never flagged
+            ok = np.zeros(flags.shape, dtype=bool)
+            ok.flat[self._put] = quality.identifiable.flat[self._take]
+            flags &= ok
+            model_flags &= (ok | ~self.real).all(axis=1)
+        lags = np.where(ready, min(self.n_lags, bank.n_samples - 1), 0)
+        return FrequencyOutput(theta, se, se_conv, ready, flags, model_flags, lags)

@@ -1,0 +1,499 @@
+"""The single data path from stamped sensor messages to estimates (numpy only).
+
+The ROS node, the offline replay and the tests all drive one :class:`Pipeline`, which
+coordinates the modules that do the work:
+
+1. ``add_imu``, ``add_airspeed``, ``add_dynamic_pressure``, ``add_surfaces``, ``add_thrust``
+   take plain stamped numbers in the REP-103 body frame (x forward, y left, z up) and SI, one
+   per input stream of :data:`STREAMS`. :class:`.intake.Intake` judges each message
+   (``limits.*``, ``inputs.frame_id``), mixes JointState surfaces into Eq. 23's deflections
+   (:mod:`.surface_mixing`) and hands it to the sampler.
+2. :mod:`.sampling` buffers the streams, counts every message (accepted, or rejected with a
+   reason), and forms samples on the grid ``t_k = k / rate`` by linear interpolation, never
+   extrapolating; the pipeline names the streams a sample needs. When the stamps move to a new
+   timeline (a looped replay, a confirmed jump) the sampler says so between the samples of the
+   two timelines, and the pipeline restarts its data path there (:meth:`Pipeline._restart`).
+3. Rates go through the fixed-lag differentiator (:mod:`.differentiation`); every other
+   signal waits in a delay line of the same lag, so a sample reaches the aerodynamics
+   ``lag`` samples late but time-aligned.
+4. :mod:`.aero` converts the sample to aircraft body axes (:func:`.aero.aircraft_sample`),
+   then Eq. 1 coefficients and Eq. 2 regressors feed one :class:`.estimator.EstimatorBank`
+   (Eqs. 15-22), and each used sample yields a :class:`SampleOutput`: estimates, standard
+   errors, per-parameter convergence flags (:mod:`.convergence`, one monitor reset with the
+   estimator) and, every ``outputs.covariance_decimation`` grid points, the full covariances.
+   What leaves for ROS is made of it at the edge (:mod:`.outputs`). With ``estimator.method``
+   ``frequency`` or ``both`` the same rows also feed the frequency-domain estimator
+   (:mod:`.frequency_path`), whose results ride in :attr:`SampleOutput.frequency`.
+
+Every formed sample ends as used or as rejected with a reason, and every message as accepted
+or rejected: :class:`.bookkeeping.Bookkeeping` holds every counter and what the refused inputs
+carried, :meth:`Pipeline.counters` reports them (the node's ``/diagnostics``), and a
+reconfigured pipeline takes over the same object.
+
+Nothing non-finite leaves: a message in another frame than ``inputs.frame_id``, or with a value
+that is non-finite or beyond ``limits.*`` (:class:`.limits.PlausibilityLimits`), is rejected
+with its reason; so is a sample that is implausible once formed, or that the estimator refuses
+(``non_finite_regression``); and a model whose outputs are not all finite is marked not
+``ready`` in its :class:`SampleOutput` and counted.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from collections.abc import Sequence
+from dataclasses import replace
+from pathlib import Path
+from typing import NamedTuple
+
+import numpy as np
+
+from ..aero.coefficients import RATES, FloatArray, aircraft_sample, coefficients, flight_state, regressors
+from ..aero.differentiation import FixedLagDifferentiator
+from ..aero.surface_mixing import SURFACES
+from ..errors import NonFiniteInput, StateFileError
+from ..estimator import EstimatorBank
+from ..estimator.state_file import EstimatorState, load_state, save_state
+from ..settings.config import REGRESSOR_UNITS, PipelineConfig
+from .alerts import explanations, identifiability
+from .bookkeeping import SAMPLES, Bookkeeping, model_fit
+from .convergence import ConvergenceMonitor
+from .frequency_path import FrequencyOutput, FrequencyPath
+from .identifiability import IdentifiabilityMonitor
+from .intake import Intake
+from .sampling import Sample, Sampler, Skipped
+
+__all__ = ["Pipeline", "SampleOutput", "STREAMS", "StateFileError", "required_streams", "sampler_for"]
+
+# The input streams, one per ``add_*`` method: inertial data, air data and the optional ones.
+STREAMS = ("imu", "airspeed", "dynamic_pressure", "control_surfaces", "thrust")
+
+
+class SampleOutput(NamedTuple):
+    """What one estimator sample produced.
+
+    ``theta``, ``se`` (corrected, Eqs. 20/22) and ``se_conventional`` (Eq. 13) are
+    ``(M, n_max)`` arrays in the order of ``config.models``; rows of models that are not
+    ``ready`` yet (exact initialization still waiting) and the padding are NaN. ``ready`` is
+    false too for a model whose estimates or standard errors are not all finite (withheld,
+    counted in ``outputs_withheld``): a ready row is safe to publish (:mod:`.outputs`).
+    ``converged`` ``(M, n_max)`` and ``model_converged`` ``(M,)`` are the
+    :class:`.convergence.ConvergenceMonitor` flags (False on padding and models not ready; a
+    model is converged when all its parameters are). ``covariance`` is ``None``, or on the
+    samples whose grid index is a multiple of ``outputs.covariance_decimation`` the
+    ``(2, M, n_max, n_max)`` corrected (``[0]``) and conventional (``[1]``) covariances
+    (:meth:`.estimator.EstimatorBank.covariance`: a corrected one with a negative variance
+    repaired to its nearest positive semi-definite matrix, zero for an exact fit; symmetrized),
+    NaN off the ready models' parameters.
+    ``lags`` ``(M,)`` ints: the largest lag of Eq. 22 behind each corrected SE (chosen per
+    sample with ``estimator.lag_selection: auto``), 0 for models not ready. ``frequency``: with
+    ``estimator.method`` ``frequency`` or ``both``, on the samples where the frequency-domain
+    estimator publishes, its :class:`.frequency_path.FrequencyOutput`; else None.
+    """
+
+    stamp_ns: int
+    index: int  # type: ignore[assignment]  # shadows tuple.index; the field name is the API
+    theta: np.ndarray
+    se: np.ndarray
+    se_conventional: np.ndarray
+    ready: np.ndarray
+    converged: np.ndarray
+    model_converged: np.ndarray
+    covariance: np.ndarray | None = None
+    lags: np.ndarray | None = None
+    frequency: FrequencyOutput | None = None
+
+    @property
+    def time(self) -> float:
+        return self.stamp_ns * 1e-9
+
+
+
+
+def required_streams(config: PipelineConfig) -> tuple[str, ...]:
+    """The streams every sample needs: IMU and air data always, the others when the
+    configuration uses them (the order is the order of the rejection checks)."""
+    uses = {r for m in config.models for r in m.regressors}
+    required = ["imu", "airspeed"]
+    if uses & set(SURFACES):
+        required.append("control_surfaces")
+    if config.inputs.use_dynamic_pressure:
+        required.append("dynamic_pressure")
+    if config.inputs.use_thrust and any(m.output == "CX" for m in config.models):
+        required.append("thrust")
+    return tuple(required)
+
+
+def symmetric_covariances(c: np.ndarray, real: np.ndarray, real_square: np.ndarray, ready: np.ndarray) -> np.ndarray:
+    """``(2, M, n_max, n_max)`` from :meth:`.estimator.EstimatorBank.covariance_all` ``c``
+    (changed in place): made exactly symmetric (``(C + C')/2``: the products leave
+    rounding-level asymmetry), NaN off the ready models' parameters (``real`` ``(M, n_max)``
+    marks the parameters, ``real_square`` their blocks)."""
+    # A negative variance only at an exact fit (the initialization sample), whose R(0)
+    # comes out as a tiny negative number: zero, as its standard errors are.
+    smallest = np.minimum.reduce(c.diagonal(0, 2, 3), axis=2, where=real, initial=np.inf)
+    c[smallest < 0.0] = 0.0
+    cov = c + c.swapaxes(2, 3)
+    cov *= 0.5
+    # NaN off the ready models' blocks (padding, models not ready or withheld).
+    np.copyto(cov, np.nan, where=~(real_square & ready[:, None, None]))
+    return cov
+
+
+def sampler_for(config: PipelineConfig, required: Sequence[str], book: Bookkeeping) -> Sampler:
+    """The :class:`.sampling.Sampler` of a configuration: its grid, gap, buffer and timeline
+    settings (``inputs.*``), the streams every sample needs, and the bookkeeping's counters."""
+    inputs = config.inputs
+    return Sampler(
+        STREAMS,
+        tuple(required),
+        period_ns=config.period_ns,
+        max_gap_ns=inputs.max_gap_ns,
+        buffer_ns=inputs.buffer_ns,
+        max_jump_ns=inputs.max_stamp_jump_ns,
+        confirm=inputs.jump_confirmation,
+        max_buffered=inputs.max_buffered,
+        max_clock_ns=inputs.max_clock_offset_ns,
+        counts=book.streams,
+    )
+
+
+class Pipeline:
+    """Sample formation, differentiation, aero reduction and estimation for one configuration.
+
+    ``record=True`` keeps every regression row and output handed to the estimator
+    (``self.regression``), for batch comparisons and the replay's plots. ``bookkeeping``
+    continues the counters of an earlier pipeline (:meth:`reconfigured`).
+    """
+
+    def __init__(
+        self,
+        config: PipelineConfig,
+        *,
+        record: bool = False,
+        enabled: bool = True,
+        bookkeeping: Bookkeeping | None = None,
+    ) -> None:
+        self.config = config
+        self.models = config.models
+        self.parameter_names = [m.parameter_names for m in config.models]
+        self.labels = [",".join(names) for names in self.parameter_names]
+        self.sizes = [len(m.regressors) for m in config.models]
+        self.enabled = enabled
+        self.record = record
+        self.regression: list[tuple[int, np.ndarray, np.ndarray]] = []
+        self.bookkeeping = book = bookkeeping if bookkeeping is not None else Bookkeeping.for_streams(STREAMS)
+        self.required = required_streams(config)
+        inputs = config.inputs
+        self.sampler = sampler_for(config, self.required, book)
+        self.intake = Intake(self.sampler, config.limits, config.surfaces, book)
+        # The caller's clock is compared with the stamps only when inputs.max_clock_offset > 0
+        # (the node then sets clock_ns before each message; the offline replay has no clock).
+        self.needs_clock = inputs.max_clock_offset_ns > 0
+        # Where the optional streams sit in a sample's values (None: not required).
+        where = {name: i for i, name in enumerate(self.required)}
+        self._i_qbar = where.get("dynamic_pressure")
+        self._i_surfaces = where.get("control_surfaces")
+        self._i_thrust = where.get("thrust")
+        self.limits = config.limits
+        self.frame_id = inputs.frame_id  # checked by inputs.feed
+        self._index = 0
+        self._monitor = ConvergenceMonitor(self.sizes, replace(config.convergence, rate_hz=config.rate))
+        # Identifiability (the fit, excitation, collinearity) takes its flags out of the monitor's.
+        rows = [m.regressors for m in config.models]
+        self._x_names = [name for names in rows for name in names]
+        self._quality = IdentifiabilityMonitor(rows, [[REGRESSOR_UNITS[r] for r in row] for row in rows],
+                                               config.identifiability, config.estimator.forgetting)
+        self._named_after = math.ceil(config.convergence.window * config.rate)  # samples before a cause is named
+        self.last_stamp_ns: int | None = None  # the newest sample the estimator used
+        self._cov_every = config.outputs.covariance_decimation
+        self._period_ns = config.period_ns
+        self._new_estimator()
+        self._diff = FixedLagDifferentiator(config.differentiator, 1.0 / config.rate, width=3)
+        self._lag = config.differentiator.lag
+        self._pending: deque = deque()  # the delay line: (stamp, sample) awaiting rate_dot
+        self._outputs = [m.output for m in config.models]
+        # Where each model's regressors go in the (M, n_max) regression matrix, flattened.
+        n_max = self.bank.n_max
+        self._x_index = np.array([j * n_max + i for j, names in enumerate(rows) for i in range(len(names))],
+                                 dtype=np.intp)
+        self._real = np.arange(n_max) < np.array(self.sizes)[:, None]  # (M, n_max): not padding
+        self._real_square = self._real[:, :, None] & self._real[:, None, :]  # (M, n_max, n_max)
+
+    def _new_estimator(self) -> None:
+        self.bank = EstimatorBank(self.sizes, self.config.estimator)
+        self._X = np.zeros((len(self.sizes), self.bank.n_max))
+        self._z = np.zeros(len(self.sizes))
+        self._quality.reset()  # its output sums (R^2) and regressor statistics restart too
+        self._withheld = np.zeros(len(self.sizes), dtype=bool)  # the last output's, per model
+        self._monitor.reset()
+        self._converged = self._monitor.no_flags()  # the newest sample's flags
+        # estimator.method frequency or both: the frequency-domain estimator on the same rows.
+        self.frequency = FrequencyPath(self.config) if self.config.frequency is not None else None
+
+    @property
+    def identifiability(self) -> IdentifiabilityMonitor:
+        """The identifiability figures of the newest sample (:mod:`.identifiability`)."""
+        return self._quality
+
+    @property
+    def samples_used(self) -> int:
+        """Samples that reached an estimator, over the pipeline's life (reconfigurations too)."""
+        return self.bookkeeping.samples_used
+
+    # ------------------------------------------------------------------ inputs (Intake judges each)
+    def add_imu(self, stamp_ns: int, angular_velocity: Sequence[float],
+                linear_acceleration: Sequence[float]) -> list[SampleOutput]:
+        """``sensor_msgs/Imu`` in the REP-103 body frame: rad/s and specific force m/s^2."""
+        return self._advance() if self.intake.imu(stamp_ns, angular_velocity, linear_acceleration) else []
+
+    def add_airspeed(self, stamp_ns: int, velocity: Sequence[float]) -> list[SampleOutput]:
+        """True-airspeed vector in the REP-103 body frame, m/s."""
+        return self._advance() if self.intake.airspeed(stamp_ns, velocity) else []
+
+    def add_dynamic_pressure(self, stamp_ns: int, pascal: float) -> list[SampleOutput]:
+        return self._advance() if self.intake.dynamic_pressure(stamp_ns, pascal) else []
+
+    def add_thrust(self, stamp_ns: int, force_x: float) -> list[SampleOutput]:
+        return self._advance() if self.intake.thrust(stamp_ns, force_x) else []
+
+    def add_surfaces(self, stamp_ns: int, names: Sequence[str], positions: Sequence[float]) -> list[SampleOutput]:
+        """``sensor_msgs/JointState`` names and positions (rad), mixed by Eq. 23."""
+        return self._advance() if self.intake.surfaces(stamp_ns, names, positions) else []
+
+    def reject_frame(self, stream: str, stamp_ns: int, frame_id: str = "") -> list[SampleOutput]:
+        """Count a message of input ``stream`` whose ``header.frame_id`` (``frame_id``) is not
+        ``inputs.frame_id`` (:func:`.inputs.feed` checks): rejected as ``frame_mismatch``,
+        never used, and like any invalid message it leaves a hole: no sample is interpolated
+        across it."""
+        return self._advance() if self.intake.frame_mismatch(stream, stamp_ns, frame_id) else []
+
+    def reject(self, stream: str, reason: str, detail: str = "") -> None:
+        """Count a message of input ``stream`` that never reached the pipeline's ``add_*``
+        (the node could not decode it; ``detail``: why, kept as evidence)."""
+        self.intake.undecodable(stream, reason, detail)
+
+    def reject_invalid(self, stream: str, stamp_ns: int, reason: str) -> list[SampleOutput]:
+        """Count a message of input ``stream`` stamped ``stamp_ns`` whose values cannot be
+        used (``reason``): no sample is formed across it (:meth:`.sampling.Sampler.reject_invalid`)."""
+        return self._advance() if self.intake.invalid(stream, stamp_ns, reason) else []
+
+    @property
+    def clock_ns(self) -> int | None:
+        """The caller's clock (ns) that stamps are checked against (``inputs.max_clock_offset``)."""
+        return self.sampler.clock_ns
+
+    @clock_ns.setter
+    def clock_ns(self, now: int | None) -> None:
+        self.sampler.clock_ns = now
+
+    # ------------------------------------------------------------------ per sample
+    def _advance(self) -> list[SampleOutput]:
+        out: list[SampleOutput] = []
+        book = self.bookkeeping
+        for item in self.sampler.due():
+            # `kind` tells the three item types apart; mypy does not narrow `item` through it.
+            kind = type(item)
+            if kind is Sample:
+                book.samples_formed += 1
+                result = self._process(item.stamp_ns, self._sample_vector(item.values))  # type: ignore[union-attr]
+                if result is not None:
+                    out.append(result)
+            elif kind is Skipped:  # grid points not formed: the differentiator restarts after them
+                book.samples_formed += item.count  # type: ignore[operator]
+                book.samples_rejected[item.reason] += item.count  # type: ignore[union-attr, operator]
+                self._flush("discontinuity")
+            else:  # Restart: the stamps moved to a new timeline
+                self._restart(item.reason)  # type: ignore[union-attr]
+        return out
+
+    def _restart(self, reason: str) -> None:
+        """The data moved to a new timeline (every sample of the previous one was formed): the
+        delay line is dropped (``reset_<reason>``) and the differentiator restarts. After a
+        backward jump (a looped replay, ``/clock`` went back) the estimator restarts too; after a
+        forward jump it goes on, as after a dropout: the later data is the same flight."""
+        self.bookkeeping.resets[reason] += 1
+        self._flush(f"reset_{reason}")
+        if reason != "stamps_jumped_forward":
+            self._new_estimator()
+            self.regression.clear()
+
+    def _sample_vector(self, values: list) -> list:
+        """The sampled streams (in ``required`` order) as one :data:`.aero.SAMPLE_FIELDS`
+        vector in aircraft body axes; streams not used take their stand-ins."""
+        i_qbar, i_surfaces, i_thrust = self._i_qbar, self._i_surfaces, self._i_thrust
+        return aircraft_sample(
+            values[0],
+            values[1],
+            math.nan if i_qbar is None else values[i_qbar][0],
+            (0.0, 0.0, 0.0) if i_surfaces is None else values[i_surfaces],
+            0.0 if i_thrust is None else values[i_thrust][0],
+        )
+
+    def _flush(self, reason: str) -> None:
+        """Drop the samples waiting in the delay line and restart the differentiator."""
+        if self._pending:
+            self.bookkeeping.samples_rejected[reason] += len(self._pending)
+            self._pending.clear()
+        self._diff.reset()
+
+    def _process(self, t: int, sample: list) -> SampleOutput | None:
+        """The delay line: the rates enter the differentiator now, the sample leaves ``lag``
+        samples later together with its angular accelerations."""
+        self._pending.append((t, sample))
+        rate_dot = self._diff.push(sample[RATES])
+        if rate_dot is None:
+            if len(self._pending) > self._lag:
+                self._pending.popleft()
+                self.bookkeeping.samples_rejected["differentiator_warmup"] += 1
+            return None
+        t, sample = self._pending.popleft()  # the sample `lag` samples back, aligned
+        return self._estimate(t, sample, rate_dot)
+
+    def _estimate(self, t: int, sample: list[float], rate_dot: FloatArray) -> SampleOutput | None:
+        book = self.bookkeeping
+        state = flight_state(sample, rate_dot, self.config.inputs.air_density, self.limits)
+        if type(state) is str:
+            book.samples_rejected[state] += 1
+            book.note(SAMPLES, state, (sample, rate_dot.tolist()))  # (a rejected sample's values)
+            return None
+        if not self.enabled:
+            book.samples_rejected["estimation_disabled"] += 1
+            return None
+        ac = self.config.aircraft
+        # A FlightState from here (mypy does not narrow on `type(x) is str`'s else branch).
+        coef = coefficients(state, ac)  # type: ignore[arg-type]
+        reg = regressors(state, ac)  # type: ignore[arg-type]
+        X, z = self._X, self._z
+        X.flat[self._x_index] = [reg[name] for name in self._x_names]
+        z[:] = [coef[name] for name in self._outputs]
+        freq = self.frequency
+        try:
+            if freq is not None:
+                freq.check(X, z)  # a row either estimator refuses is used by neither
+            self.bank.update(X, z)
+        except NonFiniteInput:  # the row, or the state it would make, is not finite: unchanged
+            book.samples_rejected["non_finite_regression"] += 1
+            return None
+        book.samples_used += 1
+        self._quality.add(X, z)
+        self.last_stamp_ns = t
+        if self.record:
+            self.regression.append((t, X.copy(), z.copy()))
+        bank = self.bank
+        self._index += 1
+        theta = bank.theta_all()
+        se = bank.standard_errors_all("corrected")
+        se_conv = bank.standard_errors_all("conventional")
+        ready = bank.ready
+        # The last guard: a ready model with a non-finite estimate or SE is withheld, counted.
+        self._withheld = bad = ready & (self._real & ~(np.isfinite(theta) & np.isfinite(se)
+                                                       & np.isfinite(se_conv))).any(axis=1)
+        if bad.any():
+            for j in np.flatnonzero(bad):
+                book.outputs_withheld[self._outputs[j]] += 1
+            ready &= ~bad
+        flags, model_flags = self._monitor.update(t, theta, se, ready)
+        # A parameter that is not identifiable from the data so far is never flagged converged.
+        self._converged = flags, model_flags = self._quality.restrict(flags, model_flags, bank, ready)
+        frequency = None if freq is None else freq.add(t, book.outputs_withheld, self._quality)
+        return SampleOutput(stamp_ns=t, index=self._index, theta=theta, se=se, se_conventional=se_conv, ready=ready,
+                            converged=flags, model_converged=model_flags, covariance=self._covariances(t, ready),
+                            lags=np.where(ready, bank.lags_used, 0), frequency=frequency)
+
+    def _covariances(self, t: int, ready: np.ndarray) -> np.ndarray | None:
+        """The corrected and conventional covariances of the ready models
+        (:func:`symmetric_covariances`) on the grid points that publish them (every
+        ``outputs.covariance_decimation``-th), else None."""
+        every = self._cov_every
+        if not every or (t // self._period_ns) % every:
+            return None
+        return symmetric_covariances(self.bank.covariance_all(), self._real, self._real_square, ready)
+
+    # ------------------------------------------------------------------ lifecycle
+    def reset(self, reason: str, *, clear_inputs: bool = True) -> None:
+        """Start afresh (``~/reset``): the estimator, and with ``clear_inputs`` all input
+        state too: buffered and held messages (counted as expired), the streams' newest stamps
+        (older stamps are accepted again), jump candidates, timelines, the grid and the delay
+        line (``reset_<reason>`` samples). ``clear_inputs=False`` restarts the estimator only:
+        samples in the delay line then reach the new estimator."""
+        self.bookkeeping.resets[reason] += 1
+        self._new_estimator()
+        self.regression.clear()
+        if clear_inputs:
+            self._flush(f"reset_{reason}")
+            self.sampler.clear(forget_newest=True)
+
+    def time_jumped(self, now_ns: int, before_ns: int) -> bool:
+        """The caller's clock went back from ``before_ns`` to ``now_ns`` (``/clock`` restarted):
+        streams whose stamps step back near ``now_ns`` start the new timeline without
+        confirmation, and the restart (``resets.time_jumped_backwards``) happens when they do,
+        after the samples of the messages sent before the jump. False when there is nothing
+        to restart (no data yet, or the stamps already moved near ``now_ns``)."""
+        return self.sampler.time_jumped(int(now_ns), int(before_ns))
+
+    def reconfigured(self, config: PipelineConfig, reason: str = "parameters_changed") -> Pipeline:
+        """A pipeline with a new configuration that takes over this one's bookkeeping:
+        buffered messages are counted as expired, samples waiting in the delay line as
+        ``reset_<reason>``, so nothing disappears from the diagnostics. The estimator starts
+        afresh; this pipeline must not be used afterwards."""
+        self._flush(f"reset_{reason}")
+        self.sampler.clear(forget_newest=False)
+        self.bookkeeping.resets[reason] += 1
+        return Pipeline(config, record=self.record, enabled=self.enabled, bookkeeping=self.bookkeeping)
+
+    def finish(self) -> None:
+        """End of data: the last ``lag`` samples never get a centred derivative."""
+        self._flush("end_of_data")
+
+    # ------------------------------------------------------------------ reporting
+    def model_fit(self, j: int) -> dict:
+        """Model ``j``'s fit (:func:`.bookkeeping.model_fit`)."""
+        withheld = self.bookkeeping.outputs_withheld.get(self._outputs[j], 0)
+        r2 = float(self._quality.fit(self.bank)[j])
+        return model_fit(self.bank, j, r2, bool(self._withheld[j]), withheld)
+
+    def model_report(self, j: int) -> dict:
+        """What ``/diagnostics`` reports of model ``j`` (node and replay alike): its
+        :meth:`model_fit`, once it is ready its newest :meth:`convergence` flags and
+        identifiability figures, and ``identifiability``: why parameters are not identifiable, or
+        why the model cannot initialize (:func:`.alerts.identifiability`), when that is so."""
+        fit, quality = self.model_fit(j), self._quality
+        why = identifiability(self._outputs[j], quality.problems(j, self._named_after))
+        if fit["ready"]:
+            fit = {**fit, **self.convergence(j), **quality.report(j, self.parameter_names[j])}
+        return {**fit, "identifiability": why} if why else fit
+
+    def convergence(self, j: int) -> dict:
+        """The newest sample's convergence flags of model ``j`` for diagnostics: ``converged``
+        (the model flag) and ``converged_parameters`` (the names, comma-separated)."""
+        flags, model_flags = self._converged
+        names = [p for p, f in zip(self.parameter_names[j], flags[j], strict=False) if f]
+        return {"converged": bool(model_flags[j]), "converged_parameters": ",".join(names)}
+
+    def counters(self) -> dict:
+        """Bookkeeping for diagnostics: messages per stream and samples, with reasons, and
+        ``explanations``: each reason in the user's terms (:func:`.alerts.explanations`)."""
+        report = self.bookkeeping.report(len(self._pending))
+        report["explanations"] = explanations(self.config, self.bookkeeping)
+        return report
+
+    # ------------------------------------------------------------------ persistence
+    def save_state(self, path: str | Path) -> None:
+        """Write the estimator state (:mod:`.state_file`) so a restarted node resumes."""
+        quality = self._quality
+        state = EstimatorState(self.bank, self.bookkeeping.samples_used, quality.output_sum, quality.output_sum_squares)
+        save_state(path, state, self.config.fingerprint())
+
+    def load_state(self, path: str | Path) -> None:
+        """Continue from :meth:`save_state`. Raises :class:`StateFileError` when the file is
+        unreadable, not a valid state or was written with another configuration (every field is
+        checked against this pipeline's configuration before anything is allocated)."""
+        expect = (tuple(self.sizes), self.config.estimator)
+        state = load_state(path, self.config.fingerprint(), expect=expect)
+        self.bank = state.bank
+        self.bookkeeping.samples_used = state.samples_used
+        self._quality.resume(state.output_sum, state.output_sum_squares)
+        # The convergence history restarts: flags need window seconds of the resumed estimates.
+        self._monitor.reset()
+        self._converged = self._monitor.no_flags()

@@ -1,0 +1,250 @@
+"""The offline replay's output files, written sample by sample as the replay runs.
+
+:class:`ReplayFiles` receives every :class:`.pipeline.SampleOutput` and every ``/diagnostics``
+report of a replay (:func:`.replay.run_pipeline`'s sink) and writes, into the replay's output
+directory:
+
+* ``estimates.csv`` (:data:`CSV_COLUMNS`): one row per sample and parameter of every ready
+  model;
+* ``estimates_wide.csv`` (:func:`wide_columns`): one row per sample, one column per parameter
+  and quantity, cells empty while a model is not ready (these two only when the time-domain
+  estimates are published: ``estimator.method`` ``time`` or ``both``);
+* ``estimates_frequency.csv`` (with ``estimator.method`` ``frequency`` or ``both``): the
+  columns of ``estimates.csv``, one row per parameter of every model ready in the frequency
+  domain on each sample where it publishes (:mod:`.frequency_path`), over the parameters
+  without the bias; ``lags`` are those of its residual autocovariance;
+* ``estimates.mcap``: every topic the node publishes, byte for byte what the node sends
+  (:meth:`.outputs.OutputLayout.encode`), log time = the sample's stamp, and the
+  ``/diagnostics`` reports at their data time; ordered by log time, then topic
+  (:class:`.bags.BagWriter`: with CRCs), holding back only the records a later one could precede: those
+  after the newest sample or the newest message;
+* ``run.json`` (:func:`run_record`): what a later ``replay --compare`` checks before
+  comparing (:mod:`.compare`): the bag's input content digest, the span, the parameters and
+  the configuration with its digest, the models and their parameters.
+
+Nothing is kept per sample: memory does not grow with the recording.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from dataclasses import asdict
+from pathlib import Path
+from types import TracebackType
+from typing import IO, TYPE_CHECKING, Any
+
+import numpy as np
+
+from ..datapath.outputs import OutputLayout
+from .bags import BagWriter
+
+if TYPE_CHECKING:  # annotations only
+    from rosbags.typesys.store import Typestore
+
+    from ..datapath.pipeline import SampleOutput
+    from ..ros.diagnostics import Status
+    from ..settings.config import PipelineConfig
+
+__all__ = ["ReplayFiles", "CSV_COLUMNS", "WIDE_QUANTITIES", "wide_columns", "stamp_text", "run_record",
+           "RUN_FORMAT", "configuration_digest", "DIAGNOSTIC_ARRAY"]
+
+CSV_COLUMNS = ("time", "model", "parameter", "estimate", "std_error", "std_error_conventional", "converged", "lags")
+# Columns of the wide CSV per parameter P: P (estimate), P_se (corrected), P_se_conventional,
+# P_converged (1.0/0.0); and per model M, after its parameters, M_lags.
+WIDE_QUANTITIES = (("", "theta"), ("_se", "se"), ("_se_conventional", "se_conventional"), ("_converged", "converged"))
+DIAGNOSTIC_ARRAY = "diagnostic_msgs/msg/DiagnosticArray"
+RUN_FORMAT = "rls_uncertainty replay run 1"
+
+
+def stamp_text(stamp_ns: int) -> str:
+    """A stamp as the CSV files write it: ``SEC.NANOSEC``, exact."""
+    return f"{stamp_ns // 10**9}.{stamp_ns % 10**9:09d}"
+
+
+def wide_columns(config: PipelineConfig) -> list[str]:
+    """The wide CSV's header: ``time`` then, per model, every quantity of each parameter and
+    the model's lag count."""
+    columns = ["time"]
+    for m in config.models:
+        columns += [f"{p}{suffix}" for p in m.parameter_names for suffix, _ in WIDE_QUANTITIES] + [f"{m.output}_lags"]
+    return columns
+
+
+def configuration_digest(config: PipelineConfig) -> tuple[dict[str, Any], str]:
+    """The configuration as plain JSON values and the SHA-256 of its canonical text."""
+    values = json.loads(json.dumps(asdict(config), default=repr))
+    text = json.dumps(values, sort_keys=True, separators=(",", ":"))
+    return values, hashlib.sha256(text.encode()).hexdigest()
+
+
+def run_record(bag: dict[str, Any], parameters: dict[str, Any], config: PipelineConfig) -> dict[str, Any]:
+    """``run.json``: the bag (``bag``: path, input digest, messages, span, strictness), every
+    parameter as resolved (defaults filled in), the configuration and its digest, and the
+    outputs' models, parameter names and sample period."""
+    values, digest = configuration_digest(config)
+    return {
+        "format": RUN_FORMAT,
+        "bag": bag,
+        "parameters": parameters,
+        "configuration": values,
+        "configuration_sha256": digest,
+        "models": [m.output for m in config.models],
+        "parameter_names": [list(m.parameter_names) for m in config.models],
+        "period_ns": config.period_ns,
+    }
+
+
+class _Csv:
+    """``estimates.csv``: :data:`CSV_COLUMNS`, one row per sample and parameter of every ready
+    model; ``converged`` is the parameter's flag (1/0), ``lags`` the model's lag count of Eq. 22
+    behind ``std_error`` (chosen per sample under ``estimator.lag_selection: auto``). With
+    ``frequency``, ``estimates_frequency.csv``: the same of the frequency-domain results."""
+
+    def __init__(self, path: Path, layout: OutputLayout, frequency: bool = False) -> None:
+        self.layout, self.frequency = layout, frequency
+        self.fh: IO[str] = open(path, "w")  # noqa: SIM115 - closed by ReplayFiles.close
+        self.fh.write(",".join(CSV_COLUMNS) + "\n")
+
+    def sample(self, out: SampleOutput) -> None:
+        t = stamp_text(out.stamp_ns)
+        write = self.fh.write
+        f = out.frequency
+        lag_counts: np.ndarray | None
+        if self.frequency:
+            if f is None:
+                return
+            rows, converged, lag_counts = self.layout.frequency_rows(out), f.converged, f.lags
+        else:
+            rows, converged, lag_counts = self.layout.rows(out), out.converged, out.lags
+        for j, name, names, theta, se, se_conv in rows:
+            lags = int(lag_counts[j]) if lag_counts is not None else ""
+            flags = converged[j, : len(names)].tolist()
+            # (Python floats from tolist: the same repr as float() of each numpy element.)
+            for p, a, b, c, f in zip(names, theta.tolist(), se.tolist(), se_conv.tolist(), flags, strict=True):
+                write(f"{t},{name},{p},{a!r},{b!r},{c!r},{int(f)},{lags}\n")
+
+
+class _WideCsv:
+    """``estimates_wide.csv``: one row per sample, one column per parameter and quantity
+    (:func:`wide_columns`), empty where the model is not ready yet. Comma separated, a header
+    row and a numeric time column (s): what PlotJuggler's CSV loader reads as is."""
+
+    def __init__(self, path: Path, config: PipelineConfig) -> None:
+        self.sizes = [len(m.regressors) for m in config.models]
+        self.fh: IO[str] = open(path, "w")  # noqa: SIM115 - closed by ReplayFiles.close
+        self.fh.write(",".join(wide_columns(config)) + "\n")
+
+    def sample(self, out: SampleOutput) -> None:
+        cells = [stamp_text(out.stamp_ns)]
+        arrays = [np.asarray(getattr(out, field), dtype=np.float64) for _, field in WIDE_QUANTITIES]
+        for j, n in enumerate(self.sizes):
+            if out.ready[j]:
+                rows = [a[j, :n].tolist() for a in arrays]  # Python floats: repr as float()
+                cells += [repr(row[i]) for i in range(n) for row in rows]
+                cells.append(str(int(out.lags[j])) if out.lags is not None else "")
+            else:
+                cells += [""] * (n * len(arrays) + 1)
+        self.fh.write(",".join(cells) + "\n")
+
+
+def _diagnostic_array(store: Typestore, stamp_ns: int, statuses: list[Status]) -> object:
+    """A ``diagnostic_msgs/DiagnosticArray`` (``rosbags`` message of ``store``) of ``statuses``
+    stamped with the data time."""
+    types = store.types
+    header, stamp_t = types["std_msgs/msg/Header"], types["builtin_interfaces/msg/Time"]
+    array_t, status_t = types[DIAGNOSTIC_ARRAY], types["diagnostic_msgs/msg/DiagnosticStatus"]
+    key_value = types["diagnostic_msgs/msg/KeyValue"]
+    sec, nanosec = divmod(stamp_ns, 1_000_000_000)
+    return array_t(
+        header=header(stamp=stamp_t(sec=sec, nanosec=nanosec), frame_id=""),
+        status=[status_t(level=s.level, name=s.name, message=s.message, hardware_id=s.hardware_id,
+                         values=[key_value(key=k, value=v) for k, v in s.values]) for s in statuses],
+    )
+
+
+class _Mcap:
+    """``estimates.mcap`` (module docstring), opened at its first record: a replay that
+    publishes nothing and reports nothing writes no bag. Every topic of the configuration's
+    outputs and ``/diagnostics`` get a connection, whether or not a message follows."""
+
+    def __init__(self, directory: Path, layout: OutputLayout, frame_id: str, node: str, store: Typestore) -> None:
+        self.directory, self.layout, self.frame_id, self.store = directory, layout, frame_id, store
+        self.topics = [(f"/{node}/{topic}", msgtype) for topic, msgtype in layout.topics]
+        self.fit_topics = [(f"/{node}/{topic}", msgtype) for topic, msgtype in layout.fit_topics]
+        self.writer: BagWriter | None = None
+        self.newest_sample: int | None = None  # stamp of the newest sample written
+
+    def _open(self) -> BagWriter:
+        if self.writer is None:
+            self.writer = BagWriter(self.directory / "estimates.mcap",
+                                    [*self.topics, *self.fit_topics, ("/diagnostics", DIAGNOSTIC_ARRAY)],
+                                    self.store)
+        return self.writer
+
+    def sample(self, out: SampleOutput) -> None:
+        writer, topics, stamp = self._open(), self.topics, out.stamp_ns
+        for index, data in self.layout.encode(out, self.frame_id):
+            writer.add(stamp, *topics[index], data)
+        self.newest_sample = stamp
+
+    def diagnostics(self, stamp_ns: int, statuses: list[Status], fits: list[tuple[int, str, str, bytes]]) -> None:
+        writer = self._open()
+        writer.add(stamp_ns, "/diagnostics", DIAGNOSTIC_ARRAY, _diagnostic_array(self.store, stamp_ns, statuses))
+        for log_ns, topic, msgtype, raw in fits:
+            writer.add(log_ns, topic, msgtype, raw)
+
+    def after(self, newest_ns: int) -> None:
+        """Write what no later record can precede: a later sample comes after the newest one,
+        a later report at the newest message's stamp or after."""
+        if self.writer is not None:
+            bound = newest_ns if self.newest_sample is None else min(newest_ns, self.newest_sample + 1)
+            self.writer.release(bound)
+
+    def close(self) -> None:
+        if self.writer is not None:
+            self.writer.close()
+
+
+class ReplayFiles:
+    """Every output file of a replay into ``directory`` (module docstring), as the samples
+    come; :meth:`close` completes them (a failure leaves them to the caller's
+    :func:`.files.output_directory`, which discards the directory)."""
+
+    def __init__(self, directory: Path, config: PipelineConfig, frame_id: str, node: str, store: Typestore) -> None:
+        layout = OutputLayout.for_config(config)
+        self.csvs: list[_Csv | _WideCsv] = []
+        if config.publishes_time:
+            self.csvs += [_Csv(directory / "estimates.csv", layout), _WideCsv(directory / "estimates_wide.csv", config)]
+        if config.frequency is not None:
+            self.csvs.append(_Csv(directory / "estimates_frequency.csv", layout, frequency=True))
+        self.mcap = _Mcap(directory, layout, frame_id, node, store)
+
+    def sample(self, out: SampleOutput) -> None:
+        for csv in self.csvs:
+            csv.sample(out)
+        self.mcap.sample(out)
+
+    def diagnostics(self, stamp_ns: int, statuses: list[Status], fits: list[tuple[int, str, str, bytes]]) -> None:
+        self.mcap.diagnostics(stamp_ns, statuses, fits)
+
+    def after(self, newest_ns: int) -> None:
+        self.mcap.after(newest_ns)
+
+    def close(self) -> None:
+        for csv in self.csvs:
+            csv.fh.close()
+        self.mcap.close()
+
+    def __enter__(self) -> ReplayFiles:
+        return self
+
+    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
+                 tb: TracebackType | None) -> None:
+        if exc_type is None:
+            self.close()
+        else:
+            for csv in self.csvs:
+                csv.fh.close()
+            if self.mcap.writer is not None:
+                self.mcap.writer.__exit__(exc_type, exc, tb)

@@ -1,0 +1,373 @@
+"""The ``/diagnostics`` statuses of the estimator node, computed without ROS.
+
+The node collects one :class:`Snapshot` per diagnostics period, the pipeline's bookkeeping
+(:meth:`.pipeline.Pipeline.counters`, :meth:`.pipeline.Pipeline.model_fit`) plus the few facts
+only the node knows (its clock, matched publishers, the period, callback latencies), and
+:meth:`DiagnosticsPolicy.update` turns it into :class:`Status` records: name, level, message and
+ordered key-values. The node only converts them into a ``diagnostic_msgs/DiagnosticArray``.
+
+Three statuses, named ``<node>: ...`` (:func:`status_prefix`: ``rls_estimator: inputs`` for the
+node in the root namespace, as always, and the fully qualified name under a namespace,
+``/ns/rls_estimator: inputs``, so two namespaced nodes never share a status name on
+``/diagnostics``; ``hardware_id`` is the same ``<node>``):
+
+* ``inputs``: ``recent_window_s``, then per stream ``required``, ``publishers``, ``rate_hz``,
+  ``age_s``, the cumulative ``received``, ``accepted``, ``expired``, ``missing``, the counts of
+  the recent window ``recent.rejected``, ``recent.missing``, ``recent.expired``, and the
+  cumulative ``rejected.<reason>``. WARN when a required stream is silent or stale (older than
+  ``max(1 s, 2 max_gap)``; with a hint when no publisher matched), or when messages were
+  rejected, missing or expired *within the recent window*: one dropped packet warns for
+  ``window_s`` seconds, not for the rest of the flight (the cumulative counters stay beside).
+  ERROR when the data path is misconfigured (:mod:`.alerts`: every message of a needed stream
+  rejected, or no sample used for a window although messages arrive): the alerts' texts, which
+  name what was expected, what came and the parameter to change, come first in the message.
+* ``samples``: ``enabled``, ``samples_formed``, ``samples_used``, ``samples_pending``,
+  ``samples_rejected.<reason>``, ``resets.<reason>``, ``unknown_joint.<name>``, callback
+  latency and CPU percentiles of the period, ``state_file``, ``nodes_with_this_name``. OK, or
+  ERROR while another node with this node's fully qualified name is on the ROS graph (its
+  outputs then mix with this node's on the same topics: every consumer receives each sample
+  from both): the text first in the message, and logged as a warning (throttled like the
+  alerts).
+* ``model M``: the model fit, and the convergence flags when the node hands them in
+  (``converged``, ``converged_parameters``) with the identifiability figures
+  (:mod:`.identifiability`: ``identifiable``, ``not_identifiable``, ``held_back``,
+  ``max_parameter_correlation``, ``excitation.<regressor>``); OK when ready, WARN while a
+  parameter's convergence flag is held back as not identifiable (the message says why, naming
+  the regressors and the figure); while initializing OK until the first sample is used, WARN
+  after (naming the regressor that does not move, or the two that move together, once
+  ``convergence.window`` of samples has not initialized the model).
+
+**The window.** The policy keeps, per snapshot, the steady time (the sum of ``elapsed_s``)
+and each stream's rejected, missing and expired totals. The recent counts are the current
+totals minus those of the newest snapshot at least ``window_s`` old (the node's start before
+the first ``window_s`` seconds), so the window spans ``window_s`` to ``window_s`` plus one
+period; the history holds about ``window_s / period`` small tuples.
+
+**Bounded size.** Whatever arrives, each table of names (a stream's rejection reasons,
+rejected samples, resets, unknown joints) shows at most ``max_keys`` entries, the largest
+counts first, then ``<table>_other_names`` and ``<table>_other_count`` for the rest; a name
+is cut to :data:`MAX_NAME` characters (with a hash, so keys stay unique) and unprintable
+characters become ``?``; a value is cut to :data:`MAX_VALUE` characters. The ``inputs`` status
+holds at most ``1 + 5 (13 + max_keys)`` key-values, ``samples`` at most ``11 + 3 (2 +
+max_keys)``.
+"""
+
+from __future__ import annotations
+
+import heapq
+import zlib
+from collections import deque
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+
+from ..datapath.alerts import Alert, AlertPolicy
+from ..datapath.outputs import NODE_NAME
+
+__all__ = [
+    "OK",
+    "WARN",
+    "ERROR",
+    "STALE",
+    "Status",
+    "Snapshot",
+    "DiagnosticsPolicy",
+    "stale_after",
+    "percentile",
+    "malformed_reason",
+    "malformed_warning",
+    "status_prefix",
+    "namesake_alert",
+    "MAX_KEYS",
+    "MAX_NAME",
+    "MAX_VALUE",
+]
+
+MAX_KEYS = 16  # entries shown per table of names (rejection reasons, unknown joints, ...)
+MAX_NAME = 64  # characters of a name inside a key
+MAX_VALUE = 1024  # characters of a value
+
+# diagnostic_msgs/DiagnosticStatus levels (the message defines them as bytes 0..3).
+OK, WARN, ERROR, STALE = 0, 1, 2, 3
+
+
+@dataclass(frozen=True)
+class Status:
+    """One ``diagnostic_msgs/DiagnosticStatus``: values are ``(key, text)`` pairs, in order."""
+
+    name: str
+    level: int
+    message: str
+    values: tuple[tuple[str, str], ...]
+    hardware_id: str = NODE_NAME
+
+
+@dataclass(frozen=True)
+class Snapshot:
+    """What one diagnostics period saw.
+
+    ``counters`` is :meth:`.pipeline.Pipeline.counters`; ``models`` pairs each configured
+    model's output name with :meth:`.pipeline.Pipeline.model_fit`; ``required`` lists the
+    streams the samples need and ``max_gap`` (s) is the configured largest interpolated gap.
+    The rest only the node knows: its clock (``now_ns``, the clock the stamps are compared
+    with, simulated under ``use_sim_time``), the steady time since the previous snapshot
+    (``elapsed_s``), the publishers matched per input and the resolved topic names, the QoS
+    choice, the wall and CPU times of the callbacks that produced outputs in the period, the
+    state-file status, whether estimation is enabled and how many other nodes on the graph
+    carry this node's fully qualified name (``namesakes``).
+    """
+
+    counters: Mapping
+    models: Sequence[tuple[str, Mapping]]
+    required: Sequence[str]
+    max_gap: float
+    now_ns: int
+    elapsed_s: float
+    publishers: Mapping[str, int]
+    topics: Mapping[str, str]
+    reliable: bool
+    enabled: bool
+    state_file: str
+    latencies_s: Sequence[float] = field(default_factory=tuple)
+    cpu_times_s: Sequence[float] = field(default_factory=tuple)
+    namesakes: int = 0  # other nodes on the ROS graph with this node's fully qualified name
+
+
+def status_prefix(node: str) -> str:
+    """What every status of ``node`` (a fully qualified name, or a name in the root namespace)
+    is named after: the bare name in the root namespace (``rls_estimator``, the form consumers
+    have always matched), the fully qualified name under a namespace (``/ns/rls_estimator``)."""
+    full = node if node.startswith("/") else f"/{node}"
+    namespace, _, name = full.rpartition("/")
+    return full if namespace else name
+
+
+def namesake_alert(node: str, namesakes: int) -> Alert | None:
+    """The alert while ``namesakes`` other nodes carry ``node``'s fully qualified name."""
+    if namesakes <= 0:
+        return None
+    full = node if node.startswith("/") else f"/{node}"
+    return Alert(("graph", "namesake"), (
+        f"{namesakes} other node(s) named {full} on the ROS graph: their outputs mix with this node's on "
+        f"{full}/..., so every consumer receives each sample {namesakes + 1} times, and {full}/reset and "
+        f"{full}/enable reach any of them; start each node with its own name or namespace "
+        "(--ros-args -r __node:=NAME or -r __ns:=/NAMESPACE)"))
+
+
+def stale_after(max_gap: float) -> float:
+    """Age (s) beyond which a required stream is reported stale: twice the largest gap the
+    pipeline interpolates across, at least one second."""
+    return max(1.0, 2.0 * max_gap)
+
+
+def percentile(sorted_values: Sequence[float], q: float) -> float:
+    """The ``q`` quantile (0..1) of ascending ``sorted_values`` as the element at index
+    ``min(n - 1, int(q n))`` (no interpolation: a reported latency really happened)."""
+    n = len(sorted_values)
+    if n == 0:
+        raise ValueError("percentile of no values")
+    return sorted_values[min(n - 1, int(q * n))]
+
+
+def malformed_reason(exc: BaseException) -> str:
+    """The ``rejected.<reason>`` of a message that could not be decoded or fed."""
+    return f"malformed: {type(exc).__name__}"
+
+
+def malformed_warning(topic: str, exc: BaseException) -> str:
+    """The warning logged for the first malformed message of an input: the topic, the
+    exception type and its text, and where the later ones are counted."""
+    return (f"malformed message on {topic}: {type(exc).__name__}: {exc} (this and later ones are "
+            f"counted in /diagnostics as rejected.{malformed_reason(exc)}; only the first is logged)")
+
+
+def _ms(seconds: float) -> str:
+    return f"{1e3 * seconds:.3f}"
+
+
+def _name(text: str) -> str:
+    """A name (a joint, a reason) as it appears in a key: printable and at most MAX_NAME
+    characters. A name that had to change (cut, or unprintable characters replaced by ``?``)
+    ends in a hash of the whole, so keys stay unique."""
+    if len(text) <= MAX_NAME and text.isprintable():
+        return text
+    head = "".join(c if c.isprintable() else "?" for c in text[: MAX_NAME - 12])
+    return f"{head}...#{zlib.crc32(text.encode('utf-8', 'surrogatepass')):08x}"
+
+
+def _table(prefix: str, counts: Mapping[str, int], max_keys: int, noun: str) -> list[tuple[str, object]]:
+    """``prefix.<name>`` for the ``max_keys`` largest counts (ties by name), sorted by name, then
+    ``prefix_other_<noun>`` and ``prefix_other_count`` for the rest."""
+    if len(counts) <= max_keys:
+        shown = sorted(counts.items())
+    else:
+        shown = sorted(heapq.nsmallest(max_keys, counts.items(), key=lambda kv: (-kv[1], kv[0])))
+    kv: list[tuple[str, object]] = [(f"{prefix}.{_name(name)}", n) for name, n in shown]
+    if len(shown) < len(counts):
+        kv += [(f"{prefix}_other_{noun}", len(counts) - len(shown)),
+               (f"{prefix}_other_count", sum(counts.values()) - sum(n for _, n in shown))]
+    return kv
+
+
+class DiagnosticsPolicy:
+    """Turns one :class:`Snapshot` per period into the node's statuses.
+
+    Stateful: input rates are the received-count differences between consecutive snapshots
+    over ``elapsed_s`` (the first period counts from zero), and levels come from the counts of
+    the last ``window_s`` seconds (see the module docstring). :attr:`previous` is the last
+    snapshot handed in. ``max_keys`` bounds every table of names. ``node_name``: the node's
+    fully qualified name (or its name in the root namespace), which names the statuses
+    (:func:`status_prefix`).
+    """
+
+    def __init__(self, node_name: str = NODE_NAME, window_s: float = 10.0, max_keys: int = MAX_KEYS,
+                 repeat_s: float = 30.0) -> None:
+        if not window_s > 0:
+            raise ValueError(f"window_s must be positive, got {window_s!r}")
+        if max_keys < 1:
+            raise ValueError(f"max_keys must be at least 1, got {max_keys!r}")
+        self.node_name = node_name
+        self.window_s = float(window_s)
+        self.max_keys = int(max_keys)
+        self.previous: Snapshot | None = None
+        # The misconfiguration alerts (:mod:`.alerts`): first in the inputs status, and the
+        # lines to log (alerts.due()), each at most once per repeat_s seconds.
+        self.alerts = AlertPolicy(repeat_s)
+        self._time = 0.0  # steady seconds since the policy started (sum of elapsed_s)
+        # (time, {stream: (rejected, missing, expired)}) of earlier snapshots, oldest first;
+        # the start counts as a snapshot with every total zero.
+        self._history: deque[tuple[float, dict[str, tuple[int, int, int]]]] = deque([(0.0, {})])
+
+    def update(self, snap: Snapshot) -> list[Status]:
+        """The statuses of this period: ``inputs``, ``samples``, then one per model."""
+        self._time += max(snap.elapsed_s, 0.0)
+        totals = {kind: (sum(s["rejected"].values()), s["missing"], s["expired"])
+                  for kind, s in snap.counters["streams"].items()}
+        baseline = self._baseline()
+        alerts = self.alerts.update(snap.elapsed_s, snap.counters, snap.required, snap.enabled, self.window_s)
+        namesake = namesake_alert(self.node_name, snap.namesakes)
+        if namesake is not None:  # logged with the alerts (AlertPolicy.due), shown in the samples status
+            self.alerts.current = [*alerts, namesake]
+        self.alerts.models(snap.models)  # identifiability, logged with the alerts
+        statuses = [self._inputs(snap, totals, baseline, alerts), self._samples(snap, namesake)]
+        statuses += [self._model(name, fit, snap) for name, fit in snap.models]
+        self._history.append((self._time, totals))
+        self.previous = snap
+        return statuses
+
+    def _baseline(self) -> dict[str, tuple[int, int, int]]:
+        """The totals of the newest snapshot at least ``window_s`` old; older ones are dropped."""
+        history, cut = self._history, self._time - self.window_s
+        while len(history) > 1 and history[1][0] <= cut:
+            history.popleft()
+        return history[0][1]
+
+    def _status(self, name: str, level: int, message: str, values: list[tuple[str, object]]) -> Status:
+        def text(v: object) -> str:
+            t = str(v)
+            return t if len(t) <= MAX_VALUE else t[: MAX_VALUE - 3] + "..."
+
+        prefix = status_prefix(self.node_name)
+        return Status(f"{prefix}: {name}", level, text(message), tuple((k, text(v)) for k, v in values),
+                      hardware_id=prefix)
+
+    def _received_before(self, kind: str) -> int:
+        if self.previous is None:
+            return 0
+        stream = self.previous.counters["streams"].get(kind)
+        return stream["received"] if stream else 0
+
+    def _inputs(self, snap: Snapshot, totals: Mapping[str, tuple[int, int, int]],
+                baseline: Mapping[str, tuple[int, int, int]], alerts: Sequence[Alert]) -> Status:
+        period = max(snap.elapsed_s, 1e-9)
+        limit = stale_after(snap.max_gap)
+        window = f"in the last {self.window_s:g} s"
+        kv: list[tuple[str, object]] = [("recent_window_s", f"{self.window_s:g}")]
+        problems: list[str] = []
+        for kind, s in snap.counters["streams"].items():
+            needed = kind in snap.required
+            rate = (s["received"] - self._received_before(kind)) / period
+            newest = s["newest_stamp_ns"]
+            age = (snap.now_ns - newest) * 1e-9 if newest is not None else None
+            publishers = snap.publishers[kind]
+            now, before = totals[kind], baseline.get(kind, (0, 0, 0))
+            # Counters only grow; one that went down restarted, and counts from zero.
+            rejected, missing, expired = (n - b if n >= b else n for n, b in zip(now, before, strict=True))
+            kv += [
+                (f"{kind}.required", needed),
+                (f"{kind}.publishers", publishers),
+                (f"{kind}.rate_hz", f"{rate:.1f}"),
+                (f"{kind}.age_s", "never received" if age is None else f"{age:.3f}"),
+                (f"{kind}.received", s["received"]),
+                (f"{kind}.accepted", s["accepted"]),
+                (f"{kind}.expired", s["expired"]),
+                (f"{kind}.missing", s["missing"]),
+                (f"{kind}.recent.rejected", rejected),
+                (f"{kind}.recent.missing", missing),
+                (f"{kind}.recent.expired", expired),
+            ]
+            kv += _table(f"{kind}.rejected", s["rejected"], self.max_keys, "reasons")
+            if needed and (age is None or age > limit):
+                problems.append(f"{kind} {'silent' if age is None else f'stale ({age:.1f} s)'}")
+                if publishers == 0:
+                    problems.append(f"no publisher matched on {snap.topics[kind]} "
+                                    f"(none running, or incompatible QoS: qos.reliable={snap.reliable})")
+            if rejected:
+                problems.append(f"{kind} rejected {rejected} {window}")
+            if missing:
+                problems.append(f"{kind} missing about {missing} {window} (stamp gaps: lost in transport?)")
+            if expired:
+                problems.append(f"{kind} expired {expired} {window} (buffered, never used: another stream "
+                                "lagging, or a reset)")
+        level = ERROR if alerts else WARN if problems else OK
+        message = "; ".join([a.text for a in alerts] + problems) or "all inputs fresh"
+        return self._status("inputs", level, message, kv)
+
+    def _samples(self, snap: Snapshot, namesake: Alert | None = None) -> Status:
+        c = snap.counters
+        kv: list[tuple[str, object]] = [
+            ("enabled", snap.enabled),
+            ("samples_formed", c["samples_formed"]),
+            ("samples_used", c["samples_used"]),
+            ("samples_pending", c["samples_pending"]),
+        ]
+        kv += _table("samples_rejected", c["samples_rejected"], self.max_keys, "reasons")
+        kv += _table("resets", c["resets"], self.max_keys, "reasons")
+        kv += _table("unknown_joint", c["unknown_joints"], self.max_keys, "names")
+        if snap.latencies_s:
+            lat, cpu = sorted(snap.latencies_s), sorted(snap.cpu_times_s)
+            kv += [
+                ("latency_ms.p50", _ms(percentile(lat, 0.5))),
+                ("latency_ms.p99", _ms(percentile(lat, 0.99))),
+                ("latency_ms.max", _ms(lat[-1])),
+            ]
+            if cpu:
+                kv += [
+                    ("processing_cpu_ms.p50", _ms(percentile(cpu, 0.5))),
+                    ("processing_cpu_ms.p99", _ms(percentile(cpu, 0.99))),
+                ]
+        kv += [("state_file", snap.state_file), ("nodes_with_this_name", 1 + max(snap.namesakes, 0))]
+        message = f"{c['samples_used']} of {c['samples_formed']} samples used"
+        if not snap.enabled:
+            message += "; estimation disabled"
+        if namesake is not None:
+            return self._status("samples", ERROR, f"{namesake.text}; {message}", kv)
+        return self._status("samples", OK, message, kv)
+
+    def _model(self, name: str, fit: Mapping, snap: Snapshot) -> Status:
+        why = fit.get("identifiability", "")
+        if fit["ready"]:
+            text = f"R^2 {fit['r_squared']:.3f}, residual lag-1 correlation {fit['residual_rho1']:.2f}"
+            if "converged" in fit:
+                if fit["converged"]:
+                    text += "; converged"
+                elif fit.get("converged_parameters"):
+                    text += f"; converged: {fit['converged_parameters']}"
+                else:
+                    text += "; not converged"
+            if why:  # not identifiable: WARN while it holds a convergence flag back
+                text += f"; {why.removeprefix(name + ': ')}"
+            level = WARN if fit.get("held_back") else OK
+        else:
+            text = f"initializing: {why.removeprefix(name + ': ') or 'regressors not yet informative'}"
+            level = OK if snap.counters["samples_used"] == 0 else WARN
+        return self._status(f"model {name}", level, text, list(fit.items()))
