@@ -22,7 +22,7 @@ from numpy.typing import NDArray
 from ..datapath.limits import PlausibilityLimits
 
 if TYPE_CHECKING:  # annotations only: this module imports numpy alone
-    from ..settings.config import AircraftConfig, ModelConfig
+    from ..settings.models import AircraftConfig, ModelConfig
 
 __all__ = [
     "FloatArray",

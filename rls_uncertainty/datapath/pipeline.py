@@ -54,7 +54,8 @@ from ..aero.surface_mixing import SURFACES
 from ..errors import NonFiniteInput, StateFileError
 from ..estimator import EstimatorBank
 from ..estimator.state_file import EstimatorState, load_state, save_state
-from ..settings.config import REGRESSOR_UNITS, PipelineConfig
+from ..settings.config import PipelineConfig
+from ..settings.models import REGRESSOR_UNITS
 from .alerts import explanations, identifiability
 from .bookkeeping import SAMPLES, Bookkeeping, model_fit
 from .convergence import ConvergenceMonitor

@@ -35,7 +35,7 @@ from ..datapath.outputs import FREQUENCY, FREQUENCY_OUTPUTS, NODE_NAME, SAMPLE_S
 from ..errors import BagError, LiveTimeout
 from ..offline.bags import input_topics
 from ..offline.results import History, ReplayResult, accounting
-from ..settings.config import node_config, pipeline_config
+from ..settings.parameters import node_config, pipeline_config
 
 __all__ = ["REPLAY_PARAMETERS", "EstimatorProcess", "LiveTimeout", "play_to_node"]
 
