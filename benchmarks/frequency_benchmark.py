@@ -154,7 +154,7 @@ def pipeline_costs() -> None:
 
     from rls_uncertainty.offline.bags import convert, read_inputs
     from rls_uncertainty.offline.replay import run_pipeline
-    from rls_uncertainty.settings.config import load_parameters_file, pipeline_config
+    from rls_uncertainty.settings import load_parameters_file, pipeline_config
 
     variants = {"time": {}, "both": {"estimator.method": "both"}, "both, every 5": {
         "estimator.method": "both", "frequency.every": 5}, "frequency": {"estimator.method": "frequency"}}

@@ -163,7 +163,7 @@ def test_every_mcap_the_package_writes_carries_valid_crcs(tmp_path):
     assert cli.main(["make-bag", "--out", str(tmp_path / "made")]) == 0
     assert cli.main(["convert", str(FLIGHT_DATA / "totter_f1_017"), "--mapping", str(MAPPING), "--out",
                      str(tmp_path / "converted")]) == 0
-    assert cli.main(["replay", str(BUNDLED), "--config", "t2", "--out", str(tmp_path / "replayed"), "--no-plots",
+    assert cli.main(["replay", str(BUNDLED), "--config", "t2", "--out", str(tmp_path / "replayed"), "--no-figures",
                      "--quiet"]) == 0
     for path in (BUNDLED / "t2_maneuver.mcap", tmp_path / "made" / "made.mcap",
                  tmp_path / "converted" / "converted.mcap", tmp_path / "replayed" / "estimates.mcap"):

@@ -15,7 +15,7 @@ from rls_uncertainty import cli
 from rls_uncertainty.campaign import CampaignSettings, campaign_to, load_maneuvers
 from rls_uncertainty.campaign.figure import campaign_figures
 from rls_uncertainty.executors import LocalProcesses
-from rls_uncertainty.settings.config import node_config, pipeline_config
+from rls_uncertainty.settings import node_config, pipeline_config
 from rls_uncertainty.testing import parameters, replay_bag
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -73,7 +73,7 @@ def _file(tmp_path, spans):
 def test_no_maneuver_estimated_is_exit_status_1(tmp_path, capsys):
     f = _file(tmp_path, [("x", 0.0, 0.2), ("y", 0.2, 0.4)])
     assert cli.main(["campaign", str(BUNDLED), "--maneuvers", str(f), "--out", str(tmp_path / "o"), "--quiet",
-                     "--workers", "1", "--no-plots"]) == 1
+                     "--workers", "1", "--no-figures"]) == 1
     assert "0 of 2 maneuvers used" in capsys.readouterr().out
 
 
