@@ -120,7 +120,7 @@ def default_of(f: Field[Any]) -> Any:
         return f.default
     if f.default_factory is not MISSING:
         return f.default_factory()
-    raise ConfigError(f"{f.name} has no default")
+    raise TypeError(f"field {f.name}: a setting needs a default")
 
 
 def kind_of(f: Field[Any]) -> type:

@@ -18,7 +18,7 @@ from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from typing import Any
 
-from ..schema import default_of, expected, kind_of, settings, valid
+from ..schema import default_of, expected, kind_of, number, settings, valid
 from ..settings.parameters import PARAMETER_NAMES, Parameter
 
 __all__ = ["RENAMED_FLAGS", "add_parameter_flags", "add_option_flags", "parameter_overrides", "option_values",
@@ -119,12 +119,17 @@ def _number_type(p: Parameter) -> Callable[[str], Any]:
 
 
 def _help(p: Parameter) -> str:
+    """The declaration in words: meaning, unit, range, special values, parameter and default."""
     unit = f", {p.unit}" if p.unit else ""
-    special = "".join(f"; {s.word or f'{s.seconds:g}'}: {s.meaning}" for s in p.specials)
+    bounds = f"; {number(max(p.low, 0.0) if p.specials else p.low)} to {number(p.high)}" \
+        if p.low is not None and p.high is not None else ""
+    words = [f"{s.word or number(s.seconds)}: {s.meaning}" for s in p.specials]
     if p.companion:
-        special += "; " + ", ".join(PARAMETER_NAMES[p.companion].choices[1:]) + f": {p.companion} so"
-    default = " ".join(p.default) if isinstance(p.default, list) else p.default
-    return f"{p.description}{unit}{special} (parameter {p.name}, default {default})".replace("%", "%%")
+        words += [f"{c}: {p.companion} {c}" for c in PARAMETER_NAMES[p.companion].choices[1:]]
+    word = next((repr(s.word) for s in p.specials if s.word and s.seconds == p.default), None)
+    default = word or (" ".join(p.default) if isinstance(p.default, list) else p.default)
+    text = f"{p.description}{unit}{bounds}{''.join('; ' + w for w in words)} (parameter {p.name}, default {default})"
+    return text.replace("%", "%%")
 
 
 def add_parameter_flags(parser: argparse.ArgumentParser, names: Iterable[str]) -> None:
