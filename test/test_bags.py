@@ -397,8 +397,8 @@ BAD_MAPPINGS = [
     ("no joints", {"control_surfaces": {"topic": "/fcc/air_data"}}, "input 'control_surfaces': needs 'joints"),
     ("a list at the top", "- imu\n- airspeed\n", "expected a mapping at the top level"),
     ("an empty file", "", "expected a mapping at the top level"),
-    ("a YAML syntax error", "imu:\n\t- topic\n", "not valid YAML: found character '\\t' that cannot start any token "
-                                               "(line 2, column 1)"),
+    ("a YAML syntax error", "imu:\n\t- topic\n", "mapping.yaml:2:1: not valid YAML: found character '\\t' that cannot "
+                                               "start any token"),
     ("not UTF-8", b"imu: {topic: /fcc/imu}\n\xff\xfe\n", "not UTF-8 text (byte 23)"),
 ]
 

@@ -218,10 +218,11 @@ class PipelineConfig:
         }
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class InputTopics(Mapping[str, str]):
     """The topic of each input stream (``topics.*``; relative names resolve in the node's
-    namespace), a mapping from the stream to its topic."""
+    namespace), a mapping from the stream to its topic (equal to any mapping of the same
+    items, as a dict is)."""
 
     imu: str = option("imu", "sensor_msgs/Imu topic, REP-103 body frame", ros="topics.imu", read_only=True)
     airspeed: str = option("airspeed", "geometry_msgs/Vector3Stamped true-airspeed vector topic, REP-103 body frame, "
@@ -246,6 +247,9 @@ class InputTopics(Mapping[str, str]):
 
     def __len__(self) -> int:
         return len(self._names())
+
+    def __hash__(self) -> int:
+        return hash(tuple(self.items()))
 
     @classmethod
     def _names(cls) -> tuple[str, ...]:
