@@ -13,7 +13,8 @@ only (and the package's ``errors``).
   :mod:`.burn_in`, :mod:`.initialization`, :mod:`.evaluation` and :mod:`.covariance`
   (Eqs. 13, 20, 22), :mod:`.lag_window`, :mod:`.lag_selection` (the flat-top rule) and
   :mod:`.state`; :mod:`.recursive`: :class:`RecursiveEstimator`, a bank of one;
-  :mod:`.batch`: Eqs. 6-14; :mod:`.state_file`: the node's state file.
+  :mod:`.batch`: Eqs. 6-14. The node's state file, which reads and writes :mod:`.state`,
+  is :mod:`rls_uncertainty.state_file`, outside the core.
 
 The options table, the theory behind the options and the figures of the studies behind their
 defaults: ``docs/estimator.md``.
