@@ -267,7 +267,7 @@ def test_bank_equals_the_reference_with_a_residual_burn_in(window, lags, forgett
         after = [k - r.ready_at - burn_in if r.ready else 0 for r in refs]
         expected = [r.n_B if a > 0 else r.n_R for r, a in zip(refs, after, strict=True)]
         np.testing.assert_allclose(bank.n_R, expected, rtol=1e-12)
-    assert bank.options.burn_in == burn_in and not (lags != "all" and bank._burn.masking)
+    assert bank.options.burn_in == burn_in and not (lags != "all" and bank._counts.masking)
 
 
 @pytest.mark.parametrize("forgetting", [1.0, 0.99])

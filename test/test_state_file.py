@@ -437,17 +437,27 @@ def test_big_endian_arrays_load_and_continue_identically(tmp_path):
     np.testing.assert_array_equal(state.bank.standard_errors_all(), bank.standard_errors_all())
 
 
-def test_a_state_with_all_lags_round_trips(tmp_path):
+@pytest.mark.parametrize("n,cap", [(150, 256), (64, 64), (128, 128)])
+def test_a_state_with_all_lags_round_trips(tmp_path, n, cap):
+    """Also when the buffer is exactly full (64, 128 samples): the capacity grows with the
+    next sample, so the state holds the capacity its sample count implies, and the restored
+    bank continues bit for bit through the growth."""
     rng = np.random.default_rng(2)
-    bank = EstimatorBank((3, 2), EstimatorOptions(lags="all", forgetting=0.99))
-    for _ in range(150):
-        bank.update(rng.standard_normal((2, 3)), rng.standard_normal(2))
+    options = EstimatorOptions(lags="all", forgetting=0.99)
+    bank = EstimatorBank((3, 2), options)
+    X, z = rng.standard_normal((n + 20, 2, 3)), rng.standard_normal((n + 20, 2))
+    for k in range(n):
+        bank.update(X[k], z[k])
     path = tmp_path / "all.npz"
-    save_state(path, EstimatorState(bank, 150, np.zeros(2), np.ones(2)), FINGERPRINT)
-    state = load_state(path, FINGERPRINT, expect=((3, 2), EstimatorOptions(lags="all", forgetting=0.99)))
+    save_state(path, EstimatorState(bank, n, np.zeros(2), np.ones(2)), FINGERPRINT)
+    state = load_state(path, FINGERPRINT, expect=((3, 2), options))
     assert state.bank.state()["counters"] == bank.state()["counters"]
-    assert state.bank.state()["counters"]["cap"] == 256
+    assert state.bank.state()["counters"]["cap"] == cap
     np.testing.assert_array_equal(state.bank.standard_errors_all(), bank.standard_errors_all())
+    for k in range(n, n + 20):
+        bank.update(X[k], z[k])
+        state.bank.update(X[k], z[k])
+    np.testing.assert_array_equal(state.bank.covariance_all(), bank.covariance_all())
 
 
 # ------------------------------------------------------------------ writing safely, setting aside
