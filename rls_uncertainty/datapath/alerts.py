@@ -40,7 +40,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from ..aero.coefficients import flight_state
+from ..aero.coefficients import FlightState, flight_state
+from ..errors import Refused
 from .bookkeeping import SAMPLES, Bookkeeping
 from .limits import BOUNDS, message_value, sample_value
 
@@ -164,11 +165,12 @@ def _explain_sample(config: PipelineConfig, reason: str, evidence: Any) -> str:
     if reason.startswith("invalid_"):
         return f"holes left by rejected {stream} messages"
     if reason.startswith("implausible_") or reason == "inconsistent_dynamic_pressure":
-        state = None
+        state: FlightState | Refused | None = None
         if evidence is not None:
             sample, rate_dot = evidence
             state = flight_state(sample, np.asarray(rate_dot), inputs.air_density)
-            state = None if isinstance(state, str) else state
+        if isinstance(state, Refused):
+            state = None
         if reason == "inconsistent_dynamic_pressure":
             return _inconsistent_dynamic_pressure(config, state)
         return _limit(config, reason, math.nan if state is None else sample_value(reason, state))

@@ -28,7 +28,8 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
-from ..aero.surface_mixing import SurfaceMixer, SurfaceMixing
+from ..aero.surface_mixing import MISMATCHED, MISSING, SurfaceMixer, SurfaceMixing
+from ..errors import Refused
 from .bookkeeping import EVIDENCE_ITEMS, KEY_CHARS, KEYS_KEPT, OTHER_JOINTS, OTHER_REASONS, Bookkeeping, count_bounded
 from .limits import PlausibilityLimits
 from .sampling import Sampler
@@ -104,22 +105,19 @@ class Intake:
 
     def surfaces(self, stamp_ns: int, names: Sequence[str], positions: Sequence[float]) -> bool:
         """``sensor_msgs/JointState`` names and positions (rad), mixed by Eq. 23."""
-        layout = self._mixer.layout(names)
-        if len(positions) != len(names):
-            layout = "mismatched_arrays"
-        if type(layout) is str:  # unusable at its stamp, like any invalid message: a hole
-            missing = tuple(self._mixer.mixing.missing(names)) if layout == "missing_joint" else ()
-            self.book.note("control_surfaces", layout, (*_names(names), len(positions), missing))
-            return self._reject(self._surfaces, stamp_ns, layout)
-        # A JointLayout from here (mypy does not narrow on `type(x) is str`'s else branch).
+        layout = self._mixer.layout(names) if len(positions) == len(names) else MISMATCHED
+        if isinstance(layout, Refused):  # unusable at its stamp, like any invalid message: a hole
+            missing = tuple(self._mixer.mixing.missing(names)) if layout == MISSING else ()
+            self.book.note("control_surfaces", layout.reason, (*_names(names), len(positions), missing))
+            return self._reject(self._surfaces, stamp_ns, layout.reason)
         unknown = self.book.unknown_joints
-        for n in layout.unknown:  # type: ignore[union-attr]
+        for n in layout.unknown:
             count_bounded(unknown, n, OTHER_JOINTS)
-        used = [positions[i] for i in layout.used]  # type: ignore[union-attr]
+        used = [positions[i] for i in layout.used]
         reason = self.limits.surface_rejection(used)
         if reason is not None:
             return self._invalid(self._surfaces, stamp_ns, tuple(used), reason)
-        de, da, dr = layout.deflections(positions)  # type: ignore[union-attr]
+        de, da, dr = layout.deflections(positions)
         return self.sampler.add(self._surfaces, int(stamp_ns), (de, da, dr))
 
     def _invalid(self, stream: Stream, stamp_ns: int, values: tuple, reason: str) -> bool:

@@ -51,7 +51,7 @@ import numpy as np
 from ..aero.coefficients import RATES, FloatArray, aircraft_sample, coefficients, flight_state, regressors
 from ..aero.differentiation import FixedLagDifferentiator
 from ..aero.surface_mixing import SURFACES
-from ..errors import NonFiniteInput, StateFileError
+from ..errors import NonFiniteInput, Refused, StateFileError
 from ..estimator import EstimatorBank
 from ..estimator.state_file import EstimatorState, load_state, save_state
 from ..settings.config import REGRESSOR_UNITS, PipelineConfig
@@ -292,19 +292,17 @@ class Pipeline:
         out: list[SampleOutput] = []
         book = self.bookkeeping
         for item in self.sampler.due():
-            # `kind` tells the three item types apart; mypy does not narrow `item` through it.
-            kind = type(item)
-            if kind is Sample:
+            if isinstance(item, Sample):
                 book.samples_formed += 1
-                result = self._process(item.stamp_ns, self._sample_vector(item.values))  # type: ignore[union-attr]
+                result = self._process(item.stamp_ns, self._sample_vector(item.values))
                 if result is not None:
                     out.append(result)
-            elif kind is Skipped:  # grid points not formed: the differentiator restarts after them
-                book.samples_formed += item.count  # type: ignore[operator]
-                book.samples_rejected[item.reason] += item.count  # type: ignore[union-attr, operator]
+            elif isinstance(item, Skipped):  # grid points not formed: the differentiator restarts after them
+                book.samples_formed += item.count
+                book.samples_rejected[item.reason] += item.count
                 self._flush("discontinuity")
             else:  # Restart: the stamps moved to a new timeline
-                self._restart(item.reason)  # type: ignore[union-attr]
+                self._restart(item.reason)
         return out
 
     def _restart(self, reason: str) -> None:
@@ -353,17 +351,16 @@ class Pipeline:
     def _estimate(self, t: int, sample: list[float], rate_dot: FloatArray) -> SampleOutput | None:
         book = self.bookkeeping
         state = flight_state(sample, rate_dot, self.config.inputs.air_density, self.limits)
-        if type(state) is str:
-            book.samples_rejected[state] += 1
-            book.note(SAMPLES, state, (sample, rate_dot.tolist()))  # (a rejected sample's values)
+        if isinstance(state, Refused):
+            book.samples_rejected[state.reason] += 1
+            book.note(SAMPLES, state.reason, (sample, rate_dot.tolist()))  # (a rejected sample's values)
             return None
         if not self.enabled:
             book.samples_rejected["estimation_disabled"] += 1
             return None
         ac = self.config.aircraft
-        # A FlightState from here (mypy does not narrow on `type(x) is str`'s else branch).
-        coef = coefficients(state, ac)  # type: ignore[arg-type]
-        reg = regressors(state, ac)  # type: ignore[arg-type]
+        coef = coefficients(state, ac)
+        reg = regressors(state, ac)
         X, z = self._X, self._z
         X.flat[self._x_index] = [reg[name] for name in self._x_names]
         z[:] = [coef[name] for name in self._outputs]

@@ -83,6 +83,14 @@ class Restart(NamedTuple):
     reason: str
 
 
+class _Hole(NamedTuple):
+    """No sample at a grid point, ``reason`` (``gap_<stream>``, ``expired_<stream>``,
+    ``invalid_<stream>``), nor at the later ones before ``until`` (ns)."""
+
+    reason: str
+    until: int
+
+
 _NEWEST = attrgetter("last")
 
 
@@ -246,13 +254,11 @@ class Sampler:
             if lagging.last < t:  # type: ignore[operator]  # (last is set: it holds a message)
                 self._frontier = lagging
                 break
-            values, reason, skip_to = self._interpolate(t)
-            if values is None:
-                # Every grid point up to skip_to shares the problem: report them at once.
-                # (values None comes with a reason and skip_to, see _interpolate's return type;
-                # mypy does not narrow the unpacked tuple's other items.)
-                n_skip = max(1, -(-(skip_to - t) // P))  # type: ignore[operator]
-                out.append(Skipped(t, n_skip, reason))  # type: ignore[arg-type]
+            values = self._interpolate(t)
+            if isinstance(values, _Hole):
+                # Every grid point up to the hole's end shares the problem: report them at once.
+                n_skip = max(1, -(-(values.until - t) // P))
+                out.append(Skipped(t, n_skip, values.reason))
                 t += n_skip * P
             else:
                 out.append(Sample(t, values))
@@ -261,8 +267,8 @@ class Sampler:
             self._trim(t)
         self.next_ns = t
 
-    def _interpolate(self, t: int) -> tuple[list[Sequence[float]], None, None] | tuple[None, str, int]:
-        """``(values, None, None)`` at ``t``, or ``(None, reason, skip_to)``."""
+    def _interpolate(self, t: int) -> list[Sequence[float]] | _Hole:
+        """The required streams' values at ``t``, or why there are none and until when."""
         vals: list[Sequence[float]] = []
         max_gap = self.max_gap_ns
         for s in self._needed:
@@ -273,18 +279,18 @@ class Sampler:
                 vals.append(s.values[i])
                 continue
             if i == 0:
-                return None, f"expired_{s.name}", stamps[0]
+                return _Hole(f"expired_{s.name}", stamps[0])
             t0 = stamps[i - 1]
             broken = s.broken
             if broken:
                 j = bisect_left(broken, t0)
                 if j < len(broken) and broken[j] == t0:
-                    return None, f"invalid_{s.name}", t1
+                    return _Hole(f"invalid_{s.name}", t1)
             if t1 - t0 > max_gap:
-                return None, f"gap_{s.name}", t1
+                return _Hole(f"gap_{s.name}", t1)
             w = (t - t0) / (t1 - t0)
             vals.append([x + w * (y - x) for x, y in zip(s.values[i - 1], s.values[i], strict=True)])
-        return vals, None, None
+        return vals
 
     def _trim(self, t_next: int) -> None:
         """Drop messages no later sample can need (keep the last one at or before ``t_next``)."""
