@@ -8,8 +8,8 @@ import os
 import numpy as np
 import pytest
 
+from rls_uncertainty.datapath.bookkeeping import StreamCounts
 from rls_uncertainty.datapath.sampling import Restart, Sample, Sampler, Skipped
-from rls_uncertainty.datapath.streams import StreamCounts
 
 MS = 1_000_000
 P = 20 * MS  # 50 Hz grid

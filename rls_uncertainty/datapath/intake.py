@@ -30,7 +30,7 @@ from collections.abc import Sequence
 
 from ..aero.surface_mixing import MISMATCHED, MISSING, SurfaceMixer, SurfaceMixing
 from ..errors import Refused
-from .bookkeeping import EVIDENCE_ITEMS, KEY_CHARS, KEYS_KEPT, OTHER_JOINTS, OTHER_REASONS, Bookkeeping, count_bounded
+from .bookkeeping import EVIDENCE_ITEMS, KEY_CHARS, Bookkeeping
 from .limits import PlausibilityLimits
 from .sampling import Sampler
 from .streams import Stream
@@ -112,7 +112,7 @@ class Intake:
             return self._reject(self._surfaces, stamp_ns, layout.reason)
         unknown = self.book.unknown_joints
         for n in layout.unknown:
-            count_bounded(unknown, n, OTHER_JOINTS)
+            unknown.count(n)
         used = [positions[i] for i in layout.used]
         reason = self.limits.surface_rejection(used)
         if reason is not None:
@@ -148,11 +148,6 @@ class Intake:
         """A message of ``stream`` that has no stamp (it could not be decoded). Reasons are
         the caller's: a stream keeps at most :data:`.bookkeeping.KEYS_KEPT` distinct ones,
         later new ones count as :data:`.bookkeeping.OTHER_REASONS`."""
-        s = self.sampler.streams[stream]
-        rejected = s.counts.rejected
-        reason = reason[:KEY_CHARS]
-        if reason not in rejected and len(rejected) - (OTHER_REASONS in rejected) >= KEYS_KEPT:
-            reason = OTHER_REASONS
+        reason = self.sampler.reject(self.sampler.streams[stream], reason)
         if detail:
             self.book.note(stream, reason, detail[:2 * KEY_CHARS])
-        self.sampler.reject(s, reason)

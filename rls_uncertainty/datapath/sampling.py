@@ -37,7 +37,7 @@ starts the grid afresh on the next. :meth:`Sampler.time_jumped` (a backwards ``/
 jump) and :meth:`Sampler.clear` (``~/reset``: afterwards older stamps are accepted again)
 reach the timelines the same way.
 
-The counters of each stream live in a :class:`.streams.StreamCounts` that outlives the
+The counters of each stream live in a :class:`.bookkeeping.StreamCounts` that outlives the
 sampler: a reconfigured pipeline hands the same objects to its new sampler, so no count is lost.
 """
 
@@ -48,7 +48,8 @@ from collections.abc import Iterable, Sequence
 from operator import attrgetter
 from typing import NamedTuple
 
-from .streams import RING, Stream, StreamCounts, Values, drop_front, expire
+from .bookkeeping import StreamCounts
+from .streams import RING, Stream, Values, drop_front, expire
 from .timelines import Timelines
 
 __all__ = ["Sample", "Skipped", "Restart", "Sampler", "CURRENT", "AHEAD", "BEHIND"]
@@ -155,11 +156,12 @@ class Sampler:
         return CURRENT if stream.epoch == epoch else AHEAD if stream.epoch > epoch else BEHIND
 
     # ------------------------------------------------------------------ messages
-    def reject(self, stream: Stream, reason: str) -> None:
-        """Count a received message of ``stream`` that the caller could not use (no stamp)."""
+    def reject(self, stream: Stream, reason: str) -> str:
+        """Count a received message of ``stream`` that the caller could not use (no stamp);
+        returns the reason it is counted under (:meth:`.bookkeeping.Tally.count`)."""
         counts = stream.counts
         counts.received += 1
-        counts.rejected[reason] += 1
+        return counts.reject(reason)
 
     def reject_invalid(self, stream: Stream, stamp: int, reason: str) -> bool:
         """Count a received message of ``stream`` stamped ``stamp`` whose values the caller
@@ -186,7 +188,7 @@ class Sampler:
         dt = stamp - counts.newest_ns  # type: ignore[operator]  # not slow: newest_ns is set (_update_slow)
         if dt <= 0:
             if dt >= self._back:
-                counts.rejected["duplicate" if dt == 0 else "out_of_order"] += 1
+                counts.reject("duplicate" if dt == 0 else "out_of_order")
                 return False
             return self._slow(stream, stamp, values, "")
         if dt > stream.hold_ns:
@@ -217,7 +219,7 @@ class Sampler:
         The one clock check of every received message (:meth:`add`, :meth:`reject_invalid`)."""
         clock = self.clock_ns
         if clock and abs(stamp - clock) > self.max_clock_ns:
-            counts.rejected["far_from_clock"] += 1
+            counts.reject("far_from_clock")
             return True
         return False
 
