@@ -36,17 +36,9 @@ from rls_uncertainty.offline.bags import read_inputs
 from rls_uncertainty.offline.replay import run_pipeline
 from rls_uncertainty.settings.config import load_parameters_file, pipeline_config
 
-from ros_harness import ROOT, NodeProcess, RosTester, to_rclpy
+from ros_harness import BUNDLED, ROOT, T2, NodeProcess, RosTester, to_rclpy
 
-BUNDLED = ROOT / "bags" / "t2_maneuver"
-T2 = str(ROOT / "config" / "t2.yaml")
-
-
-@pytest.fixture(scope="module", autouse=True)
-def ros():
-    rclpy.init()
-    yield
-    rclpy.try_shutdown()
+pytestmark = pytest.mark.usefixtures("ros")
 
 
 @pytest.fixture(scope="module")
