@@ -268,4 +268,4 @@ def test_the_player_names_its_fast_heartbeat_profile_only_while_dds_starts_and_o
     period = writer.find("p:times/p:heartbeatPeriod", ns)
     assert int(period.find("p:sec", ns).text) + int(period.find("p:nanosec", ns).text) * 1e-9 == 0.05
     # Installed with the package (setup.py package_data), next to player.py.
-    assert '"fastdds_player.xml"' in (ROOT / "setup.py").read_text()
+    assert '"ros/fastdds_player.xml"' in (ROOT / "setup.py").read_text()
