@@ -677,8 +677,8 @@ def test_pipeline_imports_no_ros():
     assert subprocess.run([sys.executable, "-c", code]).returncode == 0
 
 
-@pytest.mark.parametrize("module", ["datapath.sampling", "aero.surface_mixing", "aero.coefficients", "aero.differentiation",
-                                    "estimator.state_file"])
+@pytest.mark.parametrize("module", ["datapath.sampling", "aero.surface_mixing", "aero.coefficients",
+                                    "aero.differentiation", "estimator.state_file"])
 def test_the_numerical_core_imports_numpy_only(module):
     import subprocess
 
