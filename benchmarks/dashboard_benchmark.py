@@ -31,7 +31,6 @@ import argparse
 import asyncio
 import json
 import os
-import signal
 import statistics
 import subprocess
 import sys
@@ -39,6 +38,8 @@ import tempfile
 import threading
 import time
 from pathlib import Path
+
+from rls_uncertainty.ros.player import stop_process
 
 ROOT = Path(__file__).resolve().parents[1]
 os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
@@ -71,13 +72,7 @@ def start_dashboard() -> tuple[subprocess.Popen, str]:
 
 
 def stop(proc: subprocess.Popen) -> str:
-    if proc.poll() is None:
-        proc.send_signal(signal.SIGINT)
-        try:
-            proc.wait(30)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait()
+    stop_process(proc, 30)
     return proc.stderr.read() if proc.stderr else ""
 
 
@@ -174,8 +169,7 @@ def main() -> int:
             browser.close()
     finally:
         err = stop(dashboard)
-        node.send_signal(signal.SIGINT)
-        node.wait(30)
+        stop_process(node, 30)
     if play.returncode != 0:
         print(play.stderr)
     total = [r["received_ms"] - r["published_ns"] * 1e-6 for r in records if r["published_ns"]]

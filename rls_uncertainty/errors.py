@@ -5,9 +5,15 @@ matches its meaning, so callers may catch either: ``except RlsUncertaintyError``
 package's own errors (bad input, bad configuration, a bad file) and nothing else, while a
 programming error (a numpy shape ``ValueError``, a ``KeyError``) is not caught by it and
 shows its traceback. The command line catches only these and :class:`OSError`.
+
+Bad input that is counted rather than raised (a message or sample rejected with its reason)
+is a :class:`Refused`: returned by the check instead of its result, so the caller tells the
+two apart by type.
 """
 
 from __future__ import annotations
+
+from dataclasses import dataclass
 
 __all__ = [
     "RlsUncertaintyError",
@@ -22,6 +28,7 @@ __all__ = [
     "LiveTimeout",
     "SchedulerUnreachable",
     "WorkerLost",
+    "Refused",
 ]
 
 
@@ -83,3 +90,12 @@ class SchedulerUnreachable(RlsUncertaintyError, ConnectionError):
 
 class WorkerLost(RlsUncertaintyError, RuntimeError):
     """A job that no worker finished (its worker died in every attempt); the message names it."""
+
+
+@dataclass(frozen=True, slots=True)
+class Refused:
+    """Not an exception: what a check returns instead of its result when the input cannot be
+    used, and why. ``reason`` is the key the caller counts the rejection under
+    (``rejected.<reason>``, ``samples_rejected.<reason>``)."""
+
+    reason: str

@@ -22,6 +22,9 @@
   directory (unless ``force``), and, even with ``force``, a path that is, contains or lies
   inside one of the command's inputs. Paths are resolved (symlinks, ``..``) before they are
   compared. On any failure everything the command created is removed, and nothing else.
+* :class:`OutputWriter` is the base of the writers used in a ``with`` block (a bag, an MCAP
+  file, a replay's outputs): completed by ``close`` when the block ends normally, discarded by
+  ``abort`` when it raises.
 """
 
 from __future__ import annotations
@@ -34,14 +37,16 @@ import secrets
 import shutil
 import stat
 import tempfile
+from abc import ABC, abstractmethod
 from collections.abc import Iterable, Iterator
 from contextlib import contextmanager, suppress
 from pathlib import Path
-from typing import IO
+from types import TracebackType
+from typing import IO, Self
 
 from .errors import OutputPathError
 
-__all__ = ["atomic_file", "temporaries", "FileLock", "output_directory"]
+__all__ = ["atomic_file", "temporaries", "FileLock", "output_directory", "OutputWriter"]
 
 # atomic_file's temporary names beside NAME, and those of versions up to 0.1.0 (tempfile.mkstemp).
 _TEMPORARY = r"\.{name}\.(?:[0-9a-f]{{16}}|[a-z0-9_]{{8}})\.tmp"
@@ -272,3 +277,27 @@ def output_directory(
                         break
         raise
     _fsync_directory(final.parent)
+
+
+class OutputWriter(ABC):
+    """A writer of an output, used in a ``with`` block: :meth:`close` completes the output when
+    the block ends normally, :meth:`abort` discards what was written when it raises (the
+    exception goes on)."""
+
+    @abstractmethod
+    def close(self) -> object:
+        """Complete the output."""
+
+    @abstractmethod
+    def abort(self) -> None:
+        """Discard the unfinished output."""
+
+    def __enter__(self) -> Self:
+        return self
+
+    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
+                 tb: TracebackType | None) -> None:
+        if exc_type is None:
+            self.close()
+        else:
+            self.abort()

@@ -27,6 +27,17 @@ REQUIRE_FLIGHT_DATA = os.environ.get("RLS_REQUIRE_FLIGHT_DATA", "") not in ("", 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 
+@pytest.fixture(scope="module")
+def ros():
+    """rclpy initialised for the DDS tests of one module, shut down after them (such a module
+    says ``pytestmark = pytest.mark.usefixtures("ros")``)."""
+    import rclpy
+
+    rclpy.init()
+    yield
+    rclpy.try_shutdown()
+
+
 def require_flight_data() -> None:
     """Skip the calling test (fail it under RLS_REQUIRE_FLIGHT_DATA) if the recordings are absent."""
     if FLIGHT_DATA.is_dir():

@@ -4,7 +4,6 @@ node that publishes inputs and records every output of the estimator node."""
 from __future__ import annotations
 
 import os
-import signal
 import subprocess
 import sys
 import time
@@ -17,8 +16,16 @@ from std_msgs.msg import Float64MultiArray, Header
 
 from rls_uncertainty.datapath.inputs import MESSAGE_TYPES, STREAMS, message_class
 from rls_uncertainty.datapath.outputs import MODEL_OUTPUTS, NODE_NAME
+from rls_uncertainty.ros.player import stop_process
 
 ROOT = Path(__file__).resolve().parents[1]
+BUNDLED = ROOT / "bags" / "t2_maneuver"
+T2 = str(ROOT / "config" / "t2.yaml")
+# The node settings the README gives for a replay at any rate: reliable inputs whose queues
+# hold every message of the bag's busiest topic, and a buffer longer than the node's backlog
+# can grow (the node takes one message per topic per executor round, so a backlog lets the
+# slow streams run ahead of the IMU; with the default 2 s buffer their messages would expire).
+REPLAY_NODE = ("-p", "qos.reliable:=true", "-p", "qos.depth:=10000", "-p", "inputs.buffer_duration:=60.0")
 TYPES = {kind: message_class(MESSAGE_TYPES[kind]) for kind in STREAMS}
 RELIABLE = QoSProfile(depth=5000, reliability=QoSReliabilityPolicy.RELIABLE, history=QoSHistoryPolicy.KEEP_LAST)
 
@@ -38,15 +45,19 @@ class NodeProcess:
         return self.log.read_text()
 
     def stop(self, timeout: float = 15.0) -> int:
-        if self.proc.poll() is None:
-            self.proc.send_signal(signal.SIGINT)
-            try:
-                self.proc.wait(timeout)
-            except subprocess.TimeoutExpired:
-                self.proc.kill()
-                self.proc.wait()
+        stop_process(self.proc, timeout)
         self._fh.close()
         return self.proc.returncode
+
+
+def spin_until(node, condition, timeout: float) -> bool:
+    """Spin ``node`` until ``condition()`` holds (True) or ``timeout`` seconds pass (False)."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        rclpy.spin_once(node, timeout_sec=0.05)
+        if condition():
+            return True
+    return False
 
 
 def stamp_of(msg) -> int:
@@ -73,12 +84,7 @@ class RosTester:
         self.subs.append(self.node.create_subscription(msg_type, topic, store.append, RELIABLE))
 
     def spin_until(self, condition, timeout: float = 20.0) -> bool:
-        deadline = time.monotonic() + timeout
-        while time.monotonic() < deadline:
-            rclpy.spin_once(self.node, timeout_sec=0.05)
-            if condition():
-                return True
-        return False
+        return spin_until(self.node, condition, timeout)
 
     def wait_connected(self, timeout: float = 20.0, outputs: bool = True) -> None:
         def ready():

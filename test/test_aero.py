@@ -17,6 +17,7 @@ from rls_uncertainty.aero.coefficients import (
     rep103_to_aircraft,
 )
 from rls_uncertainty.datapath.limits import PlausibilityLimits
+from rls_uncertainty.errors import Refused
 from rls_uncertainty.settings import DEFAULT_MODELS, load_aircraft
 
 T2 = load_aircraft("t2")
@@ -105,7 +106,7 @@ def test_a_rep103_sample_becomes_aircraft_axes_and_a_flight_state():
 ])
 def test_a_sample_that_cannot_be_reduced_gives_its_reason(velocity, qbar, reason):
     sample = aircraft_sample((0.0,) * 6, velocity, qbar)
-    assert flight_state(sample, np.zeros(3), 1.225) == reason
+    assert flight_state(sample, np.zeros(3), 1.225) == Refused(reason)
 
 
 # ----------------------------------------------------------------------------- plausibility
@@ -117,18 +118,18 @@ def test_flight_state_judges_derived_quantities_with_the_limits():
     was plausible; without limits the same sample reduces (the caller decides)."""
     imu = (0.0, -0.1, 0.0, 0.3, 0.0, 9.8)
     sample = aircraft_sample(imu, (25.0, 0.0, -1.0))
-    assert flight_state(sample, np.zeros(3), 0.01, LIMITS) == "implausible_dynamic_pressure"  # 3.1 Pa
+    assert flight_state(sample, np.zeros(3), 0.01, LIMITS) == Refused("implausible_dynamic_pressure")  # 3.1 Pa
     assert isinstance(flight_state(sample, np.zeros(3), 0.01), FlightState)
     assert isinstance(flight_state(sample, np.zeros(3), 1.225, LIMITS), FlightState)  # 383 Pa
     # Non-finite is reported as such before any limit.
     infinite_qbar = aircraft_sample(imu, (25.0, 0.0, -1.0), math.inf)
-    assert flight_state(infinite_qbar, np.zeros(3), 1.2, LIMITS) == "non_finite_qbar"
+    assert flight_state(infinite_qbar, np.zeros(3), 1.2, LIMITS) == Refused("non_finite_qbar")
     # Interpolated air data: each message within |alpha| <= 1 rad, half way between them too,
     # but a low speed made of two just-plausible ones is not (V = 3 cos 0.9 = 1.9 m/s).
     a = 0.9
     mid = aircraft_sample(imu, (3.0 * math.cos(a), 0.0, 0.0))
     assert LIMITS.airspeed_rejection((3.0 * math.cos(a), 0.0, 3.0 * math.sin(a))) is None
-    assert flight_state(mid, np.zeros(3), 1.225, LIMITS) == "implausible_airspeed"
+    assert flight_state(mid, np.zeros(3), 1.225, LIMITS) == Refused("implausible_airspeed")
 
 
 def test_a_measured_dynamic_pressure_is_judged_against_the_airspeed_a_computed_one_is_not():
@@ -139,7 +140,7 @@ def test_a_measured_dynamic_pressure_is_judged_against_the_airspeed_a_computed_o
     velocity = (25.0, 0.0, 0.0)
     qbar = 0.5 * 0.03 * 25.0**2
     assert flight_state(aircraft_sample(imu, velocity, qbar), np.zeros(3), 1.225, LIMITS) == \
-        "inconsistent_dynamic_pressure"
+        Refused("inconsistent_dynamic_pressure")
     computed = flight_state(aircraft_sample(imu, velocity), np.zeros(3), 0.03, LIMITS)
     assert isinstance(computed, FlightState) and computed.qbar == pytest.approx(qbar, rel=1e-15)
     assert isinstance(flight_state(aircraft_sample(imu, velocity, 383.0), np.zeros(3), 0.03, LIMITS), FlightState)

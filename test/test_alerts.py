@@ -161,8 +161,10 @@ def counters(received=0, accepted=None, rejected=None, formed=0, used=0, samples
     """Counters of a pipeline whose needed streams are ``imu`` and ``airspeed``."""
     rejected = dict(rejected or {})
     accepted = received - sum(rejected.values()) if accepted is None else accepted
-    streams = {"imu": {"received": 10 * received, "accepted": 10 * received, "rejected": {}},
-               "airspeed": {"received": received, "accepted": accepted, "rejected": rejected}}
+    streams = {"imu": {"received": 10 * received, "accepted": 10 * received, "rejected": {}, "missing": 0,
+                       "expired": 0},
+               "airspeed": {"received": received, "accepted": accepted, "rejected": rejected, "missing": 0,
+                            "expired": 0}}
     return {"streams": streams, "samples_formed": formed, "samples_used": used,
             "samples_rejected": dict(samples_rejected or {}), "explanations": explanations or {}}
 

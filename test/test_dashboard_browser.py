@@ -27,7 +27,6 @@ from __future__ import annotations
 import csv
 import os
 import shutil
-import signal
 import subprocess
 import sys
 import threading
@@ -41,18 +40,17 @@ from std_msgs.msg import Float64MultiArray, Header
 
 from rls_uncertainty.datapath.inputs import STREAMS
 from rls_uncertainty.datapath.outputs import parse_stamp_label
+from rls_uncertainty.ros.player import stop_process
 from rls_uncertainty.simulation.t2 import T2_TRUE
 
 from conftest import FLIGHT_DATA
-from ros_harness import ROOT, NodeProcess
+from ros_harness import REPLAY_NODE, ROOT, T2, NodeProcess, spin_until
 
 CHROMIUM = os.environ.get("RLS_CHROMIUM", "/usr/bin/chromium")
 REQUIRE = os.environ.get("RLS_REQUIRE_BROWSER", "") not in ("", "0")
 FLAGS = ["--no-sandbox", "--disable-gpu", "--disable-background-networking", "--disable-component-update",
          "--disable-sync", "--no-first-run"]
-T2 = str(ROOT / "config" / "t2.yaml")
 NS = "/fleet"
-REPLAY_NODE = ("-p", "qos.reliable:=true", "-p", "qos.depth:=10000", "-p", "inputs.buffer_duration:=60.0")
 RELIABLE = QoSProfile(depth=5000, reliability=QoSReliabilityPolicy.RELIABLE, history=QoSHistoryPolicy.KEEP_LAST)
 
 
@@ -97,13 +95,7 @@ class Dashboard:
         self.url = lines[0].split()[1]
 
     def stop(self) -> str:
-        if self.proc.poll() is None:
-            self.proc.send_signal(signal.SIGINT)
-            try:
-                self.proc.wait(30)
-            except subprocess.TimeoutExpired:
-                self.proc.kill()
-                self.proc.wait()
+        stop_process(self.proc, 30)
         return self.proc.stderr.read()
 
 
@@ -168,12 +160,7 @@ class _Recorder:
                 self.node.create_subscription(Float64MultiArray, f"{node_name}/{m}/{suffix}", store.append, RELIABLE)
 
     def spin_until(self, condition, timeout: float) -> bool:
-        deadline = time.monotonic() + timeout
-        while time.monotonic() < deadline:
-            rclpy.spin_once(self.node, timeout_sec=0.05)
-            if condition():
-                return True
-        return False
+        return spin_until(self.node, condition, timeout)
 
     def last(self) -> tuple[int, dict[str, tuple[float, float]]]:
         out, stamps = {}, set()

@@ -340,7 +340,7 @@ def test_one_dropped_packet_warns_for_the_window_then_clears_with_the_cumulative
     assert out[5].message == "imu missing about 1 in the last 10 s (stamp gaps: lost in transport?)"
     end = values(out[-1])
     assert (end["imu.missing"], end["imu.recent.missing"], out[-1].message) == ("1", "0", "all inputs fresh")
-    assert len(policy._history) <= 12  # the window's snapshots, not the flight's
+    assert len(policy._window._history) <= 12  # the window's snapshots, not the flight's
 
 
 def test_rejections_and_expiries_in_the_window_warn_and_are_counted_beside_the_totals():

@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from bag_samples import changed_messages
+from interleaving import interleave
 
 from rls_uncertainty.aero.differentiation import DifferentiatorConfig, differentiate
 from rls_uncertainty.aero.surface_mixing import SurfaceMixing
@@ -677,7 +678,8 @@ def test_pipeline_imports_no_ros():
     assert subprocess.run([sys.executable, "-c", code]).returncode == 0
 
 
-@pytest.mark.parametrize("module", ["sampling", "surface_mixing", "aero", "differentiation", "estimator.state_file"])
+@pytest.mark.parametrize("module", ["datapath.sampling", "aero.surface_mixing", "aero.coefficients",
+                                    "aero.differentiation", "state_file"])
 def test_the_numerical_core_imports_numpy_only(module):
     import subprocess
 
@@ -746,20 +748,8 @@ def t2_streams():
 def _interleave(rng, runs, weighted):
     """Each stream's messages of consecutive runs in order, the streams randomly interleaved;
     returns ``(event, run)`` pairs."""
-    queues = {kind: [(e, r) for r, run in enumerate(runs) for e in run[kind]] for kind in KINDS}
-    pos = dict.fromkeys(KINDS, 0)
-    out = []
-    while True:
-        left = [k for k in KINDS if pos[k] < len(queues[k])]
-        if not left:
-            return out
-        if weighted:
-            w = np.array([len(queues[k]) - pos[k] for k in left], dtype=float)
-            kind = left[rng.choice(len(left), p=w / w.sum())]
-        else:
-            kind = left[rng.integers(len(left))]
-        out.append(queues[kind][pos[kind]])
-        pos[kind] += 1
+    return interleave(rng, {kind: [(e, r) for r, run in enumerate(runs) for e in run[kind]] for kind in KINDS},
+                      weighted)
 
 
 def _same_outputs(a, b):

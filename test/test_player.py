@@ -19,22 +19,9 @@ from rls_uncertainty.offline.bags import read_inputs
 from rls_uncertainty.offline.replay import run_pipeline
 from rls_uncertainty.settings import load_parameters_file, node_config, pipeline_config
 
-from ros_harness import RELIABLE, ROOT, NodeProcess
+from ros_harness import BUNDLED, RELIABLE, REPLAY_NODE, ROOT, T2, NodeProcess, spin_until
 
-BUNDLED = ROOT / "bags" / "t2_maneuver"
-T2 = str(ROOT / "config" / "t2.yaml")
-# The node settings the README gives for a replay at any rate: reliable inputs whose queues
-# hold every message of the bag's busiest topic, and a buffer longer than the node's backlog
-# can grow (the node takes one message per topic per executor round, so a backlog lets the
-# slow streams run ahead of the IMU; with the default 2 s buffer their messages would expire).
-REPLAY_NODE = ("-p", "qos.reliable:=true", "-p", "qos.depth:=10000", "-p", "inputs.buffer_duration:=60.0")
-
-
-@pytest.fixture(scope="module", autouse=True)
-def ros():
-    rclpy.init()
-    yield
-    rclpy.try_shutdown()
+pytestmark = pytest.mark.usefixtures("ros")
 
 
 @pytest.fixture(scope="module")
@@ -67,12 +54,7 @@ class RawRecorder:
                                                            raw=True))
 
     def spin_until(self, condition, timeout: float) -> bool:
-        deadline = time.monotonic() + timeout
-        while time.monotonic() < deadline:
-            rclpy.spin_once(self.node, timeout_sec=0.05)
-            if condition():
-                return True
-        return False
+        return spin_until(self.node, condition, timeout)
 
     def wait_connected(self, timeout: float = 30.0) -> None:
         assert self.spin_until(lambda: all(s.get_publisher_count() >= 1 for s in self.subs), timeout), \
@@ -268,4 +250,4 @@ def test_the_player_names_its_fast_heartbeat_profile_only_while_dds_starts_and_o
     period = writer.find("p:times/p:heartbeatPeriod", ns)
     assert int(period.find("p:sec", ns).text) + int(period.find("p:nanosec", ns).text) * 1e-9 == 0.05
     # Installed with the package (setup.py package_data), next to player.py.
-    assert '"fastdds_player.xml"' in (ROOT / "setup.py").read_text()
+    assert '"ros/fastdds_player.xml"' in (ROOT / "setup.py").read_text()

@@ -7,9 +7,10 @@ import os
 
 import numpy as np
 import pytest
+from interleaving import interleave as interleave_queues
 
+from rls_uncertainty.datapath.bookkeeping import StreamCounts
 from rls_uncertainty.datapath.sampling import Restart, Sample, Sampler, Skipped
-from rls_uncertainty.datapath.streams import StreamCounts
 
 MS = 1_000_000
 P = 20 * MS  # 50 Hz grid
@@ -233,19 +234,7 @@ def interleave(rng, *runs, weighted=False):
     for r, run in enumerate(runs):
         for name, events in per_stream(run).items():
             queues.setdefault(name, []).extend((e, r) for e in events)
-    pos = dict.fromkeys(queues, 0)
-    out = []
-    while True:
-        left = [n for n in queues if pos[n] < len(queues[n])]
-        if not left:
-            return out
-        if weighted:
-            w = np.array([len(queues[n]) - pos[n] for n in left], dtype=float)
-            name = left[rng.choice(len(left), p=w / w.sum())]
-        else:
-            name = left[rng.integers(len(left))]
-        out.append(queues[name][pos[name]])
-        pos[name] += 1
+    return interleave_queues(rng, queues, weighted)
 
 
 def split_at_restarts(items):

@@ -4,6 +4,7 @@ the deflections of Eq. 2, the reasons a name list cannot be mixed, and the bound
 import pytest
 
 from rls_uncertainty.aero.surface_mixing import JointLayout, SurfaceMixer, SurfaceMixing
+from rls_uncertainty.errors import Refused
 
 
 def test_aileron_mixing_is_eq_23():
@@ -36,8 +37,9 @@ def test_elevator_and_rudder_are_averages_and_other_joints_are_reported():
 
 def test_joint_lists_that_cannot_be_mixed_give_their_reason():
     mixing = SurfaceMixing()
-    assert mixing.layout(("elevator", "rudder", "aileron_left")) == "missing_joint"
-    assert mixing.layout(("elevator", "rudder", "aileron_left", "aileron_right", "rudder")) == "mismatched_arrays"
+    assert mixing.layout(("elevator", "rudder", "aileron_left")) == Refused("missing_joint")
+    twice = ("elevator", "rudder", "aileron_left", "aileron_right", "rudder")
+    assert mixing.layout(twice) == Refused("mismatched_arrays")
     # A deflection that no model needs may be unmapped: nothing is missing then.
     assert isinstance(SurfaceMixing(rudder=()).layout(("elevator", "aileron_left", "aileron_right")), JointLayout)
 
@@ -81,7 +83,7 @@ def test_the_mixer_never_caches_long_name_lists():
 def test_the_missing_fields_are_those_whose_joints_a_message_lacks():
     mixing = SurfaceMixing(elevator=("el", "er"), rudder=("ru",))
     assert mixing.missing(("el", "er", "ru", "aileron_left", "aileron_right")) == []
-    assert mixing.layout(("el", "ru", "aileron_left", "aileron_right")) == "missing_joint"
+    assert mixing.layout(("el", "ru", "aileron_left", "aileron_right")) == Refused("missing_joint")
     assert mixing.missing(("el", "ru", "aileron_left", "aileron_right")) == [("surfaces.elevator", ("el", "er"))]
     assert mixing.missing(()) == [("surfaces.elevator", ("el", "er")), ("surfaces.rudder", ("ru",)),
                                   ("surfaces.aileron_right", ("aileron_right",)),

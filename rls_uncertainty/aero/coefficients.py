@@ -20,6 +20,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..datapath.limits import PlausibilityLimits
+from ..errors import Refused
 
 if TYPE_CHECKING:  # annotations only: this module imports numpy alone
     from ..settings.models import AircraftConfig, ModelConfig
@@ -113,16 +114,17 @@ def aircraft_sample(imu: Sequence[float], velocity: Sequence[float], qbar: float
 
 
 def flight_state(sample: Sequence[float], rate_dot: FloatArray, air_density: float,
-                 limits: PlausibilityLimits | None = None) -> FlightState | str:
+                 limits: PlausibilityLimits | None = None) -> FlightState | Refused:
     """A :data:`SAMPLE_FIELDS` vector and its angular accelerations as a :class:`FlightState`
     (``V``, ``alpha = atan2(w, u)``, ``beta = asin(v / V)``; ``qbar = rho V^2 / 2`` when not
-    measured), or the reason it cannot be reduced (:func:`physics_rejection`) or is not
-    plausible (:meth:`.limits.PlausibilityLimits.sample_rejection`, when ``limits`` are given;
-    a measured dynamic pressure is also checked against ``V``)."""
+    measured), or :class:`.errors.Refused` with the reason it cannot be reduced
+    (:func:`physics_rejection`) or is not plausible
+    (:meth:`.limits.PlausibilityLimits.sample_rejection`, when ``limits`` are given; a measured
+    dynamic pressure is also checked against ``V``)."""
     u, v, w = sample[_U:_W + 1]
     V = math.sqrt(u * u + v * v + w * w)
     if not V > 0.0:
-        return "nonpositive_airspeed"
+        return Refused("nonpositive_airspeed")
     qbar = sample[_QBAR]
     measured = not math.isnan(qbar)
     if not measured:
@@ -138,7 +140,7 @@ def flight_state(sample: Sequence[float], rate_dot: FloatArray, air_density: flo
     reason = physics_rejection(state)
     if reason is None and limits is not None:
         reason = limits.sample_rejection(state, measured)
-    return reason or state
+    return state if reason is None else Refused(reason)
 
 
 def physics_rejection(state: FlightState) -> str | None:

@@ -5,7 +5,8 @@ model wants three deflections: the elevator ``delta_e`` and the rudder ``delta_r
 averages of their surfaces, the aileron is ``delta_a = (right - left) / 2`` (Eq. 23), unless
 one joint already holds that combination. :class:`SurfaceMixing` says which joints are
 which (the ``surfaces.*`` parameters); :class:`SurfaceMixer` applies it to messages, with the
-joints' positions in a message found once per name list (:class:`JointLayout`).
+joints' positions in a message found once per name list (:class:`JointLayout`), or the
+reason a message with that list cannot be mixed (a :class:`.errors.Refused`).
 """
 
 from __future__ import annotations
@@ -14,13 +15,19 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Literal, NamedTuple, get_args
 
+from ..errors import Refused
 from ..schema import check, option
 
-__all__ = ["Surface", "SURFACES", "SurfaceMixing", "JointLayout", "SurfaceMixer"]
+__all__ = ["Surface", "SURFACES", "SurfaceMixing", "JointLayout", "SurfaceMixer", "MISMATCHED", "MISSING"]
 
 # The deflections of Eq. 2, in the order the mixing produces them.
 Surface = Literal["delta_e", "delta_a", "delta_r"]
 SURFACES: tuple[Surface, ...] = get_args(Surface)
+
+# Why a JointState cannot be mixed: its names and positions do not pair one to one (a name
+# twice, or as many positions as names), or a joint of the ``surfaces.*`` parameters is missing.
+MISMATCHED = Refused("mismatched_arrays")
+MISSING = Refused("missing_joint")
 
 
 @dataclass(frozen=True)
@@ -65,13 +72,13 @@ class SurfaceMixing:
             fields += [("aileron_right", self.aileron_right), ("aileron_left", self.aileron_left)]
         return [(f"surfaces.{name}", joints) for name, joints in fields if any(j not in have for j in joints)]
 
-    def layout(self, names: tuple[str, ...]) -> JointLayout | str:
+    def layout(self, names: tuple[str, ...]) -> JointLayout | Refused:
         """Where each mixed joint sits in a message with these joint ``names``, or why such a
-        message cannot be used: ``mismatched_arrays`` (a name twice) or ``missing_joint``."""
+        message cannot be used: :data:`MISMATCHED` (a name twice) or :data:`MISSING`."""
         if len(set(names)) != len(names):
-            return "mismatched_arrays"
+            return MISMATCHED
         if any(n not in names for s in SURFACES for n in self.names(s)):
-            return "missing_joint"
+            return MISSING
         where = {n: i for i, n in enumerate(names)}
         aileron = self.names("delta_a")
         split = bool(aileron) and not self.aileron_combined
@@ -133,15 +140,14 @@ class SurfaceMixer:
     def __init__(self, mixing: SurfaceMixing) -> None:
         self.mixing = mixing
         self._last_names: list[str] | None = None
-        self._last_layout: JointLayout | str | None = None
-        self._layouts: dict[tuple[str, ...], JointLayout | str] = {}
+        self._last_layout: JointLayout | Refused = MISSING  # read only once _last_names is set
+        self._layouts: dict[tuple[str, ...], JointLayout | Refused] = {}
 
-    def layout(self, names: Sequence[str]) -> JointLayout | str:
-        """The layout of a message's joint ``names`` (a sequence of str), or the reason the
-        message cannot be used."""
+    def layout(self, names: Sequence[str]) -> JointLayout | Refused:
+        """The layout of a message's joint ``names`` (a sequence of str), or why the message
+        cannot be used."""
         if names == self._last_names:  # the usual case
-            # Set together with _last_names, so not None once a name list matched it.
-            return self._last_layout  # type: ignore[return-value]
+            return self._last_layout
         key = tuple(names)
         layout = self._layouts.get(key)
         if layout is None:

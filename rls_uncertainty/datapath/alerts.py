@@ -40,8 +40,9 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from ..aero.coefficients import flight_state
-from .bookkeeping import SAMPLES, Bookkeeping
+from ..aero.coefficients import FlightState, flight_state
+from ..errors import Refused
+from .bookkeeping import NO_TOTALS, SAMPLES, Bookkeeping, Totals, Window, growth
 from .limits import BOUNDS, message_value, sample_value
 
 if TYPE_CHECKING:  # annotations only
@@ -164,11 +165,12 @@ def _explain_sample(config: PipelineConfig, reason: str, evidence: Any) -> str:
     if reason.startswith("invalid_"):
         return f"holes left by rejected {stream} messages"
     if reason.startswith("implausible_") or reason == "inconsistent_dynamic_pressure":
-        state = None
+        state: FlightState | Refused | None = None
         if evidence is not None:
             sample, rate_dot = evidence
             state = flight_state(sample, np.asarray(rate_dot), inputs.air_density)
-            state = None if isinstance(state, str) else state
+        if isinstance(state, Refused):
+            state = None
         if reason == "inconsistent_dynamic_pressure":
             return _inconsistent_dynamic_pressure(config, state)
         return _limit(config, reason, math.nan if state is None else sample_value(reason, state))
@@ -200,35 +202,6 @@ def explanations(config: PipelineConfig, book: Bookkeeping) -> dict[str, dict[st
     return out
 
 
-@dataclass(frozen=True)
-class _Totals:
-    """What the alerts compare across the window: per stream received, accepted and rejected
-    by reason; samples formed, used and rejected by reason."""
-
-    received: Mapping[str, int]
-    accepted: Mapping[str, int]
-    rejected: Mapping[str, Mapping[str, int]]
-    formed: int
-    used: int
-    samples_rejected: Mapping[str, int]
-
-    @classmethod
-    def of(cls, counters: Mapping) -> _Totals:
-        streams = counters["streams"]
-        return cls({k: s["received"] for k, s in streams.items()}, {k: s["accepted"] for k, s in streams.items()},
-                   {k: dict(s["rejected"]) for k, s in streams.items()}, counters["samples_formed"],
-                   counters["samples_used"], dict(counters["samples_rejected"]))
-
-
-_ZERO = _Totals({}, {}, {}, 0, 0, {})
-
-
-def _growth(now: Mapping[str, int], before: Mapping[str, int]) -> list[tuple[str, int]]:
-    """The counts that grew (a count that went down restarted: its value), largest first."""
-    grew = [(k, n - before.get(k, 0) if n >= before.get(k, 0) else n) for k, n in now.items()]
-    return sorted(((k, d) for k, d in grew if d > 0), key=lambda kv: (-kv[1], kv[0]))
-
-
 def _reasons(grown: list[tuple[str, int]]) -> str:
     return grown[0][0] if len(grown) == 1 else ", ".join(f"{k} {n}" for k, n in grown[:3])
 
@@ -237,7 +210,7 @@ def _line(text: str) -> str:
     return text if len(text) <= MAX_LINE else text[: MAX_LINE - 3] + "..."
 
 
-def _problems(now: _Totals, before: _Totals, counters: Mapping, required: Sequence[str], window: str) -> list[Alert]:
+def _problems(now: Totals, before: Totals, counters: Mapping, required: Sequence[str], window: str) -> list[Alert]:
     """The alerts of the counts between ``before`` and ``now`` (``window``: how the span is
     named in the texts, e.g. ``"the last 10 s"``)."""
     why = counters.get("explanations", {})
@@ -247,7 +220,7 @@ def _problems(now: _Totals, before: _Totals, counters: Mapping, required: Sequen
     for kind in required:
         received = now.received.get(kind, 0) - before.received.get(kind, 0)
         accepted = now.accepted.get(kind, 0) - before.accepted.get(kind, 0)
-        grown = _growth(now.rejected.get(kind, {}), before.rejected.get(kind, {}))
+        grown = growth(now.rejected.get(kind, {}), before.rejected.get(kind, {}))
         if received >= MIN_MESSAGES and accepted <= 0 and grown:
             reason = grown[0][0]
             ever = now.accepted.get(kind, 0) <= 0  # never one accepted: count them all
@@ -265,7 +238,7 @@ def _problems(now: _Totals, before: _Totals, counters: Mapping, required: Sequen
     if not arriving or now.used > before.used:
         return []
     formed = now.formed - before.formed
-    grown = _growth(now.samples_rejected, before.samples_rejected)
+    grown = growth(now.samples_rejected, before.samples_rejected)
     grown = [(k, n) for k, n in grown if k not in ("estimation_disabled", "end_of_data")]
     if formed > 0 and grown:
         reason = grown[0][0]
@@ -292,25 +265,18 @@ class AlertPolicy:
         self.repeat_s = float(repeat_s)
         self.current: list[Alert] = []
         self.model: list[Alert] = []  # identifiability (model_alerts), logged beside the inputs'
-        self._time = 0.0
-        self._history: list[tuple[float, _Totals]] = [(0.0, _ZERO)]  # the start: every total zero
+        self._window = Window()
         self._logged: dict[tuple[str, str], float] = {}
 
     def update(self, elapsed_s: float, counters: Mapping, required: Sequence[str], enabled: bool,
                window_s: float) -> list[Alert]:
         """The alerts over the last ``window_s`` seconds (``elapsed_s``: steady time since the
         previous update). "No sample used" needs a whole window of history."""
-        self._time += max(elapsed_s, 0.0)
-        now = _Totals.of(counters)
-        history, cut = self._history, self._time - window_s
-        while len(history) > 1 and history[1][0] <= cut:
-            del history[0]
-        start, before = history[0]
-        window = f"the last {window_s:g} s"
-        alerts = _problems(now, before, counters, required, window)
-        if alerts and alerts[0].key[0] == SAMPLES and (not enabled or start > cut):
+        now = Totals.of(counters)
+        before, whole = self._window.advance(elapsed_s, now, window_s)
+        alerts = _problems(now, before, counters, required, f"the last {window_s:g} s")
+        if alerts and alerts[0].key[0] == SAMPLES and (not enabled or not whole):
             alerts = []  # disabled on purpose, or less than a window since the start
-        history.append((self._time, now))
         self.current = alerts
         return alerts
 
@@ -325,8 +291,8 @@ class AlertPolicy:
         lines = []
         for alert in self.current + self.model:
             last = self._logged.get(alert.key)
-            if last is None or self._time - last >= self.repeat_s:
-                self._logged[alert.key] = self._time
+            if last is None or self._window.time - last >= self.repeat_s:
+                self._logged[alert.key] = self._window.time
                 lines.append(alert.text)
         if len(self._logged) > 256:  # keys come from bounded tables; stay bounded anyway
             self._logged = {a.key: self._logged[a.key] for a in self.current + self.model if a.key in self._logged}
@@ -336,7 +302,7 @@ class AlertPolicy:
 def no_estimate(counters: Mapping, required: Sequence[str]) -> str | None:
     """Why no model can have produced an estimate in a whole run (the alerts of the run's
     counters), or None when samples were used."""
-    alerts = _problems(_Totals.of(counters), _ZERO, counters, required, "the run")
+    alerts = _problems(Totals.of(counters), NO_TOTALS, counters, required, "the run")
     if alerts:
         return "; ".join(a.text for a in alerts)
     if counters["samples_used"] == 0:

@@ -30,7 +30,6 @@ frequency-domain record.
 
 from __future__ import annotations
 
-from collections import Counter
 from dataclasses import replace
 from typing import TYPE_CHECKING, NamedTuple
 
@@ -42,6 +41,7 @@ from .convergence import ConvergenceMonitor
 
 if TYPE_CHECKING:  # annotations only
     from ..settings.config import PipelineConfig
+    from .bookkeeping import Tally
     from .identifiability import IdentifiabilityMonitor
 
 __all__ = ["FrequencyOutput", "FrequencyPath", "WITHHELD_SUFFIX"]
@@ -99,7 +99,7 @@ class FrequencyPath:
         self._X.flat[self._put] = X.flat[self._take]
         self._row = self.bank.check(self._X, z)
 
-    def add(self, stamp_ns: int, withheld: Counter, quality: IdentifiabilityMonitor) -> FrequencyOutput | None:
+    def add(self, stamp_ns: int, withheld: Tally, quality: IdentifiabilityMonitor) -> FrequencyOutput | None:
         """Advance by the row :meth:`check` took; on the samples that publish (every
         ``frequency.every``-th) the results, else None. ``withheld`` counts the models whose
         results were not finite; ``quality`` has judged the same sample."""
@@ -116,7 +116,7 @@ class FrequencyPath:
         ready = bank.ready
         bad = ready & (self.real & ~(np.isfinite(theta) & np.isfinite(se) & np.isfinite(se_conv))).any(axis=1)
         for j in np.flatnonzero(bad).tolist():
-            withheld[self.outputs[j] + WITHHELD_SUFFIX] += 1
+            withheld.count(self.outputs[j] + WITHHELD_SUFFIX)
         ready &= ~bad
         flags, model_flags = self._monitor.update(stamp_ns, theta, se, ready)
         if flags.any():  # a parameter the data cannot identify is never flagged

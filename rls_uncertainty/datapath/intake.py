@@ -28,8 +28,9 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
-from ..aero.surface_mixing import SurfaceMixer, SurfaceMixing
-from .bookkeeping import EVIDENCE_ITEMS, KEY_CHARS, KEYS_KEPT, OTHER_JOINTS, OTHER_REASONS, Bookkeeping, count_bounded
+from ..aero.surface_mixing import MISMATCHED, MISSING, SurfaceMixer, SurfaceMixing
+from ..errors import Refused
+from .bookkeeping import EVIDENCE_ITEMS, KEY_CHARS, Bookkeeping
 from .limits import PlausibilityLimits
 from .sampling import Sampler
 from .streams import Stream
@@ -104,22 +105,19 @@ class Intake:
 
     def surfaces(self, stamp_ns: int, names: Sequence[str], positions: Sequence[float]) -> bool:
         """``sensor_msgs/JointState`` names and positions (rad), mixed by Eq. 23."""
-        layout = self._mixer.layout(names)
-        if len(positions) != len(names):
-            layout = "mismatched_arrays"
-        if type(layout) is str:  # unusable at its stamp, like any invalid message: a hole
-            missing = tuple(self._mixer.mixing.missing(names)) if layout == "missing_joint" else ()
-            self.book.note("control_surfaces", layout, (*_names(names), len(positions), missing))
-            return self._reject(self._surfaces, stamp_ns, layout)
-        # A JointLayout from here (mypy does not narrow on `type(x) is str`'s else branch).
+        layout = self._mixer.layout(names) if len(positions) == len(names) else MISMATCHED
+        if isinstance(layout, Refused):  # unusable at its stamp, like any invalid message: a hole
+            missing = tuple(self._mixer.mixing.missing(names)) if layout == MISSING else ()
+            self.book.note("control_surfaces", layout.reason, (*_names(names), len(positions), missing))
+            return self._reject(self._surfaces, stamp_ns, layout.reason)
         unknown = self.book.unknown_joints
-        for n in layout.unknown:  # type: ignore[union-attr]
-            count_bounded(unknown, n, OTHER_JOINTS)
-        used = [positions[i] for i in layout.used]  # type: ignore[union-attr]
+        for n in layout.unknown:
+            unknown.count(n)
+        used = [positions[i] for i in layout.used]
         reason = self.limits.surface_rejection(used)
         if reason is not None:
             return self._invalid(self._surfaces, stamp_ns, tuple(used), reason)
-        de, da, dr = layout.deflections(positions)  # type: ignore[union-attr]
+        de, da, dr = layout.deflections(positions)
         return self.sampler.add(self._surfaces, int(stamp_ns), (de, da, dr))
 
     def _invalid(self, stream: Stream, stamp_ns: int, values: tuple, reason: str) -> bool:
@@ -150,11 +148,6 @@ class Intake:
         """A message of ``stream`` that has no stamp (it could not be decoded). Reasons are
         the caller's: a stream keeps at most :data:`.bookkeeping.KEYS_KEPT` distinct ones,
         later new ones count as :data:`.bookkeeping.OTHER_REASONS`."""
-        s = self.sampler.streams[stream]
-        rejected = s.counts.rejected
-        reason = reason[:KEY_CHARS]
-        if reason not in rejected and len(rejected) - (OTHER_REASONS in rejected) >= KEYS_KEPT:
-            reason = OTHER_REASONS
+        reason = self.sampler.reject(self.sampler.streams[stream], reason)
         if detail:
             self.book.note(stream, reason, detail[:2 * KEY_CHARS])
-        self.sampler.reject(s, reason)

@@ -51,13 +51,13 @@ import numpy as np
 from ..aero.coefficients import RATES, FloatArray, aircraft_sample, coefficients, flight_state, regressors
 from ..aero.differentiation import FixedLagDifferentiator
 from ..aero.surface_mixing import SURFACES
-from ..errors import NonFiniteInput, StateFileError
+from ..errors import NonFiniteInput, Refused, StateFileError
 from ..estimator import EstimatorBank
-from ..estimator.state_file import EstimatorState, load_state, save_state
 from ..settings.config import PipelineConfig
 from ..settings.models import REGRESSOR_UNITS
+from ..state_file import EstimatorState, load_state, save_state
 from .alerts import explanations, identifiability
-from .bookkeeping import SAMPLES, Bookkeeping, model_fit
+from .bookkeeping import Bookkeeping, model_fit
 from .convergence import ConvergenceMonitor
 from .frequency_path import FrequencyOutput, FrequencyPath
 from .identifiability import IdentifiabilityMonitor
@@ -293,19 +293,17 @@ class Pipeline:
         out: list[SampleOutput] = []
         book = self.bookkeeping
         for item in self.sampler.due():
-            # `kind` tells the three item types apart; mypy does not narrow `item` through it.
-            kind = type(item)
-            if kind is Sample:
+            if isinstance(item, Sample):
                 book.samples_formed += 1
-                result = self._process(item.stamp_ns, self._sample_vector(item.values))  # type: ignore[union-attr]
+                result = self._process(item.stamp_ns, self._sample_vector(item.values))
                 if result is not None:
                     out.append(result)
-            elif kind is Skipped:  # grid points not formed: the differentiator restarts after them
-                book.samples_formed += item.count  # type: ignore[operator]
-                book.samples_rejected[item.reason] += item.count  # type: ignore[union-attr, operator]
+            elif isinstance(item, Skipped):  # grid points not formed: the differentiator restarts after them
+                book.samples_formed += item.count
+                book.reject_samples(item.reason, item.count)
                 self._flush("discontinuity")
             else:  # Restart: the stamps moved to a new timeline
-                self._restart(item.reason)  # type: ignore[union-attr]
+                self._restart(item.reason)
         return out
 
     def _restart(self, reason: str) -> None:
@@ -313,7 +311,7 @@ class Pipeline:
         delay line is dropped (``reset_<reason>``) and the differentiator restarts. After a
         backward jump (a looped replay, ``/clock`` went back) the estimator restarts too; after a
         forward jump it goes on, as after a dropout: the later data is the same flight."""
-        self.bookkeeping.resets[reason] += 1
+        self.bookkeeping.resets.count(reason)
         self._flush(f"reset_{reason}")
         if reason != "stamps_jumped_forward":
             self._new_estimator()
@@ -334,7 +332,7 @@ class Pipeline:
     def _flush(self, reason: str) -> None:
         """Drop the samples waiting in the delay line and restart the differentiator."""
         if self._pending:
-            self.bookkeeping.samples_rejected[reason] += len(self._pending)
+            self.bookkeeping.reject_samples(reason, len(self._pending))
             self._pending.clear()
         self._diff.reset()
 
@@ -346,7 +344,7 @@ class Pipeline:
         if rate_dot is None:
             if len(self._pending) > self._lag:
                 self._pending.popleft()
-                self.bookkeeping.samples_rejected["differentiator_warmup"] += 1
+                self.bookkeeping.reject_samples("differentiator_warmup")
             return None
         t, sample = self._pending.popleft()  # the sample `lag` samples back, aligned
         return self._estimate(t, sample, rate_dot)
@@ -354,17 +352,15 @@ class Pipeline:
     def _estimate(self, t: int, sample: list[float], rate_dot: FloatArray) -> SampleOutput | None:
         book = self.bookkeeping
         state = flight_state(sample, rate_dot, self.config.inputs.air_density, self.limits)
-        if type(state) is str:
-            book.samples_rejected[state] += 1
-            book.note(SAMPLES, state, (sample, rate_dot.tolist()))  # (a rejected sample's values)
+        if isinstance(state, Refused):
+            book.reject_samples(state.reason, evidence=(sample, rate_dot.tolist()))  # (a rejected sample's values)
             return None
         if not self.enabled:
-            book.samples_rejected["estimation_disabled"] += 1
+            book.reject_samples("estimation_disabled")
             return None
         ac = self.config.aircraft
-        # A FlightState from here (mypy does not narrow on `type(x) is str`'s else branch).
-        coef = coefficients(state, ac)  # type: ignore[arg-type]
-        reg = regressors(state, ac)  # type: ignore[arg-type]
+        coef = coefficients(state, ac)
+        reg = regressors(state, ac)
         X, z = self._X, self._z
         X.flat[self._x_index] = [reg[name] for name in self._x_names]
         z[:] = [coef[name] for name in self._outputs]
@@ -374,7 +370,7 @@ class Pipeline:
                 freq.check(X, z)  # a row either estimator refuses is used by neither
             self.bank.update(X, z)
         except NonFiniteInput:  # the row, or the state it would make, is not finite: unchanged
-            book.samples_rejected["non_finite_regression"] += 1
+            book.reject_samples("non_finite_regression")
             return None
         book.samples_used += 1
         self._quality.add(X, z)
@@ -392,7 +388,7 @@ class Pipeline:
                                                        & np.isfinite(se_conv))).any(axis=1)
         if bad.any():
             for j in np.flatnonzero(bad):
-                book.outputs_withheld[self._outputs[j]] += 1
+                book.outputs_withheld.count(self._outputs[j])
             ready &= ~bad
         flags, model_flags = self._monitor.update(t, theta, se, ready)
         # A parameter that is not identifiable from the data so far is never flagged converged.
@@ -418,7 +414,7 @@ class Pipeline:
         (older stamps are accepted again), jump candidates, timelines, the grid and the delay
         line (``reset_<reason>`` samples). ``clear_inputs=False`` restarts the estimator only:
         samples in the delay line then reach the new estimator."""
-        self.bookkeeping.resets[reason] += 1
+        self.bookkeeping.resets.count(reason)
         self._new_estimator()
         self.regression.clear()
         if clear_inputs:
@@ -440,7 +436,7 @@ class Pipeline:
         afresh; this pipeline must not be used afterwards."""
         self._flush(f"reset_{reason}")
         self.sampler.clear(forget_newest=False)
-        self.bookkeeping.resets[reason] += 1
+        self.bookkeeping.resets.count(reason)
         return Pipeline(config, record=self.record, enabled=self.enabled, bookkeeping=self.bookkeeping)
 
     def finish(self) -> None:

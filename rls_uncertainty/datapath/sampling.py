@@ -37,7 +37,7 @@ starts the grid afresh on the next. :meth:`Sampler.time_jumped` (a backwards ``/
 jump) and :meth:`Sampler.clear` (``~/reset``: afterwards older stamps are accepted again)
 reach the timelines the same way.
 
-The counters of each stream live in a :class:`.streams.StreamCounts` that outlives the
+The counters of each stream live in a :class:`.bookkeeping.StreamCounts` that outlives the
 sampler: a reconfigured pipeline hands the same objects to its new sampler, so no count is lost.
 """
 
@@ -48,7 +48,8 @@ from collections.abc import Iterable, Sequence
 from operator import attrgetter
 from typing import NamedTuple
 
-from .streams import RING, Stream, StreamCounts, Values, drop_front, expire
+from .bookkeeping import StreamCounts
+from .streams import RING, Stream, Values, drop_front, expire
 from .timelines import Timelines
 
 __all__ = ["Sample", "Skipped", "Restart", "Sampler", "CURRENT", "AHEAD", "BEHIND"]
@@ -81,6 +82,14 @@ class Restart(NamedTuple):
     sample of the previous timeline was returned before it."""
 
     reason: str
+
+
+class _Hole(NamedTuple):
+    """No sample at a grid point, ``reason`` (``gap_<stream>``, ``expired_<stream>``,
+    ``invalid_<stream>``), nor at the later ones before ``until`` (ns)."""
+
+    reason: str
+    until: int
 
 
 _NEWEST = attrgetter("last")
@@ -147,11 +156,12 @@ class Sampler:
         return CURRENT if stream.epoch == epoch else AHEAD if stream.epoch > epoch else BEHIND
 
     # ------------------------------------------------------------------ messages
-    def reject(self, stream: Stream, reason: str) -> None:
-        """Count a received message of ``stream`` that the caller could not use (no stamp)."""
+    def reject(self, stream: Stream, reason: str) -> str:
+        """Count a received message of ``stream`` that the caller could not use (no stamp);
+        returns the reason it is counted under (:meth:`.bookkeeping.Tally.count`)."""
         counts = stream.counts
         counts.received += 1
-        counts.rejected[reason] += 1
+        return counts.reject(reason)
 
     def reject_invalid(self, stream: Stream, stamp: int, reason: str) -> bool:
         """Count a received message of ``stream`` stamped ``stamp`` whose values the caller
@@ -178,7 +188,7 @@ class Sampler:
         dt = stamp - counts.newest_ns  # type: ignore[operator]  # not slow: newest_ns is set (_update_slow)
         if dt <= 0:
             if dt >= self._back:
-                counts.rejected["duplicate" if dt == 0 else "out_of_order"] += 1
+                counts.reject("duplicate" if dt == 0 else "out_of_order")
                 return False
             return self._slow(stream, stamp, values, "")
         if dt > stream.hold_ns:
@@ -209,7 +219,7 @@ class Sampler:
         The one clock check of every received message (:meth:`add`, :meth:`reject_invalid`)."""
         clock = self.clock_ns
         if clock and abs(stamp - clock) > self.max_clock_ns:
-            counts.rejected["far_from_clock"] += 1
+            counts.reject("far_from_clock")
             return True
         return False
 
@@ -246,13 +256,11 @@ class Sampler:
             if lagging.last < t:  # type: ignore[operator]  # (last is set: it holds a message)
                 self._frontier = lagging
                 break
-            values, reason, skip_to = self._interpolate(t)
-            if values is None:
-                # Every grid point up to skip_to shares the problem: report them at once.
-                # (values None comes with a reason and skip_to, see _interpolate's return type;
-                # mypy does not narrow the unpacked tuple's other items.)
-                n_skip = max(1, -(-(skip_to - t) // P))  # type: ignore[operator]
-                out.append(Skipped(t, n_skip, reason))  # type: ignore[arg-type]
+            values = self._interpolate(t)
+            if isinstance(values, _Hole):
+                # Every grid point up to the hole's end shares the problem: report them at once.
+                n_skip = max(1, -(-(values.until - t) // P))
+                out.append(Skipped(t, n_skip, values.reason))
                 t += n_skip * P
             else:
                 out.append(Sample(t, values))
@@ -261,8 +269,8 @@ class Sampler:
             self._trim(t)
         self.next_ns = t
 
-    def _interpolate(self, t: int) -> tuple[list[Sequence[float]], None, None] | tuple[None, str, int]:
-        """``(values, None, None)`` at ``t``, or ``(None, reason, skip_to)``."""
+    def _interpolate(self, t: int) -> list[Sequence[float]] | _Hole:
+        """The required streams' values at ``t``, or why there are none and until when."""
         vals: list[Sequence[float]] = []
         max_gap = self.max_gap_ns
         for s in self._needed:
@@ -273,18 +281,18 @@ class Sampler:
                 vals.append(s.values[i])
                 continue
             if i == 0:
-                return None, f"expired_{s.name}", stamps[0]
+                return _Hole(f"expired_{s.name}", stamps[0])
             t0 = stamps[i - 1]
             broken = s.broken
             if broken:
                 j = bisect_left(broken, t0)
                 if j < len(broken) and broken[j] == t0:
-                    return None, f"invalid_{s.name}", t1
+                    return _Hole(f"invalid_{s.name}", t1)
             if t1 - t0 > max_gap:
-                return None, f"gap_{s.name}", t1
+                return _Hole(f"gap_{s.name}", t1)
             w = (t - t0) / (t1 - t0)
             vals.append([x + w * (y - x) for x, y in zip(s.values[i - 1], s.values[i], strict=True)])
-        return vals, None, None
+        return vals
 
     def _trim(self, t_next: int) -> None:
         """Drop messages no later sample can need (keep the last one at or before ``t_next``)."""

@@ -1,9 +1,10 @@
 """One input stream of the sampler: its counters, its time-ordered buffers and its interval
 statistics (pure Python; see :mod:`.sampling` for the rules they serve).
 
-* **Accounting.** :class:`StreamCounts` says what happened to a stream's messages: received,
-  rejected by reason, expired unused, missing (inferred from stamp gaps). It outlives the
-  sampler: a reconfigured pipeline hands the same objects to its new sampler.
+* **Accounting.** A stream counts what happened to its messages in a
+  :class:`.bookkeeping.StreamCounts`: received, rejected by reason, expired unused, missing
+  (inferred from stamp gaps). It outlives the sampler: a reconfigured pipeline hands the same
+  objects to its new sampler.
 * **Missing messages.** The reference interval of a stream is the lower median of its last 9
   stamp intervals, recomputed when an interval leaves +-25% of it
   (:meth:`Stream.interval`). An interval over 1.5 times the reference counts
@@ -18,48 +19,16 @@ statistics (pure Python; see :mod:`.sampling` for the rules they serve).
 from __future__ import annotations
 
 from bisect import bisect_left
-from collections import Counter
-from dataclasses import dataclass, field
-from typing import Any
 
-__all__ = ["StreamCounts", "Stream", "Values", "RING", "NEVER", "expire", "drop_front"]
+from .bookkeeping import StreamCounts
+
+__all__ = ["Stream", "Values", "RING", "NEVER", "expire", "drop_front"]
 
 RING = 9  # stamp intervals in the median reference interval
 NEVER = -(1 << 62)  # "no stamp yet" for a timeline's newest stamp (keeps the hot path int-only)
 
 # One message's values (the caller's tuple of floats); ``None`` where a message is a hole.
 Values = tuple[float, ...]
-
-
-@dataclass(slots=True)
-class StreamCounts:
-    """What happened to one stream's messages: every received message is accepted or rejected
-    (with its reason); accepted ones may later expire unused. ``missing`` counts messages
-    inferred from stamp gaps (never received). ``newest_ns`` is the newest stamp of the
-    stream's own timeline (the stamp order is checked against it), ``interval_ns`` the
-    reference interval (lower median of the recent stamp intervals)."""
-
-    received: int = 0
-    rejected: Counter[str] = field(default_factory=Counter)
-    expired: int = 0
-    missing: int = 0
-    newest_ns: int | None = None
-    interval_ns: float = 0.0
-
-    @property
-    def accepted(self) -> int:
-        return self.received - sum(self.rejected.values())
-
-    def report(self) -> dict[str, Any]:
-        """The counts as plain values (diagnostics, the replay's summary)."""
-        return {
-            "received": self.received,
-            "accepted": self.accepted,
-            "rejected": dict(self.rejected),
-            "expired": self.expired,
-            "missing": self.missing,
-            "newest_stamp_ns": self.newest_ns,
-        }
 
 
 class Stream:

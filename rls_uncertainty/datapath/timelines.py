@@ -48,7 +48,8 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Any
 
-from .streams import NEVER, RING, Stream, StreamCounts, Values, expire
+from .bookkeeping import StreamCounts
+from .streams import NEVER, RING, Stream, Values, expire
 
 __all__ = ["Timelines", "MAX_PENDING"]
 
@@ -80,7 +81,7 @@ class Timelines:
     def _drop_held(counts: StreamCounts, n: int) -> None:
         """Held candidates the stream did not confirm (no key for none: diagnostics warn on any)."""
         if n:
-            counts.rejected["stamp_jump"] += n
+            counts.reject("stamp_jump", n)
 
     def update_slow(self, s: Stream) -> None:
         s.slow = s.epoch != self.epoch or bool(s.held) or s.rewound or s.counts.newest_ns is None
@@ -151,7 +152,7 @@ class Timelines:
                 self._drop_held(counts, len(held))  # the stream goes on: they were wrong
             return self._take(s, m, values, reason, dt)
         if dt <= 0 and dt >= -J:
-            counts.rejected["duplicate" if dt == 0 else "out_of_order"] += 1
+            counts.reject("duplicate" if dt == 0 else "out_of_order")
             return False
         later = self._later(s, m) if self.pending else None
         if later is not None:  # another stream opened that timeline: join it at once
@@ -187,7 +188,7 @@ class Timelines:
             r[1] = max(r[1], m)
         self.update_slow(s)
         if values is None:
-            counts.rejected[reason] += 1
+            counts.reject(reason)
             if stamps and (not broken or broken[-1] != stamps[-1]):
                 broken.append(stamps[-1])
             return False
@@ -203,7 +204,7 @@ class Timelines:
         """Hold ``m`` as a jump candidate, or continue the held ones; confirm when enough."""
         counts = s.counts
         if values is None:  # a message with bad values never starts or continues a jump
-            counts.rejected[reason] += 1
+            counts.reject(reason)
             return False
         held = s.held
         if held:
@@ -212,7 +213,7 @@ class Timelines:
                 held.append((m, values))
                 return self._confirm(s) if len(held) > self.confirm else False
             if -self.max_jump_ns <= d <= 0:
-                counts.rejected["duplicate" if d == 0 else "out_of_order"] += 1
+                counts.reject("duplicate" if d == 0 else "out_of_order")
                 return False
             self._drop_held(counts, len(held))
             held.clear()
@@ -249,7 +250,7 @@ class Timelines:
         """Stream ``s`` opens a new timeline with ``msgs``; the restart that reaches it is
         counted as ``opens``. Other streams' held candidates that land near it join it."""
         if msgs[-1][1] is None:  # a hole (only ever the last) moves nothing
-            s.counts.rejected[reason] += 1
+            s.counts.reject(reason)
             msgs = msgs[:-1]
             if not msgs:
                 return False
@@ -264,7 +265,7 @@ class Timelines:
     def _join(self, s: Stream, e: int, msgs: list[tuple[int, Values | None]], reason: str) -> bool:
         """Stream ``s`` moves on to timeline ``e`` with ``msgs`` (increasing)."""
         if msgs[-1][1] is None:
-            s.counts.rejected[reason] += 1
+            s.counts.reject(reason)
             msgs = msgs[:-1]
             if not msgs:
                 return False
@@ -297,7 +298,7 @@ class Timelines:
                     return self._join(s, later, [(m, values)], reason)
                 opens = "stamps_jumped_backwards" if m < self.hi else "stamps_jumped_forward"
                 return self._open(s, [(m, values)], reason, opens)
-            counts.rejected["previous_timeline"] += 1
+            counts.reject("previous_timeline")
             counts.newest_ns = m
             return False
         later = self._later(s, m) if self.pending else None
@@ -312,7 +313,7 @@ class Timelines:
             s.held = []
             return self._join(s, later, [*held, (m, values)], reason)
         if -J <= d <= 0:
-            counts.rejected["previous_timeline"] += 1
+            counts.reject("previous_timeline")
             return False
         return self._candidate(s, m, values, reason)
 

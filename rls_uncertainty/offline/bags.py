@@ -47,7 +47,7 @@ from ..datapath import cdr
 from ..datapath.inputs import MESSAGE_TYPES, Stamped, stamp_ns
 from ..datapath.inputs import STREAMS as INPUTS
 from ..errors import BagError, ConfigError
-from ..files import output_directory
+from ..files import OutputWriter, output_directory
 from ..settings import yaml_files
 from ..settings.models import package_path
 from .mcap_io import McapWriter, check_mcap_integrity, write_metadata
@@ -199,7 +199,7 @@ def _check_log_time(path: Path, stamp: int, topic: str) -> None:
         raise BagError(f"{path}: topic {topic}: stamp {stamp} ns cannot be a log time (0 to 2^64 - 1 ns)")
 
 
-class BagWriter:
+class BagWriter(OutputWriter):
     """One MCAP file of a ROS 2 bag (storage version 9) written as its records arrive, at
     ``path`` (a new file, :class:`.mcap_io.McapWriter`: with CRCs; callers make it atomic with
     :func:`.files.output_directory`, and :func:`_bag_directory` adds ``metadata.yaml``).
@@ -249,15 +249,9 @@ class BagWriter:
         self.release()
         self.info = self._writer.close()
 
-    def __enter__(self) -> BagWriter:
-        return self
-
-    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
-                 tb: TracebackType | None) -> None:
-        if exc_type is None:
-            self.close()
-        else:  # the unfinished file is removed (the caller's output directory is discarded)
-            self._writer.abort()
+    def abort(self) -> None:
+        """Remove the unfinished file (the caller's output directory is discarded)."""
+        self._writer.abort()
 
 
 @contextmanager

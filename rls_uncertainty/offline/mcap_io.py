@@ -25,10 +25,10 @@ import struct
 import zlib
 from collections.abc import Mapping
 from pathlib import Path
-from types import TracebackType
 from typing import IO, TYPE_CHECKING, Any
 
 from ..errors import BagError
+from ..files import OutputWriter
 
 if TYPE_CHECKING:  # annotations only: the mcap library is imported where it is used
     from mcap.records import Chunk, ChunkIndex
@@ -46,7 +46,7 @@ _DATA_END = 1 + 8 + 4  # opcode, length, data_section_crc
 _OFFERED_QOS = "[]"  # rosbag2 version 9: the offered QoS profiles as YAML (none recorded)
 
 
-class McapWriter:
+class McapWriter(OutputWriter):
     """One MCAP file written as messages come, with CRCs (see the module docstring).
 
     ``path`` is created exclusively (an existing file is never replaced). Register a topic with
@@ -130,16 +130,6 @@ class McapWriter:
         """Close and remove the unfinished file."""
         self._fh.close()
         self.path.unlink(missing_ok=True)
-
-    def __enter__(self) -> McapWriter:
-        return self
-
-    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
-                 tb: TracebackType | None) -> None:
-        if exc_type is None:
-            self.close()
-        else:
-            self.abort()
 
 
 def write_metadata(directory: Path, info: Mapping[str, Any]) -> None:

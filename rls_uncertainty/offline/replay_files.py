@@ -31,12 +31,12 @@ import hashlib
 import json
 from dataclasses import asdict
 from pathlib import Path
-from types import TracebackType
 from typing import IO, TYPE_CHECKING, Any
 
 import numpy as np
 
 from ..datapath.outputs import OutputLayout
+from ..files import OutputWriter
 from .bags import BagWriter
 
 if TYPE_CHECKING:  # annotations only
@@ -206,7 +206,7 @@ class _Mcap:
             self.writer.close()
 
 
-class ReplayFiles:
+class ReplayFiles(OutputWriter):
     """Every output file of a replay into ``directory`` (module docstring), as the samples
     come; :meth:`close` completes them (a failure leaves them to the caller's
     :func:`.files.output_directory`, which discards the directory)."""
@@ -236,15 +236,9 @@ class ReplayFiles:
             csv.fh.close()
         self.mcap.close()
 
-    def __enter__(self) -> ReplayFiles:
-        return self
-
-    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
-                 tb: TracebackType | None) -> None:
-        if exc_type is None:
-            self.close()
-        else:
-            for csv in self.csvs:
-                csv.fh.close()
-            if self.mcap.writer is not None:
-                self.mcap.writer.__exit__(exc_type, exc, tb)
+    def abort(self) -> None:
+        """Close the CSV files and remove the unfinished bag (the caller discards the directory)."""
+        for csv in self.csvs:
+            csv.fh.close()
+        if self.mcap.writer is not None:
+            self.mcap.writer.abort()

@@ -38,10 +38,10 @@ node in the root namespace, as always, and the fully qualified name under a name
   ``convergence.window`` of samples has not initialized the model).
 
 **The window.** The policy keeps, per snapshot, the steady time (the sum of ``elapsed_s``)
-and each stream's rejected, missing and expired totals. The recent counts are the current
-totals minus those of the newest snapshot at least ``window_s`` old (the node's start before
-the first ``window_s`` seconds), so the window spans ``window_s`` to ``window_s`` plus one
-period; the history holds about ``window_s / period`` small tuples.
+and the totals of the counters (:class:`.bookkeeping.Window`). The recent counts are the
+current totals minus those of the newest snapshot at least ``window_s`` old (the node's start
+before the first ``window_s`` seconds), so the window spans ``window_s`` to ``window_s`` plus
+one period; the history holds about ``window_s / period`` totals.
 
 **Bounded size.** Whatever arrives, each table of names (a stream's rejection reasons,
 rejected samples, resets, unknown joints) shows at most ``max_keys`` entries, the largest
@@ -56,11 +56,11 @@ from __future__ import annotations
 
 import heapq
 import zlib
-from collections import deque
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 
 from ..datapath.alerts import Alert, AlertPolicy
+from ..datapath.bookkeeping import Totals, Window, increase
 from ..datapath.outputs import NODE_NAME
 
 __all__ = [
@@ -232,34 +232,21 @@ class DiagnosticsPolicy:
         # The misconfiguration alerts (:mod:`.alerts`): first in the inputs status, and the
         # lines to log (alerts.due()), each at most once per repeat_s seconds.
         self.alerts = AlertPolicy(repeat_s)
-        self._time = 0.0  # steady seconds since the policy started (sum of elapsed_s)
-        # (time, {stream: (rejected, missing, expired)}) of earlier snapshots, oldest first;
-        # the start counts as a snapshot with every total zero.
-        self._history: deque[tuple[float, dict[str, tuple[int, int, int]]]] = deque([(0.0, {})])
+        self._window = Window()  # the totals of the snapshot that starts the recent window
 
     def update(self, snap: Snapshot) -> list[Status]:
         """The statuses of this period: ``inputs``, ``samples``, then one per model."""
-        self._time += max(snap.elapsed_s, 0.0)
-        totals = {kind: (sum(s["rejected"].values()), s["missing"], s["expired"])
-                  for kind, s in snap.counters["streams"].items()}
-        baseline = self._baseline()
+        now = Totals.of(snap.counters)
+        before, _ = self._window.advance(snap.elapsed_s, now, self.window_s)
         alerts = self.alerts.update(snap.elapsed_s, snap.counters, snap.required, snap.enabled, self.window_s)
         namesake = namesake_alert(self.node_name, snap.namesakes)
         if namesake is not None:  # logged with the alerts (AlertPolicy.due), shown in the samples status
             self.alerts.current = [*alerts, namesake]
         self.alerts.models(snap.models)  # identifiability, logged with the alerts
-        statuses = [self._inputs(snap, totals, baseline, alerts), self._samples(snap, namesake)]
+        statuses = [self._inputs(snap, now, before, alerts), self._samples(snap, namesake)]
         statuses += [self._model(name, fit, snap) for name, fit in snap.models]
-        self._history.append((self._time, totals))
         self.previous = snap
         return statuses
-
-    def _baseline(self) -> dict[str, tuple[int, int, int]]:
-        """The totals of the newest snapshot at least ``window_s`` old; older ones are dropped."""
-        history, cut = self._history, self._time - self.window_s
-        while len(history) > 1 and history[1][0] <= cut:
-            history.popleft()
-        return history[0][1]
 
     def _status(self, name: str, level: int, message: str, values: list[tuple[str, object]]) -> Status:
         def text(v: object) -> str:
@@ -276,8 +263,7 @@ class DiagnosticsPolicy:
         stream = self.previous.counters["streams"].get(kind)
         return stream["received"] if stream else 0
 
-    def _inputs(self, snap: Snapshot, totals: Mapping[str, tuple[int, int, int]],
-                baseline: Mapping[str, tuple[int, int, int]], alerts: Sequence[Alert]) -> Status:
+    def _inputs(self, snap: Snapshot, now: Totals, before: Totals, alerts: Sequence[Alert]) -> Status:
         period = max(snap.elapsed_s, 1e-9)
         limit = stale_after(snap.max_gap)
         window = f"in the last {self.window_s:g} s"
@@ -289,9 +275,9 @@ class DiagnosticsPolicy:
             newest = s["newest_stamp_ns"]
             age = (snap.now_ns - newest) * 1e-9 if newest is not None else None
             publishers = snap.publishers[kind]
-            now, before = totals[kind], baseline.get(kind, (0, 0, 0))
-            # Counters only grow; one that went down restarted, and counts from zero.
-            rejected, missing, expired = (n - b if n >= b else n for n, b in zip(now, before, strict=True))
+            rejected = increase(now.rejected_total(kind), before.rejected_total(kind))
+            missing = increase(now.missing[kind], before.missing.get(kind, 0))
+            expired = increase(now.expired[kind], before.expired.get(kind, 0))
             kv += [
                 (f"{kind}.required", needed),
                 (f"{kind}.publishers", publishers),

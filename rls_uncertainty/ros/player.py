@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import math
 import os
+import signal
 import subprocess
 import sys
 import time
@@ -48,7 +49,7 @@ if TYPE_CHECKING:
     from ..datapath.pipeline import SampleOutput
     from ..settings.config import PipelineConfig
 
-__all__ = ["play", "demo", "bundled_bag", "TopicStats", "DEFAULT_WINDOW"]
+__all__ = ["play", "demo", "bundled_bag", "stop_process", "TopicStats", "DEFAULT_WINDOW"]
 
 # Messages per topic that may wait for acknowledgement: the estimator node's default input
 # queue depth (qos.depth), so a keep-last subscriber of that depth is never sent more at once.
@@ -407,12 +408,19 @@ def _start_node(params_path: str) -> tuple[subprocess.Popen[str], str]:
     return proc, node_log.name
 
 
-def _stop(proc: subprocess.Popen[str]) -> None:
-    proc.send_signal(2)
-    try:
-        proc.wait(15)
-    except subprocess.TimeoutExpired:
-        proc.kill()
+def stop_process(proc: subprocess.Popen, timeout: float = 15.0) -> bool:
+    """End a child process (a node, the dashboard) as Ctrl-C does: SIGINT, then SIGKILL if it
+    has not ended within ``timeout`` seconds. Whether it ended by itself (then its exit status
+    is ``proc.returncode``)."""
+    if proc.poll() is None:
+        proc.send_signal(signal.SIGINT)
+        try:
+            proc.wait(timeout)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+            return False
+    return True
 
 
 class _Outputs:
@@ -492,7 +500,7 @@ def demo(rate: float = 4.0, params_file: str = "t2") -> int:
             player.close()
         node.destroy_node()
         rclpy.try_shutdown()
-        _stop(node_proc)
+        stop_process(node_proc)
     print(f"\nlive node: {outputs.samples} samples published (offline replay: {want})\n")
     worst = _compare(config, outputs, offline.outputs[-1], node_log)
     if worst is None:

@@ -21,7 +21,6 @@ everywhere in the package (set it to ``LOCALHOST`` in CI).
 from __future__ import annotations
 
 import os
-import signal
 import subprocess
 import sys
 import time
@@ -35,6 +34,7 @@ from ..datapath.outputs import FREQUENCY, FREQUENCY_OUTPUTS, NODE_NAME, SAMPLE_S
 from ..errors import BagError, LiveTimeout
 from ..offline.bags import input_topics
 from ..offline.results import History, ReplayResult, accounting
+from ..ros.player import stop_process
 from ..settings.parameters import node_config, pipeline_config
 
 __all__ = ["REPLAY_PARAMETERS", "EstimatorProcess", "LiveTimeout", "play_to_node"]
@@ -96,15 +96,7 @@ class EstimatorProcess:
 
     def stop(self, timeout: float = 15.0) -> int | None:
         """End the node (its exit status; None if it had to be killed)."""
-        if self.proc.poll() is None:
-            self.proc.send_signal(signal.SIGINT)
-            try:
-                self.proc.wait(timeout)
-            except subprocess.TimeoutExpired:
-                self.proc.kill()
-                self.proc.wait()
-                return None
-        return self.proc.returncode
+        return self.proc.returncode if stop_process(self.proc, timeout) else None
 
 
 def _counters(statuses: Sequence[tuple[str, int, str, Mapping[str, str]]]) -> dict[str, Any]:
