@@ -161,7 +161,9 @@ class FrequencyBank:
         A, b = G[:, 1:, 1:].copy(), G[:, 1:, 0]
         A[self._pad_diagonal] = 1.0  # padded parameters: theta = 0
         ready = self._well_conditioned(A) if N >= 2 else np.zeros(len(self.sizes), dtype=bool)
-        A[~ready] = np.eye(A.shape[1])
+        all_ready = bool(ready.all())
+        if not all_ready:
+            A[~ready] = np.eye(A.shape[1])
         A_inv = np.linalg.inv(A)
         A_inv[self._pad_square] = 0.0
         theta = np.einsum("mab,mb->ma", A_inv, b)
@@ -170,9 +172,10 @@ class FrequencyBank:
         s2 = (E.real**2 + E.imag**2).sum(axis=1) / self._residual_dof
         conventional = s2[:, None, None] * A_inv
         corrected = self._corrected(X, A_inv, theta, N)
-        self._theta = np.where(ready[:, None] & self._real, theta, np.nan)
+        self._theta = np.where(self._real if all_ready else ready[:, None] & self._real, theta, np.nan)
         self._cov[0], self._cov[1] = corrected, conventional
-        self._cov[:, ~ready] = np.nan
+        if not all_ready:
+            self._cov[:, ~ready] = np.nan
         self._ready = ready
 
     def _trim_count(self) -> int:
@@ -197,7 +200,8 @@ class FrequencyBank:
         positive: BoolArray = np.all(d > 0, axis=1) & np.all(np.isfinite(A), axis=(1, 2))
         s = 1.0 / np.sqrt(np.where(positive[:, None], d, 1.0))
         scaled = A * s[:, :, None] * s[:, None, :]
-        scaled[~positive] = np.eye(A.shape[1])
+        if not positive.all():
+            scaled[~positive] = np.eye(A.shape[1])
         eig = np.linalg.eigvalsh(scaled)
         ok: BoolArray = positive & (eig[:, 0] * self.options.init_condition > eig[:, -1])
         return ok
@@ -213,7 +217,8 @@ class FrequencyBank:
         cov: FloatArray = A_inv @ mid @ A_inv
         output_variance = np.einsum("ma,mab,mb->m", theta, C0[:, 1:, 1:], theta) / N
         exact = R[:, 0] <= EXACT_FIT * output_variance
-        cov[exact] = 0.0
+        if exact.any():
+            cov[exact] = 0.0
         negative = (np.diagonal(cov, axis1=1, axis2=2) < 0.0).any(axis=1)  # padding: 0
         if negative.any():
             for j in np.flatnonzero(negative).tolist():
