@@ -129,8 +129,7 @@ def dof_correction(
     ``T1(j) = max(N - |j|, 0) / N`` and ``var(R) = sum_(|l|<=L) (N - |l|) R(l) / N^2``.
     The centered sums are never formed: ``C^x_j = E_x Sa_j E_x'`` (``E_x`` the regressor rows of
     :func:`centering`), so ``T``, the traces and ``sum_l R(l) C^x_l`` are each one product with
-    the augmented sums; the terms but the trace are one ``(L+1) x (L+1)`` matrix per model,
-    ``R(l)`` and ``R(-l)`` folded onto ``l >= 0``."""
+    the augmented sums; the cross terms are one contraction with strided windows of ``T + T1``."""
     M, lags, q1 = augmented.shape[:3]
     L = lags - 1
     flat = augmented.reshape(M, lags, q1 * q1)
@@ -142,31 +141,27 @@ def dof_correction(
         out: FloatArray = (flat @ (ExT @ K.swapaxes(1, 2) @ Ex).reshape(M, q1 * q1, 1))[:, :, 0]
         return out
 
-    # T(j) + T1(j) at index j + 2L, j = -2L..2L; rows of the folded matrix are windows of it.
+    # T(j) + T1(j) at index j + 2L, j = -2L..2L: row i of the cross term's matrix, f(l - i) for
+    # l = -L..L, is the window starting at L - i (a strided view, never formed: O(M L) memory).
     shifted = np.zeros((M, 4 * L + 1))
     T = traces(B_inv)
     shifted[:, 2 * L : 3 * L + 1] = T
     shifted[:, L : 2 * L + 1] = T[:, ::-1]
     shifted += np.maximum(N - np.abs(np.arange(-2 * L, 2 * L + 1)), 0) / N
     step = shifted.strides
-    # f(l - i) = shifted[l - i + 2L] and f(-l - i) = shifted[2L - i - l], i, l = 0..L.
-    ahead = np.lib.stride_tricks.as_strided(shifted[:, 2 * L :], (M, lags, lags), (step[0], -step[1], step[1]))
-    behind = np.lib.stride_tricks.as_strided(shifted[:, 2 * L :], (M, lags, lags), (step[0], -step[1], -step[1]))
-    linear = ahead + behind
-    linear[:, :, 0] = ahead[:, :, 0]  # l = 0 is one term
-    linear *= 2.0
-    # (N - i) var(R), var(R) = sum_l fold_l R(l): fold_0 = N / N^2, fold_l = 2 (N - l) / N^2.
+    windows = np.lib.stride_tricks.as_strided(shifted[:, L:], (M, lags, 2 * L + 1), (step[0], -step[1], step[1]))
+    # (N - i) var(R), var(R) = sum_(|l|<=L) (N - |l|) R(l) / N^2.
     count = N - np.arange(lags, dtype=np.float64)
-    fold = 2.0 / N**2 * count
-    fold[0] = 1.0 / N
-    linear -= count[:, None] * fold[None, :]
+    weight = (N - np.abs(np.arange(-L, L + 1))) / N**2
     first = Ex @ augmented[:, 0] @ ExT  # C^x_0
 
     def apply(R: FloatArray) -> FloatArray:
         summed = Ex @ (R[:, None, :] @ flat).reshape(M, q1, q1) @ ExT  # sum_l R(l) C^x_l
         middle = summed + summed.swapaxes(1, 2) - R[:, :1, None] * first
-        quad = traces(B_inv @ middle @ B_inv)
-        out: FloatArray = (linear @ R[:, :, None])[:, :, 0] - quad
+        two_sided = np.concatenate([R[:, :0:-1], R], axis=1)  # R(|l|), l = -L..L
+        out: FloatArray = 2.0 * np.einsum("mil,ml->mi", windows, two_sided)
+        out -= count * (two_sided @ weight)[:, None]
+        out -= traces(B_inv @ middle @ B_inv)
         out /= N
         return out
 
