@@ -206,8 +206,8 @@ def pipeline_costs() -> None:
                            for _ in range(3))
                 used = run_pipeline(messages, config, record=False, keep_outputs=False).counters()["samples_used"]
                 line += f" | {name}: {best / used * 1e6:6.0f}"
-            costs[name] = best / used
-        print(line + f" | both, every 5 / time: {costs['both, every 5'] / costs['time']:.2f}")
+                costs[name] = best / used
+            print(line + f" | both, every 5 / time: {costs['both, every 5'] / costs['time']:.2f}")
 
 
 def against(other: str, rounds: int) -> None:
