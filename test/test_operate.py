@@ -187,3 +187,12 @@ def test_the_answers_of_twins_decide_the_exit_status(answers, nodes, code, said,
         assert lines[1:] == [f"{NODE} [answer {i} of {counted}]: {m}" for i, (_s, m) in enumerate(answers, 1)]
     err = capsys.readouterr().err
     assert (err == "") if said is None else (err.startswith("rls-uncertainty enable: error: ") and said in err), err
+
+
+def test_a_call_sent_again_says_so():
+    from rls_uncertainty.ros.operate import report
+
+    out = io.StringIO()
+    assert report("reset", NODE, [(True, "reset")] * 2, 2, 5.0, sends=2, out=out) == 0
+    assert out.getvalue().splitlines()[0].endswith(
+        "; sent 2 times, as the earlier calls did not reach every node (a node may have had it more than once)")

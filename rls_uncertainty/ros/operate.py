@@ -17,20 +17,25 @@ searched), or when several nodes carry the name and not all of them answered the
 **Several nodes of one name** (twins: two launches of one file) all serve ``NAME/enable``. A
 DDS service client reaches every server it has matched when it sends, and each answers; but
 rclpy's client hands back only the first answer, and a client is ready as soon as it has
-matched *one* server, so a call made at once reaches whichever twin was discovered first
-(before this rule, one twin missed 5 of 15 calls while the command said "estimation enabled").
-Neither rclpy nor rmw in Jazzy can address one server among several of a name (no endpoint
-GIDs for services, and a request goes to every matched server), so :func:`call` makes sure
-the one request reaches them all and collects every answer:
+matched *one* server, so a call made at once would reach whichever twin was discovered
+first, and say that one's answer. Neither rclpy nor rmw in Jazzy can address one server
+among several of a name (no endpoint GIDs for services, and a request goes to every matched
+server), so :func:`call` makes sure a request reaches them all and collects every answer:
 
 1. it counts the nodes that carry the name: the most of the ROS graph's nodes of that name,
    the graph's servers of the service, and ``nodes_with_this_name`` from the node's own
    ``/diagnostics`` (the node has run long enough to have discovered its twins, where this
    command's graph is a second old), waiting up to :data:`REPORT_WAIT_S` for a report;
-2. it sends once the graph shows that many servers (DDS matches the request's writer with a
-   server's reader on the same discovery), and collects answers until as many arrived;
-3. it prints each answer; with more than one node, a line says so first, and the exit status
-   is 1 unless every node answered and all succeeded alike.
+2. it sends once the graph shows that many servers, and collects answers until as many
+   arrived to one request. The graph can list a server before this client's request writer
+   has matched it (a twin listed beside the other missed a call now and then), and a request
+   sent before the match never reaches that server, so with fewer answers after
+   :data:`RESEND_S` the call is sent again, at most :data:`SENDS` times: a node may then get
+   it twice (harmless for ``enable`` and ``disable``; ``reset`` resets that node again, a
+   second later), which the output says;
+3. it prints the answers to the request that most nodes answered; with more than one node,
+   a line says so first, and the exit status is 1 unless every node answered and all
+   succeeded alike.
 
 Answers carry no sender: they are numbered, not named (the twins' logs say which got what).
 """
@@ -53,7 +58,8 @@ from ..dashboard.health import LEVELS, HealthTracker, NodeHealth, parse_statuses
 from ..dashboard.model import METHODS, array_key
 from ..dashboard.settings import split_node_name, where
 
-__all__ = ["call", "report", "status", "format_health", "published_methods", "SERVICES", "REPORT_WAIT_S"]
+__all__ = ["call", "report", "status", "format_health", "published_methods", "SERVICES", "REPORT_WAIT_S", "RESEND_S",
+           "SENDS"]
 
 # command -> (service relative to the node, type, request data)
 SERVICES: dict[str, tuple[str, Any, bool | None]] = {
@@ -66,6 +72,11 @@ _CLEAR = "\x1b[H\x1b[2J"
 # the node (its nodes_with_this_name) before counting the nodes from the ROS graph alone: the
 # node reports every diagnostics_period (1 s by default).
 REPORT_WAIT_S = 3.0
+# A request reaches only the servers matched when it is sent, and the graph can list a server
+# before the match: when fewer nodes answer than carry the name, the call is sent again after
+# RESEND_S, at most SENDS times in all.
+RESEND_S = 1.0
+SENDS = 3
 # How the status names each estimation method (rls_uncertainty.dashboard.model.METHODS).
 METHOD_TEXT = {"time": "time domain (RLS, ~/M/estimates)", "frequency": "frequency domain (~/M/frequency/estimates)"}
 
@@ -126,9 +137,10 @@ def _spin_until(session: _Session, condition: Callable[[], bool], deadline: floa
 
 
 def report(command: str, node_name: str, answers: list[tuple[bool, str]], nodes: int, timeout: float,
-           out: TextIO = sys.stdout) -> int:
-    """Print the ``answers`` (success, message) of the ``nodes`` that carry ``node_name``; the
-    exit status (module docstring)."""
+           sends: int = 1, out: TextIO = sys.stdout) -> int:
+    """Print the ``answers`` (success, message) of the ``nodes`` that carry ``node_name`` to
+    the request that most of them answered, of ``sends`` sent; the exit status (module
+    docstring)."""
     nodes = max(nodes, len(answers))
     if not answers:
         return _fail(command, f"{node_name} did not answer within {timeout:g} s")
@@ -136,8 +148,10 @@ def report(command: str, node_name: str, answers: list[tuple[bool, str]], nodes:
         success, message = answers[0]
         print(f"{node_name}: {message}", file=out)
         return 0 if success else 1
+    again = (f"; sent {sends} times, as the earlier calls did not reach every node (a node may have had it more "
+             "than once)") if sends > 1 else ""
     print(f"{node_name}: {nodes} nodes answer to this name, and each gets every call: give each its own name or "
-          "namespace (--ros-args -r __node:=NAME or -r __ns:=/NAMESPACE)", file=out)
+          f"namespace (--ros-args -r __node:=NAME or -r __ns:=/NAMESPACE){again}", file=out)
     for i, (_success, message) in enumerate(answers, 1):
         print(f"{node_name} [answer {i} of {nodes}]: {message}", file=out)
     if len(answers) < nodes:
@@ -153,14 +167,18 @@ def call(command: str, node_name: str, timeout: float) -> int:
     docstring); each answer printed. Discovery and the answers each wait up to ``timeout``."""
     service, srv_type, data = SERVICES[command]
     name = f"{node_name.rstrip('/')}/{service}"
-    answers: list[tuple[bool, str]] = []
+    answers: dict[int, list[tuple[bool, str]]] = {}  # by the request's sequence number
 
-    def every_answer(_sequence: int) -> Future:
-        # rclpy's executor hands each response to the future of its sequence number and a
-        # plain client keeps only the first; this one keeps them all (one request is sent).
+    def every_answer(sequence: int) -> Future:
+        # rclpy's executor hands each response to the future of its sequence number, and a
+        # plain client keeps only the first; this one keeps them all.
         future = Future()
-        future.add_done_callback(lambda f: answers.append((bool(f.result().success), str(f.result().message))))
+        future.add_done_callback(lambda f: answers.setdefault(sequence, []).append(
+            (bool(f.result().success), str(f.result().message))))
         return future
+
+    def most() -> list[tuple[bool, str]]:
+        return max(answers.values(), key=len, default=[])
 
     with _Session() as session:
         client = session.node.create_client(srv_type, name)
@@ -177,11 +195,15 @@ def call(command: str, node_name: str, timeout: float) -> int:
         request = srv_type.Request()
         if data is not None:
             request.data = data
-        client.call_async(request)
-        _spin_until(session, lambda: len(answers) >= nodes, time.monotonic() + timeout)
-        session.executor.spin_once(timeout_sec=0)  # done callbacks of answers taken in the last round
+        deadline = time.monotonic() + timeout
+        sends = 0
+        while sends < SENDS and len(most()) < nodes and time.monotonic() < deadline:
+            client.call_async(request)
+            sends += 1
+            last = sends == SENDS
+            _spin_until(session, lambda: len(most()) >= nodes, deadline if last else time.monotonic() + RESEND_S)
         nodes = max(nodes, namesakes.expected())
-    return report(command, node_name, answers, nodes, timeout)
+    return report(command, node_name, most(), nodes, timeout, sends)
 
 
 # ------------------------------------------------------------------ status
