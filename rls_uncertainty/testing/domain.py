@@ -93,9 +93,12 @@ def _lock(domain: int) -> tuple[int | None, str]:
     """The locked descriptor of ``domain``'s lock file, or None and who holds it."""
     path = _lock_dir() / f"domain-{domain}.lock"
     try:
-        fd = os.open(path, os.O_RDWR | os.O_CREAT | os.O_CLOEXEC, 0o666)
-    except PermissionError:  # another user's file: a read-only descriptor locks as well
-        fd = os.open(path, os.O_RDONLY | os.O_CLOEXEC)
+        try:
+            fd = os.open(path, os.O_RDWR | os.O_CREAT | os.O_CLOEXEC, 0o666)
+        except PermissionError:  # another user's file: a read-only descriptor locks as well
+            fd = os.open(path, os.O_RDONLY | os.O_CLOEXEC)
+    except OSError as exc:
+        return None, f"not lockable ({path}: {exc.strerror})"
     try:
         fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
     except BlockingIOError:
