@@ -267,7 +267,7 @@ def test_bank_equals_the_reference_with_a_residual_burn_in(window, lags, forgett
         after = [k - r.ready_at - burn_in if r.ready else 0 for r in refs]
         expected = [r.n_B if a > 0 else r.n_R for r, a in zip(refs, after, strict=True)]
         np.testing.assert_allclose(bank.n_R, expected, rtol=1e-12)
-    assert bank.options.burn_in == burn_in and not (lags != "all" and bank._burn.masking)
+    assert bank.options.burn_in == burn_in and not (lags != "all" and bank._counts.masking)
 
 
 @pytest.mark.parametrize("forgetting", [1.0, 0.99])
@@ -416,17 +416,13 @@ def test_numerical_core_imports_numpy_only():
         imported = set()
         for node in ast.walk(tree):
             if isinstance(node, ast.ImportFrom) and node.level > 0:
-                # The package's own modules, or its parent's errors module (and, for the state
-                # file, the atomic-write helper).
-                parent_ok = {"errors", "files"} if path.name == "state_file.py" else {"errors"}
-                assert node.level == 1 or node.module in parent_ok, (path.name, node.module)
+                # The package's own modules, or its parent's errors module.
+                assert node.level == 1 or node.module == "errors", (path.name, node.module)
             elif isinstance(node, ast.ImportFrom):
                 imported.add(node.module.split(".")[0])
             elif isinstance(node, ast.Import):
                 imported.update(alias.name.split(".")[0] for alias in node.names)
         allowed = {"numpy", "math", "typing", "collections", "__future__"}
-        if path.name == "state_file.py":  # the file format: JSON metadata in a zip (npz) archive
-            allowed |= {"json", "dataclasses", "pathlib", "zipfile", "os", "io", "datetime", "errno", "stat"}
         if path.name == "options.py":  # the options object: a frozen dataclass
             allowed |= {"dataclasses"}
         assert imported <= allowed, (path.name, imported)

@@ -115,3 +115,25 @@ def test_state_holds_plain_arrays_with_the_residuals_and_history_newest_first():
     np.testing.assert_array_equal(arrays["v"][0], est.residuals()[::-1])
     np.testing.assert_allclose(arrays["x"][0, 0] / arrays["inv_s"][0], X[49], rtol=1e-15)
     np.testing.assert_allclose(arrays["lag_sums"][0] / 50, est.autocorrelation(), rtol=1e-15)
+
+
+@pytest.mark.parametrize("kw,n", [
+    (dict(lags=10), 5), (dict(lags=10), 300), (dict(lags=0), 50), (dict(lags="all"), 40),
+    (dict(lags="all"), 200), (dict(lags=7, forgetting=0.98), 100), (dict(lags=5, window="bartlett"), 1),
+    (dict(lags="auto", max_lags=8), 120), (dict(lags="all", residual_burn_in=30), 100),
+    (dict(lags=5, forgetting=0.98), 2), (dict(lags=5, p0=10.0), 7),
+])
+def test_the_layout_table_is_the_estimators_state(kw, n):
+    """EstimatorBank.state_layout() describes exactly what EstimatorBank.state() writes (also
+    while a model waits, with and without a noise model, with a prior): what a state file must
+    hold."""
+    rng = np.random.default_rng(1)
+    bank = EstimatorBank((3, 2, 4), EstimatorOptions(**kw))
+    for _ in range(n):
+        bank.update(rng.standard_normal((3, 4)), rng.standard_normal(3))
+    s = bank.state()
+    options = EstimatorOptions.from_dict(s["options"])
+    waiting = not s["arrays"]["ready"].all()
+    layout = EstimatorBank.state_layout(tuple(s["sizes"]), options, s["counters"], waiting=waiting)
+    assert {k: (v.shape, v.dtype) for k, v in s["arrays"].items()} == {
+        k: (shape, dtype.newbyteorder("=")) for k, (shape, dtype) in layout.items()}

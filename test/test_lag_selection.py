@@ -1,5 +1,6 @@
 """Automatic lag selection against hand-computed values of the published formulas,
-literal implementations on raw series, edge cases and monotonic behaviour."""
+literal implementations on raw series, edge cases and monotonic behaviour; beside it the rules
+the estimator does not use (``lag_rules.py``), which show why it uses the flat-top rule."""
 
 from __future__ import annotations
 
@@ -7,19 +8,12 @@ import math
 
 import numpy as np
 import pytest
+from lag_rules import RULES, andrews_lags, correlations, newey_west_lags, score_flat_top_lags, select_lags
 from statsmodels.tsa.stattools import acf
 
 from rls_uncertainty.aero.differentiation import DifferentiatorConfig, derivative_weights
 from rls_uncertainty.estimator import EstimatorBank, EstimatorOptions
-from rls_uncertainty.estimator.lag_selection import (
-    RULES,
-    andrews_lags,
-    correlations,
-    flat_top_lags,
-    newey_west_lags,
-    politis_threshold,
-    select_lags,
-)
+from rls_uncertainty.estimator.lag_selection import flat_top_lags, politis_threshold
 
 
 def geometric(rho: float, W: int) -> np.ndarray:
@@ -139,7 +133,7 @@ def test_rules_on_R_equal_literal_implementations_on_the_series(seed, rho):
 def test_flat_top_with_one_count_per_model_is_each_models_own_call():
     """n_samples as an array (the bank's counts after a residual burn-in) gives every model
     what the scalar call with its count gives: threshold, run length (K = 6 above 1e25) and the
-    limits n - 1 and min_lags, with and without the score series."""
+    limits n - 1 and min_lags."""
     rng = np.random.default_rng(0)
     for _ in range(300):
         M, W = int(rng.integers(1, 8)), int(rng.integers(1, 60))
@@ -150,10 +144,8 @@ def test_flat_top_with_one_count_per_model_is_each_models_own_call():
         n = rng.choice([1.0, 1.5, 2.0, 7.0, 60.0, 500.0, 1e4, 1e26], M)
         cap = int(rng.integers(1, 70))
         lo = min(int(rng.integers(0, 5)), cap)
-        lam = rng.uniform(0.1, 1.0, (M, W, 3)) if rng.random() < 0.5 else None
-        per_model = flat_top_lags(R, n, cap=cap, min_lags=lo, lambda_diag=lam)
-        alone = [flat_top_lags(R[j], n[j], cap=cap, min_lags=lo, lambda_diag=None if lam is None else lam[j])
-                 for j in range(M)]
+        per_model = flat_top_lags(R, n, cap=cap, min_lags=lo)
+        alone = [flat_top_lags(R[j], n[j], cap=cap, min_lags=lo) for j in range(M)]
         assert per_model.dtype == np.int64 and list(per_model) == [int(L) for L in alone]
     R = geometric(0.7, 51)[None, :] * np.array([[1.0], [0.9], [1.1]])
     R[1, 20:] += 0.05
@@ -186,8 +178,8 @@ def test_flat_top_keeps_the_whole_moving_average_of_the_papers_differentiator():
     c = derivative_weights(DifferentiatorConfig(window=5, order=3, lag=2), 1.0)
     R = ma_acf(c, 51)
     assert R[1:5] == pytest.approx([-0.1231, -0.4923, 0.1231, -0.0077], abs=1e-4)
-    assert flat_top_lags(R, 600) == 4
-    assert flat_top_lags(R, 600, factor=1) == 2
+    assert flat_top_lags(R, 600) == 4  # M = 2 m_hat
+    assert flat_top_lags(R, 600) // 2 == 2  # m_hat
     assert 1 + 2 * R[1:3].sum() < 0
     assert abs(1 + 2 * R[1:5].sum()) < 1e-12
     # The AR(1) plug-ins read only rho(1) = -.123: a short bandwidth (Andrews, truncated:
@@ -239,11 +231,11 @@ def test_score_lags_are_no_more_than_residual_lags_when_regressors_decorrelate()
     lam = np.zeros((51, 2))
     lam[0] = 1.0
     lam[1:, 0] = 2.0  # g = 1: the score is the residual
-    assert flat_top_lags(R, n, lambda_diag=lam) == flat_top_lags(R, n)
+    assert score_flat_top_lags(R, n, lam) == flat_top_lags(R, n)
     lam[1:, 0] = 2.0 * 0.5 ** np.arange(1, 51)  # fast-decorrelating regressor
-    assert flat_top_lags(R, n, lambda_diag=lam) < flat_top_lags(R, n)
+    assert score_flat_top_lags(R, n, lam) < flat_top_lags(R, n)
     lam[:, 1] = np.nan  # padding of a smaller model: ignored
-    assert flat_top_lags(R, n, lambda_diag=lam) == flat_top_lags(R, n, lambda_diag=lam[:, :1])
+    assert score_flat_top_lags(R, n, lam) == score_flat_top_lags(R, n, lam[:, :1])
 
 
 # ------------------------------------------------------------------ edge cases

@@ -31,10 +31,10 @@ from rls_uncertainty.datapath.inputs import MESSAGE_TYPES, feed
 from rls_uncertainty.datapath.outputs import NODE_NAME as NODE
 from rls_uncertainty.datapath.outputs import parse_stamp_label
 from rls_uncertainty.datapath.pipeline import Pipeline
-from rls_uncertainty.estimator.state_file import load_state
 from rls_uncertainty.offline.bags import read_inputs
 from rls_uncertainty.offline.replay import run_pipeline
 from rls_uncertainty.settings.config import load_parameters_file, pipeline_config
+from rls_uncertainty.state_file import load_state
 
 from ros_harness import BUNDLED, ROOT, T2, NodeProcess, RosTester, to_rclpy
 

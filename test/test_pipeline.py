@@ -679,7 +679,7 @@ def test_pipeline_imports_no_ros():
 
 
 @pytest.mark.parametrize("module", ["datapath.sampling", "aero.surface_mixing", "aero.coefficients",
-                                    "aero.differentiation", "estimator.state_file"])
+                                    "aero.differentiation", "state_file"])
 def test_the_numerical_core_imports_numpy_only(module):
     import subprocess
 

@@ -53,8 +53,8 @@ from ..aero.differentiation import FixedLagDifferentiator
 from ..aero.surface_mixing import SURFACES
 from ..errors import NonFiniteInput, Refused, StateFileError
 from ..estimator import EstimatorBank
-from ..estimator.state_file import EstimatorState, load_state, save_state
 from ..settings.config import REGRESSOR_UNITS, PipelineConfig
+from ..state_file import EstimatorState, load_state, save_state
 from .alerts import explanations, identifiability
 from .bookkeeping import Bookkeeping, model_fit
 from .convergence import ConvergenceMonitor

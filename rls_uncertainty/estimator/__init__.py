@@ -9,11 +9,14 @@ only (and the package's ``errors``).
   option (forgetting and the noise model, residual kinds, exact initialization, the lag
   window, automatic lags, the residual burn-in); the test oracle.
 * :mod:`.bank`: :class:`EstimatorBank`, the fast per-sample path for ``M`` models at once,
-  built from :mod:`.rls_fit` (Eqs. 15-16), :mod:`.lag_storage` (Eqs. 17, 21),
-  :mod:`.burn_in`, :mod:`.initialization`, :mod:`.evaluation` and :mod:`.covariance`
-  (Eqs. 13, 20, 22), :mod:`.lag_window`, :mod:`.lag_selection` (the flat-top rule) and
-  :mod:`.state`; :mod:`.recursive`: :class:`RecursiveEstimator`, a bank of one;
-  :mod:`.batch`: Eqs. 6-14; :mod:`.state_file`: the node's state file.
+  built from parts that each own their arrays: :mod:`.rls_fit` (Eqs. 15-16),
+  :mod:`.counts` (the sample counts and the residual burn-in), :mod:`.lag_storage` (Eqs. 17,
+  21), :mod:`.initialization` (Eqs. 6, 7, 10), :mod:`.evaluation` and :mod:`.covariance`
+  (Eqs. 13, 20, 22) with :mod:`.lag_window` and :mod:`.lag_selection` (the flat-top rule),
+  and :mod:`.state` (the state as plain data and the checks of a saved one);
+  :mod:`.recursive`: :class:`RecursiveEstimator`, a bank of one; :mod:`.batch`: Eqs. 6-14.
+  The node's state file, which reads and writes :mod:`.state`, is
+  :mod:`rls_uncertainty.state_file`, outside the core.
 
 The options table, the theory behind the options and the figures of the studies behind their
 defaults: ``docs/estimator.md``.

@@ -3,23 +3,25 @@
 :class:`EstimatorBank` runs the six coefficient models of Eq. 2 (3-6 parameters each), or
 the hundreds of a Monte Carlo study, with one set of vectorised numpy operations per sample.
 Its numbers are those of :class:`.reference.RecursiveReference`, which defines every option
-(:class:`.options.EstimatorOptions`); the tests hold the two together. This module is the
-per-sample path; the rest lives beside it: :mod:`.rls_fit` (Eqs. 15-16, run for the
-estimator and for the noise model), :mod:`.lag_storage` (history and lag-indexed sums),
-:mod:`.burn_in`, :mod:`.initialization`, :mod:`.evaluation` (the lag choice and Eqs. 13, 20,
-22) and :mod:`.state`.
+(:class:`.options.EstimatorOptions`); the tests hold the two together. The bank composes one
+object per part of the paper, each owning its arrays: :class:`.rls_fit.RlsFit` (Eqs. 15-16;
+a second one is the noise model under forgetting), :class:`.counts.SampleCounts` (``k``,
+``n_k`` and the residual burn-in), :class:`.lag_storage.LagStorage` (the histories, Eq. 17's
+lag sums and Eq. 21's lag products), :class:`.initialization.ExactInitialization` (Eqs. 6, 7,
+10) and :class:`.evaluation.Evaluation` (the lag choice and Eqs. 13, 20, 22); the bank hands
+each sample from one to the next (:meth:`EstimatorBank._apply`) and keeps :mod:`.state`.
 
 How the hot path differs from the reference, and why (each measured in
 ``benchmarks/estimator_benchmark.py``):
 
-* Each model works on column-scaled regressors once initialized (``x / s``); results are
-  scaled back on output.
+* Each model works on column-scaled regressors once initialized (``x / s``, the
+  :class:`ScaledSample`); results are scaled back on output.
 * ``D`` and ``theta`` are the rows of one array ``[D; theta']``, updated by one rank-one
   product (:mod:`.rls_fit`), which also keeps ``D`` exactly symmetric.
 * Eq. 17 is kept as the lag sums ``n_k R_k(i)`` and Eq. 21 one-sided (see
   :mod:`.lag_storage`); the sample histories are written once into a newest-first buffer.
-* The residual burn-in is not stored (:mod:`.burn_in`): its ends follow from ``ready_at``,
-  its counts are closed forms, and its products are zeroed only while a window reaches back.
+* The residual burn-in is not stored (:mod:`.counts`): its ends follow from ``ready_at``,
+  its counts are closed forms, and its products are left out only while a window reaches back.
 * An update whose every quantity (scaled regressors, output, ``D x``, innovation) is at most
   ``1e100`` in magnitude cannot make a finite state non-finite (its products with anything
   already in the state stay below ``1e254``, which rounding absorbs even next to the largest
@@ -38,15 +40,15 @@ import numpy as np
 import numpy.typing as npt
 
 from ..errors import EstimatorNotReady, NonFiniteInput
-from .burn_in import BurnIn
+from .counts import SampleCounts
 from .evaluation import Evaluation, kind_index
 from .initialization import ExactInitialization
-from .lag_storage import GROWTH_START, FloatArray, LagStorage, assign_checked
+from .lag_storage import GROWTH_START, FloatArray, LagStorage
 from .options import EstimatorOptions, check_kind
 from .rls_fit import RlsFit
 from .state import STATE_FORMAT, pack, unpack
 
-__all__ = ["EstimatorBank"]
+__all__ = ["EstimatorBank", "ScaledSample"]
 
 _F64 = np.dtype(np.float64)
 
@@ -71,6 +73,29 @@ def as_regressors(X: npt.NDArray[Any] | Sequence[npt.ArrayLike], sizes: tuple[in
             raise ValueError(f"model {j} has {s} parameters, got {values.shape[0]} regressors")
         x[j, :s] = values
     return x
+
+
+class ScaledSample:
+    """The sample being added, as the models see it: ``y = (x / s, z)`` ``(M, n+1)``, the
+    column-scaled regressors ``x`` and the outputs ``z`` side by side, with the views the
+    fits and the lag storage read (``x_col``, ``y_col``: columns)."""
+
+    def __init__(self, m: int, n: int) -> None:
+        self.y = np.zeros((m, n + 1))
+        self.x = self.y[:, :n]
+        self.z = self.y[:, n]
+        self.x_col = self.x[:, :, None]
+        self.y_col = self.y[:, :, None]
+        self._flat = self.y.reshape(-1)
+        self._magnitude = np.zeros_like(self._flat)
+
+    def set(self, x: FloatArray, inv_s: FloatArray, z: FloatArray) -> bool:
+        """``y = (x / s, z)`` (``inv_s`` = ``1/s``); True when every entry is at most 1e100 in
+        magnitude (NaN, infinity or a larger number: False)."""
+        np.multiply(x, inv_s, out=self.x)
+        self.z[...] = z
+        small: bool = np.maximum.reduce(np.absolute(self._flat, out=self._magnitude)) <= _SAFE
+        return small
 
 
 class EstimatorBank:
@@ -98,32 +123,17 @@ class EstimatorBank:
         self.forgetting = f = o.forgetting
         g = o.noise_forgetting_used  # f_R
         self._mask = np.arange(n) < np.array(sizes)[:, None]  # each model's parameters, not the padding
-        self.k = 0
-        self.n_eff = 0.0  # n_k = sum_j f^(k-j); equals k when f = 1
-        self.n_noise = 0.0  # n^N_k = sum_j f_R^(k-j): R_k(i) = lag_sums / n_R (n_eff without noise model)
+        self._sample = ScaledSample(m, n)
         self._fit = RlsFit(m, n, f, o.residual)  # [D; theta'] in column-scaled units: S D S, S theta
         self._noise = RlsFit(m, n, g, o.residual) if o.noise_model else None  # gives R_k(i) (f < 1)
-        self.repairs = np.zeros(m, dtype=np.int64)
-        self._burn = BurnIn(m, o.burn_in, g)
+        self._counts = SampleCounts(m, f, g, o.noise_model, o.burn_in)
         held = o.held
         self._lags = LagStorage(
             m, n, GROWTH_START if held is None else held + 1, all_lags=held is None, forgetting=f,
             waiting=o.p0 is None, noise_forgetting=g,
         )
-        init = self._init = ExactInitialization(sizes, o.init_condition, self._lags, self._fit, self._noise,
-                                                prior=o.p0 is not None)
-        self._inv_s, self._ready, self._ready_at = init.inv_s, init.ready, init.ready_at  # (updated in place)
-        # Per-sample scratch, contiguous: y = (x / s, z). Its magnitude and that of the fits'
-        # (D x, theta' x - z) decide whether the sample can be applied unchecked (_prepare).
-        self._y = self._y_k = np.zeros((m, n + 1))
-        self._y_xs = self._xs = self._y[:, :n]
-        self._z_slot = self._y[:, n]
-        self._y_flat = self._y.reshape(-1)
-        self._y_abs = np.zeros_like(self._y)
-        self._y_abs_flat = self._y_abs.reshape(-1)
-        self._y_xs_col = self._xs_col = self._xs[:, :, None]
-        fit = (self._fit.D, self._fit.theta, self._fit.theta_row)
-        self._eval = Evaluation(o, sizes, self._lags, self._burn, fit, self._ready, self.repairs, self._counters)
+        self._init = ExactInitialization(sizes, n, o.init_condition, prior=o.p0 is not None)
+        self._eval = Evaluation(o, sizes, self._fit, self._lags, self._counts)
         prior = o.prior(n)
         if prior is not None:
             D0 = np.eye(n) * prior * self._mask[:, :, None] * self._mask[:, None, :]
@@ -135,17 +145,31 @@ class EstimatorBank:
     def _readiness_changed(self) -> None:
         """Recompute what depends on which models are ready (after an initialization or a
         restored state)."""
-        if self._ready.all():
+        ready = self._init.ready
+        if ready.all():
             self._lags.all_initialized()
-            self._xs, self._xs_col = self._y_xs, self._y_xs_col  # the scratch from now on
-        self._burn.restart(self._ready, self._ready_at, self.k, self._lags.cap)
-        self._eval.readiness_changed(self._mask, self._inv_s)
-        self._init.reset()
+        self._counts.restart(ready, self._init.ready_at, self._lags.cap)
+        self._eval.readiness_changed(ready, self._init.inv_s)
+
+    @property
+    def k(self) -> int:
+        """The number of samples processed."""
+        return self._counts.k
+
+    @property
+    def n_eff(self) -> float:
+        """``n_k = sum_j f^(k-j)``, the estimator's weight total (``k`` when ``f = 1``)."""
+        return self._counts.n
+
+    @property
+    def n_noise(self) -> float:
+        """``n^N_k = sum_j f_R^(k-j)``, the noise model's weight total (0 without one)."""
+        return self._counts.n_noise
 
     @property
     def n_window(self) -> int:
         """Number of lags currently held: ``min(k, lags + 1)``, or ``k`` for all lags."""
-        return min(self.k, self._lags.cap)
+        return min(self._counts.k, self._lags.cap)
 
     # ------------------------------------------------------------------ update
     def update(self, X: npt.NDArray[Any] | Sequence[npt.ArrayLike], z: npt.ArrayLike) -> None:
@@ -160,7 +184,7 @@ class EstimatorBank:
             x = X
         else:
             x = as_regressors(X, self.sizes)
-        if not (type(z) is np.ndarray and z.shape == self._ready.shape and z.dtype == _F64):
+        if not (type(z) is np.ndarray and z.shape == (self.n_models,) and z.dtype == _F64):
             z = np.asarray(z, dtype=float).reshape(-1)
             if z.shape != (self.n_models,):
                 raise ValueError(f"expected {self.n_models} measured outputs, got shape {z.shape}")
@@ -170,58 +194,44 @@ class EstimatorBank:
             self._apply_checked(x, z)
 
     def _prepare(self, x: FloatArray, z: FloatArray, check: bool = True) -> bool:
-        """Write the sample's ``y = (x / s, z)`` (to its history slot in front of the window
-        while a model waits, else to scratch) and let the fits prepare their update: the
-        state is not touched. True when every entry of ``y`` and of the fits' ``(D x,
-        theta' x - z)`` is at most 1e100 in magnitude (then the update keeps a finite state
-        finite); with ``check``, NaN, infinity or a larger number in ``y`` stops it early and
-        returns False."""
-        if self._lags.waiting:
-            y = self._lags.y[:, self._lags.ptr - 1]
-            self._y_k, self._xs, self._xs_col = y, y[:, : self.n_max], y[:, : self.n_max, None]
-            np.multiply(x, self._inv_s, out=self._xs)
-            y[:, self.n_max] = z
-            small: bool = np.maximum.reduce(np.absolute(y, out=self._y_abs), axis=None) <= _SAFE
-        else:  # scratch (self._xs is its x part once every model is initialized)
-            np.multiply(x, self._inv_s, out=self._xs)
-            self._z_slot[...] = z
-            small = np.maximum.reduce(np.absolute(self._y_flat, out=self._y_abs_flat)) <= _SAFE
+        """The sample ``y = (x / s, z)`` and the fits' ``(D x, theta' x - z)`` and ``d_k``:
+        the state is not touched. True when every entry of ``y`` and of ``(D x, theta' x -
+        z)`` is at most 1e100 in magnitude (then the update keeps a finite state finite); with
+        ``check``, NaN, infinity or a larger number in ``y`` stops it early and returns False."""
+        sample = self._sample
+        small = sample.set(x, self._init.inv_s, z)
         if check and not small:
             return False
-        magnitude = self._fit.prepare(self._xs, self._xs_col, z)
+        magnitude = self._fit.prepare(sample.x, sample.x_col, sample.z)
         small = small and magnitude <= _SAFE_SQUARED
         if self._noise is not None:  # the same for the noise model (forgetting f_R)
-            magnitude = self._noise.prepare(self._xs, self._xs_col, z)
+            magnitude = self._noise.prepare(sample.x, sample.x_col, sample.z)
             small = small and magnitude <= _SAFE_SQUARED
         return small
 
     def _apply(self) -> None:
-        """Add the prepared sample to the state (Eqs. 15-17, 21)."""
-        f, lags = self.forgetting, self._lags
-        k = self.k + 1
-        w = k if k < lags.cap else lags.cap  # lags held after this sample
-        p = lags.ptr - 1  # the free slot in front of the window (see the end)
-        waiting = lags.waiting
-        if not lags.merged:
-            lags.x[:, p] = self._xs  # (while a model waits, _prepare wrote y to its slot)
-        self.k = k
-        lags.ptr = p
-        self.n_eff = f * self.n_eff + 1.0  # n_k
-        self._fit.apply(lags.v[:, p])  # Eqs. 15a-c and the residual v_k
-        if self._noise is not None:  # the noise model: Eq. 15 with f_R, its residual u_k
-            g = self._noise.forgetting
-            self._noise.apply(lags.u[:, p])
-            self.n_noise = g * self.n_noise + 1.0  # n^N_k
-        lags.add_sample(p, w, self._xs_col, self._y_k, self._burn, k)  # Eqs. 17, 21
-        if waiting and self._init.check(k, w):  # Eqs. 6, 7, 10 for the models that allow it
+        """Add the prepared sample to the state."""
+        self._fit.update()  # Eqs. 15a-c
+        if self._noise is not None:
+            self._noise.update()  # the noise model: Eq. 15 with f_R
+        self._counts.add()  # k, n_k, n^N_k
+        self._lags.add(self._sample, self._fit, self._noise, self._counts)  # v_k (u_k), Eqs. 17, 21
+        if self._lags.waiting:
+            self._initialize()  # Eqs. 6, 7, 10 for the models that allow it
+
+    def _initialize(self) -> None:
+        """Initialize the waiting models whose data allow it (:mod:`.initialization`): the
+        batch solution (Eq. 6) to the fits, the residuals (Eq. 7) and their lag sums (Eq. 10)
+        to the lag storage."""
+        w = self.n_window
+        started = self._init.check(self._counts.k, w, self._lags)
+        for start in started:
+            self._fit.start(start.model, start.D, start.theta)
+            if self._noise is not None and start.D_noise is not None and start.theta_noise is not None:
+                self._noise.start(start.model, start.D_noise, start.theta_noise)
+            self._lags.start(start, w)
+        if started:
             self._readiness_changed()
-        if p == 0:  # keep a free slot in front of the window for the next sample
-            if lags.all_lags:
-                lags.grow(w)
-                self._init.reset()  # its indices point into the old arrays
-            else:
-                lags.relocate(w)
-        self._eval.new_sample()
 
     def _apply_checked(self, x: FloatArray, z: FloatArray) -> None:
         """Apply a sample on which :meth:`_prepare` found NaN, infinity or a large number:
@@ -233,14 +243,13 @@ class EstimatorBank:
         if bad:
             raise NonFiniteInput(f"non-finite regressor or output for model(s) {bad}; sample ignored")
         x = np.where(self._mask, x, 0.0)  # the padding is ignored
-        before, outputs = self.state(), self._eval.saved()
+        before = self.state()
         with np.errstate(all="ignore"):  # overflow is what is being checked
             self._prepare(x, z, check=False)
             self._apply()
         finite = all(np.isfinite(a).all() for a in self.state()["arrays"].values())
-        if not finite:
+        if not finite:  # back to the state before it (the evaluation's results of it stay valid)
             self._restore(before["counters"], before["arrays"])
-            self._eval.restore(outputs)  # evaluated (and repairs counted) before this sample
             raise NonFiniteInput(
                 "sample ignored: its magnitude would make the estimator state non-finite "
                 f"(largest |regressor| {np.max(np.abs(x)):.3g}, largest |output| {np.max(np.abs(z)):.3g})"
@@ -250,19 +259,25 @@ class EstimatorBank:
     @property
     def ready(self) -> np.ndarray:
         """Boolean per model: initialized, so estimates and covariances exist."""
-        return self._ready.copy()
+        return self._init.ready.copy()
 
     @property
     def ready_at(self) -> np.ndarray:
         """Sample count at which each model was initialized (0 while not ready)."""
-        return np.where(self._ready, self._ready_at, 0)
+        return np.where(self._init.ready, self._init.ready_at, 0)
 
     @property
     def n_samples(self) -> int:
-        return self.k
+        return self._counts.k
+
+    @property
+    def repairs(self) -> np.ndarray:
+        """How many evaluated corrected covariances of each model needed a positive
+        semi-definite repair, ``(M,)``."""
+        return self._eval.repairs.copy()
 
     def _require(self, j: int) -> None:
-        if not self._ready[j]:
+        if not self._init.ready[j]:
             raise EstimatorNotReady(
                 f"model {j} is not initialized after {self.k} samples: its regressors "
                 "have not yet made X'X well conditioned"
@@ -272,7 +287,7 @@ class EstimatorBank:
         """Parameter estimate ``theta_k`` of model ``j`` (Eq. 15c)."""
         self._require(j)
         s_n = self.sizes[j]
-        theta: FloatArray = self._fit.theta[j, :s_n] * self._inv_s[j, :s_n]
+        theta: FloatArray = self._fit.theta[j, :s_n] * self._init.inv_s[j, :s_n]
         return theta
 
     def theta_all(self) -> np.ndarray:
@@ -285,11 +300,7 @@ class EstimatorBank:
         """The weight total of each model's ``R_k(i)``, ``(M,)``: ``n^N_k = sum_j f_R^(k-j)``
         with a noise model, otherwise ``n_k = sum_j f^(k-j)``; after a model's residual
         burn-in the sum runs over ``j > k0 + B`` only."""
-        return np.broadcast_to(self._eval.weight_totals(), (self.n_models,)).copy()
-
-    def _counters(self) -> tuple[int, float]:
-        """``k`` and the weight total of ``R_k(i)`` before any burn-in (``n_k``, ``n^N_k``)."""
-        return self.k, self.n_eff if self._noise is None else self.n_noise
+        return np.broadcast_to(self._counts.weight_totals(), (self.n_models,)).copy()
 
     def residual_variance(self, j: int) -> float:
         """Fit-error variance (Eq. 16), i.e. ``R_k(0)`` (the noise model's under forgetting)."""
@@ -300,13 +311,13 @@ class EstimatorBank:
         """:meth:`residual_variance` of every model at once, a new ``(M,)`` array, NaN for the
         models that are not :attr:`ready` (one vectorised step: the per-sample fit test of
         :mod:`rls_uncertainty.datapath.identifiability`)."""
-        totals = self._eval.weight_totals()
+        totals = self._counts.weight_totals()
         if isinstance(totals, float) and totals > 0.0:
             R0: FloatArray = self._lags.lag_sums[:, 0] / totals
         else:  # per model after a burn-in; none yet right after it (0 / 0: NaN)
             with np.errstate(divide="ignore", invalid="ignore"):
                 R0 = self._lags.lag_sums[:, 0] / totals
-        return np.where(self._ready, R0, np.nan)
+        return np.where(self._init.ready, R0, np.nan)
 
     def autocorrelation(self, j: int) -> np.ndarray:
         """Residual autocorrelation ``R_k(i)``, ``i = 0..n_window-1`` (Eq. 17; under
@@ -340,8 +351,8 @@ class EstimatorBank:
     def rule_samples(self) -> np.ndarray:
         """The sample count the lag rule uses for each model, ``(M,)``: ``k``, or under
         forgetting Kish's effective size of the weights ``f_R^(k-j)`` of ``R_k(i)``; after a
-        model's residual burn-in the same with ``k - k0 - B`` samples (:mod:`.burn_in`)."""
-        return np.broadcast_to(self._burn.rule_samples(self.k), (self.n_models,)).copy()
+        model's residual burn-in the same with ``k - k0 - B`` samples (:mod:`.counts`)."""
+        return np.broadcast_to(self._counts.rule_samples(), (self.n_models,)).copy()
 
     def standard_errors_all(self, kind: str = "corrected") -> np.ndarray:
         """Standard errors of every model as an ``(M, n_max)`` array: the square roots of the
@@ -366,7 +377,7 @@ class EstimatorBank:
         """:meth:`covariance` (repaired) of every model and both kinds at once, a new
         ``(2, M, n_max, n_max)`` array: ``[0]`` corrected, ``[1]`` conventional; NaN outside
         the :attr:`ready` models' blocks."""
-        return self._eval.evaluate().published(self.sizes, self._ready)
+        return self._eval.evaluate().published(self.sizes, self._init.ready)
 
     def standard_errors(self, j: int, kind: str = "corrected") -> np.ndarray:
         """Square roots of the covariance diagonal (never NaN: see :meth:`covariance`)."""
@@ -378,11 +389,11 @@ class EstimatorBank:
     def state(self) -> dict[str, Any]:
         """A deep copy of the complete state (:mod:`.state`); :meth:`from_state` continues
         bit-identically."""
-        counters = {"k": self.k, "n_eff": self.n_eff, "n_noise": self.n_noise, "cap": self._lags.cap}
+        counters = {**self._counts.counters(), "cap": self._lags.cap}
         arrays: dict[str, np.ndarray] = {**self._fit.arrays("")}
         if self._noise is not None:
             arrays.update(self._noise.arrays("noise_"))
-        arrays.update(self._init.arrays(), repairs=self.repairs.copy())
+        arrays.update(self._init.arrays(), **self._eval.arrays())
         arrays.update(self._lags.arrays(self.n_window))
         return pack(self.sizes, self.options, counters, arrays)
 
@@ -406,19 +417,17 @@ class EstimatorBank:
         return {name: (a.shape, a.dtype) for name, a in bank.state()["arrays"].items()}
 
     def _lay_out(self, counters: Mapping[str, Any], waiting: bool) -> None:
-        self.k, self.n_eff, self.n_noise = int(counters["k"]), float(counters["n_eff"]), float(counters["n_noise"])
+        self._counts.load(counters)
         cap = int(counters["cap"])
-        self._lags.lay_out(cap, waiting, min(self.k, cap))
+        self._lags.lay_out(cap, waiting, min(self._counts.k, cap))
 
     def _restore(self, counters: Mapping[str, Any], arrays: Mapping[str, Any]) -> None:
         """Load a state of this configuration, in place."""
         self._init.load(arrays)
-        assign_checked(self.repairs, arrays["repairs"], "repairs")
+        self._eval.load(arrays)
         self._fit.load(arrays, "")
         if self._noise is not None:
             self._noise.load(arrays, "noise_")
-        self._lay_out(counters, waiting=not bool(self._ready.all()))
+        self._lay_out(counters, waiting=not bool(self._init.ready.all()))
         self._lags.load(arrays, self.n_window)
-        if self._lags.ptr == 0:  # a full buffer (all lags): the next sample needs a free slot
-            self._lags.grow(self.n_window)
         self._readiness_changed()

@@ -25,8 +25,6 @@ entry is replaced by :func:`nearest_psd` (a repair), or by zero when the model f
 
 from __future__ import annotations
 
-from collections.abc import Callable
-
 import numpy as np
 import numpy.typing as npt
 
@@ -67,23 +65,52 @@ class Covariances:
 
     ``variances`` ``(2, M, n_max)`` are the diagonals of the corrected (``[0]``, Eq. 20/22)
     and conventional (``[1]``, Eq. 13) covariances in the regressors' units, published
-    (repaired), and ``standard_errors`` their square roots (negative rounding clipped at 0).
-    ``matrices()`` are the unrepaired covariances ``(2, M, n_max, n_max)``, formed on first use
-    from the same ``D N`` products as ``(P + P') * scale / n_k`` with ``P = D N D``, their
-    diagonals summed as the variances were, so that ``standard_errors`` are exactly
-    ``sqrt(diag(matrices))``. NaN outside the ready models' blocks. Where a corrected variance
-    is negative, ``repaired`` maps a model to its nearest positive semi-definite matrix, and
-    ``exact`` marks the models that fit exactly, whose covariance is published as zero.
+    (repaired: :meth:`repair`, when :attr:`indefinite`), and :attr:`standard_errors` their
+    square roots (negative rounding clipped at 0). ``matrices()`` are the unrepaired
+    covariances ``(2, M, n_max, n_max)``, formed on first use from the same ``D N`` products as
+    ``(P + P') * scale / n_k`` with ``P = D N D``, their diagonals summed as the variances
+    were, so that ``standard_errors`` are exactly ``sqrt(diag(matrices))``. NaN outside the
+    ready models' blocks. Where a corrected variance is negative, ``repaired`` maps a model to
+    its nearest positive semi-definite matrix, and ``exact`` marks the models that fit
+    exactly, whose covariance is published as zero.
     """
 
-    __slots__ = ("standard_errors", "repaired", "exact", "_parts", "_matrices")
+    __slots__ = ("indefinite", "repaired", "exact", "_variances", "_standard_errors", "_parts", "_matrices")
 
-    def __init__(self, standard_errors: FloatArray, parts: _Parts) -> None:
-        self.standard_errors = standard_errors
+    def __init__(self, variances: FloatArray, indefinite: bool, parts: _Parts) -> None:
+        self.indefinite = indefinite  # a corrected variance is negative
         self.repaired: dict[int, FloatArray] = {}
         self.exact: BoolArray | None = None
+        self._variances = variances
+        self._standard_errors: FloatArray | None = None
         self._parts = parts
         self._matrices: FloatArray | None = None
+
+    def repair(self, exact: BoolArray, sizes: tuple[int, ...]) -> list[int]:
+        """Publish the corrected covariance of the models that fit ``exact``-ly as zero (its
+        variances are rounding, not indefiniteness), and replace each other one with a
+        negative variance by its nearest positive semi-definite matrix; the models repaired."""
+        self.exact = exact
+        corrected = self._variances[0]
+        corrected *= ~exact[:, None]  # (NaN stays)
+        counted: list[int] = []
+        if np.fmin.reduce(corrected, axis=None) < 0.0:
+            for index in np.flatnonzero((corrected < 0.0).any(axis=1)):
+                j = int(index)
+                s = sizes[j]
+                fixed = self.repaired[j] = nearest_psd(self.matrices()[0, j, :s, :s])
+                counted.append(j)
+                corrected[j, :s] = np.diag(fixed)
+        return counted
+
+    @property
+    def standard_errors(self) -> FloatArray:
+        """The published standard errors ``(2, M, n_max)``, the square roots of the variances."""
+        if self._standard_errors is None:
+            se = self._variances
+            np.maximum(se, 0.0, out=se)
+            self._standard_errors = np.sqrt(se, out=se)
+        return self._standard_errors
 
     def matrices(self) -> FloatArray:
         if self._matrices is None:
@@ -144,27 +171,18 @@ class CovarianceEvaluator:
         self.eq13 = eq13
 
     def __call__(
-        self,
-        D: FloatArray,
-        D_diagonal: FloatArray,
-        lag_sums: FloatArray,
-        h: FloatArray,
-        lag_products: FloatArray,
-        inv_n: float | FloatArray,
-        scale: FloatArray,
-        diagonal_scale: FloatArray,
-        exact_fit: Callable[[], BoolArray],
-        sizes: tuple[int, ...],
-    ) -> tuple[Covariances, list[int]]:
-        """Both covariances of every model, and the models whose corrected one was repaired.
+        self, D: FloatArray, D_diagonal: FloatArray, lag_sums: FloatArray, h: FloatArray, lag_products: FloatArray,
+        inv_n: float | FloatArray, scale: FloatArray, diagonal_scale: FloatArray,
+    ) -> Covariances:
+        """Both covariances of every model, not yet repaired.
 
         ``D`` ``(M, n, n)`` (``D_diagonal`` its diagonal) and ``lag_products`` ``(M, n, w, n)``
-        (``Lambda+_k(i)``) are in column-scaled units; ``lag_sums`` ``(M, w)`` is ``n_k R_k(i)`` and ``h`` the half
-        window of the ``w`` lags held; ``inv_n = 1 / n_k`` (or ``(M,)``, one per model: with a
-        residual burn-in each model's ``R_k(i)`` has its own weight total); ``scale`` ``(M, n, n)`` takes
-        scaled units back to the regressors' (NaN outside the ready models' blocks) and
-        ``diagonal_scale`` is ``2 diag(scale)`` ``(M, n)``; ``exact_fit()`` returns the models
-        that fit exactly.
+        (``Lambda+_k(i)``) are in column-scaled units; ``lag_sums`` ``(M, w)`` is ``n_k
+        R_k(i)`` and ``h`` the half window of the ``w`` lags held; ``inv_n = 1 / n_k`` (or
+        ``(M,)``, one per model: with a residual burn-in each model's ``R_k(i)`` has its own
+        weight total); ``scale`` ``(M, n, n)`` takes scaled units back to the regressors' (NaN
+        outside the ready models' blocks) and ``diagonal_scale`` is ``2 diag(scale)`` ``(M,
+        n)``.
         """
         if not isinstance(inv_n, float):  # one 1/n_k per model: folded into the scales (same products)
             scale = scale * inv_n[:, None, None]
@@ -184,21 +202,6 @@ class CovarianceEvaluator:
             np.multiply(hS0, D_diagonal, out=var[1])  # Eq. 13: R_k(0) D / 2
         else:
             vecdot(DN0, D, out=var[1])  # Eq. 22 with n_tau = 0
-        negative = np.minimum.reduce(var[0], axis=None) < 0.0  # models not ready are 0 here
+        negative = bool(np.minimum.reduce(var[0], axis=None) < 0.0)  # models not ready are 0 here
         var *= diagonal_scale * inv_n  # diag(P + P') * scale / n_k
-        cov = Covariances(var, (D, DN, DN0, hS0, scale, diagonal_scale, inv_n))
-        counted: list[int] = []
-        if negative:
-            exact = cov.exact = exact_fit()
-            corrected = var[0]
-            corrected *= ~exact[:, None]  # exact fits: rounding, not indefiniteness: zero (NaN stays)
-            if np.fmin.reduce(corrected, axis=None) < 0.0:
-                for index in np.flatnonzero((corrected < 0.0).any(axis=1)):
-                    j = int(index)
-                    s = sizes[j]
-                    fixed = cov.repaired[j] = nearest_psd(cov.matrices()[0, j, :s, :s])
-                    counted.append(j)
-                    corrected[j, :s] = np.diag(fixed)
-        np.maximum(var, 0.0, out=var)
-        np.sqrt(var, out=var)  # the published standard errors
-        return cov, counted
+        return Covariances(var, negative, (D, DN, DN0, hS0, scale, diagonal_scale, inv_n))

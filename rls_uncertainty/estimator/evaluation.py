@@ -1,33 +1,39 @@
 """What a bank publishes at a sample: the lag choice and both covariances (Eqs. 13, 20, 22).
 
-:class:`Evaluation` reads the bank's state (the estimator's ``D`` and ``theta``, the lag
-storage, the burn-in's counts) and computes, at most once per sample and only when asked:
+:class:`Evaluation` reads the bank's fit (``D``, ``theta``), lag storage (``R_k(i)`` as lag
+sums, ``Lambda_k(i)``) and sample counts, and computes, at most once per sample and only when
+asked:
 
 * the largest lag ``L`` of Eq. 22 of every model: ``min(lags, k - 1)``, or with
   ``lags="auto"`` Politis' flat-top rule (:func:`.lag_selection.flat_top_lags`) on
-  ``R_k(0..max_lags)`` with the rule's sample count (:mod:`.burn_in`). A model that is not
+  ``R_k(0..max_lags)`` with the rule's sample count (:mod:`.counts`). A model that is not
   ready, and a model that fits exactly (:func:`exact_fits`: its residuals are rounding,
   whose pattern depends on the machine's floating-point kernels and means nothing), is
   given ``R_k(0) = 0`` and so ``min_lags`` (as far as the lags held allow);
 * the corrected and conventional covariances of every model from one computation
-  (:class:`.CovarianceEvaluator`), the window's half weights cached while the lags
-  held stay the same.
+  (:class:`.CovarianceEvaluator`), the window's half weights cached while the lags held stay
+  the same; a corrected covariance with a negative variance is repaired and counted in
+  :attr:`Evaluation.repairs`.
+
+The results of a sample are kept until the sample count moves on: a refused sample (the
+bank rolls its state back to the same sample) leaves them valid, so a repair is counted once.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Mapping, Sequence
 
 import numpy as np
 import numpy.typing as npt
 
-from .burn_in import BurnIn
+from .counts import SampleCounts
 from .covariance import EXACT_FIT, CovarianceEvaluator, Covariances, half_window
 from .lag_selection import flat_top_lags
-from .lag_storage import FloatArray, LagStorage
+from .lag_storage import FloatArray, LagStorage, assign_checked
 from .lag_window import lag_weights
 from .numpy_compat import vecdot
 from .options import EstimatorOptions, check_kind
+from .rls_fit import RlsFit
 
 __all__ = ["Evaluation", "kind_index", "exact_fits"]
 
@@ -59,70 +65,55 @@ def exact_fits(
 
 
 class Evaluation:
-    """The lag choice and the covariances of a bank at its current sample (module docstring).
-
-    ``D``, ``theta`` and ``theta_row`` are views of the estimator's fit, ``ready`` and
-    ``repairs`` the bank's arrays (read, and ``repairs`` counted, in place), ``counters()``
-    returns the bank's sample count ``k`` and the weight total ``n`` of ``R_k(i)`` before
-    any burn-in.
-    """
+    """The lag choice and the covariances of a bank at its current sample (module docstring),
+    read from its ``fit``, ``lags`` and ``counts``; the repairs counted per model."""
 
     def __init__(
-        self, options: EstimatorOptions, sizes: Sequence[int], lags: LagStorage, burn: BurnIn,
-        fit: tuple[FloatArray, FloatArray, FloatArray], ready: BoolArray, repairs: IntArray,
-        counters: Callable[[], tuple[int, float]],
+        self, options: EstimatorOptions, sizes: Sequence[int], fit: RlsFit, lags: LagStorage, counts: SampleCounts,
     ) -> None:
         self.options, self.sizes = options, tuple(sizes)
+        self._fit, self._lags, self._counts = fit, lags, counts
         self._auto, self._all_lags, self._window = options.auto, options.lags == "all", options.window
-        self._lags, self._burn, self._ready, self._repairs, self._counters = lags, burn, ready, repairs, counters
-        self._D, self._theta, self._theta_row = fit
-        self._D_diagonal = self._D.diagonal(0, 1, 2)
+        self._D_diagonal = fit.D.diagonal(0, 1, 2)
         self._evaluator = CovarianceEvaluator(eq13=options.forgetting == 1.0)
-        self._covariances: Covariances | None = None  # of the current sample
-        self._chosen: IntArray | None = None  # the lags of the current sample (chosen on first use)
-        self._totals: float | FloatArray | None = None  # the weight totals of the current sample
-        self._exact_fits: BoolArray | None = None  # exact_fits() of the current sample
+        self.repairs = np.zeros(len(self.sizes), dtype=np.int64)  # corrected covariances repaired, per model
+        self._mask = np.arange(fit.D.shape[1]) < np.array(self.sizes)[:, None]  # parameters, not padding
+        self._ready = np.zeros(len(self.sizes), dtype=bool)
+        self._at = -1  # the sample the results below are of
+        self._covariances: Covariances | None = None
+        self._chosen: IntArray | None = None  # the lags (chosen on first use)
+        self._exact_fits: BoolArray | None = None  # exact_fits(), asked by the lag choice and the repair
         self._window_key: tuple[int, int] | None = None
         self._window_h = np.zeros(0)
 
-    def readiness_changed(self, mask: BoolArray, inv_s: FloatArray) -> None:
-        """The scales after the ready models or their column scales ``1/s`` changed."""
-        self._all_ready = bool(self._ready.all())
-        invalid = ~(mask & self._ready[:, None])  # padding and models not ready: NaN
+    def readiness_changed(self, ready: BoolArray, inv_s: FloatArray) -> None:
+        """The models ``ready`` and their column scales ``inv_s`` (``1/s``) after a change: at
+        a new sample (whose results are computed afresh) or a state restored."""
+        self._ready = ready.copy()
+        self._all_ready = bool(ready.all())
+        invalid = ~(self._mask & ready[:, None])  # padding and models not ready: NaN
         self._theta_scale = np.where(invalid, np.nan, inv_s)
         self._cov_scale = self._theta_scale[:, :, None] * self._theta_scale[:, None, :]
         self._se_scale = 2.0 * self._cov_scale.diagonal(0, 1, 2)  # see Covariances
-        self.new_sample()
 
-    def new_sample(self) -> None:
-        self._covariances = self._chosen = self._totals = self._exact_fits = None
-
-    def saved(self) -> Covariances | None:
-        """The covariances evaluated at this sample (None if none were)."""
-        return self._covariances
-
-    def restore(self, saved: Covariances | None) -> None:
-        """Back to :meth:`saved` (a refused sample: evaluated, and repairs counted, before it)."""
-        self._covariances = saved
-
-    def weight_totals(self) -> float | FloatArray:
-        """The weight total of ``R_k(i)``: one float, or one per model after a burn-in
-        (:mod:`.burn_in`); computed once per sample."""
-        totals = self._totals
-        if totals is None:
-            totals = self._totals = self._burn.weight_totals(*self._counters())
-        return totals
+    def _sample(self) -> int:
+        """The current sample count; the results of an earlier one are dropped."""
+        k = self._counts.k
+        if k != self._at:
+            self._covariances = self._chosen = self._exact_fits = None
+            self._at = k
+        return k
 
     def theta_all(self) -> FloatArray:
         """Estimates of every model, NaN on padding and models not ready."""
-        theta: FloatArray = self._theta * self._theta_scale
+        theta: FloatArray = self._fit.theta * self._theta_scale
         return theta
 
     def lags_chosen(self) -> IntArray:
         """``L`` of Eq. 22 of every model at this sample (module docstring)."""
+        k = self._sample()
         chosen = self._chosen
         if chosen is None:
-            k, _ = self._counters()
             if not self._auto:
                 held = self._lags.cap - 1
                 largest = max(k - 1, 0) if self._all_lags else min(held, max(k - 1, 0))
@@ -130,23 +121,23 @@ class Evaluation:
             else:  # models not ready, and exact fits, get R(0) = 0: min_lags (the rule's edge case)
                 sums = self._lags.lag_sums[:, : min(k, self._lags.cap)]
                 if self._all_ready:
-                    exact = self._exact(k, self.weight_totals())
+                    exact = self._exact(k)
                     if exact.any():
                         sums = np.where(exact[:, None], 0.0, sums)
                 elif k:
-                    usable = self._ready & ~self._exact(k, self.weight_totals())
+                    usable = self._ready & ~self._exact(k)
                     sums = np.where(usable[:, None], sums, 0.0)
                 o = self.options
-                chosen = flat_top_lags(sums, self._burn.rule_samples(k), cap=o.max_lags, min_lags=o.min_lags)
+                chosen = flat_top_lags(sums, self._counts.rule_samples(), cap=o.max_lags, min_lags=o.min_lags)
             self._chosen = chosen
         return chosen
 
     def evaluate(self) -> Covariances:
-        """Both covariances of every model at this sample, computed once."""
+        """Both covariances of every model at this sample, computed once (Eqs. 13, 20, 22)."""
+        k = self._sample()
         cov = self._covariances
         if cov is None:
             lags = self._lags
-            k, _ = self._counters()
             if k < lags.cap:
                 w = max(k, 1)  # (before the first sample: lag 0 only, all zero; no model is ready)
                 sums, products = lags.lag_sums[:, :w], lags.lag_products[:, :, :w]
@@ -162,13 +153,13 @@ class Evaluation:
             else:
                 largest = max(k - 1, 0) if self._all_lags else lags.cap - 1
                 h = self._window_h if self._window_key == (largest, w) else self._half_window(largest, w)
-            totals = self.weight_totals()
-            cov, repaired = self._evaluator(
-                self._D, self._D_diagonal, sums, h, products, 1.0 / totals if k else 1.0,  # (k = 0: all NaN)
-                self._cov_scale, self._se_scale, lambda: self._exact(k, totals), self.sizes,
+            totals = self._counts.weight_totals()
+            cov = self._evaluator(
+                self._fit.D, self._D_diagonal, sums, h, products, 1.0 / totals if k else 1.0,  # (k = 0: all NaN)
+                self._cov_scale, self._se_scale,
             )
-            if repaired:
-                self._repairs[repaired] += 1
+            if cov.indefinite:  # exact fits published as zero, the others repaired and counted
+                self.repairs[cov.repair(self._exact(k), self.sizes)] += 1
             self._covariances = cov
         return cov
 
@@ -179,14 +170,14 @@ class Evaluation:
         self._window_key = (largest, w)
         return self._window_h
 
-    def _exact(self, k: int, totals: float | FloatArray) -> BoolArray:
-        """:func:`exact_fits` at this sample, computed once (the lag choice and the evaluator's
-        repair both ask)."""
+    def _exact(self, k: int) -> BoolArray:
+        """:func:`exact_fits` at this sample, computed once."""
         exact = self._exact_fits
         if exact is None:
-            lags = self._lags
+            fit, lags = self._fit, self._lags
             exact = self._exact_fits = exact_fits(
-                lags.lag_sums, self._theta, self._theta_row, lags.lag0, totals, self.options.forgetting, k)
+                lags.lag_sums, fit.theta, fit.theta_row, lags.lag0, self._counts.weight_totals(),
+                self.options.forgetting, k)
         return exact
 
     def standard_errors(self, kind: str) -> FloatArray:
@@ -194,3 +185,12 @@ class Evaluation:
         index = kind_index(kind)
         se: FloatArray = self.evaluate().standard_errors[index]
         return se
+
+    # ------------------------------------------------------------------ state
+    def arrays(self) -> dict[str, np.ndarray]:
+        """A copy of :attr:`repairs`."""
+        return {"repairs": self.repairs.copy()}
+
+    def load(self, arrays: Mapping[str, npt.ArrayLike]) -> None:
+        """Inverse of :meth:`arrays`; another shape is refused by name."""
+        assign_checked(self.repairs, arrays["repairs"], "repairs")

@@ -19,14 +19,33 @@ residuals of samples ``1..k0``. ``A_k`` weighted ``f_R`` is at least ``A_k`` wei
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
+from typing import NamedTuple
 
 import numpy as np
 import numpy.typing as npt
 
 from .lag_storage import FloatArray, LagStorage, assign_checked
-from .rls_fit import RlsFit
 
-__all__ = ["ExactInitialization"]
+__all__ = ["ExactInitialization", "Start"]
+
+
+class Start(NamedTuple):
+    """A model initialized at sample ``k0``, in its column-scaled units (``inv`` = ``1/s`` on
+    its parameters, 0 on padding): its batch solution ``D``, ``theta`` (Eq. 6; the noise
+    model's ``D_noise``, ``theta_noise`` with a noise model), the lag sums ``n R_k0(i)`` of
+    Eq. 10, the scaled regressors ``x_scaled`` of its history buffer and its residuals (Eq. 7;
+    ``noise_residuals`` the noise model's)."""
+
+    model: int
+    inv: FloatArray
+    D: FloatArray
+    theta: FloatArray
+    D_noise: FloatArray | None
+    theta_noise: FloatArray | None
+    lag_sums: FloatArray
+    x_scaled: FloatArray
+    residuals: FloatArray
+    noise_residuals: FloatArray | None
 
 
 class _Waiting:
@@ -40,11 +59,11 @@ class _Waiting:
 
 
 class ExactInitialization:
-    """Watches the models that wait and initializes each as soon as its data allow it: it
-    writes the model's fits (``fit``, and ``noise`` with a noise model) and its lag storage,
-    and keeps which models are :attr:`ready`, since when (:attr:`ready_at`) and their column
-    scales (:attr:`inv_s`: ``1/s`` on each model's parameters, 0 on padding). With a prior
-    (``prior``) every model is ready from the start, with ``s = 1``.
+    """Which models are :attr:`ready`, since when (:attr:`ready_at`) and their column scales
+    (:attr:`inv_s`: ``1/s`` on each model's parameters, 0 on padding); :meth:`check` finds the
+    waiting models whose data allow an initialization and solves them (:class:`Start`), which
+    the bank hands to its fits and lag storage. With a ``prior`` every model is ready from the
+    start, with ``s = 1``.
 
     Only a model whose ``A_k`` has a positive diagonal can be well conditioned. A zero
     diagonal entry (a regressor that has been exactly zero so far, such as a surface that
@@ -52,36 +71,29 @@ class ExactInitialization:
     at until it becomes positive.
     """
 
-    def __init__(
-        self, sizes: Sequence[int], init_condition: float, lags: LagStorage, fit: RlsFit, noise: RlsFit | None,
-        *, prior: bool,
-    ) -> None:
-        self.sizes, self.init_condition = tuple(sizes), init_condition
-        self.lags, self.fit, self.noise = lags, fit, noise
-        m, n = len(self.sizes), lags.n
+    def __init__(self, sizes: Sequence[int], n: int, init_condition: float, *, prior: bool) -> None:
+        self.sizes, self.n, self.init_condition = tuple(sizes), n, init_condition
+        m = len(self.sizes)
         self.inv_s = (np.arange(n) < np.array(self.sizes)[:, None]).astype(float)
         self.ready = np.full(m, prior, dtype=bool)
         self.ready_at = np.zeros(m, dtype=np.int64)
         self._waiting: list[_Waiting] | None = None  # one per waiting model
+        self._cap = 0  # the lag capacity _waiting's flat indices are for
 
-    def reset(self) -> None:
-        """Forget the cached indices (after a model initialized or the arrays changed)."""
-        self._waiting = None
-
-    def check(self, k: int, w: int) -> bool:
-        """Initialize the waiting models whose ``A_k`` allows it at sample ``k`` (``w`` lags
-        held); True if one was."""
-        lags, ready = self.lags, self.ready
+    def check(self, k: int, w: int, lags: LagStorage) -> list[Start]:
+        """The waiting models whose ``A_k`` allows an initialization at sample ``k`` (``w``
+        lags held), solved from ``lags``' moments and history; each is :attr:`ready` from now."""
         waiting = self._waiting
-        if waiting is None:
+        if waiting is None or self._cap != lags.cap:
             # Flat indices of each waiting model's diag(A_k) in products_y, and its blocker.
-            n1, cap = lags.n + 1, lags.cap
+            n1, cap = self.n + 1, lags.cap
+            self._cap = cap
             waiting = self._waiting = [
                 _Waiting(j, np.array([((j * n1 + a) * cap) * n1 + a for a in range(s)], dtype=np.intp), None)
-                for j, s in enumerate(self.sizes) if not ready[j]
+                for j, s in enumerate(self.sizes) if not self.ready[j]
             ]
         flat = lags.products_y.reshape(-1)
-        done = False
+        started = []
         for entry in waiting:
             blocker = entry.blocker
             if blocker is not None and not flat[blocker] > 0.0:
@@ -92,21 +104,21 @@ class ExactInitialization:
                 entry.blocker = int(entry.diagonal[zero[0]])
                 continue
             entry.blocker = None
-            inv = self.initialize(entry.model, k, w)
-            if inv is not None:
+            start = self._solve(entry.model, k, w, lags)
+            if start is not None:
                 j = entry.model
-                self.inv_s[j, : inv.shape[0]] = inv
-                ready[j], self.ready_at[j] = True, k
-                self._waiting = None
-                done = True
-        return done
+                self.inv_s[j, : self.sizes[j]] = start.inv[: self.sizes[j]]
+                self.ready[j], self.ready_at[j] = True, k
+                started.append(start)
+        if started:
+            self._waiting = None
+        return started
 
-    def initialize(self, j: int, k: int, w: int) -> FloatArray | None:
+    def _solve(self, j: int, k: int, w: int, lags: LagStorage) -> Start | None:
         """Exact initialization of model ``j`` at sample ``k``, if ``A_k`` allows it and the
-        batch solution is finite: its ``1/s``, else None. Before it, the model's units are
-        the regressors'."""
-        lags = self.lags
-        s_n, n = self.sizes[j], lags.n
+        batch solution is finite, else None. Before it, the model's units are the
+        regressors'."""
+        s_n, n = self.sizes[j], self.n
         if k < s_n:
             return None
         # P(i) = sum_j f^(k-j) y_j y_(j-i)' of y = (x, z): A_k = X'WX is its lag-0 x block.
@@ -122,7 +134,7 @@ class ExactInitialization:
         D_scaled = np.linalg.inv(C)
         D_scaled = 0.5 * (D_scaled + D_scaled.T)  # S D S with S = diag(s)
         theta_scaled = D_scaled @ (P0[:s_n, n] / s)  # Eq. 6 (S theta), X'Wz the lag-0 x z moment
-        theta_noise = noise_residuals = None
+        D_noise = theta_noise = noise_residuals = None
         if lags.noise:  # the noise model's batch solution, weighted f_R, in the same units
             D_noise = np.linalg.inv(P[:s_n, 0, :s_n] / np.outer(s, s))
             D_noise = 0.5 * (D_noise + D_noise.T)
@@ -138,18 +150,15 @@ class ExactInitialization:
         history = lags.y[j]
         x_scaled = history[:, :n] * inv[None, :]
         residuals = history[:, n] - x_scaled @ np.concatenate([theta_scaled, np.zeros(n - s_n)])  # Eq. 7
+        held = slice(lags.ptr, lags.ptr + w)
         finite = np.isfinite(theta_scaled).all() and np.isfinite(lag_sums).all()
         if theta_noise is not None:
             noise_residuals = history[:, n] - x_scaled @ np.concatenate([theta_noise, np.zeros(n - s_n)])
-            held = noise_residuals[lags.ptr : lags.ptr + w]
-            finite = finite and np.isfinite(theta_noise).all() and np.isfinite(held).all()
-        if not (finite and np.isfinite(residuals[lags.ptr : lags.ptr + w]).all()):
+            finite = finite and np.isfinite(theta_noise).all() and np.isfinite(noise_residuals[held]).all()
+        if not (finite and np.isfinite(residuals[held]).all()):
             return None  # absurd (finite) data so far: the state would not stay finite
-        self.fit.set_model(j, D_scaled, theta_scaled)
-        if theta_noise is not None and self.noise is not None:
-            self.noise.set_model(j, D_noise, theta_noise)
-        lags.start_model(j, w, inv, lag_sums, x_scaled, residuals, noise_residuals)
-        return inv[:s_n]
+        return Start(j, inv, D_scaled, theta_scaled, D_noise, theta_noise, lag_sums, x_scaled, residuals,
+                     noise_residuals)
 
     # ------------------------------------------------------------------ state
     def arrays(self) -> dict[str, np.ndarray]:
@@ -160,4 +169,4 @@ class ExactInitialization:
         """Inverse of :meth:`arrays`; another shape is refused by name."""
         for name, target in (("inv_s", self.inv_s), ("ready", self.ready), ("ready_at", self.ready_at)):
             assign_checked(target, arrays[name], name)
-        self.reset()
+        self._waiting = None

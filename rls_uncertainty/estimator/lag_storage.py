@@ -1,17 +1,19 @@
-"""What a bank keeps per lag: the recent samples and the lag-indexed sums.
+"""What a bank keeps per lag: the recent samples and the lag-indexed sums (Eqs. 17 and 21).
 
-For ``M`` models of at most ``n`` parameters and a lag capacity ``cap`` (``held + 1``,
-or growing by doubling when all lags are kept):
+:class:`LagStorage` owns these arrays; :meth:`LagStorage.add` takes one sample (its scaled
+regressors and outputs, and the fits that give its residuals), :meth:`LagStorage.start` a
+model just initialized; the evaluation reads the sums. For ``M`` models of at most ``n``
+parameters and a lag capacity ``cap`` (``held + 1``, or growing by doubling when all lags are
+kept):
 
 * **History**, newest first: ``x`` (column-scaled regressors) and ``v`` (residuals of
   Eqs. 16-17) of the last ``min(k, cap)`` samples, and while a model waits for
   initialization ``y = (x, z)`` with the outputs. :meth:`LagStorage.window` of a buffer is
   ``[:, 0]`` = sample ``k``, ``[:, i]`` = sample ``k - i``. Each sample is written once, in
   front of the window, which stays contiguous, so one outer product updates every lag of
-  Eq. 21. When a sample lands on slot 0 the window is copied back to the end of the buffer
-  (every ``3 cap`` samples; the buffer holds ``4 cap``). With all lags the buffer is exactly
-  the capacity, and it grows when a sample fills it, so that a free slot is always in front
-  of the window.
+  Eq. 21. When the newest sample sits at slot 0, the next one first copies the window back
+  to the end of the buffer (every ``3 cap`` samples; the buffer holds ``4 cap``). With all
+  lags the buffer is exactly the capacity, and the next sample first doubles it.
 * **Eq. 17 as sums**: ``lag_sums[m, i] = n_k R_k(i) = sum_j w_j v_j v_(j-i)``, so that one
   multiply-add per sample updates it; ``R_k(i) = lag_sums[:, i] / n_k``.
 * **Eq. 21, one-sided**: ``lag_products[m, a, i, b] = Lambda+_k(i)[a, b]`` with
@@ -20,9 +22,8 @@ or growing by doubling when all lags are kept):
   so that each model's row ``a`` is one contiguous block.
 * **Lagged moments** for exact initialization (:mod:`.initialization`), weighted
   ``w_j = f^(k-j)``: the products of ``y = (x, z)``, ``products_y[m, a, i, b] = sum_j w_j
-  y_j[a] y_(j-i)[b]``, kept only while a model waits. Their blocks are named views:
-  ``moment_xx`` (``x x'``), ``moment_xz`` (``x_j z_(j-i)``) and ``moment_zy``
-  (``z_j y_(j-i)``).
+  y_j[a] y_(j-i)[b]``, kept only while a model waits: ``A_k = X'WX`` is the ``x x'``
+  block of lag 0, ``X'Wz`` the ``x z`` block.
 
 **With a noise model** (forgetting ``f < 1`` with ``noise_forgetting`` ``f_R != f``, see
 :mod:`.bank`): a third history ``u`` holds the noise model's residuals, ``lag_sums`` are
@@ -41,13 +42,14 @@ replay about 20%). When every model is initialized (:meth:`LagStorage.all_initia
 from __future__ import annotations
 
 from collections.abc import Mapping
+from typing import Protocol
 
 import numpy as np
 import numpy.typing as npt
 
-from .burn_in import BurnIn
+from .counts import SampleCounts
 
-__all__ = ["LagStorage", "GROWTH_START"]
+__all__ = ["LagStorage", "Sample", "GROWTH_START", "assign_checked"]
 
 GROWTH_START = 64  # initial lag capacity when all lags are kept (lags="all")
 
@@ -58,30 +60,61 @@ FloatArray = npt.NDArray[np.float64]
 LagViews = tuple[FloatArray, FloatArray, FloatArray, FloatArray]
 
 
+class Sample(Protocol):
+    """The sample being added, as the models see it: ``y = (x / s, z)`` ``(M, n+1)``, ``x``
+    its regressor part, ``x_col`` and ``y_col`` their column views (:class:`.bank.ScaledSample`)."""
+
+    y: FloatArray
+    x: FloatArray
+    x_col: FloatArray
+    y_col: FloatArray
+
+
+class Residuals(Protocol):
+    """A fit that gives the residual ``v_k`` of the sample being added (:class:`.rls_fit.RlsFit`)."""
+
+    def residual(self, out: FloatArray) -> None: ...
+
+
+class Start(Protocol):
+    """What an initialized model's storage takes (:class:`.initialization.Start`)."""
+
+    @property
+    def model(self) -> int: ...
+    @property
+    def inv(self) -> FloatArray: ...
+    @property
+    def lag_sums(self) -> FloatArray: ...
+    @property
+    def x_scaled(self) -> FloatArray: ...
+    @property
+    def residuals(self) -> FloatArray: ...
+    @property
+    def noise_residuals(self) -> FloatArray | None: ...
+
+
 class LagStorage:
-    """The history buffers and lag-indexed sums of ``m`` models (see the module docstring)."""
+    """The history buffers and lag-indexed sums of ``m`` models (see the module docstring):
+    :meth:`add` takes one sample, :meth:`start` an initialized model."""
 
     # Arrays that exist only in some configurations hold None otherwise (assigned in
-    # :meth:`allocate`); they are read only where they exist: ``u`` and ``moment0`` with a
-    # noise model, the moments while a model waits, ``products_scratch`` when not merged.
+    # :meth:`_allocate`); they are read only where they exist: ``u`` and ``moment0`` with a
+    # noise model, ``products_y`` while a model waits, ``_products_scratch`` when not merged.
     # Typed as arrays, since mypy cannot follow that invariant.
     x: FloatArray
     y: FloatArray
     v: FloatArray
     u: FloatArray
     lag_sums: FloatArray
-    sums_scratch: FloatArray
-    lag_powers: FloatArray
     products_y: FloatArray
-    products_y_scratch: FloatArray
-    moment_xx: FloatArray
-    moment_xz: FloatArray
-    moment_zy: FloatArray
     moment0: FloatArray | None  # (checked where it may be None)
     lag_products: FloatArray
-    products_scratch: FloatArray
-    full: LagViews
     lag0: FloatArray
+    _sums_scratch: FloatArray
+    _lag_powers: FloatArray
+    _products_y_scratch: FloatArray
+    _products_scratch: FloatArray
+    _full: LagViews
 
     def __init__(
         self, m: int, n: int, cap: int, *, all_lags: bool, forgetting: float, waiting: bool,
@@ -94,11 +127,11 @@ class LagStorage:
         self.noise = noise_forgetting is not None and noise_forgetting != forgetting
         # (self.noise implies noise_forgetting is a float, which mypy cannot see)
         self.moment_forgetting: float = noise_forgetting if self.noise else forgetting  # type: ignore[assignment]
-        self.history = (*_HISTORY, "u") if self.noise else _HISTORY
+        self._history = (*_HISTORY, "u") if self.noise else _HISTORY
         self.waiting = waiting
-        self.allocate(cap)
+        self._allocate(cap)
 
-    def allocate(self, cap: int) -> None:
+    def _allocate(self, cap: int) -> None:
         """Fresh zero arrays for a lag capacity ``cap`` (an empty history)."""
         m, n = self.m, self.n
         n1 = n + 1
@@ -112,53 +145,53 @@ class LagStorage:
         self.u = np.zeros((m, length)) if self.noise else None  # type: ignore[assignment]  # read only with noise
         self.ptr = length  # the window is [ptr, ptr + w)
         self.lag_sums = np.zeros((m, cap))
-        self.sums_scratch = np.zeros((m, cap))
-        self.lag_powers = self.forgetting ** np.arange(cap, dtype=float)  # f^i of Eq. 21
-        self.products_y = self.products_y_scratch = None  # type: ignore[assignment]  # set below while waiting
-        self.moment_xx = self.moment_xz = self.moment_zy = None  # type: ignore[assignment]  # as products_y
+        self._sums_scratch = np.zeros((m, cap))
+        self._lag_powers = self.forgetting ** np.arange(cap, dtype=float)  # f^i of Eq. 21
+        self.products_y = self._products_y_scratch = None  # type: ignore[assignment]  # set below while waiting
         self.moment0 = None  # lag-0 moments weighted f (with a noise model, while waiting)
         if self.waiting and self.noise:
             self.moment0 = np.zeros((m, n1, n1))
         if self.waiting:
             self.products_y = np.zeros((m, n1, cap, n1))
-            self.products_y_scratch = np.zeros((m, n1, cap * n1))
-            self.moment_xx = self.products_y[:, :n, :, :n]
-            self.moment_xz = self.products_y[:, :n, :, n]
-            self.moment_zy = self.products_y[:, n]
+            self._products_y_scratch = np.zeros((m, n1, cap * n1))
         if self.merged:
-            self.lag_products = self.moment_xx
-            self.products_scratch = None  # type: ignore[assignment]  # unused when merged
+            self.lag_products = self.products_y[:, :n, :, :n]
+            self._products_scratch = None  # type: ignore[assignment]  # unused when merged
         else:
             self.lag_products = np.zeros((m, n, cap, n))
-            self.products_scratch = np.zeros((m, n, cap * n))
-        self.full = self._restricted(cap)
+            self._products_scratch = np.zeros((m, n, cap * n))
+        self._full = self._restricted(cap)
         self.lag0 = self.lag_products[:, :, 0, :]  # Lambda+_k(0)
 
     def _restricted(self, w: int) -> LagViews:
-        m, n = self.m, self.n
-        if self.merged:
-            products = self.products_y[:, :, :w].reshape(m, n + 1, w * (n + 1))
-            scratch = self.products_y_scratch[:, :, : w * (n + 1)]
-            return self.lag_sums[:, :w], self.sums_scratch[:, :w], products, scratch
-        products = self.lag_products[:, :, :w].reshape(m, n, w * n)
-        return self.lag_sums[:, :w], self.sums_scratch[:, :w], products, self.products_scratch[:, :, : w * n]
-
-    def by_lag(self, w: int) -> LagViews:
         """Views of the first ``w`` lags with the scratch their updates use: ``(lag_sums, .,
         products, .)``, the products flattened to ``(M, rows, w cols)``: ``lag_products``, or
         ``products_y`` when merged."""
-        return self.full if w == self.cap else self._restricted(w)
+        m, n = self.m, self.n
+        if self.merged:
+            products = self.products_y[:, :, :w].reshape(m, n + 1, w * (n + 1))
+            scratch = self._products_y_scratch[:, :, : w * (n + 1)]
+            return self.lag_sums[:, :w], self._sums_scratch[:, :w], products, scratch
+        products = self.lag_products[:, :, :w].reshape(m, n, w * n)
+        return self.lag_sums[:, :w], self._sums_scratch[:, :w], products, self._products_scratch[:, :, : w * n]
 
-    def products_y_by_lag(self, w: int) -> tuple[FloatArray, FloatArray]:
-        """``products_y`` of the first ``w`` lags as ``(M, n+1, w (n+1))`` and its scratch."""
-        m, n1 = self.m, self.n + 1
-        return self.products_y[:, :, :w].reshape(m, n1, w * n1), self.products_y_scratch[:, :, : w * n1]
-
-    def add_sample(self, p: int, w: int, xs_col: FloatArray, y_k: FloatArray, burn: BurnIn, k: int) -> None:
-        """Eqs. 17 and 21 for sample ``k``, whose history and residuals were written to slot
-        ``p`` (``w`` lags held after it): ``xs_col`` is the scaled ``x_k`` as a column, ``y_k``
-        the sample's ``(x_k, z_k)`` (read while a model waits)."""
-        sums, sums_tmp, products, products_tmp = self.full if w == self.cap else self._restricted(w)
+    def add(self, sample: Sample, fit: Residuals, noise: Residuals | None, counts: SampleCounts) -> None:
+        """Sample ``k`` (``counts.k``): its ``x`` (and while a model waits its ``y``) and its
+        residuals ``v_k`` (``u_k``) written in front of the window, then Eqs. 17 and 21."""
+        k = counts.k
+        if self.ptr == 0:  # no free slot in front of the window: move it back, or grow (all lags)
+            self._make_room(k - 1 if k - 1 < self.cap else self.cap)
+        cap = self.cap
+        w = k if k < cap else cap  # lags held after this sample
+        p = self.ptr = self.ptr - 1  # the slot in front of the window
+        if self.waiting:
+            self.y[:, p] = sample.y
+        if not self.merged:  # (merged: the x history is kept in y)
+            self.x[:, p] = sample.x
+        fit.residual(self.v[:, p])  # v_k (Eqs. 16-17)
+        if noise is not None:
+            noise.residual(self.u[:, p])  # u_k, the noise model's
+        sums, sums_tmp, products, products_tmp = self._full if w == cap else self._restricted(w)
         # Eq. 17 as sums: n_k R_k(i) = f n_(k-1) R_(k-1)(i) + v_k v_(k-i) (with a noise model
         # f_R and its residuals u_k).
         g = self.moment_forgetting
@@ -167,38 +200,39 @@ class LagStorage:
         series = self.u if self.noise else self.v
         v_window = series[:, p : p + w]  # v_k, v_(k-1), ...
         lagged = np.multiply(v_window, v_window[:, :1], out=sums_tmp)  # v_k v_(k-i)
-        if burn.masking:  # some model's window reaches into its burn-in
-            burn.mask(sums, lagged, k, w, self.cap)
+        if counts.masking:  # some model's window reaches into its burn-in
+            starts, left_out = counts.burn_in(w, cap)
+            sums[starts] = 0.0
+            lagged[left_out] = 0.0
         sums += lagged
-        self._add_products(products, products_tmp, p, w, xs_col, y_k)
+        self._add_products(products, products_tmp, p, w, sample)
 
-    def _add_products(
-        self, products: FloatArray, scratch: FloatArray, p: int, w: int, xs_col: FloatArray, y_k: FloatArray
-    ) -> None:
+    def _add_products(self, products: FloatArray, scratch: FloatArray, p: int, w: int, sample: Sample) -> None:
         """Eq. 21, one-sided: ``Lambda+_k(i) = f^2 Lambda+_(k-1)(i) + f^i x_k x_(k-i)'``, and
         while a model waits the lagged moments weighted ``f^(k-j)`` (``f_R^(k-j)`` with a
-        noise model); ``products`` and ``scratch`` are :meth:`by_lag`'s."""
+        noise model); ``products`` and ``scratch`` are :meth:`_restricted`'s."""
         m, n = self.m, self.n
         if self.merged:  # of y = (x, z): Lambda+ and the lagged moments at once
             y_window = self.y[:, p : p + w].reshape(m, 1, w * (n + 1))  # y_k, y_(k-1), ...
-            products += np.multiply(y_k[:, :, None], y_window, out=scratch)
+            products += np.multiply(sample.y_col, y_window, out=scratch)
             return
         f = self.forgetting
         x_window = self.x[:, p : p + w].reshape(m, 1, w * n)  # x_k, x_(k-1), ... (a view)
         if f == 1.0:
-            products += np.multiply(xs_col, x_window, out=scratch)
+            products += np.multiply(sample.x_col, x_window, out=scratch)
         else:
-            weighted = (x_window.reshape(m, w, n) * self.lag_powers[None, :w, None]).reshape(m, 1, w * n)
+            weighted = (x_window.reshape(m, w, n) * self._lag_powers[None, :w, None]).reshape(m, 1, w * n)
             self.lag_products *= f * f
-            products += np.multiply(xs_col, weighted, out=scratch)
+            products += np.multiply(sample.x_col, weighted, out=scratch)
         if self.waiting:
-            moments, moments_tmp = self.products_y_by_lag(w)
+            n1 = n + 1
+            moments = self.products_y[:, :, :w].reshape(m, n1, w * n1)
             if self.moment0 is not None:  # the lag-0 moments weighted f^(k-j)
                 self.moment0 *= f
-                self.moment0 += y_k[:, :, None] * y_k[:, None, :]
+                self.moment0 += sample.y_col * sample.y[:, None, :]
             self.products_y *= self.moment_forgetting
-            y_window = self.y[:, p : p + w].reshape(m, 1, w * (n + 1))
-            moments += np.multiply(y_k[:, :, None], y_window, out=moments_tmp)
+            y_window = self.y[:, p : p + w].reshape(m, 1, w * n1)
+            moments += np.multiply(sample.y_col, y_window, out=self._products_y_scratch[:, :, : w * n1])
 
     def all_initialized(self) -> None:
         """Every model is initialized: ``lag_products`` gets an array of its own and the
@@ -213,37 +247,42 @@ class LagStorage:
         self.waiting = False
         lag_sums, history = self.lag_sums, (self.x, self.y, self.v, self.u)
         ptr = self.ptr
-        self.allocate(self.cap)
+        self._allocate(self.cap)
         self.lag_sums, self.lag_products = lag_sums, lag_products
         self.x, self.y, self.v, self.u = history
         self.ptr = ptr
-        self.full = self._restricted(self.cap)
+        self._full = self._restricted(self.cap)
         self.lag0 = self.lag_products[:, :, 0, :]
 
-    def start_model(
-        self, j: int, w: int, inv: FloatArray, lag_sums: FloatArray, x_scaled: FloatArray, residuals: FloatArray,
-        noise_residuals: FloatArray | None,
-    ) -> None:
-        """Model ``j`` initialized (:mod:`.initialization`; ``w`` lags held): its lag sums of
-        Eq. 10, its lag products and history in the column-scaled units ``x / s`` (``inv`` is
-        ``1/s``, 0 on padding), and its residual histories."""
-        self.lag_sums[j, :w] = lag_sums
+    def start(self, start: Start, w: int) -> None:
+        """Model ``start.model`` initialized (:mod:`.initialization`; ``w`` lags held): its
+        lag sums of Eq. 10, its lag products and history in the column-scaled units ``x / s``
+        (``start.inv`` is ``1/s``, 0 on padding), and its residual histories (Eq. 7)."""
+        j = start.model
+        self.lag_sums[j, :w] = start.lag_sums
         products = self.lag_products[j]
-        products *= inv[:, None, None]  # regressors to scaled units
-        products *= inv[None, None, :]
-        self.y[j, :, : self.n] = x_scaled
-        self.x[j] = x_scaled
-        self.v[j] = residuals
-        if noise_residuals is not None:
-            self.u[j] = noise_residuals
+        products *= start.inv[:, None, None]  # regressors to scaled units
+        products *= start.inv[None, None, :]
+        self.y[j, :, : self.n] = start.x_scaled
+        self.x[j] = start.x_scaled
+        self.v[j] = start.residuals
+        if start.noise_residuals is not None:
+            self.u[j] = start.noise_residuals
 
     def window(self, buf: FloatArray, w: int) -> FloatArray:
         """The last ``w`` entries of a history buffer, newest first (a view)."""
         return buf[:, self.ptr : self.ptr + w]
 
-    def relocate(self, w: int) -> None:
-        """Move the history window from the buffer's front back to its end (called when the
-        newest sample was written at slot 0)."""
+    def _make_room(self, w: int) -> None:
+        """A free slot in front of the ``w`` samples held, when the newest is at slot 0: the
+        window moved back to the buffer's end, or with all lags the capacity doubled."""
+        if self.all_lags:
+            self._grow(w)
+        else:
+            self._relocate(w)
+
+    def _relocate(self, w: int) -> None:
+        """Move the history window from the buffer's front back to its end."""
         length = self.v.shape[1]
         for buf in (self.y, self.v) if self.merged else (self.x, self.y, self.v):
             buf[:, length - w :] = buf[:, :w]
@@ -251,16 +290,16 @@ class LagStorage:
             self.u[:, length - w :] = self.u[:, :w]
         self.ptr = length - w
 
-    def grow(self, w: int) -> None:
+    def _grow(self, w: int) -> None:
         """Double the lag capacity (all lags), keeping the ``w`` samples and lags held."""
-        names = (*self.history, "lag_sums", "lag_products", "products_y", "moment0")
+        names = (*self._history, "lag_sums", "lag_products", "products_y", "moment0")
         old = {name: getattr(self, name) for name in names}
         old_ptr, old_cap = self.ptr, self.cap
-        self.allocate(2 * old_cap)
+        self._allocate(2 * old_cap)
         self.ptr -= w
         if old["moment0"] is not None:
             self.moment0[...] = old["moment0"]  # type: ignore[index]  # allocated again (waiting, noise)
-        for name in self.history:
+        for name in self._history:
             getattr(self, name)[:, self.ptr :] = old[name][:, old_ptr : old_ptr + w]
         self.lag_sums[:, :old_cap] = old["lag_sums"]
         if old["products_y"] is not None:
@@ -272,7 +311,7 @@ class LagStorage:
     def arrays(self, w: int) -> dict[str, FloatArray]:
         """Copies of the history windows (newest first) and the lag-indexed sums (the moments
         only while a model waits)."""
-        out = {name: self.window(getattr(self, name), w).copy() for name in self.history}
+        out = {name: self.window(getattr(self, name), w).copy() for name in self._history}
         out["lag_sums"] = self.lag_sums.copy()
         out["lag_products"] = self.lag_products.copy()  # (a contiguous copy, also of the view)
         if self.waiting:
@@ -285,12 +324,12 @@ class LagStorage:
         """Fresh storage of capacity ``cap`` for a state with ``w`` lags held (``waiting``: some
         model waits for initialization), its history window placed as :meth:`load` fills it."""
         self.waiting = waiting
-        self.allocate(cap)
+        self._allocate(cap)
         self.ptr -= w
 
     def load(self, arrays: Mapping[str, npt.ArrayLike], w: int) -> None:
         """Inverse of :meth:`arrays`, on storage laid out by :meth:`lay_out`."""
-        for name in self.history:
+        for name in self._history:
             assign_checked(self.window(getattr(self, name), w), arrays[name], name)
         assign_checked(self.lag_sums, arrays["lag_sums"], "lag_sums")
         if self.waiting:

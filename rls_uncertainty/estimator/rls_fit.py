@@ -29,65 +29,66 @@ FloatArray = npt.NDArray[np.float64]
 
 
 class RlsFit:
-    """``[D; theta']`` of ``m`` models of at most ``n`` parameters with forgetting ``f`` and
-    its per-sample scratch; :meth:`prepare` then :meth:`apply` add one sample."""
+    """``[D; theta']`` of ``m`` models of at most ``n`` parameters with forgetting ``f``, and
+    the sample being added: :meth:`prepare` (its ``D x``, innovation and ``d_k``), then
+    :meth:`update` (Eq. 15) and :meth:`residual` (the ``v_k`` of Eqs. 16-17)."""
 
     def __init__(self, m: int, n: int, forgetting: float, residual: str) -> None:
         self.forgetting = forgetting
-        self.residual = residual
-        self.aug = np.zeros((m, n + 1, n))  # [D; theta'] (scaled units)
-        self.D = self.aug[:, :n]
-        self.theta = self.aug[:, n]
-        self.theta_row = self.aug[:, n, None, :]
+        self.residual_kind = residual
+        self._aug = np.zeros((m, n + 1, n))  # [D; theta'] (scaled units)
+        self.D = self._aug[:, :n]  # (read by the evaluation; written here only)
+        self.theta = self._aug[:, n]
+        self.theta_row = self._aug[:, n, None, :]
         # g = (D x, theta' x - z) as a column: the matmul's output, then -e_k in its last row.
-        self.g = np.zeros((m, n + 1, 1))
-        self.Dx = self.g[:, :n, 0]
-        self._Dx_row = self.g[:, None, :n, 0]
-        self.neg_e = self.g[:, n, 0]
-        self._g_flat = self.g.reshape(-1)
-        self.d = np.zeros(m)  # d_k = f + x' D x
-        self._d_col = self.d[:, None, None]
+        self._g = np.zeros((m, n + 1, 1))
+        self._Dx = self._g[:, :n, 0]
+        self._Dx_row = self._g[:, None, :n, 0]
+        self._neg_e = self._g[:, n, 0]
+        self._g_flat = self._g.reshape(-1)
+        self._d = np.zeros(m)  # d_k = f + x' D x
+        self._d_col = self._d[:, None, None]
         self._root = np.zeros(m)  # sqrt(d_k / f)
         self._outer = np.zeros((m, n + 1, n))
 
-    def prepare(self, xs: FloatArray, xs_col: FloatArray, z: FloatArray) -> float:
+    def prepare(self, x: FloatArray, x_col: FloatArray, z: FloatArray) -> float:
         """``g = (D x, theta' x - z)`` and ``d_k = f + x' D x`` (Eq. 15a's denominator) of the
-        scaled regressors ``xs`` (``xs_col`` their column view), state untouched; returns
-        ``|g|^2``, the magnitude the bank's overflow guard looks at."""
-        np.matmul(self.aug, xs_col, out=self.g)  # (D x, theta' x)
-        d = vecdot(xs, self.Dx, out=self.d)
+        scaled regressors ``x`` (``x_col`` their column view) and outputs ``z``, state
+        untouched; returns ``|g|^2``, the magnitude the bank's overflow guard looks at."""
+        np.matmul(self._aug, x_col, out=self._g)  # (D x, theta' x)
+        d = vecdot(x, self._Dx, out=self._d)
         d += self.forgetting  # d_k = f + x' D x
-        np.subtract(self.neg_e, z, out=self.neg_e)  # -e_k = x' theta_(k-1) - z_k
+        np.subtract(self._neg_e, z, out=self._neg_e)  # -e_k = x' theta_(k-1) - z_k
         magnitude: float = np.dot(self._g_flat, self._g_flat)
         return magnitude
 
-    def apply(self, residual_out: FloatArray) -> None:
-        """Eqs. 15a-c for the prepared sample, and its residual (Eqs. 16-17) to ``residual_out``."""
-        f = self.forgetting
-        outer = np.multiply(self.g, self._Dx_row, out=self._outer)
+    def update(self) -> None:
+        """Eqs. 15a-c for the prepared sample: ``[D; theta'] -= (D x, -e_k) (D x)' / d_k``,
+        then ``D /= f``."""
+        outer = np.multiply(self._g, self._Dx_row, out=self._outer)
         outer /= self._d_col
-        self.aug -= outer  # Eq. 15b (D rows), Eq. 15c (theta row)
-        if f != 1.0:
-            self.D /= f  # Eq. 15b with forgetting
-        self._residual(residual_out)
+        self._aug -= outer  # Eq. 15b (D rows), Eq. 15c (theta row)
+        if self.forgetting != 1.0:
+            self.D /= self.forgetting  # Eq. 15b with forgetting
 
-    def _residual(self, out: FloatArray) -> None:
-        """The residual of Eqs. 16-17 of the chosen kind from ``-e_k`` and ``d_k``."""
-        f, d, root = self.forgetting, self.d, self._root
-        if self.residual == "standardized":  # v_k = e_k sqrt(f/d_k)
+    def residual(self, out: FloatArray) -> None:
+        """The prepared sample's residual ``v_k`` of Eqs. 16-17, of the chosen kind, to ``out``
+        (the caller's history slot)."""
+        f, d, root = self.forgetting, self._d, self._root
+        if self.residual_kind == "standardized":  # v_k = e_k sqrt(f/d_k)
             root = np.sqrt(d if f == 1.0 else np.divide(d, f, out=root), out=root)
-            np.divide(self.neg_e, np.negative(root, out=root), out=out)
-        elif self.residual == "a_posteriori":
-            np.multiply(self.neg_e / d, -f, out=out)  # v_k = e_k f/d_k = z_k - x_k' theta_k (Eq. 7)
+            np.divide(self._neg_e, np.negative(root, out=root), out=out)
+        elif self.residual_kind == "a_posteriori":
+            np.multiply(self._neg_e / d, -f, out=out)  # v_k = e_k f/d_k = z_k - x_k' theta_k (Eq. 7)
         else:
-            np.negative(self.neg_e, out=out)  # v_k = e_k
+            np.negative(self._neg_e, out=out)  # v_k = e_k
 
-    def set_model(self, j: int, D: FloatArray, theta: FloatArray) -> None:
+    def start(self, j: int, D: FloatArray, theta: FloatArray) -> None:
         """Model ``j``'s ``D`` and ``theta`` (scaled units, its ``s`` parameters): an exact
-        initialization (Eq. 6) or a prior."""
-        s, n = theta.shape[0], self.aug.shape[2]
-        self.aug[j, :s, :s] = D
-        self.aug[j, n, :s] = theta
+        initialization (Eq. 6)."""
+        s, n = theta.shape[0], self._aug.shape[2]
+        self._aug[j, :s, :s] = D
+        self._aug[j, n, :s] = theta
 
     def set_prior(self, D: FloatArray) -> None:
         """``D_0`` of every model (scaled units), ``theta_0 = 0``."""

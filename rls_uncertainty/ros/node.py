@@ -47,8 +47,8 @@ from ..datapath.cdr import decode
 from ..datapath.inputs import MESSAGE_TYPES, STREAMS, feed, message_class
 from ..datapath.outputs import HEADER, NODE_NAME, OutputLayout
 from ..datapath.pipeline import Pipeline, SampleOutput, StateFileError
-from ..estimator.state_file import StateFileClaim, claim, set_aside
 from ..settings.config import PARAMETERS, ConfigError, ParamSpec, node_config, pipeline_config, startup_parameters
+from ..state_file import StateFileClaim, claim, set_aside
 from .diagnostics import DiagnosticsPolicy, Snapshot, malformed_reason, malformed_warning
 from .input_watch import SilentInputs
 
@@ -298,10 +298,10 @@ class EstimatorNode(Node):
     # ------------------------------------------------------------------ state file
     def _load_state(self) -> None:
         """Resume from ``state_file`` when it holds this configuration's state. The file is
-        claimed first (:func:`.estimator.state_file.claim`): one that is not a regular file,
+        claimed first (:func:`rls_uncertainty.state_file.claim`): one that is not a regular file,
         or that another process holds, is refused in one line and the node runs without a
         state file. A file that exists but cannot be used (corrupt, crafted, another
-        configuration's) is renamed aside (:func:`.estimator.state_file.set_aside`) so that
+        configuration's) is renamed aside (:func:`rls_uncertainty.state_file.set_aside`) so that
         the fresh state saved later never replaces it; if it cannot be moved, nothing is saved
         this run."""
         path = self._state_path = self.node_cfg.state_file

@@ -1,5 +1,11 @@
 """The estimator state file: a restarted node resumes the estimation where it stopped.
 
+The file side of :mod:`.estimator.state` (which maps a bank to plain data and checks each
+field of a saved one): locks, the atomic write, the archive read without trusting it, and the
+renaming of a refused file. The pipeline saves and loads through it, the node claims and sets
+aside through it; it sits beside :mod:`.files`, whose write-then-rename and lock it uses, so
+that the numerical core opens no file.
+
 One ``.npz`` archive (numpy only, no pickle, entries stored uncompressed): the
 :meth:`.EstimatorBank.state` arrays, plus a ``meta`` entry holding one JSON text with
 
@@ -29,13 +35,14 @@ anything is allocated from the file's declarations: the archive (a regular file,
 most :data:`MAX_ENTRIES` ``.npy`` entries, none compressed or encrypted, their declared sizes
 adding up to no more than the file holds: a small file cannot inflate); the ``meta`` entry
 (a unicode scalar of at most :data:`MAX_META_BYTES`); every ``meta`` field (type, keys, value
-range) and its agreement with the configuration the caller expects; then the array entries:
-exactly the names the state layout has, each entry's declared size equal to what the
-configuration and counters imply, each ``.npy`` header's dtype and shape as expected, every
-float finite and every counter in range. Any failure is one :class:`StateFileError` whose
-text names the file and the field. :meth:`EstimatorBank.from_state` checks shapes again (a
-second line). :func:`set_aside` renames a refused (regular) file out of the way without
-overwriting anything, so the node never replaces a file it could not use.
+range; the estimator's fields by :mod:`.estimator.state`) and its agreement with the
+configuration the caller expects; then the array entries: exactly the names the state layout
+has, each entry's declared size equal to what the configuration and counters imply, each
+``.npy`` header's dtype and shape as expected, every float finite and every counter in range.
+Any failure is one :class:`StateFileError` whose text names the file and the field.
+:meth:`EstimatorBank.from_state` checks shapes again (a second line). :func:`set_aside`
+renames a refused (regular) file out of the way without overwriting anything, so the node
+never replaces a file it could not use.
 """
 
 from __future__ import annotations
@@ -54,12 +61,26 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import ConfigError, StateFileError
-from ..files import FileLock, atomic_file, temporaries
-from .bank import EstimatorBank
-from .lag_storage import GROWTH_START
-from .options import EstimatorOptions
-from .state import COUNTERS
+from .errors import StateFileError
+from .estimator.bank import EstimatorBank
+from .estimator.options import EstimatorOptions
+from .estimator.state import (
+    ANOTHER_CONFIGURATION,
+    MAX_COUNT,
+    check_counters,
+    check_expected,
+    check_format,
+    check_options,
+    check_sizes,
+    check_values,
+    describe,
+    implied_bytes,
+    integer,
+    invalid,
+    json_object,
+    number,
+)
+from .files import FileLock, atomic_file, temporaries
 
 __all__ = [
     "EstimatorState",
@@ -68,7 +89,6 @@ __all__ = [
     "save_state",
     "load_state",
     "set_aside",
-    "state_layout",
     "StateFileError",
     "MAX_ENTRIES",
     "MAX_META_BYTES",
@@ -77,13 +97,7 @@ __all__ = [
 MAX_ENTRIES = 32  # entries of a state archive (format 3 has 11 or 12)
 MAX_META_BYTES = 1 << 20  # the meta entry's text as stored (4 bytes a character); a few kB in practice
 _NPY_PREAMBLE = 12 + 10_000  # magic, version, header length and numpy's largest header text
-_MAX_MODELS, _MAX_PARAMETERS = 64, 64
-_MAX_LAGS = 10_000_000
-_MAX_COUNT = 2**53  # samples: exact as a float
-_GROWTH_START = GROWTH_START  # the lag capacity an all-lags bank starts with, doubled as samples arrive
-_ANOTHER = "saved with another aircraft, model or estimator configuration"
 _META_KEYS = ("format", "fingerprint", "sizes", "options", "bank_counters", "samples_used", "zsum", "zsq")
-_F8, _I8, _B1 = np.dtype("<f8"), np.dtype("<i8"), np.dtype("|b1")
 
 
 @dataclass
@@ -114,171 +128,17 @@ def save_state(path: str | Path, state: EstimatorState, fingerprint: Mapping[str
         np.savez(fh, meta=np.array(json.dumps(meta)), **bank["arrays"])
 
 
-class _Invalid(Exception):
-    """One problem with one field; :func:`load_state` adds the path."""
-
-
-def _fail(field: str, problem: str) -> _Invalid:
-    return _Invalid(f"field '{field}' {problem}")
-
-
-# ---------------------------------------------------------------------------------------------
-# The array layout of each state format, from the validated configuration and counters.
-
-
-def _all_lags_capacity(k: int) -> int:
-    """The lag capacity of an all-lags bank after ``k`` samples: 64, doubled until it holds k."""
-    cap = _GROWTH_START
-    while cap < k:
-        cap *= 2
-    return cap
-
-
-Layout = dict[str, tuple[tuple[int, ...], np.dtype]]
-
-
-def state_layout(
-    sizes: tuple[int, ...], options: EstimatorOptions, counters: Mapping[str, Any], waiting: bool
-) -> Layout:
-    """``{entry name: (shape, dtype)}`` of the arrays of a state of a bank of ``sizes`` and
-    ``options`` at ``counters`` (``waiting``: some model still waits for initialization), as
-    :meth:`EstimatorBank.state` writes them: the estimator's own layout
-    (:meth:`EstimatorBank.state_layout`), nothing read from the file. The caller bounds the
-    size first (:func:`_implied_bytes`)."""
-    return EstimatorBank.state_layout(sizes, options, counters, waiting)
-
-
-def _implied_bytes(sizes: tuple[int, ...], counters: Mapping[str, Any]) -> int:
-    """An upper bound of the memory an empty bank of ``sizes`` takes at ``counters``' lag
-    capacity (histories, lag sums and products of y = (x, z))."""
-    m, n1, cap = len(sizes), max(sizes) + 1, int(counters["cap"])
-    return 8 * m * cap * (2 * n1 * n1 + 4 * 3 * n1 + 4)
-
-# ---------------------------------------------------------------------------------------------
-# meta
-
-
-def _is_int(value: Any) -> bool:
-    return isinstance(value, int) and not isinstance(value, bool)
-
-
-def _int(value: Any, field: str, low: int, high: int) -> int:
-    if not _is_int(value):
-        raise _fail(field, f"must be an integer, found {_kind(value)}")
-    if not low <= value <= high:
-        raise _fail(field, f"must be in [{low}, {high}], found {value}")
-    checked: int = value  # (an int: _is_int)
-    return checked
-
-
-def _number(value: Any, field: str) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise _fail(field, f"must be a number, found {_kind(value)}")
-    number = float(value)
-    if not math.isfinite(number):
-        raise _fail(field, f"must be finite, found {number}")
-    return number
-
-
-def _kind(value: Any) -> str:
-    """A short description of a JSON value for a message (never the whole value)."""
-    if isinstance(value, (dict, list)):
-        return f"a {'JSON object' if isinstance(value, dict) else 'list'} of {len(value)} items"
-    text = repr(value)
-    return f"{type(value).__name__} {text[:40]}{'...' if len(text) > 40 else ''}"
-
-
-def _short(value: Any) -> str:
-    text = repr(list(value) if isinstance(value, tuple) else value)
-    return text if len(text) <= 60 else text[:57] + "..."
-
-
-def _object(value: Any, field: str, keys: tuple[str, ...]) -> dict[str, Any]:
-    if not isinstance(value, dict):
-        raise _fail(field, f"must be a JSON object, found {_kind(value)}")
-    missing = [k for k in keys if k not in value]
-    if missing:
-        raise _fail(f"{field}.{missing[0]}" if field else missing[0], "is missing")
-    extra = sorted(str(k) for k in value if k not in keys)
-    if extra:
-        raise _fail(f"{field}.{extra[0]}" if field else extra[0][:40], "is not part of a state file")
-    checked: dict[str, Any] = value  # (a JSON object: string keys)
-    return checked
-
-
-def _check_format(meta: Any) -> None:
-    if not isinstance(meta, dict):
-        raise _fail("meta", f"must be a JSON object, found {_kind(meta)}")
-    if "format" not in meta:
-        raise _fail("format", "is missing")
-    found = meta["format"]
-    if found != EstimatorBank.STATE_FORMAT or not _is_int(found):
-        raise _Invalid(
-            f"state format {_kind(found) if not _is_int(found) else found}, this version reads "
-            f"{EstimatorBank.STATE_FORMAT} (saved by another version; delete it to start afresh)"
-        )
-
-
-def _check_sizes(raw: Any) -> tuple[int, ...]:
-    if not isinstance(raw, list) or not 1 <= len(raw) <= _MAX_MODELS:
-        raise _fail("sizes", f"must be a list of 1 to {_MAX_MODELS} sizes, found {_kind(raw)}")
-    return tuple(_int(s, f"sizes[{i}]", 1, _MAX_PARAMETERS) for i, s in enumerate(raw))
-
-
-def _check_options(raw: Any) -> EstimatorOptions:
-    try:
-        options = EstimatorOptions.from_dict(raw)
-    except ConfigError as exc:
-        raise _fail("options", f"is not valid ({str(exc)[:160]})") from None
-    if (options.held or 0) > _MAX_LAGS:
-        raise _fail("options.lags", f"holds {options.held} lags, more than a state file may ({_MAX_LAGS})")
-    return options
-
-
-def _check_expected(
-    sizes: tuple[int, ...], options: EstimatorOptions, expect: tuple[tuple[int, ...], EstimatorOptions] | None
-) -> None:
-    """The file's sizes and options are those of the configuration the caller continues with."""
-    if expect is None:
-        return
-    want_sizes, want_options = expect
-    if list(sizes) != list(want_sizes):
-        raise _Invalid(f"{_ANOTHER}: field 'sizes' is {_short(sizes)}, the configuration has {_short(want_sizes)}")
-    found, want = options.resolved().as_dict(), want_options.resolved().as_dict()
-    for key in want:
-        if found[key] != want[key]:
-            raise _Invalid(f"{_ANOTHER}: field 'options.{key}' is {_short(found[key])}, the configuration has "
-                           f"{_short(want[key])}")
-
-
-def _check_counters(raw: Any, options: EstimatorOptions) -> dict[str, Any]:
-    c = _object(raw, "bank_counters", COUNTERS)
-    k = _int(c["k"], "bank_counters.k", 0, _MAX_COUNT)
-    n_eff = _number(c["n_eff"], "bank_counters.n_eff")
-    if not 0.0 <= n_eff <= k * (1.0 + 1e-9):
-        raise _fail("bank_counters.n_eff", f"must be in [0, k = {k}], found {n_eff}")
-    n_noise = _number(c["n_noise"], "bank_counters.n_noise")
-    if not 0.0 <= n_noise <= k * (1.0 + 1e-9):
-        raise _fail("bank_counters.n_noise", f"must be in [0, k = {k}], found {n_noise}")
-    held = options.held
-    want = _all_lags_capacity(k) if held is None else held + 1
-    cap = _int(c["cap"], "bank_counters.cap", 1, 2 * _MAX_COUNT)
-    if cap != want:
-        lags = "all lags" if held is None else f"{held} lags"
-        raise _fail("bank_counters.cap", f"is {cap}; {lags} after {k} samples hold {want}")
-    return c
-
-
 def _check_sums(meta: dict[str, Any], m: int) -> tuple[np.ndarray, np.ndarray]:
     out = []
     for key in ("zsum", "zsq"):
         values = meta[key]
         if not isinstance(values, list) or len(values) != m:
-            raise _fail(key, f"must be a list of {m} numbers (one per model), found {_kind(values)}")
-        out.append(np.array([_number(v, f"{key}[{i}]") for i, v in enumerate(values)]))
+            raise invalid(key, f"must be a list of {m} numbers (one per model), found {describe(values)}")
+        out.append(np.array([number(v, f"{key}[{i}]") for i, v in enumerate(values)]))
     if np.any(out[1] < 0):
-        raise _fail("zsq", "must not be negative (sums of squares)")
+        raise invalid("zsq", "must not be negative (sums of squares)")
     return out[0], out[1]
+
 
 
 # ---------------------------------------------------------------------------------------------
@@ -289,27 +149,27 @@ def _entries(zf: zipfile.ZipFile, file_size: int) -> dict[str, zipfile.ZipInfo]:
     """The archive's entries by array name, checked before any is read."""
     infos = zf.infolist()
     if len(infos) > MAX_ENTRIES:
-        raise _Invalid(f"not a state file: {len(infos)} entries (a state has at most {MAX_ENTRIES})")
+        raise StateFileError(f"not a state file: {len(infos)} entries (a state has at most {MAX_ENTRIES})")
     entries: dict[str, zipfile.ZipInfo] = {}
     declared = 0
     for info in infos:
         name = info.filename
         shown = name[:40]
         if not name.endswith(".npy") or not name[:-4].isidentifier():
-            raise _Invalid(f"not a state file: entry '{shown}' is not a numpy array of a state")
+            raise StateFileError(f"not a state file: entry '{shown}' is not a numpy array of a state")
         if name[:-4] in entries:
-            raise _Invalid(f"not a state file: entry '{shown}' appears twice")
+            raise StateFileError(f"not a state file: entry '{shown}' appears twice")
         if info.flag_bits & 0x1:
-            raise _Invalid(f"not a state file: entry '{shown}' is encrypted")
+            raise StateFileError(f"not a state file: entry '{shown}' is encrypted")
         if info.compress_type != zipfile.ZIP_STORED:
-            raise _Invalid(f"not a state file: entry '{shown}' is compressed (state files are written "
+            raise StateFileError(f"not a state file: entry '{shown}' is compressed (state files are written "
                            "uncompressed; it is not inflated)")
         declared += info.file_size
         entries[name[:-4]] = info
     if declared > file_size:
-        raise _Invalid(f"not a state file: its entries declare {declared} bytes, the file holds {file_size}")
+        raise StateFileError(f"not a state file: its entries declare {declared} bytes, the file holds {file_size}")
     if "meta" not in entries:
-        raise _fail("meta", "is missing (not a state file)")
+        raise invalid("meta", "is missing (not a state file)")
     return entries
 
 
@@ -328,19 +188,19 @@ def _read_array(zf: zipfile.ZipFile, info: zipfile.ZipInfo, field: str, shape: t
             else:
                 raise ValueError(f"npy format version {version}")
         except (ValueError, SyntaxError, EOFError, TypeError) as exc:
-            raise _fail(field, f"is not a readable numpy array ({str(exc)[:80]})") from None
+            raise invalid(field, f"is not a readable numpy array ({str(exc)[:80]})") from None
         if found.hasobject or found.fields is not None or found.subdtype is not None:
-            raise _fail(field, f"has dtype {found.str}, not plain numbers")
+            raise invalid(field, f"has dtype {found.str}, not plain numbers")
         if dtype is not None and (found.kind, found.itemsize) != (dtype.kind, dtype.itemsize):
-            raise _fail(field, f"has dtype {found.str}, expected {dtype.str}")
+            raise invalid(field, f"has dtype {found.str}, expected {dtype.str}")
         if shape is not None and tuple(found_shape) != shape:
-            raise _fail(field, f"has shape {tuple(found_shape)}, the configuration implies {shape}")
+            raise invalid(field, f"has shape {tuple(found_shape)}, the configuration implies {shape}")
         nbytes = math.prod(found_shape) * found.itemsize
         if fp.tell() + nbytes != info.file_size:
-            raise _fail(field, f"holds {info.file_size - fp.tell()} bytes of data, its shape needs {nbytes}")
+            raise invalid(field, f"holds {info.file_size - fp.tell()} bytes of data, its shape needs {nbytes}")
         data = fp.read(nbytes)
     if len(data) != nbytes:  # pragma: no cover - zipfile checks the size and CRC
-        raise _fail(field, "is truncated")
+        raise invalid(field, "is truncated")
     native = found.newbyteorder("=") if found.byteorder in "<>" else found
     arr = np.frombuffer(data, dtype=found).astype(native, copy=True)
     return arr.reshape(found_shape, order="F" if fortran else "C")
@@ -348,24 +208,14 @@ def _read_array(zf: zipfile.ZipFile, info: zipfile.ZipInfo, field: str, shape: t
 
 def _read_meta(zf: zipfile.ZipFile, info: zipfile.ZipInfo) -> Any:
     if info.file_size > MAX_META_BYTES + _NPY_PREAMBLE:
-        raise _fail("meta", f"declares {info.file_size} bytes (at most {MAX_META_BYTES})")
+        raise invalid("meta", f"declares {info.file_size} bytes (at most {MAX_META_BYTES})")
     arr = _read_array(zf, info, "meta", (), None)
     if arr.dtype.kind != "U":
-        raise _fail("meta", f"must be a JSON text, found an array of dtype {arr.dtype.str}")
+        raise invalid("meta", f"must be a JSON text, found an array of dtype {arr.dtype.str}")
     try:
         return json.loads(str(arr[()]))
     except (ValueError, RecursionError) as exc:
-        raise _fail("meta", f"is not valid JSON ({str(exc)[:80]})") from None
-
-
-def _check_values(arrays: dict[str, np.ndarray], k: int) -> None:
-    for name, arr in arrays.items():
-        if arr.dtype.kind == "f" and not np.isfinite(arr).all():
-            raise _fail(f"arrays.{name}", "holds NaN or infinite values (a bank's state never does)")
-    for name, low, high in (("ready_at", 0, k), ("repairs", 0, _MAX_COUNT)):
-        counts = arrays.get(name)
-        if counts is not None and counts.size > 0 and not (counts.min() >= low and counts.max() <= high):
-            raise _fail(f"arrays.{name}", f"must hold counts in [{low}, {high}]")
+        raise invalid("meta", f"is not valid JSON ({str(exc)[:80]})") from None
 
 
 Expected = tuple[tuple[int, ...], EstimatorOptions] | None
@@ -376,23 +226,23 @@ def _load(path: Path, fingerprint: Mapping[str, Any], expect: Expected) -> Estim
         # Without waiting: a FIFO put here after the caller's claim cannot block the read.
         fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | os.O_NOCTTY | getattr(os, "O_CLOEXEC", 0))
     except FileNotFoundError:
-        raise _Invalid("no such state file") from None
+        raise StateFileError("no such state file") from None
     except OSError as exc:
-        raise _Invalid(f"not a readable state file ({exc.strerror or exc})") from None
+        raise StateFileError(f"not a readable state file ({exc.strerror or exc})") from None
     st = os.fstat(fd)
     if not stat.S_ISREG(st.st_mode):
         os.close(fd)
-        raise _Invalid(f"not a readable state file ({_file_kind(st.st_mode)}, not a regular file)")
+        raise StateFileError(f"not a readable state file ({_file_kind(st.st_mode)}, not a regular file)")
     with os.fdopen(fd, "rb") as fh:
         try:
             zf = zipfile.ZipFile(fh)
         except (zipfile.BadZipFile, zipfile.LargeZipFile, ValueError, OSError, EOFError) as exc:
-            raise _Invalid(f"not a readable state file (not a zip archive: {str(exc)[:80]})") from None
+            raise StateFileError(f"not a readable state file (not a zip archive: {str(exc)[:80]})") from None
         with zf:
             try:
                 return _load_archive(zf, st.st_size, fingerprint, expect)
             except (zipfile.BadZipFile, OSError, EOFError) as exc:  # a CRC or size mismatch while reading
-                raise _Invalid(f"not a readable state file ({str(exc)[:80]})") from None
+                raise StateFileError(f"not a readable state file ({str(exc)[:80]})") from None
 
 
 def _load_archive(
@@ -400,19 +250,19 @@ def _load_archive(
 ) -> EstimatorState:
     entries = _entries(zf, file_size)
     meta = _read_meta(zf, entries["meta"])
-    _check_format(meta)
-    meta = _object(meta, "", _META_KEYS)
-    sizes, options = _check_sizes(meta["sizes"]), _check_options(meta["options"])
-    _check_expected(sizes, options, expect)
+    check_format(meta)
+    meta = json_object(meta, "", _META_KEYS)
+    sizes, options = check_sizes(meta["sizes"]), check_options(meta["options"])
+    check_expected(sizes, options, expect)
     # Compare as JSON would store it (tuples become lists).
     if meta["fingerprint"] != json.loads(json.dumps(fingerprint)):
-        raise _Invalid(_ANOTHER)
-    counters = _check_counters(meta["bank_counters"], options)
-    samples_used = _int(meta["samples_used"], "samples_used", 0, _MAX_COUNT)
+        raise StateFileError(ANOTHER_CONFIGURATION)
+    counters = check_counters(meta["bank_counters"], options)
+    samples_used = integer(meta["samples_used"], "samples_used", 0, MAX_COUNT)
     zsum, zsq = _check_sums(meta, len(sizes))
-    implied = _implied_bytes(sizes, counters)
+    implied = implied_bytes(sizes, counters)
     if implied > 64 * file_size + (16 << 20):  # the arrays of such a state would be in the file
-        raise _fail(
+        raise invalid(
             "bank_counters.cap", f"implies about {implied} bytes of estimator state; the file holds {file_size}"
         )
     arrays = _read_arrays(zf, entries, sizes, options, counters)
@@ -422,7 +272,7 @@ def _load_archive(
              "arrays": arrays}
         )
     except (KeyError, TypeError, ValueError, IndexError) as exc:  # the second line: the bank's own checks
-        raise _Invalid(f"inconsistent estimator state ({str(exc)[:120]})") from None
+        raise StateFileError(f"inconsistent estimator state ({str(exc)[:120]})") from None
     return EstimatorState(bank=bank, samples_used=samples_used, output_sum=zsum, output_sum_squares=zsq)
 
 
@@ -434,22 +284,22 @@ def _read_arrays(
     size checked before anything is read, then each header and every value."""
     names = set(entries) - {"meta"}
     if "ready" not in entries:
-        raise _fail("arrays.ready", "is missing")
+        raise invalid("arrays.ready", "is missing")
     ready = _read_array(zf, entries["ready"], "arrays.ready", (len(sizes),), np.dtype(bool))
-    layout = state_layout(sizes, options, counters, waiting=not bool(ready.all()))
+    layout = EstimatorBank.state_layout(sizes, options, counters, waiting=not bool(ready.all()))
     missing, extra = sorted(set(layout) - names), sorted(names - set(layout))
     if missing:
-        raise _fail(f"arrays.{missing[0]}", "is missing")
+        raise invalid(f"arrays.{missing[0]}", "is missing")
     if extra:
-        raise _fail(f"arrays.{extra[0]}", "is not part of this configuration's state")
+        raise invalid(f"arrays.{extra[0]}", "is not part of this configuration's state")
     for name, (want_shape, want_dtype) in layout.items():  # declared sizes, before reading anything
         nbytes = math.prod(want_shape) * want_dtype.itemsize
         declared = entries[name].file_size
         if not nbytes < declared <= nbytes + _NPY_PREAMBLE:
-            raise _fail(f"arrays.{name}", f"declares {declared} bytes; the configuration implies an array "
+            raise invalid(f"arrays.{name}", f"declares {declared} bytes; the configuration implies an array "
                         f"{want_shape} of {nbytes} bytes")
     arrays = {name: _read_array(zf, entries[name], f"arrays.{name}", *layout[name]) for name in sorted(names)}
-    _check_values(arrays, counters["k"])
+    check_values(arrays, counters["k"])
     return arrays
 
 
@@ -466,7 +316,7 @@ def load_state(
     path = Path(path)
     try:
         return _load(path, fingerprint, expect)
-    except _Invalid as exc:
+    except StateFileError as exc:
         raise StateFileError(f"{path}: {exc}") from None
 
 
