@@ -93,11 +93,12 @@ def add_operator_commands(sub: Any) -> None:
                     help="show a finished replay's outputs (the --out DIR of rls-uncertainty replay)")
     db.add_argument("--reference", metavar="FILE", help="YAML of reference values by parameter name (CZ_alpha: -3.9)")
     db.set_defaults(func=_dashboard)
-    st = sub.add_parser("status", help="the node's inputs, samples and models from /diagnostics, refreshed in place")
+    st = sub.add_parser("status", help="the node's inputs, samples and models from /diagnostics, refreshed in place until Ctrl-C")
     st.add_argument("--once", action="store_true", help="print one report and exit")
     st.add_argument("--node", default="/rls_estimator", help=node_help)
     st.add_argument("--timeout", type=real(0.0, low_open=True), default=5.0,
-                    help="seconds to wait for the node's first report (default 5)")
+                    help="seconds to wait for the node's first report (exit status 1 without one), and of silence "
+                         "after which the node is said gone while status waits for its return (default 5)")
     st.set_defaults(func=_status)
     for name, text in (("enable", "start estimating (~/enable true)"),
                        ("disable", "stop estimating; samples still counted (~/enable false)"),
