@@ -13,10 +13,11 @@ node in the root namespace, as always, and the fully qualified name under a name
 
 * ``inputs``: ``recent_window_s``, then per stream ``required``, ``publishers``, ``rate_hz``,
   ``age_s`` (seconds since the stream's newest message arrived, on the node's steady clock:
-  neither the stamps' origin nor ``/clock`` matters), the cumulative ``received``, ``accepted``, ``expired``, ``missing``, the counts of
-  the recent window ``recent.rejected``, ``recent.missing``, ``recent.expired``, and the
-  cumulative ``rejected.<reason>``. WARN when a required stream is silent or stale (older than
-  ``max(1 s, 2 max_gap)``; with a hint when no publisher matched), or when messages were
+  neither the stamps' origin nor ``/clock`` matters), the cumulative ``received``,
+  ``accepted``, ``expired``, ``missing``, the counts of the recent window ``recent.rejected``,
+  ``recent.missing``, ``recent.expired``, and the cumulative ``rejected.<reason>``. WARN
+  when a required stream is silent or stale (older than ``max(1 s, 2 max_gap)``; with a hint
+  when no publisher matched), or when messages were
   rejected, missing or expired *within the recent window*: one dropped packet warns for
   ``window_s`` seconds, not for the rest of the flight (the cumulative counters stay beside).
   ERROR when the data path is misconfigured (:mod:`.alerts`: every message of a needed stream
