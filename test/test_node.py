@@ -413,8 +413,9 @@ def _declared_as_written(tester):
     each parameter's range (or choices), meaning and read-only flag are its field's."""
     from rcl_interfaces.srv import DescribeParameters
 
+    from rls_uncertainty.datapath.config import InputConfig
     from rls_uncertainty.schema import settings
-    from rls_uncertainty.settings.config import InputConfig, NodeConfig
+    from rls_uncertainty.settings.config import NodeConfig
     from rls_uncertainty.settings.parameters import PARAMETERS
 
     names = [p.name for p in PARAMETERS]

@@ -12,10 +12,11 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from ..ros.environment import discovery_environment
 from .hub import Hub, Source
 from .model import Sample
 from .server import Broadcaster, Inbox, asset_table, bind, check_assets, serve
-from .settings import ServerOptions, check_options, discovery_environment, full_node_name, load_reference
+from .settings import ServerOptions, check_options, full_node_name, load_reference
 
 if TYPE_CHECKING:  # annotations only: rclpy and the bag library are imported where they are used
     from .replay_source import ReplaySource

@@ -15,9 +15,10 @@ from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
+from ..datapath.outputs import FIT_ARRAYS, ArrayKey
+from ..ros.health import HealthTracker, StatusTuple, parse_statuses
 from .fit import Fit, Identifiability, fit_of, identifiability_of, quality_json
-from .health import HealthTracker, StatusTuple, parse_statuses
-from .model import FIT_ARRAYS, MAX_PENDING, ArrayKey, ModelHistory, Pairing, Sample, array_update, sample_columns
+from .model import MAX_PENDING, ModelHistory, Pairing, Sample, array_update, sample_columns
 
 __all__ = ["Source", "Hub"]
 

@@ -39,8 +39,8 @@ from rclpy.signals import SignalHandlerOptions
 from std_msgs.msg import Float64MultiArray
 
 from ..datapath.cdr import FLOAT64_MULTIARRAY, decode
-from .health import statuses_of
-from .model import ArrayKey, array_key
+from ..datapath.outputs import ArrayKey, array_key
+from ..ros.health import statuses_of
 from .settings import split_node_name
 
 __all__ = ["RosSource"]

@@ -44,6 +44,7 @@ from std_msgs.msg import Float64MultiArray, Header
 from std_srvs.srv import SetBool, Trigger
 
 from ..datapath.cdr import decode
+from ..datapath.diagnostics import DiagnosticsPolicy, Snapshot, malformed_reason, malformed_warning
 from ..datapath.inputs import MESSAGE_TYPES, STREAMS, feed, message_class
 from ..datapath.outputs import HEADER, NODE_NAME, OutputLayout
 from ..datapath.pipeline import Pipeline, SampleOutput, StateFileError
@@ -51,7 +52,6 @@ from ..errors import ConfigError
 from ..settings.parameters import PARAMETERS, Parameter, node_config, pipeline_config
 from ..settings.sources import startup_parameters
 from ..state_file import StateFileClaim, claim, set_aside
-from .diagnostics import DiagnosticsPolicy, Snapshot, malformed_reason, malformed_warning
 
 __all__ = ["EstimatorNode", "main", "NODE_NAME"]
 

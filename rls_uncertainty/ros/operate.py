@@ -26,9 +26,9 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from std_srvs.srv import SetBool, Trigger
 
-from ..dashboard.health import LEVELS, HealthTracker, NodeHealth, parse_statuses, statuses_of
-from ..dashboard.model import METHODS, array_key
-from ..dashboard.settings import where
+from ..datapath.outputs import METHODS, array_key
+from .environment import where
+from .health import LEVELS, HealthTracker, NodeHealth, parse_statuses, statuses_of
 
 __all__ = ["call", "status", "format_health", "published_methods", "SERVICES"]
 
@@ -39,7 +39,7 @@ SERVICES: dict[str, tuple[str, Any, bool | None]] = {
     "reset": ("reset", Trigger, None),
 }
 _CLEAR = "\x1b[H\x1b[2J"
-# How the status names each estimation method (rls_uncertainty.dashboard.model.METHODS).
+# How the status names each estimation method (rls_uncertainty.datapath.outputs.METHODS).
 METHOD_TEXT = {"time": "time domain (RLS, ~/M/estimates)", "frequency": "frequency domain (~/M/frequency/estimates)"}
 
 
@@ -100,7 +100,7 @@ def _table(header: list[str], rows: list[list[str]]) -> list[str]:
 
 
 def published_methods(topics: Iterable[str], node_name: str) -> list[str]:
-    """The estimation methods (:data:`.dashboard.model.METHODS`) whose ``estimates`` topic
+    """The estimation methods (:data:`rls_uncertainty.datapath.outputs.METHODS`) whose ``estimates`` topic
     ``node_name`` has among ``topics`` (the graph's topic names; the node creates its
     publishers at start, before any sample)."""
     prefix = node_name.rstrip("/") + "/"

@@ -102,7 +102,7 @@ class EstimatorProcess:
 def _counters(statuses: Sequence[tuple[str, int, str, Mapping[str, str]]]) -> dict[str, Any]:
     """:func:`..results.accounting`'s form of the node's ``/diagnostics`` (its ``inputs`` and
     ``samples`` statuses)."""
-    from ..dashboard.health import parse_statuses  # noqa: PLC0415 - the reader of the node's keys
+    from ..ros.health import parse_statuses  # noqa: PLC0415 - the reader of the node's keys
 
     health = parse_statuses(statuses, NODE_NAME)
     if health is None:
@@ -149,7 +149,7 @@ class _Outputs:
         self.stamps.append(int(msg.stamp.sec) * 1_000_000_000 + int(msg.stamp.nanosec))
 
     def _diagnostics(self, msg: Any) -> None:
-        from ..dashboard.health import statuses_of  # noqa: PLC0415
+        from ..ros.health import statuses_of  # noqa: PLC0415
 
         statuses = statuses_of(msg)
         if any(name.startswith(f"{NODE_NAME}: ") for name, *_ in statuses):
