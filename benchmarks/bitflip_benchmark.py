@@ -70,7 +70,7 @@ def where(offset: int, layout: list[tuple[int, int, str]]) -> str:
 def replay(bag: Path, out: Path) -> tuple[int, str]:
     """Exit status and the last line of stderr of a replay of ``bag`` into ``out``."""
     cmd = [sys.executable, "-m", "rls_uncertainty.cli", "replay", str(bag), "--config", "t2", "--out", str(out),
-           "--no-plots", "--quiet"]
+           "--no-figures", "--quiet"]
     try:
         proc = subprocess.run(cmd, check=False, capture_output=True, text=True, timeout=300, env=dict(os.environ))
     except subprocess.TimeoutExpired:

@@ -113,7 +113,7 @@ def replay_memory(minutes_list: list[float], keep: str | None, pythonpath: str |
                                 str(bag), str(minutes)], check=True, cwd=ROOT)
             if not est.exists():
                 subprocess.run([sys.executable, "-m", "rls_uncertainty.cli", "replay", str(bag), "--config",
-                                str(ROOT / "config" / "t2.yaml"), "--out", str(est), "--quiet", "--no-plots"],
+                                str(ROOT / "config" / "t2.yaml"), "--out", str(est), "--quiet", "--no-figures"],
                                check=True, cwd=ROOT, stdout=subprocess.DEVNULL)
             t0 = time.monotonic()
             proc = subprocess.Popen([sys.executable, "-m", "rls_uncertainty.cli", "dashboard", "--port", "0",

@@ -6,35 +6,48 @@ parameters; frequency domain the same without the bias: 2, 3, 2, 5, 3, 3), 50 la
   1. the time-domain EstimatorBank: update plus every output a node publishes (estimates,
      corrected and conventional standard errors);
   2. the FrequencyBank on the default grid (0.1-1.5 Hz every 0.04 Hz, 36 frequencies) and on
-     the T-2 grid (0.2-2.2 Hz, 51): the update alone (transform and lag sums), and update plus
-     all outputs when they are evaluated every sample, every 5 and every 50 samples
-     (``every``; the mean per sample over a whole period);
+     the T-2 grid (0.2-2.2 Hz, 51): the update alone (transform and lag sums), one evaluation
+     (estimates and both covariances, Eqs. F4-F10, after an update), and update plus all
+     outputs when they are evaluated every sample, every 5 and every 50 samples (``every``; the
+     mean per sample over a whole period);
   3. the evaluation against the number of frequencies (36 to 400);
   4. the memory of each bank's state;
   5. the whole pipeline (``replay.run_pipeline``: sampling, differentiation, aerodynamics, both
      estimators, convergence, identifiability) per sample used, with ``estimator.method`` time,
      both and frequency (``frequency.every`` 1 and 5), on the bundled T-2 bag (``config/t2.yaml``:
      2 models, 51 frequencies) and, when ``../shared/flight_data`` is there, the Twin Otter
-     lateral recording f1_017 (3 models, 36 frequencies); best of three runs (wall time).
+     lateral recording f1_017 (3 models, 36 frequencies); best of three runs (wall time), and
+     ``both`` with ``frequency.every: 5`` as a multiple of ``time``.
 
 The rows are ``estimator_benchmark.maneuver``'s (multisine-like regressors, AR(1) noise).
 Median (and 99th percentile) over 2000 samples after 300 of warm-up. numpy's BLAS threads as
 the environment sets them (``OPENBLAS_NUM_THREADS``; printed).
 
 Run: .venv/bin/python benchmarks/frequency_benchmark.py
+     .venv/bin/python benchmarks/frequency_benchmark.py --against OTHER_SRC --rounds 2
+
+``--against`` runs the whole benchmark on this checkout's package and on the one in the source
+tree OTHER_SRC alternately, each run in its own process (the order alternates between rounds):
+a before/after comparison in one session, on the same machine load.
 """
 
 from __future__ import annotations
 
+import argparse
 import gc
 import os
+import subprocess
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+# RLS_BENCH_SRC (set by --against): the package of that source tree, imported before the
+# time-domain benchmark's module (which puts this checkout first on the path) can load ours.
+sys.path.insert(0, os.environ.get("RLS_BENCH_SRC") or str(Path(__file__).resolve().parents[1]))
+import rls_uncertainty.estimator  # cached: later imports use this tree's package
+
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from estimator_benchmark import RATE, SIZES, maneuver  # the time-domain benchmark's six models and rows
 
@@ -82,6 +95,24 @@ def frequency_bank(options: FrequencyOptions, X: np.ndarray, z: np.ndarray) -> F
     return bank
 
 
+def evaluation(options: FrequencyOptions, X: np.ndarray, z: np.ndarray) -> float:
+    """Median us of one evaluation (estimates, both standard errors) after each update."""
+    bank = frequency_bank(options, X, z)
+    times = []
+    gc.disable()
+    try:
+        for k in range(WARM, WARM + SAMPLES):
+            bank.update(X[k, :, 1:], z[k])
+            t0 = time.perf_counter()
+            bank.theta_all()
+            bank.standard_errors_all("corrected")
+            bank.standard_errors_all("conventional")
+            times.append(time.perf_counter() - t0)
+    finally:
+        gc.enable()
+    return float(np.median(times) * 1e6)
+
+
 def frequency_domain(options: FrequencyOptions, X: np.ndarray, z: np.ndarray, outputs: bool) -> tuple[float, float]:
     bank = frequency_bank(options, X, z)
 
@@ -118,7 +149,8 @@ def state_bytes(bank: object) -> int:
 
 
 def main() -> None:
-    print(f"OPENBLAS_NUM_THREADS={os.environ.get('OPENBLAS_NUM_THREADS', '(unset)')}, numpy {np.__version__}")
+    print(f"OPENBLAS_NUM_THREADS={os.environ.get('OPENBLAS_NUM_THREADS', '(unset)')}, numpy {np.__version__}, "
+          f"package {Path(rls_uncertainty.estimator.__file__).parents[1]}")
     X, z = maneuver(WARM + SAMPLES)
     med, p99 = time_domain(X, z)
     print(f"1. time domain, six models, 50 lags, update + all outputs: {med:7.1f} us (p99 {p99:.1f})")
@@ -127,7 +159,7 @@ def main() -> None:
     for label, (lo, hi, step) in grids.items():
         base = FrequencyOptions(rate_hz=RATE, f_min=lo, f_max=hi, f_step=step)
         upd = frequency_domain(base, X, z, outputs=False)
-        line = f"   {label:28s} update {upd[0]:6.1f}"
+        line = f"   {label:28s} update {upd[0]:6.1f} | evaluation {evaluation(base, X, z):7.1f}"
         for every in (1, 5, 50):
             opts = FrequencyOptions(rate_hz=RATE, f_min=lo, f_max=hi, f_step=step, every=every)
             med, p99 = frequency_domain(opts, X, z, outputs=True)
@@ -154,7 +186,7 @@ def pipeline_costs() -> None:
 
     from rls_uncertainty.offline.bags import convert, read_inputs
     from rls_uncertainty.offline.replay import run_pipeline
-    from rls_uncertainty.settings.config import load_parameters_file, pipeline_config
+    from rls_uncertainty.settings import load_parameters_file, pipeline_config
 
     variants = {"time": {}, "both": {"estimator.method": "both"}, "both, every 5": {
         "estimator.method": "both", "frequency.every": 5}, "frequency": {"estimator.method": "frequency"}}
@@ -167,16 +199,33 @@ def pipeline_costs() -> None:
         print("5. the pipeline per sample used (us, best of 3; sampling to outputs, no files):")
         for label, (bag, config_name) in cases.items():
             messages, _ = read_inputs(bag)
-            line = f"   {label:38s}"
+            line, costs = f"   {label:38s}", {}
             for name, extra in variants.items():
                 config = pipeline_config({**load_parameters_file(config_name), **extra})
                 best = min(run_pipeline(messages, config, record=False, keep_outputs=False).wall_seconds
                            for _ in range(3))
                 used = run_pipeline(messages, config, record=False, keep_outputs=False).counters()["samples_used"]
                 line += f" | {name}: {best / used * 1e6:6.0f}"
-            print(line)
+                costs[name] = best / used
+            print(line + f" | both, every 5 / time: {costs['both, every 5'] / costs['time']:.2f}")
+
+
+def against(other: str, rounds: int) -> None:
+    """This checkout and ``other`` alternately, each in its own process (module docstring)."""
+    trees = [("this checkout", str(Path(__file__).resolve().parents[1])), (other, str(Path(other).resolve()))]
+    for r in range(rounds):
+        for label, src in trees if r % 2 == 0 else trees[::-1]:
+            print(f"== {label} (round {r + 1} of {rounds})", flush=True)
+            subprocess.run([sys.executable, __file__], env={**os.environ, "RLS_BENCH_SRC": src}, check=True)
 
 
 if __name__ == "__main__":
-    main()
-    pipeline_costs()
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--against", metavar="OTHER_SRC", help="also run the package of this source tree, alternately")
+    parser.add_argument("--rounds", type=int, default=2, help="with --against: runs of each tree (default 2)")
+    args = parser.parse_args()
+    if args.against:
+        against(args.against, args.rounds)
+    else:
+        main()
+        pipeline_costs()

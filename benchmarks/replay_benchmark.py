@@ -21,7 +21,7 @@ from pathlib import Path
 
 from rls_uncertainty.offline.bags import convert, read_inputs
 from rls_uncertainty.offline.replay import replay, run_pipeline
-from rls_uncertainty.settings.config import load_parameters_file, pipeline_config
+from rls_uncertainty.settings import load_parameters_file, pipeline_config
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -37,7 +37,13 @@ class RlsUncertaintyError(Exception):
 
 
 class ConfigError(RlsUncertaintyError, ValueError):
-    """A configuration value is missing or invalid; the message says which and why."""
+    """A configuration value is missing or invalid; the message says which and why.
+    ``parameter``: the setting refused (``inputs.max_gap``), when one is, so that a caller
+    can say where its value came from."""
+
+    def __init__(self, message: str, *, parameter: str | None = None) -> None:
+        super().__init__(message)
+        self.parameter = parameter
 
 
 class StateFileError(RlsUncertaintyError, ValueError):

@@ -47,7 +47,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from rls_uncertainty.datapath.outputs import NODE_NAME  # noqa: E402
-from rls_uncertainty.settings.config import load_parameters_file, pipeline_config  # noqa: E402
+from rls_uncertainty.settings import load_parameters_file, pipeline_config  # noqa: E402
 
 LAYOUTS = ROOT / "layouts"
 CONFIGS = ("t2", "twin_otter_lateral", "twin_otter_longitudinal")

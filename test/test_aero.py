@@ -18,7 +18,7 @@ from rls_uncertainty.aero.coefficients import (
 )
 from rls_uncertainty.datapath.limits import PlausibilityLimits
 from rls_uncertainty.errors import Refused
-from rls_uncertainty.settings.config import DEFAULT_MODELS, load_aircraft
+from rls_uncertainty.settings import DEFAULT_MODELS, load_aircraft
 
 T2 = load_aircraft("t2")
 

@@ -14,7 +14,7 @@ from rls_uncertainty.datapath.alerts import MAX_LINE, MIN_MESSAGES, SHOWN, Alert
 from rls_uncertainty.datapath.inputs import feed
 from rls_uncertainty.datapath.pipeline import Pipeline
 from rls_uncertainty.offline.bags import read_inputs
-from rls_uncertainty.settings.config import load_parameters_file, pipeline_config
+from rls_uncertainty.settings import load_parameters_file, pipeline_config
 
 from conftest import ROOT
 

@@ -163,7 +163,7 @@ def test_every_mcap_the_package_writes_carries_valid_crcs(tmp_path):
     assert cli.main(["make-bag", "--out", str(tmp_path / "made")]) == 0
     assert cli.main(["convert", str(FLIGHT_DATA / "totter_f1_017"), "--mapping", str(MAPPING), "--out",
                      str(tmp_path / "converted")]) == 0
-    assert cli.main(["replay", str(BUNDLED), "--config", "t2", "--out", str(tmp_path / "replayed"), "--no-plots",
+    assert cli.main(["replay", str(BUNDLED), "--config", "t2", "--out", str(tmp_path / "replayed"), "--no-figures",
                      "--quiet"]) == 0
     for path in (BUNDLED / "t2_maneuver.mcap", tmp_path / "made" / "made.mcap",
                  tmp_path / "converted" / "converted.mcap", tmp_path / "replayed" / "estimates.mcap"):
@@ -397,8 +397,8 @@ BAD_MAPPINGS = [
     ("no joints", {"control_surfaces": {"topic": "/fcc/air_data"}}, "input 'control_surfaces': needs 'joints"),
     ("a list at the top", "- imu\n- airspeed\n", "expected a mapping at the top level"),
     ("an empty file", "", "expected a mapping at the top level"),
-    ("a YAML syntax error", "imu:\n\t- topic\n", "not valid YAML: found character '\\t' that cannot start any token "
-                                               "(line 2, column 1)"),
+    ("a YAML syntax error", "imu:\n\t- topic\n", "mapping.yaml:2:1: not valid YAML: found character '\\t' that cannot "
+                                               "start any token"),
     ("not UTF-8", b"imu: {topic: /fcc/imu}\n\xff\xfe\n", "not UTF-8 text (byte 23)"),
 ]
 

@@ -15,7 +15,7 @@ from rls_uncertainty import cli
 from rls_uncertainty.campaign import CampaignSettings, campaign_to, load_maneuvers
 from rls_uncertainty.campaign.figure import campaign_figures
 from rls_uncertainty.executors import LocalProcesses
-from rls_uncertainty.settings.config import node_config, pipeline_config
+from rls_uncertainty.settings import node_config, pipeline_config
 from rls_uncertainty.testing import parameters, replay_bag
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -73,7 +73,7 @@ def _file(tmp_path, spans):
 def test_no_maneuver_estimated_is_exit_status_1(tmp_path, capsys):
     f = _file(tmp_path, [("x", 0.0, 0.2), ("y", 0.2, 0.4)])
     assert cli.main(["campaign", str(BUNDLED), "--maneuvers", str(f), "--out", str(tmp_path / "o"), "--quiet",
-                     "--workers", "1", "--no-plots"]) == 1
+                     "--workers", "1", "--no-figures"]) == 1
     assert "0 of 2 maneuvers used" in capsys.readouterr().out
 
 
@@ -112,14 +112,18 @@ def test_fig12_gets_each_maneuver_s_values_and_table_4_s_mean_and_scatter(tmp_pa
             np.testing.assert_array_equal(kw["se_corrected_all"][i], [got[n].se_corrected_all for n in names])
 
 
-def test_campaign_writes_fig12_in_every_format_asked_for(tmp_path, maneuvers_file):
+def test_campaign_writes_fig12_in_every_format_asked_for(tmp_path, maneuvers_file, capsys):
     """--figures png,svg,pdf gives each model's Fig. 12 in the three formats; --dpi bad is one
-    line naming it, exit 2, nothing written."""
+    line naming it and its range (FigureOptions' declaration), exit 2, nothing written."""
     out = tmp_path / "o"
     argv = ["campaign", str(BUNDLED), "--maneuvers", str(maneuvers_file), "--config", "t2", "--out", str(out),
             "--quiet", "--workers", "1", "--figures", "png,svg,pdf"]
     assert cli.main(argv) == 0
     want = {f"fig12_{m}.{f}" for m in ("CZ", "Cm") for f in ("png", "svg", "pdf")}
     assert {p.name for p in out.glob("fig12_*")} == want
-    assert cli.main([*argv[:-2], "--out", str(tmp_path / "x"), "--dpi", "5"]) == 2
+    capsys.readouterr()
+    with pytest.raises(SystemExit) as exc:
+        cli.main([*argv[:-2], "--out", str(tmp_path / "x"), "--dpi", "5"])
+    err = capsys.readouterr().err
+    assert exc.value.code == 2 and len(err.splitlines()) == 1 and "--dpi: must be an integer in [50, 1200]" in err
     assert not (tmp_path / "x").exists()

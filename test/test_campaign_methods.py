@@ -20,7 +20,7 @@ from rls_uncertainty.campaign import CampaignSettings, Maneuver, campaign_to, fr
 from rls_uncertainty.campaign.figure import campaign_figures
 from rls_uncertainty.campaign.run import run_maneuver
 from rls_uncertainty.executors import LocalProcesses
-from rls_uncertainty.settings.config import node_config, pipeline_config
+from rls_uncertainty.settings import node_config, pipeline_config
 from rls_uncertainty.testing import parameters
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -47,7 +47,7 @@ def both(bags, tmp_path_factory):
     """The campaign over ``bags`` with --method both (no plots)."""
     out = tmp_path_factory.mktemp("both") / "out"
     assert cli.main(["campaign", *map(str, bags), "--config", CONFIG, "--method", "both", "--out", str(out),
-                     "--workers", "1", "--quiet", "--no-plots"]) == 0
+                     "--workers", "1", "--quiet", "--no-figures"]) == 0
     return out
 
 
@@ -58,7 +58,7 @@ def replays(bags, tmp_path_factory):
     for bag in bags:
         out = tmp_path_factory.mktemp("replay") / bag.name
         assert cli.main(["replay", str(bag), "--config", CONFIG, "--method", "both", "--out", str(out), "--quiet",
-                         "--no-plots"]) == 0
+                         "--no-figures"]) == 0
         dirs.append(out)
     return dirs
 
@@ -124,7 +124,7 @@ def test_table4_frequency_rows_are_numpys_mean_and_scatter_of_the_frequency_rows
 def test_method_time_gives_the_time_rows_of_both_without_a_method_column_in_the_text(bags, both, tmp_path):
     out = tmp_path / "time"
     assert cli.main(["campaign", *map(str, bags), "--config", CONFIG, "--out", str(out), "--workers", "1",
-                     "--quiet", "--no-plots"]) == 0
+                     "--quiet", "--no-figures"]) == 0
     lines = (out / "maneuvers.csv").read_text().splitlines()
     both_lines = (both / "maneuvers.csv").read_text().splitlines()
     assert lines[0] == both_lines[0]

@@ -14,7 +14,7 @@ import pytest
 
 from rls_uncertainty.campaign import MANEUVER_COLUMNS, CampaignSettings, Maneuver, ParameterResult
 from rls_uncertainty.campaign.run import run_maneuver
-from rls_uncertainty.settings.config import node_config, pipeline_config
+from rls_uncertainty.settings import node_config, pipeline_config
 from rls_uncertainty.testing import parameters, replay_bag
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -1,6 +1,6 @@
-"""The `rls-uncertainty` command line (rls_uncertainty/cli.py): subcommands, outputs, and
-every bad input ending in a one-line error with exit status 2 (programming errors keep
-their traceback). No DDS."""
+"""The `rls-uncertainty` command line (rls_uncertainty/cli/): subcommands, outputs, one
+vocabulary of setting flags made from the options classes, and every bad input ending in a
+one-line error with exit status 2 (programming errors keep their traceback). No DDS."""
 
 import csv
 import math
@@ -12,7 +12,10 @@ import pytest
 from bag_samples import fails, fti_bag, tree, write_mapping
 
 from rls_uncertainty import cli
+from rls_uncertainty.cli.offline import replay_params
+from rls_uncertainty.cli.simulation import simulation_options
 from rls_uncertainty.errors import ConfigError
+from rls_uncertainty.estimator import EstimatorOptions
 
 ROOT = Path(__file__).resolve().parents[1]
 BUNDLED = ROOT / "bags" / "t2_maneuver"
@@ -46,7 +49,7 @@ def _setup(command, tmp_path):
         return ["convert", str(src), "--mapping", str(write_mapping(inputs))], inputs
     bag = inputs / "t2_maneuver"
     shutil.copytree(BUNDLED, bag)
-    return ["replay", str(bag), "--config", "t2", "--models", "CZ", "--no-plots", "--quiet"], inputs
+    return ["replay", str(bag), "--config", "t2", "--models", "CZ", "--no-figures", "--quiet"], inputs
 
 
 def _expected_outputs(command, out):
@@ -138,7 +141,7 @@ def test_multisine_never_overwrites_a_file_without_force(tmp_path, capsys):
 
 def test_montecarlo_refuses_a_non_empty_output_before_running(tmp_path, capsys):
     (tmp_path / "table3.csv").write_bytes(b"last week's table")
-    fails(capsys, ["montecarlo", "--runs", "2", "--levels", "5", "--out", str(tmp_path), "--jobs", "1"],
+    fails(capsys, ["montecarlo", "--runs", "2", "--levels", "5", "--out", str(tmp_path), "--workers", "1"],
           "not empty", "--force")
     assert [p.name for p in tmp_path.iterdir()] == ["table3.csv"]
     assert (tmp_path / "table3.csv").read_bytes() == b"last week's table"
@@ -151,13 +154,23 @@ BAD_ARGUMENTS = [
     (["simulate", "--seed", "-1"], "--seed"),
     (["simulate", "--forgetting", "0"], "--forgetting"),
     (["simulate", "--forgetting", "1.5"], "--forgetting"),
-    (["simulate", "--lags", "abc"], "--lags"),
+    (["simulate", "--forgetting", "0.3"], "argument --forgetting: must be a number in [0.5, 1] (estimator.forgetting)"),
+    (["replay", "{bag}", "--out", "{tmp}/r", "--quiet", "--forgetting", "0.3"],
+     "argument --forgetting: must be a number in [0.5, 1] (estimator.forgetting)"),
+    (["simulate", "--lag-span", "abc"], "--lag-span"),
+    (["simulate", "--lag-span", "0.001"], "'estimator.lag_span' = 0.001 s is less than one sample at rate 50 Hz"),
+    (["simulate", "--lags", "abc"], "--lags is now --lag-span SECONDS (lags / rate: 50 lags at 50 Hz = 1.0)"),
     (["montecarlo", "--out", "{tmp}/mc", "--runs", "0"], "--runs"),
     (["montecarlo", "--out", "{tmp}/mc", "--levels", "-5"], "--levels"),
-    (["montecarlo", "--out", "{tmp}/mc", "--lags", "-3"], "--lags"),
-    (["montecarlo", "--out", "{tmp}/mc", "--jobs", "0"], "--jobs"),
-    (["montecarlo", "--out", "{tmp}/mc", "--burn-in", "-1"], "--burn-in"),
-    (["simulate", "--burn-in", "few"], "--burn-in"),
+    (["montecarlo", "--out", "{tmp}/mc", "--lag-span", "-3"], "--lag-span"),
+    (["montecarlo", "--out", "{tmp}/mc", "--lags", "50"], "--lags is now --lag-span"),
+    (["montecarlo", "--out", "{tmp}/mc", "--workers", "0"], "--workers"),
+    (["montecarlo", "--out", "{tmp}/mc", "--jobs", "2"], "--jobs is now --workers"),
+    (["montecarlo", "--out", "{tmp}/mc", "--burn-in-span", "-1"], "--burn-in-span"),
+    (["montecarlo", "--out", "{tmp}/mc", "--burn-in", "20"], "--burn-in is now --burn-in-span SECONDS"),
+    (["simulate", "--burn-in-span", "few"], "--burn-in-span"),
+    (["replay", "{bag}", "--out", "{tmp}/r", "--quiet", "--no-plots"], "--no-plots is now --no-figures"),
+    (["campaign", "{bag}", "--out", "{tmp}/c", "--quiet", "--no-plots"], "--no-plots is now --no-figures"),
     (["replay", "{bag}", "--out", "{tmp}/r", "--quiet", "--burn-in-span", "few"], "--burn-in-span"),
     (["replay", "{bag}", "--out", "{tmp}/r", "--quiet", "--burn-in-span", "2001"],
      "estimator.residual_burn_in_span"),
@@ -191,7 +204,7 @@ BAD_ARGUMENTS = [
      "--lags is now --lag-span SECONDS (lags / rate: 50 lags at 50 Hz = 1.0)"),
     (["replay", "{bag}", "--out", "{tmp}/r", "--quiet", "--max-lags", "50"], "--max-lags is now --max-lag-span"),
     (["replay", "{bag}", "--out", "{tmp}/r", "--quiet", "--max-lag-span", "0"], "--max-lag-span"),
-    (["montecarlo", "--out", "{tmp}/mc", "--lags", "none"], "--lags"),
+    (["montecarlo", "--out", "{tmp}/mc", "--lag-span", "none"], "--lag-span"),
     (["replay", "{bag}", "--out", "{tmp}/r", "--quiet", "--forgetting", "nan"], "estimator.forgetting"),
     (["replay", "{bag}", "--out", "{tmp}/r", "--quiet", "--models", "XX"], "'XX'"),
     (["replay", "{bag}", "--out", "{tmp}/r", "--quiet", "--config", "{tmp}/missing.yaml"], "missing.yaml"),
@@ -342,22 +355,57 @@ def test_replay_reads_its_config_as_the_node_does(tmp_path, capsys):
     config = (ROOT / "config" / "t2.yaml").read_text() + "planner:\n  ros__parameters:\n    speed: 3\n"
     (tmp_path / "multi.yaml").write_text(config)
     assert cli.main(["replay", str(BUNDLED), "--config", str(tmp_path / "multi.yaml"), "--out", str(tmp_path / "r"),
-                     "--quiet", "--no-plots", "--models", "CZ"]) == 0
+                     "--quiet", "--no-figures", "--models", "CZ"]) == 0
     err = capsys.readouterr().err
     assert err == f"rls-uncertainty replay: warning: parameter file {tmp_path / 'multi.yaml'}: sections for other " \
                   "nodes ignored: planner\n"
 
 
-def test_every_lags_option_gives_the_estimators_lags_form():
-    """simulate and montecarlo (the paper's fixed 50 Hz) read --lags as the estimator's lags
-    option takes them: an integer >= 0, 'all' or 'auto'; replay's --lag-span is in seconds, as
-    estimator.lag_span (-1 for 'all')."""
+def test_every_command_that_runs_the_estimator_takes_its_spans_in_seconds():
+    """simulate and montecarlo (the T-2 simulation's 50 Hz) and replay take one --lag-span, in
+    seconds as estimator.lag_span: 0.4 s is 20 lags at 50 Hz, all is -1 (Eq. 20), auto the
+    lag selection; --burn-in-span likewise ('default': 1 s with auto lags, 0 with fixed)."""
     parser = cli.build_parser()
     for head in (["simulate"], ["montecarlo", "--out", "o"]):
-        for given, lags in (("0", 0), ("50", 50), ("all", "all"), ("auto", "auto")):
-            assert parser.parse_args([*head, "--lags", given]).lags == lags
-    for given, span in (("0", 0.0), ("1", 1.0), ("0.25", 0.25), ("all", -1.0), ("auto", "auto")):
-        assert parser.parse_args(["replay", "bag", "--out", "o", "--lag-span", given]).lag_span == span
+        for given, lags in (([], 50), (["0"], 0), (["0.4"], 20), (["1"], 50), (["all"], "all"), (["auto"], "auto")):
+            options = simulation_options(parser.parse_args([*head, *(["--lag-span", *given] if given else [])]))
+            assert options.lags == lags and options.max_lags == 50, (head, given)
+        for given, burn_in in ((["--burn-in-span", "0.4"], 20), (["--burn-in-span", "default"], 50), ([], 50)):
+            assert simulation_options(parser.parse_args([*head, "--lag-span", "auto", *given])).burn_in == burn_in
+        assert simulation_options(parser.parse_args([*head, "--max-lag-span", "0.5", "--lag-span", "auto"])) \
+            .max_lags == 25
+    for given, span in (("0", 0.0), ("1", 1.0), ("0.25", 0.25), ("all", -1.0)):
+        assert replay_params(parser.parse_args(["replay", "bag", "--out", "o", "--lag-span", given])) \
+            ["estimator.lag_span"] == span
+
+
+def test_the_setting_flags_are_made_from_the_options_classes():
+    """Each command that runs the estimator has one flag per estimator setting that declares
+    one, named, bounded and explained by the declaration (schema.option on
+    EstimatorOptions): a value beyond the setting's range is refused naming the parameter,
+    and the help gives the setting's meaning and default."""
+    from rls_uncertainty.cli.flags import RENAMED_FLAGS
+    from rls_uncertainty.schema import settings
+    from rls_uncertainty.settings.parameters import PARAMETER_NAMES
+
+    declared = [s.ros for _f, s in settings(EstimatorOptions) if s.cli]
+    assert sorted(declared) == sorted(["estimator.lag_span", "estimator.max_lag_span",
+                                       "estimator.residual_burn_in_span", "estimator.window", "estimator.forgetting"])
+    commands = {"simulate": [], "montecarlo": ["--out", "o"], "replay": ["bag", "--out", "o"],
+                "campaign": ["bag", "--out", "o"]}
+    sub = next(a for a in cli.build_parser()._actions if a.dest == "command").choices
+    for command, head in commands.items():
+        actions = {a.dest: a for a in sub[command]._actions}
+        for name in declared:
+            p = PARAMETER_NAMES[name]
+            assert actions[name].option_strings == [p.flag] and p.description in actions[name].help, (command, name)
+            if p.high is not None:
+                with pytest.raises(SystemExit) as exc:
+                    sub[command].parse_args([*head, p.flag, str(2 * p.high)])
+                assert exc.value.code == 2
+        for old in ("--lags", "--max-lags", "--burn-in"):
+            assert old in {o for a in sub[command]._actions for o in a.option_strings}, (command, old)
+    assert RENAMED_FLAGS["--jobs"] == "--workers" and RENAMED_FLAGS["--no-plots"] == "--no-figures"
 
 
 def test_replay_lag_span_sets_the_lag_parameters_whatever_the_file_says(tmp_path):
@@ -369,7 +417,7 @@ def test_replay_lag_span_sets_the_lag_parameters_whatever_the_file_says(tmp_path
     for given, want in expected.items():
         args = parser.parse_args(["replay", "bag", "--out", "o", "--config", str(tmp_path / "auto.yaml"), "--lag-span",
                                   given])
-        params = cli._replay_params(args)
+        params = replay_params(args)
         assert {k: v for k, v in params.items() if k in ("estimator.lag_selection", "estimator.lag_span")} == want
 
 
@@ -386,33 +434,26 @@ def test_replay_with_no_estimate_says_why_and_exits_1(tmp_path, capsys):
     """The bundled bag has split elevators; the default surfaces.elevator expects one joint named
     elevator, so every control_surfaces message is refused and no model is ever estimated: the
     run names the joints on both sides and the parameter, and a script sees exit status 1."""
-    code = cli.main(["replay", str(BUNDLED), "--out", str(tmp_path / "out"), "--quiet", "--no-plots"])
+    code = cli.main(["replay", str(BUNDLED), "--out", str(tmp_path / "out"), "--quiet", "--no-figures"])
     out = capsys.readouterr().out
     assert code == 1
     assert "surfaces.elevator expects [elevator]" in out and "elevator_left, elevator_right" in out, out
     # The same bag with its configuration estimates, and exits 0.
     code = cli.main(["replay", str(BUNDLED), "--config", str(ROOT / "config" / "t2.yaml"),
-                     "--out", str(tmp_path / "ok"), "--quiet", "--no-plots"])
+                     "--out", str(tmp_path / "ok"), "--quiet", "--no-figures"])
     assert code == 0
 
 
 def test_lags_and_burn_in_options_map_onto_the_estimator_parameters():
     parser = cli.build_parser()
     args = parser.parse_args(["replay", "bag", "--out", "o", "--lag-span", "auto", "--max-lag-span", "1.4"])
-    params = cli._replay_params(args)
+    params = replay_params(args)
     assert params["estimator.lag_selection"] == "auto" and params["estimator.max_lag_span"] == 1.4
     assert "estimator.lag_span" not in params
-    assert parser.parse_args(["montecarlo", "--out", "o", "--lags", "auto"]).lags == "auto"
-    assert parser.parse_args(["montecarlo", "--out", "o", "--lags", "7"]).lags == 7
-    assert parser.parse_args(["simulate", "--lags", "auto"]).lags == "auto"
-    # The residual burn-in: replay overrides the parameter ('default' is its -1), simulate and
-    # montecarlo pass it to the bank (not given or 'default': the bank's, 50 with auto).
+    # The residual burn-in overrides the parameter ('default' is its -1).
     for given, param in ((["--burn-in-span", "0.4"], 0.4), (["--burn-in-span", "default"], -1.0), ([], None)):
-        params = cli._replay_params(parser.parse_args(["replay", "bag", "--out", "o", "--lag-span", "auto", *given]))
+        params = replay_params(parser.parse_args(["replay", "bag", "--out", "o", "--lag-span", "auto", *given]))
         assert params.get("estimator.residual_burn_in_span") == param
-    for given, bank in ((["--burn-in", "0"], 0), (["--burn-in", "default"], None), ([], None)):
-        assert cli._bank_burn_in(parser.parse_args(["montecarlo", "--out", "o", *given]).burn_in) == bank
-        assert cli._bank_burn_in(parser.parse_args(["simulate", *given]).burn_in) == bank
 
 
 def test_a_reader_that_stops_reading_ends_the_command_quietly(tmp_path):

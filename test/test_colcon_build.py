@@ -66,7 +66,7 @@ def test_colcon_build_and_test_from_a_copy_without_git(tmp_path):
     assert len(site) == 1 and (site[0] / "py.typed").is_file(), site
     # Start the installed executable from a sourced workspace, outside the source tree.
     run = subprocess.run(
-        ["bash", "-c", f"source {tmp_path}/install/setup.bash && {exe} simulate --noise 5 --lags 11"],
+        ["bash", "-c", f"source {tmp_path}/install/setup.bash && {exe} simulate --noise 5 --lag-span 0.22"],
         cwd=tmp_path, env=env, capture_output=True, text=True, timeout=300,
     )
     assert run.returncode == 0, run.stderr

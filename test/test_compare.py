@@ -17,7 +17,7 @@ from rls_uncertainty import cli
 from rls_uncertainty.errors import NotComparable
 from rls_uncertainty.offline.compare import DEFAULT_RTOL, comparable, compare_replays, read_run
 from rls_uncertainty.offline.replay import replay
-from rls_uncertainty.settings.config import load_parameters_file
+from rls_uncertainty.settings import load_parameters_file
 
 from conftest import ROOT
 
@@ -44,7 +44,7 @@ def _write_rows(directory, rows):
 
 
 def test_an_unchanged_replay_is_equal(golden, tmp_path, capsys):
-    assert cli.main(["replay", str(BUNDLED), "--config", "t2", "--out", str(tmp_path / "r"), "--no-plots", "--quiet",
+    assert cli.main(["replay", str(BUNDLED), "--config", "t2", "--out", str(tmp_path / "r"), "--no-figures", "--quiet",
                      "--compare", str(golden)]) == 0
     out = capsys.readouterr().out
     n = len(_rows(golden))
@@ -54,7 +54,7 @@ def test_an_unchanged_replay_is_equal(golden, tmp_path, capsys):
 
 def test_a_changed_parameter_is_different_and_named_with_the_largest_differences(golden, tmp_path, capsys):
     assert cli.main(["replay", str(BUNDLED), "--config", "t2", "--forgetting", "0.9999", "--out",
-                     str(tmp_path / "r"), "--no-plots", "--quiet", "--compare", str(golden)]) == 1
+                     str(tmp_path / "r"), "--no-figures", "--quiet", "--compare", str(golden)]) == 1
     out = capsys.readouterr().out
     assert "configuration differs from the reference's: estimator.forgetting: 0.9999 here, 1.0 in the reference" in out
     assert "DIFFERENT" in out
@@ -137,7 +137,7 @@ def test_flags_lag_counts_and_missing_samples_differ(golden, tmp_path):
 def test_another_bag_span_models_or_rate_is_not_comparable(golden, tmp_path, capsys):
     other = tmp_path / "seed7"
     assert cli.main(["make-bag", "--seed", "7", "--out", str(other)]) == 0
-    base = ["--config", "t2", "--no-plots", "--quiet", "--compare", str(golden)]
+    base = ["--config", "t2", "--no-figures", "--quiet", "--compare", str(golden)]
     fails(capsys, ["replay", str(other), "--out", str(tmp_path / "a"), *base], "another bag: its input messages differ")
     fails(capsys, ["replay", str(BUNDLED), "--out", str(tmp_path / "b"), "--end", "9", *base], "another span: end 9.0")
     fails(capsys, ["replay", str(BUNDLED), "--out", str(tmp_path / "c"), "--models", "CZ", *base],
@@ -179,7 +179,7 @@ def test_another_openblas_kernel_is_equal_within_the_default_tolerance(golden, t
     round differently (on this machine the CSVs differ in their last bits), within 1e-6."""
     env = {**os.environ, "OPENBLAS_CORETYPE": "Prescott"}
     run = subprocess.run([sys.executable, "-m", "rls_uncertainty.cli", "replay", str(BUNDLED), "--config", "t2",
-                          "--out", str(tmp_path / "r"), "--no-plots", "--quiet", "--compare", str(golden)],
+                          "--out", str(tmp_path / "r"), "--no-figures", "--quiet", "--compare", str(golden)],
                          env=env, capture_output=True, text=True, timeout=300)
     assert run.returncode == 0, run.stdout + run.stderr
     assert "equal:" in run.stdout
@@ -199,7 +199,7 @@ def _count(path):
 
 def test_both_methods_results_are_compared(golden_both, tmp_path, capsys):
     assert cli.main(["replay", str(BUNDLED), "--config", "t2", "--method", "both", "--out", str(tmp_path / "r"),
-                     "--no-plots", "--quiet", "--compare", str(golden_both)]) == 0
+                     "--no-figures", "--quiet", "--compare", str(golden_both)]) == 0
     n = _count(golden_both / "estimates.csv") + _count(golden_both / "estimates_frequency.csv")
     assert _count(golden_both / "estimates_frequency.csv") > 0
     assert f"equal: {5 * n} values ({n} samples x parameters)" in capsys.readouterr().out
@@ -234,7 +234,7 @@ def test_runs_with_no_estimation_method_in_common_are_not_comparable(golden, tmp
     # A frequency-domain replay against a time-domain reference: no results file to pair, said
     # before the bag is read (not "DIFFERENT: 0 of 0 values").
     fails(capsys, ["replay", str(BUNDLED), "--config", "t2", "--method", "frequency", "--out", str(tmp_path / "f"),
-                   "--no-plots", "--quiet", "--compare", str(golden)],
+                   "--no-figures", "--quiet", "--compare", str(golden)],
           "no estimation method in common: estimator.method 'frequency' here (estimates_frequency.csv), "
           "'time' in the reference (estimates.csv)")
     assert not (tmp_path / "f").exists()

@@ -1,5 +1,6 @@
-"""Typed configuration: aircraft and model files, the parameter table, the nested
-PipelineConfig built from dotted parameters, and every validation with its reason."""
+"""Typed configuration: aircraft and model files, the parameters generated from the options
+classes, the nested PipelineConfig built from dotted parameters, every validation with its
+reason, and where a start-up parameter came from when it is refused."""
 
 import dataclasses
 import math
@@ -12,21 +13,17 @@ from pathlib import Path
 
 import pytest
 
-from rls_uncertainty.aero.differentiation import DifferentiatorConfig
 from rls_uncertainty.aero.surface_mixing import SurfaceMixing
-from rls_uncertainty.datapath.identifiability import IdentifiabilityConfig
-from rls_uncertainty.estimator import RESIDUALS, WINDOWS
+from rls_uncertainty.datapath.limits import PlausibilityLimits
+from rls_uncertainty.errors import ConfigError
+from rls_uncertainty.estimator import RESIDUALS, WINDOWS, EstimatorOptions
 from rls_uncertainty.frequency import FrequencyOptions
-from rls_uncertainty.settings.config import (
+from rls_uncertainty.settings import (
     NODE_NAME,
     PARAMETERS,
-    ConfigError,
-    EstimatorOptions,
     InputConfig,
     ModelConfig,
     PipelineConfig,
-    PlausibilityLimits,
-    frequency_options,
     load_aircraft,
     load_models,
     load_parameters_file,
@@ -34,6 +31,7 @@ from rls_uncertainty.settings.config import (
     pipeline_config,
     startup_parameters,
 )
+from rls_uncertainty.settings.parameters import COMPONENTS, frequency_options
 
 ROOT = Path(__file__).resolve().parents[1]
 T2 = load_aircraft("t2")
@@ -197,17 +195,21 @@ def test_the_lag_window_follows_time_not_samples(rate):
     assert (half.estimator.lags, half.estimator.burn_in) == (math.floor(0.5 * rate + 0.5), math.floor(0.1 * rate + 0.5))
 
 
-def test_defaults_of_the_table_and_the_dataclasses_agree():
+def test_the_default_parameters_build_each_components_default_options():
+    """The parameters' defaults go back into the options classes unchanged: every component of
+    pipeline_config({}) is its class's default, the spans' seconds (1 s) the fields' samples at
+    the default rate (50 lags), the residual burn-in's default resolved (0 with fixed lags)."""
     cfg = pipeline_config({})
-    d = parameter_defaults()
-    assert cfg.estimator == replace(EstimatorOptions(), residual_burn_in=0)
-    assert cfg.estimator.lags == d["estimator.lag_span"] * d["rate"]
-    assert cfg.identifiability == IdentifiabilityConfig()
-    assert cfg.differentiator == DifferentiatorConfig()
-    assert cfg.inputs == InputConfig()
-    assert cfg.surfaces == SurfaceMixing()
-    assert cfg.limits == PlausibilityLimits()
-    assert cfg.rate == d["rate"] == PipelineConfig(T2).rate
+    for name, cls in COMPONENTS:
+        if name == "estimator":
+            assert cfg.estimator == replace(EstimatorOptions(), residual_burn_in=0)
+        elif name == "frequency":
+            assert cfg.frequency is None and pipeline_config({"estimator.method": "both"}).frequency == \
+                FrequencyOptions(rate_hz=cfg.rate)
+        else:
+            assert getattr(cfg, name) == cls(), name
+    assert cfg.rate == PipelineConfig(T2).rate and cfg.models == PipelineConfig(T2).models
+    assert cfg.aircraft == load_aircraft(parameter_defaults()["aircraft"])
 
 
 def test_estimator_choices_are_the_estimators_own():
@@ -279,7 +281,8 @@ def test_residual_burn_in_defaults_by_lag_selection_and_enters_the_fingerprint_r
     twenty = pipeline_config({"estimator.residual_burn_in_span": 0.4})
     assert twenty.estimator.burn_in == 20 and twenty.fingerprint()["estimator"]["residual_burn_in"] == 20
     spec = {p.name: p for p in PARAMETERS}["estimator.residual_burn_in_span"]
-    assert spec.default == -1 and (spec.low, spec.high) == (-1, 2000) and "-1: 1 s" in spec.description
+    assert spec.default == -1 and (spec.low, spec.high) == (-1, 2000)
+    assert [(x.seconds, x.meaning[:4]) for x in spec.specials] == [(-1.0, "1 s "), (0.0, "none")]
 
 
 def test_plausibility_defaults_lie_between_any_flight_and_absurd_values():
@@ -331,21 +334,24 @@ def _refused(*ros_args):
 
 
 @pytest.mark.parametrize("args,needles", [
-    (["-p", "estimator.lag_span:=-5.0"], ["parameter 'estimator.lag_span' must be in [-1, 2000], got -5.0",
+    (["-p", "estimator.lag_span:=-5.0"], ["parameter 'estimator.lag_span' must be -1 (keeps all lags (Eq. 20)), 0 "
+                                          "(the conventional covariance) or a number of seconds in (0, 2000], got -5.0",
                                           "(from -p estimator.lag_span:=-5.0)"]),
     (["-p", "estimator.lags:=50"], ["-p estimator.lags:=50: unknown parameter 'estimator.lags' (renamed: "
                                     "estimator.lag_span, in seconds (lags / rate: 50 lags at 50 Hz = 1.0; "
                                     "-1 all lags))"]),
-    (["-p", "rate:=fast"], ["parameter 'rate' must be a finite number, got 'fast'", "(from -p rate:=fast)"]),
+    (["-p", "rate:=fast"], ["rate must be a number in [1, 1000] Hz, got 'fast'", "(from -p rate:=fast)"]),
     (["-p", "estimator.window:=hann"], ["must be one of ['truncated', 'bartlett'], got 'hann'"]),
-    (["-p", "differentiator.window:=9.5"], ["parameter 'differentiator.window' must be an integer, got 9.5"]),
+    (["-p", "differentiator.window:=9.5"], ["differentiator.window must be an integer in [3, 201] samples, got 9.5 "
+                                            "(from -p differentiator.window:=9.5)"]),
     (["-p", "use_sim_time:=1"], ["parameter 'use_sim_time' must be true or false, got 1"]),
     (["-p", "estimator.lag:=20"], ["-p estimator.lag:=20: unknown parameter 'estimator.lag' "
                                    "(did you mean estimator.lag_span?)"]),
     (["-p", "colour:=red"], ["unknown parameter 'colour'"]),
     (["-p", "rls_estimator:estimator.lag:=20"], ["did you mean estimator.lag_span?"]),
     (["-p", "aircraft:=concorde"], ["concorde.yaml: no such file"]),
-    (["-p", "inputs.max_gap:=1.0", "-p", "inputs.max_stamp_jump:=0.5"], ["inputs.max_stamp_jump"]),
+    (["-p", "inputs.max_gap:=1.0", "-p", "inputs.max_stamp_jump:=0.5"],
+     ["inputs.max_stamp_jump", "(from -p inputs.max_stamp_jump:=0.5)"]),
     (["--params-file", "missing.yaml"], ["parameter file missing.yaml: no such file"]),
     (["--foo"], ["unknown ROS argument '--foo'"]),
 ])
@@ -372,7 +378,7 @@ def test_a_section_naming_the_node_refuses_unknown_names(tmp_path):
     for key in ("rls_estimator", "/rls_estimator"):
         path = _file(tmp_path, f"{key}:\n  ros__parameters:\n    estimator:\n      lag: 20\n")
         message = _refused("--params-file", path)
-        assert f"parameter file {path}, section {key}, line 4: unknown parameter 'estimator.lag' " \
+        assert f"parameter file {path}:4:7, section {key}: unknown parameter 'estimator.lag' " \
                "(did you mean estimator.lag_span?)" in message
     path = _file(tmp_path, "x:\n  rls_estimator:\n    ros__parameters:\n      rat: 20.0\n")
     assert "did you mean rate?" in _refused("-r", "__ns:=/x", "--params-file", path)
@@ -439,6 +445,31 @@ def test_the_value_that_wins_is_the_one_rcl_gives_the_node(tmp_path):
     assert _startup("--params-file", path, "-p", "rls_estimator:rate:=20.0").values["rate"] == 20.0
 
 
+def test_a_key_given_twice_or_a_parameter_spelled_twice_is_refused_naming_both_places(tmp_path):
+    """YAML leaves a repeated key to the reader (PyYAML keeps the last in silence); a dotted name
+    beside the same name nested is the same parameter twice: both are refused in one line with
+    the file, line and column, whichever value is first."""
+    path = _file(tmp_path, "rls_estimator:\n  ros__parameters:\n    rate: 5000.0\n    rate: 50.0\n")
+    assert _refused("--params-file", path) == (
+        f"parameter file {path}:4:5: not valid YAML: key 'rate' given twice (first at line 3, column 5); give it once")
+    for first, second in (("estimator.lag_span: 0.4", "estimator:\n      lag_span: 0.6"),
+                          ("estimator:\n      lag_span: 0.6", "estimator.lag_span: 0.4")):
+        path = _file(tmp_path, f"rls_estimator:\n  ros__parameters:\n    {first}\n    {second}\n")
+        message = _refused("--params-file", path)
+        assert message.startswith(f"parameter file {path}:") and "parameter estimator.lag_span given twice in " \
+            "section /rls_estimator (first at line " in message and "\n" not in message, message
+    # Two files, or a file and a -p rule, are two sources: the later one wins, as in rcl.
+    one = _file(tmp_path, "rls_estimator:\n  ros__parameters:\n    rate: 40.0\n", "one.yaml")
+    two = _file(tmp_path, "rls_estimator:\n  ros__parameters:\n    rate: 30.0\n", "two.yaml")
+    assert _startup("--params-file", one, "--params-file", two).values["rate"] == 30.0
+
+
+def test_a_value_refused_by_its_options_class_names_its_file_line_and_column(tmp_path):
+    path = _file(tmp_path, "rls_estimator:\n  ros__parameters:\n    inputs:\n      max_gap: 20.0\n")
+    assert _refused("--params-file", path) == ("inputs.max_gap must be a number in [0.001, 10] s, got 20.0 (from "
+                                               f"parameter file {path}:4:7, section rls_estimator)")
+
+
 # ------------------------------------------------------------------ the console script
 def _run_node(*ros_args):
     return subprocess.run([sys.executable, "-m", "rls_uncertainty.ros.node", "--ros-args", *ros_args],
@@ -446,10 +477,10 @@ def _run_node(*ros_args):
 
 
 @pytest.mark.parametrize("args,needle", [
-    (["-p", "estimator.lag_span:=-5.0"], "parameter 'estimator.lag_span' must be in [-1, 2000], got -5.0"),
-    (["-p", "rate:=fast"], "parameter 'rate' must be a finite number, got 'fast'"),
+    (["-p", "estimator.lag_span:=-5.0"], "parameter 'estimator.lag_span' must be -1 (keeps all lags (Eq. 20)), 0"),
+    (["-p", "rate:=fast"], "rate must be a number in [1, 1000] Hz, got 'fast'"),
     (["--params-file", "missing.yaml"], "parameter file missing.yaml: no such file"),
-    (["--params-file", "{malformed}"], "not valid YAML: expected ',' or ']', but got '<stream end>' (line 4"),
+    (["--params-file", "{malformed}"], "m.yaml:4:1: not valid YAML: expected ',' or ']', but got '<stream end>'"),
     (["-p", "estimator.lag:=20"], "did you mean estimator.lag_span?"),
     (["--params-file", "{section}"], "no section for node /rls_estimator"),
 ])
@@ -534,7 +565,7 @@ def test_every_frequency_parameter_reaches_its_option():
         pipeline_config({**low, "estimator.method": "frequency"})
     values = {**parameter_defaults(), "estimator.method": "both", "frequency.trim_span": 0.001}
     with pytest.raises(ConfigError, match=r"'frequency\.trim_span' = 0\.001 s is less than one sample"):
-        frequency_options(values)
+        frequency_options(values, 50.0)
 
 
 def test_t2_file_sets_the_grid_of_table_2_and_the_twin_otter_files_keep_the_default():
@@ -552,15 +583,17 @@ def test_t2_file_sets_the_grid_of_table_2_and_the_twin_otter_files_keep_the_defa
 @pytest.mark.parametrize(
     ("params", "match"),
     [
-        ({"estimator.method": "fourier"}, r"'estimator\.method' must be one of \['time', 'frequency', 'both'\]"),
+        ({"estimator.method": "fourier"}, r"estimator\.method must be one of \['time', 'frequency', 'both'\]"),
         ({"estimator.method": "both", "models.enabled": ["CX"], "models.CX": ["1"]},
          r"model CX has no regressor but the bias '1'.*models\.CX.*estimator\.method: time"),
         ({"estimator.method": "both", "frequency.f_min": 0.5, "frequency.f_max": 0.6},
          r"grid .* has 3 frequencies, a model 5 frequency-domain parameters.*frequency\.f_step"),
         ({"estimator.method": "frequency", "frequency.f_step": 1e-4}, r"frequency\.f_step .* more than 1000"),
         ({"estimator.method": "frequency", "frequency.f_max": 0.05}, r"frequency\.f_max must be >= f_min"),
-        ({"estimator.method": "frequency", "frequency.trim_span": 250.0}, r"'frequency\.trim_span' must be in"),
-        ({"estimator.method": "frequency", "frequency.every": 0}, r"'frequency\.every' must be in"),
+        ({"estimator.method": "frequency", "frequency.trim_span": 250.0},
+         r"'frequency\.trim_span' must be 0 \(the first sample\) or a number of seconds in \(0, 200\], got 250\.0"),
+        ({"estimator.method": "frequency", "frequency.every": 0},
+         r"frequency\.every must be an integer in \[1, 1000000\] samples, got 0"),
     ],
 )
 def test_frequency_settings_are_refused_naming_the_parameter(params, match):

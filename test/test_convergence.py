@@ -310,5 +310,5 @@ def test_config_rejects_bad_values(kwargs):
 def test_capacity_is_window_times_rate_with_a_hard_cap():
     assert ConvergenceConfig(window=2.0, rate_hz=50.0).capacity == 102
     assert ConvergenceConfig(window=2.0, rate_hz=200.0).capacity == 402
-    assert ConvergenceConfig(window=100.0, rate_hz=1000.0).capacity == 4096
-    assert ConvergenceConfig(window=0.01, rate_hz=1.0).capacity == 3
+    assert ConvergenceConfig(window=60.0, rate_hz=1000.0).capacity == 4096
+    assert ConvergenceConfig(window=0.05, rate_hz=1.0).capacity == 3

@@ -32,7 +32,7 @@ from rls_uncertainty.dashboard.settings import full_node_name, load_reference
 from rls_uncertainty.datapath.inputs import STREAMS
 from rls_uncertainty.datapath.outputs import stamp_label
 from rls_uncertainty.errors import ConfigError
-from rls_uncertainty.settings.config import NODE_NAME
+from rls_uncertainty.settings import NODE_NAME
 
 ROOT = Path(__file__).resolve().parents[1]
 NAMES = ("CZ_0", "CZ_alpha", "CZ_delta_e")
@@ -196,7 +196,7 @@ def test_history_is_bounded_and_keeps_the_newest_half_at_full_rate():
 def bundled_replay():
     from rls_uncertainty.offline.bags import read_inputs
     from rls_uncertainty.offline.replay import run_pipeline
-    from rls_uncertainty.settings.config import load_parameters_file, node_config, pipeline_config
+    from rls_uncertainty.settings import load_parameters_file, node_config, pipeline_config
 
     params = load_parameters_file("t2")
     messages = read_inputs(ROOT / "bags" / "t2_maneuver")[0]
@@ -231,7 +231,7 @@ def _snapshot(enabled: bool):
     """What a fresh node with the t2 configuration hands its diagnostics policy."""
     from rls_uncertainty.datapath.pipeline import Pipeline
     from rls_uncertainty.ros.diagnostics import Snapshot
-    from rls_uncertainty.settings.config import load_parameters_file, pipeline_config
+    from rls_uncertainty.settings import load_parameters_file, pipeline_config
 
     pipe = Pipeline(pipeline_config(load_parameters_file("t2")))
     return Snapshot(counters=pipe.counters(), models=[(m.output, pipe.model_report(j)) for j, m in
@@ -317,7 +317,7 @@ def test_why_a_parameter_is_not_identifiable_is_read_from_the_published_figures_
     from rls_uncertainty.datapath.outputs import FIT_OUTPUTS, OutputLayout
     from rls_uncertainty.offline.bags import read_inputs, write_sensor_streams
     from rls_uncertainty.offline.replay import run_pipeline
-    from rls_uncertainty.settings.config import load_parameters_file, node_config, pipeline_config
+    from rls_uncertainty.settings import load_parameters_file, node_config, pipeline_config
 
     params = load_parameters_file("t2")
     if case != "noise":  # the rudder in C_Z (the T-2 maneuver does not move it otherwise)
@@ -531,7 +531,7 @@ def test_reference_values_are_a_mapping_of_names_to_finite_numbers(tmp_path):
 @pytest.fixture(scope="module")
 def t2_replay(tmp_path_factory):
     from rls_uncertainty.offline.replay import replay
-    from rls_uncertainty.settings.config import load_parameters_file
+    from rls_uncertainty.settings import load_parameters_file
 
     out = tmp_path_factory.mktemp("t2") / "est"
     replay(ROOT / "bags" / "t2_maneuver", load_parameters_file("t2"), out, progress=False, plots=False)
@@ -706,7 +706,7 @@ def test_a_directory_without_replay_outputs_is_refused_with_the_reason(tmp_path)
 def t2_both(tmp_path_factory):
     """The bundled bag replayed with both estimators (estimator.method both)."""
     from rls_uncertainty.offline.replay import replay
-    from rls_uncertainty.settings.config import load_parameters_file
+    from rls_uncertainty.settings import load_parameters_file
 
     out = tmp_path_factory.mktemp("t2_both") / "est"
     replay(ROOT / "bags" / "t2_maneuver", {**load_parameters_file("t2"), "estimator.method": "both"}, out,

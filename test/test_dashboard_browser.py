@@ -350,7 +350,7 @@ def test_a_live_node_publishing_both_methods_shows_its_last_frequency_domain_val
 def twin_otter_replay(tmp_path_factory):
     from rls_uncertainty.offline.bags import convert
     from rls_uncertainty.offline.replay import replay
-    from rls_uncertainty.settings.config import load_parameters_file
+    from rls_uncertainty.settings import load_parameters_file
 
     base = tmp_path_factory.mktemp("twin_otter")
     convert(FLIGHT_DATA / "totter_f1_017", ROOT / "msg_schemas" / "fti_msgs" / "mapping.yaml", base / "bag")
@@ -447,7 +447,7 @@ def test_a_replay_of_both_methods_shows_the_frequency_domain_beside_the_time_dom
     estimate, says so; the frequency domain's history is drawn in the same plot."""
     out = tmp_path / "both"
     run = subprocess.run([sys.executable, "-m", "rls_uncertainty.cli", "replay", str(ROOT / "bags" / "t2_maneuver"),
-                          "--config", T2, "--method", "both", "--out", str(out), "--no-plots", "--quiet"],
+                          "--config", T2, "--method", "both", "--out", str(out), "--no-figures", "--quiet"],
                          capture_output=True, text=True, cwd=ROOT, timeout=300)
     assert run.returncode == 0, run.stderr
     time_rows, freq_rows = _last_rows(out / "estimates.csv"), _last_rows(out / "estimates_frequency.csv")

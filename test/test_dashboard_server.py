@@ -17,11 +17,10 @@ from rls_uncertainty.dashboard.server import (
     MAX_INBOUND,
     TOKEN_COOKIE,
     Broadcaster,
-    ServerOptions,
     asset_table,
-    check_options,
     make_app,
 )
+from rls_uncertainty.dashboard.settings import ServerOptions, check_options
 from rls_uncertainty.errors import ConfigError
 
 TOKEN = "s3cret-token-0123456789"

@@ -294,7 +294,7 @@ def test_malformed_reason_and_warning_name_topic_type_and_text():
 # ------------------------------------------------------------------ with a real pipeline
 def test_statuses_from_a_real_pipeline():
     from rls_uncertainty.datapath.pipeline import Pipeline
-    from rls_uncertainty.settings.config import load_parameters_file, pipeline_config
+    from rls_uncertainty.settings import load_parameters_file, pipeline_config
 
     config = pipeline_config(load_parameters_file("t2"))
     p = Pipeline(config)

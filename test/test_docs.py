@@ -88,7 +88,7 @@ def test_demo_output_in_the_readme_is_the_offline_replay_of_the_bundled_bag():
     from rls_uncertainty.offline.bags import read_inputs
     from rls_uncertainty.offline.replay import run_pipeline
     from rls_uncertainty.ros.player import bundled_bag
-    from rls_uncertainty.settings.config import config_dir, load_parameters_file, pipeline_config
+    from rls_uncertainty.settings import config_dir, load_parameters_file, pipeline_config
     from rls_uncertainty.simulation.t2 import T2_TRUE
 
     block = next(b for b in _code_blocks(README.read_text()) if b.startswith("live node:"))
@@ -124,7 +124,7 @@ def test_node_page_holds_exactly_the_generated_parameter_table():
 def test_node_page_documents_every_parameter_topic_and_service():
     from rls_uncertainty.datapath.inputs import MESSAGE_TYPES
     from rls_uncertainty.datapath.outputs import fit_topics, output_topics
-    from rls_uncertainty.settings.config import PARAMETERS
+    from rls_uncertainty.settings import PARAMETERS
 
     text = (DOCS / "node.md").read_text()
     body = text[: text.index("<!-- parameter table")]  # documented outside the generated table too
@@ -185,7 +185,7 @@ def test_every_name_of_the_package_the_docs_cite_exists():
     parameter names (`estimator.lags`, `limits.angular_rate`) and file names are not code."""
     import importlib
 
-    from rls_uncertainty.settings.config import PARAMETERS
+    from rls_uncertainty.settings import PARAMETERS
 
     parameters = {p.name for p in PARAMETERS}
     modules = _package_modules()

@@ -185,7 +185,8 @@ def test_auto_state_continues_bit_identically_with_the_memory_of_max_lags(forget
 
 # --------------------------------------------------------------------------- configuration, pipeline, CLI
 def test_parameters_reach_the_bank_and_are_validated():
-    from rls_uncertainty.settings.config import ConfigError, pipeline_config
+    from rls_uncertainty.errors import ConfigError
+    from rls_uncertainty.settings import pipeline_config
 
     cfg = pipeline_config({"estimator.lag_selection": "auto", "estimator.max_lag_span": 1.6})
     assert cfg.estimator.lags == "auto" and cfg.estimator.max_lags == 80
@@ -207,7 +208,7 @@ def test_pipeline_publishes_the_chosen_lags_per_sample_and_in_the_model_fit():
     from test_pipeline import T2_PARAMS, feed_streams
 
     from rls_uncertainty.datapath.pipeline import Pipeline
-    from rls_uncertainty.settings.config import pipeline_config
+    from rls_uncertainty.settings import pipeline_config
     from rls_uncertainty.simulation.t2 import simulate_sensor_streams
 
     st = simulate_sensor_streams(0.2, 250)

@@ -19,7 +19,7 @@ from rls_uncertainty.campaign import CampaignSettings, Maneuver, run_campaign
 from rls_uncertainty.campaign.run import run_maneuver
 from rls_uncertainty.errors import ConfigError, SchedulerUnreachable
 from rls_uncertainty.executors import DaskCluster, LocalProcesses, Lost, executor_for
-from rls_uncertainty.settings.config import node_config, pipeline_config
+from rls_uncertainty.settings import node_config, pipeline_config
 from rls_uncertainty.testing import parameters
 
 ROOT = Path(__file__).resolve().parents[1]

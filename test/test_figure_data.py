@@ -23,7 +23,7 @@ from rls_uncertainty.offline.figure_data import (
     excitation_start,
 )
 from rls_uncertainty.offline.replay import replay
-from rls_uncertainty.settings.config import load_parameters_file, pipeline_config
+from rls_uncertainty.settings import load_parameters_file, pipeline_config
 
 ROOT = Path(__file__).resolve().parents[1]
 BUNDLED = ROOT / "bags" / "t2_maneuver"

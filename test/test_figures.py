@@ -30,7 +30,7 @@ from rls_uncertainty.offline.figures import (
     y_limits,
 )
 from rls_uncertainty.offline.replay import replay, run_pipeline
-from rls_uncertainty.settings.config import load_parameters_file, pipeline_config
+from rls_uncertainty.settings import load_parameters_file, pipeline_config
 
 from conftest import FLIGHT_DATA, ROOT
 

@@ -14,7 +14,7 @@ import pytest
 from rls_uncertainty.estimator import batch_estimate
 from rls_uncertainty.offline.bags import convert, read_inputs
 from rls_uncertainty.offline.replay import run_pipeline
-from rls_uncertainty.settings.config import load_parameters_file, pipeline_config
+from rls_uncertainty.settings import load_parameters_file, pipeline_config
 
 from conftest import FLIGHT_DATA, ROOT
 

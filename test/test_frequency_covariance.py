@@ -1,15 +1,18 @@
 """The corrected covariance in closed form (docs/frequency.md, F7-F8): the pair matrices equal the
-explicit sums over the samples, the fast contraction equals the explicit sandwich, and the
-covariance with the true noise autocovariance matches the Monte Carlo scatter of the estimate
-where the conventional formula does not."""
+explicit sums over the samples, the fast contraction equals the explicit sandwich and the literal
+reference's sum over every pair of samples (to 1e-12 of its largest element, on random and
+simulated records, several grids, lag spans and trims), and the covariance with the true noise
+autocovariance matches the Monte Carlo scatter of the estimate where the conventional formula
+does not."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from rls_uncertainty.frequency import finite_fourier_transform
+from rls_uncertainty.frequency import FrequencyOptions, finite_fourier_transform, frequency_reference
 from rls_uncertainty.frequency.covariance import PairGeometry, middle, pair_matrices, sandwich
+from rls_uncertainty.simulation.montecarlo import level_inputs
 
 RATE = 50.0
 
@@ -42,16 +45,50 @@ def test_the_pair_matrices_equal_the_sums_over_every_pair_of_samples(N, L, trim)
         np.testing.assert_allclose(P[m], P_ref, rtol=0, atol=1e-11 * scale)
 
 
-def test_the_shared_products_equal_the_explicit_sandwich():
-    rng = np.random.default_rng(11)
-    f = 0.1 + 0.04 * np.arange(54)
+@pytest.mark.parametrize(("K", "N", "L", "trim"), [(54, 173, 50, 1), (54, 173, 50, 25), (36, 1000, 50, 1),
+                                                  (36, 51, 50, 1), (9, 30, 6, 4), (101, 400, 200, 1),
+                                                  (36, 5000, 0, 1), (4, 12, 11, 12)])
+def test_the_contraction_equals_the_explicit_sandwich(K, N, L, trim):
+    rng = np.random.default_rng(K + N + L)
+    f = np.sort(rng.uniform(0.05, 20.0, K)) if K < 20 else 0.1 + 0.04 * np.arange(K)
     angles = 2 * np.pi * f / RATE
-    R = rng.standard_normal((5, 51))
-    X = rng.standard_normal((5, 54, 4)) + 1j * rng.standard_normal((5, 54, 4))
-    geometry = PairGeometry(angles).at(173)
-    for trim in (1, 25):
-        expected = sandwich(X, *pair_matrices(R, geometry, trim))
-        np.testing.assert_allclose(middle(R, X, geometry, trim), expected, rtol=0, atol=1e-12 * np.abs(expected).max())
+    R = rng.standard_normal((5, L + 1))
+    X = rng.standard_normal((5, K, 4)) + 1j * rng.standard_normal((5, K, 4))
+    geometry = PairGeometry(angles).at(N)
+    expected = sandwich(X, *pair_matrices(R, geometry, trim))
+    np.testing.assert_allclose(middle(R, X, geometry, trim), expected, rtol=0, atol=1e-12 * np.abs(expected).max())
+
+
+def records():
+    """(name, x (N, p), z (N,)): random regressors and output, and the simulated T-2's C_m
+    (alpha, q_hat, delta_e) at 0 and 20 % band-limited noise."""
+    rng = np.random.default_rng(4)
+    x = rng.standard_normal((300, 3))
+    yield "random", x, x @ [0.3, -1.0, 2.0] + rng.standard_normal(300)
+    for noise in (0.0, 0.2):
+        _t, _red, _sizes, X, Z = level_inputs(noise, 1, seed=9)
+        yield f"T-2 C_m {noise:.0%}", X[:300, 1, 1:4], Z[:300, 1]
+
+
+@pytest.mark.parametrize(("grid", "n_lags", "trim"), [((0.1, 1.5, 0.04), 50, 1), ((0.2, 2.2, 0.04), 50, 25),
+                                                      ((0.1, 1.5, 0.04), 0, 1), ((0.1, 5.0, 0.1), 7, 3),
+                                                      ((0.3, 0.9, 0.1), 120, 1)])
+def test_the_contraction_equals_the_literal_sum_over_every_pair_of_samples(grid, n_lags, trim):
+    # frequency_reference forms h' T(R) h over the samples (F6: h the estimate's weights on each
+    # sample's error, T(R) the N x N Toeplitz matrix of R): the contraction of the same R and X
+    # gives it to 1e-12 of its largest element.
+    lo, hi, step = grid
+    options = FrequencyOptions(rate_hz=RATE, f_min=lo, f_max=hi, f_step=step, n_lags=n_lags, trim_samples=trim)
+    angles = 2 * np.pi * options.frequencies() / RATE
+    for name, x, z in records():
+        for N in (n_lags + 2, 64, 300):
+            fit = frequency_reference(x[:N], z[:N], options)
+            r = np.zeros(N)
+            r[: fit.R.size] = fit.R
+            literal = fit.h.T @ r[np.abs(np.subtract.outer(np.arange(N), np.arange(N)))] @ fit.h
+            got = middle(fit.R[None], fit.X[None], PairGeometry(angles).at(N), min(trim, N))[0] / RATE**2
+            np.testing.assert_allclose(got, literal, rtol=0, atol=1e-12 * np.abs(literal).max(),
+                                       err_msg=f"{name}, N = {N}")
 
 
 def test_with_the_true_autocovariance_the_covariance_matches_the_monte_carlo_scatter():

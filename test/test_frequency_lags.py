@@ -1,13 +1,16 @@
 """Lag-product sums (docs/frequency.md, F9-F10): the centered lag sums equal the products of the
-centered samples, the residual autocovariance equals that of an explicit least-squares fit, and
-the degrees-of-freedom correction removes the fit's bias of R on average."""
+centered samples, the residual autocovariance equals that of an explicit least-squares fit and,
+corrected for the fit's degrees of freedom, the literal reference's, and the correction removes
+the fit's bias of R on average."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
+from rls_uncertainty.frequency import FrequencyOptions, frequency_reference
 from rls_uncertainty.frequency.lags import LagSums, residual_autocovariance
+from rls_uncertainty.simulation.montecarlo import level_inputs
 
 
 def brute_centered(u: np.ndarray, lags: int) -> np.ndarray:
@@ -40,7 +43,7 @@ def test_the_residual_autocovariance_is_that_of_the_least_squares_fit_with_a_bia
     sums = LagSums(1, 3, L)
     for k in range(N):
         sums.update(np.r_[z[k], x[k]][None])
-    R = residual_autocovariance(sums.centered(), np.ones((1, 3), bool), N, correct=False)[0]
+    R = residual_autocovariance(sums.augmented(), np.ones((1, 3), bool), N, correct=False)[0][0]
     design = np.column_stack([np.ones(N), x])
     v = z - design @ np.linalg.lstsq(design, z, rcond=None)[0]
     np.testing.assert_allclose(R, [v[i:] @ v[: N - i] / N for i in range(L + 1)], rtol=1e-10, atol=1e-14)
@@ -56,7 +59,7 @@ def test_padded_and_constant_regressors_are_left_out_of_the_fit():
     for k in range(N):
         sums.update(u[k][None])
     cols = np.array([[True, True, True, False]])
-    R = residual_autocovariance(sums.centered(), cols, N, correct=False)[0]
+    R = residual_autocovariance(sums.augmented(), cols, N, correct=False)[0][0]
     design = np.column_stack([np.ones(N), x])
     v = z - design @ np.linalg.lstsq(design, z, rcond=None)[0]
     np.testing.assert_allclose(R[0], v @ v / N, rtol=1e-10)
@@ -74,10 +77,39 @@ def test_the_dof_correction_removes_the_fits_bias_of_the_autocovariance_on_avera
     sums = LagSums(runs, 3, L)
     for k in range(N):
         sums.update(np.column_stack([e[:, k] + x[k] @ [1.0, 2.0], np.broadcast_to(x[k], (runs, 2))]))
-    C = sums.centered()
+    C = sums.augmented()
     cols = np.ones((runs, 3), bool)
-    plain = residual_autocovariance(C, cols, N, correct=False)[:, 0].mean()
-    corrected = residual_autocovariance(C, cols, N, correct=True)[:, 0].mean()
+    plain = residual_autocovariance(C, cols, N, correct=False)[0][:, 0].mean()
+    corrected = residual_autocovariance(C, cols, N, correct=True)[0][:, 0].mean()
     tolerance = 4 * np.sqrt(2 / (N * runs))  # four standard errors of the mean of R(0)
     assert plain == pytest.approx((N - 3) / N, abs=tolerance)
     assert corrected == pytest.approx(1.0, abs=tolerance)
+
+
+def records():
+    """(name, x (N, p), z (N,)): random regressors and output, and the simulated T-2's C_m
+    (alpha, q_hat, delta_e) at 0 and 20 % band-limited noise."""
+    rng = np.random.default_rng(3)
+    x = rng.standard_normal((240, 3))
+    yield "random", x, x @ [0.3, -1.0, 2.0] + rng.standard_normal(240)
+    for noise in (0.0, 0.2):
+        _t, _red, _sizes, X, Z = level_inputs(noise, 1, seed=5)
+        yield f"T-2 C_m {noise:.0%}", X[:240, 1, 1:4], Z[:240, 1]
+
+
+@pytest.mark.parametrize("n_lags", [0, 7, 50])
+@pytest.mark.parametrize("correct", [True, False])
+def test_the_autocovariance_equals_the_literal_references(n_lags, correct):
+    # The reference forms R from the explicit residuals and writes F10 over the samples; the lag
+    # sums give the same numbers to 1e-12 of R(0) (rounding of the record's cancellation).
+    options = FrequencyOptions(rate_hz=50.0, n_lags=n_lags, dof_correction=correct)
+    for name, x, z in records():
+        sums = LagSums(1, 4, n_lags)
+        for k in range(x.shape[0]):
+            sums.update(np.r_[z[k] - z[0], x[k] - x[0]][None])
+            N = k + 1
+            if N not in (n_lags + 1, n_lags + 2, 60, 240) or N < 8:
+                continue
+            R = residual_autocovariance(sums.augmented(), np.ones((1, 4), bool), N, correct)[0][0]
+            ref = frequency_reference(x[:N], z[:N], options).R
+            np.testing.assert_allclose(R, ref, rtol=0, atol=1e-12 * ref[0], err_msg=f"{name}, N = {N}")

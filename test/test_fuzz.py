@@ -29,7 +29,7 @@ from rls_uncertainty.datapath.inputs import feed
 from rls_uncertainty.datapath.outputs import OutputLayout
 from rls_uncertainty.datapath.pipeline import STREAMS, Pipeline
 from rls_uncertainty.offline.bags import read_inputs
-from rls_uncertainty.settings.config import load_parameters_file, pipeline_config
+from rls_uncertainty.settings import load_parameters_file, pipeline_config
 
 from conftest import ROOT
 

@@ -8,7 +8,7 @@ from types import SimpleNamespace as NS
 
 from rls_uncertainty.datapath.inputs import DEFAULT_TOPICS, MESSAGE_TYPES, feed, stamp_ns
 from rls_uncertainty.datapath.pipeline import STREAMS
-from rls_uncertainty.settings.config import node_config
+from rls_uncertainty.settings import node_config
 
 
 class Recorder:

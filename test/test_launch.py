@@ -75,6 +75,6 @@ def test_the_node_takes_every_argument(monkeypatch):
 
 
 def test_the_node_name_is_the_one_the_package_uses():
-    from rls_uncertainty.settings.config import NODE_NAME
+    from rls_uncertainty.settings import NODE_NAME
 
     assert f'name="{NODE_NAME}"' in LAUNCH_FILE.read_text()

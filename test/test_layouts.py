@@ -17,7 +17,7 @@ from pathlib import Path
 import pytest
 
 from rls_uncertainty.datapath.outputs import NODE_NAME, output_topics
-from rls_uncertainty.settings.config import load_parameters_file, pipeline_config
+from rls_uncertainty.settings import load_parameters_file, pipeline_config
 
 ROOT = Path(__file__).resolve().parents[1]
 LAYOUTS = ROOT / "layouts"

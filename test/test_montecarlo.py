@@ -17,7 +17,7 @@ from rls_uncertainty.datapath.convergence import ConvergenceMonitor
 from rls_uncertainty.datapath.identifiability import IdentifiabilityConfig, IdentifiabilityMonitor
 from rls_uncertainty.estimator import EstimatorBank
 from rls_uncertainty.executors import LocalProcesses
-from rls_uncertainty.settings.config import REGRESSOR_UNITS
+from rls_uncertainty.settings import REGRESSOR_UNITS
 from rls_uncertainty.simulation.montecarlo import (
     MONTE_CARLO_CONVERGENCE,
     PARAMETERS,
@@ -102,7 +102,7 @@ def test_levels_on_an_executor_are_the_levels_run_here(tmp_path, capsys):
     pooled = run_table3(3, (0.05, 0.2), executor=LocalProcesses(2), band_limited_on=SIGNALS, progress=lambda _s: None)
     for a, b in zip(direct, pooled, strict=True):
         assert a.level == b.level and a.summary() == b.summary()
-    assert cli.main(["montecarlo", "--runs", "3", "--levels", "20", "--noise-on", "all", "--jobs", "1",
+    assert cli.main(["montecarlo", "--runs", "3", "--levels", "20", "--noise-on", "all", "--workers", "1",
                      "--no-figures", "--out", str(tmp_path / "mc")]) == 0
     assert "Band-limited noise on delta_e, alpha, q, az" in (tmp_path / "mc" / "table3.md").read_text()
     assert "band-limited noise on all" in capsys.readouterr().out

@@ -33,7 +33,7 @@ from rls_uncertainty.datapath.outputs import parse_stamp_label
 from rls_uncertainty.datapath.pipeline import Pipeline
 from rls_uncertainty.offline.bags import read_inputs
 from rls_uncertainty.offline.replay import run_pipeline
-from rls_uncertainty.settings.config import load_parameters_file, pipeline_config
+from rls_uncertainty.settings import load_parameters_file, pipeline_config
 from rls_uncertainty.state_file import load_state
 
 from ros_harness import BUNDLED, ROOT, T2, NodeProcess, RosTester, to_rclpy
@@ -408,10 +408,38 @@ def _call(tester, srv_type, name, request):
     return future.result()
 
 
+def _declared_as_written(tester):
+    """The node's parameter descriptors, asked over DDS, against the settings' declarations:
+    each parameter's range (or choices), meaning and read-only flag are its field's."""
+    from rcl_interfaces.srv import DescribeParameters
+
+    from rls_uncertainty.schema import settings
+    from rls_uncertainty.settings.config import InputConfig, NodeConfig
+    from rls_uncertainty.settings.parameters import PARAMETERS
+
+    names = [p.name for p in PARAMETERS]
+    described = {d.name: d for d in _call(tester, DescribeParameters, "describe_parameters",
+                                          DescribeParameters.Request(names=names)).descriptors}
+    assert sorted(described) == sorted(names)
+    for cls in (InputConfig, NodeConfig):
+        for _f, s in settings(cls):
+            d = described[s.ros]
+            assert d.description.startswith(s.description) and d.read_only == s.read_only, s.ros
+            ranges = d.floating_point_range or d.integer_range
+            assert ([(r.from_value, r.to_value) for r in ranges] or [(None, None)]) == [(s.low, s.high)], s.ros
+    window = described["estimator.window"]
+    assert window.additional_constraints == "one of: truncated, bartlett" and not window.read_only
+    span = described["estimator.lag_span"]
+    assert (span.floating_point_range[0].from_value, span.floating_point_range[0].to_value) == (-1.0, 2000.0)
+    assert "(s); -1: keeps all lags (Eq. 20); 0: the conventional covariance" in span.description
+    assert described["topics.imu"].read_only and described["qos.depth"].read_only
+
+
 def test_parameters_are_refused_with_reasons_and_changes_reset(tmp_path, tester):
     node = _node(tmp_path)
     try:
         tester.wait_connected()
+        _declared_as_written(tester)
         (r,) = _set_parameters(tester, **{"estimator.window": "hann"})
         assert not r.successful and "estimator.window" in r.reason
         (r,) = _set_parameters(tester, **{"estimator.lag_span": -5.0})

@@ -25,7 +25,7 @@ from rls_uncertainty.aero.surface_mixing import SurfaceMixing
 from rls_uncertainty.datapath.outputs import OutputLayout
 from rls_uncertainty.datapath.pipeline import STREAMS, Pipeline, StateFileError
 from rls_uncertainty.offline.replay import run_pipeline
-from rls_uncertainty.settings.config import load_aircraft, load_parameters_file, pipeline_config
+from rls_uncertainty.settings import load_aircraft, load_parameters_file, pipeline_config
 from rls_uncertainty.simulation.t2 import simulate_sensor_streams
 
 T2 = load_aircraft("t2")
@@ -937,7 +937,7 @@ def test_converted_and_generated_bags_carry_the_default_frame():
     builder: its frame is the default inputs.frame_id (the real conversions are checked in
     the report: the three Twin Otter flights convert to base_link on every topic)."""
     from rls_uncertainty.offline.bags import _standard_message, typestore
-    from rls_uncertainty.settings.config import parameter_defaults
+    from rls_uncertainty.settings import parameter_defaults
 
     store = typestore()
     values = {"imu": [0.0] * 6, "airspeed": [40.0, 0.0, 0.0], "dynamic_pressure": 900.0,
@@ -1038,7 +1038,7 @@ def test_a_flipped_bit_in_a_recorded_double_is_counted_and_never_replayed(tmp_pa
     assert math.isfinite(flipped) and abs(flipped) > 1e300
     bag = write_replay(tmp_path / "flipped", records)
     out = tmp_path / "out"
-    code = cli.main(["replay", str(bag), "--config", "t2", "--out", str(out), "--no-plots", "--quiet"])
+    code = cli.main(["replay", str(bag), "--config", "t2", "--out", str(out), "--no-figures", "--quiet"])
     assert code == 0
     text = capsys.readouterr().out
     assert "imu: 2400 received, rejected {'implausible_angular_rate': 1}" in text

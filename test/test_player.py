@@ -17,7 +17,7 @@ from rls_uncertainty.datapath.inputs import MESSAGE_TYPES, message_class
 from rls_uncertainty.datapath.outputs import NODE_NAME, OutputLayout, output_topics
 from rls_uncertainty.offline.bags import read_inputs
 from rls_uncertainty.offline.replay import run_pipeline
-from rls_uncertainty.settings.config import load_parameters_file, node_config, pipeline_config
+from rls_uncertainty.settings import load_parameters_file, node_config, pipeline_config
 
 from ros_harness import BUNDLED, RELIABLE, REPLAY_NODE, ROOT, T2, NodeProcess, spin_until
 

@@ -12,7 +12,7 @@ from rls_uncertainty import cli
 from rls_uncertainty.offline.bags import read_inputs
 from rls_uncertainty.offline.figures import REPLAY_FIGURES
 from rls_uncertainty.offline.replay import replay, run_pipeline
-from rls_uncertainty.settings.config import load_parameters_file, pipeline_config
+from rls_uncertainty.settings import load_parameters_file, pipeline_config
 
 ROOT = Path(__file__).resolve().parents[1]
 BUNDLED = ROOT / "bags" / "t2_maneuver"
@@ -61,7 +61,7 @@ def test_replay_writes_identical_outputs_twice_and_matches_the_pipeline(tmp_path
 
 def test_replay_options_select_span_models_and_lags(tmp_path):
     code = cli.main(["replay", str(BUNDLED), "--config", "t2", "--out", str(tmp_path / "o"), "--models", "CZ",
-                     "--lag-span", "all", "--start", "1.0", "--end", "9.0", "--no-plots", "--quiet"])
+                     "--lag-span", "all", "--start", "1.0", "--end", "9.0", "--no-figures", "--quiet"])
     assert code == 0
     with open(tmp_path / "o" / "estimates.csv") as fh:
         rows = list(csv.DictReader(fh))
@@ -78,7 +78,7 @@ def test_no_partial_output_when_the_replay_fails(tmp_path, capsys):
 
 
 def test_the_printed_summary_is_the_last_sample_of_every_ready_model(tmp_path, capsys):
-    assert cli.main(["replay", str(BUNDLED), "--config", "t2", "--out", str(tmp_path / "o"), "--no-plots",
+    assert cli.main(["replay", str(BUNDLED), "--config", "t2", "--out", str(tmp_path / "o"), "--no-figures",
                      "--quiet"]) == 0
     out = capsys.readouterr().out.splitlines()
     assert out[0].split() == ["parameter", "estimate", "SE", "conv.", "SE", "corr.", "corr/conv"]
@@ -238,7 +238,7 @@ def test_the_replays_diagnostics_never_divide_by_zero_elapsed_time():
     """Messages whose stamps do not advance the data time after the last report (older
     stamps at the end of a bag) get no report over zero elapsed time: every input rate in
     every report is that of the data, never a count divided by a vanishing period."""
-    from rls_uncertainty.settings.config import node_config
+    from rls_uncertainty.settings import node_config
 
     params = load_parameters_file("t2")
     messages, _ = read_inputs(BUNDLED)
@@ -359,7 +359,7 @@ def test_estimates_frequency_csv_holds_the_frequency_domain_results_with_the_col
 
 def test_frequency_only_writes_no_time_domain_files_and_counts_its_estimates(tmp_path, capsys):
     code = cli.main(["replay", str(BUNDLED), "--config", "t2", "--out", str(tmp_path / "o"), "--method", "frequency",
-                     "--no-plots", "--quiet"])
+                     "--no-figures", "--quiet"])
     assert code == 0  # estimates were published: the frequency-domain ones
     names = {p.name for p in (tmp_path / "o").iterdir()}
     assert "estimates_frequency.csv" in names and not names & {"estimates.csv", "estimates_wide.csv"}

@@ -4,6 +4,7 @@ rclpy.init and a node that declares whatever it is given shows what rcl made of 
 context per case, closed in a finally; no messages are exchanged)."""
 
 import math
+import os
 
 import pytest
 import rclpy
@@ -114,7 +115,8 @@ def test_nested_namespaces_and_dotted_names_are_one_section(tmp_path):
     fqn, rcl = _rcl_parameters(["--ros-args", "-r", "__ns:=/x", "--params-file", str(path)])
     (section,) = read_parameter_file(path).sections
     assert (section.pattern, section.matches(fqn)) == ("/x/probe", True)
-    assert {name: value for name, value, _line in section.parameters} == rcl == {"a.b": 1, "a.c": ["p", "q"], "d": "5"}
+    values = {name: value for name, value, _line, _column in section.parameters}
+    assert values == rcl == {"a.b": 1, "a.c": ["p", "q"], "d": "5"}
 
 
 ORDER_FILES = {
@@ -177,14 +179,19 @@ def test_a_malformed_argument_is_named(argv, needle):
 
 
 @pytest.mark.parametrize("text,needle", [
-    ("probe:\n  ros__parameters:\n    a: [1\n", "not valid YAML: expected ',' or ']'"),
+    ("probe:\n  ros__parameters:\n    a: [1\n", "p.yaml:4:1: not valid YAML: expected ',' or ']'"),
     ("probe:\n  ros__parameters:\n", "'ros__parameters' must be a mapping"),
-    ("probe:\n  ros__parameters:\n    a: 1\n  other: 3\n", "node names to 'ros__parameters:' (line 4)"),
+    ("probe:\n  ros__parameters:\n    a: 1\n  other: 3\n", "p.yaml:4:10: expected a mapping of node names to "
+                                                       "'ros__parameters:'"),
     ("- probe\n", "expected a mapping of node names"),
     ("ros__parameters:\n  a: 1\n", "needs a node name above it"),
-    ("rls_est*:\n  ros__parameters:\n    a: 1\n", "'rls_est*' (line 1) is not a node name"),
-    ("probe:\n  ros__parameters:\n    a: [1, x]\n", "a list holds values of one type"),
-    ("probe:\n  ros__parameters:\n    a: [{b: 1}]\n", "a list holds values, not lists or mappings"),
+    ("rls_est*:\n  ros__parameters:\n    a: 1\n", "p.yaml:1:1: 'rls_est*' is not a node name"),
+    ("probe:\n  ros__parameters:\n    a: [1, x]\n", "p.yaml:3:8: a: a list holds values of one type"),
+    ("probe:\n  ros__parameters:\n    a: [{b: 1}]\n", "p.yaml:3:9: a: a list holds values, not lists or mappings"),
+    ("probe:\n  ros__parameters:\n    a: 1\n    a: 2\n", "p.yaml:4:5: not valid YAML: key 'a' given twice (first at "
+                                                        "line 3, column 5)"),
+    ("probe:\n  ros__parameters:\n    a.b: 1\n    a:\n      b: 2\n", "p.yaml:5:7: parameter a.b given twice in "
+                                                                  "section /probe (first at line 3, column 5)"),
 ])
 def test_a_malformed_parameter_file_is_one_error_naming_the_file(tmp_path, text, needle):
     path = tmp_path / "p.yaml"
@@ -201,8 +208,11 @@ def test_a_missing_or_binary_parameter_file_is_named(tmp_path):
     (tmp_path / "b.yaml").write_bytes(b"\xff\xfe")
     with pytest.raises(ConfigError, match=r"b\.yaml: not UTF-8 text"):
         read_parameter_file(tmp_path / "b.yaml")
-    with pytest.raises(ConfigError, match="cannot be read"):
+    with pytest.raises(ConfigError, match="a directory; give a YAML file"):
         read_parameter_file(tmp_path)
+    os.mkfifo(tmp_path / "fifo.yaml")  # never opened: reading it would wait for a writer
+    with pytest.raises(ConfigError, match=r"fifo\.yaml: not a regular file"):
+        read_parameter_file(tmp_path / "fifo.yaml")
 
 
 def test_an_empty_file_has_no_sections(tmp_path):

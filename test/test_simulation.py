@@ -61,7 +61,7 @@ def test_noise_levels_and_determinism():
 def test_reduced_monte_carlo_command(tmp_path):
     """20% band-limited noise, 60 runs: corrected SEs match the scatter, conventional ones are
     far too small, recursive and batch agree, 50 lags near all lags."""
-    assert main(["montecarlo", "--runs", "60", "--levels", "20", "--out", str(tmp_path), "--jobs", "1"]) == 0
+    assert main(["montecarlo", "--runs", "60", "--levels", "20", "--out", str(tmp_path), "--workers", "1"]) == 0
     with open(tmp_path / "table3.csv") as fh:
         rows = list(csv.DictReader(fh))
     assert [r["parameter"] for r in rows] == list(PAPER_TABLE3[0.2])

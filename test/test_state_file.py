@@ -22,6 +22,7 @@ from bag_samples import no_hang
 
 from rls_uncertainty.errors import StateFileError
 from rls_uncertainty.estimator import EstimatorBank, EstimatorOptions
+from rls_uncertainty.estimator.options import MAX_LAGS
 from rls_uncertainty.state_file import EstimatorState, claim, load_state, save_state, set_aside
 
 FINGERPRINT = {"aircraft": [1.0, 2.0], "models": [["CZ", "1", "alpha", "delta_e"], ["Cm", "1", "q_hat"]], "n_lags": 10}
@@ -204,12 +205,12 @@ def _with(meta, dotted, value):
     ("sizes", [3, 10**9], "field 'sizes[1]' must be in [1, 64]"),
     ("sizes", [3], "field 'sizes' is [3], the configuration has [3, 2]"),
     ("options", [10], "field 'options' is not valid (estimator options must be a mapping"),
-    ("options.lags", "10", "field 'options' is not valid (estimator.lags must be an integer >= 0, 'all' or 'auto', "
-                           "got '10')"),
+    ("options.lags", "10", "field 'options' is not valid (estimator.lags must be an integer in [0, 100000], 'all' or "
+                           "'auto', got '10')"),
     ("options.lags", 11, "field 'options.lags' is 11, the configuration has 10"),
     ("options.window", "hann", "field 'options' is not valid (estimator.window must be one of"),
-    ("options.forgetting", 1.5, "(estimator.forgetting must be a number in (0, 1], got 1.5)"),
-    ("options.forgetting", None, "(estimator.forgetting must be a number in (0, 1], got None)"),
+    ("options.forgetting", 1.5, "(estimator.forgetting must be a number in [0.5, 1], got 1.5)"),
+    ("options.forgetting", None, "(estimator.forgetting must be a number in [0.5, 1], got None)"),
     ("options.init_condition", 0.5, "(estimator.init_condition must be a number > 1, got 0.5)"),
     ("options.residual", KeyError, "field 'options' is not valid (estimator.residual is missing)"),
     ("options.lag", 10, "field 'options' is not valid (estimator.lag is not an estimator option)"),
@@ -350,13 +351,13 @@ def test_declared_sizes_larger_than_the_file_are_refused_before_reading(tmp_path
 
 
 def test_a_header_declaring_a_huge_shape_is_refused_before_reading(tmp_path):
-    """An absurd capacity, consistent in meta, implies arrays larger than the file: refused
-    from the declared entry sizes; and an entry whose npy header lies about its shape is
-    refused from the header, before numpy allocates it."""
+    """An absurd capacity (the most lags the options allow), consistent in meta, implies
+    arrays larger than the file: refused from the declared entry sizes; and an entry whose npy
+    header lies about its shape is refused from the header, before numpy allocates it."""
     arrays, meta = contents(saved(tmp_path))
-    big = _with(meta, "options.lags", 10**7 - 1)
-    big["bank_counters"]["cap"] = 10**7
-    fp = {**FINGERPRINT, "n_lags": 10**7 - 1}
+    big = _with(meta, "options.lags", MAX_LAGS)
+    big["bank_counters"]["cap"] = MAX_LAGS + 1
+    fp = {**FINGERPRINT, "n_lags": MAX_LAGS}
     big["fingerprint"] = fp
     tracemalloc.start()
     try:

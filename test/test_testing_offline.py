@@ -8,7 +8,7 @@ import pytest
 from rls_uncertainty.errors import ConfigError
 from rls_uncertainty.offline.bags import read_inputs
 from rls_uncertainty.offline.replay import run_pipeline
-from rls_uncertainty.settings.config import load_parameters_file, pipeline_config
+from rls_uncertainty.settings import load_parameters_file, pipeline_config
 from rls_uncertainty.testing import parameters, replay_bag
 
 from conftest import ROOT

@@ -23,7 +23,7 @@ from ..datapath.limits import PlausibilityLimits
 from ..errors import Refused
 
 if TYPE_CHECKING:  # annotations only: this module imports numpy alone
-    from ..settings.config import AircraftConfig, ModelConfig
+    from ..settings.models import AircraftConfig, ModelConfig
 
 __all__ = [
     "FloatArray",

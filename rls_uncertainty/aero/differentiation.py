@@ -24,12 +24,12 @@ import math
 from dataclasses import dataclass
 from fractions import Fraction
 from functools import lru_cache
-from numbers import Integral
 
 import numpy as np
 import numpy.typing as npt
 
 from ..errors import ConfigError
+from ..schema import check, option
 
 __all__ = ["DifferentiatorConfig", "FixedLagDifferentiator", "derivative_weights", "differentiate", "MIN_WINDOW",
            "MAX_WINDOW", "MAX_ORDER"]
@@ -47,28 +47,21 @@ class DifferentiatorConfig:
     """Window length (samples), polynomial order and fixed lag (samples, 0 = causal): the
     ``differentiator.*`` parameters, validated here and nowhere else."""
 
-    window: int = 9
-    order: int = 3
-    lag: int = 4
+    window: int = option(9, "angular-acceleration differentiator window", unit="samples", low=MIN_WINDOW,
+                         high=MAX_WINDOW, ros="differentiator.window")
+    order: int = option(3, "local polynomial order of the differentiator (below differentiator.window; weights "
+                        "exact at every setting)", low=1, high=MAX_ORDER, ros="differentiator.order")
+    lag: int = option(4, "differentiator fixed lag (0 = causal); every signal is delayed by it", unit="samples",
+                      low=0, high=MAX_WINDOW - 1, ros="differentiator.lag")
 
     def __post_init__(self) -> None:
-        for name in ("window", "order", "lag"):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, Integral):
-                raise ConfigError(f"differentiator.{name} must be an integer, got {value!r}")
-        if not MIN_WINDOW <= self.window <= MAX_WINDOW:
-            raise ConfigError(
-                f"differentiator.window must be in [{MIN_WINDOW}, {MAX_WINDOW}] samples, got {self.window}"
-            )
-        if not 1 <= self.order <= min(MAX_ORDER, self.window - 1):
-            raise ConfigError(
-                f"differentiator.order must be in [1, {MAX_ORDER}] and below differentiator.window = {self.window}, "
-                f"got {self.order}"
-            )
-        if not 0 <= self.lag < self.window:
-            raise ConfigError(
-                f"differentiator.lag must be in [0, differentiator.window - 1 = {self.window - 1}], got {self.lag}"
-            )
+        check(self, "differentiator")
+        if not self.order < self.window:
+            raise ConfigError(f"differentiator.order must be below differentiator.window = {self.window}, "
+                              f"got {self.order}", parameter="differentiator.order")
+        if not self.lag < self.window:
+            raise ConfigError(f"differentiator.lag must be in [0, differentiator.window - 1 = {self.window - 1}], "
+                              f"got {self.lag}", parameter="differentiator.lag")
 
 
 def derivative_weights(config: DifferentiatorConfig, dt: float) -> FloatArray:

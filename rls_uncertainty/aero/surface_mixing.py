@@ -16,6 +16,7 @@ from dataclasses import dataclass
 from typing import Literal, NamedTuple, get_args
 
 from ..errors import Refused
+from ..schema import check, option
 
 __all__ = ["Surface", "SURFACES", "SurfaceMixing", "JointLayout", "SurfaceMixer", "MISMATCHED", "MISSING"]
 
@@ -34,11 +35,19 @@ class SurfaceMixing:
     """JointState names -> Eq. 23 deflections: elevator and rudder are averages of their
     surfaces, the aileron is (right - left)/2 unless one joint already holds it."""
 
-    elevator: tuple[str, ...] = ("elevator",)
-    aileron_right: tuple[str, ...] = ("aileron_right",)
-    aileron_left: tuple[str, ...] = ("aileron_left",)
-    aileron_combined: str = ""
-    rudder: tuple[str, ...] = ("rudder",)
+    elevator: tuple[str, ...] = option(("elevator",), "JointState names averaged into the elevator deflection "
+                                       "(Eq. 23)", ros="surfaces.elevator")
+    aileron_right: tuple[str, ...] = option(("aileron_right",), "JointState names of right ailerons; delta_a = "
+                                            "(right - left)/2 (Eq. 23)", ros="surfaces.aileron_right")
+    aileron_left: tuple[str, ...] = option(("aileron_left",), "JointState names of left ailerons",
+                                           ros="surfaces.aileron_left")
+    aileron_combined: str = option("", "JointState name that already holds (right - left)/2; when set, "
+                                   "aileron_right/left are ignored", ros="surfaces.aileron_combined")
+    rudder: tuple[str, ...] = option(("rudder",), "JointState names averaged into the rudder deflection (Eq. 23)",
+                                     ros="surfaces.rudder")
+
+    def __post_init__(self) -> None:
+        check(self, "surfaces")
 
     def names(self, surface: Surface) -> tuple[str, ...]:
         """The joints a deflection needs (empty: not measured)."""

@@ -10,7 +10,8 @@
         - {name: m01, start: 62.0, end: 74.0}
         - {name: m02, start: 121.5, end: 133.5}
 
-Every problem is a :class:`.errors.ConfigError` naming the file, the entry and the key.
+Every problem is a :class:`.errors.ConfigError` naming the file, the entry and the key (the YAML
+itself is read by :mod:`..settings.yaml_files`: a key given twice is refused there).
 """
 
 from __future__ import annotations
@@ -21,9 +22,8 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-import yaml
-
 from ..errors import ConfigError
+from ..settings.yaml_files import load
 
 __all__ = ["Maneuver", "from_bags", "load_maneuvers"]
 
@@ -71,12 +71,7 @@ def _seconds(value: object, where: str) -> float:
 def load_maneuvers(path: str | Path, recording: str | Path) -> list[Maneuver]:
     """The maneuvers of ``path`` (module docstring), each a span of ``recording``."""
     path = Path(path)
-    try:
-        data = yaml.safe_load(path.read_text())
-    except UnicodeDecodeError as exc:
-        raise ConfigError(f"{path}: not UTF-8 text (byte {exc.start})") from exc
-    except yaml.YAMLError as exc:
-        raise ConfigError(f"{path}: not valid YAML: {' '.join(str(exc).split())}") from exc
+    data = load(path, "maneuvers file")
     entries = data.get("maneuvers") if isinstance(data, dict) else None
     if not isinstance(entries, list) or not entries:
         raise ConfigError(f"{path}: expected 'maneuvers:' with a list of {{name, start, end}} entries")

@@ -36,7 +36,8 @@ from ..estimator import EstimatorBank
 from ..offline.bags import InputStream
 from ..offline.replay import run_pipeline
 from ..offline.results import ReplayResult
-from ..settings.config import ModelConfig, PipelineConfig
+from ..settings.config import PipelineConfig
+from ..settings.models import ModelConfig
 from .maneuvers import Maneuver
 
 __all__ = ["CampaignSettings", "ParameterResult", "ManeuverResult", "MANEUVER_COLUMNS", "run_maneuver",

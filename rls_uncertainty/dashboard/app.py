@@ -14,8 +14,8 @@ from typing import TYPE_CHECKING
 
 from .hub import Hub, Source
 from .model import Sample
-from .server import Broadcaster, Inbox, ServerOptions, asset_table, bind, check_assets, check_options, serve
-from .settings import discovery_environment, full_node_name, load_reference
+from .server import Broadcaster, Inbox, asset_table, bind, check_assets, serve
+from .settings import ServerOptions, check_options, discovery_environment, full_node_name, load_reference
 
 if TYPE_CHECKING:  # annotations only: rclpy and the bag library are imported where they are used
     from .replay_source import ReplaySource

@@ -19,14 +19,11 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import hmac
-import ipaddress
 import json
-import secrets
 import socket
 import threading
 from collections import deque
 from collections.abc import Callable
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -34,8 +31,9 @@ from aiohttp import WSMsgType, web
 
 from ..errors import ConfigError
 from .hub import Hub
+from .settings import ServerOptions, is_loopback
 
-__all__ = ["ServerOptions", "asset_table", "is_loopback", "Inbox", "make_app", "serve", "MAX_INBOUND"]
+__all__ = ["asset_table", "Inbox", "make_app", "serve", "MAX_INBOUND"]
 
 HERE = Path(__file__).resolve().parent
 STATIC = HERE / "static"
@@ -47,41 +45,6 @@ TOKEN_COOKIE = "rls_dashboard_token"
 _TYPES = {".html": "text/html", ".js": "text/javascript", ".css": "text/css", ".txt": "text/plain"}
 _CSP = ("default-src 'none'; script-src 'self'; style-src 'self'; img-src 'self' data:; connect-src 'self'; "
         "base-uri 'none'; form-action 'none'; frame-ancestors 'none'")
-
-
-@dataclass(frozen=True)
-class ServerOptions:
-    """Validated once (:func:`check_options`): where to listen and the token, if any."""
-
-    host: str = "127.0.0.1"
-    port: int = 8080
-    token: str | None = None
-
-
-def is_loopback(host: str) -> bool:
-    if host == "localhost":
-        return True
-    try:
-        return ipaddress.ip_address(host).is_loopback
-    except ValueError:
-        return False
-
-
-def check_options(host: str, port: int, token: str | None) -> ServerOptions:
-    """The options, or ConfigError naming the one to change. A non-loopback host without a
-    token gets a generated one."""
-    if not 0 <= port <= 65535:
-        raise ConfigError(f"--port {port}: must be in 0..65535 (0 picks a free port)")
-    if host != "localhost":
-        try:
-            ipaddress.ip_address(host)
-        except ValueError:
-            raise ConfigError(f"--host {host!r}: give an IP address of this machine (default 127.0.0.1)") from None
-    if token is not None and (len(token) < 16 or not token.isascii() or not token.isprintable() or " " in token):
-        raise ConfigError("--token: at least 16 printable ASCII characters without spaces")
-    if token is None and not is_loopback(host):
-        token = secrets.token_urlsafe(24)
-    return ServerOptions(host, port, token)
 
 
 def asset_table() -> dict[str, tuple[Path, str]]:

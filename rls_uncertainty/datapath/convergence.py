@@ -69,7 +69,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from ..errors import ConfigError
+from ..schema import check, option
 
 __all__ = ["ConvergenceConfig", "ConvergenceMonitor"]
 
@@ -99,27 +99,19 @@ class ConvergenceConfig:
         Hard cap of the buffer, samples.
     """
 
-    window: float = 2.0
-    band: float = 1.0
-    max_se_rate: float = 0.25
-    rate_hz: float = 200.0
-    max_samples: int = 4096
+    window: float = option(2.0, "convergence flags (~/M/converged): seconds of history that must be settled; "
+                           "window x rate may not exceed 4094 samples", unit="s", low=0.05, high=60.0,
+                           ros="convergence.window")
+    band: float = option(1.0, "convergence flags: every estimate of the window within this many current corrected "
+                         "standard errors of the current estimate", low=0.01, high=1e6, ros="convergence.band")
+    max_se_rate: float = option(0.25, "convergence flags: every standard error of the window within a factor "
+                                "exp(max_se_rate x age) of the current one", unit="1/s", low=0.001, high=100.0,
+                                ros="convergence.max_se_rate")
+    rate_hz: float = option(200.0, "highest sample rate the buffer is sized for", unit="Hz", low=0.0, low_open=True)
+    max_samples: int = option(4096, "hard cap of the buffer", unit="samples", low=2)
 
     def __post_init__(self) -> None:
-        for name in ("window", "band", "max_se_rate", "rate_hz"):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, (int, float)):
-                raise ConfigError(f"convergence {name} must be a number, got {value!r}")
-            if not (math.isfinite(value) and value > 0):
-                raise ConfigError(f"convergence {name} must be positive and finite, got {value!r}")
-        if isinstance(self.max_samples, bool) or not isinstance(self.max_samples, (int, np.integer)):
-            raise ConfigError(f"convergence max_samples must be an integer, got {self.max_samples!r}")
-        if self.max_samples < 2:
-            raise ConfigError(f"convergence max_samples must be >= 2, got {self.max_samples!r}")
-        if self.window * 1e9 >= 2.0**61:
-            raise ConfigError(f"convergence window is too long: {self.window!r} s")
-        if self.band > 1e6:
-            raise ConfigError(f"convergence band must be at most 1e6 standard errors, got {self.band!r}")
+        check(self, "convergence")
 
     @property
     def capacity(self) -> int:

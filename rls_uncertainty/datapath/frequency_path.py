@@ -36,7 +36,7 @@ from typing import TYPE_CHECKING, NamedTuple
 import numpy as np
 
 from ..frequency import FrequencyBank
-from ..settings.config import BIAS_REGRESSOR
+from ..settings.models import BIAS_REGRESSOR
 from .convergence import ConvergenceMonitor
 
 if TYPE_CHECKING:  # annotations only

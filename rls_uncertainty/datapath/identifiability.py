@@ -65,7 +65,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ..errors import ConfigError
+from ..schema import check, option
 
 if TYPE_CHECKING:  # annotations only
     from ..estimator import EstimatorBank
@@ -89,34 +89,27 @@ _CONSTANT_OUTPUT = 1e-12  # var(z) at most this fraction of mean(z^2): R^2 undef
 
 @dataclass(frozen=True)
 class IdentifiabilityConfig:
-    """The three tests of the module docstring (``identifiability.*`` parameters).
+    """The three tests of the module docstring (``identifiability.*`` parameters): the largest
+    magnitude of the correlation of two slope estimates, the smallest R^2 of a model whose
+    parameters can be identifiable, and the excitation floors of the flow angles and surfaces
+    (rad) and of the nondimensional rates. Each field's meaning and bounds are its option's."""
 
-    max_correlation:
-        largest magnitude of the correlation of two slope estimates, in (0, 1).
-    min_r_squared:
-        smallest R^2 of a model whose parameters can be identifiable, in [0, 1).
-    angle_resolution:
-        rad: a flow angle or surface whose standard deviation since the start is at most this
-        is not excited.
-    rate_resolution:
-        the same for the nondimensional rates ``p b/2V``, ``q cbar/2V``, ``r b/2V``.
-    """
-
-    max_correlation: float = 0.9998
-    min_r_squared: float = 0.5
-    angle_resolution: float = 1e-4
-    rate_resolution: float = 1e-6
+    max_correlation: float = option(
+        0.9998, "convergence flags: two parameters whose estimates are correlated beyond this (either sign, from the "
+        "corrected covariance) are not identifiable and never flagged", low=0.5, high=0.999999,
+        ros="identifiability.max_correlation")
+    min_r_squared: float = option(
+        0.5, "convergence flags: a model whose R^2 is below this explains nothing; none of its parameters is flagged",
+        low=0.0, high=0.99, ros="identifiability.min_r_squared")
+    angle_resolution: float = option(
+        1e-4, "convergence flags: a flow angle or surface regressor whose standard deviation since the start is at "
+        "most this is not excited and its parameter never flagged", unit="rad", low=0.0, high=0.1,
+        ros="identifiability.angle_resolution")
+    rate_resolution: float = option(1e-6, "the same for the nondimensional rates p b/2V, q cbar/2V, r b/2V",
+                                    low=0.0, high=0.01, ros="identifiability.rate_resolution")
 
     def __post_init__(self) -> None:
-        checks = (("max_correlation", lambda x: 0.0 < x < 1.0, "in (0, 1)"),
-                  ("min_r_squared", lambda x: 0.0 <= x < 1.0, "in [0, 1)"),
-                  ("angle_resolution", lambda x: x >= 0.0, ">= 0"),
-                  ("rate_resolution", lambda x: x >= 0.0, ">= 0"))
-        for name, ok, expected in checks:
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) \
-                    or not ok(value):
-                raise ConfigError(f"identifiability.{name} must be a number {expected}, got {value!r}")
+        check(self, "identifiability")
 
     def resolution(self, unit: str | None) -> float:
         """The excitation floor of a regressor of ``unit`` (NaN for the bias: not tested)."""

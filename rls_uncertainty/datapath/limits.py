@@ -34,27 +34,14 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterable, Sequence
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 from typing import Any
 
 from ..errors import ConfigError
+from ..schema import check, option, settings
 
 __all__ = ["PlausibilityLimits", "BOUNDS", "message_value", "sample_value"]
 
-# implausible_<quantity> -> (the limits.* fields that bound it, unit). A bound given as one
-# field is symmetric (|x| <= limit); as two, a range (min <= x <= max).
-BOUNDS: dict[str, tuple[tuple[str, ...], str]] = {
-    "implausible_airspeed": (("airspeed_min", "airspeed_max"), "m/s"),
-    "implausible_alpha": (("alpha",), "rad"),
-    "implausible_beta": (("beta",), "rad"),
-    "implausible_angular_rate": (("angular_rate",), "rad/s"),
-    "implausible_specific_force": (("specific_force",), "m/s^2"),
-    "implausible_surface": (("surface",), "rad"),
-    "implausible_dynamic_pressure": (("dynamic_pressure_min", "dynamic_pressure_max"), "Pa"),
-    "implausible_thrust": (("thrust",), "N"),
-    "implausible_angular_acceleration": (("angular_acceleration",), "rad/s^2"),
-    "inconsistent_dynamic_pressure": (("air_density_min", "air_density_max"), "kg/m^3"),
-}
 # The quantity a reason's bound is on, where it is not the reason's own ``implausible_<quantity>``.
 _QUANTITY = {"inconsistent_dynamic_pressure": "air_density"}
 
@@ -90,33 +77,61 @@ class PlausibilityLimits:
     refuses any jump above 10 rad/s between 50 Hz messages, above 2.5 rad/s at 200 Hz.
     """
 
-    airspeed_min: float = 3.0
-    airspeed_max: float = 400.0
-    alpha: float = 1.0
-    beta: float = 0.6
-    angular_rate: float = 20.0
-    specific_force: float = 200.0
-    surface: float = 1.0
-    dynamic_pressure_min: float = 5.0
-    dynamic_pressure_max: float = 1.0e5
-    thrust: float = 2.0e6
-    air_density_min: float = 0.05
-    air_density_max: float = 2.0
-    angular_acceleration: float = 500.0
+    airspeed_min: float = option(
+        3.0, "lowest plausible true airspeed (flow angles and p b/2V are noise below it); rejected as "
+        "implausible_airspeed",
+        unit="m/s", low=0.1, high=100.0, ros="limits.airspeed_min")
+    airspeed_max: float = option(
+        400.0, "highest plausible true airspeed (supersonic at any altitude); rejected as implausible_airspeed",
+        unit="m/s", low=1.0, high=3000.0, ros="limits.airspeed_max")
+    alpha: float = option(
+        1.0, "largest plausible angle of attack, either sign (57 deg; flying backwards is near 3.14); rejected as "
+        "implausible_alpha",
+        unit="rad", low=0.05, high=1.5, ros="limits.alpha")
+    beta: float = option(
+        0.6, "largest plausible sideslip angle, either sign (34 deg); rejected as implausible_beta",
+        unit="rad", low=0.05, high=1.5, ros="limits.beta")
+    angular_rate: float = option(
+        20.0, "largest plausible body rate about any axis (1150 deg/s); rejected as implausible_angular_rate",
+        unit="rad/s", low=0.1, high=100.0, ros="limits.angular_rate")
+    specific_force: float = option(
+        200.0, "largest plausible specific force along any axis (20 g); rejected as implausible_specific_force",
+        unit="m/s^2", low=1.0, high=2000.0, ros="limits.specific_force")
+    surface: float = option(
+        1.0, "largest plausible deflection of a mixed control-surface joint, either sign (57 deg); rejected as "
+        "implausible_surface",
+        unit="rad", low=0.01, high=1.5, ros="limits.surface")
+    dynamic_pressure_min: float = option(
+        5.0, "lowest plausible dynamic pressure (3 m/s at sea level; Eq. 1 divides by it); rejected as "
+        "implausible_dynamic_pressure",
+        unit="Pa", low=0.01, high=10000.0, ros="limits.dynamic_pressure_min")
+    dynamic_pressure_max: float = option(
+        1.0e5, "highest plausible dynamic pressure (400 m/s at sea level); rejected as implausible_dynamic_pressure",
+        unit="Pa", low=1.0, high=1.0e7, ros="limits.dynamic_pressure_max")
+    thrust: float = option(
+        2.0e6, "largest plausible thrust, either sign (reverse thrust; above the largest aircraft's total thrust); "
+        "rejected as implausible_thrust",
+        unit="N", low=1.0, high=1.0e8, ros="limits.thrust")
+    air_density_min: float = option(
+        0.05, "lowest plausible air density 2 qbar/V^2 implied by the measured dynamic pressure and the true "
+        "airspeed (the air at 21 km is 0.07); a sample below is rejected as inconsistent_dynamic_pressure",
+        unit="kg/m^3", low=0.005, high=10.0, ros="limits.air_density_min")
+    air_density_max: float = option(
+        2.0, "highest plausible air density 2 qbar/V^2 implied by the measured dynamic pressure and the true "
+        "airspeed (-60 C at 1085 hPa is 1.77); a sample above is rejected as inconsistent_dynamic_pressure",
+        unit="kg/m^3", low=0.01, high=100.0, ros="limits.air_density_max")
+    angular_acceleration: float = option(
+        500.0, "largest plausible change of a body rate between consecutive imu messages over their interval (a "
+        "gyro spike of 10 rad/s in one 50 Hz message is 500); rejected as implausible_angular_acceleration",
+        unit="rad/s^2", low=1.0, high=1.0e6, ros="limits.angular_acceleration")
 
     def __post_init__(self) -> None:
-        for f in fields(self):
-            value = getattr(self, f.name)
-            if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) \
-                    or value <= 0:
-                raise ConfigError(f"limits.{f.name} must be a positive number, got {value!r}")
-        for name in ("alpha", "beta"):
-            if getattr(self, name) >= 0.5 * math.pi:
-                raise ConfigError(f"limits.{name} must be below pi/2 rad, got {getattr(self, name)!r}")
+        check(self, "limits")
         for name in ("airspeed", "dynamic_pressure", "air_density"):
             low, high = getattr(self, f"{name}_min"), getattr(self, f"{name}_max")
             if not low < high:
-                raise ConfigError(f"limits.{name}_min ({low!r}) must be below limits.{name}_max ({high!r})")
+                raise ConfigError(f"limits.{name}_min ({low!r}) must be below limits.{name}_max ({high!r})",
+                                  parameter=f"limits.{name}_min")
 
     # One message each. ``non_finite`` when a value is NaN or infinite (checked first, as the
     # sampler does), else ``implausible_<field>`` for the first value out of its bounds, else
@@ -218,6 +233,24 @@ class PlausibilityLimits:
         low, high = (getattr(self, n) for n in names)
         side = names[1] if seen > high else names[0] if seen < low else f"{names[0]}/{names[1].rsplit('_', 1)[1]}"
         return f"limits.{side}", f"{low:g} <= {quantity} <= {high:g} {unit}"
+
+
+# implausible_<quantity> -> (the limits.* fields that bound it, their unit). A bound given as one
+# field is symmetric (|x| <= limit); as two, a range (min <= x <= max).
+_BOUNDED_BY = {
+    "implausible_airspeed": ("airspeed_min", "airspeed_max"),
+    "implausible_alpha": ("alpha",),
+    "implausible_beta": ("beta",),
+    "implausible_angular_rate": ("angular_rate",),
+    "implausible_specific_force": ("specific_force",),
+    "implausible_surface": ("surface",),
+    "implausible_dynamic_pressure": ("dynamic_pressure_min", "dynamic_pressure_max"),
+    "implausible_thrust": ("thrust",),
+    "implausible_angular_acceleration": ("angular_acceleration",),
+    "inconsistent_dynamic_pressure": ("air_density_min", "air_density_max"),
+}
+_UNITS = {f.name: s.unit for f, s in settings(PlausibilityLimits)}
+BOUNDS: dict[str, tuple[tuple[str, ...], str]] = {r: (names, _UNITS[names[0]]) for r, names in _BOUNDED_BY.items()}
 
 
 def _all_finite(values: Iterable[float]) -> bool:

@@ -53,7 +53,8 @@ from ..aero.differentiation import FixedLagDifferentiator
 from ..aero.surface_mixing import SURFACES
 from ..errors import NonFiniteInput, Refused, StateFileError
 from ..estimator import EstimatorBank
-from ..settings.config import REGRESSOR_UNITS, PipelineConfig
+from ..settings.config import PipelineConfig
+from ..settings.models import REGRESSOR_UNITS
 from ..state_file import EstimatorState, load_state, save_state
 from .alerts import explanations, identifiability
 from .bookkeeping import Bookkeeping, model_fit

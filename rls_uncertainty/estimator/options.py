@@ -1,11 +1,13 @@
 """The estimator's options: one frozen object, validated once.
 
 :class:`EstimatorOptions` is the only place the options are listed, checked and given their
-defaults. The fast bank (:class:`.bank.EstimatorBank`), the executable specification
-(:class:`.reference.RecursiveReference`), :class:`.recursive.RecursiveEstimator` and the state
-file take it as it is and check nothing again; the configuration maps the ROS parameters onto
-it in one function (:func:`rls_uncertainty.settings.config.estimator_options`). What each option means
-is defined in :mod:`.reference` and tabulated in ``docs/estimator.md``.
+defaults: each field is a :func:`..schema.option` carrying its default, bounds, unit, meaning
+and, where the node has one, its ROS parameter and command-line flag (the spans in seconds
+there, :class:`..schema.Span`; in samples here). The fast bank (:class:`.bank.EstimatorBank`),
+the executable specification (:class:`.reference.RecursiveReference`),
+:class:`.recursive.RecursiveEstimator` and the state file take it as it is and check nothing
+again; :mod:`rls_uncertainty.settings.parameters` builds it from the node's parameters. What
+each option means is defined in :mod:`.reference` and tabulated in ``docs/estimator.md``.
 """
 
 from __future__ import annotations
@@ -18,6 +20,7 @@ from typing import Any, Literal, get_args
 import numpy as np
 
 from ..errors import ConfigError
+from ..schema import Choice, Span, Special, check, option, seconds
 
 __all__ = [
     "EstimatorOptions",
@@ -28,8 +31,10 @@ __all__ = [
     "WINDOWS",
     "RESIDUALS",
     "COVARIANCE_KINDS",
+    "LAG_SELECTIONS",
     "AUTO_BURN_IN",
     "MAX_BURN_IN",
+    "MAX_LAGS",
     "NOISE_MEMORY_LAGS",
     "check_window",
     "check_kind",
@@ -37,10 +42,12 @@ __all__ = [
 
 # Default memory of the noise model under forgetting, in units of (lags held + 1) samples.
 NOISE_MEMORY_LAGS = 40.0
-# residual_burn_in: the default with lags="auto" (0, the paper, otherwise) and the largest
-# value accepted (samples).
+# residual_burn_in: the default with lags="auto" (0, the paper, otherwise), samples (1 s at the
+# paper's 50 Hz; the node's estimator.residual_burn_in_span default is that span at its rate),
+# and the largest value accepted.
 AUTO_BURN_IN = 50
 MAX_BURN_IN = 100_000
+MAX_LAGS = 100_000  # the most lags held (the memory of Eq. 22's lag products)
 
 Lags = int | Literal["all", "auto"]
 Window = Literal["truncated", "bartlett"]
@@ -49,7 +56,8 @@ CovarianceKind = Literal["corrected", "conventional"]
 WINDOWS: tuple[Window, ...] = get_args(Window)
 RESIDUALS: tuple[Residual, ...] = get_args(Residual)
 COVARIANCE_KINDS: tuple[CovarianceKind, ...] = get_args(CovarianceKind)
-
+# estimator.lag_selection: lags fixed by estimator.lag_span, or chosen by the data ("auto").
+LAG_SELECTIONS = ("fixed", "auto")
 
 def check_window(window: object) -> None:
     """Refuse a lag window other than :data:`WINDOWS` (an argument of the batch formulas)."""
@@ -94,64 +102,79 @@ class EstimatorOptions:
     value per parameter. Definitions: :mod:`.reference`; the table: ``docs/estimator.md``.
     """
 
-    lags: Lags = 50
-    window: Window = "truncated"
-    forgetting: float = 1.0
-    residual: Residual = "standardized"
-    max_lags: int = 50
-    min_lags: int = 0
-    residual_burn_in: int | None = None
-    noise_forgetting: float | None = None
-    init_condition: float = 1e8
-    p0: float | tuple[float, ...] | None = None
+    lags: Lags = option(
+        50, "time span of the residual autocorrelation kept in the corrected covariance (Eq. 22): lags = lag_span x "
+        "rate (1 s: the paper's 50 lags at 50 Hz), so the standard errors do not depend on the rate",
+        unit="samples", low=0, high=MAX_LAGS, own_check=True, ros="estimator.lag_span", cli="--lag-span",
+        span=Span(-1.0, 2000.0, (Special(-1.0, "all", "all", "keeps all lags (Eq. 20)"),
+                                 Special(0.0, 0, "", "the conventional covariance"))),
+        choice=Choice("estimator.lag_selection", LAG_SELECTIONS, "auto",
+                      "fixed: estimator.lag_span; auto: each model's lags chosen from its residual autocorrelation "
+                      "at every sample (Politis flat-top rule, truncated window only), up to "
+                      "estimator.max_lag_span"))
+    window: Window = option("truncated", "lag window: truncated (Eq. 22) or bartlett (always positive semi-definite)",
+                            choices=WINDOWS, ros="estimator.window", cli="--window")
+    forgetting: float = option(1.0, "exponential forgetting factor; 1 is the paper's growing-memory estimator",
+                               low=0.5, high=1.0, ros="estimator.forgetting", cli="--forgetting")
+    residual: Residual = option(
+        "standardized", "residual used in Eqs. 16-17: standardized (innovation / sqrt(1 + x'Dx), makes Eq. 16 "
+        "equal the batch Eq. 14), a_posteriori (z - x'theta_k) or a_priori (z - x'theta_k-1)",
+        choices=RESIDUALS, ros="estimator.residual")
+    max_lags: int = option(
+        50, "with estimator.lag_selection auto: the longest lag span the rule may choose, and the memory kept (as "
+        "estimator.lag_span of that value)", unit="samples", low=1, high=MAX_LAGS, ros="estimator.max_lag_span",
+        cli="--max-lag-span", span=Span(0.001, 2000.0))
+    min_lags: int = option(0, "with automatic lags: the fewest lags used", unit="samples", own_check=True)
+    residual_burn_in: int | None = option(
+        None, "time after each model's initialization whose residuals are left out of the residual "
+        "autocorrelation (Eq. 17; the first residuals, while the estimate is still poor, inflate it)",
+        unit="samples", low=0, high=MAX_BURN_IN, own_check=True, ros="estimator.residual_burn_in_span",
+        cli="--burn-in-span",
+        span=Span(-1.0, 2000.0, (Special(-1.0, None, "default", f"{seconds(AUTO_BURN_IN):g} s with "
+                                 "estimator.lag_selection auto, 0 (the paper) with fixed lags"),
+                                 Special(0.0, 0, "", "none (the paper)"))))
+    noise_forgetting: float | None = option(
+        None, "forgetting f_R of the noise model under forgetting, in [forgetting, 1] (None: the default of "
+        "noise_forgetting_used)", own_check=True)
+    init_condition: float = option(
+        1e8, "exact initialization waits for a column-scaled X'X better conditioned than this", low=1.0,
+        low_open=True)
+    p0: float | tuple[float, ...] | None = option(
+        None, "None (exact initialization) or the prior D_0 = diag(p0), theta_0 = 0: a positive number or one per "
+        "parameter", own_check=True)
 
     def __post_init__(self) -> None:
+        check(self, "estimator")
         self._check_lags()
-        if self.window not in WINDOWS:
-            raise _fail("window", f"one of {list(WINDOWS)}", self.window)
         if self.lags == "auto" and self.window != "truncated":
             raise _fail(
                 "window", "'truncated' with automatic lags (the flat-top rule chooses a truncation point; "
                 "the Bartlett taper cannot let the anti-correlated lags of differentiated noise cancel)", self.window,
             )
-        f = self._number("forgetting", "a number in (0, 1]", lambda x: 0.0 < x <= 1.0)
-        if self.residual not in RESIDUALS:
-            raise _fail("residual", f"one of {list(RESIDUALS)}", self.residual)
         b: Any = self.residual_burn_in  # (whatever was given: checked here)
         if b is not None and not (_is_int(b) and 0 <= b <= MAX_BURN_IN):
             raise _fail("residual_burn_in", f"None (the default: {AUTO_BURN_IN} with automatic lags, 0 otherwise) "
                         f"or an integer in [0, {MAX_BURN_IN}]", b)
         self._set("residual_burn_in", None if b is None else int(b))
-        g = self.noise_forgetting
+        f, g = self.forgetting, self.noise_forgetting
         if g is not None:
             if not (_is_number(g) and f <= float(g) <= 1.0):
                 raise _fail("noise_forgetting", f"None or a number in [forgetting, 1] = [{f:g}, 1]", g)
             self._set("noise_forgetting", float(g))
-        self._number("init_condition", "a number > 1", lambda x: x > 1.0)
         self._check_p0()
 
     def _set(self, name: str, value: object) -> None:
         object.__setattr__(self, name, value)  # the normalised value (frozen dataclass)
 
-    def _number(self, name: str, expected: str, ok: Any) -> float:
-        value = getattr(self, name)
-        if not (_is_number(value) and not math.isnan(value) and ok(float(value))):
-            raise _fail(name, expected, value)
-        self._set(name, float(value))
-        return float(value)
-
     def _check_lags(self) -> None:
         lags: Any = self.lags  # (whatever was given: checked here)
         high = self.max_lags
-        if not (lags in ("all", "auto") if isinstance(lags, str) else _is_int(lags) and lags >= 0):
-            raise _fail("lags", "an integer >= 0, 'all' or 'auto'", lags)
-        if not (_is_int(high) and high >= 1):
-            raise _fail("max_lags", "an integer >= 1", high)
+        if not (lags in ("all", "auto") if isinstance(lags, str) else _is_int(lags) and 0 <= lags <= MAX_LAGS):
+            raise _fail("lags", f"an integer in [0, {MAX_LAGS}], 'all' or 'auto'", lags)
         if not (_is_int(self.min_lags) and 0 <= self.min_lags <= high):
             raise _fail("min_lags", f"an integer in [0, max_lags = {high}]", self.min_lags)
         if not isinstance(lags, str):
             self._set("lags", int(lags))
-        self._set("max_lags", int(high))
         self._set("min_lags", int(self.min_lags))
 
     def _check_p0(self) -> None:

@@ -72,6 +72,7 @@ class FrequencyBank:
         M, q = len(self.sizes), p_max + 1
         self._geometry = PairGeometry(2.0 * np.pi * self.frequencies / float(options.rate_hz))
         self._columns: BoolArray = np.arange(q)[None, :] <= np.array(self.sizes)[:, None]  # z and real x
+        self._padding: BoolArray = ~self._columns
         self._transform = RecursiveFourierTransform(self.frequencies, options.rate_hz, (M, q))
         self._lags = LagSums(M, q, options.n_lags)
         self._first: FloatArray | None = None
@@ -83,6 +84,12 @@ class FrequencyBank:
         self._R: FloatArray = np.full((M, 1), np.nan)
         self._ready: BoolArray = np.zeros(M, dtype=bool)
         self._evaluated_at = 0
+        # Fixed masks of the evaluation: the parameters, the padding's diagonal and blocks.
+        real = self._columns[:, 1:]
+        self._real: BoolArray = real
+        self._pad_diagonal: BoolArray = ~real[:, :, None] & np.eye(p_max, dtype=bool)
+        self._pad_square: BoolArray = ~(real[:, :, None] & real[:, None, :])
+        self._residual_dof: FloatArray = K - np.array(self.sizes, dtype=np.float64)
 
     # ------------------------------------------------------------------ per sample
     @property
@@ -101,10 +108,12 @@ class FrequencyBank:
         then its regressors, zero padding; :class:`NonFiniteInput` for a value :meth:`update`
         refuses. Nothing changes: a caller that feeds another estimator too checks here first."""
         M, q = self._columns.shape
-        u = np.zeros((M, q))
+        u = np.empty((M, q))
         u[:, 0] = np.asarray(z, dtype=np.float64).reshape(M)
         u[:, 1:] = np.asarray(X, dtype=np.float64).reshape(M, q - 1)
-        u[~self._columns] = 0.0
+        u[self._padding] = 0.0
+        if (np.abs(u) <= LARGEST_INPUT).all():
+            return u
         bad = ~(np.abs(u) <= LARGEST_INPUT).all(axis=1)
         if bad.any():
             raise NonFiniteInput(
@@ -150,21 +159,23 @@ class FrequencyBank:
         Z, X = U[..., 0], U[..., 1:]
         G = np.einsum("mka,mkb->mab", U.conj(), U).real
         A, b = G[:, 1:, 1:].copy(), G[:, 1:, 0]
-        pad = ~self._columns[:, 1:]
-        A[pad[:, :, None] & np.eye(A.shape[1], dtype=bool)] = 1.0  # padded parameters: theta = 0
+        A[self._pad_diagonal] = 1.0  # padded parameters: theta = 0
         ready = self._well_conditioned(A) if N >= 2 else np.zeros(len(self.sizes), dtype=bool)
-        A[~ready] = np.eye(A.shape[1])
+        all_ready = bool(ready.all())
+        if not all_ready:
+            A[~ready] = np.eye(A.shape[1])
         A_inv = np.linalg.inv(A)
-        A_inv[pad[:, :, None] | pad[:, None, :]] = 0.0
+        A_inv[self._pad_square] = 0.0
         theta = np.einsum("mab,mb->ma", A_inv, b)
         # Eq. F5: s^2 = sum_k |Z_k - X_k theta|^2 / (K - p).
         E = Z - np.einsum("mka,ma->mk", X, theta)
-        s2 = (E.real**2 + E.imag**2).sum(axis=1) / (self.frequencies.size - np.array(self.sizes))
+        s2 = (E.real**2 + E.imag**2).sum(axis=1) / self._residual_dof
         conventional = s2[:, None, None] * A_inv
         corrected = self._corrected(X, A_inv, theta, N)
-        self._theta = np.where(ready[:, None] & ~pad, theta, np.nan)
+        self._theta = np.where(self._real if all_ready else ready[:, None] & self._real, theta, np.nan)
         self._cov[0], self._cov[1] = corrected, conventional
-        self._cov[:, ~ready] = np.nan
+        if not all_ready:
+            self._cov[:, ~ready] = np.nan
         self._ready = ready
 
     def _trim_count(self) -> int:
@@ -186,10 +197,11 @@ class FrequencyBank:
         """Column-scaled ``Re(X^H X)`` of each model (padding: a unit diagonal, which leaves the
         extreme eigenvalues of a unit-diagonal matrix unchanged) below ``init_condition``."""
         d = np.diagonal(A, axis1=1, axis2=2)
-        positive = np.all(d > 0, axis=1) & np.all(np.isfinite(A), axis=(1, 2))
-        s = 1.0 / np.sqrt(np.where(positive[:, None] & (d > 0), d, 1.0))
+        positive: BoolArray = np.all(d > 0, axis=1) & np.all(np.isfinite(A), axis=(1, 2))
+        s = 1.0 / np.sqrt(np.where(positive[:, None], d, 1.0))
         scaled = A * s[:, :, None] * s[:, None, :]
-        scaled[~positive] = np.eye(A.shape[1])
+        if not positive.all():
+            scaled[~positive] = np.eye(A.shape[1])
         eig = np.linalg.eigvalsh(scaled)
         ok: BoolArray = positive & (eig[:, 0] * self.options.init_condition > eig[:, -1])
         return ok
@@ -198,20 +210,21 @@ class FrequencyBank:
         """Eqs. F7-F10: the residual autocovariance over the record (least-squares residuals,
         corrected for the fit's degrees of freedom), the closed-form sandwich; repaired to
         positive semi-definite where a variance came out negative."""
-        C = self._lags.centered()  # (M, lags, q, q)
-        R = residual_autocovariance(C, self._columns, N, self.options.dof_correction)
+        R, C0 = residual_autocovariance(self._lags.augmented(), self._columns, N, self.options.dof_correction)
         self._R = R
         mid = middle(R, X, self._geometry.at(N), self._trim_count())
-        cov: FloatArray = A_inv @ (self.options.dt**2 * mid) @ A_inv
-        output_variance = np.einsum("ma,mab,mb->m", theta, C[:, 0, 1:, 1:], theta) / N
+        mid *= self.options.dt**2
+        cov: FloatArray = A_inv @ mid @ A_inv
+        output_variance = np.einsum("ma,mab,mb->m", theta, C0[:, 1:, 1:], theta) / N
         exact = R[:, 0] <= EXACT_FIT * output_variance
-        cov[exact] = 0.0
-        repaired = False
-        for j, p in enumerate(self.sizes):
-            if not exact[j] and np.diag(cov[j, :p, :p]).min() < 0.0:
+        if exact.any():
+            cov[exact] = 0.0
+        negative = (np.diagonal(cov, axis1=1, axis2=2) < 0.0).any(axis=1)  # padding: 0
+        if negative.any():
+            for j in np.flatnonzero(negative).tolist():
+                p = self.sizes[j]
                 cov[j, :p, :p] = nearest_psd(cov[j, :p, :p])
-                repaired = True
-        self.repairs += repaired
+            self.repairs += 1
         return cov
 
     # ------------------------------------------------------------------ results

@@ -51,8 +51,25 @@ class PairGeometry:
         self.inv_minus: ComplexArray = inv_minus
         self.inv_plus: ComplexArray = 1.0 / _one_minus_exp(a[:, None] + a[None, :])
         self.inv_single: ComplexArray = 1.0 / _one_minus_exp(a)
-        self._tables: dict[int, tuple[FloatArray, FloatArray]] = {}
+        # 1 / (1 - exp(-j d)) = (1 - j cot(d / 2)) / 2: inv_minus = (J - I)/2 - (j/2) cot-,
+        # inv_plus = J/2 - (j/2) cot+ (J all ones), cot-+ = cot((a_k -+ a_l) / 2) (cot- zero on
+        # the diagonal). :func:`middle` takes [Re L; Im L] = [[J - I/2, (cot- - cot+)/2],
+        # [-(cot- + cot+)/2, -I/2]] [Re a; Im a].
+        cot_minus = np.zeros((K, K))
+        cot_minus[~self.diagonal] = 1.0 / np.tan(minus[~self.diagonal] / 2)
+        cot_plus = 1.0 / np.tan((a[:, None] + a[None, :]) / 2)
+        self.left_map: FloatArray = np.block([[np.ones((K, K)) - 0.5 * np.eye(K), 0.5 * (cot_minus - cot_plus)],
+                                              [-0.5 * (cot_minus + cot_plus), -0.5 * np.eye(K)]])
+        self._tables: dict[int, FloatArray] = {}
+        self._weights: dict[int, FloatArray] = {}
         self.at(1)
+
+    def lag_weights(self, lags: int) -> FloatArray:
+        """``1.0 .. lags`` (kept per ``lags``)."""
+        out = self._weights.get(lags)
+        if out is None:
+            out = self._weights[lags] = np.arange(1, lags + 1, dtype=np.float64)
+        return out
 
     def head_phasors(self, count: int) -> ComplexArray:
         """``exp(-j a_k n)`` for ``n = 0 .. count-1``, ``(K, count)`` (kept for the largest count)."""
@@ -61,34 +78,61 @@ class PairGeometry:
         out: ComplexArray = self._head[:, :count]
         return out
 
-    def lag_table(self, lags: int) -> tuple[FloatArray, FloatArray]:
-        """``cos(a_k i)`` and ``sin(a_k i)`` for ``i = 1..lags``, ``(lags, K)`` (kept per ``lags``)."""
-        if lags not in self._tables:
+    def lag_table(self, lags: int) -> FloatArray:
+        """``(lags, 2K)``: ``cos(a_k i)`` and ``-sin(a_k i)`` interleaved (columns ``2k``, ``2k+1``)
+        for ``i = 1..lags``, so that ``r @ table`` viewed as complex is ``sum_i r_i exp(-j a_k i)``
+        (kept per ``lags``)."""
+        table = self._tables.get(lags)
+        if table is None:
             phase = np.mod(np.multiply.outer(np.arange(1, lags + 1, dtype=np.float64), self.angles), 2 * np.pi)
-            self._tables[lags] = (np.cos(phase), np.sin(phase))
-        return self._tables[lags]
+            table = np.empty((lags, 2 * self.angles.size))
+            table[:, 0::2], table[:, 1::2] = np.cos(phase), -np.sin(phase)
+            self._tables[lags] = table
+        return table
 
     def at(self, N: int) -> PairGeometry:
         """Set the sample count ``N`` (the record so far); returns ``self``."""
         self.N = int(N)
-        rho = np.exp(-1j * np.mod(self.angles * N, 2 * np.pi))
-        self.rot_minus: ComplexArray = rho[:, None] * rho.conj()[None, :]
-        self.rot_plus: ComplexArray = rho[:, None] * rho[None, :]
-        self.g_minus: ComplexArray = (1.0 - self.rot_minus) * self.inv_minus
-        self.g_minus[self.diagonal] = float(N)
-        self.g_plus: ComplexArray = (1.0 - self.rot_plus) * self.inv_plus
-        self.gamma: ComplexArray = (1.0 - rho) * self.inv_single
+        self.rho = rho = np.exp(-1j * np.mod(self.angles * N, 2 * np.pi))
+        self.gamma = (1.0 - rho) * self.inv_single
         return self
+
+    # The N-dependent K x K matrices, formed only by :func:`pair_matrices` (tests, the explicit form).
+    @property
+    def rot_minus(self) -> ComplexArray:
+        """``exp(-j (a_k - a_l) N)``."""
+        out: ComplexArray = self.rho[:, None] * self.rho.conj()[None, :]
+        return out
+
+    @property
+    def rot_plus(self) -> ComplexArray:
+        """``exp(-j (a_k + a_l) N)``."""
+        out: ComplexArray = self.rho[:, None] * self.rho[None, :]
+        return out
+
+    @property
+    def g_minus(self) -> ComplexArray:
+        """``G_N(a_k - a_l)`` (``N`` on the diagonal)."""
+        out: ComplexArray = (1.0 - self.rot_minus) * self.inv_minus
+        out[self.diagonal] = float(self.N)
+        return out
+
+    @property
+    def g_plus(self) -> ComplexArray:
+        """``G_N(a_k + a_l)``."""
+        out: ComplexArray = (1.0 - self.rot_plus) * self.inv_plus
+        return out
 
 
 def spectral_sums(R: FloatArray, geometry: PairGeometry) -> tuple[ComplexArray, ComplexArray]:
-    """``S+`` and ``S1`` (``(M, K)``) of ``R`` (``(M, L+1)``, lags 0..L) at the grid's angles."""
-    cos, sin = geometry.lag_table(R.shape[1] - 1)
-    lags = np.arange(1, R.shape[1], dtype=np.float64)
-    r, ir = R[:, 1:], R[:, 1:] * lags
-    plus: ComplexArray = r @ cos - 1j * (r @ sin)
-    first: ComplexArray = ir @ cos - 1j * (ir @ sin)
-    return plus, first
+    """``S+`` and ``S1`` (``(M, K)``) of ``R`` (``(M, L+1)``, lags 0..L) at the grid's angles:
+    one product of ``R(1..L)`` and ``i R(i)`` with :meth:`PairGeometry.lag_table`."""
+    M, lags = R.shape[0], R.shape[1] - 1
+    weighted = np.empty((2 * M, lags))
+    weighted[:M] = R[:, 1:]
+    np.multiply(R[:, 1:], geometry.lag_weights(lags), out=weighted[M:])
+    sums: ComplexArray = (weighted @ geometry.lag_table(lags)).view(np.complex128)
+    return sums[:M], sums[M:]
 
 
 def trim_terms(R: FloatArray, geometry: PairGeometry, trim: int) -> tuple[ComplexArray, FloatArray]:
@@ -144,48 +188,57 @@ def sandwich(X: ComplexArray, M: ComplexArray, P: ComplexArray) -> FloatArray:
     return out
 
 
-def _shared(G: ComplexArray, Y: ComplexArray) -> ComplexArray:
-    """``G @ Y_m`` for every model at once: one ``(K, K) @ (K, M p)`` product."""
-    m, K, p = Y.shape
-    out: ComplexArray = (G @ Y.transpose(1, 0, 2).reshape(K, m * p)).reshape(K, m, p).transpose(1, 0, 2)
-    return out
-
-
-def _inner(left: ComplexArray, right: ComplexArray) -> ComplexArray:
-    """``sum_k left_k right_k'`` per model: ``(M, K, p) x (M, K, p) -> (M, p, p)``."""
-    out: ComplexArray = np.swapaxes(left, 1, 2) @ right
-    return out
-
-
 def middle(R: FloatArray, X: ComplexArray, geometry: PairGeometry, trim: int = 1) -> FloatArray:
-    """:func:`sandwich` of :func:`pair_matrices` without forming them. Every term of Eq. F8 is
-    ``G o (a b')`` with ``G`` a geometry matrix shared by all models and ``a``, ``b`` per model,
-    and ``X^H (G o a b') Y = sum_k a_k conj(X_k) (G (b o Y))_k``: ten products of a shared
-    ``K x K`` matrix with every model's columns at once, plus the diagonal and rank-one terms.
-    Returns ``(M, p, p)`` (divided by ``dt^2`` like :func:`pair_matrices`)."""
+    """:func:`sandwich` of :func:`pair_matrices` without forming them, ``(M, p, p)`` (divided by
+    ``dt^2`` like :func:`pair_matrices`), for ``X`` ``(M, K, p)``.
+
+    With ``rho_k = exp(-j a_k N)``, ``Y = conj(rho) X``, ``S = S+``, the two-sided spectrum
+    ``s = R(0) + 2 Re S`` and the fixed matrices ``W = 1 / (1 - exp(-j (a_k - a_l)))`` (zero
+    diagonal) and ``V = 1 / (1 - exp(-j (a_k + a_l)))``, Eq. F8 regroups as
+    ``M_kl = W_kl [R(0) + conj(S_l) + S_k - rho_k conj(rho_l) (R(0) + S_l + conj(S_k))]`` off the
+    diagonal and ``P_kl = V_kl [R(0) + S_l + S_k - rho_k rho_l (R(0) + conj(S_l) + conj(S_k))]``,
+    so that the symmetric part of ``Re(X^H M X + X^H P conj(X))`` is that of
+
+        F(X, bX) - F(Y, bY) + Re(X^H diag(N s - 2 Re S1) X) + (trim),
+        bX = (R(0) + 2 conj(S)) X,   bY = (R(0) + 2 S) Y,   F(a, b) = Re(a^H W b + a^H V conj(b)).
+
+    ``W = (J - I)/2 - (j/2) cot((a_k - a_l)/2)`` and ``V = J/2 - (j/2) cot((a_k + a_l)/2)``
+    (``J`` all ones) give ``F(a, b) = Re(L(a)^H b)`` with ``L(a) = (Q - j P - a)/2 + Re(1' a)``,
+    ``P = (cot- + cot+) Re(a)``, ``Q = (cot- - cot+) Im(a)``: one product of the two fixed real
+    ``K x K`` matrices with the ``2 M p`` columns of ``X`` and ``Y`` (``O(K^2 M p)``), then one
+    contraction over ``3K`` rows per model."""
     g = geometry
+    m, K, p = X.shape
     plus, first = spectral_sums(R, g)
     r0 = R[:, :1]
-    spectrum = (r0 + 2.0 * plus.real)[:, :, None]
-    Sp, Sc = plus[:, :, None], plus.conj()[:, :, None]
-    Xc = X.conj()
-    rot_minus, rot_plus = g.inv_minus * g.rot_minus, g.inv_plus * g.rot_plus
-    # X^H M X: g_minus o 1 S' - inv_minus o (1 S+' - S+ 1') - rot_minus o (conj(S+) 1' - 1 conj(S+)').
-    xmx = (_inner(Xc, _shared(g.g_minus, spectrum * X) - _shared(g.inv_minus, Sp * X) + _shared(rot_minus, Sc * X))
-           + _inner(Sp * Xc, _shared(g.inv_minus, X)) - _inner(Sc * Xc, _shared(rot_minus, X))
-           + _inner(Xc, (-2.0 * first.real)[:, :, None] * X))  # diagonal: N S(w_k) - 2 Re S1(w_k)
-    # X^H P conj(X): g_plus o 1 S' - inv_plus o (1 conj(S+)' - S+ 1') - rot_plus o (conj(S+) 1' - 1 S+').
-    xpx = (_inner(Xc, _shared(g.g_plus, spectrum * Xc) - _shared(g.inv_plus, Sc * Xc) + _shared(rot_plus, Sp * Xc))
-           + _inner(Sp * Xc, _shared(g.inv_plus, Xc)) - _inner(Sc * Xc, _shared(rot_plus, Xc)))
-    # The trim subtracted: var Gamma Gamma^H - V Gamma^H - Gamma V^H (and ^T for P).
-    V, var = trim_terms(R, g, trim)
-    var3 = var[:, None, None]
-    xg = np.einsum("mka,k->ma", Xc, g.gamma)  # X^H Gamma
-    xv = np.einsum("mka,mk->ma", Xc, V)  # X^H V
-    outer = np.einsum
-    xmx += (var3 * outer("ma,mb->mab", xg, xg.conj())
-            - outer("ma,mb->mab", xv, xg.conj()) - outer("ma,mb->mab", xg, xv.conj()))
-    xpx += var3 * outer("ma,mb->mab", xg, xg) - outer("ma,mb->mab", xv, xg) - outer("ma,mb->mab", xg, xv)
-    mid = 0.5 * (xmx + xpx).real
-    out: FloatArray = 0.5 * (mid + np.swapaxes(mid, 1, 2))
+    XY = np.empty((m, 2, K, p), complex)  # X and Y per model
+    XY[:, 0] = X
+    np.multiply(g.rho.conj()[:, None], X, out=XY[:, 1])
+    # [Re; Im] of every column of X and Y, (2K, M 2 p), through the fixed (2K, 2K) map.
+    columns = XY.view(np.float64).reshape(m, 2, K, p, 2).transpose(4, 2, 0, 1, 3).reshape(2 * K, 2 * m * p)
+    mapped = (g.left_map @ columns).reshape(2, K, m, 2, p).transpose(0, 2, 3, 1, 4)  # (re/im, M, X/Y, K, p)
+    left = np.empty((m, 3 * K, p), complex)  # L(X), L(Y), X (the diagonal of M)
+    left.real[:, : 2 * K].reshape(m, 2, K, p)[...] = mapped[0]
+    left.imag[:, : 2 * K].reshape(m, 2, K, p)[...] = mapped[1]
+    left[:, 2 * K :] = X
+    base = r0 + 2.0 * plus  # R(0) + 2 S
+    right = np.empty((m, 3 * K, p), complex)  # bX, -bY, (N s - 2 Re S1) X
+    np.multiply(base.conj()[:, :, None], X, out=right[:, :K])
+    np.multiply(base[:, :, None], XY[:, 1], out=right[:, K : 2 * K])
+    np.negative(right[:, K : 2 * K], out=right[:, K : 2 * K])
+    np.multiply((g.N * base.real - 2.0 * first.real)[:, :, None], X, out=right[:, 2 * K :])
+    mid = 0.5 * (left.conj().swapaxes(1, 2) @ right).real
+    # The trim subtracted: var Gamma Gamma^H - V Gamma^H - Gamma V^H (and ^T for P), whose real
+    # parts reduce to var g g' - v g' - g v' with g = Re(X^H Gamma), v = Re(X^H V).
+    if trim == 1:
+        V, var = r0 + plus, R[:, 0]
+    else:
+        V, var = trim_terms(R, g, trim)
+    targets = np.empty((m, K, 2), complex)
+    targets[:, :, 0], targets[:, :, 1] = g.gamma, V
+    gv = (X.conj().swapaxes(1, 2) @ targets).real
+    gam = gv[:, :, 0]
+    mid += (var[:, None] * gam - 2.0 * gv[:, :, 1])[:, :, None] * gam[:, None, :]
+    out: FloatArray = mid + mid.swapaxes(1, 2)
+    out *= 0.5
     return out

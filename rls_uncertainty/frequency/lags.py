@@ -10,10 +10,14 @@ give the centered lag sums ``C_i = sum_(n=i..N-1) (u_n - m)(u_(n-i) - m)'``, ``m
 
     C_i = S_i - (s - H_i) m' - m (s - T_i)' + (N - i) m m'                   (F9)
 
-so the residual ``v_n = w' u_n`` of any weight ``w = (1, -theta)`` has the mean-removed sample
-autocovariance (the paper's Eq. 10 about the mean) ``R(i) = w' C_i w / N`` over the whole
-record -- the residuals of an estimate of *now*, not the stale ones of a recursion. Memory is
-bounded: ``S`` and ``H`` hold ``L + 1`` lags, ``T`` comes from the last ``L + 1`` samples.
+or, with the augmented sums ``Sa_i = sum_(n=i..N-1) (u_n, 1)(u_(n-i), 1)'``, which hold
+``s - H_i``, ``s - T_i`` and ``N - i`` in their last column and row, ``C_i = E Sa_i E'`` with
+``E = [I, -m]``: any contraction of ``C_i`` with a matrix ``K``, ``sum K . C_i``, is the
+contraction of ``Sa_i`` with ``E' K E``. The residual ``v_n = w' u_n`` of any weight
+``w = (1, -theta)`` has the mean-removed sample autocovariance (the paper's Eq. 10 about the
+mean) ``R(i) = w' C_i w / N`` over the whole record -- the residuals of an estimate of *now*,
+not the stale ones of a recursion. Memory is bounded: ``S`` and ``H`` hold ``L + 1`` lags,
+``T`` comes from the last ``L + 1`` samples.
 
 :func:`residual_autocovariance` takes the weight of the time-domain least-squares fit of the
 record (with a bias) and corrects ``R`` for the degrees of freedom that fit takes (Eq. F10).
@@ -26,27 +30,27 @@ from collections.abc import Callable
 
 import numpy as np
 import numpy.typing as npt
-from numpy.lib.stride_tricks import sliding_window_view
 
-__all__ = ["LagSums", "pseudo_inverse", "dof_correction", "residual_autocovariance"]
+__all__ = ["LagSums", "pseudo_inverse", "dof_correction", "residual_autocovariance", "centering"]
 
 FloatArray = npt.NDArray[np.float64]
 
 
 class LagSums:
-    """Eq. F9 for ``M`` models of ``q`` signals each, lags ``0 .. n_lags``, one sample at a time."""
+    """Eq. F9 for ``M`` models of ``q`` signals each, lags ``0 .. n_lags``, one sample at a time,
+    kept as the augmented sums ``Sa_i`` (module docstring): the sums, the partial totals and the
+    counts are one product per sample."""
 
     def __init__(self, models: int, signals: int, n_lags: int) -> None:
         self.width = w = int(n_lags) + 1
         self.n = 0
-        self.sums: FloatArray = np.zeros((models, w, signals, signals))  # S_i
-        self.total: FloatArray = np.zeros((models, signals))  # s
-        self.head: FloatArray = np.zeros((models, w, signals))  # H_i
-        # The last w samples, each written twice so that a contiguous slice is the window.
-        self._buffer: FloatArray = np.zeros((models, 2 * w, signals))
+        self.sums: FloatArray = np.zeros((models, w, signals + 1, signals + 1))  # Sa_i
+        # The last w samples (u_n, 1), each written twice so that a contiguous slice is the window.
+        self._buffer: FloatArray = np.zeros((models, 2 * w, signals + 1))
+        self._product: FloatArray = np.empty_like(self.sums)
 
     def window(self) -> FloatArray:
-        """The last ``n_lags + 1`` samples, newest first (zeros before the first), a view."""
+        """The last ``n_lags + 1`` samples ``(u_n, 1)``, newest first (zeros before the first), a view."""
         pos = (self.n - 1) % self.width
         view: FloatArray = self._buffer[:, pos + 1 : pos + 1 + self.width][:, ::-1]
         return view
@@ -55,54 +59,64 @@ class LagSums:
         """Add sample ``n`` (``(M, q)``, first sample already subtracted)."""
         w, n = self.width, self.n
         pos = n % w
-        self._buffer[:, pos] = u
-        self._buffer[:, pos + w] = u
+        sample = self._buffer[:, pos]
+        sample[:, :-1] = u
+        if n < w:  # the constant 1 stays once every position has held a sample
+            sample[:, -1] = 1.0
+        self._buffer[:, pos + w] = sample
         self.n += 1
-        # S_i += u_n u_(n-i)' for every lag at once (the window is newest first).
-        self.sums += u[:, None, :, None] * self.window()[:, :, None, :]
-        self.total += u
-        if n + 1 < w:
-            self.head[:, n + 1 :] += u[:, None, :]
+        # Sa_i += (u_n, 1) (u_(n-i), 1)' for every lag at once (the window is newest first).
+        np.multiply(sample[:, None, :, None], self.window()[:, :, None, :], out=self._product)
+        self.sums += self._product
+
+    def augmented(self) -> FloatArray:
+        """``Sa_i`` for ``i = 0 .. min(n_lags, N - 1)``, ``(M, lags, q+1, q+1)``, a view."""
+        out: FloatArray = self.sums[:, : min(self.width, self.n)]
+        return out
 
     def centered(self) -> FloatArray:
-        """``C_i`` of Eq. F9 for ``i = 0 .. min(n_lags, N - 1)``, shape ``(M, lags, q, q)``."""
-        N = self.n
-        lags = min(self.width, N)
-        mean = self.total / N
-        tail = np.zeros_like(self.head[:, :lags])
-        np.cumsum(self.window()[:, : lags - 1], axis=1, out=tail[:, 1:])
-        after_head = self.total[:, None] - self.head[:, :lags]  # sum_(n >= i) u_n
-        before_tail = self.total[:, None] - tail  # sum_(n <= N-1-i) u_n
-        count = (N - np.arange(lags, dtype=np.float64))[None, :, None, None]
-        centered: FloatArray = (
-            self.sums[:, :lags]
-            - after_head[..., :, None] * mean[:, None, None, :]
-            - mean[:, None, :, None] * before_tail[..., None, :]
-            + count * (mean[:, :, None] * mean[:, None, :])[:, None]
-        )
-        return centered
+        """``C_i = E Sa_i E'`` of Eq. F9 for ``i = 0 .. min(n_lags, N - 1)``, ``(M, lags, q, q)``."""
+        augmented = self.augmented()
+        E = centering(augmented)[:, None]
+        out: FloatArray = E @ augmented @ E.swapaxes(2, 3)
+        return out
 
     def reset(self) -> None:
         self.n = 0
-        for a in (self.sums, self.total, self.head, self._buffer):
-            a[...] = 0.0
+        self.sums[...] = 0.0
+        self._buffer[...] = 0.0
 
 
 def pseudo_inverse(B: FloatArray, columns: npt.NDArray[np.bool_]) -> FloatArray:
     """``B^+`` of symmetric ``(M, p, p)`` matrices after scaling to a unit diagonal (relative
-    cutoff 1e-12); rows and columns that are padding (``columns`` false) or zero on the
-    diagonal are left out (0 in ``B^+``). Where ``B`` is singular the fit's residual is still
-    the unique least-squares projection."""
+    cutoff 1e-12 on the eigenvalues' magnitudes); rows and columns that are padding
+    (``columns`` false) or zero on the diagonal are left out (0 in ``B^+``). Where ``B`` is
+    singular the fit's residual is still the unique least-squares projection."""
     d = np.diagonal(B, axis1=1, axis2=2)
     used = columns & (d > 0)
     s = np.where(used, 1.0 / np.sqrt(np.where(used, d, 1.0)), 0.0)
-    scaled = B * s[:, :, None] * s[:, None, :]
-    inv = np.linalg.pinv(scaled, rcond=1e-12, hermitian=True) * s[:, :, None] * s[:, None, :]
-    out: FloatArray = np.asarray(inv, dtype=np.float64)
+    scale = s[:, :, None] * s[:, None, :]
+    w, u = np.linalg.eigh(B * scale)
+    magnitude = np.abs(w)
+    inverse = np.divide(1.0, w, where=magnitude > 1e-12 * magnitude.max(axis=1, keepdims=True), out=np.zeros_like(w))
+    out: FloatArray = (u * inverse[:, None, :]) @ u.swapaxes(1, 2)
+    out *= scale
     return out
 
 
-def dof_correction(Cx: FloatArray, B_inv: FloatArray, N: int) -> Callable[[FloatArray], FloatArray]:
+def centering(augmented: FloatArray) -> FloatArray:
+    """``E = [I, -m]`` ``(M, q, q+1)`` of augmented sums ``(M, lags, q+1, q+1)``:
+    ``C_i = E Sa_i E'`` (``m = (s - H_0) / N`` from ``Sa_0``)."""
+    M, q = augmented.shape[0], augmented.shape[2] - 1
+    E = np.zeros((M, q, q + 1))
+    E[:, :, :q] = np.eye(q)
+    np.divide(augmented[:, 0, :q, q], -augmented[:, 0, q, q, None], out=E[:, :, q])
+    return E
+
+
+def dof_correction(
+    augmented: FloatArray, E: FloatArray, B_inv: FloatArray, N: int
+) -> Callable[[FloatArray], FloatArray]:
     """The linear map ``D`` of Eq. F10 (what the least-squares fit of the same record, the
     regressors and the bias, takes out of ``R(i)`` on average), for ``R`` ``(M, L+1)``:
 
@@ -112,43 +126,69 @@ def dof_correction(Cx: FloatArray, B_inv: FloatArray, N: int) -> Callable[[Float
     ``T(j) = tr(B^+ C^x_j)`` (0 beyond ``L``; even in ``j``), ``C^x`` the centered regressor lag
     sums, ``cov(R) = B^+ [R(0) C^x_0 + sum_(l>=1) R(l) (C^x_l + C^x_l')] B^+`` the fit's
     covariance; the bias (the mean, orthogonal to the centered regressors) is the same with
-    ``T1(j) = max(N - |j|, 0) / N`` and ``var(R) = sum_(|l|<=L) (N - |l|) R(l) / N^2``."""
-    M, lags = Cx.shape[:2]
+    ``T1(j) = max(N - |j|, 0) / N`` and ``var(R) = sum_(|l|<=L) (N - |l|) R(l) / N^2``.
+    The centered sums are never formed: ``C^x_j = E_x Sa_j E_x'`` (``E_x`` the regressor rows of
+    :func:`centering`), so ``T``, the traces and ``sum_l R(l) C^x_l`` are each one product with
+    the augmented sums; the cross terms are one contraction with strided windows of ``T + T1``."""
+    M, lags, q1 = augmented.shape[:3]
     L = lags - 1
-    T = np.zeros((M, 4 * L + 1))  # T(j) at index j + 2L, j = -2L..2L
-    T[:, 2 * L : 3 * L + 1] = np.einsum("mab,miba->mi", B_inv, Cx)
-    T[:, L : 2 * L + 1] = T[:, 2 * L : 3 * L + 1][:, ::-1]
-    # Row i holds T(l - i) for l = -L..L: the window starting at index L - i.
-    shifted = sliding_window_view(T, 2 * L + 1, axis=1)[:, L::-1]  # (M, L+1, 2L+1), a view
-    gap = np.arange(-2 * L, 2 * L + 1)
-    shifted_mean = sliding_window_view(np.maximum(N - np.abs(gap), 0) / N, 2 * L + 1)[L::-1]  # T1(l - i)
-    weight = (N - np.abs(np.arange(-L, L + 1))) / N**2
-    both = Cx[:, 1:] + np.swapaxes(Cx[:, 1:], 2, 3)
+    flat = augmented.reshape(M, lags, q1 * q1)
+    Ex = E[:, 1:]
+    ExT = Ex.swapaxes(1, 2)
+
+    def traces(K: FloatArray) -> FloatArray:
+        """``tr(K C^x_j)`` for every lag ``j``, ``(M, lags)``."""
+        out: FloatArray = (flat @ (ExT @ K.swapaxes(1, 2) @ Ex).reshape(M, q1 * q1, 1))[:, :, 0]
+        return out
+
+    # T(j) + T1(j) at index j + 2L, j = -2L..2L: row i of the cross term's matrix, f(l - i) for
+    # l = -L..L, is the window starting at L - i (a strided view, never formed: O(M L) memory).
+    shifted = np.zeros((M, 4 * L + 1))
+    T = traces(B_inv)
+    shifted[:, 2 * L : 3 * L + 1] = T
+    shifted[:, L : 2 * L + 1] = T[:, ::-1]
+    shifted += np.maximum(N - np.abs(np.arange(-2 * L, 2 * L + 1)), 0) / N
+    step = shifted.strides
+    windows = np.lib.stride_tricks.as_strided(shifted[:, L:], (M, lags, 2 * L + 1), (step[0], -step[1], step[1]))
+    # (N - i) var(R), var(R) = sum_(|l|<=L) (N - |l|) R(l) / N^2.
     count = N - np.arange(lags, dtype=np.float64)
+    weight = (N - np.abs(np.arange(-L, L + 1))) / N**2
+    first = Ex @ augmented[:, 0] @ ExT  # C^x_0
 
     def apply(R: FloatArray) -> FloatArray:
+        summed = Ex @ (R[:, None, :] @ flat).reshape(M, q1, q1) @ ExT  # sum_l R(l) C^x_l
+        middle = summed + summed.swapaxes(1, 2) - R[:, :1, None] * first
         two_sided = np.concatenate([R[:, :0:-1], R], axis=1)  # R(|l|), l = -L..L
-        cross = 2.0 * (np.einsum("mil,ml->mi", shifted, two_sided) + two_sided @ shifted_mean.T)
-        middle = R[:, 0, None, None] * Cx[:, 0] + np.einsum("mi,miab->mab", R[:, 1:], both)
-        quad = np.einsum("miab,mba->mi", Cx, B_inv @ middle @ B_inv)
-        quad_mean = count[None, :] * (two_sided @ weight)[:, None]
-        out: FloatArray = (cross - quad - quad_mean) / N
+        out: FloatArray = 2.0 * np.einsum("mil,ml->mi", windows, two_sided)
+        out -= count * (two_sided @ weight)[:, None]
+        out -= traces(B_inv @ middle @ B_inv)
+        out /= N
         return out
 
     return apply
 
 
-def residual_autocovariance(C: FloatArray, columns: npt.NDArray[np.bool_], N: int, correct: bool) -> FloatArray:
+def residual_autocovariance(
+    augmented: FloatArray, columns: npt.NDArray[np.bool_], N: int, correct: bool
+) -> tuple[FloatArray, FloatArray]:
     """Eqs. F9-F10: ``R(0..L)`` (``(M, L+1)``) of the residuals of the least-squares fit of ``z``
     on the regressors and a bias over the record (``theta = B^+ b``, ``B = C_0[x, x]``,
-    ``b = C_0[x, z]``), plus ``D R + D^2 R`` when ``correct`` (the fit's degrees of freedom)."""
-    B_inv = pseudo_inverse(C[:, 0, 1:, 1:], columns[:, 1:])
-    theta = np.einsum("mab,mb->ma", B_inv, C[:, 0, 1:, 0])
-    w = np.concatenate([np.ones((C.shape[0], 1)), -theta], axis=1)
-    R0: FloatArray = np.einsum("ma,miab,mb->mi", w, C, w) / N
+    ``b = C_0[x, z]``), plus ``D R + D^2 R`` when ``correct`` (the fit's degrees of freedom),
+    and ``C_0`` ``(M, q, q)``. ``augmented``: :meth:`LagSums.augmented` ``(M, L+1, q+1, q+1)``
+    (the centered sums ``C_i`` with a zero last row and column and ``N - i`` in the corner are
+    the same)."""
+    M, lags, q1 = augmented.shape[:3]
+    E = centering(augmented)
+    C0 = E @ augmented[:, 0] @ E.swapaxes(1, 2)
+    B_inv = pseudo_inverse(C0[:, 1:, 1:], columns[:, 1:])
+    theta = np.einsum("mab,mb->ma", B_inv, C0[:, 1:, 0])
+    w = np.concatenate([np.ones((M, 1)), -theta], axis=1)
+    weight = (w[:, None, :] @ E)[:, 0]  # R(i) = w' C_i w / N = (E'w)' Sa_i (E'w) / N
+    outer = (weight[:, :, None] * weight[:, None, :]).reshape(M, q1 * q1, 1)
+    R0: FloatArray = (augmented.reshape(M, lags, q1 * q1) @ outer)[:, :, 0] / N
     if not correct:
-        return R0
-    D = dof_correction(C[:, :, 1:, 1:], B_inv, N)
+        return R0, C0
+    D = dof_correction(augmented, E, B_inv, N)
     R1 = R0 + D(R0)
     R: FloatArray = R0 + D(R1)
-    return R
+    return R, C0

@@ -1,9 +1,11 @@
 """The frequency-domain estimator's options, defined and validated once.
 
 :class:`FrequencyOptions` is frozen and checks itself in its constructor; a bad value raises
-:class:`~rls_uncertainty.errors.ConfigError` naming the option as the node's parameter
-(``frequency.f_max``; :func:`rls_uncertainty.settings.config.frequency_options` maps the parameters).
-Nothing downstream re-checks it. The frequency grid of the recursive Fourier transform is
+:class:`~rls_uncertainty.errors.ConfigError` naming the option (``frequency.f_max``). Each
+field is a :func:`..schema.option` with its default, bounds, unit, meaning and node parameter
+(the trim and the lags in seconds there, in samples here);
+:mod:`rls_uncertainty.settings.parameters` builds the object from the parameters. Nothing
+downstream re-checks it. The frequency grid of the recursive Fourier transform is
 :meth:`FrequencyOptions.frequencies`.
 """
 
@@ -16,6 +18,7 @@ import numpy as np
 import numpy.typing as npt
 
 from ..errors import ConfigError
+from ..schema import Span, Special, check, option
 
 __all__ = ["FrequencyOptions", "MAX_FREQUENCIES", "MAX_LAGS", "MAX_TRIM"]
 
@@ -38,12 +41,6 @@ def _number(name: str, value: object) -> float:
     if not math.isfinite(out):
         raise ConfigError(f"frequency.{name} must be finite, got {value!r}")
     return out
-
-
-def _count(name: str, value: object, low: int, high: int) -> int:
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or not low <= int(value) <= high:
-        raise ConfigError(f"frequency.{name} must be an integer in [{low}, {high}], got {value!r}")
-    return int(value)
 
 
 @dataclass(frozen=True)
@@ -80,45 +77,49 @@ class FrequencyOptions:
     """
 
     rate_hz: float
-    f_min: float = 0.1
-    f_max: float = 1.5
-    f_step: float = 0.04
-    trim_samples: int = 1
-    n_lags: int = 50
-    every: int = 1
-    dof_correction: bool = True
-    init_condition: float = 1e8
+    f_min: float = option(0.1, "frequency-domain method: lowest frequency of the grid", unit="Hz", low=1e-6,
+                          high=1000.0, ros="frequency.f_min")
+    f_max: float = option(1.5, "frequency-domain method: highest frequency of the grid (included when a whole "
+                          "number of f_step from f_min); below rate / 2", unit="Hz", low=1e-6, high=1000.0,
+                          ros="frequency.f_max")
+    f_step: float = option(0.04, "frequency-domain method: grid step (at most 1000 frequencies)", unit="Hz",
+                           low=1e-6, high=1000.0, ros="frequency.f_step")
+    trim_samples: int = option(
+        1, "frequency-domain method: the trim subtracted from every signal is the mean of the samples of this first "
+        "span (steady flight before the excitation)", unit="samples", low=1, high=MAX_TRIM, ros="frequency.trim_span",
+        span=Span(0.0, 200.0, (Special(0.0, 1, "", "the first sample"),)))
+    n_lags: int = option(
+        50, "frequency-domain method: time span of the residual autocorrelation kept in the corrected covariance "
+        "(lags = lag_span x rate)", unit="samples", low=0, high=MAX_LAGS, ros="frequency.lag_span",
+        span=Span(0.0, 2000.0, (Special(0.0, 0, "", "keeps R(0) only"),)))
+    every: int = option(1, "frequency-domain method: estimates and standard errors computed and published every this "
+                        "many samples (the transform advances every sample)", unit="samples", low=1, high=1_000_000,
+                        ros="frequency.every")
+    dof_correction: bool = option(True, "correct the residual autocovariance for the degrees of freedom of the fit "
+                                  "(docs/frequency.md, Eq. F10)")
+    init_condition: float = option(1e8, "a model is ready once its column-scaled Re(X^H X) is better conditioned "
+                                   "than this", low=1.0, low_open=True)
 
     def __post_init__(self) -> None:
         rate = _number("rate_hz", self.rate_hz)
-        f_min, f_max, step = (_number(n, getattr(self, n)) for n in ("f_min", "f_max", "f_step"))
         if rate <= 0:
             raise ConfigError(f"frequency.rate_hz must be positive, got {self.rate_hz!r}")
-        if f_min <= 0:
-            raise ConfigError(f"frequency.f_min must be positive (the transform drops the bias at 0 Hz), got {f_min!r}")
+        check(self, "frequency")
+        f_min, f_max, step = self.f_min, self.f_max, self.f_step
         if f_max < f_min:
-            raise ConfigError(f"frequency.f_max must be >= f_min = {f_min}, got {f_max!r}")
-        if step <= 0:
-            raise ConfigError(f"frequency.f_step must be positive, got {step!r}")
+            raise ConfigError(f"frequency.f_max must be >= f_min = {f_min}, got {f_max!r}", parameter="frequency.f_max")
         count = math.floor((f_max - f_min) / step + _GRID_TOLERANCE) + 1
         if count > MAX_FREQUENCIES:
             raise ConfigError(
                 f"frequency.f_step {step} gives {count} frequencies from {f_min} to {f_max} Hz, more than "
-                f"{MAX_FREQUENCIES}; raise f_step or narrow the band"
+                f"{MAX_FREQUENCIES}; raise f_step or narrow the band", parameter="frequency.f_step"
             )
         top = f_min + (count - 1) * step
         if top >= rate / 2:
             raise ConfigError(
                 f"frequency.f_max must stay below the Nyquist frequency rate / 2 = {rate / 2} Hz, "
-                f"the grid reaches {top} Hz"
+                f"the grid reaches {top} Hz", parameter="frequency.f_max"
             )
-        _count("trim_samples", self.trim_samples, 1, MAX_TRIM)
-        _count("n_lags", self.n_lags, 0, MAX_LAGS)
-        _count("every", self.every, 1, 1_000_000)
-        if not isinstance(self.dof_correction, (bool, np.bool_)):
-            raise ConfigError(f"frequency.dof_correction must be true or false, got {self.dof_correction!r}")
-        if not _number("init_condition", self.init_condition) > 1.0:
-            raise ConfigError(f"frequency.init_condition must be > 1, got {self.init_condition!r}")
 
     def frequencies(self) -> FloatArray:
         """The grid in Hz, ``f_min + k f_step``."""

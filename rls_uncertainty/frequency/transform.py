@@ -60,9 +60,11 @@ class RecursiveFourierTransform:
         return out
 
     def update(self, sample: npt.ArrayLike) -> None:
-        """Add sample ``n`` (Eq. F2) and advance ``n``."""
+        """Add sample ``n`` (Eq. F2) and advance ``n``; the phasor is :meth:`phasor`'s, computed
+        by the same operations inline."""
         u = np.asarray(sample, dtype=np.float64)
-        self.values += self.phasor()[:, None] * u[..., None, :]
+        phasor = np.exp(-2j * np.pi * np.mod(self.frequencies * float(self.n) / self.rate_hz, 1.0)) / self.rate_hz
+        self.values += phasor[:, None] * u[..., None, :]
         self.n += 1
 
     def reset(self) -> None:

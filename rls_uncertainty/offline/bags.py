@@ -48,7 +48,8 @@ from ..datapath.inputs import MESSAGE_TYPES, Stamped, stamp_ns
 from ..datapath.inputs import STREAMS as INPUTS
 from ..errors import BagError, ConfigError
 from ..files import OutputWriter, output_directory
-from ..settings.config import package_path
+from ..settings import yaml_files
+from ..settings.models import package_path
 from .mcap_io import McapWriter, check_mcap_integrity, write_metadata
 
 if TYPE_CHECKING:  # annotations only: rosbags itself is imported where it is used
@@ -420,7 +421,7 @@ def write_campaign_bags(path: str | Path, maneuvers: int, gust: DrydenVertical, 
 
 
 # ------------------------------------------------------------------------------ reading
-def input_topics(topics: dict[str, str] | None = None) -> dict[str, str]:
+def input_topics(topics: Mapping[str, str] | None = None) -> dict[str, str]:
     """Bag topic of each standard input: ``topics.*`` parameters, absolute (``/imu``...)."""
     topics = topics or {}
     out = {}
@@ -446,7 +447,7 @@ class InputStream:
     lists (the span aside), :attr:`digest` (once iterated) the SHA-256 of every input-topic
     message of the bag (:func:`content_digest_update`), and :attr:`read` the messages read."""
 
-    def __init__(self, path: str | Path, topics: dict[str, str] | None = None, *, strict: bool = True,
+    def __init__(self, path: str | Path, topics: Mapping[str, str] | None = None, *, strict: bool = True,
                  start: float | None = None, end: float | None = None) -> None:
         self.path = path = Path(path)
         _check_span(start, end)
@@ -543,7 +544,7 @@ class InputStream:
         self.close()
 
 
-def read_inputs(path: str | Path, topics: dict[str, str] | None = None, *, strict: bool = True,
+def read_inputs(path: str | Path, topics: Mapping[str, str] | None = None, *, strict: bool = True,
                 start: float | None = None, end: float | None = None) -> tuple[list[tuple[str, int, Stamped]], int]:
     """The messages of :class:`InputStream` as a list, and the bag's start time: every
     message in memory at once, for small bags and tests (the replay streams)."""
@@ -690,35 +691,12 @@ def _check_input(kind: str, spec: object, where: str) -> None:
                 raise BagError(f"{at}: {value!r} is not a unit of {what}; {what} units: {list(allowed)}")
 
 
-def _read_mapping_yaml(path: Path) -> dict:
-    """The mapping file's YAML; every problem is a one-line :class:`BagError`."""
-    import yaml  # noqa: PLC0415
-
-    try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError as exc:
-        raise BagError(f"mapping file {path}: no such file") from exc
-    except UnicodeDecodeError as exc:
-        raise BagError(f"mapping file {path}: not UTF-8 text (byte {exc.start})") from exc
-    try:
-        data = yaml.safe_load(text)
-    except yaml.MarkedYAMLError as exc:
-        where = exc.problem_mark or exc.context_mark
-        at = f" (line {where.line + 1}, column {where.column + 1})" if where is not None else ""
-        raise BagError(f"mapping file {path}: not valid YAML: {exc.problem or exc.context}{at}") from exc
-    except yaml.YAMLError as exc:
-        raise BagError(f"mapping file {path}: not valid YAML: {' '.join(str(exc).split())}") from exc
-    if not isinstance(data, dict):
-        raise BagError(f"mapping file {path}: expected a mapping at the top level")
-    return data
-
-
 def load_mapping(path: str | Path) -> dict:
     """A mapping file: for each standard input, the recorded topic, fields, units and frame.
     Every key and value is checked here, before any bag is read: a problem is a
     :class:`BagError` naming the file, the input and the key."""
     path = Path(path)
-    data = _read_mapping_yaml(path)
+    data = yaml_files.load_mapping(path, "mapping file", BagError)
     unknown = sorted(map(str, set(data) - set(INPUTS)))
     if unknown:
         raise BagError(f"{path}: unknown input(s) {unknown}; known: {list(INPUTS)}")

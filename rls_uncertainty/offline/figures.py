@@ -33,6 +33,7 @@ from typing import TYPE_CHECKING, Any, NamedTuple
 import numpy as np
 
 from ..errors import ConfigError
+from ..schema import check, option
 from .figure_data import excitation_start
 
 if TYPE_CHECKING:  # annotations only
@@ -71,14 +72,12 @@ class FigureOptions:
     dots per inch, SVG and PDF are vectors). Checked here, once (:class:`.errors.ConfigError`
     naming ``--figures`` or ``--dpi``)."""
 
-    formats: tuple[str, ...] = ("png",)
-    dpi: int = DEFAULT_DPI
+    formats: tuple[str, ...] = option(("png",), "figure formats, comma separated, of png, svg, pdf", cli="--figures")
+    dpi: int = option(DEFAULT_DPI, "PNG resolution, dots per inch", low=DPI_RANGE[0], high=DPI_RANGE[1], cli="--dpi")
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "formats", figure_formats(self.formats))
-        dpi: object = self.dpi
-        if isinstance(dpi, bool) or not isinstance(dpi, int) or not DPI_RANGE[0] <= dpi <= DPI_RANGE[1]:
-            raise ConfigError(f"--dpi must be an integer from {DPI_RANGE[0]} to {DPI_RANGE[1]}, got {self.dpi!r}")
+        check(self, "")
 
 
 def _suffix(parameter: str) -> str:

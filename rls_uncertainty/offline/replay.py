@@ -50,7 +50,8 @@ from ..datapath.outputs import NODE_NAME, OutputLayout, fit_records
 from ..datapath.pipeline import Pipeline, SampleOutput
 from ..files import output_directory
 from ..ros.diagnostics import DiagnosticsPolicy, Snapshot, Status
-from ..settings.config import NodeConfig, PipelineConfig, node_config, parameter_defaults, pipeline_config
+from ..settings.config import NodeConfig, PipelineConfig
+from ..settings.parameters import node_config, parameter_defaults, pipeline_config
 from .bags import InputStream, typestore
 from .figure_data import FigureData
 from .replay_files import ReplayFiles, run_record

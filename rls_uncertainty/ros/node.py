@@ -14,7 +14,8 @@ are computed by :mod:`.diagnostics` and :mod:`.alerts` from a snapshot the node 
 period. A needed input topic with no publisher for ``diagnostics_window`` seconds is logged
 once (:mod:`.input_watch`).
 
-Parameters (declared with descriptions and ranges; see :data:`.config.PARAMETERS`), the
+Parameters (declared with the descriptions, ranges and choices of
+:data:`rls_uncertainty.settings.parameters.PARAMETERS`, generated from the options classes), the
 ``~/reset`` and ``~/enable`` services, an optional state file, ``use_sim_time`` and
 backwards time jumps are handled here.
 """
@@ -38,7 +39,7 @@ from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.node import Node
-from rclpy.parameter import Parameter
+from rclpy.parameter import Parameter as RosParameter
 from rclpy.qos import QoSDurabilityPolicy, QoSHistoryPolicy, QoSProfile, QoSReliabilityPolicy, qos_profile_sensor_data
 from std_msgs.msg import Float64MultiArray, Header
 from std_srvs.srv import SetBool, Trigger
@@ -47,7 +48,9 @@ from ..datapath.cdr import decode
 from ..datapath.inputs import MESSAGE_TYPES, STREAMS, feed, message_class
 from ..datapath.outputs import HEADER, NODE_NAME, OutputLayout
 from ..datapath.pipeline import Pipeline, SampleOutput, StateFileError
-from ..settings.config import PARAMETERS, ConfigError, ParamSpec, node_config, pipeline_config, startup_parameters
+from ..errors import ConfigError
+from ..settings.parameters import PARAMETERS, Parameter, node_config, pipeline_config
+from ..settings.sources import startup_parameters
 from ..state_file import StateFileClaim, claim, set_aside
 from .diagnostics import DiagnosticsPolicy, Snapshot, malformed_reason, malformed_warning
 from .input_watch import SilentInputs
@@ -60,25 +63,22 @@ _TYPES = {kind: message_class(MESSAGE_TYPES[kind]) for kind in STREAMS}
 # (``<stream>.publishers`` is 0 and the stream is reported silent).
 _NO_EVENTS = PublisherEventCallbacks(use_default_callbacks=False)
 _NO_SUB_EVENTS = SubscriptionEventCallbacks(use_default_callbacks=False)
-# Settings that change subscriptions or QoS: read-only, they need a restart. So does the state
-# file: the node only ever writes the one it checked at start-up (it never replaces a file it
-# has not read).
-_READ_ONLY_PREFIXES = ("topics.", "qos.")
-_READ_ONLY_NAMES = ("state_file",)
 
 
-def _descriptor(spec: ParamSpec) -> ParameterDescriptor:
-    d = ParameterDescriptor(description=spec.description)
-    if spec.choices:
-        d.additional_constraints = "one of: " + ", ".join(spec.choices)
-    if spec.low is not None and spec.high is not None:  # a range has both bounds
-        if isinstance(spec.default, float):
-            d.floating_point_range = [
-                FloatingPointRange(from_value=float(spec.low), to_value=float(spec.high), step=0.0)
-            ]
+def _descriptor(p: Parameter) -> ParameterDescriptor:
+    """The parameter's ROS descriptor: its meaning (and unit), its choices or its range, and
+    whether a change needs a restart (the topics, the QoS and the state file: the node only
+    ever writes the state file it checked at start-up)."""
+    unit = f" ({p.unit})" if p.unit else ""
+    special = "".join(f"; {s.seconds:g}: {s.meaning}" for s in p.specials)
+    d = ParameterDescriptor(description=p.description + unit + special, read_only=p.read_only)
+    if p.choices:
+        d.additional_constraints = "one of: " + ", ".join(p.choices)
+    if p.low is not None and p.high is not None:  # a range has both bounds
+        if isinstance(p.default, float):
+            d.floating_point_range = [FloatingPointRange(from_value=float(p.low), to_value=float(p.high), step=0.0)]
         else:
-            d.integer_range = [IntegerRange(from_value=int(spec.low), to_value=int(spec.high), step=1)]
-    d.read_only = spec.name.startswith(_READ_ONLY_PREFIXES) or spec.name in _READ_ONLY_NAMES
+            d.integer_range = [IntegerRange(from_value=int(p.low), to_value=int(p.high), step=1)]
     return d
 
 
@@ -95,8 +95,8 @@ class EstimatorNode(Node):
 
     def __init__(self, **kwargs: Any) -> None:
         super().__init__(NODE_NAME, **kwargs)
-        for spec in PARAMETERS:
-            self.declare_parameter(spec.name, spec.default, _descriptor(spec))
+        for p in PARAMETERS:
+            self.declare_parameter(p.name, p.default, _descriptor(p))
         params = self._parameter_values()
         # Invalid settings at start-up: ConfigError propagates to main(), which says why.
         self.config = pipeline_config(params)
@@ -154,16 +154,16 @@ class EstimatorNode(Node):
         )
 
     # ------------------------------------------------------------------ parameters
-    def _parameter_values(self, overrides: list[Parameter] | None = None) -> dict[str, Any]:
-        values = {spec.name: self.get_parameter(spec.name).value for spec in PARAMETERS}
+    def _parameter_values(self, overrides: list[RosParameter] | None = None) -> dict[str, Any]:
+        values = {p.name: self.get_parameter(p.name).value for p in PARAMETERS}
         for p in overrides or []:
             values[p.name] = p.value
         return values
 
-    def _validate_parameters(self, params: list[Parameter]) -> SetParametersResult:
+    def _validate_parameters(self, params: list[RosParameter]) -> SetParametersResult:
         """Refuse any change that makes an invalid configuration, saying why."""
         names = {p.name for p in params}
-        if not names & {s.name for s in PARAMETERS}:
+        if not names & {p.name for p in PARAMETERS}:
             return SetParametersResult(successful=True)
         try:
             pipeline_config(self._parameter_values(params))
@@ -172,7 +172,7 @@ class EstimatorNode(Node):
             return SetParametersResult(successful=False, reason=str(exc))
         return SetParametersResult(successful=True)
 
-    def _apply_parameters(self, params: list[Parameter]) -> None:
+    def _apply_parameters(self, params: list[RosParameter]) -> None:
         values = self._parameter_values()
         new = pipeline_config(values)
         self.node_cfg = node_config(values)
@@ -406,14 +406,14 @@ class EstimatorNode(Node):
             self.get_logger().warning(line)
 
 
-def _overrides(values: dict[str, Any]) -> list[Parameter]:
-    """The start-up values checked by :func:`.config.startup_parameters`, as the node declares
+def _overrides(values: dict[str, Any]) -> list[RosParameter]:
+    """The start-up values checked by :func:`.settings.sources.startup_parameters`, as the node declares
     them: they replace rcl's reading of the same arguments, so the node starts with exactly
     what was checked (an integer given for a floating-point parameter is that number, as in
     the replay). rclpy types a parameter by its value, and an empty list has no type: an empty
     list of names is declared as ``[""]``, which the configuration reads as empty."""
-    return [Parameter(spec.name, value=values[spec.name] if values[spec.name] != [] else [""])
-            for spec in PARAMETERS if spec.name in values]
+    return [RosParameter(p.name, value=values[p.name] if values[p.name] != [] else [""])
+            for p in PARAMETERS if p.name in values]
 
 
 def _refuse(exc: Exception) -> int:
@@ -426,7 +426,7 @@ def main(args: list[str] | None = None) -> int:
     """Console script ``estimator_node`` (``ros2 run rls_uncertainty estimator_node``).
 
     ``args`` is the command line as ``rclpy.init`` takes it (default ``sys.argv``). Its ROS
-    arguments are checked before rcl reads them (:func:`.config.startup_parameters`, the policy
+    arguments are checked before rcl reads them (:func:`rls_uncertainty.settings.sources.startup_parameters`, the policy
     in :mod:`.config`): a misconfiguration is one line and exit status 2, before any DDS.
     DDS discovery follows the environment (``ROS_AUTOMATIC_DISCOVERY_RANGE``, ROS's default
     otherwise): a control room spans machines."""

@@ -378,7 +378,7 @@ def play(bag: str | Path, *, rate: float = 1.0, clock: bool = True, reliable: bo
 
 def bundled_bag() -> Path:
     """``bags/t2_maneuver`` in the source tree or the ROS install's share directory."""
-    from ..settings.config import package_path  # noqa: PLC0415
+    from ..settings.models import package_path  # noqa: PLC0415
 
     return package_path("bags", "t2_maneuver")
 
@@ -468,7 +468,9 @@ def demo(rate: float = 4.0, params_file: str = "t2") -> int:
 
     from ..offline.bags import InputStream  # noqa: PLC0415
     from ..offline.replay import run_pipeline  # noqa: PLC0415
-    from ..settings.config import config_dir, load_parameters_file, pipeline_config  # noqa: PLC0415
+    from ..settings.models import config_dir  # noqa: PLC0415
+    from ..settings.parameters import pipeline_config  # noqa: PLC0415
+    from ..settings.sources import load_parameters_file  # noqa: PLC0415
 
     bag = bundled_bag()
     params_path = str(config_dir() / f"{params_file}.yaml")

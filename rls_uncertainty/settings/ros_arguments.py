@@ -37,6 +37,7 @@ from typing import Any
 import yaml
 
 from ..errors import ConfigError
+from .yaml_files import compose, position, read_text
 
 __all__ = [
     "Assignment",
@@ -68,7 +69,6 @@ _TOKEN = re.compile(r"[A-Za-z0-9_]+")
 # A -p rule's parameter name as rcl's lexer reads it (a file's keys are not restricted).
 _PARAMETER_NAME = re.compile(r"[A-Za-z0-9_/]+(\.[A-Za-z0-9_/]+)*")
 _PARAMETERS_KEY = "ros__parameters"
-_STR_TAG = "tag:yaml.org,2002:str"
 # Options that take one value, and flags, besides -p, -r and --params-file.
 _VALUE_OPTIONS = ("--log-level", "--log-config-file", "--log-file-name", "-e", "--enclave")
 _FLAGS = tuple(f"--{onoff}-{what}" for onoff in ("enable", "disable")
@@ -116,49 +116,38 @@ def scalar_value(text: str, *, string: bool = False) -> bool | int | float | str
     return text if x is None else x
 
 
-class _Loader(yaml.SafeLoader):
-    """Composes YAML nodes and marks the scalars rcl reads as text (quoted or ``!!str``)."""
-
-    def compose_scalar_node(self, anchor: Any) -> yaml.ScalarNode:  # the anchor's name (the stubs say otherwise)
-        event = self.peek_event()
-        node = super().compose_scalar_node(anchor)
-        node.rcl_string = event.style in ("'", '"') or event.tag == _STR_TAG  # type: ignore[attr-defined]
-        return node
-
-
 def _line(node: yaml.Node) -> int:
-    return int(node.start_mark.line) + 1
+    return position(node)[0]
 
 
-def yaml_value(node: yaml.Node, where: str) -> Any:
+def _at(where: str, node: yaml.Node, what: str = "") -> str:
+    """Where a problem is: ``parameter file FILE:LINE:COLUMN: what`` in a file (``where`` is
+    ``parameter file FILE``), ``-p RULE (column C): what`` in a ``-p`` value."""
+    line, column = position(node)
+    place = f"{where}:{line}:{column}" if where.startswith("parameter file") else f"{where} (column {column})"
+    return f"{place}: {what}" if what else place
+
+
+def yaml_value(node: yaml.Node, where: str, name: str = "") -> Any:
     """A parameter value from a composed YAML node: a scalar or a sequence of scalars of one
-    type (rcl's rules); a mapping or a nested sequence is a :class:`ConfigError`."""
+    type (rcl's rules); a mapping or a nested sequence is a :class:`ConfigError` naming
+    ``where`` (the file or the ``-p`` rule), the place and the parameter ``name``."""
     if isinstance(node, yaml.ScalarNode):
         return scalar_value(str(node.value), string=getattr(node, "rcl_string", False))
     if isinstance(node, yaml.SequenceNode):
         items = []
         for item in node.value:
             if not isinstance(item, yaml.ScalarNode):
-                raise ConfigError(f"{where}: a list holds values, not lists or mappings (line {_line(item)})")
-            items.append(yaml_value(item, where))
+                raise ConfigError(f"{_at(where, item, name)}: a list holds values, not lists or mappings",
+                                  parameter=name or None)
+            items.append(yaml_value(item, where, name))
         kinds = {type(v) for v in items}
         if len(kinds) > 1:
             names = sorted(k.__name__ for k in kinds)
-            raise ConfigError(f"{where}: a list holds values of one type, got {' and '.join(names)} "
-                              f"(line {_line(node)}; quote text that looks like a number or a boolean)")
+            raise ConfigError(f"{_at(where, node, name)}: a list holds values of one type, got {' and '.join(names)} "
+                              "(quote text that looks like a number or a boolean)", parameter=name or None)
         return items
-    raise ConfigError(f"{where}: expected a value or a list, got a mapping (line {_line(node)})")
-
-
-def _compose(text: str, where: str) -> yaml.Node | None:
-    try:
-        return yaml.compose(text, Loader=_Loader)
-    except yaml.MarkedYAMLError as exc:
-        mark = exc.problem_mark or exc.context_mark
-        at = f" (line {mark.line + 1}, column {mark.column + 1})" if mark is not None else ""
-        raise ConfigError(f"{where}: not valid YAML: {exc.problem or exc.context}{at}") from exc
-    except yaml.YAMLError as exc:
-        raise ConfigError(f"{where}: not valid YAML: {' '.join(str(exc).split())}") from exc
+    raise ConfigError(f"{_at(where, node, name)}: expected a value or a list, got a mapping", parameter=name or None)
 
 
 # --------------------------------------------------------------------------- parameter files
@@ -174,12 +163,13 @@ def pattern_matches(pattern: str, fqn: str) -> bool:
 @dataclass(frozen=True)
 class Section:
     """One ``NODE: ros__parameters:`` section of a parameter file: the node pattern as written
-    (``key``), absolute (``pattern``), its line, and its ``(name, value, line)`` parameters."""
+    (``key``), absolute (``pattern``), its line, and its ``(name, value, line, column)``
+    parameters."""
 
     key: str
     pattern: str
     line: int
-    parameters: tuple[tuple[str, Any, int], ...]
+    parameters: tuple[tuple[str, Any, int, int], ...]
 
     @property
     def wildcard(self) -> bool:
@@ -204,55 +194,62 @@ class ParameterFile:
     sections: tuple[Section, ...]
 
 
-def _flatten(node: yaml.MappingNode, prefix: str, where: str) -> Iterator[tuple[str, Any, int]]:
+def _flatten(node: yaml.MappingNode, prefix: str, where: str) -> Iterator[tuple[str, Any, int, int]]:
     for key, value in node.value:
         name = f"{prefix}{key.value}"
         if isinstance(value, yaml.MappingNode):
             yield from _flatten(value, name + ".", where)
         else:
-            yield name, yaml_value(value, f"{where}: {name}"), _line(key)
+            yield name, yaml_value(value, where, name), *position(key)
 
 
-def _sections(node: yaml.Node, path: list[str], written: list[str], where: str) -> Iterator[Section]:
+def _parameters(node: yaml.MappingNode, pattern: str, path: Path) -> tuple[tuple[str, Any, int, int], ...]:
+    """A section's parameters, dotted; one given twice (a dotted ``estimator.lag_span`` beside
+    a nested ``estimator: {lag_span: ...}``) is refused naming both places."""
+    out = tuple(_flatten(node, "", f"parameter file {path}"))
+    first: dict[str, tuple[int, int]] = {}
+    for name, _value, line, column in out:
+        if name in first:
+            raise ConfigError(f"parameter file {path}:{line}:{column}: parameter {name} given twice in section "
+                              f"{pattern} (first at line {first[name][0]}, column {first[name][1]}); give it once",
+                              parameter=name)
+        first[name] = (line, column)
+    return out
+
+
+def _sections(node: yaml.Node, path: list[str], written: list[str], file: Path) -> Iterator[Section]:
     """The sections under ``node``, whose keys so far are ``written``, with the name components
     ``path`` (namespaces and node)."""
+    where = f"parameter file {file}"
     if not isinstance(node, yaml.MappingNode):
-        raise ConfigError(f"{where}: expected a mapping of node names to 'ros__parameters:' (line {_line(node)})")
+        raise ConfigError(f"{_at(where, node)}: expected a mapping of node names to 'ros__parameters:'")
     for key, value in node.value:
         name = str(key.value)
         if name != _PARAMETERS_KEY:
             components = [c for c in name.split("/") if c]
             bad = [c for c in components if c not in ("*", "**") and not _TOKEN.fullmatch(c)]
             if bad or not components:
-                raise ConfigError(f"{where}: {name!r} (line {_line(key)}) is not a node name: names hold letters, "
-                                  "digits and '_', with '/' between namespaces and '*' or '**' as wildcards")
-            yield from _sections(value, [*path, *components], [*written, name], where)
+                raise ConfigError(f"{_at(where, key)}: {name!r} is not a node name: names hold letters, digits and "
+                                  "'_', with '/' between namespaces and '*' or '**' as wildcards")
+            yield from _sections(value, [*path, *components], [*written, name], file)
             continue
         if not path:
-            raise ConfigError(f"{where}: 'ros__parameters' (line {_line(key)}) needs a node name above it")
+            raise ConfigError(f"{_at(where, key)}: 'ros__parameters' needs a node name above it")
         pattern = "/" + "/".join(path)
         if not isinstance(value, yaml.MappingNode):
-            raise ConfigError(f"{where}: section {pattern} (line {_line(key)}): 'ros__parameters' must be a "
-                              "mapping of parameters")
+            raise ConfigError(f"{_at(where, key)}: section {pattern}: 'ros__parameters' must be a mapping of "
+                              "parameters")
         yield Section(key="/".join(written), pattern=pattern, line=_line(key),
-                      parameters=tuple(_flatten(value, "", f"{where}: section {pattern}")))
+                      parameters=_parameters(value, pattern, file))
 
 
 def read_parameter_file(path: str | Path) -> ParameterFile:
-    """A ROS 2 parameter file's sections; every problem (missing, not UTF-8, not YAML, not the
-    ``NODE: ros__parameters:`` layout, a mixed list) is a :class:`ConfigError` naming the file."""
+    """A ROS 2 parameter file's sections; every problem (missing, not UTF-8, not YAML, a key or
+    a parameter given twice, not the ``NODE: ros__parameters:`` layout, a mixed list) is a
+    :class:`ConfigError` naming the file (:mod:`.yaml_files`' policy)."""
     path = Path(path)
-    where = f"parameter file {path}"
-    try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError as exc:
-        raise ConfigError(f"{where}: no such file") from exc
-    except UnicodeDecodeError as exc:
-        raise ConfigError(f"{where}: not UTF-8 text (byte {exc.start})") from exc
-    except OSError as exc:
-        raise ConfigError(f"{where}: cannot be read ({exc.strerror or exc})") from exc
-    root = _compose(text, where)
-    return ParameterFile(path, () if root is None else tuple(_sections(root, [], [], where)))
+    root = compose(read_text(path, "parameter file"), f"parameter file {path}")
+    return ParameterFile(path, () if root is None else tuple(_sections(root, [], [], path)))
 
 
 # --------------------------------------------------------------------------- the command line
@@ -290,27 +287,25 @@ class RosArguments:
 @dataclass(frozen=True)
 class Assignment:
     """A value a source gives a parameter, filed under a node ``pattern``; ``source``: the
-    ``-p`` rule, or the file and section; ``exact``: the source names one node (a ``-p`` rule,
-    or a section without wildcards), not every node of a kind."""
+    ``-p`` rule, or the file and section; ``origin``: the same with the line and column of a
+    file's value; ``exact``: the source names one node (a ``-p`` rule, or a section without
+    wildcards), not every node of a kind."""
 
     name: str
     value: Any
     source: str
-    line: int | None
+    origin: str
     pattern: str
     exact: bool
-
-    @property
-    def origin(self) -> str:
-        return self.source if self.line is None else f"{self.source}, line {self.line}"
 
 
 def assignments(source: ParameterFile | ParameterRule) -> list[Assignment]:
     """Every value a ``-p`` rule or a parameter file gives, for whichever node."""
     if isinstance(source, ParameterRule):
-        return [Assignment(source.name, source.value, source.text, None, source.pattern, True)]
-    return [Assignment(name, value, f"parameter file {source.path}, section {s.key}", line, s.pattern, not s.wildcard)
-            for s in source.sections for name, value, line in s.parameters]
+        return [Assignment(source.name, source.value, source.text, source.text, source.pattern, True)]
+    return [Assignment(name, value, f"parameter file {source.path}, section {s.key}",
+                       f"parameter file {source.path}:{line}:{column}, section {s.key}", s.pattern, not s.wildcard)
+            for s in source.sections for name, value, line, column in s.parameters]
 
 
 def in_rcl_order(sources: Sequence[ParameterFile | ParameterRule],
@@ -344,10 +339,10 @@ def _parameter_rule(flag: str, rule: str) -> ParameterRule:
         raise ConfigError(f"{where}: {name!r} is not a parameter name")
     if not text.strip():
         raise ConfigError(f"{where}: no value after ':='")
-    root = _compose(text, where)
+    root = compose(text, where)
     if root is None:
         raise ConfigError(f"{where}: no value after ':='")
-    return ParameterRule(node, name, yaml_value(root, where), where)
+    return ParameterRule(node, name, yaml_value(root, where, name), where)
 
 
 def _remap(flag: str, rule: str, original: str, renamed: dict[str, str]) -> None:

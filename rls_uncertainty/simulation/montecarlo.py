@@ -25,7 +25,7 @@ from ..datapath.identifiability import IdentifiabilityConfig, IdentifiabilityMon
 from ..errors import WorkerLost
 from ..estimator import EstimatorBank, EstimatorOptions, Lags, batch_estimate
 from ..executors import Executor, LocalProcesses, Lost
-from ..settings.config import REGRESSOR_UNITS
+from ..settings.models import REGRESSOR_UNITS
 from .t2 import (
     BAND_LIMITED_ON,
     SIGNALS,

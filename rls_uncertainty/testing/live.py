@@ -44,7 +44,7 @@ from ..errors import BagError, LiveTimeout
 from ..offline.bags import input_topics
 from ..offline.results import History, ReplayResult, accounting
 from ..ros.player import stop_process
-from ..settings.config import node_config, pipeline_config
+from ..settings.parameters import node_config, pipeline_config
 
 __all__ = ["REPLAY_PARAMETERS", "EstimatorProcess", "LiveTimeout", "play_to_node"]
 

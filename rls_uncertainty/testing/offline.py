@@ -12,7 +12,8 @@ from ..errors import ConfigError
 from ..offline.bags import InputStream
 from ..offline.replay import run_pipeline
 from ..offline.results import History, ReplayResult
-from ..settings.config import PARAMETER_NAMES, load_parameters_file, node_config, pipeline_config
+from ..settings.parameters import PARAMETER_NAMES, node_config, pipeline_config
+from ..settings.sources import load_parameters_file
 
 __all__ = ["parameters", "replay_bag"]
 

@@ -124,7 +124,7 @@ def part2(flight: Path, work: Path) -> None:
         final = {}
         for name, opts in REPLAYS.items():
             out = work / f"{rec}_{name.replace(' ', '_').replace(',', '')}"
-            cli("replay", str(bag), "--config", str(config), "--out", str(out), "--no-plots", "--quiet", *opts)
+            cli("replay", str(bag), "--config", str(config), "--out", str(out), "--no-figures", "--quiet", *opts)
             final[name] = final_rows(out / "estimates.csv")
         print(f"\n## {rec}: end of the maneuver\n")
         print("| parameter | lags: " + " / ".join(REPLAYS) + " | SE " + " | SE ".join(REPLAYS)

@@ -49,7 +49,7 @@ from rls_uncertainty.datapath.convergence import ConvergenceMonitor  # noqa: E40
 from rls_uncertainty.estimator import EstimatorBank  # noqa: E402
 from rls_uncertainty.frequency import FrequencyBank, FrequencyOptions  # noqa: E402
 from rls_uncertainty.frequency.covariance import PairGeometry, middle  # noqa: E402
-from rls_uncertainty.settings.config import load_parameters_file, pipeline_config  # noqa: E402
+from rls_uncertainty.settings import load_parameters_file, pipeline_config  # noqa: E402
 from rls_uncertainty.simulation.montecarlo import LEVELS, MONTE_CARLO_CONVERGENCE, level_inputs  # noqa: E402
 from rls_uncertainty.simulation.t2 import T2_MODELS, T2_TRUE, SimulationConfig  # noqa: E402
 

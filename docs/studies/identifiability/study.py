@@ -52,7 +52,7 @@ from rls_uncertainty.datapath.pipeline import Pipeline
 from rls_uncertainty.offline.bags import convert, read_inputs
 from rls_uncertainty.offline.replay import run_pipeline
 from rls_uncertainty.ros.diagnostics import DiagnosticsPolicy, Snapshot
-from rls_uncertainty.settings.config import PARAMETERS, load_parameters_file, node_config, package_path, pipeline_config
+from rls_uncertainty.settings import PARAMETERS, load_parameters_file, node_config, package_path, pipeline_config
 from rls_uncertainty.simulation.montecarlo import PARAMETERS as TABLE3
 from rls_uncertainty.simulation.montecarlo import convergence_summary, run_level
 from rls_uncertainty.simulation.t2 import SimulationConfig, simulate_sensor_streams

@@ -1,0 +1,82 @@
+"""``rls-uncertainty``: the package's command line, one subcommand per job.
+
+One module per group of commands: :mod:`.simulation` (``simulate``, ``montecarlo``,
+``multisine``), :mod:`.bags` (``make-bag``, ``convert``), :mod:`.offline` (``replay``,
+``campaign``) and :mod:`.ros` (``demo``, ``play``, ``dashboard``, ``status``, ``enable``,
+``disable``, ``reset``). A setting's flag is made from its declaration on its options class
+(:mod:`.flags`), so every command names, bounds and explains it the same way. Errors: a usage
+error or one of the package's own errors (or a file-system error) is one line and exit status
+2; anything else is a bug and keeps its traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+from typing import NoReturn
+from xml.etree import ElementTree
+
+from ..errors import RlsUncertaintyError
+from .bags import add_convert, add_make_bag
+from .offline import add_campaign, add_replay
+from .ros import add_demo, add_operator_commands, add_play
+from .simulation import add_montecarlo, add_multisine, add_simulate
+
+__all__ = ["main", "build_parser"]
+
+_SUBCOMMANDS = (add_demo, add_simulate, add_montecarlo, add_multisine, add_make_bag, add_convert, add_replay,
+                add_campaign, add_play, add_operator_commands)
+
+
+class _Parser(argparse.ArgumentParser):
+    """Usage errors in one line, like every other error of the command (exit status 2)."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
+def _version() -> str:
+    """The installed package's version, which setup.py reads from package.xml (the one place it
+    is written); from package.xml itself in a source tree that was never installed."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("rls_uncertainty")
+    except PackageNotFoundError:
+        from ..settings.models import package_path
+
+        return ElementTree.parse(package_path("package.xml")).getroot().findtext("version", "unknown")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = _Parser(
+        prog="rls-uncertainty",
+        description="Recursive least squares with colored-residual parameter uncertainty.",
+    )
+    parser.add_argument("--version", action="version", version=f"%(prog)s {_version()}")
+    sub = parser.add_subparsers(dest="command", required=True)
+    for add in _SUBCOMMANDS:
+        add(sub)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        code = int(args.func(args) or 0)
+        sys.stdout.flush()  # here, so that a reader gone (below) is seen here
+        return code
+    except BrokenPipeError:
+        # Whatever read the output stopped reading (`| head`): the command's files are
+        # written; nothing more to say, and nothing more can be printed. Python's own exit
+        # flush must not fail again on the closed pipe.
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 1
+    except (RlsUncertaintyError, OSError) as exc:
+        # The package's own errors and file-system problems are the user's to fix; anything
+        # else is a bug and shows its traceback. One line, whatever the message holds.
+        message = " ".join(str(exc).split())
+        print(f"rls-uncertainty {args.command}: error: {message}", file=sys.stderr)
+        return 2
