@@ -40,8 +40,8 @@ from std_msgs.msg import Float64MultiArray
 
 from ..datapath.cdr import FLOAT64_MULTIARRAY, decode
 from ..datapath.outputs import ArrayKey, array_key
+from ..ros.environment import split_node_name
 from ..ros.health import statuses_of
-from .settings import split_node_name
 
 __all__ = ["RosSource"]
 

@@ -18,7 +18,7 @@ from ..schema import check, option
 from ..settings.config import NODE_NAME
 from ..settings.yaml_files import load
 
-__all__ = ["DEFAULT_NODE", "ServerOptions", "is_loopback", "check_options", "full_node_name", "split_node_name",
+__all__ = ["DEFAULT_NODE", "ServerOptions", "is_loopback", "check_options", "full_node_name",
            "load_reference"]
 
 DEFAULT_NODE = f"/{NODE_NAME}"
@@ -74,12 +74,6 @@ def full_node_name(value: str) -> str:
     if not _NAME.match(full):
         raise ConfigError(f"--node {value!r}: not a ROS node name (for example {DEFAULT_NODE} or /ns/{NODE_NAME})")
     return full
-
-
-def split_node_name(full: str) -> tuple[str, str]:
-    """``(namespace, name)`` of a fully qualified node name such as ``/ns/rls_estimator``."""
-    ns, _, name = full.rpartition("/")
-    return ns or "/", name
 
 
 def load_reference(path: str | Path) -> dict[str, float]:

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import os
 
-__all__ = ["discovery_environment", "where"]
+__all__ = ["discovery_environment", "where", "split_node_name"]
 
 
 def discovery_environment() -> dict[str, str]:
@@ -24,3 +24,9 @@ def where() -> str:
     env = discovery_environment()
     peers = f", ROS_STATIC_PEERS={env['static_peers']}" if env["static_peers"] else ""
     return f"ROS_DOMAIN_ID={env['domain']}, ROS_AUTOMATIC_DISCOVERY_RANGE={env['discovery_range']}{peers}"
+
+
+def split_node_name(full: str) -> tuple[str, str]:
+    """``(namespace, name)`` of a fully qualified node name such as ``/ns/rls_estimator``."""
+    ns, _, name = full.rpartition("/")
+    return ns or "/", name
