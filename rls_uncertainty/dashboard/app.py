@@ -8,9 +8,10 @@ import asyncio
 import signal
 import socket
 import sys
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from .hub import Hub, Source
 from .model import Sample
@@ -32,10 +33,11 @@ class DashboardOptions:
     reference: dict[str, float]
 
 
-def dashboard_options(host: str, port: int, node: str, replay: str | None = None, reference: str | None = None,
-                      token: str | None = None) -> DashboardOptions:
-    """Every option checked (ConfigError naming the one to change) before anything starts."""
-    server = check_options(host, port, token)
+def dashboard_options(server_values: Mapping[str, Any], node: str, replay: str | None = None,
+                      reference: str | None = None) -> DashboardOptions:
+    """Every option checked (ConfigError naming the one to change) before anything starts;
+    ``server_values`` are :class:`.settings.ServerOptions`' fields by name."""
+    server = check_options(**server_values)
     check_assets(asset_table())
     return DashboardOptions(server, full_node_name(node), Path(replay) if replay else None,
                             load_reference(reference) if reference else {})
