@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import csv
 import random
+import re
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -749,6 +750,54 @@ def _first_samples(t2_replay, samples: int) -> tuple[str, list[str]]:
     return header, [r for r in rows if r.split(",", 1)[0] in set(times)]
 
 
+@pytest.mark.parametrize("case", ["models", "parameters", "time", "short", "repeated", "nan", "inf", "cut"])
+def test_a_hostile_replay_csv_ends_the_reading_at_the_line_named_never_a_traceback(t2_replay, tmp_path, case,
+                                                                                   capsys):
+    """What rls-uncertainty replay never writes: more models than Eq. 2 has (here the 100,000
+    names of an attack, cut short at the seventh), one sample with 50,000 parameters, a time of
+    1e30 s, a last sample missing a row or repeating one, a value NaN or inf, a row cut short.
+    The reading ends at the line named, on the page's banner and in one line on stderr; the
+    samples before it are shown; memory stays that of the rows read."""
+    from rls_uncertainty.dashboard.model import MAX_MODELS, MAX_PARAMETERS
+
+    header, rows = _first_samples(t2_replay, 100)
+    t0 = 1767225600
+    if case == "models":
+        lines = [f"{t0 + i // 50}.{(i % 50) * 20_000_000:09d},M{i},M{i}_0,0.5,0.01,0.005,0,2\n" for i in range(100_000)]
+        bad, why = MAX_MODELS + 2, rf"a model more \('M{MAX_MODELS}'\) than the {MAX_MODELS} of Eq. 2"
+    elif case == "parameters":
+        lines = [f"{t0}.000000000,CZ,P{i},0.5,0.01,0.005,0,2\n" for i in range(50_000)]
+        bad, why = MAX_PARAMETERS + 2, rf"CZ at {t0}.000000000 s has more than {MAX_PARAMETERS} parameters"
+    elif case == "time":
+        last = [r for r in rows if r.split(",", 1)[0] == rows[-1].split(",", 1)[0]]
+        lines = rows + ["1" + "0" * 30 + ".000000000," + r.split(",", 1)[1] for r in last]
+        bad, why = len(rows) + 2, r"time '1000000000000000000000000000000.000000000' s is after the year 2262"
+    elif case in ("short", "repeated"):
+        lines = rows[:-1] if case == "short" else [*rows, rows[-1]]
+        model = rows[-1].split(",")[1]
+        start = next(i for i, r in enumerate(lines) if r.split(",")[:2] == rows[-1].split(",")[:2])
+        bad, why = start + 2, rf"{model} at .* has the parameters .*, its first sample \(line \d+\)"
+    else:
+        lines = list(rows)
+        k = len(rows) // 2
+        if case == "cut":
+            lines[k] = ",".join(lines[k].split(",")[:4]) + "\n"
+        else:
+            parts = lines[k].split(",")
+            parts[3] = case
+            lines[k] = ",".join(parts)
+        bad, why = k + 2, r"not a row of estimates.csv \((values|time)"
+    directory = _hostile(tmp_path / case, header, lines)
+    hub, _ = _read(directory)
+    state = hub.state()
+    assert state["state"] == "replay_error"
+    assert re.search(rf"estimates.csv: line {bad}: .*{why}", state["text"]), state["text"]
+    err = capsys.readouterr().err
+    assert len(err.splitlines()) == 1 and f"line {bad}:" in err and "Traceback" not in err
+    held = sum(h.size for h in hub.histories.values())
+    assert 0 < held <= 100 * MAX_MODELS or (case == "parameters" and held == 0)
+
+
 def test_samples_with_a_standard_error_of_zero_or_less_are_refused_counted_and_said(t2_replay, tmp_path, capsys):
     """Rows with a standard error of -5 or 0: their samples are not drawn (no band to draw);
     the page's banner and one line on stderr say how many were refused and why."""
@@ -770,6 +819,22 @@ def test_samples_with_a_standard_error_of_zero_or_less_are_refused_counted_and_s
     assert hub.refused == {"se_not_positive": refused} and hub.state()["state"] == "replay"
     assert text in hub.state()["text"]
     assert capsys.readouterr().err == f"rls-uncertainty dashboard: {directory}: {text}\n"
+
+
+def test_whatever_a_file_provokes_while_shown_ends_the_reading_on_the_page(t2_replay, tmp_path, monkeypatch):
+    """A failure met while the read samples are shown (here provoked) ends the reading with the
+    file and the error on the banner: never a page left at "reading"."""
+    only = tmp_path / "csv_only"
+    only.mkdir()
+    (only / "estimates.csv").write_bytes((t2_replay / "estimates.csv").read_bytes())
+
+    def broken(self, samples):
+        raise RuntimeError("provoked")
+
+    monkeypatch.setattr(Hub, "add_samples", broken)
+    hub, _ = _read(only)
+    assert hub.state()["state"] == "replay_error"
+    assert hub.state()["text"].endswith("then estimates.csv: cannot be shown (RuntimeError: provoked)")
 
 
 def test_a_live_node_beyond_eq_2_is_bounded_and_counted():
