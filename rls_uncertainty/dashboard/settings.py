@@ -44,7 +44,7 @@ class ServerOptions:
     token: str | None = option(None, f"token the page must present ({TOKEN_RULE}; default: generated when --host "
                                "is not loopback)", cli="--token", own_check=True)
     allow_origin: tuple[str, ...] = option((), "origins besides the dashboard's own whose pages may open its socket "
-                                           "(comma-separated, e.g. https://wall.example:8443; default none)",
+                                           "(comma-separated, e.g. https://wall.example:8443)",
                                            cli="--allow-origin", own_check=True)
     max_connections: int = option(256, "connections served at once (pages, their assets and sockets); more are "
                                   "closed at once and counted", low=1, high=100_000, cli="--max-connections")
