@@ -13,26 +13,21 @@ from types import SimpleNamespace
 
 import pytest
 
-from rls_uncertainty.dashboard.health import HealthTracker, parse_statuses
 from rls_uncertainty.dashboard.hub import Hub, Source
-from rls_uncertainty.dashboard.model import (
+from rls_uncertainty.dashboard.model import MAX_PENDING, ArrayUpdate, ModelHistory, Pairing, Sample, array_update
+from rls_uncertainty.dashboard.settings import full_node_name, load_reference
+from rls_uncertainty.datapath.inputs import STREAMS
+from rls_uncertainty.datapath.outputs import (
     FREQUENCY_DOMAIN,
-    MAX_PENDING,
     PAIRED,
     TIME_DOMAIN,
     ArrayKey,
-    ArrayUpdate,
-    ModelHistory,
-    Pairing,
-    Sample,
     array_key,
-    array_update,
     split_topic,
+    stamp_label,
 )
-from rls_uncertainty.dashboard.settings import full_node_name, load_reference
-from rls_uncertainty.datapath.inputs import STREAMS
-from rls_uncertainty.datapath.outputs import stamp_label
 from rls_uncertainty.errors import ConfigError
+from rls_uncertainty.ros.health import HealthTracker, parse_statuses
 from rls_uncertainty.settings import NODE_NAME
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -253,8 +248,8 @@ def _inputs(rejected: dict[str, int], recent: int, window: float = 10.0, prefix:
 
 def _snapshot(enabled: bool):
     """What a fresh node with the t2 configuration hands its diagnostics policy."""
+    from rls_uncertainty.datapath.diagnostics import Snapshot
     from rls_uncertainty.datapath.pipeline import Pipeline
-    from rls_uncertainty.ros.diagnostics import Snapshot
     from rls_uncertainty.settings import load_parameters_file, pipeline_config
 
     pipe = Pipeline(pipeline_config(load_parameters_file("t2")))
@@ -268,7 +263,7 @@ def _snapshot(enabled: bool):
 def test_statuses_of_namespaced_nodes_are_told_apart():
     """Three nodes named rls_estimator (root, /a, /b) report on one /diagnostics: each
     consumer reads its own node's statuses, named by the node's policy."""
-    from rls_uncertainty.ros.diagnostics import DiagnosticsPolicy
+    from rls_uncertainty.datapath.diagnostics import DiagnosticsPolicy
 
     arrays = []
     for node, enabled in (("/rls_estimator", True), ("/a/rls_estimator", False), ("/b/rls_estimator", True)):

@@ -413,8 +413,9 @@ def _declared_as_written(tester):
     each parameter's range (or choices), meaning and read-only flag are its field's."""
     from rcl_interfaces.srv import DescribeParameters
 
+    from rls_uncertainty.datapath.config import InputConfig
     from rls_uncertainty.schema import settings
-    from rls_uncertainty.settings.config import InputConfig, NodeConfig
+    from rls_uncertainty.settings.config import NodeConfig
     from rls_uncertainty.settings.parameters import PARAMETERS
 
     names = [p.name for p in PARAMETERS]
@@ -1002,3 +1003,76 @@ def test_fit_topics_reach_a_late_subscriber_and_an_unidentifiable_model_is_said_
         np.testing.assert_array_equal(np.array(msg.data), exp.data)  # one machine: bit for bit
     warnings = [line for line in node.text().splitlines() if want in line]
     assert len(warnings) == 1 and "WARN" in warnings[0], node.text()
+
+
+def test_an_input_topic_nobody_publishes_is_logged_once_with_the_likely_topic(tmp_path, tester):
+    """topics.imu misspelt, the tester publishing on /imu and the other inputs: one WARN line
+    after diagnostics_window seconds (1 s here: 5 s, the least) naming /imu_typo, its parameter
+    and type, and /imu as the likely topic; not repeated while the silence lasts (counted in
+    diagnostics reports, 0.2 s apart). A publisher that comes and goes re-arms it; one whose QoS does not match is named
+    as such. The streams that have publishers are never named."""
+    from rclpy.qos import qos_profile_sensor_data
+    from sensor_msgs.msg import Imu
+
+    node = _node(tmp_path, "-p", "topics.imu:=imu_typo", "-p", "diagnostics_window:=1.0")
+    head = "no publisher on /imu_typo (topics.imu, sensor_msgs/msg/Imu) for 5 s: the estimation waits for imu; "
+    remap = head + "/imu has 1 publisher(s) of that type: is it the one meant (topics.imu or a remap)?"
+    qos = head + "1 publisher(s) on it do not match the subscription's QoS (qos.reliable=True)"
+
+    def said():
+        return [line.split("]: ", 1)[1] for line in node.text().splitlines() if "no publisher on" in line]
+
+    def reports_later(n):  # n more /diagnostics reports of the node: time passes by the node's clock
+        tester.diagnostics.clear()
+        assert tester.spin_until(lambda: len(tester.diagnostics) >= n, 60), node.text()
+
+    try:
+        others = [pub for kind, pub in tester.pubs.items() if kind != "imu"]
+        assert tester.spin_until(lambda: all(pub.get_subscription_count() == 1 for pub in others), 60), node.text()
+        assert tester.spin_until(lambda: len(said()) >= 1, 60), node.text()
+        reports_later(50)  # two silences more
+        assert said() == [remap] and "[WARN]" in node.text().split(remap)[0].splitlines()[-1], node.text()
+        typo = tester.node.create_publisher(Imu, "/imu_typo", 10)  # reliable: matches, and re-arms the watch
+        assert tester.spin_until(lambda: typo.get_subscription_count() == 1, 60)
+        reports_later(2)
+        tester.node.destroy_publisher(typo)
+        best_effort = tester.node.create_publisher(Imu, "/imu_typo", qos_profile_sensor_data)
+        assert tester.spin_until(lambda: len(said()) >= 2, 60), node.text()
+        reports_later(50)
+        assert said() == [remap, qos] and best_effort.get_subscription_count() == 0, node.text()
+    finally:
+        assert node.stop() == 0, node.text()
+
+
+def test_silent_inputs_are_due_once_per_silence_and_only_when_needed():
+    from rls_uncertainty.ros.input_watch import SilentInputs
+
+    watch = SilentInputs()
+    assert watch.due(0.0, {"imu": 0}, ("imu",), 0.1) == [] and watch.due(4.9, {"imu": 0}, ("imu",), 0.1) == []
+    assert watch.due(5.0, {"imu": 0}, ("imu",), 0.1) == ["imu"]  # never less than 5 s: discovery takes time
+    watch = SilentInputs()
+    required = ("imu", "airspeed")
+    silent = {"imu": 0, "airspeed": 1, "thrust": 0}  # thrust not needed: never said
+    assert watch.due(0.0, silent, required, 10.0) == []
+    assert watch.due(9.9, silent, required, 10.0) == []
+    assert watch.due(10.0, silent, required, 10.0) == ["imu"]
+    assert watch.due(500.0, silent, required, 10.0) == []  # once per silence
+    assert watch.due(501.0, {**silent, "imu": 1}, required, 10.0) == []  # a publisher came: re-armed
+    assert watch.due(502.0, silent, required, 10.0) == []
+    assert watch.due(512.0, {**silent, "airspeed": 0}, required, 10.0) == ["imu"]  # 10 s since 502
+    assert watch.due(522.0, {**silent, "airspeed": 0}, required, 10.0) == ["airspeed"]
+    assert watch.due(600.0, silent, ("airspeed",), 10.0) == []  # imu no longer needed
+
+
+def test_the_silent_input_line_names_the_topic_and_why():
+    from rls_uncertainty.ros.input_watch import silent_text
+
+    head = ("no publisher on /ns/air (topics.airspeed, geometry_msgs/msg/Vector3Stamped) for 10 s: the estimation "
+            "waits for airspeed; ")
+    assert silent_text("airspeed", "/ns/air", 10.0, 0, False, []) == head + "no topic of that type has a publisher"
+    assert silent_text("airspeed", "/ns/air", 10.0, 2, True, [("/airspeed", 1)]) == (
+        head + "2 publisher(s) on it do not match the subscription's QoS (qos.reliable=True)")
+    others = [(f"/v{i}", i) for i in range(1, 6)]
+    assert silent_text("airspeed", "/ns/air", 10.0, 0, False, others) == (
+        head + "/v1 has 1 publisher(s), /v2 has 2 publisher(s), /v3 has 3 publisher(s) (and 2 more topics) of that "
+        "type: is it the one meant (topics.airspeed or a remap)?")

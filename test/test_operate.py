@@ -1,10 +1,13 @@
 """`rls-uncertainty status | enable | disable | reset` against the estimator node in its own
 process over DDS (loopback), under a namespace: the services are called and their answers
 printed, the node's state really changes (its /diagnostics say so), the status table shows the
-node's streams and models; with no node, a clear error and exit status 1."""
+node's streams and models; with no node, a clear error and exit status 1; against two nodes of
+one name, every call reaches both, each answer is printed and the twins are said, and the exit
+status is 1 unless all answered alike."""
 
 from __future__ import annotations
 
+import io
 import subprocess
 import sys
 import time
@@ -68,7 +71,7 @@ def test_status_once_prints_the_streams_and_models_of_the_node(node):
 def test_the_status_table_names_the_parameters_held_back_and_why():
     """The model rows of one report as the node writes them (its keys, docs/node.md): the
     parameters whose flag is held back, and the node's reason below the table."""
-    from rls_uncertainty.dashboard.health import parse_statuses
+    from rls_uncertainty.ros.health import parse_statuses
     from rls_uncertainty.ros.operate import format_health
 
     why = ("Cm: no regressor explains the output (R^2 0.493, identifiability.min_r_squared 0.5): not identifiable; "
@@ -89,7 +92,7 @@ def test_the_status_table_names_the_parameters_held_back_and_why():
 
 
 def test_the_status_says_which_estimation_methods_the_node_publishes():
-    from rls_uncertainty.dashboard.health import parse_statuses
+    from rls_uncertainty.ros.health import parse_statuses
     from rls_uncertainty.ros.operate import format_health, published_methods
 
     topics = ["/ops/rls_estimator/CZ/estimates", "/ops/rls_estimator/CZ/frequency/estimates",
@@ -131,3 +134,65 @@ def test_no_node_gives_a_clear_error_and_exit_status_1():
 def test_a_bad_node_name_is_a_usage_error():
     r = _cli("status", "--node", "/bad name")
     assert r.returncode == 2 and "--node" in r.stderr and "Traceback" not in r.stderr
+
+
+MARKS = {"disable": "estimation disabled", "enable": "estimation enabled", "reset": "estimator and inputs reset"}
+
+
+def test_enable_disable_reset_reach_both_twins_and_say_so(tmp_path):
+    """Two nodes of one name; each command run as soon as both are up (this command's own
+    discovery then races the call): both log every call, and the command says there are two."""
+    twins = [NodeProcess(tmp_path, "--params-file", T2, "-r", "__ns:=/ops", name=f"twin{i}") for i in range(2)]
+    try:
+        deadline = time.monotonic() + 120
+        while not all("estimating" in t.text() for t in twins):
+            assert time.monotonic() < deadline and all(t.proc.poll() is None for t in twins), [t.text() for t in twins]
+            time.sleep(0.05)
+        for command in ("disable", "enable", "reset") * 2:
+            before = [t.text().count(MARKS[command]) for t in twins]
+            r = _cli(command, "--node", NODE, "--timeout", "60")
+            lines = r.stdout.splitlines()
+            assert r.returncode == 0, r.stdout + r.stderr
+            assert lines[0].startswith(f"{NODE}: 2 nodes answer to this name, and each gets every call"), r.stdout
+            assert [line.split("]: ")[0] for line in lines[1:]] == [f"{NODE} [answer 1 of 2", f"{NODE} [answer 2 of 2"]
+            assert all(MARKS[command] in line for line in lines[1:])
+            deadline = time.monotonic() + 60
+            while not all(t.text().count(MARKS[command]) > b for t, b in zip(twins, before, strict=True)):
+                assert time.monotonic() < deadline, f"{command}: a twin never logged it: {[t.text() for t in twins]}"
+                time.sleep(0.05)
+    finally:
+        for t in twins:
+            assert t.stop() == 0, t.text()
+
+
+@pytest.mark.parametrize("answers,nodes,code,said", [
+    ([(True, "estimation enabled")], 1, 0, None),
+    ([(False, "refused")], 1, 1, None),
+    ([(True, "estimation enabled")] * 2, 2, 0, None),
+    ([(True, "estimation enabled")], 2, 1, "1 of the 2 nodes named /ops/rls_estimator did not answer within 5 s"),
+    ([(True, "estimation enabled"), (False, "refused")], 2, 1, "did not all succeed alike"),
+    ([(True, "a"), (True, "b")], 1, 1, "did not all succeed alike"),  # more answers than nodes counted: twins
+], ids=["one", "one_refused", "twins", "a_twin_silent", "twins_differ", "uncounted_twin"])
+def test_the_answers_of_twins_decide_the_exit_status(answers, nodes, code, said, capsys):
+    from rls_uncertainty.ros.operate import report
+
+    out = io.StringIO()
+    assert report("enable", NODE, answers, nodes, 5.0, out=out) == code
+    lines = out.getvalue().splitlines()
+    counted = max(nodes, len(answers))
+    if counted == 1:
+        assert lines == [f"{NODE}: {answers[0][1]}"]
+    else:
+        assert lines[0].startswith(f"{NODE}: {counted} nodes answer to this name")
+        assert lines[1:] == [f"{NODE} [answer {i} of {counted}]: {m}" for i, (_s, m) in enumerate(answers, 1)]
+    err = capsys.readouterr().err
+    assert (err == "") if said is None else (err.startswith("rls-uncertainty enable: error: ") and said in err), err
+
+
+def test_a_call_sent_again_says_so():
+    from rls_uncertainty.ros.operate import report
+
+    out = io.StringIO()
+    assert report("reset", NODE, [(True, "reset")] * 2, 2, 5.0, sends=2, out=out) == 0
+    assert out.getvalue().splitlines()[0].endswith(
+        "; sent 2 times, as the earlier calls did not reach every node (a node may have had it more than once)")

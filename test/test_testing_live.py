@@ -1,26 +1,41 @@
 """The live node under test (rls_uncertainty/testing/live.py): the estimator node in its own
-process on a private domain (43-49: this machine's sessions use 42-49), the bundled bag played
-to it with acknowledgements, its outputs paired by stamp: bit-identical, sample by sample, to
-the in-process replay with the same parameters (one machine); failures name what was missing
-and the node's log."""
+process on a private domain (claimed among $RLS_TEST_DOMAINS, default 43-49: this machine's
+sessions use 42-49), the bundled bag played to it with acknowledgements, its outputs paired by
+stamp: bit-identical, sample by sample, to the in-process replay with the same parameters (one
+machine); failures name what was missing and the node's log; a domain with another node on it
+is passed over, and a second estimator on the domain stops the run in one line."""
 
 import os
+import time
 
 import numpy as np
 import pytest
 
 from rls_uncertainty.errors import ConfigError, LiveTimeout
-from rls_uncertainty.testing import REPLAY_PARAMETERS, EstimatorProcess, parameters, play_to_node, replay_bag
-from rls_uncertainty.testing.plugin import domains
+from rls_uncertainty.testing import (
+    REPLAY_PARAMETERS,
+    EstimatorProcess,
+    claim_domain,
+    parameters,
+    play_to_node,
+    replay_bag,
+)
+from rls_uncertainty.testing.domain import domain_ids
 
 from conftest import ROOT
 
 BUNDLED = ROOT / "bags" / "t2_maneuver"
-DOMAIN = domains("43-49", os.environ.get("ROS_DOMAIN_ID"))[0]
+DOMAINS = domain_ids(os.environ.get("RLS_TEST_DOMAINS", "43-49"))
 
 
-def test_the_live_node_publishes_what_the_replay_computes_sample_by_sample(tmp_path):
-    node = EstimatorProcess(parameters("t2"), domain=DOMAIN, directory=tmp_path)
+@pytest.fixture(scope="module")
+def domain():
+    with claim_domain(DOMAINS) as claim:
+        yield claim.domain
+
+
+def test_the_live_node_publishes_what_the_replay_computes_sample_by_sample(tmp_path, domain):
+    node = EstimatorProcess(parameters("t2"), domain=domain, directory=tmp_path)
     try:
         live = play_to_node(BUNDLED, node)
     finally:
@@ -41,12 +56,12 @@ def test_the_live_node_publishes_what_the_replay_computes_sample_by_sample(tmp_p
     assert live.n_messages == 4920 and live.data_seconds == pytest.approx(11.995)
 
 
-def test_the_live_nodes_frequency_domain_topics_are_the_replays_bit_for_bit(tmp_path):
+def test_the_live_nodes_frequency_domain_topics_are_the_replays_bit_for_bit(tmp_path, domain):
     """estimator.method both, estimates every 3 samples: the node's ~/M/frequency/* arrays, paired
     by their stamps, are the in-process replay's frequency-domain series (and its time-domain
     ones still are), bit for bit on one machine."""
     params = parameters("t2", {"estimator.method": "both", "frequency.every": 3})
-    node = EstimatorProcess(params, domain=DOMAIN, directory=tmp_path)
+    node = EstimatorProcess(params, domain=domain, directory=tmp_path)
     try:
         live = play_to_node(BUNDLED, node)
     finally:
@@ -69,12 +84,12 @@ def test_the_live_nodes_frequency_domain_topics_are_the_replays_bit_for_bit(tmp_
 
 def test_a_bad_parameter_is_refused_before_a_node_starts(tmp_path):
     with pytest.raises(ConfigError, match=r"estimator\.lag_span"):
-        EstimatorProcess({"estimator.lag_span": -5}, domain=DOMAIN, directory=tmp_path)
+        EstimatorProcess({"estimator.lag_span": -5}, domain=DOMAINS[0], directory=tmp_path)
     assert not list(tmp_path.glob("*.log"))
 
 
-def test_a_node_that_dies_is_named_with_its_log(tmp_path):
-    node = EstimatorProcess(parameters("t2"), domain=DOMAIN, directory=tmp_path)
+def test_a_node_that_dies_is_named_with_its_log(tmp_path, domain):
+    node = EstimatorProcess(parameters("t2"), domain=domain, directory=tmp_path)
     node.proc.kill()
     node.proc.wait()
     try:
@@ -82,3 +97,33 @@ def test_a_node_that_dies_is_named_with_its_log(tmp_path):
             play_to_node(BUNDLED, node, timeout=60)
     finally:
         node.stop()
+
+
+def test_a_domain_with_another_node_on_it_is_passed_over_or_refused_in_one_line(tmp_path):
+    """A node that takes no lock (another tool, one left running) is seen on the graph."""
+    with claim_domain(DOMAINS) as claim:
+        node = EstimatorProcess(parameters("t2"), domain=claim.domain, directory=tmp_path)
+    try:  # the lock released, the node still there
+        with pytest.raises(ConfigError) as refused:
+            claim_domain([claim.domain], probe=60.0)
+        assert str(refused.value) == (f"no free ROS domain for the node under test: {claim.domain} has node(s) "
+                                      "/rls_estimator; pass other domain ids")
+    finally:
+        assert node.stop() == 0, node.log()
+
+
+def test_a_second_estimator_on_the_domain_stops_the_run_in_one_line(tmp_path, domain):
+    """Two nodes of one name on the domain (the fixtures refuse it; the API can be misused):
+    the run stops once both publish, instead of collecting their mixed samples."""
+    nodes = [EstimatorProcess(parameters("t2"), domain=domain, directory=tmp_path, name=f"twin{i}") for i in range(2)]
+    try:
+        deadline = time.monotonic() + 120
+        while not all("estimating" in node.log() for node in nodes):  # both up before the play
+            assert time.monotonic() < deadline and all(node.running for node in nodes), [n.log() for n in nodes]
+            time.sleep(0.05)
+        with pytest.raises(LiveTimeout, match=f"ROS domain {domain}: 2 nodes publish /rls_estimator/sample_stamp: "
+                                              "another node named rls_estimator runs on this domain"):
+            play_to_node(BUNDLED, nodes[0], timeout=120)
+    finally:
+        for node in nodes:
+            assert node.stop() == 0, node.log()

@@ -18,10 +18,10 @@ from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from ..datapath.config import PipelineConfig
 from ..executors import Executor, LocalProcesses, Lost
 from ..files import output_directory
 from ..offline.figures import FigureOptions
-from ..settings.config import PipelineConfig
 from .figure import campaign_figures
 from .maneuvers import Maneuver, from_bags, load_maneuvers
 from .run import MANEUVER_COLUMNS, CampaignSettings, ManeuverResult, ParameterResult, failed_result, run_maneuver

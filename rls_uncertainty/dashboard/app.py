@@ -13,11 +13,12 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from ..ros.environment import discovery_environment
 from .feed import Feed
 from .hub import Hub, Source
 from .model import Sample
 from .server import Inbox, asset_table, bind, check_assets, serve
-from .settings import ServerOptions, check_options, discovery_environment, full_node_name, load_reference
+from .settings import ServerOptions, check_options, full_node_name, load_reference
 
 if TYPE_CHECKING:  # annotations only: rclpy and the bag library are imported where they are used
     from .replay_source import ReplaySource

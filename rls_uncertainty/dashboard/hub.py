@@ -15,21 +15,11 @@ from collections.abc import Callable, Iterable, Iterator, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
+from ..datapath.outputs import FIT_ARRAYS, ArrayKey
+from ..ros.health import HealthTracker, StatusTuple, parse_statuses
 from .fit import Fit, Identifiability, fit_of, identifiability_of, quality_json
-from .health import HealthTracker, StatusTuple, parse_statuses
 from .messages import FRAME_VALUES, samples_messages, snapshot_messages
-from .model import (
-    FIT_ARRAYS,
-    MAX_MODELS,
-    MAX_PARAMETERS,
-    MAX_PENDING,
-    ArrayKey,
-    ModelHistory,
-    Pairing,
-    Sample,
-    array_update,
-    refusal,
-)
+from .model import MAX_MODELS, MAX_PARAMETERS, MAX_PENDING, ModelHistory, Pairing, Sample, array_update, refusal
 
 __all__ = ["Source", "Hub", "REFUSED"]
 

@@ -31,20 +31,12 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from ..datapath.cdr import FLOAT64_MULTIARRAY, decode
+from ..datapath.outputs import FREQUENCY_DOMAIN, TIME_DOMAIN, ArrayKey, split_topic
 from ..errors import BagError
 from ..offline.bags import check_mcap_integrity, typestore
 from ..offline.replay_files import CSV_COLUMNS
-from .health import statuses_of
-from .model import (
-    FREQUENCY_DOMAIN,
-    MAX_MODELS,
-    MAX_PARAMETERS,
-    MAX_STAMP_NS,
-    TIME_DOMAIN,
-    ArrayKey,
-    Sample,
-    split_topic,
-)
+from ..ros.health import statuses_of
+from .model import MAX_MODELS, MAX_PARAMETERS, MAX_STAMP_NS, Sample
 
 if TYPE_CHECKING:
     from rosbags.highlevel import AnyReader

@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import ipaddress
 import math
-import os
 import re
 import secrets
 from collections import Counter
@@ -23,8 +22,7 @@ from ..settings.config import NODE_NAME
 from ..settings.yaml_files import load
 
 __all__ = ["DEFAULT_NODE", "ServerOptions", "strong_token", "origin_of", "is_loopback", "check_options",
-           "full_node_name", "split_node_name",
-           "discovery_environment", "where", "load_reference"]
+           "full_node_name", "load_reference"]
 
 DEFAULT_NODE = f"/{NODE_NAME}"
 _NAME = re.compile(r"^(/[A-Za-z_][A-Za-z0-9_]*)+$")
@@ -120,29 +118,6 @@ def full_node_name(value: str) -> str:
     if not _NAME.match(full):
         raise ConfigError(f"--node {value!r}: not a ROS node name (for example {DEFAULT_NODE} or /ns/{NODE_NAME})")
     return full
-
-
-def split_node_name(full: str) -> tuple[str, str]:
-    """``(namespace, name)`` of a fully qualified node name such as ``/ns/rls_estimator``."""
-    ns, _, name = full.rpartition("/")
-    return ns or "/", name
-
-
-def discovery_environment() -> dict[str, str]:
-    """The ROS domain and discovery settings DDS reads from the environment (with ROS's
-    defaults), for the page and the error messages."""
-    return {
-        "domain": os.environ.get("ROS_DOMAIN_ID", "") or "0",
-        "discovery_range": os.environ.get("ROS_AUTOMATIC_DISCOVERY_RANGE", "") or "SUBNET",
-        "static_peers": os.environ.get("ROS_STATIC_PEERS", ""),
-    }
-
-
-def where() -> str:
-    """``ROS_DOMAIN_ID=N, ROS_AUTOMATIC_DISCOVERY_RANGE=R`` for messages."""
-    env = discovery_environment()
-    peers = f", ROS_STATIC_PEERS={env['static_peers']}" if env["static_peers"] else ""
-    return f"ROS_DOMAIN_ID={env['domain']}, ROS_AUTOMATIC_DISCOVERY_RANGE={env['discovery_range']}{peers}"
 
 
 def load_reference(path: str | Path) -> dict[str, float]:

@@ -45,12 +45,13 @@ from typing import TYPE_CHECKING, Any, Protocol, TextIO
 import numpy as np
 
 from ..datapath.alerts import no_estimate, not_excited
+from ..datapath.config import PipelineConfig
+from ..datapath.diagnostics import DiagnosticsPolicy, Snapshot, Status
 from ..datapath.inputs import Stamped, feed
 from ..datapath.outputs import NODE_NAME, OutputLayout, fit_records
 from ..datapath.pipeline import Pipeline, SampleOutput
 from ..files import output_directory
-from ..ros.diagnostics import DiagnosticsPolicy, Snapshot, Status
-from ..settings.config import NodeConfig, PipelineConfig
+from ..settings.config import NodeConfig
 from ..settings.parameters import node_config, parameter_defaults, pipeline_config
 from .bags import InputStream, typestore
 from .figure_data import FigureData

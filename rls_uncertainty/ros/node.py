@@ -11,7 +11,8 @@ identifiability, convergence and latency (and ``~/M/fit``, ``~/M/identifiability
 period), and a misconfigured data path (every message of a needed stream
 rejected, no sample used) is also logged as a throttled warning: the statuses and the warnings
 are computed by :mod:`.diagnostics` and :mod:`.alerts` from a snapshot the node takes each
-period.
+period. A needed input topic with no publisher for ``diagnostics_window`` seconds is logged
+once (:mod:`.input_watch`).
 
 Parameters (declared with the descriptions, ranges and choices of
 :data:`rls_uncertainty.settings.parameters.PARAMETERS`, generated from the options classes), the
@@ -44,6 +45,7 @@ from std_msgs.msg import Float64MultiArray, Header
 from std_srvs.srv import SetBool, Trigger
 
 from ..datapath.cdr import decode
+from ..datapath.diagnostics import DiagnosticsPolicy, Snapshot, malformed_reason, malformed_warning
 from ..datapath.inputs import MESSAGE_TYPES, STREAMS, feed, message_class
 from ..datapath.outputs import HEADER, NODE_NAME, OutputLayout
 from ..datapath.pipeline import Pipeline, SampleOutput, StateFileError
@@ -51,7 +53,7 @@ from ..errors import ConfigError
 from ..settings.parameters import PARAMETERS, Parameter, node_config, pipeline_config
 from ..settings.sources import startup_parameters
 from ..state_file import StateFileClaim, claim, set_aside
-from .diagnostics import DiagnosticsPolicy, Snapshot, malformed_reason, malformed_warning
+from .input_watch import SilentInputs
 
 __all__ = ["EstimatorNode", "main", "NODE_NAME"]
 
@@ -108,6 +110,7 @@ class EstimatorNode(Node):
         self._diagnostics = DiagnosticsPolicy(self.get_fully_qualified_name(),
                                               window_s=self.node_cfg.diagnostics_window)
         self._last_diag = time.monotonic()
+        self._silent = SilentInputs()  # input topics nobody publishes, logged once
 
         # Transient local: a subscriber that joins late (a dashboard) gets the last qos.depth
         # samples at once; volatile subscribers match as before. Keep-last bounds the memory.
@@ -366,6 +369,11 @@ class EstimatorNode(Node):
         """One :class:`.diagnostics.Snapshot` per period in, one ``DiagnosticArray`` out."""
         now_ns = self.get_clock().now().nanoseconds
         wall = time.monotonic()
+        publishers = {kind: sub.get_publisher_count() for kind, sub in self._subs.items()}
+        topics = {kind: sub.topic_name for kind, sub in self._subs.items()}
+        for line in self._silent.update(self, wall, publishers, topics, self.pipeline.required,
+                                        self.node_cfg.diagnostics_window, self.node_cfg.reliable):
+            self.get_logger().warning(line)
         snapshot = Snapshot(
             counters=self.pipeline.counters(),
             models=[(m.output, self.pipeline.model_report(j)) for j, m in enumerate(self.config.models)],
@@ -373,8 +381,8 @@ class EstimatorNode(Node):
             max_gap=self.config.inputs.max_gap,
             now_ns=now_ns,
             elapsed_s=wall - self._last_diag,
-            publishers={kind: sub.get_publisher_count() for kind, sub in self._subs.items()},
-            topics={kind: sub.topic_name for kind, sub in self._subs.items()},
+            publishers=publishers,
+            topics=topics,
             reliable=self.node_cfg.reliable,
             enabled=self.pipeline.enabled,
             state_file=self.state_status,

@@ -6,11 +6,38 @@
   estimation methods' estimates the node publishes, from the ROS graph's topics), redrawn in
   place at each report; ``--once`` prints one and exits;
 * ``rls-uncertainty enable | disable | reset [--node NAME]``: calls ``~/enable``
-  (``std_srvs/SetBool``) or ``~/reset`` (``std_srvs/Trigger``) and prints the node's answer.
+  (``std_srvs/SetBool``) or ``~/reset`` (``std_srvs/Trigger``) of every node that answers to
+  the name and prints each answer (:func:`call`).
 
 Exit status 0 when the node answered (and the service succeeded), 1 when no node answered
 within ``--timeout`` seconds (the message says which domain and discovery range were
-searched), 2 for a bad option. Only the service calls change anything; ``status`` reads.
+searched), or when several nodes carry the name and not all of them answered the same success;
+2 for a bad option. Only the service calls change anything; ``status`` reads.
+
+**Several nodes of one name** (twins: two launches of one file) all serve ``NAME/enable``. A
+DDS service client reaches every server it has matched when it sends, and each answers; but
+rclpy's client hands back only the first answer, and a client is ready as soon as it has
+matched *one* server, so a call made at once would reach whichever twin was discovered
+first, and say that one's answer. Neither rclpy nor rmw in Jazzy can address one server
+among several of a name (no endpoint GIDs for services, and a request goes to every matched
+server), so :func:`call` makes sure a request reaches them all and collects every answer:
+
+1. it counts the nodes that carry the name: the most of the ROS graph's nodes of that name,
+   the graph's servers of the service, and ``nodes_with_this_name`` from the node's own
+   ``/diagnostics`` (the node has run long enough to have discovered its twins, where this
+   command's graph is a second old), waiting up to :data:`REPORT_WAIT_S` for a report;
+2. it sends once the graph shows that many servers, and collects answers until as many
+   arrived to one request. The graph can list a server before this client's request writer
+   has matched it (a twin listed beside the other missed a call now and then), and a request
+   sent before the match never reaches that server, so with fewer answers after
+   :data:`RESEND_S` the call is sent again, at most :data:`SENDS` times: a node may then get
+   it twice (harmless for ``enable`` and ``disable``; ``reset`` resets that node again, a
+   second later), which the output says;
+3. it prints the answers to the request that most nodes answered; with more than one node,
+   a line says so first, and the exit status is 1 unless every node answered and all
+   succeeded alike.
+
+Answers carry no sender: they are numbered, not named (the twins' logs say which got what).
 """
 
 from __future__ import annotations
@@ -24,13 +51,15 @@ import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
+from rclpy.task import Future
 from std_srvs.srv import SetBool, Trigger
 
-from ..dashboard.health import LEVELS, HealthTracker, NodeHealth, parse_statuses, statuses_of
-from ..dashboard.model import METHODS, array_key
-from ..dashboard.settings import where
+from ..datapath.outputs import METHODS, array_key
+from .environment import split_node_name, where
+from .health import LEVELS, HealthTracker, NodeHealth, parse_statuses, statuses_of
 
-__all__ = ["call", "status", "format_health", "published_methods", "SERVICES"]
+__all__ = ["call", "report", "status", "format_health", "published_methods", "SERVICES", "REPORT_WAIT_S", "RESEND_S",
+           "SENDS"]
 
 # command -> (service relative to the node, type, request data)
 SERVICES: dict[str, tuple[str, Any, bool | None]] = {
@@ -39,7 +68,16 @@ SERVICES: dict[str, tuple[str, Any, bool | None]] = {
     "reset": ("reset", Trigger, None),
 }
 _CLEAR = "\x1b[H\x1b[2J"
-# How the status names each estimation method (rls_uncertainty.dashboard.model.METHODS).
+# How long enable/disable/reset wait, once a server of the service is ready, for a report of
+# the node (its nodes_with_this_name) before counting the nodes from the ROS graph alone: the
+# node reports every diagnostics_period (1 s by default).
+REPORT_WAIT_S = 3.0
+# A request reaches only the servers matched when it is sent, and the graph can list a server
+# before the match: when fewer nodes answer than carry the name, the call is sent again after
+# RESEND_S, at most SENDS times in all.
+RESEND_S = 1.0
+SENDS = 3
+# How the status names each estimation method (rls_uncertainty.datapath.outputs.METHODS).
 METHOD_TEXT = {"time": "time domain (RLS, ~/M/estimates)", "frequency": "frequency domain (~/M/frequency/estimates)"}
 
 
@@ -67,25 +105,105 @@ class _Session:
         self.context.try_shutdown()
 
 
+class _Namesakes:
+    """How many nodes carry ``node_name`` (module docstring, step 1), as seen so far."""
+
+    def __init__(self, session: _Session, node_name: str, service: str) -> None:
+        self.node, self.node_name, self.service = session.node, node_name, service
+        self.key = split_node_name(node_name)[::-1]  # (name, namespace), as the graph lists nodes
+        self.reported = 0  # nodes_with_this_name of the newest report; 0: none yet
+        self.node.create_subscription(DiagnosticArray, "/diagnostics", self._on_diagnostics, 50)
+
+    def _on_diagnostics(self, msg: DiagnosticArray) -> None:
+        parsed = parse_statuses(statuses_of(msg), self.node_name)
+        if parsed is not None:
+            value = parsed.samples.get("nodes_with_this_name", "1")
+            self.reported = max(self.reported, int(value) if value.isdigit() else 1)
+
+    def servers(self) -> int:
+        return self.node.count_services(self.service)
+
+    def expected(self) -> int:
+        graph = sum(1 for key in self.node.get_node_names_and_namespaces() if tuple(key) == self.key)
+        return max(self.reported, graph, self.servers(), 1)
+
+
+def _spin_until(session: _Session, condition: Callable[[], bool], deadline: float) -> bool:
+    while not condition():
+        if time.monotonic() > deadline:
+            return False
+        session.executor.spin_once(timeout_sec=0.05)
+    return True
+
+
+def report(command: str, node_name: str, answers: list[tuple[bool, str]], nodes: int, timeout: float,
+           sends: int = 1, out: TextIO = sys.stdout) -> int:
+    """Print the ``answers`` (success, message) of the ``nodes`` that carry ``node_name`` to
+    the request that most of them answered, of ``sends`` sent; the exit status (module
+    docstring)."""
+    nodes = max(nodes, len(answers))
+    if not answers:
+        return _fail(command, f"{node_name} did not answer within {timeout:g} s")
+    if nodes == 1:
+        success, message = answers[0]
+        print(f"{node_name}: {message}", file=out)
+        return 0 if success else 1
+    again = (f"; sent {sends} times, as the earlier calls did not reach every node (a node may have had it more "
+             "than once)") if sends > 1 else ""
+    print(f"{node_name}: {nodes} nodes answer to this name, and each gets every call: give each its own name or "
+          f"namespace (--ros-args -r __node:=NAME or -r __ns:=/NAMESPACE){again}", file=out)
+    for i, (_success, message) in enumerate(answers, 1):
+        print(f"{node_name} [answer {i} of {nodes}]: {message}", file=out)
+    if len(answers) < nodes:
+        return _fail(command, f"{nodes - len(answers)} of the {nodes} nodes named {node_name} did not answer within "
+                              f"{timeout:g} s: whether the call reached them is not known")
+    if len(set(answers)) > 1 or not answers[0][0]:
+        return _fail(command, f"the {nodes} nodes named {node_name} did not all succeed alike")
+    return 0
+
+
 def call(command: str, node_name: str, timeout: float) -> int:
-    """``enable``, ``disable`` or ``reset``: call the service, print the answer."""
+    """``enable``, ``disable`` or ``reset`` of every node named ``node_name`` (module
+    docstring); each answer printed. Discovery and the answers each wait up to ``timeout``."""
     service, srv_type, data = SERVICES[command]
     name = f"{node_name.rstrip('/')}/{service}"
+    answers: dict[int, list[tuple[bool, str]]] = {}  # by the request's sequence number
+
+    def every_answer(sequence: int) -> Future:
+        # rclpy's executor hands each response to the future of its sequence number, and a
+        # plain client keeps only the first; this one keeps them all.
+        future = Future()
+        future.add_done_callback(lambda f: answers.setdefault(sequence, []).append(
+            (bool(f.result().success), str(f.result().message))))
+        return future
+
+    def most() -> list[tuple[bool, str]]:
+        return max(answers.values(), key=len, default=[])
+
     with _Session() as session:
         client = session.node.create_client(srv_type, name)
-        if not client.wait_for_service(timeout_sec=timeout):
+        client.get_pending_request = every_answer  # type: ignore[method-assign,assignment]
+        namesakes = _Namesakes(session, node_name, name)
+        deadline = time.monotonic() + timeout
+        if not _spin_until(session, client.service_is_ready, deadline):
             return _fail(command, f"no node answers {name} within {timeout:g} s ({where()}): is {node_name} running, "
                                   "with the same domain and discovery range?")
+        report_by = min(deadline, time.monotonic() + REPORT_WAIT_S)
+        _spin_until(session, lambda: (namesakes.reported > 0 or time.monotonic() > report_by)
+                    and namesakes.servers() >= namesakes.expected(), deadline)
+        nodes = namesakes.expected()
         request = srv_type.Request()
         if data is not None:
             request.data = data
-        future = client.call_async(request)
-        session.executor.spin_until_future_complete(future, timeout_sec=timeout)
-        response = future.result() if future.done() else None
-    if response is None:
-        return _fail(command, f"{name} did not answer within {timeout:g} s")
-    print(f"{node_name}: {response.message}")
-    return 0 if response.success else 1
+        deadline = time.monotonic() + timeout
+        sends = 0
+        while sends < SENDS and len(most()) < nodes and time.monotonic() < deadline:
+            client.call_async(request)
+            sends += 1
+            last = sends == SENDS
+            _spin_until(session, lambda: len(most()) >= nodes, deadline if last else time.monotonic() + RESEND_S)
+        nodes = max(nodes, namesakes.expected())
+    return report(command, node_name, most(), nodes, timeout, sends)
 
 
 # ------------------------------------------------------------------ status
@@ -100,7 +218,7 @@ def _table(header: list[str], rows: list[list[str]]) -> list[str]:
 
 
 def published_methods(topics: Iterable[str], node_name: str) -> list[str]:
-    """The estimation methods (:data:`.dashboard.model.METHODS`) whose ``estimates`` topic
+    """The estimation methods (:data:`rls_uncertainty.datapath.outputs.METHODS`) whose ``estimates`` topic
     ``node_name`` has among ``topics`` (the graph's topic names; the node creates its
     publishers at start, before any sample)."""
     prefix = node_name.rstrip("/") + "/"

@@ -46,8 +46,8 @@ if TYPE_CHECKING:
     from rclpy.node import Node
     from rclpy.publisher import Publisher
 
+    from ..datapath.config import PipelineConfig
     from ..datapath.pipeline import SampleOutput
-    from ..settings.config import PipelineConfig
 
 __all__ = ["play", "demo", "bundled_bag", "stop_process", "TopicStats", "DEFAULT_WINDOW"]
 

@@ -13,14 +13,23 @@ received here, and every model it reports ready has published for the last of th
 arrays has published them for the last sample due, the samples used being counted from the
 start: a run with a reset in it is not waited for correctly).
 
+The node dies with the process that started it, whatever ends that process (SIGKILL
+included): it runs in a process group of its own with Linux's parent-death signal set to
+SIGKILL (``prctl(PR_SET_PDEATHSIG)``). The signal follows the *thread* that started the node:
+start it from the test's own thread, not from a worker thread that ends before the test.
+
 rclpy is imported when a node is started or played to, not with this module. The domain
-isolates the test's DDS traffic; discovery follows ``ROS_AUTOMATIC_DISCOVERY_RANGE`` as
-everywhere in the package (set it to ``LOCALHOST`` in CI).
+isolates the test's DDS traffic (:mod:`.domain` claims one no one else uses; the run stops
+with :class:`LiveTimeout` if another node's outputs or another player's inputs appear on it
+all the same); discovery follows ``ROS_AUTOMATIC_DISCOVERY_RANGE`` as everywhere in the
+package (set it to ``LOCALHOST`` in CI).
 """
 
 from __future__ import annotations
 
+import ctypes
 import os
+import signal
 import subprocess
 import sys
 import time
@@ -49,6 +58,25 @@ _VECTORS = ("estimates", "standard_errors", "standard_errors_conventional", "con
 _FREQUENCY_VECTORS = tuple(f"{FREQUENCY}/{kind}" for kind in FREQUENCY_OUTPUTS)
 
 
+_PR_SET_PDEATHSIG = 1  # <linux/prctl.h>
+
+
+def _die_with_parent() -> Callable[[], None]:
+    """A ``preexec_fn`` for :class:`subprocess.Popen`: in the child, between fork and exec, ask
+    the kernel for SIGKILL when the parent (thread) dies, then leave at once if the parent is
+    already gone (it died before the request). libc's ``prctl`` is looked up here, in the
+    parent: the child only calls it."""
+    prctl = ctypes.CDLL(None, use_errno=True).prctl
+    parent = os.getpid()
+
+    def preexec() -> None:
+        prctl(_PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0)
+        if os.getppid() != parent:
+            os._exit(1)
+
+    return preexec
+
+
 def _nested(params: Mapping[str, Any]) -> dict[str, Any]:
     """Dotted parameter names as the nested mapping of a ROS 2 parameter file."""
     out: dict[str, Any] = {}
@@ -64,7 +92,8 @@ def _nested(params: Mapping[str, Any]) -> dict[str, Any]:
 class EstimatorProcess:
     """``python -m rls_uncertainty.ros.node`` with ``parameters`` (dotted names; over
     :data:`REPLAY_PARAMETERS`) written to ``directory/NAME.yaml``, on ROS domain ``domain``,
-    its output in ``directory/NAME.log``. :meth:`stop` ends it (SIGINT, then SIGKILL after
+    its output in ``directory/NAME.log``, in a process group of its own and killed when this
+    process dies (module docstring). :meth:`stop` ends it (SIGINT, then SIGKILL after
     ``timeout``); use it in a ``finally`` (the fixtures do)."""
 
     def __init__(self, parameters: Mapping[str, Any], *, domain: int, directory: str | Path,
@@ -80,11 +109,14 @@ class EstimatorProcess:
         self.params_file.write_text(yaml.safe_dump({"/**": {"ros__parameters": _nested(self.parameters)}}))
         self.log_file = directory / f"{name}.log"
         env = {**os.environ, "ROS_DOMAIN_ID": str(self.domain)}
+        # preexec_fn with threads about (a DDS participant of an earlier play): the child runs
+        # nothing but a resolved libc call and os.getppid, which need no lock another thread holds.
         with open(self.log_file, "w") as log:  # the child writes through its own descriptor
             self.proc = subprocess.Popen(
                 [sys.executable, "-m", "rls_uncertainty.ros.node", "--ros-args",
                  "--params-file", str(self.params_file)],
-                stdout=log, stderr=subprocess.STDOUT, env=env)
+                stdout=log, stderr=subprocess.STDOUT, env=env, process_group=0,
+                preexec_fn=_die_with_parent())  # noqa: PLW1509
 
     @property
     def running(self) -> bool:
@@ -102,7 +134,7 @@ class EstimatorProcess:
 def _counters(statuses: Sequence[tuple[str, int, str, Mapping[str, str]]]) -> dict[str, Any]:
     """:func:`..results.accounting`'s form of the node's ``/diagnostics`` (its ``inputs`` and
     ``samples`` statuses)."""
-    from ..dashboard.health import parse_statuses  # noqa: PLC0415 - the reader of the node's keys
+    from ..ros.health import parse_statuses  # noqa: PLC0415 - the reader of the node's keys
 
     health = parse_statuses(statuses, NODE_NAME)
     if health is None:
@@ -149,7 +181,7 @@ class _Outputs:
         self.stamps.append(int(msg.stamp.sec) * 1_000_000_000 + int(msg.stamp.nanosec))
 
     def _diagnostics(self, msg: Any) -> None:
-        from ..dashboard.health import statuses_of  # noqa: PLC0415
+        from ..ros.health import statuses_of  # noqa: PLC0415
 
         statuses = statuses_of(msg)
         if any(name.startswith(f"{NODE_NAME}: ") for name, *_ in statuses):
@@ -160,11 +192,28 @@ class _Outputs:
         """Every output subscription matched the node's publisher."""
         return all(s.get_publisher_count() >= 1 for s in self.subs)
 
+    def _publishers(self) -> dict[str, int]:
+        """The node's newest report's publisher count per input stream."""
+        return {k[:-11]: int(v) for name, _l, _m, kv in self.diagnostics if name == f"{NODE_NAME}: inputs"
+                for k, v in kv.items() if k.endswith(".publishers")}
+
     def inputs_seen(self, streams: Sequence[str]) -> bool:
         """The node's newest report counts a publisher on each of ``streams``."""
-        values = {k: v for name, _l, _m, kv in self.diagnostics if name == f"{NODE_NAME}: inputs"
-                  for k, v in kv.items()}
-        return all(int(values.get(f"{s}.publishers", "0")) >= 1 for s in streams)
+        counts = self._publishers()
+        return all(counts.get(s, 0) >= 1 for s in streams)
+
+    def intruders(self) -> str | None:
+        """Another estimator node's outputs, or another player's inputs, seen here (None:
+        only the node under test and this player)."""
+        nodes = self.subs[0].get_publisher_count()
+        if nodes > 1:
+            return (f"{nodes} nodes publish /{NODE_NAME}/{SAMPLE_STAMP}: another node named {NODE_NAME} runs on "
+                    "this domain and its samples mix with the node's")
+        crowded = {s: n for s, n in self._publishers().items() if n > 1}
+        if crowded:
+            return ("another player publishes to the node: its inputs have more than this player's publisher ("
+                    + ", ".join(f"{s} {n}" for s, n in sorted(crowded.items())) + ")")
+        return None
 
 
 def _wait(spin: Callable[[], None], condition: Callable[[], bool], timeout: float, what: Callable[[], str],
@@ -288,8 +337,15 @@ def play_to_node(bag: str | Path, node: EstimatorProcess, *, rate: float = 0.0, 
         if not kinds:
             raise BagError(f"{bag}: none of the node's input topics {sorted(input_topics(node.node_config.topics))}")
 
+        checked = [time.monotonic()]
+
         def spin() -> None:
             executor.spin_once(timeout_sec=0.01)
+            if time.monotonic() - checked[0] >= 0.5:  # a graph query: twice a second is enough
+                checked[0] = time.monotonic()
+                if (intruders := out.intruders()) is not None:
+                    raise LiveTimeout(f"ROS domain {node.domain}: {intruders}; the run's numbers would not be the "
+                                      f"node's alone (the node's log: {node.log_file})")
 
         matched = lambda: out.matched() and out.inputs_seen(list(kinds.values()))  # noqa: E731
         _wait(spin, matched, timeout, lambda: "discovery of the node's inputs and outputs", node)

@@ -4,16 +4,21 @@ Enable them with ``pytest -p rls_uncertainty.testing.plugin``, ``addopts = -p
 rls_uncertainty.testing.plugin`` in the suite's ``pytest.ini``, or ``pytest_plugins =
 ["rls_uncertainty.testing.plugin"]`` in its top-level ``conftest.py``:
 
-* ``rls_domain`` (session): the private ROS domain the node under test runs on. The first of
-  the ids ``--rls-domains FIRST-LAST`` (ini ``rls_domains``; default 42-49) that is not the
-  environment's ``ROS_DOMAIN_ID``; with pytest-xdist, worker N takes the N-th of them (modulo
-  their number), so parallel workers do not hear each other.
+* ``rls_domain`` (session): the private ROS domain the node under test runs on, claimed for
+  the session (:func:`.domain.claim_domain`: a lock no other session on the machine can take
+  and no other node seen on its graph) among the ids ``--rls-domains FIRST-LAST`` (ini
+  ``rls_domains``; default 42-49) other than the environment's ``ROS_DOMAIN_ID``. The search
+  starts at the first id (with pytest-xdist, worker N starts at the N-th) and takes the next
+  free one; when none is free every test that needs it errors with one line naming each
+  domain's holder and the option to change.
 * ``rls_estimator`` (function): ``start(config=None, **overrides) -> EstimatorProcess``
   starts the estimator node in a process of its own on ``rls_domain``
   (:class:`.live.EstimatorProcess`; ``config`` and ``overrides`` as for
-  :func:`.offline.replay_bag`); every node started is stopped after the test, in a
-  ``finally``, whether it passed or not. One node at a time per domain: two nodes of one
-  name on a domain would both hear the bag.
+  :func:`.offline.replay_bag`); the node dies with the test process whatever ends it, and is
+  stopped after the test, in a ``finally``, whether it passed or not. One node at a time per
+  fixture: two nodes of one name on a domain would both hear the bag, so ``start`` while a
+  node it started still runs fails the test in one line (stop the first, ``node.stop()``, to
+  start another).
 * ``rls_play`` (function): ``play(bag, node, rate=0.0, timeout=120.0) -> ReplayResult``
   plays a bag to a started node with acknowledgements and collects its outputs
   (:func:`.live.play_to_node`).
@@ -32,12 +37,14 @@ import pytest
 
 from ..errors import ConfigError
 from ..offline.results import ReplayResult
+from .domain import DEFAULT_DOMAINS, claim_domain
+from .domain import domain_ids as domains
 from .live import EstimatorProcess, play_to_node
 from .offline import Config, parameters
 
 __all__ = ["rls_domain", "rls_estimator", "rls_play", "rls_live_replay", "domains"]
 
-DEFAULT_DOMAINS = "42-49"
+_ADVICE = "give other ids with --rls-domains FIRST-LAST (or the ini option rls_domains)"
 
 
 def pytest_addoption(parser: pytest.Parser) -> None:
@@ -48,30 +55,25 @@ def pytest_addoption(parser: pytest.Parser) -> None:
                                                     f"ini option rls_domains; default {DEFAULT_DOMAINS})")
 
 
-def domains(spec: str, ambient: str | None = None) -> list[int]:
-    """The domain ids of ``FIRST-LAST`` (or one id) other than ``ambient`` (the environment's
-    ``ROS_DOMAIN_ID``, 0 when unset); a :class:`..errors.ConfigError` when none is left."""
-    first, _, last = spec.strip().partition("-")
-    try:
-        lo, hi = int(first), int(last or first)
-    except ValueError:
-        raise ConfigError(f"rls_domains: expected FIRST-LAST (e.g. {DEFAULT_DOMAINS}), got {spec!r}") from None
-    if not 0 <= lo <= hi <= 232:
-        raise ConfigError(f"rls_domains: ROS domain ids are 0 to 232 with FIRST <= LAST, got {spec!r}")
-    ambient = ambient if ambient is not None else os.environ.get("ROS_DOMAIN_ID", "0")
-    left = [d for d in range(lo, hi + 1) if str(d) != ambient.strip()]
-    if not left:
-        raise ConfigError(f"rls_domains {spec!r}: only the environment's own ROS_DOMAIN_ID; give others")
-    return left
-
-
 @pytest.fixture(scope="session")
-def rls_domain(request: pytest.FixtureRequest) -> int:
+def rls_domain(request: pytest.FixtureRequest) -> Iterator[int]:
     spec = request.config.getoption("--rls-domains") or request.config.getini("rls_domains")
-    ids = domains(str(spec))
     worker = os.environ.get("PYTEST_XDIST_WORKER", "gw0")
     index = int(worker[2:]) if worker[2:].isdigit() else 0
-    return ids[index % len(ids)]
+    try:
+        ids = domains(str(spec))
+        start = index % len(ids)
+        claim = claim_domain(ids[start:] + ids[:start], advice=_ADVICE)
+    except ConfigError as exc:
+        refused = str(exc)
+    else:
+        refused = ""
+    if refused:  # outside the except: no "during handling of the above exception" in the report
+        pytest.fail(f"rls_domain: {refused}", pytrace=False)
+    try:
+        yield claim.domain
+    finally:
+        claim.release()
 
 
 @pytest.fixture
@@ -79,6 +81,11 @@ def rls_estimator(rls_domain: int, tmp_path: Path) -> Iterator[Callable[..., Est
     started: list[EstimatorProcess] = []
 
     def start(config: Config = None, **overrides: Any) -> EstimatorProcess:
+        running = [n for n in started if n.running]
+        if running:
+            pytest.fail(f"rls_estimator: one node at a time: {running[0].log_file.stem} (pid {running[0].proc.pid}) "
+                        f"still runs on ROS domain {rls_domain}, and a second node of its name would hear the same "
+                        "bag; stop it first (node.stop()) or use it", pytrace=False)
         node = EstimatorProcess(parameters(config, overrides), domain=rls_domain, directory=tmp_path,
                                 name=f"estimator{len(started)}")
         started.append(node)
