@@ -30,9 +30,7 @@ def _play(args: argparse.Namespace) -> int:
 def _dashboard(args: argparse.Namespace) -> int:
     from ..dashboard.app import dashboard_options, run
 
-    server = option_values(args, ServerOptions)
-    return run(dashboard_options(server["host"], server["port"], args.node, args.replay, args.reference,
-                                 server["token"]))
+    return run(dashboard_options(option_values(args, ServerOptions), args.node, args.replay, args.reference))
 
 
 def _status(args: argparse.Namespace) -> int:

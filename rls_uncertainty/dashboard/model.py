@@ -32,6 +32,7 @@ from typing import Any
 
 import numpy as np
 
+from ..aero.models import OUTPUTS, REGRESSORS
 from ..datapath.outputs import (
     PAIRED,
     TIME_DOMAIN,
@@ -48,11 +49,21 @@ __all__ = [
     "MAX_PENDING",
     "MAX_WAITING",
     "HISTORY_CAPACITY",
+    "MAX_MODELS",
+    "MAX_PARAMETERS",
+    "MAX_STAMP_NS",
+    "refusal",
 ]
 
 MAX_PENDING = 64  # newer samples completed before a stamp's missing partner arrays count as lost
 MAX_WAITING = 4096  # stamps per model awaiting partners (a late joiner's burst of kept samples)
 HISTORY_CAPACITY = 20_000  # samples per model; 200 s at full rate at 50 Hz, older data thinned
+# What a node can publish (Eq. 2): six models per method, each with at most one parameter per
+# regressor. Beyond, arrays and samples are refused and counted: memory stays bounded whatever
+# a recording or a node sends.
+MAX_MODELS = len(OUTPUTS)
+MAX_PARAMETERS = len(REGRESSORS)
+MAX_STAMP_NS = 2**63 - 1  # int64 nanoseconds since 1970: up to the year 2262
 
 
 @dataclass(frozen=True)
@@ -206,11 +217,12 @@ class ModelHistory:
         """The stamp of the ``k``-th newest sample (the oldest when fewer are held)."""
         return int(self._t[max(0, self.size - k)]) if self.size else None
 
-    def columns(self, start: int = 0) -> dict:
-        """Samples ``start`` onwards as JSON-ready columns: ``t`` (s), and per quantity one list
-        per parameter."""
-        t = self._t[start:self.size]
-        v = self._v[start:self.size]
+    def columns(self, start: int = 0, stop: int | None = None) -> dict:
+        """Samples ``start`` to ``stop`` (the newest when None) as JSON-ready columns: ``t`` (s),
+        and per quantity one list per parameter."""
+        stop = self.size if stop is None else min(stop, self.size)
+        t = self._t[start:stop]
+        v = self._v[start:stop]
         return {
             "names": list(self.names),
             "t": (t * 1e-9).tolist(),
@@ -219,6 +231,22 @@ class ModelHistory:
             "se_conventional": v[:, 2].T.tolist(),
             "converged": v[:, 3].T.tolist(),
         }
+
+
+def refusal(s: Sample) -> str:
+    """Why a complete sample is not shown (empty: it is): ``time_out_of_range`` (not in
+    [0, :data:`MAX_STAMP_NS`]), ``too_many_parameters`` (more than :data:`MAX_PARAMETERS`),
+    ``non_finite`` or ``se_not_positive`` (a corrected or conventional standard error of 0 or
+    less: no band to draw; Eqs. 13, 20 and 22 give positive variances)."""
+    if not 0 <= s.stamp_ns <= MAX_STAMP_NS:
+        return "time_out_of_range"
+    if len(s.names) > MAX_PARAMETERS:
+        return "too_many_parameters"
+    if not all(math.isfinite(x) for x in (*s.estimate, *s.se, *s.se_conventional)):
+        return "non_finite"
+    if not all(x > 0 for x in (*s.se, *s.se_conventional)):
+        return "se_not_positive"
+    return ""
 
 
 def sample_columns(samples: Sequence[Sample]) -> dict:
