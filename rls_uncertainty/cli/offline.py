@@ -103,7 +103,7 @@ def _replay(args: argparse.Namespace) -> int:
 def _campaign(args: argparse.Namespace) -> int:
     """Many maneuvers through the replay's pipeline into Table 4 and Fig. 12 (docs/campaign.md)."""
     from ..campaign import CampaignSettings, campaign_to, from_bags, load_maneuvers
-    from ..executors import executor_for
+    from ..executors import LocalProcesses, executor_for
     from ..settings.models import config_dir
     from ..settings.parameters import node_config, pipeline_config
 
@@ -119,6 +119,8 @@ def _campaign(args: argparse.Namespace) -> int:
     if args.maneuvers:
         inputs.append(args.maneuvers)
     settings = CampaignSettings(pipeline_config(params), node_config(params).topics, strict=not args.lenient)
+    if isinstance(executor, LocalProcesses) and (note := executor.capped(len(maneuvers), "maneuver")):
+        print(f"rls-uncertainty campaign: {note}", file=sys.stderr)
     result = campaign_to(args.out, maneuvers, settings, executor, progress=not args.quiet,
                          figures=_figures(args), force=args.force, inputs=inputs)
     print(result.summary(), end="")
