@@ -122,10 +122,12 @@ class _Worker:
 
 
 def _die_with(parent: int) -> None:
-    """In a new worker: end when ``parent`` ends. Ctrl-C is its parent's to handle (ignored
-    here), SIGTERM ends it (not the parent's handler it inherited), the kernel kills it when its
-    parent dies (Linux), and it holds no parent's end of any worker's pipe."""
+    """In a new worker: end when ``parent`` ends. Ctrl-C and a hang-up reach the whole process
+    group: they are its parent's to handle (ignored here); SIGTERM ends it (not the parent's
+    handler it inherited); the kernel kills it when its parent dies (Linux); and it holds no
+    parent's end of any worker's pipe."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGHUP, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, signal.SIG_DFL)
     for end in list(_Worker.parent_ends):
         with contextlib.suppress(OSError):

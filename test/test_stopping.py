@@ -98,8 +98,9 @@ def _running(proc: subprocess.Popen, directory: Path, workers: int) -> None:
     assert proc.poll() is None, proc.communicate()
 
 
-@pytest.mark.parametrize("sig,group,code", [(signal.SIGTERM, False, 143), (signal.SIGINT, True, 130)],
-                         ids=["SIGTERM", "SIGINT to the group (Ctrl-C)"])
+@pytest.mark.parametrize("sig,group,code", [(signal.SIGTERM, False, 143), (signal.SIGINT, True, 130),
+                                            (signal.SIGHUP, True, 129)],
+                         ids=["SIGTERM", "SIGINT to the group (Ctrl-C)", "SIGHUP to the group (terminal closed)"])
 def test_a_stopped_campaign_ends_in_one_line_leaving_no_worker_and_no_output(tmp_path, many, sig, group, code):
     out = tmp_path / "out"
     proc = _start(_campaign(many, out, "--workers", "2"), tmp_path)
@@ -117,6 +118,23 @@ def test_a_stopped_campaign_ends_in_one_line_leaving_no_worker_and_no_output(tmp
         assert stdout == ""
         # The main process ended its workers before it exited: nothing of the group is left.
         assert _group(proc.pid) == [] and not any(Path(f"/proc/{pid}").exists() for pid in workers)
+        assert _partials(tmp_path) == [] and not out.exists()
+    finally:
+        _kill_group(proc)
+
+
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT])
+def test_a_stopped_replay_ends_in_one_line_leaving_no_output(tmp_path, sig):
+    out = tmp_path / "out"
+    proc = _start(["replay", str(BUNDLED), "--config", "t2", "--out", str(out), "--quiet"], tmp_path)
+    try:
+        _wait_for(lambda: _partials(tmp_path) or proc.poll() is not None, "the replay's .partial directory")
+        assert proc.poll() is None, proc.communicate()
+        os.kill(proc.pid, sig)
+        stdout, stderr = proc.communicate(timeout=DEADLINE)
+        assert (proc.returncode, stdout) == (128 + sig, "")
+        name = signal.Signals(sig).name
+        assert stderr == f"rls-uncertainty replay: stopped by {name}; its unfinished output removed\n"
         assert _partials(tmp_path) == [] and not out.exists()
     finally:
         _kill_group(proc)

@@ -41,8 +41,11 @@ _OWN_SIGNALS = frozenset({"demo", "play", "dashboard", "status", "enable", "disa
 
 
 class Stopped(KeyboardInterrupt):
-    """A stopping signal other than SIGINT (SIGTERM, SIGHUP), raised in the main thread where
-    it arrived, so that the command unwinds as for Ctrl-C."""
+    """A stopping signal (SIGINT, SIGTERM, SIGHUP), raised in the main thread where it arrived,
+    so that the command unwinds as for Ctrl-C. (Not KeyboardInterrupt itself for SIGINT: a
+    Ctrl-C that reached a replay as it started, handled here, still made the interpreter end
+    the process by SIGINT at exit instead of the status returned; CPython marks an unhandled
+    interrupt by the exception's exact type, so a subclass is never marked.)"""
 
     def __init__(self, signum: int) -> None:
         super().__init__(signal.Signals(signum).name)
@@ -55,13 +58,14 @@ def _stop(signum: int, _frame: FrameType | None) -> None:
 
 @contextmanager
 def _stopping_signals(command: str) -> Iterator[None]:
-    """While the command runs, SIGTERM and SIGHUP raise :class:`Stopped` (SIGINT raises
-    KeyboardInterrupt already); a signal the process was started ignoring (``nohup``) stays
-    ignored, and the handlers before are put back after (``main`` called from a program)."""
+    """While the command runs, SIGINT, SIGTERM and SIGHUP raise :class:`Stopped`; a signal the
+    process was started ignoring (``nohup``, a background job) stays ignored, and the handlers
+    before are put back after (``main`` called from a program)."""
     before = {}
     if command not in _OWN_SIGNALS and threading.current_thread() is threading.main_thread():
-        for signum in (signal.SIGTERM, signal.SIGHUP):
-            if signal.getsignal(signum) is signal.SIG_DFL:
+        for signum, usual in ((signal.SIGINT, signal.default_int_handler), (signal.SIGTERM, signal.SIG_DFL),
+                              (signal.SIGHUP, signal.SIG_DFL)):
+            if signal.getsignal(signum) is usual:
                 before[signum] = signal.signal(signum, _stop)
     try:
         yield
