@@ -74,7 +74,7 @@ RESULT_FILES = (("estimates.csv", "{}"), ("estimates_frequency.csv", "{} [freque
 _MAX_RUN_BYTES = 16 << 20  # a run.json beyond this is not one (a replay's is a few kB)
 _MAX_LINE = 1 << 16  # bytes in a line of a results file (a replay's are under 200)
 _TIME = re.compile(r"[0-9]{1,11}\.[0-9]{9}")  # a stamp as .replay_files.stamp_text writes it
-_NUMBERS = ("estimate", "std_error", "std_error_conventional")
+_LAGS = re.compile(r"[0-9]{1,9}")  # a lag count (empty where the run has none)
 _MISSING = object()
 
 
@@ -386,14 +386,15 @@ class _Reader:
         if index is None:
             raise self._error("parameter", f"{_shown(row['parameter'])} of model {_shown(row['model'])} is not a "
                                            "parameter of the run's models (run.json)")
-        values = tuple(self._number(row, q) for q in _NUMBERS)
+        values = (self._number(row, "estimate"), self._number(row, "std_error"),
+                  self._number(row, "std_error_conventional"))
         if row["converged"] not in ("0", "1"):
             raise self._error("converged", f"{_shown(row['converged'])} is not 0 or 1")
-        if row["lags"] and not row["lags"].isdigit():
+        if row["lags"] and not _LAGS.fullmatch(row["lags"]):
             raise self._error("lags", f"{_shown(row['lags'])} is not a whole number of lags")
         sec, _, nanosec = row["time"].partition(".")
         return _Row((int(sec) * 1_000_000_000 + int(nanosec), index), row["time"],
-                    self.label.format(row["parameter"]), values, row)  # type: ignore[arg-type]
+                    self.label.format(row["parameter"]), values, row)
 
     def _number(self, row: dict[str, str], column: str) -> float:
         try:
