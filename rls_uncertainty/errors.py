@@ -84,8 +84,8 @@ class LiveTimeout(RlsUncertaintyError, TimeoutError):
 
 
 class SchedulerUnreachable(RlsUncertaintyError, ConnectionError):
-    """The Dask scheduler given with ``--scheduler`` did not answer in time; the message gives
-    the address and the timeout."""
+    """The Dask scheduler given with ``--scheduler`` did not answer in time, or went away in the
+    middle of a run; the message gives the address and what happened."""
 
 
 class WorkerLost(RlsUncertaintyError, RuntimeError):

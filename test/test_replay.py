@@ -2,11 +2,14 @@
 pipeline, options, and no partial output on failure. No DDS."""
 
 import csv
+import os
+import shutil
 from itertools import pairwise
 from pathlib import Path
 
 import numpy as np
-from bag_samples import fails, read_all
+import pytest
+from bag_samples import fails, no_hang, read_all
 
 from rls_uncertainty import cli
 from rls_uncertainty.offline.bags import read_inputs
@@ -75,6 +78,34 @@ def test_no_partial_output_when_the_replay_fails(tmp_path, capsys):
     out = tmp_path / "out"
     fails(capsys, ["replay", str(tmp_path / "missing"), "--out", str(out), "--quiet"], "missing", "no such bag")
     assert not out.exists()
+
+
+def _not_a_bag(tmp_path, kind):
+    """An input no reader may open: a FIFO named x.mcap, a symbolic link loop, a device, a bag
+    directory whose MCAP file is a FIFO."""
+    if kind == "fifo":
+        os.mkfifo(tmp_path / "x.mcap")
+        return tmp_path / "x.mcap", "a FIFO, not a regular file or a directory"
+    if kind == "loop":
+        (tmp_path / "loop").symlink_to(tmp_path / "loop")
+        return tmp_path / "loop", "a symbolic link loop"
+    if kind == "device":
+        return Path("/dev/zero"), "a character device, not a regular file or a directory"
+    bag = tmp_path / "bag"
+    shutil.copytree(BUNDLED, bag)
+    mcap = next(bag.glob("*.mcap"))
+    mcap.unlink()
+    os.mkfifo(mcap)
+    return bag, f"{mcap}: a FIFO, not a regular file"
+
+
+@pytest.mark.parametrize("kind", ["fifo", "loop", "device", "fifo_in_bag"])
+def test_an_input_that_no_reader_may_open_is_refused_at_once_in_one_line(tmp_path, capsys, kind):
+    bag, problem = _not_a_bag(tmp_path, kind)
+    out = tmp_path / "out"
+    with no_hang(60):  # a reader that opened the FIFO would block here
+        fails(capsys, ["replay", str(bag), "--config", "t2", "--out", str(out), "--quiet"], problem)
+    assert not out.exists() and not [p for p in tmp_path.iterdir() if p.name.endswith(".partial")]
 
 
 def test_the_printed_summary_is_the_last_sample_of_every_ready_model(tmp_path, capsys):

@@ -20,7 +20,8 @@ from pathlib import Path
 
 from ..datapath.config import PipelineConfig
 from ..executors import Executor, LocalProcesses, Lost
-from ..files import output_directory
+from ..files import input_problem, output_directory
+from ..offline.bags import check_bag
 from ..offline.figures import FigureOptions
 from .figure import campaign_figures
 from .maneuvers import Maneuver, from_bags, load_maneuvers
@@ -149,8 +150,15 @@ def campaign_to(out: str | Path, maneuvers: Sequence[Maneuver], settings: Campai
                 figures: FigureOptions | None = DEFAULT_FIGURES, force: bool = False,
                 inputs: Iterable[str | Path] = ()) -> CampaignResult:
     """:func:`run_campaign` written to ``out`` (:func:`.files.output_directory`: checked
-    before the first maneuver runs, complete or absent; never over an input bag or ``inputs``)."""
+    before the first maneuver runs, complete or absent; never over an input bag or ``inputs``).
+    An input that is not a regular file or a directory is a :class:`.errors.BagError` before
+    anything runs (:func:`.offline.bags.check_bag`)."""
     bags = sorted({m.bag for m in maneuvers})
+    for bag in bags:
+        # A FIFO, a device or a symbolic link loop is refused before anything runs; a missing
+        # bag fails its maneuver alone (``failed: ... no such bag``), the others still count.
+        if input_problem(bag) != "no such file or directory":
+            check_bag(bag)
     with output_directory(out, force=force, inputs=(*bags, *inputs)) as tmp:
         campaign = run_campaign(maneuvers, settings, executor, progress=progress)
         t0 = time.perf_counter()

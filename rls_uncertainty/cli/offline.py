@@ -68,7 +68,7 @@ def _figures(args: argparse.Namespace) -> FigureOptions | None:
 
 
 def _replay(args: argparse.Namespace) -> int:
-    from ..offline.compare import DEFAULT_ATOL, DEFAULT_RTOL, comparable, compare_replays, read_run
+    from ..offline.compare import DEFAULT_ATOL, DEFAULT_RTOL, check_reference, comparable, compare_replays
     from ..offline.replay import planned_run, replay, run_summary
     from ..settings.models import config_dir
 
@@ -83,7 +83,7 @@ def _replay(args: argparse.Namespace) -> int:
     if args.compare:  # what can be checked before the bag is read, is
         inputs.append(args.compare)
         comparable(planned_run(params, start=args.start, end=args.end, strict=not args.lenient),
-                   read_run(args.compare), bag=False)
+                   check_reference(args.compare), bag=False)
     result = replay(args.bag, params, args.out, start=args.start, end=args.end, strict=not args.lenient,
                     progress=not args.quiet, plots=not args.no_figures, figures=figures, force=args.force,
                     inputs=inputs)
@@ -103,7 +103,7 @@ def _replay(args: argparse.Namespace) -> int:
 def _campaign(args: argparse.Namespace) -> int:
     """Many maneuvers through the replay's pipeline into Table 4 and Fig. 12 (docs/campaign.md)."""
     from ..campaign import CampaignSettings, campaign_to, from_bags, load_maneuvers
-    from ..executors import executor_for
+    from ..executors import LocalProcesses, executor_for
     from ..settings.models import config_dir
     from ..settings.parameters import node_config, pipeline_config
 
@@ -119,6 +119,8 @@ def _campaign(args: argparse.Namespace) -> int:
     if args.maneuvers:
         inputs.append(args.maneuvers)
     settings = CampaignSettings(pipeline_config(params), node_config(params).topics, strict=not args.lenient)
+    if isinstance(executor, LocalProcesses) and (note := executor.capped(len(maneuvers), "maneuver")):
+        print(f"rls-uncertainty campaign: {note}", file=sys.stderr)
     result = campaign_to(args.out, maneuvers, settings, executor, progress=not args.quiet,
                          figures=_figures(args), force=args.force, inputs=inputs)
     print(result.summary(), end="")
@@ -153,7 +155,8 @@ def add_replay(sub: Any) -> None:
     rp.add_argument("--compare", metavar="DIR",
                     help="compare the outputs with an earlier replay's in DIR sample by sample: exit 0 when equal "
                          "within the tolerance, 1 when not (the largest differences printed), 2 when the runs are "
-                         "not comparable (another bag, span, models, sample rate or no estimation method in common)")
+                         "not comparable (another bag, span, models, sample rate or no estimation method in common) "
+                         "or DIR is damaged (a value not finite, a malformed file, an inconsistent run.json)")
     rp.add_argument("--rtol", type=real(0.0), metavar="R",
                     help="--compare's relative tolerance, of |estimate| + its standard error (default 1e-6)")
     rp.add_argument("--atol", type=real(0.0), metavar="A",

@@ -47,7 +47,7 @@ from ..datapath import cdr
 from ..datapath.inputs import MESSAGE_TYPES, Stamped, stamp_ns
 from ..datapath.inputs import STREAMS as INPUTS
 from ..errors import BagError, ConfigError
-from ..files import OutputWriter, output_directory
+from ..files import OutputWriter, input_problem, output_directory
 from ..settings import yaml_files
 from ..settings.models import package_path
 from .mcap_io import McapWriter, check_mcap_integrity, write_metadata
@@ -68,6 +68,7 @@ __all__ = [
     "convert",
     "write_replay",
     "check_mcap_integrity",
+    "check_bag",
     "write_t2_bag",
     "write_campaign_bags",
     "write_sensor_streams",
@@ -106,11 +107,34 @@ def typestore(extra_schemas: list[Path] | None = None) -> Typestore:
     return store
 
 
+# The files of a rosbag2 directory a reader opens: its metadata and its storage files.
+_BAG_FILES = ("metadata.yaml", "*.mcap", "*.db3", "*.zstd")
+
+
+def check_bag(path: str | Path) -> Path:
+    """``path`` if it can be a bag: an MCAP file, or a rosbag2 directory whose metadata and
+    storage files are regular files; else :class:`BagError` in one line, before anything is
+    opened (a FIFO or a device would block a reader or feed it without end; a symbolic link
+    loop has no file at its end)."""
+    path = Path(path)
+    problem = input_problem(path)
+    if problem == "no such file or directory":
+        raise BagError(f"{path}: no such bag")
+    if problem is not None:
+        raise BagError(f"{path}: {problem}; a bag is an MCAP file or a rosbag2 directory")
+    if path.is_dir():
+        for pattern in _BAG_FILES:
+            for item in sorted(path.glob(pattern)):
+                problem = input_problem(item, directory=False)
+                if problem is not None:
+                    raise BagError(f"{item}: {problem}; the files of a bag are regular files")
+    return path
+
+
 def _open_reader(path: Path, store: Typestore) -> AnyReader:
     from rosbags.highlevel import AnyReader  # noqa: PLC0415
 
-    if not path.exists():
-        raise BagError(f"{path}: no such bag")
+    check_bag(path)
     mcaps = [path] if path.suffix == ".mcap" else sorted(path.glob("*.mcap")) if path.is_dir() else []
     for f in mcaps:
         check_mcap_integrity(f)

@@ -53,7 +53,7 @@ from ..datapath.pipeline import Pipeline, SampleOutput
 from ..files import output_directory
 from ..settings.config import NodeConfig
 from ..settings.parameters import node_config, parameter_defaults, pipeline_config
-from .bags import InputStream, typestore
+from .bags import InputStream, check_bag, typestore
 from .figure_data import FigureData
 from .replay_files import ReplayFiles, run_record
 from .report import results_table, rows_from_arrays
@@ -440,6 +440,7 @@ def replay(bag: str | Path, params: dict[str, Any], out: str | Path, *, start: f
     figures (:func:`.figures.replay_figures`, in the formats and resolution of ``figures``).
     The result keeps no per-sample outputs, and the time histories only decimated for the
     plots (:data:`PLOT_POINTS`)."""
+    check_bag(bag)  # before the output directory is made
     config = pipeline_config(params)
     node_cfg = node_config(params)
     names = [m.parameter_names for m in config.models]
