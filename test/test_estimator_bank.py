@@ -411,7 +411,7 @@ def test_numerical_core_imports_numpy_only():
     package = pathlib.Path(__file__).resolve().parents[1] / "rls_uncertainty" / "estimator"
     modules = sorted(package.glob("*.py"))
     assert {p.name for p in modules} >= {"__init__.py", "bank.py", "reference.py", "covariance.py"}
-    for path in modules + [package.parent / "errors.py", package.parent / "schema.py"]:
+    for path in [*modules, package.parent / "errors.py", package.parent / "schema.py"]:
         tree = ast.parse(path.read_text())
         imported = set()
         for node in ast.walk(tree):
