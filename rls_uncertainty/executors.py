@@ -32,6 +32,7 @@ from multiprocessing import connection
 from typing import Any, Protocol, TypeVar
 
 from .errors import ConfigError, SchedulerUnreachable
+from .extras import optional, require
 
 __all__ = ["ATTEMPTS", "Lost", "Executor", "LocalProcesses", "DaskCluster", "executor_for"]
 
@@ -173,9 +174,11 @@ class DaskCluster:
         self.timeout = float(timeout)
         self.retries = int(retries)
         self.description = f"Dask cluster at {self.address}"
+        require("campaign", what="a Dask scheduler (--scheduler)")
 
     def _client(self) -> Any:
-        from distributed import Client  # noqa: PLC0415 - only when a cluster is asked for
+        with optional("campaign"):
+            from distributed import Client  # noqa: PLC0415 - only when a cluster is asked for
 
         try:
             return Client(self.address, timeout=self.timeout, set_as_default=False)
@@ -187,7 +190,8 @@ class DaskCluster:
             ) from exc
 
     def run(self, fn: Callable[[A], T], args: Sequence[A], done: Done | None = None) -> list[T | Lost]:
-        from distributed import as_completed  # noqa: PLC0415 - only when a cluster is asked for
+        with optional("campaign"):
+            from distributed import as_completed  # noqa: PLC0415 - only when a cluster is asked for
 
         client = self._client()
         try:
@@ -212,7 +216,8 @@ class DaskCluster:
 
 def _lost_worker(exc: BaseException) -> bool:
     """Whether Dask gave up on a job because of its workers (not an error of the job)."""
-    from distributed.scheduler import KilledWorker  # noqa: PLC0415
+    with optional("campaign"):
+        from distributed.scheduler import KilledWorker  # noqa: PLC0415
 
     return isinstance(exc, (KilledWorker, OSError))
 

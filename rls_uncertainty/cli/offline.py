@@ -13,6 +13,7 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import ConfigError
+from ..extras import require
 from ..offline.figures import FigureOptions
 from .flags import (
     FORCE_HELP,
@@ -64,7 +65,11 @@ def _yaml_file(name_or_path: str, directory: Path) -> Path:
 
 
 def _figures(args: argparse.Namespace) -> FigureOptions | None:
-    return None if args.no_figures else FigureOptions(**option_values(args, FigureOptions))
+    """The figure options, or None with --no-figures; matplotlib checked before any work."""
+    if args.no_figures:
+        return None
+    require("figures", what="drawing the figures", instead="give --no-figures")
+    return FigureOptions(**option_values(args, FigureOptions))
 
 
 def _replay(args: argparse.Namespace) -> int:
@@ -73,7 +78,7 @@ def _replay(args: argparse.Namespace) -> int:
     from ..settings.models import config_dir
 
     params = replay_params(args)
-    figures = FigureOptions(**option_values(args, FigureOptions))
+    figures = _figures(args)
     # Files the replay reads besides the bag: never replaced by its output, even with --force.
     inputs = [_yaml_file(args.config, config_dir())] if args.config else []
     if isinstance(params.get("aircraft"), str) and params["aircraft"]:
@@ -85,7 +90,7 @@ def _replay(args: argparse.Namespace) -> int:
         comparable(planned_run(params, start=args.start, end=args.end, strict=not args.lenient),
                    read_run(args.compare), bag=False)
     result = replay(args.bag, params, args.out, start=args.start, end=args.end, strict=not args.lenient,
-                    progress=not args.quiet, plots=not args.no_figures, figures=figures, force=args.force,
+                    progress=not args.quiet, plots=figures is not None, figures=figures, force=args.force,
                     inputs=inputs)
     print(run_summary(result))
     print(f"read in {result.wall_seconds:.2f} s ({result.speed:.0f}x real time); wrote {args.out}")

@@ -33,6 +33,7 @@ from typing import TYPE_CHECKING, Any, NamedTuple
 import numpy as np
 
 from ..errors import ConfigError
+from ..extras import optional
 from ..schema import check, option
 from .figure_data import excitation_start
 
@@ -101,10 +102,11 @@ def parameter_label(parameter: str) -> str:
 
 
 def _pyplot() -> Any:
-    import matplotlib  # noqa: PLC0415 - drawing only, on demand
+    with optional("figures", what="drawing figures"):
+        import matplotlib  # noqa: PLC0415 - drawing only, on demand
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt  # noqa: PLC0415 - after the backend is chosen
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt  # noqa: PLC0415 - after the backend is chosen
 
     return plt
 
