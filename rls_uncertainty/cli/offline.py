@@ -19,10 +19,12 @@ from .flags import (
     FORCE_HELP,
     add_option_flags,
     add_parameter_flags,
+    add_progress,
     add_renamed,
     add_workers,
     option_values,
     parameter_overrides,
+    progress_mode,
     real,
 )
 from .simulation import ESTIMATOR_FLAGS
@@ -90,7 +92,7 @@ def _replay(args: argparse.Namespace) -> int:
         comparable(planned_run(params, start=args.start, end=args.end, strict=not args.lenient),
                    read_run(args.compare), bag=False)
     result = replay(args.bag, params, args.out, start=args.start, end=args.end, strict=not args.lenient,
-                    progress=not args.quiet, plots=figures is not None, figures=figures, force=args.force,
+                    progress=progress_mode(args), plots=figures is not None, figures=figures, force=args.force,
                     inputs=inputs)
     print(run_summary(result))
     print(f"read in {result.wall_seconds:.2f} s ({result.speed:.0f}x real time); wrote {args.out}")
@@ -124,7 +126,7 @@ def _campaign(args: argparse.Namespace) -> int:
     if args.maneuvers:
         inputs.append(args.maneuvers)
     settings = CampaignSettings(pipeline_config(params), node_config(params).topics, strict=not args.lenient)
-    result = campaign_to(args.out, maneuvers, settings, executor, progress=not args.quiet,
+    result = campaign_to(args.out, maneuvers, settings, executor, progress=progress_mode(args),
                          figures=_figures(args), force=args.force, inputs=inputs)
     print(result.summary(), end="")
     s = result.seconds()
@@ -136,7 +138,7 @@ def _campaign(args: argparse.Namespace) -> int:
 
 
 def _add_common(parser: argparse.ArgumentParser, no_figures: str) -> None:
-    """--config, the parameter flags, --lenient, the figure flags, --quiet and --force."""
+    """--config, the parameter flags, --lenient, the figure flags, --progress/--quiet and --force."""
     parser.add_argument("--config", help="ROS parameter file, e.g. config/t2.yaml (default: node defaults)")
     parser.add_argument("--out", required=True, help="output directory")
     add_parameter_flags(parser, PARAMETER_FLAGS)
@@ -145,7 +147,7 @@ def _add_common(parser: argparse.ArgumentParser, no_figures: str) -> None:
     parser.add_argument("--no-figures", action="store_true", help=no_figures)
     add_option_flags(parser, FigureOptions)
     add_renamed(parser, ["--no-figures"])
-    parser.add_argument("--quiet", action="store_true", help="no progress bar")
+    add_progress(parser)
     parser.add_argument("--force", action="store_true", help=FORCE_HELP)
 
 

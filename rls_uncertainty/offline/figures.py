@@ -34,6 +34,7 @@ import numpy as np
 
 from ..errors import ConfigError
 from ..extras import optional
+from ..progress import Progress
 from ..schema import check, option
 from .figure_data import excitation_start
 
@@ -283,36 +284,40 @@ class _Model(NamedTuple):
 
 
 def replay_figures(out_dir: str | Path, title: str, history: History, data: FigureData,
-                   options: FigureOptions | None = None) -> list[Path]:
+                   options: FigureOptions | None = None, *, progress: bool | None = False) -> list[Path]:
     """Every figure of a replay into ``out_dir``, per model that produced an estimate
     (``docs/tools.md``, "Figures"): ``M_estimates`` (Figs. 6/13), ``M_fit`` (Figs. 3-4),
     ``M_autocorrelation`` (Figs. 5/11) and ``M_lags`` (Fig. 7), in each format of
     ``options``. ``history``: the estimates' bounded history; ``data``: the rest
-    (:class:`.figure_data.FigureData`, finished); ``title``: the bag's name."""
+    (:class:`.figure_data.FigureData`, finished); ``title``: the bag's name; ``progress``: a
+    bar per figure on stderr (:mod:`..progress`)."""
     options = options or FigureOptions()
     written: list[Path] = []
     if not history.n:
         return written
     t0 = int(history.stamps_ns[0])
     k = 0
-    for j, name in enumerate(data.outputs):
-        params = data.parameters[j]
-        stamps, _, _ = data.coefficient(j)
-        start = excitation_start((stamps - t0) * 1e-9, data.regressor_history(j))
-        model = _Model(j, name, params, k, start)
-        k += len(params)
-        if not history.ready(j).any():
-            continue
-        drawings: dict[str, Callable[[], Figure | None]] = {
-            "estimates": partial(_estimates, title, model, history, data, t0),
-            "fit": partial(_fit, title, model, data, t0),
-            "autocorrelation": partial(_autocorrelation, title, model, data),
-            "lags": partial(_lag_sweep, title, model, data)}
-        for kind, draw in drawings.items():  # one figure in memory at a time
-            with _pyplot().rc_context(_STYLE):
-                fig = draw()
-            if fig is not None:
-                written += save(fig, Path(out_dir) / f"{name}_{kind}", options.formats, options.dpi)
+    drawn = [j for j in range(len(data.outputs)) if history.ready(j).any()]
+    with Progress(len(drawn) * len(REPLAY_FIGURES), "figures", " figures", progress) as bar:
+        for j, name in enumerate(data.outputs):
+            params = data.parameters[j]
+            stamps, _, _ = data.coefficient(j)
+            start = excitation_start((stamps - t0) * 1e-9, data.regressor_history(j))
+            model = _Model(j, name, params, k, start)
+            k += len(params)
+            if j not in drawn:
+                continue
+            drawings: dict[str, Callable[[], Figure | None]] = {
+                "estimates": partial(_estimates, title, model, history, data, t0),
+                "fit": partial(_fit, title, model, data, t0),
+                "autocorrelation": partial(_autocorrelation, title, model, data),
+                "lags": partial(_lag_sweep, title, model, data)}
+            for kind, draw in drawings.items():  # one figure in memory at a time
+                with _pyplot().rc_context(_STYLE):
+                    fig = draw()
+                if fig is not None:
+                    written += save(fig, Path(out_dir) / f"{name}_{kind}", options.formats, options.dpi)
+                bar.update()
     return written
 
 
