@@ -43,7 +43,7 @@ __all__ = [
     "campaign_to",
 ]
 
-DEFAULT_FIGURES = FigureOptions()  # PNG at print resolution (figures.DEFAULT_DPI)
+DEFAULT_FIGURES = FigureOptions()  # PNG at figures.DEFAULT_DPI
 
 
 @dataclass

@@ -2,7 +2,7 @@
 
 Front ends import this module when they draw (``replay``, ``campaign``); the numerical core
 never imports it, and matplotlib is imported only when a figure is drawn. Every figure is
-written in each requested format (:class:`FigureOptions`: PNG at ``dpi``, 300 by default;
+written in each requested format (:class:`FigureOptions`: PNG at ``dpi``, 150 by default;
 SVG and PDF as vectors; no dates or random ids, so a run gives the same bytes), with units on
 every axis (:func:`parameter_label`) and a title that names the maneuver or bag and the
 model. The figures follow the paper's (Grauer & Morelli):
@@ -50,7 +50,7 @@ __all__ = ["FORMATS", "REPLAY_FIGURES", "DEFAULT_DPI", "FigureOptions", "figure_
 FORMATS = ("png", "svg", "pdf")
 # A replay's figures per model, ``M_<kind>.<format>`` (replay_figures).
 REPLAY_FIGURES = ("estimates", "fit", "autocorrelation", "lags")
-DEFAULT_DPI = 300
+DEFAULT_DPI = 150  # half the drawing time of 300 (benchmarks/figure_benchmark.py); --dpi for print
 DPI_RANGE = (50, 1200)
 # Regressors of Eq. 2 measured in radians: the flow angles, the control surfaces and the
 # nondimensional rates (p b/2V, q cbar/2V, r b/2V: an angular rate times a time, in rad).
