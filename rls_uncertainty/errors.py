@@ -28,6 +28,7 @@ __all__ = [
     "LiveTimeout",
     "SchedulerUnreachable",
     "WorkerLost",
+    "MissingExtra",
     "Refused",
 ]
 
@@ -90,6 +91,16 @@ class SchedulerUnreachable(RlsUncertaintyError, ConnectionError):
 
 class WorkerLost(RlsUncertaintyError, RuntimeError):
     """A job that no worker finished (its worker died in every attempt); the message names it."""
+
+
+class MissingExtra(RlsUncertaintyError, ImportError):
+    """An optional dependency is not installed (:mod:`.extras`); the message names what needs
+    it and the pip extra that installs it. ``extra`` and ``module``: which."""
+
+    def __init__(self, message: str, *, extra: str, module: str) -> None:
+        super().__init__(message, name=module)
+        self.extra = extra
+        self.module = module
 
 
 @dataclass(frozen=True, slots=True)

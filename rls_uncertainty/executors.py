@@ -43,6 +43,7 @@ from multiprocessing import connection
 from typing import Any, ClassVar, Protocol, TypeVar
 
 from .errors import ConfigError, SchedulerUnreachable
+from .extras import optional, require
 
 __all__ = ["ATTEMPTS", "Lost", "Executor", "LocalProcesses", "DaskCluster", "executor_for", "usable_cores"]
 
@@ -242,9 +243,11 @@ class DaskCluster:
         self.timeout = float(timeout)
         self.retries = int(retries)
         self.description = f"Dask cluster at {self.address}"
+        require("campaign", what="a Dask scheduler (--scheduler)")
 
     def _client(self) -> Any:
-        from distributed import Client  # noqa: PLC0415 - only when a cluster is asked for
+        with optional("campaign"):
+            from distributed import Client  # noqa: PLC0415 - only when a cluster is asked for
 
         try:
             return Client(self.address, timeout=self.timeout, set_as_default=False)
@@ -316,7 +319,8 @@ def _scheduler_lost() -> tuple[type[BaseException], ...]:
 
 def _lost_worker(exc: BaseException) -> bool:
     """Whether Dask gave up on a job because of its workers (not an error of the job)."""
-    from distributed.scheduler import KilledWorker  # noqa: PLC0415
+    with optional("campaign"):
+        from distributed.scheduler import KilledWorker  # noqa: PLC0415
 
     return isinstance(exc, (KilledWorker, OSError))
 

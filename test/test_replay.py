@@ -244,7 +244,9 @@ def test_the_replays_diagnostics_report_lags_and_flags_once_per_period_of_data_t
     assert {c for _, _, c in checked} == {"True", "False"}
 
 
-def test_the_progress_bar_is_drawn_only_on_a_terminal(monkeypatch):
+def test_the_progress_bar_is_drawn_on_a_terminal_or_when_asked(monkeypatch, capsys):
+    """progress=None (the command's default): a bar on a terminal only, none into a log file or
+    a pipe; True (--progress): always; False (--quiet): never. Never on stdout."""
     import io
     import sys
 
@@ -255,14 +257,19 @@ def test_the_progress_bar_is_drawn_only_on_a_terminal(monkeypatch):
         def isatty(self):
             return True
 
-    log, tty = io.StringIO(), Terminal()
-    monkeypatch.setattr(sys, "stderr", log)
-    run_pipeline(messages, config, progress=True)
-    assert log.getvalue() == ""  # a log file or pipe gets no carriage-return frames
-    monkeypatch.setattr(sys, "stderr", tty)
-    run_pipeline(messages, config, progress=True)
-    frames = tty.getvalue()
-    assert frames.count("\r") > 10 and frames.endswith("100%\n")
+    def frames(stream, progress):
+        monkeypatch.setattr(sys, "stderr", stream)
+        run_pipeline(messages, config, progress=progress)
+        monkeypatch.undo()
+        return stream.getvalue()
+
+    assert frames(io.StringIO(), None) == ""  # a log file or pipe gets no carriage-return frames
+    assert frames(Terminal(), False) == ""
+    for drawn in (frames(Terminal(), None), frames(io.StringIO(), True)):
+        last = drawn.rstrip("\n").split("\r")[-1]
+        assert drawn.endswith("\n") and f"{len(messages)}/{len(messages)}" in last and "messages/s" in last, drawn
+        assert last.startswith("replay: 100%")
+    assert capsys.readouterr().out == ""
 
 
 def test_the_replays_diagnostics_never_divide_by_zero_elapsed_time():

@@ -149,6 +149,7 @@ def foreign_imports(package: Path, core: tuple[str, ...]) -> list[str]:
 # front ends above the offline tools) may import anything below.
 FLOORS = (
     ("errors",),
+    ("extras", "progress"),
     ("schema", "files", "executors"),
     ("aero", "estimator"),
     ("frequency", "state_file"),

@@ -26,13 +26,14 @@ from types import FrameType
 from typing import NoReturn
 from xml.etree import ElementTree
 
-from ..errors import RlsUncertaintyError
+from ..errors import MissingExtra, RlsUncertaintyError
+from ..extras import optional
 from .bags import add_convert, add_make_bag
 from .offline import add_campaign, add_replay
 from .ros import add_demo, add_operator_commands, add_play
 from .simulation import add_montecarlo, add_multisine, add_simulate
 
-__all__ = ["main", "build_parser"]
+__all__ = ["main", "build_parser", "estimator_node"]
 
 _SUBCOMMANDS = (add_demo, add_simulate, add_montecarlo, add_multisine, add_make_bag, add_convert, add_replay,
                 add_campaign, add_play, add_operator_commands)
@@ -133,3 +134,15 @@ def main(argv: list[str] | None = None) -> int:
         removed = "" if args.command in _OWN_SIGNALS else "; its unfinished output removed"
         print(f"rls-uncertainty {args.command}: stopped by {signal.Signals(signum).name}{removed}", file=sys.stderr)
         return 128 + int(signum)
+
+
+def estimator_node() -> int:
+    """The console script ``estimator_node``: :func:`..ros.node.main`, or one line naming the
+    extra to install when the ROS stack is missing (exit status 2)."""
+    try:
+        with optional("ros"):
+            from ..ros.node import main as node_main
+    except MissingExtra as exc:
+        print(f"estimator_node: error: {exc}", file=sys.stderr)
+        return 2
+    return node_main()

@@ -48,6 +48,7 @@ from ..datapath.inputs import MESSAGE_TYPES, Stamped, stamp_ns
 from ..datapath.inputs import STREAMS as INPUTS
 from ..errors import BagError, ConfigError
 from ..files import OutputWriter, input_problem, output_directory
+from ..progress import track
 from ..settings import yaml_files
 from ..settings.models import package_path
 from .mcap_io import McapWriter, check_mcap_integrity, write_metadata
@@ -414,13 +415,14 @@ def write_t2_bag(path: str | Path, band_level: float = 0.2, seed: int = 250, *, 
 
 def write_campaign_bags(path: str | Path, maneuvers: int, gust: DrydenVertical, *, band_level: float = 0.2,
                         band_limited_on: Sequence[str] | None = None, seed: int = 250,
-                        force: bool = False) -> list[Path]:
+                        force: bool = False, progress: bool | None = False) -> list[Path]:
     """A simulated flight-test campaign (Section IV.B, simulated): ``maneuvers`` T-2 maneuvers
     flown in the Dryden vertical ``gust`` (:func:`.simulation.simulate_campaign`, each with
     its own gust and noise sequences from ``seed``), each a replay bag ``mNNN`` in the
     directory ``path``, with ``campaign.yaml`` recording the settings. Atomic as
     :func:`write_replay`; one maneuver is in memory at a time. ``band_limited_on``: the
-    signals carrying the band-limited noise (None: the simulation's default)."""
+    signals carrying the band-limited noise (None: the simulation's default). ``progress``: a bar
+    of the maneuvers written on stderr (:mod:`..progress`)."""
     import yaml  # noqa: PLC0415 - the manifest only
 
     from ..simulation.t2 import BAND_LIMITED_ON, simulate_campaign  # noqa: PLC0415 - scipy only when simulating
@@ -439,7 +441,7 @@ def write_campaign_bags(path: str | Path, maneuvers: int, gust: DrydenVertical, 
                                   "Dryden vertical gust, seeds SeedSequence(seed).spawn(maneuvers))"}
         (tmp / "campaign.yaml").write_text(yaml.safe_dump(manifest, sort_keys=False))
         streams = simulate_campaign(maneuvers, gust, seed=seed, band_level=band_level, band_limited_on=on)
-        for name, maneuver in zip(names, streams, strict=True):
+        for name, maneuver in track(zip(names, streams, strict=True), maneuvers, "make-bag", " maneuvers", progress):
             write_sensor_streams(tmp / name, maneuver)
     return [path / name for name in names]
 

@@ -453,6 +453,11 @@ def main(args: list[str] | None = None) -> int:
         code = _refuse(exc)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
+    except _rclpy.RCLError:
+        if rclpy.ok():
+            raise
+        # Ctrl-C between start-up and spinning: rclpy's handler had shut the context down, and
+        # spin() could not make its executor. An interrupt, not an error.
     finally:
         if node is not None:
             node.save_state()

@@ -7,6 +7,7 @@ package's data directories are (:func:`package_path`, :func:`config_dir`).
 from __future__ import annotations
 
 from dataclasses import fields
+from importlib import resources
 from pathlib import Path
 
 from ..aero.models import (
@@ -41,19 +42,27 @@ DEFAULT_AIRCRAFT = "t2"
 
 
 def package_path(*parts: str) -> Path:
-    """A data directory of the package (``config``, ``msg_schemas``, ``bags/...``): from the
-    source tree, or from the ROS install's share directory."""
-    here = Path(__file__).resolve().parents[1]  # the rls_uncertainty package
-    for base in (here.parent, here):
-        candidate = base.joinpath(*parts)
+    """A data file or directory of the package (``config``, ``msg_schemas``, ``bags/...``,
+    ``package.xml``), looked for in this order: the source tree the package is imported from
+    (a checkout, an editable install); the package data of an installed wheel
+    (``rls_uncertainty/share/``, the share directory's layout, read with
+    :mod:`importlib.resources`); the share directory of a ROS install (ament index)."""
+    package = Path(__file__).resolve().parents[1]  # the rls_uncertainty package
+    source = package.parent
+    if (source / "package.xml").is_file() and (source / "setup.py").is_file():
+        candidate = source.joinpath(*parts)
         if candidate.exists():
             return candidate
-    try:  # installed ROS package
+    data = resources.files("rls_uncertainty").joinpath("share", *parts)
+    if isinstance(data, Path) and data.exists():
+        return data
+    try:  # installed ROS package (colcon)
         from ament_index_python.packages import get_package_share_directory  # noqa: PLC0415
 
         return Path(get_package_share_directory("rls_uncertainty")).joinpath(*parts)
-    except Exception as exc:  # pragma: no cover - depends on the install
-        raise ConfigError(f"cannot find the rls_uncertainty directory {'/'.join(parts)}") from exc
+    except Exception as exc:  # not found, whichever way ament says it
+        raise ConfigError(f"cannot find the rls_uncertainty data {'/'.join(parts)} (in {source}, {data} or a ROS "
+                          "install's share directory): reinstall the package") from exc
 
 
 def config_dir() -> Path:

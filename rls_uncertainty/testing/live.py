@@ -41,6 +41,7 @@ import numpy as np
 
 from ..datapath.outputs import FREQUENCY, FREQUENCY_OUTPUTS, NODE_NAME, SAMPLE_STAMP, parse_stamp_label
 from ..errors import BagError, LiveTimeout
+from ..extras import optional
 from ..offline.bags import input_topics
 from ..offline.results import History, ReplayResult, accounting
 from ..ros.player import stop_process
@@ -314,10 +315,11 @@ def play_to_node(bag: str | Path, node: EstimatorProcess, *, rate: float = 0.0, 
     0: as fast as the acknowledgements allow) and collect its outputs until the run is
     complete (module docstring) or ``timeout`` seconds pass at any one step
     (:class:`LiveTimeout`, naming what was missing and the node's log)."""
-    import rclpy  # noqa: PLC0415
-    from rclpy.executors import SingleThreadedExecutor  # noqa: PLC0415
+    with optional("ros", what="playing to a live node"):
+        import rclpy  # noqa: PLC0415
+        from rclpy.executors import SingleThreadedExecutor  # noqa: PLC0415
 
-    from ..ros.player import NotAcknowledged, _player_writer_profile, _Publisher  # noqa: PLC0415
+        from ..ros.player import NotAcknowledged, _player_writer_profile, _Publisher  # noqa: PLC0415
 
     config = node.config
     models = [m.output for m in config.models]

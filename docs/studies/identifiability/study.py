@@ -114,7 +114,7 @@ def constant_regressor(st, rng):
 
 def gyro_spikes(st, rng):
     """Pitch-rate spikes of 19.999 rad/s (just under limits.angular_rate) on every 40th IMU
-    message (5 Hz): the input checks pass them (h-data's checks may not); R^2 is the second line."""
+    message (5 Hz): the input checks may pass them; R^2 is the second line."""
     imu = st.imu[1].copy()
     imu[::40, 1] = -19.999  # REP-103 y = -q
     return with_stream(st, "imu", imu), dict(T2)
