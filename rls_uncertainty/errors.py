@@ -28,6 +28,7 @@ __all__ = [
     "LiveTimeout",
     "SchedulerUnreachable",
     "WorkerLost",
+    "MissingExtra",
     "Refused",
 ]
 
@@ -84,12 +85,22 @@ class LiveTimeout(RlsUncertaintyError, TimeoutError):
 
 
 class SchedulerUnreachable(RlsUncertaintyError, ConnectionError):
-    """The Dask scheduler given with ``--scheduler`` did not answer in time; the message gives
-    the address and the timeout."""
+    """The Dask scheduler given with ``--scheduler`` did not answer in time, or went away in the
+    middle of a run; the message gives the address and what happened."""
 
 
 class WorkerLost(RlsUncertaintyError, RuntimeError):
     """A job that no worker finished (its worker died in every attempt); the message names it."""
+
+
+class MissingExtra(RlsUncertaintyError, ImportError):
+    """An optional dependency is not installed (:mod:`.extras`); the message names what needs
+    it and the pip extra that installs it. ``extra`` and ``module``: which."""
+
+    def __init__(self, message: str, *, extra: str, module: str) -> None:
+        super().__init__(message, name=module)
+        self.extra = extra
+        self.module = module
 
 
 @dataclass(frozen=True, slots=True)

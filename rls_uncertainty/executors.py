@@ -6,15 +6,22 @@ runs them (:meth:`Executor.run`) and returns the results in the order of the arg
 whichever process finished first, so every sum the caller forms over them is the same
 whatever ran them.
 
-* :class:`LocalProcesses` - ``workers`` processes of this machine (every core by default),
-  each fed through a pipe of its own. A worker process that dies (killed, out of memory) is
-  replaced and its job runs again, at most :data:`ATTEMPTS` times in all.
+* :class:`LocalProcesses` - ``workers`` processes of this machine (every core by default;
+  never more than its cores, nor than the jobs), each fed through a pipe of its own. A worker
+  process that dies (killed, out of memory) is replaced and its job runs again, at most
+  :data:`ATTEMPTS` times in all. The workers never outlive the process that started them: an
+  interrupted :meth:`LocalProcesses.run` (Ctrl-C, a signal turned into an exception) kills
+  them before it returns, they ignore SIGINT (a Ctrl-C reaches the whole process group: their
+  parent ends them), and one whose parent dies, however (SIGKILL), is killed by the kernel
+  (``PR_SET_PDEATHSIG`` on Linux) or ends at the end of its pipe (it holds no other copy of
+  it).
 * :class:`DaskCluster` - the cluster whose scheduler listens at ``address``
   (``tcp://host:8786``). Dask runs a job again on another worker when its worker dies,
   until the scheduler's ``allowed-failures`` is reached; the job is then lost. The function
   and its arguments are pickled to the workers, which must have this package installed and
   read the same file paths (docs/campaign.md). An unreachable scheduler is a
-  :class:`.errors.SchedulerUnreachable` within ``timeout`` seconds.
+  :class:`.errors.SchedulerUnreachable` within ``timeout`` seconds, and so is one lost in the
+  middle of a run; the client is closed whatever ends the run.
 
 A lost job comes back as a :class:`Lost` (why, in one line) in its place: the caller names it
 in its outputs. The executor's own errors are the only ones turned into :class:`Lost`: an
@@ -24,16 +31,21 @@ exception raised by the job itself is re-raised (jobs catch their own input erro
 from __future__ import annotations
 
 import contextlib
+import ctypes
+import logging
 import multiprocessing
 import os
-from collections.abc import Callable, Sequence
+import signal
+import sys
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from multiprocessing import connection
-from typing import Any, Protocol, TypeVar
+from typing import Any, ClassVar, Protocol, TypeVar
 
 from .errors import ConfigError, SchedulerUnreachable
+from .extras import optional, require
 
-__all__ = ["ATTEMPTS", "Lost", "Executor", "LocalProcesses", "DaskCluster", "executor_for"]
+__all__ = ["ATTEMPTS", "Lost", "Executor", "LocalProcesses", "DaskCluster", "executor_for", "usable_cores"]
 
 T = TypeVar("T")
 A = TypeVar("A")
@@ -41,6 +53,15 @@ A = TypeVar("A")
 # each; the other workers' jobs are not affected).
 ATTEMPTS = 3
 DEFAULT_TIMEOUT = 10.0  # s, to reach a scheduler
+_PR_SET_PDEATHSIG = 1  # prctl(2): the signal a process gets when its parent dies (Linux)
+
+
+def usable_cores() -> int:
+    """The cores this process may run on (its CPU affinity where the system tells, else every
+    core of the machine)."""
+    with contextlib.suppress(AttributeError, OSError):
+        return max(1, len(os.sched_getaffinity(0)))
+    return os.cpu_count() or 1
 
 
 @dataclass(frozen=True)
@@ -68,10 +89,17 @@ class _Worker:
     killed :class:`concurrent.futures.ProcessPoolExecutor` worker can die holding its
     shared call queue's lock)."""
 
+    # The parent's ends of every live worker's pipe: a new worker closes its copies of them, so
+    # that its own pipe ends (EOF) when the parent is gone, whichever worker started last.
+    parent_ends: ClassVar[set[Any]] = set()
+
     def __init__(self, fn: Callable[[Any], Any]) -> None:
-        ctx = multiprocessing.get_context()
+        # fork: the worker is this process's child (PR_SET_PDEATHSIG follows the parent) and
+        # inherits the job's function without pickling it.
+        ctx = multiprocessing.get_context("fork" if "fork" in multiprocessing.get_all_start_methods() else None)
         self.conn, child = ctx.Pipe()
-        self.proc = ctx.Process(target=_serve, args=(child, fn), daemon=True)
+        _Worker.parent_ends.add(self.conn)
+        self.proc = ctx.Process(target=_serve, args=(child, fn, os.getpid()), daemon=True)
         self.proc.start()
         child.close()
         self.job: int | None = None  # the index of the job it runs, None while idle
@@ -80,20 +108,48 @@ class _Worker:
         self.job = i
         self.conn.send((i, arg))
 
-    def stop(self) -> None:
-        """Ask it to end, then make sure it has (a worker of a failed run is killed)."""
-        with contextlib.suppress(OSError):  # it is gone already
-            self.conn.send(None)
-        self.proc.join(timeout=5.0)
+    def stop(self, *, wait: bool = True) -> None:
+        """Ask it to end and wait for it (``wait``), then make sure it has: a worker of a failed
+        or interrupted run is killed at once."""
+        if wait:
+            with contextlib.suppress(OSError):  # it is gone already
+                self.conn.send(None)
+            self.proc.join(timeout=5.0)
         if self.proc.is_alive():
             self.proc.kill()
             self.proc.join()
+        _Worker.parent_ends.discard(self.conn)
         self.conn.close()
 
 
-def _serve(conn: Any, fn: Callable[[Any], Any]) -> None:
+def _die_with(parent: int) -> None:
+    """In a new worker: end when ``parent`` ends. Ctrl-C and a hang-up reach the whole process
+    group: they are its parent's to handle (ignored here); SIGTERM ends it (not the parent's
+    handler it inherited); the kernel kills it when its parent dies (Linux); and it holds no
+    parent's end of any worker's pipe."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGHUP, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    for end in list(_Worker.parent_ends):
+        with contextlib.suppress(OSError):
+            end.close()
+    _Worker.parent_ends.clear()
+    if sys.platform.startswith("linux"):
+        with contextlib.suppress(OSError, AttributeError):
+            ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0)
+    if os.getppid() != parent:  # it died before the request took effect
+        os._exit(1)
+
+
+def _serve(conn: Any, fn: Callable[[Any], Any], parent: int) -> None:
     """A worker's loop: ``(index, argument)`` in, ``(index, ok, result or exception)`` out,
-    until ``None``."""
+    until ``None`` or the end of the pipe (its parent is gone)."""
+    _die_with(parent)
+    with contextlib.suppress(EOFError, OSError):
+        _loop(conn, fn)
+
+
+def _loop(conn: Any, fn: Callable[[Any], Any]) -> None:
     while (item := conn.recv()) is not None:
         i, arg = item
         try:
@@ -103,16 +159,27 @@ def _serve(conn: Any, fn: Callable[[Any], Any]) -> None:
 
 
 class LocalProcesses:
-    """``workers`` processes of this machine (default: every core); one job runs in this
-    process when there is a single job or a single worker. A job whose worker process dies
-    runs again in a new worker, at most :data:`ATTEMPTS` times in all, then comes back as
-    :class:`Lost`."""
+    """``workers`` processes of this machine (default: every core; at most its cores, and at
+    most one per job); one job runs in this process when there is a single job or a single
+    worker. A job whose worker process dies runs again in a new worker, at most
+    :data:`ATTEMPTS` times in all, then comes back as :class:`Lost`."""
 
     def __init__(self, workers: int | None = None) -> None:
         if workers is not None and not (type(workers) is int and workers >= 1):
             raise ConfigError(f"workers must be an integer >= 1, got {workers!r} (--workers)")
-        self.workers = workers or os.cpu_count() or 1
+        self.requested, self.cores = workers, usable_cores()
+        self.workers = min(workers or self.cores, self.cores)
         self.description = f"{self.workers} local process{'es' if self.workers > 1 else ''}"
+
+    def capped(self, jobs: int, what: str = "job") -> str | None:
+        """One line saying that fewer processes than asked will run ``jobs`` jobs (``what`` one
+        is), and why; None when as many as asked will."""
+        used = min(self.workers, max(jobs, 1))
+        if self.requested is None or used >= self.requested:
+            return None
+        processes = f"{used} local process{'es' if used > 1 else ''}"
+        return (f"--workers {self.requested}: using {processes} instead: at most one per core ({self.cores} here) and "
+                f"one per {what} ({jobs} here)")
 
     def run(self, fn: Callable[[A], T], args: Sequence[A], done: Done | None = None) -> list[T | Lost]:
         results: list[Any] = [None] * len(args)
@@ -154,9 +221,12 @@ class LocalProcesses:
                     finished += 1
                     if done is not None:
                         done(finished, len(args))
-        finally:
-            for w in workers:
-                w.stop()
+        except BaseException:
+            for w in workers:  # interrupted (Ctrl-C, a signal) or failed: no worker outlives the run
+                w.stop(wait=False)
+            raise
+        for w in workers:
+            w.stop()
         return results
 
 
@@ -173,9 +243,11 @@ class DaskCluster:
         self.timeout = float(timeout)
         self.retries = int(retries)
         self.description = f"Dask cluster at {self.address}"
+        require("campaign", what="a Dask scheduler (--scheduler)")
 
     def _client(self) -> Any:
-        from distributed import Client  # noqa: PLC0415 - only when a cluster is asked for
+        with optional("campaign"):
+            from distributed import Client  # noqa: PLC0415 - only when a cluster is asked for
 
         try:
             return Client(self.address, timeout=self.timeout, set_as_default=False)
@@ -187,14 +259,19 @@ class DaskCluster:
             ) from exc
 
     def run(self, fn: Callable[[A], T], args: Sequence[A], done: Done | None = None) -> list[T | Lost]:
+        client = self._client()
+        with _quiet_client():
+            return self._run(client, fn, args, done)
+
+    def _run(self, client: Any, fn: Callable[[A], T], args: Sequence[A], done: Done | None) -> list[T | Lost]:
         from distributed import as_completed  # noqa: PLC0415 - only when a cluster is asked for
 
-        client = self._client()
+        finished = 0
         try:
             futures = client.map(fn, list(args), pure=False, retries=self.retries)
             index = {f.key: i for i, f in enumerate(futures)}
             results: list[T | Lost | None] = [None] * len(args)
-            for finished, fut in enumerate(as_completed(futures, loop=client.loop), 1):
+            for fut in as_completed(futures, loop=client.loop):
                 i = index[fut.key]
                 if fut.status == "error":
                     exc = fut.exception()
@@ -203,16 +280,47 @@ class DaskCluster:
                     results[i] = Lost(f"its worker died ({type(exc).__name__}: {' '.join(str(exc).split())[:160]})")
                 else:
                     results[i] = fut.result()
+                finished += 1
                 if done is not None:
                     done(finished, len(args))
             return results  # type: ignore[return-value]  # every slot filled
+        except _scheduler_lost() as exc:
+            why = getattr(exc, "reason", None) or " ".join(str(exc).split())[:160] or type(exc).__name__
+            raise SchedulerUnreachable(f"lost the Dask scheduler at {self.address} after {finished} of {len(args)} "
+                                       f"jobs ({why}); check that it runs and rerun") from None
         finally:
-            client.close()
+            client.close(timeout=self.timeout)
+
+
+@contextlib.contextmanager
+def _quiet_client() -> Iterator[None]:
+    """The Dask client's own log records are not printed while it runs the jobs: when its
+    scheduler goes away, it logs the traceback of each reconnection attempt; what went wrong
+    is the one error :meth:`DaskCluster.run` raises."""
+    logger = logging.getLogger("distributed.client")
+    level = logger.level
+    logger.setLevel(logging.CRITICAL + 1)
+    try:
+        yield
+    finally:
+        logger.setLevel(level)
+
+
+def _scheduler_lost() -> tuple[type[BaseException], ...]:
+    """What the client raises when its scheduler goes away during a run: its futures cancelled
+    (``scheduler-connection-lost``), its connection closed."""
+    try:
+        from distributed.client import FutureCancelledError  # noqa: PLC0415
+        from distributed.comm.core import CommClosedError  # noqa: PLC0415
+    except ImportError:  # no Dask: no cluster to lose
+        return ()
+    return (FutureCancelledError, CommClosedError)
 
 
 def _lost_worker(exc: BaseException) -> bool:
     """Whether Dask gave up on a job because of its workers (not an error of the job)."""
-    from distributed.scheduler import KilledWorker  # noqa: PLC0415
+    with optional("campaign"):
+        from distributed.scheduler import KilledWorker  # noqa: PLC0415
 
     return isinstance(exc, (KilledWorker, OSError))
 

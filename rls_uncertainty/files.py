@@ -21,7 +21,14 @@
   output that would destroy data the command did not create: an existing file, a non-empty
   directory (unless ``force``), and, even with ``force``, a path that is, contains or lies
   inside one of the command's inputs. Paths are resolved (symlinks, ``..``) before they are
-  compared. On any failure everything the command created is removed, and nothing else.
+  compared. On any failure everything the command created is removed, and nothing else,
+  Ctrl-C or a signal the command turns into an exception included. The temporary directory
+  ``.NAME.<8 characters>.partial`` is ``flock``-ed while it is written; one that a killed
+  process left (SIGKILL, a power cut: nothing runs to remove it) is unlocked, and the next
+  call for the same output removes it (:func:`stale_partials`) before it starts.
+* :func:`input_problem` says why a path cannot be an input, without opening it: a FIFO, a
+  device or a socket (a reader would block on it or read it without end), a symbolic link
+  loop, a missing path; :func:`file_kind` names what a file is.
 * :class:`OutputWriter` is the base of the writers used in a ``with`` block (a bag, an MCAP
   file, a replay's outputs): completed by ``close`` when the block ends normally, discarded by
   ``abort`` when it raises.
@@ -46,7 +53,8 @@ from typing import IO, Self
 
 from .errors import OutputPathError
 
-__all__ = ["atomic_file", "temporaries", "FileLock", "output_directory", "OutputWriter"]
+__all__ = ["atomic_file", "temporaries", "FileLock", "file_kind", "input_problem", "output_directory",
+           "stale_partials", "OutputWriter"]
 
 # atomic_file's temporary names beside NAME, and those of versions up to 0.1.0 (tempfile.mkstemp).
 _TEMPORARY = r"\.{name}\.(?:[0-9a-f]{{16}}|[a-z0-9_]{{8}})\.tmp"
@@ -190,6 +198,33 @@ class FileLock:
             os.close(fd)
 
 
+_KINDS = ((stat.S_ISREG, "a regular file"), (stat.S_ISDIR, "a directory"), (stat.S_ISFIFO, "a FIFO"),
+          (stat.S_ISCHR, "a character device"), (stat.S_ISBLK, "a block device"), (stat.S_ISSOCK, "a socket"))
+
+
+def file_kind(mode: int) -> str:
+    """What a file of ``st_mode`` ``mode`` is, in words (``a FIFO``)."""
+    return next((name for test, name in _KINDS if test(mode)), "a special file")
+
+
+def input_problem(path: str | os.PathLike[str], *, directory: bool = True) -> str | None:
+    """Why ``path`` cannot be read as an input, in words, or None when it is a regular file
+    (or, with ``directory``, a directory): missing, a symbolic link loop, unreadable, or a
+    FIFO, device or socket, which a reader would block on or read without end. Symbolic links
+    are followed; nothing is opened."""
+    try:
+        mode = os.stat(path).st_mode
+    except OSError as exc:
+        if exc.errno == errno.ELOOP:
+            return "a symbolic link loop"
+        if exc.errno == errno.ENOENT:
+            return "no such file or directory"
+        return f"cannot be read ({exc.strerror or exc})"
+    if stat.S_ISREG(mode) or (directory and stat.S_ISDIR(mode)):
+        return None
+    return f"{file_kind(mode)}, not a regular file{' or a directory' if directory else ''}"
+
+
 def _inside(path: Path, other: Path) -> bool:
     return path == other or other in path.parents
 
@@ -201,6 +236,41 @@ def _first_missing_ancestor(path: Path) -> Path | None:
             break
         missing = p
     return missing
+
+
+def _lock_directory(path: Path) -> int | None:
+    """A descriptor of the directory ``path`` holding an exclusive ``flock`` on it, taken
+    without waiting; None when another process holds it (or it cannot be opened)."""
+    try:
+        fd = os.open(path, os.O_RDONLY | os.O_DIRECTORY | os.O_NOFOLLOW | getattr(os, "O_CLOEXEC", 0))
+    except OSError:
+        return None
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except OSError:
+        os.close(fd)
+        return None
+    return fd
+
+
+def stale_partials(path: str | os.PathLike[str]) -> list[Path]:
+    """The unfinished outputs of ``path`` whose writer is gone: the ``.NAME.<8 characters>.partial``
+    directories beside it (:func:`output_directory`'s name pattern, directories only) that no
+    process holds locked. :func:`output_directory` locks its directory while it writes, and the
+    operating system releases the lock when the process ends, however it ends (a SIGKILL, a
+    power cut): a directory found unlocked is one no process will finish. Sorted."""
+    target = Path(path)
+    directory = target.parent if str(target.parent) else Path(".")
+    pattern = re.compile(rf"\.{re.escape(target.name)}\.[a-z0-9_]{{8}}\.partial")
+    found = []
+    with suppress(OSError), os.scandir(directory) as entries:
+        for entry in entries:
+            if pattern.fullmatch(entry.name) and entry.is_dir(follow_symlinks=False):
+                fd = _lock_directory(directory / entry.name)
+                if fd is not None:
+                    os.close(fd)
+                    found.append(directory / entry.name)
+    return sorted(found)
 
 
 @contextmanager
@@ -221,11 +291,12 @@ def output_directory(
         raise OutputPathError(
             f"{given}: is a symbolic link (to {os.readlink(given)}); give the directory itself"
         )
-    final = given.resolve()
+    # (os.path.realpath: a symbolic link loop on the way is left as it is, never an exception.)
+    final = Path(os.path.realpath(given))
     if final == final.parent:
         raise OutputPathError(f"{given}: cannot write an output over the file system root")
     for item in inputs:
-        source = Path(item).resolve()
+        source = Path(os.path.realpath(item))
         if _inside(final, source) or _inside(source, final):
             raise OutputPathError(
                 f"{given}: the output would overwrite the input {item} (it is, contains or lies inside it)"
@@ -240,10 +311,13 @@ def output_directory(
             )
         replace = True
     created_parent = _first_missing_ancestor(final.parent)
-    tmp = None
+    tmp, lock = None, None
     try:
         final.parent.mkdir(parents=True, exist_ok=True)
+        for stale in stale_partials(final):
+            shutil.rmtree(stale, ignore_errors=True)
         tmp = Path(tempfile.mkdtemp(prefix=f".{final.name}.", suffix=".partial", dir=final.parent))
+        lock = _lock_directory(tmp)  # held until the end: the directory is not stale (stale_partials)
         # mkdtemp's private 0700 would reach the output: give it what mkdir would.
         os.chmod(tmp, 0o777 & ~_umask())
         yield tmp
@@ -276,6 +350,9 @@ def output_directory(
                     if p == created_parent:
                         break
         raise
+    finally:
+        if lock is not None:
+            os.close(lock)
     _fsync_directory(final.parent)
 
 

@@ -5,11 +5,14 @@ from a maneuvers file; a failed maneuver is named and the others still count. No
 from __future__ import annotations
 
 import csv
+import multiprocessing
+import os
 from pathlib import Path
 
 import numpy as np
 import pytest
 import yaml
+from bag_samples import fails, no_hang
 
 from rls_uncertainty import cli
 from rls_uncertainty.campaign import CampaignSettings, campaign_to, load_maneuvers
@@ -127,3 +130,22 @@ def test_campaign_writes_fig12_in_every_format_asked_for(tmp_path, maneuvers_fil
     err = capsys.readouterr().err
     assert exc.value.code == 2 and len(err.splitlines()) == 1 and "--dpi: must be an integer in [50, 1200]" in err
     assert not (tmp_path / "x").exists()
+
+
+@pytest.mark.parametrize("kind", ["fifo", "loop", "device"])
+def test_an_input_that_no_reader_may_open_is_refused_before_any_maneuver_runs(tmp_path, capsys, kind):
+    """Beside a good bag, a FIFO named x.mcap, a symbolic link loop or a device: one line, exit 2,
+    no worker started (no hang), no output and no unfinished one."""
+    bag = {"fifo": tmp_path / "x.mcap", "loop": tmp_path / "loop", "device": Path("/dev/zero")}[kind]
+    if kind == "fifo":
+        os.mkfifo(bag)
+    elif kind == "loop":
+        bag.symlink_to(bag)
+    problem = {"fifo": "a FIFO, not a regular file or a directory", "loop": "a symbolic link loop",
+               "device": "a character device, not a regular file or a directory"}[kind]
+    out = tmp_path / "out"
+    with no_hang(60):
+        fails(capsys, ["campaign", str(BUNDLED), str(bag), "--config", "config/t2.yaml", "--out", str(out),
+                       "--workers", "2", "--quiet"], f"{bag}: {problem}")
+    assert not out.exists() and not [p for p in tmp_path.iterdir() if p.name.endswith(".partial")]
+    assert multiprocessing.active_children() == []

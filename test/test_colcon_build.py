@@ -5,7 +5,6 @@ sourced workspace, and `colcon test` works there."""
 from __future__ import annotations
 
 import os
-import shutil
 import signal
 import subprocess
 import sys
@@ -15,27 +14,13 @@ from pathlib import Path
 
 import pytest
 
+from source_tree import copy_source
+
 ROOT = Path(__file__).resolve().parents[1]
 COLCON = Path(sys.executable).with_name("colcon")
-# Never part of a source copy, whatever .gitignore says: version control, virtual
-# environments, and the output of colcon, setuptools, pytest, ruff and mypy.
-NOT_SOURCE = {".git", ".venv", "venv", "build", "install", "log", "__pycache__", ".pytest_cache", ".mypy_cache",
-              ".ruff_cache", "*.egg-info", "*.pyc"}
 # Run by `colcon test` in the copy: the manifest check and the flight-data tests, which must
 # be skipped there (the copy has no ../shared), plus the skip policy's own tests.
 COLCON_TESTS = ["test/test_package_xml.py", "test/test_flight_data.py"]
-
-
-def copy_source(dest: Path) -> None:
-    """Copy the checkout as a user would copy it, without .git and ignored files."""
-    ignored = set(NOT_SOURCE)
-    gitignore = ROOT / ".gitignore"
-    if gitignore.is_file():
-        for raw in gitignore.read_text().splitlines():
-            pattern = raw.strip()
-            if pattern and not pattern.startswith(("#", "!")):
-                ignored.add(pattern.strip("/"))
-    shutil.copytree(ROOT, dest, ignore=shutil.ignore_patterns(*ignored), symlinks=True)
 
 
 @pytest.mark.skipif(not COLCON.exists(), reason="colcon is installed by scripts/setup.sh")

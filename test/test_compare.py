@@ -5,6 +5,7 @@ edge), not comparable with the reason (another bag, span, models, rate, no run r
 
 import csv
 import json
+import math
 import os
 import shutil
 import subprocess
@@ -14,8 +15,8 @@ import pytest
 from bag_samples import fails
 
 from rls_uncertainty import cli
-from rls_uncertainty.errors import NotComparable
-from rls_uncertainty.offline.compare import DEFAULT_RTOL, comparable, compare_replays, read_run
+from rls_uncertainty.errors import ConfigError, NotComparable
+from rls_uncertainty.offline.compare import DEFAULT_RTOL, check_reference, comparable, compare_replays, read_run
 from rls_uncertainty.offline.replay import replay
 from rls_uncertainty.settings import load_parameters_file
 
@@ -244,3 +245,175 @@ def test_runs_with_no_estimation_method_in_common_are_not_comparable(golden, tmp
     with pytest.raises(NotComparable, match=r"'time' here \(estimates\.csv\), 'frequency' in the reference"):
         comparable(run, frequency)
     assert comparable(frequency, both) and comparable(run, both)  # a method in common: comparable, noted
+
+
+# A damaged reference: every kind is made here from the golden replay's own files, and must be
+# refused (exit 2) in one line naming the file, the line and the column (or run.json's field),
+# before the bag is read; never compared, never "equal".
+
+ROW = 100  # a row in the middle of the maneuver: line ROW + 2 of the file (the header is line 1)
+
+
+def _rewrite(directory, change):
+    """``change(header, rows)`` applied to the cells of ``directory``'s estimates.csv."""
+    with open(directory / "estimates.csv", newline="") as fh:
+        header, *rows = list(csv.reader(fh))
+    header, rows = change(header, rows)
+    with open(directory / "estimates.csv", "w", newline="") as fh:
+        csv.writer(fh, lineterminator="\n").writerows([header, *rows])
+
+
+def _cell(column, value, row=None):
+    def change(header, rows):
+        i = header.index(column)
+        for k, r in enumerate(rows):
+            if row is None or k == row:
+                r[i] = value
+        return header, rows
+    return lambda d: _rewrite(d, change)
+
+
+def _rows_edit(edit):
+    def change(header, rows):
+        edit(header, rows)
+        return header, rows
+    return lambda d: _rewrite(d, change)
+
+
+def _drop_column(column):
+    def change(header, rows):
+        i = header.index(column)
+        return header[:i] + header[i + 1:], [r[:i] + r[i + 1:] for r in rows]
+    return lambda d: _rewrite(d, change)
+
+
+def _swap(rows):
+    rows[ROW], rows[ROW + 1] = rows[ROW + 1], rows[ROW]
+
+
+def _run(edit):
+    def mutate(directory):
+        run = json.loads((directory / "run.json").read_text())
+        edit(run)
+        (directory / "run.json").write_text(json.dumps(run))
+    return mutate
+
+
+def _fifo(name):
+    def mutate(directory):
+        (directory / name).unlink()
+        os.mkfifo(directory / name)
+    return mutate
+
+
+LINE = f"line {ROW + 2}"
+DAMAGED = {
+    # values that are not finite, or not a standard error
+    "every estimate NaN": (_cell("estimate", "nan"), "line 2, column estimate: nan is not finite"),
+    "one estimate NaN": (_cell("estimate", "nan", ROW), f"{LINE}, column estimate: nan is not finite"),
+    "one estimate -inf": (_cell("estimate", "-inf", ROW), f"{LINE}, column estimate: -inf is not finite"),
+    "every std_error inf": (_cell("std_error", "inf"), "line 2, column std_error: inf is not finite"),
+    "one std_error -inf": (_cell("std_error", "-inf", ROW), f"{LINE}, column std_error: -inf is not finite"),
+    "one conventional SE NaN": (_cell("std_error_conventional", "NaN", ROW),
+                                f"{LINE}, column std_error_conventional: NaN is not finite"),
+    "a negative std_error": (_cell("std_error", "-5", ROW), f"{LINE}, column std_error: -5 is negative"),
+    # malformed
+    "a cell abc": (_cell("estimate", "abc", ROW), f'{LINE}, column estimate: "abc" is not a number'),
+    "an empty cell": (_cell("std_error", "", ROW), f'{LINE}, column std_error: "" is not a number'),
+    "a missing column": (_drop_column("std_error_conventional"), "line 1: no column std_error_conventional"),
+    "a row one cell short": (_rows_edit(lambda h, rows: rows[ROW].pop()), f"{LINE}: 7 cells, expected 8"),
+    "a time that is not a stamp": (_cell("time", "12.5", ROW), f'{LINE}, column time: "12.5" is not a stamp'),
+    "a flag of 2": (_cell("converged", "2", ROW), f'{LINE}, column converged: "2" is not 0 or 1'),
+    "a lag count x": (_cell("lags", "x", ROW), f'{LINE}, column lags: "x" is not a whole number'),
+    "an unknown parameter": (_cell("parameter", "Cm_beta", ROW), f'{LINE}, column parameter: "Cm_beta" of model'),
+    "binary garbage": (lambda d: (d / "estimates.csv").write_bytes(bytes(range(256)) * 64),
+                       "estimates.csv: line 1: no column time"),
+    "not UTF-8": (lambda d: (d / "estimates.csv").write_bytes(b"time,model\n\xff\xfe\n"),
+                  "estimates.csv: line 1: no column parameter"),
+    "an empty file": (lambda d: (d / "estimates.csv").write_bytes(b""), "estimates.csv: empty (no header line)"),
+    "a FIFO as estimates.csv": (_fifo("estimates.csv"), "estimates.csv: a FIFO, not a regular file"),
+    # inconsistent
+    "two rows swapped": (_rows_edit(lambda h, rows: _swap(rows)), f"line {ROW + 3}: "),
+    "a row repeated": (_rows_edit(lambda h, rows: rows.insert(ROW, list(rows[ROW]))),
+                       f"line {ROW + 3}: "),
+    "no estimates.csv": (lambda d: (d / "estimates.csv").unlink(), "estimator.method 'time' writes estimates.csv"),
+    "run.json without period_ns": (_run(lambda r: r.pop("period_ns")), "run.json: period_ns: missing"),
+    "run.json period_ns 0": (_run(lambda r: r.update(period_ns=0)),
+                             "run.json: period_ns: 0 is not a whole number of nanoseconds > 0"),
+    "run.json period_ns 20ms": (_run(lambda r: r.update(period_ns="20ms")), 'run.json: period_ns: "20ms" is not'),
+    "run.json period_ns NaN": (_run(lambda r: r.update(period_ns=float("nan"))), "run.json: period_ns: NaN is not"),
+    "run.json without models": (_run(lambda r: r.pop("models")), "run.json: models: missing"),
+    "run.json models of other length": (_run(lambda r: r["parameter_names"].pop()),
+                                        "run.json: parameter_names: 1 lists for 2 models"),
+    "run.json bag []": (_run(lambda r: r.update(bag=[])), "run.json: bag: [] is not a mapping"),
+    "run.json bag digest 12": (_run(lambda r: r["bag"].update(input_sha256=12)),
+                               "run.json: bag.input_sha256: 12 is not a SHA-256 digest"),
+    "run.json strict yes": (_run(lambda r: r["bag"].update(strict="yes")), 'run.json: bag.strict: "yes" is not'),
+    "run.json method bogus": (_run(lambda r: r["parameters"].update({"estimator.method": "bogus"})),
+                              'run.json: parameters.estimator.method: "bogus" is not one of time, frequency, both'),
+    "run.json not JSON": (lambda d: (d / "run.json").write_text("{period_ns: 1"), "run.json: not valid JSON"),
+    "run.json a list": (lambda d: (d / "run.json").write_text("[]"), "run.json: not a run record of this version"),
+    "run.json a FIFO": (_fifo("run.json"), "run.json: a FIFO, not a regular file"),
+}
+
+
+@pytest.fixture(params=list(DAMAGED))
+def damaged(request, golden, tmp_path):
+    """The golden replay's outputs with one kind of damage (:data:`DAMAGED`), and the message."""
+    mutate, message = DAMAGED[request.param]
+    reference = tmp_path / "damaged"
+    shutil.copytree(golden, reference)
+    mutate(reference)
+    return reference, message
+
+
+def test_a_damaged_reference_is_refused_naming_the_file_line_and_column(golden, damaged):
+    reference, message = damaged
+    with pytest.raises(NotComparable) as checked:
+        check_reference(reference)
+    assert str(checked.value).startswith(str(reference / "")) and message in str(checked.value)
+    with pytest.raises(NotComparable) as compared:  # and as the comparison reads it
+        compare_replays(golden, reference)
+    assert str(compared.value) == str(checked.value)
+
+
+def test_the_command_refuses_a_damaged_reference_in_one_line_before_reading_the_bag(damaged, tmp_path, capsys):
+    reference, message = damaged
+    line = fails(capsys, ["replay", str(BUNDLED), "--config", "t2", "--out", str(tmp_path / "r"), "--no-figures",
+                          "--quiet", "--compare", str(reference)], message)
+    assert "\n" not in line and not (tmp_path / "r").exists()
+
+
+def test_an_intact_reference_passes_every_check(golden):
+    """The control of the damaged ones: the golden replay itself, as written."""
+    assert check_reference(golden) == json.loads((golden / "run.json").read_text())
+
+
+@pytest.mark.parametrize("value", ["nan", "inf", "-inf"])
+@pytest.mark.parametrize("column", ["estimate", "std_error", "std_error_conventional"])
+def test_a_value_of_this_run_that_is_not_finite_is_a_difference_never_equality(golden, tmp_path, column, value):
+    here = tmp_path / "here"
+    shutil.copytree(golden, here)
+    _cell(column, value, ROW)(here)
+    rows = _rows(golden)
+    cmp = compare_replays(here, golden, rtol=1e6)  # a tolerance a million times |estimate| + SE
+    assert not cmp.equal and cmp.beyond == 1 and cmp.rows == len(rows)
+    [d] = cmp.categorical
+    assert (d.parameter, d.quantity, d.value, d.reference) == (rows[ROW]["parameter"], column, value, rows[ROW][column])
+    assert "DIFFERENT: 1 of" in cmp.report() and "differs" in cmp.report()
+
+
+def test_an_infinite_tolerance_is_refused_and_one_that_overflows_never_passes(golden, tmp_path, capsys):
+    for rtol, atol in ((math.inf, 0.0), (1e-6, math.inf), (math.nan, 0.0), (-1.0, 0.0)):
+        with pytest.raises(ConfigError, match="must be a finite number >= 0"):
+            compare_replays(golden, golden, rtol=rtol, atol=atol)
+    fails(capsys, ["replay", str(BUNDLED), "--out", str(tmp_path / "r"), "--compare", str(golden), "--rtol", "inf"],
+          "--rtol: must be a finite number >= 0")
+    # rtol 1e308 is finite, but rtol * s is infinite where s = |estimate| + SE exceeds 1.8: those
+    # tolerances pass nothing (not even an identical value); the others pass it.
+    rows = _rows(golden)
+    s = [abs(float(r["estimate"])) + float(r["std_error"]) for r in rows]
+    infinite = sum(math.isinf(1e308 * x) for x in s) + 2 * sum(math.isinf(2 * x * (1e308 * x)) for x in s)
+    assert 0 < infinite < 3 * len(rows)
+    cmp = compare_replays(golden, golden, rtol=1e308)
+    assert cmp.beyond == infinite and cmp.rows == len(rows)

@@ -7,35 +7,32 @@ from __future__ import annotations
 
 import csv
 import random
+import re
 from pathlib import Path
 from types import SimpleNamespace
 
 import pytest
 
-from rls_uncertainty.dashboard.health import HealthTracker, parse_statuses
 from rls_uncertainty.dashboard.hub import Hub, Source
-from rls_uncertainty.dashboard.model import (
+from rls_uncertainty.dashboard.model import MAX_PENDING, ArrayUpdate, ModelHistory, Pairing, Sample, array_update
+from rls_uncertainty.dashboard.settings import full_node_name, load_reference
+from rls_uncertainty.datapath.inputs import STREAMS
+from rls_uncertainty.datapath.outputs import (
     FREQUENCY_DOMAIN,
-    MAX_PENDING,
     PAIRED,
     TIME_DOMAIN,
     ArrayKey,
-    ArrayUpdate,
-    ModelHistory,
-    Pairing,
-    Sample,
     array_key,
-    array_update,
     split_topic,
+    stamp_label,
 )
-from rls_uncertainty.dashboard.settings import full_node_name, load_reference
-from rls_uncertainty.datapath.inputs import STREAMS
-from rls_uncertainty.datapath.outputs import stamp_label
 from rls_uncertainty.errors import ConfigError
+from rls_uncertainty.ros.health import HealthTracker, parse_statuses
 from rls_uncertainty.settings import NODE_NAME
 
 ROOT = Path(__file__).resolve().parents[1]
 NAMES = ("CZ_0", "CZ_alpha", "CZ_delta_e")
+QUANTITIES = ("estimate", "se", "se_conventional", "converged")
 
 
 def _values(stamp: int, suffix: str) -> tuple[float, ...]:
@@ -55,6 +52,28 @@ def _msg(names: str, data, *labels: str):
 
 def _key(suffix: str, model: str = "CZ") -> ArrayKey:
     return ArrayKey(TIME_DOMAIN, model, suffix)
+
+
+def _page_of(messages) -> dict:
+    """What a page holds after ``messages`` (a snapshot, then samples), rebuilt here as the
+    page's script does: per method and model the columns, appended in order; the counts."""
+    page: dict = {"methods": {}, "counts": {}, "quality": []}
+    for m in messages:
+        if m["type"] == "snapshot":
+            page = {"methods": {}, "counts": {}, "quality": m["quality"]}
+        elif m["type"] == "samples":
+            for model, cols in m["models"].items():
+                held = page["methods"].setdefault(m["method"], {}).get(model)
+                if held is None or held["names"] != cols["names"] or cols["t"][0] <= held["t"][-1]:
+                    held = page["methods"][m["method"]][model] = {
+                        "names": cols["names"], "t": [], **{q: [[] for _ in cols["names"]] for q in QUANTITIES}}
+                held["t"] += cols["t"]
+                for q in QUANTITIES:
+                    for column, values in zip(held[q], cols[q], strict=True):
+                        column.extend(values)
+                if "count" in cols:
+                    page["counts"][(m["method"], model)] = cols["count"]
+    return page
 
 
 def _arrays(stamps, published=None, model: str = "CZ"):
@@ -155,7 +174,7 @@ def test_the_hub_keeps_the_two_methods_of_a_model_apart():
     f_names = NAMES[1:]
 
     def f_values(stamp, suffix):
-        return tuple(-v for v in _values(stamp, suffix)[1:])
+        return tuple(1000 + v for v in _values(stamp, suffix)[1:])  # its own values (positive, as SEs are)
 
     arrays = []
     for s in stamps:  # interleaved as the node publishes them: time domain, then frequency domain
@@ -171,7 +190,7 @@ def test_the_hub_keeps_the_two_methods_of_a_model_apart():
         for quantity, suffix in zip(("estimate", "se", "se_conventional", "converged"), PAIRED, strict=True):
             assert [list(c) for c in zip(*cols[quantity], strict=True)] == [list(values(s, suffix)) for s in stamps]
     assert {m["method"] for m in messages if m["type"] == "samples"} == {TIME_DOMAIN, FREQUENCY_DOMAIN}
-    snapshot = hub.snapshot()["methods"]
+    snapshot = _page_of(hub.snapshot_messages())["methods"]
     assert snapshot[FREQUENCY_DOMAIN]["CZ"]["names"] == list(f_names)
     assert snapshot[TIME_DOMAIN]["CZ"]["names"] == list(NAMES)
     assert hub.history_resets == 0 and hub.samples_total == 2 * len(stamps)
@@ -229,8 +248,8 @@ def _inputs(rejected: dict[str, int], recent: int, window: float = 10.0, prefix:
 
 def _snapshot(enabled: bool):
     """What a fresh node with the t2 configuration hands its diagnostics policy."""
+    from rls_uncertainty.datapath.diagnostics import Snapshot
     from rls_uncertainty.datapath.pipeline import Pipeline
-    from rls_uncertainty.ros.diagnostics import Snapshot
     from rls_uncertainty.settings import load_parameters_file, pipeline_config
 
     pipe = Pipeline(pipeline_config(load_parameters_file("t2")))
@@ -244,7 +263,7 @@ def _snapshot(enabled: bool):
 def test_statuses_of_namespaced_nodes_are_told_apart():
     """Three nodes named rls_estimator (root, /a, /b) report on one /diagnostics: each
     consumer reads its own node's statuses, named by the node's policy."""
-    from rls_uncertainty.ros.diagnostics import DiagnosticsPolicy
+    from rls_uncertainty.datapath.diagnostics import DiagnosticsPolicy
 
     arrays = []
     for node, enabled in (("/rls_estimator", True), ("/a/rls_estimator", False), ("/b/rls_estimator", True)):
@@ -405,7 +424,7 @@ def test_the_page_says_when_the_node_it_showed_is_gone():
     assert hub.state()["state"] == "running"
     msg = hub.set_graph(False)
     assert msg["state"] == "node_lost" and "ROS_DOMAIN_ID=25" in msg["text"] and "last ones" in msg["text"]
-    assert hub.snapshot()["methods"][TIME_DOMAIN]["CZ"]["t"] == [1e-8]  # its last values stay on the page
+    assert _page_of(hub.snapshot_messages())["methods"][TIME_DOMAIN]["CZ"]["t"] == [1e-8]  # its last values stay
 
 
 def test_the_samples_counted_are_the_nodes_not_its_models_arrays():
@@ -420,13 +439,13 @@ def test_the_first_samples_turn_the_banner_to_running_at_once():
     """A late joiner hears the node's diagnostics ("none received here yet") before its kept
     samples: the samples themselves change the banner, not the next diagnostics a second later."""
     from rls_uncertainty.dashboard.app import _Dispatch
-    from rls_uncertainty.dashboard.server import Broadcaster
+    from rls_uncertainty.dashboard.feed import Feed
 
     hub = _live_hub()
     sent: list[dict] = []
-    broadcaster = Broadcaster(hub)
-    broadcaster.send = sent.append
-    dispatch = _Dispatch(hub, broadcaster)
+    feed = Feed(hub)
+    feed.send = sent.append  # type: ignore[method-assign]
+    dispatch = _Dispatch(hub, feed)
     dispatch([("graph", True)])
     ns = "/ns/rls_estimator"
     dispatch([("diagnostics", [*_inputs({}, 40, prefix=ns),
@@ -486,7 +505,7 @@ def test_a_hub_sends_samples_as_columns_and_restarts_a_model_whose_time_goes_bac
     assert cols["se"][1] == [_values(10, "standard_errors")[1], _values(20, "standard_errors")[1]]
     hub.add_arrays(_arrays([5]))
     assert hub.history_resets == 1 and hub.histories[(TIME_DOMAIN, "CZ")].size == 1
-    assert hub.snapshot()["methods"][TIME_DOMAIN]["CZ"]["t"] == [5e-9]
+    assert _page_of(hub.snapshot_messages())["methods"][TIME_DOMAIN]["CZ"]["t"] == [5e-9]
     assert hub.add_arrays([(_key("estimates"), None, None)]) == [] and hub.pairing.dropped == {"undecodable": 1}
 
 
@@ -544,13 +563,13 @@ def _read(directory, hub_capacity=None, deliver=None):
     import asyncio
 
     from rls_uncertainty.dashboard.app import _Dispatch
+    from rls_uncertainty.dashboard.feed import Feed
     from rls_uncertainty.dashboard.replay_source import open_replay
-    from rls_uncertainty.dashboard.server import Broadcaster
 
     source = open_replay(directory)
     hub = Hub(Source("replay", source.node, replay_dir=str(directory), replay_file=source.file),
               capacity=hub_capacity)
-    dispatch = _Dispatch(hub, Broadcaster(hub))
+    dispatch = _Dispatch(hub, Feed(hub))
     batches: list[int] = []
 
     async def main():
@@ -579,9 +598,18 @@ def _csv_rows(path):
         return list(csv.DictReader(fh))
 
 
+def _shown_rows(rows):
+    """The rows of the samples the page shows: a sample (the rows of one time and model) with a
+    standard error of 0 or less is refused; and how many were."""
+    bad = {(r["time"], r["model"]) for r in rows
+           if float(r["std_error"]) <= 0 or float(r["std_error_conventional"]) <= 0}
+    return [r for r in rows if (r["time"], r["model"]) not in bad], len(bad)
+
+
 def _expect_csv(hub, rows, method=TIME_DOMAIN):
     """Every sample of every model of ``method`` equals the CSV's rows (the same doubles: CSV
-    writes repr)."""
+    writes repr), but those refused for a standard error of 0 or less."""
+    rows, _refused = _shown_rows(rows)
     assert {m for which, m in hub.histories if which == method} == {r["model"] for r in rows}
     for (which, model), h in hub.histories.items():
         if which != method:
@@ -632,7 +660,7 @@ def test_a_finished_replay_is_read_as_a_stream_with_every_sample_of_its_estimate
             assert table.names == tuple(msg.layout.dim[0].label.split(","))
             assert [list(r) for r in table.correlation] == rows[:, :n].tolist()
             assert list(table.excitation) == rows[:, n].tolist() and list(table.identifiable) == [True] * n
-    quality = {q["model"]: q for q in hub.snapshot()["quality"]}
+    quality = {q["model"]: q for q in _page_of(hub.snapshot_messages())["quality"]}
     for model in ("CZ", "Cm"):  # the seeded T-2 maneuver identifies every parameter
         assert all(p["identifiable"] and p["reason"] == "" for p in quality[model]["parameters"].values())
         assert quality[model]["fit"]["r_squared"] == hub.fits[(TIME_DOMAIN, model)].r_squared
@@ -701,6 +729,157 @@ def test_a_directory_without_replay_outputs_is_refused_with_the_reason(tmp_path)
         open_replay(tmp_path)
 
 
+# ------------------------------------------------------------------ hostile replays
+def _hostile(directory: Path, header: str, lines) -> Path:
+    directory.mkdir()
+    with open(directory / "estimates.csv", "w") as fh:
+        fh.write(header)
+        fh.writelines(lines)
+    return directory
+
+
+def _first_samples(t2_replay, samples: int) -> tuple[str, list[str]]:
+    """The header and the rows of the first ``samples`` sample times of a replay's estimates.csv."""
+    header, *rows = (t2_replay / "estimates.csv").read_text().splitlines(keepends=True)
+    times = list(dict.fromkeys(r.split(",", 1)[0] for r in rows))[:samples]
+    return header, [r for r in rows if r.split(",", 1)[0] in set(times)]
+
+
+@pytest.mark.parametrize("case", ["models", "parameters", "time", "short", "repeated", "nan", "inf", "cut"])
+def test_a_hostile_replay_csv_ends_the_reading_at_the_line_named_never_a_traceback(t2_replay, tmp_path, case,
+                                                                                   capsys):
+    """What rls-uncertainty replay never writes: more models than Eq. 2 has (here the 100,000
+    names of an attack, cut short at the seventh), one sample with 50,000 parameters, a time of
+    1e30 s, a last sample missing a row or repeating one, a value NaN or inf, a row cut short.
+    The reading ends at the line named, on the page's banner and in one line on stderr; the
+    samples before it are shown; memory stays that of the rows read."""
+    from rls_uncertainty.dashboard.model import MAX_MODELS, MAX_PARAMETERS
+
+    header, rows = _first_samples(t2_replay, 100)
+    t0 = 1767225600
+    if case == "models":
+        lines = [f"{t0 + i // 50}.{(i % 50) * 20_000_000:09d},M{i},M{i}_0,0.5,0.01,0.005,0,2\n" for i in range(100_000)]
+        bad, why = MAX_MODELS + 2, rf"a model more \('M{MAX_MODELS}'\) than the {MAX_MODELS} of Eq. 2"
+    elif case == "parameters":
+        lines = [f"{t0}.000000000,CZ,P{i},0.5,0.01,0.005,0,2\n" for i in range(50_000)]
+        bad, why = MAX_PARAMETERS + 2, rf"CZ at {t0}.000000000 s has more than {MAX_PARAMETERS} parameters"
+    elif case == "time":
+        last = [r for r in rows if r.split(",", 1)[0] == rows[-1].split(",", 1)[0]]
+        lines = rows + ["1" + "0" * 30 + ".000000000," + r.split(",", 1)[1] for r in last]
+        bad, why = len(rows) + 2, r"time '1000000000000000000000000000000.000000000' s is after the year 2262"
+    elif case in ("short", "repeated"):
+        lines = rows[:-1] if case == "short" else [*rows, rows[-1]]
+        model = rows[-1].split(",")[1]
+        start = next(i for i, r in enumerate(lines) if r.split(",")[:2] == rows[-1].split(",")[:2])
+        bad, why = start + 2, rf"{model} at .* has the parameters .*, its first sample \(line \d+\)"
+    else:
+        lines = list(rows)
+        k = len(rows) // 2
+        if case == "cut":
+            lines[k] = ",".join(lines[k].split(",")[:4]) + "\n"
+        else:
+            parts = lines[k].split(",")
+            parts[3] = case
+            lines[k] = ",".join(parts)
+        bad, why = k + 2, r"not a row of estimates.csv \((values|time)"
+    directory = _hostile(tmp_path / case, header, lines)
+    hub, _ = _read(directory)
+    state = hub.state()
+    assert state["state"] == "replay_error"
+    assert re.search(rf"estimates.csv: line {bad}: .*{why}", state["text"]), state["text"]
+    err = capsys.readouterr().err
+    assert len(err.splitlines()) == 1 and f"line {bad}:" in err and "Traceback" not in err
+    held = sum(h.size for h in hub.histories.values())
+    assert 0 < held <= 100 * MAX_MODELS or (case == "parameters" and held == 0)
+
+
+def test_samples_with_a_standard_error_of_zero_or_less_are_refused_counted_and_said(t2_replay, tmp_path, capsys):
+    """Rows with a standard error of -5 or 0: their samples are not drawn (no band to draw);
+    the page's banner and one line on stderr say how many were refused and why."""
+    header, rows = _first_samples(t2_replay, 100)
+    lines = []
+    for k, r in enumerate(rows):
+        parts = r.split(",")
+        if k % 7 in (0, 1):
+            parts[4 if k % 2 else 5] = "-5" if k % 7 == 0 else "0"
+        lines.append(",".join(parts))
+    directory = _hostile(tmp_path / "se", header, lines)
+    hub, _ = _read(directory)
+    shown, refused = _shown_rows(_csv_rows(directory / "estimates.csv"))
+    assert refused > 10
+    _expect_csv(hub, shown)
+    held = [h.columns()[q] for h in hub.histories.values() for q in ("se", "se_conventional")]
+    assert min(min(column) for columns in held for column in columns) > 0
+    text = f"{refused} samples refused, not drawn (a standard error of 0 or less: {refused})"
+    assert hub.refused == {"se_not_positive": refused} and hub.state()["state"] == "replay"
+    assert text in hub.state()["text"]
+    assert capsys.readouterr().err == f"rls-uncertainty dashboard: {directory}: {text}\n"
+
+
+def test_whatever_a_file_provokes_while_shown_ends_the_reading_on_the_page(t2_replay, tmp_path, monkeypatch):
+    """A failure met while the read samples are shown (here provoked) ends the reading with the
+    file and the error on the banner: never a page left at "reading"."""
+    only = tmp_path / "csv_only"
+    only.mkdir()
+    (only / "estimates.csv").write_bytes((t2_replay / "estimates.csv").read_bytes())
+
+    def broken(self, samples):
+        raise RuntimeError("provoked")
+
+    monkeypatch.setattr(Hub, "add_samples", broken)
+    hub, _ = _read(only)
+    assert hub.state()["state"] == "replay_error"
+    assert hub.state()["text"].endswith("then estimates.csv: cannot be shown (RuntimeError: provoked)")
+
+
+def test_a_live_node_beyond_eq_2_is_bounded_and_counted():
+    """Arrays of a seventh model of a method, or of more parameters than Eq. 2 has regressors,
+    are dropped before pairing; samples with a standard error of 0 or less, or a time beyond
+    int64 nanoseconds, are refused: counted, never stored."""
+    from rls_uncertainty.dashboard.model import MAX_MODELS, MAX_PARAMETERS
+
+    hub = _live_hub()
+    for k in range(MAX_MODELS + 3):
+        hub.add_arrays(_arrays([10], model=f"M{k}"))
+    assert len(hub.histories) == MAX_MODELS and hub.pairing.dropped == {"too_many_models": 3 * len(PAIRED)}
+    wide = ",".join(f"CZ_{i}" for i in range(MAX_PARAMETERS + 1))
+    hub.add_arrays([(_key(suffix, "M0"), _msg(wide, [1.0] * (MAX_PARAMETERS + 1), stamp_label(20)), None)
+                    for suffix in PAIRED])
+    assert hub.pairing.dropped["too_many_parameters"] == len(PAIRED)
+    zero = [(_key(s, "M1"), _msg(",".join(NAMES), [0.0 if s == "standard_errors" else 1.0] * 3, stamp_label(30)),
+             None) for s in PAIRED]
+    late = [(_key(s, "M2"), _msg(",".join(NAMES), [1.0] * 3, "stamp:99999999999.000000000"), None) for s in PAIRED]
+    assert hub.add_arrays(zero + late) == []
+    assert hub.refused == {"se_not_positive": 1, "time_out_of_range": 1}
+    assert all(h.size == 1 for h in hub.histories.values())
+
+
+def test_large_batches_are_sent_in_bounded_pieces_counted_and_restarts_send_only_the_new_history():
+    """A replay's batch of thousands of samples is sent as several messages of at most
+    FRAME_VALUES numbers, each model's ``count`` the samples shown up to its last one; a batch
+    in which a model's time goes back sends only what follows the restart: the page rebuilt
+    from the messages holds the hub's history."""
+    from rls_uncertainty.dashboard.messages import FRAME_VALUES
+
+    hub = _live_hub()
+    samples = [Sample("CZ", 1000 + 10 * k, NAMES, (k, 0, 0), (1, 1, 1), (1, 1, 1), (0, 0, 0), None)
+               for k in range(3000)]
+    messages = hub.add_samples(samples)
+    assert len(messages) > 3
+    assert all(sum(len(c["t"]) * (1 + 4 * len(c["names"])) for c in m["models"].values()) <= FRAME_VALUES
+               for m in messages)
+    counts = [m["models"]["CZ"]["count"] for m in messages]
+    assert counts == sorted(counts) and counts[-1] == 3000
+    page = _page_of(messages)
+    assert page["methods"][TIME_DOMAIN]["CZ"]["estimate"][0] == list(range(3000))
+    again = [Sample("CZ", 5 + k, NAMES, (-k, 0, 0), (1, 1, 1), (1, 1, 1), (0, 0, 0), None) for k in range(3)]
+    more = hub.add_samples([*samples[-1:], *again])  # a duplicate, then time back: a restart
+    assert [len(m["models"]["CZ"]["t"]) for m in more] == [3] and hub.history_resets == 1
+    page = _page_of(messages + more)
+    assert page["methods"][TIME_DOMAIN]["CZ"]["estimate"][0] == [0, -1, -2]
+    assert page["counts"][(TIME_DOMAIN, "CZ")] == 3003 == hub.counts()[TIME_DOMAIN]["CZ"]
+
+
 # ------------------------------------------------------------------ both methods
 @pytest.fixture(scope="module")
 def t2_both(tmp_path_factory):
@@ -716,10 +895,15 @@ def t2_both(tmp_path_factory):
 
 def _expect_frequency_csv(hub, directory):
     """The frequency-domain histories equal estimates_frequency.csv, read here with the csv
-    module: per model the parameters without the bias, every sample of the file."""
+    module: per model the parameters without the bias, every sample of the file but those with
+    a standard error of 0 (the first of each model here: its corrected SE is 0 at the first
+    lags), which are refused and counted."""
     rows = _csv_rows(directory / "estimates_frequency.csv")
     assert rows and not any(r["parameter"].endswith("_0") for r in rows)  # no bias in the frequency domain
     _expect_csv(hub, rows, FREQUENCY_DOMAIN)
+    time_rows = _csv_rows(directory / "estimates.csv") if (directory / "estimates.csv").is_file() else []
+    refused = _shown_rows(rows)[1] + _shown_rows(time_rows)[1]
+    assert hub.refused == ({"se_not_positive": refused} if refused else {})
     for model in {r["model"] for r in rows}:  # and the last values, as the page shows them
         last_time = max(r["time"] for r in rows if r["model"] == model)
         last = {r["parameter"]: r for r in rows if r["model"] == model and r["time"] == last_time}

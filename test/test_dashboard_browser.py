@@ -18,6 +18,11 @@ no browser download) loads the page of `rls-uncertainty dashboard`:
   ``estimator.method both`` (its last published frequency-domain values);
 * no node: the page says so, naming the domain and discovery range.
 
+Every test waits for the state it then asserts: the samples the page itself counts and has
+drawn (``rlsState.drawn``) equal to the replay's, or its newest sample at the node's last
+stamp, never a first sign such as the banner (set before the readouts, which change at the
+page's next draw).
+
 Without Chromium (or Playwright) these tests skip with the reason; under RLS_REQUIRE_BROWSER=1
 they fail instead. Screenshots go to the test's directory, and to $RLS_DASHBOARD_SCREENSHOTS
 when set (docs/images/ was made so)."""
@@ -257,18 +262,40 @@ def _stop(recorder: _Recorder, dashboard: Dashboard | None, node: NodeProcess) -
     return err
 
 
-def _wait_for_times(page, times: dict[str, float]) -> None:
-    """Until the page holds each model's time-domain sample of ``times[model]`` (s) as its
-    newest, and has drawn it (a redraw clears ``dirty``; the page's script runs between
-    evaluations, never during one)."""
-    newest = " && ".join(f"m.has('{k}') && m.get('{k}').methods.time && "
-                         f"Math.abs(m.get('{k}').methods.time.t.at(-1) - {t!r}) < 1e-6" for k, t in times.items())
-    _wait(page, f"() => {{ const m = window.rlsState.models; return {newest} && !window.rlsState.dirty; }}", 60)
+def _wait_drawn(page, expected: dict[tuple[str, str], tuple[int | None, float]], timeout_s: float = 180) -> None:
+    """Until the page has *drawn*, per ``(method, model)``, its own count of samples equal to
+    the expected one (None: any) and its newest sample at the expected time (s): the state the
+    test then reads, never a first sign. The page publishes what its last draw showed
+    (``rlsState.drawn``, set at the end of each draw, after the readouts); the banner and the
+    data arrive before the draw that shows them (a 200 ms timer, late on a loaded machine)."""
+    deadline = time.monotonic() + timeout_s
+    while True:
+        drawn = page.evaluate("window.rlsState.drawn")
+        shown = {(method, model): (drawn.get(method, {}).get(model) or {}) for method, model in expected}
+        if all(d and (n is None or d["count"] == n) and abs(d["t"] - t) < 1e-6
+               for (n, t), d in zip(expected.values(), shown.values(), strict=True)):
+            return
+        assert time.monotonic() < deadline, (f"page never drew {expected}: it drew {shown}; banner: "
+                                             f"{page.text_content('#banner')!r}")
+        time.sleep(0.2)
 
 
 def _wait_for_stamp(page, stamp: int) -> None:
-    """:func:`_wait_for_times` of ``stamp`` (ns) for both models."""
-    _wait_for_times(page, {"CZ": stamp * 1e-9, "Cm": stamp * 1e-9})
+    """:func:`_wait_drawn`: both models' time-domain samples drawn up to ``stamp`` (ns)."""
+    _wait_drawn(page, {("time", "CZ"): (None, stamp * 1e-9), ("time", "Cm"): (None, stamp * 1e-9)})
+
+
+def _replay_counts(path: Path, method: str = "time") -> dict[tuple[str, str], tuple[int, float]]:
+    """Per model of a replay CSV: the samples the page shows (the distinct times of its rows;
+    a sample with a standard error of 0 or less is refused) and the time of its last one."""
+    samples: dict[str, dict[str, bool]] = {}
+    with open(path, newline="") as fh:
+        for r in csv.DictReader(fh):
+            ok = float(r["std_error"]) > 0 and float(r["std_error_conventional"]) > 0
+            times = samples.setdefault(r["model"], {})
+            times[r["time"]] = times.get(r["time"], True) and ok
+    return {(method, model): (sum(times.values()), float(max(t for t, ok in times.items() if ok)))
+            for model, times in samples.items()}
 
 
 def test_a_dashboard_started_after_the_node_shows_its_latest_values_at_once(tmp_path, browser):
@@ -329,12 +356,8 @@ def test_a_live_node_publishing_both_methods_shows_its_last_frequency_domain_val
         assert set(last_frequency) == set(last) - {"CZ_0", "Cm_0"}  # no bias in the frequency domain
         dashboard = Dashboard()
         browser.goto(dashboard.url)
-        _wait_for_stamp(browser, stamp)
-        # The frequency domain's last samples held, and drawn (a redraw clears ``dirty``).
-        held = " && ".join(f"Math.abs(m.get('{k}').methods.frequency.t.at(-1) - {t!r}) < 1e-6"
-                           for k, t in frequency_stamps.items())
-        _wait(browser, "() => { const m = window.rlsState.models; return ['CZ', 'Cm'].every(k => m.get(k).methods"
-                       f".frequency) && {held} && !window.rlsState.dirty; }}", 60)
+        _wait_drawn(browser, {**{("time", m): (None, stamp * 1e-9) for m in ("CZ", "Cm")},
+                              **{("frequency", m): (None, t) for m, t in frequency_stamps.items()}})
         _expect_shown(_shown(browser), last)
         shown = browser.evaluate("""() => Object.fromEntries([...document.querySelectorAll('.panel')].map(p => {
             const r = p.querySelector('.readout.alt[data-method="frequency"]');
@@ -373,11 +396,10 @@ def test_replay_page_shows_the_final_values_of_the_replays_estimates_csv(tmp_pat
     dashboard = Dashboard("--replay", str(twin_otter_replay))
     try:
         browser.goto(dashboard.url)
-        _wait(browser, "document.getElementById('banner').dataset.state === 'replay'"
-                       f" && document.querySelectorAll('.panel .value').length === {len(last)}", 60)
-        _wait(browser, "[...document.querySelectorAll('.panel .value')].every(v => v.textContent !== '–')", 30)
-        # The banner can say the replay was read before the page has drawn its last samples.
-        _wait_for_times(browser, {m: float(t) for m, t in last_time.items()})
+        counts = _replay_counts(twin_otter_replay / "estimates.csv")
+        assert {m: t for (_, m), (_, t) in counts.items()} == {m: float(t) for m, t in last_time.items()}
+        _wait_drawn(browser, counts)  # every sample of the replay, drawn: the readouts are its last
+        _wait(browser, "document.getElementById('banner').dataset.state === 'replay'", 60)
         assert browser.text_content("#mode") == "REPLAY"
         sections = browser.query_selector_all("section.model")
         assert [s.get_attribute("data-model") for s in sections] == ["CX", "CY", "CZ", "Cl", "Cm", "Cn"]  # Eq. 2
@@ -458,9 +480,11 @@ def test_a_replay_of_both_methods_shows_the_frequency_domain_beside_the_time_dom
     dashboard = Dashboard("--replay", str(out))
     try:
         browser.goto(dashboard.url)
-        _wait(browser, "document.getElementById('banner').dataset.state === 'replay'"
-                       f" && document.querySelectorAll('.panel .alt-value').length === {len(time_rows)}"
-                       " && [...document.querySelectorAll('.panel .alt-se')].every(v => v.textContent !== '')", 60)
+        # Every sample of both files drawn (the frequency domain's first of each model is refused:
+        # its corrected standard error is 0), then the banner's end of the reading.
+        _wait_drawn(browser, {**_replay_counts(out / "estimates.csv"),
+                              **_replay_counts(out / "estimates_frequency.csv", "frequency")})
+        _wait(browser, "document.getElementById('banner').dataset.state === 'replay'", 60)
         _expect_shown(_shown(browser), {n: (float(r["estimate"]), float(r["converged"])) for n, r in time_rows.items()})
         rows = browser.evaluate("""() => Object.fromEntries([...document.querySelectorAll('.panel')].map(p => {
             const r = p.querySelector('.readout.alt[data-method="frequency"]');

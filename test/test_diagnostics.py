@@ -10,10 +10,10 @@ from pathlib import Path
 
 import pytest
 
+from rls_uncertainty.datapath import diagnostics as dg
+from rls_uncertainty.datapath.diagnostics import OK, WARN, DiagnosticsPolicy, Snapshot
 from rls_uncertainty.datapath.inputs import STREAMS as INPUTS
 from rls_uncertainty.datapath.outputs import NODE_NAME
-from rls_uncertainty.ros import diagnostics as dg
-from rls_uncertainty.ros.diagnostics import OK, WARN, DiagnosticsPolicy, Snapshot
 
 SEC = 1_000_000_000
 NOW = 1_700_000_000 * SEC
@@ -62,7 +62,7 @@ def test_levels_are_the_diagnostic_msgs_levels():
 
 
 def test_the_module_imports_no_ros_package():
-    code = ("import sys, rls_uncertainty.ros.diagnostics; "
+    code = ("import sys, rls_uncertainty.datapath.diagnostics; "
             "print(sorted(m for m in sys.modules if m.split('.')[0] in ('rclpy', 'diagnostic_msgs', 'rosbags')))")
     root = Path(__file__).resolve().parents[1]
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=root)

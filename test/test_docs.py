@@ -258,3 +258,54 @@ def test_studies_run_in_quick_mode(study):
                          timeout=600, cwd=ROOT)
     assert run.returncode == 0, run.stderr[-2000:]
     assert any(char.isdigit() for char in run.stdout), run.stdout[-2000:]  # results, not silence
+
+
+# History does not belong in the manual: it states what the shipped code does, each figure with
+# the command that makes it. A commit id (7 to 40 hex digits with a digit and a letter), a
+# helper branch name (h-...) or a date in the README, under docs/, in the config files' comments
+# or in the package's docstrings and comments is flagged. Hex in code blocks is command output
+# (a CRC, a truncated SHA-256), and the recording names of the flight data (totter_9752ed20)
+# are names, not commits.
+_COMMIT = re.compile(r"(?<![\w/#.-])(?=[0-9a-f]*\d)(?=[0-9a-f]*[a-f])[0-9a-f]{7,40}(?!\w)")
+_BRANCH = re.compile(r"(?<![\w-])h-[a-z][a-z0-9]*\b")
+_DATE = re.compile(r"\b(19|20)\d\d-[01]\d-[0-3]\d\b")
+
+
+def _manual() -> list[Path]:
+    """The README, every page and study under docs/, the other READMEs, the config files, and
+    every Python file the package, its scripts and benchmarks ship."""
+    return [*_pages(), ROOT / "bags" / "README.md", *sorted((ROOT / "config").rglob("*.yaml")),
+            *sorted((ROOT / "rls_uncertainty").rglob("*.py")), *sorted(STUDIES.rglob("*.py")),
+            *sorted((ROOT / "benchmarks").glob("*.py")), *sorted((ROOT / "scripts").iterdir()),
+            *sorted((ROOT / "launch").glob("*.py")), *sorted((ROOT / "examples").rglob("*.py"))]
+
+
+def _recording_ids() -> set[str]:
+    """The flight recordings' ids, from the aircraft files named after them."""
+    return {p.stem.rpartition("_")[2] for p in (ROOT / "config" / "aircraft").glob("twin_otter_*.yaml")}
+
+
+def history_in(text: str, markdown: bool, allowed: set[str] = frozenset()) -> list[str]:
+    """Commit ids, branch names and dates in ``text`` (hex outside Markdown code blocks only)."""
+    found = [m.group(0) for rx in (_BRANCH, _DATE) for m in rx.finditer(text)]
+    prose = re.sub(r"```.*?```", "", text, flags=re.S) if markdown else text
+    found += [m.group(0) for m in _COMMIT.finditer(prose) if m.group(0) not in allowed]
+    return found
+
+
+def test_the_manual_holds_no_history():
+    allowed = _recording_ids()
+    assert "9752ed20" in allowed
+    problems = []
+    for path in _manual():
+        if path.is_file() and path.suffix in {".md", ".yaml", ".py", ".sh", ""}:
+            for word in history_in(path.read_text(encoding="utf-8"), path.suffix == ".md", allowed):
+                problems.append(f"{path.relative_to(ROOT)}: {word}")
+    assert not problems, "commit ids, branch names or dates in the manual:\n  " + "\n  ".join(problems)
+
+
+def test_the_history_check_finds_what_it_is_for():
+    planted = ("Measured at commit fadea67 on branch h-campaign (2026-11-25); the SHA-256 of a bag in a block:\n"
+               "```\nde4b83f2c876...\n```\nrecording totter_9752ed20, colour #1f77b4, file a/deadbeef, 12345678 runs")
+    assert history_in(planted, True, {"9752ed20"}) == ["h-campaign", "2026-11-25", "fadea67"]
+    assert "de4b83f2c876" in history_in(planted, False)  # outside Markdown, a block is no excuse

@@ -179,15 +179,17 @@ def test_a_figure_drawn_twice_is_the_same_bytes_in_every_format(tmp_path):
         assert (tmp_path / "a" / f"CZ_fig12.{fmt}").read_bytes() == (tmp_path / "b" / f"CZ_fig12.{fmt}").read_bytes()
 
 
-def test_the_default_is_png_at_300_dpi_and_a_summary(tmp_path, capture, capsys):
+def test_the_default_is_png_at_the_default_dpi_and_a_summary(tmp_path, capture, capsys):
     from rls_uncertainty import cli
+    from rls_uncertainty.offline.figures import DEFAULT_DPI
 
     out = tmp_path / "r"
     assert cli.main(["replay", str(BUNDLED), "--config", "t2", "--out", str(out), "--quiet", "--models", "CZ"]) == 0
     printed = capsys.readouterr().out
     assert set(capture) == {f"CZ_{kind}" for kind in REPLAY_FIGURES}
     assert {p.suffix for p in out.iterdir() if p.stem in capture} == {".png"}
-    _assert_png(out / "CZ_fit.png", capture["CZ_fit"], 300)
+    assert DEFAULT_DPI == 150
+    _assert_png(out / "CZ_fit.png", capture["CZ_fit"], DEFAULT_DPI)
     summary = (out / "summary.txt").read_text()
     assert printed.startswith(summary) and "CZ_alpha" in summary and "591 used" in summary
 

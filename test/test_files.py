@@ -407,3 +407,89 @@ def test_a_lock_path_that_is_not_a_regular_file_is_refused_without_blocking(tmp_
         FileLock(target)
     assert not isinstance(err.value, (BlockingIOError, TimeoutError))
     assert not (tmp_path / "elsewhere").exists() and sorted(p.name for p in tmp_path.iterdir()) == [lock.name]
+
+
+# ----------------------------------------------------------------------- inputs
+def test_an_input_that_is_not_a_regular_file_or_directory_is_named_without_being_opened(tmp_path):
+    import socket
+
+    (tmp_path / "file").write_bytes(b"data")
+    (tmp_path / "dir").mkdir()
+    os.mkfifo(tmp_path / "fifo")
+    (tmp_path / "loop").symlink_to(tmp_path / "loop")
+    (tmp_path / "link").symlink_to(tmp_path / "file")
+    with socket.socket(socket.AF_UNIX) as sock:
+        sock.bind(str(tmp_path / "sock"))
+        with no_hang(10):  # a FIFO opened for reading would block: nothing is opened
+            found = {name: files.input_problem(tmp_path / name) for name in sorted(os.listdir(tmp_path))}
+    assert found == {"dir": None, "file": None, "link": None,
+                     "fifo": "a FIFO, not a regular file or a directory",
+                     "loop": "a symbolic link loop",
+                     "sock": "a socket, not a regular file or a directory"}
+    assert files.input_problem("/dev/null") == "a character device, not a regular file or a directory"
+    assert files.input_problem(tmp_path / "missing") == "no such file or directory"
+    assert files.input_problem(tmp_path / "dir", directory=False) == "a directory, not a regular file"
+
+
+def test_an_input_that_is_a_symlink_loop_is_compared_without_an_exception(tmp_path):
+    (tmp_path / "loop").symlink_to(tmp_path / "loop")
+    with output_directory(tmp_path / "out", inputs=[tmp_path / "loop"]) as tmp:
+        _write(tmp)
+    assert (tmp_path / "out" / "result.txt").read_bytes() == b"new"
+
+
+# ----------------------------------------------------------------------- unfinished outputs
+_KILLED_OUTPUT = """
+import sys, time
+from rls_uncertainty.files import output_directory
+with output_directory(sys.argv[1]) as tmp:
+    (tmp / "half.csv").write_text("half an output")
+    print(tmp, flush=True)
+    time.sleep(120)
+"""
+
+
+def _partials(directory: Path) -> list[Path]:
+    return sorted(p for p in directory.iterdir() if p.name.endswith(".partial"))
+
+
+def test_the_unfinished_output_of_a_killed_run_is_removed_by_the_next_run(tmp_path):
+    out = tmp_path / "out"
+    writer = _run(_KILLED_OUTPUT, str(out))
+    try:
+        left = Path(writer.stdout.readline().strip())
+        assert _partials(tmp_path) == [left]
+        assert files.stale_partials(out) == []  # its writer is alive: not stale
+    finally:
+        writer.kill()
+        writer.wait(60)
+        writer.stdout.close()
+    assert _partials(tmp_path) == [left] and files.stale_partials(out) == [left]
+    with output_directory(out) as tmp:
+        assert files.stale_partials(out) == [] and _partials(tmp_path) == [tmp]  # its own is locked
+        _write(tmp)
+    assert _partials(tmp_path) == [] and sorted(os.listdir(out)) == ["result.txt"]
+
+
+def test_only_unlocked_directories_of_the_output_name_pattern_are_stale(tmp_path):
+    out = tmp_path / "out"
+    stale = tmp_path / ".out.ab_cd123.partial"
+    stale.mkdir()
+    others = [".out.abcd123.partial", ".out.ABCD1234.partial", ".other.abcd1234.partial", "out.abcd1234.partial",
+              ".out.abcd1234.old"]
+    for name in others:
+        (tmp_path / name).mkdir()
+    (tmp_path / ".out.file1234.partial").write_bytes(b"a file")
+    (tmp_path / ".out.link1234.partial").symlink_to(stale)
+    assert files.stale_partials(out) == [stale]
+    holder = _run(_KILLED_OUTPUT, str(out))  # a live writer's own is never stale, nor removed
+    try:
+        live = Path(holder.stdout.readline().strip())
+        with output_directory(out) as tmp:
+            _write(tmp)
+        assert sorted(p.name for p in tmp_path.iterdir()) == sorted(
+            [*others, ".out.file1234.partial", ".out.link1234.partial", live.name, "out"])
+    finally:
+        holder.kill()
+        holder.wait(60)
+        holder.stdout.close()

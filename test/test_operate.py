@@ -71,7 +71,7 @@ def test_status_once_prints_the_streams_and_models_of_the_node(node):
 def test_the_status_table_names_the_parameters_held_back_and_why():
     """The model rows of one report as the node writes them (its keys, docs/node.md): the
     parameters whose flag is held back, and the node's reason below the table."""
-    from rls_uncertainty.dashboard.health import parse_statuses
+    from rls_uncertainty.ros.health import parse_statuses
     from rls_uncertainty.ros.operate import format_health
 
     why = ("Cm: no regressor explains the output (R^2 0.493, identifiability.min_r_squared 0.5): not identifiable; "
@@ -92,7 +92,7 @@ def test_the_status_table_names_the_parameters_held_back_and_why():
 
 
 def test_the_status_says_which_estimation_methods_the_node_publishes():
-    from rls_uncertainty.dashboard.health import parse_statuses
+    from rls_uncertainty.ros.health import parse_statuses
     from rls_uncertainty.ros.operate import format_health, published_methods
 
     topics = ["/ops/rls_estimator/CZ/estimates", "/ops/rls_estimator/CZ/frequency/estimates",

@@ -42,6 +42,7 @@ DEPENDENCY = {
     "launch": "launch",
     "launch_ros": "launch_ros",
     "aiohttp": "python3-aiohttp",
+    "tqdm": "python3-tqdm",
 }
 # Import roots without a rosdep key (checked in rosdep/python.yaml): package.xml cannot
 # declare them, so its comments must name them (with the pip command in docs/ros_install.md).

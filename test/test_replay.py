@@ -2,11 +2,14 @@
 pipeline, options, and no partial output on failure. No DDS."""
 
 import csv
+import os
+import shutil
 from itertools import pairwise
 from pathlib import Path
 
 import numpy as np
-from bag_samples import fails, read_all
+import pytest
+from bag_samples import fails, no_hang, read_all
 
 from rls_uncertainty import cli
 from rls_uncertainty.offline.bags import read_inputs
@@ -75,6 +78,34 @@ def test_no_partial_output_when_the_replay_fails(tmp_path, capsys):
     out = tmp_path / "out"
     fails(capsys, ["replay", str(tmp_path / "missing"), "--out", str(out), "--quiet"], "missing", "no such bag")
     assert not out.exists()
+
+
+def _not_a_bag(tmp_path, kind):
+    """An input no reader may open: a FIFO named x.mcap, a symbolic link loop, a device, a bag
+    directory whose MCAP file is a FIFO."""
+    if kind == "fifo":
+        os.mkfifo(tmp_path / "x.mcap")
+        return tmp_path / "x.mcap", "a FIFO, not a regular file or a directory"
+    if kind == "loop":
+        (tmp_path / "loop").symlink_to(tmp_path / "loop")
+        return tmp_path / "loop", "a symbolic link loop"
+    if kind == "device":
+        return Path("/dev/zero"), "a character device, not a regular file or a directory"
+    bag = tmp_path / "bag"
+    shutil.copytree(BUNDLED, bag)
+    mcap = next(bag.glob("*.mcap"))
+    mcap.unlink()
+    os.mkfifo(mcap)
+    return bag, f"{mcap}: a FIFO, not a regular file"
+
+
+@pytest.mark.parametrize("kind", ["fifo", "loop", "device", "fifo_in_bag"])
+def test_an_input_that_no_reader_may_open_is_refused_at_once_in_one_line(tmp_path, capsys, kind):
+    bag, problem = _not_a_bag(tmp_path, kind)
+    out = tmp_path / "out"
+    with no_hang(60):  # a reader that opened the FIFO would block here
+        fails(capsys, ["replay", str(bag), "--config", "t2", "--out", str(out), "--quiet"], problem)
+    assert not out.exists() and not [p for p in tmp_path.iterdir() if p.name.endswith(".partial")]
 
 
 def test_the_printed_summary_is_the_last_sample_of_every_ready_model(tmp_path, capsys):
@@ -213,7 +244,9 @@ def test_the_replays_diagnostics_report_lags_and_flags_once_per_period_of_data_t
     assert {c for _, _, c in checked} == {"True", "False"}
 
 
-def test_the_progress_bar_is_drawn_only_on_a_terminal(monkeypatch):
+def test_the_progress_bar_is_drawn_on_a_terminal_or_when_asked(monkeypatch, capsys):
+    """progress=None (the command's default): a bar on a terminal only, none into a log file or
+    a pipe; True (--progress): always; False (--quiet): never. Never on stdout."""
     import io
     import sys
 
@@ -224,14 +257,19 @@ def test_the_progress_bar_is_drawn_only_on_a_terminal(monkeypatch):
         def isatty(self):
             return True
 
-    log, tty = io.StringIO(), Terminal()
-    monkeypatch.setattr(sys, "stderr", log)
-    run_pipeline(messages, config, progress=True)
-    assert log.getvalue() == ""  # a log file or pipe gets no carriage-return frames
-    monkeypatch.setattr(sys, "stderr", tty)
-    run_pipeline(messages, config, progress=True)
-    frames = tty.getvalue()
-    assert frames.count("\r") > 10 and frames.endswith("100%\n")
+    def frames(stream, progress):
+        monkeypatch.setattr(sys, "stderr", stream)
+        run_pipeline(messages, config, progress=progress)
+        monkeypatch.undo()
+        return stream.getvalue()
+
+    assert frames(io.StringIO(), None) == ""  # a log file or pipe gets no carriage-return frames
+    assert frames(Terminal(), False) == ""
+    for drawn in (frames(Terminal(), None), frames(io.StringIO(), True)):
+        last = drawn.rstrip("\n").split("\r")[-1]
+        assert drawn.endswith("\n") and f"{len(messages)}/{len(messages)}" in last and "messages/s" in last, drawn
+        assert last.startswith("replay: 100%")
+    assert capsys.readouterr().out == ""
 
 
 def test_the_replays_diagnostics_never_divide_by_zero_elapsed_time():

@@ -144,6 +144,47 @@ def foreign_imports(package: Path, core: tuple[str, ...]) -> list[str]:
     return sorted(found)
 
 
+# The wings from the ground up (docs/architecture.md, "Modules"): a wing imports only wings below it
+# and the shared modules; wings on one floor do not import each other. A wing not listed (the
+# front ends above the offline tools) may import anything below.
+FLOORS = (
+    ("errors",),
+    ("extras", "progress"),
+    ("schema", "files", "executors"),
+    ("aero", "estimator"),
+    ("frequency", "state_file"),
+    ("datapath",),
+    ("settings",),
+    ("simulation",),
+    ("offline",),
+    ("ros",),
+)
+
+
+def upward_imports(package: Path, floors: tuple[tuple[str, ...], ...]) -> list[str]:
+    """Imports from a wing into a wing on its own floor or above it (the wing is the first part
+    of a module's name below the package)."""
+    floor = {wing: i for i, wings in enumerate(floors) for wing in wings}
+    top = package.name
+    found = []
+    graph = import_graph(package)
+    for name, targets in graph.items():
+        wing = name.split(".")[1] if "." in name else ""
+        if wing not in floor:
+            continue
+        for target in sorted(targets):
+            other = target.split(".")[1] if "." in target else ""
+            if other == wing or not target.startswith(top + "."):
+                continue
+            if other not in floor or floor[other] >= floor[wing]:
+                found.append(f"{name} -> {target}")
+    return found
+
+
+def test_each_wing_imports_only_the_wings_below_it():
+    assert upward_imports(PACKAGE, FLOORS) == []
+
+
 def test_no_module_of_the_package_imports_into_a_cycle():
     cycle = find_cycle(import_graph(PACKAGE))
     assert cycle is None, "import cycle: " + " -> ".join(cycle or [])
@@ -184,6 +225,15 @@ def test_the_checks_find_what_was_planted(planted: Path):
     assert set(cycle) == {"pkg.a", "pkg.sub", "pkg.sub.b", "pkg.c"}
     assert oversized(planted) == ["pkg.d.Big: 351 lines (at most 350)", "pkg.e.long: 81 lines (at most 80)"]
     assert foreign_imports(planted, ("pkg.c", "pkg.e")) == ["pkg.c: rclpy (lazy)", "pkg.e: matplotlib"]
+
+
+def test_the_wing_check_finds_an_import_into_a_wing_above_or_beside(planted: Path):
+    # pkg.sub.b imports pkg.c (lazily), pkg.c imports pkg.a (a wing not listed: a front end).
+    assert upward_imports(planted, (("c",), ("sub",))) == ["pkg.c -> pkg.a"]
+    assert upward_imports(planted, (("sub",), ("c",))) == ["pkg.c -> pkg.a", "pkg.sub.b -> pkg.c"]
+    assert upward_imports(planted, (("sub", "c", "a"),)) == ["pkg.a -> pkg.sub", "pkg.c -> pkg.a", "pkg.sub.b -> pkg.c"]
+    (planted / "c.py").write_text("def g():\n    return 0\n")  # the cycle broken: c, then sub, then a
+    assert upward_imports(planted, (("c",), ("sub",), ("a",))) == []
 
 
 def test_an_acyclic_package_has_no_cycle(planted: Path):

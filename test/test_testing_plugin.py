@@ -172,6 +172,7 @@ def test_a_second_session_on_a_range_held_by_another_is_refused_in_one_line(tmp_
     said = (f"rls_domain: no free ROS domain for the node under test: {only} held by process {holder.pid}; give other "
             "ids with --rls-domains FIRST-LAST (or the ini option rls_domains)")
     assert any(line.endswith(said) for line in second.stdout.splitlines()), second.stdout
+    assert "Traceback" not in second.stdout and "exception" not in second.stdout, second.stdout
 
 
 WAIT_WITH_A_NODE = """

@@ -1,5 +1,6 @@
 """From a measured flight state to the aerodynamics (numerical core: numpy only).
 
+- :mod:`.models`: what is flown and what is estimated of it (the aircraft, the Eq. 2 models).
 - :mod:`.coefficients`: REP-103 to aircraft body axes (the one conversion), the flight state,
   the Eq. 1 coefficients and the Eq. 2 regressors.
 - :mod:`.differentiation`: the fixed-lag local-polynomial differentiator of the angular rates.

@@ -14,16 +14,15 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 from numpy.typing import NDArray
 
-from ..datapath.limits import PlausibilityLimits
 from ..errors import Refused
 
 if TYPE_CHECKING:  # annotations only: this module imports numpy alone
-    from ..settings.models import AircraftConfig, ModelConfig
+    from .models import AircraftConfig, ModelConfig
 
 __all__ = [
     "FloatArray",
@@ -113,8 +112,15 @@ def aircraft_sample(imu: Sequence[float], velocity: Sequence[float], qbar: float
     ]
 
 
+class SampleLimits(Protocol):
+    """What judges a reduced sample's plausibility (the data path's ``limits.*`` parameters,
+    :class:`rls_uncertainty.datapath.limits.PlausibilityLimits`)."""
+
+    def sample_rejection(self, state: FlightState, qbar_measured: bool = False) -> str | None: ...
+
+
 def flight_state(sample: Sequence[float], rate_dot: FloatArray, air_density: float,
-                 limits: PlausibilityLimits | None = None) -> FlightState | Refused:
+                 limits: SampleLimits | None = None) -> FlightState | Refused:
     """A :data:`SAMPLE_FIELDS` vector and its angular accelerations as a :class:`FlightState`
     (``V``, ``alpha = atan2(w, u)``, ``beta = asin(v / V)``; ``qbar = rho V^2 / 2`` when not
     measured), or :class:`.errors.Refused` with the reason it cannot be reduced

@@ -12,16 +12,17 @@ estimates too, in rows (or bars) of their own beside the time-domain ones (``met
 
 from __future__ import annotations
 
-import sys
 import time
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from ..datapath.config import PipelineConfig
 from ..executors import Executor, LocalProcesses, Lost
-from ..files import output_directory
+from ..files import input_problem, output_directory
+from ..offline.bags import check_bag
 from ..offline.figures import FigureOptions
-from ..settings.config import PipelineConfig
+from ..progress import Progress
 from .figure import campaign_figures
 from .maneuvers import Maneuver, from_bags, load_maneuvers
 from .run import MANEUVER_COLUMNS, CampaignSettings, ManeuverResult, ParameterResult, failed_result, run_maneuver
@@ -43,7 +44,7 @@ __all__ = [
     "campaign_to",
 ]
 
-DEFAULT_FIGURES = FigureOptions()  # PNG at print resolution (figures.DEFAULT_DPI)
+DEFAULT_FIGURES = FigureOptions()  # PNG at figures.DEFAULT_DPI
 
 
 @dataclass
@@ -87,33 +88,15 @@ def _lags(config: PipelineConfig) -> object:
     return config.frequency.n_lags
 
 
-class _Bar:
-    """A progress bar on stderr, drawn only when stderr is a terminal."""
-
-    def __init__(self, enabled: bool) -> None:
-        try:
-            self.enabled = enabled and sys.stderr.isatty()
-        except (AttributeError, ValueError):
-            self.enabled = False
-
-    def __call__(self, done: int, total: int) -> None:
-        if not self.enabled:
-            return
-        width = 40
-        filled = width * done // max(total, 1)
-        sys.stderr.write(f"\r[{'#' * filled}{'.' * (width - filled)}] {done}/{total} maneuvers")
-        if done == total:
-            sys.stderr.write("\n")
-        sys.stderr.flush()
-
-
 def run_campaign(maneuvers: Sequence[Maneuver], settings: CampaignSettings, executor: Executor | None = None, *,
-                 progress: bool = False) -> CampaignResult:
+                 progress: bool | None = False) -> CampaignResult:
     """Every maneuver on ``executor`` (default: every local core), then Table 4 over them in
-    their order. A maneuver no worker finished is reported as ``failed: <why>``."""
+    their order. A maneuver no worker finished is reported as ``failed: <why>``. ``progress``:
+    a bar of the maneuvers done on stderr (:mod:`..progress`)."""
     executor = executor or LocalProcesses()
     t0 = time.perf_counter()
-    done = executor.run(run_maneuver, [(m, settings) for m in maneuvers], _Bar(progress))
+    with Progress(len(maneuvers), "campaign", " maneuvers", progress) as bar:
+        done = executor.run(run_maneuver, [(m, settings) for m in maneuvers], lambda n, _total: bar.set_to(n))
     results = [failed_result(m.name, settings.config, f"failed: {r.why}") if isinstance(r, Lost) else r
                for m, r in zip(maneuvers, done, strict=True)]
     wall = time.perf_counter() - t0
@@ -121,9 +104,9 @@ def run_campaign(maneuvers: Sequence[Maneuver], settings: CampaignSettings, exec
 
 
 def write_campaign(campaign: CampaignResult, out: Path, *, figures: FigureOptions | None = DEFAULT_FIGURES,
-                   ) -> dict[str, Path]:
+                   progress: bool | None = False) -> dict[str, Path]:
     """The campaign's files into the directory ``out`` (module docstring); the Fig. 12 plots in
-    the ``figures`` formats (None: none)."""
+    the ``figures`` formats (None: none), with a bar on stderr per ``progress``."""
     config = campaign.settings.config
     lags = _lags(config)
     texts = {
@@ -139,22 +122,29 @@ def write_campaign(campaign: CampaignResult, out: Path, *, figures: FigureOption
     if figures is not None:
         frequency_lags = f"{config.frequency.n_lags} lags" if config.frequency is not None else ""
         for path in campaign_figures(out, campaign.table, campaign.results, formats=figures.formats, dpi=figures.dpi,
-                                     lags=f"{lags} lags", frequency_lags=frequency_lags):
+                                     lags=f"{lags} lags", frequency_lags=frequency_lags, progress=progress):
             paths[path.stem] = path
     return paths
 
 
 def campaign_to(out: str | Path, maneuvers: Sequence[Maneuver], settings: CampaignSettings,
-                executor: Executor | None = None, *, progress: bool = False,
+                executor: Executor | None = None, *, progress: bool | None = False,
                 figures: FigureOptions | None = DEFAULT_FIGURES, force: bool = False,
                 inputs: Iterable[str | Path] = ()) -> CampaignResult:
     """:func:`run_campaign` written to ``out`` (:func:`.files.output_directory`: checked
-    before the first maneuver runs, complete or absent; never over an input bag or ``inputs``)."""
+    before the first maneuver runs, complete or absent; never over an input bag or ``inputs``).
+    An input that is not a regular file or a directory is a :class:`.errors.BagError` before
+    anything runs (:func:`.offline.bags.check_bag`)."""
     bags = sorted({m.bag for m in maneuvers})
+    for bag in bags:
+        # A FIFO, a device or a symbolic link loop is refused before anything runs; a missing
+        # bag fails its maneuver alone (``failed: ... no such bag``), the others still count.
+        if input_problem(bag) != "no such file or directory":
+            check_bag(bag)
     with output_directory(out, force=force, inputs=(*bags, *inputs)) as tmp:
         campaign = run_campaign(maneuvers, settings, executor, progress=progress)
         t0 = time.perf_counter()
-        written = write_campaign(campaign, tmp, figures=figures)
+        written = write_campaign(campaign, tmp, figures=figures, progress=progress)
         campaign.written = {k: Path(out) / p.relative_to(tmp) for k, p in written.items()}
         campaign.write_seconds = time.perf_counter() - t0
     return campaign

@@ -16,6 +16,7 @@ from typing import Any
 
 import numpy as np
 
+from ..progress import track
 from .run import ManeuverResult
 from .table4 import Table4Row
 
@@ -51,18 +52,17 @@ def _frequency_beside(rows: Sequence[Table4Row], results: Sequence[ManeuverResul
 
 def campaign_figures(out: Path, rows: Sequence[Table4Row], results: Sequence[ManeuverResult], *,
                      formats: Sequence[str] = ("png",), dpi: int | None = None, lags: str = "configured lags",
-                     frequency_lags: str = "configured lags") -> list[Path]:
+                     frequency_lags: str = "configured lags", progress: bool | None = False) -> list[Path]:
     """``fig12_<model>.<fmt>`` for every model with an estimate in some maneuver: the
     time-domain values with the frequency-domain ones beside them when the campaign has both,
     the frequency-domain ones alone when it has only those (``frequency_lags``: how their
-    corrected bars' lags are named)."""
+    corrected bars' lags are named). ``progress``: a bar per figure on stderr."""
     from ..offline.figures import DEFAULT_DPI, figure12  # noqa: PLC0415 - matplotlib only when drawing
 
     written: list[Path] = []
-    for model in dict.fromkeys(r.model for r in rows):
+    models = [m for m in dict.fromkeys(r.model for r in rows) if any(r.maneuvers for r in rows if r.model == m)]
+    for model in track(models, len(models), "figures", " figures", progress):
         mine = [r for r in rows if r.model == model]
-        if not any(r.maneuvers for r in mine):
-            continue
         primary = [r for r in mine if r.method == "time"]
         if primary:
             method, extra = "time", _frequency_beside(mine, results, [r.parameter for r in primary])

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import math
 import numbers
+import os
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -56,7 +57,9 @@ def from_bags(bags: Sequence[str | Path]) -> list[Maneuver]:
     """One maneuver per replay bag, in the order given, named after the bag."""
     if not bags:
         raise ConfigError("a campaign needs at least one replay bag (INPUT)")
-    out = [Maneuver(_bag_name(Path(b).resolve()), str(b)) for b in bags]
+    # (os.path.realpath: "." is named after its directory; a symbolic link loop is left as it is,
+    # for the bag check to refuse.)
+    out = [Maneuver(_bag_name(Path(os.path.realpath(b))), str(b)) for b in bags]
     _check_unique([m.name for m in out], "INPUT")
     return out
 

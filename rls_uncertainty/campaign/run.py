@@ -30,14 +30,14 @@ from collections.abc import Iterable, Iterator, Mapping
 from dataclasses import dataclass, field, replace
 from typing import Any
 
+from ..aero.models import ModelConfig
+from ..datapath.config import PipelineConfig
 from ..datapath.inputs import Stamped
 from ..errors import RlsUncertaintyError
 from ..estimator import EstimatorBank
 from ..offline.bags import InputStream
 from ..offline.replay import run_pipeline
 from ..offline.results import ReplayResult
-from ..settings.config import PipelineConfig
-from ..settings.models import ModelConfig
 from .maneuvers import Maneuver
 
 __all__ = ["CampaignSettings", "ParameterResult", "ManeuverResult", "MANEUVER_COLUMNS", "run_maneuver",

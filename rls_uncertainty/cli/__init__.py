@@ -6,27 +6,73 @@ One module per group of commands: :mod:`.simulation` (``simulate``, ``montecarlo
 ``disable``, ``reset``). A setting's flag is made from its declaration on its options class
 (:mod:`.flags`), so every command names, bounds and explains it the same way. Errors: a usage
 error or one of the package's own errors (or a file-system error) is one line and exit status
-2; anything else is a bug and keeps its traceback.
+2; anything else is a bug and keeps its traceback. Stopping: Ctrl-C (SIGINT), and for the
+commands without ROS SIGTERM and SIGHUP too, unwind the command as an exception would (its
+worker processes ended, its unfinished output directory removed, :mod:`..files`) and end it
+with one line and exit status 128 + the signal's number (130 for Ctrl-C, 143 for SIGTERM). The
+ROS commands handle their signals themselves (the node and rclpy, the dashboard's loop).
 """
 
 from __future__ import annotations
 
 import argparse
 import os
+import signal
 import sys
+import threading
+from collections.abc import Iterator
+from contextlib import contextmanager
+from types import FrameType
 from typing import NoReturn
 from xml.etree import ElementTree
 
-from ..errors import RlsUncertaintyError
+from ..errors import MissingExtra, RlsUncertaintyError
+from ..extras import optional
 from .bags import add_convert, add_make_bag
 from .offline import add_campaign, add_replay
 from .ros import add_demo, add_operator_commands, add_play
 from .simulation import add_montecarlo, add_multisine, add_simulate
 
-__all__ = ["main", "build_parser"]
+__all__ = ["main", "build_parser", "estimator_node"]
 
 _SUBCOMMANDS = (add_demo, add_simulate, add_montecarlo, add_multisine, add_make_bag, add_convert, add_replay,
                 add_campaign, add_play, add_operator_commands)
+# The commands that handle their signals themselves (rclpy's handlers, the dashboard's loop).
+_OWN_SIGNALS = frozenset({"demo", "play", "dashboard", "status", "enable", "disable", "reset"})
+
+
+class Stopped(KeyboardInterrupt):
+    """A stopping signal (SIGINT, SIGTERM, SIGHUP), raised in the main thread where it arrived,
+    so that the command unwinds as for Ctrl-C. (Not KeyboardInterrupt itself for SIGINT: a
+    Ctrl-C that reached a replay as it started, handled here, still made the interpreter end
+    the process by SIGINT at exit instead of the status returned; CPython marks an unhandled
+    interrupt by the exception's exact type, so a subclass is never marked.)"""
+
+    def __init__(self, signum: int) -> None:
+        super().__init__(signal.Signals(signum).name)
+        self.signum = signum
+
+
+def _stop(signum: int, _frame: FrameType | None) -> None:
+    raise Stopped(signum)
+
+
+@contextmanager
+def _stopping_signals(command: str) -> Iterator[None]:
+    """While the command runs, SIGINT, SIGTERM and SIGHUP raise :class:`Stopped`; a signal the
+    process was started ignoring (``nohup``, a background job) stays ignored, and the handlers
+    before are put back after (``main`` called from a program)."""
+    before = {}
+    if command not in _OWN_SIGNALS and threading.current_thread() is threading.main_thread():
+        for signum, usual in ((signal.SIGINT, signal.default_int_handler), (signal.SIGTERM, signal.SIG_DFL),
+                              (signal.SIGHUP, signal.SIG_DFL)):
+            if signal.getsignal(signum) is usual:
+                before[signum] = signal.signal(signum, _stop)
+    try:
+        yield
+    finally:
+        for signum, handler in before.items():
+            signal.signal(signum, handler)
 
 
 class _Parser(argparse.ArgumentParser):
@@ -65,7 +111,8 @@ def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
-        code = int(args.func(args) or 0)
+        with _stopping_signals(args.command):
+            code = int(args.func(args) or 0)
         sys.stdout.flush()  # here, so that a reader gone (below) is seen here
         return code
     except BrokenPipeError:
@@ -80,3 +127,22 @@ def main(argv: list[str] | None = None) -> int:
         message = " ".join(str(exc).split())
         print(f"rls-uncertainty {args.command}: error: {message}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt as exc:
+        # Ctrl-C or a stopping signal: everything in the way unwound (workers ended, unfinished
+        # outputs removed); one line, and the status a shell gives a command a signal ended.
+        signum = exc.signum if isinstance(exc, Stopped) else signal.SIGINT
+        removed = "" if args.command in _OWN_SIGNALS else "; its unfinished output removed"
+        print(f"rls-uncertainty {args.command}: stopped by {signal.Signals(signum).name}{removed}", file=sys.stderr)
+        return 128 + int(signum)
+
+
+def estimator_node() -> int:
+    """The console script ``estimator_node``: :func:`..ros.node.main`, or one line naming the
+    extra to install when the ROS stack is missing (exit status 2)."""
+    try:
+        with optional("ros"):
+            from ..ros.node import main as node_main
+    except MissingExtra as exc:
+        print(f"estimator_node: error: {exc}", file=sys.stderr)
+        return 2
+    return node_main()

@@ -7,7 +7,7 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import ConfigError
-from .flags import FORCE_HELP, integer, real
+from .flags import FORCE_HELP, add_progress, integer, progress_mode, real
 from .simulation import noise_on, noise_on_name
 
 __all__ = ["add_make_bag", "add_convert"]
@@ -37,7 +37,8 @@ def _make_campaign(args: argparse.Namespace) -> int:
         raise ConfigError("--campaign needs --gust-intensity (sigma_w in m/s, or light, moderate or severe)")
     gust = DrydenVertical(args.gust_intensity, scale_length(SimulationConfig().altitude))
     paths = write_campaign_bags(args.out, args.campaign, gust, band_level=args.noise / 100.0,
-                                band_limited_on=noise_on(args.noise_on), seed=args.seed, force=args.force)
+                                band_limited_on=noise_on(args.noise_on), seed=args.seed, force=args.force,
+                                progress=progress_mode(args))
     print(f"wrote {len(paths)} replay bags to {args.out}: T-2 maneuvers in Dryden vertical gusts sigma_w "
           f"{gust.sigma:.3g} m/s, L_w {gust.scale_length:.0f} m, {args.noise:g}% band-limited noise on "
           f"{noise_on_name(args.noise_on)}, seed {args.seed} (settings in {Path(args.out) / 'campaign.yaml'})")
@@ -87,6 +88,7 @@ def add_make_bag(sub: Any) -> None:
                          "'responses' (alpha, q, a_z) (default: all for one maneuver, the bundled bag's; with "
                          "--campaign the simulation's, responses: docs/validation.md, Table 3)")
     mb.add_argument("--force", action="store_true", help=FORCE_HELP)
+    add_progress(mb)
     mb.set_defaults(func=_make_bag)
 
 

@@ -22,7 +22,7 @@ from ..schema import default_of, expected, kind_of, number, settings, valid
 from ..settings.parameters import PARAMETER_NAMES, Parameter
 
 __all__ = ["RENAMED_FLAGS", "add_parameter_flags", "add_option_flags", "parameter_overrides", "option_values",
-           "add_workers", "real", "integer", "FORCE_HELP"]
+           "add_workers", "add_progress", "progress_mode", "real", "integer", "FORCE_HELP"]
 
 # Flags renamed for one vocabulary across commands: the old one is refused naming the new one.
 RENAMED_FLAGS = {
@@ -192,7 +192,7 @@ def add_option_flags(parser: argparse.ArgumentParser, cls: type) -> None:
         if kind is bool:
             parser.add_argument(s.cli, dest=f.name, action="store_true", help=s.description)
             continue
-        shown = ",".join(default) if isinstance(default, tuple) else default
+        shown = (",".join(default) or "none") if isinstance(default, tuple) else default
         ok = kind is tuple or s.own_check
         what = "" if ok else f"; {expected(kind, s)}"
         parser.add_argument(s.cli, dest=f.name, default=default, type=_option_type(kind, s),
@@ -230,6 +230,22 @@ def add_workers(parser: argparse.ArgumentParser, what: str) -> None:
                         help=f"run {what} on the Dask cluster whose scheduler listens at ADDRESS (tcp://host:8786) "
                              "(default: local processes)")
     add_renamed(parser, ["--workers"])
+
+
+def add_progress(parser: argparse.ArgumentParser) -> None:
+    """``--progress`` and ``--quiet``: the progress bars on stderr always, or never (default: on a
+    terminal only; :mod:`..progress`)."""
+    group = parser.add_mutually_exclusive_group()
+    group.add_argument("--progress", action="store_true",
+                       help="progress bars with rate and time left on stderr even when it is not a terminal "
+                            "(default: on a terminal only)")
+    group.add_argument("--quiet", action="store_true", help="no progress bars")
+
+
+def progress_mode(args: argparse.Namespace) -> bool | None:
+    """:mod:`..progress`'s mode from :func:`add_progress`'s flags: True, False, or None (on a
+    terminal only)."""
+    return True if args.progress else False if args.quiet else None
 
 
 class _Renamed(argparse.Action):

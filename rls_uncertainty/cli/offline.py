@@ -13,15 +13,18 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import ConfigError
+from ..extras import require
 from ..offline.figures import FigureOptions
 from .flags import (
     FORCE_HELP,
     add_option_flags,
     add_parameter_flags,
+    add_progress,
     add_renamed,
     add_workers,
     option_values,
     parameter_overrides,
+    progress_mode,
     real,
 )
 from .simulation import ESTIMATOR_FLAGS
@@ -64,16 +67,20 @@ def _yaml_file(name_or_path: str, directory: Path) -> Path:
 
 
 def _figures(args: argparse.Namespace) -> FigureOptions | None:
-    return None if args.no_figures else FigureOptions(**option_values(args, FigureOptions))
+    """The figure options, or None with --no-figures; matplotlib checked before any work."""
+    if args.no_figures:
+        return None
+    require("figures", what="drawing the figures", instead="give --no-figures")
+    return FigureOptions(**option_values(args, FigureOptions))
 
 
 def _replay(args: argparse.Namespace) -> int:
-    from ..offline.compare import DEFAULT_ATOL, DEFAULT_RTOL, comparable, compare_replays, read_run
+    from ..offline.compare import DEFAULT_ATOL, DEFAULT_RTOL, check_reference, comparable, compare_replays
     from ..offline.replay import planned_run, replay, run_summary
     from ..settings.models import config_dir
 
     params = replay_params(args)
-    figures = FigureOptions(**option_values(args, FigureOptions))
+    figures = _figures(args)
     # Files the replay reads besides the bag: never replaced by its output, even with --force.
     inputs = [_yaml_file(args.config, config_dir())] if args.config else []
     if isinstance(params.get("aircraft"), str) and params["aircraft"]:
@@ -83,9 +90,9 @@ def _replay(args: argparse.Namespace) -> int:
     if args.compare:  # what can be checked before the bag is read, is
         inputs.append(args.compare)
         comparable(planned_run(params, start=args.start, end=args.end, strict=not args.lenient),
-                   read_run(args.compare), bag=False)
+                   check_reference(args.compare), bag=False)
     result = replay(args.bag, params, args.out, start=args.start, end=args.end, strict=not args.lenient,
-                    progress=not args.quiet, plots=not args.no_figures, figures=figures, force=args.force,
+                    progress=progress_mode(args), plots=figures is not None, figures=figures, force=args.force,
                     inputs=inputs)
     print(run_summary(result))
     print(f"read in {result.wall_seconds:.2f} s ({result.speed:.0f}x real time); wrote {args.out}")
@@ -103,7 +110,7 @@ def _replay(args: argparse.Namespace) -> int:
 def _campaign(args: argparse.Namespace) -> int:
     """Many maneuvers through the replay's pipeline into Table 4 and Fig. 12 (docs/campaign.md)."""
     from ..campaign import CampaignSettings, campaign_to, from_bags, load_maneuvers
-    from ..executors import executor_for
+    from ..executors import LocalProcesses, executor_for
     from ..settings.models import config_dir
     from ..settings.parameters import node_config, pipeline_config
 
@@ -119,7 +126,9 @@ def _campaign(args: argparse.Namespace) -> int:
     if args.maneuvers:
         inputs.append(args.maneuvers)
     settings = CampaignSettings(pipeline_config(params), node_config(params).topics, strict=not args.lenient)
-    result = campaign_to(args.out, maneuvers, settings, executor, progress=not args.quiet,
+    if isinstance(executor, LocalProcesses) and (note := executor.capped(len(maneuvers), "maneuver")):
+        print(f"rls-uncertainty campaign: {note}", file=sys.stderr)
+    result = campaign_to(args.out, maneuvers, settings, executor, progress=progress_mode(args),
                          figures=_figures(args), force=args.force, inputs=inputs)
     print(result.summary(), end="")
     s = result.seconds()
@@ -131,7 +140,7 @@ def _campaign(args: argparse.Namespace) -> int:
 
 
 def _add_common(parser: argparse.ArgumentParser, no_figures: str) -> None:
-    """--config, the parameter flags, --lenient, the figure flags, --quiet and --force."""
+    """--config, the parameter flags, --lenient, the figure flags, --progress/--quiet and --force."""
     parser.add_argument("--config", help="ROS parameter file, e.g. config/t2.yaml (default: node defaults)")
     parser.add_argument("--out", required=True, help="output directory")
     add_parameter_flags(parser, PARAMETER_FLAGS)
@@ -140,7 +149,7 @@ def _add_common(parser: argparse.ArgumentParser, no_figures: str) -> None:
     parser.add_argument("--no-figures", action="store_true", help=no_figures)
     add_option_flags(parser, FigureOptions)
     add_renamed(parser, ["--no-figures"])
-    parser.add_argument("--quiet", action="store_true", help="no progress bar")
+    add_progress(parser)
     parser.add_argument("--force", action="store_true", help=FORCE_HELP)
 
 
@@ -153,7 +162,8 @@ def add_replay(sub: Any) -> None:
     rp.add_argument("--compare", metavar="DIR",
                     help="compare the outputs with an earlier replay's in DIR sample by sample: exit 0 when equal "
                          "within the tolerance, 1 when not (the largest differences printed), 2 when the runs are "
-                         "not comparable (another bag, span, models, sample rate or no estimation method in common)")
+                         "not comparable (another bag, span, models, sample rate or no estimation method in common) "
+                         "or DIR is damaged (a value not finite, a malformed file, an inconsistent run.json)")
     rp.add_argument("--rtol", type=real(0.0), metavar="R",
                     help="--compare's relative tolerance, of |estimate| + its standard error (default 1e-6)")
     rp.add_argument("--atol", type=real(0.0), metavar="A",

@@ -7,6 +7,7 @@ import argparse
 from typing import Any
 
 from ..dashboard.settings import ServerOptions
+from ..extras import optional
 from .flags import add_option_flags, integer, option_values, real
 
 __all__ = ["add_demo", "add_play", "add_operator_commands"]
@@ -14,39 +15,44 @@ __all__ = ["add_demo", "add_play", "add_operator_commands"]
 
 def _demo(args: argparse.Namespace) -> int:
     """The live node on the bundled bag over DDS, beside the offline replay."""
-    from ..ros.demo import demo
+    with optional("ros"):
+        from ..ros.demo import demo
 
-    return demo(rate=args.rate)
+        return demo(rate=args.rate)
 
 
 def _play(args: argparse.Namespace) -> int:
-    from ..ros.player import play
+    with optional("ros"):
+        from ..ros.player import play
 
-    return play(args.bag, rate=args.rate, clock=not args.no_clock, reliable=not args.best_effort,
-                subscribers=args.subscribers, wait=args.wait, start_delay=args.delay, loops=args.loop,
-                window=args.window, ack_timeout=args.ack_timeout, report=args.report)
+        return play(args.bag, rate=args.rate, clock=not args.no_clock, reliable=not args.best_effort,
+                    subscribers=args.subscribers, wait=args.wait, start_delay=args.delay, loops=args.loop,
+                    window=args.window, ack_timeout=args.ack_timeout, report=args.report)
 
 
 def _dashboard(args: argparse.Namespace) -> int:
-    from ..dashboard.app import dashboard_options, run
+    with optional("dashboard", "ros"):
+        from ..dashboard.app import dashboard_options, run
 
-    server = option_values(args, ServerOptions)
-    return run(dashboard_options(server["host"], server["port"], args.node, args.replay, args.reference,
-                                 server["token"]))
+        return run(dashboard_options(option_values(args, ServerOptions), args.node, args.replay, args.reference))
 
 
 def _status(args: argparse.Namespace) -> int:
     from ..dashboard.settings import full_node_name
-    from ..ros.operate import status
 
-    return status(full_node_name(args.node), args.once, args.timeout)
+    with optional("ros"):
+        from ..ros.operate import status
+
+        return status(full_node_name(args.node), args.once, args.timeout)
 
 
 def _service(args: argparse.Namespace) -> int:
     from ..dashboard.settings import full_node_name
-    from ..ros.operate import call
 
-    return call(args.command, full_node_name(args.node), args.timeout)
+    with optional("ros"):
+        from ..ros.operate import call
+
+        return call(args.command, full_node_name(args.node), args.timeout)
 
 
 def add_demo(sub: Any) -> None:

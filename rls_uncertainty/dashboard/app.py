@@ -8,14 +8,17 @@ import asyncio
 import signal
 import socket
 import sys
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
+from ..ros.environment import discovery_environment
+from .feed import Feed
 from .hub import Hub, Source
 from .model import Sample
-from .server import Broadcaster, Inbox, asset_table, bind, check_assets, serve
-from .settings import ServerOptions, check_options, discovery_environment, full_node_name, load_reference
+from .server import Inbox, asset_table, bind, check_assets, serve
+from .settings import ServerOptions, check_options, full_node_name, load_reference
 
 if TYPE_CHECKING:  # annotations only: rclpy and the bag library are imported where they are used
     from .replay_source import ReplaySource
@@ -32,10 +35,11 @@ class DashboardOptions:
     reference: dict[str, float]
 
 
-def dashboard_options(host: str, port: int, node: str, replay: str | None = None, reference: str | None = None,
-                      token: str | None = None) -> DashboardOptions:
-    """Every option checked (ConfigError naming the one to change) before anything starts."""
-    server = check_options(host, port, token)
+def dashboard_options(server_values: Mapping[str, Any], node: str, replay: str | None = None,
+                      reference: str | None = None) -> DashboardOptions:
+    """Every option checked (ConfigError naming the one to change) before anything starts;
+    ``server_values`` are :class:`.settings.ServerOptions`' fields by name."""
+    server = check_options(**server_values)
     check_assets(asset_table())
     return DashboardOptions(server, full_node_name(node), Path(replay) if replay else None,
                             load_reference(reference) if reference else {})
@@ -45,9 +49,9 @@ class _Dispatch:
     """Items from a source (live or replay) into the hub, and the hub's messages out. Arrays and
     samples in a row are handed to the hub together (one ``samples`` message per batch)."""
 
-    def __init__(self, hub: Hub, broadcaster: Broadcaster) -> None:
+    def __init__(self, hub: Hub, feed: Feed) -> None:
         self.hub = hub
-        self.broadcaster = broadcaster
+        self.feed = feed
 
     def __call__(self, items: list[tuple]) -> None:
         arrays: list[tuple] = []
@@ -64,20 +68,22 @@ class _Dispatch:
         self._flush(arrays, samples)
 
     def _other(self, item: tuple) -> None:
-        hub, send = self.hub, self.broadcaster.send
+        hub, send = self.hub, self.feed.send
         if item[0] == "diagnostics":
             if hub.add_diagnostics(item[1]) is not None:
-                send(self.broadcaster.status())
+                send(self.feed.status())
                 for message in hub.quality_updates():
                     send(message)
         elif item[0] == "graph":
             if hub.set_graph(item[1]) is not None:
-                send(self.broadcaster.status())
+                send(self.feed.status())
         elif item[0] == "replay_done":
             hub.replay_finished(item[1])
-            send(self.broadcaster.status())
-            if item[1]:
-                print(f"rls-uncertainty dashboard: {item[1]}", file=sys.stderr, flush=True)
+            send(self.feed.status())
+            for problem in (item[1], hub.refused_text()):
+                if problem:
+                    print(f"rls-uncertainty dashboard: {hub.source.replay_dir}: {problem}", file=sys.stderr,
+                          flush=True)
 
     def _flush(self, arrays: list[tuple], samples: list[Sample]) -> None:
         if not (arrays or samples):
@@ -85,11 +91,11 @@ class _Dispatch:
         before = self.hub.state()["state"]
         for message in [*(self.hub.add_arrays(arrays) if arrays else []),
                         *(self.hub.add_samples(samples) if samples else [])]:
-            self.broadcaster.send(message)
+            self.feed.send(message)
         arrays.clear()
         samples.clear()
         if self.hub.state()["state"] != before:  # the first samples: "running" at once, not at the next diagnostics
-            self.broadcaster.send(self.broadcaster.status())
+            self.feed.send(self.feed.status())
 
 
 async def _main(options: DashboardOptions, hub: Hub, replay: ReplaySource | None, sock: socket.socket) -> None:
@@ -97,8 +103,8 @@ async def _main(options: DashboardOptions, hub: Hub, replay: ReplaySource | None
     stop = asyncio.Event()
     for sig in (signal.SIGINT, signal.SIGTERM):
         loop.add_signal_handler(sig, stop.set)
-    broadcaster = Broadcaster(hub)
-    dispatch = _Dispatch(hub, broadcaster)
+    feed = Feed(hub)
+    dispatch = _Dispatch(hub, feed)
     source: ReplaySource | RosSource
     if replay is not None:
         source = replay
@@ -110,13 +116,26 @@ async def _main(options: DashboardOptions, hub: Hub, replay: ReplaySource | None
         source = RosSource(options.node, inbox.put)
         source.start()
     try:
-        await serve(broadcaster, options.server, sock, stop)
+        await serve(feed, options.server, sock, stop, warn=_warn)
     finally:
         source.stop()
-    dropped = ", ".join(f"{k} {v}" for k, v in sorted(hub.pairing.dropped.items())) or "none"
-    inbound = ", ".join(f"{k} {v}" for k, v in broadcaster.inbound.items())
-    print(f"dashboard stopped: {hub.samples_shown} samples; arrays dropped: {dropped}; from pages: {inbound}; "
-          f"resyncs {broadcaster.resyncs}", file=sys.stderr)
+    print(f"dashboard stopped: {hub.samples_shown} samples; {_counts(hub, feed)}", file=sys.stderr)
+
+
+def _warn(text: str) -> None:
+    print(f"rls-uncertainty dashboard: {text}", file=sys.stderr, flush=True)
+
+
+def _counts(hub: Hub, feed: Feed) -> str:
+    """What was dropped or refused, for the line printed at exit."""
+    def listed(counts: Mapping[str, int]) -> str:
+        return ", ".join(f"{k} {v}" for k, v in sorted(counts.items())) or "none"
+
+    refused = {k: v for k, v in hub.refused.items() if v}
+    return (f"arrays dropped: {listed(hub.pairing.dropped)}; samples refused: {listed(refused)}; "
+            f"from pages: {', '.join(f'{k} {v}' for k, v in feed.inbound.items())}; "
+            f"connections refused: {', '.join(f'{k} {v}' for k, v in feed.refused.items())}; "
+            f"resyncs {feed.resyncs}; snapshots built {feed.snapshots_built}")
 
 
 def run(options: DashboardOptions) -> int:

@@ -11,15 +11,26 @@ results sit side by side without mixing.
 from __future__ import annotations
 
 import time
-from collections.abc import Callable, Iterable, Mapping
+from collections.abc import Callable, Iterable, Iterator, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
+from ..datapath.outputs import FIT_ARRAYS, ArrayKey
+from ..ros.health import HealthTracker, StatusTuple, parse_statuses
 from .fit import Fit, Identifiability, fit_of, identifiability_of, quality_json
-from .health import HealthTracker, StatusTuple, parse_statuses
-from .model import FIT_ARRAYS, MAX_PENDING, ArrayKey, ModelHistory, Pairing, Sample, array_update, sample_columns
+from .messages import FRAME_VALUES, samples_messages, snapshot_messages
+from .model import MAX_MODELS, MAX_PARAMETERS, MAX_PENDING, ModelHistory, Pairing, Sample, array_update, refusal
 
-__all__ = ["Source", "Hub"]
+__all__ = ["Source", "Hub", "REFUSED"]
+
+# Why a sample or array was refused, in the words of the page's banner and the log.
+REFUSED = {
+    "se_not_positive": "a standard error of 0 or less",
+    "non_finite": "a value not finite",
+    "time_out_of_range": "a time outside 1970-2262",
+    "too_many_parameters": f"more than {MAX_PARAMETERS} parameters in a model",
+    "too_many_models": f"more than {MAX_MODELS} models of a method",
+}
 
 
 @dataclass(frozen=True)
@@ -59,6 +70,8 @@ class Hub:
         # does (a busy machine), which is not a node lost.
         self.node_seen = False
         self._samples_by: dict[tuple[str, str], int] = {}  # complete samples per (method, model)
+        self._models: dict[str, set[str]] = {}  # by method: the models admitted (at most MAX_MODELS)
+        self.refused: dict[str, int] = {}  # complete samples not shown, by reason (REFUSED)
         self.history_resets = 0
         self._capacity = capacity
         self._clock = clock
@@ -68,12 +81,17 @@ class Hub:
         """Feed ``(key, Float64MultiArray, published_ns)`` tuples (rclpy, rosbags or
         :mod:`...cdr` messages; None for a payload that could not be decoded); the messages of
         what they completed: ``samples`` per method, ``quality`` per model whose fit or
-        identifiability came."""
+        identifiability came. Arrays of a model beyond the first :data:`.model.MAX_MODELS` of
+        their method, or of more than :data:`.model.MAX_PARAMETERS` parameters, are dropped and
+        counted before they are paired."""
         done: dict[tuple[str, str], list[Sample]] = {}
         changed: list[tuple[str, str]] = []
         for key, msg, published_ns in arrays:
             if msg is None:
                 self.pairing.count("undecodable")
+                continue
+            if not self._admit_model(key.method, key.model):
+                self.pairing.count("too_many_models")
                 continue
             try:
                 if key.suffix in FIT_ARRAYS:
@@ -83,27 +101,52 @@ class Hub:
             except ValueError:
                 self.pairing.count("bad_layout")
                 continue
+            if len(update.names) > MAX_PARAMETERS:
+                self.pairing.count("too_many_parameters")
+                continue
             s = self.pairing.add(update)
-            if s is not None and self._store(s):
-                done.setdefault((s.method, s.model), []).append(s)
+            if s is not None:
+                self._collect(done, s)
         return self._samples_messages(done) + [self._quality(k) for k in dict.fromkeys(changed)]
 
     def add_samples(self, samples: Iterable[Sample]) -> list[dict]:
         """Feed complete samples (a replay's CSV files); their ``samples`` messages."""
         done: dict[tuple[str, str], list[Sample]] = {}
         for s in samples:
-            if self._store(s):
-                done.setdefault((s.method, s.model), []).append(s)
+            if self._admit_model(s.method, s.model):
+                self._collect(done, s)
+            else:
+                self._refuse("too_many_models")
         return self._samples_messages(done)
+
+    def _collect(self, done: dict[tuple[str, str], list[Sample]], s: Sample) -> None:
+        """Store ``s`` and list it among the samples to send; a restarted history sends only
+        what came after the restart (the page restarts too)."""
+        kept = self._store(s)
+        if kept:
+            run = done.setdefault((s.method, s.model), [])
+            if kept == "restart":
+                run.clear()
+            run.append(s)
+
+    def _admit_model(self, method: str, model: str) -> bool:
+        models = self._models.setdefault(method, set())
+        if model in models:
+            return True
+        if len(models) >= MAX_MODELS:
+            return False
+        models.add(model)
+        return True
+
+    def _refuse(self, reason: str) -> None:
+        self.refused[reason] = self.refused.get(reason, 0) + 1
 
     def _samples_messages(self, done: Mapping[tuple[str, str], list[Sample]]) -> list[dict]:
         out = []
         for method in dict.fromkeys(m for m, _ in done):
-            mine = {model: ss for (m, model), ss in done.items() if m == method}
-            published = [s.published_ns for ss in mine.values() for s in ss if s.published_ns is not None]
-            out.append({"type": "samples", "method": method,
-                        "models": {model: sample_columns(ss) for model, ss in mine.items()},
-                        "published_ns": max(published) if published else None, "sent_ns": self._clock()})
+            runs = [(model, ss, self._samples_by[(method, model)]) for (m, model), ss in done.items()
+                    if m == method and ss]
+            out.extend(samples_messages(method, runs, self._clock()))
         return out
 
     def _add_fit(self, key: ArrayKey, msg: Any) -> tuple[str, str]:
@@ -112,7 +155,10 @@ class Hub:
         if key.suffix == "fit":
             self.fits[which] = fit_of(msg)
         else:
-            self.tables[which] = identifiability_of(msg)
+            table = identifiability_of(msg)
+            if len(table.names) > MAX_PARAMETERS:
+                raise ValueError(f"identifiability: {len(table.names)} parameters")
+            self.tables[which] = table
         return which
 
     def _quality(self, which: tuple[str, str]) -> dict:
@@ -133,29 +179,36 @@ class Hub:
                 out.append(message)
         return out
 
-    def _store(self, s: Sample) -> bool:
-        """Keep ``s`` in its model's history; False when it is dropped (and counted) as a
-        sample completed after a newer one: a late partner array among the newest
-        :data:`.model.MAX_PENDING` samples (a late joiner's burst of kept samples), or a
-        duplicate."""
+    def _store(self, s: Sample) -> str:
+        """Keep ``s`` in its model's history: ``"kept"``, ``"restart"`` (its history started
+        over with it), or ``""``: refused (:func:`.model.refusal`), or dropped as a sample
+        completed after a newer one (a late partner array among the newest
+        :data:`.model.MAX_PENDING` samples: a late joiner's burst of kept samples), or a
+        duplicate; each counted."""
+        reason = refusal(s)
+        if reason:
+            self._refuse(reason)
+            return ""
         which = (s.method, s.model)
         h = self.histories.get(which)
         if h is not None and h.names == s.names and h.last_stamp is not None and s.stamp_ns <= h.last_stamp:
             floor = h.stamp_from_end(MAX_PENDING)
             if floor is not None and s.stamp_ns >= floor:
                 self.pairing.count("out_of_order")
-                return False
+                return ""
+        kept = "kept"
         if h is None or h.names != s.names or (h.last_stamp is not None and s.stamp_ns <= h.last_stamp):
             # A new model, another set of parameters, or time going back further than the
             # pairing window (a looped replay): the display history restarts for this model
             # (the page does the same when it sees the time go back).
             if h is not None:
                 self.history_resets += 1
+                kept = "restart"
             h = self.histories[which] = (ModelHistory(s.names) if self._capacity is None
                                          else ModelHistory(s.names, self._capacity))
         h.append(s)
         self._samples_by[which] = self._samples_by.get(which, 0) + 1
-        return True
+        return kept
 
     @property
     def samples_total(self) -> int:
@@ -196,11 +249,17 @@ class Hub:
                 "discovery_range": s.discovery_range, "static_peers": s.static_peers,
                 "replay_dir": s.replay_dir, "reference": dict(s.reference)}
 
-    def snapshot(self) -> dict:
-        methods: dict[str, dict] = {}
-        for (method, model), h in self.histories.items():
-            methods.setdefault(method, {})[model] = h.columns()
-        return {"type": "snapshot", "methods": methods, "quality": list(self._quality_sent.values())}
+    def snapshot_messages(self, max_values: int = FRAME_VALUES) -> Iterator[dict]:
+        """The page's state from scratch (:func:`.messages.snapshot_messages`): every method's
+        display histories and every model's latest quality, in pieces."""
+        return snapshot_messages(self.histories, self._samples_by, list(self._quality_sent.values()), max_values)
+
+    def counts(self) -> dict[str, dict[str, int]]:
+        """Samples shown per method and model (the ``count`` of the ``samples`` messages)."""
+        out: dict[str, dict[str, int]] = {}
+        for (method, model), n in self._samples_by.items():
+            out.setdefault(method, {})[model] = n
+        return out
 
     def state(self) -> dict:
         """What the page says above the panels: ``no_node``, ``waiting_diagnostics``,
@@ -236,16 +295,28 @@ class Hub:
             if not_ready:
                 text += "; " + "; ".join(not_ready)
             return {"state": "no_samples", "text": text}
-        return {"state": "running", "text": f"{s.node}: {self.samples_shown} samples received"}
+        return {"state": "running", "text": f"{s.node}: {self.samples_shown} samples received{self._refused_note()}"}
+
+    def refused_text(self) -> str:
+        """``N samples refused (REASON N, ...)``, or empty when none was."""
+        if not self.refused:
+            return ""
+        total = sum(self.refused.values())
+        reasons = ", ".join(f"{REFUSED.get(k, k)}: {n}" for k, n in sorted(self.refused.items()))
+        return f"{total} sample{'s' if total != 1 else ''} refused, not drawn ({reasons})"
+
+    def _refused_note(self) -> str:
+        text = self.refused_text()
+        return f"; {text}" if text else ""
 
     def _replay_text(self) -> str:
         s = self.source
         where = f"{s.replay_dir}/{s.replay_file}"
         if self.replay_error:
-            return f"replay {where}: {self.samples_shown} samples, then {self.replay_error}"
+            return f"replay {where}: {self.samples_shown} samples{self._refused_note()}, then {self.replay_error}"
         if not self.replay_done:
-            return f"reading replay {where}: {self.samples_shown} samples so far"
-        text = f"replay of {s.replay_dir}: {self.samples_shown} samples"
+            return f"reading replay {where}: {self.samples_shown} samples so far{self._refused_note()}"
+        text = f"replay of {s.replay_dir}: {self.samples_shown} samples{self._refused_note()}"
         if s.replay_file.endswith(".csv"):
             text += (f" from {s.replay_file} (no estimates.mcap: no fit, identifiability or input health, which "
                      "rls-uncertainty replay writes into estimates.mcap)")
@@ -255,4 +326,5 @@ class Hub:
         health = self.health.latest
         return {"type": "health", **self.state(), "node_present": self.node_present,
                 "health": health.as_json() if health is not None else None,
-                "dropped": dict(self.pairing.dropped), "history_resets": self.history_resets}
+                "dropped": dict(self.pairing.dropped), "refused": dict(self.refused),
+                "history_resets": self.history_resets}

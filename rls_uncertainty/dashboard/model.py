@@ -28,22 +28,19 @@ import math
 from collections import OrderedDict
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Any, NamedTuple
+from typing import Any
 
 import numpy as np
 
-from ..datapath.outputs import parse_stamp_label
+from ..aero.models import OUTPUTS, REGRESSORS
+from ..datapath.outputs import (
+    PAIRED,
+    TIME_DOMAIN,
+    ArrayKey,
+    parse_stamp_label,
+)
 
 __all__ = [
-    "PAIRED",
-    "FIT_ARRAYS",
-    "SHOWN",
-    "TIME_DOMAIN",
-    "FREQUENCY_DOMAIN",
-    "METHODS",
-    "ArrayKey",
-    "array_key",
-    "split_topic",
     "ArrayUpdate",
     "array_update",
     "Sample",
@@ -52,55 +49,21 @@ __all__ = [
     "MAX_PENDING",
     "MAX_WAITING",
     "HISTORY_CAPACITY",
+    "MAX_MODELS",
+    "MAX_PARAMETERS",
+    "MAX_STAMP_NS",
+    "refusal",
 ]
 
-# The four arrays a sample needs, by suffix of ~/M/<suffix>.
-PAIRED = ("estimates", "standard_errors", "standard_errors_conventional", "converged")
-# Published once per diagnostics period (docs/node.md#fit-and-identifiability): Fig. 5's
-# residual autocorrelation with R^2, and the parameters' identifiability.
-FIT_ARRAYS = ("fit", "identifiability")
-SHOWN = PAIRED + FIT_ARRAYS  # every array the dashboard subscribes to
-TIME_DOMAIN = "time"  # the method of ~/M/<array>: recursive least squares (Eqs. 9-22)
-FREQUENCY_DOMAIN = "frequency"  # of ~/M/frequency/<array>: equation error in the frequency domain (docs/frequency.md)
-METHODS = (TIME_DOMAIN, FREQUENCY_DOMAIN)
 MAX_PENDING = 64  # newer samples completed before a stamp's missing partner arrays count as lost
 MAX_WAITING = 4096  # stamps per model awaiting partners (a late joiner's burst of kept samples)
 HISTORY_CAPACITY = 20_000  # samples per model; 200 s at full rate at 50 Hz, older data thinned
-
-
-class ArrayKey(NamedTuple):
-    """What a topic under the node carries: ``method`` (one of :data:`METHODS`), ``model`` and
-    ``suffix`` (one of :data:`SHOWN`; of :data:`PAIRED` for :data:`FREQUENCY_DOMAIN`)."""
-
-    method: str
-    model: str
-    suffix: str
-
-
-def array_key(relative: str) -> ArrayKey | None:
-    """The :class:`ArrayKey` of a topic relative to the node (``CZ/estimates``), or None for a
-    topic the dashboard does not show. ``M/frequency/<suffix>`` is the frequency-domain method's
-    (only the paired arrays: it publishes no fit or identifiability)."""
-    parts = relative.split("/")
-    if len(parts) == 2 and parts[0] and parts[1] in SHOWN:
-        return ArrayKey(TIME_DOMAIN, parts[0], parts[1])
-    if len(parts) == 3 and parts[0] and parts[1] == FREQUENCY_DOMAIN and parts[2] in PAIRED:
-        return ArrayKey(FREQUENCY_DOMAIN, parts[0], parts[2])
-    return None
-
-
-def split_topic(topic: str) -> tuple[str, ArrayKey] | None:
-    """``(node, key)`` of an absolute topic of a node's shown arrays
-    (``/ns/rls_estimator/CZ/frequency/estimates``: ``/ns/rls_estimator`` and the key), for a
-    reader that does not know the node's name (a bag); None for any other topic. The
-    frequency-domain form is tried first, so its ``frequency`` is never taken for a model."""
-    parts = topic.split("/")
-    for depth in (3, 2):
-        if len(parts) > depth + 1:
-            key = array_key("/".join(parts[-depth:]))
-            if key is not None:
-                return "/".join(parts[:-depth]), key
-    return None
+# What a node can publish (Eq. 2): six models per method, each with at most one parameter per
+# regressor. Beyond, arrays and samples are refused and counted: memory stays bounded whatever
+# a recording or a node sends.
+MAX_MODELS = len(OUTPUTS)
+MAX_PARAMETERS = len(REGRESSORS)
+MAX_STAMP_NS = 2**63 - 1  # int64 nanoseconds since 1970: up to the year 2262
 
 
 @dataclass(frozen=True)
@@ -254,11 +217,12 @@ class ModelHistory:
         """The stamp of the ``k``-th newest sample (the oldest when fewer are held)."""
         return int(self._t[max(0, self.size - k)]) if self.size else None
 
-    def columns(self, start: int = 0) -> dict:
-        """Samples ``start`` onwards as JSON-ready columns: ``t`` (s), and per quantity one list
-        per parameter."""
-        t = self._t[start:self.size]
-        v = self._v[start:self.size]
+    def columns(self, start: int = 0, stop: int | None = None) -> dict:
+        """Samples ``start`` to ``stop`` (the newest when None) as JSON-ready columns: ``t`` (s),
+        and per quantity one list per parameter."""
+        stop = self.size if stop is None else min(stop, self.size)
+        t = self._t[start:stop]
+        v = self._v[start:stop]
         return {
             "names": list(self.names),
             "t": (t * 1e-9).tolist(),
@@ -267,6 +231,22 @@ class ModelHistory:
             "se_conventional": v[:, 2].T.tolist(),
             "converged": v[:, 3].T.tolist(),
         }
+
+
+def refusal(s: Sample) -> str:
+    """Why a complete sample is not shown (empty: it is): ``time_out_of_range`` (not in
+    [0, :data:`MAX_STAMP_NS`]), ``too_many_parameters`` (more than :data:`MAX_PARAMETERS`),
+    ``non_finite`` or ``se_not_positive`` (a corrected or conventional standard error of 0 or
+    less: no band to draw; Eqs. 13, 20 and 22 give positive variances)."""
+    if not 0 <= s.stamp_ns <= MAX_STAMP_NS:
+        return "time_out_of_range"
+    if len(s.names) > MAX_PARAMETERS:
+        return "too_many_parameters"
+    if not all(math.isfinite(x) for x in (*s.estimate, *s.se, *s.se_conventional)):
+        return "non_finite"
+    if not all(x > 0 for x in (*s.se, *s.se_conventional)):
+        return "se_not_positive"
+    return ""
 
 
 def sample_columns(samples: Sequence[Sample]) -> dict:

@@ -31,11 +31,12 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from ..datapath.cdr import FLOAT64_MULTIARRAY, decode
+from ..datapath.outputs import FREQUENCY_DOMAIN, TIME_DOMAIN, ArrayKey, split_topic
 from ..errors import BagError
 from ..offline.bags import check_mcap_integrity, typestore
 from ..offline.replay_files import CSV_COLUMNS
-from .health import statuses_of
-from .model import FREQUENCY_DOMAIN, TIME_DOMAIN, ArrayKey, Sample, split_topic
+from ..ros.health import statuses_of
+from .model import MAX_MODELS, MAX_PARAMETERS, MAX_STAMP_NS, Sample
 
 if TYPE_CHECKING:
     from rosbags.highlevel import AnyReader
@@ -62,9 +63,16 @@ class ReplaySource:
         self._thread: threading.Thread | None = None
 
     def start(self, call_soon_threadsafe: Callable[..., Any], deliver: Callable[[list[tuple]], None]) -> None:
+        failed: list[str] = []
+
         def handle(batch: list[tuple]) -> None:
             try:
-                deliver(batch)
+                if not failed:
+                    deliver(batch)
+            except Exception as exc:  # noqa: BLE001 - whatever a file's content provokes ends the reading, said
+                failed.append(f"{self.file}: cannot be shown ({type(exc).__name__}: {exc})")
+                self._stop.set()
+                deliver([("replay_done", failed[0])])
             finally:
                 self._slots.release()
 
@@ -207,30 +215,63 @@ def _open_csv(directory: Path, tables: dict[str, Path]) -> ReplaySource:
 
 
 def _csv_samples(path: Path, rows: Iterator[list[str]], method: str) -> Iterator[tuple]:
-    """``("sample", Sample)`` of consecutive rows of one time and model (one row per parameter)."""
+    """``("sample", Sample)`` of consecutive rows of one time and model (one row per parameter).
+    What rls-uncertainty replay never writes ends the reading (BagError naming the line): a
+    row that does not parse, more than :data:`.model.MAX_MODELS` models or
+    :data:`.model.MAX_PARAMETERS` parameters in a sample, a sample whose parameters are not
+    those of its model's first sample (a row missing or repeated)."""
     group: list[tuple[int, str, str, tuple[float, ...]]] = []
+    first: dict[str, tuple[tuple[str, ...], int]] = {}  # per model: its first sample's names and line
+    start = 2
+
+    def sample() -> tuple:
+        names = tuple(r[2] for r in group)
+        model = group[0][1]
+        known = first.setdefault(model, (names, start))
+        if names != known[0] or len(set(names)) != len(names):
+            raise BagError(f"{path}: line {start}: {model} at {_time(group[0][0])} has the parameters "
+                           f"{', '.join(names)}, its first sample (line {known[1]}) {', '.join(known[0])}: not a "
+                           f"sample of {path.name} as rls-uncertainty replay writes it")
+        return ("sample", _csv_sample(group, method))
+
     for line, row in enumerate(rows, start=2):
         try:
             parsed = _csv_row(row)
         except (ValueError, IndexError) as exc:
             raise BagError(f"{path}: line {line}: not a row of {path.name} ({exc})") from exc
         if group and parsed[:2] != group[0][:2]:
-            yield ("sample", _csv_sample(group, method))
-            group = []
+            yield sample()
+            group, start = [], line
+        if not group and parsed[1] not in first and len(first) == MAX_MODELS:
+            raise BagError(f"{path}: line {line}: a model more ({parsed[1]!r}) than the {MAX_MODELS} of Eq. 2 "
+                           f"({', '.join(first)} before it): not a file of rls-uncertainty replay")
         group.append(parsed)
+        if len(group) > MAX_PARAMETERS:
+            raise BagError(f"{path}: line {line}: {parsed[1]} at {_time(parsed[0])} has more than {MAX_PARAMETERS} "
+                           "parameters (Eq. 2's regressors): not a file of rls-uncertainty replay")
     if group:
-        yield ("sample", _csv_sample(group, method))
+        yield sample()
+
+
+def _time(stamp_ns: int) -> str:
+    return f"{stamp_ns // 1_000_000_000}.{stamp_ns % 1_000_000_000:09d} s"
 
 
 def _csv_row(row: list[str]) -> tuple[int, str, str, tuple[float, ...]]:
-    """``(stamp_ns, model, parameter, (estimate, std_error, std_error_conventional, converged))``."""
+    """``(stamp_ns, model, parameter, (estimate, std_error, std_error_conventional, converged))``;
+    ValueError naming what is wrong (a time after 2262, a value that is not finite, no name)."""
     sec, dot, nanosec = row[0].partition(".")
     if not sec.isdigit() or (dot and not nanosec.isdigit()) or len(nanosec) > 9:
-        raise ValueError(f"time {row[0]!r}")
+        raise ValueError(f"time {row[0][:60]!r}")
+    stamp = int(sec) * 1_000_000_000 + int(nanosec.ljust(9, "0")) if len(sec) <= 19 else MAX_STAMP_NS + 1
+    if stamp > MAX_STAMP_NS:
+        raise ValueError(f"time {row[0][:60]!r} s is after the year 2262")
     values = tuple(float(x) for x in row[3:7])
     if len(values) != 4 or not all(math.isfinite(x) for x in values):
         raise ValueError(f"values {row[3:7]!r}")
-    return int(sec) * 1_000_000_000 + int(nanosec.ljust(9, "0")), row[1], row[2], values
+    if not row[1] or not row[2]:
+        raise ValueError("no model or parameter name")
+    return stamp, row[1], row[2], values
 
 
 def _csv_sample(rows: list[tuple[int, str, str, tuple[float, ...]]], method: str) -> Sample:

@@ -39,9 +39,9 @@ from rclpy.signals import SignalHandlerOptions
 from std_msgs.msg import Float64MultiArray
 
 from ..datapath.cdr import FLOAT64_MULTIARRAY, decode
-from .health import statuses_of
-from .model import ArrayKey, array_key
-from .settings import split_node_name
+from ..datapath.outputs import ArrayKey, array_key
+from ..ros.environment import split_node_name
+from ..ros.health import statuses_of
 
 __all__ = ["RosSource"]
 

@@ -5,13 +5,18 @@
   cookie, and every request (assets, the websocket) must carry the token (cookie or query).
   On loopback a given ``--token`` is required the same way; without one, requests whose
   ``Host`` header is not this server's (a DNS-rebinding page) are refused.
+* The websocket is refused (403, counted) to a page of another origin: a browser names the
+  page that opens a websocket in ``Origin``, and only this server's own (``http://`` + the
+  ``Host`` it was asked by) or one of ``--allow-origin`` may read the estimates. A client that
+  is not a browser sends no ``Origin`` and is let through (the token, when set, still applies).
 * Serves exactly the files of :func:`asset_table` (the page's own files and the plotting
   library's two files), looked up by name: no path from a request ever reaches the file
   system, so nothing outside them can be served.
-* The websocket only pushes (:mod:`.hub` messages). Text the page sends is read and dropped:
-  ``{"type": "ping"}`` is answered, anything else is counted as malformed, anything longer
-  than :data:`MAX_INBOUND` bytes as oversized; binary frames count as malformed.
-* A page that cannot keep up gets a fresh snapshot instead of an ever-growing queue.
+* The websocket only pushes (:mod:`.feed`: shared messages, bounded per page). Text the page
+  sends is read and dropped: ``{"type": "ping"}`` is answered, anything else is counted as
+  malformed, anything longer than :data:`.feed.MAX_INBOUND` bytes as oversized; binary
+  frames count as malformed.
+* Connections are bounded in number and must send their request in time (:mod:`.guard`).
 """
 
 from __future__ import annotations
@@ -19,27 +24,26 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import hmac
-import json
 import socket
 import threading
 from collections import deque
-from collections.abc import Callable
+from collections.abc import AsyncIterator, Callable
 from pathlib import Path
 from typing import Any
 
 from aiohttp import WSMsgType, web
 
 from ..errors import ConfigError
-from .hub import Hub
+from .feed import Feed, Page
+from .guard import ConnectionGuard, connection_limit
 from .settings import ServerOptions, is_loopback
 
-__all__ = ["asset_table", "Inbox", "make_app", "serve", "MAX_INBOUND"]
+__all__ = ["asset_table", "check_assets", "Inbox", "make_app", "bind", "serving", "serve"]
 
 HERE = Path(__file__).resolve().parent
 STATIC = HERE / "static"
 VENDOR = HERE / "node_modules" / "uplot"
-MAX_INBOUND = 1024  # bytes of one message from the page; longer ones are dropped and counted
-CLIENT_QUEUE = 256  # messages waiting for one page; beyond, the page is resynchronized
+HEARTBEAT_S = 20.0  # a websocket that answers no ping within half of this is closed
 COALESCE_S = 0.005  # items arriving within this of the first are handed to the loop together (Inbox)
 TOKEN_COOKIE = "rls_dashboard_token"
 _TYPES = {".html": "text/html", ".js": "text/javascript", ".css": "text/css", ".txt": "text/plain"}
@@ -102,74 +106,6 @@ class Inbox:
             self._handler(items)
 
 
-class _Client:
-    def __init__(self, ws: web.WebSocketResponse) -> None:
-        self.ws = ws
-        self.queue: asyncio.Queue[str] = asyncio.Queue(CLIENT_QUEUE)
-        self.resync = False
-
-
-class Broadcaster:
-    """The connected pages: each gets every message in order through its own queue."""
-
-    def __init__(self, hub: Hub) -> None:
-        self.hub = hub
-        self.clients: set[_Client] = set()
-        self.inbound = {"ping": 0, "malformed": 0, "oversized": 0}
-        self.resyncs = 0
-
-    def send(self, message: dict | None) -> None:
-        if message is None:
-            return
-        text = json.dumps(message, allow_nan=False, separators=(",", ":"))
-        for c in self.clients:
-            self._put(c, text)
-
-    def _put(self, c: _Client, text: str) -> None:
-        if c.resync:
-            return
-        try:
-            c.queue.put_nowait(text)
-        except asyncio.QueueFull:
-            # The page fell behind: drop what waits and start it over from a snapshot.
-            self.resyncs += 1
-            c.resync = True
-            while not c.queue.empty():
-                c.queue.get_nowait()
-            c.queue.put_nowait("")  # wakes the pump, which sends the snapshot
-
-    def welcome(self, c: _Client) -> None:
-        c.resync = False
-        for message in (self.hub.hello(), self.hub.snapshot(), self.status()):
-            c.queue.put_nowait(json.dumps(message, allow_nan=False, separators=(",", ":")))
-
-    def status(self) -> dict:
-        return {**self.hub.status(), "socket": {**self.inbound, "resyncs": self.resyncs}}
-
-    def inbound_text(self, c: _Client, data: str) -> None:
-        if len(data.encode()) > MAX_INBOUND:
-            self.inbound["oversized"] += 1
-            return
-        try:
-            message = json.loads(data)
-        except ValueError:
-            message = None
-        if isinstance(message, dict) and message.get("type") == "ping" and len(message) == 1:
-            self.inbound["ping"] += 1
-            self._put(c, '{"type":"pong"}')
-        else:
-            self.inbound["malformed"] += 1
-
-    async def pump(self, c: _Client) -> None:
-        """Send ``c``'s queue in order; after a resync, the snapshot."""
-        while not c.ws.closed:
-            if c.resync:
-                self.welcome(c)
-            text = await c.queue.get()
-            if text:
-                await c.ws.send_str(text)
-
-
 def _allowed_hosts(options: ServerOptions, port: int) -> set[str]:
     names = {options.host, "localhost", "127.0.0.1", "[::1]"} if is_loopback(options.host) else {options.host}
     return {f"{n}:{port}" for n in names} | ({f"[{options.host}]:{port}"} if ":" in options.host else set())
@@ -182,7 +118,17 @@ def _authorized(request: web.Request, options: ServerOptions, hosts: set[str]) -
     return hmac.compare_digest(given.encode(), options.token.encode())
 
 
-def make_app(broadcaster: Broadcaster, options: ServerOptions, port: int,
+def same_origin(request: web.Request, options: ServerOptions) -> bool:
+    """Whether a websocket request may be served: no ``Origin`` (not a browser), this server's
+    own origin, or one of ``--allow-origin``."""
+    origin = request.headers.get("Origin")
+    if origin is None:
+        return True
+    origin = origin.strip().lower()
+    return origin == f"{request.scheme}://{request.host}".lower() or origin in options.allow_origin
+
+
+def make_app(feed: Feed, options: ServerOptions, port: int,
              assets: dict[str, tuple[Path, str]] | None = None) -> web.Application:
     """The routes: ``/`` (the page), ``/static/NAME`` (only the names of ``assets``), ``/ws``."""
     table = asset_table() if assets is None else assets
@@ -214,25 +160,30 @@ def make_app(broadcaster: Broadcaster, options: ServerOptions, port: int,
         return send_file(name)
 
     async def websocket(request: web.Request) -> web.WebSocketResponse:
+        if not same_origin(request, options):
+            feed.refused["foreign_origin"] += 1
+            raise web.HTTPForbidden(text="403: a page of another origin may not read the dashboard (see its "
+                                         "--allow-origin)\n")
         # No per-message compression: deflating each small JSON message cost a tenth of the
         # dashboard's CPU, for ~100 kB/s that any network carries.
-        ws = web.WebSocketResponse(max_msg_size=64 * 1024, heartbeat=20.0, compress=False)
+        ws = web.WebSocketResponse(max_msg_size=64 * 1024, heartbeat=HEARTBEAT_S, compress=False)
         await ws.prepare(request)
-        client = _Client(ws)
-        broadcaster.clients.add(client)
-        broadcaster.welcome(client)
-        pump = asyncio.create_task(broadcaster.pump(client))
+        page = Page(ws, request.transport)
+        feed.join(page)
+        pump = asyncio.create_task(feed.pump(page))
         try:
             async for msg in ws:
                 if msg.type == WSMsgType.TEXT:
-                    broadcaster.inbound_text(client, msg.data)
+                    feed.inbound_text(page, msg.data)
                 elif msg.type == WSMsgType.BINARY:
-                    broadcaster.inbound["malformed"] += 1
-                elif msg.type == WSMsgType.ERROR:  # e.g. beyond max_msg_size: aiohttp closes
-                    broadcaster.inbound["oversized"] += 1
+                    feed.inbound["malformed"] += 1
+                elif msg.type == WSMsgType.ERROR:  # beyond max_msg_size (aiohttp closes), or the heartbeat
+                    feed.count_error(ws)
         finally:
-            broadcaster.clients.discard(client)
+            feed.leave(page)
             pump.cancel()
+            if page.buffered and request.transport is not None:
+                request.transport.abort()  # a page that stopped reading: drop what it did not take, now
         return ws
 
     app = web.Application(middlewares=[guard], client_max_size=4096)
@@ -252,16 +203,32 @@ def bind(options: ServerOptions) -> socket.socket:
                           "choose another --port or --host") from exc
 
 
-async def serve(broadcaster: Broadcaster, options: ServerOptions, sock: socket.socket,
-                stop: asyncio.Event) -> None:
-    """Serve until ``stop`` is set."""
+@contextlib.asynccontextmanager
+async def serving(feed: Feed, options: ServerOptions, sock: socket.socket,
+                  warn: Callable[[str], None] = print) -> AsyncIterator[ConnectionGuard]:
+    """Serve on ``sock`` behind a :class:`.guard.ConnectionGuard` while inside the block; on
+    leaving it, every page is closed and the port released."""
     port = sock.getsockname()[1]
-    runner = web.AppRunner(make_app(broadcaster, options, port), handle_signals=False, access_log=None)
+    runner = web.AppRunner(make_app(feed, options, port), handle_signals=False, access_log=None,
+                           keepalive_timeout=options.header_timeout)
     await runner.setup()
+    limit, why = connection_limit(options.max_connections)
+    if why:
+        warn(why)
+    assert runner.server is not None
+    guard = ConnectionGuard(runner.server, limit, options.header_timeout, feed.refused)
+    server = await asyncio.get_running_loop().create_server(guard, sock=sock)
     try:
-        await web.SockSite(runner, sock).start()
-        await stop.wait()
+        yield guard
     finally:
-        for c in list(broadcaster.clients):
-            await c.ws.close()
+        server.close()
+        await asyncio.gather(*(asyncio.wait_for(page.ws.close(), 2.0) for page in list(feed.pages)),
+                             return_exceptions=True)
         await runner.cleanup()
+
+
+async def serve(feed: Feed, options: ServerOptions, sock: socket.socket, stop: asyncio.Event,
+                warn: Callable[[str], None] = print) -> None:
+    """Serve until ``stop`` is set."""
+    async with serving(feed, options, sock, warn):
+        await stop.wait()

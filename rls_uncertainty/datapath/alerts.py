@@ -46,7 +46,7 @@ from .bookkeeping import NO_TOTALS, SAMPLES, Bookkeeping, Totals, Window, growth
 from .limits import BOUNDS, message_value, sample_value
 
 if TYPE_CHECKING:  # annotations only
-    from ..settings.config import PipelineConfig
+    from .config import PipelineConfig
     from .identifiability import Problem
 
 __all__ = ["Alert", "AlertPolicy", "explain", "explanations", "no_estimate", "not_excited", "identifiability",

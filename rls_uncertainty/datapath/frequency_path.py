@@ -35,13 +35,13 @@ from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 
+from ..aero.models import BIAS_REGRESSOR
 from ..frequency import FrequencyBank
-from ..settings.models import BIAS_REGRESSOR
 from .convergence import ConvergenceMonitor
 
 if TYPE_CHECKING:  # annotations only
-    from ..settings.config import PipelineConfig
     from .bookkeeping import Tally
+    from .config import PipelineConfig
     from .identifiability import IdentifiabilityMonitor
 
 __all__ = ["FrequencyOutput", "FrequencyPath", "WITHHELD_SUFFIX"]

@@ -65,6 +65,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from ..aero.models import ANGLE, BIAS, NONDIMENSIONAL
 from ..schema import check, option
 
 if TYPE_CHECKING:  # annotations only
@@ -83,7 +84,6 @@ __all__ = [
 
 # Regressor units (config.REGRESSOR_UNITS): a flow angle or surface deflection in rad, a
 # nondimensional rate, or the bias.
-ANGLE, NONDIMENSIONAL, BIAS = "rad", "", None
 _CONSTANT_OUTPUT = 1e-12  # var(z) at most this fraction of mean(z^2): R^2 undefined (model_fit)
 
 

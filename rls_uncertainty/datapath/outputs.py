@@ -58,16 +58,19 @@ from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 
-from ..settings.config import (
-    NODE_NAME,  # the node's name: private topics /rls_estimator/..., diagnostics "rls_estimator: ..."
-)
 from .cdr import encode_float64_multiarray, encode_float64_multiarray_dims, encode_header
 
 if TYPE_CHECKING:  # annotations only: the pipeline is the core, this module its edge
-    from ..settings.config import PipelineConfig
+    from .config import PipelineConfig
     from .pipeline import Pipeline, SampleOutput
 
+# The node's name: its parameter sections, its private topics (/rls_estimator/...) and its
+# diagnostics ("rls_estimator: ...").
+NODE_NAME = "rls_estimator"
+
 __all__ = [
+    "PAIRED", "FIT_ARRAYS", "SHOWN", "TIME_DOMAIN", "FREQUENCY_DOMAIN", "METHODS", "ArrayKey", "array_key",
+    "split_topic",
     "NODE_NAME", "HEADER", "FLOAT64_MULTIARRAY", "SAMPLE_STAMP", "MODEL_OUTPUTS", "ARRAY_OUTPUTS", "FREQUENCY",
     "FREQUENCY_OUTPUTS", "FIT_OUTPUTS",
     "FIT_LAGS_SHOWN", "stamp_label", "parse_stamp_label", "dims", "output_topics", "fit_topics", "PublishedArray",
@@ -321,3 +324,50 @@ def fit_records(pipe: Pipeline, log_ns: int, node: str = NODE_NAME) -> list[tupl
     layout = OutputLayout.of(pipe)
     return [(log_ns, f"/{node}/{layout.fit_topics[i][0]}", FLOAT64_MULTIARRAY, raw)
             for i, raw in layout.encode_fit(pipe)]
+
+
+# Reading the arrays back by topic (the dashboard, status, bag readers).
+# The four arrays a sample needs, by suffix of ~/M/<suffix>.
+PAIRED = ("estimates", "standard_errors", "standard_errors_conventional", "converged")
+# Published once per diagnostics period (docs/node.md#fit-and-identifiability): Fig. 5's
+# residual autocorrelation with R^2, and the parameters' identifiability.
+FIT_ARRAYS = ("fit", "identifiability")
+SHOWN = PAIRED + FIT_ARRAYS  # every array the dashboard subscribes to
+TIME_DOMAIN = "time"  # the method of ~/M/<array>: recursive least squares (Eqs. 9-22)
+FREQUENCY_DOMAIN = "frequency"  # of ~/M/frequency/<array>: equation error in the frequency domain (docs/frequency.md)
+METHODS = (TIME_DOMAIN, FREQUENCY_DOMAIN)
+
+
+class ArrayKey(NamedTuple):
+    """What a topic under the node carries: ``method`` (one of :data:`METHODS`), ``model`` and
+    ``suffix`` (one of :data:`SHOWN`; of :data:`PAIRED` for :data:`FREQUENCY_DOMAIN`)."""
+
+    method: str
+    model: str
+    suffix: str
+
+
+def array_key(relative: str) -> ArrayKey | None:
+    """The :class:`ArrayKey` of a topic relative to the node (``CZ/estimates``), or None for a
+    topic the dashboard does not show. ``M/frequency/<suffix>`` is the frequency-domain method's
+    (only the paired arrays: it publishes no fit or identifiability)."""
+    parts = relative.split("/")
+    if len(parts) == 2 and parts[0] and parts[1] in SHOWN:
+        return ArrayKey(TIME_DOMAIN, parts[0], parts[1])
+    if len(parts) == 3 and parts[0] and parts[1] == FREQUENCY_DOMAIN and parts[2] in PAIRED:
+        return ArrayKey(FREQUENCY_DOMAIN, parts[0], parts[2])
+    return None
+
+
+def split_topic(topic: str) -> tuple[str, ArrayKey] | None:
+    """``(node, key)`` of an absolute topic of a node's shown arrays
+    (``/ns/rls_estimator/CZ/frequency/estimates``: ``/ns/rls_estimator`` and the key), for a
+    reader that does not know the node's name (a bag); None for any other topic. The
+    frequency-domain form is tried first, so its ``frequency`` is never taken for a model."""
+    parts = topic.split("/")
+    for depth in (3, 2):
+        if len(parts) > depth + 1:
+            key = array_key("/".join(parts[-depth:]))
+            if key is not None:
+                return "/".join(parts[:-depth]), key
+    return None

@@ -50,14 +50,14 @@ import numpy as np
 
 from ..aero.coefficients import RATES, FloatArray, aircraft_sample, coefficients, flight_state, regressors
 from ..aero.differentiation import FixedLagDifferentiator
+from ..aero.models import REGRESSOR_UNITS
 from ..aero.surface_mixing import SURFACES
 from ..errors import NonFiniteInput, Refused, StateFileError
 from ..estimator import EstimatorBank
-from ..settings.config import PipelineConfig
-from ..settings.models import REGRESSOR_UNITS
 from ..state_file import EstimatorState, load_state, save_state
 from .alerts import explanations, identifiability
 from .bookkeeping import Bookkeeping, model_fit
+from .config import PipelineConfig
 from .convergence import ConvergenceMonitor
 from .frequency_path import FrequencyOutput, FrequencyPath
 from .identifiability import IdentifiabilityMonitor

@@ -47,7 +47,8 @@ from ..datapath import cdr
 from ..datapath.inputs import MESSAGE_TYPES, Stamped, stamp_ns
 from ..datapath.inputs import STREAMS as INPUTS
 from ..errors import BagError, ConfigError
-from ..files import OutputWriter, output_directory
+from ..files import OutputWriter, input_problem, output_directory
+from ..progress import track
 from ..settings import yaml_files
 from ..settings.models import package_path
 from .mcap_io import McapWriter, check_mcap_integrity, write_metadata
@@ -68,6 +69,7 @@ __all__ = [
     "convert",
     "write_replay",
     "check_mcap_integrity",
+    "check_bag",
     "write_t2_bag",
     "write_campaign_bags",
     "write_sensor_streams",
@@ -106,11 +108,34 @@ def typestore(extra_schemas: list[Path] | None = None) -> Typestore:
     return store
 
 
+# The files of a rosbag2 directory a reader opens: its metadata and its storage files.
+_BAG_FILES = ("metadata.yaml", "*.mcap", "*.db3", "*.zstd")
+
+
+def check_bag(path: str | Path) -> Path:
+    """``path`` if it can be a bag: an MCAP file, or a rosbag2 directory whose metadata and
+    storage files are regular files; else :class:`BagError` in one line, before anything is
+    opened (a FIFO or a device would block a reader or feed it without end; a symbolic link
+    loop has no file at its end)."""
+    path = Path(path)
+    problem = input_problem(path)
+    if problem == "no such file or directory":
+        raise BagError(f"{path}: no such bag")
+    if problem is not None:
+        raise BagError(f"{path}: {problem}; a bag is an MCAP file or a rosbag2 directory")
+    if path.is_dir():
+        for pattern in _BAG_FILES:
+            for item in sorted(path.glob(pattern)):
+                problem = input_problem(item, directory=False)
+                if problem is not None:
+                    raise BagError(f"{item}: {problem}; the files of a bag are regular files")
+    return path
+
+
 def _open_reader(path: Path, store: Typestore) -> AnyReader:
     from rosbags.highlevel import AnyReader  # noqa: PLC0415
 
-    if not path.exists():
-        raise BagError(f"{path}: no such bag")
+    check_bag(path)
     mcaps = [path] if path.suffix == ".mcap" else sorted(path.glob("*.mcap")) if path.is_dir() else []
     for f in mcaps:
         check_mcap_integrity(f)
@@ -390,13 +415,14 @@ def write_t2_bag(path: str | Path, band_level: float = 0.2, seed: int = 250, *, 
 
 def write_campaign_bags(path: str | Path, maneuvers: int, gust: DrydenVertical, *, band_level: float = 0.2,
                         band_limited_on: Sequence[str] | None = None, seed: int = 250,
-                        force: bool = False) -> list[Path]:
+                        force: bool = False, progress: bool | None = False) -> list[Path]:
     """A simulated flight-test campaign (Section IV.B, simulated): ``maneuvers`` T-2 maneuvers
     flown in the Dryden vertical ``gust`` (:func:`.simulation.simulate_campaign`, each with
     its own gust and noise sequences from ``seed``), each a replay bag ``mNNN`` in the
     directory ``path``, with ``campaign.yaml`` recording the settings. Atomic as
     :func:`write_replay`; one maneuver is in memory at a time. ``band_limited_on``: the
-    signals carrying the band-limited noise (None: the simulation's default)."""
+    signals carrying the band-limited noise (None: the simulation's default). ``progress``: a bar
+    of the maneuvers written on stderr (:mod:`..progress`)."""
     import yaml  # noqa: PLC0415 - the manifest only
 
     from ..simulation.t2 import BAND_LIMITED_ON, simulate_campaign  # noqa: PLC0415 - scipy only when simulating
@@ -415,7 +441,7 @@ def write_campaign_bags(path: str | Path, maneuvers: int, gust: DrydenVertical, 
                                   "Dryden vertical gust, seeds SeedSequence(seed).spawn(maneuvers))"}
         (tmp / "campaign.yaml").write_text(yaml.safe_dump(manifest, sort_keys=False))
         streams = simulate_campaign(maneuvers, gust, seed=seed, band_level=band_level, band_limited_on=on)
-        for name, maneuver in zip(names, streams, strict=True):
+        for name, maneuver in track(zip(names, streams, strict=True), maneuvers, "make-bag", " maneuvers", progress):
             write_sensor_streams(tmp / name, maneuver)
     return [path / name for name in names]
 

@@ -2,7 +2,7 @@
 
 Front ends import this module when they draw (``replay``, ``campaign``); the numerical core
 never imports it, and matplotlib is imported only when a figure is drawn. Every figure is
-written in each requested format (:class:`FigureOptions`: PNG at ``dpi``, 300 by default;
+written in each requested format (:class:`FigureOptions`: PNG at ``dpi``, 150 by default;
 SVG and PDF as vectors; no dates or random ids, so a run gives the same bytes), with units on
 every axis (:func:`parameter_label`) and a title that names the maneuver or bag and the
 model. The figures follow the paper's (Grauer & Morelli):
@@ -33,6 +33,8 @@ from typing import TYPE_CHECKING, Any, NamedTuple
 import numpy as np
 
 from ..errors import ConfigError
+from ..extras import optional
+from ..progress import Progress
 from ..schema import check, option
 from .figure_data import excitation_start
 
@@ -48,7 +50,7 @@ __all__ = ["FORMATS", "REPLAY_FIGURES", "DEFAULT_DPI", "FigureOptions", "figure_
 FORMATS = ("png", "svg", "pdf")
 # A replay's figures per model, ``M_<kind>.<format>`` (replay_figures).
 REPLAY_FIGURES = ("estimates", "fit", "autocorrelation", "lags")
-DEFAULT_DPI = 300
+DEFAULT_DPI = 150  # half the drawing time of 300 (benchmarks/figure_benchmark.py); --dpi for print
 DPI_RANGE = (50, 1200)
 # Regressors of Eq. 2 measured in radians: the flow angles, the control surfaces and the
 # nondimensional rates (p b/2V, q cbar/2V, r b/2V: an angular rate times a time, in rad).
@@ -101,10 +103,11 @@ def parameter_label(parameter: str) -> str:
 
 
 def _pyplot() -> Any:
-    import matplotlib  # noqa: PLC0415 - drawing only, on demand
+    with optional("figures", what="drawing figures"):
+        import matplotlib  # noqa: PLC0415 - drawing only, on demand
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt  # noqa: PLC0415 - after the backend is chosen
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt  # noqa: PLC0415 - after the backend is chosen
 
     return plt
 
@@ -281,36 +284,40 @@ class _Model(NamedTuple):
 
 
 def replay_figures(out_dir: str | Path, title: str, history: History, data: FigureData,
-                   options: FigureOptions | None = None) -> list[Path]:
+                   options: FigureOptions | None = None, *, progress: bool | None = False) -> list[Path]:
     """Every figure of a replay into ``out_dir``, per model that produced an estimate
     (``docs/tools.md``, "Figures"): ``M_estimates`` (Figs. 6/13), ``M_fit`` (Figs. 3-4),
     ``M_autocorrelation`` (Figs. 5/11) and ``M_lags`` (Fig. 7), in each format of
     ``options``. ``history``: the estimates' bounded history; ``data``: the rest
-    (:class:`.figure_data.FigureData`, finished); ``title``: the bag's name."""
+    (:class:`.figure_data.FigureData`, finished); ``title``: the bag's name; ``progress``: a
+    bar per figure on stderr (:mod:`..progress`)."""
     options = options or FigureOptions()
     written: list[Path] = []
     if not history.n:
         return written
     t0 = int(history.stamps_ns[0])
     k = 0
-    for j, name in enumerate(data.outputs):
-        params = data.parameters[j]
-        stamps, _, _ = data.coefficient(j)
-        start = excitation_start((stamps - t0) * 1e-9, data.regressor_history(j))
-        model = _Model(j, name, params, k, start)
-        k += len(params)
-        if not history.ready(j).any():
-            continue
-        drawings: dict[str, Callable[[], Figure | None]] = {
-            "estimates": partial(_estimates, title, model, history, data, t0),
-            "fit": partial(_fit, title, model, data, t0),
-            "autocorrelation": partial(_autocorrelation, title, model, data),
-            "lags": partial(_lag_sweep, title, model, data)}
-        for kind, draw in drawings.items():  # one figure in memory at a time
-            with _pyplot().rc_context(_STYLE):
-                fig = draw()
-            if fig is not None:
-                written += save(fig, Path(out_dir) / f"{name}_{kind}", options.formats, options.dpi)
+    drawn = [j for j in range(len(data.outputs)) if history.ready(j).any()]
+    with Progress(len(drawn) * len(REPLAY_FIGURES), "figures", " figures", progress) as bar:
+        for j, name in enumerate(data.outputs):
+            params = data.parameters[j]
+            stamps, _, _ = data.coefficient(j)
+            start = excitation_start((stamps - t0) * 1e-9, data.regressor_history(j))
+            model = _Model(j, name, params, k, start)
+            k += len(params)
+            if j not in drawn:
+                continue
+            drawings: dict[str, Callable[[], Figure | None]] = {
+                "estimates": partial(_estimates, title, model, history, data, t0),
+                "fit": partial(_fit, title, model, data, t0),
+                "autocorrelation": partial(_autocorrelation, title, model, data),
+                "lags": partial(_lag_sweep, title, model, data)}
+            for kind, draw in drawings.items():  # one figure in memory at a time
+                with _pyplot().rc_context(_STYLE):
+                    fig = draw()
+                if fig is not None:
+                    written += save(fig, Path(out_dir) / f"{name}_{kind}", options.formats, options.dpi)
+                bar.update()
     return written
 
 

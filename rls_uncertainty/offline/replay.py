@@ -29,30 +29,32 @@ stream (:class:`.bags.InputStream`) and the outputs are written sample by sample
   ``M_autocorrelation``, ``M_lags``, in the requested formats), drawn from at most twice
   :data:`PLOT_POINTS` evenly spaced samples per run and from sums kept as the run goes
   (:class:`.figure_data.FigureData`), so a long recording plots in bounded memory.
-Two runs give bit-identical CSV and MCAP files. The progress bar is drawn only on a terminal.
+Two runs give bit-identical CSV and MCAP files. The progress bars (reading, then drawing) go to stderr,
+by default only on a terminal (:mod:`..progress`).
 """
 
 from __future__ import annotations
 
 import gc
 import json
-import sys
 import time
 from collections.abc import Callable, Iterable, Sized
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Protocol, TextIO
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
 from ..datapath.alerts import no_estimate, not_excited
+from ..datapath.config import PipelineConfig
+from ..datapath.diagnostics import DiagnosticsPolicy, Snapshot, Status
 from ..datapath.inputs import Stamped, feed
 from ..datapath.outputs import NODE_NAME, OutputLayout, fit_records
 from ..datapath.pipeline import Pipeline, SampleOutput
 from ..files import output_directory
-from ..ros.diagnostics import DiagnosticsPolicy, Snapshot, Status
-from ..settings.config import NodeConfig, PipelineConfig
+from ..progress import Progress
+from ..settings.config import NodeConfig
 from ..settings.parameters import node_config, parameter_defaults, pipeline_config
-from .bags import InputStream, typestore
+from .bags import InputStream, check_bag, typestore
 from .figure_data import FigureData
 from .replay_files import ReplayFiles, run_record
 from .report import results_table, rows_from_arrays
@@ -76,21 +78,6 @@ class Sink(Protocol):
     def diagnostics(self, stamp_ns: int, statuses: list[Status], fits: list[tuple[int, str, str, bytes]]) -> None: ...
 
     def after(self, newest_ns: int) -> None: ...
-
-
-def _is_terminal(stream: TextIO) -> bool:
-    try:
-        return bool(stream.isatty())
-    except (AttributeError, ValueError):  # no isatty, or a closed stream
-        return False
-
-
-def _progress(done: int, total: int, width: int = 40) -> None:
-    filled = int(width * done / total)
-    sys.stderr.write(f"\r[{'#' * filled}{'.' * (width - filled)}] {100 * done // total:3d}%")
-    if done == total:
-        sys.stderr.write("\n")
-    sys.stderr.flush()
 
 
 class _DataClockDiagnostics:
@@ -272,7 +259,7 @@ def _new_result(pipe: Pipeline, history: History | None) -> ReplayResult:
 
 
 def run_pipeline(messages: Iterable[tuple[str, int, Stamped]], config: PipelineConfig, *, record: bool = True,
-                 progress: bool = False, diagnostics: NodeConfig | None = None, keep_outputs: bool = True,
+                 progress: bool | None = False, diagnostics: NodeConfig | None = None, keep_outputs: bool = True,
                  history: History | None = None, sink: Sink | None = None,
                  figure_data: FigureData | None = None) -> ReplayResult:
     """Feed ``(kind, stamp, msg)`` messages (a list, or a :class:`.bags.InputStream` read as it
@@ -283,12 +270,12 @@ def run_pipeline(messages: Iterable[tuple[str, int, Stamped]], config: PipelineC
     figures draw besides the histories (:class:`.figure_data.FigureData`, bounded). Without
     the first two, memory does not grow with the run. With ``estimator.method`` ``frequency``
     or ``both`` the result keeps the frequency-domain estimates too (in a history like
-    ``history``, when given). ``progress`` draws a bar on stderr when stderr is a terminal
-    (never carriage-return frames into a log file or a pipe). With ``diagnostics`` (the node's
+    ``history``, when given). ``progress``: a bar on stderr with the rate and the time left
+    (:mod:`..progress`: None on a terminal only, True always, False never). With ``diagnostics`` (the node's
     settings), the node's ``/diagnostics`` statuses once per diagnostics period of data time,
     and once at the end."""
     total = len(messages) if isinstance(messages, Sized) else int(getattr(messages, "total", 0))
-    progress = progress and total > 0 and _is_terminal(sys.stderr)
+    bar = Progress(total or None, "replay", " messages", progress)
     pipe = Pipeline(config, record=record)
     result = _new_result(pipe, history)
     run = _Run(pipe, result, keep_outputs, sink)
@@ -328,17 +315,17 @@ def run_pipeline(messages: Iterable[tuple[str, int, Stamped]], config: PipelineC
             if sink is not None:
                 sink.after(newest)
             n += 1
-            if progress and n % step == 0:
-                _progress(min(n, total), total)
+            if n % step == 0:
+                bar.update(step)
         pipe.finish()
         if diag is not None and n:
             diag.finish()
     finally:
         if gc_was_enabled:
             gc.enable()
+        bar.set_to(n)
+        bar.close()
     result.wall_seconds = time.perf_counter() - t0
-    if progress:
-        _progress(total, total)
     result.n_messages = n
     if first is not None:
         result.data_seconds = (newest - first) * 1e-9
@@ -429,7 +416,7 @@ def run_summary(result: ReplayResult) -> str:
 
 
 def replay(bag: str | Path, params: dict[str, Any], out: str | Path, *, start: float | None = None,
-           end: float | None = None, strict: bool = True, progress: bool = True, plots: bool = True,
+           end: float | None = None, strict: bool = True, progress: bool | None = None, plots: bool = True,
            figures: FigureOptions | None = None, force: bool = False,
            inputs: Iterable[str | Path] = ()) -> ReplayResult:
     """Run a replay bag through the pipeline, reading it and writing the outputs to ``out``
@@ -439,6 +426,7 @@ def replay(bag: str | Path, params: dict[str, Any], out: str | Path, *, start: f
     figures (:func:`.figures.replay_figures`, in the formats and resolution of ``figures``).
     The result keeps no per-sample outputs, and the time histories only decimated for the
     plots (:data:`PLOT_POINTS`)."""
+    check_bag(bag)  # before the output directory is made
     config = pipeline_config(params)
     node_cfg = node_config(params)
     names = [m.parameter_names for m in config.models]
@@ -458,7 +446,7 @@ def replay(bag: str | Path, params: dict[str, Any], out: str | Path, *, start: f
         if data is not None and result.history is not None:
             from .figures import replay_figures  # noqa: PLC0415 - drawing (matplotlib) only when asked
 
-            replay_figures(tmp, Path(bag).name, result.history, data, figures)
+            replay_figures(tmp, Path(bag).name, result.history, data, figures, progress=progress)
     return result
 
 

@@ -42,9 +42,9 @@ from .bags import BagWriter
 if TYPE_CHECKING:  # annotations only
     from rosbags.typesys.store import Typestore
 
+    from ..datapath.config import PipelineConfig
+    from ..datapath.diagnostics import Status
     from ..datapath.pipeline import SampleOutput
-    from ..ros.diagnostics import Status
-    from ..settings.config import PipelineConfig
 
 __all__ = ["ReplayFiles", "CSV_COLUMNS", "WIDE_QUANTITIES", "wide_columns", "stamp_text", "run_record",
            "RUN_FORMAT", "configuration_digest", "DIAGNOSTIC_ARRAY"]

@@ -33,8 +33,8 @@ import numpy as np
 from ..errors import EstimatorNotReady, UnknownName
 
 if TYPE_CHECKING:  # annotations only: this module does not need the pipeline to work
+    from ..datapath.diagnostics import Status
     from ..datapath.pipeline import Pipeline, SampleOutput
-    from ..ros.diagnostics import Status
 
 __all__ = ["Final", "Series", "History", "ReplayResult", "accounting", "METHODS"]
 

@@ -1,6 +1,7 @@
-"""The ROS adapter: the rclpy node (:mod:`.node`), its ``/diagnostics`` statuses computed without
-ROS (:mod:`.diagnostics`), DDS playback and the live demo (:mod:`.player`), and the operator
-commands (:mod:`.operate`).
+"""The ROS adapter: the rclpy node (:mod:`.node`), DDS playback (:mod:`.player`), the live demo
+(:mod:`.demo`) and the operator commands (:mod:`.operate`).
 
-The only wing that imports rclpy; it adapts :mod:`..datapath` and adds no numerical policy.
+The only wing that imports rclpy; it adapts :mod:`..datapath` (whose
+:mod:`..datapath.diagnostics` computes the ``/diagnostics`` statuses without ROS) and adds no
+numerical policy.
 """

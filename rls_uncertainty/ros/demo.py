@@ -24,13 +24,14 @@ from typing import TYPE_CHECKING, Protocol
 
 from ..datapath.inputs import message_class
 from ..datapath.outputs import ARRAY_OUTPUTS, NODE_NAME
+from .environment import where
 from .player import NoAudience, _check_rate, _player_writer_profile, _Publisher, bundled_bag, stop_process
 
 if TYPE_CHECKING:
     from rclpy.node import Node
 
+    from ..datapath.config import PipelineConfig
     from ..datapath.pipeline import SampleOutput
-    from ..settings.config import PipelineConfig
 
 __all__ = ["demo", "private_namespace", "REPLAY_PARAMETERS"]
 
@@ -152,7 +153,6 @@ def demo(rate: float = 4.0, params_file: str = "t2") -> int:
     os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
     import rclpy  # noqa: PLC0415
 
-    from ..dashboard.settings import where  # noqa: PLC0415
     from ..offline.bags import InputStream  # noqa: PLC0415
     from ..offline.replay import run_pipeline  # noqa: PLC0415
     from ..settings.models import config_dir  # noqa: PLC0415

@@ -45,6 +45,7 @@ from std_msgs.msg import Float64MultiArray, Header
 from std_srvs.srv import SetBool, Trigger
 
 from ..datapath.cdr import decode
+from ..datapath.diagnostics import DiagnosticsPolicy, Snapshot, malformed_reason, malformed_warning
 from ..datapath.inputs import MESSAGE_TYPES, STREAMS, feed, message_class
 from ..datapath.outputs import HEADER, NODE_NAME, OutputLayout
 from ..datapath.pipeline import Pipeline, SampleOutput, StateFileError
@@ -52,7 +53,6 @@ from ..errors import ConfigError
 from ..settings.parameters import PARAMETERS, Parameter, node_config, pipeline_config
 from ..settings.sources import startup_parameters
 from ..state_file import StateFileClaim, claim, set_aside
-from .diagnostics import DiagnosticsPolicy, Snapshot, malformed_reason, malformed_warning
 from .input_watch import SilentInputs
 
 __all__ = ["EstimatorNode", "main", "NODE_NAME"]
@@ -459,6 +459,11 @@ def main(args: list[str] | None = None) -> int:
         code = _refuse(exc)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
+    except _rclpy.RCLError:
+        if rclpy.ok():
+            raise
+        # Ctrl-C between start-up and spinning: rclpy's handler had shut the context down, and
+        # spin() could not make its executor. An interrupt, not an error.
     finally:
         if node is not None:
             node.save_state()

@@ -58,9 +58,9 @@ from rclpy.node import Node
 from rclpy.task import Future
 from std_srvs.srv import SetBool, Trigger
 
-from ..dashboard.health import LEVELS, HealthTracker, NodeHealth, parse_statuses, statuses_of
-from ..dashboard.model import METHODS, array_key
-from ..dashboard.settings import split_node_name, where
+from ..datapath.outputs import METHODS, array_key
+from .environment import split_node_name, where
+from .health import LEVELS, HealthTracker, NodeHealth, parse_statuses, statuses_of
 
 __all__ = ["call", "report", "status", "format_health", "published_methods", "SERVICES", "REPORT_WAIT_S", "RESEND_S",
            "SENDS"]
@@ -81,7 +81,7 @@ REPORT_WAIT_S = 3.0
 # RESEND_S, at most SENDS times in all.
 RESEND_S = 1.0
 SENDS = 3
-# How the status names each estimation method (rls_uncertainty.dashboard.model.METHODS).
+# How the status names each estimation method (rls_uncertainty.datapath.outputs.METHODS).
 METHOD_TEXT = {"time": "time domain (RLS, ~/M/estimates)", "frequency": "frequency domain (~/M/frequency/estimates)"}
 
 
@@ -222,7 +222,7 @@ def _table(header: list[str], rows: list[list[str]]) -> list[str]:
 
 
 def published_methods(topics: Iterable[str], node_name: str) -> list[str]:
-    """The estimation methods (:data:`.dashboard.model.METHODS`) whose ``estimates`` topic
+    """The estimation methods (:data:`rls_uncertainty.datapath.outputs.METHODS`) whose ``estimates`` topic
     ``node_name`` has among ``topics`` (the graph's topic names; the node creates its
     publishers at start, before any sample)."""
     prefix = node_name.rstrip("/") + "/"

@@ -49,6 +49,7 @@ from typing import TYPE_CHECKING
 
 from ..datapath.inputs import message_class
 from ..errors import BagError, ConfigError
+from .environment import where
 
 if TYPE_CHECKING:
     from rclpy.node import Node
@@ -160,12 +161,12 @@ class Audience:
     def describe(self) -> str:
         """How many subscriptions matched, on how many topics, and whose."""
         total, topics = sum(self.matched.values()), [t for t, n in self.matched.items() if n]
-        where = (f"each of the bag's {len(self.matched)} topics" if len(topics) == len(self.matched)
+        scope = (f"each of the bag's {len(self.matched)} topics" if len(topics) == len(self.matched)
                  else f"{len(topics)} of the bag's {len(self.matched)} topics (none on "
                       f"{', '.join(t for t in self.matched if t not in topics)})")
         nodes = self.nodes()
         whose = ", ".join(f"{n} ({'reliable' if r else 'best effort'})" for n, r in nodes.items())
-        return (f"{total} subscription(s) matched on {where}" + (f", of {len(nodes)} node(s): {whose}" if nodes else "")
+        return (f"{total} subscription(s) matched on {scope}" + (f", of {len(nodes)} node(s): {whose}" if nodes else "")
                 if total else "no subscriber")
 
     def notes(self, incompatible_only: bool = False) -> list[str]:
@@ -184,12 +185,6 @@ class Audience:
 
 class NoAudience(Exception):
     """Playing did not start: the subscribers were not there, or not matched, in time."""
-
-
-def _where() -> str:
-    from ..dashboard.settings import where  # noqa: PLC0415
-
-    return where()
 
 
 class NotAcknowledged(Exception):
@@ -315,7 +310,7 @@ class _Publisher:
             else:
                 ready_since = None
             if now > deadline:
-                raise NoAudience(f"{short} within {wait:g} s ({_where()}): nothing was played")
+                raise NoAudience(f"{short} within {wait:g} s ({where()}): nothing was played")
             if spin:
                 spin()
             else:

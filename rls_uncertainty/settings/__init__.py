@@ -1,8 +1,8 @@
 """Every setting, defined once, and where the node's come from; read without rclpy.
 
-- :mod:`.models`: the aircraft and the models (what is flown, what is estimated).
-- :mod:`.config`: the typed configuration, :class:`PipelineConfig` (one options object per
-  component) and :class:`NodeConfig`.
+- :mod:`.models`: the aircraft and model files (the classes are :mod:`rls_uncertainty.aero.models`'s).
+- :mod:`.config`: the node's own options, :class:`NodeConfig` (the pipeline's, :class:`PipelineConfig`,
+  are :mod:`rls_uncertainty.datapath.config`'s).
 - :mod:`.parameters`: the node's parameters, generated from the options classes' fields
   (:mod:`rls_uncertainty.schema`), and back into the options (:func:`pipeline_config`).
 - :mod:`.sources`: where the node's parameters come from (``--ros-args``, parameter files) and
@@ -13,18 +13,10 @@ The names below are the public face; each is defined in one of those modules. Im
 numerical core's options classes and the standard library, numpy and yaml.
 """
 
-from .config import NODE_NAME, InputConfig, InputTopics, NodeConfig, OutputConfig, PipelineConfig
-from .models import (
-    DEFAULT_MODELS,
-    REGRESSOR_UNITS,
-    REGRESSORS,
-    AircraftConfig,
-    ModelConfig,
-    config_dir,
-    load_aircraft,
-    load_models,
-    package_path,
-)
+from ..aero.models import DEFAULT_MODELS, REGRESSOR_UNITS, REGRESSORS, AircraftConfig, ModelConfig
+from ..datapath.config import InputConfig, OutputConfig, PipelineConfig
+from .config import NODE_NAME, InputTopics, NodeConfig
+from .models import config_dir, load_aircraft, load_models, package_path
 from .parameters import PARAMETERS, Parameter, node_config, parameter_defaults, pipeline_config
 from .sources import NodeParameters, load_parameters_file, node_parameters_file, startup_parameters
 

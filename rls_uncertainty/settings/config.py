@@ -1,13 +1,6 @@
-"""The typed configuration of the pipeline and the node: frozen dataclasses, each checking its
-own fields when it is built, so that a configuration that exists is a valid one.
-
-:class:`PipelineConfig` is everything that decides the numbers: the rate, the aircraft and models
-(:mod:`.models`), and one options object per component (:class:`.estimator.EstimatorOptions`,
-:class:`.frequency.FrequencyOptions`, :class:`.aero.differentiation.DifferentiatorConfig`,
-:class:`InputConfig`, :class:`.aero.surface_mixing.SurfaceMixing`,
-:class:`.datapath.limits.PlausibilityLimits`, :class:`.datapath.convergence.ConvergenceConfig`,
-:class:`.datapath.identifiability.IdentifiabilityConfig`, :class:`OutputConfig`).
-:class:`NodeConfig` holds what only the ROS node uses. Every field of these is a
+"""The node's own configuration, beside the pipeline's (:mod:`rls_uncertainty.datapath.config`):
+frozen dataclasses, each checking its own fields when it is built. :class:`NodeConfig` holds what
+only the ROS node uses, :class:`InputTopics` its input topics. Every field is a
 :func:`rls_uncertainty.schema.option`: its default, bounds, unit, meaning and node parameter are
 written there and nowhere else. The node's parameters become these objects in
 :mod:`.parameters`; where the parameters come from is :mod:`.sources`.
@@ -15,207 +8,18 @@ written there and nowhere else. The node's parameters become these objects in
 
 from __future__ import annotations
 
-import math
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field, fields
-from typing import Any
 
-from ..aero.differentiation import DifferentiatorConfig
-from ..aero.surface_mixing import SURFACES, SurfaceMixing
-from ..datapath.convergence import ConvergenceConfig
-from ..datapath.identifiability import IdentifiabilityConfig
-from ..datapath.limits import PlausibilityLimits
-from ..errors import ConfigError
-from ..estimator.options import EstimatorOptions
-from ..frequency.options import FrequencyOptions
+from ..datapath.outputs import NODE_NAME
 from ..schema import check, option
-from .models import DEFAULT_MODELS, AircraftConfig, ModelConfig
 
 __all__ = [
     "NODE_NAME",
-    "METHODS",
-    "InputConfig",
-    "OutputConfig",
-    "PipelineConfig",
     "InputTopics",
     "NodeConfig",
 ]
 
-# The node's name: its parameter sections, its private topics (/rls_estimator/..., see outputs) and
-# its diagnostics ("rls_estimator: ...").
-NODE_NAME = "rls_estimator"
-# estimator.method: which estimates are published (docs/frequency.md, "In the node").
-METHODS = ("time", "frequency", "both")
-
-
-@dataclass(frozen=True)
-class InputConfig:
-    """How the input streams are used (``inputs.*`` parameters): the dynamic-pressure topic or
-    ``0.5 air_density V^2`` (kg/m^3), the thrust topic or zero thrust, the longest gap
-    interpolated across and how far a stream may run ahead before its old messages expire (s),
-    the stream timelines (:mod:`.sampling`): the stamp jump (s) that needs
-    ``jump_confirmation`` messages to be taken as a new timeline, the largest offset from the
-    node's clock (s, 0 = not checked) and the most messages buffered per stream; and the
-    ``header.frame_id`` every input must carry (empty: not checked)."""
-
-    use_dynamic_pressure: bool = option(True, "use the dynamic_pressure topic; false computes 0.5 rho V^2 with "
-                                        "inputs.air_density", ros="inputs.use_dynamic_pressure")
-    air_density: float = option(1.225, "air density for 0.5 rho V^2 when the dynamic pressure topic is not used",
-                                unit="kg/m^3", low=0.01, high=2.0, ros="inputs.air_density")
-    use_thrust: bool = option(True, "use the thrust topic (force.x, N) in Eq. 1a; false sets thrust to 0",
-                              ros="inputs.use_thrust")
-    max_gap: float = option(0.25, "largest gap between two messages of one stream that is interpolated across",
-                            unit="s", low=0.001, high=10.0, ros="inputs.max_gap")
-    buffer_duration: float = option(2.0, "how far a stream may run ahead of the slowest one before its old messages "
-                                    "expire", unit="s", low=0.1, high=60.0, ros="inputs.buffer_duration")
-    max_stamp_jump: float = option(
-        5.0, "a stamp this far behind a stream's newest, or this far ahead of it and of every stream, is a jump "
-        "candidate: held until inputs.jump_confirmation more messages confirm a new timeline (a looped replay "
-        "restarts), else rejected as stamp_jump", unit="s", low=0.01, high=1.0e9, ros="inputs.max_stamp_jump")
-    jump_confirmation: int = option(5, "messages after a jump candidate that must continue its stamps before the "
-                                    "jump is taken as real (0: at once)", low=0, high=1000,
-                                    ros="inputs.jump_confirmation")
-    max_clock_offset: float = option(
-        0.0, "reject messages stamped farther than this from the node's clock as far_from_clock; 0 = off (replays "
-        "played without /clock keep their recorded stamps)", unit="s", low=0.0, high=1.0e9,
-        ros="inputs.max_clock_offset")
-    max_buffered: int = option(20000, "messages buffered per stream at most (2 s at 10 kHz); beyond it the oldest "
-                               "expire", low=10, high=10_000_000, ros="inputs.max_buffered")
-    frame_id: str = option("base_link", "header.frame_id every input must carry (the REP-103 body frame); a message "
-                           "in another frame is rejected as frame_mismatch; empty: not checked", ros="inputs.frame_id")
-
-    def __post_init__(self) -> None:
-        check(self, "inputs")
-        if self.max_stamp_jump < self.max_gap:
-            raise ConfigError(f"inputs.max_stamp_jump ({self.max_stamp_jump} s) must be at least "
-                              f"inputs.max_gap ({self.max_gap} s)", parameter="inputs.max_stamp_jump")
-
-    @property
-    def max_gap_ns(self) -> int:
-        return int(round(self.max_gap * 1e9))
-
-    @property
-    def buffer_ns(self) -> int:
-        return int(round(self.buffer_duration * 1e9))
-
-    @property
-    def max_stamp_jump_ns(self) -> int:
-        return int(round(self.max_stamp_jump * 1e9))
-
-    @property
-    def max_clock_offset_ns(self) -> int:
-        return int(round(self.max_clock_offset * 1e9))
-
-
-@dataclass(frozen=True)
-class OutputConfig:
-    """What the pipeline computes for its consumers beyond estimates and standard errors
-    (``outputs.*`` parameters): full covariance matrices for the samples whose grid index is a
-    multiple of ``covariance_decimation`` (0: never)."""
-
-    covariance_decimation: int = option(
-        10, "publish ~/M/covariance and ~/M/covariance_conventional for samples whose grid index (stamp x rate) is a "
-        "multiple of this; 0 = never", low=0, high=100_000, ros="outputs.covariance_decimation")
-
-    def __post_init__(self) -> None:
-        check(self, "outputs")
-
-
-@dataclass(frozen=True)
-class PipelineConfig:
-    """Everything that decides the numbers: sample rate (Hz), aircraft, models, and the nested
-    estimator, differentiator, input, surface-mixing and plausibility settings. The node and
-    the offline replay build it the same way (:func:`pipeline_config`)."""
-
-    aircraft: AircraftConfig
-    models: tuple[ModelConfig, ...] = DEFAULT_MODELS
-    rate: float = option(50.0, "estimator sample rate; input streams are interpolated to it", unit="Hz", low=1.0,
-                         high=1000.0, ros="rate")
-    estimator: EstimatorOptions = field(default_factory=EstimatorOptions)
-    differentiator: DifferentiatorConfig = DifferentiatorConfig()
-    inputs: InputConfig = InputConfig()
-    surfaces: SurfaceMixing = SurfaceMixing()
-    limits: PlausibilityLimits = PlausibilityLimits()
-    # Consumers' outputs (not part of the fingerprint: they do not change the estimator state).
-    convergence: ConvergenceConfig = field(default_factory=ConvergenceConfig)
-    identifiability: IdentifiabilityConfig = field(default_factory=IdentifiabilityConfig)
-    outputs: OutputConfig = OutputConfig()
-    # estimator.method and, unless it is "time", the frequency-domain estimator's options.
-    method: str = option("time", "estimates published: time (recursive least squares, ~/M/estimates ...), "
-                         "frequency (equation error on a recursive Fourier transform, ~/M/frequency/estimates ...) or "
-                         "both (docs/frequency.md)", choices=METHODS, ros="estimator.method", cli="--method")
-    frequency: FrequencyOptions | None = None
-
-    def __post_init__(self) -> None:
-        check(self, "")
-        self._check_method()
-        held = math.ceil(self.convergence.window * self.rate) + 2
-        if held > self.convergence.max_samples:
-            raise ConfigError(
-                f"convergence.window ({self.convergence.window:g} s) at rate {self.rate:g} Hz spans {held - 2} "
-                f"samples; at most {self.convergence.max_samples - 2} are kept (shorten the window)",
-                parameter="convergence.window")
-        if not self.models:
-            raise ConfigError("at least one model must be enabled")
-        outputs = [m.output for m in self.models]
-        if len(set(outputs)) != len(outputs):
-            raise ConfigError(f"a model is enabled twice: {outputs}")
-        for m in self.models:
-            for surface in SURFACES:
-                if surface in m.regressors and not self.surfaces.names(surface):
-                    raise ConfigError(
-                        f"model {m.output} uses {surface} but no control surface is mapped to it "
-                        "(surfaces.* parameters)"
-                    )
-        if self.inputs.max_gap * self.rate < 1.0:
-            raise ConfigError(
-                f"inputs.max_gap ({self.inputs.max_gap} s) is shorter than one estimator sample "
-                f"(1/rate = {1 / self.rate:g} s)", parameter="inputs.max_gap")
-
-    def _check_method(self) -> None:
-        """``method`` and ``frequency`` agree, and every model has a parameter the frequency
-        domain estimates, on a grid with more frequencies than parameters (F5)."""
-        if (self.method == "time") != (self.frequency is None):
-            raise ConfigError(f"estimator.method {self.method} needs frequency options exactly when it is not 'time'")
-        if self.frequency is None:
-            return
-        if self.frequency.rate_hz != self.rate:
-            raise ConfigError(f"frequency options at {self.frequency.rate_hz} Hz for a pipeline at rate {self.rate} Hz")
-        for m in self.models:
-            if not m.frequency_parameter_names:
-                raise ConfigError(f"model {m.output} has no regressor but the bias '1', which the frequency-domain "
-                                  f"method does not estimate (estimator.method: {self.method}): give models."
-                                  f"{m.output} a regressor, leave it out of models.enabled or use "
-                                  "estimator.method: time")
-        grid = self.frequency.frequencies().size
-        most = max(len(m.frequency_parameter_names) for m in self.models)
-        if grid <= most:
-            raise ConfigError(f"the frequency grid (frequency.f_min .. f_max every f_step) has {grid} frequencies, a "
-                              f"model {most} frequency-domain parameters: it needs more frequencies (lower "
-                              "frequency.f_step or widen the band)")
-
-    @property
-    def publishes_time(self) -> bool:
-        """``estimator.method`` publishes the time-domain estimates (``time``, ``both``)."""
-        return self.method != "frequency"
-
-    @property
-    def published_methods(self) -> tuple[str, ...]:
-        """The estimates ``estimator.method`` publishes: ``("time",)``, ``("frequency",)`` or both."""
-        return ("time",) * self.publishes_time + ("frequency",) * (self.frequency is not None)
-
-    @property
-    def period_ns(self) -> int:
-        return int(round(1e9 / self.rate))
-
-    def fingerprint(self) -> dict[str, Any]:
-        """What a saved estimator state must match to be resumed."""
-        return {
-            "aircraft": [getattr(self.aircraft, f.name) for f in fields(AircraftConfig)],
-            "models": [[m.output, *m.regressors] for m in self.models],
-            "rate": self.rate,
-            "estimator": self.estimator.resolved().as_dict(),
-        }
 
 
 @dataclass(frozen=True, eq=False)

@@ -23,7 +23,9 @@ from dataclasses import dataclass
 from typing import Any
 
 from ..aero.differentiation import DifferentiatorConfig
+from ..aero.models import DEFAULT_MODELS, OUTPUTS, REGRESSORS, ModelConfig
 from ..aero.surface_mixing import SurfaceMixing
+from ..datapath.config import InputConfig, OutputConfig, PipelineConfig
 from ..datapath.convergence import ConvergenceConfig
 from ..datapath.identifiability import IdentifiabilityConfig
 from ..datapath.limits import PlausibilityLimits
@@ -43,8 +45,8 @@ from ..schema import (
     span_value,
     valid,
 )
-from .config import InputConfig, InputTopics, NodeConfig, OutputConfig, PipelineConfig
-from .models import DEFAULT_AIRCRAFT, DEFAULT_MODELS, OUTPUTS, REGRESSORS, ModelConfig, load_aircraft
+from .config import InputTopics, NodeConfig
+from .models import DEFAULT_AIRCRAFT, load_aircraft
 
 __all__ = ["Parameter", "PARAMETERS", "PARAMETER_NAMES", "COMPONENTS", "RENAMED", "parameter_defaults", "typed",
            "pipeline_config", "node_config", "estimator_options", "frequency_options", "unknown_parameter",

@@ -20,12 +20,12 @@ from pathlib import Path
 import numpy as np
 
 from ..aero.differentiation import DifferentiatorConfig
+from ..aero.models import REGRESSOR_UNITS
 from ..datapath.convergence import ConvergenceConfig, ConvergenceMonitor
 from ..datapath.identifiability import IdentifiabilityConfig, IdentifiabilityMonitor
 from ..errors import WorkerLost
 from ..estimator import EstimatorBank, EstimatorOptions, Lags, batch_estimate
 from ..executors import Executor, LocalProcesses, Lost
-from ..settings.models import REGRESSOR_UNITS
 from .t2 import (
     BAND_LIMITED_ON,
     SIGNALS,

@@ -33,8 +33,9 @@ from scipy import signal
 
 from ..aero.coefficients import FlightState, coefficients, regressor_matrix, regressors
 from ..aero.differentiation import DifferentiatorConfig, differentiate
+from ..aero.models import AircraftConfig, ModelConfig
 from ..errors import ConfigError
-from ..settings.models import AircraftConfig, ModelConfig, load_aircraft
+from ..settings.models import load_aircraft
 from .multisine import T2_TABLE2, Multisine
 from .turbulence import DrydenVertical
 

@@ -41,6 +41,7 @@ import numpy as np
 
 from ..datapath.outputs import FREQUENCY, FREQUENCY_OUTPUTS, NODE_NAME, SAMPLE_STAMP, parse_stamp_label
 from ..errors import BagError, LiveTimeout
+from ..extras import optional
 from ..offline.bags import input_topics
 from ..offline.results import History, ReplayResult, accounting
 from ..ros.player import stop_process
@@ -134,7 +135,7 @@ class EstimatorProcess:
 def _counters(statuses: Sequence[tuple[str, int, str, Mapping[str, str]]]) -> dict[str, Any]:
     """:func:`..results.accounting`'s form of the node's ``/diagnostics`` (its ``inputs`` and
     ``samples`` statuses)."""
-    from ..dashboard.health import parse_statuses  # noqa: PLC0415 - the reader of the node's keys
+    from ..ros.health import parse_statuses  # noqa: PLC0415 - the reader of the node's keys
 
     health = parse_statuses(statuses, NODE_NAME)
     if health is None:
@@ -181,7 +182,7 @@ class _Outputs:
         self.stamps.append(int(msg.stamp.sec) * 1_000_000_000 + int(msg.stamp.nanosec))
 
     def _diagnostics(self, msg: Any) -> None:
-        from ..dashboard.health import statuses_of  # noqa: PLC0415
+        from ..ros.health import statuses_of  # noqa: PLC0415
 
         statuses = statuses_of(msg)
         if any(name.startswith(f"{NODE_NAME}: ") for name, *_ in statuses):
@@ -314,10 +315,11 @@ def play_to_node(bag: str | Path, node: EstimatorProcess, *, rate: float = 0.0, 
     0: as fast as the acknowledgements allow) and collect its outputs until the run is
     complete (module docstring) or ``timeout`` seconds pass at any one step
     (:class:`LiveTimeout`, naming what was missing and the node's log)."""
-    import rclpy  # noqa: PLC0415
-    from rclpy.executors import SingleThreadedExecutor  # noqa: PLC0415
+    with optional("ros", what="playing to a live node"):
+        import rclpy  # noqa: PLC0415
+        from rclpy.executors import SingleThreadedExecutor  # noqa: PLC0415
 
-    from ..ros.player import NotAcknowledged, _player_writer_profile, _Publisher  # noqa: PLC0415
+        from ..ros.player import NotAcknowledged, _player_writer_profile, _Publisher  # noqa: PLC0415
 
     config = node.config
     models = [m.output for m in config.models]

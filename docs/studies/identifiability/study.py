@@ -47,11 +47,11 @@ from pathlib import Path
 import numpy as np
 
 from rls_uncertainty.datapath.convergence import ConvergenceMonitor
+from rls_uncertainty.datapath.diagnostics import DiagnosticsPolicy, Snapshot
 from rls_uncertainty.datapath.inputs import feed as feed_message
 from rls_uncertainty.datapath.pipeline import Pipeline
 from rls_uncertainty.offline.bags import convert, read_inputs
 from rls_uncertainty.offline.replay import run_pipeline
-from rls_uncertainty.ros.diagnostics import DiagnosticsPolicy, Snapshot
 from rls_uncertainty.settings import PARAMETERS, load_parameters_file, node_config, package_path, pipeline_config
 from rls_uncertainty.simulation.montecarlo import PARAMETERS as TABLE3
 from rls_uncertainty.simulation.montecarlo import convergence_summary, run_level
@@ -114,7 +114,7 @@ def constant_regressor(st, rng):
 
 def gyro_spikes(st, rng):
     """Pitch-rate spikes of 19.999 rad/s (just under limits.angular_rate) on every 40th IMU
-    message (5 Hz): the input checks pass them (h-data's checks may not); R^2 is the second line."""
+    message (5 Hz): the input checks may pass them; R^2 is the second line."""
     imu = st.imu[1].copy()
     imu[::40, 1] = -19.999  # REP-103 y = -q
     return with_stream(st, "imu", imu), dict(T2)

@@ -13,7 +13,10 @@ const GREEK = { alpha: "α", beta: "β", delta: "δ", theta: "θ", phi: "φ", ps
 
 const params = new URLSearchParams(location.search);
 const token = params.get("token");
-const state = { mode: "", reference: {}, models: new Map(), windowS: null, dirty: false, health: null };
+// counts: the server's samples shown per method and model (the "count" of its messages);
+// drawn: per method and model, the count and newest time the last draw showed (for tests).
+const state = { mode: "", reference: {}, models: new Map(), windowS: null, dirty: false, health: null,
+                counts: {}, drawn: {} };
 window.rlsLatency = [];      // {published_ns, sent_ns, received_ms}: for benchmarks and tests
 window.rlsState = state;
 
@@ -72,12 +75,13 @@ function thin(h) {
   for (const q of QUANTITIES) h[q] = h[q].map(keep);
 }
 
-function appendColumns(method, name, cols, replace) {
+function appendColumns(method, name, cols) {
   const m = modelFor(name);
+  if (cols.count !== undefined) (state.counts[method] ||= {})[name] = cols.count;
   let h = m.methods[method];
   const sameNames = h && h.names.join(",") === cols.names.join(",");
   const goesBack = h && h.t.length && cols.t.length && cols.t[0] <= h.t[h.t.length - 1];
-  if (!h || !sameNames || goesBack || replace) h = m.methods[method] = newHistory(cols.names);
+  if (!h || !sameNames || goesBack) h = m.methods[method] = newHistory(cols.names);
   for (let k = 0; k < cols.t.length; k++) h.t.push(cols.t[k]);
   for (const q of QUANTITIES) cols[q].forEach((values, i) => { for (const v of values) h[q][i].push(v); });
   while (h.t.length > CAP) thin(h);
@@ -368,11 +372,21 @@ function drawQuality(m) {
 function draw() {
   state.dirty = false;
   let newest = -Infinity;
+  const drawn = {};
+  let total = 0;
   for (const m of state.models.values()) {
     drawModel(m);
     drawQuality(m);
-    for (const h of Object.values(m.methods)) if (h.t.length) newest = Math.max(newest, h.t[h.t.length - 1]);
+    for (const [k, h] of Object.entries(m.methods)) {
+      if (!h.t.length) continue;
+      newest = Math.max(newest, h.t[h.t.length - 1]);
+      const count = (state.counts[k] || {})[m.name] || 0;
+      (drawn[k] ||= {})[m.name] = { count, t: h.t[h.t.length - 1] };
+      total += count;
+    }
   }
+  state.drawn = drawn;
+  document.getElementById("models").dataset.drawn = String(total);
   if (Number.isFinite(newest)) {
     const d = new Date(newest * 1000);
     document.getElementById("clock").textContent = "t = " + d.toISOString().replace("T", " ").slice(0, 22) + " UTC";
@@ -417,10 +431,12 @@ function drawHealth(msg) {
       `pending ${h.samples.samples_pending || 0}; rejected: ${rej || "none"}; enabled: ${h.samples.enabled}`;
   }
   const socket = msg.socket || {};
-  const dropped = Object.entries(msg.dropped || {}).map(([k, v]) => `${k} ${v}`).join(", ") || "none";
+  const listed = (counts) => Object.entries(counts || {}).filter(([, v]) => v).map(([k, v]) => `${k} ${v}`).join(", ") || "none";
   document.getElementById("footer").textContent =
-    `arrays dropped: ${dropped}; display history restarts: ${msg.history_resets || 0}; ` +
-    `socket: malformed ${socket.malformed || 0}, oversized ${socket.oversized || 0}, resyncs ${socket.resyncs || 0}`;
+    `arrays dropped: ${listed(msg.dropped)}; samples refused: ${listed(msg.refused)}; ` +
+    `display history restarts: ${msg.history_resets || 0}; ` +
+    `socket: malformed ${socket.malformed || 0}, oversized ${socket.oversized || 0}, resyncs ${socket.resyncs || 0}; ` +
+    `connections refused: ${listed(socket.refused)}`;
   state.dirty = true;
 }
 
@@ -437,16 +453,16 @@ function onMessage(msg) {
       : `${msg.replay_dir}  ·  ${msg.node}`;
     if (state.windowS === null) setWindow(params.has("window") ? Number(params.get("window")) : (msg.mode === "live" ? 60 : 0));
   } else if (msg.type === "snapshot") {
+    // The page starts over; the histories follow as "samples" messages marked "snapshot".
     for (const m of state.models.values()) removeView(m);
     state.models.clear();
-    for (const [method, models] of Object.entries(msg.methods)) {
-      for (const [name, cols] of Object.entries(models)) appendColumns(method, name, cols, true);
-    }
+    state.counts = {};
     for (const q of msg.quality) setQuality(q);
+    state.dirty = true;
   } else if (msg.type === "samples") {
     const received = performance.timeOrigin + performance.now();
-    for (const [name, cols] of Object.entries(msg.models)) appendColumns(msg.method, name, cols, false);
-    if (window.rlsLatency.length < LATENCY_KEEP) {
+    for (const [name, cols] of Object.entries(msg.models)) appendColumns(msg.method, name, cols);
+    if (!msg.snapshot && window.rlsLatency.length < LATENCY_KEEP) {
       window.rlsLatency.push({ published_ns: msg.published_ns, sent_ns: msg.sent_ns, received_ms: received,
                                stamp: Math.max(...Object.values(msg.models).map((c) => c.t[c.t.length - 1])) });
     }

@@ -61,9 +61,9 @@ import zlib
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 
-from ..datapath.alerts import Alert, AlertPolicy
-from ..datapath.bookkeeping import Totals, Window, increase
-from ..datapath.outputs import NODE_NAME
+from .alerts import Alert, AlertPolicy
+from .bookkeeping import Totals, Window, increase
+from .outputs import NODE_NAME
 
 __all__ = [
     "OK",

@@ -18,7 +18,7 @@ from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
-from ..ros.diagnostics import status_prefix
+from ..datapath.diagnostics import status_prefix
 
 __all__ = ["statuses_of", "StatusTuple", "StreamHealth", "NodeHealth", "parse_statuses", "HealthTracker", "LEVELS"]
 
