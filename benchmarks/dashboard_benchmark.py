@@ -161,7 +161,8 @@ def main() -> int:
                 time.sleep(0.2)
             cpu0, wall0 = cpu_seconds(dashboard.pid), time.monotonic()
             play = subprocess.run([sys.executable, "-m", "rls_uncertainty.cli", "play", args.bag, "--rate", args.rate,
-                                   "--wait", "1"], check=False, capture_output=True, text=True, cwd=ROOT)
+                                   "--subscribers", "1", "--wait", "60"],
+                                  check=False, capture_output=True, text=True, cwd=ROOT)
             time.sleep(1.0)
             cpu1, wall1 = cpu_seconds(dashboard.pid), time.monotonic()
             records = page.evaluate("window.rlsLatency")

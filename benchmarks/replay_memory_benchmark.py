@@ -104,7 +104,7 @@ def main() -> int:
                 runs.append(("convert", ["convert", str(bag), "--mapping", str(mapping), "--out",
                                          str(Path(tmp) / f"c{minutes:g}")]))
             if args.play:
-                runs.append(("play", ["play", str(bag), "--rate", "0", "--delay", "0"]))
+                runs.append(("play", ["play", str(bag), "--rate", "0", "--subscribers", "0", "--delay", "0"]))
             for name, cmd in runs:
                 wall, rss, _code = measure(cmd, args.pythonpath)
                 label = f"{minutes:g} min at 200 Hz IMU"

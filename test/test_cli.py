@@ -217,6 +217,9 @@ BAD_ARGUMENTS = [
     (["play", "{bag}", "--rate", "nan"], "--rate"),
     (["play", "{bag}", "--delay", "-1"], "--delay"),
     (["play", "{bag}", "--wait", "-1"], "--wait"),
+    (["play", "{bag}", "--wait", "inf"], "--wait"),
+    (["play", "{bag}", "--subscribers", "-1"], "--subscribers"),
+    (["play", "{bag}", "--subscribers", "1.5"], "--subscribers"),
     (["play", "{bag}", "--loop", "0"], "--loop"),
     (["play", "{bag}", "--loop", "1.5"], "--loop"),
     (["play", "{bag}", "--window", "0"], "--window"),
@@ -259,14 +262,14 @@ def test_bad_text_in_parameter_and_aircraft_files_is_one_line(tmp_path, capsys):
 
 
 def test_the_player_functions_refuse_bad_numbers_before_starting_dds():
-    from rls_uncertainty.ros import player
+    from rls_uncertainty.ros import demo, player
     for kwargs in ({"rate": math.nan}, {"rate": -1.0}, {"rate": math.inf}, {"start_delay": -0.5},
-                   {"wait_for_subscribers": -1}, {"wait_timeout": math.nan}, {"loops": 0}, {"loops": True},
-                   {"window": 0}, {"ack_timeout": -1.0}, {"ack_timeout": math.inf}):
+                   {"subscribers": -1}, {"subscribers": 1.5}, {"wait": math.nan}, {"wait": -1.0}, {"loops": 0},
+                   {"loops": True}, {"window": 0}, {"ack_timeout": -1.0}, {"ack_timeout": math.inf}):
         with pytest.raises(ConfigError):
             player.play(BUNDLED, **kwargs)
     with pytest.raises(ConfigError, match="rate"):
-        player.demo(rate=math.nan)
+        demo.demo(rate=math.nan)
 
 
 def test_play_leaves_dds_discovery_to_the_environment(monkeypatch):
@@ -303,7 +306,7 @@ WORKERS = [
     ("rls_uncertainty.simulation.multisine.design_multisines",
      ["multisine", "--period", "12", "--band", "0.2", "2", "--inputs", "2", "--out", "{tmp}/m.csv"]),
     ("rls_uncertainty.ros.player.play", ["play", "{bag}"]),
-    ("rls_uncertainty.ros.player.demo", ["demo"]),
+    ("rls_uncertainty.ros.demo.demo", ["demo"]),
 ]
 
 

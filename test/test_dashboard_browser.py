@@ -231,7 +231,8 @@ def test_live_page_shows_the_nodes_last_published_values_and_flags_under_a_names
         _wait(browser, "document.getElementById('banner').dataset.state === 'no_samples'", 90)
         assert node_name in browser.text_content("#node")
         play = subprocess.run([sys.executable, "-m", "rls_uncertainty.cli", "play", str(ROOT / "bags" / "t2_maneuver"),
-                               "--rate", "1", "--wait", "1"], capture_output=True, text=True, cwd=ROOT, timeout=300)
+                               "--rate", "1", "--subscribers", "1", "--wait", "60"],
+                              capture_output=True, text=True, cwd=ROOT, timeout=300)
         assert play.returncode == 0, play.stderr
         # The node's last samples: its outputs have stopped coming for 2 s (at real time it may
         # form a few samples fewer than the offline replay's 591; the page must show its last).
@@ -307,7 +308,8 @@ def test_a_dashboard_started_after_the_node_shows_its_latest_values_at_once(tmp_
     recorder = _Recorder("/rls_estimator")
     try:
         play = subprocess.run([sys.executable, "-m", "rls_uncertainty.cli", "play", str(ROOT / "bags" / "t2_maneuver"),
-                               "--rate", "1", "--wait", "1"], capture_output=True, text=True, cwd=ROOT, timeout=300)
+                               "--rate", "1", "--subscribers", "1", "--wait", "60"],
+                              capture_output=True, text=True, cwd=ROOT, timeout=300)
         assert play.returncode == 0, play.stderr
         recorder.wait_quiet(300)  # on a busy machine the node forms fewer than the replay's 591
         stamp, last = recorder.last()
@@ -338,7 +340,8 @@ def test_a_live_node_publishing_both_methods_shows_its_last_frequency_domain_val
                                               store.append, RELIABLE)
     try:
         play = subprocess.run([sys.executable, "-m", "rls_uncertainty.cli", "play", str(ROOT / "bags" / "t2_maneuver"),
-                               "--rate", "1", "--wait", "1"], capture_output=True, text=True, cwd=ROOT, timeout=300)
+                               "--rate", "1", "--subscribers", "1", "--wait", "60"],
+                              capture_output=True, text=True, cwd=ROOT, timeout=300)
         assert play.returncode == 0, play.stderr
         recorder.wait_quiet(300)
         assert all(frequency.values()), {k: len(v) for k, v in frequency.items()}

@@ -150,6 +150,26 @@ def test_a_required_stream_older_than_the_limit_is_stale(max_gap, age_s, stale):
         assert (s.level, s.message) == (OK, "all inputs fresh")
 
 
+@pytest.mark.parametrize("max_gap,arrived_s,stale", [(0.25, 1.0, False), (0.25, 1.001, True), (2.0, 4.01, True)])
+def test_with_arrival_ages_a_stream_is_as_old_as_its_newest_arrival_whatever_its_stamps(max_gap, arrived_s, stale):
+    """The node hands in when each stream's newest message arrived: a bag's stamps, a year
+    behind the node's clock (a replay without /clock), do not make it stale; a stream that
+    stopped arriving is stale after the same limit; one never heard from is silent."""
+    year = 365 * 86400 * SEC
+    c = counters({k: stream(received=5, newest=NOW - year) for k in ("imu", "airspeed")}
+                 | {"control_surfaces": stream(received=0)})
+    ages = {"imu": 0.02, "airspeed": arrived_s, "dynamic_pressure": 0.1, "thrust": 0.1}
+    snap = snapshot(c, max_gap=max_gap, required=("imu", "airspeed", "control_surfaces"))
+    s = statuses(Snapshot(**{**snap.__dict__, "arrival_ages_s": ages}))["inputs"]
+    assert values(s)["imu.age_s"] == "0.020" and values(s)["airspeed.age_s"] == f"{arrived_s:.3f}"
+    assert values(s)["control_surfaces.age_s"] == "never received"
+    want = ([f"airspeed stale ({arrived_s:.1f} s)"] if stale else []) + ["control_surfaces silent"]
+    assert (s.level, s.message) == (WARN, "; ".join(want))
+    # Without arrival ages (the offline replay) the same stamps are a year old.
+    s = statuses(snap)["inputs"]
+    assert values(s)["imu.age_s"] == f"{year / SEC:.3f}" and s.message.startswith("imu stale (")
+
+
 def test_a_silent_required_stream_warns_and_hints_when_no_publisher_matched():
     c = counters({"imu": stream(received=0)})
     s = statuses(snapshot(c, publishers={"imu": 1}))["inputs"]

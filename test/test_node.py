@@ -783,7 +783,8 @@ def test_play_command_drives_the_live_node_to_the_replay_numbers(tmp_path, teste
         tester.wait_connected()
         offline = run_pipeline(bag, _t2_config(NO_EXPIRY))
         player = subprocess.run(
-            [sys.executable, "-m", "rls_uncertainty.cli", "play", str(BUNDLED), "--rate", "4", "--wait", "1"],
+            [sys.executable, "-m", "rls_uncertainty.cli", "play", str(BUNDLED), "--rate", "4", "--subscribers", "1",
+             "--wait", "60"],
             capture_output=True, text=True, timeout=120, cwd=ROOT,
         )
         assert player.returncode == 0, player.stderr

@@ -196,3 +196,59 @@ def test_a_call_sent_again_says_so():
     assert report("reset", NODE, [(True, "reset")] * 2, 2, 5.0, sends=2, out=out) == 0
     assert out.getvalue().splitlines()[0].endswith(
         "; sent 2 times, as the earlier calls did not reach every node (a node may have had it more than once)")
+
+
+def test_status_follows_the_node_through_a_silence_until_sigterm(tmp_path):
+    """`status` (not --once) keeps printing the node's reports long past --timeout; a node
+    frozen (SIGSTOP) longer than that is said silent and still on the graph, its next report
+    after SIGCONT is said back; SIGTERM ends status with exit status 0."""
+    import signal
+    import threading
+
+    lines: list[str] = []
+
+    def reports() -> int:
+        return sum(line.startswith(f"{NODE}  (ROS_DOMAIN_ID=") for line in list(lines))
+
+    node = NodeProcess(tmp_path, "--params-file", T2, "-r", "__ns:=/ops", "-p", "diagnostics_period:=0.2")
+    status = reader = None
+    try:
+        _status_once()  # the node reports: from now on --timeout 1 applies
+        status = subprocess.Popen([sys.executable, "-m", "rls_uncertainty.cli", "status", "--node", NODE,
+                                   "--timeout", "1"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                                  cwd=ROOT)
+        out = status.stdout
+        reader = threading.Thread(target=lambda: lines.extend(iter(out.readline, "")), daemon=True)
+        reader.start()
+
+        def wait_for(condition, what: str) -> None:
+            deadline = time.monotonic() + 120
+            while not condition():
+                assert status.poll() is None, (what, status.returncode, status.stderr.read(), lines[-5:])
+                assert time.monotonic() < deadline, (what, lines[-5:])
+                time.sleep(0.05)
+
+        wait_for(lambda: reports() >= 1, "a first report")
+        first = time.monotonic()
+        # Ten times the --timeout of 1 s, reporting all along (it used to give up after 3-5).
+        wait_for(lambda: reports() >= 20 and time.monotonic() - first > 10, "reports for 10 s")
+        node.proc.send_signal(signal.SIGSTOP)
+        try:
+            wait_for(lambda: any(": no report for " in line for line in list(lines)), "the silence said")
+            gone = next(line for line in list(lines) if ": no report for " in line)
+            assert f"{NODE}: no report for " in gone and "still on the ROS graph" in gone, gone
+        finally:
+            node.proc.send_signal(signal.SIGCONT)
+        wait_for(lambda: any(f"{NODE} is back after " in line for line in list(lines)), "the return said")
+        status.send_signal(signal.SIGTERM)
+        assert status.wait(timeout=60) == 0, status.stderr.read()
+    finally:
+        if status is not None:
+            if status.poll() is None:
+                status.kill()
+                status.wait()
+            if reader is not None:
+                reader.join(timeout=10)
+            status.stdout.close()
+            status.stderr.close()
+        assert node.stop() == 0, node.text()

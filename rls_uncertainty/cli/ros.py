@@ -16,7 +16,7 @@ __all__ = ["add_demo", "add_play", "add_operator_commands"]
 def _demo(args: argparse.Namespace) -> int:
     """The live node on the bundled bag over DDS, beside the offline replay."""
     with optional("ros"):
-        from ..ros.player import demo
+        from ..ros.demo import demo
 
         return demo(rate=args.rate)
 
@@ -26,8 +26,8 @@ def _play(args: argparse.Namespace) -> int:
         from ..ros.player import play
 
         return play(args.bag, rate=args.rate, clock=not args.no_clock, reliable=not args.best_effort,
-                    wait_for_subscribers=args.wait, start_delay=args.delay, loops=args.loop, window=args.window,
-                    ack_timeout=args.ack_timeout, report=args.report)
+                    subscribers=args.subscribers, wait=args.wait, start_delay=args.delay, loops=args.loop,
+                    window=args.window, ack_timeout=args.ack_timeout, report=args.report)
 
 
 def _dashboard(args: argparse.Namespace) -> int:
@@ -63,12 +63,14 @@ def add_demo(sub: Any) -> None:
 
 
 def add_play(sub: Any) -> None:
-    from ..ros.player import DEFAULT_WINDOW  # no ROS import at module level
+    from ..ros.player import DEFAULT_WAIT_S, DEFAULT_WINDOW  # no ROS import at module level
 
     pl = sub.add_parser("play", help="publish a replay bag over DDS with /clock",
-                        description="Publish a replay bag over DDS with /clock. Exit status 0 when every reliable "
-                                    "subscriber acknowledged every message, 1 when not (what was not delivered is "
-                                    "printed), 2 on bad input.")
+                        description="Publish a replay bag over DDS with /clock, once the subscribers present have "
+                                    "matched (it says how many). Exit status 0 when every reliable subscriber "
+                                    "acknowledged every message, 1 when not (what was not delivered is printed) or "
+                                    "when no subscriber matched within --wait (nothing is published), 2 on bad "
+                                    "input.")
     pl.add_argument("bag")
     pl.add_argument("--rate", type=real(0.0), default=1.0,
                     help="rate factor (default 1 = real time; 0 = as fast as the acknowledgements allow)")
@@ -83,9 +85,14 @@ def add_play(sub: Any) -> None:
                     help="print per topic the messages published, acknowledged, and the discovered subscriptions")
     pl.add_argument("--no-clock", action="store_true", help="do not publish /clock")
     pl.add_argument("--best-effort", action="store_true", help="best-effort QoS (default reliable)")
-    pl.add_argument("--wait", type=integer(0), default=0, help="wait for this many subscribers on each topic")
-    pl.add_argument("--delay", type=real(0.0), default=0.5,
-                    help="seconds between discovery and the first message (default 0.5)")
+    pl.add_argument("--wait", type=real(0.0), default=DEFAULT_WAIT_S, metavar="SECONDS",
+                    help="wait at most this long for the subscribers to be discovered and matched; none by then: "
+                         f"nothing is played, exit status 1 (default {DEFAULT_WAIT_S:g})")
+    pl.add_argument("--subscribers", type=integer(0), default=None, metavar="N",
+                    help="wait for N matched subscriptions on every topic of the bag (default: every subscription "
+                         "listed on the bag's topics, at least one; 0: play even to nobody)")
+    pl.add_argument("--delay", type=real(0.0), default=0.5, metavar="SECONDS",
+                    help="how long the subscriptions must stay matched before the first message (default 0.5)")
     pl.set_defaults(func=_play)
 
 
@@ -99,11 +106,13 @@ def add_operator_commands(sub: Any) -> None:
                     help="show a finished replay's outputs (the --out DIR of rls-uncertainty replay)")
     db.add_argument("--reference", metavar="FILE", help="YAML of reference values by parameter name (CZ_alpha: -3.9)")
     db.set_defaults(func=_dashboard)
-    st = sub.add_parser("status", help="the node's inputs, samples and models from /diagnostics, refreshed in place")
+    st = sub.add_parser("status", help="the node's inputs, samples and models from /diagnostics, followed until "
+                                       "Ctrl-C")
     st.add_argument("--once", action="store_true", help="print one report and exit")
     st.add_argument("--node", default="/rls_estimator", help=node_help)
     st.add_argument("--timeout", type=real(0.0, low_open=True), default=5.0,
-                    help="seconds to wait for the node's first report (default 5)")
+                    help="seconds to wait for the node's first report (exit status 1 without one), and of silence "
+                         "after which the node is said gone while status waits for its return (default 5)")
     st.set_defaults(func=_status)
     for name, text in (("enable", "start estimating (~/enable true)"),
                        ("disable", "stop estimating; samples still counted (~/enable false)"),

@@ -12,10 +12,12 @@ node in the root namespace, as always, and the fully qualified name under a name
 ``/diagnostics``; ``hardware_id`` is the same ``<node>``):
 
 * ``inputs``: ``recent_window_s``, then per stream ``required``, ``publishers``, ``rate_hz``,
-  ``age_s``, the cumulative ``received``, ``accepted``, ``expired``, ``missing``, the counts of
-  the recent window ``recent.rejected``, ``recent.missing``, ``recent.expired``, and the
-  cumulative ``rejected.<reason>``. WARN when a required stream is silent or stale (older than
-  ``max(1 s, 2 max_gap)``; with a hint when no publisher matched), or when messages were
+  ``age_s`` (seconds since the stream's newest message arrived, on the node's steady clock:
+  neither the stamps' origin nor ``/clock`` matters), the cumulative ``received``,
+  ``accepted``, ``expired``, ``missing``, the counts of the recent window ``recent.rejected``,
+  ``recent.missing``, ``recent.expired``, and the cumulative ``rejected.<reason>``. WARN
+  when a required stream is silent or stale (older than ``max(1 s, 2 max_gap)``; with a hint
+  when no publisher matched), or when messages were
   rejected, missing or expired *within the recent window*: one dropped packet warns for
   ``window_s`` seconds, not for the rest of the flight (the cumulative counters stay beside).
   ERROR when the data path is misconfigured (:mod:`.alerts`: every message of a needed stream
@@ -108,8 +110,8 @@ class Snapshot:
     ``counters`` is :meth:`.pipeline.Pipeline.counters`; ``models`` pairs each configured
     model's output name with :meth:`.pipeline.Pipeline.model_fit`; ``required`` lists the
     streams the samples need and ``max_gap`` (s) is the configured largest interpolated gap.
-    The rest only the node knows: its clock (``now_ns``, the clock the stamps are compared
-    with, simulated under ``use_sim_time``), the steady time since the previous snapshot
+    The rest only the node knows: its clock (``now_ns``, simulated under ``use_sim_time``), when
+    each stream's newest message arrived (``arrival_ages_s``), the steady time since the previous snapshot
     (``elapsed_s``), the publishers matched per input and the resolved topic names, the QoS
     choice, the wall and CPU times of the callbacks that produced outputs in the period, the
     state-file status, whether estimation is enabled and how many other nodes on the graph
@@ -130,6 +132,10 @@ class Snapshot:
     latencies_s: Sequence[float] = field(default_factory=tuple)
     cpu_times_s: Sequence[float] = field(default_factory=tuple)
     namesakes: int = 0  # other nodes on the ROS graph with this node's fully qualified name
+    # Seconds since each stream's newest message arrived, on the node's steady clock (a stream
+    # never heard from is absent). When given, it is the streams' age; without it (the offline
+    # replay) the age is ``now_ns`` minus the stream's newest stamp.
+    arrival_ages_s: Mapping[str, float] | None = None
 
 
 def status_prefix(node: str) -> str:
@@ -157,6 +163,14 @@ def stale_after(max_gap: float) -> float:
     """Age (s) beyond which a required stream is reported stale: twice the largest gap the
     pipeline interpolates across, at least one second."""
     return max(1.0, 2.0 * max_gap)
+
+
+def _age(snap: Snapshot, kind: str, newest_stamp_ns: int | None) -> float | None:
+    """How old stream ``kind``'s newest message is (s; None: never received): since it arrived
+    when the snapshot has arrival ages (the node), else the snapshot's clock minus its stamp."""
+    if snap.arrival_ages_s is not None:
+        return snap.arrival_ages_s.get(kind)
+    return (snap.now_ns - newest_stamp_ns) * 1e-9 if newest_stamp_ns is not None else None
 
 
 def percentile(sorted_values: Sequence[float], q: float) -> float:
@@ -272,8 +286,7 @@ class DiagnosticsPolicy:
         for kind, s in snap.counters["streams"].items():
             needed = kind in snap.required
             rate = (s["received"] - self._received_before(kind)) / period
-            newest = s["newest_stamp_ns"]
-            age = (snap.now_ns - newest) * 1e-9 if newest is not None else None
+            age = _age(snap, kind, s["newest_stamp_ns"])
             publishers = snap.publishers[kind]
             rejected = increase(now.rejected_total(kind), before.rejected_total(kind))
             missing = increase(now.missing[kind], before.missing.get(kind, 0))

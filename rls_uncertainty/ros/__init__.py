@@ -1,5 +1,5 @@
-"""The ROS adapter: the rclpy node (:mod:`.node`), DDS playback and the live demo (:mod:`.player`),
-and the operator commands (:mod:`.operate`).
+"""The ROS adapter: the rclpy node (:mod:`.node`), DDS playback (:mod:`.player`), the live demo
+(:mod:`.demo`) and the operator commands (:mod:`.operate`).
 
 The only wing that imports rclpy; it adapts :mod:`..datapath` (whose
 :mod:`..datapath.diagnostics` computes the ``/diagnostics`` statuses without ROS) and adds no

@@ -111,6 +111,9 @@ class EstimatorNode(Node):
                                               window_s=self.node_cfg.diagnostics_window)
         self._last_diag = time.monotonic()
         self._silent = SilentInputs()  # input topics nobody publishes, logged once
+        # When each stream's newest message arrived (steady clock): its age in /diagnostics, so a
+        # bag's recorded stamps and /clock do not make a fresh stream look stale.
+        self._arrived: dict[str, float] = {}
 
         # Transient local: a subscriber that joins late (a dashboard) gets the last qos.depth
         # samples at once; volatile subscribers match as before. Keep-last bounds the memory.
@@ -224,9 +227,11 @@ class EstimatorNode(Node):
         order) into light objects with the message's field names: building rclpy's Python
         messages (numpy covariance arrays and all) cost more than the pipeline itself."""
         msgtype = MESSAGE_TYPES[kind]
+        arrived = self._arrived
 
         def on_message(raw: bytes) -> None:
             t0 = time.perf_counter()
+            arrived[kind] = time.monotonic()
             c0 = time.thread_time()
             try:
                 pipeline = self.pipeline
@@ -389,6 +394,7 @@ class EstimatorNode(Node):
             latencies_s=self._latencies,
             cpu_times_s=self._cpu_times,
             namesakes=self._namesakes(),
+            arrival_ages_s={kind: wall - t for kind, t in self._arrived.items()},
         )
         self._last_diag = wall
         self._latencies, self._cpu_times = [], []

@@ -4,7 +4,9 @@
   table (streams with rate, age, counts and the reasons of recent rejections; samples;
   models, the parameters whose convergence flag is held back as not identifiable and why; which
   estimation methods' estimates the node publishes, from the ROS graph's topics), redrawn in
-  place at each report; ``--once`` prints one and exits;
+  place at each report until Ctrl-C or SIGTERM (exit status 0); it follows the node: a silence
+  longer than ``--timeout`` (or three report intervals) is said, with whether the node is still
+  on the ROS graph, and so is its return; ``--once`` prints one and exits;
 * ``rls-uncertainty enable | disable | reset [--node NAME]``: calls ``~/enable``
   (``std_srvs/SetBool``) or ``~/reset`` (``std_srvs/Trigger``) of every node that answers to
   the name and prints each answer (:func:`call`).
@@ -42,9 +44,11 @@ Answers carry no sender: they are numbered, not named (the twins' logs say which
 
 from __future__ import annotations
 
+import signal
 import sys
 import time
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Iterator
+from contextlib import contextmanager
 from typing import Any, TextIO
 
 import rclpy
@@ -262,37 +266,114 @@ def format_health(node_name: str, h: NodeHealth, methods: Iterable[str] = ()) ->
     return "\n".join(lines)
 
 
+class _Presence:
+    """Whether the node still reports, as ``status`` follows it: the node is taken as gone
+    when no report came for :meth:`limit` seconds (``timeout``, or three of its report
+    intervals when it reports more slowly than that), and back at its next report."""
+
+    def __init__(self, timeout: float) -> None:
+        self.timeout = timeout
+        self.last: float | None = None  # when the newest report arrived
+        self.interval = 0.0  # the newest interval between two reports
+        self.gone_since: float | None = None  # the newest report's time while the node is said gone
+
+    def limit(self) -> float:
+        return max(self.timeout, 3.0 * self.interval)
+
+    def report(self, now: float) -> float | None:
+        """A report arrived at ``now``: the seconds without one if the node had been said gone."""
+        silent = now - self.gone_since if self.gone_since is not None else None
+        if self.last is not None and silent is None:
+            self.interval = now - self.last
+        self.last, self.gone_since = now, None
+        return silent
+
+    def went(self, now: float) -> bool:
+        """Whether the node is to be said gone now (once per absence)."""
+        if self.last is None or self.gone_since is not None or now - self.last <= self.limit():
+            return False
+        self.gone_since = self.last
+        return True
+
+
+@contextmanager
+def _sigterm_interrupts() -> Iterator[None]:
+    """SIGTERM ends ``status`` as Ctrl-C does (a KeyboardInterrupt in the main thread); the
+    previous handler is restored afterwards."""
+    def interrupt(_signum: int, _frame: object) -> None:
+        raise KeyboardInterrupt
+
+    try:
+        previous = signal.signal(signal.SIGTERM, interrupt)
+    except ValueError:  # not the main thread: signals stay as they are
+        yield
+        return
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
+def _gone_line(node: Node, node_name: str, silent_s: float) -> str:
+    key = split_node_name(node_name)[::-1]  # (name, namespace), as the graph lists nodes
+    on_graph = any(tuple(n) == key for n in node.get_node_names_and_namespaces())
+    where_now = "still on the ROS graph: busy, or its reports do not reach here" if on_graph else \
+        "no longer on the ROS graph"
+    return (f"{time.strftime('%H:%M:%S')}  {node_name}: no report for {silent_s:.0f} s ({where_now}); waiting for it "
+            "to come back (Ctrl-C to stop)")
+
+
 def status(node_name: str, once: bool, timeout: float, out: TextIO = sys.stdout,
            until: Callable[[], bool] | None = None) -> int:
-    """Print the node's reports as they come (in place on a terminal) until Ctrl-C (or
-    ``until()``); with ``once`` the first one."""
+    """Print the node's reports as they come (in place on a terminal) until Ctrl-C or SIGTERM
+    (or ``until()``); with ``once`` the first one. No first report within ``timeout``: exit
+    status 1. Afterwards the node is followed: a silence longer than :meth:`_Presence.limit`
+    is said (with whether the node is still on the ROS graph), and so is its return."""
+    presence = _Presence(timeout)
     tracker = HealthTracker()
     reports: list[NodeHealth] = []
 
     def on_diagnostics(msg: DiagnosticArray) -> None:
+        nonlocal tracker
         parsed = parse_statuses(statuses_of(msg), node_name)
         if parsed is not None:
+            if presence.gone_since is not None:
+                tracker = HealthTracker()  # a restarted node counts from zero
             reports.append(tracker.update(parsed))
 
     live = out.isatty()
-    shown = 0
-    with _Session() as session:
+    shown, text = 0, ""
+
+    def write(block: str) -> None:
+        out.write(block + "\n")
+        out.flush()
+
+    with _Session() as session, _sigterm_interrupts():
         session.node.create_subscription(DiagnosticArray, "/diagnostics", on_diagnostics, 50)
-        deadline = time.monotonic() + timeout
+        started = time.monotonic()
         try:
             while until is None or not until():
                 session.executor.spin_once(timeout_sec=0.2)
+                now = time.monotonic()
                 if not reports:
-                    if time.monotonic() > deadline:
+                    if presence.last is None and now - started > timeout:
                         return _fail("status", f"no /diagnostics from {node_name} within {timeout:g} s ({where()}): "
                                                "is the node running, with the same domain and discovery range?")
+                    if presence.went(now):
+                        line = _gone_line(session.node, node_name, now - (presence.last or now))
+                        write(f"{_CLEAR}{text}\n\n{line}" if live else f"\n{line}")
                     continue
+                silent = presence.report(now)
                 topics = [t for t, _types in session.node.get_topic_names_and_types()]
                 text = format_health(node_name, reports[-1], published_methods(topics, node_name))
                 reports.clear()
                 shown += 1
-                out.write((_CLEAR if live else ("\n" if shown > 1 else "")) + text + "\n")
-                out.flush()
+                back = "" if silent is None else \
+                    f"{time.strftime('%H:%M:%S')}  {node_name} is back after {silent:.0f} s without a report"
+                if live:
+                    write(_CLEAR + text + (f"\n\n{back}" if back else ""))
+                else:
+                    write(("\n" if shown > 1 else "") + "\n".join(filter(None, (back, text))))
                 if once:
                     return 0
         except KeyboardInterrupt:

@@ -1,10 +1,21 @@
-"""DDS playback of replay bags, and the live demo.
+"""DDS playback of replay bags (``rls-uncertainty play``; the demo's player, :mod:`.demo`).
 
 ``rls-uncertainty play BAG`` publishes each message's recorded CDR bytes unchanged on its
 topic at the bag's pace (times a rate factor), and ``/clock`` at every message's log time so
 a node with ``use_sim_time`` follows the bag (rosbag2's player is not installable here).
 ``--loop N`` plays the bag N times: stamps and ``/clock`` restart with every pass, as a looped
 ``ros2 bag play`` does.
+
+**Who listens** (:meth:`_Publisher.find_audience`). Before the first message the player waits,
+at most ``--wait`` seconds (:data:`DEFAULT_WAIT_S`), until every subscription the ROS graph
+lists on the bag's topics has matched its publishers, and at least one has (or
+``--subscribers N`` on every topic), all of it holding for ``--delay`` seconds (a
+subscriber's other topics and its side of the match catch up meanwhile); then it says how
+many subscriptions matched, on which topics, of which nodes, and notes the best-effort ones
+(the player cannot know what they lose). Nobody in time: it says so, publishes nothing and
+exits 1. A message published before a subscriber matched would be lost to it: the ROS graph
+learns of a new node within a second or two, later than its publishers do on a busy
+machine.
 
 Reliable QoS by default, with flow control by acknowledgements (the player's writers ask for
 them every 50 ms: :data:`PLAYER_PROFILE`, a Fast DDS profile used unless the caller names
@@ -17,11 +28,9 @@ acknowledgement means the message is in every matched reliable subscriber's DDS 
 publisher, for all its reliable subscribers together); not that the subscribing program took
 it from the queue, nor anything about best-effort subscribers. How many messages a subscriber
 processed only the subscriber can say (the estimator node: ``/diagnostics``,
-``inputs.<stream>.received``).
-
-``rls-uncertainty demo`` starts the estimator node in its own process, plays the bundled
-T-2 bag to it over DDS, listens to its outputs and prints the final estimates beside the
-offline replay of the same bag.
+``inputs.<stream>.received``). A subscriber that keeps the last N messages loses those it
+has not taken when more arrive: lossless at any pace needs reliable subscriptions with
+queues deeper than the backlog can grow (the estimator node: :data:`.demo.REPLAY_PARAMETERS`).
 """
 
 from __future__ import annotations
@@ -32,28 +41,28 @@ import signal
 import subprocess
 import sys
 import time
-from collections.abc import Callable, Iterator, MutableMapping, Sequence
+from collections.abc import Callable, Iterator, MutableMapping
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Protocol
+from typing import TYPE_CHECKING
 
 from ..datapath.inputs import message_class
-from ..datapath.outputs import ARRAY_OUTPUTS, NODE_NAME
 from ..errors import BagError, ConfigError
+from .environment import where
 
 if TYPE_CHECKING:
     from rclpy.node import Node
     from rclpy.publisher import Publisher
 
-    from ..datapath.config import PipelineConfig
-    from ..datapath.pipeline import SampleOutput
-
-__all__ = ["play", "demo", "bundled_bag", "stop_process", "TopicStats", "DEFAULT_WINDOW"]
+__all__ = ["play", "bundled_bag", "stop_process", "TopicStats", "Audience", "Subscription", "NoAudience",
+           "DEFAULT_WINDOW", "DEFAULT_WAIT_S"]
 
 # Messages per topic that may wait for acknowledgement: the estimator node's default input
 # queue depth (qos.depth), so a keep-last subscriber of that depth is never sent more at once.
 DEFAULT_WINDOW = 100
+# How long play waits for its subscribers to be discovered and matched before it gives up.
+DEFAULT_WAIT_S = 10.0
 
 
 # Fast DDS (the default RMW) sends a reliable writer's heartbeat, its request for
@@ -81,11 +90,6 @@ def _player_writer_profile(env: MutableMapping[str, str] = os.environ) -> Iterat
         env.pop(_PROFILE_VARIABLES[0], None)
 
 
-def _loopback_default() -> None:
-    # DDS discovery stays on this machine unless the caller chose otherwise (the demo only).
-    os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
-
-
 @dataclass
 class TopicStats:
     """What the player knows about one topic's delivery. ``unconfirmed``: messages published
@@ -105,24 +109,82 @@ class TopicStats:
         self.subscribers_max = max(self.subscribers_max, n)
 
 
-class _Dimension(Protocol):
-    @property
-    def label(self) -> str: ...
+@dataclass(frozen=True)
+class Subscription:
+    """A subscription the ROS graph lists on a bag topic: its node's name, whether it is
+    reliable, and why its QoS can never match the player's (empty when it can)."""
+
+    node: str
+    reliable: bool
+    incompatible: str = ""
 
 
-class _Layout(Protocol):
-    @property
-    def dim(self) -> Sequence[_Dimension]: ...
+@dataclass
+class Audience:
+    """Who listens on the bag's topics: per topic, the subscriptions matched with the player's
+    publisher (DDS says how many, not whose) and those the ROS graph lists."""
+
+    matched: dict[str, int]
+    present: dict[str, list[Subscription]]
+
+    def shortfall(self, subscribers: int | None) -> str:
+        """Why playing may not start yet (empty when it may): a subscription listed and not
+        matched (one whose QoS can never match is not waited for); fewer than ``subscribers``
+        matched on a topic; with ``subscribers`` None, no subscription matched at all."""
+        by_problem: dict[str, list[str]] = {}  # the same problem on several topics: said once
+        for topic, subs in self.present.items():
+            want = sum(1 for sub in subs if not sub.incompatible)
+            if self.matched[topic] < want:
+                by_problem.setdefault(f"{self.matched[topic]} of the {want} subscription(s) listed matched",
+                                      []).append(topic)
+            if subscribers and self.matched[topic] < subscribers:
+                by_problem.setdefault(f"{self.matched[topic]} of the {subscribers} subscription(s) asked for matched",
+                                      []).append(topic)
+        problems = [f"{problem} on {', '.join(topics)}" for problem, topics in by_problem.items()]
+        if subscribers is None and not any(self.matched.values()):
+            problems.insert(0, f"no subscriber on any of the bag's {len(self.matched)} topics "
+                               f"({', '.join(self.matched)})")
+        if problems:  # and what may explain them
+            problems += self.notes(incompatible_only=True)
+        return "; ".join(problems)
+
+    def nodes(self) -> dict[str, bool]:
+        """The subscribing nodes the graph names (compatible subscriptions), and whether all
+        their subscriptions are reliable."""
+        out: dict[str, bool] = {}
+        for subs in self.present.values():
+            for sub in subs:
+                if not sub.incompatible:
+                    out[sub.node] = out.get(sub.node, True) and sub.reliable
+        return dict(sorted(out.items()))
+
+    def describe(self) -> str:
+        """How many subscriptions matched, on how many topics, and whose."""
+        total, topics = sum(self.matched.values()), [t for t, n in self.matched.items() if n]
+        scope = (f"each of the bag's {len(self.matched)} topics" if len(topics) == len(self.matched)
+                 else f"{len(topics)} of the bag's {len(self.matched)} topics (none on "
+                      f"{', '.join(t for t in self.matched if t not in topics)})")
+        nodes = self.nodes()
+        whose = ", ".join(f"{n} ({'reliable' if r else 'best effort'})" for n, r in nodes.items())
+        return (f"{total} subscription(s) matched on {scope}" + (f", of {len(nodes)} node(s): {whose}" if nodes else "")
+                if total else "no subscriber")
+
+    def notes(self, incompatible_only: bool = False) -> list[str]:
+        """What the player cannot promise: subscriptions that never match, best-effort ones."""
+        out = []
+        for topic, subs in self.present.items():
+            for sub in subs:
+                if sub.incompatible:
+                    out.append(f"{sub.node} on {topic} can never match: incompatible QoS ({sub.incompatible})")
+        if not incompatible_only:
+            out += [f"{node} subscribes best effort: a message it cannot take in time is lost, and play cannot know "
+                    "(a lossless replay needs reliable subscriptions with deep queues: docs/tools.md, play)"
+                    for node, reliable in self.nodes().items() if not reliable]
+        return out
 
 
-class _ArrayMessage(Protocol):
-    """What the demo reads of a ``std_msgs/Float64MultiArray`` (rosidl's classes are untyped)."""
-
-    @property
-    def layout(self) -> _Layout: ...
-
-    @property
-    def data(self) -> Sequence[float]: ...
+class NoAudience(Exception):
+    """Playing did not start: the subscribers were not there, or not matched, in time."""
 
 
 class NotAcknowledged(Exception):
@@ -137,7 +199,8 @@ class NotAcknowledged(Exception):
 class _Publisher:
     """Publishers for every topic of a bag (and /clock) on an existing rclpy node."""
 
-    def __init__(self, node: Node, bag: Path, *, clock: bool, reliable: bool, window: int = DEFAULT_WINDOW) -> None:
+    def __init__(self, node: Node, bag: Path, *, clock: bool, reliable: bool, window: int = DEFAULT_WINDOW,
+                 namespace: str = "") -> None:
         from rclpy.qos import QoSHistoryPolicy, QoSProfile, QoSReliabilityPolicy  # noqa: PLC0415
 
         from ..offline.bags import _open_reader, typestore  # noqa: PLC0415
@@ -151,8 +214,10 @@ class _Publisher:
         # wait for acknowledgement, so keep-last never drops one that was not delivered.
         reliability = QoSReliabilityPolicy.RELIABLE if reliable else QoSReliabilityPolicy.BEST_EFFORT
         self.qos = QoSProfile(depth=self.window, history=QoSHistoryPolicy.KEEP_LAST, reliability=reliability)
+        # Publishers and stats by the topic published: the bag's, under ``namespace`` if given.
         self.pubs: dict[str, Publisher] = {}
         self.stats: dict[str, TopicStats] = {}
+        self._published_as: dict[str, str] = {}
         for conn in self.reader.connections:
             try:
                 cls = message_class(conn.msgtype)
@@ -160,8 +225,9 @@ class _Publisher:
                 self.reader.close()
                 raise BagError(f"{self.path}: topic {conn.topic}: type {conn.msgtype} is not available in this "
                                "ROS install") from exc
-            self.pubs[conn.topic] = node.create_publisher(cls, conn.topic, self.qos)
-            self.stats[conn.topic] = TopicStats(conn.topic, conn.msgtype)
+            topic = self._published_as[conn.topic] = namespace.rstrip("/") + conn.topic
+            self.pubs[topic] = node.create_publisher(cls, topic, self.qos)
+            self.stats[topic] = TopicStats(topic, conn.msgtype)
         clock_type = message_class("rosgraph_msgs/msg/Clock")
         # /clock: only the newest value matters (rclpy's time source subscribes best effort,
         # depth 1), so it takes no part in flow control.
@@ -195,13 +261,56 @@ class _Publisher:
             raise BagError(f"{self.path}: {'; '.join(sorted(set(wrong)))} (a subscriber of another type never "
                            "receives a message); nothing was played")
 
-    def wait_for_subscribers(self, n: int, timeout: float, spin: Callable[[], None] | None = None) -> None:
-        deadline = time.monotonic() + timeout
-        while n and any(p.get_subscription_count() < n for p in self.pubs.values()):
+    def subscriptions(self) -> dict[str, list[Subscription]]:
+        """Per bag topic, the subscriptions of other nodes the ROS graph lists."""
+        from rclpy.qos import QoSDurabilityPolicy, QoSReliabilityPolicy  # noqa: PLC0415
+
+        me = (self.node.get_name(), self.node.get_namespace())
+        found: dict[str, list[Subscription]] = {}
+        for topic, s in self.stats.items():
+            found[topic] = []
+            for info in self.node.get_subscriptions_info_by_topic(topic):
+                if (info.node_name, info.node_namespace) == me or info.topic_type != s.msgtype:
+                    continue  # another type is check_types' to refuse
+                known = not info.node_name.startswith("_NODE_NAME_UNKNOWN")
+                name = f"{info.node_namespace.rstrip('/')}/{info.node_name}" if known else "a subscriber"
+                reliable = info.qos_profile.reliability == QoSReliabilityPolicy.RELIABLE
+                # The player's writers are volatile, and best effort with --best-effort: what
+                # a subscription may ask of them (the graph's deadline and liveliness values
+                # are not comparable with a profile's defaults, so those are not judged here).
+                why = [text for bad, text in (
+                    (reliable and not self.reliable, "it is reliable, the player best effort (--best-effort)"),
+                    (info.qos_profile.durability == QoSDurabilityPolicy.TRANSIENT_LOCAL,
+                     "it asks for transient-local durability, the player's is volatile")) if bad]
+                found[topic].append(Subscription(name, reliable, "; ".join(why)))
+        return found
+
+    def find_audience(self, wait: float, subscribers: int | None = None, settle: float = 0.5,
+                      spin: Callable[[], None] | None = None) -> Audience:
+        """Wait, at most ``wait`` seconds, until every subscription the ROS graph lists on the
+        bag's topics has matched this player's publishers (their count, per topic, is at least
+        the graph's), and: at least one has (``subscribers`` None), or at least
+        ``subscribers`` on every topic (0: none needed); all of it holding for ``settle``
+        seconds, so that a subscriber's later topics and the subscriber's side of the match
+        catch up. Raises :class:`NoAudience` saying what was missing; :class:`BagError` from
+        :meth:`check_types`."""
+        deadline = time.monotonic() + wait
+        ready_since: float | None = None
+        while True:
             self.check_types()  # a subscriber of another type never matches: say so, not "no subscriber"
-            if time.monotonic() > deadline:
-                missing = [t for t, p in self.pubs.items() if p.get_subscription_count() < n]
-                raise BagError(f"{self.path}: no subscriber on {missing} after {timeout:g} s")
+            present = self.subscriptions()
+            matched = {t: p.get_subscription_count() for t, p in self.pubs.items()}
+            audience = Audience(matched, present)
+            short = audience.shortfall(subscribers)
+            now = time.monotonic()
+            if not short:
+                ready_since = now if ready_since is None else ready_since
+                if now - ready_since >= settle:
+                    return audience
+            else:
+                ready_since = None
+            if now > deadline:
+                raise NoAudience(f"{short} within {wait:g} s ({where()}): nothing was played")
             if spin:
                 spin()
             else:
@@ -238,6 +347,7 @@ class _Publisher:
         window = self.window
         stats, pubs = self.stats, self.pubs
         clock_pub, clock = self.clock_pub, self._clock
+        published_as = self._published_as
         for _ in range(loops):
             t_wall0, t_bag0 = time.monotonic(), None
             self.count_subscribers()
@@ -248,7 +358,7 @@ class _Publisher:
                     delay = t_wall0 + (t - t_bag0) * 1e-9 / rate - time.monotonic()
                     if delay > 0:
                         time.sleep(delay)
-                topic = conn.topic
+                topic = published_as[conn.topic]
                 s = stats[topic]
                 if s.unconfirmed >= window and not self.confirm(topic, ack_timeout):
                     raise NotAcknowledged(topic, s.unconfirmed, ack_timeout)
@@ -313,22 +423,27 @@ def _check_rate(rate: float) -> None:
 
 
 def play(bag: str | Path, *, rate: float = 1.0, clock: bool = True, reliable: bool = True,
-         wait_for_subscribers: int = 0, start_delay: float = 0.5, wait_timeout: float = 30.0,
+         subscribers: int | None = None, wait: float = DEFAULT_WAIT_S, start_delay: float = 0.5,
          loops: int = 1, window: int = DEFAULT_WINDOW, ack_timeout: float = 30.0, report: bool = False) -> int:
     """Publish ``bag`` ``loops`` times; ``rate`` is the speed factor (0 = as fast as the
-    acknowledgements allow). Waits for ``wait_for_subscribers`` subscribers on every topic
-    first. Returns a process exit code: 0 when every reliable subscriber acknowledged every
-    message, 1 when not (what was not delivered is printed). Raises :class:`BagError` before
-    anything is published when a subscriber on a bag topic takes another type than the bag
-    holds (:meth:`_Publisher.check_types`, checked while waiting and before the first message)."""
+    acknowledgements allow). First waits, at most ``wait`` seconds, for its audience
+    (:meth:`_Publisher.find_audience`: every subscription listed on the bag's topics matched,
+    and at least one, or ``subscribers`` on every topic; for ``start_delay`` seconds) and
+    says who it is. Returns a process exit code: 0 when every reliable subscriber
+    acknowledged every message, 1 when not (what was not delivered is printed) or when the
+    audience was not there in time (nothing is published; the reason is printed). Raises
+    :class:`BagError` before anything is published when a subscriber on a bag topic takes
+    another type than the bag holds (:meth:`_Publisher.check_types`, checked while waiting and
+    before the first message)."""
     _check_rate(rate)
     # Checked at run time whatever the annotations say: callers from Python may pass anything.
     integers: tuple[tuple[str, object, int], ...] = (
-        ("number of subscribers to wait for", wait_for_subscribers, 0), ("loop count", loops, 1), ("window", window, 1))
+        ("number of subscribers to wait for", 0 if subscribers is None else subscribers, 0), ("loop count", loops, 1),
+        ("window", window, 1))
     for name, n, low in integers:
         if not (isinstance(n, int) and not isinstance(n, bool) and n >= low):
             raise ConfigError(f"the {name} must be an integer >= {low}, got {n!r}")
-    for name, value in (("start delay", start_delay), ("wait timeout", wait_timeout), ("ack timeout", ack_timeout)):
+    for name, value in (("start delay", start_delay), ("wait", wait), ("ack timeout", ack_timeout)):
         if not (math.isfinite(value) and value >= 0):
             raise ConfigError(f"{name} must be a finite number of seconds >= 0, got {value!r}")
     import rclpy  # noqa: PLC0415
@@ -339,14 +454,17 @@ def play(bag: str | Path, *, rate: float = 1.0, clock: bool = True, reliable: bo
     player = None
     try:
         player = _Publisher(node, Path(bag), clock=clock, reliable=reliable, window=window)
-        player.wait_for_subscribers(wait_for_subscribers, wait_timeout)
-        player.count_subscribers()
-        lo, hi = (f(s.subscribers_max for s in player.stats.values()) for f in (min, max))
-        player.check_types()
-        print(f"playing {bag}: {lo if lo == hi else f'{lo}-{hi}'} subscription(s) matched per topic; first message "
-              f"in {start_delay:g} s", file=sys.stderr, flush=True)
-        time.sleep(start_delay)
+        try:
+            audience = player.find_audience(wait, subscribers, start_delay)
+        except NoAudience as exc:
+            print(f"NOT PLAYED: {bag}: {exc}. Start the subscribers first, give them longer (--wait SECONDS), or "
+                  "play to nobody (--subscribers 0)", file=sys.stderr)
+            return 1
         player.check_types()  # the subscribers discovered meanwhile
+        pace = f"at {rate:g}x" if rate > 0 else "as fast as possible"
+        print(f"playing {bag} {pace}: {audience.describe()}", file=sys.stderr, flush=True)
+        for note in audience.notes():
+            print(f"note: {note}", file=sys.stderr, flush=True)
         t0 = time.monotonic()
         failure = None
         try:
@@ -383,31 +501,6 @@ def bundled_bag() -> Path:
     return package_path("bags", "t2_maneuver")
 
 
-# Input queue depth for the node in a reliable replay: deeper than any topic of the bundled
-# bag, so a node that falls behind (a busy machine) delays messages instead of overwriting them.
-_REPLAY_DEPTH = 10_000
-# And a long input buffer: a node that falls behind takes about one message per topic per
-# executor round, so its slow streams run seconds ahead of the IMU; with the default 2 s their
-# messages would expire (docs/tools.md, play).
-_REPLAY_BUFFER_S = 60.0
-
-
-def _start_node(params_path: str) -> tuple[subprocess.Popen[str], str]:
-    """The estimator node for a reliable replay, in a process of its own; and its log file's
-    name. The node writes its log through its own copy of the file descriptor: ours is closed
-    once the node is started; the file stays (delete=False) until the demo succeeds."""
-    import tempfile  # noqa: PLC0415
-
-    with tempfile.NamedTemporaryFile("w+", prefix="rls_demo_node_", suffix=".log", delete=False) as node_log:
-        proc = subprocess.Popen(
-            [sys.executable, "-m", "rls_uncertainty.ros.node", "--ros-args", "--params-file", params_path,
-             "-p", "qos.reliable:=true", "-p", f"qos.depth:={_REPLAY_DEPTH}",
-             "-p", f"inputs.buffer_duration:={_REPLAY_BUFFER_S}"],
-            stdout=node_log, stderr=subprocess.STDOUT, text=True,
-        )
-    return proc, node_log.name
-
-
 def stop_process(proc: subprocess.Popen, timeout: float = 15.0) -> bool:
     """End a child process (a node, the dashboard) as Ctrl-C does: SIGINT, then SIGKILL if it
     has not ended within ``timeout`` seconds. Whether it ended by itself (then its exit status
@@ -421,117 +514,3 @@ def stop_process(proc: subprocess.Popen, timeout: float = 15.0) -> bool:
             proc.wait()
             return False
     return True
-
-
-class _Outputs:
-    """What the demo's listener keeps of the node's outputs: the number of samples published
-    and the latest array of each topic."""
-
-    def __init__(self, node: Node, models: Sequence[str]) -> None:
-        from rclpy.qos import QoSHistoryPolicy, QoSProfile, QoSReliabilityPolicy  # noqa: PLC0415
-
-        self.samples = 0
-        self.latest: dict[str, _ArrayMessage] = {}
-        qos = QoSProfile(depth=1000, reliability=QoSReliabilityPolicy.RELIABLE, history=QoSHistoryPolicy.KEEP_LAST)
-        self.subs = [node.create_subscription(message_class("std_msgs/msg/Header"), f"/{NODE_NAME}/sample_stamp",
-                                              self._count, qos)]
-        array_type = message_class("std_msgs/msg/Float64MultiArray")
-        for model in models:
-            for suffix in ARRAY_OUTPUTS:
-                topic = f"/{NODE_NAME}/{model}/{suffix}"
-
-                def keep(msg: _ArrayMessage, t: str = topic) -> None:
-                    self.latest[t] = msg
-
-                self.subs.append(node.create_subscription(array_type, topic, keep, qos))
-
-    def _count(self, _msg: object) -> None:
-        self.samples += 1
-
-    def arrays(self, model: str) -> list[_ArrayMessage | None]:
-        """The latest estimates, corrected and conventional standard errors of ``model``."""
-        return [self.latest.get(f"/{NODE_NAME}/{model}/{suffix}") for suffix in ARRAY_OUTPUTS]
-
-
-def _spin_for(spin: Callable[[], object], seconds: float, until: Callable[[], bool] = lambda: False) -> None:
-    """Spin for ``seconds`` or until ``until()`` holds."""
-    deadline = time.monotonic() + seconds
-    while not until() and time.monotonic() < deadline:
-        spin()
-
-
-def demo(rate: float = 4.0, params_file: str = "t2") -> int:
-    """The live node on the bundled bag: estimates over DDS beside the offline replay."""
-    _check_rate(rate)
-    _loopback_default()
-    import rclpy  # noqa: PLC0415
-
-    from ..offline.bags import InputStream  # noqa: PLC0415
-    from ..offline.replay import run_pipeline  # noqa: PLC0415
-    from ..settings.models import config_dir  # noqa: PLC0415
-    from ..settings.parameters import pipeline_config  # noqa: PLC0415
-    from ..settings.sources import load_parameters_file  # noqa: PLC0415
-
-    bag = bundled_bag()
-    params_path = str(config_dir() / f"{params_file}.yaml")
-    params = {**load_parameters_file(params_path), "inputs.buffer_duration": _REPLAY_BUFFER_S}
-    config = pipeline_config(params)
-    print(f"starting the estimator node ({params_path}) and playing {bag} over DDS at {rate:g}x ...")
-    node_proc, node_log = _start_node(params_path)
-    with _player_writer_profile():
-        rclpy.init()
-        node = rclpy.create_node("rls_demo")
-    outputs = _Outputs(node, [m.output for m in config.models])
-    player = None
-    try:
-        player = _Publisher(node, bag, clock=False, reliable=True)
-        spin = lambda: rclpy.spin_once(node, timeout_sec=0.01)  # noqa: E731
-        player.wait_for_subscribers(1, 30.0, spin)
-        _spin_for(spin, 30, lambda: all(s.get_publisher_count() >= 1 for s in outputs.subs))
-        _spin_for(spin, 1.0)  # discovery is not symmetric: let both sides match
-        player.run(rate, spin)
-        with InputStream(bag) as stream:
-            offline = run_pipeline(stream, config, record=False)
-        want = len(offline.outputs)
-        _spin_for(spin, 20, lambda: outputs.samples >= want)
-        _spin_for(spin, 0.5)
-    finally:
-        if player is not None:
-            player.close()
-        node.destroy_node()
-        rclpy.try_shutdown()
-        stop_process(node_proc)
-    print(f"\nlive node: {outputs.samples} samples published (offline replay: {want})\n")
-    worst = _compare(config, outputs, offline.outputs[-1], node_log)
-    if worst is None:
-        return 1
-    os.unlink(node_log)
-    print("Conventional standard errors assume white residuals (Eq. 13); the corrected ones use the recursive\n"
-          "residual autocorrelation (Eqs. 17-22) and cover the real scatter of the estimates (Table 3).")
-    return 0 if worst < 1e-9 and outputs.samples == want else 1
-
-
-def _compare(config: PipelineConfig, outputs: _Outputs, last: SampleOutput, node_log: str) -> float | None:
-    """Print the live node's last estimates beside the true values and the largest relative
-    difference from the offline replay's last sample (returned; None if a model sent nothing)."""
-    import numpy as np  # noqa: PLC0415
-
-    from ..offline.report import results_table, rows_from_arrays  # noqa: PLC0415
-    from ..simulation.t2 import T2_TRUE  # noqa: PLC0415
-
-    rows = []
-    worst = 0.0
-    for j, m in enumerate(config.models):
-        est, se, sc = outputs.arrays(m.output)
-        if est is None or se is None or sc is None:
-            print(f"{m.output}: no estimate received from the node; its log: {node_log}")
-            return None
-        names = est.layout.dim[0].label.split(",")
-        rows += rows_from_arrays(names, est.data, sc.data, se.data, T2_TRUE)
-        n = len(names)
-        pairs = ((est.data, last.theta[j, :n]), (se.data, last.se[j, :n]), (sc.data, last.se_conventional[j, :n]))
-        for live, off in pairs:
-            worst = max(worst, float(np.max(np.abs(np.array(live) - off) / np.abs(off))))
-    print(results_table(rows))
-    print(f"\nlargest relative difference between the live node and the offline replay: {worst:.1e}")
-    return worst
