@@ -403,7 +403,7 @@ def test_every_status_stays_bounded_whatever_arrives():
     out = statuses(snapshot(c, state="x" * 100_000))
     inputs, samples = out["inputs"], out["samples"]
     assert len(inputs.values) <= 1 + 5 * (13 + dg.MAX_KEYS)
-    assert len(samples.values) <= 11 + 3 * (2 + dg.MAX_KEYS)
+    assert len(samples.values) <= 12 + 3 * (2 + dg.MAX_KEYS)
     assert _size(inputs) < 20_000 and _size(samples) < 10_000
     for s in (inputs, samples):
         assert len({k for k, _ in s.values}) == len(s.values)  # keys unique
@@ -447,3 +447,55 @@ def test_a_ready_model_says_which_parameters_converged(conv, suffix):
     s = statuses(snapshot(counters(used=512), models=[("CZ", {**FIT, **conv})]))["model CZ"]
     assert (s.level, s.message) == (OK, "R^2 0.912, residual lag-1 correlation 0.12" + suffix)
     assert dict(s.values).get("converged_parameters") == conv.get("converged_parameters")
+
+
+# ------------------------------------------------------------------ the node's round in steps
+def test_periodic_step_maximum_is_reported():
+    v = values(statuses(snapshot())["samples"])
+    assert "periodic_ms.max" not in v
+    snap = Snapshot(**{**snapshot().__dict__, "periodic_s": [0.0004, 0.0021, 0.0009]})
+    assert values(statuses(snap)["samples"])["periodic_ms.max"] == "2.100"
+
+
+def _fed_pipeline(n_messages):
+    from rls_uncertainty.datapath.inputs import feed
+    from rls_uncertainty.datapath.pipeline import Pipeline
+    from rls_uncertainty.offline.bags import read_inputs
+    from rls_uncertainty.settings import load_parameters_file, pipeline_config
+
+    root = Path(__file__).resolve().parents[1]
+    messages, _ = read_inputs(root / "bags" / "t2_maneuver")
+    pipe = Pipeline(pipeline_config(load_parameters_file("t2")))
+    for kind, _stamp, msg in messages[:n_messages]:
+        feed(pipe, kind, msg)
+    return pipe
+
+
+@pytest.mark.parametrize("n_messages", [0, 900, 4000])
+def test_a_round_in_steps_reports_what_the_one_shot_report_does(n_messages):
+    """The node's DiagnosticsRound, stepped one part at a time, publishes the statuses and the
+    fit arrays that Snapshot + DiagnosticsPolicy.update and OutputLayout.encode_fit give for
+    the same pipeline state (before the first sample, while initializing, converged), and
+    the policy's window advances the same way over successive rounds."""
+    from rls_uncertainty.datapath.diagnostics_round import DiagnosticsRound
+    from rls_uncertainty.datapath.outputs import OutputLayout
+
+    pipe = _fed_pipeline(n_messages)
+    layout = OutputLayout.of(pipe)
+    facts = {k: v for k, v in snapshot(latencies=[0.002, 0.001], cpu=[0.001, 0.001]).__dict__.items()
+             if k not in ("counters", "models")}
+    one_shot, stepped = DiagnosticsPolicy(), DiagnosticsPolicy()
+    for _period in range(3):
+        want = one_shot.update(Snapshot(counters=pipe.counters(), models=[
+            (m.output, pipe.model_report(j)) for j, m in enumerate(pipe.config.models)], **facts))
+        fits, published = [], []
+        r = DiagnosticsRound(pipe, layout, stepped, facts, lambda i, raw, fits=fits: fits.append((i, raw)),
+                             published.append)
+        steps = 1
+        while not r.step():
+            steps += 1
+            assert not published
+        assert steps == 2 * len(pipe.config.models) + 2 and r.done and r.step()
+        assert published == [want]
+        assert fits == layout.encode_fit(pipe)
+        assert bool(fits) == (n_messages > 0 and pipe.samples_used > 0)

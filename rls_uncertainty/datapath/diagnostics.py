@@ -23,7 +23,9 @@ node in the root namespace, as always, and the fully qualified name under a name
   name what was expected, what came and the parameter to change, come first in the message.
 * ``samples``: ``enabled``, ``samples_formed``, ``samples_used``, ``samples_pending``,
   ``samples_rejected.<reason>``, ``resets.<reason>``, ``unknown_joint.<name>``, callback
-  latency and CPU percentiles of the period, ``state_file``, ``nodes_with_this_name``. OK, or
+  latency and CPU percentiles of the period, ``periodic_ms.max`` (the longest step of the
+  node's periodic work, which holds up the input callbacks for that long),
+  ``state_file``, ``nodes_with_this_name``. OK, or
   ERROR while another node with this node's fully qualified name is on the ROS graph (its
   outputs then mix with this node's on the same topics: every consumer receives each sample
   from both): the text first in the message, and logged as a warning (throttled like the
@@ -48,7 +50,7 @@ rejected samples, resets, unknown joints) shows at most ``max_keys`` entries, th
 counts first, then ``<table>_other_names`` and ``<table>_other_count`` for the rest; a name
 is cut to :data:`MAX_NAME` characters (with a hash, so keys stay unique) and unprintable
 characters become ``?``; a value is cut to :data:`MAX_VALUE` characters. The ``inputs`` status
-holds at most ``1 + 5 (13 + max_keys)`` key-values, ``samples`` at most ``11 + 3 (2 +
+holds at most ``1 + 5 (13 + max_keys)`` key-values, ``samples`` at most ``12 + 3 (2 +
 max_keys)``.
 """
 
@@ -112,6 +114,7 @@ class Snapshot:
     with, simulated under ``use_sim_time``), the steady time since the previous snapshot
     (``elapsed_s``), the publishers matched per input and the resolved topic names, the QoS
     choice, the wall and CPU times of the callbacks that produced outputs in the period, the
+    wall time of each step of the node's periodic work (``periodic_s``), the
     state-file status, whether estimation is enabled and how many other nodes on the graph
     carry this node's fully qualified name (``namesakes``).
     """
@@ -130,6 +133,7 @@ class Snapshot:
     latencies_s: Sequence[float] = field(default_factory=tuple)
     cpu_times_s: Sequence[float] = field(default_factory=tuple)
     namesakes: int = 0  # other nodes on the ROS graph with this node's fully qualified name
+    periodic_s: Sequence[float] = field(default_factory=tuple)  # wall time of each periodic job step
 
 
 def status_prefix(node: str) -> str:
@@ -331,6 +335,8 @@ class DiagnosticsPolicy:
                     ("processing_cpu_ms.p50", _ms(percentile(cpu, 0.5))),
                     ("processing_cpu_ms.p99", _ms(percentile(cpu, 0.99))),
                 ]
+        if snap.periodic_s:
+            kv.append(("periodic_ms.max", _ms(max(snap.periodic_s))))
         kv += [("state_file", snap.state_file), ("nodes_with_this_name", 1 + max(snap.namesakes, 0))]
         message = f"{c['samples_used']} of {c['samples_formed']} samples used"
         if not snap.enabled:

@@ -45,7 +45,8 @@ from std_msgs.msg import Float64MultiArray, Header
 from std_srvs.srv import SetBool, Trigger
 
 from ..datapath.cdr import decode
-from ..datapath.diagnostics import DiagnosticsPolicy, Snapshot, malformed_reason, malformed_warning
+from ..datapath.diagnostics import DiagnosticsPolicy, Status, malformed_reason, malformed_warning
+from ..datapath.diagnostics_round import DiagnosticsRound
 from ..datapath.inputs import MESSAGE_TYPES, STREAMS, feed, message_class
 from ..datapath.outputs import HEADER, NODE_NAME, OutputLayout
 from ..datapath.pipeline import Pipeline, SampleOutput, StateFileError
@@ -110,6 +111,8 @@ class EstimatorNode(Node):
         self._diagnostics = DiagnosticsPolicy(self.get_fully_qualified_name(),
                                               window_s=self.node_cfg.diagnostics_window)
         self._last_diag = time.monotonic()
+        self._periodic: list[float] = []  # wall time of each step of periodic work since the last report
+        self._round: DiagnosticsRound | None = None  # the diagnostics period in progress
         self._silent = SilentInputs()  # input topics nobody publishes, logged once
 
         # Transient local: a subscriber that joins late (a dashboard) gets the last qos.depth
@@ -141,6 +144,7 @@ class EstimatorNode(Node):
         # Health reporting and state saving run on the steady clock: they go on when /clock
         # pauses or jumps (use_sim_time).
         steady = Clock(clock_type=ClockType.STEADY_TIME)
+        self._next_step = self.create_guard_condition(self._diagnostics_step)
         self.create_timer(self.node_cfg.diagnostics_period, self._publish_diagnostics, clock=steady)
         if self.node_cfg.state_file and self.node_cfg.state_save_period > 0:
             self.create_timer(self.node_cfg.state_save_period, self.save_state, clock=steady)
@@ -348,10 +352,12 @@ class EstimatorNode(Node):
     def save_state(self) -> None:
         path = self._state_path
         if path:
+            t0 = time.perf_counter()
             try:
                 self.pipeline.save_state(path)
             except OSError as exc:
                 self.get_logger().error(f"cannot save state to {path}: {exc}")
+            self._periodic.append(time.perf_counter() - t0)
 
     def release_state_file(self) -> None:
         """Free the state file's lock (after the last save)."""
@@ -366,42 +372,58 @@ class EstimatorNode(Node):
         return max(0, sum(1 for name_ns in self.get_node_names_and_namespaces() if tuple(name_ns) == me) - 1)
 
     def _publish_diagnostics(self) -> None:
-        """One :class:`.diagnostics.Snapshot` per period in, one ``DiagnosticArray`` out."""
-        now_ns = self.get_clock().now().nanoseconds
+        """Start one :class:`.diagnostics_round.DiagnosticsRound`: here only the node's own
+        facts are read (constant time); the rest runs one step per executor turn
+        (:meth:`_diagnostics_step`), between the input callbacks."""
+        t0 = time.perf_counter()
+        if self._round is not None:  # the previous round has not finished: it goes on
+            return
         wall = time.monotonic()
-        publishers = {kind: sub.get_publisher_count() for kind, sub in self._subs.items()}
+        publishers = {kind: sub.get_publisher_count() for kind, sub in self._subs.items()}  # graph cache reads
         topics = {kind: sub.topic_name for kind, sub in self._subs.items()}
         for line in self._silent.update(self, wall, publishers, topics, self.pipeline.required,
                                         self.node_cfg.diagnostics_window, self.node_cfg.reliable):
             self.get_logger().warning(line)
-        snapshot = Snapshot(
-            counters=self.pipeline.counters(),
-            models=[(m.output, self.pipeline.model_report(j)) for j, m in enumerate(self.config.models)],
-            required=tuple(self.pipeline.required),
-            max_gap=self.config.inputs.max_gap,
-            now_ns=now_ns,
-            elapsed_s=wall - self._last_diag,
-            publishers=publishers,
-            topics=topics,
-            reliable=self.node_cfg.reliable,
-            enabled=self.pipeline.enabled,
-            state_file=self.state_status,
-            latencies_s=self._latencies,
-            cpu_times_s=self._cpu_times,
-            namesakes=self._namesakes(),
-        )
+        facts = {
+            "required": tuple(self.pipeline.required), "max_gap": self.config.inputs.max_gap,
+            "now_ns": self.get_clock().now().nanoseconds, "elapsed_s": wall - self._last_diag,
+            "publishers": publishers, "topics": topics, "reliable": self.node_cfg.reliable,
+            "enabled": self.pipeline.enabled, "state_file": self.state_status,
+            "latencies_s": self._latencies, "cpu_times_s": self._cpu_times, "namesakes": self._namesakes(),
+            "periodic_s": self._periodic,
+        }
         self._last_diag = wall
-        self._latencies, self._cpu_times = [], []
+        self._latencies, self._cpu_times, self._periodic = [], [], []
+        self._round = DiagnosticsRound(self.pipeline, self._layout, self._diagnostics, facts,
+                                       self._publish_fit, self._publish_statuses)
+        self._next_step.trigger()
+        self._periodic.append(time.perf_counter() - t0)
+
+    def _diagnostics_step(self) -> None:
+        """One step of the running round; the next is due on the next executor turn. A round
+        whose pipeline was reconfigured meanwhile is dropped (the next period reports)."""
+        t0 = time.perf_counter()
+        r = self._round
+        if r is None:
+            return
+        if r.pipeline is not self.pipeline or r.layout is not self._layout or r.step():
+            self._round = None
+        else:
+            self._next_step.trigger()
+        self._periodic.append(time.perf_counter() - t0)
+
+    def _publish_fit(self, index: int, raw: bytes) -> None:
+        self._fit_pubs[index].publish(raw)  # ~/M/fit, ~/M/identifiability
+
+    def _publish_statuses(self, statuses: list[Status]) -> None:
         arr = DiagnosticArray()
         arr.header.stamp = self.get_clock().now().to_msg()
         arr.status = [
             DiagnosticStatus(level=bytes((s.level,)), name=s.name, message=s.message, hardware_id=s.hardware_id,
                              values=[KeyValue(key=k, value=v) for k, v in s.values])
-            for s in self._diagnostics.update(snapshot)
+            for s in statuses
         ]
         self._diag_pub.publish(arr)
-        for index, raw in self._layout.encode_fit(self.pipeline):  # ~/M/fit, ~/M/identifiability
-            self._fit_pubs[index].publish(raw)
         for line in self._diagnostics.alerts.due():  # a misconfigured data path, throttled
             self.get_logger().warning(line)
 
