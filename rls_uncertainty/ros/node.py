@@ -1,8 +1,9 @@
 """``estimator_node``: the live ROS 2 adapter over :class:`.pipeline.Pipeline`.
 
 The node only converts, schedules and publishes: messages of the topics and types of
-:mod:`.inputs` are decoded by :mod:`.cdr` and go through :func:`.inputs.feed` (the code the
-offline replay runs), and every completed sample is published as the messages of
+:mod:`.inputs` are taken in batches each intake period (the estimator period, at most 5 ms),
+decoded by :mod:`.cdr` and go through :func:`.inputs.feed` in order of arrival (the code and
+order of the offline replay), and every completed sample is published as the messages of
 :mod:`.outputs` (``~/sample_stamp``, then per ready model M ``~/M/estimates``, its standard
 errors, convergence flags and decimated covariances), serialized there: the node publishes the
 bytes :meth:`.outputs.OutputLayout.encode` makes, on the publisher of each topic index.
@@ -26,7 +27,6 @@ import gc
 import os
 import sys
 import time
-from collections.abc import Callable
 from typing import Any
 
 import rclpy
@@ -34,7 +34,7 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult
 from rclpy.clock import Clock, ClockChange, ClockType, JumpThreshold, TimeJump
 from rclpy.duration import Duration
-from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallbacks
+from rclpy.event_handler import PublisherEventCallbacks
 from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
@@ -47,7 +47,7 @@ from std_srvs.srv import SetBool, Trigger
 from ..datapath.cdr import decode
 from ..datapath.diagnostics import DiagnosticsPolicy, Status, malformed_reason, malformed_warning
 from ..datapath.diagnostics_round import DiagnosticsRound
-from ..datapath.inputs import MESSAGE_TYPES, STREAMS, feed, message_class
+from ..datapath.inputs import MESSAGE_TYPES, STREAMS, arrival_order, feed, message_class
 from ..datapath.outputs import HEADER, NODE_NAME, OutputLayout
 from ..datapath.pipeline import Pipeline, SampleOutput, StateFileError
 from ..errors import ConfigError
@@ -55,6 +55,7 @@ from ..settings.parameters import PARAMETERS, Parameter, node_config, pipeline_c
 from ..settings.sources import startup_parameters
 from ..state_file import StateFileClaim, claim, set_aside
 from .input_watch import SilentInputs
+from .intake import Intake
 
 __all__ = ["EstimatorNode", "main", "NODE_NAME"]
 
@@ -63,7 +64,12 @@ _TYPES = {kind: message_class(MESSAGE_TYPES[kind]) for kind in STREAMS}
 # CPU than the estimation itself. A QoS mismatch on an input shows in /diagnostics instead
 # (``<stream>.publishers`` is 0 and the stream is reported silent).
 _NO_EVENTS = PublisherEventCallbacks(use_default_callbacks=False)
-_NO_SUB_EVENTS = SubscriptionEventCallbacks(use_default_callbacks=False)
+
+
+def _intake_period(rate: float) -> float:
+    """Seconds between two takes of the inputs: the estimator period, at most 5 ms (the
+    longest a message waits before it is fed)."""
+    return min(1.0 / rate, 0.005)
 
 
 def _descriptor(p: Parameter) -> ParameterDescriptor:
@@ -128,11 +134,8 @@ class EstimatorNode(Node):
         self._make_publishers()
         self._diag_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10, event_callbacks=_NO_EVENTS)
         in_qos = _input_qos(self.node_cfg.reliable, self.node_cfg.depth)
-        self._subs = {
-            kind: self.create_subscription(_TYPES[kind], self.node_cfg.topics[kind], self._callback(kind), in_qos,
-                                           raw=True, event_callbacks=_NO_SUB_EVENTS)
-            for kind in STREAMS
-        }
+        self._intake = Intake(self, _TYPES, self.node_cfg.topics, in_qos)  # off the executor: taken in batches
+        self._subs = self._intake.subs
         self.create_service(Trigger, "~/reset", self._on_reset)
         self.create_service(SetBool, "~/enable", self._on_enable)
         self.add_on_set_parameters_callback(self._validate_parameters)
@@ -146,6 +149,7 @@ class EstimatorNode(Node):
         steady = Clock(clock_type=ClockType.STEADY_TIME)
         self._next_step = self.create_guard_condition(self._diagnostics_step)
         self.create_timer(self.node_cfg.diagnostics_period, self._publish_diagnostics, clock=steady)
+        self._intake_timer = self.create_timer(_intake_period(self.config.rate), self._take_inputs, clock=steady)
         if self.node_cfg.state_file and self.node_cfg.state_save_period > 0:
             self.create_timer(self.node_cfg.state_save_period, self.save_state, clock=steady)
         models = ", ".join(f"{m.output}({len(m.regressors)})" for m in self.config.models)
@@ -181,6 +185,7 @@ class EstimatorNode(Node):
         new = pipeline_config(values)
         self.node_cfg = node_config(values)
         self.pipeline.enabled = self.node_cfg.enabled
+        self._intake_timer.timer_period_ns = int(_intake_period(new.rate) * 1e9)
         self._diagnostics.window_s = self.node_cfg.diagnostics_window
         if new != self.config:
             changed = ", ".join(sorted(p.name for p in params))
@@ -223,30 +228,34 @@ class EstimatorNode(Node):
         self._fit_pubs = [new[topic] for topic, _ in self._layout.fit_topics]
 
     # ------------------------------------------------------------------ data path
-    def _callback(self, kind: str) -> Callable[[bytes], None]:
-        """Inputs arrive serialized (``raw=True``) and are decoded by :mod:`.cdr` (either byte
-        order) into light objects with the message's field names: building rclpy's Python
-        messages (numpy covariance arrays and all) cost more than the pipeline itself."""
-        msgtype = MESSAGE_TYPES[kind]
+    def destroy_node(self) -> None:
+        self._intake.destroy()
+        super().destroy_node()
 
-        def on_message(raw: bytes) -> None:
-            t0 = time.perf_counter()
+    def _take_inputs(self) -> None:
+        """Every message the input subscriptions hold, taken at once each intake period
+        (:func:`_intake_period`) and fed to :func:`.inputs.feed` in order of arrival
+        (:func:`.inputs.arrival_order`, the reception times of the middleware, :mod:`.intake`): the offline
+        replay feeds the same messages in the same order. Latency is counted from the arrival
+        of the message that completed a sample to its last publish."""
+        taken = self._intake.take()
+        if not any(taken.values()):
+            return
+        pipeline, start = self.pipeline, time.time_ns()
+        if pipeline.needs_clock:  # inputs.max_clock_offset: stamps are checked against it
+            pipeline.clock_ns = self.get_clock().now().nanoseconds
+        for kind, (arrived, raw) in arrival_order(taken):
             c0 = time.thread_time()
             try:
-                pipeline = self.pipeline
-                if pipeline.needs_clock:  # inputs.max_clock_offset: stamps are checked against it
-                    pipeline.clock_ns = self.get_clock().now().nanoseconds
-                outputs = feed(pipeline, kind, decode(msgtype, raw))
+                outputs = feed(pipeline, kind, decode(MESSAGE_TYPES[kind], raw))
             except Exception as exc:  # noqa: BLE001 - a bad message must never stop the node
                 self._malformed(kind, exc)
-                return
+                continue
             if outputs:
                 for out in outputs:
                     self._publish(out)
-                self._latencies.append(time.perf_counter() - t0)
+                self._latencies.append((time.time_ns() - (arrived or start)) * 1e-9)
                 self._cpu_times.append(time.thread_time() - c0)
-
-        return on_message
 
     def _malformed(self, kind: str, exc: Exception) -> None:
         """Count a message that could not be decoded or fed; log the first one per input."""
