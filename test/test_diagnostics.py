@@ -403,7 +403,7 @@ def test_every_status_stays_bounded_whatever_arrives():
     out = statuses(snapshot(c, state="x" * 100_000))
     inputs, samples = out["inputs"], out["samples"]
     assert len(inputs.values) <= 1 + 5 * (13 + dg.MAX_KEYS)
-    assert len(samples.values) <= 12 + 3 * (2 + dg.MAX_KEYS)
+    assert len(samples.values) <= 13 + 3 * (2 + dg.MAX_KEYS)
     assert _size(inputs) < 20_000 and _size(samples) < 10_000
     for s in (inputs, samples):
         assert len({k for k, _ in s.values}) == len(s.values)  # keys unique
@@ -499,3 +499,31 @@ def test_a_round_in_steps_reports_what_the_one_shot_report_does(n_messages):
         assert published == [want]
         assert fits == layout.encode_fit(pipe)
         assert bool(fits) == (n_messages > 0 and pipe.samples_used > 0)
+
+
+def test_a_node_behind_its_inputs_says_so_first_and_names_what_to_change():
+    """The intake waits of the period (how long each pass's oldest message waited) against the
+    estimator period: a backlog (median wait over max(50 ms, 5 periods)) is WARN, the text first,
+    with the p99 wait, the median CPU per sample and the period; a single stall is not."""
+    base = snapshot(counters(formed=100, used=100), cpu=[0.004] * 9 + [0.2])
+    period = 0.02  # 50 Hz
+
+    def samples(waits):
+        snap = Snapshot(**{**base.__dict__, "waits_s": waits, "period_s": period})
+        policy = DiagnosticsPolicy()
+        return statuses(snap, policy)["samples"], policy
+
+    behind = [0.3 + 0.01 * i for i in range(100)]  # 300 ... 1290 ms
+    s, policy = samples(behind)
+    want = "cannot keep up: 1290 ms behind, 4.0 ms per sample against a period of 20.0 ms"
+    assert s.level == WARN and s.message.startswith(want) and "rate" in s.message
+    assert policy.overload == s.message.split("; 100 of")[0]
+    assert values(s)["intake_wait_ms.p99"] == "1290.000"
+    stall = [0.001] * 99 + [2.0]  # one long pass: not behind
+    s, policy = samples(stall)
+    assert (s.level, policy.overload) == (OK, None) and s.message == "100 of 100 samples used"
+    assert values(s)["intake_wait_ms.p99"] == "2000.000"
+    s, policy = samples([0.101] * 10)  # the threshold is max(50 ms, 5 periods) = 100 ms
+    assert s.level == WARN
+    s, policy = samples([0.099] * 10)
+    assert s.level == OK

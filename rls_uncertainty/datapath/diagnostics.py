@@ -23,13 +23,15 @@ node in the root namespace, as always, and the fully qualified name under a name
   name what was expected, what came and the parameter to change, come first in the message.
 * ``samples``: ``enabled``, ``samples_formed``, ``samples_used``, ``samples_pending``,
   ``samples_rejected.<reason>``, ``resets.<reason>``, ``unknown_joint.<name>``, callback
-  latency and CPU percentiles of the period, ``periodic_ms.max`` (the longest step of the
+  latency and CPU percentiles of the period, ``intake_wait_ms.p99`` (how long inputs waited
+  to be fed), ``periodic_ms.max`` (the longest step of the
   node's periodic work, which holds up the input callbacks for that long),
   ``state_file``, ``nodes_with_this_name``. OK, or
   ERROR while another node with this node's fully qualified name is on the ROS graph (its
   outputs then mix with this node's on the same topics: every consumer receives each sample
   from both): the text first in the message, and logged as a warning (throttled like the
-  alerts).
+  alerts). WARN while the node cannot keep up with its inputs (:func:`overload`), the text
+  first.
 * ``model M``: the model fit, and the convergence flags when the node hands them in
   (``converged``, ``converged_parameters``) with the identifiability figures
   (:mod:`.identifiability`: ``identifiable``, ``not_identifiable``, ``held_back``,
@@ -50,7 +52,7 @@ rejected samples, resets, unknown joints) shows at most ``max_keys`` entries, th
 counts first, then ``<table>_other_names`` and ``<table>_other_count`` for the rest; a name
 is cut to :data:`MAX_NAME` characters (with a hash, so keys stay unique) and unprintable
 characters become ``?``; a value is cut to :data:`MAX_VALUE` characters. The ``inputs`` status
-holds at most ``1 + 5 (13 + max_keys)`` key-values, ``samples`` at most ``12 + 3 (2 +
+holds at most ``1 + 5 (13 + max_keys)`` key-values, ``samples`` at most ``13 + 3 (2 +
 max_keys)``.
 """
 
@@ -134,6 +136,8 @@ class Snapshot:
     cpu_times_s: Sequence[float] = field(default_factory=tuple)
     namesakes: int = 0  # other nodes on the ROS graph with this node's fully qualified name
     periodic_s: Sequence[float] = field(default_factory=tuple)  # wall time of each periodic job step
+    waits_s: Sequence[float] = field(default_factory=tuple)  # per intake pass, how long its oldest input waited
+    period_s: float = 0.0  # the estimator period (1 / rate)
 
 
 def status_prefix(node: str) -> str:
@@ -155,6 +159,21 @@ def namesake_alert(node: str, namesakes: int) -> Alert | None:
         f"{full}/..., so every consumer receives each sample {namesakes + 1} times, and {full}/reset and "
         f"{full}/enable reach any of them; start each node with its own name or namespace "
         "(--ros-args -r __node:=NAME or -r __ns:=/NAMESPACE)"))
+
+
+def overload(snap: Snapshot) -> str | None:
+    """"cannot keep up: ..." when the node falls behind its inputs: the median wait of an intake
+    pass's oldest message is over ``max(50 ms, 5 estimator periods)`` (a backlog, not one
+    stall), naming how far behind (p99 of the waits), the CPU per sample (p50) against the
+    period and the parameters that lighten the load; None otherwise."""
+    if not snap.waits_s or snap.period_s <= 0:
+        return None
+    waits = sorted(snap.waits_s)
+    if percentile(waits, 0.5) <= max(0.05, 5 * snap.period_s):
+        return None
+    cpu = f"{1e3 * percentile(sorted(snap.cpu_times_s), 0.5):.1f} ms per sample" if snap.cpu_times_s else "no sample"
+    return (f"cannot keep up: {1e3 * percentile(waits, 0.99):.0f} ms behind, {cpu} against a period of "
+            f"{1e3 * snap.period_s:.1f} ms; lower rate or estimator.lag_span, or raise frequency.every")
 
 
 def stale_after(max_gap: float) -> float:
@@ -233,6 +252,7 @@ class DiagnosticsPolicy:
         self.window_s = float(window_s)
         self.max_keys = int(max_keys)
         self.previous: Snapshot | None = None
+        self.overload: str | None = None  # the samples status's "cannot keep up" text, when it says that
         # The misconfiguration alerts (:mod:`.alerts`): first in the inputs status, and the
         # lines to log (alerts.due()), each at most once per repeat_s seconds.
         self.alerts = AlertPolicy(repeat_s)
@@ -247,6 +267,7 @@ class DiagnosticsPolicy:
         if namesake is not None:  # logged with the alerts (AlertPolicy.due), shown in the samples status
             self.alerts.current = [*alerts, namesake]
         self.alerts.models(snap.models)  # identifiability, logged with the alerts
+        self.overload = overload(snap)
         statuses = [self._inputs(snap, now, before, alerts), self._samples(snap, namesake)]
         statuses += [self._model(name, fit, snap) for name, fit in snap.models]
         self.previous = snap
@@ -335,6 +356,8 @@ class DiagnosticsPolicy:
                     ("processing_cpu_ms.p50", _ms(percentile(cpu, 0.5))),
                     ("processing_cpu_ms.p99", _ms(percentile(cpu, 0.99))),
                 ]
+        if snap.waits_s:
+            kv.append(("intake_wait_ms.p99", _ms(percentile(sorted(snap.waits_s), 0.99))))
         if snap.periodic_s:
             kv.append(("periodic_ms.max", _ms(max(snap.periodic_s))))
         kv += [("state_file", snap.state_file), ("nodes_with_this_name", 1 + max(snap.namesakes, 0))]
@@ -343,6 +366,8 @@ class DiagnosticsPolicy:
             message += "; estimation disabled"
         if namesake is not None:
             return self._status("samples", ERROR, f"{namesake.text}; {message}", kv)
+        if self.overload is not None:
+            return self._status("samples", WARN, f"{self.overload}; {message}", kv)
         return self._status("samples", OK, message, kv)
 
     def _model(self, name: str, fit: Mapping, snap: Snapshot) -> Status:

@@ -117,6 +117,8 @@ class EstimatorNode(Node):
         self._diagnostics = DiagnosticsPolicy(self.get_fully_qualified_name(),
                                               window_s=self.node_cfg.diagnostics_window)
         self._last_diag = time.monotonic()
+        self._waits: list[float] = []  # per intake pass, how long its oldest message waited
+        self._overload_said: str | None = None  # "cannot keep up: ..." while it is so (logged once)
         self._periodic: list[float] = []  # wall time of each step of periodic work since the last report
         self._round: DiagnosticsRound | None = None  # the diagnostics period in progress
         self._silent = SilentInputs()  # input topics nobody publishes, logged once
@@ -242,6 +244,8 @@ class EstimatorNode(Node):
         if not any(taken.values()):
             return
         pipeline, start = self.pipeline, time.time_ns()
+        oldest = min((q[0][0] for q in taken.values() if q and q[0][0] > 0), default=start)
+        self._waits.append(max(start - oldest, 0) * 1e-9)
         if pipeline.needs_clock:  # inputs.max_clock_offset: stamps are checked against it
             pipeline.clock_ns = self.get_clock().now().nanoseconds
         for kind, (arrived, raw) in arrival_order(taken):
@@ -399,10 +403,10 @@ class EstimatorNode(Node):
             "publishers": publishers, "topics": topics, "reliable": self.node_cfg.reliable,
             "enabled": self.pipeline.enabled, "state_file": self.state_status,
             "latencies_s": self._latencies, "cpu_times_s": self._cpu_times, "namesakes": self._namesakes(),
-            "periodic_s": self._periodic,
+            "periodic_s": self._periodic, "waits_s": self._waits, "period_s": 1.0 / self.config.rate,
         }
         self._last_diag = wall
-        self._latencies, self._cpu_times, self._periodic = [], [], []
+        self._latencies, self._cpu_times, self._periodic, self._waits = [], [], [], []
         self._round = DiagnosticsRound(self.pipeline, self._layout, self._diagnostics, facts,
                                        self._publish_fit, self._publish_statuses)
         self._next_step.trigger()
@@ -433,6 +437,12 @@ class EstimatorNode(Node):
             for s in statuses
         ]
         self._diag_pub.publish(arr)
+        overload = self._diagnostics.overload
+        if overload is not None and self._overload_said is None:  # said once per episode
+            self.get_logger().warning(overload)
+        elif overload is None and self._overload_said is not None:
+            self.get_logger().info("keeping up with the inputs again")
+        self._overload_said = overload
         for line in self._diagnostics.alerts.due():  # a misconfigured data path, throttled
             self.get_logger().warning(line)
 
