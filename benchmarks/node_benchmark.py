@@ -262,17 +262,19 @@ def main() -> int:
     # Measure the node's CPU over the streaming part only.
     while pub.poll() is None and not stamps_seen:
         rclpy.spin_once(sub, timeout_sec=0.01)
-    cpu0, wall0 = cpu_seconds(node.pid), time.monotonic()
+    cpu0, wall0, stamps0 = cpu_seconds(node.pid), time.monotonic(), count["stamps"]
     while pub.poll() is None:
         rclpy.spin_once(sub, timeout_sec=0.01)
-    cpu1, wall1 = cpu_seconds(node.pid), time.monotonic()
+    cpu1, wall1, stamps1 = cpu_seconds(node.pid), time.monotonic(), count["stamps"]
     end = time.monotonic() + 2
     while time.monotonic() < end:
         rclpy.spin_once(sub, timeout_sec=0.05)
-    diag, proc_p99 = {}, []
+    diag, proc_p99, periodic = {}, [], []
     for d in diags:
         for s in d.status:
             diag[s.name] = {kv.key: kv.value for kv in s.values}
+            if "periodic_ms.max" in diag[s.name]:
+                periodic.append(float(diag[s.name]["periodic_ms.max"]))
             if "latency_ms.p99" in diag[s.name]:
                 proc_p99.append((float(diag[s.name]["latency_ms.p99"]), float(diag[s.name]["processing_cpu_ms.p99"]),
                                  float(diag[s.name]["processing_cpu_ms.p50"])))
@@ -299,6 +301,10 @@ def main() -> int:
         print(f"  input-to-output latency, ms      p50 {np.percentile(lat, 50):.3f}  p99 {np.percentile(lat, 99):.3f}  "
               f"max {lat.max():.3f}")
     print(f"  node CPU                         {100 * (cpu1 - cpu0) / (wall1 - wall0):.1f} % of one core")
+    per_sample = 1e3 * (cpu1 - cpu0) / max(stamps1 - stamps0, 1)
+    print(f"  node CPU per output sample       {per_sample:.3f} ms  (process CPU / samples published)")
+    if periodic:
+        print(f"  longest periodic step (diagnostics periodic_ms.max)  {max(periodic):.3f} ms")
     if samples:
         rejected = {k: v for k, v in samples.items() if k.startswith("samples_rejected")}
         print(f"  node diagnostics                 used {samples.get('samples_used')}, rejected {rejected}, "
@@ -308,7 +314,9 @@ def main() -> int:
     with open(tmp / "result.json", "w") as fh:
         json.dump({"p50_ms": float(np.percentile(lat, 50)) if lat.size else None,
                    "p99_ms": float(np.percentile(lat, 99)) if lat.size else None,
-                   "cpu_percent": 100 * (cpu1 - cpu0) / (wall1 - wall0),
+                   "max_ms": float(lat.max()) if lat.size else None,
+                   "cpu_percent": 100 * (cpu1 - cpu0) / (wall1 - wall0), "cpu_per_sample_ms": per_sample,
+                   "periodic_max_ms": max(periodic, default=None),
                    "dropped": expected - count["stamps"]}, fh)
     sub.destroy_node()
     if not args.no_baseline:

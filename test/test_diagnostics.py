@@ -423,7 +423,7 @@ def test_every_status_stays_bounded_whatever_arrives():
     out = statuses(snapshot(c, state="x" * 100_000))
     inputs, samples = out["inputs"], out["samples"]
     assert len(inputs.values) <= 1 + 5 * (13 + dg.MAX_KEYS)
-    assert len(samples.values) <= 11 + 3 * (2 + dg.MAX_KEYS)
+    assert len(samples.values) <= 13 + 3 * (2 + dg.MAX_KEYS)
     assert _size(inputs) < 20_000 and _size(samples) < 10_000
     for s in (inputs, samples):
         assert len({k for k, _ in s.values}) == len(s.values)  # keys unique
@@ -467,3 +467,83 @@ def test_a_ready_model_says_which_parameters_converged(conv, suffix):
     s = statuses(snapshot(counters(used=512), models=[("CZ", {**FIT, **conv})]))["model CZ"]
     assert (s.level, s.message) == (OK, "R^2 0.912, residual lag-1 correlation 0.12" + suffix)
     assert dict(s.values).get("converged_parameters") == conv.get("converged_parameters")
+
+
+# ------------------------------------------------------------------ the node's round in steps
+def test_periodic_step_maximum_is_reported():
+    v = values(statuses(snapshot())["samples"])
+    assert "periodic_ms.max" not in v
+    snap = Snapshot(**{**snapshot().__dict__, "periodic_s": [0.0004, 0.0021, 0.0009]})
+    assert values(statuses(snap)["samples"])["periodic_ms.max"] == "2.100"
+
+
+def _fed_pipeline(n_messages):
+    from rls_uncertainty.datapath.inputs import feed
+    from rls_uncertainty.datapath.pipeline import Pipeline
+    from rls_uncertainty.offline.bags import read_inputs
+    from rls_uncertainty.settings import load_parameters_file, pipeline_config
+
+    root = Path(__file__).resolve().parents[1]
+    messages, _ = read_inputs(root / "bags" / "t2_maneuver")
+    pipe = Pipeline(pipeline_config(load_parameters_file("t2")))
+    for kind, _stamp, msg in messages[:n_messages]:
+        feed(pipe, kind, msg)
+    return pipe
+
+
+@pytest.mark.parametrize("n_messages", [0, 900, 4000])
+def test_a_round_in_steps_reports_what_the_one_shot_report_does(n_messages):
+    """The node's DiagnosticsRound, stepped one part at a time, publishes the statuses and the
+    fit arrays that Snapshot + DiagnosticsPolicy.update and OutputLayout.encode_fit give for
+    the same pipeline state (before the first sample, while initializing, converged), and
+    the policy's window advances the same way over successive rounds."""
+    from rls_uncertainty.datapath.diagnostics_round import DiagnosticsRound
+    from rls_uncertainty.datapath.outputs import OutputLayout
+
+    pipe = _fed_pipeline(n_messages)
+    layout = OutputLayout.of(pipe)
+    facts = {k: v for k, v in snapshot(latencies=[0.002, 0.001], cpu=[0.001, 0.001]).__dict__.items()
+             if k not in ("counters", "models")}
+    one_shot, stepped = DiagnosticsPolicy(), DiagnosticsPolicy()
+    for _period in range(3):
+        want = one_shot.update(Snapshot(counters=pipe.counters(), models=[
+            (m.output, pipe.model_report(j)) for j, m in enumerate(pipe.config.models)], **facts))
+        fits, published = [], []
+        r = DiagnosticsRound(pipe, layout, stepped, facts, lambda i, raw, fits=fits: fits.append((i, raw)),
+                             published.append)
+        steps = 1
+        while not r.step():
+            steps += 1
+            assert not published
+        assert steps == 2 * len(pipe.config.models) + 2 and r.done and r.step()
+        assert published == [want]
+        assert fits == layout.encode_fit(pipe)
+        assert bool(fits) == (n_messages > 0 and pipe.samples_used > 0)
+
+
+def test_a_node_behind_its_inputs_says_so_first_and_names_what_to_change():
+    """The intake waits of the period (how long each pass's oldest message waited) against the
+    estimator period: a backlog (median wait over max(50 ms, 5 periods)) is WARN, the text first,
+    with the p99 wait, the median CPU per sample and the period; a single stall is not."""
+    base = snapshot(counters(formed=100, used=100), cpu=[0.004] * 9 + [0.2])
+    period = 0.02  # 50 Hz
+
+    def samples(waits):
+        snap = Snapshot(**{**base.__dict__, "waits_s": waits, "period_s": period})
+        policy = DiagnosticsPolicy()
+        return statuses(snap, policy)["samples"], policy
+
+    behind = [0.3 + 0.01 * i for i in range(100)]  # 300 ... 1290 ms
+    s, policy = samples(behind)
+    want = "cannot keep up: 1290 ms behind, 4.0 ms per sample against a period of 20.0 ms"
+    assert s.level == WARN and s.message.startswith(want) and "rate" in s.message
+    assert policy.overload == s.message.split("; 100 of")[0]
+    assert values(s)["intake_wait_ms.p99"] == "1290.000"
+    stall = [0.001] * 99 + [2.0]  # one long pass: not behind
+    s, policy = samples(stall)
+    assert (s.level, policy.overload) == (OK, None) and s.message == "100 of 100 samples used"
+    assert values(s)["intake_wait_ms.p99"] == "2000.000"
+    s, policy = samples([0.101] * 10)  # the threshold is max(50 ms, 5 periods) = 100 ms
+    assert s.level == WARN
+    s, policy = samples([0.099] * 10)
+    assert s.level == OK

@@ -25,11 +25,15 @@ node in the root namespace, as always, and the fully qualified name under a name
   name what was expected, what came and the parameter to change, come first in the message.
 * ``samples``: ``enabled``, ``samples_formed``, ``samples_used``, ``samples_pending``,
   ``samples_rejected.<reason>``, ``resets.<reason>``, ``unknown_joint.<name>``, callback
-  latency and CPU percentiles of the period, ``state_file``, ``nodes_with_this_name``. OK, or
+  latency and CPU percentiles of the period, ``intake_wait_ms.p99`` (how long inputs waited
+  to be fed), ``periodic_ms.max`` (the longest step of the
+  node's periodic work, which holds up the input callbacks for that long),
+  ``state_file``, ``nodes_with_this_name``. OK, or
   ERROR while another node with this node's fully qualified name is on the ROS graph (its
   outputs then mix with this node's on the same topics: every consumer receives each sample
   from both): the text first in the message, and logged as a warning (throttled like the
-  alerts).
+  alerts). WARN while the node cannot keep up with its inputs (:func:`overload`), the text
+  first.
 * ``model M``: the model fit, and the convergence flags when the node hands them in
   (``converged``, ``converged_parameters``) with the identifiability figures
   (:mod:`.identifiability`: ``identifiable``, ``not_identifiable``, ``held_back``,
@@ -50,7 +54,7 @@ rejected samples, resets, unknown joints) shows at most ``max_keys`` entries, th
 counts first, then ``<table>_other_names`` and ``<table>_other_count`` for the rest; a name
 is cut to :data:`MAX_NAME` characters (with a hash, so keys stay unique) and unprintable
 characters become ``?``; a value is cut to :data:`MAX_VALUE` characters. The ``inputs`` status
-holds at most ``1 + 5 (13 + max_keys)`` key-values, ``samples`` at most ``11 + 3 (2 +
+holds at most ``1 + 5 (13 + max_keys)`` key-values, ``samples`` at most ``13 + 3 (2 +
 max_keys)``.
 """
 
@@ -114,6 +118,7 @@ class Snapshot:
     each stream's newest message arrived (``arrival_ages_s``), the steady time since the previous snapshot
     (``elapsed_s``), the publishers matched per input and the resolved topic names, the QoS
     choice, the wall and CPU times of the callbacks that produced outputs in the period, the
+    wall time of each step of the node's periodic work (``periodic_s``), the
     state-file status, whether estimation is enabled and how many other nodes on the graph
     carry this node's fully qualified name (``namesakes``).
     """
@@ -136,6 +141,9 @@ class Snapshot:
     # never heard from is absent). When given, it is the streams' age; without it (the offline
     # replay) the age is ``now_ns`` minus the stream's newest stamp.
     arrival_ages_s: Mapping[str, float] | None = None
+    periodic_s: Sequence[float] = field(default_factory=tuple)  # wall time of each periodic job step
+    waits_s: Sequence[float] = field(default_factory=tuple)  # per intake pass, how long its oldest input waited
+    period_s: float = 0.0  # the estimator period (1 / rate)
 
 
 def status_prefix(node: str) -> str:
@@ -157,6 +165,21 @@ def namesake_alert(node: str, namesakes: int) -> Alert | None:
         f"{full}/..., so every consumer receives each sample {namesakes + 1} times, and {full}/reset and "
         f"{full}/enable reach any of them; start each node with its own name or namespace "
         "(--ros-args -r __node:=NAME or -r __ns:=/NAMESPACE)"))
+
+
+def overload(snap: Snapshot) -> str | None:
+    """"cannot keep up: ..." when the node falls behind its inputs: the median wait of an intake
+    pass's oldest message is over ``max(50 ms, 5 estimator periods)`` (a backlog, not one
+    stall), naming how far behind (p99 of the waits), the CPU per sample (p50) against the
+    period and the parameters that lighten the load; None otherwise."""
+    if not snap.waits_s or snap.period_s <= 0:
+        return None
+    waits = sorted(snap.waits_s)
+    if percentile(waits, 0.5) <= max(0.05, 5 * snap.period_s):
+        return None
+    cpu = f"{1e3 * percentile(sorted(snap.cpu_times_s), 0.5):.1f} ms per sample" if snap.cpu_times_s else "no sample"
+    return (f"cannot keep up: {1e3 * percentile(waits, 0.99):.0f} ms behind, {cpu} against a period of "
+            f"{1e3 * snap.period_s:.1f} ms; lower rate or estimator.lag_span, or raise frequency.every")
 
 
 def stale_after(max_gap: float) -> float:
@@ -243,6 +266,7 @@ class DiagnosticsPolicy:
         self.window_s = float(window_s)
         self.max_keys = int(max_keys)
         self.previous: Snapshot | None = None
+        self.overload: str | None = None  # the samples status's "cannot keep up" text, when it says that
         # The misconfiguration alerts (:mod:`.alerts`): first in the inputs status, and the
         # lines to log (alerts.due()), each at most once per repeat_s seconds.
         self.alerts = AlertPolicy(repeat_s)
@@ -257,6 +281,7 @@ class DiagnosticsPolicy:
         if namesake is not None:  # logged with the alerts (AlertPolicy.due), shown in the samples status
             self.alerts.current = [*alerts, namesake]
         self.alerts.models(snap.models)  # identifiability, logged with the alerts
+        self.overload = overload(snap)
         statuses = [self._inputs(snap, now, before, alerts), self._samples(snap, namesake)]
         statuses += [self._model(name, fit, snap) for name, fit in snap.models]
         self.previous = snap
@@ -344,12 +369,18 @@ class DiagnosticsPolicy:
                     ("processing_cpu_ms.p50", _ms(percentile(cpu, 0.5))),
                     ("processing_cpu_ms.p99", _ms(percentile(cpu, 0.99))),
                 ]
+        if snap.waits_s:
+            kv.append(("intake_wait_ms.p99", _ms(percentile(sorted(snap.waits_s), 0.99))))
+        if snap.periodic_s:
+            kv.append(("periodic_ms.max", _ms(max(snap.periodic_s))))
         kv += [("state_file", snap.state_file), ("nodes_with_this_name", 1 + max(snap.namesakes, 0))]
         message = f"{c['samples_used']} of {c['samples_formed']} samples used"
         if not snap.enabled:
             message += "; estimation disabled"
         if namesake is not None:
             return self._status("samples", ERROR, f"{namesake.text}; {message}", kv)
+        if self.overload is not None:
+            return self._status("samples", WARN, f"{self.overload}; {message}", kv)
         return self._status("samples", OK, message, kv)
 
     def _model(self, name: str, fit: Mapping, snap: Snapshot) -> Status:

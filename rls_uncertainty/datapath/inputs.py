@@ -25,12 +25,15 @@ through :func:`feed`, the same code.
 
 from __future__ import annotations
 
+import heapq
 import importlib
-from typing import Any, Protocol
+from collections.abc import Mapping, Sequence
+from typing import Any, Protocol, TypeVar
 
 from .pipeline import STREAMS, Pipeline, SampleOutput
 
-__all__ = ["STREAMS", "MESSAGE_TYPES", "DEFAULT_TOPICS", "Stamped", "message_class", "stamp_ns", "feed"]
+__all__ = ["STREAMS", "MESSAGE_TYPES", "DEFAULT_TOPICS", "Stamped", "message_class", "stamp_ns", "feed",
+           "arrival_order"]
 
 # The ROS message type of each input stream.
 MESSAGE_TYPES = {
@@ -124,3 +127,17 @@ def feed(pipeline: Pipeline, kind: str, msg: Stamped) -> list[SampleOutput]:
     if frame and msg.header.frame_id != frame:
         return pipeline.reject_frame(kind, stamp_ns(msg), msg.header.frame_id)
     return _FEED[kind](pipeline, msg)
+
+
+_T = TypeVar("_T")
+
+
+def arrival_order(taken: Mapping[str, Sequence[tuple[int, _T]]]) -> list[tuple[str, _T]]:
+    """The messages taken at once from each input's queue, ``{kind: [(arrival time, message),
+    ...]}`` in each queue's order, as one list of ``(kind, message)`` in order of arrival: the
+    order :func:`feed` sees them in, as if each had been handed over when it arrived. Each
+    stream keeps its own order; equal arrival times keep the order of ``taken``."""
+    queues = [[(t, kind, m) for t, m in queue] for kind, queue in taken.items() if queue]
+    if len(queues) == 1:
+        return [(kind, m) for _t, kind, m in queues[0]]
+    return [(kind, m) for _t, kind, m in heapq.merge(*queues, key=lambda x: x[0])]

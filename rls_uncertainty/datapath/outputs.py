@@ -262,17 +262,18 @@ class OutputLayout:
         """``(index into fit_topics, CDR bytes)`` of ``M/fit`` and ``M/identifiability`` of
         each model whose fit is ready (module docstring); nothing before the first sample or
         where a figure is not finite."""
+        return [m for j in range(len(self.models)) for m in self.encode_fit_model(pipe, j)]
+
+    def encode_fit_model(self, pipe: Pipeline, j: int) -> list[tuple[int, bytes]]:
+        """:meth:`encode_fit` of model ``j`` alone (the node encodes one model per step)."""
         stamp = pipe.last_stamp_ns
         if stamp is None:
             return []
-        when = stamp_label(stamp)
-        out = []
-        for j, (_name, names) in enumerate(self.models):
-            arrays = _fit_arrays(pipe, j, names, when)
-            if arrays is not None:
-                out += [(len(FIT_OUTPUTS) * j + i, encode_float64_multiarray_dims(d, data.tolist()))
-                        for i, (d, data) in enumerate(arrays)]
-        return out
+        arrays = _fit_arrays(pipe, j, self.models[j][1], stamp_label(stamp))
+        if arrays is None:
+            return []
+        return [(len(FIT_OUTPUTS) * j + i, encode_float64_multiarray_dims(d, data.tolist()))
+                for i, (d, data) in enumerate(arrays)]
 
 
 def _rows(models: list[tuple[str, tuple[str, ...]]], ready: np.ndarray, theta: np.ndarray, se: np.ndarray,

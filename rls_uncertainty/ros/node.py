@@ -1,8 +1,9 @@
 """``estimator_node``: the live ROS 2 adapter over :class:`.pipeline.Pipeline`.
 
 The node only converts, schedules and publishes: messages of the topics and types of
-:mod:`.inputs` are decoded by :mod:`.cdr` and go through :func:`.inputs.feed` (the code the
-offline replay runs), and every completed sample is published as the messages of
+:mod:`.inputs` are taken in batches each intake period (the estimator period, at most 5 ms),
+decoded by :mod:`.cdr` and go through :func:`.inputs.feed` in order of arrival (the code and
+order of the offline replay), and every completed sample is published as the messages of
 :mod:`.outputs` (``~/sample_stamp``, then per ready model M ``~/M/estimates``, its standard
 errors, convergence flags and decimated covariances), serialized there: the node publishes the
 bytes :meth:`.outputs.OutputLayout.encode` makes, on the publisher of each topic index.
@@ -23,10 +24,8 @@ backwards time jumps are handled here.
 from __future__ import annotations
 
 import gc
-import os
 import sys
 import time
-from collections.abc import Callable
 from typing import Any
 
 import rclpy
@@ -34,7 +33,7 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult
 from rclpy.clock import Clock, ClockChange, ClockType, JumpThreshold, TimeJump
 from rclpy.duration import Duration
-from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallbacks
+from rclpy.event_handler import PublisherEventCallbacks
 from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
@@ -45,15 +44,17 @@ from std_msgs.msg import Float64MultiArray, Header
 from std_srvs.srv import SetBool, Trigger
 
 from ..datapath.cdr import decode
-from ..datapath.diagnostics import DiagnosticsPolicy, Snapshot, malformed_reason, malformed_warning
-from ..datapath.inputs import MESSAGE_TYPES, STREAMS, feed, message_class
+from ..datapath.diagnostics import DiagnosticsPolicy, Status, malformed_reason, malformed_warning
+from ..datapath.diagnostics_round import DiagnosticsRound
+from ..datapath.inputs import MESSAGE_TYPES, STREAMS, arrival_order, feed, message_class
 from ..datapath.outputs import HEADER, NODE_NAME, OutputLayout
-from ..datapath.pipeline import Pipeline, SampleOutput, StateFileError
+from ..datapath.pipeline import Pipeline, SampleOutput
 from ..errors import ConfigError
 from ..settings.parameters import PARAMETERS, Parameter, node_config, pipeline_config
 from ..settings.sources import startup_parameters
-from ..state_file import StateFileClaim, claim, set_aside
 from .input_watch import SilentInputs
+from .intake import Intake
+from .node_state import NodeStateFile
 
 __all__ = ["EstimatorNode", "main", "NODE_NAME"]
 
@@ -62,7 +63,12 @@ _TYPES = {kind: message_class(MESSAGE_TYPES[kind]) for kind in STREAMS}
 # CPU than the estimation itself. A QoS mismatch on an input shows in /diagnostics instead
 # (``<stream>.publishers`` is 0 and the stream is reported silent).
 _NO_EVENTS = PublisherEventCallbacks(use_default_callbacks=False)
-_NO_SUB_EVENTS = SubscriptionEventCallbacks(use_default_callbacks=False)
+
+
+def _intake_period(rate: float) -> float:
+    """Seconds between two takes of the inputs: the estimator period, at most 5 ms (the
+    longest a message waits before it is fed)."""
+    return min(1.0 / rate, 0.005)
 
 
 def _descriptor(p: Parameter) -> ParameterDescriptor:
@@ -102,14 +108,18 @@ class EstimatorNode(Node):
         self.config = pipeline_config(params)
         self.node_cfg = node_config(params)
         self.pipeline = Pipeline(self.config, enabled=self.node_cfg.enabled)
-        self.state_status = "no state file"
-        self._load_state()
+        self._state = NodeStateFile(self.node_cfg.state_file)
+        self._state.load(self.pipeline, self.get_logger())
         self._latencies: list[float] = []  # wall time from message to last publish
         self._cpu_times: list[float] = []  # CPU time of the same (without preemption)
         self._malformed_logged: set[str] = set()  # inputs whose first malformed message was logged
         self._diagnostics = DiagnosticsPolicy(self.get_fully_qualified_name(),
                                               window_s=self.node_cfg.diagnostics_window)
         self._last_diag = time.monotonic()
+        self._waits: list[float] = []  # per intake pass, how long its oldest message waited
+        self._overload_said: str | None = None  # "cannot keep up: ..." while it is so (logged once)
+        self._periodic: list[float] = []  # wall time of each step of periodic work since the last report
+        self._round: DiagnosticsRound | None = None  # the diagnostics period in progress
         self._silent = SilentInputs()  # input topics nobody publishes, logged once
         # When each stream's newest message arrived (steady clock): its age in /diagnostics, so a
         # bag's recorded stamps and /clock do not make a fresh stream look stale.
@@ -128,11 +138,8 @@ class EstimatorNode(Node):
         self._make_publishers()
         self._diag_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10, event_callbacks=_NO_EVENTS)
         in_qos = _input_qos(self.node_cfg.reliable, self.node_cfg.depth)
-        self._subs = {
-            kind: self.create_subscription(_TYPES[kind], self.node_cfg.topics[kind], self._callback(kind), in_qos,
-                                           raw=True, event_callbacks=_NO_SUB_EVENTS)
-            for kind in STREAMS
-        }
+        self._intake = Intake(self, _TYPES, self.node_cfg.topics, in_qos)  # off the executor: taken in batches
+        self._subs = self._intake.subs
         self.create_service(Trigger, "~/reset", self._on_reset)
         self.create_service(SetBool, "~/enable", self._on_enable)
         self.add_on_set_parameters_callback(self._validate_parameters)
@@ -144,7 +151,9 @@ class EstimatorNode(Node):
         # Health reporting and state saving run on the steady clock: they go on when /clock
         # pauses or jumps (use_sim_time).
         steady = Clock(clock_type=ClockType.STEADY_TIME)
+        self._next_step = self.create_guard_condition(self._diagnostics_step)
         self.create_timer(self.node_cfg.diagnostics_period, self._publish_diagnostics, clock=steady)
+        self._intake_timer = self.create_timer(_intake_period(self.config.rate), self._take_inputs, clock=steady)
         if self.node_cfg.state_file and self.node_cfg.state_save_period > 0:
             self.create_timer(self.node_cfg.state_save_period, self.save_state, clock=steady)
         models = ", ".join(f"{m.output}({len(m.regressors)})" for m in self.config.models)
@@ -153,7 +162,7 @@ class EstimatorNode(Node):
         self.get_logger().info(
             f"estimating {models} at {self.config.rate:g} Hz, {lags} lags, aircraft {self.config.aircraft.name}; "
             f"inputs {', '.join(self.node_cfg.topics[k] for k in STREAMS)}; "
-            + (f"{self.state_status.partition(':')[0]} (above)" if self._state_said else self.state_status)
+            + self._state.startup_text()
         )
 
     # ------------------------------------------------------------------ parameters
@@ -180,6 +189,7 @@ class EstimatorNode(Node):
         new = pipeline_config(values)
         self.node_cfg = node_config(values)
         self.pipeline.enabled = self.node_cfg.enabled
+        self._intake_timer.timer_period_ns = int(_intake_period(new.rate) * 1e9)
         self._diagnostics.window_s = self.node_cfg.diagnostics_window
         if new != self.config:
             changed = ", ".join(sorted(p.name for p in params))
@@ -222,32 +232,40 @@ class EstimatorNode(Node):
         self._fit_pubs = [new[topic] for topic, _ in self._layout.fit_topics]
 
     # ------------------------------------------------------------------ data path
-    def _callback(self, kind: str) -> Callable[[bytes], None]:
-        """Inputs arrive serialized (``raw=True``) and are decoded by :mod:`.cdr` (either byte
-        order) into light objects with the message's field names: building rclpy's Python
-        messages (numpy covariance arrays and all) cost more than the pipeline itself."""
-        msgtype = MESSAGE_TYPES[kind]
-        arrived = self._arrived
+    def destroy_node(self) -> None:
+        self._intake.destroy()
+        super().destroy_node()
 
-        def on_message(raw: bytes) -> None:
-            t0 = time.perf_counter()
-            arrived[kind] = time.monotonic()
+    def _take_inputs(self) -> None:
+        """Every message the input subscriptions hold, taken at once each intake period
+        (:func:`_intake_period`) and fed to :func:`.inputs.feed` in order of arrival
+        (:func:`.inputs.arrival_order`, the reception times of the middleware, :mod:`.intake`): the offline
+        replay feeds the same messages in the same order. Latency is counted from the arrival
+        of the message that completed a sample to its last publish."""
+        taken = self._intake.take()
+        if not any(taken.values()):
+            return
+        now = time.monotonic()
+        for kind, queued in taken.items():
+            if queued:
+                self._arrived[kind] = now  # the stream's age in /diagnostics runs from here
+        pipeline, start = self.pipeline, time.time_ns()
+        oldest = min((q[0][0] for q in taken.values() if q and q[0][0] > 0), default=start)
+        self._waits.append(max(start - oldest, 0) * 1e-9)
+        if pipeline.needs_clock:  # inputs.max_clock_offset: stamps are checked against it
+            pipeline.clock_ns = self.get_clock().now().nanoseconds
+        for kind, (arrived, raw) in arrival_order(taken):
             c0 = time.thread_time()
             try:
-                pipeline = self.pipeline
-                if pipeline.needs_clock:  # inputs.max_clock_offset: stamps are checked against it
-                    pipeline.clock_ns = self.get_clock().now().nanoseconds
-                outputs = feed(pipeline, kind, decode(msgtype, raw))
+                outputs = feed(pipeline, kind, decode(MESSAGE_TYPES[kind], raw))
             except Exception as exc:  # noqa: BLE001 - a bad message must never stop the node
                 self._malformed(kind, exc)
-                return
+                continue
             if outputs:
                 for out in outputs:
                     self._publish(out)
-                self._latencies.append(time.perf_counter() - t0)
+                self._latencies.append((time.time_ns() - (arrived or start)) * 1e-9)
                 self._cpu_times.append(time.thread_time() - c0)
-
-        return on_message
 
     def _malformed(self, kind: str, exc: Exception) -> None:
         """Count a message that could not be decoded or fed; log the first one per input."""
@@ -301,68 +319,15 @@ class EstimatorNode(Node):
                 self.get_logger().info(f"time jumped {delta * 1e-9:+.3f} s: the inputs are already near the new time")
 
     # ------------------------------------------------------------------ state file
-    def _load_state(self) -> None:
-        """Resume from ``state_file`` when it holds this configuration's state. The file is
-        claimed first (:func:`rls_uncertainty.state_file.claim`): one that is not a regular file,
-        or that another process holds, is refused in one line and the node runs without a
-        state file. A file that exists but cannot be used (corrupt, crafted, another
-        configuration's) is renamed aside (:func:`rls_uncertainty.state_file.set_aside`) so that
-        the fresh state saved later never replaces it; if it cannot be moved, nothing is saved
-        this run."""
-        path = self._state_path = self.node_cfg.state_file
-        self._state_claim: StateFileClaim | None = None
-        self._state_said = False  # a problem with the file is logged once; the start-up line points to it
-        if not path:
-            return
-        try:
-            self._state_claim = claim(path)
-        except StateFileError as exc:
-            self._state_path = ""
-            self.state_status = f"state file refused: {exc}; running without a state file"
-            self.get_logger().error(self.state_status)
-            self._state_said = True
-            return
-        if self._state_claim.removed:
-            names = ", ".join(p.name for p in self._state_claim.removed)
-            self.get_logger().info(f"removed {len(self._state_claim.removed)} temporary file(s) of interrupted "
-                                   f"saves of {path}: {names}")
-        if not os.path.lexists(path):
-            self.state_status = f"state file {path} not found: starting fresh"
-            return
-        try:
-            self.pipeline.load_state(path)
-        except StateFileError as exc:
-            reason = str(exc)
-        else:
-            self.state_status = f"resumed from {path} ({self.pipeline.bank.k} samples)"
-            return
-        try:
-            aside = set_aside(path)
-        except OSError as exc:
-            self._state_path = ""
-            self.release_state_file()
-            self.state_status = (f"state file ignored: {reason}; it could not be moved aside ({exc}), so it is "
-                                 "left as it is and no state is saved this run")
-            self.get_logger().error(self.state_status)
-            self._state_said = True
-            return
-        self.state_status = f"state file ignored: {reason}; kept as {aside}; a fresh state will be saved to {path}"
-        self.get_logger().warning(self.state_status)
-        self._state_said = True
-
     def save_state(self) -> None:
-        path = self._state_path
-        if path:
-            try:
-                self.pipeline.save_state(path)
-            except OSError as exc:
-                self.get_logger().error(f"cannot save state to {path}: {exc}")
+        """Save the estimator's state to ``state_file`` (a periodic step, timed)."""
+        t0 = time.perf_counter()
+        if self._state.save(self.pipeline, self.get_logger()):
+            self._periodic.append(time.perf_counter() - t0)
 
     def release_state_file(self) -> None:
         """Free the state file's lock (after the last save)."""
-        if self._state_claim is not None:
-            self._state_claim.release()
-            self._state_claim = None
+        self._state.release()
 
     # ------------------------------------------------------------------ diagnostics
     def _namesakes(self) -> int:
@@ -371,43 +336,65 @@ class EstimatorNode(Node):
         return max(0, sum(1 for name_ns in self.get_node_names_and_namespaces() if tuple(name_ns) == me) - 1)
 
     def _publish_diagnostics(self) -> None:
-        """One :class:`.diagnostics.Snapshot` per period in, one ``DiagnosticArray`` out."""
-        now_ns = self.get_clock().now().nanoseconds
+        """Start one :class:`.diagnostics_round.DiagnosticsRound`: here only the node's own
+        facts are read (constant time); the rest runs one step per executor turn
+        (:meth:`_diagnostics_step`), between the input callbacks."""
+        t0 = time.perf_counter()
+        if self._round is not None:  # the previous round has not finished: it goes on
+            return
         wall = time.monotonic()
-        publishers = {kind: sub.get_publisher_count() for kind, sub in self._subs.items()}
+        publishers = {kind: sub.get_publisher_count() for kind, sub in self._subs.items()}  # graph cache reads
         topics = {kind: sub.topic_name for kind, sub in self._subs.items()}
         for line in self._silent.update(self, wall, publishers, topics, self.pipeline.required,
                                         self.node_cfg.diagnostics_window, self.node_cfg.reliable):
             self.get_logger().warning(line)
-        snapshot = Snapshot(
-            counters=self.pipeline.counters(),
-            models=[(m.output, self.pipeline.model_report(j)) for j, m in enumerate(self.config.models)],
-            required=tuple(self.pipeline.required),
-            max_gap=self.config.inputs.max_gap,
-            now_ns=now_ns,
-            elapsed_s=wall - self._last_diag,
-            publishers=publishers,
-            topics=topics,
-            reliable=self.node_cfg.reliable,
-            enabled=self.pipeline.enabled,
-            state_file=self.state_status,
-            latencies_s=self._latencies,
-            cpu_times_s=self._cpu_times,
-            namesakes=self._namesakes(),
-            arrival_ages_s={kind: wall - t for kind, t in self._arrived.items()},
-        )
+        facts = {
+            "required": tuple(self.pipeline.required), "max_gap": self.config.inputs.max_gap,
+            "now_ns": self.get_clock().now().nanoseconds, "elapsed_s": wall - self._last_diag,
+            "publishers": publishers, "topics": topics, "reliable": self.node_cfg.reliable,
+            "enabled": self.pipeline.enabled, "state_file": self._state.status,
+            "latencies_s": self._latencies, "cpu_times_s": self._cpu_times, "namesakes": self._namesakes(),
+            "periodic_s": self._periodic, "waits_s": self._waits, "period_s": 1.0 / self.config.rate,
+            "arrival_ages_s": {kind: wall - t for kind, t in self._arrived.items()},
+        }
         self._last_diag = wall
-        self._latencies, self._cpu_times = [], []
+        self._latencies, self._cpu_times, self._periodic, self._waits = [], [], [], []
+        self._round = DiagnosticsRound(self.pipeline, self._layout, self._diagnostics, facts,
+                                       self._publish_fit, self._publish_statuses)
+        self._next_step.trigger()
+        self._periodic.append(time.perf_counter() - t0)
+
+    def _diagnostics_step(self) -> None:
+        """One step of the running round; the next is due on the next executor turn. A round
+        whose pipeline was reconfigured meanwhile is dropped (the next period reports)."""
+        t0 = time.perf_counter()
+        r = self._round
+        if r is None:
+            return
+        if r.pipeline is not self.pipeline or r.layout is not self._layout or r.step():
+            self._round = None
+        else:
+            self._next_step.trigger()
+        self._periodic.append(time.perf_counter() - t0)
+
+    def _publish_fit(self, index: int, raw: bytes) -> None:
+        self._fit_pubs[index].publish(raw)  # ~/M/fit, ~/M/identifiability
+
+    def _publish_statuses(self, statuses: list[Status]) -> None:
         arr = DiagnosticArray()
         arr.header.stamp = self.get_clock().now().to_msg()
         arr.status = [
             DiagnosticStatus(level=bytes((s.level,)), name=s.name, message=s.message, hardware_id=s.hardware_id,
                              values=[KeyValue(key=k, value=v) for k, v in s.values])
-            for s in self._diagnostics.update(snapshot)
+            for s in statuses
         ]
         self._diag_pub.publish(arr)
-        for index, raw in self._layout.encode_fit(self.pipeline):  # ~/M/fit, ~/M/identifiability
-            self._fit_pubs[index].publish(raw)
+        overload = self._diagnostics.overload
+        if overload is not None and self._overload_said is None:  # said once per episode
+            self.get_logger().warning(overload)
+        elif overload is None and self._overload_said is not None:
+            self.get_logger().info("keeping up with the inputs again")
+        self._overload_said = overload
         for line in self._diagnostics.alerts.due():  # a misconfigured data path, throttled
             self.get_logger().warning(line)
 
