@@ -60,9 +60,11 @@ from .bookkeeping import Bookkeeping, model_fit
 from .config import PipelineConfig
 from .convergence import ConvergenceMonitor
 from .frequency_path import FrequencyOutput, FrequencyPath
+from .guard import withheld as unpublishable
 from .identifiability import IdentifiabilityMonitor
 from .intake import Intake
 from .sampling import Sample, Sampler, Skipped
+from .states import initializing, parameter_states
 
 __all__ = ["Pipeline", "SampleOutput", "STREAMS", "StateFileError", "required_streams", "sampler_for"]
 
@@ -229,6 +231,7 @@ class Pipeline:
         self._withheld = np.zeros(len(self.sizes), dtype=bool)  # the last output's, per model
         self._monitor.reset()
         self._converged = self._monitor.no_flags()  # the newest sample's flags
+        self._last: SampleOutput | None = None  # the newest sample's output
         # estimator.method frequency or both: the frequency-domain estimator on the same rows.
         self.frequency = FrequencyPath(self.config) if self.config.frequency is not None else None
 
@@ -335,6 +338,7 @@ class Pipeline:
             self.bookkeeping.reject_samples(reason, len(self._pending))
             self._pending.clear()
         self._diff.reset()
+        self._quality.restart_chain()  # the sensor-noise estimate's second differences too
 
     def _process(self, t: int, sample: list) -> SampleOutput | None:
         """The delay line: the rates enter the differentiator now, the sample leaves ``lag``
@@ -383,9 +387,9 @@ class Pipeline:
         se = bank.standard_errors_all("corrected")
         se_conv = bank.standard_errors_all("conventional")
         ready = bank.ready
-        # The last guard: a ready model with a non-finite estimate or SE is withheld, counted.
-        self._withheld = bad = ready & (self._real & ~(np.isfinite(theta) & np.isfinite(se)
-                                                       & np.isfinite(se_conv))).any(axis=1)
+        # The last guard: a ready model with a non-finite estimate or SE, or an SE not above
+        # rounding of its estimate (:mod:`.guard`), is withheld, counted.
+        self._withheld = bad = unpublishable(ready, self._real, theta, se, se_conv)
         if bad.any():
             for j in np.flatnonzero(bad):
                 book.outputs_withheld.count(self._outputs[j])
@@ -394,9 +398,11 @@ class Pipeline:
         # A parameter that is not identifiable from the data so far is never flagged converged.
         self._converged = flags, model_flags = self._quality.restrict(flags, model_flags, bank, ready)
         frequency = None if freq is None else freq.add(t, book.outputs_withheld, self._quality)
-        return SampleOutput(stamp_ns=t, index=self._index, theta=theta, se=se, se_conventional=se_conv, ready=ready,
-                            converged=flags, model_converged=model_flags, covariance=self._covariances(t, ready),
-                            lags=np.where(ready, bank.lags_used, 0), frequency=frequency)
+        self._last = SampleOutput(stamp_ns=t, index=self._index, theta=theta, se=se, se_conventional=se_conv,
+                                  ready=ready, converged=flags, model_converged=model_flags,
+                                  covariance=self._covariances(t, ready), lags=np.where(ready, bank.lags_used, 0),
+                                  frequency=frequency)
+        return self._last
 
     def _covariances(self, t: int, ready: np.ndarray) -> np.ndarray | None:
         """The corrected and conventional covariances of the ready models
@@ -454,11 +460,32 @@ class Pipeline:
         """What ``/diagnostics`` reports of model ``j`` (node and replay alike): its
         :meth:`model_fit`, once it is ready its newest :meth:`convergence` flags and
         identifiability figures, and ``identifiability``: why parameters are not identifiable, or
-        why the model cannot initialize (:func:`.alerts.identifiability`), when that is so."""
+        why the model cannot initialize (:func:`.alerts.identifiability`), when that is so;
+        ``initializing``: ``37 of 104 samples (...)`` while the publication rule holds it back;
+        per parameter of each method published ``state.<parameter>`` and
+        ``se_percent.<parameter>`` (:mod:`.states`; ``frequency.`` before them for the
+        frequency domain), and with the frequency domain its fit (:meth:`.frequency_path.
+        FrequencyPath.report`). ``time_domain``: whether the time domain's estimates are published."""
         fit, quality = self.model_fit(j), self._quality
         why = identifiability(self._outputs[j], quality.problems(j, self._named_after))
         if fit["ready"]:
             fit = {**fit, **self.convergence(j), **quality.report(j, self.parameter_names[j])}
+        elif "publish_at_samples" in fit and self.bank.initialized[j]:
+            o = self.config.estimator
+            fit["initializing"] = (f"{initializing(fit['publish_count'], fit['publish_at_samples'])} (the corrected "
+                                   f"standard errors need estimator.publish_lag_windows {o.publish_lag_windows:g} x "
+                                   f"{o.publish_lags} lags + {self.sizes[j]} parameters)")
+        fit["time_domain"] = self.config.publishes_time
+        methods = [("time", "")] if self.config.publishes_time else []
+        if self.frequency is not None:
+            fit.update(self.frequency.report(j))
+            methods.append(("frequency", "frequency."))
+        for method, prefix in methods:
+            for s in parameter_states(self, self._last, method):
+                if s.model == self._outputs[j]:
+                    fit[f"{prefix}state.{s.parameter}"] = s.text
+                    fit[f"{prefix}se_percent.{s.parameter}"] = round(s.se_percent, 2) if math.isfinite(s.se_percent) \
+                        else "-"
         return {**fit, "identifiability": why} if why else fit
 
     def convergence(self, j: int) -> dict:

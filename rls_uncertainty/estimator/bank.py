@@ -134,6 +134,10 @@ class EstimatorBank:
         )
         self._init = ExactInitialization(sizes, n, o.init_condition, prior=o.p0 is not None)
         self._eval = Evaluation(o, sizes, self._fit, self._lags, self._counts)
+        # The publication rule: samples each model needs (after its burn-in, if any) before it publishes.
+        self._publish_at = np.array([o.publish_samples(s) for s in sizes], dtype=np.int64)
+        self._burn_in = o.burn_in
+        self._all_published = False
         prior = o.prior(n)
         if prior is not None:
             D0 = np.eye(n) * prior * self._mask[:, :, None] * self._mask[:, None, :]
@@ -146,6 +150,7 @@ class EstimatorBank:
         """Recompute what depends on which models are ready (after an initialization or a
         restored state)."""
         ready = self._init.ready
+        self._all_published = False
         if ready.all():
             self._lags.all_initialized()
         self._counts.restart(ready, self._init.ready_at, self._lags.cap)
@@ -258,8 +263,42 @@ class EstimatorBank:
     # ------------------------------------------------------------------ results
     @property
     def ready(self) -> np.ndarray:
-        """Boolean per model: initialized, so estimates and covariances exist."""
+        """Boolean per model: published, i.e. :attr:`initialized` and past the publication
+        rule: its residual degrees of freedom ``k - n`` (``k - k0 - B - n`` after a residual
+        burn-in of ``B`` samples from the initialization at ``k0``) reach
+        ``estimator.publish_lag_windows`` lag windows of Eq. 22 (:meth:`.options.EstimatorOptions.publish_samples`).
+        Below that the corrected standard error is an artefact of the window (at ``k = n`` the
+        residuals are those of an exact fit): nothing of the model is published."""
+        return self._published().copy()
+
+    @property
+    def initialized(self) -> np.ndarray:
+        """Boolean per model: exactly initialized (Eqs. 6, 7, 10), so estimates and
+        covariances exist (:meth:`theta`, :meth:`covariance`), published or not."""
         return self._init.ready.copy()
+
+    def _published(self) -> np.ndarray:
+        init = self._init.ready
+        if self._all_published:
+            return init
+        published: np.ndarray = init & (self.publish_count >= self._publish_at)
+        if published.all():
+            self._all_published = True
+        return published
+
+    @property
+    def publish_count(self) -> np.ndarray:
+        """What the publication rule counts for each model, ``(M,)``: the samples ``k``, or
+        after a residual burn-in those after it (``k - k0 - B``; negative before it)."""
+        if not self._burn_in:
+            return np.full(self.n_models, self._counts.k, dtype=np.int64)
+        return np.where(self._init.ready, self._counts.k - self._init.ready_at - self._burn_in, 0)
+
+    @property
+    def publish_at(self) -> np.ndarray:
+        """The :attr:`publish_count` at which each model publishes, ``(M,)``: ``n +
+        ceil(publish_lag_windows x L)``."""
+        return self._publish_at.copy()
 
     @property
     def ready_at(self) -> np.ndarray:
@@ -292,8 +331,11 @@ class EstimatorBank:
 
     def theta_all(self) -> np.ndarray:
         """Estimates of every model as an ``(M, n_max)`` array; padding and models that are
-        not :attr:`ready` are NaN."""
-        return self._eval.theta_all()
+        not :attr:`ready` (published) are NaN."""
+        theta = self._eval.theta_all()
+        if not self._all_published:
+            theta[~self._published()] = np.nan
+        return theta
 
     @property
     def n_R(self) -> np.ndarray:
@@ -356,9 +398,14 @@ class EstimatorBank:
 
     def standard_errors_all(self, kind: str = "corrected") -> np.ndarray:
         """Standard errors of every model as an ``(M, n_max)`` array: the square roots of the
-        diagonals of :meth:`covariance`. Padding and models that are not :attr:`ready` are NaN.
+        diagonals of :meth:`covariance`. Padding and models that are not :attr:`ready`
+        (published) are NaN.
         """
-        return self._eval.standard_errors(kind)
+        se = self._eval.standard_errors(kind)
+        if self._all_published or self._published().all():
+            return se
+        out: FloatArray = np.where(self._published()[:, None], se, np.nan)
+        return out
 
     def covariance(self, j: int, kind: str = "corrected", *, repair: bool = True) -> np.ndarray:
         """Parameter covariance of model ``j``.
@@ -376,14 +423,18 @@ class EstimatorBank:
     def covariance_all(self) -> np.ndarray:
         """:meth:`covariance` (repaired) of every model and both kinds at once, a new
         ``(2, M, n_max, n_max)`` array: ``[0]`` corrected, ``[1]`` conventional; NaN outside
-        the :attr:`ready` models' blocks."""
-        return self._eval.evaluate().published(self.sizes, self._init.ready)
+        the :attr:`ready` (published) models' blocks."""
+        published = self._published()
+        cov = self._eval.evaluate().published(self.sizes, published)
+        if not self._all_published:
+            cov[:, ~published] = np.nan
+        return cov
 
     def standard_errors(self, j: int, kind: str = "corrected") -> np.ndarray:
         """Square roots of the covariance diagonal (never NaN: see :meth:`covariance`)."""
         check_kind(kind)
         self._require(j)
-        return self.standard_errors_all(kind)[j, : self.sizes[j]].copy()
+        return self._eval.standard_errors(kind)[j, : self.sizes[j]].copy()
 
     # ------------------------------------------------------------------ snapshot
     def state(self) -> dict[str, Any]:
