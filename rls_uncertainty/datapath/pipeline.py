@@ -55,7 +55,7 @@ from ..aero.surface_mixing import SURFACES
 from ..errors import NonFiniteInput, Refused, StateFileError
 from ..estimator import EstimatorBank
 from ..state_file import EstimatorState, load_state, save_state
-from .alerts import explanations, identifiability
+from .alerts import explanations
 from .bookkeeping import Bookkeeping, model_fit
 from .config import PipelineConfig
 from .convergence import ConvergenceMonitor
@@ -64,7 +64,7 @@ from .guard import withheld as unpublishable
 from .identifiability import IdentifiabilityMonitor
 from .intake import Intake
 from .sampling import Sample, Sampler, Skipped
-from .states import initializing, parameter_states
+from .states import model_report
 
 __all__ = ["Pipeline", "SampleOutput", "STREAMS", "StateFileError", "required_streams", "sampler_for"]
 
@@ -207,7 +207,7 @@ class Pipeline:
         self._x_names = [name for names in rows for name in names]
         self._quality = IdentifiabilityMonitor(rows, [[REGRESSOR_UNITS[r] for r in row] for row in rows],
                                                config.identifiability, config.estimator.forgetting)
-        self._named_after = math.ceil(config.convergence.window * config.rate)  # samples before a cause is named
+        self.named_after = math.ceil(config.convergence.window * config.rate)  # samples before a cause is named
         self.last_stamp_ns: int | None = None  # the newest sample the estimator used
         self._cov_every = config.outputs.covariance_decimation
         self._period_ns = config.period_ns
@@ -457,36 +457,13 @@ class Pipeline:
         return model_fit(self.bank, j, r2, bool(self._withheld[j]), withheld)
 
     def model_report(self, j: int) -> dict:
-        """What ``/diagnostics`` reports of model ``j`` (node and replay alike): its
-        :meth:`model_fit`, once it is ready its newest :meth:`convergence` flags and
-        identifiability figures, and ``identifiability``: why parameters are not identifiable, or
-        why the model cannot initialize (:func:`.alerts.identifiability`), when that is so;
-        ``initializing``: ``37 of 104 samples (...)`` while the publication rule holds it back;
-        per parameter of each method published ``state.<parameter>`` and
-        ``se_percent.<parameter>`` (:mod:`.states`; ``frequency.`` before them for the
-        frequency domain), and with the frequency domain its fit (:meth:`.frequency_path.
-        FrequencyPath.report`). ``time_domain``: whether the time domain's estimates are published."""
-        fit, quality = self.model_fit(j), self._quality
-        why = identifiability(self._outputs[j], quality.problems(j, self._named_after))
-        if fit["ready"]:
-            fit = {**fit, **self.convergence(j), **quality.report(j, self.parameter_names[j])}
-        elif "publish_at_samples" in fit and self.bank.initialized[j]:
-            o = self.config.estimator
-            fit["initializing"] = (f"{initializing(fit['publish_count'], fit['publish_at_samples'])} (the corrected "
-                                   f"standard errors need estimator.publish_lag_windows {o.publish_lag_windows:g} x "
-                                   f"{o.publish_lags} lags + {self.sizes[j]} parameters)")
-        fit["time_domain"] = self.config.publishes_time
-        methods = [("time", "")] if self.config.publishes_time else []
-        if self.frequency is not None:
-            fit.update(self.frequency.report(j))
-            methods.append(("frequency", "frequency."))
-        for method, prefix in methods:
-            for s in parameter_states(self, self._last, method):
-                if s.model == self._outputs[j]:
-                    fit[f"{prefix}state.{s.parameter}"] = s.text
-                    fit[f"{prefix}se_percent.{s.parameter}"] = round(s.se_percent, 2) if math.isfinite(s.se_percent) \
-                        else "-"
-        return {**fit, "identifiability": why} if why else fit
+        """What ``/diagnostics`` reports of model ``j``, node and replay alike (:func:`.states.model_report`)."""
+        return model_report(self, j)
+
+    @property
+    def last(self) -> SampleOutput | None:
+        """The newest sample's output (None before any)."""
+        return self._last
 
     def convergence(self, j: int) -> dict:
         """The newest sample's convergence flags of model ``j`` for diagnostics: ``converged``

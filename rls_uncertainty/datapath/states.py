@@ -22,19 +22,66 @@ engineers read first. ``replay``, ``campaign``, ``montecarlo``, ``/diagnostics``
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 
 from ..aero.models import BIAS_REGRESSOR
+from .alerts import identifiability
 
 if TYPE_CHECKING:  # annotations only
+    from ..aero.models import ModelConfig
+    from ..estimator import EstimatorBank
+    from .config import PipelineConfig
+    from .frequency_path import FrequencyOutput, FrequencyPath
     from .identifiability import IdentifiabilityMonitor
-    from .pipeline import Pipeline, SampleOutput
+
+
+class Published(Protocol):
+    """What a sample's output (:class:`.pipeline.SampleOutput`) holds that the states read."""
+
+    @property
+    def ready(self) -> np.ndarray: ...
+    @property
+    def theta(self) -> np.ndarray: ...
+    @property
+    def se(self) -> np.ndarray: ...
+    @property
+    def converged(self) -> np.ndarray: ...
+    @property
+    def frequency(self) -> FrequencyOutput | None: ...
+
+
+class Publisher(Protocol):
+    """What a pipeline (:class:`.pipeline.Pipeline`) holds that the states read."""
+
+    bank: EstimatorBank
+    frequency: FrequencyPath | None
+
+    @property
+    def models(self) -> Sequence[ModelConfig]: ...
+    @property
+    def parameter_names(self) -> Sequence[Sequence[str]]: ...
+    @property
+    def identifiability(self) -> IdentifiabilityMonitor: ...
+
+
+class Reporter(Publisher, Protocol):
+    """What :func:`model_report` reads of a pipeline besides :class:`Publisher`."""
+
+    config: PipelineConfig
+    named_after: int  # samples before a cause of non-identifiability is named
+
+    @property
+    def last(self) -> Published | None: ...
+    def model_fit(self, j: int) -> dict: ...
+    def convergence(self, j: int) -> dict: ...
 
 __all__ = ["ParameterState", "STATES", "se_percent", "se_percent_text", "model_reasons", "initializing",
-           "parameter_states"]
+           "parameter_states", "state_fields", "Published", "Publisher",
+           "Reporter", "model_report"]
 
 STATES = ("converged", "settling", "held back", "initializing", "withheld")
 
@@ -125,7 +172,7 @@ def initializing(count: int, needed: int) -> str:
     return f"{max(count, 0)} of {needed} samples"
 
 
-def _time_states(pipe: Pipeline, out: SampleOutput) -> list[ParameterState]:
+def _time_states(pipe: Publisher, out: Published) -> list[ParameterState]:
     bank, quality = pipe.bank, pipe.identifiability
     counts, needed, initialized = bank.publish_count, bank.publish_at, bank.initialized
     states = []
@@ -146,7 +193,7 @@ def _time_states(pipe: Pipeline, out: SampleOutput) -> list[ParameterState]:
     return states
 
 
-def _frequency_states(pipe: Pipeline, out: SampleOutput | None) -> list[ParameterState]:
+def _frequency_states(pipe: Publisher, out: Published | None) -> list[ParameterState]:
     path = pipe.frequency
     assert path is not None
     bank, quality = path.bank, pipe.identifiability
@@ -172,7 +219,7 @@ def _frequency_states(pipe: Pipeline, out: SampleOutput | None) -> list[Paramete
     return states
 
 
-def parameter_states(pipe: Pipeline, out: SampleOutput | None, method: str = "time") -> list[ParameterState]:
+def parameter_states(pipe: Publisher, out: Published | None, method: str = "time") -> list[ParameterState]:
     """Every parameter's state by ``method`` (``time`` or ``frequency``) at the pipeline's
     newest sample, whose output is ``out`` (None before any: every model initializing)."""
     if method == "frequency":
@@ -183,3 +230,47 @@ def parameter_states(pipe: Pipeline, out: SampleOutput | None, method: str = "ti
                                initializing(int(bank.publish_count[j]), int(bank.publish_at[j])))
                 for j, m in enumerate(pipe.models) for name in pipe.parameter_names[j]]
     return _time_states(pipe, out)
+
+
+def state_fields(pipe: Publisher, out: Published | None, output: str, methods: Sequence[str]) -> dict[str, str | float]:
+    """``/diagnostics`` fields of the model of ``output``, per parameter and method published
+    (``methods``): ``state.<parameter>`` (:attr:`ParameterState.text`) and
+    ``se_percent.<parameter>`` (two decimals, ``-`` when undefined); ``frequency.`` before
+    both for the frequency domain."""
+    fields: dict[str, str | float] = {}
+    for method in methods:
+        prefix = "frequency." if method == "frequency" else ""
+        for s in parameter_states(pipe, out, method):
+            if s.model == output:
+                fields[f"{prefix}state.{s.parameter}"] = s.text
+                fields[f"{prefix}se_percent.{s.parameter}"] = round(s.se_percent, 2) \
+                    if math.isfinite(s.se_percent) else "-"
+    return fields
+
+
+def model_report(pipe: Reporter, j: int) -> dict:
+    """What ``/diagnostics`` reports of model ``j`` (node and replay alike): its fit
+    (:meth:`.pipeline.Pipeline.model_fit`), once it is published its newest convergence flags
+    (:meth:`.pipeline.Pipeline.convergence`) and identifiability figures, and
+    ``identifiability``: why parameters are not identifiable, or why the model cannot
+    initialize (:func:`.alerts.identifiability`), when that is so; ``initializing``: ``37 of
+    104 samples (...)`` while the publication rule holds it back; :func:`state_fields` of each
+    method published, and with the frequency domain its fit (:meth:`.frequency_path.
+    FrequencyPath.report`). ``time_domain``: whether the time domain's estimates are published."""
+    fit, quality = pipe.model_fit(j), pipe.identifiability
+    why = identifiability(pipe.models[j].output, quality.problems(j, pipe.named_after))
+    if fit["ready"]:
+        fit = {**fit, **pipe.convergence(j), **quality.report(j, pipe.parameter_names[j])}
+    elif "publish_at_samples" in fit and pipe.bank.initialized[j]:
+        o = pipe.config.estimator
+        fit["initializing"] = (f"{initializing(fit['publish_count'], fit['publish_at_samples'])} (the corrected "
+                               f"standard errors need estimator.publish_lag_windows {o.publish_lag_windows:g} x "
+                               f"{o.publish_lags} lags + {len(pipe.parameter_names[j])} parameters)")
+    fit["time_domain"] = pipe.config.publishes_time
+    methods = ["time"] if pipe.config.publishes_time else []
+    if pipe.frequency is not None:
+        fit.update(pipe.frequency.report(j))
+        methods.append("frequency")
+    fit.update(state_fields(pipe, pipe.last, pipe.models[j].output, methods))
+    return {**fit, "identifiability": why} if why else fit
+

@@ -9,7 +9,7 @@ a second one is the noise model under forgetting), :class:`.counts.SampleCounts`
 ``n_k`` and the residual burn-in), :class:`.lag_storage.LagStorage` (the histories, Eq. 17's
 lag sums and Eq. 21's lag products), :class:`.initialization.ExactInitialization` (Eqs. 6, 7,
 10) and :class:`.evaluation.Evaluation` (the lag choice and Eqs. 13, 20, 22); the bank hands
-each sample from one to the next (:meth:`EstimatorBank._apply`) and keeps :mod:`.state`.
+each sample from one to the next (:meth:`EstimatorBank._apply`); its snapshot is :mod:`.snapshot`.
 
 How the hot path differs from the reference, and why (each measured in
 ``benchmarks/estimator_benchmark.py``):
@@ -33,7 +33,7 @@ How the hot path differs from the reference, and why (each measured in
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
@@ -45,8 +45,10 @@ from .evaluation import Evaluation, kind_index
 from .initialization import ExactInitialization
 from .lag_storage import GROWTH_START, FloatArray, LagStorage
 from .options import EstimatorOptions, check_kind
+from .publication import PublicationRule
 from .rls_fit import RlsFit
-from .state import STATE_FORMAT, pack, unpack
+from .snapshot import BankSnapshot
+from .state import STATE_FORMAT
 
 __all__ = ["EstimatorBank", "ScaledSample"]
 
@@ -98,7 +100,7 @@ class ScaledSample:
         return small
 
 
-class EstimatorBank:
+class EstimatorBank(BankSnapshot):
     """``M`` independent recursive least-squares models updated together (Eqs. 15-22).
 
     ``sizes``: the number of parameters of each model, e.g. ``(3, 4, 3, 6, 4, 4)`` for Eq.
@@ -134,10 +136,7 @@ class EstimatorBank:
         )
         self._init = ExactInitialization(sizes, n, o.init_condition, prior=o.p0 is not None)
         self._eval = Evaluation(o, sizes, self._fit, self._lags, self._counts)
-        # The publication rule: samples each model needs (after its burn-in, if any) before it publishes.
-        self._publish_at = np.array([o.publish_samples(s) for s in sizes], dtype=np.int64)
-        self._burn_in = o.burn_in
-        self._all_published = False
+        self._rule = PublicationRule(sizes, o)
         prior = o.prior(n)
         if prior is not None:
             D0 = np.eye(n) * prior * self._mask[:, :, None] * self._mask[:, None, :]
@@ -150,7 +149,7 @@ class EstimatorBank:
         """Recompute what depends on which models are ready (after an initialization or a
         restored state)."""
         ready = self._init.ready
-        self._all_published = False
+        self._rule.restart()
         if ready.all():
             self._lags.all_initialized()
         self._counts.restart(ready, self._init.ready_at, self._lags.cap)
@@ -264,11 +263,7 @@ class EstimatorBank:
     @property
     def ready(self) -> np.ndarray:
         """Boolean per model: published, i.e. :attr:`initialized` and past the publication
-        rule: its residual degrees of freedom ``k - n`` (``k - k0 - B - n`` after a residual
-        burn-in of ``B`` samples from the initialization at ``k0``) reach
-        ``estimator.publish_lag_windows`` lag windows of Eq. 22 (:meth:`.options.EstimatorOptions.publish_samples`).
-        Below that the corrected standard error is an artefact of the window (at ``k = n`` the
-        residuals are those of an exact fit): nothing of the model is published."""
+        rule (:mod:`.publication`): nothing of a model is published before."""
         return self._published().copy()
 
     @property
@@ -278,27 +273,19 @@ class EstimatorBank:
         return self._init.ready.copy()
 
     def _published(self) -> np.ndarray:
-        init = self._init.ready
-        if self._all_published:
-            return init
-        published: np.ndarray = init & (self.publish_count >= self._publish_at)
-        if published.all():
-            self._all_published = True
-        return published
+        return self._rule.published(self._counts.k, self._init.ready, self._init.ready_at)
 
     @property
     def publish_count(self) -> np.ndarray:
         """What the publication rule counts for each model, ``(M,)``: the samples ``k``, or
         after a residual burn-in those after it (``k - k0 - B``; negative before it)."""
-        if not self._burn_in:
-            return np.full(self.n_models, self._counts.k, dtype=np.int64)
-        return np.where(self._init.ready, self._counts.k - self._init.ready_at - self._burn_in, 0)
+        return self._rule.count(self._counts.k, self._init.ready, self._init.ready_at)
 
     @property
     def publish_at(self) -> np.ndarray:
         """The :attr:`publish_count` at which each model publishes, ``(M,)``: ``n +
         ceil(publish_lag_windows x L)``."""
-        return self._publish_at.copy()
+        return self._rule.at.copy()
 
     @property
     def ready_at(self) -> np.ndarray:
@@ -333,7 +320,7 @@ class EstimatorBank:
         """Estimates of every model as an ``(M, n_max)`` array; padding and models that are
         not :attr:`ready` (published) are NaN."""
         theta = self._eval.theta_all()
-        if not self._all_published:
+        if not self._rule.all_published:
             theta[~self._published()] = np.nan
         return theta
 
@@ -402,7 +389,7 @@ class EstimatorBank:
         (published) are NaN.
         """
         se = self._eval.standard_errors(kind)
-        if self._all_published or self._published().all():
+        if self._rule.all_published or self._published().all():
             return se
         out: FloatArray = np.where(self._published()[:, None], se, np.nan)
         return out
@@ -426,7 +413,7 @@ class EstimatorBank:
         the :attr:`ready` (published) models' blocks."""
         published = self._published()
         cov = self._eval.evaluate().published(self.sizes, published)
-        if not self._all_published:
+        if not self._rule.all_published:
             cov[:, ~published] = np.nan
         return cov
 
@@ -435,50 +422,3 @@ class EstimatorBank:
         check_kind(kind)
         self._require(j)
         return self._eval.standard_errors(kind)[j, : self.sizes[j]].copy()
-
-    # ------------------------------------------------------------------ snapshot
-    def state(self) -> dict[str, Any]:
-        """A deep copy of the complete state (:mod:`.state`); :meth:`from_state` continues
-        bit-identically."""
-        counters = {**self._counts.counters(), "cap": self._lags.cap}
-        arrays: dict[str, np.ndarray] = {**self._fit.arrays("")}
-        if self._noise is not None:
-            arrays.update(self._noise.arrays("noise_"))
-        arrays.update(self._init.arrays(), **self._eval.arrays())
-        arrays.update(self._lags.arrays(self.n_window))
-        return pack(self.sizes, self.options, counters, arrays)
-
-    @classmethod
-    def from_state(cls, saved: Mapping[str, Any]) -> EstimatorBank:
-        """Rebuild an estimator bank from :meth:`state` (also after a save to disk)."""
-        sizes, options, counters, arrays = unpack(saved)
-        bank = cls(sizes, options)
-        bank._restore(counters, arrays)
-        return bank
-
-    @classmethod
-    def state_layout(
-        cls, sizes: Sequence[int], options: EstimatorOptions, counters: Mapping[str, Any], waiting: bool
-    ) -> dict[str, tuple[tuple[int, ...], np.dtype]]:
-        """``{name: (shape, dtype)}`` of the arrays of :meth:`state` of a bank of ``sizes`` and
-        ``options`` at ``counters`` (``waiting``: some model waits for initialization),
-        without any data: what a state file must hold."""
-        bank = cls(sizes, options)
-        bank._lay_out(counters, waiting)
-        return {name: (a.shape, a.dtype) for name, a in bank.state()["arrays"].items()}
-
-    def _lay_out(self, counters: Mapping[str, Any], waiting: bool) -> None:
-        self._counts.load(counters)
-        cap = int(counters["cap"])
-        self._lags.lay_out(cap, waiting, min(self._counts.k, cap))
-
-    def _restore(self, counters: Mapping[str, Any], arrays: Mapping[str, Any]) -> None:
-        """Load a state of this configuration, in place."""
-        self._init.load(arrays)
-        self._eval.load(arrays)
-        self._fit.load(arrays, "")
-        if self._noise is not None:
-            self._noise.load(arrays, "noise_")
-        self._lay_out(counters, waiting=not bool(self._init.ready.all()))
-        self._lags.load(arrays, self.n_window)
-        self._readiness_changed()
