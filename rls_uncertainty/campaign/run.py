@@ -237,7 +237,8 @@ def run_maneuver(job: tuple[Maneuver, CampaignSettings]) -> ManeuverResult:
         with InputStream(maneuver.bag, dict(settings.topics), strict=settings.strict, start=maneuver.start,
                          end=maneuver.end) as stream:
             opened = time.perf_counter()
-            record_checks(config, stream.span_seconds)  # (a refusal: the maneuver's failed rows)
+            if stream.span_seconds >= settings.min_span:  # (shorter: too_short rows, below, not a refusal)
+                record_checks(config, stream.span_seconds)  # (a refusal: the maneuver's failed rows)
             timed = _TimedStream(stream)
             result = run_pipeline(timed, config, record=True, keep_outputs=False)
         t1 = time.perf_counter()
