@@ -124,7 +124,7 @@ def test_every_parameter_reaches_its_nested_field():
         "estimator.max_lag_span": (("estimator", "max_lags"), 80),
         "estimator.residual_burn_in_span": (("estimator", "residual_burn_in"), 20),
         "differentiator.window": (("differentiator", "window"), 11),
-        "differentiator.order": (("differentiator", "order"), 2),
+        "differentiator.order": (("differentiator", "order"), 4),  # (2 passes 1.28 Hz at 9: refused)
         "differentiator.lag": (("differentiator", "lag"), 5),
         "inputs.use_dynamic_pressure": (("inputs", "use_dynamic_pressure"), False),
         "inputs.air_density": (("inputs", "air_density"), 1.0),
@@ -156,6 +156,7 @@ def test_every_parameter_reaches_its_nested_field():
         "limits.angular_acceleration": (("limits", "angular_acceleration"), 100.0),
         "identifiability.max_correlation": (("identifiability", "max_correlation"), 0.99),
         "identifiability.min_r_squared": (("identifiability", "min_r_squared"), 0.25),
+        "identifiability.min_noise_ratio": (("identifiability", "min_noise_ratio"), 4.0),
         "identifiability.angle_resolution": (("identifiability", "angle_resolution"), 1e-3),
         "identifiability.rate_resolution": (("identifiability", "rate_resolution"), 1e-5),
     }
@@ -564,7 +565,9 @@ def test_every_frequency_parameter_reaches_its_option():
     rule = pipeline_config({"estimator.method": "both", "estimator.publish_lag_windows": 3.5})
     assert rule.frequency.publish_lag_windows == rule.estimator.publish_lag_windows == 3.5
     assert pipeline_config({"estimator.method": "both", "rate": 100.0}).frequency.rate_hz == 100.0
-    low = {"rate": 2.0, "inputs.max_gap": 1.0}  # Nyquist 1 Hz: the default grid reaches 1.5 Hz
+    # Nyquist 1 Hz: the default grid reaches 1.5 Hz. (Force models only: no differentiator passes
+    # the moment models' angular accelerations up to 1.5 Hz at 2 Hz, refused on its own.)
+    low = {"rate": 2.0, "inputs.max_gap": 1.0, "models.enabled": ["CX", "CY", "CZ"]}
     assert pipeline_config(low).frequency is None
     with pytest.raises(ConfigError, match=r"frequency\.f_max must stay below the Nyquist frequency rate / 2 = 1\.0"):
         pipeline_config({**low, "estimator.method": "frequency"})
