@@ -133,7 +133,7 @@ def test_method_time_gives_the_time_rows_of_both_without_a_method_column_in_the_
     assert t4[1:] == [line for line in (both / "table4.csv").read_text().splitlines()[1:]
                       if line.split(",")[2] == "time"]
     md = (out / "table4.md").read_text()
-    assert "| model | parameter | maneuvers | mean |" in md and "method" not in md
+    assert "| model | parameter | maneuvers | converged at end | mean |" in md and "method" not in md
     md_both = (both / "table4.md").read_text()
     for line in (x for x in md.splitlines() if x.startswith("| C")):  # the same cells, less the method one
         model, parameter, rest = line.split(" | ", 2)
@@ -195,7 +195,8 @@ def test_a_failed_or_short_maneuver_has_rows_for_both_methods():
     assert [r.method for r in lost.rows].count("time") == 7 and [r.method for r in lost.rows].count("frequency") == 5
     assert all(r.status.startswith("failed: ") for r in lost.rows)
     short = run_maneuver((Maneuver("short", str(BUNDLED), 0.0, 0.2), settings))
-    assert len(short.rows) == 12 and all(r.status.startswith("no estimate") for r in short.rows)
+    assert len(short.rows) == 12 and all(r.status.startswith("too_short: ") for r in short.rows)
+    assert [r.method for r in short.rows] == [r.method for r in lost.rows]
 
 
 def test_a_bad_method_is_one_line_naming_the_option(tmp_path, capsys):

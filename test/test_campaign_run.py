@@ -7,7 +7,7 @@ estimator on one machine. No ROS."""
 from __future__ import annotations
 
 import math
-from dataclasses import fields
+from dataclasses import fields, replace
 from pathlib import Path
 
 import pytest
@@ -29,8 +29,10 @@ def settings():
 
 def test_columns_are_the_documented_ones():
     assert MANEUVER_COLUMNS == ("maneuver", "model", "parameter", "method", "estimate", "se_conventional",
-                                "se_corrected", "se_corrected_all", "samples", "r_squared", "status")
-    assert set(MANEUVER_COLUMNS) == {f.name for f in fields(ParameterResult)}  # every field is written
+                                "se_corrected", "se_corrected_all", "samples", "r_squared", "status", "se_percent",
+                                "state", "reason")
+    # every field is written, and the percent error beside them
+    assert set(MANEUVER_COLUMNS) == {f.name for f in fields(ParameterResult)} | {"se_percent"}
 
 
 @pytest.mark.parametrize("span", [(None, None), (1.0, 11.5)])
@@ -44,6 +46,7 @@ def test_a_maneuver_gives_the_replays_estimates_and_the_all_lags_replays_errors(
     for row in res.rows:
         f, a = replay.final(row.parameter), every_lag.final(row.parameter)
         assert row.status == "ok" and row.maneuver == "m"
+        assert row.se_percent == pytest.approx(100 * f.std_error / abs(f.estimate), rel=1e-12)
         assert (row.estimate, row.se_conventional, row.se_corrected) == (f.estimate, f.std_error_conventional,
                                                                          f.std_error)
         assert a.estimate == f.estimate  # the lags change the standard errors only
@@ -64,7 +67,14 @@ def test_a_bag_that_cannot_be_read_fails_its_maneuver_only(settings, tmp_path):
 
 
 def test_a_maneuver_too_short_to_identify_a_model_says_why(settings):
-    """0.2 s: ten samples, fewer than the differentiator and exact initialization need."""
+    """0.2 s: ten samples, fewer than the differentiator and exact initialization need. Below
+    --min-span every row is too_short with the span and the minimum; without a minimum the rows
+    say the model published no estimate."""
     res = run_maneuver((Maneuver("short", str(BUNDLED), 0.0, 0.2), settings))
+    want = f"too_short: {res.data_seconds:.2f} s of data, fewer than --min-span {settings.min_span:g} s"
+    assert 0 < res.data_seconds < settings.min_span
+    assert {r.status for r in res.rows} == {want}
+    assert all(math.isnan(r.se_corrected_all) for r in res.rows)
+    res = run_maneuver((Maneuver("short", str(BUNDLED), 0.0, 0.2), replace(settings, min_span=0.0)))
     assert all(r.status.startswith("no estimate") for r in res.rows), {r.status for r in res.rows}
     assert all(math.isnan(r.se_corrected_all) for r in res.rows)

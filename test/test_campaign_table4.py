@@ -25,7 +25,8 @@ def _results(rng, n, failed=()):
                                          "failed: no such bag") for p in ("Cm_alpha", "Cm_q"))
         else:
             v = rng.normal(size=(2, 4)) ** 2
-            rows = tuple(ParameterResult(name, "Cm", p, *v[k], 600, 0.9, "ok")
+            rows = tuple(ParameterResult(name, "Cm", p, *v[k], 600, 0.9, "ok",
+                                         state="converged" if v[k, 0] > 0.5 else "settling")
                          for k, p in enumerate(("Cm_alpha", "Cm_q")))
         out.append(ManeuverResult(name, rows))
     return out
@@ -40,6 +41,7 @@ def test_table4_is_the_mean_of_each_column_and_the_sample_deviation_of_the_estim
         used = [res.rows[k] for i, res in enumerate(results) if i not in {3, 7}]
         est = np.array([u.estimate for u in used])
         assert row.maneuvers == 7
+        assert row.converged == sum(u.state == "converged" for u in used)
         assert row.mean == pytest.approx(est.mean(), rel=1e-15)
         assert row.scatter == pytest.approx(math.sqrt(((est - est.mean()) ** 2).sum() / 6), rel=1e-14)
         for name in ("se_conventional", "se_corrected_all", "se_corrected"):
@@ -59,14 +61,19 @@ def test_the_csv_files_hold_every_value_at_full_precision():
     results = _results(np.random.default_rng(2), 4, failed={1})
     rows = list(csv.reader(io.StringIO(maneuvers_csv(results))))
     assert tuple(rows[0]) == MANEUVER_COLUMNS and len(rows) == 1 + 8
+    col = {name: i for i, name in enumerate(rows[0])}
     first = results[0].rows[0]
-    assert float(rows[1][4]) == first.estimate and rows[1][3] == "time" and rows[1][10] == "ok"
-    assert rows[3][4] == "" and rows[3][10] == "failed: no such bag"  # a failed maneuver: empty cells
+    assert float(rows[1][col["estimate"]]) == first.estimate and rows[1][col["method"]] == "time"
+    assert rows[1][col["status"]] == "ok" and rows[1][col["state"]] == first.state
+    assert float(rows[1][col["se_percent"]]) == 100 * first.se_corrected / abs(first.estimate)
+    assert rows[3][col["estimate"]] == "" and rows[3][col["status"]] == "failed: no such bag"  # empty cells
+    assert rows[3][col["se_percent"]] == ""
     t4 = list(csv.reader(io.StringIO(table4_csv(table4(results)))))
     assert tuple(t4[0]) == TABLE4_COLUMNS
-    assert TABLE4_COLUMNS[:9] == ("model", "parameter", "method", "maneuvers", "mean", "se_conventional",
-                                  "se_corrected_all", "se_corrected", "scatter")
-    assert float(t4[1][4]) == table4(results)[0].mean and t4[1][2] == "time"
+    assert TABLE4_COLUMNS[:10] == ("model", "parameter", "method", "maneuvers", "converged", "mean",
+                                   "se_conventional", "se_corrected_all", "se_corrected", "scatter")
+    assert float(t4[1][5]) == table4(results)[0].mean and t4[1][2] == "time"
+    assert int(t4[1][4]) == sum(r.rows[0].state == "converged" for r in results if r.rows[0].ok)
 
 
 def test_the_markdown_and_the_summary_name_the_maneuvers_not_used():

@@ -54,7 +54,7 @@ def _setup(command, tmp_path):
 
 def _expected_outputs(command, out):
     if command == "replay":
-        return {"estimates.csv", "estimates_wide.csv", "estimates.mcap", "run.json", "summary.txt"}
+        return {"estimates.csv", "estimates_wide.csv", "estimates.mcap", "parameters.csv", "run.json", "summary.txt"}
     return {f"{out.name}.mcap", "metadata.yaml"}
 
 
@@ -392,7 +392,7 @@ def test_the_setting_flags_are_made_from_the_options_classes():
     from rls_uncertainty.settings.parameters import PARAMETER_NAMES
 
     declared = [s.ros for _f, s in settings(EstimatorOptions) if s.cli]
-    assert sorted(declared) == sorted(["estimator.lag_span", "estimator.max_lag_span",
+    assert sorted(declared) == sorted(["estimator.lag_span", "estimator.max_lag_span", "estimator.publish_lag_windows",
                                        "estimator.residual_burn_in_span", "estimator.window", "estimator.forgetting"])
     commands = {"simulate": [], "montecarlo": ["--out", "o"], "replay": ["bag", "--out", "o"],
                 "campaign": ["bag", "--out", "o"]}

@@ -119,11 +119,12 @@ def test_every_parameter_reaches_its_nested_field():
         "estimator.window": (("estimator", "window"), "bartlett"),
         "estimator.forgetting": (("estimator", "forgetting"), 0.99),
         "estimator.residual": (("estimator", "residual"), "a_priori"),
+        "estimator.publish_lag_windows": (("estimator", "publish_lag_windows"), 3.0),
         "estimator.lag_selection": (("estimator", "lags"), "auto"),
         "estimator.max_lag_span": (("estimator", "max_lags"), 80),
         "estimator.residual_burn_in_span": (("estimator", "residual_burn_in"), 20),
         "differentiator.window": (("differentiator", "window"), 11),
-        "differentiator.order": (("differentiator", "order"), 2),
+        "differentiator.order": (("differentiator", "order"), 4),  # (2 passes 1.28 Hz at 9: refused)
         "differentiator.lag": (("differentiator", "lag"), 5),
         "inputs.use_dynamic_pressure": (("inputs", "use_dynamic_pressure"), False),
         "inputs.air_density": (("inputs", "air_density"), 1.0),
@@ -155,6 +156,7 @@ def test_every_parameter_reaches_its_nested_field():
         "limits.angular_acceleration": (("limits", "angular_acceleration"), 100.0),
         "identifiability.max_correlation": (("identifiability", "max_correlation"), 0.99),
         "identifiability.min_r_squared": (("identifiability", "min_r_squared"), 0.25),
+        "identifiability.min_noise_ratio": (("identifiability", "min_noise_ratio"), 4.0),
         "identifiability.angle_resolution": (("identifiability", "angle_resolution"), 1e-3),
         "identifiability.rate_resolution": (("identifiability", "rate_resolution"), 1e-5),
     }
@@ -262,7 +264,8 @@ def test_fingerprint_is_what_a_state_file_stores():
         "models": [["Cm", "1", "q_hat"]],
         "rate": 50.0,
         "estimator": {"lags": 7, "window": "truncated", "forgetting": 1.0, "residual": "standardized", "max_lags": 50,
-                      "min_lags": 0, "residual_burn_in": 0, "noise_forgetting": 1.0, "init_condition": 1e8, "p0": None},
+                      "min_lags": 0, "residual_burn_in": 0, "noise_forgetting": 1.0, "init_condition": 1e8, "p0": None,
+                      "publish_lag_windows": 2.0},
     }
     assert pipeline_config({"inputs.max_gap": 0.5}).fingerprint() == pipeline_config({}).fingerprint()
 
@@ -558,8 +561,13 @@ def test_every_frequency_parameter_reaches_its_option():
         assert cfg.frequency is not None and getattr(cfg.frequency, attr) == want, name
         assert replace(cfg.frequency, **{attr: getattr(both.frequency, attr)}) == both.frequency, name
     assert pipeline_config({"estimator.method": "both", "frequency.lag_span": 0.0}).frequency.n_lags == 0
+    # One publication rule for both methods: estimator.publish_lag_windows reaches both banks' options.
+    rule = pipeline_config({"estimator.method": "both", "estimator.publish_lag_windows": 3.5})
+    assert rule.frequency.publish_lag_windows == rule.estimator.publish_lag_windows == 3.5
     assert pipeline_config({"estimator.method": "both", "rate": 100.0}).frequency.rate_hz == 100.0
-    low = {"rate": 2.0, "inputs.max_gap": 1.0}  # Nyquist 1 Hz: the default grid reaches 1.5 Hz
+    # Nyquist 1 Hz: the default grid reaches 1.5 Hz. (Force models only: no differentiator passes
+    # the moment models' angular accelerations up to 1.5 Hz at 2 Hz, refused on its own.)
+    low = {"rate": 2.0, "inputs.max_gap": 1.0, "models.enabled": ["CX", "CY", "CZ"]}
     assert pipeline_config(low).frequency is None
     with pytest.raises(ConfigError, match=r"frequency\.f_max must stay below the Nyquist frequency rate / 2 = 1\.0"):
         pipeline_config({**low, "estimator.method": "frequency"})

@@ -31,7 +31,7 @@ def test_auto_bank_equals_the_reference(max_lags, min_lags, burn_in, forgetting,
     chosen = set()
     for bank, refs, k in fed_bank_and_references(X, Z, **options):
         assert list(bank.lags_used) == [r.lags_used() for r in refs], k - 1
-        chosen.update(int(L) for L, ready in zip(bank.lags_used, bank.ready, strict=True) if ready)
+        chosen.update(int(L) for L, ready in zip(bank.lags_used, bank.initialized, strict=True) if ready)
         if k % 10 == 0 or k <= 15:
             assert_bank_equals_reference(bank, refs, k)
     assert len(chosen) >= 2  # the choice moves

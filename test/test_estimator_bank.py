@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import ast
 import itertools
+import math
 import pathlib
 import subprocess
 import sys
@@ -183,6 +184,12 @@ OPTIONS = list(itertools.product(
 CHECK_K = (2, 5, 12, 13, 14, 30, 90)  # before initialization, at it, after the window fills
 
 
+def window_of(options):
+    """The lag window the publication rule counts in, written out: the fixed lags, else (auto,
+    all lags, the conventional covariance's 0) the longest lag span ``max_lags``."""
+    return options.lags if isinstance(options.lags, int) and options.lags > 0 else options.max_lags
+
+
 def fed_bank_and_references(X, Z, **options):
     """A bank of two models (3 and 2 parameters) and their reference.py twins with the same
     ``EstimatorOptions(**options)``, fed the samples of ``X, Z`` one by one: yields ``(bank,
@@ -203,17 +210,26 @@ def assert_bank_equals_reference(bank, refs, k, rtol=1e-8):
     R_k(i) from lagged moments, ``sum z^2 - 2 theta' X'z + theta' X'X theta``, whose rounding
     is ``eps sum z^2``; it reaches the covariance through ``D Lambda D``."""
     sizes = bank.sizes
-    assert list(bank.ready) == [r.ready for r in refs], k
+    assert list(bank.initialized) == [r.ready for r in refs], k
+    b, need = bank.options.burn_in, math.ceil(bank.options.publish_lag_windows * window_of(bank.options))
+    published = [r.ready and (k - r.ready_at - b if b else k) - s >= need for r, s in zip(refs, sizes, strict=True)]
+    assert list(bank.ready) == published, k
     theta_all = bank.theta_all()
-    se = {kind: bank.standard_errors_all(kind) for kind in ("corrected", "conventional")}
+    se_all = {kind: bank.standard_errors_all(kind) for kind in ("corrected", "conventional")}
     for j, (ref, s) in enumerate(zip(refs, sizes, strict=True)):
+        if not published[j]:  # nothing published: NaN rows
+            assert np.isnan(theta_all[j]).all() and np.isnan(se_all["corrected"][j]).all()
+            assert np.isnan(bank.covariance_all()[:, j]).all()
+        else:
+            rel_close(theta_all[j, :s], ref.theta, 1e-9)
+            np.testing.assert_array_equal(se_all["corrected"][j, :s], bank.standard_errors(j))
         if not ref.ready:
-            assert np.isnan(theta_all[j]).all() and np.isnan(se["corrected"][j]).all()
             with pytest.raises(EstimatorNotReady):
                 bank.covariance(j)
             continue
+        se = {kind: bank.standard_errors(j, kind) for kind in ("corrected", "conventional")}
         assert bank.ready_at[j] == ref.ready_at
-        rel_close(theta_all[j, :s], ref.theta, 1e-9)
+        rel_close(bank.theta(j), ref.theta, 1e-9)
         floor_R = 1e-12 * np.mean(np.square(ref.z))
         R = [ref.R[i] for i in range(len(ref.R))]
         np.testing.assert_allclose(bank.autocorrelation(j), R, rtol=0, atol=rtol * np.max(np.abs(R)) + floor_R)
@@ -223,7 +239,7 @@ def assert_bank_equals_reference(bank, refs, k, rtol=1e-8):
                                  (bank.covariance(j, kind), ref.published_covariance(kind))):
                 np.testing.assert_allclose(mine, theirs, rtol=0, atol=rtol * np.max(np.abs(theirs)) + floor_cov)
             theirs = ref.standard_errors(kind)
-            np.testing.assert_allclose(se[kind][j, :s], theirs, rtol=0, atol=rtol * np.max(theirs) + np.sqrt(floor_cov))
+            np.testing.assert_allclose(se[kind], theirs, rtol=0, atol=rtol * np.max(theirs) + np.sqrt(floor_cov))
 
 
 @pytest.mark.parametrize("window, lags, forgetting, residual, p0", OPTIONS)
@@ -487,3 +503,31 @@ def test_a_bank_that_has_seen_no_sample_reports_nan_standard_errors_and_no_estim
         se = bank.standard_errors_all(kind)
         assert se.shape == (2, 4) and np.isnan(se).all()
     assert np.isnan(bank.theta_all()).all() and not bank.ready.any()
+
+
+# --------------------------------------------------------------------------- publication rule
+@pytest.mark.parametrize("lags, windows, burn_in", [(5, 2.0, None), (7, 1.5, None), ("all", 2.0, None),
+                                                     (0, 1.0, None), ("auto", 2.0, None), ("auto", 1.0, 4)])
+def test_a_model_publishes_first_at_n_plus_the_lag_windows(lags, windows, burn_in):
+    """The first published sample of each model is exactly ``n + ceil(c L)`` (or its
+    initialization, when later; with a burn-in counted after it); before it every published
+    quantity is NaN, after it the model stays published."""
+    X, Z = equivalence_problem(n=120)
+    options = EstimatorOptions(lags=lags, max_lags=9, publish_lag_windows=windows, residual_burn_in=burn_in)
+    L = window_of(options)
+    first = {}
+    for bank, _, k in fed_bank_and_references(X, Z, lags=lags, max_lags=9, publish_lag_windows=windows,
+                                              residual_burn_in=burn_in):
+        for j in np.flatnonzero(bank.ready):
+            first.setdefault(int(j), k)
+        for j in range(2):
+            if j not in first:
+                assert np.isnan(bank.theta_all()[j]).all() and np.isnan(bank.standard_errors_all()[j]).all()
+            else:
+                assert bank.ready[j] and np.isfinite(bank.standard_errors_all()[j, : bank.sizes[j]]).all()
+        ready_at = bank.ready_at
+    for j, n in enumerate((3, 2)):
+        b = options.burn_in
+        rule = n + math.ceil(windows * L)
+        expect = int(ready_at[j]) + b + rule if b else max(int(ready_at[j]), rule)
+        assert first[j] == expect, (j, first, ready_at)

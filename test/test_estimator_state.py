@@ -37,7 +37,7 @@ def test_snapshot_while_a_model_waits_for_initialization_continues_bit_identical
         a = EstimatorBank((2, 3), EstimatorOptions(lags=lags, forgetting=forgetting))
         for k in range(100):
             a.update(X[k], Z[k])
-        assert list(a.ready) == [True, False]
+        assert list(a.initialized) == [True, False]
         b = EstimatorBank.from_state(a.state())
         for k in range(100, n):
             a.update(X[k], Z[k])
@@ -69,7 +69,7 @@ def test_snapshot_during_and_after_the_residual_burn_in_continues_bit_identicall
         for k in range(stop):
             a.update(X[k], Z[k])
         b = EstimatorBank.from_state(a.state())
-        assert b.options == options and list(a.ready) == [True, stop > 60]
+        assert b.options == options and list(a.initialized) == [True, stop > 60]
         for k in range(stop, n):
             a.update(X[k], Z[k])
             b.update(X[k], Z[k])

@@ -71,7 +71,7 @@ def test_the_path_gives_what_a_frequency_bank_gives_on_the_pipelines_rows_withou
         np.testing.assert_array_equal(f.ready, bank.ready)
         np.testing.assert_array_equal(f.lags, np.where(bank.ready, min(50, bank.n_samples - 1), 0))
         ready_seen += int(f.ready.all())
-    assert ready_seen > 500
+    assert ready_seen >= len(result.outputs) - 104  # every sample from the publication rule's on
 
 
 def test_the_time_domain_numbers_do_not_depend_on_the_method(messages):

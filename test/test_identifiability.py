@@ -127,8 +127,58 @@ def test_a_regressor_that_does_not_move_is_not_excited_and_takes_the_bias_with_i
         (p,) = monitor.problems(0)
         assert (p.kind, p.regressors, p.units) == ("not_excited", ("r3",), ("rad",))
         assert p.figures[0] == pytest.approx(flat.std(), rel=1e-2) and p.limits == (1e-4,)
+    # As a nondimensional rate 5e-5 is well above the rates' 1e-6 floor, but it is white noise
+    # only: the sensor-noise test takes it (ratio about 1); without that test it passes.
     _bank, monitor = run(xs, z, units=(BIAS, ANGLE, ANGLE, NONDIMENSIONAL))
-    assert monitor.identifiable[0, 3]  # 5e-5 is well above the rates' 1e-6
+    assert not monitor.identifiable[0, 3] and [p.kind for p in monitor.problems(0)] == ["noise"]
+    no_noise_test = IdentifiabilityConfig(min_noise_ratio=0.0)
+    assert run(xs, z, units=(BIAS, ANGLE, ANGLE, NONDIMENSIONAL), config=no_noise_test)[1].identifiable[0, 3]
+
+
+@pytest.mark.parametrize("forgetting", [1.0, 0.995])
+def test_the_sensor_noise_estimate_is_the_second_differences_mean_square_over_six(forgetting):
+    """White noise of sigma 0.01 on a 2 Hz sine at 50 Hz: sigma_hat within 5 % of 0.01 over
+    2000 samples (the sine leaks (2 sin(pi 2/50))^2 = 6 % of its own variance into the second
+    differences, 2e-7 against sigma^2 = 1e-4); the running sums equal the batch weighted mean
+    square of np.diff(x, 2) over 6; a break in the chain restarts the differences, not the sums."""
+    rng = np.random.default_rng(8)
+    n, sigma = 2000, 0.01
+    t = np.arange(n) / 50.0
+    x = 0.002 * np.sin(2 * np.pi * 2.0 * t) + sigma * rng.standard_normal(n)
+    stats = RegressorStatistics((1, 1), forgetting)
+    for k in range(n):
+        if k == 1200:
+            stats.restart_chain()
+        stats.add(x[k : k + 1, None])
+    d = np.concatenate([np.diff(x[:1200], 2), np.diff(x[1200:], 2)])
+    k_of_d = np.concatenate([np.arange(2, 1200), np.arange(1202, n)])
+    w = forgetting ** (n - 1 - k_of_d)
+    np.testing.assert_allclose(stats.noise_variance[0, 0], w @ d**2 / (6 * w.sum()), rtol=1e-12)
+    if forgetting == 1.0:
+        assert np.sqrt(stats.noise_variance[0, 0]) == pytest.approx(sigma, rel=0.05)
+
+
+def test_a_regressor_moving_no_more_than_its_sensor_noise_is_not_identifiable_with_its_reason():
+    """Regressor r3 = white noise of sigma 0.002 only (ratio about 1, over the 1e-4 rad floor):
+    not identifiable, the reason 'noise' with its std and its noise's; the same white noise on
+    a 0.03 rad sine (ratio about 113) is identifiable; the ratio limit decides in between."""
+    x, z = maneuver()
+    rng = np.random.default_rng(4)
+    noise = 0.002 * rng.standard_normal(N)
+    x[:, 3] = noise
+    _bank, monitor = run(x, z)
+    assert monitor.identifiable[0].tolist() == [True, True, True, False]
+    (p,) = monitor.problems(0)
+    assert (p.kind, p.regressors, p.units, p.limits) == ("noise", ("r3",), ("rad",), (10.0,))
+    assert p.figures[0] == pytest.approx(noise.std(), rel=1e-6)
+    assert p.figures[1] == pytest.approx(np.sqrt(np.mean(np.diff(noise, 2) ** 2) / 6), rel=1e-9)
+    report = monitor.report(0, ("C_0", "C_a", "C_b", "C_c"))
+    assert report["noise.r3"] == pytest.approx(p.figures[1], rel=1e-3)
+    x[:, 3] = 0.03 * np.sin(2 * np.pi * 0.5 * np.arange(N) / 50.0) + noise
+    assert run(x, z)[1].identifiable[0].all()
+    ratio = x[:, 3].var() / (np.mean(np.diff(x[:, 3], 2) ** 2) / 6)
+    assert 50 < ratio < 200
+    assert not run(x, z, config=IdentifiabilityConfig(min_noise_ratio=1.2 * ratio))[1].identifiable[0, 3]
 
 
 def test_a_model_that_explains_nothing_has_no_identifiable_parameter():

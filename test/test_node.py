@@ -481,7 +481,9 @@ def test_invalid_start_up_parameters_stop_the_node_with_the_reason(tmp_path, arg
 
 
 def test_reset_and_enable_services(tmp_path, tester):
-    node = _node(tmp_path)
+    # 10 lags: CZ publishes from its 23rd sample on (the publication rule: 2 x 10 lags + 3
+    # parameters), so each maneuver below, 2 s at 50 Hz at least, gives it over 50 estimates.
+    node = _node(tmp_path, "-p", "estimator.lag_span:=0.2")
     try:
         tester.wait_connected()
         seq = _synthetic(10**18, 3.0, bad=False)

@@ -15,6 +15,7 @@ import time
 import pytest
 
 from rls_uncertainty.datapath.inputs import STREAMS
+from rls_uncertainty.settings import load_parameters_file, pipeline_config
 
 from ros_harness import ROOT, NodeProcess
 
@@ -64,8 +65,14 @@ def test_status_once_prints_the_streams_and_models_of_the_node(node):
     table = {line.split()[0]: line for line in lines if line and line.split()[0] in STREAMS}
     assert set(table) == set(STREAMS)
     assert "never received" in table["imu"]
-    models = {line.split()[0]: line.split()[1] for line in lines if line[:3] in ("CZ ", "Cm ")}
-    assert models == {"CZ": "initializing", "Cm": "initializing"}
+    tables = [lines[i + 1:lines.index("", i) if "" in lines[i:] else len(lines)]
+              for i, line in enumerate(lines) if line.startswith("model ")]
+    model_table, parameter_table = tables  # models, then their parameters (config/t2.yaml)
+    assert {line.split()[0]: line.split()[1] for line in model_table} == {"CZ": "initializing", "Cm": "initializing"}
+    cfg = pipeline_config(load_parameters_file(T2))
+    assert [tuple(line.split()[:3]) for line in parameter_table] == [
+        (m.output, p, "time") for m in cfg.models for p in m.parameter_names]
+    assert all(line.split()[3:5] == ["-", "initializing"] for line in parameter_table), parameter_table
 
 
 def test_the_status_table_names_the_parameters_held_back_and_why():

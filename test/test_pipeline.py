@@ -22,6 +22,7 @@ from interleaving import interleave
 
 from rls_uncertainty.aero.differentiation import DifferentiatorConfig, differentiate
 from rls_uncertainty.aero.surface_mixing import SurfaceMixing
+from rls_uncertainty.datapath.bookkeeping import WITHHELD_PROBLEM
 from rls_uncertainty.datapath.outputs import OutputLayout
 from rls_uncertainty.datapath.pipeline import STREAMS, Pipeline, StateFileError
 from rls_uncertainty.offline.replay import run_pipeline
@@ -519,11 +520,15 @@ def test_a_refused_estimator_update_is_counted_and_changes_nothing(monkeypatch):
 
 def test_a_model_whose_outputs_are_not_finite_is_withheld_and_counted(monkeypatch):
     """The last guard (unreachable through the inputs): a ready model whose estimates are not
-    finite publishes nothing, is counted, and its fit says why; after a reset it recovers."""
+    finite publishes nothing, is counted, and its fit says why; after a reset it recovers. (The
+    noise-free synthetic C_Z fits exactly: its zero standard errors are withheld at every
+    sample by the same guard, which Cm's break does not change.)"""
     pipe = pitch_pipeline(**{"models.enabled": ["CZ", "Cm"], "models.CZ": ["1", "delta_e"]})
     syn = Synthetic(pipe)
-    syn.run(0, 1000)
+    syn.run(0, 3000)  # (published from 2.1 s: the publication rule)
     assert pipe.model_fit(1)["ready"] and pipe.model_fit(1)["outputs_withheld"] == 0
+    cz_before = pipe.counters()["outputs_withheld"]["CZ"]
+    assert cz_before > 0 and not syn.outs[-1].ready[0]
     real_theta = pipe.bank.theta_all
 
     def broken():
@@ -533,13 +538,12 @@ def test_a_model_whose_outputs_are_not_finite_is_withheld_and_counted(monkeypatc
 
     monkeypatch.setattr(pipe.bank, "theta_all", broken)
     n_out = len(syn.outs)
-    syn.run(1000, 1400)
+    syn.run(3000, 3400)
     new = syn.outs[n_out:]
     assert len(new) == 20
-    models = [row.model for out in new for row in published(pipe, out)]
-    assert models == ["CZ"] * 20  # Cm withheld, CZ unaffected
+    assert [row.model for out in new for row in published(pipe, out)] == []
     assert all(not out.ready[1] for out in new)
-    assert pipe.counters()["outputs_withheld"] == {"Cm": 20}
+    assert pipe.counters()["outputs_withheld"] == {"CZ": cz_before + 20, "Cm": 20}
     fit = pipe.model_fit(1)
     assert fit["ready"] is False and "withheld" in fit["problem"] and fit["outputs_withheld"] == 20
     # Even an output built by hand leaves (OutputLayout.rows) only with finite rows.
@@ -547,22 +551,23 @@ def test_a_model_whose_outputs_are_not_finite_is_withheld_and_counted(monkeypatc
     assert [row.model for row in published(pipe, hand)] == ["CZ"]
     monkeypatch.undo()
     pipe.reset("service")
-    syn.run(1400, 2400)
-    assert pipe.model_fit(1)["ready"] and pipe.counters()["outputs_withheld"] == {"Cm": 20}
+    syn.run(3400, 6400)
+    assert pipe.model_fit(1)["ready"] and pipe.counters()["outputs_withheld"]["Cm"] == 20
 
 
 def test_r_squared_of_a_constant_output_is_not_reported_as_ok():
-    """Before: CY with no lateral motion (ay = 0, so CY = 0 exactly) was ready with
-    r_squared NaN, which the diagnostics showed at level OK. Now the fit is not ready and says
-    why; the estimate (0) is still published."""
+    """CY with no lateral motion (ay = 0, so CY = 0 exactly, its standard error 0): the fit
+    is not ready and says why, and the estimate with its zero standard error is withheld at
+    every sample (the last guard), counted; Cm is published."""
     pipe = pitch_pipeline(**{"models.enabled": ["CY", "Cm"], "models.CY": ["1"]})
     syn = Synthetic(pipe)
-    syn.run(0, 1000)
+    syn.run(0, 3000)
     fit = pipe.model_fit(0)
-    assert fit == {"ready": False, "samples": pipe.bank.k, "problem": "output constant: R^2 undefined",
-                   "outputs_withheld": 0}
+    assert fit == {"ready": False, "samples": pipe.bank.k, "problem": WITHHELD_PROBLEM,
+                   "outputs_withheld": pipe.counters()["outputs_withheld"]["CY"]}
+    assert fit["outputs_withheld"] == sum(o.index >= pipe.bank.publish_at[0] for o in syn.outs) > 0
     assert pipe.model_fit(1)["ready"] and math.isfinite(pipe.model_fit(1)["r_squared"])
-    assert [row.model for row in published(pipe, syn.outs[-1])] == ["CY", "Cm"]
+    assert [row.model for row in published(pipe, syn.outs[-1])] == ["Cm"]
 
 
 def test_a_stream_that_stops_skips_its_gap_and_restarts_the_differentiator():

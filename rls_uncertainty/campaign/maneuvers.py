@@ -19,14 +19,24 @@ from __future__ import annotations
 import math
 import numbers
 import os
-from collections.abc import Sequence
-from dataclasses import dataclass
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from ..errors import ConfigError
+from ..schema import check, option
 from ..settings.yaml_files import load
 
-__all__ = ["Maneuver", "from_bags", "load_maneuvers"]
+if TYPE_CHECKING:  # annotations only
+    from ..datapath.config import PipelineConfig
+
+# campaign --min-span's default: the T-2 models' publication span (2.1 s: 2 x 50 lags + 4
+# parameters at 50 Hz) plus convergence.window (2 s): the shortest maneuver whose parameters can
+# be flagged converged.
+MIN_SPAN = 4.0
+
+__all__ = ["Maneuver", "from_bags", "load_maneuvers", "CampaignSettings", "MIN_SPAN"]
 
 
 @dataclass(frozen=True)
@@ -100,3 +110,21 @@ def load_maneuvers(path: str | Path, recording: str | Path) -> list[Maneuver]:
         out.append(Maneuver(str(name).strip(), str(recording), start, end))
     _check_unique([m.name for m in out], str(path))
     return out
+
+
+@dataclass(frozen=True)
+class CampaignSettings:
+    """What every maneuver is run with: the pipeline's configuration, the input topics
+    (``topics.*``), ``strict`` (``replay``'s default; False is ``--lenient``) and ``min_span``
+    (``--min-span``, s: a maneuver with less data is ``too_short``)."""
+
+    config: PipelineConfig
+    topics: Mapping[str, str] = field(default_factory=dict)
+    strict: bool = True
+    min_span: float = option(MIN_SPAN, "a maneuver with less data than this is reported too_short and left out of "
+                             "Table 4 and Fig. 12 (default: the T-2 models' publication span, 2.1 s, plus "
+                             "convergence.window, 2 s: the shortest whose parameters can be flagged converged)",
+                             unit="s", low=0.0, high=3600.0, cli="--min-span")
+
+    def __post_init__(self) -> None:
+        check(self, "campaign")

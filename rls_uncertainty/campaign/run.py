@@ -17,9 +17,13 @@ published (``time``, ``both``).
 
 A maneuver's end-of-maneuver values become :class:`ParameterResult` rows (``maneuvers.csv``),
 one per parameter of every configured model and published method (per parameter the
-time-domain row, then the frequency-domain one): ``status`` ``ok``, ``no estimate: <why>``
-(the model never became identifiable: too short, not excited) or ``failed: <why>`` (the bag
-could not be read). The failure of one maneuver is its own rows' status, never the campaign's.
+time-domain row, then the frequency-domain one): ``status`` ``ok``, ``too_short: <span>`` (less
+data than ``--min-span``: its parameters could not be flagged converged; left out of Table 4),
+``no estimate: <why>`` (the model never published: too few samples for the publication rule,
+not excited) or ``failed: <why>`` (the bag could not be read); with each parameter's state at
+the end (:mod:`..datapath.states`: ``converged``, ``settling``, ``held back`` with the reason)
+and its percent error. The failure of one maneuver is its own rows' status, never the
+campaign's.
 """
 
 from __future__ import annotations
@@ -32,28 +36,21 @@ from typing import Any
 
 from ..aero.models import ModelConfig
 from ..datapath.config import PipelineConfig
+from ..datapath.feasibility import record_checks
 from ..datapath.inputs import Stamped
+from ..datapath.states import ParameterState, se_percent
 from ..errors import RlsUncertaintyError
 from ..estimator import EstimatorBank
 from ..offline.bags import InputStream
 from ..offline.replay import run_pipeline
 from ..offline.results import ReplayResult
-from .maneuvers import Maneuver
+from .maneuvers import MIN_SPAN, CampaignSettings, Maneuver
 
 __all__ = ["CampaignSettings", "ParameterResult", "ManeuverResult", "MANEUVER_COLUMNS", "run_maneuver",
-           "failed_result"]
+           "failed_result", "MIN_SPAN", "TOO_SHORT"]
 
 OK = "ok"
-
-
-@dataclass(frozen=True)
-class CampaignSettings:
-    """What every maneuver is run with: the pipeline's configuration, the input topics
-    (``topics.*``) and ``strict`` (``replay``'s default; False is ``--lenient``)."""
-
-    config: PipelineConfig
-    topics: Mapping[str, str] = field(default_factory=dict)
-    strict: bool = True
+TOO_SHORT = "too_short"
 
 
 @dataclass(frozen=True)
@@ -79,15 +76,23 @@ class ParameterResult:
     r_squared: float
     status: str
     method: str = "time"
+    state: str = ""
+    reason: str = ""
 
     @property
     def ok(self) -> bool:
         return self.status == OK
 
+    @property
+    def se_percent(self) -> float:
+        """``100 se_corrected / |estimate|`` (NaN when undefined)."""
+        return se_percent(self.estimate, self.se_corrected)
 
-# maneuvers.csv's columns (every field of ParameterResult), the method beside the parameter.
+
+# maneuvers.csv's columns (every field of ParameterResult and the percent error), the method
+# beside the parameter.
 MANEUVER_COLUMNS = ("maneuver", "model", "parameter", "method", "estimate", "se_conventional", "se_corrected",
-                    "se_corrected_all", "samples", "r_squared", "status")
+                    "se_corrected_all", "samples", "r_squared", "status", "se_percent", "state", "reason")
 
 
 @dataclass(frozen=True)
@@ -166,17 +171,23 @@ def _no_estimate(result: ReplayResult, model: str, method: str) -> str:
     return reason if reason.startswith("no estimate") else f"no estimate: {reason}"
 
 
+def _states(result: ReplayResult) -> dict[tuple[str, str], ParameterState]:
+    return {(s.method, s.parameter): s for s in result.states}
+
+
 def _frequency_row(name: str, result: ReplayResult, model: str, parameter: str, samples: int) -> ParameterResult:
     """``parameter``'s last published frequency-domain values (as ``estimates_frequency.csv``
     wrote them last)."""
     nan = math.nan
+    state = _states(result).get(("frequency", parameter))
+    st, why = ("", "") if state is None else (state.state, state.reason)
     try:
         final = result.final(parameter, "frequency")
     except RlsUncertaintyError:
         return ParameterResult(name, model, parameter, nan, nan, nan, nan, samples, nan,
-                               _no_estimate(result, model, "frequency"), "frequency")
+                               _no_estimate(result, model, "frequency"), "frequency", st, why)
     return ParameterResult(name, model, parameter, final.estimate, final.std_error_conventional, final.std_error, nan,
-                           samples, nan, OK, "frequency")
+                           samples, nan, OK, "frequency", st, why)
 
 
 def _rows(name: str, result: ReplayResult, bank_all: EstimatorBank | None) -> tuple[ParameterResult, ...]:
@@ -188,6 +199,7 @@ def _rows(name: str, result: ReplayResult, bank_all: EstimatorBank | None) -> tu
     se_all = bank_all.standard_errors_all("corrected") if bank_all is not None and bank_all.ready.any() else None
     last_row = pipe.regression[-1][0] if pipe.regression else None
     freq_samples = pipe.frequency.bank.evaluated_at if pipe.frequency is not None else 0
+    states = _states(result)
     rows = []
     for j, m in enumerate(pipe.models):
         fit = pipe.model_fit(j)
@@ -198,17 +210,19 @@ def _rows(name: str, result: ReplayResult, bank_all: EstimatorBank | None) -> tu
                 if method == "frequency":
                     rows.append(_frequency_row(name, result, m.output, p, freq_samples))
                     continue
+                state = states.get(("time", p))
+                st, why = ("", "") if state is None else (state.state, state.reason)
                 try:
                     final = result.final(p)
                 except RlsUncertaintyError:
                     rows.append(ParameterResult(name, m.output, p, math.nan, math.nan, math.nan, math.nan, samples,
-                                                r2, _no_estimate(result, m.output, "time")))
+                                                r2, _no_estimate(result, m.output, "time"), "time", st, why))
                     continue
                 # All lags at the sample of the final estimates (the last row, unless the model's
                 # last outputs were withheld as non-finite).
                 s_all = float(se_all[j, i]) if se_all is not None and final.stamp_ns == last_row else math.nan
                 rows.append(ParameterResult(name, m.output, p, final.estimate, final.std_error_conventional,
-                                            final.std_error, s_all, samples, r2, OK))
+                                            final.std_error, s_all, samples, r2, OK, "time", st, why))
     return tuple(rows)
 
 
@@ -223,6 +237,8 @@ def run_maneuver(job: tuple[Maneuver, CampaignSettings]) -> ManeuverResult:
         with InputStream(maneuver.bag, dict(settings.topics), strict=settings.strict, start=maneuver.start,
                          end=maneuver.end) as stream:
             opened = time.perf_counter()
+            if stream.span_seconds >= settings.min_span:  # (shorter: too_short rows, below, not a refusal)
+                record_checks(config, stream.span_seconds)  # (a refusal: the maneuver's failed rows)
             timed = _TimedStream(stream)
             result = run_pipeline(timed, config, record=True, keep_outputs=False)
         t1 = time.perf_counter()
@@ -230,6 +246,10 @@ def run_maneuver(job: tuple[Maneuver, CampaignSettings]) -> ManeuverResult:
     except (RlsUncertaintyError, OSError) as exc:
         return failed_result(maneuver.name, config, f"failed: {' '.join(str(exc).split())}")
     rows = _rows(maneuver.name, result, bank_all)
+    if result.data_seconds < settings.min_span:  # every row too_short: out of Table 4
+        short = (f"{TOO_SHORT}: {result.data_seconds:.2f} s of data, fewer than --min-span "
+                 f"{settings.min_span:g} s")
+        rows = tuple(replace(r, status=short) for r in rows)
     t2 = time.perf_counter()
     read = opened - t0 + timed.seconds
     seconds: dict[str, Any] = {"read": read, "pipeline": t1 - t0 - read, "all_lags": t2 - t1}

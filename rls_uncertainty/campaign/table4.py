@@ -1,6 +1,7 @@
 """The paper's Table 4 from a campaign's per-maneuver results (Section IV.B). numpy only.
 
-Per parameter, over the maneuvers whose model was estimated (status ``ok``), in the order of
+Per parameter, over the maneuvers whose model was estimated (status ``ok``: not ``too_short``,
+not ``no estimate``), in the order of
 the maneuvers: the mean estimate, the means of the conventional (Eq. 13), corrected all-lags
 (Eq. 20) and corrected configured-lags (Eq. 22) standard errors, and the observed scatter, the
 sample standard deviation of the estimates (``ddof=1``; NaN with fewer than two maneuvers). Each
@@ -36,7 +37,8 @@ __all__ = ["Table4Row", "TABLE4_COLUMNS", "table4", "maneuvers_csv", "table4_csv
 @dataclass(frozen=True)
 class Table4Row:
     """One parameter's line of Table 4 for one ``method`` (module docstring); ``maneuvers``
-    counts those used."""
+    counts those used, ``converged`` those of them whose parameter was flagged converged at
+    their end."""
 
     model: str
     parameter: str
@@ -47,6 +49,7 @@ class Table4Row:
     se_corrected: float
     scatter: float
     method: str = "time"
+    converged: int = 0
 
     def over_scatter(self, se: float) -> float:
         """``se`` / the scatter (NaN when the scatter is zero or not defined)."""
@@ -61,7 +64,7 @@ class Table4Row:
 
 RATIO_COLUMNS = ("conventional_over_scatter", "corrected_all_over_scatter", "corrected_over_scatter")
 # table4.csv's columns: every field of Table4Row, the method beside the parameter, then the ratios.
-_VALUES = ("maneuvers", "mean", "se_conventional", "se_corrected_all", "se_corrected", "scatter")
+_VALUES = ("maneuvers", "converged", "mean", "se_conventional", "se_corrected_all", "se_corrected", "scatter")
 TABLE4_COLUMNS = ("model", "parameter", "method", *_VALUES, *RATIO_COLUMNS)
 
 
@@ -80,8 +83,9 @@ def table4(results: Sequence[ManeuverResult]) -> list[Table4Row]:
         n = len(used)
         mean = v.mean(axis=0) if n else np.full(4, math.nan)
         scatter = float(np.std(v[:, 0], ddof=1)) if n > 1 else math.nan
+        converged = sum(r.state == "converged" for r in used)
         out.append(Table4Row(model, parameter, n, float(mean[0]), float(mean[1]), float(mean[2]), float(mean[3]),
-                             scatter, method))
+                             scatter, method, converged))
     return out
 
 
@@ -155,14 +159,15 @@ def table4_markdown(rows: Sequence[Table4Row], results: Sequence[ManeuverResult]
                   "(F5) and corrected (F7-F10, frequency.lag_span) standard errors; all lags is time-domain only."]
     lines += [
         "",
-        f"| model | parameter |{' method |' * method} maneuvers | mean | SE conventional | SE corrected, all lags | "
-        f"SE corrected, {lags} lags | scatter | conventional / scatter | corrected all / scatter | corrected / "
-        "scatter |",
-        "| --- | --- |" + " --- |" * (9 + method),
+        f"| model | parameter |{' method |' * method} maneuvers | converged at end | mean | SE conventional | "
+        f"SE corrected, all lags | SE corrected, {lags} lags | scatter | conventional / scatter | corrected all / "
+        "scatter | corrected / scatter |",
+        "| --- | --- |" + " --- |" * (10 + method),
     ]
     for r in rows:
         ratios = " | ".join(_num(x, 3) for x in r.ratios)
-        lines.append(f"| {r.model} | {r.parameter} |{f' {r.method} |' * method} {r.maneuvers} | {_num(r.mean)} | "
+        lines.append(f"| {r.model} | {r.parameter} |{f' {r.method} |' * method} {r.maneuvers} | "
+                     f"{r.converged} of {r.maneuvers} | {_num(r.mean)} | "
                      f"{_num(r.se_conventional, 3)} | {_num(r.se_corrected_all, 3)} | {_num(r.se_corrected, 3)} | "
                      f"{_num(r.scatter, 3)} | {ratios} |")
     failures = _failures(results)
@@ -175,9 +180,10 @@ def summary_text(rows: Sequence[Table4Row], results: Sequence[ManeuverResult], l
     """The printed summary (also ``summary.txt``): Table 4 as aligned text (with a method
     column when the frequency domain has rows), then the maneuvers not used and why."""
     method = _by_method(rows)
-    head = ("parameter", *("method",) * method, "n", "mean", "SE conv", "SE all", f"SE {lags}", "scatter", "conv/sc",
-            "all/sc", f"{lags}/sc")
-    body = [(r.parameter, *(r.method,) * method, str(r.maneuvers), _num(r.mean), _num(r.se_conventional, 3),
+    head = ("parameter", *("method",) * method, "n", "converged", "mean", "SE conv", "SE all", f"SE {lags}",
+            "scatter", "conv/sc", "all/sc", f"{lags}/sc")
+    body = [(r.parameter, *(r.method,) * method, str(r.maneuvers), f"{r.converged}/{r.maneuvers}", _num(r.mean),
+             _num(r.se_conventional, 3),
              _num(r.se_corrected_all, 3), _num(r.se_corrected, 3), _num(r.scatter, 3), *(_num(x, 3) for x in r.ratios))
             for r in rows]
     widths = [max(len(str(c)) for c in col) for col in zip(head, *body, strict=True)]
@@ -185,7 +191,8 @@ def summary_text(rows: Sequence[Table4Row], results: Sequence[ManeuverResult], l
     lines = [fmt.format(*head), fmt.format(*("-" * w for w in widths))] + [fmt.format(*b) for b in body]
     used = sum(1 for res in results if res.problem is None)
     lines += ["", f"{used} of {len(results)} maneuvers used (SE: mean over them; scatter: standard deviation of "
-              "their estimates; x/sc: the SE over the scatter, 1 is ideal)"]
+              "their estimates; x/sc: the SE over the scatter, 1 is ideal; converged: of them, flagged converged at "
+              "their end)"]
     failures = _failures(results)
     if failures:
         lines += ["not used:"] + [f"  {line}" for line in failures]

@@ -7,6 +7,7 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import ConfigError
+from ..simulation.multisine import MAX_INPUT_AMPLITUDE
 from .flags import FORCE_HELP, add_progress, integer, progress_mode, real
 from .simulation import noise_on, noise_on_name
 
@@ -27,6 +28,11 @@ def _gust(value: str) -> float:
                                          f"{', '.join(LOW_ALTITUDE_SIGMA_W)}, got {value!r}") from None
 
 
+def _amplitude(args: argparse.Namespace) -> str:
+    """`` at 0.3 x Table 2's elevator amplitude`` (nothing at the nominal 1)."""
+    return "" if args.input_amplitude == 1.0 else f" at {args.input_amplitude:g} x Table 2's elevator amplitude"
+
+
 def _make_campaign(args: argparse.Namespace) -> int:
     """make-bag --campaign N: N seeded T-2 maneuvers in Dryden turbulence, one bag each."""
     from ..offline.bags import write_campaign_bags
@@ -38,8 +44,9 @@ def _make_campaign(args: argparse.Namespace) -> int:
     gust = DrydenVertical(args.gust_intensity, scale_length(SimulationConfig().altitude))
     paths = write_campaign_bags(args.out, args.campaign, gust, band_level=args.noise / 100.0,
                                 band_limited_on=noise_on(args.noise_on), seed=args.seed, force=args.force,
-                                progress=progress_mode(args))
-    print(f"wrote {len(paths)} replay bags to {args.out}: T-2 maneuvers in Dryden vertical gusts sigma_w "
+                                input_amplitude=args.input_amplitude, progress=progress_mode(args))
+    print(f"wrote {len(paths)} replay bags to {args.out}: T-2 maneuvers{_amplitude(args)} in Dryden vertical gusts "
+          f"sigma_w "
           f"{gust.sigma:.3g} m/s, L_w {gust.scale_length:.0f} m, {args.noise:g}% band-limited noise on "
           f"{noise_on_name(args.noise_on)}, seed {args.seed} (settings in {Path(args.out) / 'campaign.yaml'})")
     return 0
@@ -56,9 +63,11 @@ def _make_bag(args: argparse.Namespace) -> int:
     from ..simulation.t2 import SIGNALS
 
     on = SIGNALS if args.noise_on is None else noise_on(args.noise_on)  # the bundled bag's: all four
-    path = write_t2_bag(args.out, args.noise / 100.0, args.seed, force=args.force, band_limited_on=on)
+    path = write_t2_bag(args.out, args.noise / 100.0, args.seed, force=args.force, band_limited_on=on,
+                        input_amplitude=args.input_amplitude)
     size = sum(f.stat().st_size for f in path.iterdir())
-    print(f"wrote {path} ({size / 1e6:.2f} MB): T-2 maneuver, {args.noise:g}% band-limited noise, seed {args.seed}")
+    print(f"wrote {path} ({size / 1e6:.2f} MB): T-2 maneuver{_amplitude(args)}, {args.noise:g}% band-limited noise, "
+          f"seed {args.seed}")
     return 0
 
 
@@ -87,6 +96,10 @@ def add_make_bag(sub: Any) -> None:
                     help="measured signals carrying the band-limited noise: 'all' (elevator, alpha, q, a_z) or "
                          "'responses' (alpha, q, a_z) (default: all for one maneuver, the bundled bag's; with "
                          "--campaign the simulation's, responses: docs/validation.md, Table 3)")
+    mb.add_argument("--input-amplitude", type=real(0.0, high=MAX_INPUT_AMPLITUDE), default=1.0, metavar="F",
+                    help="the elevator multisine at F x Table 2's amplitude, in [0, 10]; 0: no maneuver (the "
+                         "elevator shows only its sensor noise, which stays at the nominal maneuver's scale); "
+                         "default 1, the nominal maneuver")
     mb.add_argument("--force", action="store_true", help=FORCE_HELP)
     add_progress(mb)
     mb.set_defaults(func=_make_bag)

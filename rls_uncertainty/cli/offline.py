@@ -125,7 +125,8 @@ def _campaign(args: argparse.Namespace) -> int:
     inputs = [_yaml_file(args.config, config_dir())] if args.config else []
     if args.maneuvers:
         inputs.append(args.maneuvers)
-    settings = CampaignSettings(pipeline_config(params), node_config(params).topics, strict=not args.lenient)
+    settings = CampaignSettings(pipeline_config(params), node_config(params).topics, strict=not args.lenient,
+                                **option_values(args, CampaignSettings))
     if isinstance(executor, LocalProcesses) and (note := executor.capped(len(maneuvers), "maneuver")):
         print(f"rls-uncertainty campaign: {note}", file=sys.stderr)
     result = campaign_to(args.out, maneuvers, settings, executor, progress=progress_mode(args),
@@ -184,4 +185,7 @@ def add_campaign(sub: Any) -> None:
                          "one INPUT into maneuvers")
     add_workers(cp, "the maneuvers (its workers must read the INPUT paths)")
     _add_common(cp, "skip the Fig. 12 plots")
+    from ..campaign.maneuvers import CampaignSettings
+
+    add_option_flags(cp, CampaignSettings)
     cp.set_defaults(func=_campaign)

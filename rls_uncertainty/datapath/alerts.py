@@ -321,6 +321,15 @@ def not_excited(n_regressors: int, samples: int, constant: Sequence[str] = ()) -
             "models.enabled)")
 
 
+def too_few_samples(count: int, needed: int, windows: float, lags: int, parameters: int, option: str) -> str:
+    """Why an initialized model never published: its fit had ``count`` of the ``needed``
+    samples the publication rule asks (``windows`` lag windows of ``lags`` plus its
+    ``parameters``); ``option``: the lag span to shorten."""
+    return (f"{count} samples, fewer than the {needed} its corrected standard errors need "
+            f"(estimator.publish_lag_windows {windows:g} x {lags} lags + {parameters} parameters); use a longer span "
+            f"or shorten {option}")
+
+
 def _correlation_text(r: float) -> str:
     """A correlation with the digits that tell it from +-1: ``-0.999998``, ``+1 - 2.0e-09``."""
     if 1.0 - abs(r) >= 5e-7:
@@ -360,6 +369,13 @@ def _problem_text(model: str, p: Problem) -> str:
                 "not identifiable; excite the model or check its output")
     if p.kind in ("not_excited", "constant"):
         return _flat_text(model, p)
+    if p.kind == "noise":
+        (reg,), (std, noise), (limit,), (unit,) = p.regressors, p.figures, p.limits, p.units
+        ratio = (std / noise) ** 2 if noise > 0 else math.inf
+        return (f"regressor {reg} does not move beyond its sensor noise (std {_figure(std, unit)}, noise "
+                f"{_figure(noise, unit)} from its second differences: variance ratio {ratio:.3g}, "
+                f"identifiability.min_noise_ratio {limit:g}): not identifiable; move {reg} or leave it out of "
+                f"models.{model}")
     a, b = p.regressors
     r = _correlation_text(p.figures[0])
     if p.kind == "collinear":

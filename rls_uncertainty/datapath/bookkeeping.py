@@ -252,24 +252,31 @@ class Window:
         return before, start <= cut
 
 
+# Why a model's fit is not ready although it is past the publication rule.
+WITHHELD_PROBLEM = "outputs not finite or standard errors at rounding level: withheld"
+
+
 def model_fit(bank: EstimatorBank, j: int, r2: float, withheld_now: bool, withheld: int) -> dict:
     """Model ``j`` of ``bank``'s fit: ``r2``, its R^2 (:meth:`.identifiability.
     IdentifiabilityMonitor.fit`: 1 - residual variance / output variance, both since the
     estimator started) and the residual whiteness: the lag-1 autocorrelation coefficient and
     the fraction of lags whose coefficient lies outside the 2-sigma white-noise bound 2/sqrt(n)
     (Eq. 17's R). ``ready`` is false, with a ``problem``, when R^2 is undefined (NaN: a constant
-    output) or the model's outputs were withheld as non-finite (``withheld_now``: the newest
-    sample's; ``withheld``: how many so far)."""
+    output) or the model's outputs were withheld as non-finite or with a standard error at
+    rounding level (``withheld_now``: the newest sample's; ``withheld``: how many so far).
+    Before the model publishes (:attr:`.estimator.EstimatorBank.ready`): ``ready`` false,
+    ``published`` false and ``publish_at_samples``, the samples it needs
+    (:attr:`.estimator.EstimatorBank.publish_at`, after its burn-in when it has one)."""
     if not bank.ready[j]:
-        return {"ready": False, "samples": bank.k}
+        return {"ready": False, "samples": bank.k, "published": False,
+                "publish_count": int(bank.publish_count[j]), "publish_at_samples": int(bank.publish_at[j])}
     n = bank.k  # samples since the estimator (re)started
     R = bank.autocorrelation(j)
     # A constant output (variance at rounding level) leaves R^2 undefined; a non-finite
     # estimator state (withheld outputs) leaves it NaN: either way the fit is reported as
     # not ready, with the problem, never as an OK "nan".
     if not math.isfinite(r2) or withheld_now:
-        problem = "outputs not finite, withheld" if withheld_now or not np.isfinite(R).all() else \
-            "output constant: R^2 undefined"
+        problem = WITHHELD_PROBLEM if withheld_now or not np.isfinite(R).all() else "output constant: R^2 undefined"
         return {"ready": False, "samples": bank.k, "problem": problem, "outputs_withheld": withheld}
     rho = R[1:] / R[0] if R[0] > 0 else np.zeros(0)
     bound = 2.0 / math.sqrt(max(n, 1))

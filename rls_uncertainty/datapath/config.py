@@ -18,16 +18,21 @@ import math
 from dataclasses import dataclass, field, fields
 from typing import Any
 
-from ..aero.differentiation import DifferentiatorConfig
+from ..aero.differentiation import DifferentiatorConfig, pass_band
 from ..aero.models import DEFAULT_MODELS, AircraftConfig, ModelConfig
 from ..aero.surface_mixing import SURFACES, SurfaceMixing
 from ..errors import ConfigError
 from ..estimator.options import EstimatorOptions
 from ..frequency.options import FrequencyOptions
-from ..schema import check, option
+from ..schema import check, default_of, option
 from .convergence import ConvergenceConfig
 from .identifiability import IdentifiabilityConfig
 from .limits import PlausibilityLimits
+
+# Models whose outputs need the angular accelerations (Eq. 1: the moments).
+_MOMENT_MODELS = ("Cl", "Cm", "Cn")
+# The top of the band the models are estimated over when the frequency domain is not used.
+_DEFAULT_F_MAX = float(default_of(FrequencyOptions.__dataclass_fields__["f_max"]))
 
 __all__ = [
     "METHODS",
@@ -163,6 +168,26 @@ class PipelineConfig:
             raise ConfigError(
                 f"inputs.max_gap ({self.inputs.max_gap} s) is shorter than one estimator sample "
                 f"(1/rate = {1 / self.rate:g} s)", parameter="inputs.max_gap")
+        self._check_differentiator()
+
+    def _check_differentiator(self) -> None:
+        """The angular accelerations of the moment models (Cl, Cm, Cn) pass the differentiator
+        within 5 % up to ``frequency.f_max``, the top of the band the models are estimated over
+        (its default stands for the time domain too); otherwise the maneuver is smoothed away."""
+        moments = [m.output for m in self.models if m.output in _MOMENT_MODELS]
+        if not moments:
+            return
+        top = self.frequency.f_max if self.frequency is not None else _DEFAULT_F_MAX
+        d = self.differentiator
+        band = pass_band(d, self.rate)
+        if band < top:
+            good = pass_band(DifferentiatorConfig(), self.rate)
+            raise ConfigError(
+                f"differentiator.window {d.window} (order {d.order}, lag {d.lag}) at {self.rate:g} Hz passes the "
+                f"angular accelerations within 5 % only up to {band:.3g} Hz, below frequency.f_max {top:g} Hz, the "
+                f"band the models are estimated over: {', '.join(moments)} loses the maneuver; shorten "
+                f"differentiator.window ({DifferentiatorConfig().window} passes {good:.3g} Hz) or lower "
+                "frequency.f_max", parameter="differentiator.window")
 
     def _check_method(self) -> None:
         """``method`` and ``frequency`` agree, and every model has a parameter the frequency

@@ -68,6 +68,7 @@ from dataclasses import dataclass, field
 from .alerts import Alert, AlertPolicy
 from .bookkeeping import Totals, Window, increase
 from .outputs import NODE_NAME
+from .states import initializing
 
 __all__ = [
     "OK",
@@ -215,6 +216,15 @@ def malformed_warning(topic: str, exc: BaseException) -> str:
     exception type and its text, and where the later ones are counted."""
     return (f"malformed message on {topic}: {type(exc).__name__}: {exc} (this and later ones are "
             f"counted in /diagnostics as rejected.{malformed_reason(exc)}; only the first is logged)")
+
+
+def _frequency_clause(fit: Mapping) -> str:
+    """The frequency domain's fit in words: R^2, residual lag-1 correlation and convergence,
+    or how far it is from publishing."""
+    if fit["frequency.ready"]:
+        text = f"R^2 {fit['frequency.r_squared']:.3f}, residual lag-1 correlation {fit['frequency.residual_rho1']:.2f}"
+        return text + ("; converged" if fit.get("frequency.converged") else "; not converged")
+    return f"initializing: {initializing(fit['frequency.samples'], fit['frequency.publish_at_samples'])}"
 
 
 def _ms(seconds: float) -> str:
@@ -384,20 +394,36 @@ class DiagnosticsPolicy:
         return self._status("samples", OK, message, kv)
 
     def _model(self, name: str, fit: Mapping, snap: Snapshot) -> Status:
+        """The fit of each method published (the time domain's, the frequency domain's
+        ``frequency.*``; with both, one clause each), its convergence and why parameters are
+        held back; while the model initializes, how far (``37 of 104 samples``) or why it
+        cannot."""
         why = fit.get("identifiability", "")
-        if fit["ready"]:
-            text = f"R^2 {fit['r_squared']:.3f}, residual lag-1 correlation {fit['residual_rho1']:.2f}"
-            if "converged" in fit:
-                if fit["converged"]:
-                    text += "; converged"
-                elif fit.get("converged_parameters"):
-                    text += f"; converged: {fit['converged_parameters']}"
-                else:
-                    text += "; not converged"
-            if why:  # not identifiable: WARN while it holds a convergence flag back
-                text += f"; {why.removeprefix(name + ': ')}"
-            level = WARN if fit.get("held_back") else OK
-        else:
-            text = f"initializing: {why.removeprefix(name + ': ') or 'regressors not yet informative'}"
-            level = OK if snap.counters["samples_used"] == 0 else WARN
-        return self._status(f"model {name}", level, text, list(fit.items()))
+        level = OK
+        clauses = []
+        both = fit.get("time_domain", True) and "frequency.ready" in fit
+        if fit.get("time_domain", True):
+            if fit["ready"]:
+                text = f"R^2 {fit['r_squared']:.3f}, residual lag-1 correlation {fit['residual_rho1']:.2f}"
+                if "converged" in fit:
+                    if fit["converged"]:
+                        text += "; converged"
+                    elif fit.get("converged_parameters"):
+                        text += f"; converged: {fit['converged_parameters']}"
+                    else:
+                        text += "; not converged"
+                level = WARN if fit.get("held_back") else OK
+            elif "initializing" in fit:
+                text = f"initializing: {fit['initializing']}"
+            else:
+                text = f"initializing: {why.removeprefix(name + ': ') or 'regressors not yet informative'}"
+                level = OK if snap.counters["samples_used"] == 0 else WARN
+                why = ""
+            clauses.append(f"time domain: {text}" if both else text)
+        if "frequency.ready" in fit:
+            clauses.append(f"frequency domain: {_frequency_clause(fit)}")
+            if not fit["frequency.ready"] and not fit.get("time_domain", True) and "frequency.r_squared" not in fit:
+                level = OK if snap.counters["samples_used"] == 0 else WARN
+        if why and (fit["ready"] or fit.get("frequency.ready")):  # not identifiable: WARN while it holds a flag back
+            clauses.append(why.removeprefix(name + ": "))
+        return self._status(f"model {name}", level, "; ".join(clauses), list(fit.items()))

@@ -20,8 +20,11 @@ pipeline hands every regression row it gives the time-domain estimator to one
   estimates and corrected standard errors, fed the published samples; a parameter the data
   cannot identify (:class:`.identifiability.IdentifiabilityMonitor`, judged on the same
   sample from the time-domain fit) is never flagged.
-* **Nothing non-finite leaves.** A model whose estimates or standard errors are not all finite
-  is marked not ready in that output and counted (``outputs_withheld`` under ``M/frequency``).
+* **Nothing non-finite, zero or rounding-level leaves.** A model the bank withholds (an exact
+  fit, a corrected covariance with a negative variance: :attr:`.frequency.FrequencyBank.withheld`),
+  or whose estimates or standard errors are not all finite, or whose standard errors are not
+  above :data:`.guard.SE_FLOOR` of its estimates, is marked not ready in that output
+  and counted (``outputs_withheld`` under ``M/frequency``).
 
 A new path is made whenever the time-domain estimator restarts (``~/reset``, a new timeline, a
 new configuration). Its state is not saved in the state file: a node resumed from one starts a new
@@ -38,6 +41,7 @@ import numpy as np
 from ..aero.models import BIAS_REGRESSOR
 from ..frequency import FrequencyBank
 from .convergence import ConvergenceMonitor
+from .guard import withheld as unpublishable
 
 if TYPE_CHECKING:  # annotations only
     from .bookkeeping import Tally
@@ -92,6 +96,7 @@ class FrequencyPath:
         self.real = np.arange(q) < np.array(self.sizes)[:, None]  # (M, q): not padding
         self._monitor = ConvergenceMonitor(self.sizes, replace(config.convergence, rate_hz=config.rate))
         self._row: np.ndarray | None = None
+        self.last: FrequencyOutput | None = None  # the newest published results
 
     def check(self, X: np.ndarray, z: np.ndarray) -> None:
         """Take the time-domain regression row ``X`` ``(M, n_max)``, ``z`` ``(M,)``, or raise
@@ -114,7 +119,7 @@ class FrequencyPath:
         se = bank.standard_errors_all("corrected")
         se_conv = bank.standard_errors_all("conventional")
         ready = bank.ready
-        bad = ready & (self.real & ~(np.isfinite(theta) & np.isfinite(se) & np.isfinite(se_conv))).any(axis=1)
+        bad = unpublishable(ready, self.real, theta, se, se_conv) | bank.withheld
         for j in np.flatnonzero(bad).tolist():
             withheld.count(self.outputs[j] + WITHHELD_SUFFIX)
         ready &= ~bad
@@ -125,4 +130,23 @@ class FrequencyPath:
             flags &= ok
             model_flags &= (ok | ~self.real).all(axis=1)
         lags = np.where(ready, min(self.n_lags, bank.n_samples - 1), 0)
-        return FrequencyOutput(theta, se, se_conv, ready, flags, model_flags, lags)
+        self.last = FrequencyOutput(theta, se, se_conv, ready, flags, model_flags, lags)
+        return self.last
+
+    def report(self, j: int) -> dict:
+        """Model ``j``'s frequency-domain fit for ``/diagnostics``, keys prefixed ``frequency.``:
+        ``ready`` (published at the last evaluation), ``samples``, and once solved
+        ``r_squared`` and ``residual_rho1`` (:meth:`.frequency.FrequencyBank.fit`), ``converged``
+        and, until published, ``publish_at_samples``."""
+        bank, last = self.bank, self.last
+        ready = bool(last is not None and last.ready[j])
+        out: dict = {"frequency.ready": ready, "frequency.samples": bank.n_samples}
+        if bank.solved[j]:
+            r2, rho1 = bank.fit()
+            out["frequency.r_squared"], out["frequency.residual_rho1"] = float(r2[j]), float(rho1[j])
+        if ready:
+            assert last is not None
+            out["frequency.converged"] = bool(last.model_converged[j])
+        else:
+            out["frequency.publish_at_samples"] = int(bank.publish_at[j])
+        return out

@@ -19,6 +19,17 @@ already holds and two running statistics (nothing is refitted, nothing grows wit
    floor cannot be told apart from the bias (Klein and Morelli Sec. 5.5: a regressor that is a
    linear combination of others, here a constant); its parameter is not identifiable, nor is the
    bias when the regressor's mean is not zero (the bias absorbs ``mean x theta``).
+   **Against its own sensor noise**: a regressor whose variance since the start is at most
+   ``min_noise_ratio`` times its white-noise variance is not excited either, whatever its
+   floor. The noise is estimated online from the second differences of the regression rows,
+   ``d_k = x_k - 2 x_(k-1) + x_(k-2)``: for white noise of variance ``sigma^2``
+   ``E[d^2] = 6 sigma^2``, while the motion passes with gain ``(2 sin(pi f / rate))^2`` (0.063
+   at 2 Hz and 50 Hz), so ``sigma_hat^2 = sum_k w_k d_k^2 / (6 sum_k w_k)`` (weights ``f^(k-j)``
+   as the statistics; a dropout or restart starts the differences afresh, not the sums). A
+   slope estimated from ``x = s + n`` is attenuated by ``var(s) / var(x) = 1 - 1/ratio`` (errors
+   in variables, Klein and Morelli Sec. 5.4), so the default ratio 10 bounds what the sensor
+   noise alone does to a slope at 10 % (docs/studies/publication_and_noise/REPORT.md). The test
+   measures white noise: a slowly varying sensor error looks like motion to it.
 3. **Collinearity.** The correlation of each pair of parameter estimates from the corrected
    covariance (Eqs. 20/22), ``rho_ij = C_ij / sqrt(C_ii C_jj)``; where a corrected variance is
    zero (an exact fit) from the conventional covariance (Eq. 13), whose correlations are those of
@@ -107,6 +118,11 @@ class IdentifiabilityConfig:
         ros="identifiability.angle_resolution")
     rate_resolution: float = option(1e-6, "the same for the nondimensional rates p b/2V, q cbar/2V, r b/2V",
                                     low=0.0, high=0.01, ros="identifiability.rate_resolution")
+    min_noise_ratio: float = option(
+        10.0, "convergence flags: a regressor whose variance since the start is at most this many times its sensor "
+        "noise variance (estimated from its second differences) is not excited and its parameter not identifiable; "
+        "10 bounds the errors-in-variables attenuation of its slope at 10 %; 0 disables the test", low=0.0, high=1e6,
+        ros="identifiability.min_noise_ratio")
 
     def __post_init__(self) -> None:
         check(self, "identifiability")
@@ -151,6 +167,15 @@ class RegressorStatistics:
         self.mean = np.zeros((m, n))
         self.comoment = np.zeros((m, n, n))
         self.variance_sums = self.comoment.diagonal(0, 1, 2)  # (a view: weight x variance)
+        self.noise_sums = np.zeros((m, n))  # sum_k f^(k-j) d_k^2 of the second differences
+        self.noise_weight = 0.0  # sum_k f^(k-j) over the second differences taken
+        self._last = np.zeros((2, m, n))  # the previous two rows, newest first
+        self._chain = 0  # consecutive rows in _last (a second difference needs two)
+
+    def restart_chain(self) -> None:
+        """The next row does not follow the last one (a dropout, a new timeline): the second
+        differences start afresh; the sums go on."""
+        self._chain = 0
 
     def add(self, x: np.ndarray) -> None:
         """One sample's regressors ``(M, n_max)``."""
@@ -162,7 +187,27 @@ class RegressorStatistics:
         # sum_j f^(k-j) (x_j - mean_k)(x_j - mean_k)': f C + (1 - 1/w) d d' (exactly symmetric)
         if f != 1.0:
             self.comoment *= f
+            self.noise_sums *= f
+            self.noise_weight *= f
         self.comoment += (1.0 - 1.0 / w) * d[:, :, None] * d[:, None, :]
+        last = self._last
+        if self._chain >= 2:
+            d2 = x - 2.0 * last[0] + last[1]
+            self.noise_sums += d2 * d2
+            self.noise_weight += 1.0
+        else:
+            self._chain += 1
+        last[1] = last[0]
+        last[0] = x
+
+    @property
+    def noise_variance(self) -> np.ndarray:
+        """``(M, n_max)`` white-noise variance of each regressor from its second differences,
+        ``sum w d^2 / (6 sum w)`` (NaN before the first second difference)."""
+        if self.noise_weight <= 0.0:
+            return np.full(self.shape, np.nan)
+        out: np.ndarray = self.noise_sums / (6.0 * self.noise_weight)
+        return out
 
     @property
     def std(self) -> np.ndarray:
@@ -189,8 +234,9 @@ class Problem:
     """Why (some of) a model's parameters are not identifiable, in figures (:mod:`.alerts` says
     it in words). ``kind``: ``"no_fit"`` (figure R^2, NaN for a constant output; limit
     ``min_r_squared``), ``"not_excited"`` (the regressors, figures their standard deviations,
-    limits their resolutions, in ``units``) or ``"collinear"`` (two regressors, figure the
-    correlation of their estimates, limit ``max_correlation``); for a model not ready yet
+    limits their resolutions, in ``units``), ``"noise"`` (one regressor, figures its standard
+    deviation and its sensor noise's, limit ``min_noise_ratio``, in ``units``) or ``"collinear"``
+    (two regressors, figure the correlation of their estimates, limit ``max_correlation``); for a model not ready yet
     ``"constant"`` (regressors that did not move, as ``"not_excited"``) or ``"correlated"`` (the
     two most correlated regressors, figure their correlation in the data). ``samples``: the
     samples the figures are from."""
@@ -235,6 +281,8 @@ class IdentifiabilityMonitor:
         slope = self.real & ~self.bias
         self._pairs = slope[:, :, None] & slope[:, None, :] & ~np.eye(n, dtype=bool)
         self._variance_floor = self.resolution**2  # NaN for the bias and padding: never flat
+        self._noise_ratio = config.min_noise_ratio
+        self._slopes = self.real & ~self.bias
         self._max_square = config.max_correlation**2
         self._unexplained = 1.0 - config.min_r_squared  # R^2 >= min  <=>  R_k(0) <= (1 - min) var(z)
         self._nothing = np.zeros((m, n), dtype=bool)
@@ -252,7 +300,7 @@ class IdentifiabilityMonitor:
         self.ready = np.zeros(m, dtype=bool)
         self._judged = True
         self._covariance = np.zeros((m, n, n))
-        self.collinear = self.not_excited = self._identifiable = self._nothing
+        self.collinear = self.not_excited = self.noisy = self._identifiable = self._nothing
         self.no_fit = np.zeros(m, dtype=bool)
         self.held_back = self._nothing
 
@@ -261,6 +309,11 @@ class IdentifiabilityMonitor:
         self.reset()
         self.output_sum = np.array(output_sum, dtype=float)
         self.output_sum_squares = np.array(output_sum_squares, dtype=float)
+
+    def restart_chain(self) -> None:
+        """The next sample does not follow the last one (a dropout, a new timeline): the
+        sensor-noise estimate's second differences start afresh."""
+        self.stats.restart_chain()
 
     def add(self, x: np.ndarray, z: np.ndarray) -> None:
         """A sample the estimator used: regressors ``(M, n_max)``, outputs ``(M,)``."""
@@ -330,6 +383,13 @@ class IdentifiabilityMonitor:
         self.collinear = ((c * c > self._max_square * (d[:, :, None] * d[:, None, :])) & self._pairs).any(axis=2)
         stats = self.stats
         flat = stats.variance_sums <= self._variance_floor * max(stats.weight, 1.0)
+        # A regressor that moves no more than its own sensor noise (var <= R sigma^2): not excited.
+        self.noisy = self._nothing
+        if self._noise_ratio > 0.0 and stats.noise_weight > 0.0:
+            noisy = stats.variance_sums * (6.0 * stats.noise_weight) <= \
+                (self._noise_ratio * max(stats.weight, 1.0)) * stats.noise_sums
+            self.noisy = noisy & self._slopes & ~flat
+            flat = flat | self.noisy
         if flat.any():  # the bias is confounded with a flat regressor whose mean is off zero
             offset = np.any(flat & (np.abs(stats.mean) > self.resolution), axis=1, keepdims=True)
             flat |= self.bias & offset
@@ -352,15 +412,18 @@ class IdentifiabilityMonitor:
         informative (empty when nothing is named)."""
         self._judge()
         if not self.ready[j]:
+            if self._bank is not None and self._bank.initialized[j]:
+                return []  # initialized, not yet published (the publication rule): nothing wrong
             return self._not_ready(j) if self.stats.samples >= max(named_after, 1) else []
         cfg, names, n = self.config, self.regressors[j], len(self.regressors[j])
         out = []
         samples = self.stats.samples
         if self.no_fit[j]:
             out.append(Problem("no_fit", (), (float(self.r_squared[j]),), (cfg.min_r_squared,), samples=samples))
-        flat = [i for i in range(n) if self.not_excited[j, i] and not self.bias[j, i]]
+        flat = [i for i in range(n) if self.not_excited[j, i] and not self.bias[j, i] and not self.noisy[j, i]]
         if flat:
             out.append(self._flat(j, flat))
+        out.extend(self._noise(j, i) for i in range(n) if self.noisy[j, i])
         pair = self._worst_pair(j, self.correlation[j], self._pairs[j])
         if pair is not None and abs(pair[2]) > cfg.max_correlation:
             a, b, r = pair
@@ -372,6 +435,11 @@ class IdentifiabilityMonitor:
         return Problem(kind, tuple(names[i] for i in which), tuple(float(std[i]) for i in which),
                        tuple(float(self.resolution[j, i]) for i in which), tuple(str(self.units[j, i]) for i in which),
                        self.stats.samples)
+
+    def _noise(self, j: int, i: int) -> Problem:
+        noise = math.sqrt(max(float(self.stats.noise_variance[j, i]), 0.0))
+        return Problem("noise", (self.regressors[j][i],), (float(self.stats.std[j, i]), noise),
+                       (self._noise_ratio,), (str(self.units[j, i]),), self.stats.samples)
 
     def _worst_pair(self, j: int, rho: np.ndarray, pairs: np.ndarray) -> tuple[int, int, float] | None:
         a = np.where(pairs, np.abs(rho), -1.0)
@@ -401,7 +469,8 @@ class IdentifiabilityMonitor:
         (every parameter), ``not_identifiable`` and ``held_back`` (the parameters whose
         convergence flag was taken out at the last sample), ``max_parameter_correlation`` (the
         largest magnitude over slope pairs, with its sign) and ``excitation.<regressor>`` (the
-        standard deviation since the start, in its unit)."""
+        standard deviation since the start, in its unit) and ``noise.<regressor>`` (its sensor
+        noise's standard deviation from its second differences)."""
         n = len(names)
         ok = self.identifiable[j, :n]
         out: dict = {
@@ -412,8 +481,10 @@ class IdentifiabilityMonitor:
         pair = self._worst_pair(j, self.correlation[j], self._pairs[j])
         if pair is not None and self.ready[j]:
             out["max_parameter_correlation"] = round(pair[2], 6)
-        std = self.stats.std[j]
+        std, noise = self.stats.std[j], np.sqrt(self.stats.noise_variance[j])
         for i, name in enumerate(self.regressors[j]):
             if not self.bias[j, i]:
                 out[f"excitation.{name}"] = float(f"{std[i]:.4g}")
+                if math.isfinite(noise[i]):
+                    out[f"noise.{name}"] = float(f"{noise[i]:.4g}")
         return out

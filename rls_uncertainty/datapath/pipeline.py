@@ -55,14 +55,16 @@ from ..aero.surface_mixing import SURFACES
 from ..errors import NonFiniteInput, Refused, StateFileError
 from ..estimator import EstimatorBank
 from ..state_file import EstimatorState, load_state, save_state
-from .alerts import explanations, identifiability
+from .alerts import explanations
 from .bookkeeping import Bookkeeping, model_fit
 from .config import PipelineConfig
 from .convergence import ConvergenceMonitor
 from .frequency_path import FrequencyOutput, FrequencyPath
+from .guard import withheld as unpublishable
 from .identifiability import IdentifiabilityMonitor
 from .intake import Intake
 from .sampling import Sample, Sampler, Skipped
+from .states import model_report
 
 __all__ = ["Pipeline", "SampleOutput", "STREAMS", "StateFileError", "required_streams", "sampler_for"]
 
@@ -205,7 +207,7 @@ class Pipeline:
         self._x_names = [name for names in rows for name in names]
         self._quality = IdentifiabilityMonitor(rows, [[REGRESSOR_UNITS[r] for r in row] for row in rows],
                                                config.identifiability, config.estimator.forgetting)
-        self._named_after = math.ceil(config.convergence.window * config.rate)  # samples before a cause is named
+        self.named_after = math.ceil(config.convergence.window * config.rate)  # samples before a cause is named
         self.last_stamp_ns: int | None = None  # the newest sample the estimator used
         self._cov_every = config.outputs.covariance_decimation
         self._period_ns = config.period_ns
@@ -229,6 +231,7 @@ class Pipeline:
         self._withheld = np.zeros(len(self.sizes), dtype=bool)  # the last output's, per model
         self._monitor.reset()
         self._converged = self._monitor.no_flags()  # the newest sample's flags
+        self._last: SampleOutput | None = None  # the newest sample's output
         # estimator.method frequency or both: the frequency-domain estimator on the same rows.
         self.frequency = FrequencyPath(self.config) if self.config.frequency is not None else None
 
@@ -335,6 +338,7 @@ class Pipeline:
             self.bookkeeping.reject_samples(reason, len(self._pending))
             self._pending.clear()
         self._diff.reset()
+        self._quality.restart_chain()  # the sensor-noise estimate's second differences too
 
     def _process(self, t: int, sample: list) -> SampleOutput | None:
         """The delay line: the rates enter the differentiator now, the sample leaves ``lag``
@@ -383,9 +387,9 @@ class Pipeline:
         se = bank.standard_errors_all("corrected")
         se_conv = bank.standard_errors_all("conventional")
         ready = bank.ready
-        # The last guard: a ready model with a non-finite estimate or SE is withheld, counted.
-        self._withheld = bad = ready & (self._real & ~(np.isfinite(theta) & np.isfinite(se)
-                                                       & np.isfinite(se_conv))).any(axis=1)
+        # The last guard: a ready model with a non-finite estimate or SE, or an SE not above
+        # rounding of its estimate (:mod:`.guard`), is withheld, counted.
+        self._withheld = bad = unpublishable(ready, self._real, theta, se, se_conv)
         if bad.any():
             for j in np.flatnonzero(bad):
                 book.outputs_withheld.count(self._outputs[j])
@@ -394,9 +398,11 @@ class Pipeline:
         # A parameter that is not identifiable from the data so far is never flagged converged.
         self._converged = flags, model_flags = self._quality.restrict(flags, model_flags, bank, ready)
         frequency = None if freq is None else freq.add(t, book.outputs_withheld, self._quality)
-        return SampleOutput(stamp_ns=t, index=self._index, theta=theta, se=se, se_conventional=se_conv, ready=ready,
-                            converged=flags, model_converged=model_flags, covariance=self._covariances(t, ready),
-                            lags=np.where(ready, bank.lags_used, 0), frequency=frequency)
+        self._last = SampleOutput(stamp_ns=t, index=self._index, theta=theta, se=se, se_conventional=se_conv,
+                                  ready=ready, converged=flags, model_converged=model_flags,
+                                  covariance=self._covariances(t, ready), lags=np.where(ready, bank.lags_used, 0),
+                                  frequency=frequency)
+        return self._last
 
     def _covariances(self, t: int, ready: np.ndarray) -> np.ndarray | None:
         """The corrected and conventional covariances of the ready models
@@ -451,15 +457,13 @@ class Pipeline:
         return model_fit(self.bank, j, r2, bool(self._withheld[j]), withheld)
 
     def model_report(self, j: int) -> dict:
-        """What ``/diagnostics`` reports of model ``j`` (node and replay alike): its
-        :meth:`model_fit`, once it is ready its newest :meth:`convergence` flags and
-        identifiability figures, and ``identifiability``: why parameters are not identifiable, or
-        why the model cannot initialize (:func:`.alerts.identifiability`), when that is so."""
-        fit, quality = self.model_fit(j), self._quality
-        why = identifiability(self._outputs[j], quality.problems(j, self._named_after))
-        if fit["ready"]:
-            fit = {**fit, **self.convergence(j), **quality.report(j, self.parameter_names[j])}
-        return {**fit, "identifiability": why} if why else fit
+        """What ``/diagnostics`` reports of model ``j``, node and replay alike (:func:`.states.model_report`)."""
+        return model_report(self, j)
+
+    @property
+    def last(self) -> SampleOutput | None:
+        """The newest sample's output (None before any)."""
+        return self._last
 
     def convergence(self, j: int) -> dict:
         """The newest sample's convergence flags of model ``j`` for diagnostics: ``converged``

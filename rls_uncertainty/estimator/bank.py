@@ -9,7 +9,7 @@ a second one is the noise model under forgetting), :class:`.counts.SampleCounts`
 ``n_k`` and the residual burn-in), :class:`.lag_storage.LagStorage` (the histories, Eq. 17's
 lag sums and Eq. 21's lag products), :class:`.initialization.ExactInitialization` (Eqs. 6, 7,
 10) and :class:`.evaluation.Evaluation` (the lag choice and Eqs. 13, 20, 22); the bank hands
-each sample from one to the next (:meth:`EstimatorBank._apply`) and keeps :mod:`.state`.
+each sample from one to the next (:meth:`EstimatorBank._apply`); its snapshot is :mod:`.snapshot`.
 
 How the hot path differs from the reference, and why (each measured in
 ``benchmarks/estimator_benchmark.py``):
@@ -33,7 +33,7 @@ How the hot path differs from the reference, and why (each measured in
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
@@ -45,8 +45,10 @@ from .evaluation import Evaluation, kind_index
 from .initialization import ExactInitialization
 from .lag_storage import GROWTH_START, FloatArray, LagStorage
 from .options import EstimatorOptions, check_kind
+from .publication import PublicationRule
 from .rls_fit import RlsFit
-from .state import STATE_FORMAT, pack, unpack
+from .snapshot import BankSnapshot
+from .state import STATE_FORMAT
 
 __all__ = ["EstimatorBank", "ScaledSample"]
 
@@ -98,7 +100,7 @@ class ScaledSample:
         return small
 
 
-class EstimatorBank:
+class EstimatorBank(BankSnapshot):
     """``M`` independent recursive least-squares models updated together (Eqs. 15-22).
 
     ``sizes``: the number of parameters of each model, e.g. ``(3, 4, 3, 6, 4, 4)`` for Eq.
@@ -134,6 +136,7 @@ class EstimatorBank:
         )
         self._init = ExactInitialization(sizes, n, o.init_condition, prior=o.p0 is not None)
         self._eval = Evaluation(o, sizes, self._fit, self._lags, self._counts)
+        self._rule = PublicationRule(sizes, o)
         prior = o.prior(n)
         if prior is not None:
             D0 = np.eye(n) * prior * self._mask[:, :, None] * self._mask[:, None, :]
@@ -146,6 +149,7 @@ class EstimatorBank:
         """Recompute what depends on which models are ready (after an initialization or a
         restored state)."""
         ready = self._init.ready
+        self._rule.restart()
         if ready.all():
             self._lags.all_initialized()
         self._counts.restart(ready, self._init.ready_at, self._lags.cap)
@@ -258,8 +262,30 @@ class EstimatorBank:
     # ------------------------------------------------------------------ results
     @property
     def ready(self) -> np.ndarray:
-        """Boolean per model: initialized, so estimates and covariances exist."""
+        """Boolean per model: published, i.e. :attr:`initialized` and past the publication
+        rule (:mod:`.publication`): nothing of a model is published before."""
+        return self._published().copy()
+
+    @property
+    def initialized(self) -> np.ndarray:
+        """Boolean per model: exactly initialized (Eqs. 6, 7, 10), so estimates and
+        covariances exist (:meth:`theta`, :meth:`covariance`), published or not."""
         return self._init.ready.copy()
+
+    def _published(self) -> np.ndarray:
+        return self._rule.published(self._counts.k, self._init.ready, self._init.ready_at)
+
+    @property
+    def publish_count(self) -> np.ndarray:
+        """What the publication rule counts for each model, ``(M,)``: the samples ``k``, or
+        after a residual burn-in those after it (``k - k0 - B``; negative before it)."""
+        return self._rule.count(self._counts.k, self._init.ready, self._init.ready_at)
+
+    @property
+    def publish_at(self) -> np.ndarray:
+        """The :attr:`publish_count` at which each model publishes, ``(M,)``: ``n +
+        ceil(publish_lag_windows x L)``."""
+        return self._rule.at.copy()
 
     @property
     def ready_at(self) -> np.ndarray:
@@ -292,8 +318,11 @@ class EstimatorBank:
 
     def theta_all(self) -> np.ndarray:
         """Estimates of every model as an ``(M, n_max)`` array; padding and models that are
-        not :attr:`ready` are NaN."""
-        return self._eval.theta_all()
+        not :attr:`ready` (published) are NaN."""
+        theta = self._eval.theta_all()
+        if not self._rule.all_published:
+            theta[~self._published()] = np.nan
+        return theta
 
     @property
     def n_R(self) -> np.ndarray:
@@ -356,9 +385,14 @@ class EstimatorBank:
 
     def standard_errors_all(self, kind: str = "corrected") -> np.ndarray:
         """Standard errors of every model as an ``(M, n_max)`` array: the square roots of the
-        diagonals of :meth:`covariance`. Padding and models that are not :attr:`ready` are NaN.
+        diagonals of :meth:`covariance`. Padding and models that are not :attr:`ready`
+        (published) are NaN.
         """
-        return self._eval.standard_errors(kind)
+        se = self._eval.standard_errors(kind)
+        if self._rule.all_published or self._published().all():
+            return se
+        out: FloatArray = np.where(self._published()[:, None], se, np.nan)
+        return out
 
     def covariance(self, j: int, kind: str = "corrected", *, repair: bool = True) -> np.ndarray:
         """Parameter covariance of model ``j``.
@@ -376,58 +410,15 @@ class EstimatorBank:
     def covariance_all(self) -> np.ndarray:
         """:meth:`covariance` (repaired) of every model and both kinds at once, a new
         ``(2, M, n_max, n_max)`` array: ``[0]`` corrected, ``[1]`` conventional; NaN outside
-        the :attr:`ready` models' blocks."""
-        return self._eval.evaluate().published(self.sizes, self._init.ready)
+        the :attr:`ready` (published) models' blocks."""
+        published = self._published()
+        cov = self._eval.evaluate().published(self.sizes, published)
+        if not self._rule.all_published:
+            cov[:, ~published] = np.nan
+        return cov
 
     def standard_errors(self, j: int, kind: str = "corrected") -> np.ndarray:
         """Square roots of the covariance diagonal (never NaN: see :meth:`covariance`)."""
         check_kind(kind)
         self._require(j)
-        return self.standard_errors_all(kind)[j, : self.sizes[j]].copy()
-
-    # ------------------------------------------------------------------ snapshot
-    def state(self) -> dict[str, Any]:
-        """A deep copy of the complete state (:mod:`.state`); :meth:`from_state` continues
-        bit-identically."""
-        counters = {**self._counts.counters(), "cap": self._lags.cap}
-        arrays: dict[str, np.ndarray] = {**self._fit.arrays("")}
-        if self._noise is not None:
-            arrays.update(self._noise.arrays("noise_"))
-        arrays.update(self._init.arrays(), **self._eval.arrays())
-        arrays.update(self._lags.arrays(self.n_window))
-        return pack(self.sizes, self.options, counters, arrays)
-
-    @classmethod
-    def from_state(cls, saved: Mapping[str, Any]) -> EstimatorBank:
-        """Rebuild an estimator bank from :meth:`state` (also after a save to disk)."""
-        sizes, options, counters, arrays = unpack(saved)
-        bank = cls(sizes, options)
-        bank._restore(counters, arrays)
-        return bank
-
-    @classmethod
-    def state_layout(
-        cls, sizes: Sequence[int], options: EstimatorOptions, counters: Mapping[str, Any], waiting: bool
-    ) -> dict[str, tuple[tuple[int, ...], np.dtype]]:
-        """``{name: (shape, dtype)}`` of the arrays of :meth:`state` of a bank of ``sizes`` and
-        ``options`` at ``counters`` (``waiting``: some model waits for initialization),
-        without any data: what a state file must hold."""
-        bank = cls(sizes, options)
-        bank._lay_out(counters, waiting)
-        return {name: (a.shape, a.dtype) for name, a in bank.state()["arrays"].items()}
-
-    def _lay_out(self, counters: Mapping[str, Any], waiting: bool) -> None:
-        self._counts.load(counters)
-        cap = int(counters["cap"])
-        self._lags.lay_out(cap, waiting, min(self._counts.k, cap))
-
-    def _restore(self, counters: Mapping[str, Any], arrays: Mapping[str, Any]) -> None:
-        """Load a state of this configuration, in place."""
-        self._init.load(arrays)
-        self._eval.load(arrays)
-        self._fit.load(arrays, "")
-        if self._noise is not None:
-            self._noise.load(arrays, "noise_")
-        self._lay_out(counters, waiting=not bool(self._init.ready.all()))
-        self._lags.load(arrays, self.n_window)
-        self._readiness_changed()
+        return self._eval.standard_errors(kind)[j, : self.sizes[j]].copy()

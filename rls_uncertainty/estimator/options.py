@@ -36,6 +36,9 @@ __all__ = [
     "MAX_BURN_IN",
     "MAX_LAGS",
     "NOISE_MEMORY_LAGS",
+    "PUBLISH_LAG_WINDOWS",
+    "PUBLISH_LAG_WINDOWS_RANGE",
+    "PUBLISH_MEANING",
     "check_window",
     "check_kind",
 ]
@@ -48,6 +51,13 @@ NOISE_MEMORY_LAGS = 40.0
 AUTO_BURN_IN = 50
 MAX_BURN_IN = 100_000
 MAX_LAGS = 100_000  # the most lags held (the memory of Eq. 22's lag products)
+# estimator.publish_lag_windows: its default and range (both methods' banks take it).
+PUBLISH_LAG_WINDOWS = 2.0
+PUBLISH_LAG_WINDOWS_RANGE = (1.0, 100.0)
+PUBLISH_MEANING = (
+    "a model publishes its estimates and standard errors once its residual degrees of freedom (samples since the "
+    "start less its parameters) reach this many lag windows of its corrected covariance (Eq. 22); below one window "
+    "the corrected standard error is an artefact of the window")
 
 Lags = int | Literal["all", "auto"]
 Window = Literal["truncated", "bartlett"]
@@ -142,6 +152,9 @@ class EstimatorOptions:
     p0: float | tuple[float, ...] | None = option(
         None, "None (exact initialization) or the prior D_0 = diag(p0), theta_0 = 0: a positive number or one per "
         "parameter", own_check=True)
+    publish_lag_windows: float = option(
+        PUBLISH_LAG_WINDOWS, PUBLISH_MEANING, low=PUBLISH_LAG_WINDOWS_RANGE[0], high=PUBLISH_LAG_WINDOWS_RANGE[1],
+        ros="estimator.publish_lag_windows", cli="--publish-lag-windows")
 
     def __post_init__(self) -> None:
         check(self, "estimator")
@@ -204,6 +217,19 @@ class EstimatorOptions:
         return self.max_lags if self.lags == "auto" else int(self.lags)
 
     @property
+    def publish_lags(self) -> int:
+        """The lag window ``L`` the publication rule counts in: ``lags`` when fixed and
+        positive; ``max_lags`` with ``"auto"``, all lags and ``lags=0`` (the conventional
+        covariance), which have no window of their own (0 would publish the exact fit)."""
+        lags = self.lags
+        return lags if isinstance(lags, int) and lags > 0 else self.max_lags
+
+    def publish_samples(self, n: int) -> int:
+        """The samples a model of ``n`` parameters needs before it publishes: ``n +
+        ceil(publish_lag_windows x L)`` (counted after the residual burn-in, when there is one)."""
+        return n + math.ceil(self.publish_lag_windows * self.publish_lags - 1e-9)
+
+    @property
     def burn_in(self) -> int:
         """The residual burn-in ``B`` used: ``residual_burn_in``, or its default (50 with
         ``"auto"``, 0, the paper's Eq. 17, otherwise)."""
@@ -263,7 +289,7 @@ class EstimatorOptions:
         if not isinstance(values, Mapping):
             raise ConfigError(f"estimator options must be a mapping, got {type(values).__name__}")
         names = [f.name for f in fields(cls)]
-        missing = [n for n in names if n not in values]
+        missing = [n for n in names if n not in values and n not in cls.optional_keys()]
         if missing:
             raise ConfigError(f"estimator.{missing[0]} is missing")
         extra = sorted(str(k) for k in values if k not in names)
@@ -271,3 +297,8 @@ class EstimatorOptions:
             raise ConfigError(f"estimator.{extra[0][:40]} is not an estimator option")
         p0 = values["p0"]
         return cls(**{**values, "p0": tuple(p0) if isinstance(p0, list) else p0})
+
+    @staticmethod
+    def optional_keys() -> tuple[str, ...]:
+        """Keys :meth:`from_dict` may miss (options added later: their defaults)."""
+        return ("publish_lag_windows",)

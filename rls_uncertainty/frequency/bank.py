@@ -21,7 +21,7 @@ import numpy as np
 import numpy.typing as npt
 
 from ..errors import ConfigError, EstimatorNotReady, NonFiniteInput
-from ..estimator import COVARIANCE_KINDS, nearest_psd
+from ..estimator import COVARIANCE_KINDS
 from .covariance import PairGeometry, middle
 from .lags import LagSums, residual_autocovariance
 from .options import FrequencyOptions
@@ -33,7 +33,7 @@ FloatArray = npt.NDArray[np.float64]
 BoolArray = npt.NDArray[np.bool_]
 
 # An exact fit: R(0) at most this fraction of the variance of the model output x' theta. Its
-# corrected covariance is rounding of either sign and is published as zero.
+# corrected covariance is rounding of either sign: the model is not ready at that evaluation.
 EXACT_FIT = 1e-12
 # Inputs beyond this magnitude are refused: their products in the lag sums would overflow.
 LARGEST_INPUT = 1e100
@@ -82,7 +82,9 @@ class FrequencyBank:
         self._theta: FloatArray = np.full((M, p_max), np.nan)
         self._cov: FloatArray = np.full((2, M, p_max, p_max), np.nan)
         self._R: FloatArray = np.full((M, 1), np.nan)
+        self._output_variance: FloatArray = np.full(M, np.nan)
         self._ready: BoolArray = np.zeros(M, dtype=bool)
+        self._solved: BoolArray = np.zeros(M, dtype=bool)
         self._evaluated_at = 0
         # Fixed masks of the evaluation: the parameters, the padding's diagonal and blocks.
         real = self._columns[:, 1:]
@@ -90,6 +92,9 @@ class FrequencyBank:
         self._pad_diagonal: BoolArray = ~real[:, :, None] & np.eye(p_max, dtype=bool)
         self._pad_square: BoolArray = ~(real[:, :, None] & real[:, None, :])
         self._residual_dof: FloatArray = K - np.array(self.sizes, dtype=np.float64)
+        # The publication rule: samples each model needs (its regressors and the bias, plus the windows).
+        self.publish_at = np.array([options.publish_samples(s + 1) for s in self.sizes], dtype=np.int64)
+        self._withheld: BoolArray = np.zeros(M, dtype=bool)
 
     # ------------------------------------------------------------------ per sample
     @property
@@ -144,7 +149,10 @@ class FrequencyBank:
         self._theta[...] = np.nan
         self._cov[...] = np.nan
         self._R = np.full((len(self.sizes), 1), np.nan)
+        self._output_variance[...] = np.nan
         self._ready[...] = False
+        self._solved[...] = False
+        self._withheld[...] = False
         self._evaluated_at = 0
 
     # ------------------------------------------------------------------ evaluation
@@ -160,10 +168,10 @@ class FrequencyBank:
         G = np.einsum("mka,mkb->mab", U.conj(), U).real
         A, b = G[:, 1:, 1:].copy(), G[:, 1:, 0]
         A[self._pad_diagonal] = 1.0  # padded parameters: theta = 0
-        ready = self._well_conditioned(A) if N >= 2 else np.zeros(len(self.sizes), dtype=bool)
-        all_ready = bool(ready.all())
-        if not all_ready:
-            A[~ready] = np.eye(A.shape[1])
+        solved = self._well_conditioned(A) if N >= 2 else np.zeros(len(self.sizes), dtype=bool)
+        all_solved = bool(solved.all())
+        if not all_solved:
+            A[~solved] = np.eye(A.shape[1])
         A_inv = np.linalg.inv(A)
         A_inv[self._pad_square] = 0.0
         theta = np.einsum("mab,mb->ma", A_inv, b)
@@ -171,12 +179,14 @@ class FrequencyBank:
         E = Z - np.einsum("mka,ma->mk", X, theta)
         s2 = (E.real**2 + E.imag**2).sum(axis=1) / self._residual_dof
         conventional = s2[:, None, None] * A_inv
-        corrected = self._corrected(X, A_inv, theta, N)
-        self._theta = np.where(self._real if all_ready else ready[:, None] & self._real, theta, np.nan)
+        corrected, unusable = self._corrected(X, A_inv, theta, N)
+        self._theta = np.where(self._real if all_solved else solved[:, None] & self._real, theta, np.nan)
         self._cov[0], self._cov[1] = corrected, conventional
-        if not all_ready:
-            self._cov[:, ~ready] = np.nan
-        self._ready = ready
+        if not all_solved:
+            self._cov[:, ~solved] = np.nan
+        rule = solved & (N >= self.publish_at)
+        self._withheld = rule & unusable
+        self._solved, self._ready = solved, rule & ~unusable
 
     def _trim_count(self) -> int:
         return min(self._lags.n, self.options.trim_samples)
@@ -206,26 +216,27 @@ class FrequencyBank:
         ok: BoolArray = positive & (eig[:, 0] * self.options.init_condition > eig[:, -1])
         return ok
 
-    def _corrected(self, X: npt.NDArray[np.complex128], A_inv: FloatArray, theta: FloatArray, N: int) -> FloatArray:
+    def _corrected(
+        self, X: npt.NDArray[np.complex128], A_inv: FloatArray, theta: FloatArray, N: int,
+    ) -> tuple[FloatArray, BoolArray]:
         """Eqs. F7-F10: the residual autocovariance over the record (least-squares residuals,
-        corrected for the fit's degrees of freedom), the closed-form sandwich; repaired to
-        positive semi-definite where a variance came out negative."""
+        corrected for the fit's degrees of freedom), the closed-form sandwich; and the models
+        whose covariance means nothing at this evaluation: an exact fit (rounding of either
+        sign), or a sandwich with a negative variance (its nearest positive semi-definite
+        repair is zero or nearly so; counted in :attr:`repairs`)."""
         R, C0 = residual_autocovariance(self._lags.augmented(), self._columns, N, self.options.dof_correction)
         self._R = R
+        self._output_variance = C0[:, 0, 0] / N
         mid = middle(R, X, self._geometry.at(N), self._trim_count())
         mid *= self.options.dt**2
         cov: FloatArray = A_inv @ mid @ A_inv
         output_variance = np.einsum("ma,mab,mb->m", theta, C0[:, 1:, 1:], theta) / N
         exact = R[:, 0] <= EXACT_FIT * output_variance
-        if exact.any():
-            cov[exact] = 0.0
-        negative = (np.diagonal(cov, axis1=1, axis2=2) < 0.0).any(axis=1)  # padding: 0
+        negative = (np.diagonal(cov, axis1=1, axis2=2) < 0.0).any(axis=1) & ~exact  # padding: 0
         if negative.any():
-            for j in np.flatnonzero(negative).tolist():
-                p = self.sizes[j]
-                cov[j, :p, :p] = nearest_psd(cov[j, :p, :p])
             self.repairs += 1
-        return cov
+        unusable: BoolArray = exact | negative
+        return cov, unusable
 
     # ------------------------------------------------------------------ results
     @property
@@ -236,26 +247,49 @@ class FrequencyBank:
 
     @property
     def ready(self) -> BoolArray:
-        """Models with an estimate (at the last evaluation)."""
+        """Models that publish at the last evaluation: well conditioned, past the publication
+        rule (:attr:`publish_at` samples) and with a positive semi-definite corrected
+        covariance that is not an exact fit's (:attr:`withheld` otherwise)."""
         self._evaluate()
         return self._ready.copy()
 
+    @property
+    def withheld(self) -> BoolArray:
+        """Models withheld at the last evaluation although past the rule: an exact fit or a
+        corrected covariance with a negative variance."""
+        self._evaluate()
+        return self._withheld.copy()
+
+    @property
+    def solved(self) -> BoolArray:
+        """Models with a solution at the last evaluation (well conditioned), published or not:
+        :meth:`theta`, :meth:`covariance` and the others answer for them."""
+        self._evaluate()
+        return self._solved.copy()
+
     def _require(self, j: int) -> None:
-        if not self.ready[j]:
+        if not self.solved[j]:
             raise EstimatorNotReady(f"frequency model {j} is not ready ({self.n_samples} samples)")
 
     def theta_all(self) -> FloatArray:
-        """Estimates ``(M, max(sizes))``; NaN for padding and models not ready."""
+        """Published estimates ``(M, max(sizes))``; NaN for padding and models not :attr:`ready`."""
         self._evaluate()
-        return self._theta.copy()
+        out: FloatArray = np.where(self._ready[:, None], self._theta, np.nan)
+        return out
 
     def theta(self, j: int) -> FloatArray:
         self._require(j)
         return self._theta[j, : self.sizes[j]].copy()
 
     def standard_errors_all(self, kind: str = "corrected") -> FloatArray:
-        """Square roots of the covariance diagonals ``(M, max(sizes))``: ``"corrected"`` (Eq. F7)
-        or ``"conventional"`` (Eq. F5); NaN for padding and models not ready."""
+        """Published standard errors ``(M, max(sizes))``, the square roots of the covariance
+        diagonals: ``"corrected"`` (Eq. F7) or ``"conventional"`` (Eq. F5); NaN for padding and
+        models not :attr:`ready`."""
+        se = self._standard_errors(kind)
+        out: FloatArray = np.where(self._ready[:, None], se, np.nan)
+        return out
+
+    def _standard_errors(self, kind: str) -> FloatArray:
         index = self._kind(kind)
         self._evaluate()
         diag = np.diagonal(self._cov[index], axis1=1, axis2=2)
@@ -263,11 +297,13 @@ class FrequencyBank:
         return se
 
     def standard_errors(self, j: int, kind: str = "corrected") -> FloatArray:
+        """Model ``j``'s standard errors, published or not (a negative variance as 0)."""
         self._require(j)
-        return self.standard_errors_all(kind)[j, : self.sizes[j]].copy()
+        return self._standard_errors(kind)[j, : self.sizes[j]].copy()
 
     def covariance(self, j: int, kind: str = "corrected") -> FloatArray:
-        """Parameter covariance of model ``j`` (``sizes[j]`` square)."""
+        """Parameter covariance of model ``j`` (``sizes[j]`` square), published or not, as
+        Eqs. F5 and F7-F8 give it (not repaired)."""
         index = self._kind(kind)
         self._require(j)
         p = self.sizes[j]
@@ -278,6 +314,17 @@ class FrequencyBank:
         self._require(j)
         out: FloatArray = self._R[j].copy()
         return out
+
+    def fit(self) -> tuple[FloatArray, FloatArray]:
+        """``(R^2, rho_1)`` of every model ``(M,)`` at the last evaluation: ``1 - R(0) / var(z)``
+        from the record's residual autocovariance (F9-F10) and output variance, and the
+        residuals' lag-1 correlation ``R(1) / R(0)``; NaN where undefined."""
+        self._evaluate()
+        R, var = self._R, self._output_variance
+        with np.errstate(divide="ignore", invalid="ignore"):
+            r2: FloatArray = np.where(var > 0, 1.0 - R[:, 0] / var, np.nan)
+            rho1: FloatArray = R[:, 1] / R[:, 0] if R.shape[1] > 1 else np.full(R.shape[0], np.nan)
+        return r2, rho1
 
     def transforms(self) -> tuple[npt.NDArray[np.complex128], npt.NDArray[np.complex128]]:
         """``(Z, X)``: the transforms ``(M, K)`` and ``(M, K, max(sizes))`` of the outputs and

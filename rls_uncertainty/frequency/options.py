@@ -18,6 +18,7 @@ import numpy as np
 import numpy.typing as npt
 
 from ..errors import ConfigError
+from ..estimator.options import PUBLISH_LAG_WINDOWS, PUBLISH_LAG_WINDOWS_RANGE, PUBLISH_MEANING
 from ..schema import Span, Special, check, option
 
 __all__ = ["FrequencyOptions", "MAX_FREQUENCIES", "MAX_LAGS", "MAX_TRIM"]
@@ -74,6 +75,12 @@ class FrequencyOptions:
     init_condition:
         A model is ready once its column-scaled normal matrix ``Re(X^H X)`` has a condition
         number below this (like the time-domain estimator's exact initialization).
+    publish_lag_windows:
+        The publication rule, as the time-domain estimator's (the node's
+        ``estimator.publish_lag_windows`` sets both): a model publishes once ``N - n >=
+        publish_lag_windows x L``, ``N`` the samples of the record, ``n`` its regressors with the
+        bias of Eq. 2 (the residual autocovariance F9 comes from a fit with it), ``L`` the lag
+        window :attr:`publish_lags`.
     """
 
     rate_hz: float
@@ -99,6 +106,8 @@ class FrequencyOptions:
                                   "(docs/frequency.md, Eq. F10)")
     init_condition: float = option(1e8, "a model is ready once its column-scaled Re(X^H X) is better conditioned "
                                    "than this", low=1.0, low_open=True)
+    publish_lag_windows: float = option(PUBLISH_LAG_WINDOWS, PUBLISH_MEANING, low=PUBLISH_LAG_WINDOWS_RANGE[0],
+                                        high=PUBLISH_LAG_WINDOWS_RANGE[1])
 
     def __post_init__(self) -> None:
         rate = _number("rate_hz", self.rate_hz)
@@ -126,6 +135,16 @@ class FrequencyOptions:
         count = math.floor((self.f_max - self.f_min) / self.f_step + _GRID_TOLERANCE) + 1
         grid: FloatArray = self.f_min + self.f_step * np.arange(count, dtype=np.float64)
         return grid
+
+    @property
+    def publish_lags(self) -> int:
+        """The lag window of the publication rule: ``n_lags``, or with ``n_lags = 0`` (no
+        window) one second of samples, the default span."""
+        return self.n_lags if self.n_lags > 0 else max(1, round(float(self.rate_hz)))
+
+    def publish_samples(self, n: int) -> int:
+        """Samples a model of ``n`` parameters (with the bias) needs before it publishes."""
+        return n + math.ceil(self.publish_lag_windows * self.publish_lags - 1e-9)
 
     @property
     def dt(self) -> float:

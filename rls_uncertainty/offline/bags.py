@@ -402,27 +402,31 @@ BUNDLED_BAG_NOISE_ON = ("delta_e", "alpha", "q", "az")
 
 
 def write_t2_bag(path: str | Path, band_level: float = 0.2, seed: int = 250, *, force: bool = False,
-                 band_limited_on: Sequence[str] = BUNDLED_BAG_NOISE_ON) -> Path:
+                 band_limited_on: Sequence[str] = BUNDLED_BAG_NOISE_ON, input_amplitude: float = 1.0) -> Path:
     """The bundled bag: one seeded T-2 maneuver (Section IV.A) on the standard topics, IMU at
     200 Hz, air data at 50 Hz, surfaces at 100 Hz, thrust at 10 Hz
     (:func:`.simulation.simulate_sensor_streams`), the band-limited noise on
-    ``band_limited_on`` (the bundled bag's: all four signals)."""
+    ``band_limited_on`` (the bundled bag's: all four signals), the elevator multisine at
+    ``input_amplitude`` x Table 2's amplitude (the sensor noise at the nominal one's scale)."""
     from ..simulation.t2 import simulate_sensor_streams  # noqa: PLC0415
 
-    streams = simulate_sensor_streams(band_level, seed, band_limited_on=band_limited_on)
+    streams = simulate_sensor_streams(band_level, seed, band_limited_on=band_limited_on,
+                                      input_amplitude=input_amplitude)
     return write_sensor_streams(path, streams, force=force)
 
 
 def write_campaign_bags(path: str | Path, maneuvers: int, gust: DrydenVertical, *, band_level: float = 0.2,
                         band_limited_on: Sequence[str] | None = None, seed: int = 250,
-                        force: bool = False, progress: bool | None = False) -> list[Path]:
+                        force: bool = False, input_amplitude: float = 1.0,
+                        progress: bool | None = False) -> list[Path]:
     """A simulated flight-test campaign (Section IV.B, simulated): ``maneuvers`` T-2 maneuvers
     flown in the Dryden vertical ``gust`` (:func:`.simulation.simulate_campaign`, each with
     its own gust and noise sequences from ``seed``), each a replay bag ``mNNN`` in the
     directory ``path``, with ``campaign.yaml`` recording the settings. Atomic as
     :func:`write_replay`; one maneuver is in memory at a time. ``band_limited_on``: the
-    signals carrying the band-limited noise (None: the simulation's default). ``progress``: a bar
-    of the maneuvers written on stderr (:mod:`..progress`)."""
+    signals carrying the band-limited noise (None: the simulation's default); ``input_amplitude``:
+    the elevator multisine's fraction of Table 2's amplitude; ``progress``: a bar of the
+    maneuvers written on stderr (:mod:`..progress`)."""
     import yaml  # noqa: PLC0415 - the manifest only
 
     from ..simulation.t2 import BAND_LIMITED_ON, simulate_campaign  # noqa: PLC0415 - scipy only when simulating
@@ -436,11 +440,12 @@ def write_campaign_bags(path: str | Path, maneuvers: int, gust: DrydenVertical, 
     with output_directory(path, force=force) as tmp:
         manifest = {"maneuvers": maneuvers, "seed": seed, "gust_sigma_w_m_s": gust.sigma,
                     "gust_scale_length_m": gust.scale_length, "band_limited_noise": band_level,
-                    "band_limited_on": list(on), "bags": names,
+                    "band_limited_on": list(on), "input_amplitude": float(input_amplitude), "bags": names,
                     "simulation": "rls_uncertainty.simulation.t2.simulate_campaign (Section IV.A T-2 maneuver, "
                                   "Dryden vertical gust, seeds SeedSequence(seed).spawn(maneuvers))"}
         (tmp / "campaign.yaml").write_text(yaml.safe_dump(manifest, sort_keys=False))
-        streams = simulate_campaign(maneuvers, gust, seed=seed, band_level=band_level, band_limited_on=on)
+        streams = simulate_campaign(maneuvers, gust, seed=seed, band_level=band_level, band_limited_on=on,
+                                    input_amplitude=input_amplitude)
         for name, maneuver in track(zip(names, streams, strict=True), maneuvers, "make-bag", " maneuvers", progress):
             write_sensor_streams(tmp / name, maneuver)
     return [path / name for name in names]
@@ -495,6 +500,9 @@ class InputStream:
         self._lo = None if start is None else t0 + int(round(start * 1e9))
         self._hi = None if end is None else t0 + int(round(end * 1e9))
         self.total = sum(int(getattr(c, "msgcount", 0) or 0) for c in self._conns)
+        # The span read, s: the bag's, or --start/--end's within it.
+        self.span_seconds = ((self.end_ns if self._hi is None else min(self._hi, self.end_ns))
+                             - (t0 if self._lo is None else self._lo)) * 1e-9
         self._digest = hashlib.sha256()
         self.read = 0
         self._used = False

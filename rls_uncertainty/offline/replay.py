@@ -25,6 +25,8 @@ stream (:class:`.bags.InputStream`) and the outputs are written sample by sample
 * ``run.json``: the bag's input digest, the span, the parameters and the configuration
   (:func:`.replay_files.run_record`), for ``replay --compare`` (:mod:`.compare`);
 * ``summary.txt``: the summary the command prints (:func:`run_summary`);
+* ``parameters.csv``: every parameter's state and percent error at the end, both methods
+  (:func:`parameters_csv`);
 * per model ``M``, the figures of :func:`.figures.replay_figures` (``M_estimates``, ``M_fit``,
   ``M_autocorrelation``, ``M_lags``, in the requested formats), drawn from at most twice
   :data:`PLOT_POINTS` evenly spaced samples per run and from sums kept as the run goes
@@ -35,8 +37,12 @@ by default only on a terminal (:mod:`..progress`).
 
 from __future__ import annotations
 
+import csv
 import gc
+import io
 import json
+import math
+import sys
 import time
 from collections.abc import Callable, Iterable, Sized
 from pathlib import Path
@@ -44,12 +50,14 @@ from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
-from ..datapath.alerts import no_estimate, not_excited
+from ..datapath.alerts import no_estimate, not_excited, too_few_samples
 from ..datapath.config import PipelineConfig
 from ..datapath.diagnostics import DiagnosticsPolicy, Snapshot, Status
+from ..datapath.feasibility import configuration_warnings, record_checks
 from ..datapath.inputs import Stamped, feed
 from ..datapath.outputs import NODE_NAME, OutputLayout, fit_records
 from ..datapath.pipeline import Pipeline, SampleOutput
+from ..datapath.states import parameter_states
 from ..files import output_directory
 from ..progress import Progress
 from ..settings.config import NodeConfig
@@ -64,6 +72,7 @@ if TYPE_CHECKING:  # annotations only: the figures are drawn on demand
     from .figures import FigureOptions
 
 __all__ = ["ReplayResult", "run_pipeline", "replay", "planned_run", "summary_table", "run_summary", "unestimated",
+           "parameters_csv",
            "NODE_NAME", "PLOT_POINTS"]
 
 # Samples kept for the plots: at most twice this many, evenly spaced (results.History).
@@ -195,6 +204,7 @@ class _Run:
         self.ever = np.zeros(len(pipe.sizes), dtype=bool)
         self.last: list[SampleOutput | None] = [None] * len(pipe.sizes)
         self.last_frequency: list[SampleOutput | None] = [None] * len(pipe.sizes)
+        self.newest_frequency: SampleOutput | None = None  # the newest output with frequency-domain results
         self.real = np.arange(pipe.bank.n_max) < np.array(pipe.sizes)[:, None]
 
     def sample(self, out: SampleOutput) -> None:
@@ -208,6 +218,7 @@ class _Run:
             result.history.add(out, self.real)
         f = out.frequency
         if f is not None:
+            self.newest_frequency = out
             if f.ready.any():
                 for j in np.flatnonzero(f.ready).tolist():
                     self.last_frequency[j] = out
@@ -232,7 +243,13 @@ class _Run:
             self.sink.diagnostics(stamp_ns, statuses, fit_records(self.pipe, stamp_ns))
 
     def finals(self) -> None:
-        """Each model's last published values into the result."""
+        """Each model's last published values into the result, and every parameter's state at
+        the end (:mod:`.datapath.states`)."""
+        pipe, result = self.pipe, self.result
+        if pipe.config.publishes_time:
+            result.states = parameter_states(pipe, result.last_output)
+        if pipe.frequency is not None:
+            result.states += parameter_states(pipe, self.newest_frequency, "frequency")
         for j, out in enumerate(self.last):
             if out is not None:
                 n = self.pipe.sizes[j]
@@ -356,8 +373,8 @@ def unestimated(pipe: Pipeline, ever: np.ndarray, excitation: _Excitation | None
             return [f"no estimates: {why}"]
         if pipe.config.publishes_time:
             constant = excitation.constant if excitation else (lambda j: [])
-            lines = [f"{m.output}: no estimate: {not_excited(n, pipe.bank.k, constant(j))}"
-                     for j, (m, n) in enumerate(zip(pipe.models, pipe.sizes, strict=True)) if not ever[j]]
+            lines = [f"{m.output}: no estimate: {_time_unready(pipe, j, constant)}"
+                     for j, m in enumerate(pipe.models) if not ever[j]]
         else:
             lines = [f"{m.output}: no estimate: {_frequency_unready(pipe, j)}"
                      for j, m in enumerate(pipe.models) if not ever[j]]
@@ -367,12 +384,31 @@ def unestimated(pipe: Pipeline, ever: np.ndarray, excitation: _Excitation | None
     return lines
 
 
+def _time_unready(pipe: Pipeline, j: int, constant: Callable[[int], list[str]]) -> str:
+    """Why model ``j``'s time-domain estimator never published: too few samples for the
+    publication rule once initialized, else its regressors never spanned their space."""
+    bank, o = pipe.bank, pipe.config.estimator
+    if bank.initialized[j] and bank.publish_count[j] >= bank.publish_at[j]:
+        withheld = pipe.bookkeeping.outputs_withheld.get(pipe.models[j].output, 0)
+        return (f"withheld at all {withheld} samples past the publication rule: its standard errors were not above "
+                "rounding of its estimates (an exact fit: the output is a noise-free combination of the regressors) "
+                "or not finite")
+    if bank.initialized[j]:
+        return too_few_samples(int(bank.publish_count[j]), int(bank.publish_at[j]), o.publish_lag_windows,
+                               o.publish_lags, pipe.sizes[j], "estimator.lag_span")
+    return not_excited(pipe.sizes[j], bank.k, constant(j))
+
+
 def _frequency_unready(pipe: Pipeline, j: int) -> str:
     """Why model ``j``'s frequency-domain estimator never published: never evaluated (fewer
     samples than ``frequency.every``), or its regressors not independent on the grid."""
     path = pipe.frequency
     assert path is not None  # estimator.method frequency or both
     bank = path.bank
+    if bank.solved[j] and bank.n_samples < bank.publish_at[j]:
+        o = bank.options
+        return too_few_samples(bank.n_samples, int(bank.publish_at[j]), o.publish_lag_windows, o.publish_lags,
+                               path.sizes[j] + 1, "frequency.lag_span")
     if bank.evaluated_at == 0:
         return (f"the frequency-domain estimator is evaluated every frequency.every = {path.every} samples and "
                 f"took {bank.n_samples} (lower frequency.every)")
@@ -386,17 +422,33 @@ def summary_table(result: ReplayResult) -> str:
     model has none (:attr:`.results.ReplayResult.explanations`)."""
     rows = []
     last, pipe = result.last_output, result.pipeline
+    states = {m: {s.parameter: s.text for s in result.states if s.method == m} for m in ("time", "frequency")}
     if last is not None and pipe is not None:
         for row in OutputLayout.of(pipe).rows(last):
-            rows += rows_from_arrays(row.names, row.estimates, row.standard_errors_conventional, row.standard_errors)
+            rows += rows_from_arrays(row.names, row.estimates, row.standard_errors_conventional, row.standard_errors,
+                                     states=states["time"] if result.states else None)
     tables = [results_table(rows)] if rows else []
     finals = result.finals("frequency") if "frequency" in result.methods else {}
     if finals:
         names, values = list(finals), list(finals.values())
         frequency = rows_from_arrays(names, [f.estimate for f in values], [f.std_error_conventional for f in values],
-                                     [f.std_error for f in values])
+                                     [f.std_error for f in values],
+                                     states=states["frequency"] if result.states else None)
         tables.append("frequency domain (docs/frequency.md):\n" + results_table(frequency))
     return "\n".join(tables + result.explanations)
+
+
+def parameters_csv(result: ReplayResult) -> str:
+    """``parameters.csv``: every parameter's state at the end of the run, one row per method
+    and parameter: ``method,model,parameter,estimate,std_error,se_percent,state,reason``
+    (the corrected standard error; empty numbers where nothing was published)."""
+    out = io.StringIO()
+    w = csv.writer(out, lineterminator="\n")
+    w.writerow(["method", "model", "parameter", "estimate", "std_error", "se_percent", "state", "reason"])
+    for s in result.states:
+        numbers = [repr(x) if math.isfinite(x) else "" for x in (s.estimate, s.std_error, s.se_percent)]
+        w.writerow([s.method, s.model, s.parameter, *numbers, s.state, s.reason])
+    return out.getvalue()
 
 
 def run_summary(result: ReplayResult) -> str:
@@ -434,6 +486,8 @@ def replay(bag: str | Path, params: dict[str, Any], out: str | Path, *, start: f
                       PLOT_POINTS) if plots else None
     with output_directory(out, force=force, inputs=(bag, *inputs)) as tmp, \
             InputStream(bag, node_cfg.topics, strict=strict, start=start, end=end) as stream:
+        for line in configuration_warnings(config) + record_checks(config, stream.span_seconds):
+            print(f"warning: {line}", file=sys.stderr)
         files = ReplayFiles(tmp, config, node_cfg.frame_id, NODE_NAME, typestore())
         with files:
             result = run_pipeline(stream, config, record=False, progress=progress, diagnostics=node_cfg,
@@ -443,6 +497,7 @@ def replay(bag: str | Path, params: dict[str, Any], out: str | Path, *, start: f
                           "messages_used": result.n_messages}
         (tmp / "run.json").write_text(json.dumps(record, indent=1, sort_keys=True, default=repr) + "\n")
         (tmp / "summary.txt").write_text(run_summary(result) + "\n")
+        (tmp / "parameters.csv").write_text(parameters_csv(result))
         if data is not None and result.history is not None:
             from .figures import replay_figures  # noqa: PLC0415 - drawing (matplotlib) only when asked
 

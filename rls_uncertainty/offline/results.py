@@ -35,6 +35,7 @@ from ..errors import EstimatorNotReady, UnknownName
 if TYPE_CHECKING:  # annotations only: this module does not need the pipeline to work
     from ..datapath.diagnostics import Status
     from ..datapath.pipeline import Pipeline, SampleOutput
+    from ..datapath.states import ParameterState
 
 __all__ = ["Final", "Series", "History", "ReplayResult", "accounting", "METHODS"]
 
@@ -207,6 +208,8 @@ class ReplayResult:
     methods: tuple[str, ...] = ("time",)
     frequency_parameter_names: tuple[tuple[str, ...], ...] = ()
     frequency_history: History | None = None
+    # Each parameter's state at the end, both methods (:mod:`rls_uncertainty.datapath.states`).
+    states: list[ParameterState] = field(default_factory=list)
     _last: dict[str, Final] = field(default_factory=dict, repr=False)
     _last_frequency: dict[str, Final] = field(default_factory=dict, repr=False)
 

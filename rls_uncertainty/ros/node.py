@@ -46,6 +46,7 @@ from std_srvs.srv import SetBool, Trigger
 from ..datapath.cdr import decode
 from ..datapath.diagnostics import DiagnosticsPolicy, Status, malformed_reason, malformed_warning
 from ..datapath.diagnostics_round import DiagnosticsRound
+from ..datapath.feasibility import configuration_warnings
 from ..datapath.inputs import MESSAGE_TYPES, STREAMS, arrival_order, feed, message_class
 from ..datapath.outputs import HEADER, NODE_NAME, OutputLayout
 from ..datapath.pipeline import Pipeline, SampleOutput
@@ -106,6 +107,8 @@ class EstimatorNode(Node):
         params = self._parameter_values()
         # Invalid settings at start-up: ConfigError propagates to main(), which says why.
         self.config = pipeline_config(params)
+        for line in configuration_warnings(self.config):
+            self.get_logger().warning(line)
         self.node_cfg = node_config(params)
         self.pipeline = Pipeline(self.config, enabled=self.node_cfg.enabled)
         self._state = NodeStateFile(self.node_cfg.state_file)
@@ -196,6 +199,8 @@ class EstimatorNode(Node):
             old_fp, new_fp = self.config.fingerprint(), new.fingerprint()
             what = "estimator reset" if old_fp != new_fp else "pipeline restarted"
             self.get_logger().warning(f"parameters changed ({changed}): {what}")
+            for line in configuration_warnings(new):
+                self.get_logger().warning(line)
             self.config = new
             self.pipeline = self.pipeline.reconfigured(new)
             self._make_publishers()

@@ -252,15 +252,25 @@ def format_health(node_name: str, h: NodeHealth, methods: Iterable[str] = ()) ->
     methods = list(methods)
     if methods:
         lines.append("estimates published: " + ", ".join(METHOD_TEXT.get(m, m) for m in methods))
-    mrows = []
+    mrows, prows = [], []
     for model, v in h.models.items():
         ready = v.get("ready") == "True"
         r2 = f"{float(v['r_squared']):.3f}" if ready and "r_squared" in v else "-"
-        mrows.append([model, "ready" if ready else "initializing", v.get("samples", ""), r2, v.get("lags", "-"),
+        state = "ready" if ready else "initializing"
+        if not ready and "publish_at_samples" in v:
+            state += f" {v.get('publish_count', '?')}/{v['publish_at_samples']}"
+        mrows.append([model, state, v.get("samples", ""), r2, v.get("lags", "-"),
                       v.get("converged_parameters", "") or ("all" if v.get("converged") == "True" else "-"),
                       v.get("held_back", "") or "-"])
+        for key, text in v.items():  # per parameter and method: state.<p>, frequency.state.<p> (datapath.states)
+            prefix, found, parameter = key.rpartition("state.")
+            if found and parameter and prefix in ("", "frequency."):
+                method = "frequency" if prefix else "time"
+                prows.append([model, parameter, method, v.get(f"{prefix}se_percent.{parameter}", "-"), text])
     if mrows:
         lines += ["", *_table(["model", "state", "samples", "R^2", "lags", "converged", "held back"], mrows)]
+    if prows:
+        lines += ["", *_table(["model", "parameter", "method", "SE %", "state"], prows)]
     # Why a flag is held back, or a model cannot initialize: the node's own words.
     lines += [f"  {v['identifiability']}" for v in h.models.values() if v.get("identifiability")]
     return "\n".join(lines)

@@ -234,10 +234,12 @@ def estimator_options(params: dict[str, Any], rate: float) -> EstimatorOptions:
 def frequency_options(values: dict[str, Any], rate: float) -> FrequencyOptions | None:
     """The ``frequency.*`` parameters as :class:`.frequency.FrequencyOptions` at ``rate``, or
     None when ``estimator.method`` is ``time`` (they are not used then, and a grid the rate
-    cannot carry is not refused)."""
+    cannot carry is not refused). ``estimator.publish_lag_windows`` is the publication rule of
+    both methods."""
     if values["estimator.method"] == "time":
         return None
-    return FrequencyOptions(rate_hz=rate, **_arguments(FrequencyOptions, values, rate))
+    return FrequencyOptions(rate_hz=rate, publish_lag_windows=values["estimator.publish_lag_windows"],
+                            **_arguments(FrequencyOptions, values, rate))
 
 
 def _rate(value: Any) -> float:

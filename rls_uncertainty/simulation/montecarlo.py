@@ -126,6 +126,8 @@ class LevelResult:
     truth_outside: np.ndarray  # (N, 7) fraction of runs with the true value outside +-2 SE
     # (5 parameters, then any parameter of the C_Z / C_m model), each sample
     lags_used: np.ndarray | None = None  # (runs, 2) final L of C_Z / C_m (chosen with lags="auto")
+    converged_end: np.ndarray | None = None  # (runs, 5) flagged converged at the last sample (identifiability tests on)
+    identifiable_end: np.ndarray | None = None  # (runs, 5) identifiable at the last sample
     options: EstimatorOptions = TABLE3_OPTIONS  # of se_corrected and se_conventional
     band_limited_on: tuple[str, ...] = BAND_LIMITED_ON  # the measured signals with band-limited noise (add_noise)
 
@@ -151,6 +153,10 @@ class LevelResult:
                 "se_batch": float(self.se_batch[:, i].mean()),
                 "se_batch_all": float(self.se_batch_all[:, i].mean()),
                 "scatter": float(self.estimates[:, i].std(ddof=1)),
+                "converged_end": math.nan if self.converged_end is None else float(self.converged_end[:, i].mean()),
+                "identifiable_end": math.nan if self.identifiable_end is None
+                else float(self.identifiable_end[:, i].mean()),
+                "se_percent": float(np.mean(100.0 * self.se_corrected[:, i] / np.abs(self.estimates[:, i]))),
             }
         return out
 
@@ -231,6 +237,7 @@ class _Tracker:
         self.ens = np.full((3, N, P), np.nan)  # mean estimate, mean SE, scatter
         self.truth = np.array([T2_TRUE[p] for p in PARAMETERS])
         self.outside = np.full((N, P + n_models), np.nan)
+        self.final_flags = np.zeros((runs, P), dtype=bool)
 
     def sample(self, k: int, bank: EstimatorBank, x: np.ndarray, z: np.ndarray) -> None:
         runs, cz, P = self.runs, self.cz, len(PARAMETERS)
@@ -247,6 +254,7 @@ class _Tracker:
         self.untested_model_k[model_flags.reshape(runs, len(T2_MODELS)) & (self.untested_model_k < 0)] = k
         # The node's tests: a parameter not identifiable is never flagged.
         flags, model_flags = self.quality.restrict(flags, model_flags, bank, ready_k)
+        self.final_flags = flags[self.p_row, self.p_col]
         th_p, se_p = theta_k[self.p_row, self.p_col], se_k[self.p_row, self.p_col]
         new = flags[self.p_row, self.p_col] & (self.flag_k < 0)
         self.flag_k[new], self.flag_theta[new], self.flag_se[new] = k, th_p[new], se_p[new]
@@ -273,7 +281,8 @@ class _Tracker:
             model_flag_time=np.where(self.model_k >= 0, t[self.model_k], np.inf),
             model_flag_theta=self.model_theta, model_flag_se=self.model_se,
             ensemble_mean=self.ens[0], ensemble_se=self.ens[1], ensemble_scatter=self.ens[2],
-            truth_outside=self.outside,
+            truth_outside=self.outside, converged_end=self.final_flags,
+            identifiable_end=self.quality.identifiable[self.p_row, self.p_col],
         )
 
 
@@ -582,14 +591,17 @@ def write_outputs(results: list[LevelResult], out: Path, *, figures: bool = True
         "# Table 3 reproduction",
         "",
         f"{results[0].runs} runs per level; end-of-maneuver values. Each cell: ours / paper. "
-        "SE = mean standard error over runs; scatter = standard deviation of the estimates. "
+        "SE = mean standard error over runs; scatter = standard deviation of the estimates. Converged, "
+        "identifiable at end: the runs whose parameter is flagged converged (the node's criterion and "
+        "identifiability tests), identifiable, at the last sample; SE %: mean over runs of 100 corrected SE / "
+        "|estimate|. "
         f"Band-limited noise on {', '.join(results[0].band_limited_on)} (docs/validation.md)."
         + (f" Residual burn-in {burn_in} samples: R(i) of Eq. 17 from the residuals after each model's "
            f"initialization + {burn_in} (both SE columns)." if burn_in else ""),
         "",
         f"| level | parameter | true | mean | SE conventional | SE corrected ({lags} lags) | scatter | "
-        "corrected/scatter | conventional/scatter |",
-        "| --- | --- | --- | --- | --- | --- | --- | --- | --- |",
+        "corrected/scatter | conventional/scatter | converged at end | identifiable at end | SE % |",
+        "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |",
     ]
     for res in results:
         paper = PAPER_TABLE3.get(round(res.level, 2), {})
@@ -599,7 +611,8 @@ def write_outputs(results: list[LevelResult], out: Path, *, figures: bool = True
                 f"| {res.level * 100:.0f}% | {name} | {row['true']:g} | {row['mean']:.3f} / {p[0]:.3f} | "
                 f"{row['se_conventional']:.3f} / {p[1]:.3f} | {row['se_corrected']:.3f} / {p[2]:.3f} | "
                 f"{row['scatter']:.3f} / {p[3]:.3f} | {row['se_corrected'] / row['scatter']:.2f} | "
-                f"{row['se_conventional'] / row['scatter']:.2f} |"
+                f"{row['se_conventional'] / row['scatter']:.2f} | {100 * row['converged_end']:.0f}% | "
+                f"{100 * row['identifiable_end']:.0f}% | {row['se_percent']:.1f} |"
             )
     lines += [
         "",

@@ -17,7 +17,11 @@ import numpy.typing as npt
 
 from ..errors import ConfigError
 
+# Largest input amplitude of a simulated maneuver, as a multiple of Table 2's (make-bag --input-amplitude).
+MAX_INPUT_AMPLITUDE = 10.0
+
 __all__ = [
+    "MAX_INPUT_AMPLITUDE",
     "Multisine",
     "T2_TABLE2",
     "relative_peak_factor",

@@ -36,11 +36,12 @@ from ..aero.differentiation import DifferentiatorConfig, differentiate
 from ..aero.models import AircraftConfig, ModelConfig
 from ..errors import ConfigError
 from ..settings.models import load_aircraft
-from .multisine import T2_TABLE2, Multisine
+from .multisine import MAX_INPUT_AMPLITUDE, T2_TABLE2, Multisine
 from .turbulence import DrydenVertical
 
 __all__ = [
     "G0",
+    "MAX_INPUT_AMPLITUDE",
     "T2_TRUE",
     "T2_MODELS",
     "SIGNALS",
@@ -387,6 +388,7 @@ def simulate_sensor_streams(
     cfg: SimulationConfig = SimulationConfig(),
     gust: DrydenVertical | None = None,
     band_limited_on: Collection[str] = BAND_LIMITED_ON,
+    input_amplitude: float = 1.0,
 ) -> SensorStreams:
     """One seeded T-2 maneuver (Section IV.A, Eq. 25) at realistic sensor rates.
 
@@ -398,13 +400,28 @@ def simulate_sensor_streams(
     the integration grid), the air data the aerodynamic alpha. Generators as in
     :func:`simulate_maneuver`. Trim is level flight: specific force (g sin alpha, 0, -g cos
     alpha) in aircraft axes.
+
+    ``input_amplitude``: the elevator multisine at this fraction of Table 2's amplitude (0: no
+    maneuver, the elevator held at trim). Every signal's noise stays at the scale of the
+    nominal maneuver (Table 2's amplitude, calm air): the noise belongs to the sensors, so with
+    0 the elevator still shows its sensor noise. 1 is the nominal maneuver, bit for bit.
     """
+    if not 0.0 <= input_amplitude <= MAX_INPUT_AMPLITUDE:  # (NaN too)
+        raise ConfigError(f"input_amplitude must be a number in [0, {MAX_INPUT_AMPLITUDE:g}], got {input_amplitude!r}")
     rng, w = _draws(seed, gust, cfg)
     ac = load_aircraft("t2")
-    response = _fine_response(cfg, ac, T2_TABLE2["elevator"], w)
+    elevator = T2_TABLE2["elevator"]
+    nominal = None
+    if input_amplitude != 1.0:
+        nominal = _fine_response(cfg, ac, elevator, None)  # the noise scale: Table 2's maneuver, calm air
+        elevator = replace(elevator, amplitude=elevator.amplitude * float(input_amplitude))
+    response = _fine_response(cfg, ac, elevator, w)
 
     def stream(rate: float, offset: float) -> tuple[Stamps, ShortPeriodRecord]:
-        rec = _sampled(response, replace(cfg, rate=rate, sample_offset=offset), ac)
+        at = replace(cfg, rate=rate, sample_offset=offset)
+        rec = _sampled(response, at, ac)
+        if nominal is not None:
+            rec.noise_scale = _sampled(nominal, at, ac).noise_scale
         noisy = add_noise(rec, band_level, rng, band_limited_on=band_limited_on)
         stamps = start_ns + np.round(rec.t * 1e9).astype(np.int64)
         return stamps, noisy
@@ -451,10 +468,12 @@ def simulate_campaign(
     band_level: float = 0.2,
     band_limited_on: Collection[str] = BAND_LIMITED_ON,
     cfg: SimulationConfig = SimulationConfig(),
+    input_amplitude: float = 1.0,
 ) -> Iterator[SensorStreams]:
     """``maneuvers`` repeated T-2 maneuvers in the same turbulence (Section IV.B's flight-test
     campaign, simulated), one at a time (memory stays that of one maneuver):
     :func:`simulate_sensor_streams` of each of :func:`campaign_seeds`, every maneuver with its
-    own gust and noise sequences."""
+    own gust and noise sequences; ``input_amplitude`` as there."""
     for s in campaign_seeds(seed, maneuvers):
-        yield simulate_sensor_streams(band_level, s, cfg=cfg, gust=gust, band_limited_on=band_limited_on)
+        yield simulate_sensor_streams(band_level, s, cfg=cfg, gust=gust, band_limited_on=band_limited_on,
+                                      input_amplitude=input_amplitude)

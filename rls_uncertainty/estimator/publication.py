@@ -1,0 +1,51 @@
+"""The publication rule: which models of a bank publish their estimates and standard errors.
+
+A model publishes once its residual degrees of freedom ``k - n`` (``k - k0 - B - n`` after a
+residual burn-in of ``B`` samples from its initialization at ``k0``) reach
+``estimator.publish_lag_windows`` lag windows ``L`` of Eq. 22
+(:meth:`.options.EstimatorOptions.publish_samples`). Below that the corrected standard error
+of Eqs. 20-22 is an artefact of the window: at ``k = n`` the residuals are those of an exact
+fit and ``R_k(i)`` is zero. numpy only.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from .options import EstimatorOptions
+
+__all__ = ["PublicationRule"]
+
+
+class PublicationRule:
+    """The rule for models of ``sizes`` parameters under ``options``; once every model
+    publishes it stays so until :meth:`restart` (a new initialization or a restored state)."""
+
+    def __init__(self, sizes: Sequence[int], options: EstimatorOptions) -> None:
+        self.at = np.array([options.publish_samples(s) for s in sizes], dtype=np.int64)
+        self._burn_in = options.burn_in
+        self.all_published = False
+
+    def restart(self) -> None:
+        """Readiness changed: judge afresh."""
+        self.all_published = False
+
+    def count(self, k: int, initialized: np.ndarray, ready_at: np.ndarray) -> np.ndarray:
+        """What the rule counts for each model at sample ``k``, ``(M,)``: ``k``, or after a
+        residual burn-in the samples after it (``k - k0 - B``; negative before it, 0 for a
+        model not initialized)."""
+        if not self._burn_in:
+            return np.full(len(self.at), k, dtype=np.int64)
+        return np.where(initialized, k - ready_at - self._burn_in, 0)
+
+    def published(self, k: int, initialized: np.ndarray, ready_at: np.ndarray) -> np.ndarray:
+        """Boolean per model: initialized and past the rule (``initialized`` itself, not a
+        copy, once every model is)."""
+        if self.all_published:
+            return initialized
+        published: np.ndarray = initialized & (self.count(k, initialized, ready_at) >= self.at)
+        if published.all():
+            self.all_published = True
+        return published
