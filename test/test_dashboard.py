@@ -942,3 +942,30 @@ def test_a_replay_of_both_methods_shows_each_methods_estimates_as_its_csv_has_th
     (only / "estimates_frequency.csv").write_text("".join(lines))
     hub, _ = _read(only)
     assert "estimates_frequency.csv: line 51: not a row of estimates_frequency.csv" in hub.state()["text"]
+
+
+def test_a_reset_of_the_node_clears_what_the_page_shows_and_the_snapshot():
+    """The node's reset shows in its /diagnostics (the samples status's ``resets.<reason>``
+    counters grow): the hub forgets the histories and fits it showed, the page is told once
+    (``take_reset``), and a page that connects afterwards gets an empty snapshot; a dashboard
+    that joins a node that reset before it does not clear anything."""
+    ns = "/ns/rls_estimator"
+
+    def diagnostics(resets: dict[str, int]):
+        values = {"samples_used": "30", **{f"resets.{k}": str(n) for k, n in resets.items()}}
+        return [*_inputs({}, 0, prefix=ns), (f"{ns}: samples", 0, "30 of 30 samples used", values)]
+
+    hub = _live_hub()
+    hub.set_graph(True)
+    hub.add_diagnostics(diagnostics({"service": 2}))  # resets before this dashboard joined
+    assert not hub.take_reset()
+    hub.add_arrays(_arrays(range(1, 11)))
+    assert _page_of(hub.snapshot_messages())["methods"][TIME_DOMAIN]["CZ"]["t"] != []
+    hub.add_diagnostics(diagnostics({"service": 2}))
+    assert not hub.take_reset() and hub.histories
+    hub.add_diagnostics(diagnostics({"service": 2, "time_jumped_backwards": 1}))
+    assert hub.take_reset() and not hub.take_reset()  # told once
+    assert _page_of(hub.snapshot_messages())["methods"] == {}
+    hub.add_arrays(_arrays(range(20, 25)))  # the restarted estimator's samples
+    assert _page_of(hub.snapshot_messages())["methods"][TIME_DOMAIN]["CZ"]["t"] == pytest.approx(
+        [k * 1e-9 for k in range(20, 25)])

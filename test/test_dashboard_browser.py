@@ -268,12 +268,23 @@ def test_live_page_shows_the_nodes_last_published_values_and_flags_under_a_names
                 continue
             sigmas = abs(value - T2_TRUE[name]) / se
             text, verdict = refs[name]
-            assert text.startswith(f"reference {T2_TRUE[name]:.{_decimals(se)}f}  ·  "), (name, text)
+            assert text.startswith("reference ") and text.count("  ·  ") == 1, (name, text)
+            _expect_digits(text.removeprefix("reference ").split("  ·  ")[0], T2_TRUE[name], se)
             assert abs(float(text.rsplit("  ·  ", 1)[1].removesuffix("σ off")) - sigmas) <= 0.05 + 1e-9, (name, text)
             assert verdict == ("within" if sigmas <= 2 else "outside"), (name, text, sigmas)
         assert {r.get_attribute("data-stream") for r in browser.query_selector_all("#streams tbody tr")} == set(STREAMS)
         assert browser.evaluate("window.rlsLatency.length") > 100
         _shot(browser, tmp_path, "dashboard_live.png")
+        # The node's reset (its /diagnostics count it): the panels empty, no badge says
+        # converged, each parameter's state line says the node's model is initializing again.
+        reset = subprocess.run([sys.executable, "-m", "rls_uncertainty.cli", "reset", "--node", node_name],
+                               capture_output=True, text=True, cwd=ROOT, timeout=120)
+        assert reset.returncode == 0, reset.stderr
+        _wait(browser, "() => [...document.querySelectorAll('.panel')].every(p => "
+                       "p.querySelector('.value').textContent === '–' && "
+                       "p.querySelector('.badge').dataset.converged === '0' && "
+                       "p.querySelector('.pstate').textContent.startsWith('initializing'))", 60)
+        assert browser.evaluate("document.querySelectorAll('.panel').length") == len(last)
     finally:
         err = _stop(recorder, dashboard, node)
     assert "dashboard stopped" in err and "arrays dropped: none" in err, err

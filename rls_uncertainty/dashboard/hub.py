@@ -234,7 +234,8 @@ class Hub:
         parsed = parse_statuses(statuses, self.source.node)
         if parsed is None:
             return None
-        resets = sum(int(v) for k, v in parsed.samples.items() if k.startswith("resets.") and v.isdigit())
+        resets = sum(int(v) for k, v in parsed.samples.items()
+                     if (k.startswith("resets.") or k == "resets_other_count") and v.isdigit())
         if self._node_resets is not None and resets > self._node_resets:
             self._clear()
         self._node_resets = resets
