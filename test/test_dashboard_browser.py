@@ -89,9 +89,10 @@ def browser(tmp_path):
 class Dashboard:
     """``rls-uncertainty dashboard --port 0 ...`` in its own process; ``url`` from its first line."""
 
-    def __init__(self, *args: str) -> None:
+    def __init__(self, *args: str, cwd: Path = ROOT) -> None:
+        """``cwd``: where it runs (a replay named relative to it shows no test path on the page)."""
         self.proc = subprocess.Popen([sys.executable, "-m", "rls_uncertainty.cli", "dashboard", "--port", "0", *args],
-                                     stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=ROOT)
+                                     stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=cwd)
         lines: list[str] = []
         reader = threading.Thread(target=lambda: lines.append(self.proc.stdout.readline()), daemon=True)
         reader.start()
@@ -417,8 +418,8 @@ def twin_otter_replay(tmp_path_factory):
     base = tmp_path_factory.mktemp("twin_otter")
     convert(FLIGHT_DATA / "totter_f1_017", ROOT / "msg_schemas" / "fti_msgs" / "mapping.yaml", base / "bag")
     params = {**load_parameters_file("twin_otter_lateral"), "models.enabled": ["CX", "CY", "CZ", "Cl", "Cm", "Cn"]}
-    replay(base / "bag", params, base / "est", progress=False, plots=False)
-    return base / "est"
+    replay(base / "bag", params, base / "totter_f1_017", progress=False, plots=False)
+    return base / "totter_f1_017"
 
 
 def test_replay_page_shows_the_final_values_of_the_replays_estimates_csv(tmp_path, browser, twin_otter_replay):
@@ -429,7 +430,7 @@ def test_replay_page_shows_the_final_values_of_the_replays_estimates_csv(tmp_pat
         last_time[r["model"]] = r["time"]
     last = {r["parameter"]: (float(r["estimate"]), float(r["converged"]), float(r["std_error"])) for r in rows
             if r["time"] == last_time[r["model"]]}
-    dashboard = Dashboard("--replay", str(twin_otter_replay))
+    dashboard = Dashboard("--replay", twin_otter_replay.name, cwd=twin_otter_replay.parent)
     try:
         browser.goto(dashboard.url)
         counts = _replay_counts(twin_otter_replay / "estimates.csv")
@@ -571,7 +572,7 @@ def _last_held_back(path: Path) -> dict[str, list[str]]:
             values = {kv.key: kv.value for kv in status.values}
             out[model] = [p for p in values.get("held_back", "").split(",") if p]
             out[f"{model}:r_squared"] = [values["r_squared"]]
-            out.update({f"{model}:{k}": [v] for k, v in values.items() if k.startswith("state.")})
+            out.update({f"{model}:{k}": [v] for k, v in values.items() if k.startswith(("state.", "frequency.state."))})
     return out
 
 
@@ -591,14 +592,14 @@ def test_a_replay_of_both_methods_shows_the_frequency_domain_beside_the_time_dom
     and, matched by name, the frequency domain's (estimate, corrected and conventional SE,
     flag) as in estimates_frequency.csv; the bias, which the frequency domain does not
     estimate, says so; the frequency domain's history is drawn in the same plot."""
-    out = tmp_path / "both"
+    out = tmp_path / "t2_both"
     run = subprocess.run([sys.executable, "-m", "rls_uncertainty.cli", "replay", str(ROOT / "bags" / "t2_maneuver"),
                           "--config", T2, "--method", "both", "--out", str(out), "--no-figures", "--quiet"],
                          capture_output=True, text=True, cwd=ROOT, timeout=300)
     assert run.returncode == 0, run.stderr
     time_rows, freq_rows = _last_rows(out / "estimates.csv"), _last_rows(out / "estimates_frequency.csv")
     assert set(freq_rows) < set(time_rows) and {"CZ_0", "Cm_0"} == set(time_rows) - set(freq_rows)
-    dashboard = Dashboard("--replay", str(out))
+    dashboard = Dashboard("--replay", out.name, cwd=out.parent)
     try:
         browser.goto(dashboard.url)
         # Every sample of both files drawn (the frequency domain's first of each model is refused:
@@ -639,6 +640,16 @@ def test_a_replay_of_both_methods_shows_the_frequency_domain_beside_the_time_dom
             for name, series, last in drawn:
                 assert series == 1 + 5 + 3, name  # x; time: estimate, 2 corrected, 2 conventional; frequency: 3
                 assert last == (held[name] if name in freq_rows else None), name
+        # Each parameter's state line: the last /diagnostics' state of each method, time domain first.
+        held = _last_held_back(out / "estimates.mcap")
+        states = browser.evaluate("Object.fromEntries([...document.querySelectorAll('.panel')].map(p => "
+                                  "[p.dataset.param, p.querySelector('.pstate').textContent]))")
+        for name, text in states.items():
+            model = name.split("_")[0]
+            parts = [f"time domain (RLS): {held[f'{model}:state.{name}'][0]}"]
+            if name in freq_rows:
+                parts.append(f"frequency domain: {held[f'{model}:frequency.state.{name}'][0]}")
+            assert text == "  ·  ".join(parts), (name, text)
         legend = browser.evaluate("[...document.querySelectorAll('.model .legend-item')].map(e => e.textContent)")
         assert legend == ["time domain (RLS)", "frequency domain"] * 2
         _shot(browser, tmp_path, "dashboard_both_methods.png")

@@ -423,7 +423,8 @@ function drawQuality(m) {
   const q = m.quality[QUALITY_METHOD];
   const diag = state.health && state.health.models ? state.health.models[m.name] : null;
   const held = new Set(diag && diag.held_back ? diag.held_back.split(",").filter(Boolean) : []);
-  const methods = Object.keys(m.methods).filter((k) => m.methods[k].t.length);
+  const layout = layoutOf(m);
+  const methods = layout ? layout.methods : [];  // time domain first
   for (const p of v.plots) {
     showState(p, diag, methods.length > 1 ? methods : []);
     const info = q && q.parameters ? q.parameters[p.name] : null;
