@@ -383,7 +383,8 @@ def test_why_a_parameter_is_not_identifiable_is_read_from_the_published_figures_
                 assert reasons[a] == f"correlated {p.figures[0]:.4f} with {b}"
                 assert reasons[b] == f"correlated {p.figures[0]:.4f} with {a}"
         assert quality[model]["node_text"] == pipe.model_report(j)["identifiability"]
-    expected = {"collinear": {"collinear"}, "flat": {"not_excited"}, "noise": {"no_fit"}}[case]
+    # Sensor noise only: nothing fits, and the regressors move no more than their sensors' noise.
+    expected = {"collinear": {"collinear"}, "flat": {"not_excited"}, "noise": {"no_fit", "noise"}}[case]
     assert {p.kind for j in range(len(layout.models)) for p in monitor.problems(j)} == expected
 
 
@@ -694,7 +695,9 @@ def test_the_replay_reader_stays_a_bounded_number_of_batches_ahead_of_the_page(t
         _time.sleep(0.01)  # slower than the reader: without the wait it would run through the file
 
     hub, batches = _read(t2_replay, deliver=slow)
-    assert len(batches) > 40 and max(ahead) <= (replay_source.IN_FLIGHT + 1) * 100
+    # The file is many times what may be in flight (so reading it through would show), and the
+    # reader never got further ahead than that.
+    assert len(batches) > 10 * (replay_source.IN_FLIGHT + 1) and max(ahead) <= (replay_source.IN_FLIGHT + 1) * 100
     _expect_csv(hub, _csv_rows(t2_replay / "estimates.csv"))
 
 
