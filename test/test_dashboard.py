@@ -383,7 +383,8 @@ def test_why_a_parameter_is_not_identifiable_is_read_from_the_published_figures_
                 assert reasons[a] == f"correlated {p.figures[0]:.4f} with {b}"
                 assert reasons[b] == f"correlated {p.figures[0]:.4f} with {a}"
         assert quality[model]["node_text"] == pipe.model_report(j)["identifiability"]
-    expected = {"collinear": {"collinear"}, "flat": {"not_excited"}, "noise": {"no_fit"}}[case]
+    # Sensor noise only: nothing fits, and the regressors move no more than their sensors' noise.
+    expected = {"collinear": {"collinear"}, "flat": {"not_excited"}, "noise": {"no_fit", "noise"}}[case]
     assert {p.kind for j in range(len(layout.models)) for p in monitor.problems(j)} == expected
 
 
@@ -694,7 +695,9 @@ def test_the_replay_reader_stays_a_bounded_number_of_batches_ahead_of_the_page(t
         _time.sleep(0.01)  # slower than the reader: without the wait it would run through the file
 
     hub, batches = _read(t2_replay, deliver=slow)
-    assert len(batches) > 40 and max(ahead) <= (replay_source.IN_FLIGHT + 1) * 100
+    # The file is many times what may be in flight (so reading it through would show), and the
+    # reader never got further ahead than that.
+    assert len(batches) > 10 * (replay_source.IN_FLIGHT + 1) and max(ahead) <= (replay_source.IN_FLIGHT + 1) * 100
     _expect_csv(hub, _csv_rows(t2_replay / "estimates.csv"))
 
 
@@ -942,3 +945,30 @@ def test_a_replay_of_both_methods_shows_each_methods_estimates_as_its_csv_has_th
     (only / "estimates_frequency.csv").write_text("".join(lines))
     hub, _ = _read(only)
     assert "estimates_frequency.csv: line 51: not a row of estimates_frequency.csv" in hub.state()["text"]
+
+
+def test_a_reset_of_the_node_clears_what_the_page_shows_and_the_snapshot():
+    """The node's reset shows in its /diagnostics (the samples status's ``resets.<reason>``
+    counters grow): the hub forgets the histories and fits it showed, the page is told once
+    (``take_reset``), and a page that connects afterwards gets an empty snapshot; a dashboard
+    that joins a node that reset before it does not clear anything."""
+    ns = "/ns/rls_estimator"
+
+    def diagnostics(resets: dict[str, int]):
+        values = {"samples_used": "30", **{f"resets.{k}": str(n) for k, n in resets.items()}}
+        return [*_inputs({}, 0, prefix=ns), (f"{ns}: samples", 0, "30 of 30 samples used", values)]
+
+    hub = _live_hub()
+    hub.set_graph(True)
+    hub.add_diagnostics(diagnostics({"service": 2}))  # resets before this dashboard joined
+    assert not hub.take_reset()
+    hub.add_arrays(_arrays(range(1, 11)))
+    assert _page_of(hub.snapshot_messages())["methods"][TIME_DOMAIN]["CZ"]["t"] != []
+    hub.add_diagnostics(diagnostics({"service": 2}))
+    assert not hub.take_reset() and hub.histories
+    hub.add_diagnostics(diagnostics({"service": 2, "time_jumped_backwards": 1}))
+    assert hub.take_reset() and not hub.take_reset()  # told once
+    assert _page_of(hub.snapshot_messages())["methods"] == {}
+    hub.add_arrays(_arrays(range(20, 25)))  # the restarted estimator's samples
+    assert _page_of(hub.snapshot_messages())["methods"][TIME_DOMAIN]["CZ"]["t"] == pytest.approx(
+        [k * 1e-9 for k in range(20, 25)])

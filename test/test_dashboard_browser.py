@@ -30,12 +30,14 @@ when set (docs/images/ was made so)."""
 from __future__ import annotations
 
 import csv
+import math
 import os
 import shutil
 import subprocess
 import sys
 import threading
 import time
+from datetime import UTC, datetime
 from pathlib import Path
 
 import pytest
@@ -87,9 +89,10 @@ def browser(tmp_path):
 class Dashboard:
     """``rls-uncertainty dashboard --port 0 ...`` in its own process; ``url`` from its first line."""
 
-    def __init__(self, *args: str) -> None:
+    def __init__(self, *args: str, cwd: Path = ROOT) -> None:
+        """``cwd``: where it runs (a replay named relative to it shows no test path on the page)."""
         self.proc = subprocess.Popen([sys.executable, "-m", "rls_uncertainty.cli", "dashboard", "--port", "0", *args],
-                                     stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=ROOT)
+                                     stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=cwd)
         lines: list[str] = []
         reader = threading.Thread(target=lambda: lines.append(self.proc.stdout.readline()), daemon=True)
         reader.start()
@@ -140,13 +143,26 @@ def _wait(page, js: str, timeout_s: float) -> None:
         time.sleep(0.2)
 
 
-def _expect_shown(shown: dict, last: dict[str, tuple[float, float]]) -> None:
-    """Every parameter shown, its value equal to display precision (4 decimals), its badge."""
+def _decimals(se: float) -> int:
+    """The decimals that show ``se`` to two significant digits (at most 12)."""
+    return max(0, min(12, 1 - math.floor(math.log10(se))))
+
+
+def _expect_digits(text: str, value: float, se: float) -> None:
+    """``text`` is ``value`` as Python formats it to the decimals of two significant digits of
+    ``se`` (a tie, where JavaScript rounds half up and Python to even, either way)."""
+    d = _decimals(se)
+    tie = abs(abs(value * 10**d) % 1 - 0.5) < 1e-6
+    assert text == f"{value:.{d}f}" or (tie and abs(float(text) - value) <= 0.5 * 10**-d + 1e-12), (text, value, se)
+
+
+def _expect_shown(shown: dict, last: dict[str, tuple[float, float, float]]) -> None:
+    """Every parameter shown, its value to the decimals of two significant digits of its
+    corrected standard error, its badge."""
     assert set(shown) == set(last)
-    for name, (value, flag) in last.items():
+    for name, (value, flag, se) in last.items():
         text, badge = shown[name]
-        assert abs(float(text) - value) <= 0.5e-4 + 1e-12, (name, text, value)
-        assert text == f"{value:.4f}" or abs(abs(value * 1e4) % 1 - 0.5) < 1e-6, (name, text, value)
+        _expect_digits(text, value, se)
         assert badge == ("1" if flag == 1.0 else "0"), (name, badge, flag)
 
 
@@ -160,21 +176,23 @@ class _Recorder:
         self.stamps: list = []
         self.node.create_subscription(Header, f"{node_name}/sample_stamp", self.stamps.append, RELIABLE)
         for m in models:
-            for suffix in ("estimates", "converged", "fit", "identifiability"):
+            for suffix in ("estimates", "standard_errors", "converged", "fit", "identifiability"):
                 store = self.got.setdefault((m, suffix), [])
                 self.node.create_subscription(Float64MultiArray, f"{node_name}/{m}/{suffix}", store.append, RELIABLE)
 
     def spin_until(self, condition, timeout: float) -> bool:
         return spin_until(self.node, condition, timeout)
 
-    def last(self) -> tuple[int, dict[str, tuple[float, float]]]:
+    def last(self) -> tuple[int, dict[str, tuple[float, float, float]]]:
         out, stamps = {}, set()
         for m in ("CZ", "Cm"):
-            est, conv = self.got[(m, "estimates")][-1], self.got[(m, "converged")][-1]
+            est, conv, se = (self.got[(m, s)][-1] for s in ("estimates", "converged", "standard_errors"))
             stamps.add(parse_stamp_label(est.layout.dim[-1].label))
             assert parse_stamp_label(conv.layout.dim[-1].label) in stamps
-            for name, value, flag in zip(est.layout.dim[0].label.split(","), est.data, conv.data, strict=True):
-                out[name] = (float(value), float(flag))
+            assert parse_stamp_label(se.layout.dim[-1].label) in stamps
+            for name, value, flag, e in zip(est.layout.dim[0].label.split(","), est.data, conv.data, se.data,
+                                            strict=True):
+                out[name] = (float(value), float(flag), float(e))
         return max(stamps), out
 
     def wait_quiet(self, count: int, timeout: float = 120.0) -> None:
@@ -242,12 +260,33 @@ def test_live_page_shows_the_nodes_last_published_values_and_flags_under_a_names
         _expect_shown(_shown(browser), last)
         _expect_fits(browser, recorder.last_fits())
         assert browser.get_attribute("#banner", "data-state") == "running"
+        # The reference's verdict: |estimate - reference| / SE of the node's last sample.
         refs = browser.evaluate("Object.fromEntries([...document.querySelectorAll('.panel')].map(p => "
-                                "[p.dataset.param, p.querySelector('.ref').textContent]))")
-        assert refs == {name: f"reference {T2_TRUE[name]:.4f}" if name in T2_TRUE else "" for name in last}
+                                "[p.dataset.param, [p.querySelector('.ref').textContent, "
+                                "p.querySelector('.ref').dataset.verdict || '']]))")
+        for name, (value, _, se) in last.items():
+            if name not in T2_TRUE:
+                assert refs[name] == ["", ""], name
+                continue
+            sigmas = abs(value - T2_TRUE[name]) / se
+            text, verdict = refs[name]
+            assert text.startswith("reference ") and text.count("  ·  ") == 1, (name, text)
+            _expect_digits(text.removeprefix("reference ").split("  ·  ")[0], T2_TRUE[name], se)
+            assert abs(float(text.rsplit("  ·  ", 1)[1].removesuffix("σ off")) - sigmas) <= 0.05 + 1e-9, (name, text)
+            assert verdict == ("within" if sigmas <= 2 else "outside"), (name, text, sigmas)
         assert {r.get_attribute("data-stream") for r in browser.query_selector_all("#streams tbody tr")} == set(STREAMS)
         assert browser.evaluate("window.rlsLatency.length") > 100
         _shot(browser, tmp_path, "dashboard_live.png")
+        # The node's reset (its /diagnostics count it): the panels empty, no badge says
+        # converged, each parameter's state line says the node's model is initializing again.
+        reset = subprocess.run([sys.executable, "-m", "rls_uncertainty.cli", "reset", "--node", node_name],
+                               capture_output=True, text=True, cwd=ROOT, timeout=120)
+        assert reset.returncode == 0, reset.stderr
+        _wait(browser, "() => [...document.querySelectorAll('.panel')].every(p => "
+                       "p.querySelector('.value').textContent === '–' && "
+                       "p.querySelector('.badge').dataset.converged === '0' && "
+                       "p.querySelector('.pstate').textContent.startsWith('initializing'))", 60)
+        assert browser.evaluate("document.querySelectorAll('.panel').length") == len(last)
     finally:
         err = _stop(recorder, dashboard, node)
     assert "dashboard stopped" in err and "arrays dropped: none" in err, err
@@ -334,7 +373,7 @@ def test_a_live_node_publishing_both_methods_shows_its_last_frequency_domain_val
     recorder = _Recorder("/rls_estimator")
     frequency: dict[tuple[str, str], list] = {}
     for m in ("CZ", "Cm"):
-        for suffix in ("estimates", "converged"):
+        for suffix in ("estimates", "converged", "standard_errors"):
             store = frequency.setdefault((m, suffix), [])
             recorder.node.create_subscription(Float64MultiArray, f"/rls_estimator/{m}/frequency/{suffix}",
                                               store.append, RELIABLE)
@@ -348,11 +387,12 @@ def test_a_live_node_publishing_both_methods_shows_its_last_frequency_domain_val
         stamp, last = recorder.last()
         last_frequency, frequency_stamps = {}, {}
         for m in ("CZ", "Cm"):
-            est, conv = frequency[(m, "estimates")][-1], frequency[(m, "converged")][-1]
-            assert est.layout.dim[-1].label == conv.layout.dim[-1].label
+            est, conv, se = (frequency[(m, s)][-1] for s in ("estimates", "converged", "standard_errors"))
+            assert est.layout.dim[-1].label == conv.layout.dim[-1].label == se.layout.dim[-1].label
             frequency_stamps[m] = parse_stamp_label(est.layout.dim[-1].label) * 1e-9
-            for name, value, flag in zip(est.layout.dim[0].label.split(","), est.data, conv.data, strict=True):
-                last_frequency[name] = (float(value), float(flag))
+            for name, value, flag, e in zip(est.layout.dim[0].label.split(","), est.data, conv.data, se.data,
+                                            strict=True):
+                last_frequency[name] = (float(value), float(flag), float(e))
         assert set(last_frequency) == set(last) - {"CZ_0", "Cm_0"}  # no bias in the frequency domain
         dashboard = Dashboard()
         browser.goto(dashboard.url)
@@ -381,8 +421,8 @@ def twin_otter_replay(tmp_path_factory):
     base = tmp_path_factory.mktemp("twin_otter")
     convert(FLIGHT_DATA / "totter_f1_017", ROOT / "msg_schemas" / "fti_msgs" / "mapping.yaml", base / "bag")
     params = {**load_parameters_file("twin_otter_lateral"), "models.enabled": ["CX", "CY", "CZ", "Cl", "Cm", "Cn"]}
-    replay(base / "bag", params, base / "est", progress=False, plots=False)
-    return base / "est"
+    replay(base / "bag", params, base / "totter_f1_017", progress=False, plots=False)
+    return base / "totter_f1_017"
 
 
 def test_replay_page_shows_the_final_values_of_the_replays_estimates_csv(tmp_path, browser, twin_otter_replay):
@@ -391,9 +431,9 @@ def test_replay_page_shows_the_final_values_of_the_replays_estimates_csv(tmp_pat
     last_time = {}
     for r in rows:
         last_time[r["model"]] = r["time"]
-    last = {r["parameter"]: (float(r["estimate"]), float(r["converged"])) for r in rows
+    last = {r["parameter"]: (float(r["estimate"]), float(r["converged"]), float(r["std_error"])) for r in rows
             if r["time"] == last_time[r["model"]]}
-    dashboard = Dashboard("--replay", str(twin_otter_replay))
+    dashboard = Dashboard("--replay", twin_otter_replay.name, cwd=twin_otter_replay.parent)
     try:
         browser.goto(dashboard.url)
         counts = _replay_counts(twin_otter_replay / "estimates.csv")
@@ -419,17 +459,106 @@ def test_replay_page_shows_the_final_values_of_the_replays_estimates_csv(tmp_pat
                 assert (text, tag) == (f"not identifiable: model explains nothing (R^2 {r2:.3f})", True), name
             else:
                 assert text.startswith("identifiable") and not tag, name
+        # Each parameter's state line is the replay's last /diagnostics' state.<parameter>.
+        states = browser.evaluate("Object.fromEntries([...document.querySelectorAll('.panel')].map(p => "
+                                  "[p.dataset.param, p.querySelector('.pstate').textContent]))")
+        assert states == {name: held[f"{name.split('_')[0]}:state.{name}"][0] for name in last}
+        assert all(states[n].startswith("held back: not identifiable") for n in held["Cm"])
+        _expect_units_and_percent(browser, last)
+        _expect_time_axis(browser, twin_otter_replay / "estimates.csv")
         _shot_of(browser, "section.model[data-model='Cm']", tmp_path, "dashboard_held_back.png")
         assert browser.query_selector("nav#window button.active").get_attribute("data-window") == "0"  # all
         _shot(browser, tmp_path, "dashboard_replay.png")
+        _expect_y_ranges(browser, twin_otter_replay / "estimates.csv")
     finally:
         err = dashboard.stop()
     assert "dashboard stopped" in err, err
 
 
+def _csv_histories(path: Path) -> dict[str, tuple[list[float], list[float], list[float]]]:
+    """Per parameter of a replay CSV, the times, estimates and corrected standard errors of the
+    samples the page shows (a sample any of whose values is not finite, or whose standard
+    errors are not positive, is refused for every parameter of its model)."""
+    with open(path, newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    ok: dict[tuple[str, str], bool] = {}
+    for r in rows:
+        values = [float(r[k]) for k in ("estimate", "std_error", "std_error_conventional")]
+        good = all(math.isfinite(v) for v in values) and values[1] > 0 and values[2] > 0
+        ok[(r["model"], r["time"])] = ok.get((r["model"], r["time"]), True) and good
+    out: dict[str, tuple[list[float], list[float], list[float]]] = {}
+    for r in rows:
+        if ok[(r["model"], r["time"])]:
+            t, est, se = out.setdefault(r["parameter"], ([], [], []))
+            t.append(float(r["time"]))
+            est.append(float(r["estimate"]))
+            se.append(float(r["std_error"]))
+    return out
+
+
+def _expect_y_ranges(page, path: Path) -> None:
+    """Each panel's y-range is band_limits (datapath/display.py, numpy) of the CSV's samples
+    after the first TRANSIENT_FRACTION of them; with "y: all" it holds every sample's band."""
+    import numpy as np
+
+    from rls_uncertainty.datapath.display import TRANSIENT_FRACTION, band_limits
+
+    def shown() -> dict[str, list[float]]:
+        return page.evaluate("Object.fromEntries([...window.rlsState.models.values()].flatMap(m => m.view.plots.map("
+                             "p => [p.name, [p.u.scales.y.min, p.u.scales.y.max]])))")
+
+    histories = _csv_histories(path)
+    ranges = shown()
+    assert set(ranges) == set(histories)
+    narrower = 0
+    for name, (_, est, se) in histories.items():
+        k0 = math.floor(TRANSIENT_FRACTION * len(est))
+        lo, hi = band_limits(np.array(est[k0:]), np.array(se[k0:]))
+        assert abs(ranges[name][0] - lo) <= 1e-9 * (hi - lo) and abs(ranges[name][1] - hi) <= 1e-9 * (hi - lo), \
+            (name, ranges[name], (lo, hi))
+        edges = [(e - 2 * s, e + 2 * s) for e, s in zip(est, se, strict=True)]
+        narrower += max(b for _, b in edges) - min(a for a, _ in edges) > 2 * (hi - lo)
+    assert narrower > 0  # the start-up transient would have set some ranges
+    page.click("#y-all")
+    _wait(page, "document.getElementById('y-all').classList.contains('active') && !window.rlsState.dirty", 30)
+    _wait(page, "() => [...window.rlsState.models.values()].every(m => m.view.plots.every(p => p.yRange === null))", 30)
+    ranges = shown()
+    for name, (_, est, se) in histories.items():
+        assert ranges[name][0] <= min(e - 2 * s for e, s in zip(est, se, strict=True)), name
+        assert ranges[name][1] >= max(e + 2 * s for e, s in zip(est, se, strict=True)), name
+
+
+def _expect_units_and_percent(page, last: dict[str, tuple[float, float, float]]) -> None:
+    """Units from the parameter's name (per radian; a rate derivative per its nondimensional
+    rate; the bias dimensionless) and the percent error 100 SE/|estimate| to one decimal."""
+    shown = page.evaluate("Object.fromEntries([...document.querySelectorAll('.panel')].map(p => "
+                          "[p.dataset.param, [p.querySelector('.unit').textContent, "
+                          "p.querySelector('.readout .pct').textContent]]))")
+    rates = {"p": "p b/2V", "q": "q cbar/2V", "r": "r b/2V"}
+    for name, (value, _, se) in last.items():
+        suffix = name.split("_", 1)[1]
+        unit = "dimensionless" if suffix == "0" else "1/rad" + (f" (per {rates[suffix]})" if suffix in rates else "")
+        assert shown[name] == [unit, f"{100 * se / abs(value):.1f} %"], (name, shown[name])
+
+
+def _expect_time_axis(page, path: Path) -> None:
+    """The time axis and the header count from the first sample; "UTC" shows the wall clock."""
+    times = sorted({t for t, _, _ in _csv_histories(path).values() for t in t})
+    assert page.text_content("#clock") == f"t = {times[-1] - times[0]:.2f} s since the first sample"
+    first = page.evaluate("Math.min(...[...window.rlsState.models.values()].map(m => m.view.plots[0].u.data[0][0]))")
+    assert abs(first) < 1e-6
+    page.click("#clock-utc")
+    _wait(page, "document.getElementById('clock').textContent.endsWith('UTC')", 30)
+    wall = datetime.fromtimestamp(times[-1], UTC).strftime("%Y-%m-%d %H:%M:%S")
+    assert page.text_content("#clock").startswith(f"t = {wall}"), page.text_content("#clock")
+    page.click("#clock-utc")
+    _wait(page, "document.getElementById('clock').textContent.endsWith('first sample') && "
+                "[...window.rlsState.models.values()].every(m => m.view)", 30)
+
+
 def _last_held_back(path: Path) -> dict[str, list[str]]:
     """Per model, the parameters held back in the last /diagnostics of an estimates.mcap (and
-    ``M:r_squared``), read with rosbags."""
+    ``M:r_squared``, ``M:state.P`` for each parameter P), read with rosbags."""
     from rosbags.highlevel import AnyReader
 
     from rls_uncertainty.offline.bags import typestore
@@ -446,6 +575,7 @@ def _last_held_back(path: Path) -> dict[str, list[str]]:
             values = {kv.key: kv.value for kv in status.values}
             out[model] = [p for p in values.get("held_back", "").split(",") if p]
             out[f"{model}:r_squared"] = [values["r_squared"]]
+            out.update({f"{model}:{k}": [v] for k, v in values.items() if k.startswith(("state.", "frequency.state."))})
     return out
 
 
@@ -460,24 +590,19 @@ def _last_rows(path: Path) -> dict[str, dict[str, str]]:
     return {r["parameter"]: r for r in rows if r["time"] == last_time[r["model"]]}
 
 
-def _expect_value(text: str, value: str) -> None:
-    """A value shown with 4 decimals is the CSV's (to display precision)."""
-    assert abs(float(text) - float(value)) <= 0.5e-4 + 1e-12, (text, value)
-
-
 def test_a_replay_of_both_methods_shows_the_frequency_domain_beside_the_time_domain(tmp_path, browser):
     """``rls-uncertainty replay --method both``: every panel shows the time domain's last values
     and, matched by name, the frequency domain's (estimate, corrected and conventional SE,
     flag) as in estimates_frequency.csv; the bias, which the frequency domain does not
     estimate, says so; the frequency domain's history is drawn in the same plot."""
-    out = tmp_path / "both"
+    out = tmp_path / "t2_both"
     run = subprocess.run([sys.executable, "-m", "rls_uncertainty.cli", "replay", str(ROOT / "bags" / "t2_maneuver"),
                           "--config", T2, "--method", "both", "--out", str(out), "--no-figures", "--quiet"],
                          capture_output=True, text=True, cwd=ROOT, timeout=300)
     assert run.returncode == 0, run.stderr
     time_rows, freq_rows = _last_rows(out / "estimates.csv"), _last_rows(out / "estimates_frequency.csv")
     assert set(freq_rows) < set(time_rows) and {"CZ_0", "Cm_0"} == set(time_rows) - set(freq_rows)
-    dashboard = Dashboard("--replay", str(out))
+    dashboard = Dashboard("--replay", out.name, cwd=out.parent)
     try:
         browser.goto(dashboard.url)
         # Every sample of both files drawn (the frequency domain's first of each model is refused:
@@ -485,7 +610,8 @@ def test_a_replay_of_both_methods_shows_the_frequency_domain_beside_the_time_dom
         _wait_drawn(browser, {**_replay_counts(out / "estimates.csv"),
                               **_replay_counts(out / "estimates_frequency.csv", "frequency")})
         _wait(browser, "document.getElementById('banner').dataset.state === 'replay'", 60)
-        _expect_shown(_shown(browser), {n: (float(r["estimate"]), float(r["converged"])) for n, r in time_rows.items()})
+        _expect_shown(_shown(browser), {n: (float(r["estimate"]), float(r["converged"]), float(r["std_error"]))
+                                        for n, r in time_rows.items()})
         rows = browser.evaluate("""() => Object.fromEntries([...document.querySelectorAll('.panel')].map(p => {
             const r = p.querySelector('.readout.alt[data-method="frequency"]');
             return [p.dataset.param, [r.querySelector('.method').textContent, r.querySelector('.alt-value').textContent,
@@ -499,10 +625,10 @@ def test_a_replay_of_both_methods_shows_the_frequency_domain_beside_the_time_dom
                 assert (value, se, hidden) == ("–", "not estimated", True), name
                 continue
             r = freq_rows[name]
-            _expect_value(value, r["estimate"])
+            _expect_digits(value, float(r["estimate"]), float(r["std_error"]))
             corrected, conventional = se.removeprefix("SE ").removesuffix(")").split(" (conv. ")
-            _expect_value(corrected, r["std_error"])
-            _expect_value(conventional, r["std_error_conventional"])
+            _expect_digits(corrected, float(r["std_error"]), float(r["std_error"]))
+            _expect_digits(conventional, float(r["std_error_conventional"]), float(r["std_error_conventional"]))
             assert (flag, hidden) == ("1" if float(r["converged"]) == 1.0 else "0", False), name
         # The page holds the CSV's very doubles (the MCAP's arrays), and draws them: per
         # panel the frequency domain's estimate and band beside the time domain's, its newest
@@ -517,6 +643,16 @@ def test_a_replay_of_both_methods_shows_the_frequency_domain_beside_the_time_dom
             for name, series, last in drawn:
                 assert series == 1 + 5 + 3, name  # x; time: estimate, 2 corrected, 2 conventional; frequency: 3
                 assert last == (held[name] if name in freq_rows else None), name
+        # Each parameter's state line: the last /diagnostics' state of each method, time domain first.
+        held = _last_held_back(out / "estimates.mcap")
+        states = browser.evaluate("Object.fromEntries([...document.querySelectorAll('.panel')].map(p => "
+                                  "[p.dataset.param, p.querySelector('.pstate').textContent]))")
+        for name, text in states.items():
+            model = name.split("_")[0]
+            parts = [f"time domain (RLS): {held[f'{model}:state.{name}'][0]}"]
+            if name in freq_rows:
+                parts.append(f"frequency domain: {held[f'{model}:frequency.state.{name}'][0]}")
+            assert text == "  ·  ".join(parts), (name, text)
         legend = browser.evaluate("[...document.querySelectorAll('.model .legend-item')].map(e => e.textContent)")
         assert legend == ["time domain (RLS)", "frequency domain"] * 2
         _shot(browser, tmp_path, "dashboard_both_methods.png")

@@ -423,3 +423,44 @@ def test_a_request_not_complete_in_time_is_closed_and_counted_and_others_are_ser
 
     status, closed, refused = _run(options, scenario)
     assert status == 200 and closed == [b"", b"", b""] and refused["header_timeout"] == 3
+
+
+def test_a_wildcard_host_prints_an_address_a_browser_can_open():
+    """``--host 0.0.0.0`` (or ``::``) listens on every interface; the address printed is this
+    machine's name when it resolves, else 127.0.0.1; never the wildcard itself."""
+    import socket
+
+    from rls_uncertainty.dashboard.app import url_host
+
+    name = socket.gethostname()
+    try:
+        socket.getaddrinfo(name, None)
+        expected = name or "127.0.0.1"
+    except OSError:
+        expected = "127.0.0.1"
+    for wildcard in ("0.0.0.0", "::"):
+        assert url_host(wildcard) == expected
+    assert url_host("192.168.1.5") == "192.168.1.5" and url_host("127.0.0.1") == "127.0.0.1"
+
+
+def test_the_dashboard_on_every_interface_prints_a_url_that_serves_the_page(tmp_path):
+    """`rls-uncertainty dashboard --host 0.0.0.0`: its first lines name a host other than the
+    wildcard, and the printed token URL serves the page."""
+    import subprocess
+    import sys
+    import urllib.request
+
+    from rls_uncertainty.ros.player import stop_process
+
+    command = [sys.executable, "-m", "rls_uncertainty.cli", "dashboard", "--host", "0.0.0.0", "--port", "0",
+               "--node", "/nobody_here/rls_estimator"]
+    proc = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        serving, token = proc.stdout.readline(), proc.stdout.readline()
+        assert serving.startswith("serving http://") and "0.0.0.0" not in serving, serving
+        url = token.split("open ", 1)[1].strip()
+        assert "0.0.0.0" not in url and "?token=" in url, token
+        with urllib.request.urlopen(url, timeout=30) as response:
+            assert response.status == 200 and b"rls_uncertainty control room" in response.read()
+    finally:
+        stop_process(proc, 30)

@@ -24,7 +24,7 @@ if TYPE_CHECKING:  # annotations only: rclpy and the bag library are imported wh
     from .replay_source import ReplaySource
     from .ros_source import RosSource
 
-__all__ = ["DashboardOptions", "dashboard_options", "run"]
+__all__ = ["DashboardOptions", "dashboard_options", "run", "url_host"]
 
 
 @dataclass(frozen=True)
@@ -71,6 +71,8 @@ class _Dispatch:
         hub, send = self.hub, self.feed.send
         if item[0] == "diagnostics":
             if hub.add_diagnostics(item[1]) is not None:
+                if hub.take_reset():
+                    send({"type": "reset"})
                 send(self.feed.status())
                 for message in hub.quality_updates():
                     send(message)
@@ -138,8 +140,23 @@ def _counts(hub: Hub, feed: Feed) -> str:
             f"resyncs {feed.resyncs}; snapshots built {feed.snapshots_built}")
 
 
+def url_host(host: str) -> str:
+    """The host to print in the page's address: ``host`` itself, or for a wildcard address
+    (``0.0.0.0``, ``::``: every interface) this machine's name when it resolves, else
+    ``127.0.0.1``: an address a browser can open."""
+    if host not in ("0.0.0.0", "::", ""):
+        return host
+    name = socket.gethostname()
+    try:
+        socket.getaddrinfo(name, None)
+    except (OSError, UnicodeError):
+        return "127.0.0.1"
+    return name or "127.0.0.1"
+
+
 def run(options: DashboardOptions) -> int:
-    """Serve until interrupted. The first line on stdout is ``serving http://HOST:PORT/``."""
+    """Serve until interrupted. The first line on stdout is ``serving http://HOST:PORT/``
+    (:func:`url_host`)."""
     replay = None
     if options.replay is not None:
         from .replay_source import open_replay  # noqa: PLC0415 - the bag library only for replays
@@ -150,7 +167,8 @@ def run(options: DashboardOptions) -> int:
     else:
         source = Source("live", options.node, reference=options.reference, **discovery_environment())
     sock = bind(options.server)
-    host, port = options.server.host, sock.getsockname()[1]
+    port = sock.getsockname()[1]
+    host = url_host(options.server.host)
     shown = f"[{host}]" if ":" in host else host
     print(f"serving http://{shown}:{port}/", flush=True)
     if options.server.token is not None:

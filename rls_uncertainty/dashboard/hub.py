@@ -15,6 +15,7 @@ from collections.abc import Callable, Iterable, Iterator, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
+from ..datapath.display import RANGE_PAD, RANGE_QUANTILE, TRANSIENT_FRACTION, unit_table
 from ..datapath.outputs import FIT_ARRAYS, ArrayKey
 from ..ros.health import HealthTracker, StatusTuple, parse_statuses
 from .fit import Fit, Identifiability, fit_of, identifiability_of, quality_json
@@ -73,6 +74,8 @@ class Hub:
         self._models: dict[str, set[str]] = {}  # by method: the models admitted (at most MAX_MODELS)
         self.refused: dict[str, int] = {}  # complete samples not shown, by reason (REFUSED)
         self.history_resets = 0
+        self._node_resets: int | None = None  # the node's resets.<reason> counters' sum, last seen
+        self._reset_pending = False
         self._capacity = capacity
         self._clock = clock
 
@@ -231,8 +234,28 @@ class Hub:
         parsed = parse_statuses(statuses, self.source.node)
         if parsed is None:
             return None
+        resets = sum(int(v) for k, v in parsed.samples.items()
+                     if (k.startswith("resets.") or k == "resets_other_count") and v.isdigit())
+        if self._node_resets is not None and resets > self._node_resets:
+            self._clear()
+        self._node_resets = resets
         self.health.update(parsed)
         return self.status()
+
+    def take_reset(self) -> bool:
+        """Whether the node reset since this was last asked: the page then clears its panels."""
+        reset, self._reset_pending = self._reset_pending, False
+        return reset
+
+    def _clear(self) -> None:
+        """The node reset (its ``resets.<reason>`` counters grew): what it showed is gone, the
+        display histories, fits and identifiability start over with its next samples."""
+        self.histories.clear()
+        self.fits.clear()
+        self.tables.clear()
+        self._quality_sent.clear()
+        self.history_resets += 1
+        self._reset_pending = True
 
     def set_graph(self, node_present: bool) -> dict | None:
         """What discovery shows; the ``health`` message when it changed."""
@@ -247,7 +270,8 @@ class Hub:
         s = self.source
         return {"type": "hello", "mode": s.mode, "node": s.node, "domain": s.domain,
                 "discovery_range": s.discovery_range, "static_peers": s.static_peers,
-                "replay_dir": s.replay_dir, "reference": dict(s.reference)}
+                "replay_dir": s.replay_dir, "reference": dict(s.reference), "units": unit_table(),
+                "range": {"quantile": RANGE_QUANTILE, "pad": RANGE_PAD, "transient": TRANSIENT_FRACTION}}
 
     def snapshot_messages(self, max_values: int = FRAME_VALUES) -> Iterator[dict]:
         """The page's state from scratch (:func:`.messages.snapshot_messages`): every method's

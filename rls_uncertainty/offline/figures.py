@@ -32,6 +32,7 @@ from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
 
+from ..datapath.display import RANGE_PAD, RANGE_QUANTILE, band_limits, parameter_rate, parameter_unit
 from ..errors import ConfigError
 from ..extras import optional
 from ..progress import Progress
@@ -54,8 +55,6 @@ DEFAULT_DPI = 150  # half the drawing time of 300 (benchmarks/figure_benchmark.p
 DPI_RANGE = (50, 1200)
 # Regressors of Eq. 2 measured in radians: the flow angles, the control surfaces and the
 # nondimensional rates (p b/2V, q cbar/2V, r b/2V: an angular rate times a time, in rad).
-_PER_RADIAN = ("alpha", "beta", "delta_e", "delta_a", "delta_r", "p", "q", "r")
-_RATE_REGRESSOR = {"p": "p b/2V", "q": "q cbar/2V", "r": "r b/2V"}
 
 
 def figure_formats(text: str | Sequence[str]) -> tuple[str, ...]:
@@ -82,22 +81,10 @@ class FigureOptions:
         check(self, "")
 
 
-def _suffix(parameter: str) -> str:
-    """``CZ_alpha`` -> ``alpha`` (outputs of Eq. 1 have no underscore)."""
-    return parameter.split("_", 1)[1] if "_" in parameter else ""
-
-
-def parameter_unit(parameter: str) -> str:
-    """The unit of a parameter of Eq. 2 from its name: a derivative with respect to an angle,
-    a control surface or a nondimensional rate (``q_hat = q cbar/2V``, in rad) is per radian
-    (``1/rad``); the bias (``CZ_0``) is dimensionless (``-``)."""
-    return "1/rad" if _suffix(parameter) in _PER_RADIAN else "-"
-
-
 def parameter_label(parameter: str) -> str:
     """An axis label: the name and its unit, and for a rate derivative the rate it is per
     (``Cm_q, 1/rad (per q cbar/2V)``)."""
-    rate = _RATE_REGRESSOR.get(_suffix(parameter))
+    rate = parameter_rate(parameter)
     unit = parameter_unit(parameter)
     return f"{parameter}, {'dimensionless' if unit == '-' else unit}" + (f" (per {rate})" if rate else "")
 
@@ -255,22 +242,16 @@ def _fig12_maneuvers(bottom: Any, maneuvers: Sequence[str], est: np.ndarray) -> 
     bottom.set_xlabel("maneuver" if len(maneuvers) <= 30 else "maneuver index")
 
 
-def y_limits(t: np.ndarray, theta: np.ndarray, se: np.ndarray, start: float, *, quantile: float = 0.05,
-             pad: float = 0.08) -> tuple[float, float] | None:
+def y_limits(t: np.ndarray, theta: np.ndarray, se: np.ndarray, start: float, *, quantile: float = RANGE_QUANTILE,
+             pad: float = RANGE_PAD) -> tuple[float, float] | None:
     """y-limits of a parameter's history from the excited part of the maneuver: over the
     samples from ``start`` (:func:`.figure_data.excitation_start`), the ``quantile`` and
     ``1 - quantile`` quantiles of ``theta -/+ 2 se`` (so a short transient after the onset
     does not set the scale), widened to hold the final 2-sigma band, then padded by ``pad``
-    of the span. None when fewer than two finite samples lie after ``start``."""
-    ok = np.isfinite(theta) & np.isfinite(se)
-    sel = ok & (t >= start)
-    if sel.sum() < 2:
-        return None
-    th, s = theta[sel], se[sel]
-    lo = min(float(np.quantile(th - 2 * s, quantile)), float(th[-1] - 2 * s[-1]))
-    hi = max(float(np.quantile(th + 2 * s, 1 - quantile)), float(th[-1] + 2 * s[-1]))
-    span = hi - lo if hi > lo else max(abs(hi), 1e-12)
-    return lo - pad * span, hi + pad * span
+    of the span (:func:`..datapath.display.band_limits`, the rule the page uses too). None when
+    fewer than two finite samples lie after ``start``."""
+    sel = t >= start
+    return band_limits(theta[sel], se[sel], quantile=quantile, pad=pad)
 
 
 class _Model(NamedTuple):

@@ -15,8 +15,11 @@ const params = new URLSearchParams(location.search);
 const token = params.get("token");
 // counts: the server's samples shown per method and model (the "count" of its messages);
 // drawn: per method and model, the count and newest time the last draw showed (for tests).
+// t0: the time of the first sample (s), origin of the time axis unless clock is "utc"; yAll: the
+// y-range holds every sample shown, else the rule of docs/dashboard.md ("What the plots show").
 const state = { mode: "", reference: {}, models: new Map(), windowS: null, dirty: false, health: null,
-                counts: {}, drawn: {} };
+                counts: {}, drawn: {}, t0: null, clock: "relative", yAll: false, units: {},
+                range: { quantile: 0.05, pad: 0.08, transient: 0.2 } };
 window.rlsLatency = [];      // {published_ns, sent_ns, received_ms}: for benchmarks and tests
 window.rlsState = state;
 
@@ -40,6 +43,39 @@ function typeset(name) {
 }
 
 function fmt(x, digits) { return Number.isFinite(x) ? x.toFixed(digits) : "–"; }
+
+// Decimals that show a standard error to two significant digits (and its estimate to the same
+// place): 0.0043 -> 4, 0.43 -> 2, 23 -> 0; at most 12.
+function decimals(se) {
+  if (!(se > 0) || !Number.isFinite(se)) return 4;
+  return Math.min(12, Math.max(0, 1 - Math.floor(Math.log10(se))));
+}
+
+// Percent error 100 SE / |estimate|, one decimal ("–" when the estimate is 0).
+function percent(est, se) { return est !== 0 && Number.isFinite(est) ? fmt(100 * se / Math.abs(est), 1) + " %" : "–"; }
+
+// "CZ_alpha" -> "1/rad"; "Cm_q" -> "1/rad (per q cbar/2V)"; "CZ_0" -> "dimensionless" (the server's table).
+function unitOf(name) { const i = name.indexOf("_"); return i < 0 ? "" : state.units[name.slice(i + 1)] || ""; }
+
+// numpy.quantile's default (linear interpolation, its rounding) of an unsorted array.
+function quantile(values, q) {
+  const a = Float64Array.from(values).sort();
+  const pos = q * (a.length - 1), lo = Math.floor(pos), hi = Math.min(lo + 1, a.length - 1), g = pos - lo;
+  const d = a[hi] - a[lo];
+  return g >= 0.5 ? a[hi] - d * (1 - g) : a[lo] + d * g;
+}
+
+// The y-range of an estimate and its ±2σ band (datapath/display.py's band_limits): the
+// quantiles of the band's edges, widened to hold the newest band, padded.
+function bandLimits(est, se) {
+  const n = est.length;
+  if (n < 2) return null;
+  const { quantile: q, pad } = state.range;
+  const lo = Math.min(quantile(est.map((v, k) => v - 2 * se[k]), q), est[n - 1] - 2 * se[n - 1]);
+  const hi = Math.max(quantile(est.map((v, k) => v + 2 * se[k]), 1 - q), est[n - 1] + 2 * se[n - 1]);
+  const span = hi > lo ? hi - lo : Math.max(Math.abs(hi), 1e-12);
+  return [lo - pad * span, hi + pad * span];
+}
 
 // ------------------------------------------------------------------ data
 // state.models: model name -> { name, methods: { method: history }, quality: { method: quality
@@ -78,6 +114,7 @@ function thin(h) {
 function appendColumns(method, name, cols) {
   const m = modelFor(name);
   if (cols.count !== undefined) (state.counts[method] ||= {})[name] = cols.count;
+  if (cols.t.length && (state.t0 === null || cols.t[0] < state.t0)) state.t0 = cols.t[0];
   let h = m.methods[method];
   const sameNames = h && h.names.join(",") === cols.names.join(",");
   const goesBack = h && h.t.length && cols.t.length && cols.t[0] <= h.t[h.t.length - 1];
@@ -124,9 +161,11 @@ function readoutRow(method, first, labelled, badge) {
   }
   const value = el("span", first ? "value" : "alt-value", "–");
   const se = el("span", first ? "se" : "alt-se");
-  row.append(value, se);
+  const pct = el("span", "pct");
+  pct.title = "percent error, 100 SE / |estimate|";
+  row.append(value, se, pct);
   if (!first) { badge = el("span", "alt-badge", "not converged"); badge.dataset.converged = "0"; row.append(badge); }
-  return { row, value, se, badge };
+  return { row, value, se, pct, badge };
 }
 
 function chartSeries(methods, reference) {
@@ -160,6 +199,7 @@ function panelFor(m, layout, name, container) {
   left.append(title);
   const ts = typeset(name);
   if (ts) { left.append(" "); left.append(ts); }
+  left.append(el("span", "unit", unitOf(name)));
   const tags = el("span", "tags");
   const held = el("span", "held-tag", "HELD BACK");
   held.hidden = true;
@@ -173,20 +213,24 @@ function panelFor(m, layout, name, container) {
   const first = rows[layout.methods[0]].row;
   const ref = el("span", "ref");
   first.append(ref);
+  const pstate = el("div", "pstate");
   const ident = el("div", "ident");
   const chart = el("div", "chart");
-  panel.append(head, ...layout.methods.map((k) => rows[k].row), ident, chart);
+  panel.append(head, ...layout.methods.map((k) => rows[k].row), pstate, ident, chart);
   container.append(panel);
   const reference = state.reference[name];
-  if (reference !== undefined) ref.textContent = "reference " + fmt(reference, 4);
   const { series, slots, bands } = chartSeries(layout.methods, reference);
+  const p = { name, panel, badge, held, rows, slots, pstate, ident, chart, reference, ref, yRange: null };
+  const utc = state.clock === "utc";
   const opts = {
     width: Math.max(chart.clientWidth || 420, 300), height: 190, series, legend: { show: false }, bands,
-    scales: { x: { time: true } }, cursor: { drag: { x: false, y: false } },
+    scales: { x: { time: utc }, y: { range: (u, lo, hi) => p.yRange || uPlot.rangeNum(lo, hi, 0.1, true) } },
+    cursor: { drag: { x: false, y: false } },
     axes: [{ stroke: "#8b96a5", grid: { stroke: "#2a313c" } }, { stroke: "#8b96a5", grid: { stroke: "#2a313c" }, size: 70 }],
   };
-  const u = new uPlot(opts, series.map(() => []), chart);
-  return { name, panel, badge, held, rows, slots, ident, u, chart, reference };
+  if (utc) opts.tzDate = (ts) => uPlot.tzDate(new Date(ts * 1e3), "Etc/UTC");
+  p.u = new uPlot(opts, series.map(() => []), chart);
+  return p;
 }
 
 // The residual autocorrelation at the retained lags with the 2σ white-noise bound (Fig. 5).
@@ -256,9 +300,11 @@ function lowerBound(arr, x) {
 
 // Indices of the samples drawn: those in the window ending at `end`, strided to MAX_POINTS,
 // the newest always in.
+function windowStart(t, end) { return state.windowS ? lowerBound(t, end - state.windowS) : 0; }
+
 function drawnIndices(t, end) {
   const n = t.length;
-  const start = state.windowS ? lowerBound(t, end - state.windowS) : 0;
+  const start = windowStart(t, end);
   const stride = Math.max(1, Math.ceil((n - start) / MAX_POINTS));
   const idx = [];
   for (let k = start; k < n; k += stride) idx.push(k);
@@ -270,15 +316,51 @@ function drawnIndices(t, end) {
 // method, its drawn indices and their positions in x (a method's values are null elsewhere).
 function commonAxis(m, methods) {
   const end = Math.max(...methods.map((k) => m.methods[k].t.at(-1)));
-  const drawn = methods.map((k) => { const h = m.methods[k]; return { k, h, idx: drawnIndices(h.t, end) }; });
+  const drawn = methods.map((k) => { const h = m.methods[k]; return { k, h, idx: drawnIndices(h.t, end), start: windowStart(h.t, end) }; });
+  const origin = state.clock === "utc" ? 0 : state.t0;
   if (drawn.length === 1) {
     const d = drawn[0];
     d.pos = d.idx.map((_, j) => j);
-    return { x: d.idx.map((k) => d.h.t[k]), drawn };
+    return { x: d.idx.map((k) => d.h.t[k] - origin), drawn };
   }
   const x = [...new Set(drawn.flatMap((d) => d.idx.map((k) => d.h.t[k])))].sort((a, b) => a - b);
   for (const d of drawn) d.pos = d.idx.map((k) => lowerBound(x, d.h.t[k]));
-  return { x, drawn };
+  return { x: x.map((v) => v - origin), drawn };
+}
+
+// The y-range of a panel (docs/dashboard.md, "What the plots show"): per method, over the samples
+// of the window after its first `transient` fraction, bandLimits; their union. Null: every sample.
+function yRangeOf(p, drawn) {
+  if (state.yAll) return null;
+  let lo = Infinity, hi = -Infinity;
+  for (const d of drawn) {
+    const i = d.h.names.indexOf(p.name);
+    if (i < 0) continue;
+    const n = d.h.t.length - d.start;
+    const from = d.start + Math.floor(state.range.transient * n);
+    const limits = bandLimits(d.h.estimate[i].slice(from), d.h.se[i].slice(from));
+    if (limits) { lo = Math.min(lo, limits[0]); hi = Math.max(hi, limits[1]); }
+  }
+  return Number.isFinite(lo) ? [lo, hi] : null;
+}
+
+// The reference's verdict: how many corrected standard errors the estimate is from it.
+function showReference(p, h, i) {
+  if (p.reference === undefined) return;
+  const last = h.t.length - 1;
+  const est = i < 0 ? NaN : h.estimate[i][last], se = i < 0 ? NaN : h.se[i][last];
+  const sigmas = Math.abs(est - p.reference) / se;
+  p.ref.textContent = "reference " + fmt(p.reference, decimals(se)) + (Number.isFinite(sigmas) ? `  ·  ${fmt(sigmas, 1)}σ off` : "");
+  p.ref.dataset.sigmas = Number.isFinite(sigmas) ? String(sigmas) : "";
+  p.ref.dataset.verdict = !Number.isFinite(sigmas) ? "" : sigmas <= 2 ? "within" : "outside";
+}
+
+function clearReadout(row) {
+  row.value.textContent = "–";
+  row.se.textContent = "";
+  row.pct.textContent = "";
+  row.badge.dataset.converged = "0";
+  row.badge.textContent = "not converged";
 }
 
 function showReadout(row, h, i, primary) {
@@ -286,13 +368,16 @@ function showReadout(row, h, i, primary) {
   if (i < 0) {  // a parameter this method does not estimate (the frequency domain's bias)
     row.value.textContent = "–";
     row.se.textContent = "not estimated";
+    row.pct.textContent = "";
     row.badge.hidden = !primary;
     return false;
   }
-  row.value.textContent = fmt(h.estimate[i][last], 4);
+  const est = h.estimate[i][last], se = h.se[i][last], sc = h.se_conventional[i][last];
+  row.value.textContent = fmt(est, decimals(se));
   row.se.textContent = "";
-  row.se.append("SE " + fmt(h.se[i][last], 4) + " ");
-  row.se.append(el("span", "conv", "(conv. " + fmt(h.se_conventional[i][last], 4) + ")"));
+  row.se.append("SE " + fmt(se, decimals(se)) + " ");
+  row.se.append(el("span", "conv", "(conv. " + fmt(sc, decimals(sc)) + ")"));
+  row.pct.textContent = percent(est, se);
   const converged = h.converged[i][last] === 1 ? "1" : "0";
   row.badge.hidden = false;
   row.badge.dataset.converged = converged;
@@ -320,8 +405,9 @@ function drawModel(m) {
                 column(d, est, (k) => est[k] - 2 * se[k]));
       if (j === 0) data.push(column(d, est, (k) => est[k] + 2 * sc[k]), column(d, est, (k) => est[k] - 2 * sc[k]));
       const converged = showReadout(p.rows[d.k], d.h, i, j === 0);
-      if (j === 0) p.panel.classList.toggle("converged", converged);
+      if (j === 0) { p.panel.classList.toggle("converged", converged); showReference(p, d.h, i); }
     });
+    p.yRange = yRangeOf(p, drawn);
     if (p.reference !== undefined) data.push(x.map(() => p.reference));
     const width = Math.max(p.chart.clientWidth, 300);
     if (width !== p.u.width) p.u.setSize({ width, height: 190 });
@@ -337,7 +423,10 @@ function drawQuality(m) {
   const q = m.quality[QUALITY_METHOD];
   const diag = state.health && state.health.models ? state.health.models[m.name] : null;
   const held = new Set(diag && diag.held_back ? diag.held_back.split(",").filter(Boolean) : []);
+  const layout = layoutOf(m);
+  const methods = layout ? layout.methods : [];  // time domain first
   for (const p of v.plots) {
+    showState(p, diag, methods.length > 1 ? methods : []);
     const info = q && q.parameters ? q.parameters[p.name] : null;
     p.held.hidden = !held.has(p.name);
     p.panel.classList.toggle("held-back", held.has(p.name));
@@ -369,6 +458,38 @@ function drawQuality(m) {
   v.status.textContent = diag ? (diag.ready === "True" ? (diag.converged === "True" ? "converged" : "") : (diag.message || "")) : "";
 }
 
+// A parameter's state in words from the node's /diagnostics (state.<p>, frequency.state.<p>):
+// converged, settling, held back: <reason>, initializing (k of N samples), withheld.
+function showState(p, diag, methods) {
+  const key = (k) => (k === "time" ? "" : k + ".") + "state." + p.name;
+  const parts = (methods.length ? methods : ["time"]).filter((k) => diag && diag[key(k)] !== undefined)
+    .map((k) => (methods.length ? methodStyle(k).label + ": " : "") + diag[key(k)]);
+  p.pstate.textContent = parts.join("  ·  ");
+  p.pstate.dataset.state = diag && diag[key("time")] !== undefined ? diag[key("time")].split(/[:( ]/)[0] : "";
+}
+
+// The node reset: what it showed is gone. The panels stay, emptied, until its next samples
+// (their state lines say how far the node's models are).
+function clearModels() {
+  for (const m of state.models.values()) {
+    m.methods = {};
+    m.quality = {};
+    if (!m.view) continue;
+    for (const p of m.view.plots) {
+      for (const row of Object.values(p.rows)) clearReadout(row);
+      p.panel.classList.remove("converged");
+      if (p.reference !== undefined) { p.ref.textContent = "reference " + fmt(p.reference, 4); p.ref.dataset.verdict = ""; }
+      p.u.setData(p.u.series.map(() => []));
+    }
+    m.view.fit.textContent = "";
+    if (m.view.acf) { m.view.acf.destroy(); m.view.acf = null; }
+    m.view.acfBox.dataset.shown = "";
+  }
+  state.counts = {};
+  state.t0 = null;
+  state.dirty = true;
+}
+
 function draw() {
   state.dirty = false;
   let newest = -Infinity;
@@ -387,10 +508,10 @@ function draw() {
   }
   state.drawn = drawn;
   document.getElementById("models").dataset.drawn = String(total);
-  if (Number.isFinite(newest)) {
-    const d = new Date(newest * 1000);
-    document.getElementById("clock").textContent = "t = " + d.toISOString().replace("T", " ").slice(0, 22) + " UTC";
-  }
+  const clock = document.getElementById("clock");
+  if (!Number.isFinite(newest)) clock.textContent = "";
+  else if (state.clock === "utc") clock.textContent = "t = " + new Date(newest * 1000).toISOString().replace("T", " ").slice(0, 22) + " UTC";
+  else clock.textContent = `t = ${fmt(newest - state.t0, 2)} s since the first sample`;
 }
 
 // ------------------------------------------------------------------ health
@@ -445,6 +566,8 @@ function onMessage(msg) {
   if (msg.type === "hello") {
     state.mode = msg.mode;
     state.reference = msg.reference || {};
+    state.units = msg.units || {};
+    if (msg.range) state.range = msg.range;
     const mode = document.getElementById("mode");
     mode.textContent = msg.mode === "live" ? "LIVE" : "REPLAY";
     mode.className = "tag " + msg.mode;
@@ -457,6 +580,7 @@ function onMessage(msg) {
     for (const m of state.models.values()) removeView(m);
     state.models.clear();
     state.counts = {};
+    state.t0 = null;
     for (const q of msg.quality) setQuality(q);
     state.dirty = true;
   } else if (msg.type === "samples") {
@@ -466,6 +590,8 @@ function onMessage(msg) {
       window.rlsLatency.push({ published_ns: msg.published_ns, sent_ns: msg.sent_ns, received_ms: received,
                                stamp: Math.max(...Object.values(msg.models).map((c) => c.t[c.t.length - 1])) });
     }
+  } else if (msg.type === "reset") {
+    clearModels();
   } else if (msg.type === "quality") {
     setQuality(msg);
   } else if (msg.type === "health") {
@@ -497,6 +623,20 @@ function setWindow(seconds) {
   state.dirty = true;
 }
 
+// y: the rule's range or every sample; time: since the first sample or UTC (the plots rebuilt).
+function setView(yAll, clock) {
+  const rebuild = clock !== state.clock;
+  state.yAll = yAll;
+  state.clock = clock;
+  document.getElementById("y-all").classList.toggle("active", yAll);
+  document.getElementById("clock-utc").classList.toggle("active", clock === "utc");
+  if (rebuild) for (const m of state.models.values()) removeView(m);
+  state.dirty = true;
+}
+
 for (const b of document.querySelectorAll("nav#window button")) b.addEventListener("click", () => setWindow(Number(b.dataset.window)));
+document.getElementById("y-all").addEventListener("click", () => setView(!state.yAll, state.clock));
+document.getElementById("clock-utc").addEventListener("click", () => setView(state.yAll, state.clock === "utc" ? "relative" : "utc"));
+setView(params.get("y") === "all", params.get("clock") === "utc" ? "utc" : "relative");
 setInterval(() => { if (state.dirty) draw(); }, DRAW_PERIOD_MS);
 connect();
