@@ -1,11 +1,16 @@
 """Table 3 Monte Carlo of the paper (Section IV.A), and Figs. 5-7.
 
 For each band-limited noise level, ``runs`` noisy realisations of the T-2 maneuver go through
-the same aero reduction and differentiator the node uses, and through one
-:class:`~rls_uncertainty.estimator.EstimatorBank` holding every run's C_Z and C_m models
-(so all runs advance together, sample by sample). End-of-maneuver estimates, conventional and
-corrected standard errors (means over runs) and the observed scatter (standard deviation of
-the final estimates) are compared with the paper's Table 3.
+the same aero reduction and differentiator the node uses, and, in batches of
+:data:`BATCH_RUNS` runs (one job of an :mod:`..executors` executor each), through one
+:class:`~rls_uncertainty.estimator.EstimatorBank` holding the batch's C_Z and C_m models (so
+its runs advance together, sample by sample) and, with the method ``"frequency"`` or
+``"both"`` (:data:`..datapath.config.METHODS`), one
+:class:`~rls_uncertainty.frequency.FrequencyBank` on the same rows without the bias, as the
+node's frequency path takes them. The batches are joined in run order before the statistics
+over runs are formed, so the numbers do not depend on who ran the batches. End-of-maneuver
+estimates, conventional and corrected standard errors (means over runs) and the observed
+scatter (standard deviation of the final estimates) are compared with the paper's Table 3.
 """
 
 from __future__ import annotations
@@ -649,7 +654,9 @@ def convergence_summary(res: LevelResult) -> list[dict]:
       delayed or withheld.
 
     For a model the flag time is the first time all its parameters are flagged, and a false
-    convergence is any of its Table 3 parameters outside.
+    convergence is any of its Table 3 parameters outside. The statistics over runs (cover
+    times, truth outside) exist at the samples where every model of every run is ready (the
+    C_Z models, with fewer parameters, may publish a sample before the C_m models).
     """
     t, runs = res.time, res.runs
     d = 2.0 / math.sqrt(2.0 * (runs - 1)) if runs > 1 else 0.0
