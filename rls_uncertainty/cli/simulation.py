@@ -17,7 +17,7 @@ import numpy as np
 from ..errors import ConfigError, OutputPathError
 from ..estimator.options import EstimatorOptions
 from ..schema import settings
-from ..settings.parameters import estimator_options
+from ..settings.parameters import PARAMETER_NAMES, estimator_options
 from .flags import FORCE_HELP, add_parameter_flags, add_workers, integer, parameter_overrides, real
 
 __all__ = ["ESTIMATOR_FLAGS", "add_simulate", "add_montecarlo", "add_multisine", "noise_on", "noise_on_name",
@@ -25,6 +25,7 @@ __all__ = ["ESTIMATOR_FLAGS", "add_simulate", "add_montecarlo", "add_multisine",
 
 # The estimator's parameters that have a flag: every command that runs the estimator takes them.
 ESTIMATOR_FLAGS = tuple(s.ros for _f, s in settings(EstimatorOptions) if s.cli)
+METHOD = "estimator.method"  # --method: the estimates of montecarlo, as the node's parameter
 NOISE_ON_HELP = ("measured signals carrying the band-limited noise: 'all' (elevator, alpha, q, a_z) or 'responses' "
                  "(alpha, q, a_z) (default: the simulation's, docs/validation.md, Table 3)")
 
@@ -74,21 +75,26 @@ def _simulate(args: argparse.Namespace) -> int:
 
 
 def _montecarlo(args: argparse.Namespace) -> int:
-    """Table 3 of the paper: every noise level, ``--runs`` runs each, on every core."""
+    """Table 3 of the paper: every noise level, ``--runs`` runs each, with ``--method``'s estimators,
+    the runs in batches on every core (or a Dask cluster)."""
     from ..executors import executor_for
     from ..files import output_directory
-    from ..simulation.montecarlo import LEVELS, run_table3, write_outputs
+    from ..simulation.montecarlo import LEVELS, run_table3, t2_frequency_options, write_outputs
 
     levels = LEVELS if args.levels is None else tuple(x / 100.0 for x in args.levels)
     out = Path(args.out)
     options = simulation_options(args)
+    method = getattr(args, METHOD) or PARAMETER_NAMES[METHOD].default
+    # The frequency domain on the T-2 grid of config/t2.yaml, with the flags' publication rule.
+    frequency = None if method == "time" else t2_frequency_options(options.publish_lag_windows)
     executor = executor_for(args.scheduler, args.workers)
     # The output directory is checked before the runs and appears only when complete.
     with output_directory(out, force=args.force) as tmp:
-        print(f"Monte Carlo: {args.runs} runs x {len(levels)} levels, {options.lags} lags, residual burn-in "
-              f"{options.burn_in}, band-limited noise on {noise_on_name(args.noise_on)}, {executor.description}")
+        print(f"Monte Carlo: {args.runs} runs x {len(levels)} levels, method {method}, {options.lags} lags, residual "
+              f"burn-in {options.burn_in}, band-limited noise on {noise_on_name(args.noise_on)}, "
+              f"{executor.description}")
         results = run_table3(args.runs, levels, options=options, executor=executor,
-                             band_limited_on=noise_on(args.noise_on))
+                             band_limited_on=noise_on(args.noise_on), method=method, frequency=frequency)
         paths = write_outputs(results, tmp, figures=not args.no_figures)
         table = paths["md"].read_text()
     print(table)
@@ -156,12 +162,14 @@ def add_simulate(sub: Any) -> None:
 def add_montecarlo(sub: Any) -> None:
     mc = sub.add_parser("montecarlo", help="reproduce Table 3 and Figs. 5-7 of the paper",
                         description="Table 3 of the paper: every noise level, --runs runs each, at 50 Hz; the "
-                                    "estimator's settings are the node's, spans in seconds.")
+                                    "estimator's settings are the node's, spans in seconds; --method frequency or "
+                                    "both runs the frequency-domain estimator (on the same runs), with "
+                                    "config/t2.yaml's frequency.* settings.")
     mc.add_argument("--runs", type=integer(1), default=250, help="runs per noise level (default 250)")
     mc.add_argument("--out", required=True, help="output directory")
     mc.add_argument("--levels", type=real(0.0), nargs="+", help="noise levels in percent (default 0 5 10 15 20)")
-    add_parameter_flags(mc, ESTIMATOR_FLAGS)
-    add_workers(mc, "the levels")
+    add_parameter_flags(mc, (*ESTIMATOR_FLAGS, METHOD))
+    add_workers(mc, "the batches of runs")
     mc.add_argument("--noise-on", choices=("all", "responses"), help=NOISE_ON_HELP)
     mc.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
     mc.add_argument("--force", action="store_true", help=FORCE_HELP)

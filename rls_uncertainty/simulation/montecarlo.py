@@ -1,11 +1,16 @@
 """Table 3 Monte Carlo of the paper (Section IV.A), and Figs. 5-7.
 
 For each band-limited noise level, ``runs`` noisy realisations of the T-2 maneuver go through
-the same aero reduction and differentiator the node uses, and through one
-:class:`~rls_uncertainty.estimator.EstimatorBank` holding every run's C_Z and C_m models
-(so all runs advance together, sample by sample). End-of-maneuver estimates, conventional and
-corrected standard errors (means over runs) and the observed scatter (standard deviation of
-the final estimates) are compared with the paper's Table 3.
+the same aero reduction and differentiator the node uses, and, in batches of
+:data:`BATCH_RUNS` runs (one job of an :mod:`..executors` executor each), through one
+:class:`~rls_uncertainty.estimator.EstimatorBank` holding the batch's C_Z and C_m models (so
+its runs advance together, sample by sample) and, with the method ``"frequency"`` or
+``"both"`` (:data:`..datapath.config.METHODS`), one
+:class:`~rls_uncertainty.frequency.FrequencyBank` on the same rows without the bias, as the
+node's frequency path takes them. The batches are joined in run order before the statistics
+over runs are formed, so the numbers do not depend on who ran the batches. End-of-maneuver
+estimates, conventional and corrected standard errors (means over runs) and the observed
+scatter (standard deviation of the final estimates) are compared with the paper's Table 3.
 """
 
 from __future__ import annotations
@@ -20,12 +25,15 @@ from pathlib import Path
 import numpy as np
 
 from ..aero.differentiation import DifferentiatorConfig
-from ..aero.models import REGRESSOR_UNITS
+from ..aero.models import BIAS_REGRESSOR, REGRESSOR_UNITS
+from ..datapath.config import METHODS
 from ..datapath.convergence import ConvergenceConfig, ConvergenceMonitor
+from ..datapath.guard import withheld as unpublishable
 from ..datapath.identifiability import IdentifiabilityConfig, IdentifiabilityMonitor
-from ..errors import WorkerLost
+from ..errors import ConfigError, WorkerLost
 from ..estimator import EstimatorBank, EstimatorOptions, Lags, batch_estimate
 from ..executors import Executor, LocalProcesses, Lost
+from ..frequency import FrequencyBank, FrequencyOptions
 from .t2 import (
     BAND_LIMITED_ON,
     SIGNALS,
@@ -44,7 +52,9 @@ __all__ = [
     "MONTE_CARLO_CONVERGENCE",
     "BEST_FROM",
     "TABLE3_OPTIONS",
+    "BATCH_RUNS",
     "LevelResult",
+    "t2_frequency_options",
     "level_inputs",
     "run_level",
     "run_table3",
@@ -91,6 +101,9 @@ BEST_FROM = SimulationConfig().input_start + 0.5  # s: from here on, the floor o
 NODE_IDENTIFIABILITY = IdentifiabilityConfig()
 # The estimator of Table 3: 50 lags, the paper's Eq. 17 (no residual burn-in).
 TABLE3_OPTIONS = EstimatorOptions(lags=50)
+# Runs per job of run_table3: a level's runs are cut into batches of this many (the last one
+# shorter), whatever runs them, so the numbers do not depend on the workers.
+BATCH_RUNS = 25
 
 
 @dataclass
@@ -128,18 +141,24 @@ class LevelResult:
     lags_used: np.ndarray | None = None  # (runs, 2) final L of C_Z / C_m (chosen with lags="auto")
     converged_end: np.ndarray | None = None  # (runs, 5) flagged converged at the last sample (identifiability tests on)
     identifiable_end: np.ndarray | None = None  # (runs, 5) identifiable at the last sample
-    options: EstimatorOptions = TABLE3_OPTIONS  # of se_corrected and se_conventional
+    options: EstimatorOptions = TABLE3_OPTIONS  # of se_corrected and se_conventional (time domain)
     band_limited_on: tuple[str, ...] = BAND_LIMITED_ON  # the measured signals with band-limited noise (add_noise)
+    # "time" (recursive least squares) or "frequency" (docs/frequency.md, with the options
+    # ``frequency``): the method of the estimates, SEs and flags. A frequency-domain result has
+    # no all-lags or batch SEs (NaN), no lags_used and no last_run.
+    method: str = "time"
+    frequency: FrequencyOptions | None = None
 
     @property
     def lags(self) -> Lags:
         """The retained lags of ``se_corrected``: an integer, "all" or "auto"."""
-        return self.options.lags
+        return self.frequency.n_lags if self.frequency is not None else self.options.lags
 
     @property
     def residual_burn_in(self) -> int:
-        """The residual burn-in of ``se_corrected`` and ``se_conventional`` (50 with "auto" by default)."""
-        return self.options.burn_in
+        """The residual burn-in of ``se_corrected`` and ``se_conventional`` (50 with "auto" by
+        default; none in the frequency domain)."""
+        return 0 if self.frequency is not None else self.options.burn_in
 
     def summary(self) -> dict[str, dict[str, float]]:
         out = {}
@@ -175,10 +194,12 @@ def parameter_cells(runs: int) -> tuple[np.ndarray, np.ndarray]:
 
 
 def level_inputs(
-    level: float, runs: int, *, seed: int = 2016, band_limited_on: Collection[str] = BAND_LIMITED_ON
+    level: float, runs: int, *, seed: int = 2016, band_limited_on: Collection[str] = BAND_LIMITED_ON, first: int = 0
 ) -> tuple[np.ndarray, list[dict[str, tuple[np.ndarray, np.ndarray]]], list[int], np.ndarray, np.ndarray]:
     """Regressors and outputs of every run of one noise level, as the bank takes them, with
-    the band-limited noise on the signals ``band_limited_on`` (:func:`.simulation.add_noise`).
+    the band-limited noise on the signals ``band_limited_on`` (:func:`.simulation.add_noise`):
+    runs ``first`` to ``first + runs - 1`` of the level (each run's noise is drawn from its own
+    seed ``[seed, level in thousandths, run]``, whichever runs are drawn with it).
 
     Returns ``(t, reductions, sizes, X, Z)``: sample times (N,), each run's reduced data
     (``{"CZ": (X, z), "Cm": (X, z)}``), the model sizes (run ``r``'s C_Z model is bank row
@@ -186,7 +207,7 @@ def level_inputs(
     """
     clean = simulate_short_period()
     reductions = []
-    for run in range(runs):
+    for run in range(first, first + runs):
         rng = np.random.default_rng([seed, int(round(level * 1000)), run])
         t, data = reduce_short_period(add_noise(clean, level, rng, band_limited_on=band_limited_on),
                                       PAPER_DIFFERENTIATOR)
@@ -206,94 +227,118 @@ def level_inputs(
 
 
 class _Tracker:
-    """What :func:`run_level` records at every sample besides the end-of-maneuver results: the
-    Fig. 6 history of C_Z_alpha, and from one :class:`~rls_uncertainty.datapath.convergence.
-    ConvergenceMonitor` over every run's models, less what the node's identifiability tests take
-    out (:class:`~rls_uncertainty.datapath.identifiability.IdentifiabilityMonitor`), the first flag of
-    each parameter and model (estimate and corrected SE at that moment; and the first flag
-    without the tests) and the ensemble mean, mean corrected SE, scatter and truth-outside rates
-    of every Table 3 parameter."""
+    """What one method records of every run of a batch at every sample, besides the
+    end-of-maneuver results: the Table 3 parameters' estimates, corrected SEs, which runs have
+    every model ready, C_Z_alpha's conventional SE (Fig. 6), and from one
+    :class:`~rls_uncertainty.datapath.convergence.ConvergenceMonitor` over the batch's models,
+    less what the node's identifiability tests take out
+    (:class:`~rls_uncertainty.datapath.identifiability.IdentifiabilityMonitor`, judged on the
+    time-domain fit, as the node judges both methods), the first flag of each parameter and
+    model (estimate and corrected SE at that moment; and the first flag without the tests).
+    ``cols``: the column of each Table 3 parameter in its model's row of this method's bank.
+    The statistics over runs are formed once every batch is in (:func:`_ensemble`)."""
 
-    def __init__(self, t: np.ndarray, runs: int, sizes: list[int], convergence: ConvergenceConfig,
-                 identifiability: IdentifiabilityConfig) -> None:
+    def __init__(self, t: np.ndarray, runs: int, sizes: list[int], cols: np.ndarray,
+                 convergence: ConvergenceConfig) -> None:
         n_models, N, P = len(T2_MODELS), t.size, len(PARAMETERS)
         self.t, self.runs = t, runs
         self.monitor = ConvergenceMonitor(sizes, convergence)
-        rows = [m.regressors for m in T2_MODELS] * runs
-        units = [[REGRESSOR_UNITS[r] for r in row] for row in rows]
-        self.quality = IdentifiabilityMonitor(rows, units, identifiability)
         self.untested_k = np.full((runs, P), -1)
         self.untested_model_k = np.full((runs, n_models), -1)
         self.stamps = np.round(t * 1e9).astype(np.int64)
         self.cz = np.arange(runs) * n_models  # CZ model of each run
         self.model_of = np.array([_WHERE[p][0] for p in PARAMETERS])
-        self.p_row, self.p_col = parameter_cells(runs)  # (runs, 5) bank row and column of each parameter
-        self.history = np.full((N, 3), np.nan)  # mean CZ_alpha, mean conventional SE, mean corrected SE
-        self.scatter = np.full(N, np.nan)
+        self.p_row = parameter_cells(runs)[0]  # (runs, 5) bank row of each parameter
+        self.p_col = np.broadcast_to(cols, self.p_row.shape)
+        self.theta, self.se = np.full((N, runs, P), np.nan), np.full((N, runs, P), np.nan)
+        self.conventional0 = np.full((N, runs), np.nan)  # conventional SE of C_Z_alpha
+        self.ready = np.zeros((N, runs), dtype=bool)  # every model of the run ready
+        self.cz_ready = np.zeros((N, runs), dtype=bool)
         self.flag_k = np.full((runs, P), -1)
         self.flag_theta, self.flag_se = np.full((runs, P), np.nan), np.full((runs, P), np.nan)
         self.model_k = np.full((runs, n_models), -1)
         self.model_theta, self.model_se = np.full((runs, P), np.nan), np.full((runs, P), np.nan)
-        self.ens = np.full((3, N, P), np.nan)  # mean estimate, mean SE, scatter
-        self.truth = np.array([T2_TRUE[p] for p in PARAMETERS])
-        self.outside = np.full((N, P + n_models), np.nan)
         self.final_flags = np.zeros((runs, P), dtype=bool)
+        self.identifiable = np.zeros((runs, P), dtype=bool)
 
-    def sample(self, k: int, bank: EstimatorBank, x: np.ndarray, z: np.ndarray) -> None:
-        runs, cz, P = self.runs, self.cz, len(PARAMETERS)
-        self.quality.add(x, z)
-        if bank.ready[cz].all():
-            th = bank.theta_all()[cz, 1]
-            self.history[k] = (th.mean(), bank.standard_errors_all("conventional")[cz, 1].mean(),
-                               bank.standard_errors_all("corrected")[cz, 1].mean())
-            self.scatter[k] = th.std(ddof=1) if runs > 1 else 0.0
-        theta_k, se_k, ready_k = bank.theta_all(), bank.standard_errors_all("corrected"), bank.ready
+    def sample(self, k: int, theta_k: np.ndarray, se_k: np.ndarray, conventional_k: np.ndarray,
+               ready_k: np.ndarray, restrict: Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]],
+               identifiable: Callable[[], np.ndarray]) -> None:
+        """Sample ``k`` of the bank's outputs; ``restrict``: the identifiability tests on its flags,
+        ``identifiable``: the parameters they pass (both in this method's layout)."""
+        runs, n_models = self.runs, len(T2_MODELS)
+        self.cz_ready[k] = ready_k[self.cz]
+        self.ready[k] = ready_k.reshape(runs, n_models).all(axis=1)
+        self.conventional0[k] = conventional_k[self.cz, self.p_col[0, 0]]
         flags, model_flags = self.monitor.update(int(self.stamps[k]), theta_k, se_k, ready_k)
         untested = flags[self.p_row, self.p_col] & (self.untested_k < 0)
         self.untested_k[untested] = k
-        self.untested_model_k[model_flags.reshape(runs, len(T2_MODELS)) & (self.untested_model_k < 0)] = k
+        self.untested_model_k[model_flags.reshape(runs, n_models) & (self.untested_model_k < 0)] = k
         # The node's tests: a parameter not identifiable is never flagged.
-        flags, model_flags = self.quality.restrict(flags, model_flags, bank, ready_k)
+        flags, model_flags = restrict(flags, model_flags)
         self.final_flags = flags[self.p_row, self.p_col]
         th_p, se_p = theta_k[self.p_row, self.p_col], se_k[self.p_row, self.p_col]
+        self.theta[k], self.se[k] = th_p, se_p
         new = flags[self.p_row, self.p_col] & (self.flag_k < 0)
         self.flag_k[new], self.flag_theta[new], self.flag_se[new] = k, th_p[new], se_p[new]
-        new_model = model_flags.reshape(runs, len(T2_MODELS)) & (self.model_k < 0)
+        new_model = model_flags.reshape(runs, n_models) & (self.model_k < 0)
         self.model_k[new_model] = k
         new = new_model[:, self.model_of]
         self.model_theta[new], self.model_se[new] = th_p[new], se_p[new]
-        if ready_k.all():
-            self.ens[0, k], self.ens[1, k] = th_p.mean(axis=0), se_p.mean(axis=0)
-            self.ens[2, k] = th_p.std(axis=0, ddof=1) if runs > 1 else 0.0
-            out = np.abs(th_p - self.truth) > 2 * se_p
-            self.outside[k, :P] = out.mean(axis=0)
-            self.outside[k, P:] = [out[:, self.model_of == m].any(axis=1).mean() for m in range(len(T2_MODELS))]
+        if k == self.t.size - 1:
+            self.identifiable = identifiable()[self.p_row, self.p_col]
 
     def results(self) -> dict:
-        """The :class:`LevelResult` fields recorded here."""
+        """This batch's per-run records (:func:`_merge` joins the batches)."""
         t = self.t
         return dict(
-            time=t, history_mean=self.history, history_scatter=self.scatter,
+            theta=self.theta, se=self.se, conventional0=self.conventional0, ready=self.ready, cz_ready=self.cz_ready,
             flag_time=np.where(self.flag_k >= 0, t[self.flag_k], np.inf),
             untested_flag_time=np.where(self.untested_k >= 0, t[self.untested_k], np.inf),
             untested_model_flag_time=np.where(self.untested_model_k >= 0, t[self.untested_model_k], np.inf),
             flag_theta=self.flag_theta, flag_se=self.flag_se,
             model_flag_time=np.where(self.model_k >= 0, t[self.model_k], np.inf),
             model_flag_theta=self.model_theta, model_flag_se=self.model_se,
-            ensemble_mean=self.ens[0], ensemble_se=self.ens[1], ensemble_scatter=self.ens[2],
-            truth_outside=self.outside, converged_end=self.final_flags,
-            identifiable_end=self.quality.identifiable[self.p_row, self.p_col],
+            converged_end=self.final_flags, identifiable_end=self.identifiable,
         )
 
 
-def _collect(bank: EstimatorBank, runs: int, kind: str | None) -> np.ndarray:
-    """``(runs, 5)`` final estimates (``kind`` None) or standard errors of the Table 3 parameters."""
+def _ensemble(t: np.ndarray, rec: dict) -> dict:
+    """The :class:`LevelResult` fields over all runs of a level, each sample: the Fig. 6 history
+    of C_Z_alpha (where every run's C_Z model is ready), and the ensemble mean, mean corrected
+    SE, scatter and truth-outside rates of every Table 3 parameter (where every run's models
+    are all ready)."""
+    theta, se, runs, N, P = rec["theta"], rec["se"], rec["theta"].shape[1], t.size, len(PARAMETERS)
+    model_of = np.array([_WHERE[p][0] for p in PARAMETERS])
+    truth = np.array([T2_TRUE[p] for p in PARAMETERS])
+    history, scatter = np.full((N, 3), np.nan), np.full(N, np.nan)
+    ens = np.full((3, N, P), np.nan)  # mean estimate, mean SE, scatter
+    outside = np.full((N, P + len(T2_MODELS)), np.nan)
+    for k in range(N):
+        if rec["cz_ready"][k].all():
+            th = theta[k, :, 0].copy()
+            history[k] = (th.mean(), rec["conventional0"][k].mean(), se[k, :, 0].copy().mean())
+            scatter[k] = th.std(ddof=1) if runs > 1 else 0.0
+        if rec["ready"][k].all():
+            th_p, se_p = theta[k], se[k]
+            ens[0, k], ens[1, k] = th_p.mean(axis=0), se_p.mean(axis=0)
+            ens[2, k] = th_p.std(axis=0, ddof=1) if runs > 1 else 0.0
+            out = np.abs(th_p - truth) > 2 * se_p
+            outside[k, :P] = out.mean(axis=0)
+            outside[k, P:] = [out[:, model_of == m].any(axis=1).mean() for m in range(len(T2_MODELS))]
+    return dict(history_mean=history, history_scatter=scatter, ensemble_mean=ens[0], ensemble_se=ens[1],
+                ensemble_scatter=ens[2], truth_outside=outside)
+
+
+def _collect(bank: EstimatorBank | FrequencyBank, runs: int, kind: str | None, cols: np.ndarray) -> np.ndarray:
+    """``(runs, 5)`` final estimates (``kind`` None) or standard errors of the Table 3 parameters
+    (``cols``: their columns in the bank's rows)."""
     n_models = len(T2_MODELS)
     rows = []
     for r in range(runs):
         per = [bank.theta(r * n_models + m) if kind is None else bank.standard_errors(r * n_models + m, kind)
                for m in range(n_models)]
-        rows.append(_pick(per))
+        rows.append(np.array([per[_WHERE[p][0]][c] for p, c in zip(PARAMETERS, cols, strict=True)]))
     return np.array(rows)
 
 
@@ -327,6 +372,170 @@ def _last_run(bank_all: EstimatorBank, reductions: list[dict[str, tuple[np.ndarr
     return {"R_recursive": bank_all.autocorrelation(j), "R_batch": R_batch, "lag_sweep": sweep, "N": N}
 
 
+@dataclass(frozen=True)
+class _Job:
+    """One batch of runs of one level: runs ``first`` to ``first + runs - 1`` of ``total``."""
+
+    level: float
+    first: int
+    runs: int
+    total: int
+    methods: tuple[str, ...]
+    options: EstimatorOptions
+    frequency: FrequencyOptions | None
+    seed: int
+    convergence: ConvergenceConfig
+    identifiability: IdentifiabilityConfig
+    band_limited_on: tuple[str, ...]
+
+
+def _frequency_layout(sizes: list[int]) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Where the frequency-domain regressors (Eq. 2 without the bias, as the node's
+    :class:`~rls_uncertainty.datapath.frequency_path.FrequencyPath` takes them) sit in the
+    time-domain rows ``(M, n_max)``, flattened (``take``), and in the frequency-domain rows
+    ``(M, q)`` (``put``); ``real``: ``(M, q)`` not padding; ``cols``: each Table 3 parameter's
+    frequency-domain column."""
+    n_max, q = max(sizes), max(sizes) - 1
+    rows = [m.regressors for m in T2_MODELS] * (len(sizes) // len(T2_MODELS))
+    take = np.array([j * n_max + i for j, row in enumerate(rows) for i, r in enumerate(row) if r != BIAS_REGRESSOR])
+    f_sizes = [sum(r != BIAS_REGRESSOR for r in row) for row in rows]
+    put = np.array([j * q + k for j, size in enumerate(f_sizes) for k in range(size)])
+    real = np.arange(q) < np.array(f_sizes)[:, None]
+    cols = np.array([sum(r != BIAS_REGRESSOR for r in T2_MODELS[m].regressors[:c]) for m, c in
+                     (_WHERE[p] for p in PARAMETERS)])
+    return take, put, real, cols
+
+
+def _run_batch(job: _Job) -> dict[str, dict]:
+    """Every method of ``job.methods`` on one batch of runs, sample by sample (a picklable
+    top-level function: the executors' job). The time-domain bank always runs: the
+    identifiability tests of both methods judge its fit, as in the node."""
+    t, reductions, sizes, X, Z = level_inputs(job.level, job.runs, seed=job.seed, first=job.first,
+                                              band_limited_on=job.band_limited_on)
+    n_models = len(T2_MODELS)
+    time_cols = np.array([_WHERE[p][1] for p in PARAMETERS])
+    bank = EstimatorBank(sizes, job.options)
+    bank_all = EstimatorBank(sizes, EstimatorOptions(lags="all")) if "time" in job.methods else None
+    rows = [m.regressors for m in T2_MODELS] * job.runs
+    quality = IdentifiabilityMonitor(rows, [[REGRESSOR_UNITS[r] for r in row] for row in rows], job.identifiability)
+    tracks = {"time": _Tracker(t, job.runs, sizes, time_cols, job.convergence)}
+    if "frequency" in job.methods:
+        assert job.frequency is not None
+        take, put, real, f_cols = _frequency_layout(sizes)
+        f_bank = FrequencyBank(real.sum(axis=1).tolist(), job.frequency)
+        tracks["frequency"] = _Tracker(t, job.runs, real.sum(axis=1).tolist(), f_cols, job.convergence)
+        Xf = np.zeros((len(sizes), real.shape[1]))
+
+        def f_identifiable() -> np.ndarray:
+            ok = np.zeros(real.shape, dtype=bool)
+            ok.flat[put] = quality.identifiable.flat[take]
+            return ok
+
+        def f_restrict(flags: np.ndarray, model_flags: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+            ok = f_identifiable()
+            return flags & ok, model_flags & (ok | ~real).all(axis=1)
+
+    for k in range(t.size):
+        bank.update(X[k], Z[k])
+        if bank_all is not None:
+            bank_all.update(X[k], Z[k])
+        quality.add(X[k], Z[k])
+        ready = bank.ready
+
+        def restrict(flags: np.ndarray, model_flags: np.ndarray, ready: np.ndarray = ready) -> tuple[np.ndarray,
+                                                                                                    np.ndarray]:
+            return quality.restrict(flags, model_flags, bank, ready)
+
+        tracks["time"].sample(k, bank.theta_all(), bank.standard_errors_all("corrected"),
+                              bank.standard_errors_all("conventional"), ready, restrict, lambda: quality.identifiable)
+        if "frequency" in tracks:
+            Xf.flat[put] = X[k].flat[take]
+            f_bank.update(Xf, Z[k])
+            theta, se = f_bank.theta_all(), f_bank.standard_errors_all("corrected")
+            se_conv = f_bank.standard_errors_all("conventional")
+            # The node's guard: a model with a value not finite, zero or rounding-level is not ready.
+            f_ready = f_bank.ready & ~(unpublishable(f_bank.ready, real, theta, se, se_conv) | f_bank.withheld)
+            tracks["frequency"].sample(k, theta, se, se_conv, f_ready, f_restrict, f_identifiable)
+    out: dict[str, dict] = {}
+    if "time" in job.methods:
+        assert bank_all is not None
+        lags_used = bank.lags_used.reshape(job.runs, n_models)
+        se_batch, se_batch_all = _batch_standard_errors(reductions, lags_used, job.options.lags)
+        out["time"] = dict(
+            tracks["time"].results(), lags_used=lags_used, se_batch=se_batch, se_batch_all=se_batch_all,
+            estimates=_collect(bank, job.runs, None, time_cols),
+            se_conventional=_collect(bank, job.runs, "conventional", time_cols),
+            se_corrected=_collect(bank, job.runs, "corrected", time_cols),
+            se_corrected_all=_collect(bank_all, job.runs, "corrected", time_cols),
+            last_run=_last_run(bank_all, reductions) if job.first + job.runs == job.total else None)
+    if "frequency" in job.methods:
+        nan = np.full((job.runs, len(PARAMETERS)), np.nan)
+        out["frequency"] = dict(
+            tracks["frequency"].results(), lags_used=None, se_batch=nan, se_batch_all=nan, se_corrected_all=nan,
+            estimates=_collect(f_bank, job.runs, None, f_cols),
+            se_conventional=_collect(f_bank, job.runs, "conventional", f_cols),
+            se_corrected=_collect(f_bank, job.runs, "corrected", f_cols), last_run=None)
+    out["t"] = {"t": t}
+    return out
+
+
+_PER_RUN = ("estimates", "se_conventional", "se_corrected", "se_corrected_all", "se_batch", "se_batch_all",
+            "flag_time", "untested_flag_time", "untested_model_flag_time", "flag_theta", "flag_se", "model_flag_time",
+            "model_flag_theta", "model_flag_se", "converged_end", "identifiable_end", "lags_used")
+_PER_SAMPLE = ("theta", "se", "conventional0", "ready", "cz_ready")
+
+
+def _merge(job: _Job, batches: list[dict[str, dict]]) -> list[LevelResult]:
+    """One :class:`LevelResult` per method of the level of ``job`` from its batches, in the
+    order of their runs."""
+    t = batches[0]["t"]["t"]
+    results = []
+    for method in job.methods:
+        parts = [b[method] for b in batches]
+        rec: dict = {k: None if parts[0][k] is None else np.concatenate([p[k] for p in parts]) for k in _PER_RUN}
+        rec.update({k: np.concatenate([p[k] for p in parts], axis=1) for k in _PER_SAMPLE})
+        last = parts[-1]["last_run"]
+        results.append(LevelResult(
+            level=job.level, runs=job.total, time=t, last_run=last or {},
+            convergence=job.convergence, identifiability=job.identifiability, options=job.options,
+            band_limited_on=tuple(s for s in SIGNALS if s in set(job.band_limited_on)), method=method,
+            frequency=job.frequency if method == "frequency" else None,
+            **{k: rec[k] for k in _PER_RUN}, **_ensemble(t, rec),
+        ))
+    return results
+
+
+def _jobs(levels: Sequence[float], runs: int, batch_runs: int, **common: object) -> list[_Job]:
+    return [_Job(level=lv, first=first, runs=min(batch_runs, runs - first), total=runs, **common)  # type: ignore[arg-type]
+            for lv in levels for first in range(0, runs, batch_runs)]
+
+
+def _methods(method: str, frequency: FrequencyOptions | None) -> tuple[tuple[str, ...], FrequencyOptions | None]:
+    """The methods :data:`.datapath.config.METHODS` ``method`` runs, and the frequency-domain
+    options they use (default: :func:`t2_frequency_options`)."""
+    if method not in METHODS:
+        raise ConfigError(f"method must be one of {', '.join(METHODS)}, got {method!r} (--method)")
+    methods = ("time", "frequency") if method == "both" else (method,)
+    if "frequency" in methods and frequency is None:
+        frequency = t2_frequency_options()
+    return methods, frequency if "frequency" in methods else None
+
+
+def t2_frequency_options(publish_lag_windows: float | None = None) -> FrequencyOptions:
+    """The frequency-domain options the node takes from ``config/t2.yaml`` with ``estimator.method:
+    both`` (the T-2 grid 0.2-2.2 Hz every 0.04 Hz, the half second before the input as trim, 50
+    lags; docs/frequency.md), with the publication rule ``publish_lag_windows`` (default: the
+    node's)."""
+    from ..settings import load_parameters_file, pipeline_config  # noqa: PLC0415 - the parameter file, on demand
+
+    params = {**load_parameters_file("t2"), "estimator.method": "both"}
+    if publish_lag_windows is not None:
+        params["estimator.publish_lag_windows"] = publish_lag_windows
+    options = pipeline_config(params).frequency
+    assert options is not None  # method both
+    return options
+
+
 def run_level(
     level: float,
     runs: int,
@@ -336,44 +545,29 @@ def run_level(
     convergence: ConvergenceConfig = MONTE_CARLO_CONVERGENCE,
     identifiability: IdentifiabilityConfig = NODE_IDENTIFIABILITY,
     band_limited_on: Collection[str] = BAND_LIMITED_ON,
+    method: str = "time",
+    frequency: FrequencyOptions | None = None,
+    batch_runs: int | None = None,
 ) -> LevelResult:
-    """All runs of one band-limited noise level (fraction, e.g. 0.2) with the estimator
-    ``options`` (default: 50 lags, the paper's), the band-limited noise on the signals
-    ``band_limited_on`` (:func:`.simulation.add_noise`). With ``lags="auto"`` each run's models
-    choose their lags and the batch formula uses each model's final choice. A second bank
-    with all lags and the paper's Eq. 17 gives the all-lags comparison and Figs. 5 and 7.
+    """All runs of one band-limited noise level (fraction, e.g. 0.2) with one ``method``
+    (``"time"``: the estimator ``options``, default 50 lags, the paper's; ``"frequency"``: the
+    frequency-domain estimator with ``frequency``, default :func:`t2_frequency_options`), the
+    band-limited noise on the signals ``band_limited_on`` (:func:`.simulation.add_noise`), in
+    this process, in the batches of ``batch_runs`` runs :func:`run_table3` uses (the same
+    numbers). With ``lags="auto"`` each run's models choose their lags and the batch formula uses
+    each model's final choice. For the time domain a second bank with all lags and the paper's
+    Eq. 17 gives the all-lags comparison and Figs. 5 and 7.
 
     Besides the end-of-maneuver results, the convergence flags and the ensemble statistics
     of every sample are recorded (:class:`_Tracker`).
     """
-    t, reductions, sizes, X, Z = level_inputs(level, runs, seed=seed, band_limited_on=band_limited_on)
-    bank = EstimatorBank(sizes, options)
-    bank_all = EstimatorBank(sizes, EstimatorOptions(lags="all"))
-    track = _Tracker(t, runs, sizes, convergence, identifiability)
-    for k in range(t.size):
-        bank.update(X[k], Z[k])
-        bank_all.update(X[k], Z[k])
-        track.sample(k, bank, X[k], Z[k])
-    lags_used = bank.lags_used.reshape(runs, len(T2_MODELS))
-    se_batch, se_batch_all = _batch_standard_errors(reductions, lags_used, options.lags)
-    return LevelResult(
-        level=level, runs=runs,
-        estimates=_collect(bank, runs, None),
-        se_conventional=_collect(bank, runs, "conventional"),
-        se_corrected=_collect(bank, runs, "corrected"),
-        se_corrected_all=_collect(bank_all, runs, "corrected"),
-        se_batch=se_batch, se_batch_all=se_batch_all,
-        last_run=_last_run(bank_all, reductions),
-        convergence=convergence, identifiability=identifiability, lags_used=lags_used, options=options,
-        band_limited_on=tuple(s for s in SIGNALS if s in set(band_limited_on)),
-        **track.results(),
-    )
-
-
-def _level(job: tuple[float, int, EstimatorOptions, ConvergenceConfig, tuple[str, ...]]) -> LevelResult:
-    """:func:`run_level` of one job of :func:`run_table3` (a picklable top-level function)."""
-    level, runs, options, convergence, band_limited_on = job
-    return run_level(level, runs, options=options, convergence=convergence, band_limited_on=band_limited_on)
+    if method == "both":
+        raise ConfigError("run_level runs one method (time or frequency); run_table3 runs both")
+    methods, frequency = _methods(method, frequency)
+    jobs = _jobs([level], runs, batch_runs or BATCH_RUNS, methods=methods, options=options, frequency=frequency,
+                 seed=seed, convergence=convergence, identifiability=identifiability,
+                 band_limited_on=tuple(band_limited_on))
+    return _merge(jobs[0], [_run_batch(job) for job in jobs])[0]
 
 
 def run_table3(
@@ -386,23 +580,41 @@ def run_table3(
     convergence: ConvergenceConfig = MONTE_CARLO_CONVERGENCE,
     band_limited_on: Collection[str] = BAND_LIMITED_ON,
     executor: Executor | None = None,
+    method: str = "time",
+    frequency: FrequencyOptions | None = None,
+    batch_runs: int = BATCH_RUNS,
 ) -> list[LevelResult]:
-    """Run every level with the estimator ``options`` and the band-limited noise on
-    ``band_limited_on``, one job per level on ``executor`` (default: ``jobs`` local
-    processes, every core by default; or a Dask cluster, :mod:`.executors`). A level no worker
-    finished is a :class:`.errors.WorkerLost`."""
+    """Run every level with ``method`` (:data:`.datapath.config.METHODS`: the time domain with the
+    estimator ``options``, the frequency domain with ``frequency``, default
+    :func:`t2_frequency_options`, or both on the same runs) and the band-limited noise on
+    ``band_limited_on``. The runs of each level are cut into batches of ``batch_runs``, one job
+    each, on ``executor`` (default: ``jobs`` local processes, every core by default; or a Dask
+    cluster, :mod:`.executors`); the batches depend on ``runs`` and ``batch_runs`` only, so the
+    numbers are the same bit for bit whatever runs them. Returns one :class:`LevelResult` per
+    level and method, level by level (time before frequency). A batch no worker finished is a
+    :class:`.errors.WorkerLost`."""
+    if not (type(batch_runs) is int and batch_runs >= 1):
+        raise ConfigError(f"batch_runs must be an integer >= 1, got {batch_runs!r}")
+    methods, frequency = _methods(method, frequency)
     executor = executor or LocalProcesses(jobs)
     t0 = time.perf_counter()
-    on = tuple(band_limited_on)
+    work = _jobs(levels, runs, batch_runs, methods=methods, options=options, frequency=frequency, seed=2016,
+                 convergence=convergence, identifiability=NODE_IDENTIFIABILITY, band_limited_on=tuple(band_limited_on))
+    step = max(1, len(work) // 10)
 
     def done(i: int, n: int) -> None:
-        progress(f"  [{i}/{n}] levels done, {runs} runs each ({time.perf_counter() - t0:5.1f} s)")
+        if i % step == 0 or i == n:
+            progress(f"  [{i}/{n}] batches of up to {batch_runs} runs done ({time.perf_counter() - t0:5.1f} s)")
 
-    results = executor.run(_level, [(lv, runs, options, convergence, on) for lv in levels], done)
-    lost = [f"{lv * 100:g}%: {r.why}" for lv, r in zip(levels, results, strict=True) if isinstance(r, Lost)]
+    results = executor.run(_run_batch, work, done)
+    lost = {f"{job.level * 100:g}%: {r.why}": None for job, r in zip(work, results, strict=True) if isinstance(r, Lost)}
     if lost:
         raise WorkerLost(f"Monte Carlo level(s) not computed: {'; '.join(lost)}")
-    return [r for r in results if not isinstance(r, Lost)]
+    per_level = len(work) // max(len(levels), 1)
+    out: list[LevelResult] = []
+    for i in range(0, len(work), per_level):
+        out += _merge(work[i], [r for r in results[i : i + per_level] if not isinstance(r, Lost)])
+    return out
 
 
 def _cover_time(t: np.ndarray, ratio: np.ndarray, threshold: float) -> float:
@@ -442,7 +654,9 @@ def convergence_summary(res: LevelResult) -> list[dict]:
       delayed or withheld.
 
     For a model the flag time is the first time all its parameters are flagged, and a false
-    convergence is any of its Table 3 parameters outside.
+    convergence is any of its Table 3 parameters outside. The statistics over runs (cover
+    times, truth outside) exist at the samples where every model of every run is ready (the
+    C_Z models, with fewer parameters, may publish a sample before the C_m models).
     """
     t, runs = res.time, res.runs
     d = 2.0 / math.sqrt(2.0 * (runs - 1)) if runs > 1 else 0.0
@@ -523,7 +737,7 @@ CONVERGENCE_COLUMNS = (
 )
 
 
-def _convergence_lines(results: list[LevelResult]) -> list[str]:
+def _convergence_lines(results: list[LevelResult], named: bool = False) -> list[str]:
     cfg, runs = results[0].convergence, results[0].runs
     d = 2.0 / math.sqrt(2.0 * (runs - 1)) if runs > 1 else 0.0
 
@@ -549,15 +763,16 @@ def _convergence_lines(results: list[LevelResult]) -> list[str]:
         "Held back: runs whose first flag the identifiability tests delayed or withheld (in brackets: the median "
         "flag time without them).",
         "",
-        "| level | parameter | flagged | flag, s | cover, s (strict) | flag - cover, s | false | false vs mean "
-        "| truth outside: end / best | bias at flag, SE | SE/scatter at flag | held back |",
-        "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |",
+        f"| level | {'method | ' if named else ''}parameter | flagged | flag, s | cover, s (strict) | flag - cover, s "
+        "| false | false vs mean | truth outside: end / best | bias at flag, SE | SE/scatter at flag | held back |",
+        "| --- |" + (" --- |" if named else "") + " --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |",
     ]
     for res in results:
         for row in convergence_summary(res):
             model = row["parameter"].endswith("model")
             lines.append(
-                f"| {res.level * 100:.0f}% | {row['parameter']} | {pct(row['flagged'])} | "
+                f"| {res.level * 100:.0f}% | {res.method + ' | ' if named else ''}{row['parameter']} | "
+                f"{pct(row['flagged'])} | "
                 f"{sec(row['flag_time_median'])} | "
                 + ("- | - | " if model else
                    f"{sec(row['cover_time'])} ({sec(row['cover_time_strict'])}) | "
@@ -578,18 +793,23 @@ def write_outputs(results: list[LevelResult], out: Path, *, figures: bool = True
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     paths = {"csv": out / "table3.csv", "md": out / "table3.md", "convergence": out / "convergence.csv"}
+    named = _method_column(results)
+    method = ["method"] if named else []
     with open(paths["csv"], "w", newline="") as fh:
         w = csv.writer(fh)
-        w.writerow(["level", "parameter", "true", "mean", "se_conventional", "se_corrected", "scatter"])
+        w.writerow(["level", *method, "parameter", "true", "mean", "se_conventional", "se_corrected", "scatter"])
         for res in results:
             for name, row in res.summary().items():
-                w.writerow([f"{res.level:.2f}", name, row["true"], f"{row['mean']:.6g}",
-                            f"{row['se_conventional']:.6g}", f"{row['se_corrected']:.6g}", f"{row['scatter']:.6g}"])
+                w.writerow([f"{res.level:.2f}", *([res.method] if named else []), name, row["true"],
+                            f"{row['mean']:.6g}", f"{row['se_conventional']:.6g}", f"{row['se_corrected']:.6g}",
+                            f"{row['scatter']:.6g}"])
+    time_results = [r for r in results if r.method == "time"]
     lags = results[0].lags
-    burn_in = results[0].residual_burn_in
+    burn_in = time_results[0].residual_burn_in if time_results else 0
     lines = [
         "# Table 3 reproduction",
         "",
+        *(_methods_lines(results) if named else []),
         f"{results[0].runs} runs per level; end-of-maneuver values. Each cell: ours / paper. "
         "SE = mean standard error over runs; scatter = standard deviation of the estimates. Converged, "
         "identifiable at end: the runs whose parameter is flagged converged (the node's criterion and "
@@ -599,24 +819,70 @@ def write_outputs(results: list[LevelResult], out: Path, *, figures: bool = True
         + (f" Residual burn-in {burn_in} samples: R(i) of Eq. 17 from the residuals after each model's "
            f"initialization + {burn_in} (both SE columns)." if burn_in else ""),
         "",
-        f"| level | parameter | true | mean | SE conventional | SE corrected ({lags} lags) | scatter | "
+        f"| level | {'method | ' if named else ''}parameter | true | mean | SE conventional | SE corrected"
+        f"{'' if named else f' ({lags} lags)'} | scatter | "
         "corrected/scatter | conventional/scatter | converged at end | identifiable at end | SE % |",
-        "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |",
+        "| --- |" + (" --- |" if named else "") + " --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |",
     ]
     for res in results:
         paper = PAPER_TABLE3.get(round(res.level, 2), {})
         for name, row in res.summary().items():
             p = paper.get(name, (np.nan,) * 4)
             lines.append(
-                f"| {res.level * 100:.0f}% | {name} | {row['true']:g} | {row['mean']:.3f} / {p[0]:.3f} | "
+                f"| {res.level * 100:.0f}% | {res.method + ' | ' if named else ''}{name} | {row['true']:g} | "
+                f"{row['mean']:.3f} / {p[0]:.3f} | "
                 f"{row['se_conventional']:.3f} / {p[1]:.3f} | {row['se_corrected']:.3f} / {p[2]:.3f} | "
                 f"{row['scatter']:.3f} / {p[3]:.3f} | {row['se_corrected'] / row['scatter']:.2f} | "
                 f"{row['se_conventional'] / row['scatter']:.2f} | {100 * row['converged_end']:.0f}% | "
                 f"{100 * row['identifiable_end']:.0f}% | {row['se_percent']:.1f} |"
             )
-    lines += [
+    lines += _time_domain_lines(time_results, named)
+    lines += _convergence_lines(results, named)
+    paths["md"].write_text("\n".join(lines) + "\n")
+    with open(paths["convergence"], "w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow([CONVERGENCE_COLUMNS[0], *method, *CONVERGENCE_COLUMNS[1:]])
+        for res in results:
+            for row in convergence_summary(res):
+                w.writerow([f"{row['level']:.2f}", *([res.method] if named else []), row["parameter"]]
+                           + [f"{row[c]:.6g}" for c in CONVERGENCE_COLUMNS[2:]])
+    if figures and time_results:
+        paths.update(_figures(time_results, out))
+    return paths
+
+
+def _method_column(results: list[LevelResult]) -> bool:
+    """Whether the outputs name each row's method: unless every result is the time domain's
+    (the outputs of ``--method time`` are the time domain's alone, without the column)."""
+    return any(r.method != "time" for r in results)
+
+
+def _methods_lines(results: list[LevelResult]) -> list[str]:
+    """What each method of ``results`` is, with its settings (table3.md)."""
+    lines = []
+    for res in {r.method: r for r in results}.values():
+        if res.method == "time":
+            lines.append(f"Method time: recursive least squares, corrected SE with {res.options.lags} lags "
+                         "(Eqs. 17-22).")
+        else:
+            f = res.frequency
+            assert f is not None
+            lines.append(f"Method frequency: equation error on a recursive Fourier transform, grid {f.f_min:g}-"
+                         f"{f.f_max:g} Hz every {f.f_step:g} Hz, trim {f.trim_samples} samples, corrected SE with "
+                         f"{f.n_lags} lags (docs/frequency.md, F7-F10); no bias parameter.")
+    return [*lines, ""]
+
+
+def _time_domain_lines(results: list[LevelResult], named: bool) -> list[str]:
+    """table3.md's sections of the time domain alone: recursive against batch SEs, the lags chosen
+    with ``auto`` (``named``: say so in the titles)."""
+    if not results:
+        return []
+    lags = results[0].lags
+    which = " (time domain)" if named else ""
+    lines = [
         "",
-        "## Recursive against batch corrected standard errors (end of maneuver, means over runs)",
+        f"## Recursive against batch corrected standard errors{which} (end of maneuver, means over runs)",
         "",
         "Recursive: Eqs. 17-22 as the node runs them. Batch: Eqs. 8-11 with the final batch residuals.",
         "",
@@ -632,25 +898,14 @@ def write_outputs(results: list[LevelResult], out: Path, *, figures: bool = True
                 f"{row['se_corrected'] / row['se_corrected_all']:.3f} |"
             )
     if lags == "auto":
-        lines += ["", "## Chosen lags (auto), end of maneuver: median [10%-90%] over runs", "",
+        lines += ["", f"## Chosen lags (auto){which}, end of maneuver: median [10%-90%] over runs", "",
                   "| level | " + " | ".join(m.output for m in T2_MODELS) + " |",
                   "| --- |" + " --- |" * len(T2_MODELS)]
         for res in results:
             q = np.percentile(res.lags_used, [50, 10, 90], axis=0)  # type: ignore[arg-type]  # run_level sets it
             lines.append(f"| {res.level * 100:.0f}% | " + " | ".join(
                 f"{q[0, i]:.0f} [{q[1, i]:.0f}-{q[2, i]:.0f}]" for i in range(len(T2_MODELS))) + " |")
-    lines += _convergence_lines(results)
-    paths["md"].write_text("\n".join(lines) + "\n")
-    with open(paths["convergence"], "w", newline="") as fh:
-        w = csv.writer(fh)
-        w.writerow(CONVERGENCE_COLUMNS)
-        for res in results:
-            for row in convergence_summary(res):
-                w.writerow([f"{row['level']:.2f}", row["parameter"]]
-                           + [f"{row[c]:.6g}" for c in CONVERGENCE_COLUMNS[2:]])
-    if figures:
-        paths.update(_figures(results, out))
-    return paths
+    return lines
 
 
 def _figures(results: list[LevelResult], out: Path) -> dict[str, Path]:
