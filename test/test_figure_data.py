@@ -153,7 +153,7 @@ def test_the_figure_data_of_a_replay_matches_its_csv_and_stays_bounded(tmp_path,
     monkeypatch.setattr(replay_module, "PLOT_POINTS", 40)
     captured = {}
     from rls_uncertainty.offline import figures
-    monkeypatch.setattr(figures, "replay_figures", lambda out, title, history, data, options: captured.update(
+    monkeypatch.setattr(figures, "replay_figures", lambda out, title, history, data, options, **_: captured.update(
         data=data, history=history) or [])
     replay(BUNDLED, load_parameters_file("t2"), tmp_path / "r", progress=False)
     data = captured["data"]
