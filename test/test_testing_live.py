@@ -42,7 +42,8 @@ def test_the_live_node_publishes_what_the_replay_computes_sample_by_sample(tmp_p
         assert node.stop() == 0, node.log()
     assert node.parameters == {**REPLAY_PARAMETERS, **parameters("t2")}
     offline = replay_bag(BUNDLED, node.parameters)
-    assert live.parameters == offline.parameters and live.estimates == offline.estimates > 450  # 591 samples used, the first 102 held back by the publication rule (n + 2 x 50)
+    # 591 samples used, the first ones held back by the publication rule (n + 2 x 50 samples)
+    assert live.parameters == offline.parameters and live.estimates == offline.estimates > 450
     for name in offline.parameters:
         for got, want in zip(live.series(name), offline.series(name), strict=True):
             assert np.array_equal(got, want), name  # bit for bit: one machine, one pipeline
@@ -69,7 +70,7 @@ def test_the_live_nodes_frequency_domain_topics_are_the_replays_bit_for_bit(tmp_
     offline = replay_bag(BUNDLED, node.parameters)
     assert live.methods == offline.methods == ("time", "frequency")
     assert live.frequency_parameter_names == offline.frequency_parameter_names
-    assert live.estimates == offline.estimates > 450  # 591 samples used, the first 102 held back by the publication rule (n + 2 x 50)
+    assert live.estimates == offline.estimates > 450  # after the publication rule, as above
     for name in offline.parameters:
         for got, want in zip(live.series(name), offline.series(name), strict=True):
             assert np.array_equal(got, want), name
