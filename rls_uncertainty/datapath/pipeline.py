@@ -66,10 +66,11 @@ from .intake import Intake
 from .sampling import Sample, Sampler, Skipped
 from .states import model_report
 
-__all__ = ["Pipeline", "SampleOutput", "STREAMS", "StateFileError", "required_streams", "sampler_for"]
+__all__ = ["Pipeline", "SampleOutput", "STREAMS", "StateFileError", "required_streams", "sampler_for",
+           "uses_excitation"]
 
 # The input streams, one per ``add_*`` method: inertial data, air data and the optional ones.
-STREAMS = ("imu", "airspeed", "dynamic_pressure", "control_surfaces", "thrust")
+STREAMS = ("imu", "airspeed", "dynamic_pressure", "control_surfaces", "thrust", "excitation")
 
 
 class SampleOutput(NamedTuple):
@@ -124,7 +125,15 @@ def required_streams(config: PipelineConfig) -> tuple[str, ...]:
         required.append("dynamic_pressure")
     if config.inputs.use_thrust and any(m.output == "CX" for m in config.models):
         required.append("thrust")
+    if uses_excitation(config):
+        required.append("excitation")
     return tuple(required)
+
+
+def uses_excitation(config: PipelineConfig) -> bool:
+    """Whether the estimator needs the injected excitation (``estimator.algorithm iv``: its
+    instruments are built from it)."""
+    return getattr(config.estimator, "algorithm", "rls") == "iv"
 
 
 def symmetric_covariances(c: np.ndarray, real: np.ndarray, real_square: np.ndarray, ready: np.ndarray) -> np.ndarray:
@@ -198,6 +207,7 @@ class Pipeline:
         self._i_qbar = where.get("dynamic_pressure")
         self._i_surfaces = where.get("control_surfaces")
         self._i_thrust = where.get("thrust")
+        self._i_excitation = where.get("excitation")
         self.limits = config.limits
         self.frame_id = inputs.frame_id  # checked by inputs.feed
         self._index = 0
@@ -214,7 +224,7 @@ class Pipeline:
         self._new_estimator()
         self._diff = FixedLagDifferentiator(config.differentiator, 1.0 / config.rate, width=3)
         self._lag = config.differentiator.lag
-        self._pending: deque = deque()  # the delay line: (stamp, sample) awaiting rate_dot
+        self._pending: deque = deque()  # the delay line: (stamp, sample, excitation) awaiting rate_dot
         self._outputs = [m.output for m in config.models]
         # Where each model's regressors go in the (M, n_max) regression matrix, flattened.
         n_max = self.bank.n_max
@@ -261,6 +271,10 @@ class Pipeline:
     def add_thrust(self, stamp_ns: int, force_x: float) -> list[SampleOutput]:
         return self._advance() if self.intake.thrust(stamp_ns, force_x) else []
 
+    def add_excitation(self, stamp_ns: int, names: Sequence[str], positions: Sequence[float]) -> list[SampleOutput]:
+        """The injected excitation, a ``sensor_msgs/JointState`` like the surfaces (rad)."""
+        return self._advance() if self.intake.excitation(stamp_ns, names, positions) else []
+
     def add_surfaces(self, stamp_ns: int, names: Sequence[str], positions: Sequence[float]) -> list[SampleOutput]:
         """``sensor_msgs/JointState`` names and positions (rad), mixed by Eq. 23."""
         return self._advance() if self.intake.surfaces(stamp_ns, names, positions) else []
@@ -298,7 +312,10 @@ class Pipeline:
         for item in self.sampler.due():
             if isinstance(item, Sample):
                 book.samples_formed += 1
-                result = self._process(item.stamp_ns, self._sample_vector(item.values))
+                values = item.values
+                i_u = self._i_excitation
+                result = self._process(item.stamp_ns, self._sample_vector(values),
+                                       None if i_u is None else values[i_u])
                 if result is not None:
                     out.append(result)
             elif isinstance(item, Skipped):  # grid points not formed: the differentiator restarts after them
@@ -340,20 +357,22 @@ class Pipeline:
         self._diff.reset()
         self._quality.restart_chain()  # the sensor-noise estimate's second differences too
 
-    def _process(self, t: int, sample: list) -> SampleOutput | None:
+    def _process(self, t: int, sample: list, u: Sequence[float] | None = None) -> SampleOutput | None:
         """The delay line: the rates enter the differentiator now, the sample leaves ``lag``
-        samples later together with its angular accelerations."""
-        self._pending.append((t, sample))
+        samples later together with its angular accelerations (and ``u``, the injected
+        excitation's deflections, when the estimator uses them)."""
+        self._pending.append((t, sample, u))
         rate_dot = self._diff.push(sample[RATES])
         if rate_dot is None:
             if len(self._pending) > self._lag:
                 self._pending.popleft()
                 self.bookkeeping.reject_samples("differentiator_warmup")
             return None
-        t, sample = self._pending.popleft()  # the sample `lag` samples back, aligned
-        return self._estimate(t, sample, rate_dot)
+        t, sample, u = self._pending.popleft()  # the sample `lag` samples back, aligned
+        return self._estimate(t, sample, rate_dot, u)
 
-    def _estimate(self, t: int, sample: list[float], rate_dot: FloatArray) -> SampleOutput | None:
+    def _estimate(self, t: int, sample: list[float], rate_dot: FloatArray,
+                  u: Sequence[float] | None = None) -> SampleOutput | None:
         book = self.bookkeeping
         state = flight_state(sample, rate_dot, self.config.inputs.air_density, self.limits)
         if isinstance(state, Refused):
