@@ -176,7 +176,7 @@ class CovarianceEvaluator:
 
     def __call__(
         self, D: FloatArray, D_diagonal: FloatArray, lag_sums: FloatArray, h: FloatArray, lag_products: FloatArray,
-        inv_n: float | FloatArray, scale: FloatArray, diagonal_scale: FloatArray,
+        inv_n: float | FloatArray, scale: FloatArray, diagonal_scale: FloatArray, factor: FloatArray | None = None,
     ) -> Covariances:
         """Both covariances of every model, not yet repaired.
 
@@ -186,7 +186,8 @@ class CovarianceEvaluator:
         ``(M,)``, one per model: with a residual burn-in each model's ``R_k(i)`` has its own
         weight total); ``scale`` ``(M, n, n)`` takes scaled units back to the regressors' (NaN
         outside the ready models' blocks) and ``diagonal_scale`` is ``2 diag(scale)`` ``(M,
-        n)``; both may carry a leading axis of the two kinds (a factor on one kind only).
+        n)``; ``factor`` ``(M,)`` multiplies the corrected covariance alone (the small-sample
+        factor of instrumental variables).
         """
         if not isinstance(inv_n, float):  # one 1/n_k per model: folded into the scales (same products)
             scale = scale * inv_n[:, None, None]
@@ -194,6 +195,8 @@ class CovarianceEvaluator:
             inv_n = 1.0
         hS = lag_sums * h  # n_k h_i R_k(i)
         N = np.matmul(hS[:, None, None, :], lag_products)[:, :, 0, :]  # n_k sum_i h_i R(i) Lambda+(i)
+        if factor is not None:
+            N *= factor[:, None, None]
         DN = np.matmul(D, N)
         if self.eq13:
             DN0 = None  # Eq. 13: P = R_k(0) D / 2

@@ -159,30 +159,26 @@ class Evaluation:
                 largest = max(k - 1, 0) if self._all_lags else lags.cap - 1
                 h = self._window_h if self._window_key == (largest, w) else self._half_window(largest, w)
             totals = self._counts.weight_totals()
-            scale, se_scale = self._cov_scale, self._se_scale
-            if self._small_sample and k:
-                scale, se_scale = self._small_sample_scales(totals, w)
+            factor = self._small_sample_factor(totals, w) if self._small_sample and k else None
             cov = self._evaluator(
                 self._fit.D, self._D_diagonal, sums, h, products, 1.0 / totals if k else 1.0,  # (k = 0: all NaN)
-                scale, se_scale,
+                self._cov_scale, self._se_scale, factor,
             )
             if cov.indefinite:  # exact fits published as zero, the others repaired and counted
                 self.repairs[cov.repair(self._exact(k), self.sizes)] += 1
             self._covariances = cov
         return cov
 
-    def _small_sample_scales(self, totals: float | FloatArray, w: int) -> tuple[FloatArray, FloatArray]:
-        """The scales of both kinds ``(2, M, ...)`` with the corrected one times ``n_R / (n_R -
-        n - s L)`` (instrumental variables; ``L`` each model's largest lag used of the ``w``
-        held, the denominator at least ``n_R / 4``)."""
+    def _small_sample_factor(self, totals: float | FloatArray, w: int) -> FloatArray:
+        """``n_R / (n_R - n - s L)`` of every model, ``(M,)``, on the corrected covariance of
+        instrumental variables (``L`` each model's largest lag used of the ``w`` held; the
+        denominator at least ``n_R / 4``; 1 where ``n_R = 0``, a model not yet counting)."""
         L = np.minimum(self.lags_chosen(), w - 1) if self._auto else w - 1
-        n_R = np.broadcast_to(np.asarray(totals, dtype=float), self._sizes.shape)
-        with np.errstate(divide="ignore", invalid="ignore"):  # (n_R = 0: no model is published)
+        n_R = np.asarray(totals, dtype=float)
+        with np.errstate(divide="ignore", invalid="ignore"):
             factor = n_R / np.maximum(n_R - self._sizes - self._small_sample * L, 0.25 * n_R)
-        factor = np.where(n_R > 0.0, factor, 1.0)
-        scale = np.stack([self._cov_scale * factor[:, None, None], self._cov_scale])
-        se_scale = np.stack([self._se_scale * factor[:, None], self._se_scale])
-        return scale, se_scale
+        out: FloatArray = np.where(n_R > 0.0, factor, 1.0)
+        return out
 
     def _half_window(self, largest: int, w: int) -> FloatArray:
         """Half window ``h`` of the ``w`` lags held, ``largest`` the largest lag of the window
