@@ -12,6 +12,7 @@ from .auxiliary import InstrumentedSample, ShortPeriodAuxiliary
 from .bootstrap import BareRls
 from .discrete import discretize, is_stable, short_period_matrices
 from .layout import InstrumentLayout
+from .strength import WEAK_BELOW, InstrumentStrength, canonical_correlations
 
 __all__ = [
     "InstrumentedSample",
@@ -21,4 +22,7 @@ __all__ = [
     "is_stable",
     "short_period_matrices",
     "InstrumentLayout",
+    "WEAK_BELOW",
+    "InstrumentStrength",
+    "canonical_correlations",
 ]
