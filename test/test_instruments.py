@@ -221,3 +221,23 @@ def test_bare_rls_equals_least_squares_on_the_samples_so_far():
                 ls = np.linalg.lstsq(X[: k + 1, j, :s], z[: k + 1, j], rcond=None)[0]
                 np.testing.assert_allclose(rls.theta[j, :s], ls, rtol=1e-9, atol=1e-12)
             assert rls.theta[0, 2] == 0.0
+
+
+def test_regressor_vectors_per_model_and_reset():
+    """``X`` as one vector per model gives what the padded array gives; after :meth:`reset`
+    the same samples give what a new object gives."""
+    aux, again = aux_models(), aux_models()
+    _, X, _, _ = run_maneuver(aux, 120)
+    rng = np.random.default_rng(0)
+    z = rng.normal(size=(120, 2))
+    aux.reset()
+    assert not aux.has_model and aux.waiting == 0 and not aux.bare.ready and aux.refused == 0
+    for k in range(120):
+        u = X[k, 1, 3]
+        got = aux.update([X[k, 0, :3], X[k, 1]], z[k], u, QBAR, V)
+        want = again.update(X[k], z[k], u, QBAR, V)
+        assert len(got) == len(want)
+        for g, w in zip(got, want, strict=True):
+            np.testing.assert_array_equal(g.X, w.X)
+            np.testing.assert_array_equal(g.instruments, w.instruments)
+    assert aux.has_model

@@ -28,13 +28,14 @@ from __future__ import annotations
 
 from collections import deque
 from collections.abc import Sequence
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
 import numpy.typing as npt
 
 from ..aero.models import AircraftConfig, ModelConfig
 from ..errors import ConfigError, NonFiniteInput
+from ..estimator.bank import as_regressors
 from .bootstrap import BareRls
 from .discrete import MIN_DECAY, discretize, is_stable, short_period_matrices
 from .layout import InstrumentLayout
@@ -42,6 +43,7 @@ from .layout import InstrumentLayout
 __all__ = ["InstrumentedSample", "ShortPeriodAuxiliary"]
 
 FloatArray = npt.NDArray[np.float64]
+Regressors = npt.NDArray[Any] | Sequence[npt.ArrayLike]
 
 
 class InstrumentedSample(NamedTuple):
@@ -81,7 +83,13 @@ class ShortPeriodAuxiliary:
         self.dt = 1.0 / rate
         self.refresh = max(1, round(refresh_span * rate))
         self.min_decay = min_decay
-        self.bare = BareRls(self.layout.sizes, min_samples=min_samples)
+        self.min_samples = min_samples
+        self._backlog: deque[_Waiting] = deque(maxlen=max(1, round(max_backlog_span * rate)))
+        self.reset()
+
+    def reset(self) -> None:
+        """Back to the start: no model, no estimates, nothing waiting, counters at 0."""
+        self.bare = BareRls(self.layout.sizes, min_samples=self.min_samples)
         self.state = np.zeros(2)
         self.Phi = np.zeros((2, 2))
         self.Gamma = np.zeros(2)
@@ -89,7 +97,7 @@ class ShortPeriodAuxiliary:
         self.refused = 0  # candidate models refused by the stability guard
         self.dropped = 0  # waiting samples dropped from a full backlog
         self._since_refresh = 0
-        self._backlog: deque[_Waiting] = deque(maxlen=max(1, round(max_backlog_span * rate)))
+        self._backlog.clear()
 
     @property
     def waiting(self) -> int:
@@ -130,11 +138,12 @@ class ShortPeriodAuxiliary:
         self.state = np.zeros(2)
         return np.stack([self.step(float(a), float(b)) for a, b in zip(np.ravel(u), np.ravel(V), strict=True)])
 
-    def update(self, X: npt.ArrayLike, z: npt.ArrayLike, u: float, qbar: float, V: float,
+    def update(self, X: Regressors, z: npt.ArrayLike, u: float, qbar: float, V: float,
                estimates: npt.ArrayLike | None = None) -> list[InstrumentedSample]:
-        """One sample: regressors ``X`` ``(M, n_max)``, outputs ``z`` ``(M,)``, the injected
-        excitation ``u`` (rad, from trim), ``qbar`` (Pa), ``V`` (m/s) and the estimator's
-        ``estimates`` ``(M, n_max)`` (``None`` or NaN while it has none).
+        """One sample: regressors ``X`` ``(M, n_max)`` (or ``M`` regressor vectors), outputs
+        ``z`` ``(M,)``, the injected excitation ``u`` (rad, from trim), ``qbar`` (Pa), ``V``
+        (m/s) and the estimator's ``estimates`` ``(M, n_max)`` (``None`` or NaN while it has
+        none).
 
         Returns the samples to give the estimator now, in order: none while the auxiliary model
         does not exist, every waiting one at the hand-over, then this one. A non-finite input
@@ -167,12 +176,12 @@ class ShortPeriodAuxiliary:
         zeta = self.replay([w.u for w in waiting], [w.V for w in waiting])
         return [InstrumentedSample(w.X, w.z, zeta[i]) for i, w in enumerate(waiting)]
 
-    def _checked(self, X: npt.ArrayLike, z: npt.ArrayLike, u: float, qbar: float,
+    def _checked(self, X: Regressors, z: npt.ArrayLike, u: float, qbar: float,
                  V: float) -> tuple[FloatArray, FloatArray]:
-        shape = (len(self.layout.sizes), self.layout.n_max)
-        x = np.array(X, dtype=float).reshape(shape)
-        zz = np.array(z, dtype=float).reshape(shape[0])
-        x[~self.bare.mask] = 0.0
+        x = np.where(self.bare.mask, as_regressors(X, self.layout.sizes), 0.0)  # a copy: the backlog keeps it
+        zz = np.array(z, dtype=float).reshape(-1)
+        if zz.shape != (len(self.layout.sizes),):
+            raise ValueError(f"expected {len(self.layout.sizes)} measured outputs, got shape {zz.shape}")
         if not (np.isfinite(x).all() and np.isfinite(zz).all() and np.isfinite([u, qbar, V]).all() and V > 0):
             raise NonFiniteInput(f"instruments: a regressor, output, excitation u={u!r}, qbar={qbar!r} or "
                                  f"airspeed V={V!r} is not finite (or V <= 0); the sample is refused")
