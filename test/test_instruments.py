@@ -241,3 +241,13 @@ def test_regressor_vectors_per_model_and_reset():
             np.testing.assert_array_equal(g.X, w.X)
             np.testing.assert_array_equal(g.instruments, w.instruments)
     assert aux.has_model
+
+
+def test_estimates_given_from_the_start_build_the_first_model():
+    """Fixed estimates (a prior model) from the first sample: the first sample is handed over
+    at once, with that model, and the bare RLS never runs."""
+    aux = aux_models()
+    _, _, delivered, models = run_maneuver(aux, 50, estimates=TRUE)
+    assert [len(d) for d in delivered] == [1] * 50 and aux.bare.k == 0
+    A, B = short_period_matrices(aux.layout.derivatives(TRUE), QBAR, V, T2)
+    np.testing.assert_array_equal(models[0][0], discretize(A, B, aux.dt)[0])

@@ -10,9 +10,10 @@ Per sample (:meth:`ShortPeriodAuxiliary.update`):
 
 1. until the estimator has estimates of its own, a bare RLS (:mod:`.bootstrap`) takes the
    sample;
-2. until the auxiliary model exists, the sample waits; when the bare RLS first has estimates
-   whose model is stable, the model is run from rest over the excitation of the waiting samples
-   (the replay) and they are handed over, each with its instruments;
+2. until the auxiliary model exists, the sample waits; when there first are estimates (the
+   estimator's, else the bare RLS's) whose model is stable, the model is run from rest over the
+   excitation of the waiting samples (the replay) and they are handed over, each with its
+   instruments;
 3. every ``refresh_span`` the model is rebuilt from the current estimates (the estimator's when
    given, else the bare RLS's) and the current ``qbar`` and ``V``; a candidate whose poles do not
    both have a real part below ``-min_decay`` (or that is not finite) is refused and the last
@@ -26,6 +27,7 @@ auxiliary model needs its poles roughly right, not its gains.
 
 from __future__ import annotations
 
+import math
 from collections import deque
 from collections.abc import Sequence
 from typing import Any, NamedTuple
@@ -93,6 +95,7 @@ class ShortPeriodAuxiliary:
         self.state = np.zeros(2)
         self.Phi = np.zeros((2, 2))
         self.Gamma = np.zeros(2)
+        self._phi, self._gamma = self.Phi.tolist(), self.Gamma.tolist()  # Phi, Gamma as floats, for advance
         self.has_model = False
         self.refused = 0  # candidate models refused by the stability guard
         self.dropped = 0  # waiting samples dropped from a full backlog
@@ -116,6 +119,7 @@ class ShortPeriodAuxiliary:
             self.refused += 1
             return False
         self.Phi, self.Gamma, self.has_model = Phi, Gamma, True
+        self._phi, self._gamma = Phi.tolist(), Gamma.tolist()
         return True
 
     def instruments(self, u: float, V: float) -> FloatArray:
@@ -124,7 +128,10 @@ class ShortPeriodAuxiliary:
 
     def advance(self, u: float) -> None:
         """The state at the next sample (I2) with this sample's excitation ``u``."""
-        self.state = self.Phi @ self.state + self.Gamma * u
+        (p00, p01), (p10, p11) = self._phi
+        g0, g1 = self._gamma
+        a, q = float(self.state[0]), float(self.state[1])
+        self.state = np.array([p00 * a + p01 * q + g0 * u, p10 * a + p11 * q + g1 * u])
 
     def step(self, u: float, V: float) -> FloatArray:
         """:meth:`instruments` of this sample, then :meth:`advance`."""
@@ -159,7 +166,8 @@ class ShortPeriodAuxiliary:
             if len(self._backlog) == self._backlog.maxlen:
                 self.dropped += 1
             self._backlog.append(_Waiting(x, zz, float(u), float(V)))
-            if self.bare.ready and self.set_model(self.bare.theta, qbar, V):
+            first = own if own is not None else self.bare.theta if self.bare.ready else None
+            if first is not None and self.set_model(first, qbar, V):
                 return self._hand_over()
             return []
         self._since_refresh += 1
@@ -178,11 +186,20 @@ class ShortPeriodAuxiliary:
 
     def _checked(self, X: Regressors, z: npt.ArrayLike, u: float, qbar: float,
                  V: float) -> tuple[FloatArray, FloatArray]:
-        x = np.where(self.bare.mask, as_regressors(X, self.layout.sizes), 0.0)  # a copy: the backlog keeps it
-        zz = np.array(z, dtype=float).reshape(-1)
+        if not (type(X) is np.ndarray and X.shape == self.bare.mask.shape):
+            X = as_regressors(X, self.layout.sizes)
+        x = np.where(self.bare.mask, X, 0.0)  # a copy: the backlog keeps it
+        zz = np.array(z, dtype=float)
         if zz.shape != (len(self.layout.sizes),):
-            raise ValueError(f"expected {len(self.layout.sizes)} measured outputs, got shape {zz.shape}")
-        if not (np.isfinite(x).all() and np.isfinite(zz).all() and np.isfinite([u, qbar, V]).all() and V > 0):
+            zz = zz.reshape(-1)
+            if zz.shape != (len(self.layout.sizes),):
+                raise ValueError(f"expected {len(self.layout.sizes)} measured outputs, got shape {zz.shape}")
+        # One sum checks every value (a NaN or infinity makes it non-finite); only when it is
+        # not finite are the values checked one by one (the sum of huge finite values overflows).
+        total = float(x.sum()) + float(zz.sum()) + u + qbar + V
+        finite = math.isfinite(total) or (np.isfinite(x).all() and np.isfinite(zz).all()
+                                          and all(math.isfinite(v) for v in (u, qbar, V)))
+        if not (finite and V > 0):
             raise NonFiniteInput(f"instruments: a regressor, output, excitation u={u!r}, qbar={qbar!r} or "
                                  f"airspeed V={V!r} is not finite (or V <= 0); the sample is refused")
         return x, zz

@@ -43,19 +43,20 @@ class BareRls:
 
     def update(self, X: FloatArray, z: FloatArray) -> None:
         """One sample: ``X`` ``(M, n_max)`` (padding ignored), ``z`` ``(M,)``."""
-        X = np.where(self.mask, X, 0.0)
         self.k += 1
         if not self.ready:
+            X = np.where(self.mask, X, 0.0)
             self.A += X[:, :, None] * X[:, None, :]
             self.b += X * z[:, None]
             if self.k >= max(*self.sizes, self.min_samples):
                 self._try_start()
             return
-        Dx = np.einsum("mij,mj->mi", self.D, X)
-        d = 1.0 + np.einsum("mi,mi->m", X, Dx)
-        e = z - np.einsum("mi,mi->m", X, self.theta)
+        # D and theta are 0 on the padding, so the padding of X drops out here.
+        Dx = (self.D @ X[:, :, None])[:, :, 0]
+        d = 1.0 + (X * Dx).sum(axis=1)
+        e = z - (X * self.theta).sum(axis=1)
         self.theta += Dx * (e / d)[:, None]
-        self.D -= Dx[:, :, None] * Dx[:, None, :] / d[:, None, None]
+        self.D -= Dx[:, :, None] * (Dx / d[:, None])[:, None, :]
 
     def _try_start(self) -> None:
         """Eq. 13-14 if every model's scaled ``X'X`` is well conditioned (padding: identity)."""

@@ -59,7 +59,9 @@ class InstrumentLayout:
                     f"(use {_SETTING}: rls, or leave {m.output} out of models.enabled)", parameter=_SETTING)
         self.sizes = tuple(len(m.regressors) for m in self.models)
         self.n_max = max(self.sizes)
-        self._where = self._locate()
+        where = self._locate()
+        self._present = np.array([w is not None for w in where])
+        self._flat = np.array([0 if w is None else w[0] * self.n_max + w[1] for w in where])
         self._select = np.full((len(self.models), self.n_max), _PADDING)
         for j, m in enumerate(self.models):
             self._select[j, : self.sizes[j]] = [SERVED[r] for r in m.regressors]
@@ -92,7 +94,8 @@ class InstrumentLayout:
         t = np.asarray(theta, dtype=float)
         if t.shape != (len(self.models), self.n_max):
             raise ValueError(f"expected estimates of shape {(len(self.models), self.n_max)}, got {t.shape}")
-        return np.array([0.0 if w is None else t[w] for w in self._where])
+        out: FloatArray = np.where(self._present, t.ravel()[self._flat], 0.0)
+        return out
 
     def assemble(self, alpha: float, q: float, u: float, V: float, cbar: float) -> FloatArray:
         """The ``(M, n_max)`` instruments of one sample from the auxiliary state ``(alpha, q)``,
