@@ -81,3 +81,20 @@ def test_instruments_on_a_noisy_maneuver_follow_the_true_regressors(gust, rho_fl
     np.testing.assert_array_equal(zeta[:, 1, 3], u)
     np.testing.assert_array_equal(zeta[:, 0, :3], zeta[:, 1, [0, 1, 3]])
     assert (strength.rho_min() > rho_floor).all() and not strength.weak().any()
+
+
+def test_without_the_excitation_the_instruments_are_weak():
+    """The maneuver flown but its excitation not received (``u`` = 0): the auxiliary model
+    still forms from the bare RLS (the sensor noise excites it), but the instruments stay at
+    rest, so every model's smallest canonical correlation is 0 and it is flagged weak."""
+    rec = simulate_maneuver(0.2, seed=3, band_limited_on=SIGNALS)
+    t, out = reduce_short_period(rec)
+    X, z = model_rows(out)
+    aux = ShortPeriodAuxiliary(T2_MODELS, T2, rec.config.rate)
+    strength = InstrumentStrength((3, 4), bias=(0, 0))
+    for k in range(t.size):
+        for sample in aux.update(X[k], z[k], 0.0, rec.qbar, rec.V):
+            strength.update(sample.X, sample.instruments)
+    assert strength.k == t.size
+    np.testing.assert_array_equal(strength.rho_min(), [0.0, 0.0])
+    assert strength.weak().all()
