@@ -48,7 +48,15 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ..aero.coefficients import RATES, FloatArray, aircraft_sample, coefficients, flight_state, regressors
+from ..aero.coefficients import (
+    RATES,
+    FlightState,
+    FloatArray,
+    aircraft_sample,
+    coefficients,
+    flight_state,
+    regressors,
+)
 from ..aero.differentiation import FixedLagDifferentiator
 from ..aero.models import REGRESSOR_UNITS
 from ..aero.surface_mixing import SURFACES
@@ -62,6 +70,7 @@ from .convergence import ConvergenceMonitor
 from .frequency_path import FrequencyOutput, FrequencyPath
 from .guard import withheld as unpublishable
 from .identifiability import IdentifiabilityMonitor
+from .instrument_path import InstrumentPath
 from .intake import Intake
 from .sampling import Sample, Sampler, Skipped
 from .states import model_report
@@ -244,6 +253,11 @@ class Pipeline:
         self._last: SampleOutput | None = None  # the newest sample's output
         # estimator.method frequency or both: the frequency-domain estimator on the same rows.
         self.frequency = FrequencyPath(self.config) if self.config.frequency is not None else None
+        # estimator.algorithm iv: the rows' instruments (rows waiting for them end as rejected).
+        iv = getattr(self, "_iv", None)
+        if iv is not None and iv.waiting:
+            self.bookkeeping.reject_samples("instruments_not_ready", iv.waiting)
+        self._iv = InstrumentPath(self.config) if uses_excitation(self.config) else None
 
     @property
     def identifiability(self) -> IdentifiabilityMonitor:
@@ -388,18 +402,18 @@ class Pipeline:
         X.flat[self._x_index] = [reg[name] for name in self._x_names]
         z[:] = [coef[name] for name in self._outputs]
         freq = self.frequency
-        try:
-            if freq is not None:
-                freq.check(X, z)  # a row either estimator refuses is used by neither
-            self.bank.update(X, z)
-        except NonFiniteInput:  # the row, or the state it would make, is not finite: unchanged
-            book.reject_samples("non_finite_regression")
-            return None
-        book.samples_used += 1
-        self._quality.add(X, z)
-        self.last_stamp_ns = t
-        if self.record:
-            self.regression.append((t, X.copy(), z.copy()))
+        if self._iv is not None:
+            if not self._instrumented(t, X, z, state, u):
+                return None
+        else:
+            try:
+                if freq is not None:
+                    freq.check(X, z)  # a row either estimator refuses is used by neither
+                self.bank.update(X, z)
+            except NonFiniteInput:  # the row, or the state it would make, is not finite: unchanged
+                book.reject_samples("non_finite_regression")
+                return None
+            self._used(t, X, z)
         bank = self.bank
         self._index += 1
         theta = bank.theta_all()
@@ -415,13 +429,53 @@ class Pipeline:
             ready &= ~bad
         flags, model_flags = self._monitor.update(t, theta, se, ready)
         # A parameter that is not identifiable from the data so far is never flagged converged.
-        self._converged = flags, model_flags = self._quality.restrict(flags, model_flags, bank, ready)
+        flags, model_flags = self._quality.restrict(flags, model_flags, bank, ready)
+        if self._iv is not None and self._iv.weak.any():  # nor one whose instruments are weak
+            flags, model_flags = flags & ~self._iv.weak[:, None], model_flags & ~self._iv.weak
+        self._converged = flags, model_flags
         frequency = None if freq is None else freq.add(t, book.outputs_withheld, self._quality)
         self._last = SampleOutput(stamp_ns=t, index=self._index, theta=theta, se=se, se_conventional=se_conv,
                                   ready=ready, converged=flags, model_converged=model_flags,
                                   covariance=self._covariances(t, ready), lags=np.where(ready, bank.lags_used, 0),
                                   frequency=frequency)
         return self._last
+
+    def _used(self, t: int, X: np.ndarray, z: np.ndarray) -> None:
+        """Row ``t`` reached the estimator."""
+        self.bookkeeping.samples_used += 1
+        self._quality.add(X, z)
+        self.last_stamp_ns = t
+        if self.record:
+            self.regression.append((t, X.copy(), z.copy()))
+
+    def _instrumented(self, t: int, X: np.ndarray, z: np.ndarray, state: FlightState,
+                      u: Sequence[float] | None) -> bool:
+        """``estimator.algorithm iv``: row ``t`` and the rows that waited for the first
+        auxiliary model go to the estimator with their instruments (:mod:`.instrument_path`);
+        whether row ``t`` reached it (False: it waits, or was refused)."""
+        book, iv = self.bookkeeping, self._iv
+        assert iv is not None and u is not None
+        last = self._last
+        try:
+            rows, dropped = iv.update(t, X, z, u[0], float(state.qbar), float(state.V),
+                                      None if last is None else last.theta)
+        except NonFiniteInput:
+            book.reject_samples("non_finite_regression")
+            return False
+        if dropped:
+            book.reject_samples("instruments_not_ready", dropped)
+        for row in rows:
+            try:
+                self.bank.update(row.X, row.z, instruments=row.zeta)
+            except NonFiniteInput:
+                book.reject_samples("non_finite_regression")
+                continue
+            self._used(row.stamp_ns, row.X, row.z)
+        return bool(rows) and self.last_stamp_ns == t
+
+    def weak_instruments(self, j: int) -> str:
+        """Why model ``j``'s parameters are held back for weak instruments ('' if not)."""
+        return "" if self._iv is None else self._iv.weak_reason(j)
 
     def _covariances(self, t: int, ready: np.ndarray) -> np.ndarray | None:
         """The corrected and conventional covariances of the ready models
@@ -465,8 +519,12 @@ class Pipeline:
         return Pipeline(config, record=self.record, enabled=self.enabled, bookkeeping=self.bookkeeping)
 
     def finish(self) -> None:
-        """End of data: the last ``lag`` samples never get a centred derivative."""
+        """End of data: the last ``lag`` samples never get a centred derivative (and with
+        ``estimator.algorithm iv``, rows still waiting for instruments never get them)."""
         self._flush("end_of_data")
+        if self._iv is not None and self._iv.waiting:
+            self.bookkeeping.reject_samples("instruments_not_ready", self._iv.waiting)
+            self._iv = InstrumentPath(self.config)
 
     # ------------------------------------------------------------------ reporting
     def model_fit(self, j: int) -> dict:
@@ -494,7 +552,8 @@ class Pipeline:
     def counters(self) -> dict:
         """Bookkeeping for diagnostics: messages per stream and samples, with reasons, and
         ``explanations``: each reason in the user's terms (:func:`.alerts.explanations`)."""
-        report = self.bookkeeping.report(len(self._pending))
+        waiting = 0 if self._iv is None else self._iv.waiting
+        report = self.bookkeeping.report(len(self._pending) + waiting)
         report["explanations"] = explanations(self.config, self.bookkeeping)
         return report
 

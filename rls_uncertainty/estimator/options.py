@@ -170,11 +170,12 @@ class EstimatorOptions:
     algorithm: Algorithm = option(
         "rls", "rls: recursive least squares (Eq. 15); iv: recursive instrumental variables, the estimate "
         "(Z'X)^-1 Z'z from instruments given with every sample and the sandwich covariance P N P' whose middle is "
-        "Eqs. 17-22 with the instruments in Lambda (no forgetting, exact initialization)", choices=ALGORITHMS)
+        "Eqs. 17-22 with the instruments in Lambda (no forgetting, exact initialization); docs/estimator.md, "
+        "instrumental variables", choices=ALGORITHMS, ros="estimator.algorithm")
     small_sample: float = option(
         SMALL_SAMPLE, "with algorithm iv: s of the factor n_R / (n_R - n - s L) on the corrected covariance (the "
         "residuals were fitted with n parameters and the L-lag sum loses about s samples per lag); 0 is Eq. 22",
-        low=0.0, high=MAX_SMALL_SAMPLE)
+        low=0.0, high=MAX_SMALL_SAMPLE, ros="estimator.small_sample")
 
     def __post_init__(self) -> None:
         check(self, "estimator")
