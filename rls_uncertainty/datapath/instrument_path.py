@@ -40,9 +40,12 @@ class InstrumentedRow(NamedTuple):
 
 
 class InstrumentPath:
-    """The instruments of one estimator's rows (a new estimator gets a new path)."""
+    """The instruments of one estimator's rows (a new estimator gets a new path). ``record``:
+    keep the instruments of every row the estimator took (:attr:`recorded`, beside the
+    pipeline's ``regression``)."""
 
-    def __init__(self, config: PipelineConfig) -> None:
+    def __init__(self, config: PipelineConfig, record: bool = False) -> None:
+        self.recorded: list[np.ndarray] | None = [] if record else None
         opts = config.instruments
         self.options = opts
         self.aux = ShortPeriodAuxiliary(config.models, config.aircraft, config.rate,

@@ -257,7 +257,7 @@ class Pipeline:
         iv = getattr(self, "_iv", None)
         if iv is not None and iv.waiting:
             self.bookkeeping.reject_samples("instruments_not_ready", iv.waiting)
-        self._iv = InstrumentPath(self.config) if uses_excitation(self.config) else None
+        self._iv = InstrumentPath(self.config, self.record) if uses_excitation(self.config) else None
 
     @property
     def identifiability(self) -> IdentifiabilityMonitor:
@@ -471,7 +471,15 @@ class Pipeline:
                 book.reject_samples("non_finite_regression")
                 continue
             self._used(row.stamp_ns, row.X, row.z)
+            if iv.recorded is not None:
+                iv.recorded.append(row.zeta.copy())
         return bool(rows) and self.last_stamp_ns == t
+
+    @property
+    def instruments(self) -> list[np.ndarray]:
+        """With ``record`` and ``estimator.algorithm iv``: the instruments of each row in
+        :attr:`regression`, in its order (empty otherwise)."""
+        return [] if self._iv is None or self._iv.recorded is None else self._iv.recorded
 
     def weak_instruments(self, j: int) -> str:
         """Why model ``j``'s parameters are held back for weak instruments ('' if not)."""
@@ -524,7 +532,7 @@ class Pipeline:
         self._flush("end_of_data")
         if self._iv is not None and self._iv.waiting:
             self.bookkeeping.reject_samples("instruments_not_ready", self._iv.waiting)
-            self._iv = InstrumentPath(self.config)
+            self._iv = InstrumentPath(self.config, self.record)
 
     # ------------------------------------------------------------------ reporting
     def model_fit(self, j: int) -> dict:
