@@ -217,3 +217,26 @@ def test_a_non_finite_instrument_is_refused_and_changes_nothing():
 def test_iv_options_refused(options):
     with pytest.raises(ConfigError):
         EstimatorOptions(algorithm="iv", **options)
+
+
+@pytest.mark.parametrize("at", [2, 150])
+def test_an_iv_bank_round_trips_through_the_state_file(tmp_path, at):
+    """Saved to a state file and read back with its checks (layout, values, the expected
+    configuration), an IV bank continues bit for bit."""
+    from rls_uncertainty.state_file import EstimatorState, load_state, save_state
+
+    X, Zeta, z = _data(200, seed=8)
+    options = EstimatorOptions(lags=20, algorithm="iv")
+    bank = EstimatorBank(SIZES, options)
+    for k in range(at):
+        bank.update(X[k], z[k], Zeta[k])
+    path = tmp_path / "state.npz"
+    fingerprint = {"estimator": options.resolved().as_dict()}
+    save_state(path, EstimatorState(bank, at, z[:at].sum(axis=0), (z[:at] ** 2).sum(axis=0)), fingerprint)
+    restored = load_state(path, fingerprint, expect=(SIZES, options)).bank
+    for k in range(at, len(z)):
+        bank.update(X[k], z[k], Zeta[k])
+        restored.update(X[k], z[k], Zeta[k])
+    assert bank.ready.all()
+    np.testing.assert_array_equal(restored.theta_all(), bank.theta_all())
+    np.testing.assert_array_equal(restored.covariance_all(), bank.covariance_all())
