@@ -240,3 +240,30 @@ def test_an_iv_bank_round_trips_through_the_state_file(tmp_path, at):
     assert bank.ready.all()
     np.testing.assert_array_equal(restored.theta_all(), bank.theta_all())
     np.testing.assert_array_equal(restored.covariance_all(), bank.covariance_all())
+
+
+def test_a_bank_of_one_takes_instruments():
+    from rls_uncertainty.estimator import RecursiveEstimator
+
+    X, Zeta, z = _data(120, seed=6)
+    options = EstimatorOptions(lags=10, algorithm="iv")
+    one, bank = RecursiveEstimator(4, options), EstimatorBank(SIZES, options)
+    for k in range(len(z)):
+        one.update(X[k, 1], z[k, 1], Zeta[k, 1])
+        bank.update(X[k], z[k], Zeta[k])
+    np.testing.assert_array_equal(one.theta, bank.theta(1))
+    np.testing.assert_array_equal(one.standard_errors(), bank.standard_errors(1))
+
+
+def test_automatic_lags_run_with_iv():
+    """With ``lags="auto"`` each model's lags are chosen from its residuals, as for least
+    squares; the covariance stays the batch sandwich with the chosen lags."""
+    N = 260
+    X, Zeta, z = _data(N)
+    options = EstimatorOptions(lags="auto", algorithm="iv", small_sample=0.0, init_condition=1e4)
+    bank, history = _run(options, X, Zeta, z)
+    for j, s in enumerate(SIZES):
+        L = int(bank.lags_used[j])
+        first = int(bank.ready_at[j]) + options.burn_in
+        _, _, corr = batch_iv(X[:, j, :s], Zeta[:, j, :s], z[:, j], L, residuals=np.array(history[j]), first=first)
+        assert _relative(bank.covariance(j, repair=False), corr) < 1e-10
