@@ -217,3 +217,53 @@ def test_a_non_finite_instrument_is_refused_and_changes_nothing():
 def test_iv_options_refused(options):
     with pytest.raises(ConfigError):
         EstimatorOptions(algorithm="iv", **options)
+
+
+@pytest.mark.parametrize("at", [2, 150])
+def test_an_iv_bank_round_trips_through_the_state_file(tmp_path, at):
+    """Saved to a state file and read back with its checks (layout, values, the expected
+    configuration), an IV bank continues bit for bit."""
+    from rls_uncertainty.state_file import EstimatorState, load_state, save_state
+
+    X, Zeta, z = _data(200, seed=8)
+    options = EstimatorOptions(lags=20, algorithm="iv")
+    bank = EstimatorBank(SIZES, options)
+    for k in range(at):
+        bank.update(X[k], z[k], Zeta[k])
+    path = tmp_path / "state.npz"
+    fingerprint = {"estimator": options.resolved().as_dict()}
+    save_state(path, EstimatorState(bank, at, z[:at].sum(axis=0), (z[:at] ** 2).sum(axis=0)), fingerprint)
+    restored = load_state(path, fingerprint, expect=(SIZES, options)).bank
+    for k in range(at, len(z)):
+        bank.update(X[k], z[k], Zeta[k])
+        restored.update(X[k], z[k], Zeta[k])
+    assert bank.ready.all()
+    np.testing.assert_array_equal(restored.theta_all(), bank.theta_all())
+    np.testing.assert_array_equal(restored.covariance_all(), bank.covariance_all())
+
+
+def test_a_bank_of_one_takes_instruments():
+    from rls_uncertainty.estimator import RecursiveEstimator
+
+    X, Zeta, z = _data(120, seed=6)
+    options = EstimatorOptions(lags=10, algorithm="iv")
+    one, bank = RecursiveEstimator(4, options), EstimatorBank(SIZES, options)
+    for k in range(len(z)):
+        one.update(X[k, 1], z[k, 1], Zeta[k, 1])
+        bank.update(X[k], z[k], Zeta[k])
+    np.testing.assert_array_equal(one.theta, bank.theta(1))
+    np.testing.assert_array_equal(one.standard_errors(), bank.standard_errors(1))
+
+
+def test_automatic_lags_run_with_iv():
+    """With ``lags="auto"`` each model's lags are chosen from its residuals, as for least
+    squares; the covariance stays the batch sandwich with the chosen lags."""
+    N = 260
+    X, Zeta, z = _data(N)
+    options = EstimatorOptions(lags="auto", algorithm="iv", small_sample=0.0, init_condition=1e4)
+    bank, history = _run(options, X, Zeta, z)
+    for j, s in enumerate(SIZES):
+        L = int(bank.lags_used[j])
+        first = int(bank.ready_at[j]) + options.burn_in
+        _, _, corr = batch_iv(X[:, j, :s], Zeta[:, j, :s], z[:, j], L, residuals=np.array(history[j]), first=first)
+        assert _relative(bank.covariance(j, repair=False), corr) < 1e-10

@@ -11,6 +11,13 @@ lag sums and Eq. 21's lag products), :class:`.initialization.ExactInitialization
 10) and :class:`.evaluation.Evaluation` (the lag choice and Eqs. 13, 20, 22); the bank hands
 each sample from one to the next (:meth:`EstimatorBank._apply`); its snapshot is :mod:`.snapshot`.
 
+With the option ``algorithm="iv"`` the models are recursive instrumental variables: the
+instruments come with every sample (:meth:`EstimatorBank.update`), :class:`.iv_fit.IvFit`
+takes the place of the least-squares fit, :class:`.iv_initialization.IvInitialization` that of
+the exact initialization, the lag storage keeps the instruments' history for Eq. 21, and every
+covariance is the sandwich ``P N P'`` (:mod:`.covariance`); :func:`.reference.batch_iv` is its
+batch form.
+
 How the hot path differs from the reference, and why (each measured in
 ``benchmarks/estimator_benchmark.py``):
 
@@ -82,6 +89,18 @@ def as_regressors(
     return x
 
 
+def given_instruments(
+    instruments: npt.NDArray[Any] | Sequence[npt.ArrayLike] | None, iv: bool, sizes: tuple[int, ...],
+) -> FloatArray:
+    """A sample's instruments as :func:`as_regressors` makes the regressors, for a bank whose
+    algorithm is ``"iv"`` (``iv``); otherwise, or without them, one clear error."""
+    if not iv:
+        raise ValueError("instruments are taken only with estimator algorithm 'iv'")
+    if instruments is None:
+        raise ValueError("estimator algorithm 'iv' needs the instruments of every sample: update(X, z, instruments)")
+    return as_regressors(instruments, sizes, "instruments")
+
+
 class ScaledSample:
     """The sample being added, as the models see it: ``y = (x / s, z)`` ``(M, n+1)``, the
     column-scaled regressors ``x`` and the outputs ``z`` side by side, with the views the
@@ -134,7 +153,6 @@ class EstimatorBank(BankSnapshot):
         self._iv = o.algorithm == "iv"
         self._instruments = InstrumentSample(self._sample, m, n)  # (read with algorithm iv)
         self._zeta: FloatArray = np.zeros((m, n))  # this sample's instruments, as given
-        self._fit: RlsFit | IvFit = IvFit(m, n, o.residual) if self._iv else RlsFit(m, n, f, o.residual)
         self._noise = RlsFit(m, n, g, o.residual) if o.noise_model else None  # gives R_k(i) (f < 1)
         self._counts = SampleCounts(m, f, g, o.noise_model, o.burn_in)
         held = o.held
@@ -142,6 +160,8 @@ class EstimatorBank(BankSnapshot):
             m, n, GROWTH_START if held is None else held + 1, all_lags=held is None, forgetting=f,
             waiting=o.p0 is None, noise_forgetting=g, instruments=self._iv,
         )
+        # [D; theta'] in column-scaled units, S D S and S theta (iv: [P'; theta'], S P T and S theta)
+        self._fit = IvFit(m, n, o.residual, self._instruments, self._lags) if self._iv else RlsFit(m, n, f, o.residual)
         self._init = (IvInitialization(sizes, n, o.init_condition) if self._iv
                       else ExactInitialization(sizes, n, o.init_condition, prior=o.p0 is not None))
         self._eval = Evaluation(o, sizes, self._fit, self._lags, self._counts)
@@ -198,7 +218,7 @@ class EstimatorBank(BankSnapshot):
         the state non-finite, raises :class:`NonFiniteInput` and leaves the state unchanged.
         """
         if self._iv or instruments is not None:
-            self._instruments_given(instruments)
+            self._zeta = given_instruments(instruments, self._iv, self.sizes)
         if type(X) is np.ndarray and X.shape == self._mask.shape and X.dtype == _F64:
             x = X
         else:
@@ -223,11 +243,7 @@ class EstimatorBank(BankSnapshot):
             small = self._instruments.set(self._zeta, self._init.inv_t) and small  # type: ignore[attr-defined]
         if check and not small:
             return False
-        if self._iv:
-            magnitude = self._fit.prepare(sample.x, sample.x_col, sample.z,  # type: ignore[call-arg]
-                                          self._instruments.row, self._lags.lag0)
-        else:
-            magnitude = self._fit.prepare(sample.x, sample.x_col, sample.z)  # type: ignore[call-arg]
+        magnitude = self._fit.prepare(sample.x, sample.x_col, sample.z)
         small = small and magnitude <= _SAFE_SQUARED
         if self._noise is not None:  # the same for the noise model (forgetting f_R)
             magnitude = self._noise.prepare(sample.x, sample.x_col, sample.z)
@@ -244,15 +260,6 @@ class EstimatorBank(BankSnapshot):
         self._lags.add(sample, self._fit, self._noise, self._counts)  # v_k (u_k), Eqs. 17, 21
         if self._lags.waiting:
             self._initialize()  # Eqs. 6, 7, 10 for the models that allow it
-
-    def _instruments_given(self, instruments: npt.NDArray[Any] | Sequence[npt.ArrayLike] | None) -> None:
-        """This sample's instruments (algorithm ``"iv"``), or one clear error."""
-        if not self._iv:
-            raise ValueError("instruments are taken only with estimator algorithm 'iv'")
-        if instruments is None:
-            raise ValueError("estimator algorithm 'iv' needs the instruments of every sample: "
-                             "update(X, z, instruments)")
-        self._zeta = as_regressors(instruments, self.sizes, "instruments")
 
     def _initialize(self) -> None:
         """Initialize the waiting models whose data allow it (:mod:`.initialization`): the

@@ -28,7 +28,7 @@ from collections.abc import Mapping
 import numpy as np
 import numpy.typing as npt
 
-from .lag_storage import Sample, assign_checked
+from .lag_storage import LagStorage, Sample, assign_checked
 from .numpy_compat import vecdot
 
 __all__ = ["IvFit", "InstrumentSample"]
@@ -44,8 +44,9 @@ class IvFit:
 
     forgetting = 1.0
 
-    def __init__(self, m: int, n: int, residual: str) -> None:
+    def __init__(self, m: int, n: int, residual: str, instruments: InstrumentSample, lags: LagStorage) -> None:
         self.residual_kind = residual
+        self._instruments, self._lags = instruments, lags
         self._aug = np.zeros((m, n + 1, n))  # [P'; theta'] (scaled units)
         self.Q = self._aug[:, :n]  # P'
         self.D = self.Q.swapaxes(1, 2)  # P (a view; read by the evaluation)
@@ -60,20 +61,20 @@ class IvFit:
         self._root = np.zeros(m)
         self._outer = np.zeros((m, n + 1, n))
 
-    def prepare(self, x: FloatArray, x_col: FloatArray, z: FloatArray, zeta_row: FloatArray,
-                lag0: FloatArray) -> float:
+    def prepare(self, x: FloatArray, x_col: FloatArray, z: FloatArray) -> float:
         """``h = P' x``, ``g = P zeta``, ``-e_k`` and ``d_k = 1 + x' g`` of the scaled regressors
-        ``x`` (``x_col`` their column view), outputs ``z`` and instruments (``zeta_row``, ``(M,
-        1, n)``), and the standardization ``sqrt(1 + h' Lambda_(k-1)(0) h)`` (``lag0``, the
-        instruments' ``Lambda(0)``); state untouched. Returns ``|(h, e)|^2 + |g|^2``, the
+        ``x`` (``x_col`` their column view), outputs ``z`` and the instruments' sample (set
+        before), and the standardization ``sqrt(1 + h' Lambda_(k-1)(0) h)`` (the instruments'
+        ``Lambda(0)`` of the lag storage); state untouched. Returns ``|(h, e)|^2 + |g|^2``, the
         magnitude the bank's overflow guard looks at."""
         np.matmul(self._aug, x_col, out=self._h)  # (P' x, theta' x)
-        np.matmul(zeta_row, self.Q, out=self._g)  # zeta' P' = (P zeta)'
+        np.matmul(self._instruments.row, self.Q, out=self._g)  # zeta' P' = (P zeta)'
         d = vecdot(x, self._g[:, 0], out=self._d)
         d += 1.0
         np.subtract(self._neg_e, z, out=self._neg_e)
         if self.residual_kind == "standardized":
             h = self._hx
+            lag0 = self._lags.lag0
             np.sqrt(1.0 + vecdot(h, np.matmul(lag0, h[:, :, None])[:, :, 0]), out=self._root)
         flat_h, flat_g = self._h.reshape(-1), self._g.reshape(-1)
         magnitude: float = np.dot(flat_h, flat_h) + np.dot(flat_g, flat_g)

@@ -297,8 +297,10 @@ class EstimatorOptions:
 
     def resolved(self) -> EstimatorOptions:
         """The same options with the defaults resolved (``residual_burn_in``,
-        ``noise_forgetting``): two objects that run the same estimator resolve to equal ones."""
-        return replace(self, residual_burn_in=self.burn_in, noise_forgetting=self.noise_forgetting_used)
+        ``noise_forgetting``; ``small_sample`` 0 with ``rls``, which does not use it): two
+        objects that run the same estimator resolve to equal ones."""
+        return replace(self, residual_burn_in=self.burn_in, noise_forgetting=self.noise_forgetting_used,
+                       small_sample=self.small_sample if self.algorithm == "iv" else 0.0)
 
     # ------------------------------------------------------------------ state file
     def as_dict(self) -> dict[str, Any]:
