@@ -133,7 +133,7 @@ def run_maneuver(aux, n, seed=0, estimates=None):
         X[k, 0, :3] = 1.0, a, u[k]
         X[k, 1] = 1.0, a, q * T2.cbar / (2 * V), u[k]
         z = np.einsum("mi,mi->m", X[k], TRUE) + rng.normal(0.0, 1e-3, 2)
-        delivered.append(aux.update(X[k], z, u[k], QBAR, V, estimates))
+        delivered.append(aux.update(X[k], z, u[k], QBAR, V, estimates, tag=k))
         models.append((aux.Phi.copy(), aux.Gamma.copy()))
         s = Phi @ s + Gamma * u[k]
     return u, X, delivered, models
@@ -148,6 +148,7 @@ def test_replay_at_the_hand_over_equals_stepping_sample_by_sample():
     assert aux.bare.ready and aux.has_model and aux.waiting == 0
     flat = [s for d in delivered for s in d]
     np.testing.assert_array_equal(np.stack([s.X for s in flat]), X)
+    assert [s.tag for s in flat] == list(range(300))
     # the first model, stepped by hand from rest over the same inputs (I2, then I1)
     Phi, Gamma = models[k0]
     s, stepped = np.zeros(2), []

@@ -50,11 +50,13 @@ Regressors = npt.NDArray[Any] | Sequence[npt.ArrayLike]
 
 class InstrumentedSample(NamedTuple):
     """A sample ready for the estimator: regressors ``X`` ``(M, n_max)``, outputs ``z``
-    ``(M,)`` and ``instruments`` ``(M, n_max)`` laid out like ``X``."""
+    ``(M,)``, ``instruments`` ``(M, n_max)`` laid out like ``X``, and the ``tag`` it was given
+    (its stamp, say: a waiting sample is handed over later)."""
 
     X: FloatArray
     z: FloatArray
     instruments: FloatArray
+    tag: object = None
 
 
 class _Waiting(NamedTuple):
@@ -62,6 +64,7 @@ class _Waiting(NamedTuple):
     z: FloatArray
     u: float
     V: float
+    tag: object
 
 
 class ShortPeriodAuxiliary:
@@ -146,11 +149,11 @@ class ShortPeriodAuxiliary:
         return np.stack([self.step(float(a), float(b)) for a, b in zip(np.ravel(u), np.ravel(V), strict=True)])
 
     def update(self, X: Regressors, z: npt.ArrayLike, u: float, qbar: float, V: float,
-               estimates: npt.ArrayLike | None = None) -> list[InstrumentedSample]:
+               estimates: npt.ArrayLike | None = None, tag: object = None) -> list[InstrumentedSample]:
         """One sample: regressors ``X`` ``(M, n_max)`` (or ``M`` regressor vectors), outputs
         ``z`` ``(M,)``, the injected excitation ``u`` (rad, from trim), ``qbar`` (Pa), ``V``
         (m/s) and the estimator's ``estimates`` ``(M, n_max)`` (``None`` or NaN while it has
-        none).
+        none); ``tag`` comes back with the sample.
 
         Returns the samples to give the estimator now, in order: none while the auxiliary model
         does not exist, every waiting one at the hand-over, then this one. A non-finite input
@@ -165,7 +168,7 @@ class ShortPeriodAuxiliary:
         if not self.has_model:
             if len(self._backlog) == self._backlog.maxlen:
                 self.dropped += 1
-            self._backlog.append(_Waiting(x, zz, float(u), float(V)))
+            self._backlog.append(_Waiting(x, zz, float(u), float(V), tag))
             first = own if own is not None else self.bare.theta if self.bare.ready else None
             if first is not None and self.set_model(first, qbar, V):
                 return self._hand_over()
@@ -175,14 +178,14 @@ class ShortPeriodAuxiliary:
             self._since_refresh = 0
             if own is not None or self.bare.ready:
                 self.set_model(self.bare.theta if own is None else own, qbar, V)
-        return [InstrumentedSample(x, zz, self.step(float(u), float(V)))]
+        return [InstrumentedSample(x, zz, self.step(float(u), float(V)), tag)]
 
     def _hand_over(self) -> list[InstrumentedSample]:
         """The waiting samples with the instruments of the first model, replayed from rest."""
         waiting = list(self._backlog)
         self._backlog.clear()
         zeta = self.replay([w.u for w in waiting], [w.V for w in waiting])
-        return [InstrumentedSample(w.X, w.z, zeta[i]) for i, w in enumerate(waiting)]
+        return [InstrumentedSample(w.X, w.z, zeta[i], w.tag) for i, w in enumerate(waiting)]
 
     def _checked(self, X: Regressors, z: npt.ArrayLike, u: float, qbar: float,
                  V: float) -> tuple[FloatArray, FloatArray]:
