@@ -15,7 +15,6 @@ flagged converged, and the reason is its parameters' state (:mod:`.states`).
 from __future__ import annotations
 
 import math
-from collections import deque
 from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
@@ -54,7 +53,6 @@ class InstrumentPath:
         bias = [m.regressors.index(BIAS_REGRESSOR) if BIAS_REGRESSOR in m.regressors else None
                 for m in config.models]
         self.strength = InstrumentStrength(sizes, bias, opts.weak_below)
-        self._stamps: deque[int] = deque()  # the stamps of the rows waiting for the first model
         self._judge_every = max(1, round(opts.refresh_span * config.rate))
         self._since = 0
         self.rho_min = np.full(len(sizes), np.nan)  # at the last judgement
@@ -72,16 +70,9 @@ class InstrumentPath:
         with their instruments, and how many waiting rows were dropped (the backlog was full).
         A non-finite input raises :class:`..errors.NonFiniteInput` and changes nothing."""
         dropped = self.aux.dropped
-        rows = self.aux.update(X, z, u, qbar, V, estimates)
+        rows = self.aux.update(X, z, u, qbar, V, estimates, tag=int(stamp_ns))
         dropped = self.aux.dropped - dropped
-        if not rows:
-            if dropped:
-                self._stamps.popleft()
-            self._stamps.append(int(stamp_ns))
-            return [], dropped
-        stamps = [*self._stamps, int(stamp_ns)][-len(rows):]
-        self._stamps.clear()
-        out = [InstrumentedRow(t, r.X, r.z, r.instruments) for t, r in zip(stamps, rows, strict=True)]
+        out = [InstrumentedRow(int(r.tag), r.X, r.z, r.instruments) for r in rows]  # type: ignore[call-overload]
         for r in out:
             self.strength.update(r.X, r.zeta)
         self._since += len(out)
