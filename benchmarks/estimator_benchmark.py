@@ -11,7 +11,9 @@ Prints, in one run on this machine:
   2d. the lag window follows time (estimator.lag_span 1 s): 50 lags at 50 Hz, 200 at 200 Hz,
      1000 at 1 kHz: per-sample time, CPU share of one core at that rate, and state memory;
   3. the ratio against refitting batch OLS with a HAC covariance (statsmodels, uniform kernel,
-     maxlags 50) at every sample of a 600-sample maneuver, six models.
+     maxlags 50) at every sample of a 600-sample maneuver, six models;
+  4. recursive instrumental variables (algorithm "iv") against the least squares per sample,
+     six models, 50 lags, one maneuver (the two banks alternate sample by sample).
 
 Run: .venv/bin/python benchmarks/estimator_benchmark.py
 """
@@ -75,6 +77,33 @@ def per_sample(lags, n: int = 3000, warm: int = 300, **options) -> tuple[float, 
         t_all.append(t2 - t0)
     gc.enable()
     return float(np.median(t_upd) * 1e6), float(np.median(t_all) * 1e6), float(np.percentile(t_all, 99) * 1e6)
+
+
+def iv_ratio(n: int = 3000, warm: int = 300) -> tuple[float, float, float, float]:
+    """Median microseconds per sample of the least squares and of instrumental variables (the
+    regressors one sample earlier as instruments), update and update + outputs, the banks
+    alternating sample by sample on one maneuver: ``(rls update, rls total, iv update, iv total)``."""
+    X, z = maneuver(n)
+    Z = np.roll(X, 1, axis=0)
+    banks = (EstimatorBank(SIZES, EstimatorOptions(lags=50)),
+             EstimatorBank(SIZES, EstimatorOptions(lags=50, algorithm="iv")))
+    times = np.zeros((2, 2, n - warm))
+    gc.disable()
+    for k in range(n):
+        for b, bank in enumerate(banks):
+            t0 = time.perf_counter()
+            if b:
+                bank.update(X[k], z[k], Z[k])
+            else:
+                bank.update(X[k], z[k])
+            t1 = time.perf_counter()
+            outputs(bank)
+            t2 = time.perf_counter()
+            if k >= warm:
+                times[b, :, k - warm] = (t1 - t0, t2 - t0)
+    gc.enable()
+    rls_upd, rls_all, iv_upd, iv_all = (float(np.median(t) * 1e6) for t in times.reshape(4, -1))
+    return rls_upd, rls_all, iv_upd, iv_all
 
 
 def _filled(lags: int) -> EstimatorBank:
@@ -175,6 +204,14 @@ def main() -> None:
     t_rls, t_hac = hac_ratio()
     print(f"   recursive {t_rls * 1e3:.1f} ms, batch refits {t_hac * 1e3:.0f} ms: "
           f"{t_hac / t_rls:.0f}x faster")
+
+    print("\n4. Instrumental variables against least squares, six models, 50 lags, one maneuver, median "
+          "microseconds per sample")
+    rls_upd, rls_all, iv_upd, iv_all = iv_ratio()
+    print(f"   {'':>8}{'update':>10}{'update+outputs':>17}")
+    print(f"   {'rls':>8}{rls_upd:10.1f}{rls_all:17.1f}")
+    print(f"   {'iv':>8}{iv_upd:10.1f}{iv_all:17.1f}")
+    print(f"   iv / rls: update {iv_upd / rls_upd:.2f}x, update + outputs {iv_all / rls_all:.2f}x")
 
 
 if __name__ == "__main__":

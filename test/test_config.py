@@ -159,10 +159,16 @@ def test_every_parameter_reaches_its_nested_field():
         "identifiability.min_noise_ratio": (("identifiability", "min_noise_ratio"), 4.0),
         "identifiability.angle_resolution": (("identifiability", "angle_resolution"), 1e-3),
         "identifiability.rate_resolution": (("identifiability", "rate_resolution"), 1e-5),
+        "estimator.small_sample": (("estimator", "small_sample"), 1.0),
+        "instruments.refresh_span": (("instruments", "refresh_span"), 1.0),
+        "instruments.weak_below": (("instruments", "weak_below"), 0.2),
+        "instruments.max_backlog_span": (("instruments", "max_backlog_span"), 10.0),
     }
-    sections = {"rate", "estimator", "differentiator", "inputs", "surfaces", "limits", "identifiability"}
-    # (estimator.method and the frequency.* parameters: test_every_frequency_parameter_reaches_its_option)
-    pipeline_params = [p.name for p in PARAMETERS if p.name.split(".")[0] in sections and p.name != "estimator.method"]
+    sections = {"rate", "estimator", "differentiator", "inputs", "surfaces", "limits", "identifiability", "instruments"}
+    # (estimator.method and the frequency.* parameters: test_every_frequency_parameter_reaches_its_option;
+    # estimator.algorithm, which needs models the instruments serve: test_instrument_path)
+    pipeline_params = [p.name for p in PARAMETERS if p.name.split(".")[0] in sections
+                       and p.name not in ("estimator.method", "estimator.algorithm")]
     assert sorted(changed) == sorted(pipeline_params)
     given = {"estimator.lag_span": 0.22, "estimator.max_lag_span": 1.6, "estimator.residual_burn_in_span": 0.4}
     default = pipeline_config({})
@@ -265,7 +271,7 @@ def test_fingerprint_is_what_a_state_file_stores():
         "rate": 50.0,
         "estimator": {"lags": 7, "window": "truncated", "forgetting": 1.0, "residual": "standardized", "max_lags": 50,
                       "min_lags": 0, "residual_burn_in": 0, "noise_forgetting": 1.0, "init_condition": 1e8, "p0": None,
-                      "publish_lag_windows": 2.0},
+                      "publish_lag_windows": 2.0, "algorithm": "rls", "small_sample": 0.0},
     }
     assert pipeline_config({"inputs.max_gap": 0.5}).fingerprint() == pipeline_config({}).fingerprint()
 

@@ -422,7 +422,7 @@ def test_every_status_stays_bounded_whatever_arrives():
                  unknown=joints)
     out = statuses(snapshot(c, state="x" * 100_000))
     inputs, samples = out["inputs"], out["samples"]
-    assert len(inputs.values) <= 1 + 5 * (13 + dg.MAX_KEYS)
+    assert len(inputs.values) <= 1 + len(INPUTS) * (13 + dg.MAX_KEYS)
     assert len(samples.values) <= 13 + 3 * (2 + dg.MAX_KEYS)
     assert _size(inputs) < 20_000 and _size(samples) < 10_000
     for s in (inputs, samples):

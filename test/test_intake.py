@@ -12,9 +12,9 @@ from rls_uncertainty.aero.surface_mixing import SurfaceMixing
 from rls_uncertainty.datapath.bookkeeping import Bookkeeping
 from rls_uncertainty.datapath.intake import Intake
 from rls_uncertainty.datapath.limits import PlausibilityLimits, message_value
+from rls_uncertainty.datapath.pipeline import STREAMS
 from rls_uncertainty.datapath.sampling import Sampler
 
-STREAMS = ("imu", "airspeed", "dynamic_pressure", "control_surfaces", "thrust")
 MS = 1_000_000
 DT = 20 * MS  # a 50 Hz IMU
 MAX_GAP = 250 * MS  # inputs.max_gap's default

@@ -149,7 +149,7 @@ def test_every_sample_and_message_is_accounted_for(t2_run):
     assert c["samples_formed"] == c["samples_used"] + sum(c["samples_rejected"].values()) + c["samples_pending"]
     assert c["samples_rejected"] == {"differentiator_warmup": 4, "end_of_data": 4}
     for kind, s in c["streams"].items():
-        assert s["received"] == getattr(st, kind)[0].size
+        assert s["received"] == (getattr(st, kind)[0].size if hasattr(st, kind) else 0)
         assert s["accepted"] == s["received"]
     assert len(outs) == c["samples_used"]
     for out in outs:
@@ -934,7 +934,8 @@ def test_inputs_in_another_frame_are_rejected_as_frame_mismatch(bundled_messages
     c = other.pipeline.counters()
     assert not other.outputs and c["samples_formed"] == 0
     for kind, s in c["streams"].items():
-        assert s["rejected"] == {"frame_mismatch": c_clean["streams"][kind]["received"]}
+        n = c_clean["streams"][kind]["received"]  # (a stream the bag does not carry: nothing)
+        assert s["rejected"] == ({"frame_mismatch": n} if n else {})
 
 
 def test_converted_and_generated_bags_carry_the_default_frame():
@@ -946,7 +947,7 @@ def test_converted_and_generated_bags_carry_the_default_frame():
 
     store = typestore()
     values = {"imu": [0.0] * 6, "airspeed": [40.0, 0.0, 0.0], "dynamic_pressure": 900.0,
-              "control_surfaces": [0.0], "thrust": 10.0}
+              "control_surfaces": [0.0], "thrust": 10.0, "excitation": [0.0]}
     for kind in STREAMS:
         msg = _standard_message(store, kind, 10**18, values[kind], ["elevator"])
         assert msg.header.frame_id == parameter_defaults()["inputs.frame_id"] == "base_link"

@@ -26,6 +26,7 @@ CORE = (
     "rls_uncertainty.estimator", "rls_uncertainty.frequency", "rls_uncertainty.aero",
     "rls_uncertainty.simulation", "rls_uncertainty.datapath", "rls_uncertainty.offline.results",
     "rls_uncertainty.offline.figure_data", "rls_uncertainty.campaign.table4",
+    "rls_uncertainty.instruments",
 )
 
 
@@ -152,7 +153,7 @@ FLOORS = (
     ("extras", "progress"),
     ("schema", "files", "executors"),
     ("aero", "estimator"),
-    ("frequency", "state_file"),
+    ("frequency", "state_file", "instruments"),
     ("datapath",),
     ("settings",),
     ("simulation",),

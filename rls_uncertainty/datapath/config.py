@@ -15,7 +15,7 @@ parameters become these objects in :mod:`rls_uncertainty.settings.parameters`.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field, fields
+from dataclasses import asdict, dataclass, field, fields
 from typing import Any
 
 from ..aero.differentiation import DifferentiatorConfig, pass_band
@@ -24,6 +24,8 @@ from ..aero.surface_mixing import SURFACES, SurfaceMixing
 from ..errors import ConfigError
 from ..estimator.options import EstimatorOptions
 from ..frequency.options import FrequencyOptions
+from ..instruments.layout import InstrumentLayout
+from ..instruments.options import InstrumentOptions
 from ..schema import check, default_of, option
 from .convergence import ConvergenceConfig
 from .identifiability import IdentifiabilityConfig
@@ -137,6 +139,8 @@ class PipelineConfig:
     convergence: ConvergenceConfig = field(default_factory=ConvergenceConfig)
     identifiability: IdentifiabilityConfig = field(default_factory=IdentifiabilityConfig)
     outputs: OutputConfig = OutputConfig()
+    # With estimator.algorithm iv: how the instruments are made and judged.
+    instruments: InstrumentOptions = field(default_factory=InstrumentOptions)
     # estimator.method and, unless it is "time", the frequency-domain estimator's options.
     method: str = option("time", "estimates published: time (recursive least squares, ~/M/estimates ...), "
                          "frequency (equation error on a recursive Fourier transform, ~/M/frequency/estimates ...) or "
@@ -169,6 +173,18 @@ class PipelineConfig:
                 f"inputs.max_gap ({self.inputs.max_gap} s) is shorter than one estimator sample "
                 f"(1/rate = {1 / self.rate:g} s)", parameter="inputs.max_gap")
         self._check_differentiator()
+        self._check_instruments()
+
+    def _check_instruments(self) -> None:
+        """``estimator.algorithm iv``: the time domain only, and models the instruments serve
+        (:class:`..instruments.InstrumentLayout` refuses the others in one line)."""
+        if self.estimator.algorithm != "iv":
+            return
+        if self.method != "time":
+            raise ConfigError(f"estimator.algorithm iv works with estimator.method time, got {self.method} "
+                              "(set estimator.method: time, or estimator.algorithm: rls)",
+                              parameter="estimator.algorithm")
+        InstrumentLayout(self.models)
 
     def _check_differentiator(self) -> None:
         """The angular accelerations of the moment models (Cl, Cm, Cn) pass the differentiator
@@ -232,4 +248,5 @@ class PipelineConfig:
             "models": [[m.output, *m.regressors] for m in self.models],
             "rate": self.rate,
             "estimator": self.estimator.resolved().as_dict(),
+            **({"instruments": asdict(self.instruments)} if self.estimator.algorithm == "iv" else {}),
         }

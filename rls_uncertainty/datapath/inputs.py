@@ -13,6 +13,8 @@ stream (default topic)        message type                         fields read
 ``dynamic_pressure``          ``sensor_msgs/msg/FluidPressure``    ``fluid_pressure`` (Pa)
 ``control_surfaces``          ``sensor_msgs/msg/JointState``       ``name``, ``position`` (rad)
 ``thrust``                    ``geometry_msgs/msg/WrenchStamped``  ``wrench.force.x`` (N)
+``excitation``                ``sensor_msgs/msg/JointState``       ``name``, ``position`` (rad): the injected
+                                                                   input, read with ``estimator.algorithm iv``
 ============================  ===================================  =========================================
 
 Every message also gives ``header.stamp`` (the sample time) and ``header.frame_id``: vectors
@@ -42,6 +44,7 @@ MESSAGE_TYPES = {
     "dynamic_pressure": "sensor_msgs/msg/FluidPressure",
     "control_surfaces": "sensor_msgs/msg/JointState",
     "thrust": "geometry_msgs/msg/WrenchStamped",
+    "excitation": "sensor_msgs/msg/JointState",
 }
 # The default topic of each stream (the ``topics.<stream>`` parameters): its name.
 DEFAULT_TOPICS = {stream: stream for stream in STREAMS}
@@ -110,12 +113,18 @@ def _thrust(p: Pipeline, m: Any) -> list[SampleOutput]:
     return p.add_thrust(int(s.sec) * 1_000_000_000 + int(s.nanosec), m.wrench.force.x)
 
 
+def _excitation(p: Pipeline, m: Any) -> list[SampleOutput]:
+    s = m.header.stamp
+    return p.add_excitation(int(s.sec) * 1_000_000_000 + int(s.nanosec), m.name, m.position)
+
+
 _FEED = {
     "imu": _imu,
     "airspeed": _airspeed,
     "dynamic_pressure": _dynamic_pressure,
     "control_surfaces": _surfaces,
     "thrust": _thrust,
+    "excitation": _excitation,
 }
 
 

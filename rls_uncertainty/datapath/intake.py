@@ -58,6 +58,7 @@ class Intake:
         streams = sampler.streams
         self._imu, self._airspeed, self._surfaces = streams["imu"], streams["airspeed"], streams["control_surfaces"]
         self._qbar, self._thrust = streams["dynamic_pressure"], streams["thrust"]
+        self._excitation = streams["excitation"]
         self._max_gap_ns = sampler.max_gap_ns
         self._rates: tuple[int, float, float, float] | None = None  # the previous IMU message: stamp, rates
 
@@ -105,20 +106,28 @@ class Intake:
 
     def surfaces(self, stamp_ns: int, names: Sequence[str], positions: Sequence[float]) -> bool:
         """``sensor_msgs/JointState`` names and positions (rad), mixed by Eq. 23."""
+        return self._joints(self._surfaces, stamp_ns, names, positions)
+
+    def excitation(self, stamp_ns: int, names: Sequence[str], positions: Sequence[float]) -> bool:
+        """The injected excitation: a ``sensor_msgs/JointState`` of the same joints as the
+        surfaces, mixed by Eq. 23 the same way, judged by the same limits."""
+        return self._joints(self._excitation, stamp_ns, names, positions)
+
+    def _joints(self, stream: Stream, stamp_ns: int, names: Sequence[str], positions: Sequence[float]) -> bool:
         layout = self._mixer.layout(names) if len(positions) == len(names) else MISMATCHED
         if isinstance(layout, Refused):  # unusable at its stamp, like any invalid message: a hole
             missing = tuple(self._mixer.mixing.missing(names)) if layout == MISSING else ()
-            self.book.note("control_surfaces", layout.reason, (*_names(names), len(positions), missing))
-            return self._reject(self._surfaces, stamp_ns, layout.reason)
+            self.book.note(stream.name, layout.reason, (*_names(names), len(positions), missing))
+            return self._reject(stream, stamp_ns, layout.reason)
         unknown = self.book.unknown_joints
         for n in layout.unknown:
             unknown.count(n)
         used = [positions[i] for i in layout.used]
         reason = self.limits.surface_rejection(used)
         if reason is not None:
-            return self._invalid(self._surfaces, stamp_ns, tuple(used), reason)
+            return self._invalid(stream, stamp_ns, tuple(used), reason)
         de, da, dr = layout.deflections(positions)
-        return self.sampler.add(self._surfaces, int(stamp_ns), (de, da, dr))
+        return self.sampler.add(stream, int(stamp_ns), (de, da, dr))
 
     def _invalid(self, stream: Stream, stamp_ns: int, values: tuple, reason: str) -> bool:
         """A message whose values are refused: ``non_finite`` goes to the sampler as a value

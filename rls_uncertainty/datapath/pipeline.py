@@ -48,7 +48,15 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ..aero.coefficients import RATES, FloatArray, aircraft_sample, coefficients, flight_state, regressors
+from ..aero.coefficients import (
+    RATES,
+    FlightState,
+    FloatArray,
+    aircraft_sample,
+    coefficients,
+    flight_state,
+    regressors,
+)
 from ..aero.differentiation import FixedLagDifferentiator
 from ..aero.models import REGRESSOR_UNITS
 from ..aero.surface_mixing import SURFACES
@@ -62,14 +70,16 @@ from .convergence import ConvergenceMonitor
 from .frequency_path import FrequencyOutput, FrequencyPath
 from .guard import withheld as unpublishable
 from .identifiability import IdentifiabilityMonitor
+from .instrument_path import InstrumentPath
 from .intake import Intake
 from .sampling import Sample, Sampler, Skipped
 from .states import model_report
 
-__all__ = ["Pipeline", "SampleOutput", "STREAMS", "StateFileError", "required_streams", "sampler_for"]
+__all__ = ["Pipeline", "SampleOutput", "STREAMS", "StateFileError", "required_streams", "sampler_for",
+           "uses_excitation"]
 
 # The input streams, one per ``add_*`` method: inertial data, air data and the optional ones.
-STREAMS = ("imu", "airspeed", "dynamic_pressure", "control_surfaces", "thrust")
+STREAMS = ("imu", "airspeed", "dynamic_pressure", "control_surfaces", "thrust", "excitation")
 
 
 class SampleOutput(NamedTuple):
@@ -124,7 +134,15 @@ def required_streams(config: PipelineConfig) -> tuple[str, ...]:
         required.append("dynamic_pressure")
     if config.inputs.use_thrust and any(m.output == "CX" for m in config.models):
         required.append("thrust")
+    if uses_excitation(config):
+        required.append("excitation")
     return tuple(required)
+
+
+def uses_excitation(config: PipelineConfig) -> bool:
+    """Whether the estimator needs the injected excitation (``estimator.algorithm iv``: its
+    instruments are built from it)."""
+    return getattr(config.estimator, "algorithm", "rls") == "iv"
 
 
 def symmetric_covariances(c: np.ndarray, real: np.ndarray, real_square: np.ndarray, ready: np.ndarray) -> np.ndarray:
@@ -198,6 +216,7 @@ class Pipeline:
         self._i_qbar = where.get("dynamic_pressure")
         self._i_surfaces = where.get("control_surfaces")
         self._i_thrust = where.get("thrust")
+        self._i_excitation = where.get("excitation")
         self.limits = config.limits
         self.frame_id = inputs.frame_id  # checked by inputs.feed
         self._index = 0
@@ -214,7 +233,7 @@ class Pipeline:
         self._new_estimator()
         self._diff = FixedLagDifferentiator(config.differentiator, 1.0 / config.rate, width=3)
         self._lag = config.differentiator.lag
-        self._pending: deque = deque()  # the delay line: (stamp, sample) awaiting rate_dot
+        self._pending: deque = deque()  # the delay line: (stamp, sample, excitation) awaiting rate_dot
         self._outputs = [m.output for m in config.models]
         # Where each model's regressors go in the (M, n_max) regression matrix, flattened.
         n_max = self.bank.n_max
@@ -234,6 +253,11 @@ class Pipeline:
         self._last: SampleOutput | None = None  # the newest sample's output
         # estimator.method frequency or both: the frequency-domain estimator on the same rows.
         self.frequency = FrequencyPath(self.config) if self.config.frequency is not None else None
+        # estimator.algorithm iv: the rows' instruments (rows waiting for them end as rejected).
+        iv = getattr(self, "_iv", None)
+        if iv is not None and iv.waiting:
+            self.bookkeeping.reject_samples("instruments_not_ready", iv.waiting)
+        self._iv = InstrumentPath(self.config, self.record) if uses_excitation(self.config) else None
 
     @property
     def identifiability(self) -> IdentifiabilityMonitor:
@@ -260,6 +284,10 @@ class Pipeline:
 
     def add_thrust(self, stamp_ns: int, force_x: float) -> list[SampleOutput]:
         return self._advance() if self.intake.thrust(stamp_ns, force_x) else []
+
+    def add_excitation(self, stamp_ns: int, names: Sequence[str], positions: Sequence[float]) -> list[SampleOutput]:
+        """The injected excitation, a ``sensor_msgs/JointState`` like the surfaces (rad)."""
+        return self._advance() if self.intake.excitation(stamp_ns, names, positions) else []
 
     def add_surfaces(self, stamp_ns: int, names: Sequence[str], positions: Sequence[float]) -> list[SampleOutput]:
         """``sensor_msgs/JointState`` names and positions (rad), mixed by Eq. 23."""
@@ -298,7 +326,10 @@ class Pipeline:
         for item in self.sampler.due():
             if isinstance(item, Sample):
                 book.samples_formed += 1
-                result = self._process(item.stamp_ns, self._sample_vector(item.values))
+                values = item.values
+                i_u = self._i_excitation
+                result = self._process(item.stamp_ns, self._sample_vector(values),
+                                       None if i_u is None else values[i_u])
                 if result is not None:
                     out.append(result)
             elif isinstance(item, Skipped):  # grid points not formed: the differentiator restarts after them
@@ -340,20 +371,22 @@ class Pipeline:
         self._diff.reset()
         self._quality.restart_chain()  # the sensor-noise estimate's second differences too
 
-    def _process(self, t: int, sample: list) -> SampleOutput | None:
+    def _process(self, t: int, sample: list, u: Sequence[float] | None = None) -> SampleOutput | None:
         """The delay line: the rates enter the differentiator now, the sample leaves ``lag``
-        samples later together with its angular accelerations."""
-        self._pending.append((t, sample))
+        samples later together with its angular accelerations (and ``u``, the injected
+        excitation's deflections, when the estimator uses them)."""
+        self._pending.append((t, sample, u))
         rate_dot = self._diff.push(sample[RATES])
         if rate_dot is None:
             if len(self._pending) > self._lag:
                 self._pending.popleft()
                 self.bookkeeping.reject_samples("differentiator_warmup")
             return None
-        t, sample = self._pending.popleft()  # the sample `lag` samples back, aligned
-        return self._estimate(t, sample, rate_dot)
+        t, sample, u = self._pending.popleft()  # the sample `lag` samples back, aligned
+        return self._estimate(t, sample, rate_dot, u)
 
-    def _estimate(self, t: int, sample: list[float], rate_dot: FloatArray) -> SampleOutput | None:
+    def _estimate(self, t: int, sample: list[float], rate_dot: FloatArray,
+                  u: Sequence[float] | None = None) -> SampleOutput | None:
         book = self.bookkeeping
         state = flight_state(sample, rate_dot, self.config.inputs.air_density, self.limits)
         if isinstance(state, Refused):
@@ -369,18 +402,18 @@ class Pipeline:
         X.flat[self._x_index] = [reg[name] for name in self._x_names]
         z[:] = [coef[name] for name in self._outputs]
         freq = self.frequency
-        try:
-            if freq is not None:
-                freq.check(X, z)  # a row either estimator refuses is used by neither
-            self.bank.update(X, z)
-        except NonFiniteInput:  # the row, or the state it would make, is not finite: unchanged
-            book.reject_samples("non_finite_regression")
-            return None
-        book.samples_used += 1
-        self._quality.add(X, z)
-        self.last_stamp_ns = t
-        if self.record:
-            self.regression.append((t, X.copy(), z.copy()))
+        if self._iv is not None:
+            if not self._instrumented(t, X, z, state, u):
+                return None
+        else:
+            try:
+                if freq is not None:
+                    freq.check(X, z)  # a row either estimator refuses is used by neither
+                self.bank.update(X, z)
+            except NonFiniteInput:  # the row, or the state it would make, is not finite: unchanged
+                book.reject_samples("non_finite_regression")
+                return None
+            self._used(t, X, z)
         bank = self.bank
         self._index += 1
         theta = bank.theta_all()
@@ -396,13 +429,61 @@ class Pipeline:
             ready &= ~bad
         flags, model_flags = self._monitor.update(t, theta, se, ready)
         # A parameter that is not identifiable from the data so far is never flagged converged.
-        self._converged = flags, model_flags = self._quality.restrict(flags, model_flags, bank, ready)
+        flags, model_flags = self._quality.restrict(flags, model_flags, bank, ready)
+        if self._iv is not None and self._iv.weak.any():  # nor one whose instruments are weak
+            flags, model_flags = flags & ~self._iv.weak[:, None], model_flags & ~self._iv.weak
+        self._converged = flags, model_flags
         frequency = None if freq is None else freq.add(t, book.outputs_withheld, self._quality)
         self._last = SampleOutput(stamp_ns=t, index=self._index, theta=theta, se=se, se_conventional=se_conv,
                                   ready=ready, converged=flags, model_converged=model_flags,
                                   covariance=self._covariances(t, ready), lags=np.where(ready, bank.lags_used, 0),
                                   frequency=frequency)
         return self._last
+
+    def _used(self, t: int, X: np.ndarray, z: np.ndarray) -> None:
+        """Row ``t`` reached the estimator."""
+        self.bookkeeping.samples_used += 1
+        self._quality.add(X, z)
+        self.last_stamp_ns = t
+        if self.record:
+            self.regression.append((t, X.copy(), z.copy()))
+
+    def _instrumented(self, t: int, X: np.ndarray, z: np.ndarray, state: FlightState,
+                      u: Sequence[float] | None) -> bool:
+        """``estimator.algorithm iv``: row ``t`` and the rows that waited for the first
+        auxiliary model go to the estimator with their instruments (:mod:`.instrument_path`);
+        whether row ``t`` reached it (False: it waits, or was refused)."""
+        book, iv = self.bookkeeping, self._iv
+        assert iv is not None and u is not None
+        last = self._last
+        try:
+            rows, dropped = iv.update(t, X, z, u[0], float(state.qbar), float(state.V),
+                                      None if last is None else last.theta)
+        except NonFiniteInput:
+            book.reject_samples("non_finite_regression")
+            return False
+        if dropped:
+            book.reject_samples("instruments_not_ready", dropped)
+        for row in rows:
+            try:
+                self.bank.update(row.X, row.z, instruments=row.zeta)
+            except NonFiniteInput:
+                book.reject_samples("non_finite_regression")
+                continue
+            self._used(row.stamp_ns, row.X, row.z)
+            if iv.recorded is not None:
+                iv.recorded.append(row.zeta.copy())
+        return bool(rows) and self.last_stamp_ns == t
+
+    @property
+    def instruments(self) -> list[np.ndarray]:
+        """With ``record`` and ``estimator.algorithm iv``: the instruments of each row in
+        :attr:`regression`, in its order (empty otherwise)."""
+        return [] if self._iv is None or self._iv.recorded is None else self._iv.recorded
+
+    def weak_instruments(self, j: int) -> str:
+        """Why model ``j``'s parameters are held back for weak instruments ('' if not)."""
+        return "" if self._iv is None else self._iv.weak_reason(j)
 
     def _covariances(self, t: int, ready: np.ndarray) -> np.ndarray | None:
         """The corrected and conventional covariances of the ready models
@@ -446,8 +527,12 @@ class Pipeline:
         return Pipeline(config, record=self.record, enabled=self.enabled, bookkeeping=self.bookkeeping)
 
     def finish(self) -> None:
-        """End of data: the last ``lag`` samples never get a centred derivative."""
+        """End of data: the last ``lag`` samples never get a centred derivative (and with
+        ``estimator.algorithm iv``, rows still waiting for instruments never get them)."""
         self._flush("end_of_data")
+        if self._iv is not None and self._iv.waiting:
+            self.bookkeeping.reject_samples("instruments_not_ready", self._iv.waiting)
+            self._iv = InstrumentPath(self.config, self.record)
 
     # ------------------------------------------------------------------ reporting
     def model_fit(self, j: int) -> dict:
@@ -475,7 +560,8 @@ class Pipeline:
     def counters(self) -> dict:
         """Bookkeeping for diagnostics: messages per stream and samples, with reasons, and
         ``explanations``: each reason in the user's terms (:func:`.alerts.explanations`)."""
-        report = self.bookkeeping.report(len(self._pending))
+        waiting = 0 if self._iv is None else self._iv.waiting
+        report = self.bookkeeping.report(len(self._pending) + waiting)
         report["explanations"] = explanations(self.config, self.bookkeeping)
         return report
 

@@ -66,6 +66,7 @@ class Publisher(Protocol):
     def parameter_names(self) -> Sequence[Sequence[str]]: ...
     @property
     def identifiability(self) -> IdentifiabilityMonitor: ...
+    def weak_instruments(self, j: int) -> str: ...
 
 
 class Reporter(Publisher, Protocol):
@@ -180,6 +181,8 @@ def _time_states(pipe: Publisher, out: Published) -> list[ParameterState]:
         names = list(pipe.parameter_names[j])
         published = bool(out.ready[j])
         reasons = model_reasons(quality, j, names) if published else [""] * len(names)
+        weak = pipe.weak_instruments(j) if published else ""
+        reasons = [r or weak for r in reasons]
         for i, name in enumerate(names):
             theta, se = float(out.theta[j, i]), float(out.se[j, i])
             if published:

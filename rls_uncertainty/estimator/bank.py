@@ -11,6 +11,13 @@ lag sums and Eq. 21's lag products), :class:`.initialization.ExactInitialization
 10) and :class:`.evaluation.Evaluation` (the lag choice and Eqs. 13, 20, 22); the bank hands
 each sample from one to the next (:meth:`EstimatorBank._apply`); its snapshot is :mod:`.snapshot`.
 
+With the option ``algorithm="iv"`` the models are recursive instrumental variables: the
+instruments come with every sample (:meth:`EstimatorBank.update`), :class:`.iv_fit.IvFit`
+takes the place of the least-squares fit, :class:`.iv_initialization.IvInitialization` that of
+the exact initialization, the lag storage keeps the instruments' history for Eq. 21, and every
+covariance is the sandwich ``P N P'`` (:mod:`.covariance`); :func:`.reference.batch_iv` is its
+batch form.
+
 How the hot path differs from the reference, and why (each measured in
 ``benchmarks/estimator_benchmark.py``):
 
@@ -43,6 +50,8 @@ from ..errors import EstimatorNotReady, NonFiniteInput
 from .counts import SampleCounts
 from .evaluation import Evaluation, kind_index
 from .initialization import ExactInitialization
+from .iv_fit import InstrumentSample, IvFit
+from .iv_initialization import IvInitialization
 from .lag_storage import GROWTH_START, FloatArray, LagStorage
 from .options import EstimatorOptions, check_kind
 from .publication import PublicationRule
@@ -59,22 +68,37 @@ _SAFE = 1e100
 _SAFE_SQUARED = _SAFE * _SAFE
 
 
-def as_regressors(X: npt.NDArray[Any] | Sequence[npt.ArrayLike], sizes: tuple[int, ...]) -> FloatArray:
-    """``X`` as the ``(M, n_max)`` array of regressors of models of ``sizes`` parameters, from
-    such an array or a sequence of ``M`` regressor vectors; another shape is refused."""
+def as_regressors(
+    X: npt.NDArray[Any] | Sequence[npt.ArrayLike], sizes: tuple[int, ...], what: str = "regressors",
+) -> FloatArray:
+    """``X`` as the ``(M, n_max)`` array of regressors (or instruments: ``what``) of models of
+    ``sizes`` parameters, from such an array or a sequence of ``M`` vectors; another shape is
+    refused."""
     m, n = len(sizes), max(sizes)
     if isinstance(X, np.ndarray) and X.shape == (m, n):
         return X if X.dtype == float else X.astype(float)
     rows = [X] if isinstance(X, np.ndarray) and X.ndim == 1 else list(X)
     if len(rows) != m:
-        raise ValueError(f"expected regressors for {m} models, got {len(rows)}")
+        raise ValueError(f"expected {what} for {m} models, got {len(rows)}")
     x = np.zeros((m, n))
     for j, (row, s) in enumerate(zip(rows, sizes, strict=True)):  # (lengths checked above)
         values = np.asarray(row, dtype=float).reshape(-1)
         if values.shape != (s,):
-            raise ValueError(f"model {j} has {s} parameters, got {values.shape[0]} regressors")
+            raise ValueError(f"model {j} has {s} parameters, got {values.shape[0]} {what}")
         x[j, :s] = values
     return x
+
+
+def given_instruments(
+    instruments: npt.NDArray[Any] | Sequence[npt.ArrayLike] | None, iv: bool, sizes: tuple[int, ...],
+) -> FloatArray:
+    """A sample's instruments as :func:`as_regressors` makes the regressors, for a bank whose
+    algorithm is ``"iv"`` (``iv``); otherwise, or without them, one clear error."""
+    if not iv:
+        raise ValueError("instruments are taken only with estimator algorithm 'iv'")
+    if instruments is None:
+        raise ValueError("estimator algorithm 'iv' needs the instruments of every sample: update(X, z, instruments)")
+    return as_regressors(instruments, sizes, "instruments")
 
 
 class ScaledSample:
@@ -126,21 +150,26 @@ class EstimatorBank(BankSnapshot):
         g = o.noise_forgetting_used  # f_R
         self._mask = np.arange(n) < np.array(sizes)[:, None]  # each model's parameters, not the padding
         self._sample = ScaledSample(m, n)
-        self._fit = RlsFit(m, n, f, o.residual)  # [D; theta'] in column-scaled units: S D S, S theta
+        self._iv = o.algorithm == "iv"
+        self._instruments = InstrumentSample(self._sample, m, n)  # (read with algorithm iv)
+        self._zeta: FloatArray = np.zeros((m, n))  # this sample's instruments, as given
         self._noise = RlsFit(m, n, g, o.residual) if o.noise_model else None  # gives R_k(i) (f < 1)
         self._counts = SampleCounts(m, f, g, o.noise_model, o.burn_in)
         held = o.held
         self._lags = LagStorage(
             m, n, GROWTH_START if held is None else held + 1, all_lags=held is None, forgetting=f,
-            waiting=o.p0 is None, noise_forgetting=g,
+            waiting=o.p0 is None, noise_forgetting=g, instruments=self._iv,
         )
-        self._init = ExactInitialization(sizes, n, o.init_condition, prior=o.p0 is not None)
+        # [D; theta'] in column-scaled units, S D S and S theta (iv: [P'; theta'], S P T and S theta)
+        self._fit = IvFit(m, n, o.residual, self._instruments, self._lags) if self._iv else RlsFit(m, n, f, o.residual)
+        self._init = (IvInitialization(sizes, n, o.init_condition) if self._iv
+                      else ExactInitialization(sizes, n, o.init_condition, prior=o.p0 is not None))
         self._eval = Evaluation(o, sizes, self._fit, self._lags, self._counts)
         self._rule = PublicationRule(sizes, o)
         prior = o.prior(n)
         if prior is not None:
             D0 = np.eye(n) * prior * self._mask[:, :, None] * self._mask[:, None, :]
-            self._fit.set_prior(D0)
+            self._fit.set_prior(D0)  # type: ignore[union-attr]  # (rls: the options refuse p0 with iv)
             if self._noise is not None:
                 self._noise.set_prior(D0)
         self._readiness_changed()
@@ -176,14 +205,20 @@ class EstimatorBank(BankSnapshot):
         return min(self._counts.k, self._lags.cap)
 
     # ------------------------------------------------------------------ update
-    def update(self, X: npt.NDArray[Any] | Sequence[npt.ArrayLike], z: npt.ArrayLike) -> None:
+    def update(
+        self, X: npt.NDArray[Any] | Sequence[npt.ArrayLike], z: npt.ArrayLike,
+        instruments: npt.NDArray[Any] | Sequence[npt.ArrayLike] | None = None,
+    ) -> None:
         """Process one sample for every model (Eqs. 15-17, 21).
 
         ``X`` is ``(M, n_max)`` (row ``j`` holds model ``j``'s regressors first; the padding
         is ignored) or a sequence of ``M`` regressor vectors; ``z`` holds the ``M`` measured
-        outputs. A NaN or infinite input, or one that would make the state non-finite,
-        raises :class:`NonFiniteInput` and leaves the state unchanged.
+        outputs; ``instruments`` (algorithm ``"iv"`` only, and then required) are shaped as
+        ``X``, one instrument per parameter. A NaN or infinite input, or one that would make
+        the state non-finite, raises :class:`NonFiniteInput` and leaves the state unchanged.
         """
+        if self._iv or instruments is not None:
+            self._zeta = given_instruments(instruments, self._iv, self.sizes)
         if type(X) is np.ndarray and X.shape == self._mask.shape and X.dtype == _F64:
             x = X
         else:
@@ -204,6 +239,8 @@ class EstimatorBank(BankSnapshot):
         ``check``, NaN, infinity or a larger number in ``y`` stops it early and returns False."""
         sample = self._sample
         small = sample.set(x, self._init.inv_s, z)
+        if self._iv:
+            small = self._instruments.set(self._zeta, self._init.inv_t) and small  # type: ignore[attr-defined]
         if check and not small:
             return False
         magnitude = self._fit.prepare(sample.x, sample.x_col, sample.z)
@@ -219,7 +256,8 @@ class EstimatorBank(BankSnapshot):
         if self._noise is not None:
             self._noise.update()  # the noise model: Eq. 15 with f_R
         self._counts.add()  # k, n_k, n^N_k
-        self._lags.add(self._sample, self._fit, self._noise, self._counts)  # v_k (u_k), Eqs. 17, 21
+        sample = self._instruments if self._iv else self._sample
+        self._lags.add(sample, self._fit, self._noise, self._counts)  # v_k (u_k), Eqs. 17, 21
         if self._lags.waiting:
             self._initialize()  # Eqs. 6, 7, 10 for the models that allow it
 
@@ -240,12 +278,16 @@ class EstimatorBank(BankSnapshot):
     def _apply_checked(self, x: FloatArray, z: FloatArray) -> None:
         """Apply a sample on which :meth:`_prepare` found NaN, infinity or a large number:
         refuse a non-finite input, or one that would make the state non-finite."""
+        zeta = self._zeta if self._iv else x
         bad = [
             j for j in range(self.n_models)
-            if not (np.isfinite(x[j, : self.sizes[j]]).all() and np.isfinite(z[j]))
+            if not (np.isfinite(x[j, : self.sizes[j]]).all() and np.isfinite(z[j])
+                    and np.isfinite(zeta[j, : self.sizes[j]]).all())
         ]
         if bad:
-            raise NonFiniteInput(f"non-finite regressor or output for model(s) {bad}; sample ignored")
+            raise NonFiniteInput(f"non-finite regressor, instrument or output for model(s) {bad}; sample ignored")
+        if self._iv:
+            self._zeta = np.where(self._mask, zeta, 0.0)
         x = np.where(self._mask, x, 0.0)  # the padding is ignored
         before = self.state()
         with np.errstate(all="ignore"):  # overflow is what is being checked

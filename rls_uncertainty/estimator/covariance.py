@@ -40,8 +40,8 @@ EXACT_FIT = 1e-12
 FloatArray = npt.NDArray[np.float64]
 BoolArray = npt.NDArray[np.bool_]
 # What Covariances.matrices() is formed from: D, D N, D N0 (None for Eq. 13), h_0 S_0, scale,
-# diagonal scale, 1/n_k.
-_Parts = tuple[FloatArray, FloatArray, FloatArray | None, FloatArray, FloatArray, FloatArray, float]
+# diagonal scale, 1/n_k, D' (D itself when symmetric).
+_Parts = tuple[FloatArray, FloatArray, FloatArray | None, FloatArray, FloatArray, FloatArray, float, FloatArray]
 
 
 def nearest_psd(cov: FloatArray) -> FloatArray:
@@ -114,13 +114,13 @@ class Covariances:
 
     def matrices(self) -> FloatArray:
         if self._matrices is None:
-            D, DN, DN0, hS0, scale, diagonal_scale, inv_n = self._parts
+            D, DN, DN0, hS0, scale, diagonal_scale, inv_n, Dt = self._parts
             P = np.empty((2, *D.shape))
-            np.matmul(DN, D, out=P[0])
+            np.matmul(DN, Dt, out=P[0])
             if DN0 is None:
                 np.multiply(D, hS0[:, :, None], out=P[1])
             else:
-                np.matmul(DN0, D, out=P[1])
+                np.matmul(DN0, Dt, out=P[1])
             cov = P + P.swapaxes(2, 3)  # the two-sided sum
             cov *= scale * inv_n
             a = np.arange(D.shape[1])
@@ -153,7 +153,7 @@ class Covariances:
 
 
 def _diagonals(D: FloatArray, DN: FloatArray, DN0: FloatArray | None, hS0: FloatArray) -> FloatArray:
-    """``diag(P)`` of both kinds, ``(2, M, n)``: ``diag(D N D) = sum_c (D N)_ac D_ac``."""
+    """``diag(P)`` of both kinds, ``(2, M, n)``: ``diag(D N D') = sum_c (D N)_ac D_ac``."""
     out = np.empty((2, *D.shape[:2]))
     vecdot(DN, D, out=out[0])
     if DN0 is None:
@@ -165,14 +165,18 @@ def _diagonals(D: FloatArray, DN: FloatArray, DN0: FloatArray | None, hS0: Float
 
 class CovarianceEvaluator:
     """Evaluates :class:`Covariances` for a bank whose conventional covariance is Eq. 13
-    (``eq13``, ``f = 1``) or ``R_k(0) D Lambda_k(0) D`` (``f < 1``)."""
+    (``eq13``, ``f = 1``) or ``R_k(0) D Lambda_k(0) D`` (``f < 1``). With ``sandwich``
+    (instrumental variables) ``D`` is ``P = (Z'X)^-1``, not symmetric, and the lag products
+    are the instruments': every covariance is ``P [sum_i c_i R_k(i) Lambda_k(i)] P'`` (the
+    conventional one ``R_k(0) P Lambda_k(0) P'``)."""
 
-    def __init__(self, eq13: bool) -> None:
+    def __init__(self, eq13: bool, sandwich: bool = False) -> None:
         self.eq13 = eq13
+        self.sandwich = sandwich
 
     def __call__(
         self, D: FloatArray, D_diagonal: FloatArray, lag_sums: FloatArray, h: FloatArray, lag_products: FloatArray,
-        inv_n: float | FloatArray, scale: FloatArray, diagonal_scale: FloatArray,
+        inv_n: float | FloatArray, scale: FloatArray, diagonal_scale: FloatArray, factor: FloatArray | None = None,
     ) -> Covariances:
         """Both covariances of every model, not yet repaired.
 
@@ -182,7 +186,8 @@ class CovarianceEvaluator:
         ``(M,)``, one per model: with a residual burn-in each model's ``R_k(i)`` has its own
         weight total); ``scale`` ``(M, n, n)`` takes scaled units back to the regressors' (NaN
         outside the ready models' blocks) and ``diagonal_scale`` is ``2 diag(scale)`` ``(M,
-        n)``.
+        n)``; ``factor`` ``(M,)`` multiplies the corrected covariance alone (the small-sample
+        factor of instrumental variables).
         """
         if not isinstance(inv_n, float):  # one 1/n_k per model: folded into the scales (same products)
             scale = scale * inv_n[:, None, None]
@@ -190,6 +195,8 @@ class CovarianceEvaluator:
             inv_n = 1.0
         hS = lag_sums * h  # n_k h_i R_k(i)
         N = np.matmul(hS[:, None, None, :], lag_products)[:, :, 0, :]  # n_k sum_i h_i R(i) Lambda+(i)
+        if factor is not None:
+            N *= factor[:, None, None]
         DN = np.matmul(D, N)
         if self.eq13:
             DN0 = None  # Eq. 13: P = R_k(0) D / 2
@@ -204,4 +211,5 @@ class CovarianceEvaluator:
             vecdot(DN0, D, out=var[1])  # Eq. 22 with n_tau = 0
         negative = bool(np.minimum.reduce(var[0], axis=None) < 0.0)  # models not ready are 0 here
         var *= diagonal_scale * inv_n  # diag(P + P') * scale / n_k
-        return Covariances(var, negative, (D, DN, DN0, hS0, scale, diagonal_scale, inv_n))
+        Dt = D.swapaxes(1, 2) if self.sandwich else D
+        return Covariances(var, negative, (D, DN, DN0, hS0, scale, diagonal_scale, inv_n, Dt))

@@ -28,6 +28,7 @@ import numpy.typing as npt
 
 from .counts import SampleCounts
 from .covariance import EXACT_FIT, CovarianceEvaluator, Covariances, half_window
+from .iv_fit import IvFit
 from .lag_selection import flat_top_lags
 from .lag_storage import FloatArray, LagStorage, assign_checked
 from .lag_window import lag_weights
@@ -69,13 +70,17 @@ class Evaluation:
     read from its ``fit``, ``lags`` and ``counts``; the repairs counted per model."""
 
     def __init__(
-        self, options: EstimatorOptions, sizes: Sequence[int], fit: RlsFit, lags: LagStorage, counts: SampleCounts,
+        self, options: EstimatorOptions, sizes: Sequence[int], fit: RlsFit | IvFit, lags: LagStorage,
+        counts: SampleCounts,
     ) -> None:
         self.options, self.sizes = options, tuple(sizes)
         self._fit, self._lags, self._counts = fit, lags, counts
         self._auto, self._all_lags, self._window = options.auto, options.lags == "all", options.window
         self._D_diagonal = fit.D.diagonal(0, 1, 2)
-        self._evaluator = CovarianceEvaluator(eq13=options.forgetting == 1.0)
+        iv = options.algorithm == "iv"
+        self._evaluator = CovarianceEvaluator(eq13=options.forgetting == 1.0 and not iv, sandwich=iv)
+        self._small_sample = options.small_sample if iv else 0.0
+        self._sizes = np.array(self.sizes, dtype=float)
         self.repairs = np.zeros(len(self.sizes), dtype=np.int64)  # corrected covariances repaired, per model
         self._mask = np.arange(fit.D.shape[1]) < np.array(self.sizes)[:, None]  # parameters, not padding
         self._ready = np.zeros(len(self.sizes), dtype=bool)
@@ -154,14 +159,26 @@ class Evaluation:
                 largest = max(k - 1, 0) if self._all_lags else lags.cap - 1
                 h = self._window_h if self._window_key == (largest, w) else self._half_window(largest, w)
             totals = self._counts.weight_totals()
+            factor = self._small_sample_factor(totals, w) if self._small_sample and k else None
             cov = self._evaluator(
                 self._fit.D, self._D_diagonal, sums, h, products, 1.0 / totals if k else 1.0,  # (k = 0: all NaN)
-                self._cov_scale, self._se_scale,
+                self._cov_scale, self._se_scale, factor,
             )
             if cov.indefinite:  # exact fits published as zero, the others repaired and counted
                 self.repairs[cov.repair(self._exact(k), self.sizes)] += 1
             self._covariances = cov
         return cov
+
+    def _small_sample_factor(self, totals: float | FloatArray, w: int) -> FloatArray:
+        """``n_R / (n_R - n - s L)`` of every model, ``(M,)``, on the corrected covariance of
+        instrumental variables (``L`` each model's largest lag used of the ``w`` held; the
+        denominator at least ``n_R / 4``; 1 where ``n_R = 0``, a model not yet counting)."""
+        L = np.minimum(self.lags_chosen(), w - 1) if self._auto else w - 1
+        n_R = np.asarray(totals, dtype=float)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            factor = n_R / np.maximum(n_R - self._sizes - self._small_sample * L, 0.25 * n_R)
+        out: FloatArray = np.where(n_R > 0.0, factor, 1.0)
+        return out
 
     def _half_window(self, largest: int, w: int) -> FloatArray:
         """Half window ``h`` of the ``w`` lags held, ``largest`` the largest lag of the window

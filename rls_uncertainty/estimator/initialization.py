@@ -46,6 +46,8 @@ class Start(NamedTuple):
     x_scaled: FloatArray
     residuals: FloatArray
     noise_residuals: FloatArray | None
+    inv_instruments: FloatArray | None = None
+    instruments_scaled: FloatArray | None = None
 
 
 class _Waiting:

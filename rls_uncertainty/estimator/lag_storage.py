@@ -37,6 +37,12 @@ The ``v`` history (the estimator's residuals) is kept for :meth:`.EstimatorBank.
 sample updates both (a separate product of ``x`` plus the moments costs the six-model T-2
 replay about 20%). When every model is initialized (:meth:`LagStorage.all_initialized`),
 ``lag_products`` moves to an array of its own and the moments are dropped.
+
+**With instruments** (instrumental variables, :mod:`.iv_fit`): the ``x`` history and Eq. 21's
+products are those of the instruments ``zeta`` (column-scaled by their own ``t``), so that
+``Lambda_k(i)`` is the instruments'; the ``y = (x, z)`` history and lagged moments are kept as
+above while a model waits, with the lag-0 cross moments ``cross0[m, a, b] = sum_j zeta_j[a]
+y_j[b]`` beside them (``Z'X`` and ``Z'z`` of the batch estimate). Nothing is merged.
 """
 
 from __future__ import annotations
@@ -91,6 +97,10 @@ class Start(Protocol):
     def residuals(self) -> FloatArray: ...
     @property
     def noise_residuals(self) -> FloatArray | None: ...
+    @property
+    def inv_instruments(self) -> FloatArray | None: ...
+    @property
+    def instruments_scaled(self) -> FloatArray | None: ...
 
 
 class LagStorage:
@@ -108,6 +118,7 @@ class LagStorage:
     lag_sums: FloatArray
     products_y: FloatArray
     moment0: FloatArray | None  # (checked where it may be None)
+    cross0: FloatArray | None  # (with instruments, while waiting)
     lag_products: FloatArray
     lag0: FloatArray
     _sums_scratch: FloatArray
@@ -118,9 +129,10 @@ class LagStorage:
 
     def __init__(
         self, m: int, n: int, cap: int, *, all_lags: bool, forgetting: float, waiting: bool,
-        noise_forgetting: float | None = None,
+        noise_forgetting: float | None = None, instruments: bool = False,
     ) -> None:
         self.m, self.n = m, n
+        self.instruments = instruments
         self.all_lags = all_lags
         self.forgetting = forgetting
         # A noise model (f_R != f): the u history, lag sums of u, moments weighted f_R.
@@ -137,7 +149,7 @@ class LagStorage:
         n1 = n + 1
         self.cap = cap
         # lag_products is the x block of products_y (while a model waits, f = 1)
-        self.merged = self.waiting and self.forgetting == 1.0
+        self.merged = self.waiting and self.forgetting == 1.0 and not self.instruments
         length = cap if self.all_lags else 4 * cap
         self.x = np.zeros((m, length, n))
         self.y = np.zeros((m, length, n1))
@@ -151,6 +163,7 @@ class LagStorage:
         self.moment0 = None  # lag-0 moments weighted f (with a noise model, while waiting)
         if self.waiting and self.noise:
             self.moment0 = np.zeros((m, n1, n1))
+        self.cross0 = np.zeros((m, n, n1)) if self.waiting and self.instruments else None
         if self.waiting:
             self.products_y = np.zeros((m, n1, cap, n1))
             self._products_y_scratch = np.zeros((m, n1, cap * n1))
@@ -227,6 +240,8 @@ class LagStorage:
         if self.waiting:
             n1 = n + 1
             moments = self.products_y[:, :, :w].reshape(m, n1, w * n1)
+            if self.cross0 is not None:  # sum zeta_j y_j' (instruments)
+                self.cross0 += sample.x_col * sample.y[:, None, :]
             if self.moment0 is not None:  # the lag-0 moments weighted f^(k-j)
                 self.moment0 *= f
                 self.moment0 += sample.y_col * sample.y[:, None, :]
@@ -261,10 +276,11 @@ class LagStorage:
         j = start.model
         self.lag_sums[j, :w] = start.lag_sums
         products = self.lag_products[j]
-        products *= start.inv[:, None, None]  # regressors to scaled units
-        products *= start.inv[None, None, :]
+        inv = start.inv if start.inv_instruments is None else start.inv_instruments
+        products *= inv[:, None, None]  # regressors (instruments) to scaled units
+        products *= inv[None, None, :]
         self.y[j, :, : self.n] = start.x_scaled
-        self.x[j] = start.x_scaled
+        self.x[j] = start.x_scaled if start.instruments_scaled is None else start.instruments_scaled
         self.v[j] = start.residuals
         if start.noise_residuals is not None:
             self.u[j] = start.noise_residuals
@@ -292,13 +308,15 @@ class LagStorage:
 
     def _grow(self, w: int) -> None:
         """Double the lag capacity (all lags), keeping the ``w`` samples and lags held."""
-        names = (*self._history, "lag_sums", "lag_products", "products_y", "moment0")
+        names = (*self._history, "lag_sums", "lag_products", "products_y", "moment0", "cross0")
         old = {name: getattr(self, name) for name in names}
         old_ptr, old_cap = self.ptr, self.cap
         self._allocate(2 * old_cap)
         self.ptr -= w
         if old["moment0"] is not None:
             self.moment0[...] = old["moment0"]  # type: ignore[index]  # allocated again (waiting, noise)
+        if old["cross0"] is not None:
+            self.cross0[...] = old["cross0"]  # type: ignore[index]  # allocated again (waiting, instruments)
         for name in self._history:
             getattr(self, name)[:, self.ptr :] = old[name][:, old_ptr : old_ptr + w]
         self.lag_sums[:, :old_cap] = old["lag_sums"]
@@ -318,6 +336,8 @@ class LagStorage:
             out["products_y"] = self.products_y.copy()
             if self.noise:
                 out["moment0"] = self.moment0.copy()  # type: ignore[union-attr]  # set while waiting with noise
+            if self.cross0 is not None:
+                out["cross0"] = self.cross0.copy()
         return out
 
     def lay_out(self, cap: int, waiting: bool, w: int) -> None:
@@ -336,6 +356,8 @@ class LagStorage:
             assign_checked(self.products_y, arrays["products_y"], "products_y")
             if self.noise:
                 assign_checked(self.moment0, arrays["moment0"], "moment0")  # type: ignore[arg-type]  # as in arrays()
+            if self.cross0 is not None:
+                assign_checked(self.cross0, arrays["cross0"], "cross0")
         if not self.merged:
             assign_checked(self.lag_products, arrays["lag_products"], "lag_products")
 

@@ -27,6 +27,9 @@ __all__ = [
     "Lags",
     "Window",
     "Residual",
+    "Algorithm",
+    "ALGORITHMS",
+    "SMALL_SAMPLE",
     "CovarianceKind",
     "WINDOWS",
     "RESIDUALS",
@@ -62,6 +65,12 @@ PUBLISH_MEANING = (
 Lags = int | Literal["all", "auto"]
 Window = Literal["truncated", "bartlett"]
 Residual = Literal["standardized", "a_posteriori", "a_priori"]
+Algorithm = Literal["rls", "iv"]
+ALGORITHMS: tuple[Algorithm, ...] = get_args(Algorithm)
+# small_sample: the default factor s of n_R / (n_R - n - s L) on the instrumental-variables
+# corrected covariance, and the largest value accepted.
+SMALL_SAMPLE = 0.5
+MAX_SMALL_SAMPLE = 10.0
 CovarianceKind = Literal["corrected", "conventional"]
 WINDOWS: tuple[Window, ...] = get_args(Window)
 RESIDUALS: tuple[Residual, ...] = get_args(Residual)
@@ -104,12 +113,14 @@ class EstimatorOptions:
     or ``"bartlett"`` (positive semi-definite; not with ``"auto"``). ``forgetting``: ``0 < f
     <= 1``, 1 is the paper. ``residual``: the residual of Eqs. 16-17. ``residual_burn_in``:
     samples after each model's initialization left out of ``R_k(i)`` (``None``: 50 with
-    ``"auto"``, 0 otherwise). ``noise_forgetting``: ``f_R`` of the noise model under
+    ``"auto"`` or algorithm ``"iv"``, 0 otherwise). ``noise_forgetting``: ``f_R`` of the noise model under
     forgetting, ``forgetting <= f_R <= 1`` (``None``: the default of
     :attr:`noise_forgetting_used`). ``init_condition``: exact initialization waits for a
     column-scaled ``X'X`` better conditioned than this. ``p0``: ``None`` (exact
     initialization) or the prior ``D_0 = diag(p0)``, ``theta_0 = 0``, a positive scalar or one
-    value per parameter. Definitions: :mod:`.reference`; the table: ``docs/estimator.md``.
+    value per parameter. ``algorithm``: ``"rls"`` (Eq. 15) or ``"iv"`` (instrumental
+    variables, :mod:`.iv_fit`; ``small_sample`` its covariance factor).
+    Definitions: :mod:`.reference`; the table: ``docs/estimator.md``.
     """
 
     lags: Lags = option(
@@ -141,7 +152,8 @@ class EstimatorOptions:
         unit="samples", low=0, high=MAX_BURN_IN, own_check=True, ros="estimator.residual_burn_in_span",
         cli="--burn-in-span",
         span=Span(-1.0, 2000.0, (Special(-1.0, None, "default", f"{seconds(AUTO_BURN_IN):g} s with "
-                                 "estimator.lag_selection auto, 0 (the paper) with fixed lags"),
+                                 "estimator.lag_selection auto or the iv algorithm, 0 (the paper) "
+                                 "otherwise"),
                                  Special(0.0, 0, "", "none (the paper)"))))
     noise_forgetting: float | None = option(
         None, "forgetting f_R of the noise model under forgetting, in [forgetting, 1] (None: the default of "
@@ -155,6 +167,15 @@ class EstimatorOptions:
     publish_lag_windows: float = option(
         PUBLISH_LAG_WINDOWS, PUBLISH_MEANING, low=PUBLISH_LAG_WINDOWS_RANGE[0], high=PUBLISH_LAG_WINDOWS_RANGE[1],
         ros="estimator.publish_lag_windows", cli="--publish-lag-windows")
+    algorithm: Algorithm = option(
+        "rls", "rls: recursive least squares (Eq. 15); iv: recursive instrumental variables, the estimate "
+        "(Z'X)^-1 Z'z from instruments given with every sample and the sandwich covariance P N P' whose middle is "
+        "Eqs. 17-22 with the instruments in Lambda (no forgetting, exact initialization); docs/estimator.md, "
+        "instrumental variables", choices=ALGORITHMS, ros="estimator.algorithm")
+    small_sample: float = option(
+        SMALL_SAMPLE, "with algorithm iv: s of the factor n_R / (n_R - n - s L) on the corrected covariance (the "
+        "residuals were fitted with n parameters and the L-lag sum loses about s samples per lag); 0 is Eq. 22",
+        low=0.0, high=MAX_SMALL_SAMPLE, ros="estimator.small_sample")
 
     def __post_init__(self) -> None:
         check(self, "estimator")
@@ -175,6 +196,12 @@ class EstimatorOptions:
                 raise _fail("noise_forgetting", f"None or a number in [forgetting, 1] = [{f:g}, 1]", g)
             self._set("noise_forgetting", float(g))
         self._check_p0()
+        if self.algorithm == "iv":
+            if self.forgetting != 1.0:
+                raise _fail("forgetting", "1 with algorithm iv (instrumental variables without forgetting)",
+                            self.forgetting)
+            if self.p0 is not None:
+                raise _fail("p0", "None with algorithm iv (exact initialization)", self.p0)
 
     def _set(self, name: str, value: object) -> None:
         object.__setattr__(self, name, value)  # the normalised value (frozen dataclass)
@@ -232,9 +259,9 @@ class EstimatorOptions:
     @property
     def burn_in(self) -> int:
         """The residual burn-in ``B`` used: ``residual_burn_in``, or its default (50 with
-        ``"auto"``, 0, the paper's Eq. 17, otherwise)."""
+        ``"auto"`` or algorithm ``"iv"``, 0, the paper's Eq. 17, otherwise)."""
         if self.residual_burn_in is None:
-            return AUTO_BURN_IN if self.auto else 0
+            return AUTO_BURN_IN if self.auto or self.algorithm == "iv" else 0
         return self.residual_burn_in
 
     @property
@@ -270,8 +297,10 @@ class EstimatorOptions:
 
     def resolved(self) -> EstimatorOptions:
         """The same options with the defaults resolved (``residual_burn_in``,
-        ``noise_forgetting``): two objects that run the same estimator resolve to equal ones."""
-        return replace(self, residual_burn_in=self.burn_in, noise_forgetting=self.noise_forgetting_used)
+        ``noise_forgetting``; ``small_sample`` 0 with ``rls``, which does not use it): two
+        objects that run the same estimator resolve to equal ones."""
+        return replace(self, residual_burn_in=self.burn_in, noise_forgetting=self.noise_forgetting_used,
+                       small_sample=self.small_sample if self.algorithm == "iv" else 0.0)
 
     # ------------------------------------------------------------------ state file
     def as_dict(self) -> dict[str, Any]:
@@ -301,4 +330,4 @@ class EstimatorOptions:
     @staticmethod
     def optional_keys() -> tuple[str, ...]:
         """Keys :meth:`from_dict` may miss (options added later: their defaults)."""
-        return ("publish_lag_windows",)
+        return ("publish_lag_windows", "algorithm", "small_sample")

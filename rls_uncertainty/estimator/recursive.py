@@ -30,12 +30,14 @@ class RecursiveEstimator:
         est._bank = bank
         return est
 
-    def update(self, x: npt.ArrayLike, z: float) -> None:
-        """Eq. 15-17, 21 for one sample; non-finite input raises :class:`NonFiniteInput`."""
+    def update(self, x: npt.ArrayLike, z: float, instruments: npt.ArrayLike | None = None) -> None:
+        """Eq. 15-17, 21 for one sample (``instruments``, one per parameter, with the option
+        ``algorithm="iv"`` only); non-finite input raises :class:`NonFiniteInput`."""
         x = np.asarray(x, dtype=float).reshape(1, -1)
         if x.shape[1] != self._bank.n_max:
             raise ValueError(f"expected {self._bank.n_max} regressors, got {x.shape[1]}")
-        self._bank.update(x, np.asarray([z], dtype=float).reshape(1))
+        zeta = None if instruments is None else np.asarray(instruments, dtype=float).reshape(1, -1)
+        self._bank.update(x, np.asarray([z], dtype=float).reshape(1), zeta)
 
     @property
     def n_params(self) -> int:

@@ -9,6 +9,9 @@ against closed forms.
 
 What the paper leaves open is defined here, and the fast bank follows it:
 
+* **Instrumental variables** (:func:`batch_iv`): the estimate ``(Z'X)^-1 Z'z`` and Eq. 8 with
+  the instruments ``Z`` in place of the regressors beside ``R``; the bank's recursive form is
+  :mod:`.iv_fit`.
 * **Forgetting** ``0 < f <= 1`` (``f = 1`` is the paper). At sample ``k`` sample ``j`` has
   weight ``w_j = f^(k-j)`` and the sample count is ``n_k = sum_j w_j = f n_(k-1) + 1``.
   Least squares is weighted by ``W = diag(w)``: ``D_k = (X'WX)^-1``. Eq. 15 then reads
@@ -159,6 +162,48 @@ def batch_reference(
         cov_conventional = sigma2 * D  # Eq. 13
     else:
         cov_conventional = D @ X.T @ W @ (sigma2 * np.eye(N)) @ W @ X @ D  # Eq. 8 with Eq. 12
+    return theta, cov_conventional, cov_corrected
+
+
+def batch_iv(
+    X: np.ndarray,
+    Zeta: np.ndarray,
+    z: np.ndarray,
+    lags: int | Literal["all"] = "all",
+    window: str = "truncated",
+    *,
+    residuals: np.ndarray | None = None,
+    first: int = 0,
+    small_sample: float = 0.0,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Batch instrumental variables with the paper's matrices: ``(theta, cov_conventional,
+    cov_corrected)``, the oracle of the bank's algorithm ``"iv"``.
+
+    ``theta = P Z'z`` with ``P = (Z'X)^-1`` (Eq. 6 with the instruments ``Z`` on the left), and
+    Eq. 8 with ``D X'`` replaced by ``P Z'``: ``cov = P Z' E Z P'``, ``E`` the Toeplitz matrix of
+    Eq. 9 (22) of the residual autocorrelation (Eq. 10); the conventional covariance is
+    ``R(0) P Z'Z P'``. With ``Z = X`` these are Eqs. 6-14. ``residuals`` replaces ``z - X theta``
+    (Eq. 7; for instance a recursive history), of which Eq. 10 uses those from index ``first``
+    on (a residual burn-in), divided by their number ``n_R``; ``small_sample`` ``s`` multiplies
+    the corrected covariance by ``n_R / (n_R - n - s L)``.
+    """
+    X, Zeta, z = (np.asarray(a, dtype=float) for a in (X, Zeta, z))
+    check_window(window)
+    N, n = X.shape
+    P = np.linalg.inv(Zeta.T @ X)
+    theta = P @ Zeta.T @ z
+    v = z - X @ theta if residuals is None else np.asarray(residuals, dtype=float)  # Eq. 7
+    n_R = N - first
+    R = np.zeros(N)
+    for i in range(n_R):
+        R[i] = sum(v[first + i + j] * v[first + j] for j in range(n_R - i)) / n_R  # Eq. 10
+    n_tau = N - 1 if lags == "all" else int(lags)
+    c = lag_weights(n_tau, window, N)
+    E = np.array([[c[abs(a - b)] * R[abs(a - b)] for b in range(N)] for a in range(N)])  # Eq. 9 (22)
+    cov_corrected = P @ Zeta.T @ E @ Zeta @ P.T
+    if small_sample:
+        cov_corrected = cov_corrected * n_R / max(n_R - n - small_sample * min(n_tau, N - 1), 0.25 * n_R)
+    cov_conventional = R[0] * P @ Zeta.T @ Zeta @ P.T
     return theta, cov_conventional, cov_corrected
 
 

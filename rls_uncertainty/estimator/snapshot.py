@@ -15,6 +15,7 @@ import numpy as np
 from .counts import SampleCounts
 from .evaluation import Evaluation
 from .initialization import ExactInitialization
+from .iv_fit import IvFit
 from .lag_storage import LagStorage
 from .options import EstimatorOptions
 from .rls_fit import RlsFit
@@ -31,7 +32,7 @@ class BankSnapshot:
     options: EstimatorOptions
     _counts: SampleCounts
     _lags: LagStorage
-    _fit: RlsFit
+    _fit: RlsFit | IvFit
     _noise: RlsFit | None
     _init: ExactInitialization
     _eval: Evaluation

@@ -334,9 +334,9 @@ def _standard_message(
         return T["geometry_msgs/msg/Vector3Stamped"](header=header(stamp), vector=vec(*values))
     if kind == "dynamic_pressure":
         return T["sensor_msgs/msg/FluidPressure"](header=header(stamp), fluid_pressure=float(values), variance=0.0)
-    if kind == "control_surfaces":
+    if kind in ("control_surfaces", "excitation"):  # (the excitation: the surfaces' type and joints)
         if names is None:
-            raise ValueError("control_surfaces needs the joint names")
+            raise ValueError(f"{kind} needs the joint names")
         return T["sensor_msgs/msg/JointState"](
             header=header(stamp),
             name=list(names),
@@ -386,8 +386,9 @@ def write_sensor_streams(path: str | Path, streams: SensorStreams, *, force: boo
         stamps = getattr(streams, kind)[0]
         return ((int(stamps[k]), _rank(kind), kind, k) for k in range(stamps.size))
 
-    with _bag_directory(path, [(f"/{kind}", MESSAGE_TYPES[kind]) for kind in INPUTS], store, force=force) as writer:
-        for stamp, _, kind, k in heapq.merge(*(records(kind) for kind in INPUTS)):
+    kinds = [kind for kind in INPUTS if hasattr(streams, kind)]  # (the streams a simulation gives)
+    with _bag_directory(path, [(f"/{kind}", MESSAGE_TYPES[kind]) for kind in kinds], store, force=force) as writer:
+        for stamp, _, kind, k in heapq.merge(*(records(kind) for kind in kinds)):
             values = getattr(streams, kind)[1][k]
             msg = _standard_message(store, kind, stamp, values, streams.surface_names)
             writer.add(stamp, f"/{kind}", MESSAGE_TYPES[kind], msg)

@@ -37,6 +37,9 @@ class InputTopics(Mapping[str, str]):
                                    ros="topics.control_surfaces", read_only=True)
     thrust: str = option("thrust", "geometry_msgs/WrenchStamped thrust topic (force.x, N)", ros="topics.thrust",
                          read_only=True)
+    excitation: str = option("excitation", "sensor_msgs/JointState topic of the injected excitation (the designed "
+                             "input on each surface, rad, before any feedback): the instruments of "
+                             "estimator.algorithm iv", ros="topics.excitation", read_only=True)
 
     def __post_init__(self) -> None:
         check(self, "topics")

@@ -32,6 +32,7 @@ from ..datapath.limits import PlausibilityLimits
 from ..errors import ConfigError
 from ..estimator.options import AUTO_BURN_IN, MAX_BURN_IN, EstimatorOptions
 from ..frequency.options import FrequencyOptions
+from ..instruments.options import InstrumentOptions
 from ..schema import (
     Setting,
     Special,
@@ -63,6 +64,7 @@ COMPONENTS: tuple[tuple[str, type], ...] = (
     ("convergence", ConvergenceConfig),
     ("identifiability", IdentifiabilityConfig),
     ("outputs", OutputConfig),
+    ("instruments", InstrumentOptions),
 )
 # Parameters renamed when the lag window began to follow time: said when an old file names them.
 RENAMED = {
@@ -222,12 +224,12 @@ def estimator_options(params: dict[str, Any], rate: float) -> EstimatorOptions:
     :class:`.estimator.EstimatorOptions` at ``rate`` Hz (the command line's simulations: 50). The
     residual burn-in's default (``estimator.residual_burn_in_span: -1``) is a span as well: the
     estimator's default count at the reference rate (1 s), in samples at ``rate``, with
-    automatic lags; 0 (the paper) with fixed lags."""
+    automatic lags or instrumental variables; 0 (the paper) otherwise."""
     args = _arguments(EstimatorOptions, _values(params), rate)
     if args["residual_burn_in"] is None:
         name = "estimator.residual_burn_in_span"
         args["residual_burn_in"] = samples(name, seconds(AUTO_BURN_IN), rate, MAX_BURN_IN) \
-            if args["lags"] == "auto" else 0
+            if args["lags"] == "auto" or args.get("algorithm") == "iv" else 0
     return EstimatorOptions(**args)
 
 

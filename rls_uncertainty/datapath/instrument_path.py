@@ -1,0 +1,91 @@
+"""``estimator.algorithm iv`` in the data path: instruments for each regression row (numpy only).
+
+The pipeline hands every row it would give the estimator to :meth:`InstrumentPath.update`
+with the injected elevator excitation aligned with it (the ``excitation`` input stream, mixed
+by Eq. 23 like the surfaces and delayed with its sample). :class:`..instruments.ShortPeriodAuxiliary`
+turns the excitation into instruments through an auxiliary short-period model; until its first
+model exists the rows wait (bounded by ``instruments.max_backlog_span``; older ones are
+rejected as ``instruments_not_ready``) and are then handed over together, each with its stamp.
+:class:`..instruments.InstrumentStrength` keeps the sums of the weak-instrument measure
+(the smallest canonical correlation ``rho_min`` between a model's instruments and regressors),
+judged every ``instruments.refresh_span``: a model whose instruments are weak is never
+flagged converged, and the reason is its parameters' state (:mod:`.states`).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import TYPE_CHECKING, NamedTuple
+
+import numpy as np
+
+from ..aero.models import BIAS_REGRESSOR
+from ..instruments import InstrumentStrength, ShortPeriodAuxiliary
+
+if TYPE_CHECKING:  # annotations only
+    from .config import PipelineConfig
+
+__all__ = ["InstrumentPath", "InstrumentedRow"]
+
+
+class InstrumentedRow(NamedTuple):
+    """A regression row for the estimator: its stamp (ns), regressors ``X`` ``(M, n_max)``,
+    outputs ``z`` ``(M,)`` and instruments ``zeta`` laid out like ``X``."""
+
+    stamp_ns: int
+    X: np.ndarray
+    z: np.ndarray
+    zeta: np.ndarray
+
+
+class InstrumentPath:
+    """The instruments of one estimator's rows (a new estimator gets a new path). ``record``:
+    keep the instruments of every row the estimator took (:attr:`recorded`, beside the
+    pipeline's ``regression``)."""
+
+    def __init__(self, config: PipelineConfig, record: bool = False) -> None:
+        self.recorded: list[np.ndarray] | None = [] if record else None
+        opts = config.instruments
+        self.options = opts
+        self.aux = ShortPeriodAuxiliary(config.models, config.aircraft, config.rate,
+                                        refresh_span=opts.refresh_span, max_backlog_span=opts.max_backlog_span)
+        sizes = [len(m.regressors) for m in config.models]
+        bias = [m.regressors.index(BIAS_REGRESSOR) if BIAS_REGRESSOR in m.regressors else None
+                for m in config.models]
+        self.strength = InstrumentStrength(sizes, bias, opts.weak_below)
+        self._judge_every = max(1, round(opts.refresh_span * config.rate))
+        self._since = 0
+        self.rho_min = np.full(len(sizes), np.nan)  # at the last judgement
+        self.weak = np.zeros(len(sizes), dtype=bool)
+
+    @property
+    def waiting(self) -> int:
+        """Rows waiting for the first auxiliary model (neither used nor rejected yet)."""
+        return self.aux.waiting
+
+    def update(self, stamp_ns: int, X: np.ndarray, z: np.ndarray, u: float, qbar: float, V: float,
+               estimates: np.ndarray | None) -> tuple[list[InstrumentedRow], int]:
+        """One row (stamped ``stamp_ns``) with the excitation ``u`` (rad, the elevator's) and the
+        estimator's newest ``estimates`` (None before any): the rows to give the estimator now
+        with their instruments, and how many waiting rows were dropped (the backlog was full).
+        A non-finite input raises :class:`..errors.NonFiniteInput` and changes nothing."""
+        dropped = self.aux.dropped
+        rows = self.aux.update(X, z, u, qbar, V, estimates, tag=int(stamp_ns))
+        dropped = self.aux.dropped - dropped
+        out = [InstrumentedRow(int(r.tag), r.X, r.z, r.instruments) for r in rows]  # type: ignore[call-overload]
+        for r in out:
+            self.strength.update(r.X, r.zeta)
+        self._since += len(out)
+        if self._since >= self._judge_every:
+            self._since = 0
+            self.rho_min = self.strength.rho_min()
+            self.weak = self.strength.weak()
+        return out, dropped
+
+    def weak_reason(self, j: int) -> str:
+        """Why model ``j``'s parameters are held back for weak instruments, or ''."""
+        if not self.weak[j]:
+            return ""
+        rho = float(self.rho_min[j])
+        return (f"weak instruments (rho_min {rho:.3f} < instruments.weak_below {self.options.weak_below:g}: "
+                "is the excitation injected and on topics.excitation?)" if math.isfinite(rho) else "")
