@@ -271,7 +271,8 @@ def test_fingerprint_is_what_a_state_file_stores():
         "rate": 50.0,
         "estimator": {"lags": 7, "window": "truncated", "forgetting": 1.0, "residual": "standardized", "max_lags": 50,
                       "min_lags": 0, "residual_burn_in": 0, "noise_forgetting": 1.0, "init_condition": 1e8, "p0": None,
-                      "publish_lag_windows": 2.0, "algorithm": "rls", "small_sample": 0.0},
+                      "publish_lag_windows": 2.0, "algorithm": "rls", "small_sample": 0.0,
+                      "iv_init_samples": 0},
     }
     assert pipeline_config({"inputs.max_gap": 0.5}).fingerprint() == pipeline_config({}).fingerprint()
 

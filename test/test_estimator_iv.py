@@ -49,16 +49,19 @@ def _data(N: int, seed: int = 7) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 
 def _run(options: EstimatorOptions, X: np.ndarray, Zeta: np.ndarray, z: np.ndarray) -> tuple[EstimatorBank, list]:
-    """The bank after every sample, and each model's residual history (init residuals, then
-    the newest residual of each later sample)."""
+    """The bank after every sample, and each model's residual history: those of the batch
+    estimate at its initialization ``k0`` (Eq. 7, samples ``1..k0``), then the newest residual
+    of each later sample."""
     bank = EstimatorBank(SIZES, options)
     history: list = [None] * len(SIZES)
     for k in range(len(z)):
         bank.update(X[k], z[k], Zeta[k])
-        for j in range(len(SIZES)):
+        for j, s in enumerate(SIZES):
             if bank.initialized[j]:
                 if history[j] is None:
-                    history[j] = list(bank.residuals(j))
+                    history[j] = list(z[: k + 1, j] - X[: k + 1, j, :s] @ bank.theta(j))
+                    held = bank.residuals(j)  # the bank's, of the samples it holds
+                    assert np.allclose(held, history[j][-held.size:], rtol=0, atol=1e-9)
                 else:
                     history[j].append(bank.residuals(j)[-1])
     return bank, history
@@ -78,7 +81,7 @@ def test_recursive_iv_equals_batch_iv(residual, burn_in, small_sample, lags):
     options = EstimatorOptions(lags=lags, algorithm="iv", residual=residual, residual_burn_in=burn_in,
                                small_sample=small_sample, init_condition=1e4)
     bank, history = _run(options, X, Zeta, z)
-    assert bank.initialized.all()
+    assert bank.initialized.all() and (bank.ready_at >= options.iv_init_samples).all()
     for j, s in enumerate(SIZES):
         v = np.array(history[j])
         assert v.size == N
@@ -96,7 +99,7 @@ def test_instruments_equal_to_regressors_give_the_least_squares_bank(residual, b
     X, _, z = _data(400, seed=11)
     common = dict(lags=30, residual=residual, residual_burn_in=burn_in)
     rls = EstimatorBank(SIZES, EstimatorOptions(**common))
-    iv = EstimatorBank(SIZES, EstimatorOptions(**common, algorithm="iv", small_sample=0.0))
+    iv = EstimatorBank(SIZES, EstimatorOptions(**common, algorithm="iv", small_sample=0.0, iv_init_samples=0))
     for k in range(len(z)):
         rls.update(X[k], z[k])
         iv.update(X[k], z[k], X[k])

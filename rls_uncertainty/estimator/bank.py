@@ -162,7 +162,7 @@ class EstimatorBank(BankSnapshot):
         )
         # [D; theta'] in column-scaled units, S D S and S theta (iv: [P'; theta'], S P T and S theta)
         self._fit = IvFit(m, n, o.residual, self._instruments, self._lags) if self._iv else RlsFit(m, n, f, o.residual)
-        self._init = (IvInitialization(sizes, n, o.init_condition) if self._iv
+        self._init = (IvInitialization(sizes, n, o.init_condition, o.iv_init_samples) if self._iv
                       else ExactInitialization(sizes, n, o.init_condition, prior=o.p0 is not None))
         self._eval = Evaluation(o, sizes, self._fit, self._lags, self._counts)
         self._rule = PublicationRule(sizes, o)

@@ -3,8 +3,9 @@
 
 While a model waits, the lag storage keeps the lag-0 cross moments ``Z'X`` and ``Z'z`` of the
 instruments with ``y = (x, z)`` beside the lagged moments of ``y`` (:mod:`.lag_storage`). At
-the first sample ``k0`` at which the column-scaled ``T^-1 Z'X S^-1`` is better conditioned than
-``init_condition`` (``s = sqrt(diag(X'X))``, ``t = sqrt(diag(Z'Z))``) the model takes the batch
+the first sample ``k0`` (at least ``iv_init_samples``) at which the column-scaled
+``T^-1 Z'X S^-1`` is better conditioned than ``init_condition`` (``s = sqrt(diag(X'X))``,
+``t = sqrt(diag(Z'Z))``) the model takes the batch
 estimate ``theta = (Z'X)^-1 Z'z`` (:func:`.reference.batch_iv`), the residuals of samples
 ``1..k0`` with it (Eq. 7) and their lag sums ``n_k R_k(i)`` (Eq. 10) from the lagged moments,
 and continues with :mod:`.iv_fit`. From then on its regressors are divided by ``s`` and its
@@ -27,10 +28,11 @@ __all__ = ["IvInitialization"]
 class IvInitialization(ExactInitialization):
     """:class:`.initialization.ExactInitialization` for instrumental variables, with the
     instruments' column scales :attr:`inv_t` (``1/t`` on each model's parameters, 0 on
-    padding) beside :attr:`inv_s`."""
+    padding) beside :attr:`inv_s`; a model waits for at least ``min_samples`` samples."""
 
-    def __init__(self, sizes: Sequence[int], n: int, init_condition: float) -> None:
+    def __init__(self, sizes: Sequence[int], n: int, init_condition: float, min_samples: int = 0) -> None:
         super().__init__(sizes, n, init_condition, prior=False)
+        self.min_samples = min_samples
         self.inv_t = self.inv_s.copy()
 
     def check(self, k: int, w: int, lags: LagStorage) -> list[Start]:
@@ -45,7 +47,7 @@ class IvInitialization(ExactInitialization):
         """The batch IV estimate of model ``j`` at sample ``k`` if ``Z'X`` allows it and it is
         finite, else None."""
         s_n, n = self.sizes[j], self.n
-        if k < s_n or lags.cross0 is None:
+        if k < max(s_n, self.min_samples) or lags.cross0 is None:
             return None
         P = lags.products_y[j]
         cross = lags.cross0[j]

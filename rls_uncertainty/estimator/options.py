@@ -70,6 +70,8 @@ ALGORITHMS: tuple[Algorithm, ...] = get_args(Algorithm)
 # small_sample: the default factor s of n_R / (n_R - n - s L) on the instrumental-variables
 # corrected covariance, and the largest value accepted.
 SMALL_SAMPLE = 0.5
+# iv_init_samples: the default fewest samples before an instrumental-variables model initializes.
+IV_INIT_SAMPLES = 25
 MAX_SMALL_SAMPLE = 10.0
 CovarianceKind = Literal["corrected", "conventional"]
 WINDOWS: tuple[Window, ...] = get_args(Window)
@@ -119,7 +121,8 @@ class EstimatorOptions:
     column-scaled ``X'X`` better conditioned than this. ``p0``: ``None`` (exact
     initialization) or the prior ``D_0 = diag(p0)``, ``theta_0 = 0``, a positive scalar or one
     value per parameter. ``algorithm``: ``"rls"`` (Eq. 15) or ``"iv"`` (instrumental
-    variables, :mod:`.iv_fit`; ``small_sample`` its covariance factor).
+    variables, :mod:`.iv_fit`; ``small_sample`` its covariance factor, ``iv_init_samples``
+    the fewest samples before it initializes).
     Definitions: :mod:`.reference`; the table: ``docs/estimator.md``.
     """
 
@@ -176,6 +179,10 @@ class EstimatorOptions:
         SMALL_SAMPLE, "with algorithm iv: s of the factor n_R / (n_R - n - s L) on the corrected covariance (the "
         "residuals were fitted with n parameters and the L-lag sum loses about s samples per lag); 0 is Eq. 22",
         low=0.0, high=MAX_SMALL_SAMPLE, ros="estimator.small_sample")
+    iv_init_samples: int = option(
+        IV_INIT_SAMPLES, "with algorithm iv: the exact initialization waits for at least this many samples as well as "
+        "for a well-conditioned column-scaled Z'X (an estimate from a handful of samples is poor, and its residuals "
+        "inflate the autocorrelation)", unit="samples", low=0, high=MAX_BURN_IN)
 
     def __post_init__(self) -> None:
         check(self, "estimator")
@@ -297,10 +304,11 @@ class EstimatorOptions:
 
     def resolved(self) -> EstimatorOptions:
         """The same options with the defaults resolved (``residual_burn_in``,
-        ``noise_forgetting``; ``small_sample`` 0 with ``rls``, which does not use it): two
-        objects that run the same estimator resolve to equal ones."""
+        ``noise_forgetting``; ``small_sample`` and ``iv_init_samples`` 0 with ``rls``, which does
+        not use them): two objects that run the same estimator resolve to equal ones."""
         return replace(self, residual_burn_in=self.burn_in, noise_forgetting=self.noise_forgetting_used,
-                       small_sample=self.small_sample if self.algorithm == "iv" else 0.0)
+                       small_sample=self.small_sample if self.algorithm == "iv" else 0.0,
+                       iv_init_samples=self.iv_init_samples if self.algorithm == "iv" else 0)
 
     # ------------------------------------------------------------------ state file
     def as_dict(self) -> dict[str, Any]:
@@ -330,4 +338,4 @@ class EstimatorOptions:
     @staticmethod
     def optional_keys() -> tuple[str, ...]:
         """Keys :meth:`from_dict` may miss (options added later: their defaults)."""
-        return ("publish_lag_windows", "algorithm", "small_sample")
+        return ("publish_lag_windows", "algorithm", "small_sample", "iv_init_samples")
