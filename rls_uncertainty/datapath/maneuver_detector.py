@@ -42,7 +42,7 @@ from __future__ import annotations
 import math
 from collections import deque
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
@@ -63,6 +63,7 @@ EVENT_REASONS = {
     "event_value": "the value must be start or stop",
 }
 MAX_NAME = 64  # characters of a test-point name
+_RESUM = 4096  # messages between exact sums of the window
 
 
 @dataclass(frozen=True)
@@ -100,13 +101,43 @@ class ManeuverOptions:
         check(self, "maneuvers")
 
 
-@dataclass
-class _Surfaces:
-    """The low-passed positions of the last ``window`` seconds (stamps, values)."""
+class _Window:
+    """The low-passed positions of the last ``span_ns`` and their running sums (about
+    ``reference``, exact again every :data:`_RESUM` messages), for the variance."""
 
-    filtered: npt.NDArray[np.float64]
-    stamps: deque[int] = field(default_factory=deque)
-    values: deque[npt.NDArray[np.float64]] = field(default_factory=deque)
+    def __init__(self, first: npt.NDArray[np.float64], span_ns: int) -> None:
+        self.filtered = first.copy()
+        self.span_ns = span_ns
+        self.reference = first.copy()
+        self.stamps: deque[int] = deque()
+        self.values: deque[npt.NDArray[np.float64]] = deque()
+        self.sum = np.zeros_like(first)
+        self.sum2 = np.zeros_like(first)
+        self._added = 0
+
+    def add(self, stamp_ns: int) -> None:
+        v = self.filtered - self.reference
+        self.stamps.append(stamp_ns)
+        self.values.append(v)
+        self.sum += v
+        self.sum2 += v * v
+        while self.stamps[0] < stamp_ns - self.span_ns:
+            self.stamps.popleft()
+            old = self.values.popleft()
+            self.sum -= old
+            self.sum2 -= old * old
+        self._added += 1
+        if self._added % _RESUM == 0:  # rounding of the running sums stays bounded
+            held = np.array(self.values) + self.reference
+            self.reference = held.mean(axis=0)
+            self.values = deque(held - self.reference)
+            self.sum = np.sum(self.values, axis=0)
+            self.sum2 = np.sum(np.square(self.values), axis=0)
+
+    def variance(self) -> float:
+        """The summed variance of the held positions (rad^2)."""
+        n = len(self.values)
+        return float(np.maximum(self.sum2 / n - (self.sum / n) ** 2, 0.0).sum())
 
 
 class ManeuverDetector:
@@ -126,7 +157,7 @@ class ManeuverDetector:
         self.power = math.nan
         self.floor = math.nan
         self.count = 0  # maneuvers started
-        self._surfaces: _Surfaces | None = None
+        self._surfaces: _Window | None = None
         self._first_ns: int | None = None
         self._last_ns: int | None = None
         self._log_floor = math.nan
@@ -156,24 +187,19 @@ class ManeuverDetector:
         """Filter, window and measure ``P``; False until the window is first full."""
         o = self.options
         if self._surfaces is None:
-            self._surfaces = _Surfaces(x.copy())
+            self._surfaces = _Window(x, round(o.window * 1e9))
             self._first_ns = stamp_ns
         else:
             assert self._last_ns is not None
             dt = (stamp_ns - self._last_ns) * 1e-9
             self._surfaces.filtered += -math.expm1(-2.0 * math.pi * o.f_max * dt) * (x - self._surfaces.filtered)
         self._last_ns = stamp_ns
-        s = self._surfaces
-        s.stamps.append(stamp_ns)
-        s.values.append(s.filtered.copy())
-        span = round(o.window * 1e9)
-        while s.stamps and s.stamps[0] < stamp_ns - span:
-            s.stamps.popleft()
-            s.values.popleft()
+        w = self._surfaces
+        w.add(stamp_ns)
         assert self._first_ns is not None
-        if stamp_ns - self._first_ns < span or len(s.values) < 2:
+        if stamp_ns - self._first_ns < w.span_ns or len(w.values) < 2:
             return False
-        self.power = float(np.var(np.array(s.values), axis=0).sum())
+        self.power = w.variance()
         return True
 
     def _track_floor(self, stamp_ns: int, dt: float) -> None:
