@@ -51,9 +51,11 @@ from ..errors import Refused
 from ..schema import check, option
 
 __all__ = ["Boundary", "ManeuverOptions", "ManeuverDetector", "event_boundary", "refusal_text", "KINDS",
-           "EVENT_VALUES", "EVENT_REASONS", "MAX_NAME"]
+           "EVENT_TOPIC", "EVENT_TYPE", "EVENT_VALUES", "EVENT_REASONS", "MAX_NAME"]
 
 KINDS = ("start", "end")
+EVENT_TOPIC = "test_point"  # the event topic a simulated flight records (relative, as the input topics)
+EVENT_TYPE = "diagnostic_msgs/msg/KeyValue"
 # The event topic's values and the boundary each one is.
 EVENT_VALUES = {"start": "start", "stop": "end"}
 # Why an event is refused, by the reason it is counted under.
