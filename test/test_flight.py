@@ -11,7 +11,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
-from bag_samples import read_all
 
 from rls_uncertainty import cli
 from rls_uncertainty.datapath.maneuver_detector import (
@@ -22,6 +21,7 @@ from rls_uncertainty.datapath.maneuver_detector import (
     refusal_text,
 )
 from rls_uncertainty.errors import ConfigError, Refused
+from rls_uncertainty.offline.bags import typestore
 from rls_uncertainty.settings.models import load_aircraft
 from rls_uncertainty.settings.yaml_files import load
 from rls_uncertainty.simulation.flight import CONDITIONS, PARAMETERS, TRIM_LEG, simulate_flight
@@ -192,6 +192,17 @@ def test_events_are_boundaries_and_garbage_is_refused_with_a_reason():
         assert "refused" in text and len(text) < 300 and "\n" not in text
 
 
+def _read(path, *names):
+    from rosbags.highlevel import AnyReader
+
+    out = {}
+    with AnyReader([Path(path)], default_typestore=typestore()) as reader:
+        conns = [c for c in reader.connections if c.topic in names]
+        for conn, t, raw in reader.messages(connections=conns):
+            out.setdefault(conn.topic, []).append((t, reader.deserialize(raw, conn.msgtype)))
+        return out, reader.start_time
+
+
 def test_make_bag_flight_writes_the_recording_its_events_and_its_truth(tmp_path, capsys):
     out = tmp_path / "flight"
     assert cli.main(["make-bag", "--flight", "--out", str(out), "--seed", "4"]) == 0
@@ -204,8 +215,7 @@ def test_make_bag_flight_writes_the_recording_its_events_and_its_truth(tmp_path,
     assert [float(r["Cm_q"]) for r in rows] == [T2_TRUE["Cm_q"]] * len(rows)
     manifest = yaml.safe_load((out / "flight.yaml").read_text())
     assert manifest["seed"] == 4 and [c["name"] for c in manifest["conditions"]] == [c.name for c in CONDITIONS]
-    topics = read_all(out)
-    t0 = min(t for msgs in topics.values() for t, _ in msgs)
+    topics, t0 = _read(out, "/test_point", "/control_surfaces")
     events = [(round((t - t0) * 1e-9, 6), m.key, m.value) for t, m in topics["/test_point"]]
     assert events == [(round(float(r[k]), 6), r["maneuver"], v) for r in rows for k, v in (("start", "start"),
                                                                                           ("end", "stop"))]
@@ -222,3 +232,20 @@ def test_make_bag_flight_writes_the_recording_its_events_and_its_truth(tmp_path,
     assert "not empty" in capsys.readouterr().err and (other / "notes.txt").read_text() == "keep"
     assert cli.main(["make-bag", "--flight", "--campaign", "2", "--out", str(tmp_path / "x")]) == 2
     assert "give one" in capsys.readouterr().err
+
+
+def test_the_input_power_is_the_window_variance_of_the_low_passed_surfaces():
+    """P against scipy's first-order filter and numpy's variance over the last window."""
+    from scipy import signal
+
+    rng = np.random.default_rng(9)
+    dt, n = 0.01, 6000  # more messages than the running sums go between exact sums
+    x = np.cumsum(rng.standard_normal((n, 2)), axis=0) * 1e-3 + 0.05
+    options = ManeuverOptions()
+    d = ManeuverDetector(options)
+    for k in range(n):
+        d.update(round(k * dt * 1e9), x[k])
+    a = -math.expm1(-2 * math.pi * options.f_max * dt)
+    y = np.column_stack([signal.lfilter([a], [1, a - 1], x[:, j], zi=[(1 - a) * x[0, j]])[0] for j in range(2)])
+    held = y[-round(options.window / dt) - 1:]  # the window holds its two ends
+    assert d.power == pytest.approx(float(np.var(held, axis=0).sum()), rel=1e-9)

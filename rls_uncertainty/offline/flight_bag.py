@@ -43,7 +43,7 @@ def truth_csv(flight: Flight) -> str:
 
 def _events(flight: Flight) -> list[tuple[int, str, str, object]]:
     key_value = typestore().types[EVENT_TYPE]
-    out = []
+    out: list[tuple[int, str, str, object]] = []
     for m in flight.maneuvers:
         for at, value in ((m.start, "start"), (m.end, "stop")):
             out.append((flight.streams.start_ns + round(at * 1e9), f"/{EVENT_TOPIC}", EVENT_TYPE,
