@@ -21,9 +21,11 @@ the surface positions (rad, any number of surfaces):
    the start.
 
 At the defaults (``threshold`` 10, i.e. 10 dB, ``window`` 2 s, ``rise`` 0.3 s, ``hold`` 1 s)
-on the simulated flight (``make-bag --flight``, docs/maneuvers.md) every maneuver is found
-within a few tenths of a second and no trim leg with gusts gives a maneuver: the gusts move the
-aircraft, not the surfaces. A pilot's trim corrections in the band would count as input; raise
+on the simulated flight (``make-bag --flight``, docs/maneuvers.md) every maneuver is found,
+its start and end within 0.3 s of the input's when the elevator's trim floor is its wide-band
+sensor noise, within 1.2 s when band-limited noise 16 dB below the maneuver's power is on the
+elevator too, and no trim leg in gusts gives a maneuver: the gusts move the aircraft, not the
+surfaces. A pilot's trim corrections in the band would count as input; raise
 ``threshold`` when the trim floor is not sensor noise.
 
 Garbage is counted, never raised: a message with a NaN or infinite position (``non_finite``),
