@@ -36,7 +36,7 @@ empty for a model not applied) and ``summary.txt`` (what the command prints).
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from statistics import NormalDist
@@ -180,7 +180,7 @@ def fit_error(z: np.ndarray, y: np.ndarray, lower: np.ndarray, upper: np.ndarray
     return FitError(rms, r2, u, inside, int(z.size))
 
 
-def regression_rows(bag: str | Path, config: PipelineConfig, topics: dict[str, str], *, strict: bool = True,
+def regression_rows(bag: str | Path, config: PipelineConfig, topics: Mapping[str, str], *, strict: bool = True,
                     progress: bool | None = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The regression rows the replay's pipeline forms from ``bag`` under ``config``:
     ``(stamps_ns (K,), X (K, M, n_max), z (K, M))``, models in the order of ``config.models``
