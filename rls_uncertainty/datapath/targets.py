@@ -255,4 +255,4 @@ def judge(progress: Sequence[ParameterProgress]) -> Verdict:
 
 def targets_of(values: Mapping[str, float]) -> TargetOptions:
     """:class:`TargetOptions` of a ``{name: percent}`` mapping (the default window)."""
-    return TargetOptions(targets=tuple(f"{k}={v!r}" for k, v in values.items()))
+    return TargetOptions(targets=tuple(f"{k}={float(v)!r}" for k, v in values.items()))
