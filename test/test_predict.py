@@ -137,6 +137,7 @@ def test_end_to_end_the_coverage_on_a_repeat_is_near_nominal(repeats, tmp_path: 
     out = tmp_path / "p"
     assert main(["predict", str(run), str(second), "--config", T2, "--out", str(out), "--quiet"]) == 0
     printed = capsys.readouterr().out
+    [(_, fitted)] = read_models(run)
     assert "CZ" in printed and "Cm" in printed and "95 % nominal" in printed
     header = (out / "prediction.csv").read_text().splitlines()[0].split(",")
     assert header == ["time"] + [f"{m}_{q}" for m in ("CZ", "Cm") for q in ("measured", "predicted", "lower", "upper")]
@@ -150,6 +151,10 @@ def test_end_to_end_the_coverage_on_a_repeat_is_near_nominal(repeats, tmp_path: 
         tolerance = 4 * math.sqrt(0.95 * 0.05 / n_eff)
         assert abs(inside.mean() - 0.95) < tolerance, (inside.mean(), n_eff)
         assert f"{100 * inside.mean():.1f}%" in printed
+        # The parameters' share of the interval, from its width: (half / q)^2 = x'Px + s^2.
+        s2 = fitted[m].residual_variance
+        share = np.median(((hi - y) / 1.959963984540054) ** 2 - s2) / s2
+        assert f"{share:.3f}" in printed.splitlines()[2 + m]
 
 
 def test_bad_input_is_one_line(repeats, tmp_path: Path, capsys) -> None:

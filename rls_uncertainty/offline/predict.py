@@ -18,8 +18,10 @@ ones its estimator would use. Per model and sample:
 
 Per model it reports the fit error (:class:`FitError`: the RMS of ``z - y``, R^2 = 1 - SS_res
 / SS_tot about the measured mean, Theil's inequality coefficient U = RMS(z - y) / (RMS(z) +
-RMS(y)), 0 for a perfect prediction, 1 for none), and the coverage: the fraction of measured
-coefficients inside their interval, to be read against ``level``. The coverage is a marginal,
+RMS(y)), 0 for a perfect prediction, 1 for none), the coverage: the fraction of measured
+coefficients inside their interval, to be read against ``level``, and the median of
+``x' P x / s^2``: how much of the interval is the parameters' uncertainty (when small, the
+coverage checks ``s^2`` and the model's structure more than ``P``). The coverage is a marginal,
 per-sample figure: colored residuals make neighbouring samples fall out together, so its
 scatter between maneuvers is wider than a binomial's.
 
@@ -37,7 +39,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from statistics import NormalDist
 from typing import Any
@@ -80,13 +82,16 @@ class PredictOptions:
 @dataclass(frozen=True)
 class FitError:
     """A model's prediction against the measurements: ``rms`` of ``z - y``, ``r_squared``,
-    ``theil_u``, ``coverage`` (fraction inside the interval), over ``samples``."""
+    ``theil_u``, ``coverage`` (fraction inside the interval), over ``samples``; ``parameter_share``
+    the median over the samples of ``x' P x / s^2``, the parameters' uncertainty against the
+    residual variance in the interval (NaN when not computed)."""
 
     rms: float
     r_squared: float
     theil_u: float
     coverage: float
     samples: int
+    parameter_share: float = math.nan
 
 
 @dataclass(frozen=True)
@@ -115,11 +120,11 @@ class PredictionResult:
     def summary(self) -> str:
         lines = [f"models of {self.source} applied to {self.stamps_ns.size} samples; "
                  f"prediction intervals at {100 * self.level:g} % nominal (x' P_corrected x + s^2)",
-                 f"{'model':<8}{'RMS':>11}{'R^2':>8}{'Theil U':>9}{'inside':>9}"]
+                 f"{'model':<8}{'RMS':>11}{'R^2':>8}{'Theil U':>9}{'inside':>9}{'xPx/s^2':>9}"]
         for p in self.models:
             e = p.error
             lines.append(f"{p.model.model:<8}{e.rms:>11.4g}{e.r_squared:>8.3f}{e.theil_u:>9.3f}"
-                         f"{100 * e.coverage:>8.1f}%")
+                         f"{100 * e.coverage:>8.1f}%{e.parameter_share:>9.3f}")
         return "\n".join(lines)
 
 
@@ -242,7 +247,11 @@ def predict(run_dir: str | Path, bag: str | Path, params: dict[str, Any], out: s
         for f, j in columns:
             Xj, zj = X[:, j, : len(f.regressors)], z[:, j]
             y, lo, hi = prediction(f, Xj, options.quantile)
-            predicted.append(ModelPrediction(f, zj, y, lo, hi, fit_error(zj, y, lo, hi)))
+            error = fit_error(zj, y, lo, hi)
+            if f.residual_variance > 0:
+                share = float(np.median(np.einsum("ki,ij,kj->k", Xj, f.covariance, Xj))) / f.residual_variance
+                error = replace(error, parameter_share=share)
+            predicted.append(ModelPrediction(f, zj, y, lo, hi, error))
         result = PredictionResult(source, stamps, predicted, options.level)
         (tmp / "prediction.csv").write_text(prediction_csv(result))
         (tmp / "summary.txt").write_text(result.summary() + "\n")
