@@ -107,7 +107,7 @@ class ManeuverResult:
     rows: tuple[ParameterResult, ...]
     data_seconds: float = 0.0
     seconds: Mapping[str, float] = field(default_factory=dict)
-    models: tuple[FittedModel, ...] = ()
+    models: tuple[FittedModel, ...] = field(default=(), compare=False)  # (numpy arrays: not compared)
 
     @property
     def problem(self) -> str | None:
