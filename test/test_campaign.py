@@ -37,8 +37,8 @@ def test_the_command_writes_table4_from_the_replays_of_its_maneuvers(tmp_path, m
     out = tmp_path / "out"
     assert cli.main(["campaign", str(BUNDLED), "--maneuvers", str(maneuvers_file), "--config", "config/t2.yaml",
                      "--out", str(out), "--workers", "2", "--quiet"]) == 0
-    assert sorted(p.name for p in out.iterdir()) == ["fig12_CZ.png", "fig12_Cm.png", "maneuvers.csv", "summary.txt",
-                                                     "table4.csv", "table4.md"]
+    assert sorted(p.name for p in out.iterdir()) == ["fig12_CZ.png", "fig12_Cm.png", "maneuvers.csv", "models.json",
+                                                     "summary.txt", "table4.csv", "table4.md"]
     finals = [replay_bag(BUNDLED, "t2", start=s, end=e) for _, s, e in SPANS]
     with open(out / "table4.csv") as fh:
         table = {r["parameter"]: r for r in csv.DictReader(fh)}

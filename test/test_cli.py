@@ -54,7 +54,8 @@ def _setup(command, tmp_path):
 
 def _expected_outputs(command, out):
     if command == "replay":
-        return {"estimates.csv", "estimates_wide.csv", "estimates.mcap", "parameters.csv", "run.json", "summary.txt"}
+        return {"estimates.csv", "estimates_wide.csv", "estimates.mcap", "models.json", "parameters.csv", "run.json",
+                "summary.txt"}
     return {f"{out.name}.mcap", "metadata.yaml"}
 
 

@@ -5,7 +5,9 @@
 with the configured lags and, on the same regression rows, with all lags (:mod:`.run`), in
 local worker processes or on a Dask cluster (:mod:`..executors`); the results, in maneuver
 order, make Table 4 (:mod:`.table4`) and Fig. 12 (:mod:`.figure`). Written to ``--out``:
-``maneuvers.csv``, ``table4.csv``, ``table4.md``, ``summary.txt`` and ``fig12_<model>.png``.
+``maneuvers.csv``, ``table4.csv``, ``table4.md``, ``summary.txt``, ``fig12_<model>.png`` and
+``models.json`` (each maneuver's final models with their covariances, :mod:`..offline.model_file`,
+for ``rls-uncertainty predict``).
 With ``estimator.method`` ``frequency`` or ``both`` every file shows the frequency-domain
 estimates too, in rows (or bars) of their own beside the time-domain ones (``method``).
 """
@@ -22,6 +24,7 @@ from ..executors import Executor, LocalProcesses, Lost
 from ..files import input_problem, output_directory
 from ..offline.bags import check_bag
 from ..offline.figures import FigureOptions
+from ..offline.model_file import MODELS_FILE, models_json
 from ..progress import Progress
 from .figure import campaign_figures
 from .maneuvers import Maneuver, from_bags, load_maneuvers
@@ -114,6 +117,7 @@ def write_campaign(campaign: CampaignResult, out: Path, *, figures: FigureOption
         "table4_csv": ("table4.csv", table4_csv(campaign.table)),
         "table4_md": ("table4.md", table4_markdown(campaign.table, campaign.results, lags)),
         "summary": ("summary.txt", campaign.summary()),
+        "models": (MODELS_FILE, models_json([(r.name, r.models) for r in campaign.results])),
     }
     paths = {}
     for key, (name, text) in texts.items():

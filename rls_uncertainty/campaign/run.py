@@ -42,6 +42,7 @@ from ..datapath.states import ParameterState, se_percent
 from ..errors import RlsUncertaintyError
 from ..estimator import EstimatorBank
 from ..offline.bags import InputStream
+from ..offline.model_file import FittedModel, run_models
 from ..offline.replay import run_pipeline
 from ..offline.results import ReplayResult
 from .maneuvers import MIN_SPAN, CampaignSettings, Maneuver
@@ -99,12 +100,14 @@ MANEUVER_COLUMNS = ("maneuver", "model", "parameter", "method", "estimate", "se_
 class ManeuverResult:
     """A maneuver's rows, and where its time went (s): ``seconds["read"]`` reading and
     decoding the bag, ``["pipeline"]`` the pipeline with the configured lags, ``["all_lags"]``
-    the all-lags bank; ``data_seconds`` the span of data read."""
+    the all-lags bank; ``data_seconds`` the span of data read; ``models`` the models identified
+    at its end (:mod:`..offline.model_file`; none for a maneuver too short or failed)."""
 
     name: str
     rows: tuple[ParameterResult, ...]
     data_seconds: float = 0.0
     seconds: Mapping[str, float] = field(default_factory=dict)
+    models: tuple[FittedModel, ...] = field(default=(), compare=False)  # (numpy arrays: not compared)
 
     @property
     def problem(self) -> str | None:
@@ -246,11 +249,13 @@ def run_maneuver(job: tuple[Maneuver, CampaignSettings]) -> ManeuverResult:
     except (RlsUncertaintyError, OSError) as exc:
         return failed_result(maneuver.name, config, f"failed: {' '.join(str(exc).split())}")
     rows = _rows(maneuver.name, result, bank_all)
+    models = tuple(run_models(result.pipeline)) if result.pipeline is not None else ()
     if result.data_seconds < settings.min_span:  # every row too_short: out of Table 4
         short = (f"{TOO_SHORT}: {result.data_seconds:.2f} s of data, fewer than --min-span "
                  f"{settings.min_span:g} s")
         rows = tuple(replace(r, status=short) for r in rows)
+        models = ()
     t2 = time.perf_counter()
     read = opened - t0 + timed.seconds
     seconds: dict[str, Any] = {"read": read, "pipeline": t1 - t0 - read, "all_lags": t2 - t1}
-    return ManeuverResult(maneuver.name, rows, result.data_seconds, seconds)
+    return ManeuverResult(maneuver.name, rows, result.data_seconds, seconds, models)

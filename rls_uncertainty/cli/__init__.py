@@ -2,7 +2,7 @@
 
 One module per group of commands: :mod:`.simulation` (``simulate``, ``montecarlo``,
 ``multisine``), :mod:`.bags` (``make-bag``, ``convert``), :mod:`.offline` (``replay``,
-``campaign``) and :mod:`.ros` (``demo``, ``play``, ``dashboard``, ``status``, ``enable``,
+``campaign``, ``predict``) and :mod:`.ros` (``demo``, ``play``, ``dashboard``, ``status``, ``enable``,
 ``disable``, ``reset``). A setting's flag is made from its declaration on its options class
 (:mod:`.flags`), so every command names, bounds and explains it the same way. Errors: a usage
 error or one of the package's own errors (or a file-system error) is one line and exit status
@@ -29,14 +29,14 @@ from xml.etree import ElementTree
 from ..errors import MissingExtra, RlsUncertaintyError
 from ..extras import optional
 from .bags import add_convert, add_make_bag
-from .offline import add_campaign, add_replay
+from .offline import add_campaign, add_predict, add_replay
 from .ros import add_demo, add_operator_commands, add_play
 from .simulation import add_montecarlo, add_multisine, add_simulate
 
 __all__ = ["main", "build_parser", "estimator_node"]
 
 _SUBCOMMANDS = (add_demo, add_simulate, add_montecarlo, add_multisine, add_make_bag, add_convert, add_replay,
-                add_campaign, add_play, add_operator_commands)
+                add_campaign, add_predict, add_play, add_operator_commands)
 # The commands that handle their signals themselves (rclpy's handlers, the dashboard's loop).
 _OWN_SIGNALS = frozenset({"demo", "play", "dashboard", "status", "enable", "disable", "reset"})
 

@@ -192,7 +192,7 @@ def add_option_flags(parser: argparse.ArgumentParser, cls: type) -> None:
         if kind is bool:
             parser.add_argument(s.cli, dest=f.name, action="store_true", help=s.description)
             continue
-        shown = (",".join(default) or "none") if isinstance(default, tuple) else default
+        shown = (",".join(default) or "none") if isinstance(default, tuple) else (default if default != "" else "none")
         ok = kind is tuple or s.own_check
         what = "" if ok else f"; {expected(kind, s)}"
         parser.add_argument(s.cli, dest=f.name, default=default, type=_option_type(kind, s),

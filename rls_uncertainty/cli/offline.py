@@ -1,6 +1,6 @@
-"""``replay`` and ``campaign``: bags through the node's pipeline, offline.
+"""``replay``, ``campaign`` and ``predict``: bags through the node's pipeline, offline.
 
-Both read ``--config`` as the node reads its parameter file and take the estimator's and the
+All read ``--config`` as the node reads its parameter file and take the estimator's and the
 models' flags over it (:data:`PARAMETER_FLAGS`, made from the settings' declarations), and the
 figure flags of :class:`..offline.figures.FigureOptions`.
 """
@@ -29,7 +29,7 @@ from .flags import (
 )
 from .simulation import ESTIMATOR_FLAGS
 
-__all__ = ["PARAMETER_FLAGS", "replay_params", "add_replay", "add_campaign"]
+__all__ = ["PARAMETER_FLAGS", "replay_params", "add_replay", "add_campaign", "add_predict"]
 
 # The node's parameters the offline commands take as flags, over --config.
 PARAMETER_FLAGS = (*ESTIMATOR_FLAGS, "models.enabled", "estimator.method")
@@ -189,3 +189,40 @@ def add_campaign(sub: Any) -> None:
 
     add_option_flags(cp, CampaignSettings)
     cp.set_defaults(func=_campaign)
+
+
+def _predict(args: argparse.Namespace) -> int:
+    """A run's models applied to another maneuver (:mod:`..offline.predict`)."""
+    from ..offline.predict import PredictOptions, predict
+    from ..settings.models import config_dir
+
+    params = replay_params(args, "predict")
+    options = PredictOptions(**option_values(args, PredictOptions))
+    inputs = [_yaml_file(args.config, config_dir())] if args.config else []
+    result = predict(args.run_dir, args.bag, params, args.out, options, strict=not args.lenient,
+                     progress=progress_mode(args), force=args.force, inputs=inputs)
+    print(result.summary())
+    print(f"wrote {args.out}")
+    return 0
+
+
+def add_predict(sub: Any) -> None:
+    pp = sub.add_parser("predict", help="apply the models of a replay or campaign to another maneuver",
+                        description="Apply the final models of RUN_DIR (a replay's or a campaign's output) to the "
+                                    "regressors of BAG, formed by the replay's pipeline under --config; write "
+                                    "prediction.csv (measured, predicted, interval per model) and summary.txt to "
+                                    "--out and print per model the fit error and the fraction of measured "
+                                    "coefficients inside the prediction interval.")
+    pp.add_argument("run_dir", metavar="RUN_DIR", help="output directory of a replay or a campaign (models.json)")
+    pp.add_argument("bag", metavar="BAG", help="replay bag of the maneuver to predict")
+    pp.add_argument("--config", help="ROS parameter file, e.g. config/t2.yaml (default: node defaults)")
+    pp.add_argument("--out", required=True, help="output directory")
+    add_parameter_flags(pp, PARAMETER_FLAGS)
+    pp.add_argument("--lenient", action="store_true",
+                    help="pass out-of-order and duplicate stamps to the pipeline (counted like the node does)")
+    from ..offline.predict import PredictOptions
+
+    add_option_flags(pp, PredictOptions)
+    add_progress(pp)
+    pp.add_argument("--force", action="store_true", help=FORCE_HELP)
+    pp.set_defaults(func=_predict)

@@ -27,6 +27,8 @@ stream (:class:`.bags.InputStream`) and the outputs are written sample by sample
 * ``summary.txt``: the summary the command prints (:func:`run_summary`);
 * ``parameters.csv``: every parameter's state and percent error at the end, both methods
   (:func:`parameters_csv`);
+* ``models.json``: each model's final estimates with their corrected and conventional
+  covariances and residual variance (:mod:`.model_file`), for ``rls-uncertainty predict``;
 * per model ``M``, the figures of :func:`.figures.replay_figures` (``M_estimates``, ``M_fit``,
   ``M_autocorrelation``, ``M_lags``, in the requested formats), drawn from at most twice
   :data:`PLOT_POINTS` evenly spaced samples per run and from sums kept as the run goes
@@ -64,6 +66,7 @@ from ..settings.config import NodeConfig
 from ..settings.parameters import node_config, parameter_defaults, pipeline_config
 from .bags import InputStream, check_bag, typestore
 from .figure_data import FigureData
+from .model_file import MODELS_FILE, models_json, run_models
 from .replay_files import ReplayFiles, run_record
 from .report import results_table, rows_from_arrays
 from .results import History, ReplayResult, accounting
@@ -498,6 +501,8 @@ def replay(bag: str | Path, params: dict[str, Any], out: str | Path, *, start: f
         (tmp / "run.json").write_text(json.dumps(record, indent=1, sort_keys=True, default=repr) + "\n")
         (tmp / "summary.txt").write_text(run_summary(result) + "\n")
         (tmp / "parameters.csv").write_text(parameters_csv(result))
+        if result.pipeline is not None:
+            (tmp / MODELS_FILE).write_text(models_json([(Path(bag).name, run_models(result.pipeline))]))
         if data is not None and result.history is not None:
             from .figures import replay_figures  # noqa: PLC0415 - drawing (matplotlib) only when asked
 

@@ -1,0 +1,151 @@
+"""``models.json``: the identified models at the end of a run, for ``rls-uncertainty predict``.
+
+``replay`` and ``campaign`` write it beside their other outputs. Per maneuver (a replay is one
+maneuver, named after its bag; a campaign has one entry per maneuver, in order), per model
+that published time-domain estimates at its last sample:
+
+* ``model``, ``regressors`` and ``parameters`` (names, in the order of the configuration);
+* ``estimate``: the final estimates (the recursive estimates of Eqs. 15-16 at the last sample);
+* ``covariance``: their corrected covariance (Eq. 20 with all lags, Eq. 22 with the configured
+  window; repaired to the nearest positive semi-definite matrix when needed, as published),
+  and ``covariance_conventional`` (Eq. 13);
+* ``residual_variance``: the fit-error variance ``R(0)`` (Eq. 16) and ``samples`` the samples
+  the estimator used.
+
+:func:`run_models` takes them out of a pipeline at the end of a run; :func:`read_models` reads
+the file back, refusing, in one line, a file that is not one or a value that is not finite.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from ..errors import ConfigError
+
+if TYPE_CHECKING:  # annotations only
+    from ..datapath.pipeline import Pipeline
+
+__all__ = ["FittedModel", "MODELS_FILE", "MODELS_FORMAT", "run_models", "models_json", "read_models"]
+
+MODELS_FILE = "models.json"
+MODELS_FORMAT = "rls_uncertainty models 1"
+
+
+@dataclass(frozen=True)
+class FittedModel:
+    """One model identified on one maneuver (module docstring): ``estimate`` ``(n,)``,
+    ``covariance`` and ``covariance_conventional`` ``(n, n)``."""
+
+    model: str
+    regressors: tuple[str, ...]
+    parameters: tuple[str, ...]
+    estimate: np.ndarray
+    covariance: np.ndarray
+    covariance_conventional: np.ndarray
+    residual_variance: float
+    samples: int
+
+    def as_json(self) -> dict[str, Any]:
+        return {"model": self.model, "regressors": list(self.regressors), "parameters": list(self.parameters),
+                "estimate": self.estimate.tolist(), "covariance": self.covariance.tolist(),
+                "covariance_conventional": self.covariance_conventional.tolist(),
+                "residual_variance": self.residual_variance, "samples": self.samples}
+
+
+def run_models(pipe: Pipeline) -> list[FittedModel]:
+    """Every model of ``pipe`` that published at its last sample (:attr:`.pipeline.Pipeline.last`),
+    with its estimates, both covariances and its residual variance from the estimator's state
+    at the end of the run (the last sample's)."""
+    last = pipe.last
+    if last is None or not pipe.config.publishes_time:
+        return []
+    bank = pipe.bank
+    cov = bank.covariance_all()
+    variances = bank.residual_variances()
+    out = []
+    for j, m in enumerate(pipe.models):
+        n = pipe.sizes[j]
+        if not last.ready[j]:
+            continue
+        out.append(FittedModel(m.output, tuple(m.regressors), tuple(m.parameter_names), last.theta[j, :n].copy(),
+                               _symmetric(cov[0, j, :n, :n]), _symmetric(cov[1, j, :n, :n]), float(variances[j]),
+                               int(bank.k)))
+    return out
+
+
+def _symmetric(c: np.ndarray) -> np.ndarray:
+    out: np.ndarray = 0.5 * (c + c.T)
+    return out
+
+
+def models_json(maneuvers: Sequence[tuple[str, Sequence[FittedModel]]]) -> str:
+    """The text of ``models.json`` of ``(maneuver, models)`` pairs."""
+    doc = {"format": MODELS_FORMAT,
+           "maneuvers": [{"name": name, "models": [m.as_json() for m in models]} for name, models in maneuvers]}
+    return json.dumps(doc, indent=1) + "\n"
+
+
+def _array(value: Any, shape: tuple[int, ...], where: str) -> np.ndarray:
+    try:
+        a = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ConfigError(f"{where}: not numbers") from None
+    if a.shape != shape:
+        raise ConfigError(f"{where}: shape {a.shape}, expected {shape}")
+    if not np.isfinite(a).all():
+        raise ConfigError(f"{where}: a value is not finite")
+    return a
+
+
+def _model(entry: Any, where: str) -> FittedModel:
+    if not isinstance(entry, dict):
+        raise ConfigError(f"{where}: not a model entry")
+    try:
+        name, regressors, parameters = str(entry["model"]), tuple(entry["regressors"]), tuple(entry["parameters"])
+        n = len(regressors)
+        where = f"{where} ({name})"
+        if len(parameters) != n or n == 0:
+            raise ConfigError(f"{where}: {len(parameters)} parameters for {n} regressors")
+        variance, samples = float(entry["residual_variance"]), int(entry["samples"])
+        estimate = _array(entry["estimate"], (n,), f"{where} estimate")
+        cov = _array(entry["covariance"], (n, n), f"{where} covariance")
+        conv = _array(entry["covariance_conventional"], (n, n), f"{where} covariance_conventional")
+    except (KeyError, TypeError, ValueError) as exc:
+        if isinstance(exc, ConfigError):
+            raise
+        raise ConfigError(f"{where}: malformed ({type(exc).__name__}: {exc})") from None
+    if not (math.isfinite(variance) and variance >= 0):
+        raise ConfigError(f"{where}: residual_variance must be a finite number >= 0, got {variance!r}")
+    return FittedModel(name, tuple(map(str, regressors)), tuple(map(str, parameters)), estimate, cov, conv, variance,
+                       samples)
+
+
+def read_models(run_dir: str | Path) -> list[tuple[str, list[FittedModel]]]:
+    """The ``(maneuver, models)`` pairs of ``run_dir``'s ``models.json``. A directory without it,
+    a file that is not one, or a value that is not finite is a :class:`.errors.ConfigError`."""
+    path = Path(run_dir) / MODELS_FILE
+    if not Path(run_dir).is_dir():
+        raise ConfigError(f"{run_dir}: not a directory (give the output directory of a replay or a campaign)")
+    if not path.is_file():
+        raise ConfigError(f"{run_dir}: no {MODELS_FILE} (the final models a replay or a campaign writes); "
+                          "give the output directory of a replay or a campaign")
+    try:
+        doc = json.loads(path.read_text())
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise ConfigError(f"{path}: not readable as JSON ({' '.join(str(exc).split())})") from None
+    if not isinstance(doc, dict) or doc.get("format") != MODELS_FORMAT or not isinstance(doc.get("maneuvers"), list):
+        raise ConfigError(f"{path}: not a {MODELS_FORMAT!r} file")
+    out = []
+    for i, m in enumerate(doc["maneuvers"]):
+        if not isinstance(m, dict) or not isinstance(m.get("models"), list):
+            raise ConfigError(f"{path}: maneuver {i + 1}: malformed")
+        name = str(m.get("name", i + 1))
+        out.append((name, [_model(e, f"{path}: maneuver {name}, model {k + 1}") for k, e in enumerate(m["models"])]))
+    return out
