@@ -48,6 +48,7 @@ from ..datapath.diagnostics import DiagnosticsPolicy, Status, malformed_reason, 
 from ..datapath.diagnostics_round import DiagnosticsRound
 from ..datapath.feasibility import configuration_warnings
 from ..datapath.inputs import MESSAGE_TYPES, STREAMS, arrival_order, feed, message_class
+from ..datapath.load_policy import LoadPolicy
 from ..datapath.outputs import HEADER, NODE_NAME, OutputLayout
 from ..datapath.pipeline import Pipeline, SampleOutput
 from ..errors import ConfigError
@@ -361,6 +362,9 @@ class EstimatorNode(Node):
             "latencies_s": self._latencies, "cpu_times_s": self._cpu_times, "namesakes": self._namesakes(),
             "periodic_s": self._periodic, "waits_s": self._waits, "period_s": 1.0 / self.config.rate,
             "arrival_ages_s": {kind: wall - t for kind, t in self._arrived.items()},
+            "frequency_every": self.config.frequency.every if self.config.frequency is not None else 0,
+            "covariance_decimation": self.config.outputs.covariance_decimation,
+            "buffer_duration": self.config.inputs.buffer_duration,
         }
         self._last_diag = wall
         self._latencies, self._cpu_times, self._periodic, self._waits = [], [], [], []
@@ -400,8 +404,21 @@ class EstimatorNode(Node):
         elif overload is None and self._overload_said is not None:
             self.get_logger().info("keeping up with the inputs again")
         self._overload_said = overload
+        load = self._diagnostics.load
+        if load is not None:  # the degradation policy's step of this period, said once
+            _shed(self.pipeline, load)
+            for line in load.said:  # a step down is a warning, a step back news
+                (self.get_logger().warning if line.startswith("degraded") else self.get_logger().info)(line)
         for line in self._diagnostics.alerts.due():  # a misconfigured data path, throttled
             self.get_logger().warning(line)
+
+
+def _shed(pipeline: Pipeline, load: LoadPolicy) -> None:
+    """Apply the degradation policy's settings (:mod:`.load_policy`) to ``pipeline``."""
+    if pipeline.frequency is not None and load.base[0]:
+        pipeline.frequency.every = load.frequency_every
+    if load.base[1]:
+        pipeline.covariance_every = load.covariance_decimation
 
 
 def _overrides(values: dict[str, Any]) -> list[RosParameter]:
