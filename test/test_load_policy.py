@@ -4,10 +4,21 @@ from __future__ import annotations
 
 import random
 
-from rls_uncertainty.datapath.diagnostics import WARN, DiagnosticsPolicy, Snapshot
-from rls_uncertainty.datapath.load_policy import (CLOCKS, FACTOR, NODE, TRANSPORT, LoadPolicy, Timing, behind, blame,
-                                                  cause, keep_up_text)
 from test_diagnostics import NOW, counters, snapshot, statuses, stream
+
+from rls_uncertainty.datapath.diagnostics import WARN, DiagnosticsPolicy, Snapshot
+from rls_uncertainty.datapath.load_policy import (
+    CLOCKS,
+    FACTOR,
+    NODE,
+    TRANSPORT,
+    LoadPolicy,
+    Timing,
+    behind,
+    blame,
+    cause,
+    keep_up_text,
+)
 
 MS = 1e-3
 
