@@ -9,6 +9,12 @@ differentiator) to the reception of that sample's last output array.
 
     .venv/bin/python benchmarks/node_benchmark.py                      # 1 kHz IMU, 100 Hz air data
     .venv/bin/python benchmarks/node_benchmark.py --imu-rate 200 --air-rate 50
+    .venv/bin/python benchmarks/node_benchmark.py --extreme --no-baseline  # more than the node can do
+
+``--extreme``: estimates at 1000 Hz with ``estimator.method: both`` and ``frequency.every: 1``
+(1 kHz IMU): more work than one core does in real time. It prints the node's RSS, the last
+``/diagnostics`` texts of the samples and inputs statuses verbatim, and what the node logged
+about keeping up.
 """
 
 from __future__ import annotations
@@ -166,6 +172,17 @@ def cpu_seconds(pid: int) -> float:
     return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
+def rss_mb(pid: int) -> float:
+    """Resident set size of process ``pid``, MB (0 once it has gone)."""
+    try:
+        for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+            if line.startswith("VmRSS:"):
+                return int(line.split()[1]) / 1024
+    except OSError:
+        pass
+    return 0.0
+
+
 def completing_times(log: np.ndarray, rate: float, lag: int, required=(0, 1, 2, 3, 4)) -> dict[int, float]:
     """For each output sample stamp: when the input that completed sample (stamp + lag) was
     published (the pipeline's frontier rule, replayed on the publication log)."""
@@ -196,11 +213,17 @@ def main() -> int:
     ap.add_argument("--rate", type=float, default=50.0, help="estimator rate, Hz")
     ap.add_argument("--duration", type=float, default=20.0)
     ap.add_argument("--lag-span", type=float, default=1.0, help="estimator.lag_span, s (1.0: 50 lags at 50 Hz)")
+    ap.add_argument("--method", choices=("time", "frequency", "both"), default="time", help="estimator.method")
+    ap.add_argument("--frequency-every", type=int, default=5, help="frequency.every (with --method frequency/both)")
+    ap.add_argument("--extreme", action="store_true",
+                    help="rate 1000 Hz, method both, frequency.every 1 (overrides --rate, --method, --frequency-every)")
     ap.add_argument("--no-baseline", action="store_true", help="skip the echo-node latency baseline")
     ap.add_argument("--publisher", action="store_true", help=argparse.SUPPRESS)
     ap.add_argument("--echo", action="store_true", help=argparse.SUPPRESS)
     ap.add_argument("--log", default=None, help=argparse.SUPPRESS)
     args = ap.parse_args()
+    if args.extreme:
+        args.rate, args.method, args.frequency_every = 1000.0, "both", 1
     if args.publisher:
         publisher(args)
         return 0
@@ -222,7 +245,8 @@ def main() -> int:
              "--ros-args", "-p", "qos.reliable:=true",
              "-p", f"rate:={args.rate}", "-p", f"estimator.lag_span:={args.lag_span}",
              "-p", "surfaces.elevator:=[elevator]",
-             "-p", "qos.depth:=1000"],
+             "-p", "qos.depth:=1000", "-p", f"estimator.method:={args.method}",
+             *(["-p", f"frequency.every:={args.frequency_every}"] if args.method != "time" else [])],
             stdout=node_log, stderr=subprocess.STDOUT, cwd=ROOT,
         )
     rclpy.init()
@@ -263,16 +287,23 @@ def main() -> int:
     while pub.poll() is None and not stamps_seen:
         rclpy.spin_once(sub, timeout_sec=0.01)
     cpu0, wall0, stamps0 = cpu_seconds(node.pid), time.monotonic(), count["stamps"]
+    rss = [rss_mb(node.pid)]
+    next_rss = time.monotonic() + 0.5
     while pub.poll() is None:
         rclpy.spin_once(sub, timeout_sec=0.01)
+        if time.monotonic() >= next_rss:
+            rss.append(rss_mb(node.pid))
+            next_rss += 0.5
     cpu1, wall1, stamps1 = cpu_seconds(node.pid), time.monotonic(), count["stamps"]
     end = time.monotonic() + 2
     while time.monotonic() < end:
         rclpy.spin_once(sub, timeout_sec=0.05)
-    diag, proc_p99, periodic = {}, [], []
+    rss.append(rss_mb(node.pid))
+    diag, proc_p99, periodic, texts = {}, [], [], {}
     for d in diags:
         for s in d.status:
             diag[s.name] = {kv.key: kv.value for kv in s.values}
+            texts[s.name] = f"[{['OK', 'WARN', 'ERROR', 'STALE'][s.level[0]]}] {s.message}"
             if "periodic_ms.max" in diag[s.name]:
                 periodic.append(float(diag[s.name]["periodic_ms.max"]))
             if "latency_ms.p99" in diag[s.name]:
@@ -311,6 +342,14 @@ def main() -> int:
               f"in-node wall p99 (worst second) {max((p[0] for p in proc_p99), default=float('nan')):.3f} ms")
         print(f"  in-node CPU per output sample    p50 {np.median([p[2] for p in proc_p99]):.3f} ms, "
               f"p99 (worst second) {max((p[1] for p in proc_p99), default=float('nan')):.3f} ms")
+    print(f"  node RSS, MB                     start {rss[0]:.0f}, max {max(rss):.0f}, end {rss[-1]:.0f}")
+    for name in ("rls_estimator: samples", "rls_estimator: inputs"):
+        if name in texts:
+            print(f"  last /diagnostics {name.split(': ')[1]:8s}       {texts[name]}")
+    said = [line.strip() for line in (tmp / "node.log").read_text(errors="replace").splitlines()
+            if any(w in line for w in ("cannot keep up", "degraded:", "restored:", "keeping up"))]
+    for line in said:
+        print(f"  node log: {line}")
     with open(tmp / "result.json", "w") as fh:
         json.dump({"p50_ms": float(np.percentile(lat, 50)) if lat.size else None,
                    "p99_ms": float(np.percentile(lat, 99)) if lat.size else None,

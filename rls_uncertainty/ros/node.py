@@ -47,7 +47,7 @@ from ..datapath.cdr import decode
 from ..datapath.diagnostics import DiagnosticsPolicy, Status, malformed_reason, malformed_warning
 from ..datapath.diagnostics_round import DiagnosticsRound
 from ..datapath.feasibility import configuration_warnings
-from ..datapath.inputs import MESSAGE_TYPES, STREAMS, arrival_order, feed, message_class
+from ..datapath.inputs import MESSAGE_TYPES, STREAMS, feed, message_class
 from ..datapath.load_policy import LoadPolicy
 from ..datapath.outputs import HEADER, NODE_NAME, OutputLayout
 from ..datapath.pipeline import Pipeline, SampleOutput
@@ -55,7 +55,7 @@ from ..errors import ConfigError
 from ..settings.parameters import PARAMETERS, Parameter, node_config, pipeline_config
 from ..settings.sources import startup_parameters
 from .input_watch import SilentInputs
-from .intake import Intake
+from .intake import Backlog, Intake
 from .node_state import NodeStateFile
 
 __all__ = ["EstimatorNode", "main", "NODE_NAME"]
@@ -65,6 +65,10 @@ _TYPES = {kind: message_class(MESSAGE_TYPES[kind]) for kind in STREAMS}
 # CPU than the estimation itself. A QoS mismatch on an input shows in /diagnostics instead
 # (``<stream>.publishers`` is 0 and the stream is reported silent).
 _NO_EVENTS = PublisherEventCallbacks(use_default_callbacks=False)
+
+
+# The longest an intake pass feeds before the executor's other work (diagnostics) gets a turn.
+_PASS_BUDGET_S = 0.01
 
 
 def _intake_period(rate: float) -> float:
@@ -144,6 +148,7 @@ class EstimatorNode(Node):
         in_qos = _input_qos(self.node_cfg.reliable, self.node_cfg.depth)
         self._intake = Intake(self, _TYPES, self.node_cfg.topics, in_qos)  # off the executor: taken in batches
         self._subs = self._intake.subs
+        self._backlog = Backlog()  # taken, not yet fed
         self.create_service(Trigger, "~/reset", self._on_reset)
         self.create_service(SetBool, "~/enable", self._on_enable)
         self.add_on_set_parameters_callback(self._validate_parameters)
@@ -246,21 +251,27 @@ class EstimatorNode(Node):
         """Every message the input subscriptions hold, taken at once each intake period
         (:func:`_intake_period`) and fed to :func:`.inputs.feed` in order of arrival
         (:func:`.inputs.arrival_order`, the reception times of the middleware, :mod:`.intake`): the offline
-        replay feeds the same messages in the same order. Latency is counted from the arrival
-        of the message that completed a sample to its last publish."""
-        taken = self._intake.take()
-        if not any(taken.values()):
-            return
-        now = time.monotonic()
-        for kind, queued in taken.items():
-            if queued:
-                self._arrived[kind] = now  # the stream's age in /diagnostics runs from here
+        replay feeds the same messages in the same order. A pass feeds for at most
+        :data:`_PASS_BUDGET_S`; the rest of the batch is fed by the next passes before anything
+        new is taken (:class:`.intake.Backlog`). Latency is counted from the arrival of the
+        message that completed a sample to its last publish."""
+        backlog = self._backlog
+        if not backlog:
+            taken = self._intake.take()
+            if not any(taken.values()):
+                return
+            now = time.monotonic()
+            for kind, queued in taken.items():
+                if queued:
+                    self._arrived[kind] = now  # the stream's age in /diagnostics runs from here
+            backlog.refill(taken)
         pipeline, start = self.pipeline, time.time_ns()
-        oldest = min((q[0][0] for q in taken.values() if q and q[0][0] > 0), default=start)
-        self._waits.append(max(start - oldest, 0) * 1e-9)
+        self._waits.append(max(start - backlog.oldest(start), 0) * 1e-9)
         if pipeline.needs_clock:  # inputs.max_clock_offset: stamps are checked against it
             pipeline.clock_ns = self.get_clock().now().nanoseconds
-        for kind, (arrived, raw) in arrival_order(taken):
+        deadline = time.perf_counter() + _PASS_BUDGET_S
+        while backlog and time.perf_counter() < deadline:
+            kind, (arrived, raw) = backlog.pop()
             c0 = time.thread_time()
             try:
                 outputs = feed(pipeline, kind, decode(MESSAGE_TYPES[kind], raw))
