@@ -206,7 +206,58 @@ def completing_times(log: np.ndarray, rate: float, lag: int, required=(0, 1, 2, 
     return out
 
 
-def main() -> int:
+def report(args, tmp: Path, received: dict[int, float], count: dict[str, int], m: dict) -> None:
+    """Print the run's figures (``m``: what the run measured) and write them to result.json."""
+    diag, texts, proc_p99, periodic, rss = m["diag"], m["texts"], m["proc_p99"], m["periodic"], m["rss"]
+    log = np.load(tmp / "publish_log.npy")
+    lag = 4
+    done = completing_times(log, args.rate, lag)
+    lat = np.array([received[s] - done[s] for s in received if s in done]) * 1e3
+    # The first output: after the first formed sample and the differentiator warm-up (window 9).
+    first = min(k for k in done) + 8 * int(round(1e9 / args.rate))
+    expected = sum(1 for s in done if s >= first)
+    n_in = log.shape[0]
+    samples = diag.get("rls_estimator: samples", {})
+    print(f"node benchmark: IMU {args.imu_rate:g} Hz, air data and surfaces {args.air_rate:g} Hz, estimates "
+          f"{args.rate:g} Hz, six models, {args.lag_span:g} s of lags, {args.duration:g} s")
+    print(f"  input messages published        {n_in}")
+    print(f"  samples completed by the inputs  {expected}")
+    print(f"  sample stamps received           {count['stamps']}  (dropped: {expected - count['stamps']}; "
+          f"the last {lag} wait for the differentiator)")
+    print(f"  last-model arrays received       {count['arrays']}  (non-finite: {count['nonfinite']})")
+    if lat.size:
+        print(f"  input-to-output latency, ms      p50 {np.percentile(lat, 50):.3f}  p99 {np.percentile(lat, 99):.3f}  "
+              f"max {lat.max():.3f}")
+    cpu_percent = 100 * m["cpu_s"] / m["wall_s"]
+    print(f"  node CPU                         {cpu_percent:.1f} % of one core")
+    per_sample = 1e3 * m["cpu_s"] / max(m["stamps"], 1)
+    print(f"  node CPU per output sample       {per_sample:.3f} ms  (process CPU / samples published)")
+    if periodic:
+        print(f"  longest periodic step (diagnostics periodic_ms.max)  {max(periodic):.3f} ms")
+    if samples:
+        rejected = {k: v for k, v in samples.items() if k.startswith("samples_rejected")}
+        print(f"  node diagnostics                 used {samples.get('samples_used')}, rejected {rejected}, "
+              f"in-node wall p99 (worst second) {max((p[0] for p in proc_p99), default=float('nan')):.3f} ms")
+        print(f"  in-node CPU per output sample    p50 {np.median([p[2] for p in proc_p99]):.3f} ms, "
+              f"p99 (worst second) {max((p[1] for p in proc_p99), default=float('nan')):.3f} ms")
+    print(f"  node RSS, MB                     start {rss[0]:.0f}, max {max(rss):.0f}, end {rss[-1]:.0f}")
+    for name in ("rls_estimator: samples", "rls_estimator: inputs"):
+        if name in texts:
+            print(f"  last /diagnostics {name.split(': ')[1]:8s}       {texts[name]}")
+    said = [line.strip() for line in (tmp / "node.log").read_text(errors="replace").splitlines()
+            if any(w in line for w in ("cannot keep up", "degraded:", "restored:", "keeping up"))]
+    for line in said:
+        print(f"  node log: {line}")
+    with open(tmp / "result.json", "w") as fh:
+        json.dump({"p50_ms": float(np.percentile(lat, 50)) if lat.size else None,
+                   "p99_ms": float(np.percentile(lat, 99)) if lat.size else None,
+                   "max_ms": float(lat.max()) if lat.size else None,
+                   "cpu_percent": cpu_percent, "cpu_per_sample_ms": per_sample,
+                   "periodic_max_ms": max(periodic, default=None),
+                   "dropped": expected - count["stamps"]}, fh)
+
+
+def parse_args() -> argparse.Namespace:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--imu-rate", type=float, default=1000.0)
     ap.add_argument("--air-rate", type=float, default=100.0)
@@ -224,6 +275,43 @@ def main() -> int:
     args = ap.parse_args()
     if args.extreme:
         args.rate, args.method, args.frequency_every = 1000.0, "both", 1
+    return args
+
+
+def start_node(args: argparse.Namespace, tmp: Path) -> subprocess.Popen:
+    """The estimator node, its log in ``tmp/node.log``."""
+    # The child writes node.log through its own descriptor: ours is closed once it has started.
+    with open(tmp / "node.log", "w") as node_log:
+        node = subprocess.Popen(
+            [sys.executable, *os.environ.get("RLS_BENCH_PYFLAGS", "").split(), "-m", "rls_uncertainty.ros.node",
+             "--ros-args", "-p", "qos.reliable:=true",
+             "-p", f"rate:={args.rate}", "-p", f"estimator.lag_span:={args.lag_span}",
+             "-p", "surfaces.elevator:=[elevator]",
+             "-p", "qos.depth:=1000", "-p", f"estimator.method:={args.method}",
+             *(["-p", f"frequency.every:={args.frequency_every}"] if args.method != "time" else [])],
+            stdout=node_log, stderr=subprocess.STDOUT, cwd=ROOT,
+        )
+    return node
+
+
+def read_diagnostics(diags: list) -> dict:
+    """The last key-values and text of each status, every period's latency and CPU percentiles and
+    longest periodic step."""
+    diag, proc_p99, periodic, texts = {}, [], [], {}
+    for d in diags:
+        for s in d.status:
+            diag[s.name] = {kv.key: kv.value for kv in s.values}
+            texts[s.name] = f"[{['OK', 'WARN', 'ERROR', 'STALE'][s.level[0]]}] {s.message}"
+            if "periodic_ms.max" in diag[s.name]:
+                periodic.append(float(diag[s.name]["periodic_ms.max"]))
+            if "latency_ms.p99" in diag[s.name]:
+                proc_p99.append((float(diag[s.name]["latency_ms.p99"]), float(diag[s.name]["processing_cpu_ms.p99"]),
+                                 float(diag[s.name]["processing_cpu_ms.p50"])))
+    return {"diag": diag, "texts": texts, "proc_p99": proc_p99, "periodic": periodic}
+
+
+def main() -> int:
+    args = parse_args()
     if args.publisher:
         publisher(args)
         return 0
@@ -238,17 +326,7 @@ def main() -> int:
 
     tmp = Path(os.environ.get("TMPDIR", "/tmp")) / f"rls_bench_{os.getpid()}"
     tmp.mkdir(parents=True, exist_ok=True)
-    # The child writes node.log through its own descriptor: ours is closed once it has started.
-    with open(tmp / "node.log", "w") as node_log:
-        node = subprocess.Popen(
-            [sys.executable, *os.environ.get("RLS_BENCH_PYFLAGS", "").split(), "-m", "rls_uncertainty.ros.node",
-             "--ros-args", "-p", "qos.reliable:=true",
-             "-p", f"rate:={args.rate}", "-p", f"estimator.lag_span:={args.lag_span}",
-             "-p", "surfaces.elevator:=[elevator]",
-             "-p", "qos.depth:=1000", "-p", f"estimator.method:={args.method}",
-             *(["-p", f"frequency.every:={args.frequency_every}"] if args.method != "time" else [])],
-            stdout=node_log, stderr=subprocess.STDOUT, cwd=ROOT,
-        )
+    node = start_node(args, tmp)
     rclpy.init()
     sub = rclpy.create_node("bench_subscriber")
     qos = QoSProfile(depth=1000, reliability=QoSReliabilityPolicy.RELIABLE, history=QoSHistoryPolicy.KEEP_LAST)
@@ -299,64 +377,12 @@ def main() -> int:
     while time.monotonic() < end:
         rclpy.spin_once(sub, timeout_sec=0.05)
     rss.append(rss_mb(node.pid))
-    diag, proc_p99, periodic, texts = {}, [], [], {}
-    for d in diags:
-        for s in d.status:
-            diag[s.name] = {kv.key: kv.value for kv in s.values}
-            texts[s.name] = f"[{['OK', 'WARN', 'ERROR', 'STALE'][s.level[0]]}] {s.message}"
-            if "periodic_ms.max" in diag[s.name]:
-                periodic.append(float(diag[s.name]["periodic_ms.max"]))
-            if "latency_ms.p99" in diag[s.name]:
-                proc_p99.append((float(diag[s.name]["latency_ms.p99"]), float(diag[s.name]["processing_cpu_ms.p99"]),
-                                 float(diag[s.name]["processing_cpu_ms.p50"])))
+    m = read_diagnostics(diags)
     node.send_signal(2)
     node.wait(20)
 
-    log = np.load(log_path)
-    lag = 4
-    done = completing_times(log, args.rate, lag)
-    lat = np.array([received[s] - done[s] for s in received if s in done]) * 1e3
-    # The first output: after the first formed sample and the differentiator warm-up (window 9).
-    first = min(k for k in done) + 8 * int(round(1e9 / args.rate))
-    expected = sum(1 for s in done if s >= first)
-    n_in = log.shape[0]
-    samples = diag.get("rls_estimator: samples", {})
-    print(f"node benchmark: IMU {args.imu_rate:g} Hz, air data and surfaces {args.air_rate:g} Hz, estimates "
-          f"{args.rate:g} Hz, six models, {args.lag_span:g} s of lags, {args.duration:g} s")
-    print(f"  input messages published        {n_in}")
-    print(f"  samples completed by the inputs  {expected}")
-    print(f"  sample stamps received           {count['stamps']}  (dropped: {expected - count['stamps']}; "
-          f"the last {lag} wait for the differentiator)")
-    print(f"  last-model arrays received       {count['arrays']}  (non-finite: {count['nonfinite']})")
-    if lat.size:
-        print(f"  input-to-output latency, ms      p50 {np.percentile(lat, 50):.3f}  p99 {np.percentile(lat, 99):.3f}  "
-              f"max {lat.max():.3f}")
-    print(f"  node CPU                         {100 * (cpu1 - cpu0) / (wall1 - wall0):.1f} % of one core")
-    per_sample = 1e3 * (cpu1 - cpu0) / max(stamps1 - stamps0, 1)
-    print(f"  node CPU per output sample       {per_sample:.3f} ms  (process CPU / samples published)")
-    if periodic:
-        print(f"  longest periodic step (diagnostics periodic_ms.max)  {max(periodic):.3f} ms")
-    if samples:
-        rejected = {k: v for k, v in samples.items() if k.startswith("samples_rejected")}
-        print(f"  node diagnostics                 used {samples.get('samples_used')}, rejected {rejected}, "
-              f"in-node wall p99 (worst second) {max((p[0] for p in proc_p99), default=float('nan')):.3f} ms")
-        print(f"  in-node CPU per output sample    p50 {np.median([p[2] for p in proc_p99]):.3f} ms, "
-              f"p99 (worst second) {max((p[1] for p in proc_p99), default=float('nan')):.3f} ms")
-    print(f"  node RSS, MB                     start {rss[0]:.0f}, max {max(rss):.0f}, end {rss[-1]:.0f}")
-    for name in ("rls_estimator: samples", "rls_estimator: inputs"):
-        if name in texts:
-            print(f"  last /diagnostics {name.split(': ')[1]:8s}       {texts[name]}")
-    said = [line.strip() for line in (tmp / "node.log").read_text(errors="replace").splitlines()
-            if any(w in line for w in ("cannot keep up", "degraded:", "restored:", "keeping up"))]
-    for line in said:
-        print(f"  node log: {line}")
-    with open(tmp / "result.json", "w") as fh:
-        json.dump({"p50_ms": float(np.percentile(lat, 50)) if lat.size else None,
-                   "p99_ms": float(np.percentile(lat, 99)) if lat.size else None,
-                   "max_ms": float(lat.max()) if lat.size else None,
-                   "cpu_percent": 100 * (cpu1 - cpu0) / (wall1 - wall0), "cpu_per_sample_ms": per_sample,
-                   "periodic_max_ms": max(periodic, default=None),
-                   "dropped": expected - count["stamps"]}, fh)
+    m.update(rss=rss, cpu_s=cpu1 - cpu0, wall_s=wall1 - wall0, stamps=stamps1 - stamps0)
+    report(args, tmp, received, count, m)
     sub.destroy_node()
     if not args.no_baseline:
         base = echo_baseline()
