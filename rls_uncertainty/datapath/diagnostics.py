@@ -152,6 +152,7 @@ class Snapshot:
     frequency_every: int = 0
     covariance_decimation: int = 0
     buffer_duration: float = 1.0
+    shed: bool = False  # the node sheds work while it cannot keep up (shed_load)
 
 
 def status_prefix(node: str) -> str:
@@ -335,7 +336,7 @@ class DiagnosticsPolicy:
         if self.load is None or self._load_key != key:  # a new configuration starts unshed
             rate = 1.0 / snap.period_s if snap.period_s > 0 else 1.0
             self.load, self._load_key = LoadPolicy(rate, snap.frequency_every, snap.covariance_decimation), key
-        if snap.waits_s or self.load.degraded:
+        if snap.shed and (snap.waits_s or self.load.degraded):
             self.load.update(self.cause == NODE, snap.elapsed_s)
         else:
             self.load.said = []
@@ -384,7 +385,10 @@ class DiagnosticsPolicy:
             ]
             kv += _table(f"{kind}.rejected", s["rejected"], self.max_keys, "reasons")
             if needed and (age is None or age > limit):
-                problems.append(f"{kind} {'silent' if age is None else f'stale ({age:.1f} s)'}")
+                if age is not None and self.cause == NODE:  # its messages wait while the node feeds a backlog
+                    problems.append(f"{kind} not taken for {age:.1f} s (the node is behind its inputs)")
+                else:
+                    problems.append(f"{kind} {'silent' if age is None else f'stale ({age:.1f} s)'}")
                 if publishers == 0:
                     problems.append(f"no publisher matched on {snap.topics[kind]} "
                                     f"(none running, or incompatible QoS: qos.reliable={snap.reliable})")

@@ -10,7 +10,7 @@ minus arrival age, seconds; the node's clock against the sender's).
 
 * :data:`NODE` (:func:`behind`): the node's own processing per sample exceeds the period, or
   the median wait is a backlog (over ``max(50 ms, 5 periods)``), or the waits grow through the
-  period (the last third's median exceeds the first third's by ``max(10 ms, 2 periods)``);
+  period by as much (the last third's median against the first third's);
 * :data:`CLOCKS`: the required streams' stamp offsets differ by more than the tolerance and
   that difference stayed put since the previous period (a constant offset: another clock);
 * :data:`TRANSPORT`: stamp gaps while the node was not behind;
@@ -84,13 +84,14 @@ def behind(t: Timing) -> bool:
     waits = list(t.waits_s)
     if not waits:
         return False
-    if _median(waits) > max(0.05, 5 * t.period_s):
+    backlog = max(0.05, 5 * t.period_s)
+    if _median(waits) > backlog:
         return True
     third = len(waits) // 3
     if third < 2:
         return False
     first, last = _median(waits[:third]), _median(waits[-third:])
-    return last - first > max(0.01, 2 * t.period_s)
+    return last - first > backlog
 
 
 def _clock_spread(offsets: Mapping[str, float]) -> float:

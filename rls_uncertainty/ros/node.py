@@ -24,6 +24,7 @@ backwards time jumps are handled here.
 from __future__ import annotations
 
 import gc
+import math
 import sys
 import time
 from typing import Any
@@ -265,11 +266,17 @@ class EstimatorNode(Node):
                 if queued:
                     self._arrived[kind] = now  # the stream's age in /diagnostics runs from here
             backlog.refill(taken)
-        pipeline, start = self.pipeline, time.time_ns()
+        self._feed(time.perf_counter() + _PASS_BUDGET_S)
+
+    def _feed(self, deadline: float) -> None:
+        """Feed the backlog in order until it is empty or ``deadline`` (``time.perf_counter``)
+        has passed, at least one message."""
+        backlog, pipeline, start = self._backlog, self.pipeline, time.time_ns()
+        if not backlog:
+            return
         self._waits.append(max(start - backlog.oldest(start), 0) * 1e-9)
         if pipeline.needs_clock:  # inputs.max_clock_offset: stamps are checked against it
             pipeline.clock_ns = self.get_clock().now().nanoseconds
-        deadline = time.perf_counter() + _PASS_BUDGET_S
         while backlog and time.perf_counter() < deadline:
             kind, (arrived, raw) = backlog.pop()
             c0 = time.thread_time()
@@ -302,6 +309,7 @@ class EstimatorNode(Node):
 
     # ------------------------------------------------------------------ services, time
     def _on_reset(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
+        self._feed(math.inf)  # what was taken before the call is fed before it, as it arrived
         self.pipeline.reset("service")  # the estimator and every input state: older stamps are accepted again
         response.success = True
         response.message = "estimator and inputs reset: estimates restart from the next messages, whatever their stamps"
@@ -310,6 +318,7 @@ class EstimatorNode(Node):
 
     def _on_enable(self, request: SetBool.Request, response: SetBool.Response) -> SetBool.Response:
         enabled = bool(request.data)
+        self._feed(math.inf)  # what was taken before the call is fed before it, as it arrived
         self.pipeline.enabled = enabled
         if not enabled:
             self.save_state()
@@ -376,6 +385,7 @@ class EstimatorNode(Node):
             "frequency_every": self.config.frequency.every if self.config.frequency is not None else 0,
             "covariance_decimation": self.config.outputs.covariance_decimation,
             "buffer_duration": self.config.inputs.buffer_duration,
+            "shed": self.node_cfg.shed_load,
         }
         self._last_diag = wall
         self._latencies, self._cpu_times, self._periodic, self._waits = [], [], [], []
@@ -419,7 +429,10 @@ class EstimatorNode(Node):
         if load is not None:  # the degradation policy's step of this period, said once
             _shed(self.pipeline, load)
             for line in load.said:  # a step down is a warning, a step back news
-                (self.get_logger().warning if line.startswith("degraded") else self.get_logger().info)(line)
+                if line.startswith("degraded"):
+                    self.get_logger().warning(line)
+                else:
+                    self.get_logger().info(line)
         for line in self._diagnostics.alerts.due():  # a misconfigured data path, throttled
             self.get_logger().warning(line)
 
