@@ -33,7 +33,10 @@ node in the root namespace, as always, and the fully qualified name under a name
   outputs then mix with this node's on the same topics: every consumer receives each sample
   from both): the text first in the message, and logged as a warning (throttled like the
   alerts). WARN while the node cannot keep up with its inputs (:func:`overload`), the text
-  first.
+  first, and while it sheds work (:mod:`.load_policy`: ``load.frequency_every``,
+  ``load.covariance_decimation`` and ``degraded: ...`` in the message). While the node is the
+  cause (:func:`.load_policy.cause`), the ``inputs`` status and the alerts name it instead of
+  guessing at the transport or the clocks (:func:`.load_policy.blame`).
 * ``model M``: the model fit, and the convergence flags when the node hands them in
   (``converged``, ``converged_parameters``) with the identifiability figures
   (:mod:`.identifiability`: ``identifiable``, ``not_identifiable``, ``held_back``,
