@@ -9,6 +9,12 @@ differentiator) to the reception of that sample's last output array.
 
     .venv/bin/python benchmarks/node_benchmark.py                      # 1 kHz IMU, 100 Hz air data
     .venv/bin/python benchmarks/node_benchmark.py --imu-rate 200 --air-rate 50
+    .venv/bin/python benchmarks/node_benchmark.py --extreme --no-baseline  # more than the node can do
+
+``--extreme``: estimates at 1000 Hz with ``estimator.method: both`` and ``frequency.every: 1``
+(1 kHz IMU): more work than one core does in real time. It prints the node's RSS, the last
+``/diagnostics`` texts of the samples and inputs statuses verbatim, and what the node logged
+about keeping up.
 """
 
 from __future__ import annotations
@@ -166,6 +172,17 @@ def cpu_seconds(pid: int) -> float:
     return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
+def rss_mb(pid: int) -> float:
+    """Resident set size of process ``pid``, MB (0 once it has gone)."""
+    try:
+        for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+            if line.startswith("VmRSS:"):
+                return int(line.split()[1]) / 1024
+    except OSError:
+        pass
+    return 0.0
+
+
 def completing_times(log: np.ndarray, rate: float, lag: int, required=(0, 1, 2, 3, 4)) -> dict[int, float]:
     """For each output sample stamp: when the input that completed sample (stamp + lag) was
     published (the pipeline's frontier rule, replayed on the publication log)."""
@@ -189,18 +206,112 @@ def completing_times(log: np.ndarray, rate: float, lag: int, required=(0, 1, 2, 
     return out
 
 
-def main() -> int:
+def report(args, tmp: Path, received: dict[int, float], count: dict[str, int], m: dict) -> None:
+    """Print the run's figures (``m``: what the run measured) and write them to result.json."""
+    diag, texts, proc_p99, periodic, rss = m["diag"], m["texts"], m["proc_p99"], m["periodic"], m["rss"]
+    log = np.load(tmp / "publish_log.npy")
+    lag = 4
+    done = completing_times(log, args.rate, lag)
+    lat = np.array([received[s] - done[s] for s in received if s in done]) * 1e3
+    # The first output: after the first formed sample and the differentiator warm-up (window 9).
+    first = min(k for k in done) + 8 * int(round(1e9 / args.rate))
+    expected = sum(1 for s in done if s >= first)
+    n_in = log.shape[0]
+    samples = diag.get("rls_estimator: samples", {})
+    print(f"node benchmark: IMU {args.imu_rate:g} Hz, air data and surfaces {args.air_rate:g} Hz, estimates "
+          f"{args.rate:g} Hz, six models, {args.lag_span:g} s of lags, {args.duration:g} s")
+    print(f"  input messages published        {n_in}")
+    print(f"  samples completed by the inputs  {expected}")
+    print(f"  sample stamps received           {count['stamps']}  (dropped: {expected - count['stamps']}; "
+          f"the last {lag} wait for the differentiator)")
+    print(f"  last-model arrays received       {count['arrays']}  (non-finite: {count['nonfinite']})")
+    if lat.size:
+        print(f"  input-to-output latency, ms      p50 {np.percentile(lat, 50):.3f}  p99 {np.percentile(lat, 99):.3f}  "
+              f"max {lat.max():.3f}")
+    cpu_percent = 100 * m["cpu_s"] / m["wall_s"]
+    print(f"  node CPU                         {cpu_percent:.1f} % of one core")
+    per_sample = 1e3 * m["cpu_s"] / max(m["stamps"], 1)
+    print(f"  node CPU per output sample       {per_sample:.3f} ms  (process CPU / samples published)")
+    if periodic:
+        print(f"  longest periodic step (diagnostics periodic_ms.max)  {max(periodic):.3f} ms")
+    if samples:
+        rejected = {k: v for k, v in samples.items() if k.startswith("samples_rejected")}
+        print(f"  node diagnostics                 used {samples.get('samples_used')}, rejected {rejected}, "
+              f"in-node wall p99 (worst second) {max((p[0] for p in proc_p99), default=float('nan')):.3f} ms")
+        print(f"  in-node CPU per output sample    p50 {np.median([p[2] for p in proc_p99]):.3f} ms, "
+              f"p99 (worst second) {max((p[1] for p in proc_p99), default=float('nan')):.3f} ms")
+    print(f"  node RSS, MB                     start {rss[0]:.0f}, max {max(rss):.0f}, end {rss[-1]:.0f}")
+    for name in ("rls_estimator: samples", "rls_estimator: inputs"):
+        if name in texts:
+            print(f"  last /diagnostics {name.split(': ')[1]:8s}       {texts[name]}")
+    said = [line.strip() for line in (tmp / "node.log").read_text(errors="replace").splitlines()
+            if any(w in line for w in ("cannot keep up", "degraded:", "restored:", "keeping up"))]
+    for line in said:
+        print(f"  node log: {line}")
+    with open(tmp / "result.json", "w") as fh:
+        json.dump({"p50_ms": float(np.percentile(lat, 50)) if lat.size else None,
+                   "p99_ms": float(np.percentile(lat, 99)) if lat.size else None,
+                   "max_ms": float(lat.max()) if lat.size else None,
+                   "cpu_percent": cpu_percent, "cpu_per_sample_ms": per_sample,
+                   "periodic_max_ms": max(periodic, default=None),
+                   "dropped": expected - count["stamps"]}, fh)
+
+
+def parse_args() -> argparse.Namespace:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--imu-rate", type=float, default=1000.0)
     ap.add_argument("--air-rate", type=float, default=100.0)
     ap.add_argument("--rate", type=float, default=50.0, help="estimator rate, Hz")
     ap.add_argument("--duration", type=float, default=20.0)
     ap.add_argument("--lag-span", type=float, default=1.0, help="estimator.lag_span, s (1.0: 50 lags at 50 Hz)")
+    ap.add_argument("--method", choices=("time", "frequency", "both"), default="time", help="estimator.method")
+    ap.add_argument("--frequency-every", type=int, default=5, help="frequency.every (with --method frequency/both)")
+    ap.add_argument("--extreme", action="store_true",
+                    help="rate 1000 Hz, method both, frequency.every 1 (overrides --rate, --method, --frequency-every)")
     ap.add_argument("--no-baseline", action="store_true", help="skip the echo-node latency baseline")
     ap.add_argument("--publisher", action="store_true", help=argparse.SUPPRESS)
     ap.add_argument("--echo", action="store_true", help=argparse.SUPPRESS)
     ap.add_argument("--log", default=None, help=argparse.SUPPRESS)
     args = ap.parse_args()
+    if args.extreme:
+        args.rate, args.method, args.frequency_every = 1000.0, "both", 1
+    return args
+
+
+def start_node(args: argparse.Namespace, tmp: Path) -> subprocess.Popen:
+    """The estimator node, its log in ``tmp/node.log``."""
+    # The child writes node.log through its own descriptor: ours is closed once it has started.
+    with open(tmp / "node.log", "w") as node_log:
+        node = subprocess.Popen(
+            [sys.executable, *os.environ.get("RLS_BENCH_PYFLAGS", "").split(), "-m", "rls_uncertainty.ros.node",
+             "--ros-args", "-p", "qos.reliable:=true",
+             "-p", f"rate:={args.rate}", "-p", f"estimator.lag_span:={args.lag_span}",
+             "-p", "surfaces.elevator:=[elevator]",
+             "-p", "qos.depth:=1000", "-p", f"estimator.method:={args.method}",
+             *(["-p", f"frequency.every:={args.frequency_every}"] if args.method != "time" else [])],
+            stdout=node_log, stderr=subprocess.STDOUT, cwd=ROOT,
+        )
+    return node
+
+
+def read_diagnostics(diags: list) -> dict:
+    """The last key-values and text of each status, every period's latency and CPU percentiles and
+    longest periodic step."""
+    diag, proc_p99, periodic, texts = {}, [], [], {}
+    for d in diags:
+        for s in d.status:
+            diag[s.name] = {kv.key: kv.value for kv in s.values}
+            texts[s.name] = f"[{['OK', 'WARN', 'ERROR', 'STALE'][s.level[0]]}] {s.message}"
+            if "periodic_ms.max" in diag[s.name]:
+                periodic.append(float(diag[s.name]["periodic_ms.max"]))
+            if "latency_ms.p99" in diag[s.name]:
+                proc_p99.append((float(diag[s.name]["latency_ms.p99"]), float(diag[s.name]["processing_cpu_ms.p99"]),
+                                 float(diag[s.name]["processing_cpu_ms.p50"])))
+    return {"diag": diag, "texts": texts, "proc_p99": proc_p99, "periodic": periodic}
+
+
+def main() -> int:
+    args = parse_args()
     if args.publisher:
         publisher(args)
         return 0
@@ -215,16 +326,7 @@ def main() -> int:
 
     tmp = Path(os.environ.get("TMPDIR", "/tmp")) / f"rls_bench_{os.getpid()}"
     tmp.mkdir(parents=True, exist_ok=True)
-    # The child writes node.log through its own descriptor: ours is closed once it has started.
-    with open(tmp / "node.log", "w") as node_log:
-        node = subprocess.Popen(
-            [sys.executable, *os.environ.get("RLS_BENCH_PYFLAGS", "").split(), "-m", "rls_uncertainty.ros.node",
-             "--ros-args", "-p", "qos.reliable:=true",
-             "-p", f"rate:={args.rate}", "-p", f"estimator.lag_span:={args.lag_span}",
-             "-p", "surfaces.elevator:=[elevator]",
-             "-p", "qos.depth:=1000"],
-            stdout=node_log, stderr=subprocess.STDOUT, cwd=ROOT,
-        )
+    node = start_node(args, tmp)
     rclpy.init()
     sub = rclpy.create_node("bench_subscriber")
     qos = QoSProfile(depth=1000, reliability=QoSReliabilityPolicy.RELIABLE, history=QoSHistoryPolicy.KEEP_LAST)
@@ -263,61 +365,24 @@ def main() -> int:
     while pub.poll() is None and not stamps_seen:
         rclpy.spin_once(sub, timeout_sec=0.01)
     cpu0, wall0, stamps0 = cpu_seconds(node.pid), time.monotonic(), count["stamps"]
+    rss = [rss_mb(node.pid)]
+    next_rss = time.monotonic() + 0.5
     while pub.poll() is None:
         rclpy.spin_once(sub, timeout_sec=0.01)
+        if time.monotonic() >= next_rss:
+            rss.append(rss_mb(node.pid))
+            next_rss += 0.5
     cpu1, wall1, stamps1 = cpu_seconds(node.pid), time.monotonic(), count["stamps"]
     end = time.monotonic() + 2
     while time.monotonic() < end:
         rclpy.spin_once(sub, timeout_sec=0.05)
-    diag, proc_p99, periodic = {}, [], []
-    for d in diags:
-        for s in d.status:
-            diag[s.name] = {kv.key: kv.value for kv in s.values}
-            if "periodic_ms.max" in diag[s.name]:
-                periodic.append(float(diag[s.name]["periodic_ms.max"]))
-            if "latency_ms.p99" in diag[s.name]:
-                proc_p99.append((float(diag[s.name]["latency_ms.p99"]), float(diag[s.name]["processing_cpu_ms.p99"]),
-                                 float(diag[s.name]["processing_cpu_ms.p50"])))
+    rss.append(rss_mb(node.pid))
+    m = read_diagnostics(diags)
     node.send_signal(2)
     node.wait(20)
 
-    log = np.load(log_path)
-    lag = 4
-    done = completing_times(log, args.rate, lag)
-    lat = np.array([received[s] - done[s] for s in received if s in done]) * 1e3
-    # The first output: after the first formed sample and the differentiator warm-up (window 9).
-    first = min(k for k in done) + 8 * int(round(1e9 / args.rate))
-    expected = sum(1 for s in done if s >= first)
-    n_in = log.shape[0]
-    samples = diag.get("rls_estimator: samples", {})
-    print(f"node benchmark: IMU {args.imu_rate:g} Hz, air data and surfaces {args.air_rate:g} Hz, estimates "
-          f"{args.rate:g} Hz, six models, {args.lag_span:g} s of lags, {args.duration:g} s")
-    print(f"  input messages published        {n_in}")
-    print(f"  samples completed by the inputs  {expected}")
-    print(f"  sample stamps received           {count['stamps']}  (dropped: {expected - count['stamps']}; "
-          f"the last {lag} wait for the differentiator)")
-    print(f"  last-model arrays received       {count['arrays']}  (non-finite: {count['nonfinite']})")
-    if lat.size:
-        print(f"  input-to-output latency, ms      p50 {np.percentile(lat, 50):.3f}  p99 {np.percentile(lat, 99):.3f}  "
-              f"max {lat.max():.3f}")
-    print(f"  node CPU                         {100 * (cpu1 - cpu0) / (wall1 - wall0):.1f} % of one core")
-    per_sample = 1e3 * (cpu1 - cpu0) / max(stamps1 - stamps0, 1)
-    print(f"  node CPU per output sample       {per_sample:.3f} ms  (process CPU / samples published)")
-    if periodic:
-        print(f"  longest periodic step (diagnostics periodic_ms.max)  {max(periodic):.3f} ms")
-    if samples:
-        rejected = {k: v for k, v in samples.items() if k.startswith("samples_rejected")}
-        print(f"  node diagnostics                 used {samples.get('samples_used')}, rejected {rejected}, "
-              f"in-node wall p99 (worst second) {max((p[0] for p in proc_p99), default=float('nan')):.3f} ms")
-        print(f"  in-node CPU per output sample    p50 {np.median([p[2] for p in proc_p99]):.3f} ms, "
-              f"p99 (worst second) {max((p[1] for p in proc_p99), default=float('nan')):.3f} ms")
-    with open(tmp / "result.json", "w") as fh:
-        json.dump({"p50_ms": float(np.percentile(lat, 50)) if lat.size else None,
-                   "p99_ms": float(np.percentile(lat, 99)) if lat.size else None,
-                   "max_ms": float(lat.max()) if lat.size else None,
-                   "cpu_percent": 100 * (cpu1 - cpu0) / (wall1 - wall0), "cpu_per_sample_ms": per_sample,
-                   "periodic_max_ms": max(periodic, default=None),
-                   "dropped": expected - count["stamps"]}, fh)
+    m.update(rss=rss, cpu_s=cpu1 - cpu0, wall_s=wall1 - wall0, stamps=stamps1 - stamps0)
+    report(args, tmp, received, count, m)
     sub.destroy_node()
     if not args.no_baseline:
         base = echo_baseline()

@@ -69,11 +69,17 @@ def _ros_params(values):
     return [arg for name, value in values.items() for arg in ("-p", f"{name}:={value}")]
 
 
+# These tests play faster than real time and compare with the offline replay: a node that falls
+# behind on a busy machine must not shed work (which samples carry covariances would change).
+# Shedding is tested in test_node_overload.py.
+NO_SHEDDING = ("-p", "shed_load:=false")
+
+
 def _node(tmp_path, *args, name="node"):
     # Reliable inputs with a queue deeper than any test's topic: a node slowed down by a busy
     # machine then delays messages instead of losing them (KEEP_LAST overwrites when full).
     return NodeProcess(tmp_path, "--params-file", T2, "-p", "qos.reliable:=true", "-p", "qos.depth:=10000",
-                       "-p", "diagnostics_period:=0.2", *args, name=name)
+                       "-p", "diagnostics_period:=0.2", *NO_SHEDDING, *args, name=name)
 
 
 def _arrays(tester, model, suffix):
@@ -814,7 +820,7 @@ def test_default_sensor_qos_receives_and_a_qos_mismatch_is_diagnosed(tmp_path, t
     from sensor_msgs.msg import Imu
 
     # Default QoS (best effort): a reliable publisher is compatible, estimates arrive.
-    node = NodeProcess(tmp_path, "--params-file", T2, "-p", "diagnostics_period:=0.2", name="default_qos")
+    node = NodeProcess(tmp_path, "--params-file", T2, "-p", "diagnostics_period:=0.2", *NO_SHEDDING, name="default_qos")
     try:
         tester.wait_connected()
         tester.publish_all([(k, to_rclpy(k, m)) for k, _s, m in bag[:2000]])

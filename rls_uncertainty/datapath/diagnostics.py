@@ -33,7 +33,10 @@ node in the root namespace, as always, and the fully qualified name under a name
   outputs then mix with this node's on the same topics: every consumer receives each sample
   from both): the text first in the message, and logged as a warning (throttled like the
   alerts). WARN while the node cannot keep up with its inputs (:func:`overload`), the text
-  first.
+  first, and while it sheds work (:mod:`.load_policy`: ``load.frequency_every``,
+  ``load.covariance_decimation`` and ``degraded: ...`` in the message). While the node is the
+  cause (:func:`.load_policy.cause`), the ``inputs`` status and the alerts name it instead of
+  guessing at the transport or the clocks (:func:`.load_policy.blame`).
 * ``model M``: the model fit, and the convergence flags when the node hands them in
   (``converged``, ``converged_parameters``) with the identifiability figures
   (:mod:`.identifiability`: ``identifiable``, ``not_identifiable``, ``held_back``,
@@ -67,6 +70,7 @@ from dataclasses import dataclass, field
 
 from .alerts import Alert, AlertPolicy
 from .bookkeeping import Totals, Window, increase
+from .load_policy import NODE, LoadPolicy, Timing, behind, blame, cause, keep_up_text
 from .outputs import NODE_NAME
 from .states import initializing
 
@@ -145,6 +149,13 @@ class Snapshot:
     periodic_s: Sequence[float] = field(default_factory=tuple)  # wall time of each periodic job step
     waits_s: Sequence[float] = field(default_factory=tuple)  # per intake pass, how long its oldest input waited
     period_s: float = 0.0  # the estimator period (1 / rate)
+    # What the degradation policy (:mod:`.load_policy`) starts from: the configured
+    # frequency.every (0: no frequency domain) and outputs.covariance_decimation, and the stamp
+    # spread between streams beyond which a constant one is another clock (inputs.buffer_duration).
+    frequency_every: int = 0
+    covariance_decimation: int = 0
+    buffer_duration: float = 1.0
+    shed: bool = False  # the node sheds work while it cannot keep up (shed_load)
 
 
 def status_prefix(node: str) -> str:
@@ -168,19 +179,28 @@ def namesake_alert(node: str, namesakes: int) -> Alert | None:
         "(--ros-args -r __node:=NAME or -r __ns:=/NAMESPACE)"))
 
 
+def timing(snap: Snapshot, previous_offsets: Mapping[str, float]) -> Timing:
+    """The snapshot's :class:`.load_policy.Timing`: the node's waits and CPU per sample, the
+    required streams' stamp gaps of the period and, when arrivals are known, each required
+    stream's stamp age minus its arrival age."""
+    offsets: dict[str, float] = {}
+    if snap.arrival_ages_s is not None:
+        for kind in snap.required:
+            stream, age = snap.counters["streams"].get(kind), snap.arrival_ages_s.get(kind)
+            if stream and stream["newest_stamp_ns"] is not None and age is not None:
+                offsets[kind] = (snap.now_ns - stream["newest_stamp_ns"]) * 1e-9 - age
+    return Timing(snap.period_s, snap.cpu_times_s, snap.waits_s, offsets_s=offsets,
+                  previous_offsets_s=previous_offsets, clock_tolerance_s=snap.buffer_duration)
+
+
 def overload(snap: Snapshot) -> str | None:
-    """"cannot keep up: ..." when the node falls behind its inputs: the median wait of an intake
-    pass's oldest message is over ``max(50 ms, 5 estimator periods)`` (a backlog, not one
-    stall), naming how far behind (p99 of the waits), the CPU per sample (p50) against the
-    period and the parameters that lighten the load; None otherwise."""
-    if not snap.waits_s or snap.period_s <= 0:
+    """"cannot keep up: ..." when the node falls behind its inputs (:func:`.load_policy.behind`),
+    naming how far behind (p99 of the waits), the CPU per sample (p50) against the period and
+    the parameters that lighten the load; None otherwise."""
+    t = timing(snap, {})
+    if not behind(t):
         return None
-    waits = sorted(snap.waits_s)
-    if percentile(waits, 0.5) <= max(0.05, 5 * snap.period_s):
-        return None
-    cpu = f"{1e3 * percentile(sorted(snap.cpu_times_s), 0.5):.1f} ms per sample" if snap.cpu_times_s else "no sample"
-    return (f"cannot keep up: {1e3 * percentile(waits, 0.99):.0f} ms behind, {cpu} against a period of "
-            f"{1e3 * snap.period_s:.1f} ms; lower rate or estimator.lag_span, or raise frequency.every")
+    return f"{keep_up_text(t)}; lower rate or estimator.lag_span, or raise frequency.every"
 
 
 def stale_after(max_gap: float) -> float:
@@ -277,6 +297,10 @@ class DiagnosticsPolicy:
         self.max_keys = int(max_keys)
         self.previous: Snapshot | None = None
         self.overload: str | None = None  # the samples status's "cannot keep up" text, when it says that
+        self.cause: str | None = None  # why inputs are late or missing (:func:`.load_policy.cause`)
+        self.load: LoadPolicy | None = None  # the degradation ladder of the node's configuration
+        self._offsets: dict[str, float] = {}  # the previous period's stamp offsets
+        self._load_key: tuple[float, int, int] | None = None  # the configuration self.load is for
         # The misconfiguration alerts (:mod:`.alerts`): first in the inputs status, and the
         # lines to log (alerts.due()), each at most once per repeat_s seconds.
         self.alerts = AlertPolicy(repeat_s)
@@ -291,11 +315,34 @@ class DiagnosticsPolicy:
         if namesake is not None:  # logged with the alerts (AlertPolicy.due), shown in the samples status
             self.alerts.current = [*alerts, namesake]
         self.alerts.models(snap.models)  # identifiability, logged with the alerts
-        self.overload = overload(snap)
+        self._judge_load(snap, before)
+        if self.cause == NODE:
+            alerts = [Alert(a.key, blame(a.text, NODE)) for a in alerts]
+            self.alerts.current = [Alert(a.key, blame(a.text, NODE)) for a in self.alerts.current]
         statuses = [self._inputs(snap, now, before, alerts), self._samples(snap, namesake)]
         statuses += [self._model(name, fit, snap) for name, fit in snap.models]
         self.previous = snap
         return statuses
+
+    def _judge_load(self, snap: Snapshot, before: Totals) -> None:
+        """The cause of late or missing inputs, the "cannot keep up" text, and one step of the
+        degradation ladder (:mod:`.load_policy`; only with the node's waits measured)."""
+        t = timing(snap, self._offsets)
+        gaps = sum(increase(Totals.of(snap.counters).missing[k], before.missing.get(k, 0)) for k in snap.required
+                   if k in snap.counters["streams"])
+        t = Timing(t.period_s, t.cpu_per_sample_s, t.waits_s, gaps, t.offsets_s, t.previous_offsets_s,
+                   t.clock_tolerance_s)
+        self._offsets = dict(t.offsets_s)
+        self.cause = cause(t)
+        self.overload = overload(snap) if self.cause == NODE else None
+        key = (snap.period_s, snap.frequency_every, snap.covariance_decimation)
+        if self.load is None or self._load_key != key:  # a new configuration starts unshed
+            rate = 1.0 / snap.period_s if snap.period_s > 0 else 1.0
+            self.load, self._load_key = LoadPolicy(rate, snap.frequency_every, snap.covariance_decimation), key
+        if snap.shed and (snap.waits_s or self.load.degraded):
+            self.load.update(self.cause == NODE, snap.elapsed_s)
+        else:
+            self.load.said = []
 
     def _status(self, name: str, level: int, message: str, values: list[tuple[str, object]]) -> Status:
         def text(v: object) -> str:
@@ -341,14 +388,18 @@ class DiagnosticsPolicy:
             ]
             kv += _table(f"{kind}.rejected", s["rejected"], self.max_keys, "reasons")
             if needed and (age is None or age > limit):
-                problems.append(f"{kind} {'silent' if age is None else f'stale ({age:.1f} s)'}")
+                if age is not None and self.cause == NODE:  # its messages wait while the node feeds a backlog
+                    problems.append(f"{kind} not taken for {age:.1f} s (the node is behind its inputs)")
+                else:
+                    problems.append(f"{kind} {'silent' if age is None else f'stale ({age:.1f} s)'}")
                 if publishers == 0:
                     problems.append(f"no publisher matched on {snap.topics[kind]} "
                                     f"(none running, or incompatible QoS: qos.reliable={snap.reliable})")
             if rejected:
                 problems.append(f"{kind} rejected {rejected} {window}")
             if missing:
-                problems.append(f"{kind} missing about {missing} {window} (stamp gaps: lost in transport?)")
+                problems.append(blame(f"{kind} missing about {missing} {window} (stamp gaps: lost in transport?)",
+                                      self.cause))
             if expired:
                 problems.append(f"{kind} expired {expired} {window} (buffered, never used: another stream "
                                 "lagging, or a reset)")
@@ -385,12 +436,19 @@ class DiagnosticsPolicy:
             kv.append(("periodic_ms.max", _ms(max(snap.periodic_s))))
         kv += [("state_file", snap.state_file), ("nodes_with_this_name", 1 + max(snap.namesakes, 0))]
         message = f"{c['samples_used']} of {c['samples_formed']} samples used"
+        load = self.load
+        if load is not None and snap.waits_s:
+            kv += load.values()
+        if load is not None and load.degraded:
+            message += f"; {load.text()}"
         if not snap.enabled:
             message += "; estimation disabled"
         if namesake is not None:
             return self._status("samples", ERROR, f"{namesake.text}; {message}", kv)
         if self.overload is not None:
             return self._status("samples", WARN, f"{self.overload}; {message}", kv)
+        if load is not None and load.degraded:
+            return self._status("samples", WARN, message, kv)
         return self._status("samples", OK, message, kv)
 
     def _model(self, name: str, fit: Mapping, snap: Snapshot) -> Status:

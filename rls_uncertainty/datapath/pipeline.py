@@ -187,7 +187,8 @@ class Pipeline(PipelineInputs):
                                                config.identifiability, config.estimator.forgetting)
         self.named_after = math.ceil(config.convergence.window * config.rate)  # samples before a cause is named
         self.last_stamp_ns: int | None = None  # the newest sample the estimator used
-        self._cov_every = config.outputs.covariance_decimation
+        # outputs.covariance_decimation; the node raises it while it cannot keep up (.load_policy)
+        self.covariance_every = config.outputs.covariance_decimation
         self._period_ns = config.period_ns
         self._new_estimator()
         self._diff = FixedLagDifferentiator(config.differentiator, 1.0 / config.rate, width=3)
@@ -372,7 +373,7 @@ class Pipeline(PipelineInputs):
         """The corrected and conventional covariances of the ready models
         (:func:`symmetric_covariances`) on the grid points that publish them (every
         ``outputs.covariance_decimation``-th), else None."""
-        every = self._cov_every
+        every = self.covariance_every
         if not every or (t // self._period_ns) % every:
             return None
         return symmetric_covariances(self.bank.covariance_all(), self._real, self._real_square, ready)

@@ -5,10 +5,17 @@ a second with a 1 kHz IMU), which cost the node more CPU than the estimation. Th
 creates its five input subscriptions outside the executor's view and, once per intake period,
 takes every message they hold, serialized, with the middleware's reception time
 (:meth:`Intake.take`); it feeds them in order of arrival (:func:`..datapath.inputs.arrival_order`).
+
+A pass feeds for at most a time budget (:class:`Backlog`): what it has not fed waits, in order,
+for the next pass, and nothing new is taken until it is all fed. Between passes the executor
+runs the periodic work (diagnostics), so a node with more input than it can process still
+reports, and its memory stays bounded: messages that arrive meanwhile wait in the
+subscriptions' queues (``qos.depth`` each), which drop the oldest when full.
 """
 
 from __future__ import annotations
 
+from collections import deque
 from collections.abc import Mapping
 from typing import Any
 
@@ -19,7 +26,9 @@ from rclpy.qos import QoSProfile
 from rclpy.subscription import Subscription
 from rclpy.type_support import check_is_valid_msg_type
 
-__all__ = ["Intake", "Taken"]
+from ..datapath.inputs import arrival_order
+
+__all__ = ["Intake", "Taken", "Backlog"]
 
 # Per stream, ``(reception time ns, (reception time ns, serialized message))`` in queue order:
 # the shape :func:`..datapath.inputs.arrival_order` merges (the time also rides with the message).
@@ -61,3 +70,25 @@ class Intake:
     def destroy(self) -> None:
         for sub in self.subs.values():
             sub.destroy()
+
+
+class Backlog:
+    """The messages of the last :meth:`Intake.take` not fed yet, ``(kind, (arrival ns, raw))``
+    in order of arrival."""
+
+    def __init__(self) -> None:
+        self._queue: deque[tuple[str, tuple[int, bytes]]] = deque()
+
+    def __len__(self) -> int:
+        return len(self._queue)
+
+    def refill(self, taken: Taken) -> None:
+        self._queue.extend(arrival_order(taken))
+
+    def oldest(self, default: int) -> int:
+        """The arrival time (ns) of the next message to feed (``default`` when unknown)."""
+        t = self._queue[0][1][0] if self._queue else 0
+        return t if t > 0 else default
+
+    def pop(self) -> tuple[str, tuple[int, bytes]]:
+        return self._queue.popleft()

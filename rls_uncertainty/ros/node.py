@@ -24,6 +24,7 @@ backwards time jumps are handled here.
 from __future__ import annotations
 
 import gc
+import math
 import sys
 import time
 from typing import Any
@@ -47,14 +48,15 @@ from ..datapath.cdr import decode
 from ..datapath.diagnostics import DiagnosticsPolicy, Status, malformed_reason, malformed_warning
 from ..datapath.diagnostics_round import DiagnosticsRound
 from ..datapath.feasibility import configuration_warnings
-from ..datapath.inputs import MESSAGE_TYPES, STREAMS, arrival_order, feed, message_class
+from ..datapath.inputs import MESSAGE_TYPES, STREAMS, feed, message_class
+from ..datapath.load_policy import LoadPolicy
 from ..datapath.outputs import HEADER, NODE_NAME, OutputLayout
 from ..datapath.pipeline import Pipeline, SampleOutput
 from ..errors import ConfigError
 from ..settings.parameters import PARAMETERS, Parameter, node_config, pipeline_config
 from ..settings.sources import startup_parameters
 from .input_watch import SilentInputs
-from .intake import Intake
+from .intake import Backlog, Intake
 from .node_state import NodeStateFile
 
 __all__ = ["EstimatorNode", "main", "NODE_NAME"]
@@ -64,6 +66,10 @@ _TYPES = {kind: message_class(MESSAGE_TYPES[kind]) for kind in STREAMS}
 # CPU than the estimation itself. A QoS mismatch on an input shows in /diagnostics instead
 # (``<stream>.publishers`` is 0 and the stream is reported silent).
 _NO_EVENTS = PublisherEventCallbacks(use_default_callbacks=False)
+
+
+# The longest an intake pass feeds before the executor's other work (diagnostics) gets a turn.
+_PASS_BUDGET_S = 0.01
 
 
 def _intake_period(rate: float) -> float:
@@ -143,6 +149,7 @@ class EstimatorNode(Node):
         in_qos = _input_qos(self.node_cfg.reliable, self.node_cfg.depth)
         self._intake = Intake(self, _TYPES, self.node_cfg.topics, in_qos)  # off the executor: taken in batches
         self._subs = self._intake.subs
+        self._backlog = Backlog()  # taken, not yet fed
         self.create_service(Trigger, "~/reset", self._on_reset)
         self.create_service(SetBool, "~/enable", self._on_enable)
         self.add_on_set_parameters_callback(self._validate_parameters)
@@ -245,21 +252,33 @@ class EstimatorNode(Node):
         """Every message the input subscriptions hold, taken at once each intake period
         (:func:`_intake_period`) and fed to :func:`.inputs.feed` in order of arrival
         (:func:`.inputs.arrival_order`, the reception times of the middleware, :mod:`.intake`): the offline
-        replay feeds the same messages in the same order. Latency is counted from the arrival
-        of the message that completed a sample to its last publish."""
-        taken = self._intake.take()
-        if not any(taken.values()):
+        replay feeds the same messages in the same order. A pass feeds for at most
+        :data:`_PASS_BUDGET_S`; the rest of the batch is fed by the next passes before anything
+        new is taken (:class:`.intake.Backlog`). Latency is counted from the arrival of the
+        message that completed a sample to its last publish."""
+        backlog = self._backlog
+        if not backlog:
+            taken = self._intake.take()
+            if not any(taken.values()):
+                return
+            now = time.monotonic()
+            for kind, queued in taken.items():
+                if queued:
+                    self._arrived[kind] = now  # the stream's age in /diagnostics runs from here
+            backlog.refill(taken)
+        self._feed(time.perf_counter() + _PASS_BUDGET_S)
+
+    def _feed(self, deadline: float) -> None:
+        """Feed the backlog in order until it is empty or ``deadline`` (``time.perf_counter``)
+        has passed, at least one message."""
+        backlog, pipeline, start = self._backlog, self.pipeline, time.time_ns()
+        if not backlog:
             return
-        now = time.monotonic()
-        for kind, queued in taken.items():
-            if queued:
-                self._arrived[kind] = now  # the stream's age in /diagnostics runs from here
-        pipeline, start = self.pipeline, time.time_ns()
-        oldest = min((q[0][0] for q in taken.values() if q and q[0][0] > 0), default=start)
-        self._waits.append(max(start - oldest, 0) * 1e-9)
+        self._waits.append(max(start - backlog.oldest(start), 0) * 1e-9)
         if pipeline.needs_clock:  # inputs.max_clock_offset: stamps are checked against it
             pipeline.clock_ns = self.get_clock().now().nanoseconds
-        for kind, (arrived, raw) in arrival_order(taken):
+        while backlog and time.perf_counter() < deadline:
+            kind, (arrived, raw) = backlog.pop()
             c0 = time.thread_time()
             try:
                 outputs = feed(pipeline, kind, decode(MESSAGE_TYPES[kind], raw))
@@ -290,6 +309,7 @@ class EstimatorNode(Node):
 
     # ------------------------------------------------------------------ services, time
     def _on_reset(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
+        self._feed(math.inf)  # what was taken before the call is fed before it, as it arrived
         self.pipeline.reset("service")  # the estimator and every input state: older stamps are accepted again
         response.success = True
         response.message = "estimator and inputs reset: estimates restart from the next messages, whatever their stamps"
@@ -298,6 +318,7 @@ class EstimatorNode(Node):
 
     def _on_enable(self, request: SetBool.Request, response: SetBool.Response) -> SetBool.Response:
         enabled = bool(request.data)
+        self._feed(math.inf)  # what was taken before the call is fed before it, as it arrived
         self.pipeline.enabled = enabled
         if not enabled:
             self.save_state()
@@ -361,6 +382,10 @@ class EstimatorNode(Node):
             "latencies_s": self._latencies, "cpu_times_s": self._cpu_times, "namesakes": self._namesakes(),
             "periodic_s": self._periodic, "waits_s": self._waits, "period_s": 1.0 / self.config.rate,
             "arrival_ages_s": {kind: wall - t for kind, t in self._arrived.items()},
+            "frequency_every": self.config.frequency.every if self.config.frequency is not None else 0,
+            "covariance_decimation": self.config.outputs.covariance_decimation,
+            "buffer_duration": self.config.inputs.buffer_duration,
+            "shed": self.node_cfg.shed_load,
         }
         self._last_diag = wall
         self._latencies, self._cpu_times, self._periodic, self._waits = [], [], [], []
@@ -400,8 +425,24 @@ class EstimatorNode(Node):
         elif overload is None and self._overload_said is not None:
             self.get_logger().info("keeping up with the inputs again")
         self._overload_said = overload
+        load = self._diagnostics.load
+        if load is not None:  # the degradation policy's step of this period, said once
+            _shed(self.pipeline, load)
+            for line in load.said:  # a step down is a warning, a step back news
+                if line.startswith("degraded"):
+                    self.get_logger().warning(line)
+                else:
+                    self.get_logger().info(line)
         for line in self._diagnostics.alerts.due():  # a misconfigured data path, throttled
             self.get_logger().warning(line)
+
+
+def _shed(pipeline: Pipeline, load: LoadPolicy) -> None:
+    """Apply the degradation policy's settings (:mod:`.load_policy`) to ``pipeline``."""
+    if pipeline.frequency is not None and load.base[0]:
+        pipeline.frequency.every = load.frequency_every
+    if load.base[1]:
+        pipeline.covariance_every = load.covariance_decimation
 
 
 def _overrides(values: dict[str, Any]) -> list[RosParameter]:

@@ -80,6 +80,9 @@ class NodeConfig:
     diagnostics_period: float = option(1.0, "seconds between /diagnostics messages", unit="s", low=0.05, high=60.0,
                                        ros="diagnostics_period")
     frame_id: str = option("base_link", "frame_id of the ~/sample_stamp header", ros="frame_id")
+    shed_load: bool = option(True, "while the node cannot keep up with its inputs, space out frequency-domain "
+                             "evaluations, then published covariances (each step logged; restored once it keeps up)",
+                             ros="shed_load")
     diagnostics_window: float = option(10.0, "seconds over which /diagnostics levels count rejected, missing and "
                                        "expired messages (cumulative counts are reported beside)", unit="s",
                                        low=0.1, high=3600.0, ros="diagnostics_window")
