@@ -44,3 +44,31 @@ def test_the_command_needs_an_intensity_and_takes_a_word_or_a_number(tmp_path, c
     assert manifest["gust_sigma_w_m_s"] == 1.2 and manifest["band_limited_on"] == list(RESPONSES)
     with pytest.raises(ConfigError, match="--campaign"):
         write_campaign_bags(tmp_path / "d", 0, DrydenVertical(1.0, 300.0))
+
+
+def test_pitch_gust_off_writes_the_maneuvers_without_it_and_says_so(tmp_path, capsys):
+    """``--pitch-gust off``: the bags hold the maneuvers simulated without the pitch gust (the
+    vertical gust on alpha alone), ``on`` (the default) with it; campaign.yaml records which."""
+    gust = DrydenVertical(LOW_ALTITUDE_SIGMA_W["severe"], 389.0)
+
+    def gyro(path):
+        messages, _ = read_inputs(path)
+        return np.array([m.angular_velocity.y for kind, _, m in messages if kind == "imu"])
+
+    seed = campaign_seeds(2010, 1)[0]
+    for word, pitch in (("off", False), ("on", True)):
+        out = tmp_path / word
+        assert cli.main(["make-bag", "--campaign", "1", "--gust-intensity", "severe", "--seed", "2010",
+                         "--pitch-gust", word, "--out", str(out)]) == 0
+        assert ("no pitch gust" in capsys.readouterr().out) is not pitch
+        manifest = yaml.safe_load((out / "campaign.yaml").read_text())
+        assert manifest["pitch_gust"] is pitch
+        want = simulate_sensor_streams(0.2, seed, gust=DrydenVertical(gust.sigma, manifest["gust_scale_length_m"]),
+                                       band_limited_on=RESPONSES, pitch_gust=pitch)
+        np.testing.assert_array_equal(gyro(out / "m001"), want.imu[1][:, 1])
+    assert not np.array_equal(gyro(tmp_path / "off" / "m001"), gyro(tmp_path / "on" / "m001"))
+    assert cli.main(["make-bag", "--campaign", "1", "--gust-intensity", "severe", "--pitch-gust", "maybe",
+                     "--out", str(tmp_path / "bad")]) == 2
+    assert "--pitch-gust must be one of ['on', 'off']" in capsys.readouterr().err
+    assert cli.main(["make-bag", "--pitch-gust", "off", "--out", str(tmp_path / "one")]) == 2
+    assert "--pitch-gust sets the turbulence of a simulated campaign" in capsys.readouterr().err

@@ -417,7 +417,7 @@ def write_t2_bag(path: str | Path, band_level: float = 0.2, seed: int = 250, *, 
 
 def write_campaign_bags(path: str | Path, maneuvers: int, gust: DrydenVertical, *, band_level: float = 0.2,
                         band_limited_on: Sequence[str] | None = None, seed: int = 250,
-                        force: bool = False, input_amplitude: float = 1.0,
+                        force: bool = False, input_amplitude: float = 1.0, pitch_gust: bool = True,
                         progress: bool | None = False) -> list[Path]:
     """A simulated flight-test campaign (Section IV.B, simulated): ``maneuvers`` T-2 maneuvers
     flown in the Dryden vertical ``gust`` (:func:`.simulation.simulate_campaign`, each with
@@ -425,7 +425,8 @@ def write_campaign_bags(path: str | Path, maneuvers: int, gust: DrydenVertical, 
     directory ``path``, with ``campaign.yaml`` recording the settings. Atomic as
     :func:`write_replay`; one maneuver is in memory at a time. ``band_limited_on``: the
     signals carrying the band-limited noise (None: the simulation's default); ``input_amplitude``:
-    the elevator multisine's fraction of Table 2's amplitude; ``progress``: a bar of the
+    the elevator multisine's fraction of Table 2's amplitude; ``pitch_gust``: the gust's pitch
+    gust acts on the aircraft too (:mod:`..simulation.t2`); ``progress``: a bar of the
     maneuvers written on stderr (:mod:`..progress`)."""
     import yaml  # noqa: PLC0415 - the manifest only
 
@@ -439,13 +440,15 @@ def write_campaign_bags(path: str | Path, maneuvers: int, gust: DrydenVertical, 
     path = Path(path)
     with output_directory(path, force=force) as tmp:
         manifest = {"maneuvers": maneuvers, "seed": seed, "gust_sigma_w_m_s": gust.sigma,
-                    "gust_scale_length_m": gust.scale_length, "band_limited_noise": band_level,
+                    "gust_scale_length_m": gust.scale_length, "pitch_gust": bool(pitch_gust),
+                    "band_limited_noise": band_level,
                     "band_limited_on": list(on), "input_amplitude": float(input_amplitude), "bags": names,
                     "simulation": "rls_uncertainty.simulation.t2.simulate_campaign (Section IV.A T-2 maneuver, "
-                                  "Dryden vertical gust, seeds SeedSequence(seed).spawn(maneuvers))"}
+                                  "Dryden vertical gust on alpha, with pitch_gust its MIL-F-8785C pitch gust on q, "
+                                  "seeds SeedSequence(seed).spawn(maneuvers))"}
         (tmp / "campaign.yaml").write_text(yaml.safe_dump(manifest, sort_keys=False))
         streams = simulate_campaign(maneuvers, gust, seed=seed, band_level=band_level, band_limited_on=on,
-                                    input_amplitude=input_amplitude)
+                                    input_amplitude=input_amplitude, pitch_gust=bool(pitch_gust))
         for name, maneuver in track(zip(names, streams, strict=True), maneuvers, "make-bag", " maneuvers", progress):
             write_sensor_streams(tmp / name, maneuver)
     return [path / name for name in names]
