@@ -234,10 +234,15 @@ def _fine_response(
     return _FineResponse(t_fine, u, y, gust, y_gust, q_g)
 
 
+def _sample_indices(n_fine: int, cfg: SimulationConfig) -> npt.NDArray[np.intp]:
+    """The integration-grid indices of the samples at ``cfg.rate`` from ``cfg.sample_offset`` on."""
+    step = int(round(cfg.fine_rate / cfg.rate))
+    return np.arange(int(round(cfg.sample_offset * cfg.fine_rate)), n_fine, step)
+
+
 def _sampled(response: _FineResponse, cfg: SimulationConfig, ac: AircraftConfig) -> ShortPeriodRecord:
     """The record at ``cfg.rate`` from ``cfg.sample_offset`` on."""
-    step = int(round(cfg.fine_rate / cfg.rate))
-    idx = np.arange(int(round(cfg.sample_offset * cfg.fine_rate)), response.t.size, step)
+    idx = _sample_indices(response.t.size, cfg)
     u, y = response.u, response.y
     ct = np.cos(cfg.alpha_trim)
     # Trim: level flight, so the body-z specific force balances gravity (a_z = -g cos(theta),
@@ -366,6 +371,9 @@ class SensorStreams:
     control_surfaces: tuple[Stamps, FloatArray]  # (stamps, (N, 5))
     thrust: tuple[Stamps, FloatArray]  # (stamps, (N,))
     surface_names: tuple[str, ...] = ("elevator_left", "elevator_right", "aileron_left", "aileron_right", "rudder")
+    # The designed excitation injected on each surface (rad, from trim, before any feedback),
+    # at the surfaces' stamps, columns as the surfaces'; None: not known.
+    excitation: tuple[Stamps, FloatArray] | None = None
 
 
 def gust_velocity(
@@ -433,7 +441,8 @@ def simulate_sensor_streams(
     gets the paper's noise (wide-band at the Section IV.A SNRs plus band-limited noise at
     ``band_level`` on ``band_limited_on``, :func:`add_noise`) generated at that rate: the IMU
     carries q and a_z, the air data alpha (as the airspeed vector), the surfaces the elevator
-    (both halves equal, Eq. 23). With ``gust`` every stream sees the same gust (one draw on
+    (both halves equal, Eq. 23); ``excitation`` holds the multisine injected on both halves,
+    noise-free, at the surfaces' stamps. With ``gust`` every stream sees the same gust (one draw on
     the integration grid), the air data the aerodynamic alpha; ``pitch_gust``: its pitch gust
     acts too (module docstring). Generators as in
     :func:`simulate_maneuver`. Trim is level flight: specific force (g sin alpha, 0, -g cos
@@ -448,12 +457,7 @@ def simulate_sensor_streams(
         raise ConfigError(f"input_amplitude must be a number in [0, {MAX_INPUT_AMPLITUDE:g}], got {input_amplitude!r}")
     rng, w = _draws(seed, gust, cfg)
     ac = load_aircraft("t2")
-    elevator = T2_TABLE2["elevator"]
-    nominal = None
-    if input_amplitude != 1.0:
-        nominal = _fine_response(cfg, ac, elevator, None)  # the noise scale: Table 2's maneuver, calm air
-        elevator = replace(elevator, amplitude=elevator.amplitude * float(input_amplitude))
-    response = _fine_response(cfg, ac, elevator, w, pitch_gust)
+    response, nominal = _responses(cfg, ac, w, input_amplitude, pitch_gust)
 
     def stream(rate: float, offset: float) -> tuple[Stamps, ShortPeriodRecord]:
         at = replace(cfg, rate=rate, sample_offset=offset)
@@ -477,6 +481,7 @@ def simulate_sensor_streams(
     t_srf, srf = stream(surface_rate, surface_offset)
     zeros = np.zeros(t_srf.size)
     surfaces = np.column_stack([srf.delta_e, srf.delta_e, zeros, zeros, zeros])
+    u = response.u[_sample_indices(response.t.size, replace(cfg, rate=surface_rate, sample_offset=surface_offset))]
     t_thr = start_ns + np.round(np.arange(0.0, cfg.duration, 1.0 / thrust_rate) * 1e9).astype(np.int64)
     # Thrust balancing a drag coefficient of 0.03 at trim (CX only; the T-2 model has no CX).
     thrust = np.full(t_thr.size, ac.mass * ax + 0.03 * cfg.qbar * ac.S)
@@ -487,7 +492,21 @@ def simulate_sensor_streams(
         dynamic_pressure=(t_air, qbar),
         control_surfaces=(t_srf, surfaces),
         thrust=(t_thr, thrust),
+        excitation=(t_srf, np.column_stack([u, u, zeros, zeros, zeros])),
     )
+
+
+def _responses(
+    cfg: SimulationConfig, ac: AircraftConfig, w: FloatArray | None, input_amplitude: float, pitch_gust: bool
+) -> tuple[_FineResponse, _FineResponse | None]:
+    """The maneuver's response with the elevator multisine at ``input_amplitude`` x Table 2's
+    amplitude, and (when that is not 1) the nominal calm-air one that sets the noise scale."""
+    elevator = T2_TABLE2["elevator"]
+    nominal = None
+    if input_amplitude != 1.0:
+        nominal = _fine_response(cfg, ac, elevator, None)  # the noise scale: Table 2's maneuver, calm air
+        elevator = replace(elevator, amplitude=elevator.amplitude * float(input_amplitude))
+    return _fine_response(cfg, ac, elevator, w, pitch_gust), nominal
 
 
 def campaign_seeds(seed: int, maneuvers: int) -> list[np.random.SeedSequence]:
