@@ -226,20 +226,22 @@ def _gusty_config(rate):
 
 
 def test_turbulent_response_satisfies_the_equations_with_the_aerodynamic_alpha():
-    """Noise-free, 1 kHz, a 1 m/s Dryden gust: with alpha_a the recorded (vane) alpha and
-    alpha = alpha_a - w_g/V the inertial one, the record integrates Eq. 25a with alpha_a in the
-    aerodynamics (trapezoid over the 1 kHz grid, within 1e-4 of each signal's RMS; with the
-    inertial alpha in the aerodynamics instead, q is off by 70 times its RMS) and a_z is Eq. 25b
-    with alpha_a, to rounding."""
+    """Noise-free, 1 kHz, a 1 m/s Dryden gust and its pitch gust: with alpha_a the recorded
+    (vane) alpha and alpha = alpha_a - w_g/V the inertial one, the record integrates Eq. 25a
+    with alpha_a and the aerodynamic pitch rate q - q_g in the aerodynamics (trapezoid over the
+    1 kHz grid, within 1e-4 of each signal's RMS; with the inertial alpha instead, q is off by
+    70 times its RMS; with the gyro's q instead of q - q_g, by more than the tolerance a
+    hundredfold) and a_z is Eq. 25b with alpha_a, to rounding."""
     from scipy.integrate import cumulative_trapezoid
 
     from rls_uncertainty.simulation.t2 import G0, gust_velocity
-    from rls_uncertainty.simulation.turbulence import DrydenVertical
+    from rls_uncertainty.simulation.turbulence import DrydenVertical, pitch_gust
 
     cfg = _gusty_config(1000.0)
     w = gust_velocity(DrydenVertical(1.0, 290.0), np.random.default_rng(1), cfg)
     r = simulate_short_period(cfg, gust=w)
     np.testing.assert_array_equal(r.gust, w)
+    np.testing.assert_array_equal(r.pitch_gust, pitch_gust(w, 1e-3, r.aircraft.b, cfg.airspeed))
     ac, tv, V = r.aircraft, cfg.true, cfg.airspeed
     qS = cfg.qbar * ac.S
     alpha_a = r.alpha - cfg.alpha_trim
@@ -252,12 +254,14 @@ def test_turbulent_response_satisfies_the_equations_with_the_aerodynamic_alpha()
     alpha_dot = qS / (ac.mass * V) * (tv["CZ_alpha"] * alpha_a + tv["CZ_delta_e"] * r.delta_e) + r.q
     assert np.max(np.abs(alpha_i - alpha_i[0] - integrated(alpha_dot))) < 1e-4 * np.std(alpha_i)
 
-    def q_dot(alpha):
-        return qS * ac.cbar / ac.Iyy * (tv["Cm_alpha"] * alpha + ac.cbar / (2 * V) * tv["Cm_q"] * r.q
+    def q_dot(alpha, q_a):
+        return qS * ac.cbar / ac.Iyy * (tv["Cm_alpha"] * alpha + ac.cbar / (2 * V) * tv["Cm_q"] * q_a
                                         + tv["Cm_delta_e"] * r.delta_e)
 
-    assert np.max(np.abs(r.q - r.q[0] - integrated(q_dot(alpha_a)))) < 1e-4 * np.std(r.q)
-    assert np.max(np.abs(r.q - r.q[0] - integrated(q_dot(alpha_i)))) > 10 * np.std(r.q)
+    q_a = r.q - r.pitch_gust
+    assert np.max(np.abs(r.q - r.q[0] - integrated(q_dot(alpha_a, q_a)))) < 1e-4 * np.std(r.q)
+    assert np.max(np.abs(r.q - r.q[0] - integrated(q_dot(alpha_i, q_a)))) > 10 * np.std(r.q)
+    assert np.max(np.abs(r.q - r.q[0] - integrated(q_dot(alpha_a, r.q)))) > 1e-2 * np.std(r.q)
     az = qS / ac.mass * (tv["CZ_alpha"] * alpha_a + tv["CZ_delta_e"] * r.delta_e)
     np.testing.assert_allclose(r.az + G0 * np.cos(cfg.alpha_trim), az, rtol=0, atol=1e-12)
 
@@ -387,3 +391,38 @@ def test_gust_on_the_wrong_grid_is_refused():
     bad[5] = np.nan
     with pytest.raises(ConfigError, match="finite"):
         simulate_short_period(gust=bad)
+
+
+def test_without_the_pitch_gust_the_gust_acts_on_alpha_alone_as_before():
+    """``pitch_gust=False`` is the vertical gust on alpha alone, computed as before bit for bit:
+    the calm-air response plus the response of Eq. 25 to the gust angle w_g / V alone, each one
+    ``lsim`` on the integration grid, sampled. The sensor streams of a campaign maneuver
+    without it differ from those with it only where the pitch gust acts (the gyro, the
+    accelerometers and the vane), never in the elevator."""
+    from scipy import signal
+
+    from rls_uncertainty.simulation import t2
+    from rls_uncertainty.simulation.turbulence import DrydenVertical
+
+    cfg = _gusty_config(50.0)
+    w = t2.gust_velocity(DrydenVertical(2.3, 389.0), np.random.default_rng(4), cfg)
+    got = simulate_short_period(cfg, gust=w, pitch_gust=False)
+    assert got.pitch_gust is None
+    ac = got.aircraft
+    A, _, C, _ = t2._state_space(cfg, ac)
+    Bg, Dg = t2._gust_input(cfg, ac)
+    t_fine = np.arange(12_000) / cfg.fine_rate
+    _, y_gust, _ = signal.lsim((A, Bg, C, Dg), w / cfg.airspeed, t_fine)
+    calm = simulate_short_period(cfg)
+    idx = np.arange(0, 12_000, 20)
+    for i, name in enumerate(t2.RESPONSES):
+        np.testing.assert_array_equal(getattr(got, name), calm.noise_free[name] + y_gust[idx, i])
+    np.testing.assert_array_equal(got.delta_e, calm.delta_e)
+    assert got.noise_scale == calm.noise_scale
+
+    gust, seed = DrydenVertical(2.3, 389.0), t2.campaign_seeds(2010, 1)[0]
+    off = t2.simulate_sensor_streams(0.2, seed, gust=gust, pitch_gust=False)
+    on = t2.simulate_sensor_streams(0.2, seed, gust=gust)
+    np.testing.assert_array_equal(on.control_surfaces[1], off.control_surfaces[1])
+    for kind, column in (("imu", 1), ("imu", 5), ("airspeed", 2)):
+        assert np.std(getattr(on, kind)[1][:, column] - getattr(off, kind)[1][:, column]) > 0

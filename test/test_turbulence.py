@@ -116,3 +116,79 @@ def test_sequences_repeat_per_generator_and_scale_with_sigma():
     np.testing.assert_allclose(c, 2 * a, rtol=1e-12, atol=1e-15)
     assert not np.array_equal(a, GUST.sample(500, V, 0.02, np.random.default_rng(4)))
     np.testing.assert_array_equal(DrydenVertical(0.0, 100.0).sample(50, V, 0.02, np.random.default_rng(3)), 0.0)
+
+
+# ------------------------------------------------------------------------------ pitch gust (G1, G3)
+SPAN = 2.0875752  # m, the T-2's b
+
+
+def _pitch_gust_spectrum(gust, f):
+    """One-sided PSD of q_g, (rad/s)^2/Hz: |H_q(j omega)|^2 times the Dryden PSD, written here
+    from G1 (not from the module)."""
+    from rls_uncertainty.simulation.turbulence import pitch_gust_lag
+
+    w = 2 * np.pi * np.asarray(f)
+    tau = pitch_gust_lag(SPAN, V)
+    assert tau == pytest.approx(4 * SPAN / (np.pi * V))
+    return (w / V) ** 2 / (1 + (tau * w) ** 2) * gust.psd(f, V)
+
+
+def test_pitch_gust_variance_is_the_integral_of_its_spectrum_and_the_thin_wing_limit():
+    """G3's closed form against the spectrum integrated numerically, for the T-2 and for a
+    wing a third of pi L_w / 4; for b << L_w it tends to 3 pi sigma_w^2 / (8 L_w b)."""
+    from rls_uncertainty.simulation.turbulence import pitch_gust_variance
+
+    for gust in (GUST, DrydenVertical(2.0, 4 * SPAN / (np.pi * 0.3))):
+        numeric = integrate.quad(lambda f, g=gust: float(_pitch_gust_spectrum(g, f)), 0, np.inf, limit=400)[0]
+        assert pitch_gust_variance(gust, SPAN, V) == pytest.approx(numeric, rel=1e-8)
+    far = DrydenVertical(1.3, 1e6)
+    limit = 3 * np.pi * far.sigma**2 / (8 * far.scale_length * SPAN)
+    assert pitch_gust_variance(far, SPAN, V) == pytest.approx(limit, rel=1e-4)
+    with pytest.raises(ConfigError, match="span shorter"):
+        pitch_gust_variance(DrydenVertical(1.0, 2.0), SPAN, V)
+
+
+def test_sampled_pitch_gust_has_the_g3_variance():
+    """The mean square of q_g sampled at 1 kHz (the integration grid) over 20 independent
+    60 s gusts, against G3, within four standard deviations of the estimate: for a Gaussian
+    process observed for T s the mean square's variance is 2 int R_q(tau)^2 d tau / T =
+    int_0^inf S_q(f)^2 df / T (Parseval, S_q one-sided). The step's own error, about 2e-5 of
+    the gain (the sine test), is far below it."""
+    from rls_uncertainty.simulation.turbulence import pitch_gust, pitch_gust_variance
+
+    dt, runs, n = 1e-3, 20, 60_000
+    rng = np.random.default_rng(3)
+    squares = [np.mean(pitch_gust(GUST.sample(n, V, dt, rng), dt, SPAN, V) ** 2) for _ in range(runs)]
+    exact = pitch_gust_variance(GUST, SPAN, V)
+    s2 = integrate.quad(lambda f: float(_pitch_gust_spectrum(GUST, f)) ** 2, 0, np.inf, limit=400)[0]
+    sd = math.sqrt(s2 / (runs * n * dt))
+    assert 0.005 < sd / exact < 0.05  # the tolerance is a real one
+    assert abs(np.mean(squares) - exact) < 4 * sd
+
+
+@pytest.mark.parametrize("f", [0.1, 1.3, 5.0, 20.0])
+def test_pitch_gust_filter_has_the_g1_gain_and_phase_on_a_sine(f):
+    """G1 on a sine at 1 kHz: amplitude and phase of the steady output (least squares on sin
+    and cos after 20 lags) against |H_q(j omega)| and arg H_q(j omega). The trapezoidal step of
+    the lag errs to leading order by (dt/tau)^2 / 12 in gain and omega dt^2 / (12 tau) in
+    phase; twice that is allowed."""
+    from rls_uncertainty.simulation.turbulence import pitch_gust, pitch_gust_lag
+
+    dt, tau = 1e-3, pitch_gust_lag(SPAN, V)
+    w = 2 * np.pi * f
+    t = np.arange(int(round(max(40.0, 20 / f) / dt))) * dt
+    q = pitch_gust(np.sin(w * t), dt, SPAN, V)
+    keep = t > 20 * tau
+    fit = np.linalg.lstsq(np.column_stack([np.sin(w * t[keep]), np.cos(w * t[keep])]), q[keep], rcond=None)[0]
+    H = (1j * w / V) / (1 + 1j * w * tau)
+    assert abs(np.hypot(*fit) / abs(H) - 1) < 2 * (dt / tau) ** 2 / 12
+    assert abs(np.arctan2(fit[1], fit[0]) - np.angle(H)) < 2 * w * dt**2 / (12 * tau)
+    assert abs(np.angle(H) - np.pi / 2) > 1e-3  # the lag's phase is seen
+
+
+def test_turbulence_options_take_on_or_off():
+    from rls_uncertainty.simulation.turbulence import TurbulenceOptions
+
+    assert TurbulenceOptions().pitch and not TurbulenceOptions("off").pitch
+    with pytest.raises(ConfigError, match="--pitch-gust must be one of"):
+        TurbulenceOptions("maybe")

@@ -151,11 +151,16 @@ def failed_result(maneuver: str, config: PipelineConfig, status: str) -> Maneuve
 
 def all_lags_bank(result: ReplayResult) -> EstimatorBank:
     """A bank with every lag (Eq. 20) fed the regression rows the run's estimator used, in
-    order; the other options are the run's (the residual burn-in resolved as configured)."""
+    order (with ``estimator.algorithm iv``, and their instruments); the other options are the
+    run's (the residual burn-in resolved as configured)."""
     pipe = result.pipeline
     assert pipe is not None  # run_pipeline keeps its pipeline
     o = pipe.config.estimator
     bank = EstimatorBank(pipe.sizes, replace(o, lags="all", residual_burn_in=o.burn_in, noise_forgetting=None))
+    if o.algorithm == "iv":
+        for (_t, X, z), zeta in zip(pipe.regression, pipe.instruments, strict=True):
+            bank.update(X, z, instruments=zeta)
+        return bank
     for _t, X, z in pipe.regression:
         bank.update(X, z)
     return bank

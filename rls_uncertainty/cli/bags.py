@@ -8,7 +8,8 @@ from typing import Any
 
 from ..errors import ConfigError
 from ..simulation.multisine import MAX_INPUT_AMPLITUDE
-from .flags import FORCE_HELP, add_progress, integer, progress_mode, real
+from ..simulation.turbulence import TurbulenceOptions
+from .flags import FORCE_HELP, add_option_flags, add_progress, integer, option_values, progress_mode, real
 from .simulation import noise_on, noise_on_name
 
 __all__ = ["add_make_bag", "add_convert"]
@@ -42,12 +43,15 @@ def _make_campaign(args: argparse.Namespace) -> int:
     if args.gust_intensity is None:
         raise ConfigError("--campaign needs --gust-intensity (sigma_w in m/s, or light, moderate or severe)")
     gust = DrydenVertical(args.gust_intensity, scale_length(SimulationConfig().altitude))
+    turbulence = TurbulenceOptions(**option_values(args, TurbulenceOptions))
     paths = write_campaign_bags(args.out, args.campaign, gust, band_level=args.noise / 100.0,
                                 band_limited_on=noise_on(args.noise_on), seed=args.seed, force=args.force,
-                                input_amplitude=args.input_amplitude, progress=progress_mode(args))
+                                input_amplitude=args.input_amplitude, pitch_gust=turbulence.pitch,
+                                progress=progress_mode(args))
+    pitch = " with their pitch gust" if turbulence.pitch else " (no pitch gust)"
     print(f"wrote {len(paths)} replay bags to {args.out}: T-2 maneuvers{_amplitude(args)} in Dryden vertical gusts "
           f"sigma_w "
-          f"{gust.sigma:.3g} m/s, L_w {gust.scale_length:.0f} m, {args.noise:g}% band-limited noise on "
+          f"{gust.sigma:.3g} m/s, L_w {gust.scale_length:.0f} m{pitch}, {args.noise:g}% band-limited noise on "
           f"{noise_on_name(args.noise_on)}, seed {args.seed} (settings in {Path(args.out) / 'campaign.yaml'})")
     return 0
 
@@ -60,6 +64,8 @@ def _make_flight(args: argparse.Namespace) -> int:
         raise ConfigError("--flight and --campaign are two kinds of output: give one")
     if args.input_amplitude != 1.0:
         raise ConfigError("--input-amplitude is not used with --flight (every maneuver is Table 2's multisine)")
+    if args.pitch_gust != TurbulenceOptions().pitch_gust:
+        raise ConfigError("--pitch-gust is not used with --flight (its gusts act with their pitch gust)")
     out = args.out or "bags/t2_flight"
     flight = write_flight_bag(out, args.seed, force=args.force, band_level=args.noise / 100.0,
                               band_limited_on=noise_on(args.noise_on), gust_sigma=args.gust_intensity)
@@ -83,6 +89,8 @@ def _make_bag(args: argparse.Namespace) -> int:
     if args.gust_intensity is not None:
         raise ConfigError("--gust-intensity sets the turbulence of a simulated campaign or flight: give --campaign N "
                           "or --flight")
+    if args.pitch_gust != TurbulenceOptions().pitch_gust:
+        raise ConfigError("--pitch-gust sets the turbulence of a simulated campaign: give --campaign N")
     from ..simulation.t2 import SIGNALS
 
     on = SIGNALS if args.noise_on is None else noise_on(args.noise_on)  # the bundled bag's: all four
@@ -118,6 +126,7 @@ def add_make_bag(sub: Any) -> None:
     mb.add_argument("--gust-intensity", type=_gust, metavar="SIGMA_W",
                     help="with --campaign or --flight: RMS vertical gust in m/s, or light, moderate, severe "
                          "(MIL-F-8785C low altitude: 0.77, 1.54, 2.31 m/s; --flight's default light)")
+    add_option_flags(mb, TurbulenceOptions)
     mb.add_argument("--noise-on", choices=("all", "responses"),
                     help="measured signals carrying the band-limited noise: 'all' (elevator, alpha, q, a_z) or "
                          "'responses' (alpha, q, a_z) (default: all for one maneuver, the bundled bag's; with "

@@ -79,6 +79,7 @@ __all__ = [
     "load_mapping",
     "schema_dir",
     "UNITS",
+    "EXCITATION_TOPIC",
 ]
 
 
@@ -378,35 +379,42 @@ def write_replay(path: str | Path, records: Iterable[tuple[int, str, str, object
 
 
 def write_sensor_streams(path: str | Path, streams: SensorStreams, *, force: bool = False,
-                         events: Sequence[tuple[int, str, str, object]] = (),
+                         excitation: bool = False, events: Sequence[tuple[int, str, str, object]] = (),
                          files: Mapping[str, str] | None = None) -> Path:
     """A :class:`.simulation.SensorStreams` as a bag on the standard topics at ``path``
     (atomic, as :func:`write_replay`), written message by message in stamp order: a long
-    recording never sits in memory as messages. ``events``: more records ``(stamp_ns, topic,
-    msgtype, msg)`` in stamp order (an event topic), merged in; ``files``: text files (name:
-    text) written beside the bag's."""
+    recording never sits in memory as messages. With ``excitation``, the designed excitation
+    the streams carry goes on :data:`EXCITATION_TOPIC` with the surfaces' message type, names
+    and stamps; ``events``: more records ``(stamp_ns, topic, msgtype, msg)`` in stamp order (an
+    event topic), merged in; ``files``: text files (name: text) written beside the bag's."""
     store = typestore()
     path = Path(path)
+    sources = {f"/{kind}": (kind, getattr(streams, kind)) for kind in INPUTS if kind != "excitation"}
+    if excitation and streams.excitation is not None:
+        sources[EXCITATION_TOPIC] = ("control_surfaces", streams.excitation)
 
-    def records(kind: str) -> Iterator[tuple[int, int, str, int]]:
-        stamps = getattr(streams, kind)[0]
-        return ((int(stamps[k]), _rank(kind), kind, k) for k in range(stamps.size))
+    def records(topic: str) -> Iterator[tuple[int, int, str, int]]:
+        stamps = sources[topic][1][0]
+        return ((int(stamps[k]), _rank(topic), topic, k) for k in range(stamps.size))
 
     extra = ((int(e[0]), _rank(e[1]), e[1], k) for k, e in enumerate(events))
-    kinds = [kind for kind in INPUTS if hasattr(streams, kind)]  # (the streams a simulation gives)
-    topics = [(f"/{kind}", MESSAGE_TYPES[kind]) for kind in kinds]
+    topics = [(topic, MESSAGE_TYPES[kind]) for topic, (kind, _) in sources.items()]
     topics += sorted({(topic, msgtype) for _, topic, msgtype, _ in events} - set(topics))
     with _bag_directory(path, topics, store, force=force, files=files) as writer:
-        for stamp, _, kind, k in heapq.merge(*(records(kind) for kind in kinds), extra):
-            if kind not in INPUTS:
-                writer.add(stamp, kind, events[k][2], events[k][3])
+        for stamp, _, topic, k in heapq.merge(*(records(topic) for topic in sources), extra):
+            if topic not in sources:  # an event
+                writer.add(stamp, topic, events[k][2], events[k][3])
             else:
-                values = getattr(streams, kind)[1][k]
-                msg = _standard_message(store, kind, stamp, values, streams.surface_names)
-                writer.add(stamp, f"/{kind}", MESSAGE_TYPES[kind], msg)
+                kind, (_, values) = sources[topic]
+                msg = _standard_message(store, kind, stamp, values[k], streams.surface_names)
+                writer.add(stamp, topic, MESSAGE_TYPES[kind], msg)
             writer.release()  # the merge gives the records in the bag's order
     return path
 
+
+# The topic of the designed excitation in a simulated bag: the multisine injected on each
+# surface (rad, from trim, before any feedback), as a flight-control computer would publish it.
+EXCITATION_TOPIC = "/fcc/excitation"
 
 # The bundled bag's band-limited noise is on all four measured signals, as it was recorded:
 # the demo and the measured figures of the docs are its replay. The simulation's default moved
@@ -430,15 +438,17 @@ def write_t2_bag(path: str | Path, band_level: float = 0.2, seed: int = 250, *, 
 
 def write_campaign_bags(path: str | Path, maneuvers: int, gust: DrydenVertical, *, band_level: float = 0.2,
                         band_limited_on: Sequence[str] | None = None, seed: int = 250,
-                        force: bool = False, input_amplitude: float = 1.0,
+                        force: bool = False, input_amplitude: float = 1.0, pitch_gust: bool = True,
                         progress: bool | None = False) -> list[Path]:
     """A simulated flight-test campaign (Section IV.B, simulated): ``maneuvers`` T-2 maneuvers
     flown in the Dryden vertical ``gust`` (:func:`.simulation.simulate_campaign`, each with
     its own gust and noise sequences from ``seed``), each a replay bag ``mNNN`` in the
-    directory ``path``, with ``campaign.yaml`` recording the settings. Atomic as
+    directory ``path`` with the designed excitation on :data:`EXCITATION_TOPIC`, and
+    ``campaign.yaml`` recording the settings. Atomic as
     :func:`write_replay`; one maneuver is in memory at a time. ``band_limited_on``: the
     signals carrying the band-limited noise (None: the simulation's default); ``input_amplitude``:
-    the elevator multisine's fraction of Table 2's amplitude; ``progress``: a bar of the
+    the elevator multisine's fraction of Table 2's amplitude; ``pitch_gust``: the gust's pitch
+    gust acts on the aircraft too (:mod:`..simulation.t2`); ``progress``: a bar of the
     maneuvers written on stderr (:mod:`..progress`)."""
     import yaml  # noqa: PLC0415 - the manifest only
 
@@ -452,15 +462,17 @@ def write_campaign_bags(path: str | Path, maneuvers: int, gust: DrydenVertical, 
     path = Path(path)
     with output_directory(path, force=force) as tmp:
         manifest = {"maneuvers": maneuvers, "seed": seed, "gust_sigma_w_m_s": gust.sigma,
-                    "gust_scale_length_m": gust.scale_length, "band_limited_noise": band_level,
+                    "gust_scale_length_m": gust.scale_length, "pitch_gust": bool(pitch_gust),
+                    "band_limited_noise": band_level,
                     "band_limited_on": list(on), "input_amplitude": float(input_amplitude), "bags": names,
                     "simulation": "rls_uncertainty.simulation.t2.simulate_campaign (Section IV.A T-2 maneuver, "
-                                  "Dryden vertical gust, seeds SeedSequence(seed).spawn(maneuvers))"}
+                                  "Dryden vertical gust on alpha, with pitch_gust its MIL-F-8785C pitch gust on q, "
+                                  "seeds SeedSequence(seed).spawn(maneuvers))"}
         (tmp / "campaign.yaml").write_text(yaml.safe_dump(manifest, sort_keys=False))
         streams = simulate_campaign(maneuvers, gust, seed=seed, band_level=band_level, band_limited_on=on,
-                                    input_amplitude=input_amplitude)
+                                    input_amplitude=input_amplitude, pitch_gust=bool(pitch_gust))
         for name, maneuver in track(zip(names, streams, strict=True), maneuvers, "make-bag", " maneuvers", progress):
-            write_sensor_streams(tmp / name, maneuver)
+            write_sensor_streams(tmp / name, maneuver, excitation=True)
     return [path / name for name in names]
 
 

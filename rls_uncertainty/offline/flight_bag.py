@@ -75,5 +75,5 @@ def write_flight_bag(path: str | Path, seed: int = 2010, *, force: bool = False,
                 "event_topic": f"/{EVENT_TOPIC}", "truth": TRUTH_FILE,
                 "simulation": "rls_uncertainty.simulation.flight.simulate_flight"}
     files = {TRUTH_FILE: truth_csv(flight), MANIFEST_FILE: yaml.safe_dump(manifest, sort_keys=False)}
-    write_sensor_streams(path, flight.streams, force=force, events=_events(flight), files=files)
+    write_sensor_streams(path, flight.streams, force=force, excitation=True, events=_events(flight), files=files)
     return flight

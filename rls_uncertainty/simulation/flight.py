@@ -52,10 +52,12 @@ from .t2 import (
     SimulationConfig,
     fine_response,
     gust_input,
+    pitch_gust_input,
     sensor_streams,
     state_space,
 )
 from .turbulence import LOW_ALTITUDE_SIGMA_W, DrydenVertical, scale_length
+from .turbulence import pitch_gust as pitch_gust_of
 
 __all__ = ["FlightCondition", "CONDITIONS", "TRIM_LEG", "FlownManeuver", "Flight", "PARAMETERS", "true_values",
            "simulate_flight"]
@@ -145,7 +147,10 @@ def _response(cfg: SimulationConfig, ac: AircraftConfig, elevator: Multisine, st
         return FineResponse(t, u, y, None, None)
     A, _, C, _ = state_space(cfg, ac)
     Bg, Dg = gust_input(cfg, ac)
-    return FineResponse(t, u, y, gust, _lsim((A, Bg, C, Dg), gust / cfg.airspeed, dt))
+    Bq, Dq = pitch_gust_input(cfg, ac)  # the gust acts with its pitch gust, as in the campaign
+    q_g = pitch_gust_of(gust, dt, ac.b, cfg.airspeed)
+    y_gust = _lsim((A, Bg, C, Dg), gust / cfg.airspeed, dt) + _lsim((A, Bq, C, Dq), q_g, dt)
+    return FineResponse(t, u, y, gust, y_gust, q_g)
 
 
 def _legs(rng: np.random.Generator, n: int) -> list[float]:
@@ -162,7 +167,8 @@ def _concatenate(parts: Sequence[SensorStreams], start_ns: int) -> SensorStreams
         return stamps, np.concatenate([getattr(p, kind)[1] for p in parts])
 
     kinds = ("imu", "airspeed", "dynamic_pressure", "control_surfaces", "thrust")
-    return SensorStreams(start_ns, **{k: joined(k) for k in kinds})  # type: ignore[arg-type]
+    excitation = joined("excitation") if all(p.excitation is not None for p in parts) else None
+    return SensorStreams(start_ns, **{k: joined(k) for k in kinds}, excitation=excitation)  # type: ignore[arg-type]
 
 
 def simulate_flight(

@@ -20,6 +20,16 @@ Eq. 25a-b become
 and the vane reads ``alpha_a`` (plus its noise): the gust is one more input ``w_g / V``,
 simulated by superposition on the integration grid. The sensor noise keeps the calm-air
 scale (the RMS variation of each signal without the gust), since it belongs to the sensor.
+
+With ``pitch_gust`` (the default) the gust's gradient along the aircraft acts too: the
+MIL-F-8785C pitch gust ``q_g`` (:func:`.turbulence.pitch_gust`, G1, from the same ``w_g``)
+makes the aerodynamic pitch rate ``q - q_g``, so C_m sees it through C_m_q,
+
+    dq/dt       = qbar S cbar / I_yy (C_m_alpha alpha_a + cbar / (2 V) C_m_q (q - q_g) + C_m_delta_e delta_e)
+
+while the gyro reads the inertial ``q``: no sensor reads ``q_g``, an unmeasured input of the
+C_m equation (the T-2 model has no C_Z_q, so C_Z and a_z do not see it). Both gust inputs
+go through one simulation on the integration grid. Without it the gust acts on alpha alone.
 """
 
 from __future__ import annotations
@@ -38,6 +48,7 @@ from ..errors import ConfigError
 from ..settings.models import load_aircraft
 from .multisine import MAX_INPUT_AMPLITUDE, T2_TABLE2, Multisine
 from .turbulence import DrydenVertical
+from .turbulence import pitch_gust as pitch_gust_of
 
 __all__ = [
     "G0",
@@ -127,7 +138,8 @@ class ShortPeriodRecord:
     qbar; ``noise_free`` holds the same signals without noise; ``noise_scale`` the RMS
     variation of each signal in calm air, the unit of :func:`add_noise`'s noise levels;
     ``gust`` the vertical gust ``w_g`` (m/s, positive up) at the sample times, ``None`` in
-    calm air."""
+    calm air; ``pitch_gust`` the pitch gust ``q_g`` (rad/s) at the sample times, ``None``
+    when it does not act."""
 
     t: FloatArray
     delta_e: FloatArray
@@ -141,6 +153,7 @@ class ShortPeriodRecord:
     noise_free: dict[str, FloatArray] = field(default_factory=dict)
     noise_scale: dict[str, float] = field(default_factory=dict)
     gust: FloatArray | None = None
+    pitch_gust: FloatArray | None = None
 
     def signals(self) -> dict[str, FloatArray]:
         return {name: getattr(self, name) for name in SIGNALS}
@@ -174,6 +187,14 @@ def gust_input(cfg: SimulationConfig, ac: AircraftConfig) -> tuple[FloatArray, F
     return Bg, Dg
 
 
+def pitch_gust_input(cfg: SimulationConfig, ac: AircraftConfig) -> tuple[FloatArray, FloatArray]:
+    """Input and feedthrough columns of the pitch gust ``q_g`` (module docstring): it acts on
+    dq/dt through C_m_q with the sign of ``-q``, and no output reads it."""
+    mq = cfg.qbar * ac.S * ac.cbar / ac.Iyy
+    Bq = np.array([[0.0], [-mq * ac.cbar / (2 * cfg.airspeed) * cfg.true["Cm_q"]]])
+    return Bq, np.zeros((3, 1))
+
+
 def _rms_variation(x: FloatArray) -> float:
     return float(np.sqrt(np.mean((x - x.mean()) ** 2)))
 
@@ -181,17 +202,19 @@ def _rms_variation(x: FloatArray) -> float:
 @dataclass(frozen=True)
 class FineResponse:
     """The response on the integration grid: elevator ``u``, calm-air outputs ``y`` (d alpha,
-    q, d a_z of Eq. 25b), the gust ``w_g`` and its outputs ``y_gust`` (``None`` in calm air)."""
+    q, d a_z of Eq. 25b), the gust ``w_g`` and its outputs ``y_gust`` (``None`` in calm air),
+    the pitch gust ``q_g`` (``None`` when it does not act)."""
 
     t: FloatArray
     u: FloatArray
     y: FloatArray
     gust: FloatArray | None
     y_gust: FloatArray | None
+    pitch_gust: FloatArray | None = None
 
 
 def fine_response(
-    cfg: SimulationConfig, ac: AircraftConfig, elevator: Multisine, gust: FloatArray | None
+    cfg: SimulationConfig, ac: AircraftConfig, elevator: Multisine, gust: FloatArray | None, pitch_gust: bool = True
 ) -> FineResponse:
     A, B, C, Dm = state_space(cfg, ac)
     n_fine = int(round(cfg.duration * cfg.fine_rate))
@@ -207,14 +230,25 @@ def fine_response(
         raise ConfigError(f"gust must be {n_fine} finite samples of w_g on the {cfg.fine_rate:g} Hz "
                           f"integration grid, got shape {gust.shape}")
     Bg, Dg = gust_input(cfg, ac)
-    _, y_gust, _ = signal.lsim((A, Bg, C, Dg), gust / cfg.airspeed, t_fine)
-    return FineResponse(t_fine, u, y, gust, y_gust)
+    if not pitch_gust:
+        _, y_gust, _ = signal.lsim((A, Bg, C, Dg), gust / cfg.airspeed, t_fine)
+        return FineResponse(t_fine, u, y, gust, y_gust)
+    q_g = pitch_gust_of(gust, 1.0 / cfg.fine_rate, ac.b, cfg.airspeed)
+    Bq, Dq = pitch_gust_input(cfg, ac)
+    _, y_gust, _ = signal.lsim((A, np.hstack([Bg, Bq]), C, np.hstack([Dg, Dq])),
+                               np.column_stack([gust / cfg.airspeed, q_g]), t_fine)
+    return FineResponse(t_fine, u, y, gust, y_gust, q_g)
+
+
+def _sample_indices(n_fine: int, cfg: SimulationConfig) -> npt.NDArray[np.intp]:
+    """The integration-grid indices of the samples at ``cfg.rate`` from ``cfg.sample_offset`` on."""
+    step = int(round(cfg.fine_rate / cfg.rate))
+    return np.arange(int(round(cfg.sample_offset * cfg.fine_rate)), n_fine, step)
 
 
 def _sampled(response: FineResponse, cfg: SimulationConfig, ac: AircraftConfig) -> ShortPeriodRecord:
     """The record at ``cfg.rate`` from ``cfg.sample_offset`` on."""
-    step = int(round(cfg.fine_rate / cfg.rate))
-    idx = np.arange(int(round(cfg.sample_offset * cfg.fine_rate)), response.t.size, step)
+    idx = _sample_indices(response.t.size, cfg)
     u, y = response.u, response.y
     ct = np.cos(cfg.alpha_trim)
     # Trim: level flight, so the body-z specific force balances gravity (a_z = -g cos(theta),
@@ -232,7 +266,8 @@ def _sampled(response: FineResponse, cfg: SimulationConfig, ac: AircraftConfig) 
     return ShortPeriodRecord(
         t=response.t[idx], V=cfg.airspeed, qbar=cfg.qbar, aircraft=ac, config=cfg,
         noise_free={k: v.copy() for k, v in clean.items()}, noise_scale=scale,
-        gust=None if response.gust is None else response.gust[idx], **clean,
+        gust=None if response.gust is None else response.gust[idx],
+        pitch_gust=None if response.pitch_gust is None else response.pitch_gust[idx], **clean,
     )
 
 
@@ -242,15 +277,17 @@ def simulate_short_period(
     elevator: Multisine = T2_TABLE2["elevator"],
     *,
     gust: FloatArray | None = None,
+    pitch_gust: bool = True,
 ) -> ShortPeriodRecord:
     """Noise-free T-2 short-period response to the elevator multisine, sampled at ``cfg.rate``.
 
     ``gust``: the vertical gust ``w_g`` (m/s, positive up) on the integration grid
     (``cfg.duration * cfg.fine_rate`` samples from t = 0, :func:`gust_velocity`), or ``None``
-    for calm air. Its response (module docstring) is added to the calm-air response.
+    for calm air. Its response (module docstring) is added to the calm-air response, with the
+    pitch gust it drives when ``pitch_gust``.
     """
     ac = aircraft or load_aircraft("t2")
-    return _sampled(fine_response(cfg, ac, elevator, gust), cfg, ac)
+    return _sampled(fine_response(cfg, ac, elevator, gust, pitch_gust), cfg, ac)
 
 
 def _check_band_limited_on(band_limited_on: Collection[str]) -> frozenset[str]:
@@ -296,7 +333,8 @@ def add_noise(
         noisy[name] = clean + wide + colored
     return ShortPeriodRecord(
         t=record.t, V=record.V, qbar=record.qbar, aircraft=record.aircraft, config=cfg,
-        noise_free=record.noise_free, noise_scale=record.noise_scale, gust=record.gust, **noisy,
+        noise_free=record.noise_free, noise_scale=record.noise_scale, gust=record.gust,
+        pitch_gust=record.pitch_gust, **noisy,
     )
 
 
@@ -339,6 +377,9 @@ class SensorStreams:
     control_surfaces: tuple[Stamps, FloatArray]  # (stamps, (N, 5))
     thrust: tuple[Stamps, FloatArray]  # (stamps, (N,))
     surface_names: tuple[str, ...] = ("elevator_left", "elevator_right", "aileron_left", "aileron_right", "rudder")
+    # The designed excitation injected on each surface (rad, from trim, before any feedback),
+    # at the surfaces' stamps, columns as the surfaces'; None: not known.
+    excitation: tuple[Stamps, FloatArray] | None = None
 
 
 def gust_velocity(
@@ -370,14 +411,17 @@ def simulate_maneuver(
     gust: DrydenVertical | None = None,
     band_limited_on: Collection[str] = BAND_LIMITED_ON,
     cfg: SimulationConfig = SimulationConfig(),
+    pitch_gust: bool = True,
 ) -> ShortPeriodRecord:
     """One seeded T-2 maneuver at ``cfg.rate`` (Section IV.A, Eq. 25), in turbulence when
-    ``gust`` is given (its ``sigma`` 0 or ``None``: calm air), with the :func:`add_noise`
-    noise. The noise comes from ``np.random.default_rng(seed)``, the gust from an independent
-    child stream of ``seed``; in calm air this is ``add_noise(simulate_short_period(cfg),
-    band_level, np.random.default_rng(seed))``."""
+    ``gust`` is given (its ``sigma`` 0 or ``None``: calm air; with its pitch gust when
+    ``pitch_gust``), with the :func:`add_noise` noise. The noise comes from
+    ``np.random.default_rng(seed)``, the gust from an independent child stream of ``seed``; in
+    calm air this is ``add_noise(simulate_short_period(cfg), band_level,
+    np.random.default_rng(seed))``."""
     rng, w = _draws(seed, gust, cfg)
-    return add_noise(simulate_short_period(cfg, gust=w), band_level, rng, band_limited_on=band_limited_on)
+    return add_noise(simulate_short_period(cfg, gust=w, pitch_gust=pitch_gust), band_level, rng,
+                     band_limited_on=band_limited_on)
 
 
 def simulate_sensor_streams(
@@ -395,6 +439,7 @@ def simulate_sensor_streams(
     gust: DrydenVertical | None = None,
     band_limited_on: Collection[str] = BAND_LIMITED_ON,
     input_amplitude: float = 1.0,
+    pitch_gust: bool = True,
 ) -> SensorStreams:
     """One seeded T-2 maneuver (Section IV.A, Eq. 25) at realistic sensor rates.
 
@@ -402,8 +447,10 @@ def simulate_sensor_streams(
     gets the paper's noise (wide-band at the Section IV.A SNRs plus band-limited noise at
     ``band_level`` on ``band_limited_on``, :func:`add_noise`) generated at that rate: the IMU
     carries q and a_z, the air data alpha (as the airspeed vector), the surfaces the elevator
-    (both halves equal, Eq. 23). With ``gust`` every stream sees the same gust (one draw on
-    the integration grid), the air data the aerodynamic alpha. Generators as in
+    (both halves equal, Eq. 23); ``excitation`` holds the multisine injected on both halves,
+    noise-free, at the surfaces' stamps. With ``gust`` every stream sees the same gust (one draw on
+    the integration grid), the air data the aerodynamic alpha; ``pitch_gust``: its pitch gust
+    acts too (module docstring). Generators as in
     :func:`simulate_maneuver`. Trim is level flight: specific force (g sin alpha, 0, -g cos
     alpha) in aircraft axes.
 
@@ -416,12 +463,7 @@ def simulate_sensor_streams(
         raise ConfigError(f"input_amplitude must be a number in [0, {MAX_INPUT_AMPLITUDE:g}], got {input_amplitude!r}")
     rng, w = _draws(seed, gust, cfg)
     ac = load_aircraft("t2")
-    elevator = T2_TABLE2["elevator"]
-    nominal = None
-    if input_amplitude != 1.0:
-        nominal = fine_response(cfg, ac, elevator, None)  # the noise scale: Table 2's maneuver, calm air
-        elevator = replace(elevator, amplitude=elevator.amplitude * float(input_amplitude))
-    response = fine_response(cfg, ac, elevator, w)
+    response, nominal = _responses(cfg, ac, w, input_amplitude, pitch_gust)
     rates = StreamRates(imu_rate, air_data_rate, surface_rate, thrust_rate, air_data_offset, surface_offset)
     return sensor_streams(response, nominal, cfg, ac, rng, band_level=band_level, band_limited_on=band_limited_on,
                           rates=rates, start_ns=start_ns)
@@ -480,6 +522,7 @@ def sensor_streams(
     t_srf, srf = stream(surface_rate, surface_offset)
     zeros = np.zeros(t_srf.size)
     surfaces = np.column_stack([srf.delta_e, srf.delta_e, zeros, zeros, zeros])
+    u = response.u[_sample_indices(response.t.size, replace(cfg, rate=surface_rate, sample_offset=surface_offset))]
     n_thr = int(np.ceil(cfg.duration * thrust_rate - 1e-6))  # the samples before cfg.duration
     t_thr = start_ns + np.round(np.arange(n_thr) / thrust_rate * 1e9).astype(np.int64)
     # Thrust balancing a drag coefficient of 0.03 at trim (CX only; the T-2 model has no CX).
@@ -491,7 +534,21 @@ def sensor_streams(
         dynamic_pressure=(t_air, qbar),
         control_surfaces=(t_srf, surfaces),
         thrust=(t_thr, thrust),
+        excitation=(t_srf, np.column_stack([u, u, zeros, zeros, zeros])),
     )
+
+
+def _responses(
+    cfg: SimulationConfig, ac: AircraftConfig, w: FloatArray | None, input_amplitude: float, pitch_gust: bool
+) -> tuple[FineResponse, FineResponse | None]:
+    """The maneuver's response with the elevator multisine at ``input_amplitude`` x Table 2's
+    amplitude, and (when that is not 1) the nominal calm-air one that sets the noise scale."""
+    elevator = T2_TABLE2["elevator"]
+    nominal = None
+    if input_amplitude != 1.0:
+        nominal = fine_response(cfg, ac, elevator, None)  # the noise scale: Table 2's maneuver, calm air
+        elevator = replace(elevator, amplitude=elevator.amplitude * float(input_amplitude))
+    return fine_response(cfg, ac, elevator, w, pitch_gust), nominal
 
 
 def campaign_seeds(seed: int, maneuvers: int) -> list[np.random.SeedSequence]:
@@ -511,11 +568,12 @@ def simulate_campaign(
     band_limited_on: Collection[str] = BAND_LIMITED_ON,
     cfg: SimulationConfig = SimulationConfig(),
     input_amplitude: float = 1.0,
+    pitch_gust: bool = True,
 ) -> Iterator[SensorStreams]:
     """``maneuvers`` repeated T-2 maneuvers in the same turbulence (Section IV.B's flight-test
     campaign, simulated), one at a time (memory stays that of one maneuver):
     :func:`simulate_sensor_streams` of each of :func:`campaign_seeds`, every maneuver with its
-    own gust and noise sequences; ``input_amplitude`` as there."""
+    own gust and noise sequences; ``input_amplitude`` and ``pitch_gust`` as there."""
     for s in campaign_seeds(seed, maneuvers):
         yield simulate_sensor_streams(band_level, s, cfg=cfg, gust=gust, band_limited_on=band_limited_on,
-                                      input_amplitude=input_amplitude)
+                                      input_amplitude=input_amplitude, pitch_gust=pitch_gust)

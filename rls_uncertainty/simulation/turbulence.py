@@ -27,6 +27,23 @@ sqrt(3)) x2) / 2``. The sequence is the exact discrete equivalent at step ``dt``
 
 started from ``x_0 ~ N(0, P)``, so every sample has variance ``sigma_w^2`` and samples ``j``
 apart have covariance ``R_w(j dt)`` exactly: no discretisation error, no warm-up transient.
+
+Pitch gust (MIL-F-8785C): the vertical gust is not uniform along the aircraft; its gradient
+met at ``V``, spread over the span ``b``, is the pitch gust
+
+    q_g = H_q(s) w_g,   H_q(s) = (s / V) / (1 + tau s),   tau = 4 b / (pi V)              (G1)
+
+(rad/s). Its variance is ``int_0^inf |H_q(j omega)|^2 Phi_w(omega) d omega``; with ``x = L_w
+omega / V`` and ``c = tau V / L_w = 4 b / (pi L_w)`` (partial fractions)
+
+    sigma_q^2 = sigma_w^2 / (pi L_w^2) (A pi / 2 + B pi / 4 + C pi / (2 c)),
+    A = (3 c^2 - 5) / (c^2 - 1)^2,  B = 2 / (1 - c^2),  C = (3 - c^2) / (c^2 - 1)^2     (G3)
+
+which for ``b << L_w`` is ``3 pi sigma_w^2 / (8 L_w b)``. Sampling (:func:`pitch_gust`):
+``w_lag`` is ``w_g`` through ``1 / (1 + tau s)``, stepped exactly for ``w_g`` linear between
+samples to first order in ``dt / tau`` (trapezoidal weights ``w_lag[k] = a w_lag[k-1] + (1 -
+a) (w_g[k] + w_g[k-1]) / 2``, ``a = exp(-dt / tau)``, started at ``w_g[0]``), and ``q_g =
+(w_g - w_lag) / (tau V)``.
 """
 
 from __future__ import annotations
@@ -38,6 +55,7 @@ import numpy as np
 import numpy.typing as npt
 
 from ..errors import ConfigError
+from ..schema import check, option
 
 __all__ = [
     "FT",
@@ -45,6 +63,10 @@ __all__ = [
     "LOW_ALTITUDE_SIGMA_W",
     "DrydenVertical",
     "scale_length",
+    "pitch_gust_lag",
+    "pitch_gust",
+    "pitch_gust_variance",
+    "TurbulenceOptions",
 ]
 
 FloatArray = npt.NDArray[np.float64]
@@ -123,3 +145,57 @@ class DrydenVertical:
             # x_{k+1} = F x_k + eta_k (F lower triangular)
             x1, x2 = f11 * x1 + e1, f21 * x1 + f22 * x2 + e2
         return w
+
+
+def pitch_gust_lag(span: float, airspeed: float) -> float:
+    """``tau = 4 b / (pi V)`` of G1 (s), ``span`` the wing span ``b`` (m)."""
+    if not (math.isfinite(span) and span > 0.0 and math.isfinite(airspeed) and airspeed > 0.0):
+        raise ConfigError(f"the pitch gust needs a span > 0 m and an airspeed > 0 m/s, got {span!r}, {airspeed!r}")
+    return 4.0 * span / (math.pi * airspeed)
+
+
+def pitch_gust(w_g: FloatArray, dt: float, span: float, airspeed: float) -> FloatArray:
+    """G1: the pitch gust ``q_g`` (rad/s) of the vertical gust ``w_g`` (m/s) sampled every
+    ``dt`` (s), for the span ``span`` (m) at ``airspeed`` (module docstring, Sampling)."""
+    tau = pitch_gust_lag(span, airspeed)
+    w = np.asarray(w_g, dtype=np.float64)
+    a = math.exp(-dt / tau)
+    c = 0.5 * (1.0 - a)
+    lag = np.empty_like(w)
+    state, previous = (float(w[0]), float(w[0])) if w.size else (0.0, 0.0)
+    for k, x in enumerate(w.tolist()):
+        state = a * state + c * (x + previous)
+        lag[k] = state
+        previous = x
+    return (w - lag) / (tau * airspeed)
+
+
+def pitch_gust_variance(gust: DrydenVertical, span: float, airspeed: float) -> float:
+    """G3: the variance of the pitch gust (rad^2/s^2) of ``gust`` for the span ``span`` (m)
+    at ``airspeed``; the span must be shorter than ``pi L_w / 4`` (``c < 1``)."""
+    c = pitch_gust_lag(span, airspeed) * airspeed / gust.scale_length
+    if c >= 1.0:
+        limit = math.pi * gust.scale_length / 4
+        raise ConfigError(f"the pitch gust needs a span shorter than pi L_w / 4 = {limit:g} m, "
+                          f"got {span!r} m")
+    d = (c * c - 1.0) ** 2
+    A, B, C = (3.0 * c * c - 5.0) / d, 2.0 / (1.0 - c * c), (3.0 - c * c) / d
+    integral = A * math.pi / 2.0 + B * math.pi / 4.0 + C * math.pi / (2.0 * c)
+    return gust.sigma**2 / (math.pi * gust.scale_length**2) * integral
+
+
+@dataclass(frozen=True)
+class TurbulenceOptions:
+    """How the simulated turbulence acts on the aircraft (``make-bag --campaign``)."""
+
+    pitch_gust: str = option("on", "with --campaign: 'on' adds the MIL-F-8785C pitch gust (the vertical gust's "
+                             "gradient along the aircraft, read by no sensor) to the pitch dynamics; 'off' leaves "
+                             "the vertical gust on alpha only", choices=("on", "off"), cli="--pitch-gust")
+
+    def __post_init__(self) -> None:
+        check(self, "turbulence")
+
+    @property
+    def pitch(self) -> bool:
+        """Whether the pitch gust acts."""
+        return self.pitch_gust == "on"

@@ -1,0 +1,297 @@
+"""Recursive instrumental variables (``estimator.algorithm: iv``, ``config/t2_turbulence.yaml``)
+against the paper's RLS (``config/t2.yaml``) on simulated T-2 campaigns. Report: REPORT.md
+beside this file.
+
+A campaign is a directory that ``rls-uncertainty make-bag --campaign N`` wrote. Each maneuver's
+bag is read once and its messages go through the shipped data path (the replay's
+``run_pipeline``, as ``rls-uncertainty campaign`` runs it) twice: with ``config/t2.yaml``
+(without the excitation topic, which that configuration does not read) and with
+``config/t2_turbulence.yaml``. Per maneuver, method and Table 3 parameter it keeps the
+end-of-maneuver estimate and corrected standard error (the values ``campaign`` writes to
+maneuvers.csv) and, from the per-sample outputs, the first sample at which the convergence flag
+is set, with the estimate and standard error there. The pipeline's time per sample of each
+method, measured alternately on the same messages in the same process, gives the cost ratio.
+
+    python docs/studies/instrumental_variables/study.py run CAMPAIGN_DIR --count N --out OUT.csv
+    python docs/studies/instrumental_variables/study.py table OUT.csv [OUT2.csv ...]
+    python docs/studies/instrumental_variables/study.py figure OUT.csv ... --png FIG.png
+
+``table`` prints per case, parameter and method: coverage of the truth (``T2_TRUE``) by
++-2 corrected SE at the maneuver's end, mean SE / scatter (standard deviation of the end
+estimates), bias / scatter, false convergence (of the maneuvers flagged, those whose truth lies
+outside +-2 SE at the first flag), the median flag time and the per-sample cost.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import math
+import subprocess
+import sys
+import tempfile
+import time
+from multiprocessing import Pool
+from pathlib import Path
+
+import matplotlib
+import numpy as np
+from rosbags.rosbag2 import Reader, Writer
+from rosbags.rosbag2.enums import StoragePlugin
+from rosbags.typesys import Stores, get_typestore
+
+from rls_uncertainty.offline.bags import InputStream
+from rls_uncertainty.offline.replay import run_pipeline
+from rls_uncertainty.settings.parameters import PARAMETER_NAMES, node_config, pipeline_config
+from rls_uncertainty.settings.sources import node_parameters_file
+from rls_uncertainty.simulation.t2 import T2_TRUE
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt
+
+ROOT = Path(__file__).resolve().parents[3]
+CONFIGS = {"RLS": ROOT / "config" / "t2.yaml", "IV": ROOT / "config" / "t2_turbulence.yaml"}
+PARAMS = tuple(T2_TRUE)
+FIELDS = ("case", "maneuver", "method", "parameter", "estimate", "se", "flag_time", "flag_estimate", "flag_se",
+          "converged_end", "samples", "pipeline_seconds")
+
+
+def _params(path: Path) -> dict:
+    values = node_parameters_file(str(path)).values
+    return {k: v for k, v in values.items() if k in PARAMETER_NAMES}
+
+
+def _rows(case: str, name: str, method: str, result, t0: int, seconds: float) -> list[dict]:
+    """Per Table 3 parameter: end values and the first flag (NaN when never flagged)."""
+    outs = result.outputs
+    rows = []
+    for j, names in enumerate(result.parameter_names):
+        ready = [o for o in outs if o.ready[j]]
+        for i, p in enumerate(names):
+            if p not in T2_TRUE:
+                continue
+            row = {"case": case, "maneuver": name, "method": method, "parameter": p, "estimate": math.nan,
+                   "se": math.nan, "flag_time": math.nan, "flag_estimate": math.nan, "flag_se": math.nan,
+                   "converged_end": 0, "samples": len(outs), "pipeline_seconds": seconds}
+            if ready:
+                last = ready[-1]
+                row.update(estimate=float(last.theta[j, i]), se=float(last.se[j, i]),
+                           converged_end=int(bool(last.converged[j, i])))
+                first = next((o for o in ready if o.converged[j, i]), None)
+                if first is not None:
+                    row.update(flag_time=(first.stamp_ns - t0) * 1e-9, flag_estimate=float(first.theta[j, i]),
+                               flag_se=float(first.se[j, i]))
+            rows.append(row)
+    return rows
+
+
+def one_maneuver(job: tuple[str, str]) -> list[dict]:
+    case, bag = job
+    params = {m: _params(c) for m, c in CONFIGS.items()}
+    topics = dict(node_config(params["IV"]).topics)
+    with InputStream(bag, topics) as stream:
+        t0 = stream.t0
+        messages = list(stream)
+    rows: list[dict] = []
+    for method in ("RLS", "IV"):  # alternately, on the same messages
+        msgs = messages if method == "IV" else [m for m in messages if m[0] != "excitation"]
+        config = pipeline_config(params[method])
+        start = time.perf_counter()
+        result = run_pipeline(msgs, config, record=False, keep_outputs=True)
+        seconds = time.perf_counter() - start
+        rows += _rows(case, Path(bag).name, method, result, t0, seconds)
+    return rows
+
+
+def run(args: argparse.Namespace) -> None:
+    bags = sorted(str(p) for p in Path(args.campaign).glob("m*") if p.is_dir())[: args.count]
+    case = args.case or Path(args.campaign).name
+    with open(args.out, "w", newline="") as f, Pool(args.workers) as pool:
+        w = csv.DictWriter(f, FIELDS)
+        w.writeheader()
+        for n, rows in enumerate(pool.imap(one_maneuver, [(case, b) for b in bags]), 1):
+            w.writerows(rows)
+            f.flush()
+            print(f"\r{case}: {n}/{len(bags)}", end="", file=sys.stderr)
+    print(file=sys.stderr)
+
+
+def _read(paths: list[str]) -> list[dict]:
+    rows = []
+    for path in paths:
+        with open(path) as f:
+            for r in csv.DictReader(f):
+                for k in ("estimate", "se", "flag_time", "flag_estimate", "flag_se", "pipeline_seconds"):
+                    r[k] = float(r[k])
+                r["converged_end"] = int(r["converged_end"])
+                r["samples"] = int(r["samples"])
+                rows.append(r)
+    return rows
+
+
+def statistics(rows: list[dict]) -> dict:
+    """Per (case, method, parameter): n, coverage %, SE/scatter, bias/scatter, false conv. %,
+    flagged, median flag time."""
+    out = {}
+    keys = sorted({(r["case"], r["method"], r["parameter"]) for r in rows})
+    for case, method, p in keys:
+        sel = [r for r in rows if (r["case"], r["method"], r["parameter"]) == (case, method, p)
+               and np.isfinite(r["estimate"])]
+        est = np.array([r["estimate"] for r in sel])
+        se = np.array([r["se"] for r in sel])
+        truth = T2_TRUE[p]
+        scatter = est.std(ddof=1)
+        flagged = [r for r in sel if np.isfinite(r["flag_time"])]
+        false = [r for r in flagged if abs(r["flag_estimate"] - truth) > 2 * r["flag_se"]]
+        out[case, method, p] = {
+            "n": len(sel),
+            "coverage": 100 * np.mean(np.abs(est - truth) <= 2 * se),
+            "se_scatter": se.mean() / scatter,
+            "bias_scatter": (est.mean() - truth) / scatter,
+            "false": 100 * len(false) / len(flagged) if flagged else math.nan,
+            "flagged": len(flagged),
+            "flag_time": float(np.median([r["flag_time"] for r in flagged])) if flagged else math.nan,
+            "scatter": scatter,
+        }
+    return out
+
+
+def _cost(rows: list[dict], case: str) -> tuple[float, float]:
+    per = {}
+    for method in ("RLS", "IV"):
+        seen = {(r["maneuver"], r["pipeline_seconds"], r["samples"]) for r in rows
+                if r["case"] == case and r["method"] == method and r["parameter"] == "Cm_q"}
+        per[method] = 1e6 * sum(s for _m, s, _n in seen) / max(1, sum(n for _m, _s, n in seen))
+    return per["RLS"], per["IV"]
+
+
+def table(args: argparse.Namespace) -> None:
+    rows = _read(args.csv)
+    stats = statistics(rows)
+    for case in sorted({r["case"] for r in rows}):
+        n = {m: stats[case, m, PARAMS[0]]["n"] for m in ("RLS", "IV") if (case, m, PARAMS[0]) in stats}
+        print(f"\n### {case} ({', '.join(f'{m} {k} maneuvers' for m, k in n.items())})\n")
+        print("| parameter | method | coverage % | SE/scatter | bias/scatter | false conv. % (flagged) "
+              "| median flag time, s | scatter |")
+        print("| --- | --- | --- | --- | --- | --- | --- | --- |")
+        for p in PARAMS:
+            for m in ("RLS", "IV"):
+                s = stats.get((case, m, p))
+                if s is None:
+                    continue
+                print(f"| {p} | {m} | {s['coverage']:.0f} | {s['se_scatter']:.2f} | {s['bias_scatter']:+.2f} | "
+                      f"{s['false']:.0f} ({s['flagged']}) | {s['flag_time']:.2f} | {s['scatter']:.3g} |")
+        rls, iv = _cost(rows, case)
+        print(f"\npipeline time per estimator sample: RLS {rls:.0f} us, IV {iv:.0f} us, IV / RLS {iv / rls:.2f}")
+
+
+def figure(args: argparse.Namespace) -> None:
+    stats = statistics(_read(args.csv))
+    cases = sorted({k[0] for k in stats})
+    fig, axes = plt.subplots(3, len(cases), figsize=(4.2 * len(cases), 8), squeeze=False)
+    x = np.arange(len(PARAMS))
+    for c, case in enumerate(cases):
+        for r, (key, label, goal) in enumerate((("coverage", "coverage of truth, %", (93, None)),
+                                                 ("se_scatter", "SE / scatter", (0.85, 1.20)),
+                                                 ("false", "false convergence, %", (None, 5)))):
+            ax = axes[r, c]
+            for k, m in enumerate(("RLS", "IV")):
+                ax.bar(x + (k - 0.5) * 0.38, [stats[case, m, p][key] for p in PARAMS], 0.38, label=m)
+            for g in goal:
+                if g is not None:
+                    ax.axhline(g, color="k", lw=0.8, ls="--")
+            ax.set_xticks(x, [p.replace("_", "\n", 1) for p in PARAMS], fontsize=7)
+            ax.set_ylabel(label)
+            if r == 0:
+                ax.set_title(case, fontsize=9)
+                ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(args.png, dpi=110)
+
+
+def _with_excitation(src: Path, dst: Path) -> None:
+    """A copy of the converted bag ``src`` with ``/excitation`` = its ``/control_surfaces``
+    (the measured surfaces as the instruments' input; ``convert``'s mapping has no excitation
+    stream)."""
+    store = get_typestore(Stores.ROS2_JAZZY)
+    with Reader(src) as reader, Writer(dst, version=8, storage_plugin=StoragePlugin.MCAP) as writer:
+        conns = {c.id: writer.add_connection(c.topic, c.msgtype, typestore=store) for c in reader.connections}
+        excitation = writer.add_connection("/excitation", "sensor_msgs/msg/JointState", typestore=store)
+        for c, stamp, raw in reader.messages():
+            writer.write(conns[c.id], stamp, raw)
+            if c.topic == "/control_surfaces":
+                writer.write(excitation, stamp, raw)
+
+
+def flight(args: argparse.Namespace) -> None:
+    """The longitudinal Twin Otter recording replayed with config/twin_otter_longitudinal.yaml
+    (RLS) and the same with ``estimator.algorithm: iv`` and ``topics.excitation`` the measured
+    surfaces; the end-of-maneuver estimates and corrected standard errors side by side."""
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    cli = [sys.executable, "-m", "rls_uncertainty.cli"]
+    recording = Path(args.flight_data) / "totter_9752ed20"
+    subprocess.run([*cli, "convert", str(recording), "--mapping", str(ROOT / "msg_schemas/fti_msgs/mapping.yaml"),
+                    "--out", str(out / "converted"), "--force"], check=True, capture_output=True)
+    bag = out / "with_excitation"
+    if not bag.exists():
+        _with_excitation(out / "converted", bag)
+    rls_config = ROOT / "config" / "twin_otter_longitudinal.yaml"
+    iv_config = out / "twin_otter_longitudinal_iv.yaml"
+    text = rls_config.read_text().replace("    estimator:\n", "    estimator:\n      algorithm: iv\n")
+    iv_config.write_text(text.replace("    surfaces:\n", "    topics:\n      excitation: excitation\n    surfaces:\n"))
+    finals = {}
+    for method, config in (("RLS", rls_config), ("IV", iv_config)):
+        subprocess.run([*cli, "replay", str(bag), "--config", str(config), "--out", str(out / method), "--no-figures",
+                        "--quiet", "--force"], check=True, capture_output=True)
+        with open(out / method / "parameters.csv") as f:
+            finals[method] = {r["parameter"]: r for r in csv.DictReader(f)}
+    print("| parameter | RLS estimate | RLS SE | IV estimate | IV SE | IV SE / RLS SE | difference / IV SE |")
+    print("| --- | --- | --- | --- | --- | --- | --- |")
+    for p, r in finals["RLS"].items():
+        v = finals["IV"].get(p)
+        if v is None:
+            continue
+        e_r, s_r, e_i, s_i = (float(x) for x in (r["estimate"], r["std_error"], v["estimate"], v["std_error"]))
+        print(f"| {p} | {e_r:.4g} | {s_r:.2g} | {e_i:.4g} | {s_i:.2g} | {s_i / s_r:.1f} | {(e_i - e_r) / s_i:+.2f} |")
+
+
+def quick() -> None:
+    """Four maneuvers of the severe campaign, made by ``make-bag``, through both methods."""
+    with tempfile.TemporaryDirectory() as tmp:
+        bags, out = Path(tmp) / "severe", Path(tmp) / "quick.csv"
+        subprocess.run([sys.executable, "-m", "rls_uncertainty.cli", "make-bag", "--campaign", "4", "--gust-intensity",
+                        "severe", "--seed", "2010", "--out", str(bags), "--quiet"], check=True, cwd=ROOT)
+        run(argparse.Namespace(campaign=str(bags), count=4, case="severe (quick, 4 maneuvers)", workers=2, out=out))
+        table(argparse.Namespace(csv=[str(out)]))
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true", help="four maneuvers of the severe campaign, no files kept")
+    sub = ap.add_subparsers(dest="command")
+    r = sub.add_parser("run", help="one campaign through both methods into a CSV")
+    r.add_argument("campaign")
+    r.add_argument("--count", type=int, default=200, help="the first COUNT maneuvers")
+    r.add_argument("--case", help="the case's name in the tables (default: the directory's)")
+    r.add_argument("--workers", type=int, default=2)
+    r.add_argument("--out", required=True)
+    t = sub.add_parser("table", help="the tables of the CSVs")
+    t.add_argument("csv", nargs="+")
+    f = sub.add_parser("figure", help="coverage, SE / scatter and false convergence per case")
+    f.add_argument("csv", nargs="+")
+    f.add_argument("--png", required=True)
+    g = sub.add_parser("flight", help="the longitudinal Twin Otter recording, RLS and IV")
+    g.add_argument("--flight-data", default=str(ROOT.parent / "shared" / "flight_data"))
+    g.add_argument("--out", required=True, help="working directory (converted bags, replays)")
+    args = ap.parse_args()
+    if args.quick:
+        quick()
+    elif args.command is None:
+        ap.error("a command (run, table, figure) or --quick")
+    else:
+        {"run": run, "table": table, "figure": figure, "flight": flight}[args.command](args)
+
+
+if __name__ == "__main__":
+    main()
