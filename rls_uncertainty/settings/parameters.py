@@ -25,7 +25,7 @@ from typing import Any
 from ..aero.differentiation import DifferentiatorConfig
 from ..aero.models import DEFAULT_MODELS, OUTPUTS, REGRESSORS, ModelConfig
 from ..aero.surface_mixing import SurfaceMixing
-from ..datapath.config import InputConfig, OutputConfig, PipelineConfig
+from ..datapath.config import InputConfig, ManeuverOptions, OutputConfig, PipelineConfig
 from ..datapath.convergence import ConvergenceConfig
 from ..datapath.identifiability import IdentifiabilityConfig
 from ..datapath.limits import PlausibilityLimits
@@ -63,6 +63,7 @@ COMPONENTS: tuple[tuple[str, type], ...] = (
     ("convergence", ConvergenceConfig),
     ("identifiability", IdentifiabilityConfig),
     ("outputs", OutputConfig),
+    ("maneuvers", ManeuverOptions),
 )
 # Parameters renamed when the lag window began to follow time: said when an old file names them.
 RENAMED = {
