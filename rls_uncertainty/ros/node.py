@@ -48,6 +48,7 @@ from ..datapath.diagnostics import DiagnosticsPolicy, Status, malformed_reason, 
 from ..datapath.diagnostics_round import DiagnosticsRound
 from ..datapath.feasibility import configuration_warnings
 from ..datapath.inputs import MESSAGE_TYPES, STREAMS, arrival_order, feed, message_class
+from ..datapath.maneuvers import EVENT
 from ..datapath.outputs import HEADER, NODE_NAME, OutputLayout
 from ..datapath.pipeline import Pipeline, SampleOutput
 from ..errors import ConfigError
@@ -55,6 +56,7 @@ from ..settings.parameters import PARAMETERS, Parameter, node_config, pipeline_c
 from ..settings.sources import startup_parameters
 from .input_watch import SilentInputs
 from .intake import Intake
+from .maneuvers import LiveManeuvers
 from .node_state import NodeStateFile
 
 __all__ = ["EstimatorNode", "main", "NODE_NAME"]
@@ -143,6 +145,8 @@ class EstimatorNode(Node):
         in_qos = _input_qos(self.node_cfg.reliable, self.node_cfg.depth)
         self._intake = Intake(self, _TYPES, self.node_cfg.topics, in_qos)  # off the executor: taken in batches
         self._subs = self._intake.subs
+        # maneuvers.source events/detect: the test points' boundaries and ~/maneuvers (ros/maneuvers.py).
+        self._maneuvers = LiveManeuvers(self, self.pipeline) if self.config.maneuvers.source != "off" else None
         self.create_service(Trigger, "~/reset", self._on_reset)
         self.create_service(SetBool, "~/enable", self._on_enable)
         self.add_on_set_parameters_callback(self._validate_parameters)
@@ -203,6 +207,8 @@ class EstimatorNode(Node):
                 self.get_logger().warning(line)
             self.config = new
             self.pipeline = self.pipeline.reconfigured(new)
+            if self._maneuvers is not None:
+                self._maneuvers.follow(self.pipeline)
             self._make_publishers()
 
     def _make_publishers(self) -> None:
@@ -239,6 +245,8 @@ class EstimatorNode(Node):
     # ------------------------------------------------------------------ data path
     def destroy_node(self) -> None:
         self._intake.destroy()
+        if self._maneuvers is not None:
+            self._maneuvers.destroy()
         super().destroy_node()
 
     def _take_inputs(self) -> None:
@@ -248,18 +256,24 @@ class EstimatorNode(Node):
         replay feeds the same messages in the same order. Latency is counted from the arrival
         of the message that completed a sample to its last publish."""
         taken = self._intake.take()
-        if not any(taken.values()):
+        maneuvers = self._maneuvers
+        events = maneuvers.take() if maneuvers is not None else {}
+        if not any(taken.values()) and not any(events.values()):
             return
         now = time.monotonic()
         for kind, queued in taken.items():
             if queued:
                 self._arrived[kind] = now  # the stream's age in /diagnostics runs from here
+        taken |= events  # (merged in order of arrival with the inputs)
         pipeline, start = self.pipeline, time.time_ns()
         oldest = min((q[0][0] for q in taken.values() if q and q[0][0] > 0), default=start)
         self._waits.append(max(start - oldest, 0) * 1e-9)
         if pipeline.needs_clock:  # inputs.max_clock_offset: stamps are checked against it
             pipeline.clock_ns = self.get_clock().now().nanoseconds
         for kind, (arrived, raw) in arrival_order(taken):
+            if kind == EVENT:
+                maneuvers.event(raw)  # type: ignore[union-attr]  # (events come only with maneuvers)
+                continue
             c0 = time.thread_time()
             try:
                 outputs = feed(pipeline, kind, decode(MESSAGE_TYPES[kind], raw))
@@ -287,6 +301,8 @@ class EstimatorNode(Node):
         pubs = self._pubs
         for index, raw in self._layout.encode(out, self.node_cfg.frame_id):
             pubs[index].publish(raw)
+        if self._maneuvers is not None:
+            self._maneuvers.sample(out)
 
     # ------------------------------------------------------------------ services, time
     def _on_reset(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
@@ -386,6 +402,9 @@ class EstimatorNode(Node):
         self._fit_pubs[index].publish(raw)  # ~/M/fit, ~/M/identifiability
 
     def _publish_statuses(self, statuses: list[Status]) -> None:
+        if self._maneuvers is not None:
+            self._maneuvers.publish()
+            statuses = [*statuses, self._maneuvers.status(self.get_fully_qualified_name())]
         arr = DiagnosticArray()
         arr.header.stamp = self.get_clock().now().to_msg()
         arr.status = [
