@@ -36,9 +36,9 @@ def test_noise_free_regression_recovers_the_true_values():
 
 def test_short_period_mode_near_1_1_hz():
     rec = simulate_short_period()
-    from rls_uncertainty.simulation.t2 import _state_space
+    from rls_uncertainty.simulation.t2 import state_space
 
-    A = _state_space(rec.config, rec.aircraft)[0]
+    A = state_space(rec.config, rec.aircraft)[0]
     wn = np.abs(np.linalg.eigvals(A)[0]) / (2 * np.pi)
     assert 1.0 < wn < 1.2
 

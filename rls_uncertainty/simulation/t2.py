@@ -56,6 +56,12 @@ __all__ = [
     "SensorStreams",
     "simulate_sensor_streams",
     "gust_velocity",
+    "state_space",
+    "gust_input",
+    "FineResponse",
+    "fine_response",
+    "StreamRates",
+    "sensor_streams",
     "simulate_maneuver",
     "campaign_seeds",
     "simulate_campaign",
@@ -140,7 +146,7 @@ class ShortPeriodRecord:
         return {name: getattr(self, name) for name in SIGNALS}
 
 
-def _state_space(
+def state_space(
     cfg: SimulationConfig, ac: AircraftConfig
 ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
     """Eq. 25a-b: states (d alpha, d q), input d delta_e, outputs (d alpha, d q, d a_z m/s^2)."""
@@ -156,7 +162,7 @@ def _state_space(
     return A, B, C, Dm
 
 
-def _gust_input(cfg: SimulationConfig, ac: AircraftConfig) -> tuple[FloatArray, FloatArray]:
+def gust_input(cfg: SimulationConfig, ac: AircraftConfig) -> tuple[FloatArray, FloatArray]:
     """Input and feedthrough columns of the gust angle ``w_g / V`` (module docstring): it
     acts through C_Z_alpha and C_m_alpha like alpha, and the vane and a_z read it."""
     tv = cfg.true
@@ -173,7 +179,7 @@ def _rms_variation(x: FloatArray) -> float:
 
 
 @dataclass(frozen=True)
-class _FineResponse:
+class FineResponse:
     """The response on the integration grid: elevator ``u``, calm-air outputs ``y`` (d alpha,
     q, d a_z of Eq. 25b), the gust ``w_g`` and its outputs ``y_gust`` (``None`` in calm air)."""
 
@@ -184,10 +190,10 @@ class _FineResponse:
     y_gust: FloatArray | None
 
 
-def _fine_response(
+def fine_response(
     cfg: SimulationConfig, ac: AircraftConfig, elevator: Multisine, gust: FloatArray | None
-) -> _FineResponse:
-    A, B, C, Dm = _state_space(cfg, ac)
+) -> FineResponse:
+    A, B, C, Dm = state_space(cfg, ac)
     n_fine = int(round(cfg.duration * cfg.fine_rate))
     t_fine = np.arange(n_fine) / cfg.fine_rate
     tau = t_fine - cfg.input_start
@@ -195,17 +201,17 @@ def _fine_response(
     u = np.where(on, elevator(np.clip(tau, 0, elevator.period)), 0.0)
     _, y, _ = signal.lsim((A, B, C, Dm), u, t_fine)
     if gust is None:
-        return _FineResponse(t_fine, u, y, None, None)
+        return FineResponse(t_fine, u, y, None, None)
     gust = np.asarray(gust, dtype=np.float64)
     if gust.shape != (n_fine,) or not np.isfinite(gust).all():
         raise ConfigError(f"gust must be {n_fine} finite samples of w_g on the {cfg.fine_rate:g} Hz "
                           f"integration grid, got shape {gust.shape}")
-    Bg, Dg = _gust_input(cfg, ac)
+    Bg, Dg = gust_input(cfg, ac)
     _, y_gust, _ = signal.lsim((A, Bg, C, Dg), gust / cfg.airspeed, t_fine)
-    return _FineResponse(t_fine, u, y, gust, y_gust)
+    return FineResponse(t_fine, u, y, gust, y_gust)
 
 
-def _sampled(response: _FineResponse, cfg: SimulationConfig, ac: AircraftConfig) -> ShortPeriodRecord:
+def _sampled(response: FineResponse, cfg: SimulationConfig, ac: AircraftConfig) -> ShortPeriodRecord:
     """The record at ``cfg.rate`` from ``cfg.sample_offset`` on."""
     step = int(round(cfg.fine_rate / cfg.rate))
     idx = np.arange(int(round(cfg.sample_offset * cfg.fine_rate)), response.t.size, step)
@@ -244,7 +250,7 @@ def simulate_short_period(
     for calm air. Its response (module docstring) is added to the calm-air response.
     """
     ac = aircraft or load_aircraft("t2")
-    return _sampled(_fine_response(cfg, ac, elevator, gust), cfg, ac)
+    return _sampled(fine_response(cfg, ac, elevator, gust), cfg, ac)
 
 
 def _check_band_limited_on(band_limited_on: Collection[str]) -> frozenset[str]:
@@ -413,9 +419,44 @@ def simulate_sensor_streams(
     elevator = T2_TABLE2["elevator"]
     nominal = None
     if input_amplitude != 1.0:
-        nominal = _fine_response(cfg, ac, elevator, None)  # the noise scale: Table 2's maneuver, calm air
+        nominal = fine_response(cfg, ac, elevator, None)  # the noise scale: Table 2's maneuver, calm air
         elevator = replace(elevator, amplitude=elevator.amplitude * float(input_amplitude))
-    response = _fine_response(cfg, ac, elevator, w)
+    response = fine_response(cfg, ac, elevator, w)
+    rates = StreamRates(imu_rate, air_data_rate, surface_rate, thrust_rate, air_data_offset, surface_offset)
+    return sensor_streams(response, nominal, cfg, ac, rng, band_level=band_level, band_limited_on=band_limited_on,
+                          rates=rates, start_ns=start_ns)
+
+
+@dataclass(frozen=True)
+class StreamRates:
+    """The sensors' rates (Hz) and the offsets (s) of the air data and surface samples."""
+
+    imu: float = 200.0
+    air_data: float = 50.0
+    surface: float = 100.0
+    thrust: float = 10.0
+    air_data_offset: float = 0.004
+    surface_offset: float = 0.002
+
+
+def sensor_streams(
+    response: FineResponse,
+    nominal: FineResponse | None,
+    cfg: SimulationConfig,
+    ac: AircraftConfig,
+    rng: np.random.Generator,
+    *,
+    band_level: float,
+    band_limited_on: Collection[str],
+    rates: StreamRates = StreamRates(),
+    start_ns: int,
+) -> SensorStreams:
+    """A simulated response (:func:`fine_response`) as the node's input streams, each sampled
+    at its rate with :func:`add_noise`'s noise drawn from ``rng`` (IMU, air data, surfaces in
+    that order) at the scale of ``nominal``'s response (``None``: the response's own); the
+    stamps count from ``start_ns``. :func:`simulate_sensor_streams` says what each stream holds."""
+    imu_rate, air_data_rate, surface_rate = rates.imu, rates.air_data, rates.surface
+    thrust_rate, air_data_offset, surface_offset = rates.thrust, rates.air_data_offset, rates.surface_offset
 
     def stream(rate: float, offset: float) -> tuple[Stamps, ShortPeriodRecord]:
         at = replace(cfg, rate=rate, sample_offset=offset)
@@ -439,7 +480,8 @@ def simulate_sensor_streams(
     t_srf, srf = stream(surface_rate, surface_offset)
     zeros = np.zeros(t_srf.size)
     surfaces = np.column_stack([srf.delta_e, srf.delta_e, zeros, zeros, zeros])
-    t_thr = start_ns + np.round(np.arange(0.0, cfg.duration, 1.0 / thrust_rate) * 1e9).astype(np.int64)
+    n_thr = int(np.ceil(cfg.duration * thrust_rate - 1e-6))  # the samples before cfg.duration
+    t_thr = start_ns + np.round(np.arange(n_thr) / thrust_rate * 1e9).astype(np.int64)
     # Thrust balancing a drag coefficient of 0.03 at trim (CX only; the T-2 model has no CX).
     thrust = np.full(t_thr.size, ac.mass * ax + 0.03 * cfg.qbar * ac.S)
     return SensorStreams(
