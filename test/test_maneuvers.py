@@ -12,15 +12,14 @@ import pytest
 
 from rls_uncertainty import cli
 from rls_uncertainty.datapath.inputs import feed
+from rls_uncertainty.datapath.maneuver_detector import ManeuverDetector
 from rls_uncertainty.datapath.maneuvers import (
     MANEUVER_COLUMNS,
-    ManeuverOptions,
+    ManeuverSettings,
     ManeuverTracker,
-    judge_event,
     tracker_for,
 )
 from rls_uncertainty.datapath.pipeline import Pipeline
-from rls_uncertainty.errors import ConfigError
 from rls_uncertainty.offline.bags import read_inputs, typestore
 from rls_uncertainty.offline.replay import run_pipeline
 from rls_uncertainty.settings.parameters import pipeline_config
@@ -36,6 +35,7 @@ EVENTS = [
     (int(0.5 * S), "pA", "start"),
     (int(1.0 * S), "pA", "start"),  # start twice
     (int(2.0 * S), "", "start"),  # empty name
+    (int(2.5 * S), "p\x07", "start"),  # unprintable name
     (int(3.0 * S), "pA", "pause"),  # unknown value
     (int(4.0 * S), "pB", "stop"),  # another test point's stop
     (int(5.5 * S), "pA", "stop"),
@@ -43,7 +43,7 @@ EVENTS = [
     (int(6.0 * S), "pB", " START "),  # blanks and case are ignored
     (int(11.5 * S), "pB", "stop"),
 ]
-REJECTED = {"start_twice": 1, "empty_name": 1, "unknown_value": 1, "stop_other_name": 1, "stop_without_start": 1}
+REJECTED = {"start_twice": 1, "event_key": 2, "event_value": 1, "stop_other_name": 1, "stop_without_start": 1}
 
 
 def events_bag(tmp_path, events=EVENTS, topic="/test_point", name="flight"):
@@ -108,12 +108,15 @@ def live_history(bag, config):
 
 # ---------------------------------------------------------------------------- the events' rules
 @pytest.mark.parametrize(("key", "value", "reason"), [
-    ("p", "begin", "unknown_value"), ("p", "", "unknown_value"), ("", "start", "empty_name"),
-    ("   ", "stop", "empty_name"), ("x" * 201, "start", "name_too_long"), (None, "start", "not_text"),
-    ("p", 3, "not_text"), (b"p", "start", "not_text"),
+    ("p", "begin", "event_value"), ("p", "", "event_value"), ("", "start", "event_key"),
+    ("   ", "stop", "event_key"), ("x" * 65, "start", "event_key"), (None, "start", "event_type"),
+    ("p", 3, "event_type"), (b"p", "start", "event_type"),
 ])
-def test_a_bad_event_is_rejected_with_its_reason(key, value, reason):
-    assert judge_event(key, value) == reason
+def test_a_bad_event_is_rejected_with_its_reason_and_changes_nothing(key, value, reason):
+    config = pipeline_config(params(**{"maneuvers.source": "events"}))
+    tracker = ManeuverTracker(Pipeline(config), config.maneuvers)
+    assert tracker.event(0, key, value) == reason
+    assert tracker.rejected == {reason: 1} and tracker.active is None and not tracker.history
 
 
 def test_garbage_events_are_counted_by_reason_and_never_start_or_end_a_maneuver(tmp_path):
@@ -128,7 +131,7 @@ def test_garbage_events_are_counted_by_reason_and_never_start_or_end_a_maneuver(
         assert start - 0.2 < (rec.start_ns - T0) * 1e-9 <= start and end - 0.2 < (rec.end_ns - T0) * 1e-9 <= end
         assert rec.start_ns % (S // 50) == 0 and rec.end_ns % (S // 50) == 0  # samples of the 50 Hz grid
     summary = tracker.summary()
-    assert summary["maneuvers.events_rejected"] == 5 and summary["maneuvers.recorded"] == 2
+    assert summary["maneuvers.events_rejected"] == 6 and summary["maneuvers.recorded"] == 2
     assert summary["maneuvers.events_rejected.start_twice"] == 1 and summary["maneuvers.last"] == "pB"
 
 
@@ -144,14 +147,12 @@ def test_the_history_is_a_ring_of_maneuvers_history_entries():
     assert tracker.history[-1].duration == 5.0
 
 
-def test_maneuvers_are_off_by_default_and_detect_without_a_detector_is_one_clear_error():
+def test_maneuvers_are_off_by_default_and_detect_feeds_the_detector_of_the_settings():
     pipe = Pipeline(pipeline_config(params()))
-    assert pipe.config.maneuvers == ManeuverOptions() and tracker_for(pipe) is None
-    detect = Pipeline(pipeline_config(params(**{"maneuvers.source": "detect"})))
-    try:
-        tracker_for(detect)
-    except ConfigError as exc:
-        assert "maneuvers.source" in str(exc)
+    assert pipe.config.maneuvers == ManeuverSettings() and tracker_for(pipe) is None
+    detect = Pipeline(pipeline_config(params(**{"maneuvers.source": "detect", "maneuvers.threshold": 20.0})))
+    tracker = tracker_for(detect)
+    assert isinstance(tracker.detector, ManeuverDetector) and tracker.detector.options.threshold == 20.0
 
 
 # ---------------------------------------------------------------------------- a maneuver's numbers

@@ -28,6 +28,7 @@ from ..schema import check, default_of, option
 from .convergence import ConvergenceConfig
 from .identifiability import IdentifiabilityConfig
 from .limits import PlausibilityLimits
+from .maneuver_detector import ManeuverOptions
 
 # Models whose outputs need the angular accelerations (Eq. 1: the moments).
 _MOMENT_MODELS = ("Cl", "Cm", "Cn")
@@ -123,7 +124,7 @@ SOURCES = ("off", "events", "detect")
 
 
 @dataclass(frozen=True)
-class ManeuverOptions:
+class ManeuverSettings:
     """``maneuvers.*``: where maneuver boundaries come from, the event topic, the history kept."""
 
     source: str = option("off", "where maneuver boundaries come from: off (one estimate across everything), events "
@@ -160,7 +161,9 @@ class PipelineConfig:
     identifiability: IdentifiabilityConfig = field(default_factory=IdentifiabilityConfig)
     outputs: OutputConfig = OutputConfig()
     # Where maneuvers start and end (maneuvers.*; the caller's ManeuverTracker acts on them).
-    maneuvers: ManeuverOptions = field(default_factory=ManeuverOptions)
+    maneuvers: ManeuverSettings = field(default_factory=ManeuverSettings)
+    # The detection rule of maneuvers.source detect (maneuvers.f_max, .window, ...).
+    detection: ManeuverOptions = field(default_factory=ManeuverOptions)
     # estimator.method and, unless it is "time", the frequency-domain estimator's options.
     method: str = option("time", "estimates published: time (recursive least squares, ~/M/estimates ...), "
                          "frequency (equation error on a recursive Fourier transform, ~/M/frequency/estimates ...) or "

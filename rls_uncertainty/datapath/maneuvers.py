@@ -6,20 +6,29 @@ A flight-test day is a card of test points flown one after another in one record
 stream into maneuvers:
 
 * ``events``: from messages on ``maneuvers.topic`` (``diagnostic_msgs/msg/KeyValue``: ``key``
-  the test point's name, ``value`` ``start`` or ``stop``), judged by :func:`judge_event`: an
-  unknown value, an empty name, a stop without a start (or of another test point) and a start
-  while a maneuver runs are rejected with their reason and counted, never acted on;
-* ``detect``: from the excitation itself, by the maneuver detector
-  (:mod:`.maneuver_detector`), fed the control-surface positions;
+  the test point's name, ``value`` ``start`` or ``stop``), read by
+  :func:`.maneuver_detector.event_boundary`: a key or value that is not text
+  (``event_type``), an empty or unprintable name or one over 64 characters (``event_key``), a
+  value other than start or stop (``event_value``), a stop without a start
+  (``stop_without_start``) or of another test point (``stop_other_name``) and a start while a
+  maneuver runs (``start_twice``) are rejected with their reason and counted, never acted on;
+* ``detect``: from the excitation itself, by :class:`.maneuver_detector.ManeuverDetector`
+  (its rule and thresholds, ``maneuvers.f_max``, ``.window``, ``.threshold``, ``.rise``,
+  ``.hold``, are there), fed the control-surface positions before the pipeline sees them;
 * ``off`` (the default): no tracker; one estimate runs across everything, as without maneuvers.
 
-At a maneuver's start the estimator starts afresh (:meth:`.pipeline.Pipeline.reset` with
+A boundary is acted on when it is declared: an event when it arrives, a detected start
+``maneuvers.rise`` after the crossing, a detected end ``maneuvers.hold`` after the power fell
+back. At a maneuver's start the estimator starts afresh (:meth:`.pipeline.Pipeline.reset` with
 ``clear_inputs=False``: the buffered inputs, the differentiator and its delay line are kept, so
 the samples waiting there reach the new estimator). At its end the tracker records, per
-parameter, the final estimate (each model's last published sample in the maneuver), the
+parameter, the final estimate (each model's last published sample stamped at or before the
+end's stamp: a detected end is stamped about a window before it is declared, and the samples
+between are trim), the
 conventional (Eq. 13) and corrected (Eq. 22) standard errors, with the pipeline's regression
 rows kept (``record``) the corrected one with all lags (Eq. 20), the state and its reason
-(:mod:`.states`), the model's R^2 and samples, and the maneuver's start, end and duration. The
+(:mod:`.states`), the model's R^2 and samples (at the end's declaration), and the maneuver's
+start, end and duration (the boundaries' stamps). The
 rows have the campaign's columns (:data:`MANEUVER_COLUMNS`); a maneuver shorter than
 ``min_span`` has every row ``too_short`` as in a campaign. The history keeps the newest
 ``maneuvers.history`` maneuvers (a ring: the oldest is dropped, and counted), so memory is
@@ -31,31 +40,30 @@ each maneuver's start.)
 from __future__ import annotations
 
 import csv
-import importlib
 import io
 import math
 from collections import deque
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from ..errors import ConfigError
-from .config import SOURCES, ManeuverOptions
+from ..errors import Refused
+from .config import SOURCES, ManeuverSettings
+from .maneuver_detector import Boundary, ManeuverDetector, event_boundary
 from .states import parameter_states, se_percent
 
 if TYPE_CHECKING:  # annotations only
     from .pipeline import Pipeline, SampleOutput
 
-__all__ = ["ManeuverOptions", "ManeuverRow", "ManeuverRecord", "ManeuverTracker", "Boundary", "judge_event",
+__all__ = ["ManeuverSettings", "ManeuverRow", "ManeuverRecord", "ManeuverTracker", "Boundary",
            "MANEUVER_COLUMNS", "MIN_SPAN", "SOURCES", "EVENT_TYPE", "EVENT",
            "tracker_for", "maneuvers_csv"]
 
 EVENT_TYPE = "diagnostic_msgs/msg/KeyValue"
 EVENT = "event"  # the kind of an event message in a stream of (kind, stamp, message)
-START, STOP = "start", "stop"
-NAME_LENGTH = 200  # a test point's name longer than this is rejected (name_too_long)
+START, END = "start", "end"
 
 # The shortest maneuver whose parameters can be flagged converged at the defaults: the T-2 models'
 # publication span (2.1 s: 2 x 50 lags + 4 parameters at 50 Hz) plus convergence.window (2 s).
@@ -65,32 +73,6 @@ MIN_SPAN = 4.0
 # error, the method beside the parameter).
 MANEUVER_COLUMNS = ("maneuver", "model", "parameter", "method", "estimate", "se_conventional", "se_corrected",
                     "se_corrected_all", "samples", "r_squared", "status", "se_percent", "state", "reason")
-
-
-@dataclass(frozen=True)
-class Boundary:
-    """A maneuver's ``start`` or ``end`` (``kind``) at ``stamp_ns``, of the test point ``name``."""
-
-    kind: str
-    stamp_ns: int
-    name: str
-
-
-def judge_event(key: object, value: object) -> tuple[str, str] | str:
-    """An event message's ``(name, value)`` (``value`` ``start`` or ``stop``), or the reason it is
-    rejected: ``not_text`` (a key or value that is not a string), ``empty_name``,
-    ``name_too_long`` (over :data:`NAME_LENGTH` characters), ``unknown_value``. Surrounding
-    blanks are ignored, the value's case too."""
-    if not isinstance(key, str) or not isinstance(value, str):
-        return "not_text"
-    name, what = key.strip(), value.strip().lower()
-    if not name:
-        return "empty_name"
-    if len(name) > NAME_LENGTH:
-        return "name_too_long"
-    if what not in (START, STOP):
-        return "unknown_value"
-    return name, what
 
 
 @dataclass(frozen=True)
@@ -152,9 +134,8 @@ class ManeuverTracker:
     pipeline. ``detector``: for ``detect``, a callable ``(stamp_ns, positions) -> boundaries``
     fed by :meth:`surfaces`."""
 
-    def __init__(self, pipe: Pipeline, options: ManeuverOptions, *, min_span: float = MIN_SPAN,
-                 detector: Callable[[int, Sequence[float]], Sequence[Boundary]] | None = None,
-                 keep_all: bool = False) -> None:
+    def __init__(self, pipe: Pipeline, options: ManeuverSettings, *, min_span: float = MIN_SPAN,
+                 detector: ManeuverDetector | None = None, keep_all: bool = False) -> None:
         self.pipe = pipe
         self.options = options
         self.min_span = min_span
@@ -164,6 +145,9 @@ class ManeuverTracker:
         self.recorded = 0  # maneuvers recorded (dropped from the history ones too)
         self.rejected: dict[str, int] = {}  # event rejections by reason
         self.active: _Open | None = None
+        # The newest outputs, for an end stamped before it is declared (detect: window + hold).
+        span = pipe.config.detection.window + pipe.config.detection.hold + 1.0 if detector is not None else 0.0
+        self._recent: deque[SampleOutput] = deque(maxlen=1 + math.ceil(span * pipe.config.rate))
 
     # ------------------------------------------------------------------ boundaries in
     def event(self, stamp_ns: int, key: object, value: object) -> str | None:
@@ -173,18 +157,16 @@ class ManeuverTracker:
         maneuver's; at an end, the stamp of the final estimates), ``stamp_ns`` (the caller's
         clock) before any sample. So the node, the replay and a campaign of the same messages in
         the same order place it alike, whatever clock or playback speed."""
-        judged = judge_event(key, value)
-        if isinstance(judged, str):
-            return self.reject(judged)
-        name, what = judged
         newest = self.pipe.last_stamp_ns
-        at = int(stamp_ns) if newest is None else newest
-        return self.boundary(Boundary(START if what == START else "end", at, name))
+        judged = event_boundary(int(stamp_ns) if newest is None else newest, key, value)
+        if isinstance(judged, Refused):
+            return self.reject(judged.reason)
+        return self.boundary(judged)
 
     def surfaces(self, stamp_ns: int, positions: Sequence[float]) -> None:
         """Control-surface positions for the detector (``detect``), whose boundaries are acted on."""
         if self.detector is not None:
-            for b in self.detector(stamp_ns, positions):
+            for b in self.detector.update(stamp_ns, positions):
                 self.boundary(b)
 
     def boundary(self, b: Boundary) -> str | None:
@@ -196,6 +178,7 @@ class ManeuverTracker:
             if active is not None:
                 return self.reject("start_twice")
             self.pipe.reset("maneuver_start", clear_inputs=False)
+            self._recent.clear()
             self.active = _Open(b.name, b.stamp_ns, [None] * len(self.pipe.sizes))
             return None
         if active is None:
@@ -206,7 +189,11 @@ class ManeuverTracker:
         return None
 
     def finish(self, stamp_ns: int) -> None:
-        """End of data: a maneuver still running ends at ``stamp_ns`` and is recorded."""
+        """End of data: a maneuver still running ends at ``stamp_ns`` (the detector's end, with
+        ``detect``) and is recorded."""
+        if self.detector is not None:
+            for b in self.detector.finish(int(stamp_ns)):
+                self.boundary(b)
         if self.active is not None:
             self._record(max(int(stamp_ns), self.active.start_ns))
 
@@ -230,12 +217,14 @@ class ManeuverTracker:
             return
         for j in np.flatnonzero(out.ready).tolist():
             active.last[j] = out
+        self._recent.append(out)
 
     # ------------------------------------------------------------------ the record
     def _record(self, end_ns: int) -> None:
         active = self.active
         assert active is not None
         self.active = None
+        self._settle(active, end_ns)
         rows = tuple(self._rows(active))
         duration = (end_ns - active.start_ns) * 1e-9
         if duration < self.min_span:
@@ -243,6 +232,16 @@ class ManeuverTracker:
             rows = tuple(replace(r, status=short) for r in rows)
         self.history.append(ManeuverRecord(active.name, active.start_ns, end_ns, rows))
         self.recorded += 1
+
+    def _settle(self, active: _Open, end_ns: int) -> None:
+        """Each model's final output: its newest ready one stamped at or before ``end_ns``
+        (among the outputs kept; none: no estimate)."""
+        recent = self._recent
+        if not recent or recent[-1].stamp_ns <= end_ns:
+            return
+        for j in range(len(active.last)):
+            active.last[j] = next((o for o in reversed(recent) if o.stamp_ns <= end_ns and o.ready[j]), None)
+        recent.clear()
 
     def _all_lags(self) -> tuple[np.ndarray | None, int | None]:
         """The corrected standard errors with all lags (Eq. 20) over the maneuver's regression
@@ -307,30 +306,12 @@ class ManeuverTracker:
 
 def tracker_for(pipe: Pipeline, *, min_span: float = MIN_SPAN, keep_all: bool = False) -> ManeuverTracker | None:
     """The tracker of ``pipe``'s ``maneuvers.*`` settings (None with ``source: off``); with
-    ``detect``, fed by the maneuver detector (:mod:`.maneuver_detector`), or a
-    :class:`.errors.ConfigError` when the detector is not available."""
+    ``detect``, fed by the maneuver detector (:mod:`.maneuver_detector`)."""
     options = pipe.config.maneuvers
     if options.source == "off":
         return None
-    detector = None
-    if options.source == "detect":
-        detector = _detector(pipe)
+    detector = ManeuverDetector(pipe.config.detection) if options.source == "detect" else None
     return ManeuverTracker(pipe, options, min_span=min_span, detector=detector, keep_all=keep_all)
-
-
-def _detector(pipe: Pipeline) -> Callable[[int, Sequence[float]], Sequence[Boundary]]:
-    """The maneuver detector's ``update`` as a boundary source, its boundaries as :class:`Boundary`."""
-    try:
-        module = importlib.import_module(f"{__package__}.maneuver_detector")
-    except ImportError as exc:
-        raise ConfigError("maneuvers.source detect: the maneuver detector is not available in this installation; "
-                          "use maneuvers.source events", parameter="maneuvers.source") from exc
-    detector = module.ManeuverDetector(module.DetectorOptions()) if hasattr(module, "DetectorOptions") \
-        else module.ManeuverDetector()
-
-    def update(stamp_ns: int, positions: Sequence[float]) -> list[Boundary]:
-        return [Boundary(b.kind, int(b.stamp_ns), str(b.name)) for b in detector.update(stamp_ns, positions)]
-    return update
 
 
 def _cell(x: object) -> str:

@@ -4,6 +4,8 @@ With ``maneuvers.source`` other than ``off`` the node keeps one
 :class:`..datapath.maneuvers.ManeuverTracker` over its pipeline (its rules are there). This
 adapter only subscribes, decodes and publishes:
 
+* with ``detect``, each control-surface message goes to the detector before the pipeline, as
+  in the replay;
 * ``maneuvers.topic`` (``events``): ``diagnostic_msgs/msg/KeyValue`` (``key`` the test point,
   ``value`` ``start``/``stop``), subscribed outside the executor like the inputs
   (:class:`.intake.Intake`, reliable, 100 deep) and taken in the same batches, so each event is
@@ -82,6 +84,12 @@ class LiveManeuvers:
             return
         self.tracker.event(now, msg.key, msg.value)
         self.publish()
+
+    def surfaces(self, msg: Any) -> None:
+        """A decoded control-surface message for the detector (``detect``; else nothing)."""
+        if self.tracker.detector is not None:
+            s = msg.header.stamp
+            self.tracker.surfaces(int(s.sec) * 1_000_000_000 + int(s.nanosec), list(msg.position))
 
     def sample(self, out: SampleOutput) -> None:
         self.tracker.sample(out)

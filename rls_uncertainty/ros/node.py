@@ -276,7 +276,10 @@ class EstimatorNode(Node):
                 continue
             c0 = time.thread_time()
             try:
-                outputs = feed(pipeline, kind, decode(MESSAGE_TYPES[kind], raw))
+                msg = decode(MESSAGE_TYPES[kind], raw)
+                if kind == "control_surfaces" and maneuvers is not None:  # (maneuvers.source detect)
+                    maneuvers.surfaces(msg)
+                outputs = feed(pipeline, kind, msg)
             except Exception as exc:  # noqa: BLE001 - a bad message must never stop the node
                 self._malformed(kind, exc)
                 continue
