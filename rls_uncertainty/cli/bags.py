@@ -52,14 +52,37 @@ def _make_campaign(args: argparse.Namespace) -> int:
     return 0
 
 
+def _make_flight(args: argparse.Namespace) -> int:
+    """make-bag --flight: a flight-test day as one recording, with truth.csv beside the bag."""
+    from ..offline.flight_bag import TRUTH_FILE, write_flight_bag
+
+    if args.campaign is not None:
+        raise ConfigError("--flight and --campaign are two kinds of output: give one")
+    if args.input_amplitude != 1.0:
+        raise ConfigError("--input-amplitude is not used with --flight (every maneuver is Table 2's multisine)")
+    out = args.out or "bags/t2_flight"
+    flight = write_flight_bag(out, args.seed, force=args.force, band_level=args.noise / 100.0,
+                              band_limited_on=noise_on(args.noise_on), gust_sigma=args.gust_intensity)
+    conditions = sorted({m.condition for m in flight.maneuvers})
+    print(f"wrote {out}: a {flight.duration:.0f} s flight, {len(flight.maneuvers)} T-2 maneuvers at conditions "
+          f"{', '.join(conditions)} between trim legs, Dryden vertical gusts, {args.noise:g}% band-limited noise on "
+          f"{noise_on_name(args.noise_on)}, seed {args.seed}, test points on /test_point; the truth in "
+          f"{Path(out) / TRUTH_FILE}")
+    return 0
+
+
 def _make_bag(args: argparse.Namespace) -> int:
     """Write the seeded T-2 maneuver on the node's standard input topics."""
     from ..offline.bags import write_t2_bag
 
+    if args.flight:
+        return _make_flight(args)
+    args.out = args.out or "bags/t2_maneuver"
     if args.campaign is not None:
         return _make_campaign(args)
     if args.gust_intensity is not None:
-        raise ConfigError("--gust-intensity sets the turbulence of a simulated campaign: give --campaign N")
+        raise ConfigError("--gust-intensity sets the turbulence of a simulated campaign or flight: give --campaign N "
+                          "or --flight")
     from ..simulation.t2 import SIGNALS
 
     on = SIGNALS if args.noise_on is None else noise_on(args.noise_on)  # the bundled bag's: all four
@@ -83,15 +106,18 @@ def _convert(args: argparse.Namespace) -> int:
 
 def add_make_bag(sub: Any) -> None:
     mb = sub.add_parser("make-bag", help="write the seeded T-2 maneuver as a bag on the standard input topics")
-    mb.add_argument("--out", default="bags/t2_maneuver", help="bag directory (default bags/t2_maneuver)")
+    mb.add_argument("--out", help="bag directory (default bags/t2_maneuver; with --flight bags/t2_flight)")
     mb.add_argument("--noise", type=real(0.0), default=20.0, help="band-limited noise, percent (default 20)")
     mb.add_argument("--seed", type=integer(0), default=250, help="noise seed (default 250)")
     mb.add_argument("--campaign", type=integer(1), metavar="N",
                     help="write N maneuvers flown in turbulence, one replay bag each, into --out (a campaign for "
                          "rls-uncertainty campaign; docs/campaign.md)")
+    mb.add_argument("--flight", action="store_true",
+                    help="write one recording of a flight-test day: trim legs in gusts and 12 T-2 maneuvers at three "
+                         "airspeeds, test points on /test_point, truth.csv beside the bag (docs/maneuvers.md)")
     mb.add_argument("--gust-intensity", type=_gust, metavar="SIGMA_W",
-                    help="with --campaign: RMS vertical gust in m/s, or light, moderate, severe (MIL-F-8785C low "
-                         "altitude: 0.77, 1.54, 2.31 m/s)")
+                    help="with --campaign or --flight: RMS vertical gust in m/s, or light, moderate, severe "
+                         "(MIL-F-8785C low altitude: 0.77, 1.54, 2.31 m/s; --flight's default light)")
     mb.add_argument("--noise-on", choices=("all", "responses"),
                     help="measured signals carrying the band-limited noise: 'all' (elevator, alpha, q, a_z) or "
                          "'responses' (alpha, q, a_z) (default: all for one maneuver, the bundled bag's; with "

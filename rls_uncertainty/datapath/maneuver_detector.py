@@ -21,9 +21,11 @@ the surface positions (rad, any number of surfaces):
    the start.
 
 At the defaults (``threshold`` 10, i.e. 10 dB, ``window`` 2 s, ``rise`` 0.3 s, ``hold`` 1 s)
-on the simulated flight (``make-bag --flight``, docs/maneuvers.md) every maneuver is found
-within a few tenths of a second and no trim leg with gusts gives a maneuver: the gusts move the
-aircraft, not the surfaces. A pilot's trim corrections in the band would count as input; raise
+on the simulated flight (``make-bag --flight``, docs/maneuvers.md) every maneuver is found,
+its start and end within 0.3 s of the input's when the elevator's trim floor is its wide-band
+sensor noise, within 1.2 s when band-limited noise 16 dB below the maneuver's power is on the
+elevator too, and no trim leg in gusts gives a maneuver: the gusts move the aircraft, not the
+surfaces. A pilot's trim corrections in the band would count as input; raise
 ``threshold`` when the trim floor is not sensor noise.
 
 Garbage is counted, never raised: a message with a NaN or infinite position (``non_finite``),
@@ -51,9 +53,11 @@ from ..errors import Refused
 from ..schema import check, option
 
 __all__ = ["Boundary", "ManeuverOptions", "ManeuverDetector", "event_boundary", "refusal_text", "KINDS",
-           "EVENT_VALUES", "EVENT_REASONS", "MAX_NAME"]
+           "EVENT_TOPIC", "EVENT_TYPE", "EVENT_VALUES", "EVENT_REASONS", "MAX_NAME"]
 
 KINDS = ("start", "end")
+EVENT_TOPIC = "test_point"  # the event topic a simulated flight records (relative, as the input topics)
+EVENT_TYPE = "diagnostic_msgs/msg/KeyValue"
 # The event topic's values and the boundary each one is.
 EVENT_VALUES = {"start": "start", "stop": "end"}
 # Why an event is refused, by the reason it is counted under.

@@ -282,16 +282,18 @@ class BagWriter(OutputWriter):
 
 @contextmanager
 def _bag_directory(path: Path, topics: Sequence[tuple[str, str]], store: Typestore, *, force: bool,
-                   inputs: tuple[str | Path, ...] = ()) -> Iterator[BagWriter]:
+                   inputs: tuple[str | Path, ...] = (), files: Mapping[str, str] | None = None) -> Iterator[BagWriter]:
     """A ROS 2 bag directory at ``path``, atomic (:func:`.files.output_directory`: complete or
     absent; an existing non-empty ``path`` only with ``force``, never over ``inputs``):
     ``NAME.mcap`` written by the :class:`BagWriter` this yields, then rosbag2's
-    ``metadata.yaml`` (:func:`.mcap_io.write_metadata`)."""
+    ``metadata.yaml`` (:func:`.mcap_io.write_metadata`) and the text ``files`` (name: text)."""
     with output_directory(path, force=force, inputs=inputs) as tmp:
         with BagWriter(tmp / f"{path.resolve().name}.mcap", topics, store) as writer:
             yield writer
         assert writer.info is not None  # (set by close)
         write_metadata(tmp, writer.info)
+        for name, text in (files or {}).items():
+            (tmp / name).write_text(text)
 
 
 def _mk(
@@ -376,10 +378,14 @@ def write_replay(path: str | Path, records: Iterable[tuple[int, str, str, object
     return path
 
 
-def write_sensor_streams(path: str | Path, streams: SensorStreams, *, force: bool = False) -> Path:
+def write_sensor_streams(path: str | Path, streams: SensorStreams, *, force: bool = False,
+                         events: Sequence[tuple[int, str, str, object]] = (),
+                         files: Mapping[str, str] | None = None) -> Path:
     """A :class:`.simulation.SensorStreams` as a bag on the standard topics at ``path``
     (atomic, as :func:`write_replay`), written message by message in stamp order: a long
-    recording never sits in memory as messages."""
+    recording never sits in memory as messages. ``events``: more records ``(stamp_ns, topic,
+    msgtype, msg)`` in stamp order (an event topic), merged in; ``files``: text files (name:
+    text) written beside the bag's."""
     store = typestore()
     path = Path(path)
 
@@ -387,11 +393,17 @@ def write_sensor_streams(path: str | Path, streams: SensorStreams, *, force: boo
         stamps = getattr(streams, kind)[0]
         return ((int(stamps[k]), _rank(kind), kind, k) for k in range(stamps.size))
 
-    with _bag_directory(path, [(f"/{kind}", MESSAGE_TYPES[kind]) for kind in INPUTS], store, force=force) as writer:
-        for stamp, _, kind, k in heapq.merge(*(records(kind) for kind in INPUTS)):
-            values = getattr(streams, kind)[1][k]
-            msg = _standard_message(store, kind, stamp, values, streams.surface_names)
-            writer.add(stamp, f"/{kind}", MESSAGE_TYPES[kind], msg)
+    extra = ((int(e[0]), _rank(e[1]), e[1], k) for k, e in enumerate(events))
+    topics = [(f"/{kind}", MESSAGE_TYPES[kind]) for kind in INPUTS]
+    topics += sorted({(topic, msgtype) for _, topic, msgtype, _ in events} - set(topics))
+    with _bag_directory(path, topics, store, force=force, files=files) as writer:
+        for stamp, _, kind, k in heapq.merge(*(records(kind) for kind in INPUTS), extra):
+            if kind not in INPUTS:
+                writer.add(stamp, kind, events[k][2], events[k][3])
+            else:
+                values = getattr(streams, kind)[1][k]
+                msg = _standard_message(store, kind, stamp, values, streams.surface_names)
+                writer.add(stamp, f"/{kind}", MESSAGE_TYPES[kind], msg)
             writer.release()  # the merge gives the records in the bag's order
     return path
 

@@ -151,7 +151,7 @@ def _response(cfg: SimulationConfig, ac: AircraftConfig, elevator: Multisine, st
 def _legs(rng: np.random.Generator, n: int) -> list[float]:
     """``n`` trim legs (s), uniform in :data:`TRIM_LEG`, whole tenths of a second."""
     low, high = (round(x * 10) for x in TRIM_LEG)
-    return [k / 10.0 for k in rng.integers(low, high + 1, size=n)]
+    return [int(k) / 10.0 for k in rng.integers(low, high + 1, size=n)]
 
 
 def _concatenate(parts: Sequence[SensorStreams], start_ns: int) -> SensorStreams:
