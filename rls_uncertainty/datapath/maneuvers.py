@@ -225,7 +225,7 @@ class ManeuverTracker:
         assert active is not None
         self.active = None
         self._settle(active, end_ns)
-        rows = tuple(self._rows(active))
+        rows = tuple(self._rows(active, end_ns))
         duration = (end_ns - active.start_ns) * 1e-9
         if duration < self.min_span:
             short = (f"too_short: {duration:.2f} s of data, fewer than --min-span {self.min_span:g} s")
@@ -243,25 +243,26 @@ class ManeuverTracker:
             active.last[j] = next((o for o in reversed(recent) if o.stamp_ns <= end_ns and o.ready[j]), None)
         recent.clear()
 
-    def _all_lags(self) -> tuple[np.ndarray | None, int | None]:
+    def _all_lags(self, end_ns: int) -> tuple[np.ndarray | None, int | None]:
         """The corrected standard errors with all lags (Eq. 20) over the maneuver's regression
-        rows and the stamp of the last (None without rows: ``record`` off)."""
+        rows up to ``end_ns`` and the stamp of the last (None without rows: ``record`` off)."""
         pipe = self.pipe
-        if not pipe.record or not pipe.regression or not pipe.config.publishes_time:
+        rows = [r for r in pipe.regression if r[0] <= end_ns] if pipe.record else []
+        if not rows or not pipe.config.publishes_time:
             return None, None
         from ..estimator import EstimatorBank  # noqa: PLC0415 - the bank only when rows are kept
 
         o = pipe.config.estimator
         bank = EstimatorBank(pipe.sizes, replace(o, lags="all", residual_burn_in=o.burn_in, noise_forgetting=None))
-        for _t, X, z in pipe.regression:
+        for _t, X, z in rows:
             bank.update(X, z)
         se = bank.standard_errors_all("corrected") if bank.ready.any() else None
-        return se, pipe.regression[-1][0]
+        return se, rows[-1][0]
 
-    def _rows(self, active: _Open) -> list[ManeuverRow]:
+    def _rows(self, active: _Open, end_ns: int) -> list[ManeuverRow]:
         pipe = self.pipe
         states = {s.parameter: s for s in parameter_states(pipe, pipe.last)}
-        se_all, last_row = self._all_lags()
+        se_all, last_row = self._all_lags(end_ns)
         nan = math.nan
         rows = []
         for j, m in enumerate(pipe.models):
