@@ -83,7 +83,7 @@ def test_the_live_history_equals_the_offline_run_of_the_same_messages(tmp_path):
         tester.publish_all(batch)
         assert tester.spin_until(lambda: json.loads(history[-1].data)["recorded"] == 2, 30), node.text()
         got = json.loads(history[-1].data)
-        assert got["rejected"] == {"empty_name": 1, "stop_without_start": 1}
+        assert got["rejected"] == {"event_key": 1, "stop_without_start": 1}
         assert [m["name"] for m in got["maneuvers"]] == ["pA", "pB"]
         rows = [[(r["parameter"], r["estimate"], r["se_conventional"], r["se_corrected"], r["samples"], r["status"])
                  for r in m["rows"]] for m in got["maneuvers"]]
@@ -91,7 +91,7 @@ def test_the_live_history_equals_the_offline_run_of_the_same_messages(tmp_path):
         diag = tester.wait_diagnostics(lambda d: f"{NODE}: maneuvers" in d)
         status = diag[f"{NODE}: maneuvers"]
         assert status["maneuvers.recorded"] == "2" and status["maneuvers.events_rejected"] == "2"
-        assert status["maneuvers.events_rejected.empty_name"] == "1" and status["maneuvers.last"] == "pB"
+        assert status["maneuvers.events_rejected.event_key"] == "1" and status["maneuvers.last"] == "pB"
         # A late subscriber gets the history at once (transient local).
         late: list = []
         late_node = rclpy.create_node("late")
