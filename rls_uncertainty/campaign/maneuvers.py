@@ -24,6 +24,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from ..datapath.maneuvers import MIN_SPAN
 from ..errors import ConfigError
 from ..schema import check, option
 from ..settings.yaml_files import load
@@ -31,10 +32,8 @@ from ..settings.yaml_files import load
 if TYPE_CHECKING:  # annotations only
     from ..datapath.config import PipelineConfig
 
-# campaign --min-span's default: the T-2 models' publication span (2.1 s: 2 x 50 lags + 4
-# parameters at 50 Hz) plus convergence.window (2 s): the shortest maneuver whose parameters can
-# be flagged converged.
-MIN_SPAN = 4.0
+# campaign --min-span's default: the shortest maneuver whose parameters can be flagged converged
+# (datapath.maneuvers.MIN_SPAN).
 
 __all__ = ["Maneuver", "from_bags", "load_maneuvers", "CampaignSettings", "MIN_SPAN"]
 

@@ -38,6 +38,7 @@ from ..aero.models import ModelConfig
 from ..datapath.config import PipelineConfig
 from ..datapath.feasibility import record_checks
 from ..datapath.inputs import Stamped
+from ..datapath.maneuvers import MANEUVER_COLUMNS
 from ..datapath.states import ParameterState, se_percent
 from ..errors import RlsUncertaintyError
 from ..estimator import EstimatorBank
@@ -91,9 +92,7 @@ class ParameterResult:
 
 
 # maneuvers.csv's columns (every field of ParameterResult and the percent error), the method
-# beside the parameter.
-MANEUVER_COLUMNS = ("maneuver", "model", "parameter", "method", "estimate", "se_conventional", "se_corrected",
-                    "se_corrected_all", "samples", "r_squared", "status", "se_percent", "state", "reason")
+# beside the parameter: those of a maneuver cut from a stream (datapath.maneuvers).
 
 
 @dataclass(frozen=True)
@@ -108,6 +107,10 @@ class ManeuverResult:
     data_seconds: float = 0.0
     seconds: Mapping[str, float] = field(default_factory=dict)
     models: tuple[FittedModel, ...] = field(default=(), compare=False)  # (numpy arrays: not compared)
+    # A maneuver cut from one recording by its boundaries (:mod:`.split`): start and end, s
+    # from the recording's start; None otherwise.
+    start: float | None = None
+    end: float | None = None
 
     @property
     def problem(self) -> str | None:

@@ -97,13 +97,17 @@ def _cell(x: object) -> str:
 
 def maneuvers_csv(results: Sequence[ManeuverResult]) -> str:
     """``maneuvers.csv``: :data:`.run.MANEUVER_COLUMNS`, one row per maneuver, parameter and
-    method (full precision; empty cells where a maneuver gave no value)."""
+    method (full precision; empty cells where a maneuver gave no value), and ``start`` and
+    ``end`` (s from the recording's start) when the maneuvers were cut from one recording by
+    their boundaries (:mod:`.split`)."""
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
-    w.writerow(MANEUVER_COLUMNS)
+    spans = bool(results) and all(res.start is not None for res in results)
+    w.writerow((*MANEUVER_COLUMNS, "start", "end") if spans else MANEUVER_COLUMNS)
     for res in results:
+        span = [_cell(res.start), _cell(res.end)] if spans else []
         for row in res.rows:
-            w.writerow([_cell(getattr(row, c)) for c in MANEUVER_COLUMNS])
+            w.writerow([_cell(getattr(row, c)) for c in MANEUVER_COLUMNS] + span)
     return buf.getvalue()
 
 

@@ -116,17 +116,18 @@ def _campaign(args: argparse.Namespace) -> int:
 
     params = replay_params(args, "campaign")
     executor = executor_for(args.scheduler, args.workers)
+    settings = CampaignSettings(pipeline_config(params), node_config(params).topics, strict=not args.lenient,
+                                **option_values(args, CampaignSettings))
+    inputs = [_yaml_file(args.config, config_dir())] if args.config else []
+    if not args.maneuvers and len(args.inputs) == 1 and settings.config.maneuvers.source != "off":
+        return _split_campaign(args, settings, inputs)
     if args.maneuvers:
         if len(args.inputs) != 1:
             raise ConfigError(f"--maneuvers cuts one recording into maneuvers; got {len(args.inputs)} INPUTs")
         maneuvers = load_maneuvers(args.maneuvers, args.inputs[0])
+        inputs.append(args.maneuvers)
     else:
         maneuvers = from_bags(args.inputs)
-    inputs = [_yaml_file(args.config, config_dir())] if args.config else []
-    if args.maneuvers:
-        inputs.append(args.maneuvers)
-    settings = CampaignSettings(pipeline_config(params), node_config(params).topics, strict=not args.lenient,
-                                **option_values(args, CampaignSettings))
     if isinstance(executor, LocalProcesses) and (note := executor.capped(len(maneuvers), "maneuver")):
         print(f"rls-uncertainty campaign: {note}", file=sys.stderr)
     result = campaign_to(args.out, maneuvers, settings, executor, progress=progress_mode(args),
@@ -137,6 +138,19 @@ def _campaign(args: argparse.Namespace) -> int:
           f"({result.per_minute:.0f} per minute) on {result.executor}; worker time: read {s.get('read', 0):.1f} s, "
           f"pipeline {s.get('pipeline', 0):.1f} s, all lags {s.get('all_lags', 0):.1f} s; writing "
           f"{result.write_seconds:.1f} s; wrote {args.out}")
+    return 0 if any(res.problem is None for res in result.results) else 1
+
+
+def _split_campaign(args: argparse.Namespace, settings: Any, inputs: list[Any]) -> int:
+    """``campaign RECORDING`` with ``maneuvers.source`` events or detect: the recording cut into
+    maneuvers as the node cuts its stream (:mod:`..campaign.split`)."""
+    from ..campaign.split import split_campaign_to
+
+    result = split_campaign_to(args.out, args.inputs[0], settings, figures=_figures(args),
+                               progress=progress_mode(args), force=args.force, inputs=inputs)
+    print(result.summary(), end="")
+    print(f"{len(result.results)} maneuvers cut from {args.inputs[0]} by maneuvers.source "
+          f"{settings.config.maneuvers.source} in {result.wall_seconds + result.write_seconds:.1f} s; wrote {args.out}")
     return 0 if any(res.problem is None for res in result.results) else 1
 
 

@@ -30,6 +30,7 @@ from ..schema import check, default_of, option
 from .convergence import ConvergenceConfig
 from .identifiability import IdentifiabilityConfig
 from .limits import PlausibilityLimits
+from .maneuver_detector import ManeuverOptions
 
 # Models whose outputs need the angular accelerations (Eq. 1: the moments).
 _MOMENT_MODELS = ("Cl", "Cm", "Cn")
@@ -120,6 +121,28 @@ class OutputConfig:
         check(self, "outputs")
 
 
+# Where maneuver boundaries come from (maneuvers.source; :mod:`.maneuvers`).
+SOURCES = ("off", "events", "detect")
+
+
+@dataclass(frozen=True)
+class ManeuverSettings:
+    """``maneuvers.*``: where maneuver boundaries come from, the event topic, the history kept."""
+
+    source: str = option("off", "where maneuver boundaries come from: off (one estimate across everything), events "
+                         "(start/stop messages on maneuvers.topic) or detect (the control-surface excitation); each "
+                         "maneuver starts the estimator afresh and its end is recorded (docs/node.md)",
+                         choices=SOURCES, ros="maneuvers.source", read_only=True)
+    topic: str = option("/test_point", "topic of the test-point events (diagnostic_msgs/msg/KeyValue: key the test "
+                        "point's name, value start or stop) with maneuvers.source events",
+                        ros="maneuvers.topic", read_only=True)
+    history: int = option(100, "maneuvers kept in the history (~/maneuvers); the oldest beyond it is dropped",
+                          low=1, high=10_000, ros="maneuvers.history", read_only=True)
+
+    def __post_init__(self) -> None:
+        check(self, "maneuvers")
+
+
 @dataclass(frozen=True)
 class PipelineConfig:
     """Everything that decides the numbers: sample rate (Hz), aircraft, models, and the nested
@@ -141,6 +164,10 @@ class PipelineConfig:
     outputs: OutputConfig = OutputConfig()
     # With estimator.algorithm iv: how the instruments are made and judged.
     instruments: InstrumentOptions = field(default_factory=InstrumentOptions)
+    # Where maneuvers start and end (maneuvers.*; the caller's ManeuverTracker acts on them).
+    maneuvers: ManeuverSettings = field(default_factory=ManeuverSettings)
+    # The detection rule of maneuvers.source detect (maneuvers.f_max, .window, ...).
+    detection: ManeuverOptions = field(default_factory=ManeuverOptions)
     # estimator.method and, unless it is "time", the frequency-domain estimator's options.
     method: str = option("time", "estimates published: time (recursive least squares, ~/M/estimates ...), "
                          "frequency (equation error on a recursive Fourier transform, ~/M/frequency/estimates ...) or "

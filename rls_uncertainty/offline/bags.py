@@ -46,6 +46,7 @@ from ..aero.coefficients import rep103_to_aircraft
 from ..datapath import cdr
 from ..datapath.inputs import MESSAGE_TYPES, Stamped, stamp_ns
 from ..datapath.inputs import STREAMS as INPUTS
+from ..datapath.maneuvers import EVENT, EVENT_TYPE
 from ..errors import BagError, ConfigError
 from ..files import OutputWriter, input_problem, output_directory
 from ..progress import track
@@ -499,18 +500,22 @@ class InputStream:
     message in the span is a :class:`BagError` at the end.
 
     Iterable once; the bag is closed at the end of the iteration, by :meth:`close` or by
-    ``with``. :attr:`t0` is the bag's start (ns), :attr:`total` the input messages its index
-    lists (the span aside), :attr:`digest` (once iterated) the SHA-256 of every input-topic
+    ``with``. With ``events`` (``maneuvers.topic``), the test-point events of that topic
+    (``diagnostic_msgs/msg/KeyValue``, no header) come too, as ``("event", log time, msg)`` in
+    their place (:mod:`..datapath.maneuvers`). :attr:`t0` is the bag's start (ns), :attr:`total`
+    the input messages its index lists (the span aside), :attr:`digest` (once iterated) the SHA-256 of every input-topic
     message of the bag (:func:`content_digest_update`), and :attr:`read` the messages read."""
 
     def __init__(self, path: str | Path, topics: Mapping[str, str] | None = None, *, strict: bool = True,
-                 start: float | None = None, end: float | None = None) -> None:
+                 start: float | None = None, end: float | None = None, events: str | None = None) -> None:
         self.path = path = Path(path)
         _check_span(start, end)
         self.strict = strict
         self.store = store = typestore()
         wanted = input_topics(topics)
         self._kinds = {v: k for k, v in wanted.items()}
+        # The test-point events (maneuvers.topic), yielded as ("event", log time, msg) when given.
+        self._events = None if events is None else (events if events.startswith("/") else f"/{events}")
         self._reader = reader = _open_reader(path, store)
         self._open = True
         try:
@@ -545,7 +550,11 @@ class InputStream:
             expected = MESSAGE_TYPES[kinds[c.topic]]
             if c.msgtype != expected:
                 raise BagError(f"{path}: topic {c.topic} has type {c.msgtype}, expected {expected}")
-        return conns
+        events = [c for c in reader.connections if c.topic == self._events]
+        for c in events:
+            if c.msgtype != EVENT_TYPE:
+                raise BagError(f"{path}: topic {c.topic} (maneuvers.topic) has type {c.msgtype}, expected {EVENT_TYPE}")
+        return conns + events
 
     @property
     def digest(self) -> str:
@@ -565,9 +574,13 @@ class InputStream:
         path, kinds, lo, hi, strict = self.path, self._kinds, self._lo, self._hi, self.strict
         last: dict[str, int] = {}
         used = 0
-        for conn, _t, raw_msg in _iter_messages(path, self._reader, self._conns, self.store, fast=True,
+        for conn, t, raw_msg in _iter_messages(path, self._reader, self._conns, self.store, fast=True,
                                                 digest=self._digest):
             self.read += 1
+            if conn.topic == self._events:  # no header: the log time places it
+                if (lo is None or t >= lo) and (hi is None or t <= hi):
+                    yield EVENT, t, cast(Stamped, raw_msg)
+                continue
             msg = cast(Stamped, raw_msg)  # the input types (checked on opening) all carry a header
             stamp = stamp_ns(msg)
             if stamp < 0:
@@ -604,10 +617,11 @@ class InputStream:
 
 
 def read_inputs(path: str | Path, topics: Mapping[str, str] | None = None, *, strict: bool = True,
-                start: float | None = None, end: float | None = None) -> tuple[list[tuple[str, int, Stamped]], int]:
+                start: float | None = None, end: float | None = None,
+                events: str | None = None) -> tuple[list[tuple[str, int, Stamped]], int]:
     """The messages of :class:`InputStream` as a list, and the bag's start time: every
     message in memory at once, for small bags and tests (the replay streams)."""
-    with InputStream(path, topics, strict=strict, start=start, end=end) as stream:
+    with InputStream(path, topics, strict=strict, start=start, end=end, events=events) as stream:
         return list(stream), stream.t0
 
 

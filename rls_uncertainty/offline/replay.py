@@ -46,7 +46,7 @@ import json
 import math
 import sys
 import time
-from collections.abc import Callable, Iterable, Sized
+from collections.abc import Callable, Iterable, Iterator, Sized
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Protocol
 
@@ -57,6 +57,7 @@ from ..datapath.config import PipelineConfig
 from ..datapath.diagnostics import DiagnosticsPolicy, Snapshot, Status
 from ..datapath.feasibility import configuration_warnings, record_checks
 from ..datapath.inputs import Stamped, feed
+from ..datapath.maneuvers import EVENT, MIN_SPAN, ManeuverTracker, maneuvers_csv, tracker_for
 from ..datapath.outputs import NODE_NAME, OutputLayout, fit_records
 from ..datapath.pipeline import Pipeline, SampleOutput
 from ..datapath.states import parameter_states
@@ -209,6 +210,7 @@ class _Run:
         self.last_frequency: list[SampleOutput | None] = [None] * len(pipe.sizes)
         self.newest_frequency: SampleOutput | None = None  # the newest output with frequency-domain results
         self.real = np.arange(pipe.bank.n_max) < np.array(pipe.sizes)[:, None]
+        self.tracker: ManeuverTracker | None = None  # with maneuvers.source not off
 
     def sample(self, out: SampleOutput) -> None:
         result = self.result
@@ -236,6 +238,8 @@ class _Run:
         if self.keep_outputs:
             result.outputs.append(out)
         result.last_output = out
+        if self.tracker is not None:
+            self.tracker.sample(out)
         if self.sink is not None:
             self.sink.sample(out)
 
@@ -278,16 +282,34 @@ def _new_result(pipe: Pipeline, history: History | None) -> ReplayResult:
     return result
 
 
+def routed(messages: Iterable[tuple[str, int, Stamped]],
+           tracker: ManeuverTracker | None) -> Iterator[tuple[str, int, Stamped]]:
+    """The input messages of ``messages``; the event messages go to ``tracker`` in their place
+    (ignored without one), and with ``maneuvers.source: detect`` it sees every surface message."""
+    for kind, stamp, msg in messages:
+        if kind == EVENT:
+            if tracker is not None:
+                m: Any = msg
+                tracker.event(stamp, getattr(m, "key", None), getattr(m, "value", None))
+            continue
+        if tracker is not None and kind == "control_surfaces" and tracker.detector is not None:
+            tracker.surfaces(stamp, list(getattr(msg, "position", ())))
+        yield kind, stamp, msg
+
+
 def run_pipeline(messages: Iterable[tuple[str, int, Stamped]], config: PipelineConfig, *, record: bool = True,
                  progress: bool | None = False, diagnostics: NodeConfig | None = None, keep_outputs: bool = True,
                  history: History | None = None, sink: Sink | None = None,
-                 figure_data: FigureData | None = None) -> ReplayResult:
+                 figure_data: FigureData | None = None, min_span: float = MIN_SPAN) -> ReplayResult:
     """Feed ``(kind, stamp, msg)`` messages (a list, or a :class:`.bags.InputStream` read as it
     goes) through a fresh pipeline. ``record`` keeps every regression row
     (``pipeline.regression``); ``keep_outputs`` every :class:`.pipeline.SampleOutput` (and
     report) in the result; ``history`` collects the time histories (:class:`.results.History`);
     ``sink`` receives each output and report as it is made; ``figure_data`` collects what the
-    figures draw besides the histories (:class:`.figure_data.FigureData`, bounded). Without
+    figures draw besides the histories (:class:`.figure_data.FigureData`, bounded). With
+    ``maneuvers.source`` not ``off``, the stream is cut into maneuvers
+    (:class:`.maneuvers.ManeuverTracker` in ``result.maneuvers``, every maneuver kept; ``min_span``
+    its too-short rule) and event messages go to it in their place in the stream. Without
     the first two, memory does not grow with the run. With ``estimator.method`` ``frequency``
     or ``both`` the result keeps the frequency-domain estimates too (in a history like
     ``history``, when given). ``progress``: a bar on stderr with the rate and the time left
@@ -299,6 +321,7 @@ def run_pipeline(messages: Iterable[tuple[str, int, Stamped]], config: PipelineC
     pipe = Pipeline(config, record=record)
     result = _new_result(pipe, history)
     run = _Run(pipe, result, keep_outputs, sink)
+    result.maneuvers = run.tracker = tracker_for(pipe, min_span=min_span, keep_all=True)
     rows = _Rows(pipe, keep=record)
     excitation = _Excitation(pipe)
     diag = _DataClockDiagnostics(pipe, config, diagnostics, run.diagnostics) if diagnostics is not None else None
@@ -312,7 +335,7 @@ def run_pipeline(messages: Iterable[tuple[str, int, Stamped]], config: PipelineC
     gc_was_enabled = gc.isenabled()
     gc.disable()
     try:
-        for kind, stamp, msg in messages:
+        for kind, stamp, msg in routed(messages, run.tracker):
             if first is None:
                 first = newest = stamp
             elif stamp > newest:
@@ -338,6 +361,8 @@ def run_pipeline(messages: Iterable[tuple[str, int, Stamped]], config: PipelineC
             if n % step == 0:
                 bar.update(step)
         pipe.finish()
+        if run.tracker is not None:
+            run.tracker.finish(newest)
         if diag is not None and n:
             diag.finish()
     finally:
@@ -349,13 +374,20 @@ def run_pipeline(messages: Iterable[tuple[str, int, Stamped]], config: PipelineC
     result.n_messages = n
     if first is not None:
         result.data_seconds = (newest - first) * 1e-9
+    return _finished(run, excitation, figure_data, str(getattr(messages, "digest", "")))
+
+
+def _finished(run: _Run, excitation: _Excitation, figure_data: FigureData | None, digest: str) -> ReplayResult:
+    """The run's result completed at the end of the data: the final values, the figures' sums,
+    why a model never published, the counters and the input digest."""
+    pipe, result = run.pipe, run.result
     run.finals()
     if figure_data is not None:
         figure_data.finish(pipe)
     result.explanations = unestimated(pipe, run.ever, excitation,
                                       np.array([f is not None for f in run.last_frequency]))
     result.counter_values = accounting(pipe.counters())
-    result.bag_digest = str(getattr(messages, "digest", ""))
+    result.bag_digest = digest
     return result
 
 
@@ -487,13 +519,15 @@ def replay(bag: str | Path, params: dict[str, Any], out: str | Path, *, start: f
     names = [m.parameter_names for m in config.models]
     data = FigureData([m.output for m in config.models], [m.regressors for m in config.models], names, config.rate,
                       PLOT_POINTS) if plots else None
+    split = config.maneuvers.source != "off"  # (then the all-lags rows are kept: record)
+    events = config.maneuvers.topic if config.maneuvers.source == "events" else None
     with output_directory(out, force=force, inputs=(bag, *inputs)) as tmp, \
-            InputStream(bag, node_cfg.topics, strict=strict, start=start, end=end) as stream:
+            InputStream(bag, node_cfg.topics, strict=strict, start=start, end=end, events=events) as stream:
         for line in configuration_warnings(config, node_cfg.topics) + record_checks(config, stream.span_seconds):
             print(f"warning: {line}", file=sys.stderr)
         files = ReplayFiles(tmp, config, node_cfg.frame_id, NODE_NAME, typestore())
         with files:
-            result = run_pipeline(stream, config, record=False, progress=progress, diagnostics=node_cfg,
+            result = run_pipeline(stream, config, record=split, progress=progress, diagnostics=node_cfg,
                                   keep_outputs=False, history=History(names, PLOT_POINTS), sink=files, figure_data=data)
         record = planned_run(params, start=start, end=end, strict=strict)
         record["bag"] |= {"path": str(bag), "input_sha256": stream.digest, "messages_read": stream.read,
@@ -503,6 +537,8 @@ def replay(bag: str | Path, params: dict[str, Any], out: str | Path, *, start: f
         (tmp / "parameters.csv").write_text(parameters_csv(result))
         if result.pipeline is not None:
             (tmp / MODELS_FILE).write_text(models_json([(Path(bag).name, run_models(result.pipeline))]))
+        if result.maneuvers is not None:
+            (tmp / "maneuvers.csv").write_text(maneuvers_csv(list(result.maneuvers.history), stream.t0))
         if data is not None and result.history is not None:
             from .figures import replay_figures  # noqa: PLC0415 - drawing (matplotlib) only when asked
 

@@ -34,6 +34,7 @@ from ..errors import EstimatorNotReady, UnknownName
 
 if TYPE_CHECKING:  # annotations only: this module does not need the pipeline to work
     from ..datapath.diagnostics import Status
+    from ..datapath.maneuvers import ManeuverTracker
     from ..datapath.pipeline import Pipeline, SampleOutput
     from ..datapath.states import ParameterState
 
@@ -210,6 +211,8 @@ class ReplayResult:
     frequency_history: History | None = None
     # Each parameter's state at the end, both methods (:mod:`rls_uncertainty.datapath.states`).
     states: list[ParameterState] = field(default_factory=list)
+    # With maneuvers.source not off: the maneuvers cut from the stream and their history.
+    maneuvers: ManeuverTracker | None = None
     _last: dict[str, Final] = field(default_factory=dict, repr=False)
     _last_frequency: dict[str, Final] = field(default_factory=dict, repr=False)
 

@@ -50,6 +50,7 @@ from ..datapath.diagnostics_round import DiagnosticsRound
 from ..datapath.feasibility import configuration_warnings
 from ..datapath.inputs import MESSAGE_TYPES, STREAMS, feed, message_class
 from ..datapath.load_policy import LoadPolicy
+from ..datapath.maneuvers import EVENT
 from ..datapath.outputs import HEADER, NODE_NAME, OutputLayout
 from ..datapath.pipeline import Pipeline, SampleOutput
 from ..errors import ConfigError
@@ -57,6 +58,7 @@ from ..settings.parameters import PARAMETERS, Parameter, node_config, pipeline_c
 from ..settings.sources import startup_parameters
 from .input_watch import SilentInputs
 from .intake import Backlog, Intake
+from .maneuvers import LiveManeuvers
 from .node_state import NodeStateFile
 
 __all__ = ["EstimatorNode", "main", "NODE_NAME"]
@@ -150,6 +152,8 @@ class EstimatorNode(Node):
         self._intake = Intake(self, _TYPES, self.node_cfg.topics, in_qos)  # off the executor: taken in batches
         self._subs = self._intake.subs
         self._backlog = Backlog()  # taken, not yet fed
+        # maneuvers.source events/detect: the test points' boundaries and ~/maneuvers (ros/maneuvers.py).
+        self._maneuvers = LiveManeuvers(self, self.pipeline) if self.config.maneuvers.source != "off" else None
         self.create_service(Trigger, "~/reset", self._on_reset)
         self.create_service(SetBool, "~/enable", self._on_enable)
         self.add_on_set_parameters_callback(self._validate_parameters)
@@ -210,6 +214,8 @@ class EstimatorNode(Node):
                 self.get_logger().warning(line)
             self.config = new
             self.pipeline = self.pipeline.reconfigured(new)
+            if self._maneuvers is not None:
+                self._maneuvers.follow(self.pipeline)
             self._make_publishers()
 
     def _make_publishers(self) -> None:
@@ -246,6 +252,8 @@ class EstimatorNode(Node):
     # ------------------------------------------------------------------ data path
     def destroy_node(self) -> None:
         self._intake.destroy()
+        if self._maneuvers is not None:
+            self._maneuvers.destroy()
         super().destroy_node()
 
     def _take_inputs(self) -> None:
@@ -259,13 +267,15 @@ class EstimatorNode(Node):
         backlog = self._backlog
         if not backlog:
             taken = self._intake.take()
-            if not any(taken.values()):
+            maneuvers = self._maneuvers
+            events = maneuvers.take() if maneuvers is not None else {}
+            if not any(taken.values()) and not any(events.values()):
                 return
             now = time.monotonic()
             for kind, queued in taken.items():
                 if queued:
                     self._arrived[kind] = now  # the stream's age in /diagnostics runs from here
-            backlog.refill(taken)
+            backlog.refill(taken | events)  # (the events merged in order of arrival with the inputs)
         self._feed(time.perf_counter() + _PASS_BUDGET_S)
 
     def _feed(self, deadline: float) -> None:
@@ -277,11 +287,18 @@ class EstimatorNode(Node):
         self._waits.append(max(start - backlog.oldest(start), 0) * 1e-9)
         if pipeline.needs_clock:  # inputs.max_clock_offset: stamps are checked against it
             pipeline.clock_ns = self.get_clock().now().nanoseconds
+        maneuvers = self._maneuvers
         while backlog and time.perf_counter() < deadline:
             kind, (arrived, raw) = backlog.pop()
+            if kind == EVENT:
+                maneuvers.event(raw)  # type: ignore[union-attr]  # (events come only with maneuvers)
+                continue
             c0 = time.thread_time()
             try:
-                outputs = feed(pipeline, kind, decode(MESSAGE_TYPES[kind], raw))
+                msg = decode(MESSAGE_TYPES[kind], raw)
+                if kind == "control_surfaces" and maneuvers is not None:  # (maneuvers.source detect)
+                    maneuvers.surfaces(msg)
+                outputs = feed(pipeline, kind, msg)
             except Exception as exc:  # noqa: BLE001 - a bad message must never stop the node
                 self._malformed(kind, exc)
                 continue
@@ -306,6 +323,8 @@ class EstimatorNode(Node):
         pubs = self._pubs
         for index, raw in self._layout.encode(out, self.node_cfg.frame_id):
             pubs[index].publish(raw)
+        if self._maneuvers is not None:
+            self._maneuvers.sample(out)
 
     # ------------------------------------------------------------------ services, time
     def _on_reset(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
@@ -411,6 +430,9 @@ class EstimatorNode(Node):
         self._fit_pubs[index].publish(raw)  # ~/M/fit, ~/M/identifiability
 
     def _publish_statuses(self, statuses: list[Status]) -> None:
+        if self._maneuvers is not None:
+            self._maneuvers.publish()
+            statuses = [*statuses, self._maneuvers.status(self.get_fully_qualified_name())]
         arr = DiagnosticArray()
         arr.header.stamp = self.get_clock().now().to_msg()
         arr.status = [

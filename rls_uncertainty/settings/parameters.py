@@ -25,10 +25,11 @@ from typing import Any
 from ..aero.differentiation import DifferentiatorConfig
 from ..aero.models import DEFAULT_MODELS, OUTPUTS, REGRESSORS, ModelConfig
 from ..aero.surface_mixing import SurfaceMixing
-from ..datapath.config import InputConfig, OutputConfig, PipelineConfig
+from ..datapath.config import InputConfig, ManeuverSettings, OutputConfig, PipelineConfig
 from ..datapath.convergence import ConvergenceConfig
 from ..datapath.identifiability import IdentifiabilityConfig
 from ..datapath.limits import PlausibilityLimits
+from ..datapath.maneuver_detector import ManeuverOptions
 from ..errors import ConfigError
 from ..estimator.options import AUTO_BURN_IN, MAX_BURN_IN, EstimatorOptions
 from ..frequency.options import FrequencyOptions
@@ -65,6 +66,8 @@ COMPONENTS: tuple[tuple[str, type], ...] = (
     ("identifiability", IdentifiabilityConfig),
     ("outputs", OutputConfig),
     ("instruments", InstrumentOptions),
+    ("maneuvers", ManeuverSettings),
+    ("detection", ManeuverOptions),
 )
 # Parameters renamed when the lag window began to follow time: said when an old file names them.
 RENAMED = {

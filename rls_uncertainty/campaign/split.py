@@ -1,0 +1,68 @@
+"""A campaign of one recording cut into maneuvers by their boundaries, as the node cuts its stream.
+
+``rls-uncertainty campaign RECORDING --config CFG --out DIR`` with ``maneuvers.source`` ``events``
+(the test-point messages on ``maneuvers.topic``) or ``detect`` (the excitation) runs the whole
+recording once through the replay's pipeline (:func:`..offline.replay.run_pipeline`) with the
+:class:`..datapath.maneuvers.ManeuverTracker` the node uses: each maneuver starts the estimator
+afresh (inputs kept) and its end gives its rows. The rows are the tracker's, so they are those
+of ``replay``'s ``maneuvers.csv`` on the same recording and of the node's history fed the same
+messages; the regression rows are kept, so each row has the corrected standard error with all
+lags (Eq. 20) over the maneuver's rows too. ``--min-span`` is the too-short rule.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Iterable
+from dataclasses import fields
+from pathlib import Path
+
+from ..datapath.maneuvers import ManeuverRecord
+from ..files import output_directory
+from ..offline.bags import InputStream, check_bag
+from ..offline.figures import FigureOptions
+from ..offline.replay import run_pipeline
+from . import DEFAULT_FIGURES, CampaignResult, write_campaign
+from .maneuvers import CampaignSettings
+from .run import ManeuverResult, ParameterResult
+from .table4 import table4
+
+__all__ = ["split_recording", "split_campaign_to", "results_of"]
+
+_FIELDS = [f.name for f in fields(ParameterResult)]
+
+
+def results_of(records: Iterable[ManeuverRecord], origin_ns: int) -> list[ManeuverResult]:
+    """The tracker's maneuvers as campaign results, start and end in s from ``origin_ns``."""
+    return [ManeuverResult(rec.name, tuple(ParameterResult(**{k: getattr(r, k) for k in _FIELDS}) for r in rec.rows),
+                           rec.duration, {}, start=(rec.start_ns - origin_ns) * 1e-9,
+                           end=(rec.end_ns - origin_ns) * 1e-9)
+            for rec in records]
+
+
+def split_recording(bag: str | Path, settings: CampaignSettings) -> list[ManeuverResult]:
+    """The maneuvers of the recording ``bag`` by ``settings.config.maneuvers`` (module docstring)."""
+    config = settings.config
+    events = config.maneuvers.topic if config.maneuvers.source == "events" else None
+    with InputStream(bag, dict(settings.topics), strict=settings.strict, events=events) as stream:
+        result = run_pipeline(stream, config, record=True, keep_outputs=False, min_span=settings.min_span)
+    assert result.maneuvers is not None  # (maneuvers.source is not off)
+    return results_of(result.maneuvers.history, stream.t0)
+
+
+def split_campaign_to(out: str | Path, bag: str | Path, settings: CampaignSettings, *,
+                      figures: FigureOptions | None = DEFAULT_FIGURES, progress: bool | None = False,
+                      force: bool = False, inputs: Iterable[str | Path] = ()) -> CampaignResult:
+    """:func:`split_recording` and its campaign files written to ``out`` (complete or absent;
+    never over the recording or ``inputs``), in this process."""
+    check_bag(bag)
+    with output_directory(out, force=force, inputs=(bag, *inputs)) as tmp:
+        t0 = time.perf_counter()
+        results = split_recording(bag, settings)
+        campaign = CampaignResult(results, table4(results), settings, "this process (one recording)",
+                                  time.perf_counter() - t0)
+        t1 = time.perf_counter()
+        written = write_campaign(campaign, tmp, figures=figures, progress=progress)
+        campaign.written = {k: Path(out) / p.relative_to(tmp) for k, p in written.items()}
+        campaign.write_seconds = time.perf_counter() - t1
+    return campaign
