@@ -111,7 +111,7 @@ def test_reset_forgets_the_history() -> None:
 
 @pytest.mark.parametrize("entry", ["Cm_q", "Cm_q=", "=5", "Cm_q=-1", "Cm_q=nan", "Cm_q=x"])
 def test_bad_target_entries_are_refused(entry: str) -> None:
-    with pytest.raises(ConfigError, match="--target"):
+    with pytest.raises(ConfigError, match=r"targets\.percent"):
         TargetOptions(targets=(entry,))
 
 
@@ -120,5 +120,37 @@ def test_twice_and_unknown_names_and_bad_window_are_refused() -> None:
         TargetOptions(targets=("a=1", "a=2"))
     with pytest.raises(ConfigError, match="Cm_x"):
         TargetTracker(["Cm_q"], targets_of({"Cm_x": 3.0}))
-    with pytest.raises(ConfigError, match="target-window"):
+    with pytest.raises(ConfigError, match=r"targets\.window"):
         TargetOptions(window=0.0)
+
+
+def test_the_pipeline_judges_the_test_point_in_its_diagnostics():
+    """targets.percent in the data path: the tracker sees each sample's published estimates,
+    corrected SEs and flags in the models' parameter order (a tracker fed here from the
+    outputs gives the same progress), and /diagnostics' model report carries each target and
+    the verdict; a loose target on the bundled maneuver is done, an impossible one is not."""
+    from rls_uncertainty.offline.bags import read_inputs
+    from rls_uncertainty.offline.replay import run_pipeline
+    from rls_uncertainty.settings.parameters import pipeline_config
+    from rls_uncertainty.settings.sources import load_parameters_file
+
+    from source_tree import ROOT
+
+    messages = read_inputs(ROOT / "bags" / "t2_maneuver")[0]
+    params = load_parameters_file("t2")
+    loose = run_pipeline(messages, pipeline_config({**params, "targets.percent": "Cm_q=1000,CZ_alpha=1000"}))
+    pipe = loose.pipeline
+    names = [p for n in pipe.parameter_names for p in n]
+    mine = TargetTracker(names, TargetOptions(targets="Cm_q=1000,CZ_alpha=1000"))
+    for out in loose.outputs:
+        real = np.arange(out.theta.shape[1]) < np.array(pipe.sizes)[:, None]
+        mine.update(out.time, out.theta[real], out.se[real], out.converged[real])
+    assert [(p.name, p.percent_error, p.time_left) for p in mine.progress] == \
+        [(p.name, p.percent_error, p.time_left) for p in pipe.targets.progress]
+    report = pipe.model_report([m.output for m in pipe.models].index("Cm"))
+    assert report["target.Cm_q"].startswith("met") and report["verdict"] == "done"
+    tight = run_pipeline(messages, pipeline_config({**params, "targets.percent": "Cm_q=0.01"}), record=False)
+    report = tight.pipeline.model_report([m.output for m in tight.pipeline.models].index("Cm"))
+    assert "0.01 %" in report["target.Cm_q"] and report["verdict"].startswith(("needs more", "not identifiable"))
+    with pytest.raises(ConfigError, match="Cl_p"):
+        pipeline_config({**params, "targets.percent": "Cl_p=5"})

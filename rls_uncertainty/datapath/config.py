@@ -31,6 +31,7 @@ from .convergence import ConvergenceConfig
 from .identifiability import IdentifiabilityConfig
 from .limits import PlausibilityLimits
 from .maneuver_detector import ManeuverOptions
+from .targets import TargetOptions
 
 # Models whose outputs need the angular accelerations (Eq. 1: the moments).
 _MOMENT_MODELS = ("Cl", "Cm", "Cn")
@@ -164,6 +165,8 @@ class PipelineConfig:
     outputs: OutputConfig = OutputConfig()
     # With estimator.algorithm iv: how the instruments are made and judged.
     instruments: InstrumentOptions = field(default_factory=InstrumentOptions)
+    # Test points judged against target percent errors (targets.*; /diagnostics only).
+    targets: TargetOptions = field(default_factory=TargetOptions)
     # Where maneuvers start and end (maneuvers.*; the caller's ManeuverTracker acts on them).
     maneuvers: ManeuverSettings = field(default_factory=ManeuverSettings)
     # The detection rule of maneuvers.source detect (maneuvers.f_max, .window, ...).
@@ -201,6 +204,11 @@ class PipelineConfig:
                 f"(1/rate = {1 / self.rate:g} s)", parameter="inputs.max_gap")
         self._check_differentiator()
         self._check_instruments()
+        known = {p for m in self.models for p in m.parameter_names}
+        unknown = sorted(set(self.targets.percent()) - known)
+        if unknown:
+            raise ConfigError(f"targets.percent names {', '.join(unknown)}, not a parameter of the enabled models "
+                              f"({', '.join(sorted(known))})", parameter="targets.percent")
 
     def _check_instruments(self) -> None:
         """``estimator.algorithm iv``: the time domain only, and models the instruments serve

@@ -74,6 +74,7 @@ from .pipeline_inputs import PipelineInputs
 from .sample_output import SampleOutput
 from .sampling import Sample, Sampler, Skipped
 from .states import model_report
+from .targets import TargetTracker
 
 __all__ = ["Pipeline", "SampleOutput", "STREAMS", "StateFileError", "required_streams", "sampler_for",
            "uses_excitation"]
@@ -180,6 +181,10 @@ class Pipeline(PipelineInputs):
         self.frame_id = inputs.frame_id  # checked by inputs.feed
         self._index = 0
         self._monitor = ConvergenceMonitor(self.sizes, replace(config.convergence, rate_hz=config.rate))
+        # targets.percent: each named parameter's time left and the test point's verdict.
+        self.targets = TargetTracker([p for names in self.parameter_names for p in names], config.targets) \
+            if config.targets.percent() else None
+        self._flat = np.flatnonzero(np.arange(max(self.sizes)) < np.array(self.sizes)[:, None])  # (the parameters)
         # Identifiability (the fit, excitation, collinearity) takes its flags out of the monitor's.
         rows = [m.regressors for m in config.models]
         self._x_names = [name for names in rows for name in names]
@@ -209,6 +214,8 @@ class Pipeline(PipelineInputs):
         self._quality.reset()  # its output sums (R^2) and regressor statistics restart too
         self._withheld = np.zeros(len(self.sizes), dtype=bool)  # the last output's, per model
         self._monitor.reset()
+        if self.targets is not None:
+            self.targets.reset()
         self._converged = self._monitor.no_flags()  # the newest sample's flags
         self._last: SampleOutput | None = None  # the newest sample's output
         # estimator.method frequency or both: the frequency-domain estimator on the same rows.
@@ -344,6 +351,8 @@ class Pipeline(PipelineInputs):
         if self._iv is not None and self._iv.weak.any():  # nor one whose instruments are weak
             flags, model_flags = flags & ~self._iv.weak[:, None], model_flags & ~self._iv.weak
         self._converged = flags, model_flags
+        if self.targets is not None:  # (the parameters of models not ready are NaN: no forecast)
+            self.targets.update(t * 1e-9, theta.flat[self._flat], se.flat[self._flat], flags.flat[self._flat])
         frequency = None if freq is None else freq.add(t, book.outputs_withheld, self._quality)
         self._last = SampleOutput(stamp_ns=t, index=self._index, theta=theta, se=se, se_conventional=se_conv,
                                   ready=ready, converged=flags, model_converged=model_flags,

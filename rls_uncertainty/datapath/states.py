@@ -37,6 +37,7 @@ if TYPE_CHECKING:  # annotations only
     from .config import PipelineConfig
     from .frequency_path import FrequencyOutput, FrequencyPath
     from .identifiability import IdentifiabilityMonitor
+    from .targets import TargetTracker
 
 
 class Published(Protocol):
@@ -74,6 +75,7 @@ class Reporter(Publisher, Protocol):
 
     config: PipelineConfig
     named_after: int  # samples before a cause of non-identifiability is named
+    targets: TargetTracker | None  # targets.percent: the test point judged
 
     @property
     def last(self) -> Published | None: ...
@@ -275,5 +277,29 @@ def model_report(pipe: Reporter, j: int) -> dict:
         fit.update(pipe.frequency.report(j))
         methods.append("frequency")
     fit.update(state_fields(pipe, pipe.last, pipe.models[j].output, methods))
+    if pipe.targets is not None:
+        fit.update(target_fields(pipe.targets, pipe.parameter_names[j]))
     return {**fit, "identifiability": why} if why else fit
+
+
+def target_fields(tracker: TargetTracker, names: Sequence[str]) -> dict[str, str]:
+    """``target.<parameter>`` of the parameters ``names`` that have a target (:mod:`.targets`:
+    met, or the time left at the present rate of information, or why there is none) and
+    ``verdict``, the test point's (``done``, ``needs more (about 3.1 s: ...)``, ``not
+    identifiable (...)``)."""
+    out = {}
+    for p in tracker.progress:
+        if p.name not in names or math.isnan(p.target):
+            continue
+        pe = f"{p.percent_error:.1f} %" if math.isfinite(p.percent_error) else "-"
+        if p.met:
+            text = f"met: {pe} <= {p.target:g} %" + ("" if p.converged else ", not converged yet")
+        elif math.isfinite(p.time_left):
+            text = f"{pe} -> {p.target:g} % in about {p.time_left:.1f} s"
+        else:
+            text = f"{pe} > {p.target:g} %: {p.reason}"
+        out[f"target.{p.name}"] = text
+    if tracker.progress:
+        out["verdict"] = tracker.verdict().text
+    return out
 

@@ -33,9 +33,10 @@ time left (NaN when a parameter meets its target but is not converged yet, or wh
 window of history yet). Parameters
 without a target are not judged.
 
-Settings (:class:`TargetOptions`, the one schema): ``targets`` (``NAME=PERCENT`` entries) and
-``window`` (seconds). Not wired to any node output: :class:`TargetTracker` is driven by its
-caller with each sample's time, estimates, standard errors and flags.
+Settings (:class:`TargetOptions`, the one schema): ``targets.percent`` (comma-separated
+``NAME=PERCENT`` entries) and ``targets.window`` (seconds). The pipeline drives a tracker with
+each sample's time, estimates, standard errors and flags when targets are set, and
+:func:`.states.target_fields` puts its progress and verdict in the models' ``/diagnostics``.
 """
 
 from __future__ import annotations
@@ -69,25 +70,29 @@ class TargetOptions:
         Seconds of history behind the rate of information of the forecast.
     """
 
-    targets: tuple[str, ...] = option((), "target percent errors 100 SE/|estimate|, NAME=PERCENT entries (e.g. "
-                                      "Cm_q=10); parameters not named have none", own_check=True, cli="--target")
+    targets: str = option("", "target percent errors 100 SE/|estimate| of a test point: comma-separated "
+                          "NAME=PERCENT entries (e.g. Cm_q=10,Cm_alpha=5); /diagnostics then gives each named "
+                          "parameter's time left and the test point's verdict; parameters not named have none",
+                          own_check=True, ros="targets.percent")
     window: float = option(2.0, "targets: seconds of history behind the rate of information the time left is "
-                           "forecast from", unit="s", low=0.0, low_open=True, high=600.0, cli="--target-window")
+                           "forecast from", unit="s", low=0.0, low_open=True, high=600.0, ros="targets.window",
+                           cli="--target-window")
 
     def __post_init__(self) -> None:
         check(self, "targets")
         entries: object = self.targets
-        if not isinstance(entries, (tuple, list)) or not all(isinstance(t, str) for t in entries):
-            raise ConfigError(f"--target must be a list of NAME=PERCENT entries, got {self.targets!r}",
-                              parameter="--target")
-        object.__setattr__(self, "targets", tuple(self.targets))
+        if isinstance(entries, (tuple, list)) and all(isinstance(t, str) for t in entries):
+            object.__setattr__(self, "targets", ",".join(entries))
+        elif not isinstance(entries, str):
+            raise ConfigError(f"targets.percent must be comma-separated NAME=PERCENT entries, got {self.targets!r}",
+                              parameter="targets.percent")
         self.percent()  # each entry checked
 
     def percent(self) -> dict[str, float]:
         """The targets as ``{name: percent}``; a malformed entry, a percent that is not a
         positive number or a name given twice is a :class:`.errors.ConfigError`."""
         out: dict[str, float] = {}
-        for entry in self.targets:
+        for entry in (e for e in self.targets.split(",") if e.strip()):
             name, sep, value = entry.partition("=")
             name = name.strip()
             try:
@@ -95,10 +100,10 @@ class TargetOptions:
             except ValueError:
                 percent = math.nan
             if not sep or not name or not (math.isfinite(percent) and percent > 0):
-                raise ConfigError(f"--target {entry!r}: give NAME=PERCENT with a percent > 0 (e.g. Cm_q=10)",
-                                  parameter="--target")
+                raise ConfigError(f"targets.percent {entry!r}: give NAME=PERCENT with a percent > 0 (e.g. Cm_q=10)",
+                                  parameter="targets.percent")
             if name in out:
-                raise ConfigError(f"--target: {name} is given twice", parameter="--target")
+                raise ConfigError(f"targets.percent: {name} is given twice", parameter="targets.percent")
             out[name] = percent
         return out
 
@@ -172,8 +177,8 @@ class TargetTracker:
         targets = options.percent()
         unknown = sorted(set(targets) - set(self.names))
         if unknown:
-            raise ConfigError(f"--target names {', '.join(unknown)}, not a parameter of the models; they are "
-                              f"{', '.join(self.names)}", parameter="--target")
+            raise ConfigError(f"targets.percent names {', '.join(unknown)}, not a parameter of the models; they "
+                              f"are {', '.join(self.names)}", parameter="targets.percent")
         self.window = options.window
         self.targets = np.array([targets.get(n, math.nan) for n in self.names])
         self._history: deque[tuple[float, np.ndarray]] = deque()
@@ -255,4 +260,4 @@ def judge(progress: Sequence[ParameterProgress]) -> Verdict:
 
 def targets_of(values: Mapping[str, float]) -> TargetOptions:
     """:class:`TargetOptions` of a ``{name: percent}`` mapping (the default window)."""
-    return TargetOptions(targets=tuple(f"{k}={float(v)!r}" for k, v in values.items()))
+    return TargetOptions(targets=",".join(f"{k}={float(v)!r}" for k, v in values.items()))

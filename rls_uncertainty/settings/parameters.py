@@ -30,6 +30,7 @@ from ..datapath.convergence import ConvergenceConfig
 from ..datapath.identifiability import IdentifiabilityConfig
 from ..datapath.limits import PlausibilityLimits
 from ..datapath.maneuver_detector import ManeuverOptions
+from ..datapath.targets import TargetOptions
 from ..errors import ConfigError
 from ..estimator.options import AUTO_BURN_IN, MAX_BURN_IN, EstimatorOptions
 from ..frequency.options import FrequencyOptions
@@ -66,6 +67,7 @@ COMPONENTS: tuple[tuple[str, type], ...] = (
     ("identifiability", IdentifiabilityConfig),
     ("outputs", OutputConfig),
     ("instruments", InstrumentOptions),
+    ("targets", TargetOptions),
     ("maneuvers", ManeuverSettings),
     ("detection", ManeuverOptions),
 )
