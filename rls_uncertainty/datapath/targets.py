@@ -75,8 +75,7 @@ class TargetOptions:
                           "parameter's time left and the test point's verdict; parameters not named have none",
                           own_check=True, ros="targets.percent")
     window: float = option(2.0, "targets: seconds of history behind the rate of information the time left is "
-                           "forecast from", unit="s", low=0.0, low_open=True, high=600.0, ros="targets.window",
-                           cli="--target-window")
+                           "forecast from", unit="s", low=0.0, low_open=True, high=600.0, ros="targets.window")
 
     def __post_init__(self) -> None:
         check(self, "targets")
