@@ -409,8 +409,8 @@ def test_without_the_pitch_gust_the_gust_acts_on_alpha_alone_as_before():
     got = simulate_short_period(cfg, gust=w, pitch_gust=False)
     assert got.pitch_gust is None
     ac = got.aircraft
-    A, _, C, _ = t2._state_space(cfg, ac)
-    Bg, Dg = t2._gust_input(cfg, ac)
+    A, _, C, _ = t2.state_space(cfg, ac)
+    Bg, Dg = t2.gust_input(cfg, ac)
     t_fine = np.arange(12_000) / cfg.fine_rate
     _, y_gust, _ = signal.lsim((A, Bg, C, Dg), w / cfg.airspeed, t_fine)
     calm = simulate_short_period(cfg)
