@@ -464,13 +464,18 @@ class Pipeline:
             return False
         if dropped:
             book.reject_samples("instruments_not_ready", dropped)
+        freq = self.frequency
         for row in rows:
             try:
+                if freq is not None:
+                    freq.check(row.X, row.z, row.zeta)  # a row either estimator refuses is used by neither
                 self.bank.update(row.X, row.z, instruments=row.zeta)
             except NonFiniteInput:
                 book.reject_samples("non_finite_regression")
                 continue
             self._used(row.stamp_ns, row.X, row.z)
+            if freq is not None and row.stamp_ns != t:  # a row that waited: no results of its own
+                freq.take()
             if iv.recorded is not None:
                 iv.recorded.append(row.zeta.copy())
         return bool(rows) and self.last_stamp_ns == t
