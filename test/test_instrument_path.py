@@ -153,3 +153,19 @@ def test_a_configuration_iv_cannot_serve_is_one_line(params, words):
         _config(**params)
     text = str(err.value)
     assert words in text and "estimator.algorithm" in text and "\n" not in text
+
+
+def test_instruments_from_the_measured_surfaces_are_warned_once():
+    """Pointing topics.excitation at the surfaces' own topic (no injected excitation known) is
+    said in one line naming topics.excitation; the injected excitation's own topic is not."""
+    from rls_uncertainty.datapath.feasibility import configuration_warnings
+    from rls_uncertainty.settings.parameters import node_config
+
+    cfg = _config()
+    same = node_config({"topics.excitation": "control_surfaces"}).topics
+    apart = node_config({"topics.excitation": "/fcc/excitation"}).topics
+    lines = [w for w in configuration_warnings(cfg, same) if "topics.excitation" in w]
+    assert len(lines) == 1 and "\n" not in lines[0] and "biased" in lines[0]
+    assert not [w for w in configuration_warnings(cfg, apart) if "topics.excitation" in w]
+    assert not [w for w in configuration_warnings(_config(**{"estimator.algorithm": "rls"}), same)
+                if "topics.excitation" in w]

@@ -11,18 +11,26 @@ Nyquist frequency, a differentiator whose pass band lies below the models' band)
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+
 from ..errors import ConfigError
 from .config import PipelineConfig
 
 __all__ = ["configuration_warnings", "record_checks"]
 
 
-def configuration_warnings(config: PipelineConfig) -> list[str]:
+def configuration_warnings(config: PipelineConfig, topics: Mapping[str, str] | None = None) -> list[str]:
     """Warnings about a configuration: forgetting that remembers fewer samples than the
     publication rule's (``1 / (1 - f)`` against ``n + publish_lag_windows x L`` of the largest
-    model): the corrected standard errors then stay too small."""
+    model): the corrected standard errors then stay too small; and with the input ``topics``
+    (``topics.*``), instrumental variables whose excitation is the measured surfaces."""
     o = config.estimator
     out = []
+    if o.algorithm == "iv" and topics is not None and topics.get("excitation") == topics.get("control_surfaces"):
+        out.append("estimator.algorithm iv takes its instruments from the measured surfaces (topics.excitation is "
+                   "topics.control_surfaces): they carry the surfaces' sensor noise and, in closed loop (a pilot or a "
+                   "feedback answering the gusts), the gusts, so the estimates stay biased; point topics.excitation "
+                   "at the injected excitation if the flight-control computer publishes it")
     if o.forgetting < 1.0 and config.publishes_time:
         memory = 1.0 / (1.0 - o.forgetting)
         sizes = {m.output: len(m.regressors) for m in config.models}

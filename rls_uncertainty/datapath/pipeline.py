@@ -44,13 +44,11 @@ from collections import deque
 from collections.abc import Sequence
 from dataclasses import replace
 from pathlib import Path
-from typing import NamedTuple
 
 import numpy as np
 
 from ..aero.coefficients import (
     RATES,
-    FlightState,
     FloatArray,
     aircraft_sample,
     coefficients,
@@ -67,11 +65,13 @@ from .alerts import explanations
 from .bookkeeping import Bookkeeping, model_fit
 from .config import PipelineConfig
 from .convergence import ConvergenceMonitor
-from .frequency_path import FrequencyOutput, FrequencyPath
+from .frequency_path import FrequencyPath
 from .guard import withheld as unpublishable
 from .identifiability import IdentifiabilityMonitor
 from .instrument_path import InstrumentPath
 from .intake import Intake
+from .pipeline_inputs import PipelineInputs
+from .sample_output import SampleOutput
 from .sampling import Sample, Sampler, Skipped
 from .states import model_report
 
@@ -80,47 +80,6 @@ __all__ = ["Pipeline", "SampleOutput", "STREAMS", "StateFileError", "required_st
 
 # The input streams, one per ``add_*`` method: inertial data, air data and the optional ones.
 STREAMS = ("imu", "airspeed", "dynamic_pressure", "control_surfaces", "thrust", "excitation")
-
-
-class SampleOutput(NamedTuple):
-    """What one estimator sample produced.
-
-    ``theta``, ``se`` (corrected, Eqs. 20/22) and ``se_conventional`` (Eq. 13) are
-    ``(M, n_max)`` arrays in the order of ``config.models``; rows of models that are not
-    ``ready`` yet (exact initialization still waiting) and the padding are NaN. ``ready`` is
-    false too for a model whose estimates or standard errors are not all finite (withheld,
-    counted in ``outputs_withheld``): a ready row is safe to publish (:mod:`.outputs`).
-    ``converged`` ``(M, n_max)`` and ``model_converged`` ``(M,)`` are the
-    :class:`.convergence.ConvergenceMonitor` flags (False on padding and models not ready; a
-    model is converged when all its parameters are). ``covariance`` is ``None``, or on the
-    samples whose grid index is a multiple of ``outputs.covariance_decimation`` the
-    ``(2, M, n_max, n_max)`` corrected (``[0]``) and conventional (``[1]``) covariances
-    (:meth:`.estimator.EstimatorBank.covariance`: a corrected one with a negative variance
-    repaired to its nearest positive semi-definite matrix, zero for an exact fit; symmetrized),
-    NaN off the ready models' parameters.
-    ``lags`` ``(M,)`` ints: the largest lag of Eq. 22 behind each corrected SE (chosen per
-    sample with ``estimator.lag_selection: auto``), 0 for models not ready. ``frequency``: with
-    ``estimator.method`` ``frequency`` or ``both``, on the samples where the frequency-domain
-    estimator publishes, its :class:`.frequency_path.FrequencyOutput`; else None.
-    """
-
-    stamp_ns: int
-    index: int  # type: ignore[assignment]  # shadows tuple.index; the field name is the API
-    theta: np.ndarray
-    se: np.ndarray
-    se_conventional: np.ndarray
-    ready: np.ndarray
-    converged: np.ndarray
-    model_converged: np.ndarray
-    covariance: np.ndarray | None = None
-    lags: np.ndarray | None = None
-    frequency: FrequencyOutput | None = None
-
-    @property
-    def time(self) -> float:
-        return self.stamp_ns * 1e-9
-
-
 
 
 def required_streams(config: PipelineConfig) -> tuple[str, ...]:
@@ -179,7 +138,7 @@ def sampler_for(config: PipelineConfig, required: Sequence[str], book: Bookkeepi
     )
 
 
-class Pipeline:
+class Pipeline(PipelineInputs):
     """Sample formation, differentiation, aero reduction and estimation for one configuration.
 
     ``record=True`` keeps every regression row and output handed to the estimator
@@ -269,56 +228,6 @@ class Pipeline:
         """Samples that reached an estimator, over the pipeline's life (reconfigurations too)."""
         return self.bookkeeping.samples_used
 
-    # ------------------------------------------------------------------ inputs (Intake judges each)
-    def add_imu(self, stamp_ns: int, angular_velocity: Sequence[float],
-                linear_acceleration: Sequence[float]) -> list[SampleOutput]:
-        """``sensor_msgs/Imu`` in the REP-103 body frame: rad/s and specific force m/s^2."""
-        return self._advance() if self.intake.imu(stamp_ns, angular_velocity, linear_acceleration) else []
-
-    def add_airspeed(self, stamp_ns: int, velocity: Sequence[float]) -> list[SampleOutput]:
-        """True-airspeed vector in the REP-103 body frame, m/s."""
-        return self._advance() if self.intake.airspeed(stamp_ns, velocity) else []
-
-    def add_dynamic_pressure(self, stamp_ns: int, pascal: float) -> list[SampleOutput]:
-        return self._advance() if self.intake.dynamic_pressure(stamp_ns, pascal) else []
-
-    def add_thrust(self, stamp_ns: int, force_x: float) -> list[SampleOutput]:
-        return self._advance() if self.intake.thrust(stamp_ns, force_x) else []
-
-    def add_excitation(self, stamp_ns: int, names: Sequence[str], positions: Sequence[float]) -> list[SampleOutput]:
-        """The injected excitation, a ``sensor_msgs/JointState`` like the surfaces (rad)."""
-        return self._advance() if self.intake.excitation(stamp_ns, names, positions) else []
-
-    def add_surfaces(self, stamp_ns: int, names: Sequence[str], positions: Sequence[float]) -> list[SampleOutput]:
-        """``sensor_msgs/JointState`` names and positions (rad), mixed by Eq. 23."""
-        return self._advance() if self.intake.surfaces(stamp_ns, names, positions) else []
-
-    def reject_frame(self, stream: str, stamp_ns: int, frame_id: str = "") -> list[SampleOutput]:
-        """Count a message of input ``stream`` whose ``header.frame_id`` (``frame_id``) is not
-        ``inputs.frame_id`` (:func:`.inputs.feed` checks): rejected as ``frame_mismatch``,
-        never used, and like any invalid message it leaves a hole: no sample is interpolated
-        across it."""
-        return self._advance() if self.intake.frame_mismatch(stream, stamp_ns, frame_id) else []
-
-    def reject(self, stream: str, reason: str, detail: str = "") -> None:
-        """Count a message of input ``stream`` that never reached the pipeline's ``add_*``
-        (the node could not decode it; ``detail``: why, kept as evidence)."""
-        self.intake.undecodable(stream, reason, detail)
-
-    def reject_invalid(self, stream: str, stamp_ns: int, reason: str) -> list[SampleOutput]:
-        """Count a message of input ``stream`` stamped ``stamp_ns`` whose values cannot be
-        used (``reason``): no sample is formed across it (:meth:`.sampling.Sampler.reject_invalid`)."""
-        return self._advance() if self.intake.invalid(stream, stamp_ns, reason) else []
-
-    @property
-    def clock_ns(self) -> int | None:
-        """The caller's clock (ns) that stamps are checked against (``inputs.max_clock_offset``)."""
-        return self.sampler.clock_ns
-
-    @clock_ns.setter
-    def clock_ns(self, now: int | None) -> None:
-        self.sampler.clock_ns = now
-
     # ------------------------------------------------------------------ per sample
     def _advance(self) -> list[SampleOutput]:
         out: list[SampleOutput] = []
@@ -402,8 +311,10 @@ class Pipeline:
         X.flat[self._x_index] = [reg[name] for name in self._x_names]
         z[:] = [coef[name] for name in self._outputs]
         freq = self.frequency
-        if self._iv is not None:
-            if not self._instrumented(t, X, z, state, u):
+        if self._iv is not None:  # estimator.algorithm iv: the rows with their instruments
+            last = self._last
+            if not self._iv.feed(t, X, z, u, state, None if last is None else last.theta, self.bank, book, self._used,
+                                 freq):
                 return None
         else:
             try:
@@ -447,38 +358,6 @@ class Pipeline:
         self.last_stamp_ns = t
         if self.record:
             self.regression.append((t, X.copy(), z.copy()))
-
-    def _instrumented(self, t: int, X: np.ndarray, z: np.ndarray, state: FlightState,
-                      u: Sequence[float] | None) -> bool:
-        """``estimator.algorithm iv``: row ``t`` and the rows that waited for the first
-        auxiliary model go to the estimator with their instruments (:mod:`.instrument_path`);
-        whether row ``t`` reached it (False: it waits, or was refused)."""
-        book, iv = self.bookkeeping, self._iv
-        assert iv is not None and u is not None
-        last = self._last
-        try:
-            rows, dropped = iv.update(t, X, z, u[0], float(state.qbar), float(state.V),
-                                      None if last is None else last.theta)
-        except NonFiniteInput:
-            book.reject_samples("non_finite_regression")
-            return False
-        if dropped:
-            book.reject_samples("instruments_not_ready", dropped)
-        freq = self.frequency
-        for row in rows:
-            try:
-                if freq is not None:
-                    freq.check(row.X, row.z, row.zeta)  # a row either estimator refuses is used by neither
-                self.bank.update(row.X, row.z, instruments=row.zeta)
-            except NonFiniteInput:
-                book.reject_samples("non_finite_regression")
-                continue
-            self._used(row.stamp_ns, row.X, row.z)
-            if freq is not None and row.stamp_ns != t:  # a row that waited: no results of its own
-                freq.take()
-            if iv.recorded is not None:
-                iv.recorded.append(row.zeta.copy())
-        return bool(rows) and self.last_stamp_ns == t
 
     @property
     def instruments(self) -> list[np.ndarray]:

@@ -486,7 +486,7 @@ def replay(bag: str | Path, params: dict[str, Any], out: str | Path, *, start: f
                       PLOT_POINTS) if plots else None
     with output_directory(out, force=force, inputs=(bag, *inputs)) as tmp, \
             InputStream(bag, node_cfg.topics, strict=strict, start=start, end=end) as stream:
-        for line in configuration_warnings(config) + record_checks(config, stream.span_seconds):
+        for line in configuration_warnings(config, node_cfg.topics) + record_checks(config, stream.span_seconds):
             print(f"warning: {line}", file=sys.stderr)
         files = ReplayFiles(tmp, config, node_cfg.frame_id, NODE_NAME, typestore())
         with files:

@@ -107,9 +107,9 @@ class EstimatorNode(Node):
         params = self._parameter_values()
         # Invalid settings at start-up: ConfigError propagates to main(), which says why.
         self.config = pipeline_config(params)
-        for line in configuration_warnings(self.config):
-            self.get_logger().warning(line)
         self.node_cfg = node_config(params)
+        for line in configuration_warnings(self.config, self.node_cfg.topics):
+            self.get_logger().warning(line)
         self.pipeline = Pipeline(self.config, enabled=self.node_cfg.enabled)
         self._state = NodeStateFile(self.node_cfg.state_file)
         self._state.load(self.pipeline, self.get_logger())
@@ -199,7 +199,7 @@ class EstimatorNode(Node):
             old_fp, new_fp = self.config.fingerprint(), new.fingerprint()
             what = "estimator reset" if old_fp != new_fp else "pipeline restarted"
             self.get_logger().warning(f"parameters changed ({changed}): {what}")
-            for line in configuration_warnings(new):
+            for line in configuration_warnings(new, self.node_cfg.topics):
                 self.get_logger().warning(line)
             self.config = new
             self.pipeline = self.pipeline.reconfigured(new)
