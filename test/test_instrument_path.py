@@ -12,6 +12,7 @@ import pytest
 
 from rls_uncertainty.errors import ConfigError
 from rls_uncertainty.estimator.reference import batch_iv
+from rls_uncertainty.frequency import frequency_reference
 from rls_uncertainty.offline.bags import read_inputs
 from rls_uncertainty.offline.replay import run_pipeline
 from rls_uncertainty.settings.parameters import pipeline_config
@@ -72,6 +73,31 @@ def test_estimates_equal_batch_instrumental_variables(iv_run):
         np.testing.assert_allclose(pipe.bank.theta(j), theta, rtol=1e-8, atol=1e-10)
 
 
+def test_the_frequency_domain_takes_every_row_with_its_instruments(with_excitation):
+    """With estimator.method both, the frequency-domain estimates and covariances are the batch
+    frequency-domain IV (the literal oracle) over the rows and instruments the time-domain
+    estimator took, the backlog of the first auxiliary model included, in their order; the
+    time-domain numbers are those of the time method."""
+    result = run_pipeline(with_excitation, _config(**{"estimator.method": "both"}))
+    pipe = result.pipeline
+    freq = pipe.frequency
+    assert freq is not None and freq.bank.n_samples == pipe.samples_used == len(pipe.instruments) > 500
+    Zeta = np.array(pipe.instruments)
+    X = np.array([r[1] for r in pipe.regression])
+    z = np.array([r[2] for r in pipe.regression])
+    options = pipe.config.frequency
+    assert options is not None and options.every == 1
+    for j, model in enumerate(pipe.config.models):
+        cols = [i for i, r in enumerate(model.regressors) if r != "1"]
+        ref = frequency_reference(X[:, j, cols], z[:, j], options, Zeta[:, j, cols])
+        np.testing.assert_allclose(freq.bank.theta(j), ref.theta, rtol=1e-10)
+        for kind, expected in (("corrected", ref.cov_corrected), ("conventional", ref.cov_conventional)):
+            np.testing.assert_allclose(freq.bank.covariance(j, kind), expected, rtol=1e-9,
+                                       atol=1e-10 * np.abs(expected).max())
+    time_only = run_pipeline(with_excitation, _config(), record=False).pipeline
+    np.testing.assert_array_equal(pipe.bank.theta_all(), time_only.bank.theta_all())
+
+
 def test_instrumental_variables_move_the_estimates_toward_the_truth(iv_run, with_excitation):
     """The bundled maneuver carries band-limited noise on all four measured signals (errors in
     variables): RLS pulls C_m_q toward zero, instrumental variables do not (the simulation's
@@ -119,8 +145,8 @@ def test_weak_instruments_are_never_flagged_and_say_why(with_excitation):
 
 
 @pytest.mark.parametrize(("params", "words"), [
-    ({"estimator.method": "both"}, "estimator.method time"),
     ({"models.enabled": ["CZ", "Cm", "Cl"]}, "cannot instrument model Cl"),
+    ({"models.enabled": ["CZ", "Cm", "Cl"], "estimator.method": "both"}, "cannot instrument model Cl"),
 ])
 def test_a_configuration_iv_cannot_serve_is_one_line(params, words):
     with pytest.raises(ConfigError) as err:

@@ -211,14 +211,10 @@ class PipelineConfig:
                               f"({', '.join(sorted(known))})", parameter="targets.percent")
 
     def _check_instruments(self) -> None:
-        """``estimator.algorithm iv``: the time domain only, and models the instruments serve
+        """``estimator.algorithm iv``: models the instruments serve
         (:class:`..instruments.InstrumentLayout` refuses the others in one line)."""
         if self.estimator.algorithm != "iv":
             return
-        if self.method != "time":
-            raise ConfigError(f"estimator.algorithm iv works with estimator.method time, got {self.method} "
-                              "(set estimator.method: time, or estimator.algorithm: rls)",
-                              parameter="estimator.algorithm")
         InstrumentLayout(self.models)
 
     def _check_differentiator(self) -> None:

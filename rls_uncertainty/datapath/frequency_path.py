@@ -11,6 +11,12 @@ pipeline hands every regression row it gives the time-domain estimator to one
   :attr:`.config.ModelConfig.frequency_parameter_names`. Samples are taken as consecutive,
   across a dropout too, as the time-domain estimator's lag products take them (the transform's
   clock counts the samples used).
+* **Instruments.** With ``estimator.algorithm: iv`` each row comes with the instruments the
+  time-domain estimator takes (:mod:`.instrument_path`), laid out like the regressors; the bias
+  instrument is left out like the bias, the others are transformed with the regressors and the
+  bank estimates with instrumental variables (docs/frequency.md, F11-F12). Rows that waited for
+  the first auxiliary model reach both estimators together, in their order
+  (:meth:`FrequencyPath.take`: no results for them, as the time domain gives none).
 * **When it publishes.** Estimates and both standard errors are computed on the samples whose
   count since the start (or the last restart) is a multiple of ``frequency.every``, and a
   :class:`FrequencyOutput` is made for those samples only, stamped with that sample's time:
@@ -83,7 +89,8 @@ class FrequencyPath:
         self.outputs = [m.output for m in config.models]
         self.parameter_names = [m.frequency_parameter_names for m in config.models]
         self.sizes = [len(names) for names in self.parameter_names]
-        self.bank = FrequencyBank(self.sizes, options)
+        instrumented = config.estimator.algorithm == "iv"
+        self.bank = FrequencyBank(self.sizes, options, instruments=instrumented)
         self.every, self.n_lags = options.every, options.n_lags
         rows = [m.regressors for m in config.models]
         n_max, q = max(map(len, rows)), max(self.sizes)
@@ -93,16 +100,31 @@ class FrequencyPath:
                                if r != BIAS_REGRESSOR], dtype=np.intp)
         self._put = np.array([j * q + k for j, size in enumerate(self.sizes) for k in range(size)], dtype=np.intp)
         self._X = np.zeros((len(rows), q))
+        self._W: np.ndarray | None = np.zeros((len(rows), q)) if instrumented else None
         self.real = np.arange(q) < np.array(self.sizes)[:, None]  # (M, q): not padding
         self._monitor = ConvergenceMonitor(self.sizes, replace(config.convergence, rate_hz=config.rate))
         self._row: np.ndarray | None = None
         self.last: FrequencyOutput | None = None  # the newest published results
 
-    def check(self, X: np.ndarray, z: np.ndarray) -> None:
-        """Take the time-domain regression row ``X`` ``(M, n_max)``, ``z`` ``(M,)``, or raise
-        :class:`.errors.NonFiniteInput` (nothing changes); :meth:`add` then uses it."""
+    def check(self, X: np.ndarray, z: np.ndarray, zeta: np.ndarray | None = None) -> None:
+        """Take the time-domain regression row ``X`` ``(M, n_max)``, ``z`` ``(M,)`` and, with
+        ``estimator.algorithm: iv``, its instruments ``zeta`` laid out like ``X``, or raise
+        :class:`.errors.NonFiniteInput` (nothing changes); :meth:`add` or :meth:`take` then uses it."""
         self._X.flat[self._put] = X.flat[self._take]
-        self._row = self.bank.check(self._X, z)
+        W = self._W
+        if W is not None:
+            if zeta is None:
+                raise ValueError("the frequency path estimates with instruments: each row needs its zeta")
+            W.flat[self._put] = zeta.flat[self._take]
+        self._row = self.bank.check(self._X, z, W)
+
+    def take(self) -> None:
+        """Advance by the row :meth:`check` took without results: a row handed over with
+        others (the rows that waited for the instruments), not the sample being published."""
+        row, self._row = self._row, None
+        if row is None:
+            raise RuntimeError("FrequencyPath.take without a checked row")
+        self.bank.add(row)
 
     def add(self, stamp_ns: int, withheld: Tally, quality: IdentifiabilityMonitor) -> FrequencyOutput | None:
         """Advance by the row :meth:`check` took; on the samples that publish (every

@@ -29,6 +29,7 @@ if TYPE_CHECKING:  # annotations only
     from ..estimator import EstimatorBank
     from .bookkeeping import Bookkeeping
     from .config import PipelineConfig
+    from .frequency_path import FrequencyPath
 
 __all__ = ["InstrumentPath", "InstrumentedRow"]
 
@@ -89,11 +90,14 @@ class InstrumentPath:
 
     def feed(self, t: int, X: np.ndarray, z: np.ndarray, u: Sequence[float] | None, state: FlightState,
              estimates: np.ndarray | None, bank: EstimatorBank, book: Bookkeeping,
-             used: Callable[[int, np.ndarray, np.ndarray], None]) -> bool:
+             used: Callable[[int, np.ndarray, np.ndarray], None], frequency: FrequencyPath | None = None) -> bool:
         """Row ``t`` (the excitation ``u`` delayed with it, ``state`` its flight state) and the
         rows that waited for the first auxiliary model go to ``bank`` with their instruments,
-        each then reported to ``used``; refusals are counted in ``book``. Whether row ``t``
-        reached the estimator (False: it waits, or was refused)."""
+        each then reported to ``used``; refusals are counted in ``book``. With ``frequency``
+        (``estimator.method`` frequency or both) every row is checked there first (a row either
+        estimator refuses is used by neither) and the rows that waited are taken there too, in
+        order (row ``t`` is added by the caller, with its results). Whether row ``t`` reached
+        the estimator (False: it waits, or was refused)."""
         assert u is not None  # the excitation is a required stream with iv
         try:
             rows, dropped = self.update(t, X, z, u[0], float(state.qbar), float(state.V), estimates)
@@ -105,12 +109,16 @@ class InstrumentPath:
         reached = False
         for row in rows:
             try:
+                if frequency is not None:
+                    frequency.check(row.X, row.z, row.zeta)
                 bank.update(row.X, row.z, instruments=row.zeta)
             except NonFiniteInput:
                 book.reject_samples("non_finite_regression")
                 continue
             used(row.stamp_ns, row.X, row.z)
             reached = row.stamp_ns == t
+            if frequency is not None and not reached:  # a row that waited: no results of its own
+                frequency.take()
             if self.recorded is not None:
                 self.recorded.append(row.zeta.copy())
         return reached

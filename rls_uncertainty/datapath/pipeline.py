@@ -321,7 +321,8 @@ class Pipeline(PipelineInputs):
         freq = self.frequency
         if self._iv is not None:  # estimator.algorithm iv: the rows with their instruments
             last = self._last
-            if not self._iv.feed(t, X, z, u, state, None if last is None else last.theta, self.bank, book, self._used):
+            if not self._iv.feed(t, X, z, u, state, None if last is None else last.theta, self.bank, book, self._used,
+                                 freq):
                 return None
         else:
             try:

@@ -8,13 +8,15 @@ model ``Z(w) = X(w) theta`` is fitted by complex least squares on those transfor
 ``s^2 Re(X^H X)^-1`` treats the grid's frequencies as independent; this package adds the
 covariance of the same estimate for an equation error that is colored in time, derived in
 ``docs/frequency.md`` after the paper's truncated sandwich (Eqs. 17-22). Equation numbers
-``F1``-``F10`` refer to that document. numpy only.
+``F1``-``F12`` refer to that document. numpy only.
 
 * :mod:`.options`: :class:`FrequencyOptions` (grid, lags, evaluation interval), validated once.
 * :mod:`.transform`: the finite Fourier transform, batch (F1) and recursive (F2).
 * :mod:`.lags`: lag-product sums giving the residual autocovariance of any estimate (F9).
 * :mod:`.covariance`: the corrected covariance in closed form (F7-F8) and the fit correction (F10).
-* :mod:`.bank`: :class:`FrequencyBank`, ``M`` models sample by sample.
+* :mod:`.instrumental`: the instrumental-variable fit's extra pieces (F11-F12).
+* :mod:`.bank`: :class:`FrequencyBank`, ``M`` models sample by sample, least squares or
+  instrumental variables.
 * :mod:`.reference`: :func:`frequency_reference`, the same quantities for one model written
   out over the samples; the oracle of the tests and the batch estimate of a record.
 """

@@ -23,6 +23,7 @@ import numpy.typing as npt
 from ..errors import ConfigError, EstimatorNotReady, NonFiniteInput
 from ..estimator import COVARIANCE_KINDS
 from .covariance import PairGeometry, middle
+from .instrumental import instrumental_system
 from .lags import LagSums, residual_autocovariance
 from .options import FrequencyOptions
 from .transform import RecursiveFourierTransform
@@ -52,12 +53,15 @@ class FrequencyBank:
         q_hat, delta_e``).
     options:
         :class:`~.options.FrequencyOptions` (grid, lags, evaluation interval).
+    instruments:
+        Estimate with instrumental variables (Eqs. F11-F12): :meth:`update` then takes one
+        instrument per regressor, laid out like ``X``, transformed like the regressors.
 
     :meth:`update` takes ``X`` ``(M, max(sizes))`` (model ``j``'s regressors in its first
     ``sizes[j]`` columns) and ``z`` ``(M,)``, one row per sample at ``options.rate_hz``.
     """
 
-    def __init__(self, sizes: Sequence[int], options: FrequencyOptions) -> None:
+    def __init__(self, sizes: Sequence[int], options: FrequencyOptions, instruments: bool = False) -> None:
         self.sizes = tuple(int(s) for s in sizes)
         if not self.sizes or min(self.sizes) < 1:
             raise ValueError(f"every model needs at least one regressor, got sizes={self.sizes}")
@@ -72,11 +76,14 @@ class FrequencyBank:
         M, q = len(self.sizes), p_max + 1
         self._geometry = PairGeometry(2.0 * np.pi * self.frequencies / float(options.rate_hz))
         self._columns: BoolArray = np.arange(q)[None, :] <= np.array(self.sizes)[:, None]  # z and real x
-        self._padding: BoolArray = ~self._columns
-        self._transform = RecursiveFourierTransform(self.frequencies, options.rate_hz, (M, q))
+        # The transformed signals: z, x and (with instruments) w; lag sums of (z, x) only.
+        self._padding: BoolArray = ~np.concatenate([self._columns] + [self._columns[:, 1:]] * instruments, axis=1)
+        width = self._padding.shape[1]
+        self._cross: FloatArray | None = np.zeros((M, p_max, q + 1)) if instruments else None  # sum w (u, 1)'
+        self._transform = RecursiveFourierTransform(self.frequencies, options.rate_hz, (M, width))
         self._lags = LagSums(M, q, options.n_lags)
         self._first: FloatArray | None = None
-        self._trim_sum: FloatArray = np.zeros((M, q))  # sum of the first trim_samples samples (first subtracted)
+        self._trim_sum: FloatArray = np.zeros((M, width))  # sum of the first trim_samples samples (first subtracted)
         self._due = False
         self.repairs = 0
         self._theta: FloatArray = np.full((M, p_max), np.nan)
@@ -102,20 +109,25 @@ class FrequencyBank:
         """Samples taken since the start or the last :meth:`reset`."""
         return self._lags.n
 
-    def update(self, X: npt.ArrayLike, z: npt.ArrayLike) -> None:
+    def update(self, X: npt.ArrayLike, z: npt.ArrayLike, instruments: npt.ArrayLike | None = None) -> None:
         """Add one sample of every model (Eqs. F2, F9). A non-finite or too large value of a
-        model's regressors or output raises :class:`NonFiniteInput` and leaves the state as it
-        was (the sample is not counted: the transform's time runs on accepted samples)."""
-        self.add(self.check(X, z))
+        model's regressors, instruments or output raises :class:`NonFiniteInput` and leaves the
+        state as it was (the sample is not counted: the transform's time runs on accepted samples)."""
+        self.add(self.check(X, z, instruments))
 
-    def check(self, X: npt.ArrayLike, z: npt.ArrayLike) -> FloatArray:
-        """The sample as :meth:`add` takes it, ``(M, 1 + max(sizes))``: each model's output,
-        then its regressors, zero padding; :class:`NonFiniteInput` for a value :meth:`update`
-        refuses. Nothing changes: a caller that feeds another estimator too checks here first."""
+    def check(self, X: npt.ArrayLike, z: npt.ArrayLike, instruments: npt.ArrayLike | None = None) -> FloatArray:
+        """The sample as :meth:`add` takes it, ``(M, 1 + max(sizes))`` (``(M, 1 + 2 max(sizes))``
+        with instruments): each model's output, its regressors, its instruments, zero padding;
+        :class:`NonFiniteInput` for a value :meth:`update` refuses. Nothing changes: a caller
+        that feeds another estimator too checks here first."""
         M, q = self._columns.shape
-        u = np.empty((M, q))
+        if (instruments is None) != (self._cross is None):
+            raise ValueError("instruments are given exactly when the bank was made with instruments=True")
+        u = np.empty(self._padding.shape)
         u[:, 0] = np.asarray(z, dtype=np.float64).reshape(M)
-        u[:, 1:] = np.asarray(X, dtype=np.float64).reshape(M, q - 1)
+        u[:, 1:q] = np.asarray(X, dtype=np.float64).reshape(M, q - 1)
+        if instruments is not None:
+            u[:, q:] = np.asarray(instruments, dtype=np.float64).reshape(M, q - 1)
         u[self._padding] = 0.0
         if (np.abs(u) <= LARGEST_INPUT).all():
             return u
@@ -135,7 +147,10 @@ class FrequencyBank:
         if self._lags.n < self.options.trim_samples:
             self._trim_sum += u
         self._transform.update(u)
-        self._lags.update(u)
+        q = self._columns.shape[1]
+        self._lags.update(u[:, :q])
+        if self._cross is not None:  # sum_n w_n (u_n, 1)', the newest (u_n, 1) of the lag window
+            self._cross += u[:, q:, None] * self._lags.window()[:, 0, None, :]
         if self._lags.n % self.options.every == 0:
             self._due = True
 
@@ -145,6 +160,8 @@ class FrequencyBank:
         self._lags.reset()
         self._first = None
         self._trim_sum[...] = 0.0
+        if self._cross is not None:
+            self._cross[...] = 0.0
         self._due = False
         self._theta[...] = np.nan
         self._cov[...] = np.nan
@@ -157,18 +174,22 @@ class FrequencyBank:
 
     # ------------------------------------------------------------------ evaluation
     def _evaluate(self) -> None:
-        """Estimates and both covariances at the current sample (Eqs. F4-F10), if due."""
+        """Estimates and both covariances at the current sample (Eqs. F4-F12), if due."""
         if not self._due:
             return
         self._due = False
         N = self._lags.n
         self._evaluated_at = N
-        U = self._trimmed()  # (M, K, q): transforms of z and x
-        Z, X = U[..., 0], U[..., 1:]
-        G = np.einsum("mka,mkb->mab", U.conj(), U).real
-        A, b = G[:, 1:, 1:].copy(), G[:, 1:, 0]
-        A[self._pad_diagonal] = 1.0  # padded parameters: theta = 0
-        solved = self._well_conditioned(A) if N >= 2 else np.zeros(len(self.sizes), dtype=bool)
+        U = self._trimmed()  # (M, K, q or q + p): transforms of z, x (and w)
+        q = self._columns.shape[1]
+        Z, X, W = U[..., 0], U[..., 1:q], U[..., q:]
+        if self._cross is None:
+            G = np.einsum("mka,mkb->mab", U.conj(), U).real
+            A, b = G[:, 1:, 1:].copy(), G[:, 1:, 0]
+            A[self._pad_diagonal] = 1.0  # padded parameters: theta = 0
+            solved = self._well_conditioned(A) if N >= 2 else np.zeros(len(self.sizes), dtype=bool)
+        else:  # Eq. F11
+            A, b, WW, solved = instrumental_system(U, q, self._pad_diagonal, self.options.init_condition, N)
         all_solved = bool(solved.all())
         if not all_solved:
             A[~solved] = np.eye(A.shape[1])
@@ -178,8 +199,13 @@ class FrequencyBank:
         # Eq. F5: s^2 = sum_k |Z_k - X_k theta|^2 / (K - p).
         E = Z - np.einsum("mka,ma->mk", X, theta)
         s2 = (E.real**2 + E.imag**2).sum(axis=1) / self._residual_dof
-        conventional = s2[:, None, None] * A_inv
-        corrected, unusable = self._corrected(X, A_inv, theta, N)
+        if self._cross is None:
+            conventional = s2[:, None, None] * A_inv
+            corrected, unusable = self._corrected(X, A_inv, A_inv, theta, N)
+        else:  # Eq. F12: A^-1 [.] A^-T with the instruments in the middle
+            A_invT = A_inv.swapaxes(1, 2)
+            conventional = s2[:, None, None] * (A_inv @ WW @ A_invT)
+            corrected, unusable = self._corrected(W, A_inv, A_invT, theta, N)
         self._theta = np.where(self._real if all_solved else solved[:, None] & self._real, theta, np.nan)
         self._cov[0], self._cov[1] = corrected, conventional
         if not all_solved:
@@ -217,19 +243,21 @@ class FrequencyBank:
         return ok
 
     def _corrected(
-        self, X: npt.NDArray[np.complex128], A_inv: FloatArray, theta: FloatArray, N: int,
+        self, X: npt.NDArray[np.complex128], A_inv: FloatArray, right: FloatArray, theta: FloatArray, N: int,
     ) -> tuple[FloatArray, BoolArray]:
-        """Eqs. F7-F10: the residual autocovariance over the record (least-squares residuals,
-        corrected for the fit's degrees of freedom), the closed-form sandwich; and the models
+        """Eqs. F7-F10 (F12): the residual autocovariance over the record (least-squares or
+        instrumental-variable residuals, corrected for the fit's degrees of freedom), the
+        closed-form sandwich ``A_inv [.] right`` of the transforms ``X`` (the instruments'); and the models
         whose covariance means nothing at this evaluation: an exact fit (rounding of either
         sign), or a sandwich with a negative variance (its nearest positive semi-definite
         repair is zero or nearly so; counted in :attr:`repairs`)."""
-        R, C0 = residual_autocovariance(self._lags.augmented(), self._columns, N, self.options.dof_correction)
+        augmented = self._lags.augmented()
+        R, C0 = residual_autocovariance(augmented, self._columns, N, self.options.dof_correction, self._cross)
         self._R = R
         self._output_variance = C0[:, 0, 0] / N
         mid = middle(R, X, self._geometry.at(N), self._trim_count())
         mid *= self.options.dt**2
-        cov: FloatArray = A_inv @ mid @ A_inv
+        cov: FloatArray = A_inv @ mid @ right
         output_variance = np.einsum("ma,mab,mb->m", theta, C0[:, 1:, 1:], theta) / N
         exact = R[:, 0] <= EXACT_FIT * output_variance
         negative = (np.diagonal(cov, axis1=1, axis2=2) < 0.0).any(axis=1) & ~exact  # padding: 0
@@ -346,4 +374,5 @@ class FrequencyBank:
             "sizes": self.sizes, "rate_hz": o.rate_hz, "frequencies": self.frequencies.size,
             "f_min": float(self.frequencies[0]), "f_max": float(self.frequencies[-1]), "f_step": o.f_step,
             "trim_samples": o.trim_samples, "n_lags": o.n_lags, "every": o.every, "dof_correction": o.dof_correction,
+            "instruments": self._cross is not None,
         }

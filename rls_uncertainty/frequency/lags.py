@@ -31,6 +31,8 @@ from collections.abc import Callable
 import numpy as np
 import numpy.typing as npt
 
+from .instrumental import instrumental_fit
+
 __all__ = ["LagSums", "pseudo_inverse", "dof_correction", "residual_autocovariance", "centering"]
 
 FloatArray = npt.NDArray[np.float64]
@@ -169,19 +171,24 @@ def dof_correction(
 
 
 def residual_autocovariance(
-    augmented: FloatArray, columns: npt.NDArray[np.bool_], N: int, correct: bool
+    augmented: FloatArray, columns: npt.NDArray[np.bool_], N: int, correct: bool, cross: FloatArray | None = None,
 ) -> tuple[FloatArray, FloatArray]:
     """Eqs. F9-F10: ``R(0..L)`` (``(M, L+1)``) of the residuals of the least-squares fit of ``z``
     on the regressors and a bias over the record (``theta = B^+ b``, ``B = C_0[x, x]``,
     ``b = C_0[x, z]``), plus ``D R + D^2 R`` when ``correct`` (the fit's degrees of freedom),
     and ``C_0`` ``(M, q, q)``. ``augmented``: :meth:`LagSums.augmented` ``(M, L+1, q+1, q+1)``
     (the centered sums ``C_i`` with a zero last row and column and ``N - i`` in the corner are
-    the same)."""
+    the same). With ``cross`` (:func:`.instrumental.instrumental_fit`'s sums of the
+    instruments), the residuals are those of the instrumental-variable fit of the record and
+    ``D`` is still the least-squares fit's."""
     M, lags, q1 = augmented.shape[:3]
     E = centering(augmented)
     C0 = E @ augmented[:, 0] @ E.swapaxes(1, 2)
     B_inv = pseudo_inverse(C0[:, 1:, 1:], columns[:, 1:])
-    theta = np.einsum("mab,mb->ma", B_inv, C0[:, 1:, 0])
+    if cross is None:
+        theta = np.einsum("mab,mb->ma", B_inv, C0[:, 1:, 0])
+    else:
+        theta = instrumental_fit(cross, E, C0, columns[:, 1:])
     w = np.concatenate([np.ones((M, 1)), -theta], axis=1)
     weight = (w[:, None, :] @ E)[:, 0]  # R(i) = w' C_i w / N = (E'w)' Sa_i (E'w) / N
     outer = (weight[:, :, None] * weight[:, None, :]).reshape(M, q1 * q1, 1)

@@ -47,41 +47,63 @@ def _toeplitz(r: FloatArray, N: int) -> FloatArray:
     return out
 
 
-def frequency_reference(x: npt.ArrayLike, z: npt.ArrayLike, options: FrequencyOptions) -> FrequencyFit:
+def frequency_reference(
+    x: npt.ArrayLike, z: npt.ArrayLike, options: FrequencyOptions, instruments: npt.ArrayLike | None = None,
+) -> FrequencyFit:
     """The fit of ``z_n = x_n' theta + b + e_n`` (``x`` ``(N, p)`` without the bias column,
-    ``z`` ``(N,)``, sampled at ``options.rate_hz``) on ``options``' grid."""
+    ``z`` ``(N,)``, sampled at ``options.rate_hz``) on ``options``' grid; with ``instruments``
+    ``(N, p)`` (one per regressor) the instrumental-variable fit (F11-F12), whose ``h`` and
+    covariances are built from the instruments' transform ``W``."""
     x = np.asarray(x, dtype=np.float64)
     z = np.asarray(z, dtype=np.float64)
+    zeta = x if instruments is None else np.asarray(instruments, dtype=np.float64).reshape(x.shape)
     N, p = int(x.shape[0]), int(x.shape[1])
     dt, f = options.dt, options.frequencies()
     # The trim, the mean of the first m samples (1: the first sample), subtracted from every signal.
     m = min(options.trim_samples, N)
-    xt, zt = x - x[:m].mean(axis=0), z - z[:m].mean()
+    xt, zt, wt = x - x[:m].mean(axis=0), z - z[:m].mean(), zeta - zeta[:m].mean(axis=0)
     # F1: c[k, n] = exp(-j w_k t_n); X = dt sum_n x_n c_n.
     c = phasors(f, np.arange(N), options.rate_hz)
     X = dt * c @ xt
     Z = dt * c @ zt
-    # F4: theta = Re(X^H X)^-1 Re(X^H Z).
-    A = (X.conj().T @ X).real
+    W = dt * c @ wt
+    # F4 (F11 with instruments): theta = Re(W^H X)^-1 Re(W^H Z), W = X without instruments.
+    A = (W.conj().T @ X).real
     A_inv = np.linalg.inv(A)
-    theta = A_inv @ (X.conj().T @ Z).real
-    # F5: s^2 = sum_k |Z_k - X_k theta|^2 / (K - p); cov = s^2 A^-1.
+    theta = A_inv @ (W.conj().T @ Z).real
+    # F5 (F12): s^2 = sum_k |Z_k - X_k theta|^2 / (K - p); cov = s^2 A^-1 Re(W^H W) A^-T.
     E = Z - X @ theta
     s2 = float((E.conj() @ E).real) / (f.size - p)
-    cov_conventional = s2 * A_inv
+    cov_conventional = s2 * A_inv if instruments is None else s2 * A_inv @ (W.conj().T @ W).real @ A_inv.T
     # F6: theta - theta_true = A^-1 sum_n h_n (e_n - e_bar), e_bar the mean of e over the first m
     # samples; h_n = g_n - (1/m) sum_j g_j for n < m (the -e_bar of every sample moved onto them),
-    # g_n otherwise; g_n = dt Re(X^H c_n).
-    g = dt * (X.conj().T @ c).real.T
+    # g_n otherwise; g_n = dt Re(W^H c_n).
+    g = dt * (W.conj().T @ c).real.T
     h = g.copy()
     h[:m] -= g.sum(axis=0) / m
-    # F9: the residuals of the least-squares fit of the record with a bias, their
-    # autocovariance (Eq. 10), lags 0..L (L <= N - 1).
+    R = _residual_autocovariance(xt, zt, None if instruments is None else wt, options)
+    cov_corrected = A_inv @ h.T @ _toeplitz(R, N) @ h @ (A_inv if instruments is None else A_inv.T)
+    return FrequencyFit(theta=theta, cov_conventional=cov_conventional, cov_corrected=cov_corrected, R=R, Z=Z, X=X, h=h)
+
+
+def _residual_autocovariance(
+    xt: FloatArray, zt: FloatArray, wt: FloatArray | None, options: FrequencyOptions,
+) -> FloatArray:
+    """F9: the residuals of the time-domain fit of the record with a bias -- least squares, or
+    with instruments ``wt`` the instrumental-variable fit ``(W'X)^-1 W'z`` of the centered
+    signals -- their autocovariance (Eq. 10), lags 0..L (L <= N - 1), and F10's correction
+    (that of the least-squares fit in both cases)."""
+    N = int(xt.shape[0])
     lags = min(options.n_lags, N - 1)
     xc = xt - xt.mean(axis=0)
+    zc = zt - zt.mean()
     B_inv = np.linalg.pinv(xc.T @ xc)
-    v = (zt - zt.mean()) - xc @ (B_inv @ xc.T @ (zt - zt.mean()))
-    R = np.array([v[i:] @ v[: N - i] for i in range(lags + 1)]) / N
+    if wt is None:
+        v = zc - xc @ (B_inv @ xc.T @ zc)
+    else:
+        wc = wt - wt.mean(axis=0)
+        v = zc - xc @ np.linalg.solve(wc.T @ xc, wc.T @ zc)
+    R: FloatArray = np.array([v[i:] @ v[: N - i] for i in range(lags + 1)]) / N
     if options.dof_correction:
         # F10: R + D R + D^2 R, D as in lags.dof_correction, written over the samples.
         Cx = [xc[j:].T @ xc[: N - j] for j in range(lags + 1)]  # C^x_j = sum_n x_n x_(n-j)'
@@ -103,5 +125,4 @@ def frequency_reference(x: npt.ArrayLike, z: npt.ArrayLike, options: FrequencyOp
             return out
 
         R = R + D(R + D(R))
-    cov_corrected = A_inv @ h.T @ _toeplitz(R, N) @ h @ A_inv
-    return FrequencyFit(theta=theta, cov_conventional=cov_conventional, cov_corrected=cov_corrected, R=R, Z=Z, X=X, h=h)
+    return R
