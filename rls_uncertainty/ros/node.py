@@ -357,13 +357,11 @@ class EstimatorNode(Node):
         if delta < 0:
             now = self.get_clock().now().nanoseconds
             if self.pipeline.time_jumped(now, now - delta):
-                self.get_logger().warning(
-                    f"time jumped {delta * 1e-9:+.3f} s: estimator and inputs restart when the stamps follow"
-                )
+                self.get_logger().warning(f"time jumped {delta * 1e-9:+.3f} s: estimator and inputs restart when "
+                                          "the stamps follow")
             else:
                 self.get_logger().info(f"time jumped {delta * 1e-9:+.3f} s: the inputs are already near the new time")
 
-    # ------------------------------------------------------------------ state file
     def save_state(self) -> None:
         """Save the estimator's state to ``state_file`` (a periodic step, timed)."""
         t0 = time.perf_counter()
