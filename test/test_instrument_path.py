@@ -169,3 +169,36 @@ def test_instruments_from_the_measured_surfaces_are_warned_once():
     assert not [w for w in configuration_warnings(cfg, apart) if "topics.excitation" in w]
     assert not [w for w in configuration_warnings(_config(**{"estimator.algorithm": "rls"}), same)
                 if "topics.excitation" in w]
+
+
+def test_one_topic_can_feed_the_surfaces_and_the_excitation(tmp_path, capsys):
+    """topics.excitation may name the surfaces' own topic (no injected excitation recorded):
+    the replay feeds each of its messages to both inputs, the estimator runs, and the one-line
+    warning says why such instruments stay biased."""
+    from rls_uncertainty.offline.replay import replay
+
+    params = {**load_parameters_file("t2"), "estimator.algorithm": "iv", "topics.excitation": "control_surfaces"}
+    result = replay(BUNDLED, params, tmp_path / "out")
+    c = result.pipeline.counters()["streams"]
+    assert c["excitation"]["received"] == c["control_surfaces"]["received"] > 0
+    assert result.pipeline.samples_used > 500
+    err = capsys.readouterr().err
+    assert err.count("topics.excitation is topics.control_surfaces") == 1
+
+
+def test_a_mapping_file_may_give_the_excitation_joint_by_joint(tmp_path):
+    """convert's mapping takes an excitation input like the surfaces (joints to fields), and
+    refuses one without joints in one line naming it."""
+    from rls_uncertainty.errors import BagError
+    from rls_uncertainty.offline.bags import load_mapping
+
+    base = ("imu: {topic: /imu}\nairspeed: {topic: /air}\n"
+            "control_surfaces: {topic: /srf, joints: {elevator: de}}\n")
+    good = tmp_path / "good.yaml"
+    good.write_text(base + "excitation: {topic: /fcc, joints: {elevator: de_cmd}}\n")
+    assert load_mapping(good)["excitation"]["joints"] == {"elevator": "de_cmd"}
+    bad = tmp_path / "bad.yaml"
+    bad.write_text(base + "excitation: {topic: /fcc}\n")
+    with pytest.raises(BagError, match="excitation") as err:
+        load_mapping(bad)
+    assert "joints" in str(err.value) and "\n" not in str(err.value)

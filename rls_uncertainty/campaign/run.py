@@ -39,6 +39,7 @@ from ..datapath.config import PipelineConfig
 from ..datapath.feasibility import record_checks
 from ..datapath.inputs import Stamped
 from ..datapath.maneuvers import MANEUVER_COLUMNS
+from ..datapath.pipeline import all_lags_bank
 from ..datapath.states import ParameterState, se_percent
 from ..errors import RlsUncertaintyError
 from ..estimator import EstimatorBank
@@ -152,23 +153,6 @@ def failed_result(maneuver: str, config: PipelineConfig, status: str) -> Maneuve
     return ManeuverResult(maneuver, rows)
 
 
-def all_lags_bank(result: ReplayResult) -> EstimatorBank:
-    """A bank with every lag (Eq. 20) fed the regression rows the run's estimator used, in
-    order (with ``estimator.algorithm iv``, and their instruments); the other options are the
-    run's (the residual burn-in resolved as configured)."""
-    pipe = result.pipeline
-    assert pipe is not None  # run_pipeline keeps its pipeline
-    o = pipe.config.estimator
-    bank = EstimatorBank(pipe.sizes, replace(o, lags="all", residual_burn_in=o.burn_in, noise_forgetting=None))
-    if o.algorithm == "iv":
-        for (_t, X, z), zeta in zip(pipe.regression, pipe.instruments, strict=True):
-            bank.update(X, z, instruments=zeta)
-        return bank
-    for _t, X, z in pipe.regression:
-        bank.update(X, z)
-    return bank
-
-
 def _no_estimate(result: ReplayResult, model: str, method: str) -> str:
     """Why ``model`` has no ``method``-domain estimate: the run's explanation (its
     ``(frequency domain)`` line with both methods, :func:`.replay.unestimated`), else a
@@ -253,7 +237,8 @@ def run_maneuver(job: tuple[Maneuver, CampaignSettings]) -> ManeuverResult:
             timed = _TimedStream(stream)
             result = run_pipeline(timed, config, record=True, keep_outputs=False)
         t1 = time.perf_counter()
-        bank_all = all_lags_bank(result) if config.publishes_time else None
+        pipe = result.pipeline
+        bank_all = all_lags_bank(pipe) if config.publishes_time and pipe is not None else None
     except (RlsUncertaintyError, OSError) as exc:
         return failed_result(maneuver.name, config, f"failed: {' '.join(str(exc).split())}")
     rows = _rows(maneuver.name, result, bank_all)

@@ -45,12 +45,9 @@ class InstrumentedRow(NamedTuple):
 
 
 class InstrumentPath:
-    """The instruments of one estimator's rows (a new estimator gets a new path). ``record``:
-    keep the instruments of every row the estimator took (:attr:`recorded`, beside the
-    pipeline's ``regression``)."""
+    """The instruments of one estimator's rows (a new estimator gets a new path)."""
 
-    def __init__(self, config: PipelineConfig, record: bool = False) -> None:
-        self.recorded: list[np.ndarray] | None = [] if record else None
+    def __init__(self, config: PipelineConfig) -> None:
         opts = config.instruments
         self.options = opts
         self.aux = ShortPeriodAuxiliary(config.models, config.aircraft, config.rate,
@@ -90,7 +87,8 @@ class InstrumentPath:
 
     def feed(self, t: int, X: np.ndarray, z: np.ndarray, u: Sequence[float] | None, state: FlightState,
              estimates: np.ndarray | None, bank: EstimatorBank, book: Bookkeeping,
-             used: Callable[[int, np.ndarray, np.ndarray], None], frequency: FrequencyPath | None = None) -> bool:
+             used: Callable[[int, np.ndarray, np.ndarray, np.ndarray], None],
+             frequency: FrequencyPath | None = None) -> bool:
         """Row ``t`` (the excitation ``u`` delayed with it, ``state`` its flight state) and the
         rows that waited for the first auxiliary model go to ``bank`` with their instruments,
         each then reported to ``used``; refusals are counted in ``book``. With ``frequency``
@@ -115,12 +113,10 @@ class InstrumentPath:
             except NonFiniteInput:
                 book.reject_samples("non_finite_regression")
                 continue
-            used(row.stamp_ns, row.X, row.z)
+            used(row.stamp_ns, row.X, row.z, row.zeta)
             reached = row.stamp_ns == t
             if frequency is not None and not reached:  # a row that waited: no results of its own
                 frequency.take()
-            if self.recorded is not None:
-                self.recorded.append(row.zeta.copy())
         return reached
 
     def weak_reason(self, j: int) -> str:

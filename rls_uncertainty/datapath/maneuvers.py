@@ -52,6 +52,7 @@ import numpy as np
 from ..errors import Refused
 from .config import SOURCES, ManeuverSettings
 from .maneuver_detector import Boundary, ManeuverDetector, event_boundary
+from .pipeline import all_lags_bank
 from .states import parameter_states, se_percent
 
 if TYPE_CHECKING:  # annotations only
@@ -250,12 +251,7 @@ class ManeuverTracker:
         rows = [r for r in pipe.regression if r[0] <= end_ns] if pipe.record else []
         if not rows or not pipe.config.publishes_time:
             return None, None
-        from ..estimator import EstimatorBank  # noqa: PLC0415 - the bank only when rows are kept
-
-        o = pipe.config.estimator
-        bank = EstimatorBank(pipe.sizes, replace(o, lags="all", residual_burn_in=o.burn_in, noise_forgetting=None))
-        for _t, X, z in rows:
-            bank.update(X, z)
+        bank = all_lags_bank(pipe, end_ns)
         se = bank.standard_errors_all("corrected") if bank.ready.any() else None
         return se, rows[-1][0]
 

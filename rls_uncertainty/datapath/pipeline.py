@@ -77,7 +77,7 @@ from .states import model_report
 from .targets import TargetTracker
 
 __all__ = ["Pipeline", "SampleOutput", "STREAMS", "StateFileError", "required_streams", "sampler_for",
-           "uses_excitation"]
+           "uses_excitation", "all_lags_bank"]
 
 # The input streams, one per ``add_*`` method: inertial data, air data and the optional ones.
 STREAMS = ("imu", "airspeed", "dynamic_pressure", "control_surfaces", "thrust", "excitation")
@@ -139,6 +139,23 @@ def sampler_for(config: PipelineConfig, required: Sequence[str], book: Bookkeepi
     )
 
 
+def all_lags_bank(pipe: Pipeline, upto_ns: int | None = None) -> EstimatorBank:
+    """A bank with every lag (Eq. 20) fed the regression rows ``pipe`` kept (``record``), in
+    order, up to ``upto_ns`` (with ``estimator.algorithm iv``, with their instruments); the other
+    options are the run's (the residual burn-in resolved as configured)."""
+    o = pipe.config.estimator
+    bank = EstimatorBank(pipe.sizes, replace(o, lags="all", residual_burn_in=o.burn_in, noise_forgetting=None))
+    zetas = pipe.instruments if o.algorithm == "iv" else None
+    for i, (t, X, z) in enumerate(pipe.regression):
+        if upto_ns is not None and t > upto_ns:
+            break
+        if zetas is None:
+            bank.update(X, z)
+        else:
+            bank.update(X, z, instruments=zetas[i])
+    return bank
+
+
 class Pipeline(PipelineInputs):
     """Sample formation, differentiation, aero reduction and estimation for one configuration.
 
@@ -163,6 +180,7 @@ class Pipeline(PipelineInputs):
         self.enabled = enabled
         self.record = record
         self.regression: list[tuple[int, np.ndarray, np.ndarray]] = []
+        self.instruments: list[np.ndarray] = []  # with estimator.algorithm iv, each row's (record)
         self.bookkeeping = book = bookkeeping if bookkeeping is not None else Bookkeeping.for_streams(STREAMS)
         self.required = required_streams(config)
         inputs = config.inputs
@@ -224,7 +242,7 @@ class Pipeline(PipelineInputs):
         iv = getattr(self, "_iv", None)
         if iv is not None and iv.waiting:
             self.bookkeeping.reject_samples("instruments_not_ready", iv.waiting)
-        self._iv = InstrumentPath(self.config, self.record) if uses_excitation(self.config) else None
+        self._iv = InstrumentPath(self.config) if uses_excitation(self.config) else None
 
     @property
     def identifiability(self) -> IdentifiabilityMonitor:
@@ -267,6 +285,7 @@ class Pipeline(PipelineInputs):
         if reason != "stamps_jumped_forward":
             self._new_estimator()
             self.regression.clear()
+            self.instruments.clear()
 
     def _sample_vector(self, values: list) -> list:
         """The sampled streams (in ``required`` order) as one :data:`.aero.SAMPLE_FIELDS`
@@ -361,19 +380,15 @@ class Pipeline(PipelineInputs):
                                   frequency=frequency)
         return self._last
 
-    def _used(self, t: int, X: np.ndarray, z: np.ndarray) -> None:
-        """Row ``t`` reached the estimator."""
+    def _used(self, t: int, X: np.ndarray, z: np.ndarray, zeta: np.ndarray | None = None) -> None:
+        """Row ``t`` (instruments ``zeta`` with iv) reached the estimator."""
         self.bookkeeping.samples_used += 1
         self._quality.add(X, z)
         self.last_stamp_ns = t
         if self.record:
             self.regression.append((t, X.copy(), z.copy()))
-
-    @property
-    def instruments(self) -> list[np.ndarray]:
-        """With ``record`` and ``estimator.algorithm iv``: the instruments of each row in
-        :attr:`regression`, in its order (empty otherwise)."""
-        return [] if self._iv is None or self._iv.recorded is None else self._iv.recorded
+            if zeta is not None:
+                self.instruments.append(zeta.copy())
 
     def weak_instruments(self, j: int) -> str:
         """Why model ``j``'s parameters are held back for weak instruments ('' if not)."""
@@ -398,6 +413,7 @@ class Pipeline(PipelineInputs):
         self.bookkeeping.resets.count(reason)
         self._new_estimator()
         self.regression.clear()
+        self.instruments.clear()
         if clear_inputs:
             self._flush(f"reset_{reason}")
             self.sampler.clear(forget_newest=True)
@@ -426,7 +442,7 @@ class Pipeline(PipelineInputs):
         self._flush("end_of_data")
         if self._iv is not None and self._iv.waiting:
             self.bookkeeping.reject_samples("instruments_not_ready", self._iv.waiting)
-            self._iv = InstrumentPath(self.config, self.record)
+            self._iv = InstrumentPath(self.config)
 
     # ------------------------------------------------------------------ reporting
     def model_fit(self, j: int) -> dict:

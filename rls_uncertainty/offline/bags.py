@@ -513,7 +513,10 @@ class InputStream:
         self.strict = strict
         self.store = store = typestore()
         wanted = input_topics(topics)
-        self._kinds = {v: k for k, v in wanted.items()}
+        kinds: dict[str, tuple[str, ...]] = {}  # topic -> the inputs it feeds (the excitation may be the surfaces')
+        for kind, topic in wanted.items():
+            kinds[topic] = (*kinds.get(topic, ()), kind)
+        self._kinds = kinds
         # The test-point events (maneuvers.topic), yielded as ("event", log time, msg) when given.
         self._events = None if events is None else (events if events.startswith("/") else f"/{events}")
         self._reader = reader = _open_reader(path, store)
@@ -547,9 +550,10 @@ class InputStream:
                 f"(it has {sorted({c.topic for c in reader.connections}) or 'no topics'})"
             )
         for c in conns:
-            expected = MESSAGE_TYPES[kinds[c.topic]]
-            if c.msgtype != expected:
-                raise BagError(f"{path}: topic {c.topic} has type {c.msgtype}, expected {expected}")
+            for kind in kinds[c.topic]:
+                expected = MESSAGE_TYPES[kind]
+                if c.msgtype != expected:
+                    raise BagError(f"{path}: topic {c.topic} has type {c.msgtype}, expected {expected}")
         events = [c for c in reader.connections if c.topic == self._events]
         for c in events:
             if c.msgtype != EVENT_TYPE:
@@ -594,7 +598,8 @@ class InputStream:
             if (lo is not None and stamp < lo) or (hi is not None and stamp > hi):
                 continue
             used += 1
-            yield kinds[conn.topic], stamp, msg
+            for kind in kinds[conn.topic]:
+                yield kind, stamp, msg
         if not used:
             if self.read:
                 raise BagError(f"{path}: no input messages from {self.start or 0:g} s to "
@@ -680,6 +685,8 @@ _MAPPING_KEYS = {
     "control_surfaces": {"topic": "topic", "joints": "joints", "units": "angle"},
     "thrust": {"topic": "topic", "field": "field", "units": "force"},
 }
+_MAPPING_KEYS["excitation"] = _MAPPING_KEYS["control_surfaces"]  # the injected input: surfaces' joints
+_JOINTS = ("control_surfaces", "excitation")  # the inputs mapped joint by joint
 _POLAR_KEYS = ("speed", "alpha", "beta")
 _REDUCTIONS = ("sum", "mean")
 
@@ -715,7 +722,7 @@ def _check_input(kind: str, spec: object, where: str) -> None:
         raise BagError(f"{where}: unknown key(s) {extra}; known: {list(keys)}")
     if "topic" not in spec:
         raise BagError(f"{where}: needs a 'topic'")
-    if kind == "control_surfaces" and "joints" not in spec:
+    if kind in _JOINTS and "joints" not in spec:
         raise BagError(f"{where}: needs 'joints: {{joint_name: field, ...}}'")
     if kind == "airspeed":
         given = "polar" if "polar" in spec else "vector"
@@ -838,10 +845,10 @@ def _mapped_values(kind: str, spec: dict, msg: object, where: str) -> float | Se
         return _scalar(msg, spec.get("field", "fluid_pressure"), where) * _unit(spec, "units", "Pa", where)
     if kind == "thrust":
         return _scalar(msg, spec.get("field", "wrench.force.x"), where) * _unit(spec, "units", "N", where)
-    if kind == "control_surfaces":
+    if kind in _JOINTS:
         joints = spec.get("joints")
         if not isinstance(joints, dict) or not joints:
-            raise BagError(f"{where}: control_surfaces needs 'joints: {{joint_name: field}}'")
+            raise BagError(f"{where}: {kind} needs 'joints: {{joint_name: field}}'")
         scale = _unit(spec, "units", "rad", where)
         return [_scalar(msg, f, where) * scale for f in joints.values()]
     raise ValueError(kind)
@@ -938,7 +945,7 @@ def _convert_messages(src: Path, spec: dict, reader: AnyReader, conns: Sequence[
         stamp = _header_stamp(src, conn.topic, msg, last)
         for kind in kinds_of[conn.topic]:
             values = _mapped_values(kind, spec[kind], msg, f"{src}: topic {conn.topic} ({kind})")
-            names = list(spec[kind]["joints"]) if kind == "control_surfaces" else None
+            names = list(spec[kind]["joints"]) if kind in _JOINTS else None
             topic = f"/{kind}"
             writer.add(stamp, topic, MESSAGE_TYPES[kind], _standard_message(store, kind, stamp, values, names))
             counts[topic] = counts.get(topic, 0) + 1

@@ -263,13 +263,16 @@ class FigureData:
 
     def add(self, pipe: Pipeline, outs: Sequence[SampleOutput],
             rows: Sequence[tuple[int, np.ndarray, np.ndarray]]) -> None:
-        """The samples ``outs`` one message produced and the regression rows recorded for them
-        (the last ``len(rows)`` samples have rows: earlier ones went before a restart)."""
+        """The samples ``outs`` one message produced and the regression rows recorded for them:
+        the last samples and the last rows pair up (earlier samples went before a restart;
+        earlier rows, with ``estimator.algorithm iv``, waited for their instruments and have
+        no output of their own)."""
         if pipe.bank is not self._bank:
             if self._bank is not None:
                 self.reset()
             self._bank = pipe.bank
-        for out, (t, X, z) in zip(outs[len(outs) - len(rows):], rows, strict=True):
+        k = min(len(outs), len(rows))
+        for out, (t, X, z) in zip(outs[len(outs) - k:], rows[len(rows) - k:], strict=True):
             if out.stamp_ns == t:
                 self._sample(out, X, z)
 

@@ -166,6 +166,7 @@ class _Rows:
             self.seen = len(rows)
         else:
             rows.clear()
+            self.pipe.instruments.clear()  # (estimator.algorithm iv: each row's, beside them)
         return new
 
     def stop(self) -> None:
