@@ -172,8 +172,10 @@ def _cost(rows: list[dict], case: str) -> tuple[float, float]:
 
 def table(args: argparse.Namespace) -> None:
     rows = _read(args.csv)
+    if getattr(args, "flagged", False):  # what the user is handed as converged
+        rows = [r for r in rows if r["converged_end"]]
     stats = statistics(rows)
-    for case in sorted({r["case"] for r in rows}):
+    for case in dict.fromkeys(r["case"] for r in rows):  # in the order of the CSVs
         n = {m: stats[case, m, PARAMS[0]]["n"] for m in ("RLS", "IV") if (case, m, PARAMS[0]) in stats}
         print(f"\n### {case} ({', '.join(f'{m} {k} maneuvers' for m, k in n.items())})\n")
         print("| parameter | method | coverage % | SE/scatter | bias/scatter | false conv. % (flagged) "
@@ -192,8 +194,9 @@ def table(args: argparse.Namespace) -> None:
 
 
 def figure(args: argparse.Namespace) -> None:
-    stats = statistics(_read(args.csv))
-    cases = sorted({k[0] for k in stats})
+    rows = _read(args.csv)
+    stats = statistics(rows)
+    cases = list(dict.fromkeys(r["case"] for r in rows))
     fig, axes = plt.subplots(3, len(cases), figsize=(4.2 * len(cases), 8), squeeze=False)
     x = np.arange(len(PARAMS))
     for c, case in enumerate(cases):
@@ -288,6 +291,7 @@ def main() -> None:
     r.add_argument("--out", required=True)
     t = sub.add_parser("table", help="the tables of the CSVs")
     t.add_argument("csv", nargs="+")
+    t.add_argument("--flagged", action="store_true", help="only the maneuvers whose parameter is flagged at the end")
     f = sub.add_parser("figure", help="coverage, SE / scatter and false convergence per case")
     f.add_argument("csv", nargs="+")
     f.add_argument("--png", required=True)
