@@ -152,6 +152,11 @@ def statistics(rows: list[dict]) -> dict:
             "flagged": len(flagged),
             "flag_time": float(np.median([r["flag_time"] for r in flagged])) if flagged else math.nan,
             "scatter": scatter,
+            "converged_end": 100 * np.mean([r["converged_end"] for r in sel]),
+            # robust to a few maneuvers with weak instruments: the median SE over 1.4826 x the
+            # median absolute deviation of the estimates, and the spread of the z-scores
+            "robust_se_scatter": np.median(se) / (1.4826 * np.median(np.abs(est - np.median(est)))),
+            "z_std": float(np.std((est - truth) / se, ddof=1)),
         }
     return out
 
@@ -167,27 +172,31 @@ def _cost(rows: list[dict], case: str) -> tuple[float, float]:
 
 def table(args: argparse.Namespace) -> None:
     rows = _read(args.csv)
+    if getattr(args, "flagged", False):  # what the user is handed as converged
+        rows = [r for r in rows if r["converged_end"]]
     stats = statistics(rows)
-    for case in sorted({r["case"] for r in rows}):
+    for case in dict.fromkeys(r["case"] for r in rows):  # in the order of the CSVs
         n = {m: stats[case, m, PARAMS[0]]["n"] for m in ("RLS", "IV") if (case, m, PARAMS[0]) in stats}
         print(f"\n### {case} ({', '.join(f'{m} {k} maneuvers' for m, k in n.items())})\n")
         print("| parameter | method | coverage % | SE/scatter | bias/scatter | false conv. % (flagged) "
-              "| median flag time, s | scatter |")
-        print("| --- | --- | --- | --- | --- | --- | --- | --- |")
+              "| median flag time, s | scatter | robust SE/scatter | z std | flagged at the end % |")
+        print("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |")
         for p in PARAMS:
             for m in ("RLS", "IV"):
                 s = stats.get((case, m, p))
                 if s is None:
                     continue
                 print(f"| {p} | {m} | {s['coverage']:.0f} | {s['se_scatter']:.2f} | {s['bias_scatter']:+.2f} | "
-                      f"{s['false']:.0f} ({s['flagged']}) | {s['flag_time']:.2f} | {s['scatter']:.3g} |")
+                      f"{s['false']:.0f} ({s['flagged']}) | {s['flag_time']:.2f} | {s['scatter']:.3g} | "
+                      f"{s['robust_se_scatter']:.2f} | {s['z_std']:.2f} | {s['converged_end']:.0f} |")
         rls, iv = _cost(rows, case)
         print(f"\npipeline time per estimator sample: RLS {rls:.0f} us, IV {iv:.0f} us, IV / RLS {iv / rls:.2f}")
 
 
 def figure(args: argparse.Namespace) -> None:
-    stats = statistics(_read(args.csv))
-    cases = sorted({k[0] for k in stats})
+    rows = _read(args.csv)
+    stats = statistics(rows)
+    cases = list(dict.fromkeys(r["case"] for r in rows))
     fig, axes = plt.subplots(3, len(cases), figsize=(4.2 * len(cases), 8), squeeze=False)
     x = np.arange(len(PARAMS))
     for c, case in enumerate(cases):
@@ -197,14 +206,18 @@ def figure(args: argparse.Namespace) -> None:
             ax = axes[r, c]
             for k, m in enumerate(("RLS", "IV")):
                 ax.bar(x + (k - 0.5) * 0.38, [stats[case, m, p][key] for p in PARAMS], 0.38, label=m)
+                if key == "se_scatter":  # the robust ratio as a black tick on each bar
+                    ax.plot(x + (k - 0.5) * 0.38, [stats[case, m, p]["robust_se_scatter"] for p in PARAMS], "k_",
+                            ms=12, label="robust" if k else None)
             for g in goal:
                 if g is not None:
                     ax.axhline(g, color="k", lw=0.8, ls="--")
             ax.set_xticks(x, [p.replace("_", "\n", 1) for p in PARAMS], fontsize=7)
             ax.set_ylabel(label)
+            if r < 2:
+                ax.legend(fontsize=7)
             if r == 0:
                 ax.set_title(case, fontsize=9)
-                ax.legend(fontsize=7)
     fig.tight_layout()
     fig.savefig(args.png, dpi=110)
 
@@ -278,6 +291,7 @@ def main() -> None:
     r.add_argument("--out", required=True)
     t = sub.add_parser("table", help="the tables of the CSVs")
     t.add_argument("csv", nargs="+")
+    t.add_argument("--flagged", action="store_true", help="only the maneuvers whose parameter is flagged at the end")
     f = sub.add_parser("figure", help="coverage, SE / scatter and false convergence per case")
     f.add_argument("csv", nargs="+")
     f.add_argument("--png", required=True)
