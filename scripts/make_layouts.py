@@ -50,7 +50,7 @@ from rls_uncertainty.datapath.outputs import NODE_NAME  # noqa: E402
 from rls_uncertainty.settings import load_parameters_file, pipeline_config  # noqa: E402
 
 LAYOUTS = ROOT / "layouts"
-CONFIGS = ("t2", "twin_otter_lateral", "twin_otter_longitudinal")
+CONFIGS = ("t2", "t2_turbulence", "twin_otter_lateral", "twin_otter_longitudinal")
 SCRIPT_PREFIX = "/foxglove_script"
 COLORS = {"estimate": "#1f77b4", "bound": "#d62728"}
 

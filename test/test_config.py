@@ -102,7 +102,7 @@ def test_invalid_settings_are_refused_with_the_reason(params, match):
         pipeline_config(params)
 
 
-@pytest.mark.parametrize("name", ["t2", "twin_otter_lateral", "twin_otter_longitudinal"])
+@pytest.mark.parametrize("name", ["t2", "t2_turbulence", "twin_otter_lateral", "twin_otter_longitudinal"])
 def test_shipped_parameter_files_are_valid(name):
     cfg = pipeline_config(load_parameters_file(name))
     assert cfg.models

@@ -33,6 +33,9 @@ from rls_uncertainty.settings import load_parameters_file, pipeline_config
 
 from conftest import ROOT
 
+# The streams the fuzzing base carries (the excitation input is read with estimator.algorithm iv
+# only, through the surfaces' code: test_instrument_path.py).
+BASE_STREAMS = tuple(k for k in STREAMS if k != "excitation")
 EXAMPLES = 120
 N_BASE = 1500
 PARAMS = {**load_parameters_file("t2"), "models.enabled": ["CX", "CY", "CZ", "Cl", "Cm", "Cn"]}
@@ -90,7 +93,7 @@ corruptions = st.one_of(
     st.tuples(st.just("names"), st.integers(0, N_BASE - 1), names, st.sampled_from([0, 0, 0, -1, 1, 2])),
     st.tuples(st.just("frame"), st.integers(0, N_BASE - 1), frames),
     st.tuples(st.just("drop"), st.integers(0, N_BASE - 1), st.integers(1, 400)),  # up to about 1 s
-    st.tuples(st.just("insert"), st.integers(0, N_BASE - 1), st.sampled_from(STREAMS), st.integers(0, 5), values,
+    st.tuples(st.just("insert"), st.integers(0, N_BASE - 1), st.sampled_from(BASE_STREAMS), st.integers(0, 5), values,
               stamp_ops),
 )
 

@@ -55,7 +55,7 @@ def _element(ref: str, models: dict, pattern: str) -> tuple[str, str, int]:
 
 
 def test_every_shipped_configuration_has_both_layouts_and_nothing_else_is_there():
-    assert CONFIGS == ["t2", "twin_otter_lateral", "twin_otter_longitudinal"]
+    assert CONFIGS == ["t2", "t2_turbulence", "twin_otter_lateral", "twin_otter_longitudinal"]
     assert sorted(p.name for p in LAYOUTS.iterdir()) == sorted(
         f"{c}.{kind}" for c in CONFIGS for kind in ("foxglove.json", "plotjuggler.xml"))
 
