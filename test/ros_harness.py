@@ -25,7 +25,8 @@ T2 = str(ROOT / "config" / "t2.yaml")
 # hold every message of the bag's busiest topic, and a buffer longer than the node's backlog
 # can grow (the node takes one message per topic per executor round, so a backlog lets the
 # slow streams run ahead of the IMU; with the default 2 s buffer their messages would expire).
-REPLAY_NODE = ("-p", "qos.reliable:=true", "-p", "qos.depth:=10000", "-p", "inputs.buffer_duration:=60.0")
+REPLAY_NODE = ("-p", "qos.reliable:=true", "-p", "qos.depth:=10000", "-p", "inputs.buffer_duration:=60.0",
+               "-p", "shed_load:=false")  # a node that is to equal the replay never sheds
 TYPES = {kind: message_class(MESSAGE_TYPES[kind]) for kind in STREAMS}
 RELIABLE = QoSProfile(depth=5000, reliability=QoSReliabilityPolicy.RELIABLE, history=QoSHistoryPolicy.KEEP_LAST)
 

@@ -51,10 +51,11 @@ __all__ = ["REPLAY_PARAMETERS", "EstimatorProcess", "LiveTimeout", "play_to_node
 
 # The node's settings for a lossless replay (docs/tools.md, "play"): reliable inputs with a
 # queue deeper than any window the player leaves unacknowledged, an input buffer long enough
-# that a node behind its slow streams never expires their messages, and reports every 0.2 s
+# that a node behind its slow streams never expires their messages, no load shedding (a node
+# behind a fast replay would otherwise space out its covariances), and reports every 0.2 s
 # (the end of a run is read from them). A test's own parameters take precedence.
 REPLAY_PARAMETERS: dict[str, Any] = {"qos.reliable": True, "qos.depth": 10_000, "inputs.buffer_duration": 60.0,
-                                     "diagnostics_period": 0.2}
+                                     "shed_load": False, "diagnostics_period": 0.2}
 _VECTORS = ("estimates", "standard_errors", "standard_errors_conventional", "converged")
 _FREQUENCY_VECTORS = tuple(f"{FREQUENCY}/{kind}" for kind in FREQUENCY_OUTPUTS)
 
