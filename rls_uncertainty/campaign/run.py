@@ -38,9 +38,9 @@ from ..aero.models import ModelConfig
 from ..datapath.config import PipelineConfig
 from ..datapath.feasibility import record_checks
 from ..datapath.inputs import Stamped
-from ..datapath.maneuvers import MANEUVER_COLUMNS
+from ..datapath.maneuvers import MANEUVER_COLUMNS, OK, ParameterResult
 from ..datapath.pipeline import all_lags_bank
-from ..datapath.states import ParameterState, se_percent
+from ..datapath.states import ParameterState
 from ..errors import RlsUncertaintyError
 from ..estimator import EstimatorBank
 from ..offline.bags import InputStream
@@ -52,48 +52,7 @@ from .maneuvers import MIN_SPAN, CampaignSettings, Maneuver
 __all__ = ["CampaignSettings", "ParameterResult", "ManeuverResult", "MANEUVER_COLUMNS", "run_maneuver",
            "failed_result", "MIN_SPAN", "TOO_SHORT"]
 
-OK = "ok"
 TOO_SHORT = "too_short"
-
-
-@dataclass(frozen=True)
-class ParameterResult:
-    """A row of ``maneuvers.csv``: one parameter's end-of-maneuver values of one ``method``.
-    Time domain (``"time"``): ``se_corrected`` is the corrected standard error with the
-    configured lags (Eq. 22), ``se_corrected_all`` with all lags (Eq. 20), ``se_conventional``
-    Eq. 13; ``samples`` those the model's estimator used, ``r_squared`` its fit. Frequency
-    domain (``"frequency"``): ``se_corrected`` the corrected standard error the node publishes
-    (docs/frequency.md F7-F10, ``frequency.lag_span``), ``se_conventional`` F5,
-    ``se_corrected_all`` NaN (all lags is a time-domain variant), ``samples`` those behind the
-    frequency-domain record's last evaluation, ``r_squared`` NaN (the frequency-domain
-    estimator has no R^2 of its own). NaN where the maneuver gave none."""
-
-    maneuver: str
-    model: str
-    parameter: str
-    estimate: float
-    se_conventional: float
-    se_corrected: float
-    se_corrected_all: float
-    samples: int
-    r_squared: float
-    status: str
-    method: str = "time"
-    state: str = ""
-    reason: str = ""
-
-    @property
-    def ok(self) -> bool:
-        return self.status == OK
-
-    @property
-    def se_percent(self) -> float:
-        """``100 se_corrected / |estimate|`` (NaN when undefined)."""
-        return se_percent(self.estimate, self.se_corrected)
-
-
-# maneuvers.csv's columns (every field of ParameterResult and the percent error), the method
-# beside the parameter: those of a maneuver cut from a stream (datapath.maneuvers).
 
 
 @dataclass(frozen=True)

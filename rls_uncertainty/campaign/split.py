@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import time
 from collections.abc import Iterable
-from dataclasses import fields
 from pathlib import Path
 
 from ..datapath.maneuvers import ManeuverRecord
@@ -24,17 +23,16 @@ from ..offline.figures import FigureOptions
 from ..offline.replay import run_pipeline
 from . import DEFAULT_FIGURES, CampaignResult, write_campaign
 from .maneuvers import CampaignSettings
-from .run import ManeuverResult, ParameterResult
+from .run import ManeuverResult
 from .table4 import table4
 
 __all__ = ["split_recording", "split_campaign_to", "results_of"]
 
-_FIELDS = [f.name for f in fields(ParameterResult)]
 
 
 def results_of(records: Iterable[ManeuverRecord], origin_ns: int) -> list[ManeuverResult]:
     """The tracker's maneuvers as campaign results, start and end in s from ``origin_ns``."""
-    return [ManeuverResult(rec.name, tuple(ParameterResult(**{k: getattr(r, k) for k in _FIELDS}) for r in rec.rows),
+    return [ManeuverResult(rec.name, tuple(rec.rows),
                            rec.duration, {}, start=(rec.start_ns - origin_ns) * 1e-9,
                            end=(rec.end_ns - origin_ns) * 1e-9)
             for rec in records]

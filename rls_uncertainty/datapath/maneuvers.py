@@ -58,27 +58,36 @@ from .states import parameter_states, se_percent
 if TYPE_CHECKING:  # annotations only
     from .pipeline import Pipeline, SampleOutput
 
-__all__ = ["ManeuverSettings", "ManeuverRow", "ManeuverRecord", "ManeuverTracker", "Boundary",
+__all__ = ["ManeuverSettings", "ParameterResult", "OK", "ManeuverRecord", "ManeuverTracker", "Boundary",
            "MANEUVER_COLUMNS", "MIN_SPAN", "SOURCES", "EVENT_TYPE", "EVENT",
            "tracker_for", "maneuvers_csv"]
 
 EVENT_TYPE = "diagnostic_msgs/msg/KeyValue"
 EVENT = "event"  # the kind of an event message in a stream of (kind, stamp, message)
 START, END = "start", "end"
+OK = "ok"  # a row's status when the maneuver gave its values
 
 # The shortest maneuver whose parameters can be flagged converged at the defaults: the T-2 models'
 # publication span (2.1 s: 2 x 50 lags + 4 parameters at 50 Hz) plus convergence.window (2 s).
 MIN_SPAN = 4.0
 
-# A maneuver's row: the campaign's maneuvers.csv columns (every field of ManeuverRow, the percent
+# A maneuver's row: the campaign's maneuvers.csv columns (every field of ParameterResult, the percent
 # error, the method beside the parameter).
 MANEUVER_COLUMNS = ("maneuver", "model", "parameter", "method", "estimate", "se_conventional", "se_corrected",
                     "se_corrected_all", "samples", "r_squared", "status", "se_percent", "state", "reason")
 
 
 @dataclass(frozen=True)
-class ManeuverRow:
-    """One parameter's end-of-maneuver values (the campaign's row, :data:`MANEUVER_COLUMNS`)."""
+class ParameterResult:
+    """A row of ``maneuvers.csv``: one parameter's end-of-maneuver values of one ``method``.
+    Time domain (``"time"``): ``se_corrected`` is the corrected standard error with the
+    configured lags (Eq. 22), ``se_corrected_all`` with all lags (Eq. 20), ``se_conventional``
+    Eq. 13; ``samples`` those the model's estimator used, ``r_squared`` its fit. Frequency
+    domain (``"frequency"``): ``se_corrected`` the corrected standard error the node publishes
+    (docs/frequency.md F7-F10, ``frequency.lag_span``), ``se_conventional`` F5,
+    ``se_corrected_all`` NaN (all lags is a time-domain variant), ``samples`` those behind the
+    frequency-domain record's last evaluation, ``r_squared`` NaN (the frequency-domain
+    estimator has no R^2 of its own). NaN where the maneuver gave none."""
 
     maneuver: str
     model: str
@@ -95,7 +104,12 @@ class ManeuverRow:
     reason: str = ""
 
     @property
+    def ok(self) -> bool:
+        return self.status == OK
+
+    @property
     def se_percent(self) -> float:
+        """``100 se_corrected / |estimate|`` (NaN when undefined)."""
         return se_percent(self.estimate, self.se_corrected)
 
 
@@ -106,7 +120,7 @@ class ManeuverRecord:
     name: str
     start_ns: int
     end_ns: int
-    rows: tuple[ManeuverRow, ...]
+    rows: tuple[ParameterResult, ...]
 
     @property
     def duration(self) -> float:
@@ -255,7 +269,7 @@ class ManeuverTracker:
         se = bank.standard_errors_all("corrected") if bank.ready.any() else None
         return se, rows[-1][0]
 
-    def _rows(self, active: _Open, end_ns: int) -> list[ManeuverRow]:
+    def _rows(self, active: _Open, end_ns: int) -> list[ParameterResult]:
         pipe = self.pipe
         states = {s.parameter: s for s in parameter_states(pipe, pipe.last)}
         se_all, last_row = self._all_lags(end_ns)
@@ -269,13 +283,13 @@ class ManeuverTracker:
                 s = states.get(p)
                 st, why = ("", "") if s is None else (s.state, s.reason)
                 if out is None:
-                    rows.append(ManeuverRow(active.name, m.output, p, nan, nan, nan, nan, samples, r2,
+                    rows.append(ParameterResult(active.name, m.output, p, nan, nan, nan, nan, samples, r2,
                                             "no estimate: its model never became ready", "time", st, why))
                     continue
                 s_all = float(se_all[j, i]) if se_all is not None and out.stamp_ns == last_row else nan
-                rows.append(ManeuverRow(active.name, m.output, p, float(out.theta[j, i]),
+                rows.append(ParameterResult(active.name, m.output, p, float(out.theta[j, i]),
                                         float(out.se_conventional[j, i]), float(out.se[j, i]), s_all, samples, r2,
-                                        "ok", "time", st, why))
+                                        OK, "time", st, why))
         return rows
 
     # ------------------------------------------------------------------ reporting
@@ -294,7 +308,7 @@ class ManeuverTracker:
         for reason, n in sorted(self.rejected.items()):
             out[f"maneuvers.events_rejected.{reason}"] = n
         if newest is not None:
-            ok = [r for r in newest.rows if r.status == "ok"]
+            ok = [r for r in newest.rows if r.status == OK]
             out["maneuvers.last"] = newest.name
             out["maneuvers.last.duration"] = round(newest.duration, 3)
             out["maneuvers.last.converged"] = f"{sum(r.state == 'converged' for r in ok)} of {len(newest.rows)}"
