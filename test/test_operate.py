@@ -222,7 +222,7 @@ def test_status_follows_the_node_through_a_silence_until_sigterm(tmp_path):
     try:
         _status_once()  # the node reports: from now on --timeout 1 applies
         status = subprocess.Popen([sys.executable, "-m", "rls_uncertainty.cli", "status", "--node", NODE,
-                                   "--timeout", "2"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                                   "--timeout", "1"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                                   cwd=ROOT)
         out = status.stdout
         reader = threading.Thread(target=lambda: lines.extend(iter(out.readline, "")), daemon=True)
@@ -237,7 +237,7 @@ def test_status_follows_the_node_through_a_silence_until_sigterm(tmp_path):
 
         wait_for(lambda: reports() >= 1, "a first report")
         first = time.monotonic()
-        # Five times the --timeout of 2 s, reporting all along (it used to give up after 3-5 timeouts).
+        # Ten times the --timeout of 1 s, reporting all along (it used to give up after 3-5).
         wait_for(lambda: reports() >= 20 and time.monotonic() - first > 10, "reports for 10 s")
         node.proc.send_signal(signal.SIGSTOP)
         try:
