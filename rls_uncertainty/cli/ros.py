@@ -111,7 +111,8 @@ def add_operator_commands(sub: Any) -> None:
     st.add_argument("--once", action="store_true", help="print one report and exit")
     st.add_argument("--node", default="/rls_estimator", help=node_help)
     st.add_argument("--timeout", type=real(0.0, low_open=True), default=5.0,
-                    help="seconds to wait for the node's first report (exit status 1 without one), and of silence "
+                    help="seconds to wait for the node to be discovered (at least 10) and then for its first report "
+                         "(exit status 1 without one), and of silence "
                          "after which the node is said gone while status waits for its return (default 5)")
     st.set_defaults(func=_status)
     for name, text in (("enable", "start estimating (~/enable true)"),

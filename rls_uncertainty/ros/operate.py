@@ -55,6 +55,7 @@ import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
+from rclpy.subscription import Subscription
 from rclpy.task import Future
 from std_srvs.srv import SetBool, Trigger
 
@@ -81,6 +82,9 @@ REPORT_WAIT_S = 3.0
 # RESEND_S, at most SENDS times in all.
 RESEND_S = 1.0
 SENDS = 3
+# How long `status` waits at least for the node to be discovered, whatever its --timeout (measured
+# on one machine: 0.1-3 s for a process just started, sometimes more on a busy one).
+DISCOVERY_S = 10.0
 # How the status names each estimation method (rls_uncertainty.datapath.outputs.METHODS).
 METHOD_TEXT = {"time": "time domain (RLS, ~/M/estimates)", "frequency": "frequency domain (~/M/frequency/estimates)"}
 
@@ -306,6 +310,27 @@ class _Presence:
         return True
 
 
+class _Discovery:
+    """How long ``status`` waits for the node's first report: until the node is on the graph
+    with a matched ``/diagnostics`` publisher, at least :data:`DISCOVERY_S` (DDS discovery of
+    a process just started takes up to a few seconds: its participant is announced every 3 s
+    after a first burst), then ``--timeout`` from the match, as ``call`` counts it."""
+
+    def __init__(self, node: Node, subscription: Subscription, node_name: str, timeout: float) -> None:
+        self._node, self._subscription = node, subscription
+        self._key = split_node_name(node_name)[::-1]  # (name, namespace), as the graph lists nodes
+        self._timeout = timeout
+        self._since = time.monotonic()
+        self._limit = max(timeout, DISCOVERY_S)
+
+    def expired(self, now: float) -> float | None:
+        """The seconds waited in vain, or None while the wait goes on."""
+        if self._limit > self._timeout and self._subscription.get_publisher_count() > 0 and \
+                any(tuple(n) == self._key for n in self._node.get_node_names_and_namespaces()):
+            self._since, self._limit = now, self._timeout  # discovered: the report has --timeout
+        return now - self._since if now - self._since > self._limit else None
+
+
 @contextmanager
 def _sigterm_interrupts() -> Iterator[None]:
     """SIGTERM ends ``status`` as Ctrl-C does (a KeyboardInterrupt in the main thread); the
@@ -336,8 +361,10 @@ def _gone_line(node: Node, node_name: str, silent_s: float) -> str:
 def status(node_name: str, once: bool, timeout: float, out: TextIO = sys.stdout,
            until: Callable[[], bool] | None = None) -> int:
     """Print the node's reports as they come (in place on a terminal) until Ctrl-C or SIGTERM
-    (or ``until()``); with ``once`` the first one. No first report within ``timeout``: exit
-    status 1. Afterwards the node is followed: a silence longer than :meth:`_Presence.limit`
+    (or ``until()``); with ``once`` the first one. Discovery of the node and then its first
+    report each wait up to ``timeout``, discovery at least :data:`DISCOVERY_S`
+    (:class:`_Discovery`); no first report: exit status 1.
+    Afterwards the node is followed: a silence longer than :meth:`_Presence.limit`
     is said (with whether the node is still on the ROS graph), and so is its return."""
     presence = _Presence(timeout)
     tracker = HealthTracker()
@@ -359,15 +386,16 @@ def status(node_name: str, once: bool, timeout: float, out: TextIO = sys.stdout,
         out.flush()
 
     with _Session() as session, _sigterm_interrupts():
-        session.node.create_subscription(DiagnosticArray, "/diagnostics", on_diagnostics, 50)
-        started = time.monotonic()
+        subscription = session.node.create_subscription(DiagnosticArray, "/diagnostics", on_diagnostics, 50)
+        first = _Discovery(session.node, subscription, node_name, timeout)
         try:
             while until is None or not until():
                 session.executor.spin_once(timeout_sec=0.2)
                 now = time.monotonic()
                 if not reports:
-                    if presence.last is None and now - started > timeout:
-                        return _fail("status", f"no /diagnostics from {node_name} within {timeout:g} s ({where()}): "
+                    waited = first.expired(now) if presence.last is None else None
+                    if waited is not None:
+                        return _fail("status", f"no /diagnostics from {node_name} within {waited:.0f} s ({where()}): "
                                                "is the node running, with the same domain and discovery range?")
                     if presence.went(now):
                         line = _gone_line(session.node, node_name, now - (presence.last or now))
