@@ -30,7 +30,7 @@ def settings():
 def test_columns_are_the_documented_ones():
     assert MANEUVER_COLUMNS == ("maneuver", "model", "parameter", "method", "estimate", "se_conventional",
                                 "se_corrected", "se_corrected_all", "samples", "r_squared", "status", "se_percent",
-                                "state", "reason")
+                                "state", "reason", "verdict")
     # every field is written, and the percent error beside them
     assert set(MANEUVER_COLUMNS) == {f.name for f in fields(ParameterResult)} | {"se_percent"}
 

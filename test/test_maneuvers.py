@@ -236,3 +236,26 @@ def test_replay_without_maneuvers_writes_no_maneuvers_csv_and_the_same_numbers(t
     assert cli.main(["replay", str(bag), "--config", str(CONFIG), "--out", str(tmp_path / "r"), "--quiet",
                      "--no-figures"]) == 0
     assert not (tmp_path / "r" / "maneuvers.csv").exists()
+
+
+@pytest.mark.parametrize("targets", ["Cm_q=1000,CZ_alpha=1000", "Cm_q=0.01"])
+def test_a_maneuvers_rows_carry_its_verdict_at_its_end(tmp_path, targets):
+    """With targets.percent, maneuvers.csv (and the history) gives each maneuver's verdict on
+    its rows: one test point over the whole bag ends with the verdict of a run without
+    maneuvers over the same samples; without targets the column is empty."""
+    bag = events_bag(tmp_path, events=[(0, "pA", "start")])
+    cfg = tmp_path / "targets.yaml"
+    cfg.write_text(CONFIG.read_text().replace(
+        "    aircraft: t2", f"    maneuvers:\n      source: events\n    targets:\n      percent: {targets}\n"
+        "    aircraft: t2", 1))
+    assert cli.main(["replay", str(bag), "--config", str(cfg), "--out", str(tmp_path / "r"), "--quiet",
+                     "--no-figures"]) == 0
+    rows = rows_of(tmp_path / "r" / "maneuvers.csv")
+    plain = run_pipeline(read_inputs(BAG)[0], pipeline_config(params(**{"targets.percent": targets})), record=False)
+    want = plain.pipeline.targets.verdict().text
+    assert want.startswith("done" if "1000" in targets else ("needs more", "not identifiable"))
+    assert {r["maneuver"] for r in rows} == {"pA"} and {r["verdict"] for r in rows} == {want}
+    live = live_history(bag, pipeline_config(params(**{"maneuvers.source": "events", "targets.percent": targets})))
+    assert [d["rows"][0]["verdict"] for d in (rec.as_dict() for rec in live.history)] == [want]
+    untargeted = live_history(bag, pipeline_config(params(**{"maneuvers.source": "events"})))
+    assert {r.verdict for rec in untargeted.history for r in rec.rows} == {""}
