@@ -122,7 +122,9 @@ function table4(msg) {
     const name = document.createElement("td");
     name.append(typeset(r.parameter) || r.parameter);
     if (methods.size > 1) name.append(" (" + r.method + ")");
-    tr.append(name, cell("maneuvers", r.maneuvers, 3), cell("mean", r.mean, 4), cell("scatter", r.scatter, 3),
+    const n = cell("maneuvers", r.maneuvers);
+    n.textContent = String(r.maneuvers);
+    tr.append(name, n, cell("mean", r.mean, 4), cell("scatter", r.scatter, 3),
               cell("se_conventional", r.se_conventional, 3), cell("se_corrected", r.se_corrected, 3),
               cell("conventional_over_scatter", r.conventional_over_scatter, 3),
               cell("corrected_over_scatter", r.corrected_over_scatter, 3));
