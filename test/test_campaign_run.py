@@ -30,7 +30,7 @@ def settings():
 def test_columns_are_the_documented_ones():
     assert MANEUVER_COLUMNS == ("maneuver", "model", "parameter", "method", "estimate", "se_conventional",
                                 "se_corrected", "se_corrected_all", "samples", "r_squared", "status", "se_percent",
-                                "state", "reason")
+                                "state", "reason", "verdict")
     # every field is written, and the percent error beside them
     assert set(MANEUVER_COLUMNS) == {f.name for f in fields(ParameterResult)} | {"se_percent"}
 
@@ -45,7 +45,7 @@ def test_a_maneuver_gives_the_replays_estimates_and_the_all_lags_replays_errors(
     fit = {m: replay.pipeline.model_fit(j) for j, m in enumerate(replay.models)}
     for row in res.rows:
         f, a = replay.final(row.parameter), every_lag.final(row.parameter)
-        assert row.status == "ok" and row.maneuver == "m"
+        assert row.status == "ok" and row.maneuver == "m" and row.verdict == ""  # (no targets)
         assert row.se_percent == pytest.approx(100 * f.std_error / abs(f.estimate), rel=1e-12)
         assert (row.estimate, row.se_conventional, row.se_corrected) == (f.estimate, f.std_error_conventional,
                                                                          f.std_error)
@@ -78,3 +78,15 @@ def test_a_maneuver_too_short_to_identify_a_model_says_why(settings):
     res = run_maneuver((Maneuver("short", str(BUNDLED), 0.0, 0.2), replace(settings, min_span=0.0)))
     assert all(r.status.startswith("no estimate") for r in res.rows), {r.status for r in res.rows}
     assert all(math.isnan(r.se_corrected_all) for r in res.rows)
+
+
+@pytest.mark.parametrize("targets", ["Cm_q=1000,CZ_alpha=1000", "Cm_q=0.01"])
+def test_a_maneuvers_rows_carry_the_replays_verdict_against_its_targets(targets):
+    """With targets.percent, every row of the maneuver carries the verdict the replay of the same
+    bag ends with (:mod:`..datapath.targets`); without targets it is empty (above)."""
+    p = {**parameters("t2"), "targets.percent": targets}
+    res = run_maneuver((Maneuver("m", str(BUNDLED)), CampaignSettings(pipeline_config(p), node_config(p).topics)))
+    replay = replay_bag(BUNDLED, "t2", targets__percent=targets)
+    want = replay.pipeline.targets.verdict().text
+    assert want.startswith("done" if "1000" in targets else ("needs more", "not identifiable"))
+    assert {r.verdict for r in res.rows} == {want}

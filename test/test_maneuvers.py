@@ -236,3 +236,60 @@ def test_replay_without_maneuvers_writes_no_maneuvers_csv_and_the_same_numbers(t
     assert cli.main(["replay", str(bag), "--config", str(CONFIG), "--out", str(tmp_path / "r"), "--quiet",
                      "--no-figures"]) == 0
     assert not (tmp_path / "r" / "maneuvers.csv").exists()
+
+
+@pytest.mark.parametrize("targets", ["Cm_q=1000,CZ_alpha=1000", "Cm_q=0.01"])
+def test_a_maneuvers_rows_carry_its_verdict_at_its_end(tmp_path, targets):
+    """With targets.percent, maneuvers.csv (and the history) gives each maneuver's verdict on
+    its rows: one test point over the whole bag ends with the verdict of a run without
+    maneuvers over the same samples; without targets the column is empty."""
+    bag = events_bag(tmp_path, events=[(0, "pA", "start")])
+    cfg = tmp_path / "targets.yaml"
+    cfg.write_text(CONFIG.read_text().replace(
+        "    aircraft: t2", f"    maneuvers:\n      source: events\n    targets:\n      percent: {targets}\n"
+        "    aircraft: t2", 1))
+    assert cli.main(["replay", str(bag), "--config", str(cfg), "--out", str(tmp_path / "r"), "--quiet",
+                     "--no-figures"]) == 0
+    rows = rows_of(tmp_path / "r" / "maneuvers.csv")
+    plain = run_pipeline(read_inputs(BAG)[0], pipeline_config(params(**{"targets.percent": targets})), record=False)
+    want = plain.pipeline.targets.verdict().text
+    assert want.startswith("done" if "1000" in targets else ("needs more", "not identifiable"))
+    assert {r["maneuver"] for r in rows} == {"pA"} and {r["verdict"] for r in rows} == {want}
+    live = live_history(bag, pipeline_config(params(**{"maneuvers.source": "events", "targets.percent": targets})))
+    assert [d["rows"][0]["verdict"] for d in (rec.as_dict() for rec in live.history)] == [want]
+    untargeted = live_history(bag, pipeline_config(params(**{"maneuvers.source": "events"})))
+    assert {r.verdict for rec in untargeted.history for r in rec.rows} == {""}
+
+
+def test_replays_estimates_mcap_holds_the_nodes_history_as_it_changed(tmp_path):
+    """The replay writes ~/maneuvers into estimates.mcap as the node publishes it: at the start
+    (nothing recorded), at each boundary and rejected event; the last message's maneuvers are
+    the rows of maneuvers.csv, start and end in s of the inputs' stamps."""
+    import json
+
+    from rosbags.highlevel import AnyReader
+
+    bag = events_bag(tmp_path)
+    cfg = tmp_path / "events.yaml"
+    cfg.write_text(CONFIG.read_text().replace("    aircraft: t2", "    maneuvers:\n      source: events\n"
+                                              "    aircraft: t2", 1))
+    assert cli.main(["replay", str(bag), "--config", str(cfg), "--out", str(tmp_path / "r"), "--quiet",
+                     "--no-figures"]) == 0
+    with AnyReader([tmp_path / "r" / "estimates.mcap"], default_typestore=typestore()) as reader:
+        conns = [c for c in reader.connections if c.topic == "/rls_estimator/maneuvers"]
+        assert [c.msgtype for c in conns] == ["std_msgs/msg/String"]
+        history = [json.loads(reader.deserialize(raw, c.msgtype).data) for c, _t, raw in reader.messages(conns)]
+    assert history[0]["recorded"] == 0 and history[0]["active"] is None
+    assert [h["recorded"] for h in history] == sorted(h["recorded"] for h in history)
+    assert sum(history[-1]["rejected"].values()) == sum(REJECTED.values()) and history[-1]["recorded"] == 2
+    rows = rows_of(tmp_path / "r" / "maneuvers.csv")
+    flat = [(m["name"], m["start"], m["end"], r) for m in history[-1]["maneuvers"] for r in m["rows"]]
+    assert len(flat) == len(rows)
+    for (name, start, end, got), want in zip(flat, rows, strict=True):
+        assert name == want["maneuver"]
+        assert math.isclose(start - T0 * 1e-9, float(want["start"]), abs_tol=1e-6)
+        assert math.isclose(end - T0 * 1e-9, float(want["end"]), abs_tol=1e-6)
+        for c in MANEUVER_COLUMNS[1:]:
+            value = got[c]
+            cell = "" if value is None else repr(value) if isinstance(value, float) else str(value)
+            assert cell == want[c], (c, name)

@@ -22,7 +22,8 @@ data than ``--min-span``: its parameters could not be flagged converged; left ou
 ``no estimate: <why>`` (the model never published: too few samples for the publication rule,
 not excited) or ``failed: <why>`` (the bag could not be read); with each parameter's state at
 the end (:mod:`..datapath.states`: ``converged``, ``settling``, ``held back`` with the reason)
-and its percent error. The failure of one maneuver is its own rows' status, never the
+and its percent error; with ``targets.percent`` set, each row of the maneuver carries its
+verdict at the end (:mod:`..datapath.targets`). The failure of one maneuver is its own rows' status, never the
 campaign's.
 """
 
@@ -38,7 +39,7 @@ from ..aero.models import ModelConfig
 from ..datapath.config import PipelineConfig
 from ..datapath.feasibility import record_checks
 from ..datapath.inputs import Stamped
-from ..datapath.maneuvers import MANEUVER_COLUMNS, OK, ParameterResult
+from ..datapath.maneuvers import MANEUVER_COLUMNS, OK, ParameterResult, verdict_of
 from ..datapath.pipeline import all_lags_bank
 from ..datapath.states import ParameterState
 from ..errors import RlsUncertaintyError
@@ -202,6 +203,9 @@ def run_maneuver(job: tuple[Maneuver, CampaignSettings]) -> ManeuverResult:
         return failed_result(maneuver.name, config, f"failed: {' '.join(str(exc).split())}")
     rows = _rows(maneuver.name, result, bank_all)
     models = tuple(run_models(result.pipeline)) if result.pipeline is not None else ()
+    verdict = verdict_of(result.pipeline) if result.pipeline is not None else ""
+    if verdict:
+        rows = tuple(replace(r, verdict=verdict) for r in rows)
     if result.data_seconds < settings.min_span:  # every row too_short: out of Table 4
         short = (f"{TOO_SHORT}: {result.data_seconds:.2f} s of data, fewer than --min-span "
                  f"{settings.min_span:g} s")

@@ -76,6 +76,8 @@ class _Dispatch:
                 send(self.feed.status())
                 for message in hub.quality_updates():
                     send(message)
+        elif item[0] == "maneuvers":
+            send(hub.add_maneuvers(item[1]))
         elif item[0] == "graph":
             if hub.set_graph(item[1]) is not None:
                 send(self.feed.status())

@@ -19,6 +19,7 @@ from ..datapath.display import RANGE_PAD, RANGE_QUANTILE, TRANSIENT_FRACTION, un
 from ..datapath.outputs import FIT_ARRAYS, ArrayKey
 from ..ros.health import HealthTracker, StatusTuple, parse_statuses
 from .fit import Fit, Identifiability, fit_of, identifiability_of, quality_json
+from .flight import FlightHistory
 from .messages import FRAME_VALUES, samples_messages, snapshot_messages
 from .model import MAX_MODELS, MAX_PARAMETERS, MAX_PENDING, ModelHistory, Pairing, Sample, array_update, refusal
 
@@ -78,6 +79,7 @@ class Hub:
         self._reset_pending = False
         self._capacity = capacity
         self._clock = clock
+        self.flight = FlightHistory()  # the node's maneuver history (~/maneuvers)
 
     # ------------------------------------------------------------------ inputs
     def add_arrays(self, arrays: Iterable[tuple[ArrayKey, Any, int | None]]) -> list[dict]:
@@ -224,6 +226,11 @@ class Hub:
         most (every model and method of a sample is one sample, as the node counts them)."""
         return max(self._samples_by.values(), default=0)
 
+    def add_maneuvers(self, text: str) -> dict | None:
+        """Feed one ``~/maneuvers`` history (JSON text); the ``flight`` message when it changed
+        what the page shows (:mod:`.flight`)."""
+        return self.flight.update(text)
+
     def replay_finished(self, error: str = "") -> dict:
         """The replay file has been read (to its end, or up to ``error``); the ``health`` message."""
         self.replay_done, self.replay_error = True, error
@@ -276,7 +283,9 @@ class Hub:
     def snapshot_messages(self, max_values: int = FRAME_VALUES) -> Iterator[dict]:
         """The page's state from scratch (:func:`.messages.snapshot_messages`): every method's
         display histories and every model's latest quality, in pieces."""
-        return snapshot_messages(self.histories, self._samples_by, list(self._quality_sent.values()), max_values)
+        yield from snapshot_messages(self.histories, self._samples_by, list(self._quality_sent.values()), max_values)
+        if self.flight.message is not None:
+            yield self.flight.message
 
     def counts(self) -> dict[str, dict[str, int]]:
         """Samples shown per method and model (the ``count`` of the ``samples`` messages)."""

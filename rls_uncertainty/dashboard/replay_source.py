@@ -31,6 +31,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from ..datapath.cdr import FLOAT64_MULTIARRAY, decode
+from ..datapath.maneuvers import HISTORY_TOPIC
 from ..datapath.outputs import FREQUENCY_DOMAIN, TIME_DOMAIN, ArrayKey, split_topic
 from ..errors import BagError
 from ..offline.bags import check_mcap_integrity, typestore
@@ -154,15 +155,18 @@ def _open_mcap(directory: Path, path: Path) -> ReplaySource:
         reader.close()
     if not node:
         raise BagError(f"{path}: holds no estimates (no ~/M/estimates or ~/M/frequency/estimates topic)")
+    history = f"{node.rstrip('/')}/{HISTORY_TOPIC}"
 
     def items() -> Iterator[tuple]:
         reader = _open_reader(path)
         try:
-            wanted = [c for c in reader.connections if c.id in keys or c.topic == "/diagnostics"]
+            wanted = [c for c in reader.connections if c.id in keys or c.topic in ("/diagnostics", history)]
             for conn, _t, raw in reader.messages(connections=wanted):
                 key = keys.get(conn.id)
                 if key is None:
-                    yield ("diagnostics", statuses_of(reader.deserialize(raw, conn.msgtype)))
+                    msg = reader.deserialize(raw, conn.msgtype)
+                    history_item = ("maneuvers", getattr(msg, "data", ""))
+                    yield history_item if conn.topic == history else ("diagnostics", statuses_of(msg))
                     continue
                 try:
                     msg = decode(FLOAT64_MULTIARRAY, raw)

@@ -1,5 +1,6 @@
 """The dashboard's live source: an rclpy node in its own context, executor and thread that
-subscribes to a running estimator node's outputs and ``/diagnostics`` and hands what arrives
+subscribes to a running estimator node's outputs, its maneuver history (``~/maneuvers``) and
+``/diagnostics`` and hands what arrives
 to the server's event loop (:class:`.server.Inbox`). It only reads: no publisher, no service
 client, no parameter services.
 
@@ -36,9 +37,10 @@ from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.qos import DurabilityPolicy, QoSHistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
-from std_msgs.msg import Float64MultiArray
+from std_msgs.msg import Float64MultiArray, String
 
 from ..datapath.cdr import FLOAT64_MULTIARRAY, decode
+from ..datapath.maneuvers import HISTORY_TOPIC
 from ..datapath.outputs import ArrayKey, array_key
 from ..ros.environment import split_node_name
 from ..ros.health import statuses_of
@@ -56,7 +58,8 @@ _NO_EVENTS = SubscriptionEventCallbacks(use_default_callbacks=False)
 class RosSource:
     """Subscribes to ``node``'s outputs; ``put`` receives, from the executor thread,
     ``("array", key, msg, published_ns)`` (:class:`.model.ArrayKey`; ``msg`` None when the
-    payload could not be decoded), ``("diagnostics", statuses)`` and ``("graph", node_present)``."""
+    payload could not be decoded), ``("diagnostics", statuses)``, ``("maneuvers", json_text)``
+    (the node's ``~/maneuvers``) and ``("graph", node_present)``."""
 
     def __init__(self, node: str, put: Callable[[tuple], None]) -> None:
         self.node_name = node
@@ -68,6 +71,12 @@ class RosSource:
                                       start_parameter_services=False, enable_rosout=False)
         self._subs: dict[str, Any] = {}
         self.node.create_subscription(DiagnosticArray, "/diagnostics", self._on_diagnostics, 50,
+                                      event_callbacks=_NO_EVENTS)
+        # The maneuver history, latched by the node (reliable, transient local, depth 1).
+        latched = QoSProfile(depth=1, history=QoSHistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE,
+                             durability=DurabilityPolicy.TRANSIENT_LOCAL)
+        self.node.create_subscription(String, f"{node.rstrip('/')}/{HISTORY_TOPIC}",
+                                      lambda msg: self._put(("maneuvers", getattr(msg, "data", ""))), latched,
                                       event_callbacks=_NO_EVENTS)
         self.node.create_timer(GRAPH_PERIOD_S, self._look)
         self.executor = SingleThreadedExecutor(context=self.context)

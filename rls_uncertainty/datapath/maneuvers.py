@@ -27,7 +27,8 @@ end's stamp: a detected end is stamped about a window before it is declared, and
 between are trim), the
 conventional (Eq. 13) and corrected (Eq. 22) standard errors, with the pipeline's regression
 rows kept (``record``) the corrected one with all lags (Eq. 20), the state and its reason
-(:mod:`.states`), the model's R^2 and samples (at the end's declaration), and the maneuver's
+(:mod:`.states`), the model's R^2 and samples and, with ``targets.percent`` set, the test
+point's verdict (:mod:`.targets`; all three at the end's declaration), and the maneuver's
 start, end and duration (the boundaries' stamps). The
 rows have the campaign's columns (:data:`MANEUVER_COLUMNS`); a maneuver shorter than
 ``min_span`` has every row ``too_short`` as in a campaign. The history keeps the newest
@@ -41,6 +42,7 @@ from __future__ import annotations
 
 import csv
 import io
+import json
 import math
 from collections import deque
 from collections.abc import Sequence
@@ -60,7 +62,9 @@ if TYPE_CHECKING:  # annotations only
 
 __all__ = ["ManeuverSettings", "ParameterResult", "OK", "ManeuverRecord", "ManeuverTracker", "Boundary",
            "MANEUVER_COLUMNS", "MIN_SPAN", "SOURCES", "EVENT_TYPE", "EVENT",
-           "tracker_for", "maneuvers_csv"]
+           "tracker_for", "maneuvers_csv", "verdict_of", "history_json", "history_key", "HISTORY_TOPIC"]
+
+HISTORY_TOPIC = "maneuvers"  # the node's ~/maneuvers: the history as JSON (:func:`history_json`)
 
 EVENT_TYPE = "diagnostic_msgs/msg/KeyValue"
 EVENT = "event"  # the kind of an event message in a stream of (kind, stamp, message)
@@ -74,7 +78,7 @@ MIN_SPAN = 4.0
 # A maneuver's row: the campaign's maneuvers.csv columns (every field of ParameterResult, the percent
 # error, the method beside the parameter).
 MANEUVER_COLUMNS = ("maneuver", "model", "parameter", "method", "estimate", "se_conventional", "se_corrected",
-                    "se_corrected_all", "samples", "r_squared", "status", "se_percent", "state", "reason")
+                    "se_corrected_all", "samples", "r_squared", "status", "se_percent", "state", "reason", "verdict")
 
 
 @dataclass(frozen=True)
@@ -102,6 +106,7 @@ class ParameterResult:
     method: str = "time"
     state: str = ""
     reason: str = ""
+    verdict: str = ""  # the maneuver's verdict against its targets (:mod:`.targets`), empty without targets
 
     @property
     def ok(self) -> bool:
@@ -241,6 +246,9 @@ class ManeuverTracker:
         self.active = None
         self._settle(active, end_ns)
         rows = tuple(self._rows(active, end_ns))
+        verdict = verdict_of(self.pipe)
+        if verdict:
+            rows = tuple(replace(r, verdict=verdict) for r in rows)
         duration = (end_ns - active.start_ns) * 1e-9
         if duration < self.min_span:
             short = (f"too_short: {duration:.2f} s of data, fewer than --min-span {self.min_span:g} s")
@@ -315,6 +323,14 @@ class ManeuverTracker:
         return out
 
 
+def verdict_of(pipe: Pipeline) -> str:
+    """The test point's verdict against its targets at ``pipe``'s newest sample
+    (:meth:`.targets.TargetTracker.verdict`: ``done``, ``needs more (...)``, ``not identifiable
+    (...)``); empty without targets or before any sample."""
+    targets = pipe.targets
+    return targets.verdict().text if targets is not None and targets.progress else ""
+
+
 def tracker_for(pipe: Pipeline, *, min_span: float = MIN_SPAN, keep_all: bool = False) -> ManeuverTracker | None:
     """The tracker of ``pipe``'s ``maneuvers.*`` settings (None with ``source: off``); with
     ``detect``, fed by the maneuver detector (:mod:`.maneuver_detector`)."""
@@ -343,3 +359,23 @@ def maneuvers_csv(records: Sequence[ManeuverRecord], origin_ns: int) -> str:
         for row in rec.rows:
             w.writerow([_cell(getattr(row, c)) for c in MANEUVER_COLUMNS] + list(span))
     return buf.getvalue()
+
+
+def history_json(tracker: ManeuverTracker) -> str:
+    """The history message (``~/maneuvers``): ``{"source", "recorded", "rejected": {reason: n},
+    "active": name or null, "maneuvers": [...]}``, each maneuver ``{"name", "start", "end",
+    "duration", "rows"}`` (start and end in s, data time: the inputs' header stamps; ``rows``
+    one per parameter with the campaign's columns, ``null`` where there is no value:
+    :meth:`ManeuverRecord.as_dict`)."""
+    return json.dumps({
+        "source": tracker.options.source,
+        "recorded": tracker.recorded,
+        "rejected": dict(sorted(tracker.rejected.items())),
+        "active": tracker.active.name if tracker.active is not None else None,
+        "maneuvers": [rec.as_dict() for rec in tracker.history],
+    }, allow_nan=False)
+
+
+def history_key(tracker: ManeuverTracker) -> tuple:
+    """What changes the history message: the maneuvers recorded, the one running, the rejections."""
+    return (tracker.recorded, tracker.active.name if tracker.active else None, tuple(sorted(tracker.rejected.items())))

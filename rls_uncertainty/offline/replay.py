@@ -57,7 +57,15 @@ from ..datapath.config import PipelineConfig
 from ..datapath.diagnostics import DiagnosticsPolicy, Snapshot, Status
 from ..datapath.feasibility import configuration_warnings, record_checks
 from ..datapath.inputs import Stamped, feed
-from ..datapath.maneuvers import EVENT, MIN_SPAN, ManeuverTracker, maneuvers_csv, tracker_for
+from ..datapath.maneuvers import (
+    EVENT,
+    MIN_SPAN,
+    ManeuverTracker,
+    history_json,
+    history_key,
+    maneuvers_csv,
+    tracker_for,
+)
 from ..datapath.outputs import NODE_NAME, OutputLayout, fit_records
 from ..datapath.pipeline import Pipeline, SampleOutput
 from ..datapath.states import parameter_states
@@ -91,6 +99,8 @@ class Sink(Protocol):
     def diagnostics(self, stamp_ns: int, statuses: list[Status], fits: list[tuple[int, str, str, bytes]]) -> None: ...
 
     def after(self, newest_ns: int) -> None: ...
+
+    def maneuvers(self, stamp_ns: int, text: str) -> None: ...
 
 
 class _DataClockDiagnostics:
@@ -212,6 +222,7 @@ class _Run:
         self.newest_frequency: SampleOutput | None = None  # the newest output with frequency-domain results
         self.real = np.arange(pipe.bank.n_max) < np.array(pipe.sizes)[:, None]
         self.tracker: ManeuverTracker | None = None  # with maneuvers.source not off
+        self._history_sent: object = None
 
     def sample(self, out: SampleOutput) -> None:
         result = self.result
@@ -243,6 +254,13 @@ class _Run:
             self.tracker.sample(out)
         if self.sink is not None:
             self.sink.sample(out)
+
+    def history(self, stamp_ns: int) -> None:
+        """The maneuver history to the sink when it changed (as the node publishes ``~/maneuvers``)."""
+        tracker = self.tracker
+        if tracker is not None and self.sink is not None and history_key(tracker) != self._history_sent:
+            self._history_sent = history_key(tracker)
+            self.sink.maneuvers(stamp_ns, history_json(tracker))
 
     def diagnostics(self, stamp_ns: int, statuses: list[Status]) -> None:
         if self.keep_outputs:
@@ -356,6 +374,7 @@ def run_pipeline(messages: Iterable[tuple[str, int, Stamped]], config: PipelineC
                             rows.stop()
             if diag is not None:
                 diag.after(kind, stamp)
+            run.history(newest)
             if sink is not None:
                 sink.after(newest)
             n += 1

@@ -15,9 +15,13 @@ directory:
   without the bias; ``lags`` are those of its residual autocovariance;
 * ``estimates.mcap``: every topic the node publishes, byte for byte what the node sends
   (:meth:`.outputs.OutputLayout.encode`), log time = the sample's stamp, and the
-  ``/diagnostics`` reports at their data time; ordered by log time, then topic
-  (:class:`.bags.BagWriter`: with CRCs), holding back only the records a later one could precede: those
-  after the newest sample or the newest message;
+  ``/diagnostics`` reports at their data time, and with ``maneuvers.source`` not ``off`` the
+  node's ``~/maneuvers`` history (``std_msgs/msg/String``, JSON:
+  :func:`..datapath.maneuvers.history_json`) at the newest message's stamp whenever it
+  changes, as the node publishes it (a maneuver still running at the end of the data is in
+  ``maneuvers.csv``, not in this history: the node does not end it either); ordered by log
+  time, then topic (:class:`.bags.BagWriter`: with CRCs), holding back only the records a
+  later one could precede: those after the newest sample or the newest message;
 * ``run.json`` (:func:`run_record`): what a later ``replay --compare`` checks before
   comparing (:mod:`.compare`): the bag's input content digest, the span, the parameters and
   the configuration with its digest, the models and their parameters.
@@ -35,6 +39,7 @@ from typing import IO, TYPE_CHECKING, Any
 
 import numpy as np
 
+from ..datapath.maneuvers import HISTORY_TOPIC
 from ..datapath.outputs import OutputLayout
 from ..files import OutputWriter
 from .bags import BagWriter
@@ -54,6 +59,7 @@ CSV_COLUMNS = ("time", "model", "parameter", "estimate", "std_error", "std_error
 # P_converged (1.0/0.0); and per model M, after its parameters, M_lags.
 WIDE_QUANTITIES = (("", "theta"), ("_se", "se"), ("_se_conventional", "se_conventional"), ("_converged", "converged"))
 DIAGNOSTIC_ARRAY = "diagnostic_msgs/msg/DiagnosticArray"
+STRING = "std_msgs/msg/String"
 RUN_FORMAT = "rls_uncertainty replay run 1"
 
 
@@ -168,10 +174,14 @@ class _Mcap:
     publishes nothing and reports nothing writes no bag. Every topic of the configuration's
     outputs and ``/diagnostics`` get a connection, whether or not a message follows."""
 
-    def __init__(self, directory: Path, layout: OutputLayout, frame_id: str, node: str, store: Typestore) -> None:
+    def __init__(self, directory: Path, layout: OutputLayout, frame_id: str, node: str, store: Typestore,
+                 maneuvers: bool = False) -> None:
         self.directory, self.layout, self.frame_id, self.store = directory, layout, frame_id, store
         self.topics = [(f"/{node}/{topic}", msgtype) for topic, msgtype in layout.topics]
         self.fit_topics = [(f"/{node}/{topic}", msgtype) for topic, msgtype in layout.fit_topics]
+        self.history_topic = f"/{node}/{HISTORY_TOPIC}"
+        if maneuvers:
+            self.fit_topics.append((self.history_topic, STRING))
         self.writer: BagWriter | None = None
         self.newest_sample: int | None = None  # stamp of the newest sample written
 
@@ -193,6 +203,10 @@ class _Mcap:
         writer.add(stamp_ns, "/diagnostics", DIAGNOSTIC_ARRAY, _diagnostic_array(self.store, stamp_ns, statuses))
         for log_ns, topic, msgtype, raw in fits:
             writer.add(log_ns, topic, msgtype, raw)
+
+    def maneuvers(self, stamp_ns: int, text: str) -> None:
+        string = self.store.types[STRING]
+        self._open().add(stamp_ns, self.history_topic, STRING, string(data=text))
 
     def after(self, newest_ns: int) -> None:
         """Write what no later record can precede: a later sample comes after the newest one,
@@ -218,7 +232,7 @@ class ReplayFiles(OutputWriter):
             self.csvs += [_Csv(directory / "estimates.csv", layout), _WideCsv(directory / "estimates_wide.csv", config)]
         if config.frequency is not None:
             self.csvs.append(_Csv(directory / "estimates_frequency.csv", layout, frequency=True))
-        self.mcap = _Mcap(directory, layout, frame_id, node, store)
+        self.mcap = _Mcap(directory, layout, frame_id, node, store, maneuvers=config.maneuvers.source != "off")
 
     def sample(self, out: SampleOutput) -> None:
         for csv in self.csvs:
@@ -227,6 +241,10 @@ class ReplayFiles(OutputWriter):
 
     def diagnostics(self, stamp_ns: int, statuses: list[Status], fits: list[tuple[int, str, str, bytes]]) -> None:
         self.mcap.diagnostics(stamp_ns, statuses, fits)
+
+    def maneuvers(self, stamp_ns: int, text: str) -> None:
+        """The maneuver history changed: its ``~/maneuvers`` message at ``stamp_ns``."""
+        self.mcap.maneuvers(stamp_ns, text)
 
     def after(self, newest_ns: int) -> None:
         self.mcap.after(newest_ns)

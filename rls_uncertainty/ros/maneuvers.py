@@ -13,13 +13,12 @@ adapter only subscribes, decodes and publishes:
   (:meth:`.ManeuverTracker.event`: the newest sample's stamp), as the replay places it.
 * ``~/maneuvers``: ``std_msgs/msg/String`` holding JSON, reliable and transient local with
   depth 1 (a late subscriber gets the current history at once), published at start and after
-  each maneuver's end (:func:`history_json`).
+  each maneuver's end (:func:`..datapath.maneuvers.history_json`).
 * one ``/diagnostics`` status, ``rls_estimator: maneuvers`` (:meth:`ManeuverTracker.summary`).
 """
 
 from __future__ import annotations
 
-import json
 from typing import Any
 
 from diagnostic_msgs.msg import KeyValue
@@ -29,27 +28,13 @@ from rclpy.serialization import deserialize_message
 from std_msgs.msg import String
 
 from ..datapath.diagnostics import Status, status_prefix
-from ..datapath.maneuvers import EVENT, ManeuverTracker
+from ..datapath.maneuvers import EVENT, HISTORY_TOPIC, ManeuverTracker, history_json, history_key
 from ..datapath.pipeline import Pipeline, SampleOutput
 from .intake import Intake, Taken
 
 __all__ = ["LiveManeuvers", "history_json"]
 
 OK = 0  # DiagnosticStatus.OK
-
-
-def history_json(tracker: ManeuverTracker) -> str:
-    """The history message: ``{"source", "recorded", "rejected": {reason: n}, "active": name or
-    null, "maneuvers": [...]}``, each maneuver ``{"name", "start", "end", "duration", "rows"}``
-    (start and end in s, data time: the inputs' header stamps; ``rows`` one per parameter with the campaign's
-    columns, ``null`` where there is no value: :meth:`.ManeuverRecord.as_dict`)."""
-    return json.dumps({
-        "source": tracker.options.source,
-        "recorded": tracker.recorded,
-        "rejected": dict(sorted(tracker.rejected.items())),
-        "active": tracker.active.name if tracker.active is not None else None,
-        "maneuvers": [rec.as_dict() for rec in tracker.history],
-    }, allow_nan=False)
 
 
 class LiveManeuvers:
@@ -64,7 +49,7 @@ class LiveManeuvers:
             if options.source == "events" else None
         latched = QoSProfile(depth=1, reliability=QoSReliabilityPolicy.RELIABLE, history=QoSHistoryPolicy.KEEP_LAST,
                              durability=QoSDurabilityPolicy.TRANSIENT_LOCAL)
-        self._pub = node.create_publisher(String, "~/maneuvers", latched)
+        self._pub = node.create_publisher(String, f"~/{HISTORY_TOPIC}", latched)
         self._published: object = None
         self.publish()
 
@@ -100,11 +85,10 @@ class LiveManeuvers:
 
     def publish(self) -> None:
         """``~/maneuvers`` when the history or the running maneuver changed."""
-        t = self.tracker
-        key = (t.recorded, t.active.name if t.active else None, tuple(sorted(t.rejected.items())))
+        key = history_key(self.tracker)
         if key != self._published:
             self._published = key
-            self._pub.publish(String(data=history_json(t)))
+            self._pub.publish(String(data=history_json(self.tracker)))
 
     def status(self, name: str) -> Status:
         """The ``/diagnostics`` status (level OK: a rejected event is counted and said in the

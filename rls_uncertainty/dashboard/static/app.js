@@ -596,6 +596,9 @@ function onMessage(msg) {
     setQuality(msg);
   } else if (msg.type === "health") {
     drawHealth(msg);
+    drawTargets(msg.health);
+  } else if (msg.type === "flight") {
+    drawFlight(msg);
   }
 }
 
