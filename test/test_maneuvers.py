@@ -265,3 +265,15 @@ def test_campaign_of_a_recording_counts_the_refused_events_and_refuses_one_witho
     err = capsys.readouterr().err
     assert "2 events on /test_point refused (event_value 1, stop_without_start 1" in err, err
     assert not (tmp_path / "r").exists()
+
+
+def test_campaign_refuses_maneuvers_source_with_several_recordings(tmp_path, capsys):
+    # Each bag would be one maneuver and maneuvers.source silently unused.
+    cfg = tmp_path / "detect.yaml"
+    detect_on = "    maneuvers:\n      source: detect\n    aircraft: t2"
+    cfg.write_text(CONFIG.read_text().replace("    aircraft: t2", detect_on, 1))
+    assert cli.main(["campaign", str(BAG), str(BAG), "--config", str(cfg), "--out", str(tmp_path / "c"), "--quiet",
+                     "--no-figures"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "maneuvers.source detect cuts one recording into maneuvers; got 2 INPUTs" in err
+    assert not (tmp_path / "c").exists()
