@@ -85,6 +85,10 @@ def test_the_mean_over_maneuvers_is_the_mean_estimate_with_the_covariance_of_a_m
     assert applied_models([("m1", [a]), ("m2", [b])], "m2") == ("m2", [b])
     with pytest.raises(ConfigError, match=r"m3.*m1, m2"):
         applied_models([("m1", [a]), ("m2", [b])], "m3")
+    with pytest.raises(ConfigError, match="--maneuver m2 identified no model"):
+        applied_models([("m1", [a]), ("m2", [])], "m2")
+    with pytest.raises(ConfigError, match="the run identified no model"):
+        applied_models([("m1", []), ("m2", [])])
     with pytest.raises(ConfigError, match="no model"):
         applied_models([("m1", [])])
 

@@ -163,7 +163,8 @@ def applied_models(maneuvers: Sequence[tuple[str, Sequence[FittedModel]]], maneu
         chosen = list(maneuvers)
     with_models = [(n, list(m)) for n, m in chosen if m]
     if not with_models:
-        raise ConfigError("the run identified no model (no estimates: nothing to apply)")
+        which = f"--maneuver {maneuver}" if maneuver else "the run"
+        raise ConfigError(f"{which} identified no model in models.json (no estimates: nothing to apply)")
     if len(with_models) == 1:
         return with_models[0][0], with_models[0][1]
     order = list(dict.fromkeys(f.model for _, models in with_models for f in models))
