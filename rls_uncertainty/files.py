@@ -336,9 +336,16 @@ def output_directory(
                 raise
             shutil.rmtree(old)
         else:
-            if final.is_dir():
-                final.rmdir()  # empty: nothing is lost
-            os.rename(tmp, final)
+            try:
+                if final.is_dir():
+                    final.rmdir()  # empty: nothing is lost
+                os.rename(tmp, final)
+            except OSError as exc:
+                if exc.errno not in (errno.ENOTEMPTY, errno.EEXIST, errno.ENOTDIR, errno.EISDIR):
+                    raise
+                # Another process (a second run for the same output) finished it meanwhile.
+                raise OutputPathError(f"{given}: written by another process while this one ran; that output is "
+                                      "kept and this one's discarded") from None
     except BaseException:
         if tmp is not None:
             shutil.rmtree(tmp, ignore_errors=True)

@@ -145,6 +145,24 @@ def test_a_failure_removes_what_the_call_created_and_nothing_else(tmp_path):
     assert _tree(tmp_path) == before
 
 
+@pytest.mark.parametrize("other", ["directory", "file"])
+def test_an_output_another_process_finished_meanwhile_is_kept_and_this_one_discarded(tmp_path, other):
+    # Two runs for the same --out: both start while it is absent; the second to finish must not
+    # fail with a bare OS error nor touch the first one's output.
+    out = tmp_path / "out"
+    with pytest.raises(OutputPathError, match="written by another process while this one ran"), \
+            output_directory(out) as tmp:
+        (tmp / "mine.txt").write_text("second")
+        if other == "directory":
+            out.mkdir()
+            (out / "theirs.txt").write_text("first")
+        else:
+            out.write_text("first")
+    kept = out / "theirs.txt" if other == "directory" else out
+    assert kept.read_text() == "first"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out"]
+
+
 def test_a_failure_to_create_the_temporary_directory_removes_the_created_parents(tmp_path, monkeypatch):
     def failing_mkdtemp(**kwargs):
         raise OSError(28, "No space left on device")

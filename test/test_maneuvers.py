@@ -293,3 +293,44 @@ def test_replays_estimates_mcap_holds_the_nodes_history_as_it_changed(tmp_path):
             value = got[c]
             cell = "" if value is None else repr(value) if isinstance(value, float) else str(value)
             assert cell == want[c], (c, name)
+
+
+def test_campaign_of_a_recording_counts_the_refused_events_and_refuses_one_without_maneuvers(tmp_path, capsys):
+    cfg = tmp_path / "events.yaml"
+    events_on = "    maneuvers:\n      source: events\n    aircraft: t2"
+    cfg.write_text(CONFIG.read_text().replace("    aircraft: t2", events_on, 1))
+    bag = events_bag(tmp_path)
+    assert cli.main(["campaign", str(bag), "--config", str(cfg), "--out", str(tmp_path / "c"), "--quiet",
+                     "--no-figures"]) == 0
+    last = (tmp_path / "c" / "summary.txt").read_text().splitlines()[-1]
+    assert last.startswith(f"{sum(REJECTED.values())} events on /test_point refused (")
+    for reason, n in REJECTED.items():
+        assert f"{reason} {n}" in last
+    capsys.readouterr()
+    # The event topic is in the recording but holds no message: no maneuver, nothing written.
+    empty = events_bag(tmp_path, events=[], name="no_events")
+    assert cli.main(["campaign", str(empty), "--config", str(cfg), "--out", str(tmp_path / "e"), "--quiet",
+                     "--no-figures"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "no maneuver found by maneuvers.source events" in err, err
+    assert "no start and stop event on maneuvers.topic /test_point" in err
+    assert not (tmp_path / "e").exists()
+    # Only refused events: the reasons are the error's.
+    refused = events_bag(tmp_path, events=[(S, "pA", "pause"), (2 * S, "pA", "stop")], name="refused")
+    assert cli.main(["campaign", str(refused), "--config", str(cfg), "--out", str(tmp_path / "r"), "--quiet",
+                     "--no-figures"]) == 2
+    err = capsys.readouterr().err
+    assert "2 events on /test_point refused (event_value 1, stop_without_start 1" in err, err
+    assert not (tmp_path / "r").exists()
+
+
+def test_campaign_refuses_maneuvers_source_with_several_recordings(tmp_path, capsys):
+    # Each bag would be one maneuver and maneuvers.source silently unused.
+    cfg = tmp_path / "detect.yaml"
+    detect_on = "    maneuvers:\n      source: detect\n    aircraft: t2"
+    cfg.write_text(CONFIG.read_text().replace("    aircraft: t2", detect_on, 1))
+    assert cli.main(["campaign", str(BAG), str(BAG), "--config", str(cfg), "--out", str(tmp_path / "c"), "--quiet",
+                     "--no-figures"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "maneuvers.source detect cuts one recording into maneuvers; got 2 INPUTs" in err
+    assert not (tmp_path / "c").exists()

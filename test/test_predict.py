@@ -15,7 +15,14 @@ from rls_uncertainty.cli import main
 from rls_uncertainty.errors import ConfigError
 from rls_uncertainty.offline.bags import write_t2_bag
 from rls_uncertainty.offline.model_file import MODELS_FILE, FittedModel, models_json, read_models
-from rls_uncertainty.offline.predict import PredictOptions, applied_models, fit_error, prediction
+from rls_uncertainty.offline.predict import (
+    ModelPrediction,
+    PredictionResult,
+    PredictOptions,
+    applied_models,
+    fit_error,
+    prediction,
+)
 from rls_uncertainty.offline.replay import replay
 from rls_uncertainty.settings import node_config, pipeline_config
 from rls_uncertainty.testing import parameters
@@ -78,6 +85,10 @@ def test_the_mean_over_maneuvers_is_the_mean_estimate_with_the_covariance_of_a_m
     assert applied_models([("m1", [a]), ("m2", [b])], "m2") == ("m2", [b])
     with pytest.raises(ConfigError, match=r"m3.*m1, m2"):
         applied_models([("m1", [a]), ("m2", [b])], "m3")
+    with pytest.raises(ConfigError, match="--maneuver m2 identified no model"):
+        applied_models([("m1", [a]), ("m2", [])], "m2")
+    with pytest.raises(ConfigError, match="the run identified no model"):
+        applied_models([("m1", []), ("m2", [])])
     with pytest.raises(ConfigError, match="no model"):
         applied_models([("m1", [])])
 
@@ -177,3 +188,79 @@ def test_bad_input_is_one_line(repeats, tmp_path: Path, capsys) -> None:
         assert err.count("\n") == 1 and err.startswith("rls-uncertainty predict: error:"), err
         assert "Traceback" not in err
     assert not (tmp_path / "q").exists() and not (tmp_path / "r").exists()
+
+
+def _set(key: str, value: object):
+    def change(entry: dict) -> None:
+        entry[key] = value
+    return change
+
+
+HOSTILE_ENTRIES = [
+    (_set("samples", "1e400"), "samples must be a whole number"),  # (replaced by the number 1e400 below)
+    (_set("samples", -5), "samples must be a whole number"),
+    (_set("samples", 2.5), "samples must be a whole number"),
+    (_set("estimate", [True, False, True]), "estimate: not numbers"),
+    (_set("estimate", ["1", "2", "3"]), "estimate: not numbers"),
+    (_set("residual_variance", "0.1"), "residual_variance must be a finite number"),
+    (_set("residual_variance", True), "residual_variance must be a finite number"),
+    (_set("covariance", [[1.0, 0.5, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]), "covariance: not symmetric"),
+    (_set("covariance", [[-1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]), "covariance: a variance"),
+    (_set("covariance_conventional", [[1.0, 0.0], [0.0, 1.0]]), r"covariance_conventional: shape \(2, 2\)"),
+]
+
+
+@pytest.mark.parametrize(("change", "message"), HOSTILE_ENTRIES)
+def test_a_hostile_models_file_is_refused_in_one_error(tmp_path: Path, change, message: str) -> None:
+    doc = json.loads(models_json([("m", [synthetic()[0]])]))
+    change(doc["maneuvers"][0]["models"][0])
+    text = json.dumps(doc).replace('"samples": "1e400"', '"samples": 1e400')  # JSON's too-large number: inf
+    (tmp_path / MODELS_FILE).write_text(text)
+    with pytest.raises(ConfigError, match=message):
+        read_models(tmp_path)
+
+
+def test_a_models_file_nested_too_deep_or_with_a_model_twice_is_refused(tmp_path: Path) -> None:
+    (tmp_path / MODELS_FILE).write_text("[" * 100_000 + "]" * 100_000)
+    with pytest.raises(ConfigError, match="nested too deep"):
+        read_models(tmp_path)
+    model = synthetic()[0]
+    (tmp_path / MODELS_FILE).write_text(models_json([("m", [model, model])]))
+    with pytest.raises(ConfigError, match="maneuver m: model CZ given more than once"):
+        read_models(tmp_path)
+
+
+def test_a_model_whose_prediction_overflows_is_refused_never_a_nan() -> None:
+    model, X_new, _, _ = synthetic()
+    huge = FittedModel(model.model, model.regressors, model.parameters, np.full(3, 1e308), model.covariance,
+                       model.covariance, model.residual_variance, model.samples)
+    with pytest.raises(ConfigError, match="model CZ: its prediction or interval is not a finite number"):
+        prediction(huge, np.abs(X_new) + 1.0, 1.96)
+    big = FittedModel(model.model, model.regressors, model.parameters, np.full(3, 1e200), model.covariance,
+                      model.covariance, model.residual_variance, model.samples)
+    y, lo, hi = prediction(big, X_new, 1.96)
+    assert math.isinf(fit_error(X_new[:, 0], y, lo, hi).rms)  # the predict command refuses it
+
+
+def test_predict_refuses_a_model_too_large_in_one_line_and_writes_nothing(repeats, tmp_path: Path, capsys) -> None:
+    _, second, run = repeats
+    doc = json.loads((run / MODELS_FILE).read_text())
+    cz = doc["maneuvers"][0]["models"][0]
+    cz["estimate"] = [1e200] * len(cz["estimate"])
+    (tmp_path / "run").mkdir()
+    (tmp_path / "run" / MODELS_FILE).write_text(json.dumps(doc))
+    out = tmp_path / "p"
+    assert main(["predict", str(tmp_path / "run"), str(second), "--config", T2, "--out", str(out), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "model CZ: its prediction error is not a finite number" in err, err
+    assert not out.exists()
+
+
+def test_the_summary_shows_an_undefined_figure_as_a_dash_not_nan() -> None:
+    model = synthetic()[0]
+    z = np.ones(4)  # a constant measurement: R^2 is not defined
+    e = fit_error(z, z, z, z)
+    assert math.isnan(e.r_squared) and math.isnan(e.parameter_share)
+    text = PredictionResult("m", np.arange(4), [ModelPrediction(model, z, z, z, z, e)], 0.95).summary()
+    assert "nan" not in text.lower()
+    assert text.splitlines()[2].split() == ["CZ", "0", "-", "0.000", "100.0%", "-"]

@@ -154,3 +154,17 @@ def test_the_pipeline_judges_the_test_point_in_its_diagnostics():
     assert "0.01 %" in report["target.Cm_q"] and report["verdict"].startswith(("needs more", "not identifiable"))
     with pytest.raises(ConfigError, match="Cl_p"):
         pipeline_config({**params, "targets.percent": "Cl_p=5"})
+
+
+def test_a_target_far_below_the_percent_error_is_no_forecast_never_an_overflow() -> None:
+    # (pe/g)^2 beyond floating point: no forecast (a Python float's ** raised OverflowError, which
+    # stopped the pipeline with it).
+    assert math.isnan(time_left(10.0, 1e-300, 2.0, 1.0, 1.0))
+    assert time_left(10.0, 5.0, 2.0, 1.0, 1.0) == pytest.approx(1.0 * (4.0 - 1.0) * 2.0 / 1.0)
+    tracker = TargetTracker(["Cm_q"], TargetOptions(targets="Cm_q=1e-300"))
+    times = np.arange(1, 300) / RATE
+    feed(tracker, times, np.full((times.size, 1), -10.0), (1.0 / np.sqrt(times))[:, None])
+    [p] = tracker.progress
+    assert math.isnan(p.time_left) and "too far below the percent error" in p.reason
+    v = tracker.verdict()
+    assert v.state == NOT_IDENTIFIABLE and "Cm_q" in v.reason and "too far below" in v.reason

@@ -62,6 +62,8 @@ class CampaignResult:
     wall_seconds: float = 0.0
     write_seconds: float = 0.0
     written: dict[str, Path] = field(default_factory=dict)
+    # Lines the summary ends with (a recording cut into maneuvers: the events it refused).
+    notes: tuple[str, ...] = ()
 
     @property
     def per_minute(self) -> float:
@@ -80,7 +82,8 @@ class CampaignResult:
 
     def summary(self) -> str:
         """The printed summary (``summary.txt``)."""
-        return summary_text(self.table, self.results, _lags(self.settings.config))
+        text = summary_text(self.table, self.results, _lags(self.settings.config))
+        return text + "".join(f"{note}\n" for note in self.notes)
 
 
 def _lags(config: PipelineConfig) -> object:

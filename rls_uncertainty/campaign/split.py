@@ -7,7 +7,9 @@ recording once through the replay's pipeline (:func:`..offline.replay.run_pipeli
 afresh (inputs kept) and its end gives its rows. The rows are the tracker's, so they are those
 of ``replay``'s ``maneuvers.csv`` on the same recording and of the node's history fed the same
 messages; the regression rows are kept, so each row has the corrected standard error with all
-lags (Eq. 20) over the maneuver's rows too. ``--min-span`` is the too-short rule.
+lags (Eq. 20) over the maneuver's rows too. ``--min-span`` is the too-short rule. The events
+refused (a stop without a start, a start twice, an empty name, ...) are counted at the end of
+the summary; a recording in which no maneuver is found is an error (nothing written).
 """
 
 from __future__ import annotations
@@ -16,7 +18,8 @@ import time
 from collections.abc import Iterable
 from pathlib import Path
 
-from ..datapath.maneuvers import ManeuverRecord
+from ..datapath.maneuvers import ManeuverRecord, ManeuverTracker
+from ..errors import BagError
 from ..files import output_directory
 from ..offline.bags import InputStream, check_bag
 from ..offline.figures import FigureOptions
@@ -38,14 +41,31 @@ def results_of(records: Iterable[ManeuverRecord], origin_ns: int) -> list[Maneuv
             for rec in records]
 
 
-def split_recording(bag: str | Path, settings: CampaignSettings) -> list[ManeuverResult]:
-    """The maneuvers of the recording ``bag`` by ``settings.config.maneuvers`` (module docstring)."""
+def _refused(tracker: ManeuverTracker, topic: str) -> str:
+    """The events ``tracker`` refused, by reason, in words (empty: none)."""
+    if not tracker.rejected:
+        return ""
+    reasons = ", ".join(f"{reason} {n}" for reason, n in sorted(tracker.rejected.items()))
+    return f"{sum(tracker.rejected.values())} events on {topic} refused ({reasons}; docs/maneuvers.md)"
+
+
+def split_recording(bag: str | Path, settings: CampaignSettings) -> tuple[list[ManeuverResult], tuple[str, ...]]:
+    """The maneuvers of the recording ``bag`` by ``settings.config.maneuvers`` (module docstring)
+    and the notes for the summary (the events refused). A recording in which no maneuver is
+    found is a :class:`.errors.BagError` saying why."""
     config = settings.config
-    events = config.maneuvers.topic if config.maneuvers.source == "events" else None
+    source, topic = config.maneuvers.source, config.maneuvers.topic
+    events = topic if source == "events" else None
     with InputStream(bag, dict(settings.topics), strict=settings.strict, events=events) as stream:
         result = run_pipeline(stream, config, record=True, keep_outputs=False, min_span=settings.min_span)
-    assert result.maneuvers is not None  # (maneuvers.source is not off)
-    return results_of(result.maneuvers.history, stream.t0)
+    tracker = result.maneuvers
+    assert tracker is not None  # (maneuvers.source is not off)
+    refused = _refused(tracker, topic)
+    if not tracker.history:
+        why = (refused or f"no start and stop event on maneuvers.topic {topic}") if source == "events" else \
+            "the control surfaces' excitation never rose maneuvers.threshold over its trim noise floor"
+        raise BagError(f"{bag}: no maneuver found by maneuvers.source {source}: {why}")
+    return results_of(tracker.history, stream.t0), (refused,) if refused else ()
 
 
 def split_campaign_to(out: str | Path, bag: str | Path, settings: CampaignSettings, *,
@@ -56,9 +76,9 @@ def split_campaign_to(out: str | Path, bag: str | Path, settings: CampaignSettin
     check_bag(bag)
     with output_directory(out, force=force, inputs=(bag, *inputs)) as tmp:
         t0 = time.perf_counter()
-        results = split_recording(bag, settings)
+        results, notes = split_recording(bag, settings)
         campaign = CampaignResult(results, table4(results), settings, "this process (one recording)",
-                                  time.perf_counter() - t0)
+                                  time.perf_counter() - t0, notes=notes)
         t1 = time.perf_counter()
         written = write_campaign(campaign, tmp, figures=figures, progress=progress)
         campaign.written = {k: Path(out) / p.relative_to(tmp) for k, p in written.items()}

@@ -119,7 +119,11 @@ def _campaign(args: argparse.Namespace) -> int:
     settings = CampaignSettings(pipeline_config(params), node_config(params).topics, strict=not args.lenient,
                                 **option_values(args, CampaignSettings))
     inputs = [_yaml_file(args.config, config_dir())] if args.config else []
-    if not args.maneuvers and len(args.inputs) == 1 and settings.config.maneuvers.source != "off":
+    source = settings.config.maneuvers.source
+    if not args.maneuvers and source != "off":
+        if len(args.inputs) != 1:  # (each bag would be one maneuver, the setting silently unused)
+            raise ConfigError(f"maneuvers.source {source} cuts one recording into maneuvers; got {len(args.inputs)} "
+                              "INPUTs: give one recording, or maneuvers.source off for one maneuver per bag")
         return _split_campaign(args, settings, inputs)
     if args.maneuvers:
         if len(args.inputs) != 1:

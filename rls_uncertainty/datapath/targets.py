@@ -155,7 +155,8 @@ def time_left(percent_error: float, target: float, information: float, informati
     """Seconds until ``percent_error`` falls to ``target`` when the information, which grew from
     ``information_before`` to ``information`` over the last ``elapsed`` seconds, grows on at
     that rate: ``elapsed ((pe/g)^2 - 1) I / (I - I_0)`` (module docstring). 0 when the target is
-    met; NaN when it cannot be forecast (undefined percent error, no growth, no elapsed time)."""
+    met; NaN when it cannot be forecast (undefined percent error, no growth, no elapsed time, or a
+    target so far below the percent error that the forecast is beyond floating point)."""
     if not (math.isfinite(percent_error) and math.isfinite(target)):
         return math.nan
     if percent_error <= target:
@@ -163,7 +164,9 @@ def time_left(percent_error: float, target: float, information: float, informati
     gained = information - information_before
     if not (elapsed > 0 and math.isfinite(gained) and gained > 0 and math.isfinite(information)):
         return math.nan
-    return elapsed * ((percent_error / target) ** 2 - 1.0) * information / gained
+    ratio = percent_error / target
+    left = elapsed * (ratio * ratio - 1.0) * information / gained  # (``**`` would raise on overflow)
+    return left if math.isfinite(left) else math.nan
 
 
 class TargetTracker:
@@ -229,7 +232,12 @@ class TargetTracker:
                                      NO_HISTORY)
         elapsed, before = t - anchor[0], float(anchor[1][i])
         left = time_left(float(pe), target, float(info), before, elapsed)
-        reason = "" if math.isfinite(left) else f"information not growing over the last {elapsed:.1f} s"
+        if math.isfinite(left):
+            reason = ""
+        elif math.isfinite(info - before) and info > before:
+            reason = f"the target is too far below the percent error to forecast ({pe:.3g} % against {target:g} %)"
+        else:
+            reason = f"information not growing over the last {elapsed:.1f} s"
         return ParameterProgress(name, float(pe), target, False, converged, left, reason)
 
     def verdict(self) -> Verdict:

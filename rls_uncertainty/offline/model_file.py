@@ -13,7 +13,9 @@ that published time-domain estimates at its last sample:
   the estimator used.
 
 :func:`run_models` takes them out of a pipeline at the end of a run; :func:`read_models` reads
-the file back, refusing, in one line, a file that is not one or a value that is not finite.
+the file back, refusing, in one line, a file that is not one, a value that is not a finite number
+(text and ``true`` are not numbers), a covariance that is not symmetric or has a negative
+variance, a ``samples`` that is not a whole number >= 1, or a model given twice in a maneuver.
 """
 
 from __future__ import annotations
@@ -92,16 +94,36 @@ def models_json(maneuvers: Sequence[tuple[str, Sequence[FittedModel]]]) -> str:
     return json.dumps(doc, indent=1) + "\n"
 
 
+def _numbers(value: Any, depth: int) -> bool:
+    """Whether ``value`` is a number (not a bool, not text) or, ``depth`` deep, lists of them."""
+    if depth == 0:
+        return isinstance(value, (int, float)) and not isinstance(value, bool)
+    return isinstance(value, list) and all(_numbers(v, depth - 1) for v in value)
+
+
 def _array(value: Any, shape: tuple[int, ...], where: str) -> np.ndarray:
+    if not _numbers(value, len(shape)):
+        raise ConfigError(f"{where}: not numbers (expected a {'x'.join(map(str, shape))} array of numbers)")
     try:
         a = np.asarray(value, dtype=np.float64)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):
         raise ConfigError(f"{where}: not numbers") from None
     if a.shape != shape:
         raise ConfigError(f"{where}: shape {a.shape}, expected {shape}")
     if not np.isfinite(a).all():
         raise ConfigError(f"{where}: a value is not finite")
     return a
+
+
+def _covariance(value: Any, n: int, where: str) -> np.ndarray:
+    """A covariance matrix: finite, symmetric, its variances (diagonal) not negative."""
+    c = _array(value, (n, n), where)
+    scale = float(np.max(np.abs(c)))
+    if not np.allclose(c, c.T, rtol=1e-9, atol=1e-12 * scale):
+        raise ConfigError(f"{where}: not symmetric (not a covariance matrix)")
+    if (np.diag(c) < 0).any():
+        raise ConfigError(f"{where}: a variance (diagonal entry) is negative (not a covariance matrix)")
+    return c
 
 
 def _model(entry: Any, where: str) -> FittedModel:
@@ -113,23 +135,25 @@ def _model(entry: Any, where: str) -> FittedModel:
         where = f"{where} ({name})"
         if len(parameters) != n or n == 0:
             raise ConfigError(f"{where}: {len(parameters)} parameters for {n} regressors")
-        variance, samples = float(entry["residual_variance"]), int(entry["samples"])
+        variance, samples = entry["residual_variance"], entry["samples"]
+        if not (_numbers(variance, 0) and math.isfinite(variance) and variance >= 0):
+            raise ConfigError(f"{where}: residual_variance must be a finite number >= 0, got {variance!r}")
+        if not (isinstance(samples, int) and not isinstance(samples, bool) and samples >= 1):
+            raise ConfigError(f"{where}: samples must be a whole number >= 1, got {samples!r}")
         estimate = _array(entry["estimate"], (n,), f"{where} estimate")
-        cov = _array(entry["covariance"], (n, n), f"{where} covariance")
-        conv = _array(entry["covariance_conventional"], (n, n), f"{where} covariance_conventional")
+        cov = _covariance(entry["covariance"], n, f"{where} covariance")
+        conv = _covariance(entry["covariance_conventional"], n, f"{where} covariance_conventional")
     except (KeyError, TypeError, ValueError) as exc:
         if isinstance(exc, ConfigError):
             raise
         raise ConfigError(f"{where}: malformed ({type(exc).__name__}: {exc})") from None
-    if not (math.isfinite(variance) and variance >= 0):
-        raise ConfigError(f"{where}: residual_variance must be a finite number >= 0, got {variance!r}")
-    return FittedModel(name, tuple(map(str, regressors)), tuple(map(str, parameters)), estimate, cov, conv, variance,
-                       samples)
+    return FittedModel(name, tuple(map(str, regressors)), tuple(map(str, parameters)), estimate, cov, conv,
+                       float(variance), samples)
 
 
 def read_models(run_dir: str | Path) -> list[tuple[str, list[FittedModel]]]:
     """The ``(maneuver, models)`` pairs of ``run_dir``'s ``models.json``. A directory without it,
-    a file that is not one, or a value that is not finite is a :class:`.errors.ConfigError`."""
+    a file that is not one, or an entry refused (module docstring) is a :class:`.errors.ConfigError`."""
     path = Path(run_dir) / MODELS_FILE
     if not Path(run_dir).is_dir():
         raise ConfigError(f"{run_dir}: not a directory (give the output directory of a replay or a campaign)")
@@ -140,6 +164,8 @@ def read_models(run_dir: str | Path) -> list[tuple[str, list[FittedModel]]]:
         doc = json.loads(path.read_text())
     except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
         raise ConfigError(f"{path}: not readable as JSON ({' '.join(str(exc).split())})") from None
+    except RecursionError:  # arrays nested thousands deep
+        raise ConfigError(f"{path}: not a {MODELS_FORMAT!r} file (nested too deep)") from None
     if not isinstance(doc, dict) or doc.get("format") != MODELS_FORMAT or not isinstance(doc.get("maneuvers"), list):
         raise ConfigError(f"{path}: not a {MODELS_FORMAT!r} file")
     out = []
@@ -147,5 +173,9 @@ def read_models(run_dir: str | Path) -> list[tuple[str, list[FittedModel]]]:
         if not isinstance(m, dict) or not isinstance(m.get("models"), list):
             raise ConfigError(f"{path}: maneuver {i + 1}: malformed")
         name = str(m.get("name", i + 1))
-        out.append((name, [_model(e, f"{path}: maneuver {name}, model {k + 1}") for k, e in enumerate(m["models"])]))
+        models = [_model(e, f"{path}: maneuver {name}, model {k + 1}") for k, e in enumerate(m["models"])]
+        names = [f.model for f in models]
+        if twice := sorted({n for n in names if names.count(n) > 1}):
+            raise ConfigError(f"{path}: maneuver {name}: model {', '.join(twice)} given more than once")
+        out.append((name, models))
     return out

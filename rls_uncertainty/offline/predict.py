@@ -123,9 +123,16 @@ class PredictionResult:
                  f"{'model':<8}{'RMS':>11}{'R^2':>8}{'Theil U':>9}{'inside':>9}{'xPx/s^2':>9}"]
         for p in self.models:
             e = p.error
-            lines.append(f"{p.model.model:<8}{e.rms:>11.4g}{e.r_squared:>8.3f}{e.theil_u:>9.3f}"
-                         f"{100 * e.coverage:>8.1f}%{e.parameter_share:>9.3f}")
+            lines.append(f"{p.model.model:<8}{_cell(e.rms, 11, '.4g')}{_cell(e.r_squared, 8, '.3f')}"
+                         f"{_cell(e.theil_u, 9, '.3f')}{_cell(100 * e.coverage, 8, '.1f')}%"
+                         f"{_cell(e.parameter_share, 9, '.3f')}")
         return "\n".join(lines)
+
+
+def _cell(value: float, width: int, spec: str) -> str:
+    """``value`` right-aligned in ``width``; ``-`` for a figure that is not defined (NaN: R^2 of a
+    constant measurement, the share with a zero residual variance)."""
+    return f"{value:>{width}{spec}}" if math.isfinite(value) else f"{'-':>{width}}"
 
 
 def _mean_model(fits: Sequence[FittedModel]) -> FittedModel:
@@ -156,7 +163,8 @@ def applied_models(maneuvers: Sequence[tuple[str, Sequence[FittedModel]]], maneu
         chosen = list(maneuvers)
     with_models = [(n, list(m)) for n, m in chosen if m]
     if not with_models:
-        raise ConfigError("the run identified no model (no estimates: nothing to apply)")
+        which = f"--maneuver {maneuver}" if maneuver else "the run"
+        raise ConfigError(f"{which} identified no model in models.json (no estimates: nothing to apply)")
     if len(with_models) == 1:
         return with_models[0][0], with_models[0][1]
     order = list(dict.fromkeys(f.model for _, models in with_models for f in models))
@@ -166,21 +174,28 @@ def applied_models(maneuvers: Sequence[tuple[str, Sequence[FittedModel]]], maneu
 
 def prediction(model: FittedModel, X: np.ndarray, quantile: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``(y, lower, upper)`` of ``model`` on the regressor rows ``X`` ``(K, n)``: ``y = X theta``
-    and ``y -/+ quantile sqrt(x' P x + s^2)`` (module docstring)."""
-    y = X @ model.estimate
-    variance = np.einsum("ki,ij,kj->k", X, model.covariance, X) + model.residual_variance
-    half = quantile * np.sqrt(np.maximum(variance, 0.0))
-    return y, y - half, y + half
+    and ``y -/+ quantile sqrt(x' P x + s^2)`` (module docstring); a value that is not finite (a
+    model whose numbers overflow) is a :class:`.errors.ConfigError`."""
+    with np.errstate(over="ignore", invalid="ignore"):  # a model too large for floats: refused below
+        y = X @ model.estimate
+        variance = np.einsum("ki,ij,kj->k", X, model.covariance, X) + model.residual_variance
+        half = quantile * np.sqrt(np.maximum(variance, 0.0))
+        lower, upper = y - half, y + half
+    if not (np.isfinite(y).all() and np.isfinite(lower).all() and np.isfinite(upper).all()):
+        raise ConfigError(f"model {model.model}: its prediction or interval is not a finite number (estimates or "
+                          "covariance too large for the regressors)")
+    return y, lower, upper
 
 
 def fit_error(z: np.ndarray, y: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> FitError:
     """:class:`FitError` of the measured ``z`` against the prediction ``y`` and its interval."""
-    e = z - y
-    rms = float(np.sqrt(np.mean(e**2)))
-    total = float(np.sum((z - z.mean()) ** 2))
-    r2 = 1.0 - float(np.sum(e**2)) / total if total > 0 else math.nan
-    scale = float(np.sqrt(np.mean(z**2)) + np.sqrt(np.mean(y**2)))
-    u = rms / scale if scale > 0 else math.nan
+    with np.errstate(over="ignore", invalid="ignore"):  # (a prediction whose square overflows: rms inf)
+        e = z - y
+        rms = float(np.sqrt(np.mean(e**2)))
+        total = float(np.sum((z - z.mean()) ** 2))
+        r2 = 1.0 - float(np.sum(e**2)) / total if total > 0 else math.nan
+        scale = float(np.sqrt(np.mean(z**2)) + np.sqrt(np.mean(y**2)))
+        u = rms / scale if 0 < scale < math.inf else math.nan
     inside = float(np.mean((z >= lower) & (z <= upper)))
     return FitError(rms, r2, u, inside, int(z.size))
 
@@ -248,6 +263,9 @@ def predict(run_dir: str | Path, bag: str | Path, params: dict[str, Any], out: s
             Xj, zj = X[:, j, : len(f.regressors)], z[:, j]
             y, lo, hi = prediction(f, Xj, options.quantile)
             error = fit_error(zj, y, lo, hi)
+            if not math.isfinite(error.rms):
+                raise ConfigError(f"model {f.model}: its prediction error is not a finite number (estimates too "
+                                  "large for the regressors)")
             if f.residual_variance > 0:
                 share = float(np.median(np.einsum("ki,ij,kj->k", Xj, f.covariance, Xj))) / f.residual_variance
                 error = replace(error, parameter_share=share)
