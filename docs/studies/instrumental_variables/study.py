@@ -36,9 +36,6 @@ from pathlib import Path
 
 import matplotlib
 import numpy as np
-from rosbags.rosbag2 import Reader, Writer
-from rosbags.rosbag2.enums import StoragePlugin
-from rosbags.typesys import Stores, get_typestore
 
 from rls_uncertainty.offline.bags import InputStream
 from rls_uncertainty.offline.replay import run_pipeline
@@ -222,53 +219,6 @@ def figure(args: argparse.Namespace) -> None:
     fig.savefig(args.png, dpi=110)
 
 
-def _with_excitation(src: Path, dst: Path) -> None:
-    """A copy of the converted bag ``src`` with ``/excitation`` = its ``/control_surfaces``
-    (the measured surfaces as the instruments' input; ``convert``'s mapping has no excitation
-    stream)."""
-    store = get_typestore(Stores.ROS2_JAZZY)
-    with Reader(src) as reader, Writer(dst, version=8, storage_plugin=StoragePlugin.MCAP) as writer:
-        conns = {c.id: writer.add_connection(c.topic, c.msgtype, typestore=store) for c in reader.connections}
-        excitation = writer.add_connection("/excitation", "sensor_msgs/msg/JointState", typestore=store)
-        for c, stamp, raw in reader.messages():
-            writer.write(conns[c.id], stamp, raw)
-            if c.topic == "/control_surfaces":
-                writer.write(excitation, stamp, raw)
-
-
-def flight(args: argparse.Namespace) -> None:
-    """The longitudinal Twin Otter recording replayed with config/twin_otter_longitudinal.yaml
-    (RLS) and the same with ``estimator.algorithm: iv`` and ``topics.excitation`` the measured
-    surfaces; the end-of-maneuver estimates and corrected standard errors side by side."""
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    cli = [sys.executable, "-m", "rls_uncertainty.cli"]
-    recording = Path(args.flight_data) / "totter_9752ed20"
-    subprocess.run([*cli, "convert", str(recording), "--mapping", str(ROOT / "msg_schemas/fti_msgs/mapping.yaml"),
-                    "--out", str(out / "converted"), "--force"], check=True, capture_output=True)
-    bag = out / "with_excitation"
-    if not bag.exists():
-        _with_excitation(out / "converted", bag)
-    rls_config = ROOT / "config" / "twin_otter_longitudinal.yaml"
-    iv_config = out / "twin_otter_longitudinal_iv.yaml"
-    text = rls_config.read_text().replace("    estimator:\n", "    estimator:\n      algorithm: iv\n")
-    iv_config.write_text(text.replace("    surfaces:\n", "    topics:\n      excitation: excitation\n    surfaces:\n"))
-    finals = {}
-    for method, config in (("RLS", rls_config), ("IV", iv_config)):
-        subprocess.run([*cli, "replay", str(bag), "--config", str(config), "--out", str(out / method), "--no-figures",
-                        "--quiet", "--force"], check=True, capture_output=True)
-        with open(out / method / "parameters.csv") as f:
-            finals[method] = {r["parameter"]: r for r in csv.DictReader(f)}
-    print("| parameter | RLS estimate | RLS SE | IV estimate | IV SE | IV SE / RLS SE | difference / IV SE |")
-    print("| --- | --- | --- | --- | --- | --- | --- |")
-    for p, r in finals["RLS"].items():
-        v = finals["IV"].get(p)
-        if v is None:
-            continue
-        e_r, s_r, e_i, s_i = (float(x) for x in (r["estimate"], r["std_error"], v["estimate"], v["std_error"]))
-        print(f"| {p} | {e_r:.4g} | {s_r:.2g} | {e_i:.4g} | {s_i:.2g} | {s_i / s_r:.1f} | {(e_i - e_r) / s_i:+.2f} |")
-
-
 def quick() -> None:
     """Four maneuvers of the severe campaign, made by ``make-bag``, through both methods."""
     with tempfile.TemporaryDirectory() as tmp:
@@ -295,16 +245,13 @@ def main() -> None:
     f = sub.add_parser("figure", help="coverage, SE / scatter and false convergence per case")
     f.add_argument("csv", nargs="+")
     f.add_argument("--png", required=True)
-    g = sub.add_parser("flight", help="the longitudinal Twin Otter recording, RLS and IV")
-    g.add_argument("--flight-data", default=str(ROOT.parent / "shared" / "flight_data"))
-    g.add_argument("--out", required=True, help="working directory (converted bags, replays)")
     args = ap.parse_args()
     if args.quick:
         quick()
     elif args.command is None:
         ap.error("a command (run, table, figure) or --quick")
     else:
-        {"run": run, "table": table, "figure": figure, "flight": flight}[args.command](args)
+        {"run": run, "table": table, "figure": figure}[args.command](args)
 
 
 if __name__ == "__main__":
