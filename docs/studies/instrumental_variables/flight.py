@@ -5,9 +5,8 @@ Each recording (``../shared/flight_data``, ``$RLS_FLIGHT_DATA`` or ``--flight-da
 mapping and its messages go through the replay's data path (``run_pipeline``, the function
 behind ``rls-uncertainty replay``) with its configuration (``config/twin_otter_lateral.yaml``,
 ``config/twin_otter_longitudinal.yaml``) as shipped (RLS) and with ``estimator.algorithm: iv``
-(instruments: the measured surfaces for themselves and the other regressors
-``instruments.delay_span`` earlier, ``instruments.source`` auto, which picks them as no
-excitation was recorded). The longitudinal one is run a third time with the short-period
+(``instruments.source: delayed``: the measured surfaces for themselves and the other regressors
+``instruments.delay_span`` earlier; for the lateral models ``auto`` picks the same). The longitudinal one is run a third time with the short-period
 auxiliary model driven by the measured surfaces (``instruments.source: excitation``, the
 surfaces repeated on the excitation input), the instruments of the simulated study.
 
@@ -44,7 +43,7 @@ RECORDINGS = {  # recording: (configuration, extra parameters)
     "totter_f1_014": ("twin_otter_lateral", {"aircraft": "twin_otter_f1_014"}),
     "totter_9752ed20": ("twin_otter_longitudinal", {}),
 }
-IV = {"estimator.algorithm": "iv"}
+IV = {"estimator.algorithm": "iv", "instruments.source": "delayed"}
 IV_EXCITATION = {**IV, "instruments.source": "excitation"}
 FLIGHT_DATA = {"path": Path(os.environ.get("RLS_FLIGHT_DATA") or ROOT.parent / "shared" / "flight_data")}
 WORK = Path(tempfile.mkdtemp(prefix="iv_flight_"))  # the converted recordings
