@@ -1,12 +1,13 @@
 """The three Twin Otter recordings with RLS and recursive instrumental variables side by side.
 Report: REPORT.md beside this file, "The Twin Otter recordings".
 
-Each recording (``../shared/flight_data``, ``$RLS_FLIGHT_DATA`` or ``--flight-data``) is converted with the shipped
-mapping and its messages go through the replay's data path (``run_pipeline``, the function
-behind ``rls-uncertainty replay``) with its configuration (``config/twin_otter_lateral.yaml``,
-``config/twin_otter_longitudinal.yaml``) as shipped (RLS) and with ``estimator.algorithm: iv``
-(``instruments.source: delayed``: the measured surfaces for themselves and the other regressors
-``instruments.delay_span`` earlier; for the lateral models ``auto`` picks the same). The longitudinal one is run a third time with the short-period
+Each recording (``../shared/flight_data``, ``$RLS_FLIGHT_DATA`` or ``--flight-data``) is
+converted with the shipped mapping and its messages go through the replay's data path
+(``run_pipeline``, the function behind ``rls-uncertainty replay``) with its configuration
+(``config/twin_otter_lateral.yaml``, ``config/twin_otter_longitudinal.yaml``) as shipped (RLS)
+and with ``estimator.algorithm: iv`` (``instruments.source: delayed``: the measured surfaces for
+themselves and the other regressors ``instruments.delay_span`` earlier; for the lateral models
+``auto`` picks the same). The longitudinal one is run a third time with the short-period
 auxiliary model driven by the measured surfaces (``instruments.source: excitation``, the
 surfaces repeated on the excitation input), the instruments of the simulated study.
 
