@@ -100,13 +100,33 @@ def one_maneuver(job: tuple[str, str]) -> list[dict]:
     return rows
 
 
+# IV with one setting changed: the levers on its early standard error and flags.
+LEVERS = {"IV": {}, "IV, small_sample 1": {"estimator.small_sample": 1.0},
+          "IV, convergence.window 3 s": {"convergence.window": 3.0}}
+
+
+def one_maneuver_levers(job: tuple[str, str]) -> list[dict]:
+    case, bag = job
+    params = _params(CONFIGS["IV"])
+    with InputStream(bag, dict(node_config(params).topics)) as stream:
+        t0 = stream.t0
+        messages = list(stream)
+    rows: list[dict] = []
+    for label, extra in LEVERS.items():
+        start = time.perf_counter()
+        result = run_pipeline(messages, pipeline_config({**params, **extra}), record=False, keep_outputs=True)
+        rows += _rows(case, Path(bag).name, label, result, t0, time.perf_counter() - start)
+    return rows
+
+
 def run(args: argparse.Namespace) -> None:
     bags = sorted(str(p) for p in Path(args.campaign).glob("m*") if p.is_dir())[: args.count]
     case = args.case or Path(args.campaign).name
     with open(args.out, "w", newline="") as f, Pool(args.workers) as pool:
         w = csv.DictWriter(f, FIELDS)
         w.writeheader()
-        for n, rows in enumerate(pool.imap(one_maneuver, [(case, b) for b in bags]), 1):
+        job = one_maneuver_levers if getattr(args, "levers", False) else one_maneuver
+        for n, rows in enumerate(pool.imap(job, [(case, b) for b in bags]), 1):
             w.writerows(rows)
             f.flush()
             print(f"\r{case}: {n}/{len(bags)}", end="", file=sys.stderr)
@@ -173,21 +193,23 @@ def table(args: argparse.Namespace) -> None:
         rows = [r for r in rows if r["converged_end"]]
     stats = statistics(rows)
     for case in dict.fromkeys(r["case"] for r in rows):  # in the order of the CSVs
-        n = {m: stats[case, m, PARAMS[0]]["n"] for m in ("RLS", "IV") if (case, m, PARAMS[0]) in stats}
+        methods = list(dict.fromkeys(r["method"] for r in rows if r["case"] == case))
+        n = {m: stats[case, m, PARAMS[0]]["n"] for m in methods if (case, m, PARAMS[0]) in stats}
         print(f"\n### {case} ({', '.join(f'{m} {k} maneuvers' for m, k in n.items())})\n")
         print("| parameter | method | coverage % | SE/scatter | bias/scatter | false conv. % (flagged) "
               "| median flag time, s | scatter | robust SE/scatter | z std | flagged at the end % |")
         print("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |")
         for p in PARAMS:
-            for m in ("RLS", "IV"):
+            for m in methods:
                 s = stats.get((case, m, p))
                 if s is None:
                     continue
                 print(f"| {p} | {m} | {s['coverage']:.0f} | {s['se_scatter']:.2f} | {s['bias_scatter']:+.2f} | "
                       f"{s['false']:.0f} ({s['flagged']}) | {s['flag_time']:.2f} | {s['scatter']:.3g} | "
                       f"{s['robust_se_scatter']:.2f} | {s['z_std']:.2f} | {s['converged_end']:.0f} |")
-        rls, iv = _cost(rows, case)
-        print(f"\npipeline time per estimator sample: RLS {rls:.0f} us, IV {iv:.0f} us, IV / RLS {iv / rls:.2f}")
+        if "RLS" in methods:
+            rls, iv = _cost(rows, case)
+            print(f"\npipeline time per estimator sample: RLS {rls:.0f} us, IV {iv:.0f} us, IV / RLS {iv / rls:.2f}")
 
 
 def figure(args: argparse.Namespace) -> None:
@@ -238,6 +260,7 @@ def main() -> None:
     r.add_argument("--count", type=int, default=200, help="the first COUNT maneuvers")
     r.add_argument("--case", help="the case's name in the tables (default: the directory's)")
     r.add_argument("--workers", type=int, default=2)
+    r.add_argument("--levers", action="store_true", help="IV at its defaults and with each of LEVERS instead")
     r.add_argument("--out", required=True)
     t = sub.add_parser("table", help="the tables of the CSVs")
     t.add_argument("csv", nargs="+")
