@@ -399,6 +399,12 @@ class Pipeline(PipelineInputs):
         """Why model ``j``'s parameters are held back for weak instruments ('' if not)."""
         return "" if self._iv is None else self._iv.weak_reason(j)
 
+    @property
+    def instrument_strength(self) -> np.ndarray | None:
+        """Each model's ``rho_min`` at the last weak-instrument judgement (NaN before one;
+        :mod:`..instruments.strength`), or None without instruments."""
+        return None if self._iv is None else self._iv.rho_min.copy()
+
     def _covariances(self, t: int, ready: np.ndarray) -> np.ndarray | None:
         """The corrected and conventional covariances of the ready models
         (:func:`symmetric_covariances`) on the grid points that publish them (every
