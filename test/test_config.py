@@ -163,6 +163,8 @@ def test_every_parameter_reaches_its_nested_field():
         "instruments.refresh_span": (("instruments", "refresh_span"), 1.0),
         "instruments.weak_below": (("instruments", "weak_below"), 0.2),
         "instruments.max_backlog_span": (("instruments", "max_backlog_span"), 10.0),
+        "instruments.source": (("instruments", "source"), "delayed"),
+        "instruments.delay_span": (("instruments", "delay_span"), 0.2),
     }
     sections = {"rate", "estimator", "differentiator", "inputs", "surfaces", "limits", "identifiability", "instruments"}
     # (estimator.method and the frequency.* parameters: test_every_frequency_parameter_reaches_its_option;

@@ -145,8 +145,9 @@ def test_weak_instruments_are_never_flagged_and_say_why(with_excitation):
 
 
 @pytest.mark.parametrize(("params", "words"), [
-    ({"models.enabled": ["CZ", "Cm", "Cl"]}, "cannot instrument model Cl"),
-    ({"models.enabled": ["CZ", "Cm", "Cl"], "estimator.method": "both"}, "cannot instrument model Cl"),
+    ({"models.enabled": ["CZ", "Cm", "Cl"], "instruments.source": "excitation"}, "cannot instrument model Cl"),
+    ({"models.enabled": ["CZ", "Cm", "Cl"], "instruments.source": "excitation", "estimator.method": "both"},
+     "cannot instrument model Cl"),
 ])
 def test_a_configuration_iv_cannot_serve_is_one_line(params, words):
     with pytest.raises(ConfigError) as err:

@@ -24,7 +24,6 @@ from ..aero.surface_mixing import SURFACES, SurfaceMixing
 from ..errors import ConfigError
 from ..estimator.options import EstimatorOptions
 from ..frequency.options import FrequencyOptions
-from ..instruments.layout import InstrumentLayout
 from ..instruments.options import InstrumentOptions
 from ..schema import check, default_of, option
 from .convergence import ConvergenceConfig
@@ -211,11 +210,11 @@ class PipelineConfig:
                               f"({', '.join(sorted(known))})", parameter="targets.percent")
 
     def _check_instruments(self) -> None:
-        """``estimator.algorithm iv``: models the instruments serve
-        (:class:`..instruments.InstrumentLayout` refuses the others in one line)."""
+        """``estimator.algorithm iv``: with ``instruments.source excitation``, models the
+        auxiliary model serves (:class:`..instruments.InstrumentLayout` refuses the others in one line)."""
         if self.estimator.algorithm != "iv":
             return
-        InstrumentLayout(self.models)
+        self.instruments.resolved_source(self.models)
 
     def _check_differentiator(self) -> None:
         """The angular accelerations of the moment models (Cl, Cm, Cn) pass the differentiator

@@ -23,10 +23,17 @@ def configuration_warnings(config: PipelineConfig, topics: Mapping[str, str] | N
     """Warnings about a configuration: forgetting that remembers fewer samples than the
     publication rule's (``1 / (1 - f)`` against ``n + publish_lag_windows x L`` of the largest
     model): the corrected standard errors then stay too small; and with the input ``topics``
-    (``topics.*``), instrumental variables whose excitation is the measured surfaces."""
+    (``topics.*``), instrumental variables whose excitation is the measured surfaces; and
+    instrumental variables from the surfaces and the delayed regressors, which hold in open loop only."""
     o = config.estimator
     out = []
-    if o.algorithm == "iv" and topics is not None and topics.get("excitation") == topics.get("control_surfaces"):
+    source = config.instruments.resolved_source(config.models) if o.algorithm == "iv" else ""
+    if source == "delayed":
+        out.append("estimator.algorithm iv with instruments.source delayed: the measured surfaces instrument "
+                   "themselves and the other regressors their values instruments.delay_span earlier; this removes "
+                   "the bias only in open loop (no pilot or feedback answering the gusts) and with surface sensors "
+                   "far less noisy than the motion's")
+    elif source and topics is not None and topics.get("excitation") == topics.get("control_surfaces"):
         out.append("estimator.algorithm iv takes its instruments from the measured surfaces (topics.excitation is "
                    "topics.control_surfaces): they carry the surfaces' sensor noise and, in closed loop (a pilot or a "
                    "feedback answering the gusts), the gusts, so the estimates stay biased; point topics.excitation "

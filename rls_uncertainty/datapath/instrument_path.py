@@ -1,11 +1,16 @@
 """``estimator.algorithm iv`` in the data path: instruments for each regression row (numpy only).
 
-The pipeline hands every row it would give the estimator to :meth:`InstrumentPath.update`
-with the injected elevator excitation aligned with it (the ``excitation`` input stream, mixed
-by Eq. 23 like the surfaces and delayed with its sample). :class:`..instruments.ShortPeriodAuxiliary`
-turns the excitation into instruments through an auxiliary short-period model; until its first
-model exists the rows wait (bounded by ``instruments.max_backlog_span``; older ones are
-rejected as ``instruments_not_ready``) and are then handed over together, each with its stamp.
+The pipeline hands every row it would give the estimator to :meth:`InstrumentPath.update`.
+With ``instruments.source`` resolved to ``excitation`` (:meth:`..instruments.options.InstrumentOptions.resolved_source`)
+the injected elevator excitation comes aligned with the row (the ``excitation`` input stream,
+mixed by Eq. 23 like the surfaces and delayed with its sample) and
+:class:`..instruments.ShortPeriodAuxiliary` turns it into instruments through an auxiliary
+short-period model; until its first model exists the rows wait (bounded by
+``instruments.max_backlog_span``; older ones are rejected as ``instruments_not_ready``) and are
+then handed over together, each with its stamp. With ``delayed``,
+:class:`..instruments.DelayedRegressors` instruments each row with the measured surfaces and the
+regressors ``instruments.delay_span`` earlier; a row without that earlier row (the first ones,
+after a gap) is rejected as ``instruments_not_ready``.
 :class:`..instruments.InstrumentStrength` keeps the sums of the weak-instrument measure
 (the smallest canonical correlation ``rho_min`` between a model's instruments and regressors),
 judged every ``instruments.refresh_span``: a model whose instruments are weak is never
@@ -22,7 +27,7 @@ import numpy as np
 
 from ..aero.models import BIAS_REGRESSOR
 from ..errors import NonFiniteInput
-from ..instruments import InstrumentStrength, ShortPeriodAuxiliary
+from ..instruments import DelayedRegressors, InstrumentStrength, ShortPeriodAuxiliary
 
 if TYPE_CHECKING:  # annotations only
     from ..aero.coefficients import FlightState
@@ -50,8 +55,14 @@ class InstrumentPath:
     def __init__(self, config: PipelineConfig) -> None:
         opts = config.instruments
         self.options = opts
-        self.aux = ShortPeriodAuxiliary(config.models, config.aircraft, config.rate,
-                                        refresh_span=opts.refresh_span, max_backlog_span=opts.max_backlog_span)
+        self.source = opts.resolved_source(config.models)
+        self.aux: ShortPeriodAuxiliary | DelayedRegressors
+        if self.source == "excitation":
+            self.aux = ShortPeriodAuxiliary(config.models, config.aircraft, config.rate,
+                                            refresh_span=opts.refresh_span, max_backlog_span=opts.max_backlog_span)
+        else:
+            self.aux = DelayedRegressors(config.models, max(1, round(opts.delay_span * config.rate)),
+                                         config.period_ns)
         sizes = [len(m.regressors) for m in config.models]
         bias = [m.regressors.index(BIAS_REGRESSOR) if BIAS_REGRESSOR in m.regressors else None
                 for m in config.models]
@@ -66,14 +77,19 @@ class InstrumentPath:
         """Rows waiting for the first auxiliary model (neither used nor rejected yet)."""
         return self.aux.waiting
 
-    def update(self, stamp_ns: int, X: np.ndarray, z: np.ndarray, u: float, qbar: float, V: float,
+    def update(self, stamp_ns: int, X: np.ndarray, z: np.ndarray, u: float | None, qbar: float, V: float,
                estimates: np.ndarray | None) -> tuple[list[InstrumentedRow], int]:
-        """One row (stamped ``stamp_ns``) with the excitation ``u`` (rad, the elevator's) and the
-        estimator's newest ``estimates`` (None before any): the rows to give the estimator now
-        with their instruments, and how many waiting rows were dropped (the backlog was full).
+        """One row (stamped ``stamp_ns``) with the excitation ``u`` (rad, the elevator's; None
+        with delayed instruments) and the estimator's newest ``estimates`` (None before any): the
+        rows to give the estimator now with their instruments, and how many rows were dropped
+        without instruments (a full backlog; with delayed instruments, no row a delay earlier).
         A non-finite input raises :class:`..errors.NonFiniteInput` and changes nothing."""
         dropped = self.aux.dropped
-        rows = self.aux.update(X, z, u, qbar, V, estimates, tag=int(stamp_ns))
+        if isinstance(self.aux, DelayedRegressors):
+            rows = self.aux.update(X, z, int(stamp_ns))
+        else:
+            assert u is not None  # the excitation is a required stream with these instruments
+            rows = self.aux.update(X, z, u, qbar, V, estimates, tag=int(stamp_ns))
         dropped = self.aux.dropped - dropped
         out = [InstrumentedRow(int(r.tag), r.X, r.z, r.instruments) for r in rows]  # type: ignore[call-overload]
         for r in out:
@@ -96,9 +112,9 @@ class InstrumentPath:
         estimator refuses is used by neither) and the rows that waited are taken there too, in
         order (row ``t`` is added by the caller, with its results). Whether row ``t`` reached
         the estimator (False: it waits, or was refused)."""
-        assert u is not None  # the excitation is a required stream with iv
         try:
-            rows, dropped = self.update(t, X, z, u[0], float(state.qbar), float(state.V), estimates)
+            rows, dropped = self.update(t, X, z, None if u is None else u[0], float(state.qbar), float(state.V),
+                                        estimates)
         except NonFiniteInput:
             book.reject_samples("non_finite_regression")
             return False
@@ -125,4 +141,6 @@ class InstrumentPath:
             return ""
         rho = float(self.rho_min[j])
         return (f"weak instruments (rho_min {rho:.3f} < instruments.weak_below {self.options.weak_below:g}: "
-                "is the excitation injected and on topics.excitation?)" if math.isfinite(rho) else "")
+                + ("is the excitation injected and on topics.excitation?)" if self.source == "excitation" else
+                   "does the maneuver move the delayed regressors? try a shorter instruments.delay_span)")
+                if math.isfinite(rho) else "")

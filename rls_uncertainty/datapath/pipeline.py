@@ -77,7 +77,7 @@ from .states import model_report
 from .targets import TargetTracker
 
 __all__ = ["Pipeline", "SampleOutput", "STREAMS", "StateFileError", "required_streams", "sampler_for",
-           "uses_excitation", "all_lags_bank"]
+           "uses_excitation", "uses_instruments", "all_lags_bank"]
 
 # The input streams, one per ``add_*`` method: inertial data, air data and the optional ones.
 STREAMS = ("imu", "airspeed", "dynamic_pressure", "control_surfaces", "thrust", "excitation")
@@ -100,8 +100,13 @@ def required_streams(config: PipelineConfig) -> tuple[str, ...]:
 
 
 def uses_excitation(config: PipelineConfig) -> bool:
-    """Whether the estimator needs the injected excitation (``estimator.algorithm iv``: its
-    instruments are built from it)."""
+    """Whether the estimator needs the injected excitation (``estimator.algorithm iv`` with
+    ``instruments.source`` resolved to ``excitation``: its instruments are built from it)."""
+    return uses_instruments(config) and config.instruments.resolved_source(config.models) == "excitation"
+
+
+def uses_instruments(config: PipelineConfig) -> bool:
+    """Whether the estimator takes instruments with its rows (``estimator.algorithm iv``)."""
     return getattr(config.estimator, "algorithm", "rls") == "iv"
 
 
@@ -242,7 +247,7 @@ class Pipeline(PipelineInputs):
         iv = getattr(self, "_iv", None)
         if iv is not None and iv.waiting:
             self.bookkeeping.reject_samples("instruments_not_ready", iv.waiting)
-        self._iv = InstrumentPath(self.config) if uses_excitation(self.config) else None
+        self._iv = InstrumentPath(self.config) if uses_instruments(self.config) else None
 
     @property
     def identifiability(self) -> IdentifiabilityMonitor:
@@ -393,6 +398,12 @@ class Pipeline(PipelineInputs):
     def weak_instruments(self, j: int) -> str:
         """Why model ``j``'s parameters are held back for weak instruments ('' if not)."""
         return "" if self._iv is None else self._iv.weak_reason(j)
+
+    @property
+    def instrument_strength(self) -> np.ndarray | None:
+        """Each model's ``rho_min`` at the last weak-instrument judgement (NaN before one;
+        :mod:`..instruments.strength`), or None without instruments."""
+        return None if self._iv is None else self._iv.rho_min.copy()
 
     def _covariances(self, t: int, ready: np.ndarray) -> np.ndarray | None:
         """The corrected and conventional covariances of the ready models

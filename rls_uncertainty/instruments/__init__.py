@@ -10,6 +10,7 @@ auxiliary model, :mod:`.bootstrap` fits it before the estimator has estimates);
 
 from .auxiliary import InstrumentedSample, ShortPeriodAuxiliary
 from .bootstrap import BareRls
+from .delayed import DelayedRegressors
 from .discrete import discretize, is_stable, short_period_matrices
 from .layout import InstrumentLayout
 from .strength import WEAK_BELOW, InstrumentStrength, canonical_correlations
@@ -18,6 +19,7 @@ __all__ = [
     "InstrumentedSample",
     "ShortPeriodAuxiliary",
     "BareRls",
+    "DelayedRegressors",
     "discretize",
     "is_stable",
     "short_period_matrices",

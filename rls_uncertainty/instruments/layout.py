@@ -56,7 +56,8 @@ class InstrumentLayout:
                 raise ConfigError(
                     f"{_SETTING}: iv cannot instrument model {m.output}'s regressor(s) {', '.join(other)}: "
                     f"the short-period auxiliary model serves only {', '.join(SERVED)} "
-                    f"(use {_SETTING}: rls, or leave {m.output} out of models.enabled)", parameter=_SETTING)
+                    f"(use instruments.source delayed or auto, {_SETTING}: rls, or leave {m.output} out of "
+                    "models.enabled)", parameter=_SETTING)
         self.sizes = tuple(len(m.regressors) for m in self.models)
         self.n_max = max(self.sizes)
         where = self._locate()

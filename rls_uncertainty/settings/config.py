@@ -39,7 +39,8 @@ class InputTopics(Mapping[str, str]):
                          read_only=True)
     excitation: str = option("excitation", "sensor_msgs/JointState topic of the injected excitation (the designed "
                              "input on each surface, rad, before any feedback): the instruments of "
-                             "estimator.algorithm iv", ros="topics.excitation", read_only=True)
+                             "estimator.algorithm iv with instruments.source excitation", ros="topics.excitation",
+                             read_only=True)
 
     def __post_init__(self) -> None:
         check(self, "topics")

@@ -20,28 +20,52 @@ method, measured alternately on the same messages in the same process, gives the
 +-2 corrected SE at the maneuver's end, mean SE / scatter (standard deviation of the end
 estimates), bias / scatter, false convergence (of the maneuvers flagged, those whose truth lies
 outside +-2 SE at the first flag), the median flag time and the per-sample cost.
+
+The Twin Otter recordings, RLS and IV side by side (REPORT.md, "The Twin Otter recordings"):
+
+    python docs/studies/instrumental_variables/study.py flight table|prediction|delays
+
+Each recording (``../shared/flight_data``, ``$RLS_FLIGHT_DATA`` or ``--flight-data``) is
+converted with the shipped mapping and its messages go through the replay's data path
+(``run_pipeline``, the function behind ``rls-uncertainty replay``) with its configuration
+(``config/twin_otter_lateral.yaml``, ``config/twin_otter_longitudinal.yaml``) as shipped (RLS)
+and with ``estimator.algorithm: iv`` (``instruments.source: delayed``: the measured surfaces for
+themselves and the other regressors ``instruments.delay_span`` earlier; for the lateral models
+``auto`` picks the same). The longitudinal one is run a third time with the short-period
+auxiliary model driven by the measured surfaces (``instruments.source: excitation``, the
+surfaces repeated on the excitation input), the instruments of the simulated study.
+
+
+``prediction``: the estimates at the end of one lateral recording predict the other's
+coefficients from its regressors (the same rows the estimator took); the RMS of the
+prediction error per model, against that of the recording's own fit. ``delays``: the smallest
+canonical correlation between instruments and regressors (``rho_min``, weak below
+``instruments.weak_below``) and the end estimates of the key derivatives per delay.
 """
 
 from __future__ import annotations
 
 import argparse
+import atexit
 import csv
 import math
+import os
+import shutil
 import subprocess
 import sys
 import tempfile
 import time
+from functools import cache
 from multiprocessing import Pool
 from pathlib import Path
+from typing import Any
 
 import matplotlib
 import numpy as np
-from rosbags.rosbag2 import Reader, Writer
-from rosbags.rosbag2.enums import StoragePlugin
-from rosbags.typesys import Stores, get_typestore
 
-from rls_uncertainty.offline.bags import InputStream
+from rls_uncertainty.offline.bags import InputStream, convert, read_inputs
 from rls_uncertainty.offline.replay import run_pipeline
+from rls_uncertainty.settings import load_parameters_file
 from rls_uncertainty.settings.parameters import PARAMETER_NAMES, node_config, pipeline_config
 from rls_uncertainty.settings.sources import node_parameters_file
 from rls_uncertainty.simulation.t2 import T2_TRUE
@@ -103,13 +127,33 @@ def one_maneuver(job: tuple[str, str]) -> list[dict]:
     return rows
 
 
+# IV with one setting changed: the levers on its early standard error and flags.
+LEVERS = {"IV": {}, "IV, small_sample 1": {"estimator.small_sample": 1.0},
+          "IV, convergence.window 3 s": {"convergence.window": 3.0}}
+
+
+def one_maneuver_levers(job: tuple[str, str]) -> list[dict]:
+    case, bag = job
+    params = _params(CONFIGS["IV"])
+    with InputStream(bag, dict(node_config(params).topics)) as stream:
+        t0 = stream.t0
+        messages = list(stream)
+    rows: list[dict] = []
+    for label, extra in LEVERS.items():
+        start = time.perf_counter()
+        result = run_pipeline(messages, pipeline_config({**params, **extra}), record=False, keep_outputs=True)
+        rows += _rows(case, Path(bag).name, label, result, t0, time.perf_counter() - start)
+    return rows
+
+
 def run(args: argparse.Namespace) -> None:
     bags = sorted(str(p) for p in Path(args.campaign).glob("m*") if p.is_dir())[: args.count]
     case = args.case or Path(args.campaign).name
     with open(args.out, "w", newline="") as f, Pool(args.workers) as pool:
         w = csv.DictWriter(f, FIELDS)
         w.writeheader()
-        for n, rows in enumerate(pool.imap(one_maneuver, [(case, b) for b in bags]), 1):
+        job = one_maneuver_levers if getattr(args, "levers", False) else one_maneuver
+        for n, rows in enumerate(pool.imap(job, [(case, b) for b in bags]), 1):
             w.writerows(rows)
             f.flush()
             print(f"\r{case}: {n}/{len(bags)}", end="", file=sys.stderr)
@@ -176,21 +220,23 @@ def table(args: argparse.Namespace) -> None:
         rows = [r for r in rows if r["converged_end"]]
     stats = statistics(rows)
     for case in dict.fromkeys(r["case"] for r in rows):  # in the order of the CSVs
-        n = {m: stats[case, m, PARAMS[0]]["n"] for m in ("RLS", "IV") if (case, m, PARAMS[0]) in stats}
+        methods = list(dict.fromkeys(r["method"] for r in rows if r["case"] == case))
+        n = {m: stats[case, m, PARAMS[0]]["n"] for m in methods if (case, m, PARAMS[0]) in stats}
         print(f"\n### {case} ({', '.join(f'{m} {k} maneuvers' for m, k in n.items())})\n")
         print("| parameter | method | coverage % | SE/scatter | bias/scatter | false conv. % (flagged) "
               "| median flag time, s | scatter | robust SE/scatter | z std | flagged at the end % |")
         print("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |")
         for p in PARAMS:
-            for m in ("RLS", "IV"):
+            for m in methods:
                 s = stats.get((case, m, p))
                 if s is None:
                     continue
                 print(f"| {p} | {m} | {s['coverage']:.0f} | {s['se_scatter']:.2f} | {s['bias_scatter']:+.2f} | "
                       f"{s['false']:.0f} ({s['flagged']}) | {s['flag_time']:.2f} | {s['scatter']:.3g} | "
                       f"{s['robust_se_scatter']:.2f} | {s['z_std']:.2f} | {s['converged_end']:.0f} |")
-        rls, iv = _cost(rows, case)
-        print(f"\npipeline time per estimator sample: RLS {rls:.0f} us, IV {iv:.0f} us, IV / RLS {iv / rls:.2f}")
+        if "RLS" in methods:
+            rls, iv = _cost(rows, case)
+            print(f"\npipeline time per estimator sample: RLS {rls:.0f} us, IV {iv:.0f} us, IV / RLS {iv / rls:.2f}")
 
 
 def figure(args: argparse.Namespace) -> None:
@@ -222,51 +268,119 @@ def figure(args: argparse.Namespace) -> None:
     fig.savefig(args.png, dpi=110)
 
 
-def _with_excitation(src: Path, dst: Path) -> None:
-    """A copy of the converted bag ``src`` with ``/excitation`` = its ``/control_surfaces``
-    (the measured surfaces as the instruments' input; ``convert``'s mapping has no excitation
-    stream)."""
-    store = get_typestore(Stores.ROS2_JAZZY)
-    with Reader(src) as reader, Writer(dst, version=8, storage_plugin=StoragePlugin.MCAP) as writer:
-        conns = {c.id: writer.add_connection(c.topic, c.msgtype, typestore=store) for c in reader.connections}
-        excitation = writer.add_connection("/excitation", "sensor_msgs/msg/JointState", typestore=store)
-        for c, stamp, raw in reader.messages():
-            writer.write(conns[c.id], stamp, raw)
-            if c.topic == "/control_surfaces":
-                writer.write(excitation, stamp, raw)
+# ---------------------------------------------------------------- the Twin Otter recordings
+RECORDINGS = {  # recording: (configuration, extra parameters)
+    "totter_f1_017": ("twin_otter_lateral", {}),
+    "totter_f1_014": ("twin_otter_lateral", {"aircraft": "twin_otter_f1_014"}),
+    "totter_9752ed20": ("twin_otter_longitudinal", {}),
+}
+IV = {"estimator.algorithm": "iv", "instruments.source": "delayed"}
+IV_EXCITATION = {**IV, "instruments.source": "excitation"}
+FLIGHT_DATA = {"path": Path(os.environ.get("RLS_FLIGHT_DATA") or ROOT.parent / "shared" / "flight_data")}
 
 
-def flight(args: argparse.Namespace) -> None:
-    """The longitudinal Twin Otter recording replayed with config/twin_otter_longitudinal.yaml
-    (RLS) and the same with ``estimator.algorithm: iv`` and ``topics.excitation`` the measured
-    surfaces; the end-of-maneuver estimates and corrected standard errors side by side."""
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    cli = [sys.executable, "-m", "rls_uncertainty.cli"]
-    recording = Path(args.flight_data) / "totter_9752ed20"
-    subprocess.run([*cli, "convert", str(recording), "--mapping", str(ROOT / "msg_schemas/fti_msgs/mapping.yaml"),
-                    "--out", str(out / "converted"), "--force"], check=True, capture_output=True)
-    bag = out / "with_excitation"
+@cache
+def _work() -> Path:
+    """A directory for the converted recordings, removed at exit."""
+    work = Path(tempfile.mkdtemp(prefix="iv_flight_"))
+    atexit.register(shutil.rmtree, work, True)
+    return work
+
+
+@cache
+def flight_messages(recording: str, with_excitation: bool = False) -> list:
+    """The converted recording's messages (with the surfaces repeated on the excitation input)."""
+    bag = _work() / recording
     if not bag.exists():
-        _with_excitation(out / "converted", bag)
-    rls_config = ROOT / "config" / "twin_otter_longitudinal.yaml"
-    iv_config = out / "twin_otter_longitudinal_iv.yaml"
-    text = rls_config.read_text().replace("    estimator:\n", "    estimator:\n      algorithm: iv\n")
-    iv_config.write_text(text.replace("    surfaces:\n", "    topics:\n      excitation: excitation\n    surfaces:\n"))
-    finals = {}
-    for method, config in (("RLS", rls_config), ("IV", iv_config)):
-        subprocess.run([*cli, "replay", str(bag), "--config", str(config), "--out", str(out / method), "--no-figures",
-                        "--quiet", "--force"], check=True, capture_output=True)
-        with open(out / method / "parameters.csv") as f:
-            finals[method] = {r["parameter"]: r for r in csv.DictReader(f)}
-    print("| parameter | RLS estimate | RLS SE | IV estimate | IV SE | IV SE / RLS SE | difference / IV SE |")
-    print("| --- | --- | --- | --- | --- | --- | --- |")
-    for p, r in finals["RLS"].items():
-        v = finals["IV"].get(p)
-        if v is None:
-            continue
-        e_r, s_r, e_i, s_i = (float(x) for x in (r["estimate"], r["std_error"], v["estimate"], v["std_error"]))
-        print(f"| {p} | {e_r:.4g} | {s_r:.2g} | {e_i:.4g} | {s_i:.2g} | {s_i / s_r:.1f} | {(e_i - e_r) / s_i:+.2f} |")
+        convert(FLIGHT_DATA["path"] / recording, ROOT / "msg_schemas" / "fti_msgs" / "mapping.yaml", bag)
+    out = []
+    for kind, stamp, msg in read_inputs(bag)[0]:
+        out.append((kind, stamp, msg))
+        if with_excitation and kind == "control_surfaces":
+            out.append(("excitation", stamp, msg))
+    return out
+
+
+def flight_run(recording: str, extra: dict) -> Any:
+    config, own = RECORDINGS[recording]
+    params = {**load_parameters_file(config), **own, **extra}
+    return run_pipeline(flight_messages(recording, extra.get("instruments.source") == "excitation"),
+                        pipeline_config(params), record=True).pipeline
+
+
+def _rho(pipe) -> str:
+    rho = pipe.instrument_strength
+    return "" if rho is None else ", ".join(f"{m.output} {r:.2f}" for m, r in zip(pipe.models, rho, strict=True))
+
+
+def flight_table(_args: argparse.Namespace) -> None:
+    for recording in RECORDINGS:
+        variants = {"RLS": flight_run(recording, {}), "IV": flight_run(recording, IV)}
+        if RECORDINGS[recording][0].endswith("longitudinal"):
+            variants["IV, auxiliary model"] = flight_run(recording, IV_EXCITATION)
+        rls = variants["RLS"]
+        names = [(j, i, p) for j, ps in enumerate(rls.parameter_names) for i, p in enumerate(ps)]
+        others = [v for v in variants if v != "RLS"]
+        print(f"\n#### {recording} ({RECORDINGS[recording][0]})\n")
+        print("| parameter | RLS estimate +- SE | " + " | ".join(f"{v} estimate +- SE | {v} SE / RLS SE | "
+                                                              f"{v} - RLS, in {v} SE" for v in others) + " |")
+        print("| --- | --- |" + " --- | --- | --- |" * len(others))
+        for j, i, p in names:
+            e0, s0 = rls.last.theta[j, i], rls.last.se[j, i]
+            cells = [f"{e0:.4g} +- {s0:.2g}"]
+            for v in others:
+                e, s = variants[v].last.theta[j, i], variants[v].last.se[j, i]
+                cells += [f"{e:.4g} +- {s:.2g}", f"{s / s0:.1f}", f"{(e - e0) / s:+.2f}"]
+            print(f"| {p} | " + " | ".join(cells) + " |")
+        for v in others:
+            print(f"\n{v}: rho_min {_rho(variants[v])}; {variants[v].samples_used} samples used "
+                  f"(RLS {rls.samples_used})")
+
+
+def _flight_rows(pipe) -> tuple[np.ndarray, np.ndarray]:
+    return np.array([r[1] for r in pipe.regression]), np.array([r[2] for r in pipe.regression])
+
+
+def _rms(theta: np.ndarray, X: np.ndarray, z: np.ndarray, j: int, n: int) -> float:
+    e = z[:, j] - X[:, j, :n] @ theta[j, :n]
+    return float(np.sqrt(np.mean(e * e)))
+
+
+def flight_prediction(_args: argparse.Namespace) -> None:
+    pairs = (("totter_f1_017", "totter_f1_014"), ("totter_f1_014", "totter_f1_017"))
+    print("| estimates from | predicting | model | RLS fit RMS (own) | IV fit RMS (own) | RLS prediction RMS "
+          "| IV prediction RMS | IV / RLS prediction |")
+    print("| --- | --- | --- | --- | --- | --- | --- | --- |")
+    for source, target in pairs:
+        fits = {m: flight_run(source, extra) for m, extra in (("RLS", {}), ("IV", IV))}
+        X, z = _flight_rows(flight_run(target, {}))
+        for j, model in enumerate(fits["RLS"].models):
+            n = len(model.regressors)
+            own = {m: _rms(p.last.theta, *_flight_rows(p), j, n) for m, p in fits.items()}
+            pred = {m: _rms(p.last.theta, X, z, j, n) for m, p in fits.items()}
+            print(f"| {source} | {target} | {model.output} | {own['RLS']:.3g} | {own['IV']:.3g} | "
+                  f"{pred['RLS']:.3g} | {pred['IV']:.3g} | {pred['IV'] / pred['RLS']:.3f} |")
+
+
+KEY = ("CY_beta", "Cl_beta", "Cl_p", "Cl_r", "Cl_delta_a", "Cn_beta", "Cn_r", "Cn_delta_r", "CZ_alpha", "Cm_alpha",
+       "Cm_q", "Cm_delta_e")
+
+
+def flight_delays(_args: argparse.Namespace) -> None:
+    for recording in RECORDINGS:
+        pipes = {"RLS": flight_run(recording, {})}
+        for span in (0.1, 0.2, 0.5, 1.0):
+            pipes[f"{span:g} s"] = flight_run(recording, {**IV, "instruments.delay_span": span})
+        names = [(j, i, p) for j, ps in enumerate(pipes["RLS"].parameter_names) for i, p in enumerate(ps)
+                 if p in KEY]
+        print(f"\n#### {recording}\n")
+        print("| delay | rho_min | " + " | ".join(p for _j, _i, p in names) + " |")
+        print("| --- | --- |" + " --- |" * len(names))
+        for label, pipe in pipes.items():
+            rho = _rho(pipe)
+            cells = [f"{pipe.last.theta[j, i]:.4g} +- {pipe.last.se[j, i]:.2g}" for j, i, _p in names]
+            print(f"| {label} | {rho} | " + " | ".join(cells) + " |")
+
 
 
 def quick() -> None:
@@ -288,6 +402,7 @@ def main() -> None:
     r.add_argument("--count", type=int, default=200, help="the first COUNT maneuvers")
     r.add_argument("--case", help="the case's name in the tables (default: the directory's)")
     r.add_argument("--workers", type=int, default=2)
+    r.add_argument("--levers", action="store_true", help="IV at its defaults and with each of LEVERS instead")
     r.add_argument("--out", required=True)
     t = sub.add_parser("table", help="the tables of the CSVs")
     t.add_argument("csv", nargs="+")
@@ -295,16 +410,19 @@ def main() -> None:
     f = sub.add_parser("figure", help="coverage, SE / scatter and false convergence per case")
     f.add_argument("csv", nargs="+")
     f.add_argument("--png", required=True)
-    g = sub.add_parser("flight", help="the longitudinal Twin Otter recording, RLS and IV")
-    g.add_argument("--flight-data", default=str(ROOT.parent / "shared" / "flight_data"))
-    g.add_argument("--out", required=True, help="working directory (converted bags, replays)")
+    g = sub.add_parser("flight", help="the three Twin Otter recordings, RLS and IV")
+    g.add_argument("what", choices=("table", "prediction", "delays"))
+    g.add_argument("--flight-data", default=str(FLIGHT_DATA["path"]))
     args = ap.parse_args()
-    if args.quick:
+    if args.command == "flight":
+        FLIGHT_DATA["path"] = Path(args.flight_data)
+        {"table": flight_table, "prediction": flight_prediction, "delays": flight_delays}[args.what](args)
+    elif args.quick:
         quick()
     elif args.command is None:
-        ap.error("a command (run, table, figure) or --quick")
+        ap.error("a command (run, table, figure, flight) or --quick")
     else:
-        {"run": run, "table": table, "figure": figure, "flight": flight}[args.command](args)
+        {"run": run, "table": table, "figure": figure}[args.command](args)
 
 
 if __name__ == "__main__":
