@@ -273,6 +273,37 @@ def stale_partials(path: str | os.PathLike[str]) -> list[Path]:
     return sorted(found)
 
 
+def _replace_with(tmp: Path, final: Path, given: Path) -> None:
+    """``final`` (a directory) replaced by ``tmp``; should the swap fail, the old one is put back."""
+    old = Path(tempfile.mkdtemp(prefix=f".{final.name}.", suffix=".old", dir=final.parent))
+    try:
+        os.rename(final, old / final.name)
+    except BaseException:
+        old.rmdir()
+        raise
+    try:
+        os.rename(tmp, final)
+    except BaseException:
+        os.rename(old / final.name, final)  # the old output goes back where it was
+        old.rmdir()
+        raise
+    shutil.rmtree(old)
+
+
+def _move_in(tmp: Path, final: Path, given: Path) -> None:
+    """``tmp`` becomes ``final`` (absent or empty); one made meanwhile by another process is kept."""
+    try:
+        if final.is_dir():
+            final.rmdir()  # empty: nothing is lost
+        os.rename(tmp, final)
+    except OSError as exc:
+        if exc.errno not in (errno.ENOTEMPTY, errno.EEXIST, errno.ENOTDIR, errno.EISDIR):
+            raise
+        # Another process (a second run for the same output) finished it meanwhile.
+        raise OutputPathError(f"{given}: written by another process while this one ran; that output is "
+                              "kept and this one's discarded") from None
+
+
 @contextmanager
 def output_directory(
     path: str | os.PathLike[str], *, force: bool = False, inputs: Iterable[str | os.PathLike[str]] = ()
@@ -321,31 +352,7 @@ def output_directory(
         # mkdtemp's private 0700 would reach the output: give it what mkdir would.
         os.chmod(tmp, 0o777 & ~_umask())
         yield tmp
-        if replace:
-            old = Path(tempfile.mkdtemp(prefix=f".{final.name}.", suffix=".old", dir=final.parent))
-            try:
-                os.rename(final, old / final.name)
-            except BaseException:
-                old.rmdir()
-                raise
-            try:
-                os.rename(tmp, final)
-            except BaseException:
-                os.rename(old / final.name, final)  # the old output goes back where it was
-                old.rmdir()
-                raise
-            shutil.rmtree(old)
-        else:
-            try:
-                if final.is_dir():
-                    final.rmdir()  # empty: nothing is lost
-                os.rename(tmp, final)
-            except OSError as exc:
-                if exc.errno not in (errno.ENOTEMPTY, errno.EEXIST, errno.ENOTDIR, errno.EISDIR):
-                    raise
-                # Another process (a second run for the same output) finished it meanwhile.
-                raise OutputPathError(f"{given}: written by another process while this one ran; that output is "
-                                      "kept and this one's discarded") from None
+        (_replace_with if replace else _move_in)(tmp, final, given)
     except BaseException:
         if tmp is not None:
             shutil.rmtree(tmp, ignore_errors=True)

@@ -334,3 +334,38 @@ def test_campaign_refuses_maneuvers_source_with_several_recordings(tmp_path, cap
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "maneuvers.source detect cuts one recording into maneuvers; got 2 INPUTs" in err
     assert not (tmp_path / "c").exists()
+
+
+def test_each_maneuver_has_its_models_in_models_json_and_predict_takes_them(tmp_path, capsys):
+    """A replay with maneuvers and the campaign of the same recording write models.json with one
+    entry per maneuver, in order: its final estimates are the rows' in maneuvers.csv, the
+    square roots of its corrected covariance's diagonal the rows' corrected standard errors;
+    `predict --maneuver` applies one of them to the bag."""
+    from rls_uncertainty.offline.model_file import read_models
+
+    cfg = tmp_path / "events.yaml"
+    cfg.write_text(CONFIG.read_text().replace("    aircraft: t2", "    maneuvers:\n      source: events\n"
+                                              "    aircraft: t2", 1))
+    bag = events_bag(tmp_path)
+    for command in ("replay", "campaign"):
+        assert cli.main([command, str(bag), "--config", str(cfg), "--out", str(tmp_path / command), "--quiet",
+                         "--no-figures"]) == 0
+    models = read_models(tmp_path / "replay")
+    assert [name for name, _ in models] == ["pA", "pB"]
+    assert [(n, [m.as_json() for m in ms]) for n, ms in read_models(tmp_path / "campaign")] == \
+        [(n, [m.as_json() for m in ms]) for n, ms in models]
+    rows = rows_of(tmp_path / "replay" / "maneuvers.csv")
+    for name, fitted in models:
+        assert [m.model for m in fitted] == ["CZ", "Cm"]
+        for m in fitted:
+            mine = {r["parameter"]: r for r in rows if r["maneuver"] == name and r["model"] == m.model}
+            assert list(mine) == list(m.parameters)
+            np.testing.assert_array_equal(m.estimate, [float(mine[p]["estimate"]) for p in m.parameters])
+            np.testing.assert_allclose(np.sqrt(np.diag(m.covariance)),
+                                       [float(mine[p]["se_corrected"]) for p in m.parameters], rtol=1e-9)
+            np.testing.assert_allclose(np.sqrt(np.diag(m.covariance_conventional)),
+                                       [float(mine[p]["se_conventional"]) for p in m.parameters], rtol=1e-9)
+    capsys.readouterr()
+    assert cli.main(["predict", str(tmp_path / "campaign"), str(BAG), "--config", str(CONFIG), "--out",
+                     str(tmp_path / "p"), "--maneuver", "pB"]) == 0
+    assert "pB" in capsys.readouterr().out and (tmp_path / "p" / "prediction.csv").exists()

@@ -37,7 +37,7 @@ def results_of(records: Iterable[ManeuverRecord], origin_ns: int) -> list[Maneuv
     """The tracker's maneuvers as campaign results, start and end in s from ``origin_ns``."""
     return [ManeuverResult(rec.name, tuple(rec.rows),
                            rec.duration, {}, start=(rec.start_ns - origin_ns) * 1e-9,
-                           end=(rec.end_ns - origin_ns) * 1e-9)
+                           end=(rec.end_ns - origin_ns) * 1e-9, models=rec.models)
             for rec in records]
 
 

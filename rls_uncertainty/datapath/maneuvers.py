@@ -28,8 +28,10 @@ between are trim), the
 conventional (Eq. 13) and corrected (Eq. 22) standard errors, with the pipeline's regression
 rows kept (``record``) the corrected one with all lags (Eq. 20), the state and its reason
 (:mod:`.states`), the model's R^2 and samples and, with ``targets.percent`` set, the test
-point's verdict (:mod:`.targets`; all three at the end's declaration), and the maneuver's
-start, end and duration (the boundaries' stamps). The
+point's verdict (:mod:`.targets`; all three at the end's declaration), the fitted models with
+their covariances for ``models.json`` (:mod:`.fitted`, the estimator's state at the end's
+declaration: under ``detect`` it has taken the trim samples up to the declaration too), and
+the maneuver's start, end and duration (the boundaries' stamps). The
 rows have the campaign's columns (:data:`MANEUVER_COLUMNS`); a maneuver shorter than
 ``min_span`` has every row ``too_short`` as in a campaign. The history keeps the newest
 ``maneuvers.history`` maneuvers (a ring: the oldest is dropped, and counted), so memory is
@@ -53,6 +55,7 @@ import numpy as np
 
 from ..errors import Refused
 from .config import SOURCES, ManeuverSettings
+from .fitted import FittedModel, run_models
 from .maneuver_detector import Boundary, ManeuverDetector, event_boundary
 from .pipeline import all_lags_bank
 from .states import parameter_states, se_percent
@@ -120,12 +123,14 @@ class ParameterResult:
 
 @dataclass(frozen=True)
 class ManeuverRecord:
-    """A maneuver: its ``name``, ``start_ns`` and ``end_ns`` (the boundaries' stamps), and its rows."""
+    """A maneuver: its ``name``, ``start_ns`` and ``end_ns`` (the boundaries' stamps), its rows
+    and its fitted ``models`` (module docstring)."""
 
     name: str
     start_ns: int
     end_ns: int
     rows: tuple[ParameterResult, ...]
+    models: tuple[FittedModel, ...] = field(default=(), compare=False)  # (numpy arrays: not compared)
 
     @property
     def duration(self) -> float:
@@ -250,10 +255,11 @@ class ManeuverTracker:
         if verdict:
             rows = tuple(replace(r, verdict=verdict) for r in rows)
         duration = (end_ns - active.start_ns) * 1e-9
+        models = tuple(run_models(self.pipe))
         if duration < self.min_span:
             short = (f"too_short: {duration:.2f} s of data, fewer than --min-span {self.min_span:g} s")
-            rows = tuple(replace(r, status=short) for r in rows)
-        self.history.append(ManeuverRecord(active.name, active.start_ns, end_ns, rows))
+            rows, models = tuple(replace(r, status=short) for r in rows), ()
+        self.history.append(ManeuverRecord(active.name, active.start_ns, end_ns, rows, models))
         self.recorded += 1
 
     def _settle(self, active: _Open, end_ns: int) -> None:

@@ -1,8 +1,10 @@
 """``models.json``: the identified models at the end of a run, for ``rls-uncertainty predict``.
 
 ``replay`` and ``campaign`` write it beside their other outputs. Per maneuver (a replay is one
-maneuver, named after its bag; a campaign has one entry per maneuver, in order), per model
-that published time-domain estimates at its last sample:
+maneuver, named after its bag, or with ``maneuvers.source`` on one entry per maneuver
+recorded; a campaign has one entry per maneuver, in order, a recording's cut as the replay
+cuts it), per model that published time-domain estimates at its last sample
+(:mod:`..datapath.fitted`):
 
 * ``model``, ``regressors`` and ``parameters`` (names, in the order of the configuration);
 * ``estimate``: the final estimates (the recursive estimates of Eqs. 15-16 at the last sample);
@@ -12,7 +14,7 @@ that published time-domain estimates at its last sample:
 * ``residual_variance``: the fit-error variance ``R(0)`` (Eq. 16) and ``samples`` the samples
   the estimator used.
 
-:func:`run_models` takes them out of a pipeline at the end of a run; :func:`read_models` reads
+:func:`run_models` takes them out of a pipeline; :func:`read_models` reads
 the file back, refusing, in one line, a file that is not one, a value that is not a finite number
 (text and ``true`` are not numbers), a covariance that is not symmetric or has a negative
 variance, a ``samples`` that is not a whole number >= 1, or a model given twice in a maneuver.
@@ -23,68 +25,18 @@ from __future__ import annotations
 import json
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
+from ..datapath.fitted import FittedModel, run_models
 from ..errors import ConfigError
-
-if TYPE_CHECKING:  # annotations only
-    from ..datapath.pipeline import Pipeline
 
 __all__ = ["FittedModel", "MODELS_FILE", "MODELS_FORMAT", "run_models", "models_json", "read_models"]
 
 MODELS_FILE = "models.json"
 MODELS_FORMAT = "rls_uncertainty models 1"
-
-
-@dataclass(frozen=True)
-class FittedModel:
-    """One model identified on one maneuver (module docstring): ``estimate`` ``(n,)``,
-    ``covariance`` and ``covariance_conventional`` ``(n, n)``."""
-
-    model: str
-    regressors: tuple[str, ...]
-    parameters: tuple[str, ...]
-    estimate: np.ndarray
-    covariance: np.ndarray
-    covariance_conventional: np.ndarray
-    residual_variance: float
-    samples: int
-
-    def as_json(self) -> dict[str, Any]:
-        return {"model": self.model, "regressors": list(self.regressors), "parameters": list(self.parameters),
-                "estimate": self.estimate.tolist(), "covariance": self.covariance.tolist(),
-                "covariance_conventional": self.covariance_conventional.tolist(),
-                "residual_variance": self.residual_variance, "samples": self.samples}
-
-
-def run_models(pipe: Pipeline) -> list[FittedModel]:
-    """Every model of ``pipe`` that published at its last sample (:attr:`.pipeline.Pipeline.last`),
-    with its estimates, both covariances and its residual variance from the estimator's state
-    at the end of the run (the last sample's)."""
-    last = pipe.last
-    if last is None or not pipe.config.publishes_time:
-        return []
-    bank = pipe.bank
-    cov = bank.covariance_all()
-    variances = bank.residual_variances()
-    out = []
-    for j, m in enumerate(pipe.models):
-        n = pipe.sizes[j]
-        if not last.ready[j]:
-            continue
-        out.append(FittedModel(m.output, tuple(m.regressors), tuple(m.parameter_names), last.theta[j, :n].copy(),
-                               _symmetric(cov[0, j, :n, :n]), _symmetric(cov[1, j, :n, :n]), float(variances[j]),
-                               int(bank.k)))
-    return out
-
-
-def _symmetric(c: np.ndarray) -> np.ndarray:
-    out: np.ndarray = 0.5 * (c + c.T)
-    return out
 
 
 def models_json(maneuvers: Sequence[tuple[str, Sequence[FittedModel]]]) -> str:

@@ -28,7 +28,8 @@ stream (:class:`.bags.InputStream`) and the outputs are written sample by sample
 * ``parameters.csv``: every parameter's state and percent error at the end, both methods
   (:func:`parameters_csv`);
 * ``models.json``: each model's final estimates with their corrected and conventional
-  covariances and residual variance (:mod:`.model_file`), for ``rls-uncertainty predict``;
+  covariances and residual variance (:mod:`.model_file`), for ``rls-uncertainty predict``; with
+  ``maneuvers.source`` on, one entry per maneuver recorded (as ``campaign RECORDING`` writes);
 * per model ``M``, the figures of :func:`.figures.replay_figures` (``M_estimates``, ``M_fit``,
   ``M_autocorrelation``, ``M_lags``, in the requested formats), drawn from at most twice
   :data:`PLOT_POINTS` evenly spaced samples per run and from sums kept as the run goes
@@ -555,7 +556,9 @@ def replay(bag: str | Path, params: dict[str, Any], out: str | Path, *, start: f
         (tmp / "run.json").write_text(json.dumps(record, indent=1, sort_keys=True, default=repr) + "\n")
         (tmp / "summary.txt").write_text(run_summary(result) + "\n")
         (tmp / "parameters.csv").write_text(parameters_csv(result))
-        if result.pipeline is not None:
+        if result.maneuvers is not None:  # each maneuver's models, as a campaign of the recording
+            (tmp / MODELS_FILE).write_text(models_json([(m.name, m.models) for m in result.maneuvers.history]))
+        elif result.pipeline is not None:
             (tmp / MODELS_FILE).write_text(models_json([(Path(bag).name, run_models(result.pipeline))]))
         if result.maneuvers is not None:
             (tmp / "maneuvers.csv").write_text(maneuvers_csv(list(result.maneuvers.history), stream.t0))
