@@ -38,6 +38,9 @@ import numpy.typing as npt
 
 __all__ = ["flat_top_lags", "politis_threshold"]
 
+# Up to this many models the run search is a byte search per model (:func:`_first_runs`).
+_FEW_MODELS = 32
+
 
 def politis_threshold(n: float) -> float:
     """``2 sqrt(log10(n) / n)``: the flat-top rule's bound on an insignificant correlation."""
@@ -89,6 +92,9 @@ def _flat_top(R: np.ndarray, thr: float | np.ndarray, K: int, hi: int | np.ndarr
     sig = np.abs(R[..., 1:]) >= threshold * R[..., :1]  # lags 1..W-1
     if W - 1 < K:  # no room for a run of K lags: the correlation may go on
         L = np.broadcast_to(np.asarray(hi, dtype=np.int64), sig.shape[:-1])
+    elif sig.ndim == 2 and sig.shape[0] <= _FEW_MODELS:
+        m_hat = _first_runs(sig, K)
+        L = np.where(m_hat >= 0, 2 * m_hat, hi)  # M = 2 m_hat
     else:
         # counts[m] = significant lags among m+1..m+K, m = 0..W-1-K
         csum = np.cumsum(sig, axis=-1)
@@ -98,6 +104,18 @@ def _flat_top(R: np.ndarray, thr: float | np.ndarray, K: int, hi: int | np.ndarr
         L = np.where(run.any(axis=-1), 2 * run.argmax(axis=-1), hi)  # M = 2 m_hat
     L = np.where(ok, np.minimum(L, hi), lo)
     return np.maximum(L, lo).astype(np.int64)
+
+
+def _first_runs(sig: np.ndarray, K: int) -> np.ndarray:
+    """Per row of ``sig`` ``(M, W-1)``: the first ``m`` with ``sig[m:m+K]`` all False (lags
+    ``m+1..m+K`` insignificant), -1 where there is none. A byte search per row: for the few
+    models of a node or a replay, cheaper than the cumulative sums of :func:`_flat_top`'s
+    general case, with the same result."""
+    rows, width = sig.shape
+    data = np.ascontiguousarray(sig).tobytes()  # one byte (0 or 1) per lag
+    pattern = bytes(K)
+    found = [data.find(pattern, j * width, (j + 1) * width) for j in range(rows)]
+    return np.array([f - j * width if f >= 0 else -1 for j, f in enumerate(found)], dtype=np.int64)
 
 
 def _flat_top_per_model(R: np.ndarray, n: np.ndarray, cap: int | None, min_lags: int) -> np.ndarray:
