@@ -31,6 +31,7 @@ where those allow it.
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
@@ -57,6 +58,12 @@ def _limits(W: int, n: float, cap: int | None, min_lags: int) -> tuple[int, int]
     if isinstance(min_lags, bool) or int(min_lags) != min_lags or min_lags < 0:
         raise ValueError(f"min_lags must be an integer >= 0, got {min_lags!r}")
     return max(hi, 0), min(int(min_lags), max(hi, 0))
+
+
+@functools.lru_cache(maxsize=64, typed=True)  # (typed: a bool cap or min_lags is refused, not taken as 1)
+def _limits_held(W: int, cap: int | None, min_lags: int) -> tuple[int, int]:
+    """:func:`_limits` with more samples than lags held (``n = W + 1``), per call the same."""
+    return _limits(W, W + 1.0, cap, min_lags)
 
 
 def flat_top_lags(R: npt.ArrayLike, n_samples: float | npt.ArrayLike, *, cap: int | None = None,
@@ -125,7 +132,7 @@ def _flat_top_per_model(R: np.ndarray, n: np.ndarray, cap: int | None, min_lags:
     lead, W = R.shape[:-1], R.shape[-1]
     if n.shape != lead:
         raise ValueError(f"n_samples has shape {n.shape}, R has {lead} models")
-    top, top_lo = _limits(W, W + 1.0, cap, min_lags)  # checks cap and min_lags; the limits without n
+    top, top_lo = _limits_held(W, cap, min_lags)  # checks cap and min_lags; the limits without n
     hi: int | np.ndarray
     lo: int | np.ndarray
     if W >= 2 and n.min() >= W + 1.0:  # (the usual case) more samples than lags held: the limits of W
