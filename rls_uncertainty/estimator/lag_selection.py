@@ -31,7 +31,6 @@ where those allow it.
 
 from __future__ import annotations
 
-import functools
 import math
 
 import numpy as np
@@ -60,10 +59,21 @@ def _limits(W: int, n: float, cap: int | None, min_lags: int) -> tuple[int, int]
     return max(hi, 0), min(int(min_lags), max(hi, 0))
 
 
-@functools.lru_cache(maxsize=64, typed=True)  # (typed: a bool cap or min_lags is refused, not taken as 1)
+# _limits_held's results (a few per configuration)
+_HELD_LIMITS: dict[tuple[int, type, int | None, type, int], tuple[int, int]] = {}
+
+
 def _limits_held(W: int, cap: int | None, min_lags: int) -> tuple[int, int]:
-    """:func:`_limits` with more samples than lags held (``n = W + 1``), per call the same."""
-    return _limits(W, W + 1.0, cap, min_lags)
+    """:func:`_limits` with more samples than lags held (``n = W + 1``), kept per arguments
+    (their types too: a bool ``cap`` or ``min_lags`` is refused, not taken as 1)."""
+    key = (W, type(cap), cap, type(min_lags), min_lags)
+    limits = _HELD_LIMITS.get(key)
+    if limits is None:
+        limits = _limits(W, W + 1.0, cap, min_lags)
+        if len(_HELD_LIMITS) >= 256:
+            _HELD_LIMITS.clear()
+        _HELD_LIMITS[key] = limits
+    return limits
 
 
 def flat_top_lags(R: npt.ArrayLike, n_samples: float | npt.ArrayLike, *, cap: int | None = None,
