@@ -157,6 +157,34 @@ def test_flat_top_with_one_count_per_model_is_each_models_own_call():
         flat_top_lags(np.ones((3, 10)), np.full(2, 100.0))
 
 
+def _literal_flat_top_on_R(R: np.ndarray, n: float, cap: int) -> int:
+    """The rule on one model's ``R(0..W-1)`` as written: the first m whose next K lags are
+    all insignificant, L = 2m within [0, cap]; cap when no such run fits."""
+    crit = 2 * math.sqrt(math.log10(n) / n)
+    K = max(5, math.ceil(math.sqrt(math.log10(n))))
+    for m in range(len(R) - K):
+        if all(abs(R[m + j]) < crit * R[0] for j in range(1, K + 1)):
+            return min(2 * m, cap)
+    return cap
+
+
+def test_few_and_many_models_agree_with_the_rule_written_out():
+    """A few models (a node's) and hundreds (a Monte Carlo bank's) take different searches
+    for the run of insignificant lags; both give each model the literal rule's lag."""
+    rng = np.random.default_rng(11)
+    W, cap = 51, 50
+    R = 0.2 * rng.standard_normal((300, W)) + rng.uniform(0.2, 0.98, (300, 1)) ** np.arange(W)
+    R[:, 0] = np.abs(R[:, 0]) + 0.5
+    n = rng.uniform(60.0, 5000.0, 300)
+    expected = [_literal_flat_top_on_R(R[j], n[j], cap) for j in range(300)]
+    assert flat_top_lags(R, n, cap=cap).tolist() == expected  # hundreds at once
+    few = [flat_top_lags(R[j : j + 6], n[j : j + 6], cap=cap).tolist() for j in range(0, 300, 6)]
+    assert [L for block in few for L in block] == expected
+    for j in range(0, 300, 6):  # one count for the few
+        block = flat_top_lags(R[j : j + 6], float(n[j]), cap=cap).tolist()
+        assert block == [_literal_flat_top_on_R(R[i], n[j], cap) for i in range(j, j + 6)]
+
+
 def test_score_correlations_follow_the_factorisation_of_eq_11():
     # One regressor column x, residual v: sum_j x_j x_(j-i) v_j v_(j-i) over sum x^2 v^2 is
     # rho(i) g(i) when v is independent of x; check the algebra on the defining sums.

@@ -88,7 +88,7 @@ class Evaluation:
         self._covariances: Covariances | None = None
         self._chosen: IntArray | None = None  # the lags (chosen on first use)
         self._exact_fits: BoolArray | None = None  # exact_fits(), asked by the lag choice and the repair
-        self._window_key: tuple[int, int] | None = None
+        self._window_key: tuple[int, int] | tuple[int, bytes] | None = None
         self._window_h = np.zeros(0)
 
     def readiness_changed(self, ready: BoolArray, inv_s: FloatArray) -> None:
@@ -153,8 +153,7 @@ class Evaluation:
                 L = self.lags_chosen()
                 w = min(w, int(L[self._ready].max(initial=0)) + 1)  # no lag beyond the largest L
                 sums, products = lags.lag_sums[:, :w], lags.lag_products[:, :, :w]
-                h = (np.arange(w) <= L[:, None]).astype(float)
-                h[:, 0] = 0.5
+                h = self._truncated_window(L, w)
             else:
                 largest = max(k - 1, 0) if self._all_lags else lags.cap - 1
                 h = self._window_h if self._window_key == (largest, w) else self._half_window(largest, w)
@@ -179,6 +178,16 @@ class Evaluation:
             factor = n_R / np.maximum(n_R - self._sizes - self._small_sample * L, 0.25 * n_R)
         out: FloatArray = np.where(n_R > 0.0, factor, 1.0)
         return out
+
+    def _truncated_window(self, L: IntArray, w: int) -> FloatArray:
+        """Half windows ``(M, w)`` of Eq. 22 with each model's ``L``: weight 1 on lags
+        ``0..L`` (lag 0 halved); kept while the lags stay the same."""
+        key = (w, L.tobytes())
+        if key != self._window_key:
+            h = (np.arange(w) <= L[:, None]).astype(float)
+            h[:, 0] = 0.5
+            self._window_h, self._window_key = h, key
+        return self._window_h
 
     def _half_window(self, largest: int, w: int) -> FloatArray:
         """Half window ``h`` of the ``w`` lags held, ``largest`` the largest lag of the window

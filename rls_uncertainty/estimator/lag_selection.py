@@ -38,6 +38,9 @@ import numpy.typing as npt
 
 __all__ = ["flat_top_lags", "politis_threshold"]
 
+# Up to this many models the run search is a byte search per model (:func:`_first_runs`).
+_FEW_MODELS = 32
+
 
 def politis_threshold(n: float) -> float:
     """``2 sqrt(log10(n) / n)``: the flat-top rule's bound on an insignificant correlation."""
@@ -54,6 +57,23 @@ def _limits(W: int, n: float, cap: int | None, min_lags: int) -> tuple[int, int]
     if isinstance(min_lags, bool) or int(min_lags) != min_lags or min_lags < 0:
         raise ValueError(f"min_lags must be an integer >= 0, got {min_lags!r}")
     return max(hi, 0), min(int(min_lags), max(hi, 0))
+
+
+# _limits_held's results (a few per configuration)
+_HELD_LIMITS: dict[tuple[int, type, int | None, type, int], tuple[int, int]] = {}
+
+
+def _limits_held(W: int, cap: int | None, min_lags: int) -> tuple[int, int]:
+    """:func:`_limits` with more samples than lags held (``n = W + 1``), kept per arguments
+    (their types too: a bool ``cap`` or ``min_lags`` is refused, not taken as 1)."""
+    key = (W, type(cap), cap, type(min_lags), min_lags)
+    limits = _HELD_LIMITS.get(key)
+    if limits is None:
+        limits = _limits(W, W + 1.0, cap, min_lags)
+        if len(_HELD_LIMITS) >= 256:
+            _HELD_LIMITS.clear()
+        _HELD_LIMITS[key] = limits
+    return limits
 
 
 def flat_top_lags(R: npt.ArrayLike, n_samples: float | npt.ArrayLike, *, cap: int | None = None,
@@ -89,6 +109,9 @@ def _flat_top(R: np.ndarray, thr: float | np.ndarray, K: int, hi: int | np.ndarr
     sig = np.abs(R[..., 1:]) >= threshold * R[..., :1]  # lags 1..W-1
     if W - 1 < K:  # no room for a run of K lags: the correlation may go on
         L = np.broadcast_to(np.asarray(hi, dtype=np.int64), sig.shape[:-1])
+    elif sig.ndim == 2 and sig.shape[0] <= _FEW_MODELS:
+        m_hat = _first_runs(sig, K)
+        L = np.where(m_hat >= 0, 2 * m_hat, hi)  # M = 2 m_hat
     else:
         # counts[m] = significant lags among m+1..m+K, m = 0..W-1-K
         csum = np.cumsum(sig, axis=-1)
@@ -100,6 +123,18 @@ def _flat_top(R: np.ndarray, thr: float | np.ndarray, K: int, hi: int | np.ndarr
     return np.maximum(L, lo).astype(np.int64)
 
 
+def _first_runs(sig: np.ndarray, K: int) -> np.ndarray:
+    """Per row of ``sig`` ``(M, W-1)``: the first ``m`` with ``sig[m:m+K]`` all False (lags
+    ``m+1..m+K`` insignificant), -1 where there is none. A byte search per row: for the few
+    models of a node or a replay, cheaper than the cumulative sums of :func:`_flat_top`'s
+    general case, with the same result."""
+    rows, width = sig.shape
+    data = np.ascontiguousarray(sig).tobytes()  # one byte (0 or 1) per lag
+    pattern = bytes(K)
+    found = [data.find(pattern, j * width, (j + 1) * width) for j in range(rows)]
+    return np.array([f - j * width if f >= 0 else -1 for j, f in enumerate(found)], dtype=np.int64)
+
+
 def _flat_top_per_model(R: np.ndarray, n: np.ndarray, cap: int | None, min_lags: int) -> np.ndarray:
     """:func:`flat_top_lags` with one count per model: the threshold and limits of the scalar
     call, evaluated elementwise (numpy's log10 and sqrt, as ``math``'s correctly rounded here),
@@ -107,7 +142,7 @@ def _flat_top_per_model(R: np.ndarray, n: np.ndarray, cap: int | None, min_lags:
     lead, W = R.shape[:-1], R.shape[-1]
     if n.shape != lead:
         raise ValueError(f"n_samples has shape {n.shape}, R has {lead} models")
-    top, top_lo = _limits(W, W + 1.0, cap, min_lags)  # checks cap and min_lags; the limits without n
+    top, top_lo = _limits_held(W, cap, min_lags)  # checks cap and min_lags; the limits without n
     hi: int | np.ndarray
     lo: int | np.ndarray
     if W >= 2 and n.min() >= W + 1.0:  # (the usual case) more samples than lags held: the limits of W

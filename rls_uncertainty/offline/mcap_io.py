@@ -21,6 +21,7 @@ that is damaged: a chunk by its number, byte offset and the topics it holds.
 
 from __future__ import annotations
 
+import io
 import struct
 import zlib
 from collections.abc import Mapping
@@ -43,6 +44,7 @@ ROS_DISTRO = "jazzy"  # the typestore the definitions and their hashes come from
 _MAGIC = b"\x89MCAP0\r\n"
 _FOOTER = 1 + 8 + 8 + 8 + 4  # opcode, length, summary_start, summary_offset_start, summary_crc
 _DATA_END = 1 + 8 + 4  # opcode, length, data_section_crc
+_RECORD_HEADER = struct.Struct("<BQ")  # a record's opcode and length
 _OFFERED_QOS = "[]"  # rosbag2 version 9: the offered QoS profiles as YAML (none recorded)
 
 
@@ -205,6 +207,7 @@ def _chunk_header_problem(chunk: Chunk, index: ChunkIndex) -> str | None:
 
 def _count_chunk(chunk: Chunk, path: Path, name: str) -> int:
     """The messages in a chunk, its CRC checked; its records walked without decoding them."""
+    from mcap.data_stream import ReadDataStream  # noqa: PLC0415
     from mcap.stream_reader import CRCValidationError, get_chunk_data_stream  # noqa: PLC0415
 
     try:
@@ -212,14 +215,20 @@ def _count_chunk(chunk: Chunk, path: Path, name: str) -> int:
     except CRCValidationError as exc:
         raise BagError(f"{path}: corrupt MCAP: {name} fails its CRC (stored {exc.expected:08x}, computed "
                        f"{exc.actual:08x})") from None
-    count = 0
-    while stream.count < size:
-        opcode = stream.read1()
-        length = stream.read8()
-        if stream.count + length > size:
+    data = stream.read(size)  # (the whole chunk, once: its records are walked in place)
+    count = pos = 0
+    header = _RECORD_HEADER.unpack_from
+    while pos + _RECORD_HEADER.size <= size:
+        opcode, length = header(data, pos)
+        pos += _RECORD_HEADER.size
+        if pos + length > size:
             raise BagError(f"{path}: corrupt MCAP: {name}: a record runs past the chunk's end")
-        stream.read(length)
+        pos += length
         count += opcode == 0x05  # MCAP "Message" record
+    if pos < size:  # a record header cut short: the library's reader fails on it as on any other
+        tail = ReadDataStream(io.BytesIO(data[pos:]))
+        tail.read1()
+        tail.read8()
     return count
 
 
