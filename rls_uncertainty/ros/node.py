@@ -6,7 +6,9 @@ decoded by :mod:`.cdr` and go through :func:`.inputs.feed` in order of arrival (
 order of the offline replay), and every completed sample is published as the messages of
 :mod:`.outputs` (``~/sample_stamp``, then per ready model M ``~/M/estimates``, its standard
 errors, convergence flags and decimated covariances), serialized there: the node publishes the
-bytes :meth:`.outputs.OutputLayout.encode` makes, on the publisher of each topic index.
+bytes :meth:`.outputs.OutputLayout.encode` makes, on the publisher of each topic index, for
+the topics that have a subscriber (:mod:`.sample_publishers`). The node runs on rclpy's
+events executor (:func:`_spin`).
 ``/diagnostics`` reports input rates and ages, the fate of every message and sample, model fit,
 identifiability, convergence and latency (and ``~/M/fit``, ``~/M/identifiability`` follow each
 period), and a misconfigured data path (every message of a needed stream
@@ -71,7 +73,7 @@ _TYPES = {kind: message_class(MESSAGE_TYPES[kind]) for kind in STREAMS}
 _NO_EVENTS = PublisherEventCallbacks(use_default_callbacks=False)
 
 
-# The longest an intake pass feeds before the executor's other work (diagnostics) gets a turn.
+# The longest an intake pass feeds before the executor's other work gets a turn.
 _PASS_BUDGET_S = 0.01
 
 
@@ -352,8 +354,8 @@ class EstimatorNode(Node):
 
     def _publish_diagnostics(self) -> None:
         """Start one :class:`.diagnostics_round.DiagnosticsRound`: here only the node's own
-        facts are read (constant time); the rest runs one step per executor turn
-        (:meth:`_diagnostics_step`), between the input callbacks."""
+        facts are read (constant time); the rest runs one step per intake pass
+        (:meth:`_diagnostics_step`), before the pass feeds."""
         t0 = time.perf_counter()
         if self._round is not None:  # the previous round has not finished: it goes on
             return
@@ -384,7 +386,7 @@ class EstimatorNode(Node):
         self._periodic.append(time.perf_counter() - t0)
 
     def _diagnostics_step(self) -> None:
-        """One step of the running round; the next is due on the next executor turn. A round
+        """One step of the running round; the next is due on the next intake pass. A round
         whose pipeline was reconfigured meanwhile is dropped (the next period reports)."""
         t0 = time.perf_counter()
         r = self._round
