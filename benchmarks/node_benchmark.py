@@ -2,8 +2,9 @@
 
 Three processes on loopback: the node (six models of Eq. 2, 50 lags), a publisher that
 sends a synthetic six-degree-of-freedom maneuver in real time (IMU at --imu-rate, air data,
-dynamic pressure and surfaces at --air-rate), and this process, which subscribes to every
-output. Latency is input to output: from the publication of the message that completes a
+dynamic pressure and surfaces at --air-rate), and this process, which subscribes to the
+sample stamp and each sample's last array (the node publishes only the topics someone
+subscribes to). Latency is input to output: from the publication of the message that completes a
 sample (the last stream to pass the sample time, ``lag`` samples later because of the
 differentiator) to the reception of that sample's last output array.
 

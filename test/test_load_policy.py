@@ -17,6 +17,7 @@ from rls_uncertainty.datapath.load_policy import (
     behind,
     blame,
     cause,
+    clock_text,
     keep_up_text,
 )
 
@@ -71,9 +72,22 @@ def test_blame_names_the_node_only_when_it_is_the_cause():
     gaps = "imu missing about 40 in the last 10 s (stamp gaps: lost in transport?)"
     clocks = "samples: none formed ...: the needed streams' stamps never overlap (different clocks?)"
     for why in (None, TRANSPORT, CLOCKS):
-        assert blame(gaps, why) == gaps and blame(clocks, why) == clocks
+        assert blame(clocks, why) == clocks
+    for why in (None, TRANSPORT):
+        assert blame(gaps, why) == gaps
+    assert "transport" not in blame(gaps, CLOCKS) and "different clocks" in blame(gaps, CLOCKS)
     assert "transport" not in blame(gaps, NODE) and "behind" in blame(gaps, NODE)
     assert "clocks" not in blame(clocks, NODE) and "cannot keep up" in blame(clocks, NODE)
+
+
+def test_with_the_clocks_measured_the_hint_becomes_the_measured_offset():
+    offsets = {"imu": 0.002, "airspeed": 3.502, "thrust": 0.012}  # air data's clock 3.5 s behind
+    said = clock_text(offsets)
+    assert said == "different clocks: airspeed stamps 3.5 s behind imu's, against their arrival"
+    clocks = "samples: none formed ...: the needed streams' stamps never overlap (different clocks?)"
+    assert blame(clocks, CLOCKS, said) == clocks.replace("different clocks?", said)
+    for why in (None, TRANSPORT):  # a guess stays a guess unless the clocks were measured
+        assert blame(clocks, why, said) == clocks
 
 
 def test_the_keep_up_text_has_the_p99_wait_the_median_cpu_and_the_period():

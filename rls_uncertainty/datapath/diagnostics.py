@@ -70,7 +70,7 @@ from dataclasses import dataclass, field
 
 from .alerts import Alert, AlertPolicy
 from .bookkeeping import Totals, Window, increase
-from .load_policy import NODE, LoadPolicy, Timing, behind, blame, cause, keep_up_text
+from .load_policy import CLOCKS, NODE, LoadPolicy, Timing, behind, blame, cause, clock_text, keep_up_text
 from .outputs import NODE_NAME
 from .states import initializing
 
@@ -298,6 +298,7 @@ class DiagnosticsPolicy:
         self.previous: Snapshot | None = None
         self.overload: str | None = None  # the samples status's "cannot keep up" text, when it says that
         self.cause: str | None = None  # why inputs are late or missing (:func:`.load_policy.cause`)
+        self.clocks: str | None = None  # with cause CLOCKS, the measured offset (:func:`.load_policy.clock_text`)
         self.load: LoadPolicy | None = None  # the degradation ladder of the node's configuration
         self._offsets: dict[str, float] = {}  # the previous period's stamp offsets
         self._load_key: tuple[float, int, int] | None = None  # the configuration self.load is for
@@ -316,9 +317,9 @@ class DiagnosticsPolicy:
             self.alerts.current = [*alerts, namesake]
         self.alerts.models(snap.models)  # identifiability, logged with the alerts
         self._judge_load(snap, before)
-        if self.cause == NODE:
-            alerts = [Alert(a.key, blame(a.text, NODE)) for a in alerts]
-            self.alerts.current = [Alert(a.key, blame(a.text, NODE)) for a in self.alerts.current]
+        if self.cause in (NODE, CLOCKS):
+            alerts = [Alert(a.key, blame(a.text, self.cause, self.clocks)) for a in alerts]
+            self.alerts.current = [Alert(a.key, blame(a.text, self.cause, self.clocks)) for a in self.alerts.current]
         statuses = [self._inputs(snap, now, before, alerts), self._samples(snap, namesake)]
         statuses += [self._model(name, fit, snap) for name, fit in snap.models]
         self.previous = snap
@@ -334,6 +335,7 @@ class DiagnosticsPolicy:
                    t.clock_tolerance_s)
         self._offsets = dict(t.offsets_s)
         self.cause = cause(t)
+        self.clocks = clock_text(t.offsets_s) if self.cause == CLOCKS else None
         self.overload = overload(snap) if self.cause == NODE else None
         key = (snap.period_s, snap.frequency_every, snap.covariance_decimation)
         if self.load is None or self._load_key != key:  # a new configuration starts unshed

@@ -4,8 +4,8 @@ A period's report (:class:`.diagnostics.Snapshot` -> :meth:`.diagnostics.Diagnos
 -> ``/diagnostics``, and ``~/M/fit``, ``~/M/identifiability`` by
 :meth:`.outputs.OutputLayout.encode_fit_model`) costs several milliseconds of CPU with six
 models, longer than an input period at 1 kHz. The node runs it as a :class:`DiagnosticsRound`
-on its one executor thread, one :meth:`DiagnosticsRound.step` per executor turn, so the input
-callbacks that are ready run between the steps. Each step does a bounded part:
+on its one executor thread, one :meth:`DiagnosticsRound.step` per intake pass, so the inputs
+are fed between the steps. Each step does a bounded part:
 
 1. on creation: the pipeline's counters (:meth:`.pipeline.Pipeline.counters`, plain copies) and
    the node's own facts, handed in (its clock, matched publishers, the latencies of the period);

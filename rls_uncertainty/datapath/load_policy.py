@@ -17,7 +17,8 @@ minus arrival age, seconds; the node's clock against the sender's).
 * None otherwise.
 
 :func:`blame` keeps a hint of the diagnostics ("lost in transport?", "different clocks?") only
-when the measurements do not point at the node; when they do, it names the node instead.
+when the measurements do not point at the node; when they do, it names the node instead, and
+when they point at the clocks it states the measured offset (:func:`clock_text`).
 
 **The degradation policy** (:class:`LoadPolicy`). While the node is behind, each diagnostics
 period takes one step down the ladder; once it has kept up for ``recover_s`` seconds it takes
@@ -41,8 +42,8 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 
-__all__ = ["NODE", "TRANSPORT", "CLOCKS", "Timing", "behind", "cause", "blame", "keep_up_text", "LoadPolicy",
-           "FACTOR"]
+__all__ = ["NODE", "TRANSPORT", "CLOCKS", "Timing", "behind", "cause", "blame", "clock_text", "keep_up_text",
+           "LoadPolicy", "FACTOR"]
 
 NODE, TRANSPORT, CLOCKS = "node", "transport", "clocks"
 FACTOR = 5  # each step spaces the work out this many times
@@ -114,18 +115,32 @@ def cause(t: Timing) -> str | None:
 
 
 _HINTS = {
-    "stamp gaps: lost in transport?": {NODE: "stamp gaps: dropped while the node was behind its inputs"},
+    "stamp gaps: lost in transport?": {NODE: "stamp gaps: dropped while the node was behind its inputs",
+                                       CLOCKS: "stamp gaps, with the streams on different clocks"},
     "different clocks?": {NODE: "the node cannot keep up with its inputs"},
 }
 
 
-def blame(text: str, why: str | None) -> str:
+def blame(text: str, why: str | None, clocks: str | None = None) -> str:
     """``text`` (a diagnostic's message) with its guessed causes replaced by the measured one:
-    unchanged unless ``why`` is :data:`NODE`."""
+    with ``why`` :data:`NODE` the node is named; with :data:`CLOCKS` "different clocks?"
+    becomes ``clocks`` (:func:`clock_text`) and stamp gaps are not put on the transport;
+    unchanged otherwise."""
     for hint, by_cause in _HINTS.items():
         if why in by_cause and hint in text:
             text = text.replace(hint, by_cause[why])
+    if why == CLOCKS and clocks:
+        text = text.replace("different clocks?", clocks)
     return text
+
+
+def clock_text(offsets: Mapping[str, float]) -> str:
+    """``different clocks: S stamps X s behind R's, against their arrival``: of the streams'
+    stamp offsets (stamp age minus arrival age, :class:`Timing`), the most delayed stream S
+    against the least delayed R."""
+    late, early = max(offsets, key=offsets.__getitem__), min(offsets, key=offsets.__getitem__)
+    spread = offsets[late] - offsets[early]
+    return f"different clocks: {late} stamps {spread:.1f} s behind {early}'s, against their arrival"
 
 
 def keep_up_text(t: Timing) -> str:

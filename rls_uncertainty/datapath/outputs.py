@@ -228,14 +228,17 @@ class OutputLayout:
                                                          strict=True)):
                     yield first + k, new((name, f"{FREQUENCY}/{suffix}", label, vector, values[j, :n]))
 
-    def encode(self, out: SampleOutput, frame_id: str) -> list[tuple[int, bytes]]:
+    def encode(self, out: SampleOutput, frame_id: str, wanted: Sequence[bool] | None = None) -> list[tuple[int, bytes]]:
         """``(index into topics, CDR bytes)`` of every message published for ``out``:
-        ``sample_stamp`` (header ``frame_id``), then each ready model's arrays."""
+        ``sample_stamp`` (header ``frame_id``), then each ready model's arrays; with
+        ``wanted`` (a flag per topic index), only those of the topics it flags."""
         stamp = out.stamp_ns
         sec, nanosec = divmod(stamp, 1_000_000_000)
-        messages = [(0, encode_header(sec, nanosec, frame_id))]
+        messages = [(0, encode_header(sec, nanosec, frame_id))] if wanted is None or wanted[0] else []
         when = stamp_label(stamp)
         for index, a in self._arrays(out):
+            if wanted is not None and not wanted[index]:
+                continue
             if len(a.shape) == 1:
                 raw = encode_float64_multiarray(a.names, a.data.tolist(), when)
             else:

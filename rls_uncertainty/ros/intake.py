@@ -8,7 +8,8 @@ takes every message they hold, serialized, with the middleware's reception time
 
 A pass feeds for at most a time budget (:class:`Backlog`): what it has not fed waits, in order,
 for the next pass, and nothing new is taken until it is all fed. Between passes the executor
-runs the periodic work (diagnostics), so a node with more input than it can process still
+runs the periodic work (the diagnostics timer, state saves; each pass also runs one step of a
+diagnostics round before it feeds), so a node with more input than it can process still
 reports, and its memory stays bounded: messages that arrive meanwhile wait in the
 subscriptions' queues (``qos.depth`` each), which drop the oldest when full.
 """

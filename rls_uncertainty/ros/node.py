@@ -6,7 +6,9 @@ decoded by :mod:`.cdr` and go through :func:`.inputs.feed` in order of arrival (
 order of the offline replay), and every completed sample is published as the messages of
 :mod:`.outputs` (``~/sample_stamp``, then per ready model M ``~/M/estimates``, its standard
 errors, convergence flags and decimated covariances), serialized there: the node publishes the
-bytes :meth:`.outputs.OutputLayout.encode` makes, on the publisher of each topic index.
+bytes :meth:`.outputs.OutputLayout.encode` makes, on the publisher of each topic index, for
+the topics that have a subscriber (:mod:`.sample_publishers`). The node runs on rclpy's
+events executor (:func:`_spin`).
 ``/diagnostics`` reports input rates and ages, the fate of every message and sample, model fit,
 identifiability, convergence and latency (and ``~/M/fit``, ``~/M/identifiability`` follow each
 period), and a misconfigured data path (every message of a needed stream
@@ -37,11 +39,11 @@ from rclpy.duration import Duration
 from rclpy.event_handler import PublisherEventCallbacks
 from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException
+from rclpy.experimental import EventsExecutor
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.node import Node
 from rclpy.parameter import Parameter as RosParameter
 from rclpy.qos import QoSDurabilityPolicy, QoSHistoryPolicy, QoSProfile, QoSReliabilityPolicy, qos_profile_sensor_data
-from std_msgs.msg import Float64MultiArray, Header
 from std_srvs.srv import SetBool, Trigger
 
 from ..datapath.cdr import decode
@@ -51,7 +53,7 @@ from ..datapath.feasibility import configuration_warnings
 from ..datapath.inputs import MESSAGE_TYPES, STREAMS, feed, message_class
 from ..datapath.load_policy import LoadPolicy
 from ..datapath.maneuvers import EVENT
-from ..datapath.outputs import HEADER, NODE_NAME, OutputLayout
+from ..datapath.outputs import NODE_NAME, OutputLayout
 from ..datapath.pipeline import Pipeline, SampleOutput
 from ..errors import ConfigError
 from ..settings.parameters import PARAMETERS, Parameter, node_config, pipeline_config
@@ -60,6 +62,7 @@ from .input_watch import SilentInputs
 from .intake import Backlog, Intake
 from .maneuvers import LiveManeuvers
 from .node_state import NodeStateFile
+from .sample_publishers import SamplePublishers
 
 __all__ = ["EstimatorNode", "main", "NODE_NAME"]
 
@@ -70,7 +73,7 @@ _TYPES = {kind: message_class(MESSAGE_TYPES[kind]) for kind in STREAMS}
 _NO_EVENTS = PublisherEventCallbacks(use_default_callbacks=False)
 
 
-# The longest an intake pass feeds before the executor's other work (diagnostics) gets a turn.
+# The longest an intake pass feeds before the executor's other work gets a turn.
 _PASS_BUDGET_S = 0.01
 
 
@@ -122,7 +125,10 @@ class EstimatorNode(Node):
         self._state = NodeStateFile(self.node_cfg.state_file)
         self._state.load(self.pipeline, self.get_logger())
         self._latencies: list[float] = []  # wall time from message to last publish
-        self._cpu_times: list[float] = []  # CPU time of the same (without preemption)
+        # CPU time (without preemption) of feeding every message since the previous sample's
+        # publish, and of publishing: a sample's share of the input work, read once per sample.
+        self._cpu_times: list[float] = []
+        self._cpu_since_sample = 0.0
         self._malformed_logged: set[str] = set()  # inputs whose first malformed message was logged
         self._diagnostics = DiagnosticsPolicy(self.get_fully_qualified_name(),
                                               window_s=self.node_cfg.diagnostics_window)
@@ -138,15 +144,14 @@ class EstimatorNode(Node):
 
         # Transient local: a subscriber that joins late (a dashboard) gets the last qos.depth
         # samples at once; volatile subscribers match as before. Keep-last bounds the memory.
-        self._out_qos = QoSProfile(depth=self.node_cfg.depth, reliability=QoSReliabilityPolicy.RELIABLE,
-                                   history=QoSHistoryPolicy.KEEP_LAST,
-                                   durability=QoSDurabilityPolicy.TRANSIENT_LOCAL)
-        self._outputs_by_topic: dict[str, Any] = {}  # publishers by relative topic
+        out_qos = QoSProfile(depth=self.node_cfg.depth, reliability=QoSReliabilityPolicy.RELIABLE,
+                             history=QoSHistoryPolicy.KEEP_LAST, durability=QoSDurabilityPolicy.TRANSIENT_LOCAL)
         # ~/M/fit and ~/M/identifiability, once per diagnostics period: the latest kept for late joiners.
-        self._fit_qos = QoSProfile(depth=1, reliability=QoSReliabilityPolicy.RELIABLE,
-                                   durability=QoSDurabilityPolicy.TRANSIENT_LOCAL, history=QoSHistoryPolicy.KEEP_LAST)
-        self._fit_by_topic: dict[str, Any] = {}
-        self._make_publishers()
+        fit_qos = QoSProfile(depth=1, reliability=QoSReliabilityPolicy.RELIABLE,
+                             durability=QoSDurabilityPolicy.TRANSIENT_LOCAL, history=QoSHistoryPolicy.KEEP_LAST)
+        self._out = SamplePublishers(self, out_qos, fit_qos, _NO_EVENTS)
+        self._layout = OutputLayout.of(self.pipeline)
+        self._out.follow(self._layout)
         self._diag_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10, event_callbacks=_NO_EVENTS)
         in_qos = _input_qos(self.node_cfg.reliable, self.node_cfg.depth)
         self._intake = Intake(self, _TYPES, self.node_cfg.topics, in_qos)  # off the executor: taken in batches
@@ -165,7 +170,6 @@ class EstimatorNode(Node):
         # Health reporting and state saving run on the steady clock: they go on when /clock
         # pauses or jumps (use_sim_time).
         steady = Clock(clock_type=ClockType.STEADY_TIME)
-        self._next_step = self.create_guard_condition(self._diagnostics_step)
         self.create_timer(self.node_cfg.diagnostics_period, self._publish_diagnostics, clock=steady)
         self._intake_timer = self.create_timer(_intake_period(self.config.rate), self._take_inputs, clock=steady)
         if self.node_cfg.state_file and self.node_cfg.state_save_period > 0:
@@ -216,38 +220,8 @@ class EstimatorNode(Node):
             self.pipeline = self.pipeline.reconfigured(new)
             if self._maneuvers is not None:
                 self._maneuvers.follow(self.pipeline)
-            self._make_publishers()
-
-    def _make_publishers(self) -> None:
-        """One publisher per topic of the configuration's :class:`.outputs.OutputLayout`, in
-        its order (``self._pubs[i]`` publishes topic ``i``); publishers of topics that remain
-        are kept, those of models no longer configured destroyed."""
-        self._layout = OutputLayout.of(self.pipeline)
-        old, new = self._outputs_by_topic, {}
-        for topic, msgtype in self._layout.topics:
-            pub = old.pop(topic, None)
-            if pub is None:
-                pub = self.create_publisher(Header if msgtype == HEADER else Float64MultiArray, f"~/{topic}",
-                                            self._out_qos, event_callbacks=_NO_EVENTS)
-            new[topic] = pub
-        for pub in old.values():
-            self.destroy_publisher(pub)
-        self._outputs_by_topic = new
-        self._pubs = [new[topic] for topic, _ in self._layout.topics]
-        self._make_fit_publishers()
-
-    def _make_fit_publishers(self) -> None:
-        """The per-period publishers of :attr:`.outputs.OutputLayout.fit_topics`, kept, made
-        or destroyed as :meth:`_make_publishers` does."""
-        old, new = self._fit_by_topic, {}
-        for topic, _msgtype in self._layout.fit_topics:
-            pub = old.pop(topic, None)
-            new[topic] = pub or self.create_publisher(Float64MultiArray, f"~/{topic}", self._fit_qos,
-                                                      event_callbacks=_NO_EVENTS)
-        for pub in old.values():
-            self.destroy_publisher(pub)
-        self._fit_by_topic = new
-        self._fit_pubs = [new[topic] for topic, _ in self._layout.fit_topics]
+            self._layout = OutputLayout.of(self.pipeline)
+            self._out.follow(self._layout)
 
     # ------------------------------------------------------------------ data path
     def destroy_node(self) -> None:
@@ -264,6 +238,8 @@ class EstimatorNode(Node):
         :data:`_PASS_BUDGET_S`; the rest of the batch is fed by the next passes before anything
         new is taken (:class:`.intake.Backlog`). Latency is counted from the arrival of the
         message that completed a sample to its last publish."""
+        if self._round is not None:
+            self._diagnostics_step()
         backlog = self._backlog
         if not backlog:
             taken = self._intake.take()
@@ -287,13 +263,13 @@ class EstimatorNode(Node):
         self._waits.append(max(start - backlog.oldest(start), 0) * 1e-9)
         if pipeline.needs_clock:  # inputs.max_clock_offset: stamps are checked against it
             pipeline.clock_ns = self.get_clock().now().nanoseconds
-        maneuvers = self._maneuvers
-        while backlog and time.perf_counter() < deadline:
-            kind, (arrived, raw) = backlog.pop()
+        maneuvers, pop, perf_counter = self._maneuvers, backlog.pop, time.perf_counter
+        c0 = time.thread_time()
+        while backlog and perf_counter() < deadline:
+            kind, (arrived, raw) = pop()
             if kind == EVENT:
                 maneuvers.event(raw)  # type: ignore[union-attr]  # (events come only with maneuvers)
                 continue
-            c0 = time.thread_time()
             try:
                 msg = decode(MESSAGE_TYPES[kind], raw)
                 if kind == "control_surfaces" and maneuvers is not None:  # (maneuvers.source detect)
@@ -306,7 +282,10 @@ class EstimatorNode(Node):
                 for out in outputs:
                     self._publish(out)
                 self._latencies.append((time.time_ns() - (arrived or start)) * 1e-9)
-                self._cpu_times.append(time.thread_time() - c0)
+                c1 = time.thread_time()
+                self._cpu_times.append(self._cpu_since_sample + c1 - c0)
+                self._cpu_since_sample, c0 = 0.0, c1
+        self._cpu_since_sample += time.thread_time() - c0
 
     def _malformed(self, kind: str, exc: Exception) -> None:
         """Count a message that could not be decoded or fed; log the first one per input."""
@@ -316,13 +295,8 @@ class EstimatorNode(Node):
             self.get_logger().warning(malformed_warning(self._subs[kind].topic_name, exc))
 
     def _publish(self, out: SampleOutput) -> None:
-        """A sample's messages (:meth:`.outputs.OutputLayout.encode`), each on the publisher of
-        its topic index. They are serialized by :mod:`.cdr` (byte-identical to rosbags'
-        serialization and read back by rclpy, checked in test_cdr.py) and published raw:
-        converting 25 Python messages per sample cost more CPU and latency than the estimation."""
-        pubs = self._pubs
-        for index, raw in self._layout.encode(out, self.node_cfg.frame_id):
-            pubs[index].publish(raw)
+        """A sample's messages, on the topics someone subscribes to (:mod:`.sample_publishers`)."""
+        self._out.publish(out, self.node_cfg.frame_id)
         if self._maneuvers is not None:
             self._maneuvers.sample(out)
 
@@ -380,12 +354,13 @@ class EstimatorNode(Node):
 
     def _publish_diagnostics(self) -> None:
         """Start one :class:`.diagnostics_round.DiagnosticsRound`: here only the node's own
-        facts are read (constant time); the rest runs one step per executor turn
-        (:meth:`_diagnostics_step`), between the input callbacks."""
+        facts are read (constant time); the rest runs one step per intake pass
+        (:meth:`_diagnostics_step`), before the pass feeds."""
         t0 = time.perf_counter()
         if self._round is not None:  # the previous round has not finished: it goes on
             return
         wall = time.monotonic()
+        self._out.refresh(self.node_cfg.frame_id)  # which outputs anyone subscribes to
         publishers = {kind: sub.get_publisher_count() for kind, sub in self._subs.items()}  # graph cache reads
         topics = {kind: sub.topic_name for kind, sub in self._subs.items()}
         for line in self._silent.update(self, wall, publishers, topics, self.pipeline.required,
@@ -407,12 +382,11 @@ class EstimatorNode(Node):
         self._last_diag = wall
         self._latencies, self._cpu_times, self._periodic, self._waits = [], [], [], []
         self._round = DiagnosticsRound(self.pipeline, self._layout, self._diagnostics, facts,
-                                       self._publish_fit, self._publish_statuses)
-        self._next_step.trigger()
+                                       self._out.publish_fit, self._publish_statuses)
         self._periodic.append(time.perf_counter() - t0)
 
     def _diagnostics_step(self) -> None:
-        """One step of the running round; the next is due on the next executor turn. A round
+        """One step of the running round; the next is due on the next intake pass. A round
         whose pipeline was reconfigured meanwhile is dropped (the next period reports)."""
         t0 = time.perf_counter()
         r = self._round
@@ -420,12 +394,7 @@ class EstimatorNode(Node):
             return
         if r.pipeline is not self.pipeline or r.layout is not self._layout or r.step():
             self._round = None
-        else:
-            self._next_step.trigger()
         self._periodic.append(time.perf_counter() - t0)
-
-    def _publish_fit(self, index: int, raw: bytes) -> None:
-        self._fit_pubs[index].publish(raw)  # ~/M/fit, ~/M/identifiability
 
     def _publish_statuses(self, statuses: list[Status]) -> None:
         if self._maneuvers is not None:
@@ -475,6 +444,21 @@ def _overrides(values: dict[str, Any]) -> list[RosParameter]:
             for p in PARAMETERS if p.name in values]
 
 
+def _spin(node: Node) -> None:
+    """Run ``node`` on rclpy's events executor until the context shuts down (Ctrl-C raises
+    KeyboardInterrupt, SIGTERM ExternalShutdownException). It wakes only for what is due
+    instead of rebuilding a wait set on every turn: an idle node costs a third of the CPU it
+    does on the single-threaded executor (docs/benchmarks.md). Spun with a finite timeout:
+    its ``spin()`` without one busy-waits."""
+    executor = EventsExecutor()
+    executor.add_node(node)
+    try:
+        while rclpy.ok():
+            executor.spin_once(timeout_sec=1.0)
+    finally:
+        executor.shutdown()
+
+
 def _refuse(exc: Exception) -> int:
     """A misconfiguration in one line on stderr; exit status 2."""
     print(f"{NODE_NAME}: invalid configuration: {' '.join(str(exc).split())}", file=sys.stderr)
@@ -507,7 +491,7 @@ def main(args: list[str] | None = None) -> int:
         # Everything allocated so far lives for the whole run: keep it out of the cyclic
         # collector, whose full passes otherwise show up as millisecond latency spikes.
         gc.freeze()
-        rclpy.spin(node)
+        _spin(node)
     except (ConfigError, ParameterException) as exc:
         code = _refuse(exc)
     except (KeyboardInterrupt, ExternalShutdownException):
