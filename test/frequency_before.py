@@ -425,4 +425,5 @@ def evaluate_before(bank: Any) -> dict[str, Any]:
     cov[:, ~solved] = np.nan
     rule = solved & (N >= bank.publish_at)
     return {"theta": theta, "corrected": cov[0], "conventional": cov[1], "R": R, "z_variance": C0[:, 0, 0] / N,
-            "solved": solved, "ready": rule & ~unusable, "withheld": rule & unusable, "negative": negative}
+            "solved": solved, "ready": rule & ~unusable, "withheld": rule & unusable, "negative": negative,
+            "exact": exact}
