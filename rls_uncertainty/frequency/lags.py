@@ -100,7 +100,7 @@ def pseudo_inverse(B: FloatArray, columns: npt.NDArray[np.bool_]) -> FloatArray:
     scale = s[:, :, None] * s[:, None, :]
     w, u = np.linalg.eigh(B * scale)
     magnitude = np.abs(w)
-    inverse = np.divide(1.0, w, where=magnitude > 1e-12 * magnitude.max(axis=1, keepdims=True), out=np.zeros_like(w))
+    inverse = 1.0 / np.where(magnitude > 1e-12 * magnitude.max(axis=1, keepdims=True), w, np.inf)  # cut: 0
     out: FloatArray = (u * inverse[:, None, :]) @ u.swapaxes(1, 2)
     out *= scale
     return out
@@ -149,9 +149,9 @@ def dof_correction(
     T = traces(B_inv)
     shifted[:, 2 * L : 3 * L + 1] = T
     shifted[:, L : 2 * L + 1] = T[:, ::-1]
-    shifted += np.maximum(N - np.abs(np.arange(-2 * L, 2 * L + 1)), 0) / N
+    shifted += np.maximum(N - _distances(L), 0) / N
     step = shifted.strides
-    windows = np.lib.stride_tricks.as_strided(shifted[:, L:], (M, lags, 2 * L + 1), (step[0], -step[1], step[1]))
+    windows = np.ndarray((M, lags, 2 * L + 1), np.float64, shifted, L * step[1], (step[0], -step[1], step[1]))
     # (N - i) var(R), var(R) = sum_(|l|<=L) (N - |l|) R(l) / N^2.
     count = N - np.arange(lags, dtype=np.float64)
     weight = (N - np.abs(np.arange(-L, L + 1))) / N**2
@@ -168,6 +168,17 @@ def dof_correction(
         return out
 
     return apply
+
+
+_DISTANCES: dict[int, FloatArray] = {}
+
+
+def _distances(L: int) -> FloatArray:
+    """``|j|`` for ``j = -2L..2L`` (kept per ``L``)."""
+    out = _DISTANCES.get(L)
+    if out is None:
+        out = _DISTANCES[L] = np.abs(np.arange(-2 * L, 2 * L + 1, dtype=np.float64))
+    return out
 
 
 def residual_autocovariance(
