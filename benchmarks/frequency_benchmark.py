@@ -10,7 +10,8 @@ parameters; frequency domain the same without the bias: 2, 3, 2, 5, 3, 3), 50 la
      (estimates and both covariances, Eqs. F4-F10, after an update), and update plus all
      outputs when they are evaluated every sample, every 5 and every 50 samples (``every``; the
      mean per sample over a whole period);
-  3. the evaluation against the number of frequencies (36 to 400);
+  3. update plus outputs every sample, and one evaluation, against the number of frequencies
+     (36 to 400);
   4. the memory of each bank's state;
   5. the whole pipeline (``replay.run_pipeline``: sampling, differentiation, aerodynamics, both
      estimators, convergence, identifiability) per sample used, with ``estimator.method`` time,
@@ -165,11 +166,11 @@ def main() -> None:
             med, p99 = frequency_domain(opts, X, z, outputs=True)
             line += f" | every {every:2d}: {med:7.1f}" + (f" (p99 {p99:.0f})" if every == 1 else "")
         print(line)
-    print("3. frequency domain, update + outputs every sample against the number of frequencies:")
+    print("3. frequency domain against the number of frequencies: update + outputs every sample | one evaluation:")
     for K in (36, 100, 200, 400):
         opts = FrequencyOptions(rate_hz=RATE, f_min=0.1, f_max=0.1 + (K - 1) * 0.05, f_step=0.05)
         med, _ = frequency_domain(opts, X, z, outputs=True)
-        print(f"   K = {K:3d}: {med:8.1f} us")
+        print(f"   K = {K:3d}: {med:8.1f} us | {evaluation(opts, X, z):8.1f} us")
     td = EstimatorBank(SIZES, EstimatorOptions(lags=50))
     fd = FrequencyBank([s - 1 for s in SIZES], FrequencyOptions(rate_hz=RATE, f_min=0.2, f_max=2.2))
     for k in range(200):
