@@ -231,10 +231,12 @@ def middle(R: FloatArray, X: ComplexArray, geometry: PairGeometry, trim: int = 1
     base = r0 + 2.0 * plus  # R(0) + 2 S
     right = np.empty((m, 3 * K, p), complex)  # bX, -bY, (N s - 2 Re S1) X
     np.multiply(base.conj()[:, :, None], X, out=right[:, :K])
-    np.multiply(base[:, :, None], XY[:, 1], out=right[:, K : 2 * K])
-    np.negative(right[:, K : 2 * K], out=right[:, K : 2 * K])
+    np.multiply(-base[:, :, None], XY[:, 1], out=right[:, K : 2 * K])
     np.multiply((g.N * base.real - 2.0 * first.real)[:, :, None], X, out=right[:, 2 * K :])
-    mid = 0.5 * (left.conj().swapaxes(1, 2) @ right).real
+    # Re(left^H right) = Re' Re + Im' Im: one real product of the interleaved views.
+    both = left.view(np.float64).swapaxes(1, 2) @ right.view(np.float64)  # (M, 2p, 2p)
+    mid = both[:, 0::2, 0::2] + both[:, 1::2, 1::2]
+    mid *= 0.5
     # The trim subtracted: var Gamma Gamma^H - V Gamma^H - Gamma V^H (and ^T for P), whose real
     # parts reduce to var g g' - v g' - g v' with g = Re(X^H Gamma), v = Re(X^H V).
     if trim == 1:
