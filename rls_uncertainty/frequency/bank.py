@@ -188,7 +188,7 @@ class FrequencyBank:
         q = self._columns.shape[1]
         Z, X, W = U[..., 0], U[..., 1:q], U[..., q:]
         if self._cross is None:
-            G = (U.conj().swapaxes(1, 2) @ U).real
+            G: FloatArray = (U.conj().swapaxes(1, 2) @ U).real
             A, b = G[:, 1:, 1:].copy(), G[:, 1:, 0]
             A[self._pad_diagonal] = 1.0  # padded parameters: theta = 0
             solved = self._well_conditioned(A) if N >= 2 else np.zeros(len(self.sizes), dtype=bool)
