@@ -10,7 +10,8 @@ parameters; frequency domain the same without the bias: 2, 3, 2, 5, 3, 3), 50 la
      (estimates and both covariances, Eqs. F4-F10, after an update), and update plus all
      outputs when they are evaluated every sample, every 5 and every 50 samples (``every``; the
      mean per sample over a whole period);
-  3. the evaluation against the number of frequencies (36 to 400);
+  3. update plus outputs every sample, and one evaluation, against the number of frequencies
+     (36 to 400);
   4. the memory of each bank's state;
   5. the whole pipeline (``replay.run_pipeline``: sampling, differentiation, aerodynamics, both
      estimators, convergence, identifiability) per sample used, with ``estimator.method`` time,
@@ -26,7 +27,11 @@ the environment sets them (``OPENBLAS_NUM_THREADS``; printed).
 Run: .venv/bin/python benchmarks/frequency_benchmark.py
      .venv/bin/python benchmarks/frequency_benchmark.py --against OTHER_SRC --rounds 2
 
-``--against`` runs the whole benchmark on this checkout's package and on the one in the source
+``--cpu`` prints only the banks' CPU time (``time.thread_time``, the least over blocks of
+samples: far less disturbed by other load than wall time): the time-domain bank, one evaluation
+at 36 and 400 frequencies, evaluations every 5 samples beside the time domain alone.
+
+``--against`` runs the whole benchmark (or ``--cpu``) on this checkout's package and on the one in the source
 tree OTHER_SRC alternately, each run in its own process (the order alternates between rounds):
 a before/after comparison in one session, on the same machine load.
 """
@@ -165,11 +170,11 @@ def main() -> None:
             med, p99 = frequency_domain(opts, X, z, outputs=True)
             line += f" | every {every:2d}: {med:7.1f}" + (f" (p99 {p99:.0f})" if every == 1 else "")
         print(line)
-    print("3. frequency domain, update + outputs every sample against the number of frequencies:")
+    print("3. frequency domain against the number of frequencies: update + outputs every sample | one evaluation:")
     for K in (36, 100, 200, 400):
         opts = FrequencyOptions(rate_hz=RATE, f_min=0.1, f_max=0.1 + (K - 1) * 0.05, f_step=0.05)
         med, _ = frequency_domain(opts, X, z, outputs=True)
-        print(f"   K = {K:3d}: {med:8.1f} us")
+        print(f"   K = {K:3d}: {med:8.1f} us | {evaluation(opts, X, z):8.1f} us")
     td = EstimatorBank(SIZES, EstimatorOptions(lags=50))
     fd = FrequencyBank([s - 1 for s in SIZES], FrequencyOptions(rate_hz=RATE, f_min=0.2, f_max=2.2))
     for k in range(200):
@@ -210,22 +215,68 @@ def pipeline_costs() -> None:
             print(line + f" | both, every 5 / time: {costs['both, every 5'] / costs['time']:.2f}")
 
 
-def against(other: str, rounds: int) -> None:
+def cpu_costs() -> None:
+    """``--cpu``: the CPU time (``time.thread_time``) of the banks, the least over blocks of
+    samples, which a loaded machine disturbs far less than wall time: the time-domain bank with
+    every output, one frequency-domain evaluation at 36 and 400 frequencies, and the mean per
+    sample with evaluations every 5 samples (36 frequencies) beside the time-domain bank."""
+    X, z = maneuver(WARM + 1000)
+
+    def least(step, blocks: int, size: int) -> float:
+        best = float("inf")
+        for b in range(blocks):
+            t0 = time.thread_time()
+            for k in range(WARM + size * b, WARM + size * (b + 1)):
+                step(k)
+            best = min(best, (time.thread_time() - t0) / size)
+        return best * 1e6
+
+    def outputs(bank: EstimatorBank | FrequencyBank) -> None:
+        bank.theta_all()
+        bank.standard_errors_all("corrected")
+        bank.standard_errors_all("conventional")
+
+    td = EstimatorBank(SIZES, EstimatorOptions(lags=50))
+    for k in range(WARM):
+        td.update(X[k], z[k])
+    t_time = least(lambda k: (td.update(X[k], z[k]), outputs(td)), 10, 100)
+    line = f"CPU us per sample, least over blocks: time domain {t_time:.1f}"
+    for K, blocks, size in ((36, 10, 50), (400, 4, 25)):
+        bank = frequency_bank(FrequencyOptions(rate_hz=RATE, f_min=0.1, f_max=0.1 + (K - 1) * 0.05, f_step=0.05), X, z)
+        best = float("inf")
+        for b in range(blocks):  # the update outside the clock, the evaluation (all outputs) inside
+            spent = 0.0
+            for k in range(WARM + size * b, WARM + size * (b + 1)):
+                bank.update(X[k, :, 1:], z[k])
+                t0 = time.thread_time()
+                outputs(bank)
+                spent += time.thread_time() - t0
+            best = min(best, spent / size)
+        line += f" | one evaluation, {K} frequencies {best * 1e6:.1f}"
+    bank = frequency_bank(FrequencyOptions(rate_hz=RATE, every=5), X, z)
+    f5 = least(lambda k: (bank.update(X[k, :, 1:], z[k]), outputs(bank)), 10, 100)
+    print(line + f" | frequency domain every 5 samples {f5:.1f}, both / time domain alone {(t_time + f5) / t_time:.2f}")
+
+
+def against(other: str, rounds: int, extra: list[str]) -> None:
     """This checkout and ``other`` alternately, each in its own process (module docstring)."""
     trees = [("this checkout", str(Path(__file__).resolve().parents[1])), (other, str(Path(other).resolve()))]
     for r in range(rounds):
         for label, src in trees if r % 2 == 0 else trees[::-1]:
             print(f"== {label} (round {r + 1} of {rounds})", flush=True)
-            subprocess.run([sys.executable, __file__], env={**os.environ, "RLS_BENCH_SRC": src}, check=True)
+            subprocess.run([sys.executable, __file__, *extra], env={**os.environ, "RLS_BENCH_SRC": src}, check=True)
 
 
 if __name__ == "__main__":
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--against", metavar="OTHER_SRC", help="also run the package of this source tree, alternately")
     parser.add_argument("--rounds", type=int, default=2, help="with --against: runs of each tree (default 2)")
+    parser.add_argument("--cpu", action="store_true", help="only the CPU-time figures of the banks (cpu_costs)")
     args = parser.parse_args()
     if args.against:
-        against(args.against, args.rounds)
+        against(args.against, args.rounds, ["--cpu"] if args.cpu else [])
+    elif args.cpu:
+        cpu_costs()
     else:
         main()
         pipeline_costs()

@@ -88,6 +88,8 @@ class FrequencyBank:
         self.repairs = 0
         self._theta: FloatArray = np.full((M, p_max), np.nan)
         self._cov: FloatArray = np.full((2, M, p_max, p_max), np.nan)
+        self._se: FloatArray = np.full((2, M, p_max), np.nan)  # both kinds, published or not
+        self._published_se: FloatArray = np.full((2, M, p_max), np.nan)
         self._R: FloatArray = np.full((M, 1), np.nan)
         self._output_variance: FloatArray = np.full(M, np.nan)
         self._ready: BoolArray = np.zeros(M, dtype=bool)
@@ -165,6 +167,8 @@ class FrequencyBank:
         self._due = False
         self._theta[...] = np.nan
         self._cov[...] = np.nan
+        self._se[...] = np.nan
+        self._published_se[...] = np.nan
         self._R = np.full((len(self.sizes), 1), np.nan)
         self._output_variance[...] = np.nan
         self._ready[...] = False
@@ -184,7 +188,7 @@ class FrequencyBank:
         q = self._columns.shape[1]
         Z, X, W = U[..., 0], U[..., 1:q], U[..., q:]
         if self._cross is None:
-            G = np.einsum("mka,mkb->mab", U.conj(), U).real
+            G: FloatArray = (U.conj().swapaxes(1, 2) @ U).real
             A, b = G[:, 1:, 1:].copy(), G[:, 1:, 0]
             A[self._pad_diagonal] = 1.0  # padded parameters: theta = 0
             solved = self._well_conditioned(A) if N >= 2 else np.zeros(len(self.sizes), dtype=bool)
@@ -193,12 +197,12 @@ class FrequencyBank:
         all_solved = bool(solved.all())
         if not all_solved:
             A[~solved] = np.eye(A.shape[1])
-        A_inv = np.linalg.inv(A)
+        A_inv: FloatArray = np.linalg.inv(A).astype(np.float64, copy=False)
         A_inv[self._pad_square] = 0.0
-        theta = np.einsum("mab,mb->ma", A_inv, b)
+        theta = (A_inv @ b[:, :, None])[:, :, 0]
         # Eq. F5: s^2 = sum_k |Z_k - X_k theta|^2 / (K - p).
-        E = Z - np.einsum("mka,ma->mk", X, theta)
-        s2 = (E.real**2 + E.imag**2).sum(axis=1) / self._residual_dof
+        E = (Z - (X @ theta[:, :, None])[:, :, 0]).view(np.float64)
+        s2 = (E[:, None, :] @ E[:, :, None])[:, 0, 0] / self._residual_dof
         if self._cross is None:
             conventional = s2[:, None, None] * A_inv
             corrected, unusable = self._corrected(X, A_inv, A_inv, theta, N)
@@ -213,6 +217,10 @@ class FrequencyBank:
         rule = solved & (N >= self.publish_at)
         self._withheld = rule & unusable
         self._solved, self._ready = solved, rule & ~unusable
+        # Both kinds' standard errors, and as published, once per evaluation.
+        variances = np.diagonal(self._cov, axis1=2, axis2=3).clip(0.0, None)
+        self._se = np.where(self._real, np.sqrt(variances), np.nan)
+        self._published_se = np.where(self._ready[:, None], self._se, np.nan)
 
     def _trim_count(self) -> int:
         return min(self._lags.n, self.options.trim_samples)
@@ -258,7 +266,7 @@ class FrequencyBank:
         mid = middle(R, X, self._geometry.at(N), self._trim_count())
         mid *= self.options.dt**2
         cov: FloatArray = A_inv @ mid @ right
-        output_variance = np.einsum("ma,mab,mb->m", theta, C0[:, 1:, 1:], theta) / N
+        output_variance = (theta[:, None, :] @ C0[:, 1:, 1:] @ theta[:, :, None])[:, 0, 0] / N
         exact = R[:, 0] <= EXACT_FIT * output_variance
         negative = (np.diagonal(cov, axis1=1, axis2=2) < 0.0).any(axis=1) & ~exact  # padding: 0
         if negative.any():
@@ -313,15 +321,15 @@ class FrequencyBank:
         """Published standard errors ``(M, max(sizes))``, the square roots of the covariance
         diagonals: ``"corrected"`` (Eq. F7) or ``"conventional"`` (Eq. F5); NaN for padding and
         models not :attr:`ready`."""
-        se = self._standard_errors(kind)
-        out: FloatArray = np.where(self._ready[:, None], se, np.nan)
+        index = self._kind(kind)
+        self._evaluate()
+        out: FloatArray = self._published_se[index].copy()
         return out
 
     def _standard_errors(self, kind: str) -> FloatArray:
         index = self._kind(kind)
         self._evaluate()
-        diag = np.diagonal(self._cov[index], axis1=1, axis2=2)
-        se: FloatArray = np.where(self._columns[:, 1:], np.sqrt(np.clip(diag, 0.0, None)), np.nan)
+        se: FloatArray = self._se[index]
         return se
 
     def standard_errors(self, j: int, kind: str = "corrected") -> FloatArray:

@@ -54,12 +54,13 @@ class PairGeometry:
         # 1 / (1 - exp(-j d)) = (1 - j cot(d / 2)) / 2: inv_minus = (J - I)/2 - (j/2) cot-,
         # inv_plus = J/2 - (j/2) cot+ (J all ones), cot-+ = cot((a_k -+ a_l) / 2) (cot- zero on
         # the diagonal). :func:`middle` takes [Re L; Im L] = [[J - I/2, (cot- - cot+)/2],
-        # [-(cot- + cot+)/2, -I/2]] [Re a; Im a].
+        # [-(cot- + cot+)/2, -I/2]] [Re a; Im a]: the two cot blocks are K x K products, the
+        # rest column sums and halves.
         cot_minus = np.zeros((K, K))
         cot_minus[~self.diagonal] = 1.0 / np.tan(minus[~self.diagonal] / 2)
         cot_plus = 1.0 / np.tan((a[:, None] + a[None, :]) / 2)
-        self.left_map: FloatArray = np.block([[np.ones((K, K)) - 0.5 * np.eye(K), 0.5 * (cot_minus - cot_plus)],
-                                              [-0.5 * (cot_minus + cot_plus), -0.5 * np.eye(K)]])
+        self.cot_imag: FloatArray = 0.5 * (cot_minus - cot_plus)  # Im a -> Re L
+        self.cot_real: FloatArray = -0.5 * (cot_minus + cot_plus)  # Re a -> Im L
         self._tables: dict[int, FloatArray] = {}
         self._weights: dict[int, FloatArray] = {}
         self.at(1)
@@ -204,9 +205,9 @@ def middle(R: FloatArray, X: ComplexArray, geometry: PairGeometry, trim: int = 1
 
     ``W = (J - I)/2 - (j/2) cot((a_k - a_l)/2)`` and ``V = J/2 - (j/2) cot((a_k + a_l)/2)``
     (``J`` all ones) give ``F(a, b) = Re(L(a)^H b)`` with ``L(a) = (Q - j P - a)/2 + Re(1' a)``,
-    ``P = (cot- + cot+) Re(a)``, ``Q = (cot- - cot+) Im(a)``: one product of the two fixed real
-    ``K x K`` matrices with the ``2 M p`` columns of ``X`` and ``Y`` (``O(K^2 M p)``), then one
-    contraction over ``3K`` rows per model."""
+    ``P = (cot- + cot+) Re(a)``, ``Q = (cot- - cot+) Im(a)``: one product of each of the two
+    fixed real ``K x K`` matrices with the ``2 M p`` columns of ``X`` and ``Y`` (``O(K^2 M p)``),
+    then one contraction over ``3K`` rows per model."""
     g = geometry
     m, K, p = X.shape
     plus, first = spectral_sums(R, g)
@@ -216,7 +217,13 @@ def middle(R: FloatArray, X: ComplexArray, geometry: PairGeometry, trim: int = 1
     np.multiply(g.rho.conj()[:, None], X, out=XY[:, 1])
     # [Re; Im] of every column of X and Y, (2K, M 2 p), through the fixed (2K, 2K) map.
     columns = XY.view(np.float64).reshape(m, 2, K, p, 2).transpose(4, 2, 0, 1, 3).reshape(2 * K, 2 * m * p)
-    mapped = (g.left_map @ columns).reshape(2, K, m, 2, p).transpose(0, 2, 3, 1, 4)  # (re/im, M, X/Y, K, p)
+    re, im = columns[:K], columns[K:]
+    mapped = np.empty((2 * K, 2 * m * p))
+    np.matmul(g.cot_imag, im, out=mapped[:K])
+    mapped[:K] += re.sum(axis=0) - 0.5 * re
+    np.matmul(g.cot_real, re, out=mapped[K:])
+    mapped[K:] -= 0.5 * im
+    mapped = mapped.reshape(2, K, m, 2, p).transpose(0, 2, 3, 1, 4)  # (re/im, M, X/Y, K, p)
     left = np.empty((m, 3 * K, p), complex)  # L(X), L(Y), X (the diagonal of M)
     left.real[:, : 2 * K].reshape(m, 2, K, p)[...] = mapped[0]
     left.imag[:, : 2 * K].reshape(m, 2, K, p)[...] = mapped[1]
@@ -224,10 +231,12 @@ def middle(R: FloatArray, X: ComplexArray, geometry: PairGeometry, trim: int = 1
     base = r0 + 2.0 * plus  # R(0) + 2 S
     right = np.empty((m, 3 * K, p), complex)  # bX, -bY, (N s - 2 Re S1) X
     np.multiply(base.conj()[:, :, None], X, out=right[:, :K])
-    np.multiply(base[:, :, None], XY[:, 1], out=right[:, K : 2 * K])
-    np.negative(right[:, K : 2 * K], out=right[:, K : 2 * K])
+    np.multiply(-base[:, :, None], XY[:, 1], out=right[:, K : 2 * K])
     np.multiply((g.N * base.real - 2.0 * first.real)[:, :, None], X, out=right[:, 2 * K :])
-    mid = 0.5 * (left.conj().swapaxes(1, 2) @ right).real
+    # Re(left^H right) = Re' Re + Im' Im: one real product of the interleaved views.
+    both = left.view(np.float64).swapaxes(1, 2) @ right.view(np.float64)  # (M, 2p, 2p)
+    mid = both[:, 0::2, 0::2] + both[:, 1::2, 1::2]
+    mid *= 0.5
     # The trim subtracted: var Gamma Gamma^H - V Gamma^H - Gamma V^H (and ^T for P), whose real
     # parts reduce to var g g' - v g' - g v' with g = Re(X^H Gamma), v = Re(X^H V).
     if trim == 1:

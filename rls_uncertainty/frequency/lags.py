@@ -100,7 +100,7 @@ def pseudo_inverse(B: FloatArray, columns: npt.NDArray[np.bool_]) -> FloatArray:
     scale = s[:, :, None] * s[:, None, :]
     w, u = np.linalg.eigh(B * scale)
     magnitude = np.abs(w)
-    inverse = np.divide(1.0, w, where=magnitude > 1e-12 * magnitude.max(axis=1, keepdims=True), out=np.zeros_like(w))
+    inverse = 1.0 / np.where(magnitude > 1e-12 * magnitude.max(axis=1, keepdims=True), w, np.inf)  # cut: 0
     out: FloatArray = (u * inverse[:, None, :]) @ u.swapaxes(1, 2)
     out *= scale
     return out
@@ -130,44 +130,58 @@ def dof_correction(
     covariance; the bias (the mean, orthogonal to the centered regressors) is the same with
     ``T1(j) = max(N - |j|, 0) / N`` and ``var(R) = sum_(|l|<=L) (N - |l|) R(l) / N^2``.
     The centered sums are never formed: ``C^x_j = E_x Sa_j E_x'`` (``E_x`` the regressor rows of
-    :func:`centering`), so ``T``, the traces and ``sum_l R(l) C^x_l`` are each one product with
-    the augmented sums; the cross terms are one contraction with strided windows of ``T + T1``."""
+    :func:`centering`), so ``T``, the traces and ``sum_l R(l) Sa_l`` are each one product with
+    the augmented sums (the fit's covariance enters as ``E_x' B^+ E_x``, formed once); the cross
+    terms are one contraction with strided windows of ``T + T1``."""
     M, lags, q1 = augmented.shape[:3]
     L = lags - 1
     flat = augmented.reshape(M, lags, q1 * q1)
     Ex = E[:, 1:]
-    ExT = Ex.swapaxes(1, 2)
+    # tr(K C^x_j) = Sa_j . (Ex' K' Ex); for K = B^+ (Ex Y Ex') B^+ with Y symmetric in the
+    # augmented coordinates that is Sa_j . (Bt Y Bt), Bt = Ex' B^+' Ex, formed once.
+    Bt = Ex.swapaxes(1, 2) @ B_inv.swapaxes(1, 2) @ Ex
 
-    def traces(K: FloatArray) -> FloatArray:
-        """``tr(K C^x_j)`` for every lag ``j``, ``(M, lags)``."""
-        out: FloatArray = (flat @ (ExT @ K.swapaxes(1, 2) @ Ex).reshape(M, q1 * q1, 1))[:, :, 0]
+    def traces(Y: FloatArray) -> FloatArray:
+        """``Sa_j . Y`` for every lag ``j``, ``(M, lags)``."""
+        out: FloatArray = (flat @ Y.reshape(M, q1 * q1, 1))[:, :, 0]
         return out
 
     # T(j) + T1(j) at index j + 2L, j = -2L..2L: row i of the cross term's matrix, f(l - i) for
     # l = -L..L, is the window starting at L - i (a strided view, never formed: O(M L) memory).
     shifted = np.zeros((M, 4 * L + 1))
-    T = traces(B_inv)
+    T = traces(Bt)  # tr(B^+ C^x_j)
     shifted[:, 2 * L : 3 * L + 1] = T
     shifted[:, L : 2 * L + 1] = T[:, ::-1]
-    shifted += np.maximum(N - np.abs(np.arange(-2 * L, 2 * L + 1)), 0) / N
+    shifted += np.maximum(N - _distances(L), 0) / N
     step = shifted.strides
-    windows = np.lib.stride_tricks.as_strided(shifted[:, L:], (M, lags, 2 * L + 1), (step[0], -step[1], step[1]))
+    windows = np.ndarray((M, lags, 2 * L + 1), np.float64, shifted, L * step[1], (step[0], -step[1], step[1]))
     # (N - i) var(R), var(R) = sum_(|l|<=L) (N - |l|) R(l) / N^2.
     count = N - np.arange(lags, dtype=np.float64)
     weight = (N - np.abs(np.arange(-L, L + 1))) / N**2
-    first = Ex @ augmented[:, 0] @ ExT  # C^x_0
+    first = augmented[:, 0]
 
     def apply(R: FloatArray) -> FloatArray:
-        summed = Ex @ (R[:, None, :] @ flat).reshape(M, q1, q1) @ ExT  # sum_l R(l) C^x_l
-        middle = summed + summed.swapaxes(1, 2) - R[:, :1, None] * first
+        summed = (R[:, None, :] @ flat).reshape(M, q1, q1)  # sum_l R(l) Sa_l
+        middle = summed + summed.swapaxes(1, 2) - R[:, :1, None] * first  # Ex middle Ex' is cov(R)'s middle
         two_sided = np.concatenate([R[:, :0:-1], R], axis=1)  # R(|l|), l = -L..L
         out: FloatArray = 2.0 * np.einsum("mil,ml->mi", windows, two_sided)
         out -= count * (two_sided @ weight)[:, None]
-        out -= traces(B_inv @ middle @ B_inv)
+        out -= traces(Bt @ middle @ Bt)
         out /= N
         return out
 
     return apply
+
+
+_DISTANCES: dict[int, FloatArray] = {}
+
+
+def _distances(L: int) -> FloatArray:
+    """``|j|`` for ``j = -2L..2L`` (kept per ``L``)."""
+    out = _DISTANCES.get(L)
+    if out is None:
+        out = _DISTANCES[L] = np.abs(np.arange(-2 * L, 2 * L + 1, dtype=np.float64))
+    return out
 
 
 def residual_autocovariance(
