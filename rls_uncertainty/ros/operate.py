@@ -113,12 +113,17 @@ class _Session:
         self.context.try_shutdown()
 
 
+def _on_graph(node: Node, node_name: str) -> int:
+    """How many nodes the ROS graph lists under ``node_name``."""
+    key = split_node_name(node_name)[::-1]  # (name, namespace), as the graph lists nodes
+    return sum(1 for n in node.get_node_names_and_namespaces() if tuple(n) == key)
+
+
 class _Namesakes:
     """How many nodes carry ``node_name`` (module docstring, step 1), as seen so far."""
 
     def __init__(self, session: _Session, node_name: str, service: str) -> None:
         self.node, self.node_name, self.service = session.node, node_name, service
-        self.key = split_node_name(node_name)[::-1]  # (name, namespace), as the graph lists nodes
         self.reported = 0  # nodes_with_this_name of the newest report; 0: none yet
         self.node.create_subscription(DiagnosticArray, "/diagnostics", self._on_diagnostics, 50)
 
@@ -132,8 +137,7 @@ class _Namesakes:
         return self.node.count_services(self.service)
 
     def expected(self) -> int:
-        graph = sum(1 for key in self.node.get_node_names_and_namespaces() if tuple(key) == self.key)
-        return max(self.reported, graph, self.servers(), 1)
+        return max(self.reported, _on_graph(self.node, self.node_name), self.servers(), 1)
 
 
 def _spin_until(session: _Session, condition: Callable[[], bool], deadline: float) -> bool:
@@ -317,8 +321,7 @@ class _Discovery:
     after a first burst), then ``--timeout`` from the match, as ``call`` counts it."""
 
     def __init__(self, node: Node, subscription: Subscription, node_name: str, timeout: float) -> None:
-        self._node, self._subscription = node, subscription
-        self._key = split_node_name(node_name)[::-1]  # (name, namespace), as the graph lists nodes
+        self._node, self._subscription, self._node_name = node, subscription, node_name
         self._timeout = timeout
         self._since = time.monotonic()
         self._limit = max(timeout, DISCOVERY_S)
@@ -326,7 +329,7 @@ class _Discovery:
     def expired(self, now: float) -> float | None:
         """The seconds waited in vain, or None while the wait goes on."""
         if self._limit > self._timeout and self._subscription.get_publisher_count() > 0 and \
-                any(tuple(n) == self._key for n in self._node.get_node_names_and_namespaces()):
+                _on_graph(self._node, self._node_name):
             self._since, self._limit = now, self._timeout  # discovered: the report has --timeout
         return now - self._since if now - self._since > self._limit else None
 
@@ -350,9 +353,7 @@ def _sigterm_interrupts() -> Iterator[None]:
 
 
 def _gone_line(node: Node, node_name: str, silent_s: float) -> str:
-    key = split_node_name(node_name)[::-1]  # (name, namespace), as the graph lists nodes
-    on_graph = any(tuple(n) == key for n in node.get_node_names_and_namespaces())
-    where_now = "still on the ROS graph: busy, or its reports do not reach here" if on_graph else \
+    where_now = "still on the ROS graph: busy, or its reports do not reach here" if _on_graph(node, node_name) else \
         "no longer on the ROS graph"
     return (f"{time.strftime('%H:%M:%S')}  {node_name}: no report for {silent_s:.0f} s ({where_now}); waiting for it "
             "to come back (Ctrl-C to stop)")
