@@ -140,6 +140,37 @@ def test_a_stopped_replay_ends_in_one_line_leaving_no_output(tmp_path, sig):
         _kill_group(proc)
 
 
+# A child that sends itself SIGINT when the import system first looks for MODULE: Ctrl-C
+# arriving while the command still loads its modules (or, for the parser's flags module,
+# while it builds its command line).
+_INTERRUPT_AT_IMPORT = """
+import os, signal, sys
+class Trip:
+    def find_spec(self, name, path=None, target=None):
+        if name == {module!r}:
+            os.kill(os.getpid(), signal.SIGINT)
+        return None
+sys.meta_path.insert(0, Trip())
+from rls_uncertainty.cli import {entry}
+sys.exit({entry}({args}))
+"""
+
+
+@pytest.mark.parametrize(("module", "entry", "args", "program"), [
+    ("rls_uncertainty.cli.commands", "main", "['replay', {bag!r}, '--out', {out!r}]", "rls-uncertainty"),
+    ("rls_uncertainty.cli.flags", "main", "['replay', {bag!r}, '--out', {out!r}]", "rls-uncertainty"),
+    ("rls_uncertainty.cli.commands", "estimator_node", "", "estimator_node"),
+])
+def test_ctrl_c_while_the_command_starts_is_one_line_and_writes_nothing(tmp_path, module, entry, args, program):
+    out = tmp_path / "out"
+    code = _INTERRUPT_AT_IMPORT.format(module=module, entry=entry, args=args.format(bag=str(BUNDLED), out=str(out)))
+    proc = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, capture_output=True, text=True,
+                          timeout=DEADLINE)
+    assert (proc.returncode, proc.stdout) == (130, "")
+    assert proc.stderr == f"{program}: stopped by SIGINT while starting; nothing written\n"
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_a_killed_campaign_takes_its_workers_with_it_and_the_next_run_removes_its_partial(tmp_path, many):
     out = tmp_path / "out"
     proc = _start(_campaign(many, out, "--workers", "2"), tmp_path)

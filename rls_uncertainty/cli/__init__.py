@@ -11,138 +11,58 @@ commands without ROS SIGTERM and SIGHUP too, unwind the command as an exception 
 worker processes ended, its unfinished output directory removed, :mod:`..files`) and end it
 with one line and exit status 128 + the signal's number (130 for Ctrl-C, 143 for SIGTERM). The
 ROS commands handle their signals themselves (the node and rclpy, the dashboard's loop).
+Ctrl-C while a command is still starting (loading its modules, about a second, or parsing its
+command line) ends it the same way, in one line, before it has written anything.
+
+This module is kept light so that it can catch that: :mod:`.commands` holds the commands.
 """
 
 from __future__ import annotations
 
-import argparse
-import os
+import importlib
 import signal
 import sys
-import threading
-from collections.abc import Iterator
-from contextlib import contextmanager
-from types import FrameType
-from typing import NoReturn
-from xml.etree import ElementTree
-
-from ..errors import MissingExtra, RlsUncertaintyError
-from ..extras import optional
-from .bags import add_convert, add_make_bag
-from .offline import add_campaign, add_predict, add_replay
-from .ros import add_demo, add_operator_commands, add_play
-from .simulation import add_montecarlo, add_multisine, add_simulate
+from typing import Any
 
 __all__ = ["main", "build_parser", "estimator_node"]
 
-_SUBCOMMANDS = (add_demo, add_simulate, add_montecarlo, add_multisine, add_make_bag, add_convert, add_replay,
-                add_campaign, add_predict, add_play, add_operator_commands)
-# The commands that handle their signals themselves (rclpy's handlers, the dashboard's loop).
-_OWN_SIGNALS = frozenset({"demo", "play", "dashboard", "status", "enable", "disable", "reset"})
+_COMMAND_MODULES = frozenset({"bags", "commands", "flags", "offline", "ros", "simulation"})
 
 
-class Stopped(KeyboardInterrupt):
-    """A stopping signal (SIGINT, SIGTERM, SIGHUP), raised in the main thread where it arrived,
-    so that the command unwinds as for Ctrl-C. (Not KeyboardInterrupt itself for SIGINT: a
-    Ctrl-C that reached a replay as it started, handled here, still made the interpreter end
-    the process by SIGINT at exit instead of the status returned; CPython marks an unhandled
-    interrupt by the exception's exact type, so a subclass is never marked.)"""
-
-    def __init__(self, signum: int) -> None:
-        super().__init__(signal.Signals(signum).name)
-        self.signum = signum
-
-
-def _stop(signum: int, _frame: FrameType | None) -> None:
-    raise Stopped(signum)
-
-
-@contextmanager
-def _stopping_signals(command: str) -> Iterator[None]:
-    """While the command runs, SIGINT, SIGTERM and SIGHUP raise :class:`Stopped`; a signal the
-    process was started ignoring (``nohup``, a background job) stays ignored, and the handlers
-    before are put back after (``main`` called from a program)."""
-    before = {}
-    if command not in _OWN_SIGNALS and threading.current_thread() is threading.main_thread():
-        for signum, usual in ((signal.SIGINT, signal.default_int_handler), (signal.SIGTERM, signal.SIG_DFL),
-                              (signal.SIGHUP, signal.SIG_DFL)):
-            if signal.getsignal(signum) is usual:
-                before[signum] = signal.signal(signum, _stop)
-    try:
-        yield
-    finally:
-        for signum, handler in before.items():
-            signal.signal(signum, handler)
-
-
-class _Parser(argparse.ArgumentParser):
-    """Usage errors in one line, like every other error of the command (exit status 2)."""
-
-    def error(self, message: str) -> NoReturn:
-        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
-
-
-def _version() -> str:
-    """The installed package's version, which setup.py reads from package.xml (the one place it
-    is written); from package.xml itself in a source tree that was never installed."""
-    from importlib.metadata import PackageNotFoundError, version
-
-    try:
-        return version("rls_uncertainty")
-    except PackageNotFoundError:
-        from ..settings.models import package_path
-
-        return ElementTree.parse(package_path("package.xml")).getroot().findtext("version", "unknown")
-
-
-def build_parser() -> argparse.ArgumentParser:
-    parser = _Parser(
-        prog="rls-uncertainty",
-        description="Recursive least squares with colored-residual parameter uncertainty.",
-    )
-    parser.add_argument("--version", action="version", version=f"%(prog)s {_version()}")
-    sub = parser.add_subparsers(dest="command", required=True)
-    for add in _SUBCOMMANDS:
-        add(sub)
-    return parser
+def _stopped_while_starting(program: str) -> int:
+    print(f"{program}: stopped by SIGINT while starting; nothing written", file=sys.stderr)
+    return 128 + int(signal.SIGINT)
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = build_parser()
-    args = parser.parse_args(argv)
+    """``rls-uncertainty ARGV`` (:func:`.commands.run`); its exit status."""
     try:
-        with _stopping_signals(args.command):
-            code = int(args.func(args) or 0)
-        sys.stdout.flush()  # here, so that a reader gone (below) is seen here
-        return code
-    except BrokenPipeError:
-        # Whatever read the output stopped reading (`| head`): the command's files are
-        # written; nothing more to say, and nothing more can be printed. Python's own exit
-        # flush must not fail again on the closed pipe.
-        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
-        return 1
-    except (RlsUncertaintyError, OSError) as exc:
-        # The package's own errors and file-system problems are the user's to fix; anything
-        # else is a bug and shows its traceback. One line, whatever the message holds.
-        message = " ".join(str(exc).split())
-        print(f"rls-uncertainty {args.command}: error: {message}", file=sys.stderr)
-        return 2
-    except KeyboardInterrupt as exc:
-        # Ctrl-C or a stopping signal: everything in the way unwound (workers ended, unfinished
-        # outputs removed); one line, and the status a shell gives a command a signal ended.
-        signum = exc.signum if isinstance(exc, Stopped) else signal.SIGINT
-        removed = "" if args.command in _OWN_SIGNALS else "; its unfinished output removed"
-        print(f"rls-uncertainty {args.command}: stopped by {signal.Signals(signum).name}{removed}", file=sys.stderr)
-        return 128 + int(signum)
+        from .commands import parse, run
+
+        args = parse(argv)
+    except KeyboardInterrupt:
+        return _stopped_while_starting("rls-uncertainty")
+    return run(args)
 
 
 def estimator_node() -> int:
     """The console script ``estimator_node``: :func:`..ros.node.main`, or one line naming the
     extra to install when the ROS stack is missing (exit status 2)."""
     try:
-        with optional("ros"):
-            from ..ros.node import main as node_main
-    except MissingExtra as exc:
-        print(f"estimator_node: error: {exc}", file=sys.stderr)
-        return 2
-    return node_main()
+        from .commands import load_estimator_node
+
+        node_main = load_estimator_node()
+    except KeyboardInterrupt:
+        return _stopped_while_starting("estimator_node")
+    return 2 if node_main is None else node_main()
+
+
+def __getattr__(name: str) -> Any:
+    """``build_parser`` and the command modules (``cli.offline``, ...), loaded when first used."""
+    if name == "build_parser":
+        from .commands import build_parser
+
+        return build_parser
+    if name in _COMMAND_MODULES:
+        return importlib.import_module(f".{name}", __name__)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -120,6 +120,9 @@ def _campaign(args: argparse.Namespace) -> int:
                                 **option_values(args, CampaignSettings))
     inputs = [_yaml_file(args.config, config_dir())] if args.config else []
     source = settings.config.maneuvers.source
+    if args.maneuvers and source != "off":  # (two ways of cutting: neither may silently win)
+        raise ConfigError(f"--maneuvers FILE and maneuvers.source {source} both cut the recording into maneuvers: "
+                          "give one (maneuvers.source off to cut it by FILE)")
     if not args.maneuvers and source != "off":
         if len(args.inputs) != 1:  # (each bag would be one maneuver, the setting silently unused)
             raise ConfigError(f"maneuvers.source {source} cuts one recording into maneuvers; got {len(args.inputs)} "
