@@ -324,6 +324,20 @@ def test_campaign_of_a_recording_counts_the_refused_events_and_refuses_one_witho
     assert not (tmp_path / "r").exists()
 
 
+def test_campaign_refuses_a_maneuvers_file_beside_maneuvers_source(tmp_path, capsys):
+    # Two ways of cutting the one recording: the file used to win silently.
+    cfg = tmp_path / "events.yaml"
+    cfg.write_text(CONFIG.read_text().replace("    aircraft: t2", "    maneuvers:\n      source: events\n    aircraft: t2", 1))
+    spans = tmp_path / "m.yaml"
+    spans.write_text("maneuvers:\n  - {name: a, start: 0.0, end: 5.0}\n")
+    assert cli.main(["campaign", str(BAG), "--maneuvers", str(spans), "--config", str(cfg), "--out", str(tmp_path / "c"),
+                     "--quiet", "--no-figures"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1, err
+    assert "--maneuvers FILE and maneuvers.source events both cut the recording" in err
+    assert "maneuvers.source off to cut it by FILE" in err and not (tmp_path / "c").exists()
+
+
 def test_campaign_refuses_maneuvers_source_with_several_recordings(tmp_path, capsys):
     # Each bag would be one maneuver and maneuvers.source silently unused.
     cfg = tmp_path / "detect.yaml"
