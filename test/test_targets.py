@@ -109,10 +109,17 @@ def test_reset_forgets_the_history() -> None:
     assert math.isnan(tracker.progress[0].time_left)
 
 
-@pytest.mark.parametrize("entry", ["Cm_q", "Cm_q=", "=5", "Cm_q=-1", "Cm_q=nan", "Cm_q=x"])
+@pytest.mark.parametrize("entry", ["Cm_q", "Cm_q=", "=5", "Cm_q=-1", "Cm_q=nan", "Cm_q=x", "Cm_q=inf", "Cm_q=1_0",
+                                   "Cm_q=\uff11\uff10", "Cm_q=\u0661", "Cm_q=0x10"])
 def test_bad_target_entries_are_refused(entry: str) -> None:
     with pytest.raises(ConfigError, match=r"targets\.percent"):
         TargetOptions(targets=(entry,))
+
+
+@pytest.mark.parametrize(("entry", "percent"), [("Cm_q=10", 10.0), (" Cm_q = 2.5 ", 2.5), ("Cm_q=.5", 0.5),
+                                                 ("Cm_q=1e1", 10.0), ("Cm_q=+3.", 3.0)])
+def test_decimal_targets_are_taken(entry: str, percent: float) -> None:
+    assert TargetOptions(targets=(entry,)).percent() == {"Cm_q": percent}
 
 
 def test_twice_and_unknown_names_and_bad_window_are_refused() -> None:

@@ -42,6 +42,7 @@ each sample's time, estimates, standard errors and flags when targets are set, a
 from __future__ import annotations
 
 import math
+import re
 from collections import deque
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
@@ -57,6 +58,8 @@ __all__ = ["TargetOptions", "ParameterProgress", "Verdict", "TargetTracker", "ti
 
 DONE, NEEDS_MORE, NOT_IDENTIFIABLE = "done", "needs more", "not identifiable"
 NO_HISTORY = "no history yet to measure the rate of information"
+
+_DECIMAL = re.compile(r"[+-]?(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?", re.ASCII)
 
 
 @dataclass(frozen=True)
@@ -94,10 +97,9 @@ class TargetOptions:
         for entry in (e for e in self.targets.split(",") if e.strip()):
             name, sep, value = entry.partition("=")
             name = name.strip()
-            try:
-                percent = float(value)
-            except ValueError:
-                percent = math.nan
+            # A plain decimal number only: Python's float() would also take "1_0" and other
+            # scripts' digits, which a flight-test card never means.
+            percent = float(value) if _DECIMAL.fullmatch(value.strip()) else math.nan
             if not sep or not name or not (math.isfinite(percent) and percent > 0):
                 raise ConfigError(f"targets.percent {entry!r}: give NAME=PERCENT with a percent > 0 (e.g. Cm_q=10)",
                                   parameter="targets.percent")
