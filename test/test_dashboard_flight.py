@@ -132,6 +132,15 @@ def test_mid_flight_the_pages_table_4_is_the_one_of_the_replays_maneuvers_csv(tm
         assert browser.text_content("#verdict") == verdict
         _shot_of(browser, "#flight", tmp_path, "dashboard_flight_table4.png")
         _shot_of(browser, "#testpoint", tmp_path, "dashboard_flight_testpoint.png")
+        # Between test points (the same history with none running) the estimator runs over trim:
+        # the card gives the last test point's verdict at its end instead of targets; before the
+        # first test point it waits.
+        browser.evaluate("() => drawFlight({...window.rlsFlight.message, active: null})")
+        assert browser.text_content("#verdict") == \
+            f"between test points: the last, {names[3]}, ended {recorded[names[3]]}"
+        assert browser.evaluate("() => document.querySelectorAll('#targets tbody tr').length") == 0
+        browser.evaluate("() => drawFlight({...window.rlsFlight.message, active: null, maneuvers: [], table4: []})")
+        assert browser.text_content("#verdict") == "waiting for the first test point"
     finally:
         dashboard.stop()
 

@@ -158,13 +158,26 @@ function drawFlight(msg) {
   const figs = document.getElementById("fig12");
   figs.textContent = "";
   for (const r of msg.table4) figs.append(figure12(msg, r));
+  if (flight.health !== undefined) drawTargets(flight.health); // a maneuver started or ended
 }
 
 // The current test point from the node's /diagnostics: per parameter with a target its percent
 // error and the time left at the present rate of information (target.<p>), and the verdict.
+// With maneuvers, outside a test point the estimator runs over trim: its targets mean nothing
+// then, and the card gives the last test point's verdict at its end instead.
 function drawTargets(health) {
+  flight.health = health;
   const body = document.querySelector("#targets tbody");
   body.textContent = "";
+  const v = document.getElementById("verdict");
+  const msg = flight.message;
+  if (msg && !msg.active) {
+    const last = msg.maneuvers[msg.maneuvers.length - 1];
+    v.textContent = last ? `between test points: the last, ${last.name}, ended ${last.verdict || "without targets"}`
+      : "waiting for the first test point";
+    v.dataset.verdict = "between";
+    return;
+  }
   let verdict = "";
   for (const values of Object.values((health && health.models) || {})) {
     if (values.verdict && !verdict) verdict = values.verdict;
@@ -180,7 +193,6 @@ function drawTargets(health) {
       body.append(tr);
     }
   }
-  const v = document.getElementById("verdict");
   v.textContent = verdict || "no targets (targets.percent) set";
   v.dataset.verdict = verdict.split(" (")[0];
 }
