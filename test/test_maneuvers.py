@@ -191,6 +191,53 @@ def test_each_maneuver_is_a_fresh_estimator_over_its_own_samples(tmp_path):
     assert (rec.start_ns, rec.end_ns) == (newest, last.stamp_ns)
 
 
+def test_with_both_methods_each_maneuver_has_its_frequency_domain_rows(tmp_path):
+    """estimator.method both: after each time-domain row the parameter's frequency-domain row (the
+    bias has none), its values those of the newest sample before the end whose frequency-domain
+    results were ready, checked against a pipeline reset by hand at the start's place in the
+    stream; and the replay's, the campaign's and the node's way agree on them."""
+    extra = {"maneuvers.source": "events", "estimator.method": "both"}
+    config = pipeline_config(params(**extra))
+    start, stop = 6 * S + 1_300_000, int(11.5 * S) + 1_300_000
+    bag = events_bag(tmp_path, [(start, "pB", "start"), (stop, "pB", "stop")])
+    tracker = live_history(bag, config)
+    (rec,) = tracker.history
+    messages, _ = read_inputs(bag)
+    pipe = Pipeline(config)
+    last, reset = None, False
+    for kind, stamp, msg in messages:
+        if stamp >= T0 + start and not reset:
+            pipe.reset("by_hand", clear_inputs=False)
+            reset = True
+        if stamp > T0 + stop:
+            break
+        for out in feed(pipe, kind, msg):
+            if out.frequency is not None and out.frequency.ready.all():
+                last = out
+    assert last is not None
+    methods = [(r.parameter, r.method) for r in rec.rows]
+    want = [(p, m) for j, names in enumerate(pipe.parameter_names) for p in names
+            for m in ("time", "frequency") if m == "time" or p in pipe.models[j].frequency_parameter_names]
+    assert methods == want and sum(m == "frequency" for _p, m in methods) == 5
+    f = last.frequency
+    expected = {p: (f.theta[j, k], f.se[j, k], f.se_conventional[j, k])
+                for j, m in enumerate(pipe.models) for k, p in enumerate(m.frequency_parameter_names)}
+    for r in rec.rows:
+        if r.method == "frequency":
+            assert r.status == "ok" and (r.estimate, r.se_corrected, r.se_conventional) == expected[r.parameter]
+            assert math.isnan(r.se_corrected_all) and math.isnan(r.r_squared)
+    cfg = tmp_path / "both.yaml"
+    cfg.write_text(CONFIG.read_text().replace("    aircraft: t2", "    maneuvers:\n      source: events\n    aircraft: t2", 1))
+    assert cli.main(["replay", str(bag), "--config", str(cfg), "--method", "both", "--out", str(tmp_path / "r"),
+                     "--quiet", "--no-figures"]) == 0
+    assert cli.main(["campaign", str(bag), "--config", str(cfg), "--method", "both", "--out", str(tmp_path / "c"),
+                     "--quiet", "--no-figures"]) == 0
+    replayed = rows_of(tmp_path / "r" / "maneuvers.csv")
+    assert replayed == rows_of(tmp_path / "c" / "maneuvers.csv")
+    freq = [r for r in replayed if r["method"] == "frequency"]
+    assert [float(r["estimate"]) for r in freq] == [r.estimate for r in rec.rows if r.method == "frequency"]
+
+
 # ---------------------------------------------------------------------------- the three paths agree
 def test_replay_campaign_and_live_history_give_the_same_rows(tmp_path):
     bag = events_bag(tmp_path)

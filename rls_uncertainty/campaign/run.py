@@ -35,7 +35,6 @@ from collections.abc import Iterable, Iterator, Mapping
 from dataclasses import dataclass, field, replace
 from typing import Any
 
-from ..aero.models import ModelConfig
 from ..datapath.config import PipelineConfig
 from ..datapath.feasibility import record_checks
 from ..datapath.inputs import Stamped
@@ -98,18 +97,11 @@ class _TimedStream:
             self.seconds += time.perf_counter() - t0
 
 
-def _methods(config: PipelineConfig, model: ModelConfig, parameter: str) -> list[str]:
-    """The methods with a row for ``parameter`` of ``model``: those published, the frequency
-    domain but for the bias."""
-    return [m for m in config.published_methods
-            if m == "time" or parameter in model.frequency_parameter_names]
-
-
 def failed_result(maneuver: str, config: PipelineConfig, status: str) -> ManeuverResult:
     """Rows of a maneuver that produced nothing: every parameter and method with ``status``."""
     nan = math.nan
     rows = tuple(ParameterResult(maneuver, m.output, p, nan, nan, nan, nan, 0, nan, status, method)
-                 for m in config.models for p in m.parameter_names for method in _methods(config, m, p))
+                 for m in config.models for p in m.parameter_names for method in config.row_methods(m, p))
     return ManeuverResult(maneuver, rows)
 
 
@@ -161,7 +153,7 @@ def _rows(name: str, result: ReplayResult, bank_all: EstimatorBank | None) -> tu
         samples = int(fit.get("samples", 0))
         r2 = float(fit.get("r_squared", math.nan))
         for i, p in enumerate(pipe.parameter_names[j]):
-            for method in _methods(pipe.config, m, p):
+            for method in pipe.config.row_methods(m, p):
                 if method == "frequency":
                     rows.append(_frequency_row(name, result, m.output, p, freq_samples))
                     continue

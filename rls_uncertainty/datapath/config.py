@@ -267,6 +267,11 @@ class PipelineConfig:
         """The estimates ``estimator.method`` publishes: ``("time",)``, ``("frequency",)`` or both."""
         return ("time",) * self.publishes_time + ("frequency",) * (self.frequency is not None)
 
+    def row_methods(self, model: ModelConfig, parameter: str) -> list[str]:
+        """The methods with a result row for ``parameter`` of ``model`` (``maneuvers.csv``): those
+        published, the frequency domain but for the bias."""
+        return [m for m in self.published_methods if m == "time" or parameter in model.frequency_parameter_names]
+
     @property
     def period_ns(self) -> int:
         return int(round(1e9 / self.rate))

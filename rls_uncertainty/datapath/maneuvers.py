@@ -31,7 +31,9 @@ rows kept (``record``) the corrected one with all lags (Eq. 20), the state and i
 point's verdict (:mod:`.targets`; all three at the end's declaration), the fitted models with
 their covariances for ``models.json`` (:mod:`.fitted`, the estimator's state at the end's
 declaration: under ``detect`` it has taken the trim samples up to the declaration too), and
-the maneuver's start, end and duration (the boundaries' stamps). The
+the maneuver's start, end and duration (the boundaries' stamps). With the frequency domain
+published (``estimator.method`` ``frequency`` or ``both``) each parameter's frequency-domain row
+follows its time-domain one: the newest frequency-domain results ready before the end. The
 rows have the campaign's columns (:data:`MANEUVER_COLUMNS`); a maneuver shorter than
 ``min_span`` has every row ``too_short`` as in a campaign. The history keeps the newest
 ``maneuvers.history`` maneuvers (a ring: the oldest is dropped, and counted), so memory is
@@ -150,6 +152,8 @@ class _Open:
     name: str
     start_ns: int
     last: list[Any] = field(default_factory=list)  # per model: its newest ready SampleOutput
+    # per model: its newest SampleOutput whose frequency-domain results are ready
+    last_frequency: list[Any] = field(default_factory=list)
 
 
 class ManeuverTracker:
@@ -204,7 +208,7 @@ class ManeuverTracker:
                 return self.reject("start_twice")
             self.pipe.reset("maneuver_start", clear_inputs=False)
             self._recent.clear()
-            self.active = _Open(b.name, b.stamp_ns, [None] * len(self.pipe.sizes))
+            self.active = _Open(b.name, b.stamp_ns, [None] * len(self.pipe.sizes), [None] * len(self.pipe.sizes))
             return None
         if active is None:
             return self.reject("stop_without_start")
@@ -233,6 +237,7 @@ class ManeuverTracker:
         self.pipe = pipe
         if self.active is not None:
             self.active.last = [None] * len(pipe.sizes)
+            self.active.last_frequency = [None] * len(pipe.sizes)
 
     # ------------------------------------------------------------------ samples in
     def sample(self, out: SampleOutput) -> None:
@@ -242,6 +247,9 @@ class ManeuverTracker:
             return
         for j in np.flatnonzero(out.ready).tolist():
             active.last[j] = out
+        if out.frequency is not None:
+            for j in np.flatnonzero(out.frequency.ready).tolist():
+                active.last_frequency[j] = out
         self._recent.append(out)
 
     # ------------------------------------------------------------------ the record
@@ -270,6 +278,8 @@ class ManeuverTracker:
             return
         for j in range(len(active.last)):
             active.last[j] = next((o for o in reversed(recent) if o.stamp_ns <= end_ns and o.ready[j]), None)
+            active.last_frequency[j] = next((o for o in reversed(recent) if o.stamp_ns <= end_ns
+                                             and o.frequency is not None and o.frequency.ready[j]), None)
         recent.clear()
 
     def _all_lags(self, end_ns: int) -> tuple[np.ndarray | None, int | None]:
@@ -284,8 +294,13 @@ class ManeuverTracker:
         return se, rows[-1][0]
 
     def _rows(self, active: _Open, end_ns: int) -> list[ParameterResult]:
+        """Per model and parameter its time-domain row, then its frequency-domain one (the
+        methods ``estimator.method`` publishes, :meth:`.config.PipelineConfig.row_methods`)."""
         pipe = self.pipe
         states = {s.parameter: s for s in parameter_states(pipe, pipe.last)}
+        frequency = pipe.config.frequency is not None
+        f_states = {s.parameter: s for s in parameter_states(pipe, pipe.last, "frequency")} if frequency else {}
+        f_samples = pipe.frequency.bank.evaluated_at if pipe.frequency is not None else 0
         se_all, last_row = self._all_lags(end_ns)
         nan = math.nan
         rows = []
@@ -294,17 +309,37 @@ class ManeuverTracker:
             samples, r2 = int(fit.get("samples", 0)), float(fit.get("r_squared", nan))
             out = active.last[j]
             for i, p in enumerate(pipe.parameter_names[j]):
-                s = states.get(p)
-                st, why = ("", "") if s is None else (s.state, s.reason)
-                if out is None:
-                    rows.append(ParameterResult(active.name, m.output, p, nan, nan, nan, nan, samples, r2,
-                                            "no estimate: its model never became ready", "time", st, why))
-                    continue
-                s_all = float(se_all[j, i]) if se_all is not None and out.stamp_ns == last_row else nan
-                rows.append(ParameterResult(active.name, m.output, p, float(out.theta[j, i]),
-                                        float(out.se_conventional[j, i]), float(out.se[j, i]), s_all, samples, r2,
-                                        OK, "time", st, why))
+                for method in pipe.config.row_methods(m, p):
+                    if method == "frequency":
+                        rows.append(self._frequency_row(active, j, p, f_samples, f_states.get(p)))
+                        continue
+                    s = states.get(p)
+                    st, why = ("", "") if s is None else (s.state, s.reason)
+                    if out is None:
+                        rows.append(ParameterResult(active.name, m.output, p, nan, nan, nan, nan, samples, r2,
+                                                    "no estimate: its model never became ready", "time", st, why))
+                        continue
+                    s_all = float(se_all[j, i]) if se_all is not None and out.stamp_ns == last_row else nan
+                    rows.append(ParameterResult(active.name, m.output, p, float(out.theta[j, i]),
+                                                float(out.se_conventional[j, i]), float(out.se[j, i]), s_all, samples,
+                                                r2, OK, "time", st, why))
         return rows
+
+    def _frequency_row(self, active: _Open, j: int, parameter: str, samples: int,
+                       state: Any) -> ParameterResult:
+        """Model ``j``'s ``parameter`` from its newest frequency-domain results in the maneuver
+        (``samples``: those behind the last evaluation; ``se_corrected_all`` and ``r_squared``
+        NaN, as in a campaign's frequency-domain rows)."""
+        m, nan = self.pipe.models[j], math.nan
+        st, why = ("", "") if state is None else (state.state, state.reason)
+        out = active.last_frequency[j]
+        if out is None:
+            return ParameterResult(active.name, m.output, parameter, nan, nan, nan, nan, samples, nan,
+                                   "no estimate: its frequency-domain estimator never became ready", "frequency",
+                                   st, why)
+        f, k = out.frequency, m.frequency_parameter_names.index(parameter)
+        return ParameterResult(active.name, m.output, parameter, float(f.theta[j, k]), float(f.se_conventional[j, k]),
+                               float(f.se[j, k]), nan, samples, nan, OK, "frequency", st, why)
 
     # ------------------------------------------------------------------ reporting
     def summary(self) -> dict[str, Any]:
