@@ -227,7 +227,8 @@ def test_with_both_methods_each_maneuver_has_its_frequency_domain_rows(tmp_path)
             assert r.status == "ok" and (r.estimate, r.se_corrected, r.se_conventional) == expected[r.parameter]
             assert math.isnan(r.se_corrected_all) and math.isnan(r.r_squared)
     cfg = tmp_path / "both.yaml"
-    cfg.write_text(CONFIG.read_text().replace("    aircraft: t2", "    maneuvers:\n      source: events\n    aircraft: t2", 1))
+    events_on = "    maneuvers:\n      source: events\n    aircraft: t2"
+    cfg.write_text(CONFIG.read_text().replace("    aircraft: t2", events_on, 1))
     assert cli.main(["replay", str(bag), "--config", str(cfg), "--method", "both", "--out", str(tmp_path / "r"),
                      "--quiet", "--no-figures"]) == 0
     assert cli.main(["campaign", str(bag), "--config", str(cfg), "--method", "both", "--out", str(tmp_path / "c"),
@@ -374,11 +375,12 @@ def test_campaign_of_a_recording_counts_the_refused_events_and_refuses_one_witho
 def test_campaign_refuses_a_maneuvers_file_beside_maneuvers_source(tmp_path, capsys):
     # Two ways of cutting the one recording: the file used to win silently.
     cfg = tmp_path / "events.yaml"
-    cfg.write_text(CONFIG.read_text().replace("    aircraft: t2", "    maneuvers:\n      source: events\n    aircraft: t2", 1))
+    events_on = "    maneuvers:\n      source: events\n    aircraft: t2"
+    cfg.write_text(CONFIG.read_text().replace("    aircraft: t2", events_on, 1))
     spans = tmp_path / "m.yaml"
     spans.write_text("maneuvers:\n  - {name: a, start: 0.0, end: 5.0}\n")
-    assert cli.main(["campaign", str(BAG), "--maneuvers", str(spans), "--config", str(cfg), "--out", str(tmp_path / "c"),
-                     "--quiet", "--no-figures"]) == 2
+    assert cli.main(["campaign", str(BAG), "--maneuvers", str(spans), "--config", str(cfg),
+                     "--out", str(tmp_path / "c"), "--quiet", "--no-figures"]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1, err
     assert "--maneuvers FILE and maneuvers.source events both cut the recording" in err
