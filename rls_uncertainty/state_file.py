@@ -15,7 +15,11 @@ One ``.npz`` archive (numpy only, no pickle, entries stored uncompressed): the
 * ``sizes``, ``options``, ``bank_counters``: the rest of the bank's state (the options as
   :meth:`.options.EstimatorOptions.as_dict` writes them);
 * ``samples_used``, ``zsum``, ``zsq``: the samples behind the estimates and the running sums
-  of each model's output and its square (the R^2 of the model fit).
+  of each model's output and its square (the R^2 of the model fit);
+* ``instruments`` (``estimator.algorithm iv`` only): the counters of the instrument path
+  (:meth:`.datapath.instrument_path.InstrumentPath.snapshot`), whose arrays are the ``iv_``
+  entries: the auxiliary model, its bare least-squares fit and the rows waiting for it, or the
+  delayed regressors held, and the weak-instrument sums. Without iv the file has neither.
 
 It is written with :func:`rls_uncertainty.files.atomic_file` (a fresh exclusive temporary file in the same
 directory, fsync'ed, then renamed), so a crash never leaves half a file and a planted
@@ -57,7 +61,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any, Protocol
 
 import numpy as np
 
@@ -81,9 +85,6 @@ from .estimator.state import (
     number,
 )
 from .files import FileLock, atomic_file, temporaries
-
-if TYPE_CHECKING:  # annotations only (the data path imports this module)
-    from .datapath.instrument_path import InstrumentPath
 
 __all__ = [
     "EstimatorState",
@@ -113,6 +114,17 @@ class EstimatorState:
     output_sum: np.ndarray
     output_sum_squares: np.ndarray
     instruments: dict[str, Any] | None = None  # estimator.algorithm iv: InstrumentPath.snapshot()
+
+
+class InstrumentPath(Protocol):
+    """What a state's instruments are checked against: the instrument path the caller
+    continues with (:class:`.datapath.instrument_path.InstrumentPath`)."""
+
+    def state_spec(self) -> dict[str, Any]:
+        """The source, the counters' ranges and flags, the counter of the rows held, the span."""
+
+    def state_layout(self, rows: int) -> dict[str, tuple[tuple[int, ...], np.dtype]]:
+        """``{name: (shape, dtype)}`` of the arrays with ``rows`` rows held."""
 
 
 def save_state(path: str | Path, state: EstimatorState, fingerprint: Mapping[str, Any]) -> None:
