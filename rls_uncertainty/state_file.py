@@ -15,7 +15,11 @@ One ``.npz`` archive (numpy only, no pickle, entries stored uncompressed): the
 * ``sizes``, ``options``, ``bank_counters``: the rest of the bank's state (the options as
   :meth:`.options.EstimatorOptions.as_dict` writes them);
 * ``samples_used``, ``zsum``, ``zsq``: the samples behind the estimates and the running sums
-  of each model's output and its square (the R^2 of the model fit).
+  of each model's output and its square (the R^2 of the model fit);
+* ``instruments`` (``estimator.algorithm iv`` only): the counters of the instrument path
+  (:meth:`.datapath.instrument_path.InstrumentPath.snapshot`), whose arrays are the ``iv_``
+  entries: the auxiliary model, its bare least-squares fit and the rows waiting for it, or the
+  delayed regressors held, and the weak-instrument sums. Without iv the file has neither.
 
 It is written with :func:`rls_uncertainty.files.atomic_file` (a fresh exclusive temporary file in the same
 directory, fsync'ed, then renamed), so a crash never leaves half a file and a planted
@@ -57,7 +61,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 
@@ -94,7 +98,7 @@ __all__ = [
     "MAX_META_BYTES",
 ]
 
-MAX_ENTRIES = 32  # entries of a state archive (format 3 has 11 or 12)
+MAX_ENTRIES = 48  # entries of a state archive (the meta, a bank's 11 to 14 arrays, the instruments' 6 or 16)
 MAX_META_BYTES = 1 << 20  # the meta entry's text as stored (4 bytes a character); a few kB in practice
 _NPY_PREAMBLE = 12 + 10_000  # magic, version, header length and numpy's largest header text
 _META_KEYS = ("format", "fingerprint", "sizes", "options", "bank_counters", "samples_used", "zsum", "zsq")
@@ -109,6 +113,18 @@ class EstimatorState:
     samples_used: int
     output_sum: np.ndarray
     output_sum_squares: np.ndarray
+    instruments: dict[str, Any] | None = None  # estimator.algorithm iv: InstrumentPath.snapshot()
+
+
+class InstrumentPath(Protocol):
+    """What a state's instruments are checked against: the instrument path the caller
+    continues with (:class:`.datapath.instrument_path.InstrumentPath`)."""
+
+    def state_spec(self) -> dict[str, Any]:
+        """The source, the counters' ranges and flags, the counter of the rows held, the span."""
+
+    def state_layout(self, rows: int) -> dict[str, tuple[tuple[int, ...], np.dtype]]:
+        """``{name: (shape, dtype)}`` of the arrays with ``rows`` rows held."""
 
 
 def save_state(path: str | Path, state: EstimatorState, fingerprint: Mapping[str, Any]) -> None:
@@ -124,8 +140,12 @@ def save_state(path: str | Path, state: EstimatorState, fingerprint: Mapping[str
         "zsum": np.asarray(state.output_sum, dtype=float).tolist(),
         "zsq": np.asarray(state.output_sum_squares, dtype=float).tolist(),
     }
+    arrays = dict(bank["arrays"])
+    if state.instruments is not None:
+        meta["instruments"] = state.instruments["counters"]
+        arrays.update(state.instruments["arrays"])
     with atomic_file(Path(path)) as fh:
-        np.savez(fh, meta=np.array(json.dumps(meta)), **bank["arrays"])
+        np.savez(fh, meta=np.array(json.dumps(meta)), **arrays)
 
 
 def _check_sums(meta: dict[str, Any], m: int) -> tuple[np.ndarray, np.ndarray]:
@@ -221,7 +241,8 @@ def _read_meta(zf: zipfile.ZipFile, info: zipfile.ZipInfo) -> Any:
 Expected = tuple[tuple[int, ...], EstimatorOptions] | None
 
 
-def _load(path: Path, fingerprint: Mapping[str, Any], expect: Expected) -> EstimatorState:
+def _load(path: Path, fingerprint: Mapping[str, Any], expect: Expected,
+          instruments: InstrumentPath | None) -> EstimatorState:
     try:
         # Without waiting: a FIFO put here after the caller's claim cannot block the read.
         fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | os.O_NOCTTY | getattr(os, "O_CLOEXEC", 0))
@@ -240,18 +261,19 @@ def _load(path: Path, fingerprint: Mapping[str, Any], expect: Expected) -> Estim
             raise StateFileError(f"not a readable state file (not a zip archive: {str(exc)[:80]})") from None
         with zf:
             try:
-                return _load_archive(zf, st.st_size, fingerprint, expect)
+                return _load_archive(zf, st.st_size, fingerprint, expect, instruments)
             except (zipfile.BadZipFile, OSError, EOFError) as exc:  # a CRC or size mismatch while reading
                 raise StateFileError(f"not a readable state file ({str(exc)[:80]})") from None
 
 
 def _load_archive(
-    zf: zipfile.ZipFile, file_size: int, fingerprint: Mapping[str, Any], expect: Expected
+    zf: zipfile.ZipFile, file_size: int, fingerprint: Mapping[str, Any], expect: Expected,
+    instruments: InstrumentPath | None,
 ) -> EstimatorState:
     entries = _entries(zf, file_size)
     meta = _read_meta(zf, entries["meta"])
     check_format(meta)
-    meta = json_object(meta, "", _META_KEYS)
+    meta = json_object(meta, "", _META_KEYS + (() if instruments is None else ("instruments",)))
     sizes, options = check_sizes(meta["sizes"]), check_options(meta["options"])
     check_expected(sizes, options, expect)
     # Compare as JSON would store it (tuples become lists).
@@ -265,6 +287,10 @@ def _load_archive(
         raise invalid(
             "bank_counters.cap", f"implies about {implied} bytes of estimator state; the file holds {file_size}"
         )
+    saved_instruments = None
+    if instruments is not None:
+        saved_instruments = _read_instruments(zf, entries, meta["instruments"], instruments)
+        entries = {k: v for k, v in entries.items() if k not in saved_instruments["arrays"]}
     arrays = _read_arrays(zf, entries, sizes, options, counters)
     try:
         bank = EstimatorBank.from_state(
@@ -273,7 +299,8 @@ def _load_archive(
         )
     except (KeyError, TypeError, ValueError, IndexError) as exc:  # the second line: the bank's own checks
         raise StateFileError(f"inconsistent estimator state ({str(exc)[:120]})") from None
-    return EstimatorState(bank=bank, samples_used=samples_used, output_sum=zsum, output_sum_squares=zsq)
+    return EstimatorState(bank=bank, samples_used=samples_used, output_sum=zsum, output_sum_squares=zsq,
+                          instruments=saved_instruments)
 
 
 def _read_arrays(
@@ -287,6 +314,18 @@ def _read_arrays(
         raise invalid("arrays.ready", "is missing")
     ready = _read_array(zf, entries["ready"], "arrays.ready", (len(sizes),), np.dtype(bool))
     layout = EstimatorBank.state_layout(sizes, options, counters, waiting=not bool(ready.all()))
+    arrays = _read_layout(zf, entries, names, layout)
+    check_values(arrays, counters["k"])
+    return arrays
+
+
+Layout = dict[str, tuple[tuple[int, ...], np.dtype]]
+
+
+def _read_layout(zf: zipfile.ZipFile, entries: dict[str, zipfile.ZipInfo], names: set[str],
+                 layout: Layout) -> dict[str, np.ndarray]:
+    """The entries ``names``, which must be exactly those of ``layout``: each declared size
+    checked before anything is read, then each header."""
     missing, extra = sorted(set(layout) - names), sorted(names - set(layout))
     if missing:
         raise invalid(f"arrays.{missing[0]}", "is missing")
@@ -298,13 +337,77 @@ def _read_arrays(
         if not nbytes < declared <= nbytes + _NPY_PREAMBLE:
             raise invalid(f"arrays.{name}", f"declares {declared} bytes; the configuration implies an array "
                         f"{want_shape} of {nbytes} bytes")
-    arrays = {name: _read_array(zf, entries[name], f"arrays.{name}", *layout[name]) for name in sorted(names)}
-    check_values(arrays, counters["k"])
-    return arrays
+    return {name: _read_array(zf, entries[name], f"arrays.{name}", *layout[name]) for name in sorted(names)}
+
+
+# ---------------------------------------------------------------------------------------------
+# the instruments (estimator.algorithm iv)
+
+
+def _read_instruments(zf: zipfile.ZipFile, entries: dict[str, zipfile.ZipInfo], raw: Any,
+                      path: InstrumentPath) -> dict[str, Any]:
+    """The instruments' state (:meth:`.InstrumentPath.snapshot`) checked against ``path``,
+    the one the caller continues with: the counters of ``meta.instruments`` by type and range,
+    the ``iv_`` entries by layout, then their values."""
+    spec = path.state_spec()
+    counters = _instrument_counters(raw, spec)
+    layout = path.state_layout(counters[spec["rows"]])
+    names = {k for k in entries if k.startswith("iv_")}
+    arrays = _read_layout(zf, entries, names, layout)
+    _check_instrument_values(arrays, counters, spec["span_ns"])
+    return {"counters": counters, "arrays": arrays}
+
+
+def _instrument_counters(raw: Any, spec: Mapping[str, Any]) -> dict[str, Any]:
+    c = json_object(raw, "instruments", ("source", *spec["integers"], *spec["flags"]))
+    if c["source"] != spec["source"]:
+        raise StateFileError(f"{ANOTHER_CONFIGURATION}: field 'instruments.source' is {describe(c['source'])}, "
+                             f"the configuration has {spec['source']}")
+    out: dict[str, Any] = {"source": spec["source"]}
+    for name, (low, high) in spec["integers"].items():
+        out[name] = integer(c[name], f"instruments.{name}", low, high)
+    for name in spec["flags"]:
+        if not isinstance(c[name], bool):
+            raise invalid(f"instruments.{name}", f"must be true or false, found {describe(c[name])}")
+        out[name] = c[name]
+    if "has_model" in out and not out["has_model"] and out["since_refresh"]:
+        raise invalid("instruments.since_refresh", "must be 0 while there is no auxiliary model")
+    if out.get("has_model") and out["waiting"]:
+        raise invalid("instruments.waiting", "must be 0 once the auxiliary model exists")
+    return out
+
+
+def _check_instrument_values(arrays: Mapping[str, np.ndarray], counters: Mapping[str, Any],
+                             span_ns: int | None) -> None:
+    """Every float finite (``rho_min``: in [0, 1], or NaN before the first judgement), the
+    stamps increasing (and within ``span_ns``), the auxiliary model stable (all zeros before
+    it exists), the bare fit's ``D`` and ``theta`` zero before it starts."""
+    for name, arr in arrays.items():
+        if name == "iv_rho_min":
+            if not np.all(np.isnan(arr) | ((arr >= 0.0) & (arr <= 1.0))):
+                raise invalid("arrays.iv_rho_min", "must hold correlations in [0, 1] (NaN before the first)")
+        elif arr.dtype.kind == "f" and not np.isfinite(arr).all():
+            raise invalid(f"arrays.{name}", "holds NaN or infinite values (the instruments' state never does)")
+    for name in ("iv_backlog_tag", "iv_history_stamp"):
+        t = arrays.get(name)
+        if t is not None and t.size > 1 and not np.all(t[1:] > t[:-1]):
+            raise invalid(f"arrays.{name}", "must hold increasing stamps")
+        if t is not None and t.size and span_ns is not None and int(t[-1]) - int(t[0]) > span_ns:
+            raise invalid(f"arrays.{name}", f"spans more than the delay of {span_ns} ns")
+    if "has_model" in counters:
+        model = [arrays[f"iv_{k}"] for k in ("state", "Phi", "Gamma")]
+        if not counters["has_model"] and any(a.any() for a in model):
+            raise invalid("arrays.iv_Phi", "must be zero (with the state and Gamma) while there is no model")
+        if counters["has_model"] and not np.abs(np.linalg.eigvals(arrays["iv_Phi"])).max() < 1.0:
+            raise invalid("arrays.iv_Phi", "is not the discrete model of a stable aircraft (an eigenvalue "
+                          "outside the unit circle)")
+        if not counters["bare_ready"] and (arrays["iv_bare_D"].any() or arrays["iv_bare_theta"].any()):
+            raise invalid("arrays.iv_bare_D", "must be zero (with bare_theta) before the bare fit starts")
 
 
 def load_state(
-    path: str | Path, fingerprint: Mapping[str, Any], *, expect: Expected = None
+    path: str | Path, fingerprint: Mapping[str, Any], *, expect: Expected = None,
+    instruments: InstrumentPath | None = None,
 ) -> EstimatorState:
     """The state saved in ``path``. Raises :class:`StateFileError` naming the file and the
     field when the file is missing, unreadable, not a state file, of another format, saved with
@@ -312,10 +415,13 @@ def load_state(
     inconsistent (see the module docstring).
 
     ``expect``: ``(sizes, options)`` of the bank the caller will continue with; the file's
-    must be the same (the options with their defaults resolved)."""
+    must be the same (the options with their defaults resolved). ``instruments``: the
+    instrument path the caller will continue with (``estimator.algorithm iv``): the file must
+    hold its state (:meth:`.InstrumentPath.snapshot`), checked against it, returned in
+    :attr:`EstimatorState.instruments`; without it, a file holding instruments is refused."""
     path = Path(path)
     try:
-        return _load(path, fingerprint, expect)
+        return _load(path, fingerprint, expect, instruments)
     except StateFileError as exc:
         raise StateFileError(f"{path}: {exc}") from None
 

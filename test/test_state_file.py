@@ -23,7 +23,7 @@ from bag_samples import no_hang
 from rls_uncertainty.errors import StateFileError
 from rls_uncertainty.estimator import EstimatorBank, EstimatorOptions
 from rls_uncertainty.estimator.options import MAX_LAGS
-from rls_uncertainty.state_file import EstimatorState, claim, load_state, save_state, set_aside
+from rls_uncertainty.state_file import MAX_ENTRIES, EstimatorState, claim, load_state, save_state, set_aside
 
 FINGERPRINT = {"aircraft": [1.0, 2.0], "models": [["CZ", "1", "alpha", "delta_e"], ["Cm", "1", "q_hat"]], "n_lags": 10}
 
@@ -293,9 +293,9 @@ def test_entries_that_are_not_the_state_are_refused(tmp_path):
     refused(path, "entry '../escape.npy' is not a numpy array of a state")
     with zipfile.ZipFile(path, "w") as zf:
         zf.writestr("meta.npy", npy(np.array(json.dumps(meta))))
-        for i in range(40):
+        for i in range(MAX_ENTRIES):
             zf.writestr(f"a{i}.npy", b"")
-    refused(path, "41 entries (a state has at most 32)")
+    refused(path, f"{MAX_ENTRIES + 1} entries (a state has at most {MAX_ENTRIES})")
     with zipfile.ZipFile(path, "w") as zf:
         zf.writestr("lag_sums.npy", npy(arrays["lag_sums"]))
     refused(path, "field 'meta' is missing (not a state file)")

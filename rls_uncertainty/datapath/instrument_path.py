@@ -20,8 +20,8 @@ flagged converged, and the reason is its parameters' state (:mod:`.states`).
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Sequence
-from typing import TYPE_CHECKING, NamedTuple
+from collections.abc import Callable, Mapping, Sequence
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
 
@@ -36,7 +36,11 @@ if TYPE_CHECKING:  # annotations only
     from .config import PipelineConfig
     from .frequency_path import FrequencyPath
 
-__all__ = ["InstrumentPath", "InstrumentedRow"]
+__all__ = ["InstrumentPath", "InstrumentedRow", "MAX_SAVED_COUNT"]
+
+MAX_SAVED_COUNT = 2**53  # the largest sample count a saved state may hold (exact as a float)
+# The saved arrays whose first axis is the rows held (waiting, or kept for their delay).
+_ROWS = ("iv_backlog_", "iv_history_")
 
 
 class InstrumentedRow(NamedTuple):
@@ -69,6 +73,7 @@ class InstrumentPath:
         self.strength = InstrumentStrength(sizes, bias, opts.weak_below)
         self._judge_every = max(1, round(opts.refresh_span * config.rate))
         self._since = 0
+        self._config = config
         self.rho_min = np.full(len(sizes), np.nan)  # at the last judgement
         self.weak = np.zeros(len(sizes), dtype=bool)
 
@@ -112,6 +117,8 @@ class InstrumentPath:
         estimator refuses is used by neither) and the rows that waited are taken there too, in
         order (row ``t`` is added by the caller, with its results). Whether row ``t`` reached
         the estimator (False: it waits, or was refused)."""
+        if estimates is None and bank.k:  # a resumed bank before its first output: its estimates
+            estimates = bank.theta_all()
         try:
             rows, dropped = self.update(t, X, z, None if u is None else u[0], float(state.qbar), float(state.V),
                                         estimates)
@@ -134,6 +141,58 @@ class InstrumentPath:
             if frequency is not None and not reached:  # a row that waited: no results of its own
                 frequency.take()
         return reached
+
+    # ------------------------------------------------------------------ the state file
+    def snapshot(self) -> dict[str, Any]:
+        """The instruments' state as plain data, for the state file: ``counters`` (``source``,
+        ``since_judged``, ``strength_k`` and the source's own, :meth:`.ShortPeriodAuxiliary.snapshot`
+        or :meth:`.DelayedRegressors.snapshot`) and ``arrays`` named as the file stores them
+        (``iv_`` and the source's names; ``iv_S_zz``, ``iv_S_xx``, ``iv_S_zx`` the strength's
+        sums; ``iv_rho_min`` the last judgement, NaN before one). :meth:`restore` continues
+        bit-identically."""
+        aux, strength = self.aux.snapshot(), self.strength.snapshot()
+        counters = {"source": self.source, "since_judged": self._since, "strength_k": strength["counters"]["k"],
+                    **aux["counters"]}
+        arrays = {f"iv_{k}": v for k, v in (aux["arrays"] | strength["arrays"]).items()}
+        return {"counters": counters, "arrays": {**arrays, "iv_rho_min": self.rho_min.copy()}}
+
+    def restore(self, saved: Mapping[str, Any]) -> None:
+        """Continue from :meth:`snapshot` (of a path of this configuration: its checks are the
+        state file's, :func:`..state_file.load_state`; here only shapes, :class:`ValueError`)."""
+        c = dict(saved["counters"])
+        arrays = {k[3:]: v for k, v in saved["arrays"].items()}
+        if c.pop("source") != self.source:
+            raise ValueError(f"saved instruments of another source than {self.source}")
+        self._since = int(c.pop("since_judged"))
+        self.strength.restore({"counters": {"k": c.pop("strength_k")}, "arrays": arrays})
+        self.aux.restore({"counters": c, "arrays": arrays})
+        rho = np.array(arrays["rho_min"], dtype=float)
+        if rho.shape != self.rho_min.shape:
+            raise ValueError(f"saved rho_min has shape {rho.shape}, expected {self.rho_min.shape}")
+        self.rho_min = rho
+        with np.errstate(invalid="ignore"):
+            self.weak = rho < self.options.weak_below
+
+    def state_spec(self) -> dict[str, Any]:
+        """What a saved state of this path must hold besides its arrays' layout: ``source``,
+        ``integers`` (each counter's ``(low, high)``), ``flags`` (the boolean counters),
+        ``rows`` (the counter giving the rows held) and ``span_ns`` (delayed: the longest
+        stamp span the rows held may cover, else None)."""
+        counts = {"since_judged": (0, self._judge_every - 1), "strength_k": (0, MAX_SAVED_COUNT),
+                  "dropped": (0, MAX_SAVED_COUNT)}
+        if isinstance(self.aux, DelayedRegressors):
+            return {"source": self.source, "integers": {**counts, "history": (0, self.aux.delay + 1)},
+                    "flags": (), "rows": "history", "span_ns": self.aux.span_ns}
+        integers = {**counts, "since_refresh": (0, self.aux.refresh - 1), "refused": (0, MAX_SAVED_COUNT),
+                    "waiting": (0, self.aux.max_backlog), "bare_k": (0, MAX_SAVED_COUNT)}
+        return {"source": self.source, "integers": integers, "flags": ("has_model", "bare_ready"),
+                "rows": "waiting", "span_ns": None}
+
+    def state_layout(self, rows: int) -> dict[str, tuple[tuple[int, ...], np.dtype]]:
+        """``{name: (shape, dtype)}`` of :meth:`snapshot`'s arrays with ``rows`` rows held."""
+        fresh = InstrumentPath(self._config).snapshot()["arrays"]
+        return {name: ((rows, *a.shape[1:]) if name.startswith(_ROWS) else a.shape, a.dtype)
+                for name, a in fresh.items()}
 
     def weak_reason(self, j: int) -> str:
         """Why model ``j``'s parameters are held back for weak instruments, or ''."""

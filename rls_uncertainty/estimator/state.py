@@ -58,8 +58,9 @@ __all__ = [
 # as separate arrays; 5: the noise model under forgetting (its dispersion, estimate and
 # residual history u, the f-weighted lag-0 moments while a model waits) and automatic lags;
 # 6: the residual burn-in (its end k0 + B follows from ready_at); 7: the options as one
-# object (EstimatorOptions.as_dict: lags "all" / "auto" / an integer, p0 stored).
-STATE_FORMAT = 7
+# object (EstimatorOptions.as_dict: lags "all" / "auto" / an integer, p0 stored); 8: with
+# estimator.algorithm iv, the instruments' state beside the bank's (rls_uncertainty.state_file).
+STATE_FORMAT = 8
 
 COUNTERS = ("k", "n_eff", "n_noise", "cap")
 

@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import math
 from collections import deque
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from typing import Any, NamedTuple
 
 import numpy as np
@@ -38,7 +38,7 @@ import numpy.typing as npt
 from ..aero.models import AircraftConfig, ModelConfig
 from ..errors import ConfigError, NonFiniteInput
 from ..estimator.bank import as_regressors
-from .bootstrap import BareRls
+from .bootstrap import BareRls, saved_array
 from .discrete import MIN_DECAY, discretize, is_stable, short_period_matrices
 from .layout import InstrumentLayout
 
@@ -89,7 +89,8 @@ class ShortPeriodAuxiliary:
         self.refresh = max(1, round(refresh_span * rate))
         self.min_decay = min_decay
         self.min_samples = min_samples
-        self._backlog: deque[_Waiting] = deque(maxlen=max(1, round(max_backlog_span * rate)))
+        self.max_backlog = max(1, round(max_backlog_span * rate))  # samples that may wait
+        self._backlog: deque[_Waiting] = deque(maxlen=self.max_backlog)
         self.reset()
 
     def reset(self) -> None:
@@ -186,6 +187,52 @@ class ShortPeriodAuxiliary:
         self._backlog.clear()
         zeta = self.replay([w.u for w in waiting], [w.V for w in waiting])
         return [InstrumentedSample(w.X, w.z, zeta[i], w.tag) for i, w in enumerate(waiting)]
+
+    def snapshot(self) -> dict[str, Any]:
+        """A copy of the state as plain data, :meth:`restore` continues bit-identically:
+        ``counters`` ``has_model``, ``since_refresh`` (samples since the last rebuild),
+        ``refused``, ``dropped``, ``waiting`` and the bare RLS's ``bare_k``, ``bare_ready``;
+        ``arrays`` the model's ``state``, ``Phi``, ``Gamma``, the bare RLS's ``bare_A``,
+        ``bare_b``, ``bare_D``, ``bare_theta`` and the waiting samples, oldest first
+        (``backlog_X`` ``(waiting, M, n_max)``, ``backlog_z``, ``backlog_u``, ``backlog_V``,
+        ``backlog_tag``: their tags, which must be integers, as int64)."""
+        bare = self.bare.snapshot()
+        waiting = list(self._backlog)
+        m, n = self.bare.mask.shape
+        counters = {"has_model": self.has_model, "since_refresh": self._since_refresh, "refused": self.refused,
+                    "dropped": self.dropped, "waiting": len(waiting),
+                    **{f"bare_{k}": v for k, v in bare["counters"].items()}}
+        arrays = {"state": self.state.copy(), "Phi": self.Phi.copy(), "Gamma": self.Gamma.copy(),
+                  **{f"bare_{k}": v for k, v in bare["arrays"].items()},
+                  "backlog_X": np.array([w.X for w in waiting], dtype=float).reshape(len(waiting), m, n),
+                  "backlog_z": np.array([w.z for w in waiting], dtype=float).reshape(len(waiting), m),
+                  "backlog_u": np.array([w.u for w in waiting], dtype=float),
+                  "backlog_V": np.array([w.V for w in waiting], dtype=float),
+                  "backlog_tag": np.array([int(w.tag) for w in waiting], dtype=np.int64)}  # type: ignore[call-overload]
+        return {"counters": counters, "arrays": arrays}
+
+    def restore(self, saved: Mapping[str, Any]) -> None:
+        """Continue from :meth:`snapshot` (arrays of another shape, or more waiting samples
+        than ``max_backlog_span`` holds: :class:`ValueError`)."""
+        c, a = saved["counters"], saved["arrays"]
+        self.reset()
+        self.bare.restore({"counters": {"k": c["bare_k"], "ready": c["bare_ready"]},
+                           "arrays": {k: a[f"bare_{k}"] for k in ("A", "b", "D", "theta")}})
+        self.state = saved_array(a["state"], self.state, "state")
+        self.Phi, self.Gamma = saved_array(a["Phi"], self.Phi, "Phi"), saved_array(a["Gamma"], self.Gamma, "Gamma")
+        self._phi, self._gamma = self.Phi.tolist(), self.Gamma.tolist()
+        self.has_model, self._since_refresh = bool(c["has_model"]), int(c["since_refresh"])
+        self.refused, self.dropped = int(c["refused"]), int(c["dropped"])
+        w, (m, n) = int(c["waiting"]), self.bare.mask.shape
+        if w > self.max_backlog:
+            raise ValueError(f"{w} waiting samples, the backlog holds {self.max_backlog}")
+        X = saved_array(a["backlog_X"], np.zeros((w, m, n)), "backlog_X")
+        z = saved_array(a["backlog_z"], np.zeros((w, m)), "backlog_z")
+        u, V = (saved_array(a[f"backlog_{k}"], np.zeros(w), f"backlog_{k}") for k in ("u", "V"))
+        tags = np.asarray(a["backlog_tag"], dtype=np.int64)
+        if tags.shape != (w,):
+            raise ValueError(f"saved backlog_tag has shape {tags.shape}, expected {(w,)}")
+        self._backlog.extend(_Waiting(X[i], z[i], float(u[i]), float(V[i]), int(tags[i])) for i in range(w))
 
     def _checked(self, X: Regressors, z: npt.ArrayLike, u: float, qbar: float,
                  V: float) -> tuple[FloatArray, FloatArray]:

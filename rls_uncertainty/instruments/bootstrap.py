@@ -8,12 +8,13 @@ are biased in gusts and noise; the auxiliary model only needs its poles roughly 
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 
-__all__ = ["BareRls"]
+__all__ = ["BareRls", "saved_array"]
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -71,3 +72,24 @@ class BareRls:
         self.D = np.linalg.inv(A) * self.mask[:, :, None] * self.mask[:, None, :]
         self.theta = np.einsum("mij,mj->mi", self.D, self.b)
         self.ready = True
+
+    def snapshot(self) -> dict[str, Any]:
+        """A copy of the state as plain data (``counters``: ``k``, ``ready``; ``arrays``:
+        ``A``, ``b``, ``D``, ``theta``); :meth:`restore` continues bit-identically."""
+        return {"counters": {"k": self.k, "ready": self.ready},
+                "arrays": {"A": self.A.copy(), "b": self.b.copy(), "D": self.D.copy(), "theta": self.theta.copy()}}
+
+    def restore(self, saved: Mapping[str, Any]) -> None:
+        """Continue from :meth:`snapshot` (arrays of another shape: :class:`ValueError`)."""
+        arrays = saved["arrays"]
+        for name in ("A", "b", "D", "theta"):
+            setattr(self, name, saved_array(arrays[name], getattr(self, name), name))
+        self.k, self.ready = int(saved["counters"]["k"]), bool(saved["counters"]["ready"])
+
+
+def saved_array(value: npt.ArrayLike, like: FloatArray, name: str) -> FloatArray:
+    """A float copy of ``value``, which must have the shape of ``like``."""
+    arr = np.array(value, dtype=float)
+    if arr.shape != like.shape:
+        raise ValueError(f"saved {name} has shape {arr.shape}, expected {like.shape}")
+    return arr

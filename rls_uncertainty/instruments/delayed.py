@@ -21,7 +21,8 @@ the stamps) gets no instruments: it is dropped and counted (:attr:`DelayedRegres
 from __future__ import annotations
 
 from collections import deque
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -30,6 +31,7 @@ from ..aero.models import BIAS_REGRESSOR, ModelConfig
 from ..aero.surface_mixing import SURFACES
 from ..errors import ConfigError, NonFiniteInput
 from .auxiliary import InstrumentedSample
+from .bootstrap import saved_array
 
 __all__ = ["DelayedRegressors"]
 
@@ -91,3 +93,23 @@ class DelayedRegressors:
             return []
         zeta = np.where(self.delayed, history[0][1], x)
         return [InstrumentedSample(x, zz, zeta, t)]
+
+    def snapshot(self) -> dict[str, Any]:
+        """A copy of the state as plain data (``counters``: ``dropped``, ``history`` (rows
+        kept); ``arrays``: ``history_X`` ``(history, M, n_max)`` and ``history_stamp`` (ns,
+        int64), oldest first); :meth:`restore` continues bit-identically."""
+        m, n = self.mask.shape
+        rows = list(self._history)
+        return {"counters": {"dropped": self.dropped, "history": len(rows)},
+                "arrays": {"history_X": np.array([x for _, x in rows], dtype=float).reshape(len(rows), m, n),
+                           "history_stamp": np.array([t for t, _ in rows], dtype=np.int64)}}
+
+    def restore(self, saved: Mapping[str, Any]) -> None:
+        """Continue from :meth:`snapshot` (arrays of another shape: :class:`ValueError`)."""
+        rows = int(saved["counters"]["history"])
+        X = saved_array(saved["arrays"]["history_X"], np.zeros((rows, *self.mask.shape)), "history_X")
+        stamps = np.asarray(saved["arrays"]["history_stamp"], dtype=np.int64)
+        if stamps.shape != (rows,):
+            raise ValueError(f"saved history_stamp has shape {stamps.shape}, expected {(rows,)}")
+        self._history = deque((int(t), x) for t, x in zip(stamps, X, strict=True))
+        self.dropped = int(saved["counters"]["dropped"])

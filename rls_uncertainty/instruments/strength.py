@@ -19,10 +19,13 @@ threshold :data:`WEAK_BELOW` lies between.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
+
+from .bootstrap import saved_array
 
 __all__ = ["WEAK_BELOW", "canonical_correlations", "InstrumentStrength"]
 
@@ -108,3 +111,15 @@ class InstrumentStrength:
         """Which models' instruments are weak (``rho_min < weak_below``; NaN: not yet known, False)."""
         with np.errstate(invalid="ignore"):
             return self.rho_min() < self.weak_below
+
+    def snapshot(self) -> dict[str, Any]:
+        """A copy of the sums as plain data (``counters``: ``k``; ``arrays``: ``S_zz``,
+        ``S_xx``, ``S_zx``); :meth:`restore` continues bit-identically."""
+        return {"counters": {"k": self.k},
+                "arrays": {"S_zz": self.S_zz.copy(), "S_xx": self.S_xx.copy(), "S_zx": self.S_zx.copy()}}
+
+    def restore(self, saved: Mapping[str, Any]) -> None:
+        """Continue from :meth:`snapshot` (arrays of another shape: :class:`ValueError`)."""
+        for name in ("S_zz", "S_xx", "S_zx"):
+            setattr(self, name, saved_array(saved["arrays"][name], getattr(self, name), name))
+        self.k = int(saved["counters"]["k"])
