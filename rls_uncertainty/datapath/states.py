@@ -155,17 +155,17 @@ def model_reasons(quality: IdentifiabilityMonitor, j: int, parameters: list[str]
     identifiable at the last judgement, ``not identifiable: <why>``; empty for an identifiable
     one."""
     ok = quality.identifiable[j]  # (judges the pending sample)
+    no_fit = ""
+    if quality.no_fit[j] and not ok[: len(parameters)].all():
+        r2 = float(quality.r_squared[j])
+        no_fit = (f"no fit (R^2 {r2:.3f} < {quality.config.min_r_squared:g})" if math.isfinite(r2)
+                  else "no fit (the output does not vary)")
     out = []
     for i in range(len(parameters)):
         if ok[i]:
             out.append("")
             continue
-        if quality.no_fit[j]:
-            r2 = float(quality.r_squared[j])
-            why = (f"no fit (R^2 {r2:.3f} < {quality.config.min_r_squared:g})" if math.isfinite(r2)
-                   else "no fit (the output does not vary)")
-        else:
-            why = _regressor_reason(quality, j, i, parameters)
+        why = no_fit or _regressor_reason(quality, j, i, parameters)
         out.append(f"not identifiable: {why}" if why else "")
     return out
 
@@ -175,11 +175,12 @@ def initializing(count: int, needed: int) -> str:
     return f"{max(count, 0)} of {needed} samples"
 
 
-def _time_states(pipe: Publisher, out: Published) -> list[ParameterState]:
+def _time_states(pipe: Publisher, out: Published, models: Sequence[int]) -> list[ParameterState]:
     bank, quality = pipe.bank, pipe.identifiability
     counts, needed, initialized = bank.publish_count, bank.publish_at, bank.initialized
     states = []
-    for j, model in enumerate(pipe.models):
+    for j in models:
+        model = pipe.models[j]
         names = list(pipe.parameter_names[j])
         published = bool(out.ready[j])
         reasons = model_reasons(quality, j, names) if published else [""] * len(names)
@@ -198,13 +199,14 @@ def _time_states(pipe: Publisher, out: Published) -> list[ParameterState]:
     return states
 
 
-def _frequency_states(pipe: Publisher, out: Published | None) -> list[ParameterState]:
+def _frequency_states(pipe: Publisher, out: Published | None, models: Sequence[int]) -> list[ParameterState]:
     path = pipe.frequency
     assert path is not None
     bank, quality = path.bank, pipe.identifiability
     f = path.last if out is None or out.frequency is None else out.frequency
     states = []
-    for j, model in enumerate(pipe.models):
+    for j in models:
+        model = pipe.models[j]
         regs = [r for r in model.regressors if r != BIAS_REGRESSOR]
         index = [model.regressors.index(r) for r in regs]
         names = list(path.parameter_names[j])
@@ -224,17 +226,20 @@ def _frequency_states(pipe: Publisher, out: Published | None) -> list[ParameterS
     return states
 
 
-def parameter_states(pipe: Publisher, out: Published | None, method: str = "time") -> list[ParameterState]:
+def parameter_states(pipe: Publisher, out: Published | None, method: str = "time",
+                     models: Sequence[int] | None = None) -> list[ParameterState]:
     """Every parameter's state by ``method`` (``time`` or ``frequency``) at the pipeline's
-    newest sample, whose output is ``out`` (None before any: every model initializing)."""
+    newest sample, whose output is ``out`` (None before any: every model initializing);
+    ``models``: only those models' (indices, in order; default all)."""
+    index = range(len(pipe.models)) if models is None else models
     if method == "frequency":
-        return _frequency_states(pipe, out)
+        return _frequency_states(pipe, out, index)
     if out is None:
         bank = pipe.bank
-        return [ParameterState("time", m.output, name, math.nan, math.nan, "initializing",
+        return [ParameterState("time", pipe.models[j].output, name, math.nan, math.nan, "initializing",
                                initializing(int(bank.publish_count[j]), int(bank.publish_at[j])))
-                for j, m in enumerate(pipe.models) for name in pipe.parameter_names[j]]
-    return _time_states(pipe, out)
+                for j in index for name in pipe.parameter_names[j]]
+    return _time_states(pipe, out, index)
 
 
 def state_fields(pipe: Publisher, out: Published | None, output: str, methods: Sequence[str]) -> dict[str, str | float]:
@@ -243,9 +248,10 @@ def state_fields(pipe: Publisher, out: Published | None, output: str, methods: S
     ``se_percent.<parameter>`` (two decimals, ``-`` when undefined); ``frequency.`` before
     both for the frequency domain."""
     fields: dict[str, str | float] = {}
+    models = [j for j, m in enumerate(pipe.models) if m.output == output]
     for method in methods:
         prefix = "frequency." if method == "frequency" else ""
-        for s in parameter_states(pipe, out, method):
+        for s in parameter_states(pipe, out, method, models):
             if s.model == output:
                 fields[f"{prefix}state.{s.parameter}"] = s.text
                 fields[f"{prefix}se_percent.{s.parameter}"] = round(s.se_percent, 2) \
