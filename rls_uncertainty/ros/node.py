@@ -57,9 +57,10 @@ from ..datapath.outputs import NODE_NAME, OutputLayout
 from ..datapath.pipeline import Pipeline, SampleOutput
 from ..errors import ConfigError
 from ..settings.parameters import PARAMETERS, Parameter, node_config, pipeline_config
-from ..settings.sources import startup_parameters
+from ..settings.sources import NodeParameters, startup_parameters
 from .input_watch import SilentInputs
 from .intake import Backlog, Intake
+from .interrupt import sigint_through_rclpy
 from .maneuvers import LiveManeuvers
 from .node_state import NodeStateFile
 from .sample_publishers import SamplePublishers
@@ -478,10 +479,17 @@ def main(args: list[str] | None = None) -> int:
         startup = startup_parameters(argv, NODE_NAME)
     except ConfigError as exc:
         return _refuse(exc)
-    try:
-        rclpy.init(args=argv)
-    except (_rclpy.RCLError, _rclpy.UnknownROSArgsError) as exc:  # an argument rcl reads differently
-        return _refuse(exc)
+    with sigint_through_rclpy() as rclpy_is_up:
+        try:
+            rclpy.init(args=argv)
+        except (_rclpy.RCLError, _rclpy.UnknownROSArgsError) as exc:  # an argument rcl reads differently
+            return _refuse(exc)
+        rclpy_is_up()
+        return _run(startup)
+
+
+def _run(startup: NodeParameters) -> int:
+    """The node of ``startup``'s parameters, spun until the context shuts down; its exit status."""
     node = None
     code = 0
     try:
