@@ -26,7 +26,7 @@ last frequency-domain estimate and corrected SE per maneuver, and their coverage
 bias against the truth (REPORT.md, "The frequency domain"; no flags):
 
     python docs/studies/instrumental_variables/study.py fd CAMPAIGN_DIR --count N --out FD.csv
-    python docs/studies/instrumental_variables/study.py fd-table FD.csv [FD2.csv ...]
+    python docs/studies/instrumental_variables/study.py fd-table FD.csv [FD2.csv ...] [--against OUT.csv]
 
 The Twin Otter recordings, RLS and IV side by side (REPORT.md, "The Twin Otter recordings"):
 
@@ -345,6 +345,32 @@ def fd_table(args: argparse.Namespace) -> None:
             seen = {(r["maneuver"], float(r["seconds"])) for r in rows if r["method"] == m}
             print(f"\n{m}: {sum(s for _m, s in seen) / max(1, len(seen)):.2f} s per maneuver (pipeline)", end="")
         print()
+    if args.against:
+        fd_against(rows, _read([args.against]))
+
+
+def _mad(x: np.ndarray) -> float:
+    return float(1.4826 * np.median(np.abs(x - np.median(x))))
+
+
+def fd_against(fd_rows: list[dict], time_rows: list[dict]) -> None:
+    """The last CSV of ``fd`` against the time-domain CSV of ``run`` on the same maneuvers: the
+    ratios of the standard deviations, of the typical (MAD) scatters and of the median SEs, and
+    the largest SE over the median SE of each domain."""
+    print("\n| parameter | method | scatter, frequency / time | typical scatter, frequency / time "
+          "| median SE, frequency / time | largest SE / median SE, frequency | the same, time |")
+    print("| --- | --- | --- | --- | --- | --- | --- |")
+    for p in PARAMS:
+        for m in ("RLS", "IV"):
+            fd = {r["maneuver"]: (float(r["estimate"]), float(r["se"])) for r in fd_rows
+                  if r["method"] == m and r["parameter"] == p}
+            td = {r["maneuver"]: (r["estimate"], r["se"]) for r in time_rows
+                  if r["method"] == m and r["parameter"] == p}
+            both = [k for k in fd if k in td and np.isfinite(fd[k][0]) and np.isfinite(td[k][0])]
+            (fe, fs), (te, ts) = (np.array([d[k] for k in both]).T for d in (fd, td))
+            print(f"| {p} | {m} | {fe.std(ddof=1) / te.std(ddof=1):.2f} | {_mad(fe) / _mad(te):.2f} | "
+                  f"{np.median(fs) / np.median(ts):.2f} | {fs.max() / np.median(fs):.3g} | "
+                  f"{ts.max() / np.median(ts):.3g} |")
 
 
 # ---------------------------------------------------------------- the Twin Otter recordings
@@ -496,6 +522,7 @@ def main() -> None:
     d.add_argument("--out", required=True)
     e = sub.add_parser("fd-table", help="the tables of the frequency-domain CSVs")
     e.add_argument("csv", nargs="+")
+    e.add_argument("--against", help="a CSV of run on the same campaign: the last CSV against the time domain")
     g = sub.add_parser("flight", help="the three Twin Otter recordings, RLS and IV")
     g.add_argument("what", choices=("table", "prediction", "delays"))
     g.add_argument("--flight-data", default=str(FLIGHT_DATA["path"]))
