@@ -21,6 +21,13 @@ method, measured alternately on the same messages in the same process, gives the
 estimates), bias / scatter, false convergence (of the maneuvers flagged, those whose truth lies
 outside +-2 SE at the first flag), the median flag time and the per-sample cost.
 
+The frequency-domain estimator (``estimator.method: frequency``) with each configuration, the
+last frequency-domain estimate and corrected SE per maneuver, and their coverage, SE/scatter and
+bias against the truth (REPORT.md, "The frequency domain"; no flags):
+
+    python docs/studies/instrumental_variables/study.py fd CAMPAIGN_DIR --count N --out FD.csv
+    python docs/studies/instrumental_variables/study.py fd-table FD.csv [FD2.csv ...] [--against OUT.csv]
+
 The Twin Otter recordings, RLS and IV side by side (REPORT.md, "The Twin Otter recordings"):
 
     python docs/studies/instrumental_variables/study.py flight table|prediction|delays
@@ -129,7 +136,9 @@ def one_maneuver(job: tuple[str, str]) -> list[dict]:
 
 # IV with one setting changed: the levers on its early standard error and flags.
 LEVERS = {"IV": {}, "IV, small_sample 1": {"estimator.small_sample": 1.0},
-          "IV, convergence.window 3 s": {"convergence.window": 3.0}}
+          "IV, convergence.window 3 s": {"convergence.window": 3.0},
+          "IV, weak_below 0.3": {"instruments.weak_below": 0.3},
+          "IV, weak_below 0.5": {"instruments.weak_below": 0.5}}
 
 
 def one_maneuver_levers(job: tuple[str, str]) -> list[dict]:
@@ -181,28 +190,34 @@ def statistics(rows: list[dict]) -> dict:
     for case, method, p in keys:
         sel = [r for r in rows if (r["case"], r["method"], r["parameter"]) == (case, method, p)
                and np.isfinite(r["estimate"])]
-        est = np.array([r["estimate"] for r in sel])
-        se = np.array([r["se"] for r in sel])
         truth = T2_TRUE[p]
-        scatter = est.std(ddof=1)
         flagged = [r for r in sel if np.isfinite(r["flag_time"])]
         false = [r for r in flagged if abs(r["flag_estimate"] - truth) > 2 * r["flag_se"]]
         out[case, method, p] = {
-            "n": len(sel),
-            "coverage": 100 * np.mean(np.abs(est - truth) <= 2 * se),
-            "se_scatter": se.mean() / scatter,
-            "bias_scatter": (est.mean() - truth) / scatter,
+            **end_statistics(np.array([r["estimate"] for r in sel]), np.array([r["se"] for r in sel]), truth),
             "false": 100 * len(false) / len(flagged) if flagged else math.nan,
             "flagged": len(flagged),
             "flag_time": float(np.median([r["flag_time"] for r in flagged])) if flagged else math.nan,
-            "scatter": scatter,
             "converged_end": 100 * np.mean([r["converged_end"] for r in sel]),
-            # robust to a few maneuvers with weak instruments: the median SE over 1.4826 x the
-            # median absolute deviation of the estimates, and the spread of the z-scores
-            "robust_se_scatter": np.median(se) / (1.4826 * np.median(np.abs(est - np.median(est)))),
-            "z_std": float(np.std((est - truth) / se, ddof=1)),
         }
     return out
+
+
+def end_statistics(est: np.ndarray, se: np.ndarray, truth: float) -> dict:
+    """n, coverage %, SE/scatter, bias/scatter, scatter, robust SE/scatter and z std of the end
+    estimates and standard errors of one parameter over the maneuvers of a case."""
+    scatter = est.std(ddof=1)
+    return {
+        "n": len(est),
+        "coverage": 100 * np.mean(np.abs(est - truth) <= 2 * se),
+        "se_scatter": se.mean() / scatter,
+        "bias_scatter": (est.mean() - truth) / scatter,
+        "scatter": scatter,
+        # robust to a few maneuvers with weak instruments: the median SE over 1.4826 x the
+        # median absolute deviation of the estimates, and the spread of the z-scores
+        "robust_se_scatter": np.median(se) / (1.4826 * np.median(np.abs(est - np.median(est)))),
+        "z_std": float(np.std((est - truth) / se, ddof=1)),
+    }
 
 
 def _cost(rows: list[dict], case: str) -> tuple[float, float]:
@@ -266,6 +281,96 @@ def figure(args: argparse.Namespace) -> None:
                 ax.set_title(case, fontsize=9)
     fig.tight_layout()
     fig.savefig(args.png, dpi=110)
+
+
+# ---------------------------------------------------------------- the frequency domain
+FD_FIELDS = ("maneuver", "method", "parameter", "estimate", "se", "seconds")
+
+
+def one_maneuver_fd(bag: str) -> list[dict]:
+    """The maneuver through both configurations with ``estimator.method: frequency``: per method
+    and Table 3 parameter the last frequency-domain estimate and corrected SE (NaN when its
+    model never published one), and the pipeline's wall time."""
+    params = {m: {**_params(c), "estimator.method": "frequency"} for m, c in CONFIGS.items()}
+    with InputStream(bag, dict(node_config(params["IV"]).topics)) as stream:
+        messages = list(stream)
+    rows = []
+    for method in ("RLS", "IV"):
+        msgs = messages if method == "IV" else [m for m in messages if m[0] != "excitation"]
+        start = time.perf_counter()
+        result = run_pipeline(msgs, pipeline_config(params[method]), record=False, keep_outputs=False)
+        seconds = time.perf_counter() - start
+        finals = result.finals("frequency")
+        for p in PARAMS:
+            f = finals.get(p)
+            rows.append({"maneuver": Path(bag).name, "method": method, "parameter": p,
+                         "estimate": math.nan if f is None else f.estimate,
+                         "se": math.nan if f is None else f.std_error, "seconds": seconds})
+    return rows
+
+
+def fd_run(args: argparse.Namespace) -> None:
+    bags = sorted(str(p) for p in Path(args.campaign).glob("m*") if p.is_dir())[: args.count]
+    with open(args.out, "w", newline="") as f, Pool(args.workers) as pool:
+        w = csv.DictWriter(f, FD_FIELDS)
+        w.writeheader()
+        for n, rows in enumerate(pool.imap(one_maneuver_fd, bags), 1):
+            w.writerows(rows)
+            f.flush()
+            print(f"\r{args.out}: {n}/{len(bags)}", end="", file=sys.stderr)
+    print(file=sys.stderr)
+
+
+def fd_table(args: argparse.Namespace) -> None:
+    """Per CSV of ``fd``: coverage, SE/scatter, bias/scatter and the robust figures of the
+    frequency-domain end estimates, per parameter and method (no flags)."""
+    for path in args.csv:
+        with open(path) as f:
+            rows = list(csv.DictReader(f))
+        methods = list(dict.fromkeys(r["method"] for r in rows))
+        done = {m: len({r["maneuver"] for r in rows if r["method"] == m}) for m in methods}
+        print(f"\n#### {Path(path).stem} ({', '.join(f'{m} {k} maneuvers' for m, k in done.items())})\n")
+        print("| parameter | method | coverage % | SE/scatter | bias/scatter | scatter | robust SE/scatter | z std "
+              "| no estimate |")
+        print("| --- | --- | --- | --- | --- | --- | --- | --- | --- |")
+        for p in PARAMS:
+            for m in methods:
+                sel = [r for r in rows if r["method"] == m and r["parameter"] == p]
+                est, se = (np.array([float(r[k]) for r in sel]) for k in ("estimate", "se"))
+                ok = np.isfinite(est) & np.isfinite(se)
+                s = end_statistics(est[ok], se[ok], T2_TRUE[p])
+                print(f"| {p} | {m} | {s['coverage']:.0f} | {s['se_scatter']:.2f} | {s['bias_scatter']:+.2f} | "
+                      f"{s['scatter']:.3g} | {s['robust_se_scatter']:.2f} | {s['z_std']:.2f} | {int((~ok).sum())} |")
+        for m in methods:
+            seen = {(r["maneuver"], float(r["seconds"])) for r in rows if r["method"] == m}
+            print(f"\n{m}: {sum(s for _m, s in seen) / max(1, len(seen)):.2f} s per maneuver (pipeline)", end="")
+        print()
+    if args.against:
+        fd_against(rows, _read([args.against]))
+
+
+def _mad(x: np.ndarray) -> float:
+    return float(1.4826 * np.median(np.abs(x - np.median(x))))
+
+
+def fd_against(fd_rows: list[dict], time_rows: list[dict]) -> None:
+    """The last CSV of ``fd`` against the time-domain CSV of ``run`` on the same maneuvers: the
+    ratios of the standard deviations, of the typical (MAD) scatters and of the median SEs, and
+    the largest SE over the median SE of each domain."""
+    print("\n| parameter | method | scatter, frequency / time | typical scatter, frequency / time "
+          "| median SE, frequency / time | largest SE / median SE, frequency | the same, time |")
+    print("| --- | --- | --- | --- | --- | --- | --- |")
+    for p in PARAMS:
+        for m in ("RLS", "IV"):
+            fd = {r["maneuver"]: (float(r["estimate"]), float(r["se"])) for r in fd_rows
+                  if r["method"] == m and r["parameter"] == p}
+            td = {r["maneuver"]: (r["estimate"], r["se"]) for r in time_rows
+                  if r["method"] == m and r["parameter"] == p}
+            both = [k for k in fd if k in td and np.isfinite(fd[k][0]) and np.isfinite(td[k][0])]
+            (fe, fs), (te, ts) = (np.array([d[k] for k in both]).T for d in (fd, td))
+            print(f"| {p} | {m} | {fe.std(ddof=1) / te.std(ddof=1):.2f} | {_mad(fe) / _mad(te):.2f} | "
+                  f"{np.median(fs) / np.median(ts):.2f} | {fs.max() / np.median(fs):.3g} | "
+                  f"{ts.max() / np.median(ts):.3g} |")
 
 
 # ---------------------------------------------------------------- the Twin Otter recordings
@@ -410,6 +515,14 @@ def main() -> None:
     f = sub.add_parser("figure", help="coverage, SE / scatter and false convergence per case")
     f.add_argument("csv", nargs="+")
     f.add_argument("--png", required=True)
+    d = sub.add_parser("fd", help="one campaign through both methods in the frequency domain into a CSV")
+    d.add_argument("campaign")
+    d.add_argument("--count", type=int, default=200, help="the first COUNT maneuvers")
+    d.add_argument("--workers", type=int, default=2)
+    d.add_argument("--out", required=True)
+    e = sub.add_parser("fd-table", help="the tables of the frequency-domain CSVs")
+    e.add_argument("csv", nargs="+")
+    e.add_argument("--against", help="a CSV of run on the same campaign: the last CSV against the time domain")
     g = sub.add_parser("flight", help="the three Twin Otter recordings, RLS and IV")
     g.add_argument("what", choices=("table", "prediction", "delays"))
     g.add_argument("--flight-data", default=str(FLIGHT_DATA["path"]))
@@ -420,9 +533,9 @@ def main() -> None:
     elif args.quick:
         quick()
     elif args.command is None:
-        ap.error("a command (run, table, figure, flight) or --quick")
+        ap.error("a command (run, table, figure, fd, fd-table, flight) or --quick")
     else:
-        {"run": run, "table": table, "figure": figure}[args.command](args)
+        {"run": run, "table": table, "figure": figure, "fd": fd_run, "fd-table": fd_table}[args.command](args)
 
 
 if __name__ == "__main__":
