@@ -447,8 +447,8 @@ def _overrides(values: dict[str, Any]) -> list[RosParameter]:
 
 
 def _spin(node: Node) -> None:
-    """Run ``node`` on rclpy's events executor until the context shuts down (Ctrl-C raises
-    KeyboardInterrupt, SIGTERM ExternalShutdownException). It wakes only for what is due
+    """Run ``node`` on rclpy's events executor until the context shuts down (Ctrl-C and
+    SIGTERM shut it down: :mod:`.interrupt`). It wakes only for what is due
     instead of rebuilding a wait set on every turn: an idle node costs a third of the CPU it
     does on the single-threaded executor (docs/benchmarks.md). Spun until a future that never
     completes, with a finite timeout (its ``spin()`` without one busy-waits): one call serves
