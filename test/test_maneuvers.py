@@ -106,6 +106,27 @@ def live_history(bag, config):
     return tracker
 
 
+def reset_by_hand(bag, config, start, stop, wanted):
+    """A pipeline fed ``bag``'s messages up to ``stop`` (ns from the bag's start), reset by hand
+    (inputs kept) at the first message at or after ``start``: the pipeline, its newest sample's
+    stamp just before the reset, and the last output for which ``wanted(out)`` holds."""
+    messages, _ = read_inputs(bag)
+    pipe = Pipeline(config)
+    last, reset, newest = None, False, None
+    for kind, stamp, msg in messages:
+        if stamp >= T0 + start and not reset:
+            newest = pipe.last_stamp_ns
+            pipe.reset("by_hand", clear_inputs=False)
+            reset = True
+        if stamp > T0 + stop:
+            break
+        for out in feed(pipe, kind, msg):
+            if wanted(out):
+                last = out
+    assert last is not None
+    return pipe, newest, last
+
+
 # ---------------------------------------------------------------------------- the events' rules
 @pytest.mark.parametrize(("key", "value", "reason"), [
     ("p", "begin", "event_value"), ("p", "", "event_value"), ("", "start", "event_key"),
@@ -165,20 +186,7 @@ def test_each_maneuver_is_a_fresh_estimator_over_its_own_samples(tmp_path):
     bag = events_bag(tmp_path, [(start, "pB", "start"), (stop, "pB", "stop")])
     tracker = live_history(bag, config)
     (rec,) = tracker.history
-    messages, _ = read_inputs(bag)
-    pipe = Pipeline(config)
-    last, reset, newest = None, False, None
-    for kind, stamp, msg in messages:
-        if stamp >= T0 + start and not reset:
-            newest = pipe.last_stamp_ns
-            pipe.reset("by_hand", clear_inputs=False)
-            reset = True
-        if stamp > T0 + stop:
-            break
-        for out in feed(pipe, kind, msg):
-            if out.ready.all():
-                last = out
-    assert last is not None
+    pipe, newest, last = reset_by_hand(bag, config, start, stop, lambda out: out.ready.all())
     theta = [r.estimate for r in rec.rows]
     expected = [last.theta[j, i] for j, n in enumerate(pipe.sizes) for i in range(n)]
     np.testing.assert_array_equal(theta, expected)
@@ -202,19 +210,8 @@ def test_with_both_methods_each_maneuver_has_its_frequency_domain_rows(tmp_path)
     bag = events_bag(tmp_path, [(start, "pB", "start"), (stop, "pB", "stop")])
     tracker = live_history(bag, config)
     (rec,) = tracker.history
-    messages, _ = read_inputs(bag)
-    pipe = Pipeline(config)
-    last, reset = None, False
-    for kind, stamp, msg in messages:
-        if stamp >= T0 + start and not reset:
-            pipe.reset("by_hand", clear_inputs=False)
-            reset = True
-        if stamp > T0 + stop:
-            break
-        for out in feed(pipe, kind, msg):
-            if out.frequency is not None and out.frequency.ready.all():
-                last = out
-    assert last is not None
+    pipe, _newest, last = reset_by_hand(bag, config, start, stop,
+                                        lambda out: out.frequency is not None and out.frequency.ready.all())
     methods = [(r.parameter, r.method) for r in rec.rows]
     want = [(p, m) for j, names in enumerate(pipe.parameter_names) for p in names
             for m in ("time", "frequency") if m == "time" or p in pipe.models[j].frequency_parameter_names]
