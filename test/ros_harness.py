@@ -34,7 +34,12 @@ RELIABLE = QoSProfile(depth=5000, reliability=QoSReliabilityPolicy.RELIABLE, his
 class NodeProcess:
     """``python -m rls_uncertainty.ros.node --ros-args ...`` with its output in a log file."""
 
+    # When the newest node process started (wall clock, ns): diagnostics sent before it come from
+    # a node stopped earlier and are dropped by RosTester (see _take_diagnostics).
+    last_start_ns = 0
+
     def __init__(self, tmp_path: Path, *ros_args: str, name: str = "node") -> None:
+        NodeProcess.last_start_ns = time.time_ns()
         self.log = tmp_path / f"{name}.log"
         self._fh = open(self.log, "w")  # noqa: SIM115 - the child process writes to it; closed in stop()
         self.proc = subprocess.Popen(
@@ -78,7 +83,15 @@ class RosTester:
             for suffix in MODEL_OUTPUTS:
                 self._record(Float64MultiArray, f"/{NODE_NAME}/{m}/{suffix}")
         self._record(Header, f"/{NODE_NAME}/sample_stamp")
-        self.subs.append(self.node.create_subscription(DiagnosticArray, "/diagnostics", self.diagnostics.append, 50))
+        self.subs.append(self.node.create_subscription(DiagnosticArray, "/diagnostics", self._take_diagnostics, 50))
+
+    def _take_diagnostics(self, msg, info) -> None:
+        # A node stopped just before the next one started may leave a diagnostics message in this
+        # reader, taken only when the test spins again: it must not pass for the new node's (the
+        # two have the same name). The DDS source timestamp is the sender's wall clock, also
+        # under use_sim_time.
+        if info["source_timestamp"] >= NodeProcess.last_start_ns:
+            self.diagnostics.append(msg)
 
     def _record(self, msg_type, topic):
         store = self.outputs.setdefault(topic, [])
