@@ -29,9 +29,11 @@ def withheld(
     """The ``ready`` models ``(M,)`` to withhold: on a parameter (``real`` ``(M, n)``, not
     padding) an estimate or standard error that is not finite, or a standard error not above
     ``SE_FLOOR |theta|``."""
-    with np.errstate(invalid="ignore"):
-        floor = SE_FLOOR * np.abs(theta)
-        ok = np.isfinite(theta) & np.isfinite(se) & np.isfinite(se_conventional) & (se > floor) \
-            & (se_conventional > floor)
-    bad: npt.NDArray[np.bool_] = ready & (real & ~ok).any(axis=1)
+    # A non-finite estimate makes the floor NaN or infinite, which no standard error exceeds;
+    # NaN in either standard error propagates through minimum and maximum (no comparison of
+    # NaN or infinity warns).
+    floor = SE_FLOOR * np.abs(theta)
+    ok = np.minimum(se, se_conventional) > floor
+    ok &= np.maximum(se, se_conventional) < np.inf
+    bad: npt.NDArray[np.bool_] = ready & (real > ok).any(axis=1)  # (real > ok: real and not ok)
     return bad

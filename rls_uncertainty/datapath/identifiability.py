@@ -286,6 +286,7 @@ class IdentifiabilityMonitor:
         self._max_square = config.max_correlation**2
         self._unexplained = 1.0 - config.min_r_squared  # R^2 >= min  <=>  R_k(0) <= (1 - min) var(z)
         self._nothing = np.zeros((m, n), dtype=bool)
+        self._padding = ~self.real
         self.forgetting = float(forgetting)
         self.stats = RegressorStatistics((m, n), forgetting)
         self.reset()
@@ -340,7 +341,7 @@ class IdentifiabilityMonitor:
             return flags, model_flags
         ok = self._judge()
         self.held_back = flags & ~ok
-        return flags & ok, model_flags & (ok | ~self.real).all(axis=1)
+        return flags & ok, model_flags & (ok | self._padding).all(axis=1)
 
     def judge(self, bank: EstimatorBank, ready: np.ndarray) -> np.ndarray:
         """``identifiable`` ``(M, n_max)`` of ``bank``'s current sample (module docstring)."""
@@ -389,9 +390,9 @@ class IdentifiabilityMonitor:
             noisy = stats.variance_sums * (6.0 * stats.noise_weight) <= \
                 (self._noise_ratio * max(stats.weight, 1.0)) * stats.noise_sums
             self.noisy = noisy & self._slopes & ~flat
-            flat = flat | self.noisy
+            flat |= self.noisy
         if flat.any():  # the bias is confounded with a flat regressor whose mean is off zero
-            offset = np.any(flat & (np.abs(stats.mean) > self.resolution), axis=1, keepdims=True)
+            offset = (flat & (np.abs(stats.mean) > self.resolution)).any(axis=1, keepdims=True)
             flat |= self.bias & offset
         self.not_excited = flat
         n = max(bank.n_eff, 1e-300)

@@ -21,16 +21,20 @@ __all__ = ["PublicationRule"]
 
 class PublicationRule:
     """The rule for models of ``sizes`` parameters under ``options``; once every model
-    publishes it stays so until :meth:`restart` (a new initialization or a restored state)."""
+    publishes it stays so until :meth:`restart` (a new initialization or a restored state).
+    Between restarts the judgement depends on ``k`` alone, so it is made once per sample."""
 
     def __init__(self, sizes: Sequence[int], options: EstimatorOptions) -> None:
         self.at = np.array([options.publish_samples(s) for s in sizes], dtype=np.int64)
         self._burn_in = options.burn_in
         self.all_published = False
+        self._k = -1  # the sample count of the last judgement (-1: none since the last restart)
+        self._last = np.zeros(len(self.at), dtype=bool)
 
     def restart(self) -> None:
         """Readiness changed: judge afresh."""
         self.all_published = False
+        self._k = -1
 
     def count(self, k: int, initialized: np.ndarray, ready_at: np.ndarray) -> np.ndarray:
         """What the rule counts for each model at sample ``k``, ``(M,)``: ``k``, or after a
@@ -45,7 +49,10 @@ class PublicationRule:
         copy, once every model is)."""
         if self.all_published:
             return initialized
+        if k == self._k:
+            return self._last
         published: np.ndarray = initialized & (self.count(k, initialized, ready_at) >= self.at)
         if published.all():
             self.all_published = True
+        self._k, self._last = k, published
         return published

@@ -180,6 +180,11 @@ class _Rows:
             self.pipe.instruments.clear()  # (estimator.algorithm iv: each row's, beside them)
         return new
 
+    @property
+    def pending(self) -> bool:
+        """Whether :meth:`take` has anything to do (rows came, or the pipeline dropped them)."""
+        return len(self.pipe.regression) != self.seen
+
     def stop(self) -> None:
         """No reader needs rows any longer: the pipeline records them only if kept."""
         self.pipe.record = self.keep
@@ -363,16 +368,18 @@ def run_pipeline(messages: Iterable[tuple[str, int, Stamped]], config: PipelineC
             outs = feed(pipe, kind, msg)
             for out in outs:
                 run.sample(out)
-            if excitation.watching or figure_data is not None:
+            if figure_data is not None:
                 new = rows.take()
-                if figure_data is not None:
-                    figure_data.add(pipe, outs, new)
+                figure_data.add(pipe, outs, new)
                 if excitation.watching:
                     excitation.update(new)
-                    if run.ever.all():
-                        excitation.watching = False
-                        if figure_data is None:
-                            rows.stop()
+                    excitation.watching = not run.ever.all()
+            elif excitation.watching:
+                if rows.pending:
+                    excitation.update(rows.take())
+                if outs and run.ever.all():  # (only an output changes run.ever)
+                    excitation.watching = False
+                    rows.stop()
             if diag is not None:
                 diag.after(kind, stamp)
             run.history(newest)
