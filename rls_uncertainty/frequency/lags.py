@@ -95,13 +95,14 @@ def pseudo_inverse(B: FloatArray, columns: npt.NDArray[np.bool_]) -> FloatArray:
     (``columns`` false) or zero on the diagonal are left out (0 in ``B^+``). Where ``B`` is
     singular the fit's residual is still the unique least-squares projection."""
     d = np.diagonal(B, axis1=1, axis2=2)
-    used = columns & (d > 0)
-    s = np.where(used, 1.0 / np.sqrt(np.where(used, d, 1.0)), 0.0)
+    s = 1.0 / np.sqrt(np.where(columns & (d > 0), d, np.inf))  # left out: 0
     scale = s[:, :, None] * s[:, None, :]
     w, u = np.linalg.eigh(B * scale)
     magnitude = np.abs(w)
-    inverse = 1.0 / np.where(magnitude > 1e-12 * magnitude.max(axis=1, keepdims=True), w, np.inf)  # cut: 0
-    out: FloatArray = (u * inverse[:, None, :]) @ u.swapaxes(1, 2)
+    cut = magnitude <= 1e-12 * magnitude.max(axis=1, keepdims=True)
+    if cut.any():
+        w = np.where(cut, np.inf, w)  # 1 / w: 0
+    out: FloatArray = (u * (1.0 / w)[:, None, :]) @ u.swapaxes(1, 2)
     out *= scale
     return out
 
@@ -110,10 +111,21 @@ def centering(augmented: FloatArray) -> FloatArray:
     """``E = [I, -m]`` ``(M, q, q+1)`` of augmented sums ``(M, lags, q+1, q+1)``:
     ``C_i = E Sa_i E'`` (``m = (s - H_0) / N`` from ``Sa_0``)."""
     M, q = augmented.shape[0], augmented.shape[2] - 1
-    E = np.zeros((M, q, q + 1))
-    E[:, :, :q] = np.eye(q)
+    E = _identities(M, q)
     np.divide(augmented[:, 0, :q, q], -augmented[:, 0, q, q, None], out=E[:, :, q])
     return E
+
+
+_IDENTITIES: dict[tuple[int, int], FloatArray] = {}
+
+
+def _identities(M: int, q: int) -> FloatArray:
+    """A new ``(M, q, q+1)`` array ``[I, 0]`` (a copy of one kept per shape)."""
+    template = _IDENTITIES.get((M, q))
+    if template is None:
+        template = _IDENTITIES[(M, q)] = np.zeros((M, q, q + 1))
+        template[:, :, :q] = np.eye(q)
+    return template.copy()
 
 
 def dof_correction(
@@ -155,18 +167,19 @@ def dof_correction(
     shifted += np.maximum(N - _distances(L), 0) / N
     step = shifted.strides
     windows = np.ndarray((M, lags, 2 * L + 1), np.float64, shifted, L * step[1], (step[0], -step[1], step[1]))
-    # (N - i) var(R), var(R) = sum_(|l|<=L) (N - |l|) R(l) / N^2.
+    # (N - i) var(R), var(R) = sum_(|l|<=L) (N - |l|) R(l) / N^2; with the cross terms one
+    # matrix of R(|l|), l = -L..L, folded onto R(0..L): (M, lags, lags).
     count = N - np.arange(lags, dtype=np.float64)
     weight = (N - np.abs(np.arange(-L, L + 1))) / N**2
+    full = 2.0 * windows - count[:, None] * weight
+    lagged = full[:, :, L:].copy()
+    lagged[:, :, 1:] += full[:, :, :L][:, :, ::-1]
     first = augmented[:, 0]
 
     def apply(R: FloatArray) -> FloatArray:
         summed = (R[:, None, :] @ flat).reshape(M, q1, q1)  # sum_l R(l) Sa_l
         middle = summed + summed.swapaxes(1, 2) - R[:, :1, None] * first  # Ex middle Ex' is cov(R)'s middle
-        two_sided = np.concatenate([R[:, :0:-1], R], axis=1)  # R(|l|), l = -L..L
-        out: FloatArray = 2.0 * np.einsum("mil,ml->mi", windows, two_sided)
-        out -= count * (two_sided @ weight)[:, None]
-        out -= traces(Bt @ middle @ Bt)
+        out: FloatArray = (lagged @ R[:, :, None])[:, :, 0] - traces(Bt @ middle @ Bt)
         out /= N
         return out
 
