@@ -199,7 +199,7 @@ class FrequencyBank:
         all_solved = bool(solved.all())
         if not all_solved:
             A[~solved] = np.eye(A.shape[1])
-        A_inv: FloatArray = np.linalg.inv(A)
+        A_inv: FloatArray = np.linalg.inv(A).astype(np.float64, copy=False)
         A_inv *= self._real_square  # padding: 0
         theta = (A_inv @ b[:, :, None])[:, :, 0]
         # Eq. F5: s^2 = sum_k |Z_k - X_k theta|^2 / (K - p).

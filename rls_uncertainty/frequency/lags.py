@@ -144,7 +144,8 @@ def dof_correction(
     The centered sums are never formed: ``C^x_j = E_x Sa_j E_x'`` (``E_x`` the regressor rows of
     :func:`centering`), so ``T``, the traces and ``sum_l R(l) Sa_l`` are each one product with
     the augmented sums (the fit's covariance enters as ``E_x' B^+ E_x``, formed once); the cross
-    terms are one contraction with strided windows of ``T + T1``."""
+    terms and the bias's variance are one ``(L+1) x (L+1)`` matrix of ``R(0..L)`` per model,
+    formed once (``T``'s Toeplitz and Hankel parts as strided views, :func:`_bias_terms`)."""
     M, lags, q1 = augmented.shape[:3]
     L = lags - 1
     flat = augmented.reshape(M, lags, q1 * q1)
@@ -158,22 +159,19 @@ def dof_correction(
         out: FloatArray = (flat @ Y.reshape(M, q1 * q1, 1))[:, :, 0]
         return out
 
-    # T(j) + T1(j) at index j + 2L, j = -2L..2L: row i of the cross term's matrix, f(l - i) for
-    # l = -L..L, is the window starting at L - i (a strided view, never formed: O(M L) memory).
+    # The cross terms and (N - i) var(R), var(R) = sum_(|l|<=L) (N - |l|) R(l) / N^2, are one
+    # matrix of R(0..L) (the sums over l = -L..L folded onto |l|), (M, lags, lags): T's
+    # Toeplitz part 2 T(|j - i|) and Hankel part 2 T(j + i) (j >= 1; 0 beyond L) are strided
+    # views of 2 T laid out at index 2L + k, k = -2L..2L; the rest depends only on N and L.
     shifted = np.zeros((M, 4 * L + 1))
-    T = traces(Bt)  # tr(B^+ C^x_j)
-    shifted[:, 2 * L : 3 * L + 1] = T
-    shifted[:, L : 2 * L + 1] = T[:, ::-1]
-    shifted += np.maximum(N - _distances(L), 0) / N
+    T2 = 2.0 * traces(Bt)  # 2 tr(B^+ C^x_j)
+    shifted[:, 2 * L : 3 * L + 1] = T2
+    shifted[:, L : 2 * L + 1] = T2[:, ::-1]
     step = shifted.strides
-    windows = np.ndarray((M, lags, 2 * L + 1), np.float64, shifted, L * step[1], (step[0], -step[1], step[1]))
-    # (N - i) var(R), var(R) = sum_(|l|<=L) (N - |l|) R(l) / N^2; with the cross terms one
-    # matrix of R(|l|), l = -L..L, folded onto R(0..L): (M, lags, lags).
-    count = N - np.arange(lags, dtype=np.float64)
-    weight = (N - np.abs(np.arange(-L, L + 1))) / N**2
-    full = 2.0 * windows - count[:, None] * weight
-    lagged = full[:, :, L:].copy()
-    lagged[:, :, 1:] += full[:, :, :L][:, :, ::-1]
+    toeplitz = np.ndarray((M, lags, lags), np.float64, shifted, 2 * L * step[1], (step[0], -step[1], step[1]))
+    hankel = np.ndarray((M, lags, lags), np.float64, shifted, 2 * L * step[1], (step[0], step[1], step[1]))
+    lagged = toeplitz + _bias_terms(N, L)
+    lagged[:, :, 1:] += hankel[:, :, 1:]
     first = augmented[:, 0]
 
     def apply(R: FloatArray) -> FloatArray:
@@ -186,14 +184,23 @@ def dof_correction(
     return apply
 
 
-_DISTANCES: dict[int, FloatArray] = {}
+_FOLDS: dict[int, tuple[FloatArray, FloatArray, FloatArray]] = {}
 
 
-def _distances(L: int) -> FloatArray:
-    """``|j|`` for ``j = -2L..2L`` (kept per ``L``)."""
-    out = _DISTANCES.get(L)
-    if out is None:
-        out = _DISTANCES[L] = np.abs(np.arange(-2 * L, 2 * L + 1, dtype=np.float64))
+def _bias_terms(N: int, L: int) -> FloatArray:
+    """The part of :func:`dof_correction`'s lag matrix that depends only on ``N`` and ``L``,
+    ``(L+1, L+1)``: ``2 [T1(j - i) + T1(-j - i)] - (N - i)(N - j) c_j / N^2`` with
+    ``T1(k) = max(N - |k|, 0) / N`` (the ``-j`` term only for ``j >= 1``) and ``c_j`` the lags
+    ``+-j`` folded onto ``j``: 1 for ``j = 0``, 2 beyond (kept per ``L``)."""
+    folds = _FOLDS.get(L)
+    if folds is None:
+        i, j = np.arange(L + 1.0)[:, None], np.arange(L + 1.0)[None, :]
+        folds = _FOLDS[L] = (np.abs(j - i), np.where(j >= 1, i + j, np.inf), np.where(j[0] >= 1, 2.0, 1.0))
+    direct, mirrored, folded = folds
+    out: FloatArray = (N - direct) + np.maximum(N - mirrored, 0.0)  # |j - i| <= L < N
+    out *= 2.0 / N
+    count = N - np.arange(L + 1.0)
+    out -= np.multiply.outer(count, count * folded) / N**2
     return out
 
 
