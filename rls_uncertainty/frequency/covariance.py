@@ -62,6 +62,7 @@ class PairGeometry:
         self.cot_imag: FloatArray = 0.5 * (cot_minus - cot_plus)  # Im a -> Re L
         self.cot_real: FloatArray = -0.5 * (cot_minus + cot_plus)  # Re a -> Im L
         self._tables: dict[int, FloatArray] = {}
+        self._spectral: dict[int, FloatArray] = {}
         self._weights: dict[int, FloatArray] = {}
         self.at(1)
 
@@ -89,6 +90,15 @@ class PairGeometry:
             table = np.empty((lags, 2 * self.angles.size))
             table[:, 0::2], table[:, 1::2] = np.cos(phase), -np.sin(phase)
             self._tables[lags] = table
+        return table
+
+    def spectral_table(self, lags: int) -> FloatArray:
+        """``(lags, 3K)``: :meth:`lag_table` and ``i cos(a_k i)``, so that ``r @ table`` gives
+        ``S+`` (the first ``2K`` columns, viewed as complex) and ``Re S1`` (kept per ``lags``)."""
+        table = self._spectral.get(lags)
+        if table is None:
+            cosines = self.lag_table(lags)[:, 0::2]
+            table = self._spectral[lags] = np.hstack([self.lag_table(lags), self.lag_weights(lags)[:, None] * cosines])
         return table
 
     def at(self, N: int) -> PairGeometry:
@@ -216,7 +226,8 @@ def middle(R: FloatArray, X: ComplexArray, geometry: PairGeometry, trim: int = 1
     ``Re(X^H V)`` are two more columns of the same contraction."""
     g = geometry
     m, K, p = X.shape
-    plus, first = spectral_sums(R, g)
+    sums = R[:, 1:] @ g.spectral_table(R.shape[1] - 1)  # S+ and Re S1
+    plus: ComplexArray = sums[:, : 2 * K].view(np.complex128)
     r0 = R[:, :1]
     XY = np.empty((m, 2, K, p), complex)  # X and Y per model
     XY[:, 0] = X
@@ -238,7 +249,7 @@ def middle(R: FloatArray, X: ComplexArray, geometry: PairGeometry, trim: int = 1
     right = np.zeros((m, 3 * K, p + 2), complex)
     np.multiply(base.conj()[:, :, None], X, out=right[:, :K, :p])
     np.multiply(-base[:, :, None], XY[:, 1], out=right[:, K : 2 * K, :p])
-    np.multiply((g.N * base.real - 2.0 * first.real)[:, :, None], X, out=right[:, 2 * K :, :p])
+    np.multiply((g.N * base.real - 2.0 * sums[:, 2 * K :])[:, :, None], X, out=right[:, 2 * K :, :p])
     if trim == 1:
         np.add(r0, plus, out=right[:, 2 * K :, p + 1])
         var = R[:, 0]
