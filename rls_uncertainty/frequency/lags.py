@@ -159,10 +159,11 @@ def dof_correction(
         out: FloatArray = (flat @ Y.reshape(M, q1 * q1, 1))[:, :, 0]
         return out
 
-    # The cross terms and (N - i) var(R), var(R) = sum_(|l|<=L) (N - |l|) R(l) / N^2, are one
-    # matrix of R(0..L) (the sums over l = -L..L folded onto |l|), (M, lags, lags): T's
-    # Toeplitz part 2 T(|j - i|) and Hankel part 2 T(j + i) (j >= 1; 0 beyond L) are strided
-    # views of 2 T laid out at index 2L + k, k = -2L..2L; the rest depends only on N and L.
+    # The cross terms and (N - i) var(R), var(R) = sum_(|l|<=L) (N - |l|) R(l) / N^2, are
+    # matrices of R(0..L) (the sums over l = -L..L folded onto |l|): T's Toeplitz part
+    # 2 T(|j - i|) and Hankel part 2 T(j + i) (j >= 1; 0 beyond L), (M, lags, lags), strided
+    # views of 2 T laid out at index 2L + k, k = -2L..2L; the rest, shared by the models,
+    # depends only on N and L.
     shifted = np.zeros((M, 4 * L + 1))
     T2 = 2.0 * traces(Bt)  # 2 tr(B^+ C^x_j)
     shifted[:, 2 * L : 3 * L + 1] = T2
@@ -170,37 +171,49 @@ def dof_correction(
     step = shifted.strides
     toeplitz = np.ndarray((M, lags, lags), np.float64, shifted, 2 * L * step[1], (step[0], -step[1], step[1]))
     hankel = np.ndarray((M, lags, lags), np.float64, shifted, 2 * L * step[1], (step[0], step[1], step[1]))
-    lagged = toeplitz + _bias_terms(N, L)
-    lagged[:, :, 1:] += hankel[:, :, 1:]
+    lagged = toeplitz + hankel
+    lagged[:, :, 0] -= T2  # the Hankel part starts at j = 1
+    shared = _bias_terms(N, L).T
     first = augmented[:, 0]
 
     def apply(R: FloatArray) -> FloatArray:
         summed = (R[:, None, :] @ flat).reshape(M, q1, q1)  # sum_l R(l) Sa_l
         middle = summed + summed.swapaxes(1, 2) - R[:, :1, None] * first  # Ex middle Ex' is cov(R)'s middle
-        out: FloatArray = (lagged @ R[:, :, None])[:, :, 0] - traces(Bt @ middle @ Bt)
+        out: FloatArray = (lagged @ R[:, :, None])[:, :, 0] + R @ shared - traces(Bt @ middle @ Bt)
         out /= N
         return out
 
     return apply
 
 
-_FOLDS: dict[int, tuple[FloatArray, FloatArray, FloatArray]] = {}
+_FOLDS: dict[int, tuple[FloatArray, ...]] = {}
 
 
 def _bias_terms(N: int, L: int) -> FloatArray:
     """The part of :func:`dof_correction`'s lag matrix that depends only on ``N`` and ``L``,
     ``(L+1, L+1)``: ``2 [T1(j - i) + T1(-j - i)] - (N - i)(N - j) c_j / N^2`` with
     ``T1(k) = max(N - |k|, 0) / N`` (the ``-j`` term only for ``j >= 1``) and ``c_j`` the lags
-    ``+-j`` folded onto ``j``: 1 for ``j = 0``, 2 beyond (kept per ``L``)."""
+    ``+-j`` folded onto ``j``: 1 for ``j = 0``, 2 beyond. From ``N = 2L`` on no ``T1`` is
+    clipped and it is ``c_j + (P1 + P2 / N) / N`` with fixed ``P1 = (i + j) c_j - 2 (|j - i| +
+    (i + j) [j >= 1])`` and ``P2 = -i j c_j`` (kept per ``L``)."""
     folds = _FOLDS.get(L)
     if folds is None:
         i, j = np.arange(L + 1.0)[:, None], np.arange(L + 1.0)[None, :]
-        folds = _FOLDS[L] = (np.abs(j - i), np.where(j >= 1, i + j, np.inf), np.where(j[0] >= 1, 2.0, 1.0))
-    direct, mirrored, folded = folds
-    out: FloatArray = (N - direct) + np.maximum(N - mirrored, 0.0)  # |j - i| <= L < N
+        c = np.where(j >= 1, 2.0, 1.0)
+        mirrored = np.where(j >= 1, i + j, np.inf)  # |-j - i|, none for j = 0
+        P1 = (i + j) * c - 2.0 * (np.abs(j - i) + np.where(j >= 1, i + j, 0.0))
+        folds = _FOLDS[L] = (np.abs(j - i), mirrored, c, P1, -i * j * c)
+    direct, mirrored, c, P1, P2 = folds
+    if N >= 2 * L:
+        out: FloatArray = P2 / N
+        out += P1
+        out /= N
+        out += c
+        return out
+    out = (N - direct) + np.maximum(N - mirrored, 0.0)  # |j - i| <= L < N
     out *= 2.0 / N
     count = N - np.arange(L + 1.0)
-    out -= np.multiply.outer(count, count * folded) / N**2
+    out -= np.multiply.outer(count, count * c[0]) / N**2
     return out
 
 
