@@ -103,6 +103,7 @@ class FrequencyBank:
         self._pad_unit: FloatArray = self._pad_diagonal.astype(np.float64)  # added to Re(X^H X)[x, x]
         self._real_square: FloatArray = (~self._pad_square).astype(np.float64)  # multiplies A^-1
         self._none: BoolArray = np.zeros(M, dtype=bool)
+        self._all: BoolArray = np.ones(M, dtype=bool)
         self._residual_dof: FloatArray = K - np.array(self.sizes, dtype=np.float64)
         # The publication rule: samples each model needs (its regressors and the bias, plus the windows).
         self.publish_at = np.array([options.publish_samples(s + 1) for s in self.sizes], dtype=np.int64)
@@ -175,7 +176,7 @@ class FrequencyBank:
         self._R = np.full((len(self.sizes), 1), np.nan)
         self._output_variance[...] = np.nan
         self._ready[...] = False
-        self._solved[...] = False
+        self._solved = np.zeros(len(self.sizes), dtype=bool)  # not in place: it may be a shared constant
         self._withheld[...] = False
         self._evaluated_at = 0
 
@@ -193,13 +194,16 @@ class FrequencyBank:
         if self._cross is None:
             G: FloatArray = (U.conj().swapaxes(1, 2) @ U).real
             A, b = G[:, 1:, 1:] + self._pad_unit, G[:, 1:, 0]  # padded parameters (0 in G): theta = 0
-            solved = self._well_conditioned(A) if N >= 2 else self._none
+            A_inv = self._all_well_conditioned(A) if N >= 2 else None
+            solved = self._all if A_inv is not None else self._well_conditioned(A) if N >= 2 else self._none
         else:  # Eq. F11
             A, b, WW, solved = instrumental_system(U, q, self._pad_diagonal, self.options.init_condition, N)
+            A_inv = None
         all_solved = bool(solved.all())
-        if not all_solved:
-            A[~solved] = np.eye(A.shape[1])
-        A_inv: FloatArray = np.linalg.inv(A).astype(np.float64, copy=False)
+        if A_inv is None:
+            if not all_solved:
+                A[~solved] = np.eye(A.shape[1])
+            A_inv = np.linalg.inv(A).astype(np.float64, copy=False)
         A_inv *= self._real_square  # padding: 0
         theta = (A_inv @ b[:, :, None])[:, :, 0]
         # Eq. F5: s^2 = sum_k |Z_k - X_k theta|^2 / (K - p).
@@ -238,6 +242,21 @@ class FrequencyBank:
         gamma = self._geometry.at(self._lags.n).gamma
         out: npt.NDArray[np.complex128] = U - self.options.dt * shift[:, None, :] * gamma[None, :, None]
         return out
+
+    def _all_well_conditioned(self, A: FloatArray) -> FloatArray | None:
+        """``A^-1`` when every model passes :meth:`_well_conditioned` without its eigenvalues, else
+        None. For ``S = D^-1/2 A D^-1/2`` (``D`` the diagonal; positive definite, unit diagonal,
+        ``p`` rows) ``1 <= lambda_max <= p`` and ``1 / lambda_min <= tr(S^-1) = sum_i D_ii (A^-1)_ii``,
+        so ``0 < p tr(S^-1) < init_condition`` bounds the condition number below the limit."""
+        d = np.diagonal(A, axis1=1, axis2=2)
+        if not ((d > 0).all() and np.isfinite(A).all()):
+            return None
+        try:
+            A_inv: FloatArray = np.linalg.inv(A).astype(np.float64, copy=False)
+        except np.linalg.LinAlgError:
+            return None
+        bound = A.shape[1] * np.einsum("mi,mii->m", d, A_inv)
+        return A_inv if ((bound > 0) & (bound < self.options.init_condition)).all() else None
 
     def _well_conditioned(self, A: FloatArray) -> BoolArray:
         """Column-scaled ``Re(X^H X)`` of each model (padding: a unit diagonal, which leaves the
