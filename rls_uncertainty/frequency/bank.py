@@ -194,8 +194,11 @@ class FrequencyBank:
         if self._cross is None:
             G: FloatArray = (U.conj().swapaxes(1, 2) @ U).real
             A, b = G[:, 1:, 1:] + self._pad_unit, G[:, 1:, 0]  # padded parameters (0 in G): theta = 0
-            A_inv = self._all_well_conditioned(A) if N >= 2 else None
-            solved = self._all if A_inv is not None else self._well_conditioned(A) if N >= 2 else self._none
+            A_inv = _all_well_conditioned(A, self.options.init_condition) if N >= 2 else None
+            if A_inv is not None:
+                solved = self._all
+            else:
+                solved = _well_conditioned(A, self.options.init_condition) if N >= 2 else self._none
         else:  # Eq. F11
             A, b, WW, solved = instrumental_system(U, q, self._pad_diagonal, self.options.init_condition, N)
             A_inv = None
@@ -242,38 +245,6 @@ class FrequencyBank:
         gamma = self._geometry.at(self._lags.n).gamma
         out: npt.NDArray[np.complex128] = U - self.options.dt * shift[:, None, :] * gamma[None, :, None]
         return out
-
-    def _all_well_conditioned(self, A: FloatArray) -> FloatArray | None:
-        """``A^-1`` when every model passes :meth:`_well_conditioned` without its eigenvalues, else
-        None. For ``S = D^-1/2 A D^-1/2`` (``D`` the diagonal; positive definite, unit diagonal,
-        ``p`` rows) ``1 <= lambda_max <= p`` and ``1 / lambda_min <= tr(S^-1) = sum_i D_ii (A^-1)_ii``,
-        so ``0 < p tr(S^-1) < init_condition`` bounds the condition number below the limit."""
-        d = np.diagonal(A, axis1=1, axis2=2)
-        if not ((d > 0).all() and np.isfinite(A).all()):
-            return None
-        try:
-            A_inv: FloatArray = np.linalg.inv(A).astype(np.float64, copy=False)
-        except np.linalg.LinAlgError:
-            return None
-        bound = A.shape[1] * np.einsum("mi,mii->m", d, A_inv)
-        return A_inv if ((bound > 0) & (bound < self.options.init_condition)).all() else None
-
-    def _well_conditioned(self, A: FloatArray) -> BoolArray:
-        """Column-scaled ``Re(X^H X)`` of each model (padding: a unit diagonal, which leaves the
-        extreme eigenvalues of a unit-diagonal matrix unchanged) below ``init_condition``."""
-        d = np.diagonal(A, axis1=1, axis2=2)
-        if (d > 0).all() and np.isfinite(A).all():  # the usual case, without per-model reductions
-            s = 1.0 / np.sqrt(d)
-            eig = np.linalg.eigvalsh(A * s[:, :, None] * s[:, None, :])
-            ok: BoolArray = eig[:, 0] * self.options.init_condition > eig[:, -1]
-            return ok
-        positive: BoolArray = np.all(d > 0, axis=1) & np.all(np.isfinite(A), axis=(1, 2))
-        s = 1.0 / np.sqrt(np.where(positive[:, None], d, 1.0))
-        scaled = A * s[:, :, None] * s[:, None, :]
-        scaled[~positive] = np.eye(A.shape[1])
-        eig = np.linalg.eigvalsh(scaled)
-        ok = positive & (eig[:, 0] * self.options.init_condition > eig[:, -1])
-        return ok
 
     def _corrected(
         self, X: npt.NDArray[np.complex128], A_inv: FloatArray, right: FloatArray, theta: FloatArray, N: int,
@@ -414,3 +385,37 @@ class FrequencyBank:
             "trim_samples": o.trim_samples, "n_lags": o.n_lags, "every": o.every, "dof_correction": o.dof_correction,
             "instruments": self._cross is not None,
         }
+
+
+def _all_well_conditioned(A: FloatArray, init_condition: float) -> FloatArray | None:
+    """``A^-1`` when every model passes :func:`_well_conditioned` without its eigenvalues, else
+    None. For ``S = D^-1/2 A D^-1/2`` (``D`` the diagonal; positive definite, unit diagonal,
+    ``p`` rows) ``1 <= lambda_max <= p`` and ``1 / lambda_min <= tr(S^-1) = sum_i D_ii (A^-1)_ii``,
+    so ``0 < p tr(S^-1) < init_condition`` bounds the condition number below the limit."""
+    d = np.diagonal(A, axis1=1, axis2=2)
+    if not ((d > 0).all() and np.isfinite(A).all()):
+        return None
+    try:
+        A_inv: FloatArray = np.linalg.inv(A).astype(np.float64, copy=False)
+    except np.linalg.LinAlgError:
+        return None
+    bound = A.shape[1] * np.einsum("mi,mii->m", d, A_inv)
+    return A_inv if ((bound > 0) & (bound < init_condition)).all() else None
+
+
+def _well_conditioned(A: FloatArray, init_condition: float) -> BoolArray:
+    """Column-scaled ``Re(X^H X)`` of each model (padding: a unit diagonal, which leaves the
+    extreme eigenvalues of a unit-diagonal matrix unchanged) below ``init_condition``."""
+    d = np.diagonal(A, axis1=1, axis2=2)
+    if (d > 0).all() and np.isfinite(A).all():  # the usual case, without per-model reductions
+        s = 1.0 / np.sqrt(d)
+        eig = np.linalg.eigvalsh(A * s[:, :, None] * s[:, None, :])
+        ok: BoolArray = eig[:, 0] * init_condition > eig[:, -1]
+        return ok
+    positive: BoolArray = np.all(d > 0, axis=1) & np.all(np.isfinite(A), axis=(1, 2))
+    s = 1.0 / np.sqrt(np.where(positive[:, None], d, 1.0))
+    scaled = A * s[:, :, None] * s[:, None, :]
+    scaled[~positive] = np.eye(A.shape[1])
+    eig = np.linalg.eigvalsh(scaled)
+    ok = positive & (eig[:, 0] * init_condition > eig[:, -1])
+    return ok
