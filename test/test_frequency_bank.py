@@ -160,6 +160,35 @@ def test_a_model_that_is_not_ready_gives_nan_and_refuses_its_estimate(t2_run):
         bank.standard_errors_all("batch")
 
 
+def test_a_model_is_solved_exactly_when_its_scaled_normal_matrix_is_conditioned_below_the_limit(t2_run):
+    """The eigenvalues of the column-scaled ``Re(X^H X)`` of the transforms decide
+    (``lambda_min init_condition > lambda_max``), whichever way the bank finds it: a bound from
+    the inverse's trace settles most limits, not those between the condition number and ``p``
+    times ``tr(S^-1)``, nor a matrix that rounding leaves indefinite (3 samples)."""
+    x, z = t2_run
+    for n in (3, 30, 200):
+        bank = FrequencyBank(SIZES, FrequencyOptions(rate_hz=RATE))
+        feed(bank, x, z, 0, n)
+        _Z, X = bank.transforms()
+        extremes, limits = [], []
+        for j, p in enumerate(SIZES):
+            A = (X[j, :, :p].conj().T @ X[j, :, :p]).real
+            s = 1.0 / np.sqrt(np.diag(A))
+            S = A * np.outer(s, s)
+            eig = np.linalg.eigvalsh(S)
+            extremes.append((eig[0], eig[-1]))
+            if eig[0] > 0:  # the condition number and the bound (padding: unit diagonal)
+                bound = max(SIZES) * (np.trace(np.linalg.inv(S)) + max(SIZES) - p)
+                assert eig[-1] / eig[0] <= bound
+                limits += [eig[-1] / eig[0], bound]
+        limits.sort()
+        for limit in [0.5 * limits[0], *np.sqrt(np.multiply(limits[:-1], limits[1:])), 2.0 * limits[-1]]:
+            bank = FrequencyBank(SIZES, FrequencyOptions(rate_hz=RATE, init_condition=limit))
+            feed(bank, x, z, 0, n)
+            expected = [low * limit > high for low, high in extremes]
+            np.testing.assert_array_equal(bank.solved, expected, err_msg=f"{n} samples, limit {limit:g}")
+
+
 @pytest.mark.parametrize("phi", [0.0, 0.5, -0.5])
 def test_the_corrected_variance_is_unbiased_for_the_true_noise_on_average(phi):
     # 400 models with the same regressors (one of them a switched-on cosine: energy outside the

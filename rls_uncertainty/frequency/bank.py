@@ -100,6 +100,10 @@ class FrequencyBank:
         self._real: BoolArray = real
         self._pad_diagonal: BoolArray = ~real[:, :, None] & np.eye(p_max, dtype=bool)
         self._pad_square: BoolArray = ~(real[:, :, None] & real[:, None, :])
+        self._pad_unit: FloatArray = self._pad_diagonal.astype(np.float64)  # added to Re(X^H X)[x, x]
+        self._real_square: FloatArray = (~self._pad_square).astype(np.float64)  # multiplies A^-1
+        self._none: BoolArray = np.zeros(M, dtype=bool)
+        self._all: BoolArray = np.ones(M, dtype=bool)
         self._residual_dof: FloatArray = K - np.array(self.sizes, dtype=np.float64)
         # The publication rule: samples each model needs (its regressors and the bias, plus the windows).
         self.publish_at = np.array([options.publish_samples(s + 1) for s in self.sizes], dtype=np.int64)
@@ -172,7 +176,7 @@ class FrequencyBank:
         self._R = np.full((len(self.sizes), 1), np.nan)
         self._output_variance[...] = np.nan
         self._ready[...] = False
-        self._solved[...] = False
+        self._solved = np.zeros(len(self.sizes), dtype=bool)  # not in place: it may be a shared constant
         self._withheld[...] = False
         self._evaluated_at = 0
 
@@ -189,36 +193,41 @@ class FrequencyBank:
         Z, X, W = U[..., 0], U[..., 1:q], U[..., q:]
         if self._cross is None:
             G: FloatArray = (U.conj().swapaxes(1, 2) @ U).real
-            A, b = G[:, 1:, 1:].copy(), G[:, 1:, 0]
-            A[self._pad_diagonal] = 1.0  # padded parameters: theta = 0
-            solved = self._well_conditioned(A) if N >= 2 else np.zeros(len(self.sizes), dtype=bool)
+            A, b = G[:, 1:, 1:] + self._pad_unit, G[:, 1:, 0]  # padded parameters (0 in G): theta = 0
+            A_inv = _all_well_conditioned(A, self.options.init_condition) if N >= 2 else None
+            if A_inv is not None:
+                solved = self._all
+            else:
+                solved = _well_conditioned(A, self.options.init_condition) if N >= 2 else self._none
         else:  # Eq. F11
             A, b, WW, solved = instrumental_system(U, q, self._pad_diagonal, self.options.init_condition, N)
+            A_inv = None
         all_solved = bool(solved.all())
-        if not all_solved:
-            A[~solved] = np.eye(A.shape[1])
-        A_inv: FloatArray = np.linalg.inv(A).astype(np.float64, copy=False)
-        A_inv[self._pad_square] = 0.0
+        if A_inv is None:
+            if not all_solved:
+                A[~solved] = np.eye(A.shape[1])
+            A_inv = np.linalg.inv(A).astype(np.float64, copy=False)
+        A_inv *= self._real_square  # padding: 0
         theta = (A_inv @ b[:, :, None])[:, :, 0]
         # Eq. F5: s^2 = sum_k |Z_k - X_k theta|^2 / (K - p).
         E = (Z - (X @ theta[:, :, None])[:, :, 0]).view(np.float64)
         s2 = (E[:, None, :] @ E[:, :, None])[:, 0, 0] / self._residual_dof
+        cov = self._cov
         if self._cross is None:
-            conventional = s2[:, None, None] * A_inv
-            corrected, unusable = self._corrected(X, A_inv, A_inv, theta, N)
+            np.multiply(s2[:, None, None], A_inv, out=cov[1])
+            unusable = self._corrected(X, A_inv, A_inv, theta, N, cov[0])
         else:  # Eq. F12: A^-1 [.] A^-T with the instruments in the middle
             A_invT = A_inv.swapaxes(1, 2)
-            conventional = s2[:, None, None] * (A_inv @ WW @ A_invT)
-            corrected, unusable = self._corrected(W, A_inv, A_invT, theta, N)
+            np.multiply(s2[:, None, None], A_inv @ WW @ A_invT, out=cov[1])
+            unusable = self._corrected(W, A_inv, A_invT, theta, N, cov[0])
         self._theta = np.where(self._real if all_solved else solved[:, None] & self._real, theta, np.nan)
-        self._cov[0], self._cov[1] = corrected, conventional
         if not all_solved:
-            self._cov[:, ~solved] = np.nan
+            cov[:, ~solved] = np.nan
         rule = solved & (N >= self.publish_at)
         self._withheld = rule & unusable
         self._solved, self._ready = solved, rule & ~unusable
         # Both kinds' standard errors, and as published, once per evaluation.
-        variances = np.diagonal(self._cov, axis1=2, axis2=3).clip(0.0, None)
+        variances = np.maximum(np.diagonal(cov, axis1=2, axis2=3), 0.0)  # NaN stays NaN
         self._se = np.where(self._real, np.sqrt(variances), np.nan)
         self._published_se = np.where(self._ready[:, None], self._se, np.nan)
 
@@ -237,25 +246,14 @@ class FrequencyBank:
         out: npt.NDArray[np.complex128] = U - self.options.dt * shift[:, None, :] * gamma[None, :, None]
         return out
 
-    def _well_conditioned(self, A: FloatArray) -> BoolArray:
-        """Column-scaled ``Re(X^H X)`` of each model (padding: a unit diagonal, which leaves the
-        extreme eigenvalues of a unit-diagonal matrix unchanged) below ``init_condition``."""
-        d = np.diagonal(A, axis1=1, axis2=2)
-        positive: BoolArray = np.all(d > 0, axis=1) & np.all(np.isfinite(A), axis=(1, 2))
-        s = 1.0 / np.sqrt(np.where(positive[:, None], d, 1.0))
-        scaled = A * s[:, :, None] * s[:, None, :]
-        if not positive.all():
-            scaled[~positive] = np.eye(A.shape[1])
-        eig = np.linalg.eigvalsh(scaled)
-        ok: BoolArray = positive & (eig[:, 0] * self.options.init_condition > eig[:, -1])
-        return ok
-
     def _corrected(
         self, X: npt.NDArray[np.complex128], A_inv: FloatArray, right: FloatArray, theta: FloatArray, N: int,
-    ) -> tuple[FloatArray, BoolArray]:
+        out: FloatArray,
+    ) -> BoolArray:
         """Eqs. F7-F10 (F12): the residual autocovariance over the record (least-squares or
         instrumental-variable residuals, corrected for the fit's degrees of freedom), the
-        closed-form sandwich ``A_inv [.] right`` of the transforms ``X`` (the instruments'); and the models
+        closed-form sandwich ``A_inv [.] right`` of the transforms ``X`` (the instruments'), written
+        to ``out``; returned: the models
         whose covariance means nothing at this evaluation: an exact fit (rounding of either
         sign), or a sandwich with a negative variance (its nearest positive semi-definite
         repair is zero or nearly so; counted in :attr:`repairs`)."""
@@ -265,14 +263,17 @@ class FrequencyBank:
         self._output_variance = C0[:, 0, 0] / N
         mid = middle(R, X, self._geometry.at(N), self._trim_count())
         mid *= self.options.dt**2
-        cov: FloatArray = A_inv @ mid @ right
+        np.matmul(A_inv @ mid, right, out=out)
         output_variance = (theta[:, None, :] @ C0[:, 1:, 1:] @ theta[:, :, None])[:, 0, 0] / N
         exact = R[:, 0] <= EXACT_FIT * output_variance
-        negative = (np.diagonal(cov, axis1=1, axis2=2) < 0.0).any(axis=1) & ~exact  # padding: 0
+        variances = np.diagonal(out, axis1=1, axis2=2)  # padding: 0
+        if not (variances < 0.0).any():
+            return exact
+        negative = (variances < 0.0).any(axis=1) & ~exact
         if negative.any():
             self.repairs += 1
         unusable: BoolArray = exact | negative
-        return cov, unusable
+        return unusable
 
     # ------------------------------------------------------------------ results
     @property
@@ -384,3 +385,37 @@ class FrequencyBank:
             "trim_samples": o.trim_samples, "n_lags": o.n_lags, "every": o.every, "dof_correction": o.dof_correction,
             "instruments": self._cross is not None,
         }
+
+
+def _all_well_conditioned(A: FloatArray, init_condition: float) -> FloatArray | None:
+    """``A^-1`` when every model passes :func:`_well_conditioned` without its eigenvalues, else
+    None. For ``S = D^-1/2 A D^-1/2`` (``D`` the diagonal; positive definite, unit diagonal,
+    ``p`` rows) ``1 <= lambda_max <= p`` and ``1 / lambda_min <= tr(S^-1) = sum_i D_ii (A^-1)_ii``,
+    so ``0 < p tr(S^-1) < init_condition`` bounds the condition number below the limit."""
+    d = np.diagonal(A, axis1=1, axis2=2)
+    if not ((d > 0).all() and np.isfinite(A).all()):
+        return None
+    try:
+        A_inv: FloatArray = np.linalg.inv(A).astype(np.float64, copy=False)
+    except np.linalg.LinAlgError:
+        return None
+    bound = A.shape[1] * np.einsum("mi,mii->m", d, A_inv)
+    return A_inv if ((bound > 0) & (bound < init_condition)).all() else None
+
+
+def _well_conditioned(A: FloatArray, init_condition: float) -> BoolArray:
+    """Column-scaled ``Re(X^H X)`` of each model (padding: a unit diagonal, which leaves the
+    extreme eigenvalues of a unit-diagonal matrix unchanged) below ``init_condition``."""
+    d = np.diagonal(A, axis1=1, axis2=2)
+    if (d > 0).all() and np.isfinite(A).all():  # the usual case, without per-model reductions
+        s = 1.0 / np.sqrt(d)
+        eig = np.linalg.eigvalsh(A * s[:, :, None] * s[:, None, :])
+        ok: BoolArray = eig[:, 0] * init_condition > eig[:, -1]
+        return ok
+    positive: BoolArray = np.all(d > 0, axis=1) & np.all(np.isfinite(A), axis=(1, 2))
+    s = 1.0 / np.sqrt(np.where(positive[:, None], d, 1.0))
+    scaled = A * s[:, :, None] * s[:, None, :]
+    scaled[~positive] = np.eye(A.shape[1])
+    eig = np.linalg.eigvalsh(scaled)
+    ok = positive & (eig[:, 0] * init_condition > eig[:, -1])
+    return ok

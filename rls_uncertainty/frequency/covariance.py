@@ -62,6 +62,7 @@ class PairGeometry:
         self.cot_imag: FloatArray = 0.5 * (cot_minus - cot_plus)  # Im a -> Re L
         self.cot_real: FloatArray = -0.5 * (cot_minus + cot_plus)  # Re a -> Im L
         self._tables: dict[int, FloatArray] = {}
+        self._spectral: dict[int, FloatArray] = {}
         self._weights: dict[int, FloatArray] = {}
         self.at(1)
 
@@ -91,10 +92,22 @@ class PairGeometry:
             self._tables[lags] = table
         return table
 
+    def spectral_table(self, lags: int) -> FloatArray:
+        """``(lags, 3K)``: :meth:`lag_table` and ``i cos(a_k i)``, so that ``r @ table`` gives
+        ``S+`` (the first ``2K`` columns, viewed as complex) and ``Re S1`` (kept per ``lags``)."""
+        table = self._spectral.get(lags)
+        if table is None:
+            cosines = self.lag_table(lags)[:, 0::2]
+            table = self._spectral[lags] = np.hstack([self.lag_table(lags), self.lag_weights(lags)[:, None] * cosines])
+        return table
+
     def at(self, N: int) -> PairGeometry:
         """Set the sample count ``N`` (the record so far); returns ``self``."""
+        if getattr(self, "N", None) == int(N):
+            return self
         self.N = int(N)
         self.rho = rho = np.exp(-1j * np.mod(self.angles * N, 2 * np.pi))
+        self.rho_conj: ComplexArray = rho.conj()
         self.gamma = (1.0 - rho) * self.inv_single
         return self
 
@@ -207,47 +220,51 @@ def middle(R: FloatArray, X: ComplexArray, geometry: PairGeometry, trim: int = 1
     (``J`` all ones) give ``F(a, b) = Re(L(a)^H b)`` with ``L(a) = (Q - j P - a)/2 + Re(1' a)``,
     ``P = (cot- + cot+) Re(a)``, ``Q = (cot- - cot+) Im(a)``: one product of each of the two
     fixed real ``K x K`` matrices with the ``2 M p`` columns of ``X`` and ``Y`` (``O(K^2 M p)``),
-    then one contraction over ``3K`` rows per model."""
+    then one contraction over ``3K`` rows per model. The ``-a/2`` of ``L`` is left out: it adds
+    ``-Re(X^H bX)/2 + Re(Y^H bY)/2 = -Im(X^H diag(Im(R(0) + 2 S)) X)``, antisymmetric
+    (``|rho_k| = 1``), nothing to the symmetric part. The trim's ``Re(X^H Gamma)`` and
+    ``Re(X^H V)`` are two more columns of the same contraction."""
     g = geometry
     m, K, p = X.shape
-    plus, first = spectral_sums(R, g)
+    sums = R[:, 1:] @ g.spectral_table(R.shape[1] - 1)  # S+ and Re S1
+    plus: ComplexArray = sums[:, : 2 * K].view(np.complex128)
     r0 = R[:, :1]
     XY = np.empty((m, 2, K, p), complex)  # X and Y per model
     XY[:, 0] = X
-    np.multiply(g.rho.conj()[:, None], X, out=XY[:, 1])
+    np.multiply(g.rho_conj[:, None], X, out=XY[:, 1])
     # [Re; Im] of every column of X and Y, (2K, M 2 p), through the fixed (2K, 2K) map.
     columns = XY.view(np.float64).reshape(m, 2, K, p, 2).transpose(4, 2, 0, 1, 3).reshape(2 * K, 2 * m * p)
     re, im = columns[:K], columns[K:]
     mapped = np.empty((2 * K, 2 * m * p))
     np.matmul(g.cot_imag, im, out=mapped[:K])
-    mapped[:K] += re.sum(axis=0) - 0.5 * re
+    mapped[:K] += re.sum(axis=0)
     np.matmul(g.cot_real, re, out=mapped[K:])
-    mapped[K:] -= 0.5 * im
     mapped = mapped.reshape(2, K, m, 2, p).transpose(0, 2, 3, 1, 4)  # (re/im, M, X/Y, K, p)
     left = np.empty((m, 3 * K, p), complex)  # L(X), L(Y), X (the diagonal of M)
     left.real[:, : 2 * K].reshape(m, 2, K, p)[...] = mapped[0]
     left.imag[:, : 2 * K].reshape(m, 2, K, p)[...] = mapped[1]
     left[:, 2 * K :] = X
     base = r0 + 2.0 * plus  # R(0) + 2 S
-    right = np.empty((m, 3 * K, p), complex)  # bX, -bY, (N s - 2 Re S1) X
-    np.multiply(base.conj()[:, :, None], X, out=right[:, :K])
-    np.multiply(-base[:, :, None], XY[:, 1], out=right[:, K : 2 * K])
-    np.multiply((g.N * base.real - 2.0 * first.real)[:, :, None], X, out=right[:, 2 * K :])
+    # bX, -bY, (N s - 2 Re S1) X; and, against X only, Gamma and V (the trim's terms).
+    right = np.zeros((m, 3 * K, p + 2), complex)
+    np.multiply(base.conj()[:, :, None], X, out=right[:, :K, :p])
+    np.multiply(-base[:, :, None], XY[:, 1], out=right[:, K : 2 * K, :p])
+    np.multiply((g.N * base.real - 2.0 * sums[:, 2 * K :])[:, :, None], X, out=right[:, 2 * K :, :p])
+    if trim == 1:
+        np.add(r0, plus, out=right[:, 2 * K :, p + 1])
+        var = R[:, 0]
+    else:
+        right[:, 2 * K :, p + 1], var = trim_terms(R, g, trim)
+    right[:, 2 * K :, p] = g.gamma
     # Re(left^H right) = Re' Re + Im' Im: one real product of the interleaved views.
-    both = left.view(np.float64).swapaxes(1, 2) @ right.view(np.float64)  # (M, 2p, 2p)
-    mid = both[:, 0::2, 0::2] + both[:, 1::2, 1::2]
+    both = left.view(np.float64).swapaxes(1, 2) @ right.view(np.float64)  # (M, 2p, 2p + 4)
+    contracted = both[:, 0::2, 0::2] + both[:, 1::2, 1::2]
+    mid = contracted[:, :, :p]
     mid *= 0.5
     # The trim subtracted: var Gamma Gamma^H - V Gamma^H - Gamma V^H (and ^T for P), whose real
     # parts reduce to var g g' - v g' - g v' with g = Re(X^H Gamma), v = Re(X^H V).
-    if trim == 1:
-        V, var = r0 + plus, R[:, 0]
-    else:
-        V, var = trim_terms(R, g, trim)
-    targets = np.empty((m, K, 2), complex)
-    targets[:, :, 0], targets[:, :, 1] = g.gamma, V
-    gv = (X.conj().swapaxes(1, 2) @ targets).real
-    gam = gv[:, :, 0]
-    mid += (var[:, None] * gam - 2.0 * gv[:, :, 1])[:, :, None] * gam[:, None, :]
+    gam = contracted[:, :, p]
+    mid += (var[:, None] * gam - 2.0 * contracted[:, :, p + 1])[:, :, None] * gam[:, None, :]
     out: FloatArray = mid + mid.swapaxes(1, 2)
     out *= 0.5
     return out

@@ -95,13 +95,14 @@ def pseudo_inverse(B: FloatArray, columns: npt.NDArray[np.bool_]) -> FloatArray:
     (``columns`` false) or zero on the diagonal are left out (0 in ``B^+``). Where ``B`` is
     singular the fit's residual is still the unique least-squares projection."""
     d = np.diagonal(B, axis1=1, axis2=2)
-    used = columns & (d > 0)
-    s = np.where(used, 1.0 / np.sqrt(np.where(used, d, 1.0)), 0.0)
+    s = 1.0 / np.sqrt(np.where(columns & (d > 0), d, np.inf))  # left out: 0
     scale = s[:, :, None] * s[:, None, :]
     w, u = np.linalg.eigh(B * scale)
     magnitude = np.abs(w)
-    inverse = 1.0 / np.where(magnitude > 1e-12 * magnitude.max(axis=1, keepdims=True), w, np.inf)  # cut: 0
-    out: FloatArray = (u * inverse[:, None, :]) @ u.swapaxes(1, 2)
+    cut = magnitude <= 1e-12 * magnitude.max(axis=1, keepdims=True)
+    if cut.any():
+        w = np.where(cut, np.inf, w)  # 1 / w: 0
+    out: FloatArray = (u * (1.0 / w)[:, None, :]) @ u.swapaxes(1, 2)
     out *= scale
     return out
 
@@ -110,10 +111,21 @@ def centering(augmented: FloatArray) -> FloatArray:
     """``E = [I, -m]`` ``(M, q, q+1)`` of augmented sums ``(M, lags, q+1, q+1)``:
     ``C_i = E Sa_i E'`` (``m = (s - H_0) / N`` from ``Sa_0``)."""
     M, q = augmented.shape[0], augmented.shape[2] - 1
-    E = np.zeros((M, q, q + 1))
-    E[:, :, :q] = np.eye(q)
+    E = _identities(M, q)
     np.divide(augmented[:, 0, :q, q], -augmented[:, 0, q, q, None], out=E[:, :, q])
     return E
+
+
+_IDENTITIES: dict[tuple[int, int], FloatArray] = {}
+
+
+def _identities(M: int, q: int) -> FloatArray:
+    """A new ``(M, q, q+1)`` array ``[I, 0]`` (a copy of one kept per shape)."""
+    template = _IDENTITIES.get((M, q))
+    if template is None:
+        template = _IDENTITIES[(M, q)] = np.zeros((M, q, q + 1))
+        template[:, :, :q] = np.eye(q)
+    return template.copy()
 
 
 def dof_correction(
@@ -132,7 +144,8 @@ def dof_correction(
     The centered sums are never formed: ``C^x_j = E_x Sa_j E_x'`` (``E_x`` the regressor rows of
     :func:`centering`), so ``T``, the traces and ``sum_l R(l) Sa_l`` are each one product with
     the augmented sums (the fit's covariance enters as ``E_x' B^+ E_x``, formed once); the cross
-    terms are one contraction with strided windows of ``T + T1``."""
+    terms and the bias's variance are one ``(L+1) x (L+1)`` matrix of ``R(0..L)`` per model,
+    formed once (``T``'s Toeplitz and Hankel parts as strided views, :func:`_bias_terms`)."""
     M, lags, q1 = augmented.shape[:3]
     L = lags - 1
     flat = augmented.reshape(M, lags, q1 * q1)
@@ -146,41 +159,61 @@ def dof_correction(
         out: FloatArray = (flat @ Y.reshape(M, q1 * q1, 1))[:, :, 0]
         return out
 
-    # T(j) + T1(j) at index j + 2L, j = -2L..2L: row i of the cross term's matrix, f(l - i) for
-    # l = -L..L, is the window starting at L - i (a strided view, never formed: O(M L) memory).
+    # The cross terms and (N - i) var(R), var(R) = sum_(|l|<=L) (N - |l|) R(l) / N^2, are
+    # matrices of R(0..L) (the sums over l = -L..L folded onto |l|): T's Toeplitz part
+    # 2 T(|j - i|) and Hankel part 2 T(j + i) (j >= 1; 0 beyond L), (M, lags, lags), strided
+    # views of 2 T laid out at index 2L + k, k = -2L..2L; the rest, shared by the models,
+    # depends only on N and L.
     shifted = np.zeros((M, 4 * L + 1))
-    T = traces(Bt)  # tr(B^+ C^x_j)
-    shifted[:, 2 * L : 3 * L + 1] = T
-    shifted[:, L : 2 * L + 1] = T[:, ::-1]
-    shifted += np.maximum(N - _distances(L), 0) / N
+    T2 = 2.0 * traces(Bt)  # 2 tr(B^+ C^x_j)
+    shifted[:, 2 * L : 3 * L + 1] = T2
+    shifted[:, L : 2 * L + 1] = T2[:, ::-1]
     step = shifted.strides
-    windows = np.ndarray((M, lags, 2 * L + 1), np.float64, shifted, L * step[1], (step[0], -step[1], step[1]))
-    # (N - i) var(R), var(R) = sum_(|l|<=L) (N - |l|) R(l) / N^2.
-    count = N - np.arange(lags, dtype=np.float64)
-    weight = (N - np.abs(np.arange(-L, L + 1))) / N**2
+    toeplitz = np.ndarray((M, lags, lags), np.float64, shifted, 2 * L * step[1], (step[0], -step[1], step[1]))
+    hankel = np.ndarray((M, lags, lags), np.float64, shifted, 2 * L * step[1], (step[0], step[1], step[1]))
+    lagged = toeplitz + hankel
+    lagged[:, :, 0] -= T2  # the Hankel part starts at j = 1
+    shared = _bias_terms(N, L).T
     first = augmented[:, 0]
 
     def apply(R: FloatArray) -> FloatArray:
         summed = (R[:, None, :] @ flat).reshape(M, q1, q1)  # sum_l R(l) Sa_l
         middle = summed + summed.swapaxes(1, 2) - R[:, :1, None] * first  # Ex middle Ex' is cov(R)'s middle
-        two_sided = np.concatenate([R[:, :0:-1], R], axis=1)  # R(|l|), l = -L..L
-        out: FloatArray = 2.0 * np.einsum("mil,ml->mi", windows, two_sided)
-        out -= count * (two_sided @ weight)[:, None]
-        out -= traces(Bt @ middle @ Bt)
+        out: FloatArray = (lagged @ R[:, :, None])[:, :, 0] + R @ shared - traces(Bt @ middle @ Bt)
         out /= N
         return out
 
     return apply
 
 
-_DISTANCES: dict[int, FloatArray] = {}
+_FOLDS: dict[int, tuple[FloatArray, ...]] = {}
 
 
-def _distances(L: int) -> FloatArray:
-    """``|j|`` for ``j = -2L..2L`` (kept per ``L``)."""
-    out = _DISTANCES.get(L)
-    if out is None:
-        out = _DISTANCES[L] = np.abs(np.arange(-2 * L, 2 * L + 1, dtype=np.float64))
+def _bias_terms(N: int, L: int) -> FloatArray:
+    """The part of :func:`dof_correction`'s lag matrix that depends only on ``N`` and ``L``,
+    ``(L+1, L+1)``: ``2 [T1(j - i) + T1(-j - i)] - (N - i)(N - j) c_j / N^2`` with
+    ``T1(k) = max(N - |k|, 0) / N`` (the ``-j`` term only for ``j >= 1``) and ``c_j`` the lags
+    ``+-j`` folded onto ``j``: 1 for ``j = 0``, 2 beyond. From ``N = 2L`` on no ``T1`` is
+    clipped and it is ``c_j + (P1 + P2 / N) / N`` with fixed ``P1 = (i + j) c_j - 2 (|j - i| +
+    (i + j) [j >= 1])`` and ``P2 = -i j c_j`` (kept per ``L``)."""
+    folds = _FOLDS.get(L)
+    if folds is None:
+        i, j = np.arange(L + 1.0)[:, None], np.arange(L + 1.0)[None, :]
+        c = np.where(j >= 1, 2.0, 1.0)
+        mirrored = np.where(j >= 1, i + j, np.inf)  # |-j - i|, none for j = 0
+        P1 = (i + j) * c - 2.0 * (np.abs(j - i) + np.where(j >= 1, i + j, 0.0))
+        folds = _FOLDS[L] = (np.abs(j - i), mirrored, c, P1, -i * j * c)
+    direct, mirrored, c, P1, P2 = folds
+    if N >= 2 * L:
+        out: FloatArray = P2 / N
+        out += P1
+        out /= N
+        out += c
+        return out
+    out = (N - direct) + np.maximum(N - mirrored, 0.0)  # |j - i| <= L < N
+    out *= 2.0 / N
+    count = N - np.arange(L + 1.0)
+    out -= np.multiply.outer(count, count * c[0]) / N**2
     return out
 
 
