@@ -171,6 +171,17 @@ def test_ctrl_c_while_the_command_starts_is_one_line_and_writes_nothing(tmp_path
     assert list(tmp_path.iterdir()) == []
 
 
+def test_ctrl_c_while_the_node_module_loads_is_one_line(tmp_path):
+    """``python -m rls_uncertainty.ros.node`` (the demo's and the testing plugin's way to start
+    the node), interrupted while it imports rclpy: the console script's line and status."""
+    code = _INTERRUPT_AT_IMPORT.split("from rls_uncertainty.cli")[0].format(module="rclpy") + (
+        "import runpy\nrunpy.run_module('rls_uncertainty.ros.node', run_name='__main__', alter_sys=True)\n")
+    proc = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, capture_output=True, text=True,
+                          timeout=DEADLINE)
+    assert (proc.returncode, proc.stdout) == (130, "")
+    assert proc.stderr == "estimator_node: stopped by SIGINT while starting; nothing written\n"
+
+
 def test_a_killed_campaign_takes_its_workers_with_it_and_the_next_run_removes_its_partial(tmp_path, many):
     out = tmp_path / "out"
     proc = _start(_campaign(many, out, "--workers", "2"), tmp_path)

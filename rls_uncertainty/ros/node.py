@@ -25,6 +25,17 @@ backwards time jumps are handled here.
 
 from __future__ import annotations
 
+if __name__ == "__main__":  # pragma: no cover - run in a subprocess by the tests
+    # ``python -m rls_uncertainty.ros.node`` (the demo, the testing plugin, the docs): through the
+    # console script's light entry point, which imports this module under its guard, so that
+    # Ctrl-C while the node loads (about a second) ends it in one line with exit status 130
+    # instead of a traceback, and a missing ROS stack is one line naming the extra.
+    import sys as _sys
+
+    from rls_uncertainty.cli import estimator_node as _entry
+
+    _sys.exit(_entry())
+
 import gc
 import math
 import sys
@@ -521,6 +532,3 @@ def _run(startup: NodeParameters) -> int:
         rclpy.try_shutdown()
     return code
 
-
-if __name__ == "__main__":  # pragma: no cover
-    sys.exit(main())
