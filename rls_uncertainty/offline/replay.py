@@ -368,18 +368,8 @@ def run_pipeline(messages: Iterable[tuple[str, int, Stamped]], config: PipelineC
             outs = feed(pipe, kind, msg)
             for out in outs:
                 run.sample(out)
-            if figure_data is not None:
-                new = rows.take()
-                figure_data.add(pipe, outs, new)
-                if excitation.watching:
-                    excitation.update(new)
-                    excitation.watching = not run.ever.all()
-            elif excitation.watching:
-                if rows.pending:
-                    excitation.update(rows.take())
-                if outs and run.ever.all():  # (only an output changes run.ever)
-                    excitation.watching = False
-                    rows.stop()
+            if figure_data is not None or excitation.watching:
+                _take_rows(run, outs, rows, excitation, figure_data)
             if diag is not None:
                 diag.after(kind, stamp)
             run.history(newest)
@@ -403,6 +393,24 @@ def run_pipeline(messages: Iterable[tuple[str, int, Stamped]], config: PipelineC
     if first is not None:
         result.data_seconds = (newest - first) * 1e-9
     return _finished(run, excitation, figure_data, str(getattr(messages, "digest", "")))
+
+
+def _take_rows(run: _Run, outs: list[SampleOutput], rows: _Rows, excitation: _Excitation,
+               figure_data: FigureData | None) -> None:
+    """After a message: the new regression rows to the figures' data, and to the excitation
+    watch while some model has never published (taken only when new ones came)."""
+    if figure_data is not None:
+        new = rows.take()
+        figure_data.add(run.pipe, outs, new)
+        if excitation.watching:
+            excitation.update(new)
+            excitation.watching = not run.ever.all()
+    elif excitation.watching:
+        if rows.pending:
+            excitation.update(rows.take())
+        if outs and run.ever.all():  # (only an output changes run.ever)
+            excitation.watching = False
+            rows.stop()
 
 
 def _finished(run: _Run, excitation: _Excitation, figure_data: FigureData | None, digest: str) -> ReplayResult:
