@@ -21,9 +21,9 @@ method, measured alternately on the same messages in the same process, gives the
 estimates), bias / scatter, false convergence (of the maneuvers flagged, those whose truth lies
 outside +-2 SE at the first flag), the median flag time and the per-sample cost.
 
-The frequency-domain estimator (``estimator.method: frequency``) with each configuration, the
-last frequency-domain estimate and corrected SE per maneuver, and their coverage, SE/scatter and
-bias against the truth (REPORT.md, "The frequency domain"; no flags):
+The frequency-domain estimator (``estimator.method: frequency``) with each configuration: the
+same rows and tables of its outputs, the flags those of its own convergence monitor (REPORT.md,
+"The frequency domain"):
 
     python docs/studies/instrumental_variables/study.py fd CAMPAIGN_DIR --count N --out FD.csv
     python docs/studies/instrumental_variables/study.py fd-table FD.csv [FD2.csv ...] [--against OUT.csv]
@@ -92,26 +92,32 @@ def _params(path: Path) -> dict:
     return {k: v for k, v in values.items() if k in PARAMETER_NAMES}
 
 
-def _rows(case: str, name: str, method: str, result, t0: int, seconds: float) -> list[dict]:
-    """Per Table 3 parameter: end values and the first flag (NaN when never flagged)."""
-    outs = result.outputs
+def _rows(case: str, name: str, method: str, result, t0: int, seconds: float, domain: str = "time") -> list[dict]:
+    """Per Table 3 parameter: end values and the first flag (NaN when never flagged), of the
+    time-domain outputs or (``domain="frequency"``) the frequency-domain ones."""
+    if domain == "time":
+        names, outs = result.parameter_names, [(o.stamp_ns, o) for o in result.outputs]
+    else:
+        names = result.frequency_parameter_names
+        outs = [(o.stamp_ns, o.frequency) for o in result.outputs if o.frequency is not None]
     rows = []
-    for j, names in enumerate(result.parameter_names):
-        ready = [o for o in outs if o.ready[j]]
-        for i, p in enumerate(names):
+    for j, model_names in enumerate(names):
+        ready = [(stamp, o) for stamp, o in outs if o.ready[j]]
+        for i, p in enumerate(model_names):
             if p not in T2_TRUE:
                 continue
             row = {"case": case, "maneuver": name, "method": method, "parameter": p, "estimate": math.nan,
                    "se": math.nan, "flag_time": math.nan, "flag_estimate": math.nan, "flag_se": math.nan,
-                   "converged_end": 0, "samples": len(outs), "pipeline_seconds": seconds}
+                   "converged_end": 0, "samples": len(result.outputs), "pipeline_seconds": seconds}
             if ready:
-                last = ready[-1]
+                last = ready[-1][1]
                 row.update(estimate=float(last.theta[j, i]), se=float(last.se[j, i]),
                            converged_end=int(bool(last.converged[j, i])))
-                first = next((o for o in ready if o.converged[j, i]), None)
+                first = next(((stamp, o) for stamp, o in ready if o.converged[j, i]), None)
                 if first is not None:
-                    row.update(flag_time=(first.stamp_ns - t0) * 1e-9, flag_estimate=float(first.theta[j, i]),
-                               flag_se=float(first.se[j, i]))
+                    stamp, o = first
+                    row.update(flag_time=(stamp - t0) * 1e-9, flag_estimate=float(o.theta[j, i]),
+                               flag_se=float(o.se[j, i]))
             rows.append(row)
     return rows
 
@@ -155,13 +161,13 @@ def one_maneuver_levers(job: tuple[str, str]) -> list[dict]:
     return rows
 
 
-def run(args: argparse.Namespace) -> None:
+def run(args: argparse.Namespace, job: Any = None) -> None:
     bags = sorted(str(p) for p in Path(args.campaign).glob("m*") if p.is_dir())[: args.count]
     case = args.case or Path(args.campaign).name
     with open(args.out, "w", newline="") as f, Pool(args.workers) as pool:
         w = csv.DictWriter(f, FIELDS)
         w.writeheader()
-        job = one_maneuver_levers if getattr(args, "levers", False) else one_maneuver
+        job = job or (one_maneuver_levers if getattr(args, "levers", False) else one_maneuver)
         for n, rows in enumerate(pool.imap(job, [(case, b) for b in bags]), 1):
             w.writerows(rows)
             f.flush()
@@ -249,6 +255,11 @@ def table(args: argparse.Namespace) -> None:
                 print(f"| {p} | {m} | {s['coverage']:.0f} | {s['se_scatter']:.2f} | {s['bias_scatter']:+.2f} | "
                       f"{s['false']:.0f} ({s['flagged']}) | {s['flag_time']:.2f} | {s['scatter']:.3g} | "
                       f"{s['robust_se_scatter']:.2f} | {s['z_std']:.2f} | {s['converged_end']:.0f} |")
+        missing = {(m, p): k for m in methods for p in PARAMS
+                   if (k := sum(1 for r in rows if (r["case"], r["method"], r["parameter"]) == (case, m, p)
+                                and not np.isfinite(r["estimate"])))}
+        if missing:
+            print("\nmaneuvers without an estimate: " + ", ".join(f"{p} {m} {k}" for (m, p), k in missing.items()))
         if "RLS" in methods:
             rls, iv = _cost(rows, case)
             print(f"\npipeline time per estimator sample: RLS {rls:.0f} us, IV {iv:.0f} us, IV / RLS {iv / rls:.2f}")
@@ -284,69 +295,36 @@ def figure(args: argparse.Namespace) -> None:
 
 
 # ---------------------------------------------------------------- the frequency domain
-FD_FIELDS = ("maneuver", "method", "parameter", "estimate", "se", "seconds")
-
-
-def one_maneuver_fd(bag: str) -> list[dict]:
-    """The maneuver through both configurations with ``estimator.method: frequency``: per method
-    and Table 3 parameter the last frequency-domain estimate and corrected SE (NaN when its
-    model never published one), and the pipeline's wall time."""
+def one_maneuver_fd(job: tuple[str, str]) -> list[dict]:
+    """The maneuver through both configurations with ``estimator.method: frequency``: the rows
+    of ``run`` (:func:`_rows`) of the frequency-domain outputs, whose flags are the second
+    monitor's (docs/node.md, the convergence flags of the frequency domain)."""
+    case, bag = job
     params = {m: {**_params(c), "estimator.method": "frequency"} for m, c in CONFIGS.items()}
     with InputStream(bag, dict(node_config(params["IV"]).topics)) as stream:
+        t0 = stream.t0
         messages = list(stream)
     rows = []
     for method in ("RLS", "IV"):
         msgs = messages if method == "IV" else [m for m in messages if m[0] != "excitation"]
         start = time.perf_counter()
-        result = run_pipeline(msgs, pipeline_config(params[method]), record=False, keep_outputs=False)
+        result = run_pipeline(msgs, pipeline_config(params[method]), record=False, keep_outputs=True)
         seconds = time.perf_counter() - start
-        finals = result.finals("frequency")
-        for p in PARAMS:
-            f = finals.get(p)
-            rows.append({"maneuver": Path(bag).name, "method": method, "parameter": p,
-                         "estimate": math.nan if f is None else f.estimate,
-                         "se": math.nan if f is None else f.std_error, "seconds": seconds})
+        rows += _rows(case, Path(bag).name, method, result, t0, seconds, domain="frequency")
     return rows
 
 
 def fd_run(args: argparse.Namespace) -> None:
-    bags = sorted(str(p) for p in Path(args.campaign).glob("m*") if p.is_dir())[: args.count]
-    with open(args.out, "w", newline="") as f, Pool(args.workers) as pool:
-        w = csv.DictWriter(f, FD_FIELDS)
-        w.writeheader()
-        for n, rows in enumerate(pool.imap(one_maneuver_fd, bags), 1):
-            w.writerows(rows)
-            f.flush()
-            print(f"\r{args.out}: {n}/{len(bags)}", end="", file=sys.stderr)
-    print(file=sys.stderr)
+    args.case = f"{args.case or Path(args.campaign).name}, frequency domain"
+    run(args, one_maneuver_fd)
 
 
 def fd_table(args: argparse.Namespace) -> None:
-    """Per CSV of ``fd``: coverage, SE/scatter, bias/scatter and the robust figures of the
-    frequency-domain end estimates, per parameter and method (no flags)."""
-    for path in args.csv:
-        with open(path) as f:
-            rows = list(csv.DictReader(f))
-        methods = list(dict.fromkeys(r["method"] for r in rows))
-        done = {m: len({r["maneuver"] for r in rows if r["method"] == m}) for m in methods}
-        print(f"\n#### {Path(path).stem} ({', '.join(f'{m} {k} maneuvers' for m, k in done.items())})\n")
-        print("| parameter | method | coverage % | SE/scatter | bias/scatter | scatter | robust SE/scatter | z std "
-              "| no estimate |")
-        print("| --- | --- | --- | --- | --- | --- | --- | --- | --- |")
-        for p in PARAMS:
-            for m in methods:
-                sel = [r for r in rows if r["method"] == m and r["parameter"] == p]
-                est, se = (np.array([float(r[k]) for r in sel]) for k in ("estimate", "se"))
-                ok = np.isfinite(est) & np.isfinite(se)
-                s = end_statistics(est[ok], se[ok], T2_TRUE[p])
-                print(f"| {p} | {m} | {s['coverage']:.0f} | {s['se_scatter']:.2f} | {s['bias_scatter']:+.2f} | "
-                      f"{s['scatter']:.3g} | {s['robust_se_scatter']:.2f} | {s['z_std']:.2f} | {int((~ok).sum())} |")
-        for m in methods:
-            seen = {(r["maneuver"], float(r["seconds"])) for r in rows if r["method"] == m}
-            print(f"\n{m}: {sum(s for _m, s in seen) / max(1, len(seen)):.2f} s per maneuver (pipeline)", end="")
-        print()
+    """``table`` of the CSVs of ``fd``; with ``--against``, the last of them against the
+    time-domain CSV of ``run`` on the same maneuvers."""
+    table(args)
     if args.against:
-        fd_against(rows, _read([args.against]))
+        fd_against(_read(args.csv[-1:]), _read([args.against]))
 
 
 def _mad(x: np.ndarray) -> float:
@@ -362,7 +340,7 @@ def fd_against(fd_rows: list[dict], time_rows: list[dict]) -> None:
     print("| --- | --- | --- | --- | --- | --- | --- |")
     for p in PARAMS:
         for m in ("RLS", "IV"):
-            fd = {r["maneuver"]: (float(r["estimate"]), float(r["se"])) for r in fd_rows
+            fd = {r["maneuver"]: (r["estimate"], r["se"]) for r in fd_rows
                   if r["method"] == m and r["parameter"] == p}
             td = {r["maneuver"]: (r["estimate"], r["se"]) for r in time_rows
                   if r["method"] == m and r["parameter"] == p}
@@ -518,6 +496,7 @@ def main() -> None:
     d = sub.add_parser("fd", help="one campaign through both methods in the frequency domain into a CSV")
     d.add_argument("campaign")
     d.add_argument("--count", type=int, default=200, help="the first COUNT maneuvers")
+    d.add_argument("--case", help="the case's name in the tables (default: the directory's)")
     d.add_argument("--workers", type=int, default=2)
     d.add_argument("--out", required=True)
     e = sub.add_parser("fd-table", help="the tables of the frequency-domain CSVs")
