@@ -1,0 +1,100 @@
+"""A :class:`.bank.FrequencyBank`'s record as plain data, so that a resumed estimator continues
+it (the state file, :mod:`rls_uncertainty.state_file`; numpy only).
+
+The record is what the estimates are computed from (docs/frequency.md): the recursive Fourier
+transforms of every signal with the first sample subtracted (Eq. F2), that first sample, the
+sum of the samples of the trim (F1), the augmented lag-product sums and the window of the last
+samples (F9), with instruments the sums ``sum w (u, 1)'`` (F11), and the sample count ``n``,
+which is the transforms' clock. The evaluations' results (F4-F12) are not saved: they are a
+function of the record, and a bank restored at a sample it had evaluated evaluates it again,
+giving the same numbers (with ``frequency.every > 1`` a bank saved between two evaluations has
+no results until the next one, which it computes as an uninterrupted bank does).
+
+:func:`snapshot` returns ``counters`` (``n``, ``evaluated_at``, ``repairs`` and ``due``: whether the
+next request evaluates) and ``arrays`` named
+as the state file stores them (``fq_`` prefixed); :func:`restore` continues from them
+bit-identically; :func:`layout` gives the arrays' shapes and dtypes, which the state file checks
+before reading any.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+if TYPE_CHECKING:  # annotations only
+    from .bank import FrequencyBank
+
+__all__ = ["snapshot", "restore", "layout", "check_values", "PREFIX"]
+
+PREFIX = "fq_"  # the state file's names of the record's arrays
+
+
+def snapshot(bank: FrequencyBank) -> dict[str, Any]:
+    """The record of ``bank`` as plain data (module docstring), copies."""
+    lags, first = bank._lags, bank._first
+    arrays = {
+        "transform": bank._transform.values.copy(),
+        "first": np.zeros_like(bank._trim_sum) if first is None else first.copy(),
+        "trim_sum": bank._trim_sum.copy(),
+        "lag_sums": lags.sums.copy(),
+        "lag_buffer": lags._buffer.copy(),
+    }
+    if bank._cross is not None:
+        arrays["cross"] = bank._cross.copy()
+    counters = {"n": int(lags.n), "evaluated_at": int(bank._evaluated_at), "repairs": int(bank.repairs),
+                "due": bool(bank._due)}
+    return {"counters": counters, "arrays": {PREFIX + k: v for k, v in arrays.items()}}
+
+
+def layout(bank: FrequencyBank) -> dict[str, tuple[tuple[int, ...], np.dtype]]:
+    """``{name: (shape, dtype)}`` of :func:`snapshot`'s arrays for a bank like ``bank`` (its
+    sizes, options and instruments fix them all)."""
+    return {name: (a.shape, a.dtype) for name, a in snapshot(bank)["arrays"].items()}
+
+
+def check_values(arrays: Mapping[str, np.ndarray], n: int) -> str | None:
+    """The name of the first array of a record of ``n`` samples whose values no bank holds (a
+    non-finite value; anything but zeros before the first sample), or None."""
+    for name, arr in arrays.items():
+        if not np.isfinite(arr).all():
+            return name
+        if n == 0 and arr.any():
+            return name
+    return None
+
+
+def restore(bank: FrequencyBank, saved: Mapping[str, Any]) -> None:
+    """Continue ``bank`` (fresh, of the saved bank's sizes, options and instruments) from
+    :func:`snapshot`. Its checks are the state file's; here only the shapes and counters
+    (:class:`ValueError`)."""
+    want = layout(bank)
+    arrays = dict(saved["arrays"])
+    if set(arrays) != set(want):
+        raise ValueError(f"saved frequency record has arrays {sorted(arrays)}, expected {sorted(want)}")
+    for name, (shape, dtype) in want.items():
+        if np.shape(arrays[name]) != shape:
+            raise ValueError(f"saved {name} has shape {np.shape(arrays[name])}, expected {shape}")
+        arrays[name] = np.array(arrays[name], dtype=dtype)
+    c = saved["counters"]
+    n, evaluated_at, repairs, due = int(c["n"]), int(c["evaluated_at"]), int(c["repairs"]), bool(c["due"])
+    if not 0 <= evaluated_at <= n or repairs < 0 or (due and (n == 0 or evaluated_at == n)):
+        raise ValueError(f"saved frequency counters out of range: {dict(c)}")
+    bank.reset()
+    a = {k[len(PREFIX):]: v for k, v in arrays.items()}
+    bank._transform.values[...] = a["transform"]
+    bank._transform.n = n
+    bank._lags.sums[...] = a["lag_sums"]
+    bank._lags._buffer[...] = a["lag_buffer"]
+    bank._lags.n = n
+    bank._trim_sum[...] = a["trim_sum"]
+    bank._first = a["first"] if n else None
+    if bank._cross is not None:
+        bank._cross[...] = a["cross"]
+    if evaluated_at and evaluated_at == n:  # the results of the saved bank's last evaluation, again
+        bank._due = True
+        bank._evaluate()
+    bank._due = due
+    bank.repairs = repairs
