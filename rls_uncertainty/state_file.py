@@ -93,8 +93,6 @@ from .estimator.state import (
     number,
 )
 from .files import FileLock, atomic_file, temporaries
-from .frequency.state import PREFIX as FREQUENCY_PREFIX
-from .frequency.state import check_values as frequency_values
 
 __all__ = [
     "EstimatorState",
@@ -144,7 +142,7 @@ class FrequencyPath(Protocol):
     caller continues with (:class:`.datapath.frequency_path.FrequencyPath`)."""
 
     def state_spec(self) -> dict[str, Any]:
-        """The counters' ranges and flags."""
+        """The arrays' name prefix, the counters' ranges and flags."""
 
     def state_layout(self) -> dict[str, tuple[tuple[int, ...], np.dtype]]:
         """``{name: (shape, dtype)}`` of the record's arrays."""
@@ -459,12 +457,13 @@ def _read_frequency(zf: zipfile.ZipFile, entries: dict[str, zipfile.ZipInfo], ra
         raise invalid("frequency.evaluated_at", f"must be at most the record's {n} samples")
     if counters["due"] and (n == 0 or counters["evaluated_at"] == n):
         raise invalid("frequency.due", "must be false before the first sample and at the sample evaluated")
-    names = {k for k in entries if k.startswith(FREQUENCY_PREFIX)}
+    names = {k for k in entries if k.startswith(spec["prefix"])}
     arrays = _read_layout(zf, entries, names, path.state_layout())
-    bad = frequency_values(arrays, n)
-    if bad is not None:
-        raise invalid(f"arrays.{bad}", "holds NaN or infinite values, or values before the first sample (the "
-                      "frequency-domain record never does)")
+    for name, arr in arrays.items():
+        if not np.isfinite(arr).all():
+            raise invalid(f"arrays.{name}", "holds NaN or infinite values (the frequency-domain record never does)")
+        if n == 0 and arr.any():
+            raise invalid(f"arrays.{name}", "must be zero before the first sample (frequency.n is 0)")
     return {"counters": counters, "arrays": arrays}
 
 

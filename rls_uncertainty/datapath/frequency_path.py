@@ -190,10 +190,11 @@ class FrequencyPath:
         record.restore(self.bank, saved)
 
     def state_spec(self) -> dict[str, Any]:
-        """What a saved record must hold besides its arrays' layout: ``integers`` (each
-        counter's ``(low, high)``) and ``flags`` (the boolean counters)."""
+        """What a saved record must hold besides its arrays' layout: ``prefix`` (of the arrays'
+        names), ``integers`` (each counter's ``(low, high)``) and ``flags`` (the boolean counters)."""
         counts = (0, MAX_SAVED_COUNT)
-        return {"integers": {"n": counts, "evaluated_at": counts, "repairs": counts}, "flags": ("due",)}
+        return {"prefix": record.PREFIX, "integers": {"n": counts, "evaluated_at": counts, "repairs": counts},
+                "flags": ("due",)}
 
     def state_layout(self) -> dict[str, tuple[tuple[int, ...], np.dtype]]:
         """``{name: (shape, dtype)}`` of :meth:`snapshot`'s arrays."""

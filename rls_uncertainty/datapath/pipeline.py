@@ -500,13 +500,11 @@ class Pipeline(PipelineInputs):
         """Continue from :meth:`save_state`. Raises :class:`StateFileError` when the file is
         unreadable, not a valid state or was written with another configuration (every field is
         checked against this pipeline's configuration before anything is allocated)."""
-        expect = (tuple(self.sizes), self.config.estimator)
-        state = load_state(path, self.config.fingerprint(), expect=expect, instruments=self._iv,
-                           frequency=self.frequency)
-        if self._iv is not None and state.instruments is not None:
-            self._iv.restore(state.instruments)
-        if self.frequency is not None and state.frequency is not None:
-            self.frequency.restore(state.frequency)
+        expect, iv, freq = (tuple(self.sizes), self.config.estimator), self._iv, self.frequency
+        state = load_state(path, self.config.fingerprint(), expect=expect, instruments=iv, frequency=freq)
+        for part, saved in ((iv, state.instruments), (freq, state.frequency)):
+            if part is not None and saved is not None:
+                part.restore(saved)
         self.bank = state.bank
         self.bookkeeping.samples_used = state.samples_used
         self._quality.resume(state.output_sum, state.output_sum_squares)

@@ -27,7 +27,7 @@ import numpy as np
 if TYPE_CHECKING:  # annotations only
     from .bank import FrequencyBank
 
-__all__ = ["snapshot", "restore", "layout", "check_values", "PREFIX"]
+__all__ = ["snapshot", "restore", "layout", "PREFIX"]
 
 PREFIX = "fq_"  # the state file's names of the record's arrays
 
@@ -53,17 +53,6 @@ def layout(bank: FrequencyBank) -> dict[str, tuple[tuple[int, ...], np.dtype]]:
     """``{name: (shape, dtype)}`` of :func:`snapshot`'s arrays for a bank like ``bank`` (its
     sizes, options and instruments fix them all)."""
     return {name: (a.shape, a.dtype) for name, a in snapshot(bank)["arrays"].items()}
-
-
-def check_values(arrays: Mapping[str, np.ndarray], n: int) -> str | None:
-    """The name of the first array of a record of ``n`` samples whose values no bank holds (a
-    non-finite value; anything but zeros before the first sample), or None."""
-    for name, arr in arrays.items():
-        if not np.isfinite(arr).all():
-            return name
-        if n == 0 and arr.any():
-            return name
-    return None
 
 
 def restore(bank: FrequencyBank, saved: Mapping[str, Any]) -> None:
