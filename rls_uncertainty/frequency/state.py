@@ -10,11 +10,10 @@ function of the record, and a bank restored at a sample it had evaluated evaluat
 giving the same numbers (with ``frequency.every > 1`` a bank saved between two evaluations has
 no results until the next one, which it computes as an uninterrupted bank does).
 
-:func:`snapshot` returns ``counters`` (``n``, ``evaluated_at``, ``repairs`` and ``due``: whether the
-next request evaluates) and ``arrays`` named
-as the state file stores them (``fq_`` prefixed); :func:`restore` continues from them
-bit-identically; :func:`layout` gives the arrays' shapes and dtypes, which the state file checks
-before reading any.
+:func:`snapshot` returns ``counters`` (``n``, ``evaluated_at``, ``repairs`` and ``due``: whether
+the next request evaluates) and ``arrays`` named as the state file stores them (``fq_``
+prefixed); :func:`restore` continues from them bit-identically; :func:`layout` gives the
+arrays' shapes and dtypes, which the state file checks before reading any.
 """
 
 from __future__ import annotations
