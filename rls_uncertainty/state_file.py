@@ -26,8 +26,9 @@ One ``.npz`` archive (numpy only, no pickle, entries stored uncompressed): the
   :mod:`.frequency.state`: the samples in it, the last evaluation's sample, the repairs
   counted, whether an evaluation is due), whose arrays are the ``fq_`` entries: the recursive
   Fourier transforms, the first sample and the trim's sum, the lag-product sums and the window
-  of the last samples, and with iv the instruments' cross sums. With ``estimator.method time``
-  the file has neither.
+  of the last samples, with iv the instruments' cross sums, and the last evaluation's results
+  (estimates, covariances, standard errors, residual autocovariance, output variance, the
+  models ready, solved and withheld). With ``estimator.method time`` the file has neither.
 
 It is written with :func:`rls_uncertainty.files.atomic_file` (a fresh exclusive temporary file in the same
 directory, fsync'ed, then renamed), so a crash never leaves half a file and a planted
@@ -107,7 +108,7 @@ __all__ = [
 ]
 
 MAX_ENTRIES = 48  # entries of a state archive (the meta, a bank's 11 to 14 arrays, the instruments' 6 or 16,
-# the frequency-domain record's 5 or 6)
+# the frequency-domain record's 12 or 13)
 MAX_META_BYTES = 1 << 20  # the meta entry's text as stored (4 bytes a character); a few kB in practice
 _NPY_PREAMBLE = 12 + 10_000  # magic, version, header length and numpy's largest header text
 _META_KEYS = ("format", "fingerprint", "sizes", "options", "bank_counters", "samples_used", "zsum", "zsq")
@@ -142,10 +143,10 @@ class FrequencyPath(Protocol):
     caller continues with (:class:`.datapath.frequency_path.FrequencyPath`)."""
 
     def state_spec(self) -> dict[str, Any]:
-        """The arrays' name prefix, the counters' ranges and flags."""
+        """The arrays' name prefix, the counters' ranges and flags, the results' names."""
 
-    def state_layout(self) -> dict[str, tuple[tuple[int, ...], np.dtype]]:
-        """``{name: (shape, dtype)}`` of the record's arrays."""
+    def state_layout(self, evaluated_at: int) -> dict[str, tuple[tuple[int, ...], np.dtype]]:
+        """``{name: (shape, dtype)}`` of the record's arrays, last evaluated at ``evaluated_at``."""
 
 
 def save_state(path: str | Path, state: EstimatorState, fingerprint: Mapping[str, Any]) -> None:
@@ -458,13 +459,32 @@ def _read_frequency(zf: zipfile.ZipFile, entries: dict[str, zipfile.ZipInfo], ra
     if counters["due"] and (n == 0 or counters["evaluated_at"] == n):
         raise invalid("frequency.due", "must be false before the first sample and at the sample evaluated")
     names = {k for k in entries if k.startswith(spec["prefix"])}
-    arrays = _read_layout(zf, entries, names, path.state_layout())
-    for name, arr in arrays.items():
-        if not np.isfinite(arr).all():
-            raise invalid(f"arrays.{name}", "holds NaN or infinite values (the frequency-domain record never does)")
-        if n == 0 and arr.any():
-            raise invalid(f"arrays.{name}", "must be zero before the first sample (frequency.n is 0)")
+    arrays = _read_layout(zf, entries, names, path.state_layout(counters["evaluated_at"]))
+    _check_frequency_values(arrays, spec["results"], n, counters["evaluated_at"])
     return {"counters": counters, "arrays": arrays}
+
+
+def _check_frequency_values(arrays: Mapping[str, np.ndarray], results: tuple[str, ...], n: int,
+                            evaluated_at: int) -> None:
+    """The record finite (all zeros before the first sample); the last evaluation's results
+    without infinities (NaN where none), standard errors not negative, ready
+    models solved and not withheld, and nothing before the first evaluation."""
+    for name, arr in arrays.items():
+        if name in results:
+            if np.isinf(arr).any():
+                raise invalid(f"arrays.{name}", "holds infinite values (results are finite or NaN)")
+            if evaluated_at == 0 and not (np.isnan(arr).all() if arr.dtype.kind == "f" else not arr.any()):
+                raise invalid(f"arrays.{name}", "must be NaN (flags false) before the first evaluation")
+        elif not np.isfinite(arr).all():
+            raise invalid(f"arrays.{name}", "holds NaN or infinite values (the frequency-domain record never does)")
+        elif n == 0 and arr.any():
+            raise invalid(f"arrays.{name}", "must be zero before the first sample (frequency.n is 0)")
+    for name in ("se", "published_se"):
+        if (arrays[f"fq_{name}"] < 0).any():
+            raise invalid(f"arrays.fq_{name}", "must not be negative")
+    ready, solved, withheld = arrays["fq_flags"]
+    if (ready & ~solved).any() or (ready & withheld).any():
+        raise invalid("arrays.fq_flags", "has a model ready that is not solved or is withheld")
 
 
 def load_state(

@@ -191,11 +191,13 @@ class FrequencyPath:
 
     def state_spec(self) -> dict[str, Any]:
         """What a saved record must hold besides its arrays' layout: ``prefix`` (of the arrays'
-        names), ``integers`` (each counter's ``(low, high)``) and ``flags`` (the boolean counters)."""
+        names), ``integers`` (each counter's ``(low, high)``), ``flags`` (the boolean counters) and
+        ``results`` (the arrays of the last evaluation's results, NaN where there are none)."""
         counts = (0, MAX_SAVED_COUNT)
         return {"prefix": record.PREFIX, "integers": {"n": counts, "evaluated_at": counts, "repairs": counts},
-                "flags": ("due",)}
+                "flags": ("due",), "results": record.RESULTS}
 
-    def state_layout(self) -> dict[str, tuple[tuple[int, ...], np.dtype]]:
-        """``{name: (shape, dtype)}`` of :meth:`snapshot`'s arrays."""
-        return record.layout(self.bank)
+    def state_layout(self, evaluated_at: int) -> dict[str, tuple[tuple[int, ...], np.dtype]]:
+        """``{name: (shape, dtype)}`` of :meth:`snapshot`'s arrays, last evaluated at sample
+        ``evaluated_at``."""
+        return record.layout(self.bank, evaluated_at)
