@@ -10,8 +10,9 @@ One ``.npz`` archive (numpy only, no pickle, entries stored uncompressed): the
 :meth:`.EstimatorBank.state` arrays, plus a ``meta`` entry holding one JSON text with
 
 * ``format``: :attr:`EstimatorBank.STATE_FORMAT` (a file of another layout is refused by name);
-* ``fingerprint``: what the state must match to be resumed (aircraft, models, rate and the
-  estimator settings; :meth:`.config.PipelineConfig.fingerprint`);
+* ``fingerprint``: what the state must match to be resumed (aircraft, models, rate, the
+  estimator settings, with iv the instruments' and with the frequency domain the ``frequency``
+  settings; :meth:`.config.PipelineConfig.fingerprint`);
 * ``sizes``, ``options``, ``bank_counters``: the rest of the bank's state (the options as
   :meth:`.options.EstimatorOptions.as_dict` writes them);
 * ``samples_used``, ``zsum``, ``zsq``: the samples behind the estimates and the running sums
@@ -19,7 +20,15 @@ One ``.npz`` archive (numpy only, no pickle, entries stored uncompressed): the
 * ``instruments`` (``estimator.algorithm iv`` only): the counters of the instrument path
   (:meth:`.datapath.instrument_path.InstrumentPath.snapshot`), whose arrays are the ``iv_``
   entries: the auxiliary model, its bare least-squares fit and the rows waiting for it, or the
-  delayed regressors held, and the weak-instrument sums. Without iv the file has neither.
+  delayed regressors held, and the weak-instrument sums. Without iv the file has neither;
+* ``frequency`` (``estimator.method`` ``frequency`` or ``both`` only): the counters of the
+  frequency-domain estimator's record (:meth:`.datapath.frequency_path.FrequencyPath.snapshot`,
+  :mod:`.frequency.state`: the samples in it, the last evaluation's sample, the repairs
+  counted, whether an evaluation is due), whose arrays are the ``fq_`` entries: the recursive
+  Fourier transforms, the first sample and the trim's sum, the lag-product sums and the window
+  of the last samples, with iv the instruments' cross sums, and the last evaluation's results
+  (estimates, covariances, standard errors, residual autocovariance, output variance, the
+  models ready, solved and withheld). With ``estimator.method time`` the file has neither.
 
 It is written with :func:`rls_uncertainty.files.atomic_file` (a fresh exclusive temporary file in the same
 directory, fsync'ed, then renamed), so a crash never leaves half a file and a planted
@@ -98,7 +107,8 @@ __all__ = [
     "MAX_META_BYTES",
 ]
 
-MAX_ENTRIES = 48  # entries of a state archive (the meta, a bank's 11 to 14 arrays, the instruments' 6 or 16)
+MAX_ENTRIES = 48  # entries of a state archive (the meta, a bank's 11 to 14 arrays, the instruments' 6 or 16,
+# the frequency-domain record's 12 or 13)
 MAX_META_BYTES = 1 << 20  # the meta entry's text as stored (4 bytes a character); a few kB in practice
 _NPY_PREAMBLE = 12 + 10_000  # magic, version, header length and numpy's largest header text
 _META_KEYS = ("format", "fingerprint", "sizes", "options", "bank_counters", "samples_used", "zsum", "zsq")
@@ -114,6 +124,7 @@ class EstimatorState:
     output_sum: np.ndarray
     output_sum_squares: np.ndarray
     instruments: dict[str, Any] | None = None  # estimator.algorithm iv: InstrumentPath.snapshot()
+    frequency: dict[str, Any] | None = None  # estimator.method frequency or both: FrequencyPath.snapshot()
 
 
 class InstrumentPath(Protocol):
@@ -125,6 +136,17 @@ class InstrumentPath(Protocol):
 
     def state_layout(self, rows: int) -> dict[str, tuple[tuple[int, ...], np.dtype]]:
         """``{name: (shape, dtype)}`` of the arrays with ``rows`` rows held."""
+
+
+class FrequencyPath(Protocol):
+    """What a state's frequency-domain record is checked against: the frequency path the
+    caller continues with (:class:`.datapath.frequency_path.FrequencyPath`)."""
+
+    def state_spec(self) -> dict[str, Any]:
+        """The arrays' name prefix, the counters' ranges and flags, the results' names."""
+
+    def state_layout(self, evaluated_at: int) -> dict[str, tuple[tuple[int, ...], np.dtype]]:
+        """``{name: (shape, dtype)}`` of the record's arrays, last evaluated at ``evaluated_at``."""
 
 
 def save_state(path: str | Path, state: EstimatorState, fingerprint: Mapping[str, Any]) -> None:
@@ -144,6 +166,9 @@ def save_state(path: str | Path, state: EstimatorState, fingerprint: Mapping[str
     if state.instruments is not None:
         meta["instruments"] = state.instruments["counters"]
         arrays.update(state.instruments["arrays"])
+    if state.frequency is not None:
+        meta["frequency"] = state.frequency["counters"]
+        arrays.update(state.frequency["arrays"])
     with atomic_file(Path(path)) as fh:
         np.savez(fh, meta=np.array(json.dumps(meta)), **arrays)
 
@@ -242,7 +267,7 @@ Expected = tuple[tuple[int, ...], EstimatorOptions] | None
 
 
 def _load(path: Path, fingerprint: Mapping[str, Any], expect: Expected,
-          instruments: InstrumentPath | None) -> EstimatorState:
+          paths: tuple[InstrumentPath | None, FrequencyPath | None]) -> EstimatorState:
     try:
         # Without waiting: a FIFO put here after the caller's claim cannot block the read.
         fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | os.O_NOCTTY | getattr(os, "O_CLOEXEC", 0))
@@ -261,19 +286,20 @@ def _load(path: Path, fingerprint: Mapping[str, Any], expect: Expected,
             raise StateFileError(f"not a readable state file (not a zip archive: {str(exc)[:80]})") from None
         with zf:
             try:
-                return _load_archive(zf, st.st_size, fingerprint, expect, instruments)
+                return _load_archive(zf, st.st_size, fingerprint, expect, *paths)
             except (zipfile.BadZipFile, OSError, EOFError) as exc:  # a CRC or size mismatch while reading
                 raise StateFileError(f"not a readable state file ({str(exc)[:80]})") from None
 
 
 def _load_archive(
     zf: zipfile.ZipFile, file_size: int, fingerprint: Mapping[str, Any], expect: Expected,
-    instruments: InstrumentPath | None,
+    instruments: InstrumentPath | None, frequency: FrequencyPath | None,
 ) -> EstimatorState:
     entries = _entries(zf, file_size)
     meta = _read_meta(zf, entries["meta"])
     check_format(meta)
-    meta = json_object(meta, "", _META_KEYS + (() if instruments is None else ("instruments",)))
+    optional = (() if instruments is None else ("instruments",)) + (() if frequency is None else ("frequency",))
+    meta = json_object(meta, "", _META_KEYS + optional)
     sizes, options = check_sizes(meta["sizes"]), check_options(meta["options"])
     check_expected(sizes, options, expect)
     # Compare as JSON would store it (tuples become lists).
@@ -291,6 +317,10 @@ def _load_archive(
     if instruments is not None:
         saved_instruments = _read_instruments(zf, entries, meta["instruments"], instruments)
         entries = {k: v for k, v in entries.items() if k not in saved_instruments["arrays"]}
+    saved_frequency = None
+    if frequency is not None:
+        saved_frequency = _read_frequency(zf, entries, meta["frequency"], frequency)
+        entries = {k: v for k, v in entries.items() if k not in saved_frequency["arrays"]}
     arrays = _read_arrays(zf, entries, sizes, options, counters)
     try:
         bank = EstimatorBank.from_state(
@@ -300,7 +330,7 @@ def _load_archive(
     except (KeyError, TypeError, ValueError, IndexError) as exc:  # the second line: the bank's own checks
         raise StateFileError(f"inconsistent estimator state ({str(exc)[:120]})") from None
     return EstimatorState(bank=bank, samples_used=samples_used, output_sum=zsum, output_sum_squares=zsq,
-                          instruments=saved_instruments)
+                          instruments=saved_instruments, frequency=saved_frequency)
 
 
 def _read_arrays(
@@ -405,9 +435,61 @@ def _check_instrument_values(arrays: Mapping[str, np.ndarray], counters: Mapping
             raise invalid("arrays.iv_bare_D", "must be zero (with bare_theta) before the bare fit starts")
 
 
+# ---------------------------------------------------------------------------------------------
+# the frequency-domain record (estimator.method frequency or both)
+
+
+def _read_frequency(zf: zipfile.ZipFile, entries: dict[str, zipfile.ZipInfo], raw: Any,
+                    path: FrequencyPath) -> dict[str, Any]:
+    """The frequency-domain record (:meth:`.FrequencyPath.snapshot`) checked against ``path``,
+    the one the caller continues with: the counters of ``meta.frequency`` by type and range,
+    the ``fq_`` entries by layout, then their values (finite; zeros before the first sample)."""
+    spec = path.state_spec()
+    c = json_object(raw, "frequency", (*spec["integers"], *spec["flags"]))
+    counters: dict[str, Any] = {}
+    for name, (low, high) in spec["integers"].items():
+        counters[name] = integer(c[name], f"frequency.{name}", low, high)
+    for name in spec["flags"]:
+        if not isinstance(c[name], bool):
+            raise invalid(f"frequency.{name}", f"must be true or false, found {describe(c[name])}")
+        counters[name] = c[name]
+    n = counters["n"]
+    if counters["evaluated_at"] > n:
+        raise invalid("frequency.evaluated_at", f"must be at most the record's {n} samples")
+    if counters["due"] and (n == 0 or counters["evaluated_at"] == n):
+        raise invalid("frequency.due", "must be false before the first sample and at the sample evaluated")
+    names = {k for k in entries if k.startswith(spec["prefix"])}
+    arrays = _read_layout(zf, entries, names, path.state_layout(counters["evaluated_at"]))
+    _check_frequency_values(arrays, spec["results"], n, counters["evaluated_at"])
+    return {"counters": counters, "arrays": arrays}
+
+
+def _check_frequency_values(arrays: Mapping[str, np.ndarray], results: tuple[str, ...], n: int,
+                            evaluated_at: int) -> None:
+    """The record finite (all zeros before the first sample); the last evaluation's results
+    without infinities (NaN where none), standard errors not negative, ready
+    models solved and not withheld, and nothing before the first evaluation."""
+    for name, arr in arrays.items():
+        if name in results:
+            if np.isinf(arr).any():
+                raise invalid(f"arrays.{name}", "holds infinite values (results are finite or NaN)")
+            if evaluated_at == 0 and not (np.isnan(arr).all() if arr.dtype.kind == "f" else not arr.any()):
+                raise invalid(f"arrays.{name}", "must be NaN (flags false) before the first evaluation")
+        elif not np.isfinite(arr).all():
+            raise invalid(f"arrays.{name}", "holds NaN or infinite values (the frequency-domain record never does)")
+        elif n == 0 and arr.any():
+            raise invalid(f"arrays.{name}", "must be zero before the first sample (frequency.n is 0)")
+    for name in ("se", "published_se"):
+        if (arrays[f"fq_{name}"] < 0).any():
+            raise invalid(f"arrays.fq_{name}", "must not be negative")
+    ready, solved, withheld = arrays["fq_flags"]
+    if (ready & ~solved).any() or (ready & withheld).any():
+        raise invalid("arrays.fq_flags", "has a model ready that is not solved or is withheld")
+
+
 def load_state(
     path: str | Path, fingerprint: Mapping[str, Any], *, expect: Expected = None,
-    instruments: InstrumentPath | None = None,
+    instruments: InstrumentPath | None = None, frequency: FrequencyPath | None = None,
 ) -> EstimatorState:
     """The state saved in ``path``. Raises :class:`StateFileError` naming the file and the
     field when the file is missing, unreadable, not a state file, of another format, saved with
@@ -418,10 +500,14 @@ def load_state(
     must be the same (the options with their defaults resolved). ``instruments``: the
     instrument path the caller will continue with (``estimator.algorithm iv``): the file must
     hold its state (:meth:`.InstrumentPath.snapshot`), checked against it, returned in
-    :attr:`EstimatorState.instruments`; without it, a file holding instruments is refused."""
+    :attr:`EstimatorState.instruments`; without it, a file holding instruments is refused.
+    ``frequency``: the frequency path the caller will continue with (``estimator.method``
+    frequency or both): the file must hold its record (:meth:`.FrequencyPath.snapshot`),
+    checked against it, returned in :attr:`EstimatorState.frequency`; without it, a file
+    holding one is refused."""
     path = Path(path)
     try:
-        return _load(path, fingerprint, expect, instruments)
+        return _load(path, fingerprint, expect, (instruments, frequency))
     except StateFileError as exc:
         raise StateFileError(f"{path}: {exc}") from None
 

@@ -96,9 +96,9 @@ def test_snapshot_is_a_copy(lags):
 def test_a_state_of_another_format_or_shape_is_refused_by_name():
     X, z = wide_scale_problem()
     saved = run(RecursiveEstimator(4, EstimatorOptions(lags=5)), X, z, stop=50).state()
-    assert saved["format"] == EstimatorBank.STATE_FORMAT == 8
-    old = dict(saved, format=7)  # before the instruments' state
-    with pytest.raises(ValueError, match="state format 7"):
+    assert saved["format"] == EstimatorBank.STATE_FORMAT == 9
+    old = dict(saved, format=8)  # before the frequency-domain record
+    with pytest.raises(ValueError, match="state format 8"):
         EstimatorBank.from_state(old)
     bad = dict(saved, arrays=dict(saved["arrays"], lag_sums=np.zeros((1, 5))))
     with pytest.raises(ValueError, match="lag_sums"):

@@ -284,4 +284,5 @@ class PipelineConfig:
             "rate": self.rate,
             "estimator": self.estimator.resolved().as_dict(),
             **({"instruments": asdict(self.instruments)} if self.estimator.algorithm == "iv" else {}),
+            **({"frequency": asdict(self.frequency)} if self.frequency is not None else {}),
         }

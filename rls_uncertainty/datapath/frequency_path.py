@@ -33,19 +33,23 @@ pipeline hands every regression row it gives the time-domain estimator to one
   and counted (``outputs_withheld`` under ``M/frequency``).
 
 A new path is made whenever the time-domain estimator restarts (``~/reset``, a new timeline, a
-new configuration). Its state is not saved in the state file: a node resumed from one starts a new
-frequency-domain record.
+new configuration). The state file holds its bank's record (:meth:`FrequencyPath.snapshot`,
+:mod:`.frequency.state`): a node resumed from one continues the frequency-domain record where it
+stopped; the second convergence monitor restarts, as the time domain's does.
 """
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import replace
-from typing import TYPE_CHECKING, NamedTuple
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
 
 from ..aero.models import BIAS_REGRESSOR
+from ..estimator.state import MAX_COUNT as MAX_SAVED_COUNT
 from ..frequency import FrequencyBank
+from ..frequency import state as record
 from .convergence import ConvergenceMonitor
 from .guard import withheld as unpublishable
 
@@ -172,3 +176,28 @@ class FrequencyPath:
         else:
             out["frequency.publish_at_samples"] = int(bank.publish_at[j])
         return out
+
+    # ------------------------------------------------------------------ the state file
+    def snapshot(self) -> dict[str, Any]:
+        """The bank's record as plain data, for the state file: ``counters`` (``n``,
+        ``evaluated_at``, ``repairs``, ``due``) and ``fq_`` arrays (:func:`.frequency.state.snapshot`).
+        :meth:`restore` continues bit-identically."""
+        return record.snapshot(self.bank)
+
+    def restore(self, saved: Mapping[str, Any]) -> None:
+        """Continue from :meth:`snapshot` (of a path of this configuration: its checks are the
+        state file's, :func:`..state_file.load_state`; here only shapes, :class:`ValueError`)."""
+        record.restore(self.bank, saved)
+
+    def state_spec(self) -> dict[str, Any]:
+        """What a saved record must hold besides its arrays' layout: ``prefix`` (of the arrays'
+        names), ``integers`` (each counter's ``(low, high)``), ``flags`` (the boolean counters) and
+        ``results`` (the arrays of the last evaluation's results, NaN where there are none)."""
+        counts = (0, MAX_SAVED_COUNT)
+        return {"prefix": record.PREFIX, "integers": {"n": counts, "evaluated_at": counts, "repairs": counts},
+                "flags": ("due",), "results": record.RESULTS}
+
+    def state_layout(self, evaluated_at: int) -> dict[str, tuple[tuple[int, ...], np.dtype]]:
+        """``{name: (shape, dtype)}`` of :meth:`snapshot`'s arrays, last evaluated at sample
+        ``evaluated_at``."""
+        return record.layout(self.bank, evaluated_at)

@@ -489,20 +489,22 @@ class Pipeline(PipelineInputs):
     # ------------------------------------------------------------------ persistence
     def save_state(self, path: str | Path) -> None:
         """Write the estimator state (:mod:`.state_file`; with ``estimator.algorithm iv`` the
-        instruments' too) so a restarted node resumes."""
-        quality, iv = self._quality, self._iv
+        instruments' too, with ``estimator.method`` frequency or both the frequency-domain
+        record's) so a restarted node resumes."""
+        quality, iv, freq = self._quality, self._iv, self.frequency
         state = EstimatorState(self.bank, self.bookkeeping.samples_used, quality.output_sum, quality.output_sum_squares,
-                               None if iv is None else iv.snapshot())
+                               None if iv is None else iv.snapshot(), None if freq is None else freq.snapshot())
         save_state(path, state, self.config.fingerprint())
 
     def load_state(self, path: str | Path) -> None:
         """Continue from :meth:`save_state`. Raises :class:`StateFileError` when the file is
         unreadable, not a valid state or was written with another configuration (every field is
         checked against this pipeline's configuration before anything is allocated)."""
-        expect = (tuple(self.sizes), self.config.estimator)
-        state = load_state(path, self.config.fingerprint(), expect=expect, instruments=self._iv)
-        if self._iv is not None and state.instruments is not None:
-            self._iv.restore(state.instruments)
+        expect, iv, freq = (tuple(self.sizes), self.config.estimator), self._iv, self.frequency
+        state = load_state(path, self.config.fingerprint(), expect=expect, instruments=iv, frequency=freq)
+        for part, saved in ((iv, state.instruments), (freq, state.frequency)):
+            if part is not None and saved is not None:
+                part.restore(saved)
         self.bank = state.bank
         self.bookkeeping.samples_used = state.samples_used
         self._quality.resume(state.output_sum, state.output_sum_squares)

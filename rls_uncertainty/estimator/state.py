@@ -60,7 +60,7 @@ __all__ = [
 # 6: the residual burn-in (its end k0 + B follows from ready_at); 7: the options as one
 # object (EstimatorOptions.as_dict: lags "all" / "auto" / an integer, p0 stored); 8: with
 # estimator.algorithm iv, the instruments' state beside the bank's (rls_uncertainty.state_file).
-STATE_FORMAT = 8
+STATE_FORMAT = 9
 
 COUNTERS = ("k", "n_eff", "n_noise", "cap")
 

@@ -17,6 +17,7 @@ covariance of the same estimate for an equation error that is colored in time, d
 * :mod:`.instrumental`: the instrumental-variable fit's extra pieces (F11-F12).
 * :mod:`.bank`: :class:`FrequencyBank`, ``M`` models sample by sample, least squares or
   instrumental variables.
+* :mod:`.state`: a bank's record as plain data and back (the state file), bit for bit.
 * :mod:`.reference`: :func:`frequency_reference`, the same quantities for one model written
   out over the samples; the oracle of the tests and the batch estimate of a record.
 """
