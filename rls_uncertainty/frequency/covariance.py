@@ -61,16 +61,21 @@ class PairGeometry:
         cot_plus = 1.0 / np.tan((a[:, None] + a[None, :]) / 2)
         self.cot_imag: FloatArray = 0.5 * (cot_minus - cot_plus)  # Im a -> Re L
         self.cot_real: FloatArray = -0.5 * (cot_minus + cot_plus)  # Re a -> Im L
+        # The tables of the last lag count asked for, one each: the count grows with the record
+        # up to frequency.n_lags + 1 and then stays, so one entry serves every evaluation after
+        # the first n_lags samples and memory stays that of one table (one per count would add
+        # up to O(n_lags^2 K) while the record grows).
         self._tables: dict[int, FloatArray] = {}
         self._spectral: dict[int, FloatArray] = {}
         self._weights: dict[int, FloatArray] = {}
         self.at(1)
 
     def lag_weights(self, lags: int) -> FloatArray:
-        """``1.0 .. lags`` (kept per ``lags``)."""
+        """``1.0 .. lags`` (kept for the last ``lags``)."""
         out = self._weights.get(lags)
         if out is None:
-            out = self._weights[lags] = np.arange(1, lags + 1, dtype=np.float64)
+            out = np.arange(1, lags + 1, dtype=np.float64)
+            self._weights = {lags: out}
         return out
 
     def head_phasors(self, count: int) -> ComplexArray:
@@ -83,22 +88,23 @@ class PairGeometry:
     def lag_table(self, lags: int) -> FloatArray:
         """``(lags, 2K)``: ``cos(a_k i)`` and ``-sin(a_k i)`` interleaved (columns ``2k``, ``2k+1``)
         for ``i = 1..lags``, so that ``r @ table`` viewed as complex is ``sum_i r_i exp(-j a_k i)``
-        (kept per ``lags``)."""
+        (kept for the last ``lags``)."""
         table = self._tables.get(lags)
         if table is None:
             phase = np.mod(np.multiply.outer(np.arange(1, lags + 1, dtype=np.float64), self.angles), 2 * np.pi)
             table = np.empty((lags, 2 * self.angles.size))
             table[:, 0::2], table[:, 1::2] = np.cos(phase), -np.sin(phase)
-            self._tables[lags] = table
+            self._tables = {lags: table}
         return table
 
     def spectral_table(self, lags: int) -> FloatArray:
         """``(lags, 3K)``: :meth:`lag_table` and ``i cos(a_k i)``, so that ``r @ table`` gives
-        ``S+`` (the first ``2K`` columns, viewed as complex) and ``Re S1`` (kept per ``lags``)."""
+        ``S+`` (the first ``2K`` columns, viewed as complex) and ``Re S1`` (kept for the last ``lags``)."""
         table = self._spectral.get(lags)
         if table is None:
             cosines = self.lag_table(lags)[:, 0::2]
-            table = self._spectral[lags] = np.hstack([self.lag_table(lags), self.lag_weights(lags)[:, None] * cosines])
+            table = np.hstack([self.lag_table(lags), self.lag_weights(lags)[:, None] * cosines])
+            self._spectral = {lags: table}
         return table
 
     def at(self, N: int) -> PairGeometry:

@@ -186,6 +186,8 @@ def dof_correction(
     return apply
 
 
+# The fixed matrices of the last L asked for (L grows with the record up to frequency.n_lags
+# and then stays; one entry keeps memory at five (L+1) x (L+1) matrices).
 _FOLDS: dict[int, tuple[FloatArray, ...]] = {}
 
 
@@ -195,14 +197,16 @@ def _bias_terms(N: int, L: int) -> FloatArray:
     ``T1(k) = max(N - |k|, 0) / N`` (the ``-j`` term only for ``j >= 1``) and ``c_j`` the lags
     ``+-j`` folded onto ``j``: 1 for ``j = 0``, 2 beyond. From ``N = 2L`` on no ``T1`` is
     clipped and it is ``c_j + (P1 + P2 / N) / N`` with fixed ``P1 = (i + j) c_j - 2 (|j - i| +
-    (i + j) [j >= 1])`` and ``P2 = -i j c_j`` (kept per ``L``)."""
+    (i + j) [j >= 1])`` and ``P2 = -i j c_j`` (kept for the last ``L``)."""
     folds = _FOLDS.get(L)
     if folds is None:
         i, j = np.arange(L + 1.0)[:, None], np.arange(L + 1.0)[None, :]
         c = np.where(j >= 1, 2.0, 1.0)
         mirrored = np.where(j >= 1, i + j, np.inf)  # |-j - i|, none for j = 0
         P1 = (i + j) * c - 2.0 * (np.abs(j - i) + np.where(j >= 1, i + j, 0.0))
-        folds = _FOLDS[L] = (np.abs(j - i), mirrored, c, P1, -i * j * c)
+        folds = (np.abs(j - i), mirrored, c, P1, -i * j * c)
+        _FOLDS.clear()
+        _FOLDS[L] = folds
     direct, mirrored, c, P1, P2 = folds
     if N >= 2 * L:
         out: FloatArray = P2 / N
