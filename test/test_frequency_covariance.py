@@ -123,3 +123,28 @@ def test_with_the_true_autocovariance_the_covariance_matches_the_monte_carlo_sca
     s2 = (np.abs(resid) ** 2).sum(axis=0) / (f.size - 2)
     conventional = s2.mean() * np.diag(A_inv)
     assert np.all(np.abs(conventional / observed - 1) > 0.3)
+
+
+def test_the_tables_kept_while_the_record_grows_are_those_of_one_lag_count():
+    """The lag count of an evaluation grows with the record up to ``frequency.n_lags + 1``: what
+    the geometry and the degrees-of-freedom correction keep between evaluations stays that of
+    one count (kept per count, it grew to about 130 MB here), and a table
+    asked for again after another count is the same."""
+    import tracemalloc
+
+    from rls_uncertainty.frequency.lags import _bias_terms
+
+    geometry = PairGeometry(2 * np.pi * np.arange(0.2, 2.2, 0.04) / 50.0)  # 50 frequencies at 50 Hz
+    first = geometry.spectral_table(40).copy()
+    tracemalloc.start()
+    try:
+        base = tracemalloc.get_traced_memory()[0]
+        for lags in range(1, 201):
+            geometry.spectral_table(lags)
+            _bias_terms(2 * lags, lags - 1)
+        grown = tracemalloc.get_traced_memory()[0] - base
+    finally:
+        tracemalloc.stop()
+    one = geometry.spectral_table(200).nbytes + geometry.lag_table(200).nbytes + 5 * 201 * 201 * 8
+    assert grown < 2 * one
+    np.testing.assert_array_equal(geometry.spectral_table(40), first)
