@@ -388,18 +388,25 @@ def _read_instruments(zf: zipfile.ZipFile, entries: dict[str, zipfile.ZipInfo], 
     return {"counters": counters, "arrays": arrays}
 
 
+def _typed_counters(c: Mapping[str, Any], spec: Mapping[str, Any], prefix: str) -> dict[str, Any]:
+    """The ``integers`` of ``spec`` (name: (low, high)) and its ``flags`` (booleans) read from
+    ``c``, each checked; an error names ``prefix.name``."""
+    out: dict[str, Any] = {}
+    for name, (low, high) in spec["integers"].items():
+        out[name] = integer(c[name], f"{prefix}.{name}", low, high)
+    for name in spec["flags"]:
+        if not isinstance(c[name], bool):
+            raise invalid(f"{prefix}.{name}", f"must be true or false, found {describe(c[name])}")
+        out[name] = c[name]
+    return out
+
+
 def _instrument_counters(raw: Any, spec: Mapping[str, Any]) -> dict[str, Any]:
     c = json_object(raw, "instruments", ("source", *spec["integers"], *spec["flags"]))
     if c["source"] != spec["source"]:
         raise StateFileError(f"{ANOTHER_CONFIGURATION}: field 'instruments.source' is {describe(c['source'])}, "
                              f"the configuration has {spec['source']}")
-    out: dict[str, Any] = {"source": spec["source"]}
-    for name, (low, high) in spec["integers"].items():
-        out[name] = integer(c[name], f"instruments.{name}", low, high)
-    for name in spec["flags"]:
-        if not isinstance(c[name], bool):
-            raise invalid(f"instruments.{name}", f"must be true or false, found {describe(c[name])}")
-        out[name] = c[name]
+    out: dict[str, Any] = {"source": spec["source"], **_typed_counters(c, spec, "instruments")}
     if "has_model" in out and not out["has_model"] and out["since_refresh"]:
         raise invalid("instruments.since_refresh", "must be 0 while there is no auxiliary model")
     if out.get("has_model") and out["waiting"]:
@@ -446,13 +453,7 @@ def _read_frequency(zf: zipfile.ZipFile, entries: dict[str, zipfile.ZipInfo], ra
     the ``fq_`` entries by layout, then their values (finite; zeros before the first sample)."""
     spec = path.state_spec()
     c = json_object(raw, "frequency", (*spec["integers"], *spec["flags"]))
-    counters: dict[str, Any] = {}
-    for name, (low, high) in spec["integers"].items():
-        counters[name] = integer(c[name], f"frequency.{name}", low, high)
-    for name in spec["flags"]:
-        if not isinstance(c[name], bool):
-            raise invalid(f"frequency.{name}", f"must be true or false, found {describe(c[name])}")
-        counters[name] = c[name]
+    counters = _typed_counters(c, spec, "frequency")
     n = counters["n"]
     if counters["evaluated_at"] > n:
         raise invalid("frequency.evaluated_at", f"must be at most the record's {n} samples")
