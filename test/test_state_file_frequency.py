@@ -10,6 +10,7 @@ import json
 
 import numpy as np
 import pytest
+from state_resume import by_file, contents, in_memory
 
 from rls_uncertainty import cli
 from rls_uncertainty.datapath.frequency_path import FrequencyPath
@@ -118,34 +119,6 @@ def run(config, messages, cut=None, resume=None):
             pipe = resume(pipe)
         outs.extend(out for out in feed(pipe, kind, msg) if cut is None or i >= cut)
     return outs
-
-
-def contents(path):
-    with np.load(path) as data:
-        arrays = {k: data[k] for k in data.files}
-    return arrays, json.loads(str(arrays.pop("meta")))
-
-
-def by_file(config, path, seen):
-    def resume(pipe):
-        pipe.save_state(path)
-        fresh = Pipeline(config)
-        fresh.load_state(path)
-        fresh.save_state(path.with_name("again.npz"))  # what the loaded pipeline holds
-        seen.append((contents(path), contents(path.with_name("again.npz"))))
-        return fresh
-    return resume
-
-
-def in_memory(config):
-    """The estimation handed over as objects: a fresh pipeline (its inputs, delay line and
-    differentiator restarted as after a load) continuing the very banks and instrument path."""
-    def resume(pipe):
-        fresh = Pipeline(config)
-        fresh.bank, fresh._iv = pipe.bank, pipe._iv
-        fresh.frequency.bank = pipe.frequency.bank
-        return fresh
-    return resume
 
 
 def t2(method, **extra):

@@ -12,6 +12,7 @@ import json
 import numpy as np
 import pytest
 from scipy.linalg import expm
+from state_resume import by_file, contents, in_memory
 
 from rls_uncertainty import cli
 from rls_uncertainty.datapath.inputs import feed
@@ -155,35 +156,8 @@ def run(config, messages, cut=None, resume=None):
     return last
 
 
-def contents(path):
-    with np.load(path) as data:
-        arrays = {k: data[k] for k in data.files}
-    return arrays, json.loads(str(arrays.pop("meta")))
-
-
 def identical(a, b):
     return a.keys() == b.keys() and all(a[k].dtype == b[k].dtype and a[k].tobytes() == b[k].tobytes() for k in a)
-
-
-def by_file(config, path, seen):
-    def resume(pipe):
-        pipe.save_state(path)
-        fresh = Pipeline(config)
-        fresh.load_state(path)
-        fresh.save_state(path.with_name("again.npz"))  # what the loaded pipeline holds
-        seen.append((contents(path), contents(path.with_name("again.npz"))))
-        return fresh
-    return resume
-
-
-def in_memory(config):
-    """The estimation handed over as objects: a fresh pipeline (its inputs, delay line and
-    differentiator restarted as after a load) continuing the very bank and instrument path."""
-    def resume(pipe):
-        fresh = Pipeline(config)
-        fresh.bank, fresh._iv = pipe.bank, pipe._iv
-        return fresh
-    return resume
 
 
 @pytest.mark.parametrize("fraction", [0.04, 0.5], ids=["rows-waiting", "half"])
