@@ -11,11 +11,17 @@ differentiator) to the reception of that sample's last output array.
     .venv/bin/python benchmarks/node_benchmark.py                      # 1 kHz IMU, 100 Hz air data
     .venv/bin/python benchmarks/node_benchmark.py --imu-rate 200 --air-rate 50
     .venv/bin/python benchmarks/node_benchmark.py --extreme --no-baseline  # more than the node can do
+    .venv/bin/python benchmarks/node_benchmark.py --offline            # the data path alone, no DDS
 
 ``--extreme``: estimates at 1000 Hz with ``estimator.method: both`` and ``frequency.every: 1``
 (1 kHz IMU): more work than one core does in real time. It prints the node's RSS, the last
 ``/diagnostics`` texts of the samples and inputs statuses verbatim, and what the node logged
 about keeping up.
+
+``--offline``: the node's data path alone on the same messages (serialized by rclpy), without
+DDS, executor or other processes: CPU per output sample of decoding, of feeding with
+estimation disabled and enabled, and of encoding. The live run prints the node's CPU by
+thread (``main`` runs the executor and every callback).
 """
 
 from __future__ import annotations
@@ -29,6 +35,7 @@ import subprocess
 import sys
 import time
 from pathlib import Path
+from typing import Any
 
 os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
 os.environ.setdefault("ROS_DOMAIN_ID", str(1 + os.getpid() % 100))
@@ -50,6 +57,56 @@ def signals(t: float):
     }
 
 
+def schedule(args) -> list[tuple[int, str]]:
+    """The maneuver's messages, ``(stamp ns, kind)`` in publication order: IMU at imu_rate, the
+    rest at air_rate (offset 1 ms)."""
+    events = []
+    n_imu = int(args.duration * args.imu_rate)
+    events += [(T0 + int(round(k * 1e9 / args.imu_rate)), "imu") for k in range(n_imu)]
+    n_air = int(args.duration * args.air_rate)
+    for k in range(n_air):
+        s = T0 + int(round(k * 1e9 / args.air_rate)) + 10**6
+        # Thrust is needed by CX (Eq. 1a): at the air-data rate, since a slower stream would
+        # hold every sample back until its next message (the node never extrapolates).
+        events += [(s, "airspeed"), (s, "dynamic_pressure"), (s, "control_surfaces"), (s, "thrust")]
+    events.sort()
+    return events
+
+
+def message(kind: str, stamp: int):
+    """The rclpy message of ``kind`` stamped ``stamp`` (ns)."""
+    from geometry_msgs.msg import Vector3Stamped, WrenchStamped
+    from sensor_msgs.msg import FluidPressure, Imu, JointState
+
+    x = signals((stamp - T0) * 1e-9)
+    if kind == "imu":
+        m = Imu()
+        m.angular_velocity.x, m.angular_velocity.y, m.angular_velocity.z = x["p"], -x["q"], -x["r"]
+        m.linear_acceleration.x = 0.5 + 3 * x["alpha"]
+        m.linear_acceleration.y = -(2 * x["beta"] + x["dr"])
+        m.linear_acceleration.z = 9.8 + 20 * x["alpha"] + 3 * x["de"]
+    elif kind == "airspeed":
+        m = Vector3Stamped()
+        V = 60.0
+        a, b = x["alpha"], x["beta"]
+        m.vector.x = V * math.cos(a) * math.cos(b)
+        m.vector.y = -V * math.sin(b)
+        m.vector.z = -V * math.sin(a) * math.cos(b)
+    elif kind == "dynamic_pressure":
+        m = FluidPressure()
+        m.fluid_pressure = 0.5 * 1.1 * 60.0**2
+    elif kind == "control_surfaces":
+        m = JointState()
+        m.name = ["elevator", "aileron_left", "aileron_right", "rudder"]
+        m.position = [x["de"], -x["da"], x["da"], x["dr"]]
+    else:
+        m = WrenchStamped()
+        m.wrench.force.x = 4000.0
+    m.header.stamp.sec, m.header.stamp.nanosec = divmod(stamp, 10**9)
+    m.header.frame_id = "base_link"  # the node's inputs.frame_id
+    return m
+
+
 def publisher(args) -> None:
     """Publish the maneuver in real time; write (monotonic time, kind, stamp) to a file."""
     import rclpy
@@ -67,17 +124,7 @@ def publisher(args) -> None:
         time.sleep(0.05)
     time.sleep(1.0)
     kinds = {"imu": 0, "airspeed": 1, "dynamic_pressure": 2, "control_surfaces": 3, "thrust": 4}
-    # Event list: (stamp_ns, kind); IMU at imu_rate, the rest at air_rate (offset 1 ms).
-    events = []
-    n_imu = int(args.duration * args.imu_rate)
-    events += [(T0 + int(round(k * 1e9 / args.imu_rate)), "imu") for k in range(n_imu)]
-    n_air = int(args.duration * args.air_rate)
-    for k in range(n_air):
-        s = T0 + int(round(k * 1e9 / args.air_rate)) + 10**6
-        # Thrust is needed by CX (Eq. 1a): at the air-data rate, since a slower stream would
-        # hold every sample back until its next message (the node never extrapolates).
-        events += [(s, "airspeed"), (s, "dynamic_pressure"), (s, "control_surfaces"), (s, "thrust")]
-    events.sort()
+    events = schedule(args)
     log = np.zeros((len(events), 3))
     start = time.monotonic()
     for i, (stamp, kind) in enumerate(events):
@@ -85,39 +132,69 @@ def publisher(args) -> None:
         left = due - time.monotonic()
         if left > 0:
             time.sleep(left)  # no busy wait: the publisher must not steal the node's core
-        t = (stamp - T0) * 1e-9
-        x = signals(t)
-        if kind == "imu":
-            m = Imu()
-            m.angular_velocity.x, m.angular_velocity.y, m.angular_velocity.z = x["p"], -x["q"], -x["r"]
-            m.linear_acceleration.x = 0.5 + 3 * x["alpha"]
-            m.linear_acceleration.y = -(2 * x["beta"] + x["dr"])
-            m.linear_acceleration.z = 9.8 + 20 * x["alpha"] + 3 * x["de"]
-        elif kind == "airspeed":
-            m = Vector3Stamped()
-            V = 60.0
-            a, b = x["alpha"], x["beta"]
-            m.vector.x = V * math.cos(a) * math.cos(b)
-            m.vector.y = -V * math.sin(b)
-            m.vector.z = -V * math.sin(a) * math.cos(b)
-        elif kind == "dynamic_pressure":
-            m = FluidPressure()
-            m.fluid_pressure = 0.5 * 1.1 * 60.0**2
-        elif kind == "control_surfaces":
-            m = JointState()
-            m.name = ["elevator", "aileron_left", "aileron_right", "rudder"]
-            m.position = [x["de"], -x["da"], x["da"], x["dr"]]
-        else:
-            m = WrenchStamped()
-            m.wrench.force.x = 4000.0
-        m.header.stamp.sec, m.header.stamp.nanosec = divmod(stamp, 10**9)
-        m.header.frame_id = "base_link"  # the node's inputs.frame_id
-        pubs[kind].publish(m)
+        pubs[kind].publish(message(kind, stamp))
         log[i] = (time.monotonic(), kinds[kind], stamp - T0)
     np.save(args.log, log)
     time.sleep(1.0)
     node.destroy_node()
     rclpy.try_shutdown()
+
+
+def offline(args) -> None:
+    """The node's data path without DDS or executor, on this run's messages serialized by
+    rclpy: CPU per output sample (``time.process_time``, best of ``--repeats``) of decoding
+    (:mod:`.cdr`), of feeding with estimation disabled (judging, sampling, differentiating:
+    the ``estimation_disabled`` path) and enabled (:func:`.inputs.feed`, what the node runs per
+    message), and of encoding a sample's messages (:meth:`.outputs.OutputLayout.encode`)."""
+    from rclpy.serialization import serialize_message
+
+    from rls_uncertainty.datapath.cdr import decode
+    from rls_uncertainty.datapath.inputs import MESSAGE_TYPES, feed
+    from rls_uncertainty.datapath.outputs import OutputLayout
+    from rls_uncertainty.datapath.pipeline import Pipeline
+    from rls_uncertainty.settings.parameters import PARAMETERS, pipeline_config
+
+    values = {p.name: p.default for p in PARAMETERS}
+    values.update({"rate": args.rate, "estimator.lag_span": args.lag_span, "surfaces.elevator": ["elevator"],
+                   "estimator.method": args.method})
+    if args.method != "time":
+        values["frequency.every"] = args.frequency_every
+    config = pipeline_config(values)
+    raws = [(MESSAGE_TYPES[kind], kind, serialize_message(message(kind, stamp))) for stamp, kind in schedule(args)]
+    best: dict[str, float] = {}
+
+    def timed(what: str, fn, *fn_args) -> Any:
+        t0 = time.process_time()
+        result = fn(*fn_args)
+        best[what] = min(best.get(what, math.inf), time.process_time() - t0)
+        return result
+
+    def run(enabled: bool) -> list:
+        pipeline, outs = Pipeline(config, enabled=enabled), []
+        for msgtype, kind, raw in raws:
+            outs += feed(pipeline, kind, decode(msgtype, raw))
+        return outs
+
+    def encode(outs: list, wanted: list[bool] | None) -> None:
+        for out in outs:
+            layout.encode(out, "base_link", wanted)
+
+    layout = OutputLayout.of(Pipeline(config))
+    two = [topic in ("sample_stamp", "Cn/standard_errors_conventional") for topic, _ in layout.topics]  # (live run's)
+    outs: list = []
+    for _ in range(args.repeats):
+        timed("decode", lambda: [decode(msgtype, raw) for msgtype, _kind, raw in raws])
+        timed("feed, estimation disabled", run, False)
+        outs = timed("feed", run, True)
+        timed("encode, 2 topics", encode, outs, two)
+        timed(f"encode, {len(layout.topics)} topics", encode, outs, None)
+    n = len(outs)
+    print(f"node data path without DDS: {len(raws)} messages, {n} output samples, CPU per output sample "
+          f"(best of {args.repeats}), ms:")
+    for what, seconds in best.items():
+        print(f"  {what:38s} {1e3 * seconds / n:.3f}")
+    print(f"  (feed includes decoding; estimation is feed minus feed with estimation disabled: "
+          f"{1e3 * (best['feed'] - best['feed, estimation disabled']) / n:.3f})")
 
 
 def echo_node() -> None:
@@ -171,6 +248,21 @@ def echo_baseline(samples: int = 1000) -> np.ndarray:
 def cpu_seconds(pid: int) -> float:
     fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
     return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+def thread_cpu_seconds(pid: int) -> dict[str, float]:
+    """CPU seconds of each of process ``pid``'s threads so far, summed by thread name (the
+    main thread, which runs the executor and every callback, as ``main``; threads the
+    middleware starts without a name carry the process's, ``python``)."""
+    out: dict[str, float] = {}
+    for task in Path(f"/proc/{pid}/task").iterdir():
+        try:
+            name = "main" if task.name == str(pid) else (task / "comm").read_text().strip()
+            fields = (task / "stat").read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        out[name] = out.get(name, 0.0) + (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+    return out
 
 
 def rss_mb(pid: int) -> float:
@@ -233,6 +325,9 @@ def report(args, tmp: Path, received: dict[int, float], count: dict[str, int], m
     print(f"  node CPU                         {cpu_percent:.1f} % of one core")
     per_sample = 1e3 * m["cpu_s"] / max(m["stamps"], 1)
     print(f"  node CPU per output sample       {per_sample:.3f} ms  (process CPU / samples published)")
+    threads = {k: v for k, v in sorted(m["threads"].items(), key=lambda kv: -kv[1]) if v > 0}
+    print("  of which, by thread, ms/sample   "
+          + ", ".join(f"{k} {1e3 * v / max(m['stamps'], 1):.3f}" for k, v in threads.items()))
     if periodic:
         print(f"  longest periodic step (diagnostics periodic_ms.max)  {max(periodic):.3f} ms")
     if samples:
@@ -254,6 +349,7 @@ def report(args, tmp: Path, received: dict[int, float], count: dict[str, int], m
                    "p99_ms": float(np.percentile(lat, 99)) if lat.size else None,
                    "max_ms": float(lat.max()) if lat.size else None,
                    "cpu_percent": cpu_percent, "cpu_per_sample_ms": per_sample,
+                   "threads_ms_per_sample": {k: 1e3 * v / max(m["stamps"], 1) for k, v in threads.items()},
                    "periodic_max_ms": max(periodic, default=None),
                    "dropped": expected - count["stamps"]}, fh)
 
@@ -270,6 +366,9 @@ def parse_args() -> argparse.Namespace:
     ap.add_argument("--extreme", action="store_true",
                     help="rate 1000 Hz, method both, frequency.every 1 (overrides --rate, --method, --frequency-every)")
     ap.add_argument("--no-baseline", action="store_true", help="skip the echo-node latency baseline")
+    ap.add_argument("--offline", action="store_true",
+                    help="time the node's data path (decode, feed, encode) on the same messages, without DDS")
+    ap.add_argument("--repeats", type=int, default=3, help="with --offline: passes over the messages")
     ap.add_argument("--publisher", action="store_true", help=argparse.SUPPRESS)
     ap.add_argument("--echo", action="store_true", help=argparse.SUPPRESS)
     ap.add_argument("--log", default=None, help=argparse.SUPPRESS)
@@ -319,6 +418,9 @@ def main() -> int:
     if args.echo:
         echo_node()
         return 0
+    if args.offline:
+        offline(args)
+        return 0
 
     import rclpy
     from diagnostic_msgs.msg import DiagnosticArray
@@ -366,6 +468,7 @@ def main() -> int:
     while pub.poll() is None and not stamps_seen:
         rclpy.spin_once(sub, timeout_sec=0.01)
     cpu0, wall0, stamps0 = cpu_seconds(node.pid), time.monotonic(), count["stamps"]
+    threads0 = thread_cpu_seconds(node.pid)
     rss = [rss_mb(node.pid)]
     next_rss = time.monotonic() + 0.5
     while pub.poll() is None:
@@ -374,6 +477,7 @@ def main() -> int:
             rss.append(rss_mb(node.pid))
             next_rss += 0.5
     cpu1, wall1, stamps1 = cpu_seconds(node.pid), time.monotonic(), count["stamps"]
+    threads1 = thread_cpu_seconds(node.pid)
     end = time.monotonic() + 2
     while time.monotonic() < end:
         rclpy.spin_once(sub, timeout_sec=0.05)
@@ -382,6 +486,7 @@ def main() -> int:
     node.send_signal(2)
     node.wait(20)
 
+    m.update(threads={k: v - threads0.get(k, 0.0) for k, v in threads1.items()})
     m.update(rss=rss, cpu_s=cpu1 - cpu0, wall_s=wall1 - wall0, stamps=stamps1 - stamps0)
     report(args, tmp, received, count, m)
     sub.destroy_node()

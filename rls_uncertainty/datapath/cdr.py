@@ -71,10 +71,6 @@ def _align(offset: int, size: int) -> int:
     return (offset + size - 1) & ~(size - 1)
 
 
-def _vec(values, i):
-    return Vector3(values[i], values[i + 1], values[i + 2])
-
-
 def _bad_string(buf: bytes, o: int, n: int) -> struct.error:
     if n == 0 or o + 4 + n > len(buf):
         return struct.error(f"string at offset {o} declares {n} bytes with NUL, {len(buf) - o - 4} left")
@@ -107,12 +103,10 @@ def _too_long(buf: bytes, o: int, n: int, what: str) -> struct.error:
 # terminating NUL, then the bytes; n >= 1 and the last byte is NUL.
 def _header_decoder(order: str) -> Callable[[bytes], tuple[Any, int]]:
     """``std_msgs/Header`` at the start of the payload: the header and the offset after it."""
-    time_ = struct.Struct(order + "iI")
-    u32 = struct.Struct(order + "I")
+    fixed = struct.Struct(order + "iII")  # the stamp and the frame_id's length, read at once
 
     def header(buf):
-        sec, nanosec = time_.unpack_from(buf, 0)
-        (n,) = u32.unpack_from(buf, 8)
+        sec, nanosec, n = fixed.unpack_from(buf, 0)
         end = 12 + n
         if n == 0 or end > len(buf) or buf[end - 1]:
             raise _bad_string(buf, 8, n)
@@ -132,11 +126,12 @@ def _fixed_decoders(order: str, header: Callable[[bytes], tuple[Any, int]]) -> d
     def imu(buf):
         h, o = header(buf)
         v = d37.unpack_from(buf, (o + 7) & ~7)
-        return Imu(h, Quaternion(v[0], v[1], v[2], v[3]), v[4:13], _vec(v, 13), v[16:25], _vec(v, 25), v[28:37])
+        return Imu(h, Quaternion(v[0], v[1], v[2], v[3]), v[4:13], Vector3(v[13], v[14], v[15]), v[16:25],
+                   Vector3(v[25], v[26], v[27]), v[28:37])
 
     def vector3_stamped(buf):
         h, o = header(buf)
-        return Vector3Stamped(h, _vec(d3.unpack_from(buf, (o + 7) & ~7), 0))
+        return Vector3Stamped(h, Vector3(*d3.unpack_from(buf, (o + 7) & ~7)))
 
     def fluid_pressure(buf):
         h, o = header(buf)
@@ -146,7 +141,7 @@ def _fixed_decoders(order: str, header: Callable[[bytes], tuple[Any, int]]) -> d
     def wrench_stamped(buf):
         h, o = header(buf)
         v = d6.unpack_from(buf, (o + 7) & ~7)
-        return WrenchStamped(h, Wrench(_vec(v, 0), _vec(v, 3)))
+        return WrenchStamped(h, Wrench(Vector3(v[0], v[1], v[2]), Vector3(v[3], v[4], v[5])))
 
     return {
         "sensor_msgs/msg/Imu": imu,

@@ -54,18 +54,20 @@ class Intake:
                 impl = _rclpy.Subscription(node.handle, msgtype, topics[kind], qos.get_c_qos_profile())
             self.subs[kind] = Subscription(impl, msgtype, topics[kind], _unused, node.default_callback_group, qos,
                                            True, no_events)
+        self._handles = [(kind, sub.handle, types[kind]) for kind, sub in self.subs.items()]
 
     def take(self) -> Taken:
         """Every message the subscriptions hold now, per stream in queue order (reception time
         0 where the middleware gives none)."""
         taken: Taken = {}
-        for kind, sub in self.subs.items():
+        for kind, handle, msgtype in self._handles:
             queue: list[tuple[int, tuple[int, bytes]]] = []
-            taken[kind], handle, msgtype = queue, sub.handle, self.types[kind]
+            taken[kind], append = queue, queue.append
             with handle:
-                while (msg_info := handle.take_message(msgtype, True)) is not None:
+                take = handle.take_message
+                while (msg_info := take(msgtype, True)) is not None:
                     t = msg_info[1]["received_timestamp"]
-                    queue.append((t, (t, msg_info[0])))
+                    append((t, (t, msg_info[0])))
         return taken
 
     def destroy(self) -> None:
@@ -78,18 +80,17 @@ class Backlog:
     in order of arrival."""
 
     def __init__(self) -> None:
-        self._queue: deque[tuple[str, tuple[int, bytes]]] = deque()
+        # The queue itself: the node's feeding loop pops from it directly (one message at a time,
+        # thousands a second).
+        self.queue: deque[tuple[str, tuple[int, bytes]]] = deque()
 
     def __len__(self) -> int:
-        return len(self._queue)
+        return len(self.queue)
 
     def refill(self, taken: Taken) -> None:
-        self._queue.extend(arrival_order(taken))
+        self.queue.extend(arrival_order(taken))
 
     def oldest(self, default: int) -> int:
         """The arrival time (ns) of the next message to feed (``default`` when unknown)."""
-        t = self._queue[0][1][0] if self._queue else 0
+        t = self.queue[0][1][0] if self.queue else 0
         return t if t > 0 else default
-
-    def pop(self) -> tuple[str, tuple[int, bytes]]:
-        return self._queue.popleft()

@@ -280,15 +280,16 @@ class EstimatorNode(Node):
         self._waits.append(max(start - backlog.oldest(start), 0) * 1e-9)
         if pipeline.needs_clock:  # inputs.max_clock_offset: stamps are checked against it
             pipeline.clock_ns = self.get_clock().now().nanoseconds
-        maneuvers, pop, perf_counter = self._maneuvers, backlog.pop, time.perf_counter
+        maneuvers, queue, perf_counter, msgtypes = self._maneuvers, backlog.queue, time.perf_counter, MESSAGE_TYPES
+        pop = queue.popleft
         c0 = time.thread_time()
-        while backlog and perf_counter() < deadline:
+        while queue and perf_counter() < deadline:
             kind, (arrived, raw) = pop()
             if kind == EVENT:
                 maneuvers.event(raw)  # type: ignore[union-attr]  # (events come only with maneuvers)
                 continue
             try:
-                msg = decode(MESSAGE_TYPES[kind], raw)
+                msg = decode(msgtypes[kind], raw)
                 if kind == "control_surfaces" and maneuvers is not None:  # (maneuvers.source detect)
                     maneuvers.surfaces(msg)
                 outputs = feed(pipeline, kind, msg)
