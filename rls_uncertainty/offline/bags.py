@@ -263,7 +263,7 @@ class BagWriter(OutputWriter):
         queue, write, conns = self._queue, self._writer.write, self._conns
         while queue and (before_ns is None or queue[0][0] < before_ns):
             stamp, _, topic, _, raw = heapq.heappop(queue)
-            write(conns[topic], stamp, raw if isinstance(raw, bytes) else bytes(raw))
+            write(conns[topic], stamp, raw)
             self.written += 1
 
     @property
