@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import struct
 from dataclasses import asdict
 from pathlib import Path
 from typing import IO, TYPE_CHECKING, Any
@@ -154,19 +155,49 @@ class _WideCsv:
         self.fh.write(",".join(cells) + "\n")
 
 
-def _diagnostic_array(store: Typestore, stamp_ns: int, statuses: list[Status]) -> object:
-    """A ``diagnostic_msgs/DiagnosticArray`` (``rosbags`` message of ``store``) of ``statuses``
-    stamped with the data time."""
-    types = store.types
-    header, stamp_t = types["std_msgs/msg/Header"], types["builtin_interfaces/msg/Time"]
-    array_t, status_t = types[DIAGNOSTIC_ARRAY], types["diagnostic_msgs/msg/DiagnosticStatus"]
-    key_value = types["diagnostic_msgs/msg/KeyValue"]
+def _diagnostic_array(stamp_ns: int, statuses: list[Status]) -> bytes:
+    """The CDR (little endian) of a ``diagnostic_msgs/DiagnosticArray`` of ``statuses`` stamped
+    with the data time: the bytes ``rosbags`` serializes (``test_replay_files`` compares them),
+    without building its message objects and its serializer for each replay."""
     sec, nanosec = divmod(stamp_ns, 1_000_000_000)
-    return array_t(
-        header=header(stamp=stamp_t(sec=sec, nanosec=nanosec), frame_id=""),
-        status=[status_t(level=s.level, name=s.name, message=s.message, hardware_id=s.hardware_id,
-                         values=[key_value(key=k, value=v) for k, v in s.values]) for s in statuses],
-    )
+    out = bytearray(_TIME.pack(sec, nanosec))
+    _string(out, "")  # the header's frame_id
+    _count(out, len(statuses))
+    for s in statuses:
+        out.append(s.level)  # (a byte: no alignment)
+        for text in (s.name, s.message, s.hardware_id):
+            _string(out, text)
+        _count(out, len(s.values))
+        for key, value in s.values:
+            _string(out, key)
+            _string(out, value)
+    return _CDR_LE + bytes(out)
+
+
+def _string_message(text: str) -> bytes:
+    """The CDR (little endian) of a ``std_msgs/String`` holding ``text``."""
+    out = bytearray()
+    _string(out, text)
+    return _CDR_LE + bytes(out)
+
+
+_CDR_LE = b"\x00\x01\x00\x00"  # CDR encapsulation: little endian
+_TIME = struct.Struct("<iI")
+_U32 = struct.Struct("<I")
+
+
+def _count(out: bytearray, n: int) -> None:
+    """A sequence's length, 4-aligned (CDR aligns from the end of the encapsulation header)."""
+    out += bytes(-len(out) % 4)
+    out += _U32.pack(n)
+
+
+def _string(out: bytearray, text: str) -> None:
+    """A CDR string: its length with the NUL, 4-aligned, its UTF-8 bytes and the NUL."""
+    data = text.encode()
+    _count(out, len(data) + 1)
+    out += data
+    out += b"\x00"
 
 
 class _Mcap:
@@ -200,13 +231,12 @@ class _Mcap:
 
     def diagnostics(self, stamp_ns: int, statuses: list[Status], fits: list[tuple[int, str, str, bytes]]) -> None:
         writer = self._open()
-        writer.add(stamp_ns, "/diagnostics", DIAGNOSTIC_ARRAY, _diagnostic_array(self.store, stamp_ns, statuses))
+        writer.add(stamp_ns, "/diagnostics", DIAGNOSTIC_ARRAY, _diagnostic_array(stamp_ns, statuses))
         for log_ns, topic, msgtype, raw in fits:
             writer.add(log_ns, topic, msgtype, raw)
 
     def maneuvers(self, stamp_ns: int, text: str) -> None:
-        string = self.store.types[STRING]
-        self._open().add(stamp_ns, self.history_topic, STRING, string(data=text))
+        self._open().add(stamp_ns, self.history_topic, STRING, _string_message(text))
 
     def after(self, newest_ns: int) -> None:
         """Write what no later record can precede: a later sample comes after the newest one,
