@@ -74,8 +74,6 @@ class McapWriter(OutputWriter):
         self._writer.start(profile="ros2", library=LIBRARY)
         self._schemas: dict[str, int] = {}
         self._topics: list[tuple[str, str, int]] = []  # (topic, type, channel), in registration order
-        self._counts: dict[int, int] = {}
-        self._start, self._end = 2**64, -1
         self.info: dict[str, Any] | None = None
         self._chunk = _Chunk(self._writer)
 
@@ -89,21 +87,22 @@ class McapWriter(OutputWriter):
             schema = self._schemas[msgtype] = self._writer.register_schema(msgtype, encoding, text.encode())
         channel: int = self._writer.register_channel(topic, "cdr", schema, {"offered_qos_profiles": _OFFERED_QOS})
         self._topics.append((topic, msgtype, channel))
-        self._counts[channel] = 0
         self._chunk.restart()  # (the messages that follow come after the channel record)
         return channel
 
     def write(self, channel: int, log_time: int, raw: bytes | memoryview) -> None:
         """One serialized message of ``channel`` logged (and published) at ``log_time`` ns."""
         self._chunk.add(channel, log_time, raw)
-        self._counts[channel] += 1
-        self._start, self._end = min(self._start, log_time), max(self._end, log_time)
 
     def _information(self) -> dict[str, Any]:
-        """rosbag2's bag-file information (version 9) of what was written."""
-        count = sum(self._counts.values())
-        start = self._start if count else 0
-        span = self._end - self._start if count else 0
+        """rosbag2's bag-file information (version 9) of what was written (the library's
+        statistics, every message handed over)."""
+        self._chunk.hand_over()
+        stats = self._chunk.statistics
+        count = stats.message_count
+        start = stats.message_start_time if count else 0
+        span = stats.message_end_time - start if count else 0
+        counts = stats.channel_message_counts  # (a defaultdict the summary writes: only read with get)
         return {
             "version": 9,
             "storage_identifier": "mcap",
@@ -115,7 +114,7 @@ class McapWriter(OutputWriter):
                 {"topic_metadata": {"name": topic, "type": msgtype, "serialization_format": "cdr",
                                     "offered_qos_profiles": [],
                                     "type_description_hash": self._store.hash_rihs01(msgtype)},
-                 "message_count": self._counts[channel]}
+                 "message_count": counts.get(channel, 0)}
                 for topic, msgtype, channel in self._topics
             ],
             "compression_format": "",
@@ -130,8 +129,7 @@ class McapWriter(OutputWriter):
         """Write the metadata record, the summary and the footer; close the file."""
         import yaml  # noqa: PLC0415
 
-        info = self._information()
-        self._chunk.hand_over()  # (the library writes its last chunk after the metadata)
+        info = self._information()  # (the library writes the last chunk after the metadata)
         self._writer.add_metadata("rosbag2", {"serialized_metadata": yaml.safe_dump(info, default_flow_style=False)})
         self._writer.finish()
         self._fh.close()
@@ -156,7 +154,7 @@ class _Chunk:
     def __init__(self, writer: Writer) -> None:
         # The library's chunk builder and statistics (its Writer keeps them private).
         self._builder: ChunkBuilder = writer._Writer__chunk_builder  # type: ignore[attr-defined]
-        self._statistics: Statistics = writer._Writer__statistics  # type: ignore[attr-defined]
+        self.statistics: Statistics = writer._Writer__statistics  # type: ignore[attr-defined]
         self._writer = writer
         self.restart()
 
@@ -189,7 +187,7 @@ class _Chunk:
         """The buffered messages into the library's chunk builder and statistics (still unwritten)."""
         if not self._count:
             return
-        builder, stats, count = self._builder, self._statistics, self._count
+        builder, stats, count = self._builder, self.statistics, self._count
         builder.record_writer.write(self._buffer)
         first = min(builder.message_start_time, self._first) if builder.num_messages else self._first
         builder.message_start_time, builder.message_end_time = first, max(builder.message_end_time, self._last)

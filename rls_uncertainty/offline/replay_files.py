@@ -35,6 +35,7 @@ import hashlib
 import json
 import struct
 from dataclasses import asdict
+from itertools import chain
 from pathlib import Path
 from typing import IO, TYPE_CHECKING, Any
 
@@ -124,12 +125,14 @@ class _Csv:
             rows, converged, lag_counts = self.layout.frequency_rows(out), f.converged, f.lags
         else:
             rows, converged, lag_counts = self.layout.rows(out), out.converged, out.lags
+        lines = []
         for j, name, names, theta, se, se_conv in rows:
             lags = int(lag_counts[j]) if lag_counts is not None else ""
             flags = converged[j, : len(names)].tolist()
             # (Python floats from tolist: the same repr as float() of each numpy element.)
-            for p, a, b, c, f in zip(names, theta.tolist(), se.tolist(), se_conv.tolist(), flags, strict=True):
-                write(f"{t},{name},{p},{a!r},{b!r},{c!r},{int(f)},{lags}\n")
+            columns = zip(names, theta.tolist(), se.tolist(), se_conv.tolist(), flags, strict=True)
+            lines += [f"{t},{name},{p},{a!r},{b!r},{c!r},{int(f)},{lags}\n" for p, a, b, c, f in columns]
+        write("".join(lines))
 
 
 class _WideCsv:
@@ -139,19 +142,22 @@ class _WideCsv:
 
     def __init__(self, path: Path, config: PipelineConfig) -> None:
         self.sizes = [len(m.regressors) for m in config.models]
+        self.empty = [[""] * (n * len(WIDE_QUANTITIES) + 1) for n in self.sizes]  # a model not ready
         self.fh: IO[str] = open(path, "w")  # noqa: SIM115 - closed by ReplayFiles.close
         self.fh.write(",".join(wide_columns(config)) + "\n")
 
     def sample(self, out: SampleOutput) -> None:
         cells = [stamp_text(out.stamp_ns)]
-        arrays = [np.asarray(getattr(out, field), dtype=np.float64) for _, field in WIDE_QUANTITIES]
+        # Python floats (tolist): repr as float() of each element; the flags as 1.0/0.0.
+        arrays = [np.asarray(getattr(out, field), dtype=np.float64).tolist() for _, field in WIDE_QUANTITIES]
+        ready = out.ready.tolist()
         for j, n in enumerate(self.sizes):
-            if out.ready[j]:
-                rows = [a[j, :n].tolist() for a in arrays]  # Python floats: repr as float()
-                cells += [repr(row[i]) for i in range(n) for row in rows]
+            if ready[j]:
+                # parameter by parameter, each one's quantities in the order of WIDE_QUANTITIES
+                cells += map(repr, chain.from_iterable(zip(*(a[j][:n] for a in arrays), strict=True)))
                 cells.append(str(int(out.lags[j])) if out.lags is not None else "")
             else:
-                cells += [""] * (n * len(arrays) + 1)
+                cells += self.empty[j]
         self.fh.write(",".join(cells) + "\n")
 
 
