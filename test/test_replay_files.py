@@ -1,10 +1,25 @@
 """The offline replay's output files (rls_uncertainty/offline/replay_files.py): the /diagnostics
 records and the maneuver history's strings are the bytes the rosbags serializer gives for the
-same message. No DDS."""
+same message; the wide CSV's rows are the same whether it formats every number itself or takes
+the long CSV's text of them. No DDS."""
+
+from pathlib import Path
 
 from rls_uncertainty.datapath.diagnostics import Status
-from rls_uncertainty.offline.bags import typestore
-from rls_uncertainty.offline.replay_files import DIAGNOSTIC_ARRAY, STRING, _diagnostic_array, _string_message
+from rls_uncertainty.datapath.outputs import OutputLayout
+from rls_uncertainty.offline.bags import read_inputs, typestore
+from rls_uncertainty.offline.replay import run_pipeline
+from rls_uncertainty.offline.replay_files import (
+    DIAGNOSTIC_ARRAY,
+    STRING,
+    _Csv,
+    _diagnostic_array,
+    _string_message,
+    _WideCsv,
+)
+from rls_uncertainty.settings import load_parameters_file, pipeline_config
+
+BUNDLED = Path(__file__).resolve().parents[1] / "bags" / "t2_maneuver"
 
 
 def _rosbags_cdr(stamp_ns, statuses):
@@ -37,3 +52,18 @@ def test_strings_are_the_bytes_rosbags_serializes():
     store = typestore()
     for text in ("", "a", "ab", "abc", "abcd", '[{"name": "m1", "σ": 0.5}]', "x" * 1001):
         assert _string_message(text) == bytes(store.serialize_cdr(store.types[STRING](data=text), STRING))
+
+
+def test_the_wide_csv_rows_are_the_same_with_the_long_csvs_texts_or_without(tmp_path):
+    config = pipeline_config(load_parameters_file("t2"))
+    outputs = run_pipeline(read_inputs(BUNDLED)[0], config, record=False).outputs
+    long = _Csv(tmp_path / "long.csv", OutputLayout.for_config(config))
+    shared, alone = _WideCsv(tmp_path / "shared.csv", config), _WideCsv(tmp_path / "alone.csv", config)
+    for out in outputs:
+        shared.sample(out, long.sample(out))
+        alone.sample(out, {})
+    for csv in (long, shared, alone):
+        csv.fh.close()
+    rows = (tmp_path / "shared.csv").read_text().splitlines()
+    assert rows == (tmp_path / "alone.csv").read_text().splitlines()
+    assert sum(bool(cell) for cell in rows[-1].split(",")) > 10  # the models' values written

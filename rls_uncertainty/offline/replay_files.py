@@ -114,14 +114,17 @@ class _Csv:
         self.fh: IO[str] = open(path, "w")  # noqa: SIM115 - closed by ReplayFiles.close
         self.fh.write(",".join(CSV_COLUMNS) + "\n")
 
-    def sample(self, out: SampleOutput) -> None:
+    def sample(self, out: SampleOutput) -> dict[int, list[tuple[str, str, str]]]:
+        """Write the sample's rows; per model written, its parameters' estimate and standard
+        errors as written (for the wide CSV: each float's text made once)."""
         t = stamp_text(out.stamp_ns)
         write = self.fh.write
         f = out.frequency
         lag_counts: np.ndarray | None
+        texts: dict[int, list[tuple[str, str, str]]] = {}
         if self.frequency:
             if f is None:
-                return
+                return texts
             rows, converged, lag_counts = self.layout.frequency_rows(out), f.converged, f.lags
         else:
             rows, converged, lag_counts = self.layout.rows(out), out.converged, out.lags
@@ -130,9 +133,12 @@ class _Csv:
             lags = int(lag_counts[j]) if lag_counts is not None else ""
             flags = converged[j, : len(names)].tolist()
             # (Python floats from tolist: the same repr as float() of each numpy element.)
-            columns = zip(names, theta.tolist(), se.tolist(), se_conv.tolist(), flags, strict=True)
-            lines += [f"{t},{name},{p},{a!r},{b!r},{c!r},{int(f)},{lags}\n" for p, a, b, c, f in columns]
+            texts[j] = values = [(repr(a), repr(b), repr(c))
+                                 for a, b, c in zip(theta.tolist(), se.tolist(), se_conv.tolist(), strict=True)]
+            lines += [f"{t},{name},{p},{a},{b},{c},{int(f)},{lags}\n"
+                      for p, (a, b, c), f in zip(names, values, flags, strict=True)]
         write("".join(lines))
+        return texts
 
 
 class _WideCsv:
@@ -146,15 +152,24 @@ class _WideCsv:
         self.fh: IO[str] = open(path, "w")  # noqa: SIM115 - closed by ReplayFiles.close
         self.fh.write(",".join(wide_columns(config)) + "\n")
 
-    def sample(self, out: SampleOutput) -> None:
+    def sample(self, out: SampleOutput, texts: dict[int, list[tuple[str, str, str]]]) -> None:
+        """One row; ``texts``: the estimates and standard errors of the models that
+        ``estimates.csv`` wrote for this sample, as it wrote them (:meth:`_Csv.sample`)."""
         cells = [stamp_text(out.stamp_ns)]
-        # Python floats (tolist): repr as float() of each element; the flags as 1.0/0.0.
-        arrays = [np.asarray(getattr(out, field), dtype=np.float64).tolist() for _, field in WIDE_QUANTITIES]
+        arrays: list[list[list[float]]] | None = None
         ready = out.ready.tolist()
         for j, n in enumerate(self.sizes):
             if ready[j]:
-                # parameter by parameter, each one's quantities in the order of WIDE_QUANTITIES
-                cells += map(repr, chain.from_iterable(zip(*(a[j][:n] for a in arrays), strict=True)))
+                # parameter by parameter, each one's quantities in the order of WIDE_QUANTITIES;
+                # Python floats (tolist): repr as float() of each element; the flags as 1.0/0.0.
+                if j in texts:
+                    flags = np.asarray(out.converged[j, :n], dtype=np.float64).tolist()
+                    cells += chain.from_iterable((*v, repr(f)) for v, f in zip(texts[j], flags, strict=True))
+                else:  # (a row with a value not finite: written here only)
+                    if arrays is None:
+                        arrays = [np.asarray(getattr(out, field), dtype=np.float64).tolist()
+                                  for _, field in WIDE_QUANTITIES]
+                    cells += map(repr, chain.from_iterable(zip(*(a[j][:n] for a in arrays), strict=True)))
                 cells.append(str(int(out.lags[j])) if out.lags is not None else "")
             else:
                 cells += self.empty[j]
@@ -263,16 +278,23 @@ class ReplayFiles(OutputWriter):
 
     def __init__(self, directory: Path, config: PipelineConfig, frame_id: str, node: str, store: Typestore) -> None:
         layout = OutputLayout.for_config(config)
+        self.time: tuple[_Csv, _WideCsv] | None = None
+        self.frequency: _Csv | None = None
         self.csvs: list[_Csv | _WideCsv] = []
         if config.publishes_time:
-            self.csvs += [_Csv(directory / "estimates.csv", layout), _WideCsv(directory / "estimates_wide.csv", config)]
+            self.time = (_Csv(directory / "estimates.csv", layout), _WideCsv(directory / "estimates_wide.csv", config))
+            self.csvs += self.time
         if config.frequency is not None:
-            self.csvs.append(_Csv(directory / "estimates_frequency.csv", layout, frequency=True))
+            self.frequency = _Csv(directory / "estimates_frequency.csv", layout, frequency=True)
+            self.csvs.append(self.frequency)
         self.mcap = _Mcap(directory, layout, frame_id, node, store, maneuvers=config.maneuvers.source != "off")
 
     def sample(self, out: SampleOutput) -> None:
-        for csv in self.csvs:
-            csv.sample(out)
+        if self.time is not None:
+            long, wide = self.time
+            wide.sample(out, long.sample(out))
+        if self.frequency is not None:
+            self.frequency.sample(out)
         self.mcap.sample(out)
 
     def diagnostics(self, stamp_ns: int, statuses: list[Status], fits: list[tuple[int, str, str, bytes]]) -> None:
