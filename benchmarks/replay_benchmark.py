@@ -10,8 +10,8 @@ models and 150x with six, the whole command 60x, automatic lags within 1.5x of f
   and the ratio of their pipeline times.
 
 Bag reading and output writing are timed separately from the pipeline (median wall time of
-five runs). Each figure is also given in CPU time (the least ``time.process_time()`` of the
-same runs), steadier than wall time on a loaded machine.
+five runs; the whole command: of three). Each figure is also given in CPU time (the least
+``time.process_time()`` of the same runs), steadier than wall time on a loaded machine.
 
     .venv/bin/python benchmarks/replay_benchmark.py [--flight-data ../shared/flight_data]
 """
@@ -31,6 +31,19 @@ from rls_uncertainty.settings import load_parameters_file, pipeline_config
 ROOT = Path(__file__).resolve().parents[1]
 
 
+def whole_command(bag: Path, params: dict, repeats: int = 3) -> tuple[float, float]:
+    """The ``replay`` command without figures (reading the bag, the pipeline, every output file):
+    its median wall time and least CPU time over ``repeats`` runs."""
+    walls, cpus = [], []
+    for _ in range(repeats):
+        with tempfile.TemporaryDirectory() as tmp:
+            t, c = time.perf_counter(), time.process_time()
+            replay(bag, params, Path(tmp) / "out", progress=False, plots=False)
+            walls.append(time.perf_counter() - t)
+            cpus.append(time.process_time() - c)
+    return statistics.median(walls), min(cpus)
+
+
 def measure(label: str, bag: Path, params: dict, repeats: int = 5) -> float:
     t = time.perf_counter()
     messages, _ = read_inputs(bag)
@@ -43,10 +56,7 @@ def measure(label: str, bag: Path, params: dict, repeats: int = 5) -> float:
         cpu.append(time.process_time() - c)
     wall = statistics.median(r.wall_seconds for r in runs)
     data = runs[0].data_seconds
-    with tempfile.TemporaryDirectory() as tmp:
-        t, c = time.perf_counter(), time.process_time()
-        replay(bag, params, Path(tmp) / "out", progress=False, plots=False)
-        t_cmd, c_cmd = time.perf_counter() - t, time.process_time() - c
+    t_cmd, c_cmd = whole_command(bag, params)
     print(f"{label:<44} {len(messages):>6} msgs {data:5.1f} s data | pipeline {wall * 1e3:7.1f} ms = "
           f"{data / wall:6.0f}x real time (CPU {min(cpu) * 1e3:6.1f} ms = {data / min(cpu):4.0f}x) | "
           f"read {t_read * 1e3:6.0f} ms | whole replay command (no plots) {data / t_cmd:5.0f}x "

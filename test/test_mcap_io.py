@@ -146,3 +146,46 @@ def test_the_writer_never_replaces_a_file_and_removes_an_unfinished_one(tmp_path
         w.write(w.add_connection("/a", HEADER), 1, encode_header(0, 1, ""))
         raise RuntimeError("interrupted")
     assert not (tmp_path / "y.mcap").exists()
+
+
+def test_the_writer_writes_the_mcap_librarys_bytes(tmp_path, small_chunks):
+    """Byte for byte what the mcap library's Writer.add_message writes with the same records, over
+    many chunks, a channel registered after messages, and message data given as a memoryview."""
+    import yaml
+    from mcap.writer import CompressionType, Writer
+
+    store = typestore()
+    recs = sorted(_records(60))
+    late = [(t + 1, "/late", HEADER, encode_header(10**9, k, "late")) for k, (t, *_rest) in enumerate(recs[30:])]
+    ours = mcap_io.McapWriter(tmp_path / "ours.mcap", store)
+    channels = {topic: ours.add_connection(topic, HEADER) for topic in ("/a", "/b", "/none")}
+    for t, topic, _type, raw in recs[:30]:
+        ours.write(channels[topic], t, memoryview(raw))
+    channels["/late"] = ours.add_connection("/late", HEADER)
+    mixed = sorted(recs[30:] + late)
+    for t, topic, _type, raw in mixed:
+        ours.write(channels[topic], t, raw)
+    info = ours.close()
+    written = recs + late
+    assert {t["topic_metadata"]["name"]: t["message_count"] for t in info["topics_with_message_count"]} == {
+        topic: sum(r[1] == topic for r in written) for topic in ("/a", "/b", "/none", "/late")}
+    stamps = [r[0] for r in written]
+    assert (info["message_count"], info["starting_time"]["nanoseconds_since_epoch"], info["duration"]["nanoseconds"]) \
+        == (len(written), min(stamps), max(stamps) - min(stamps))
+
+    with open(tmp_path / "library.mcap", "xb") as fh:
+        writer = Writer(fh, chunk_size=300, compression=CompressionType.NONE, enable_crcs=True, enable_data_crcs=True)
+        writer.start(profile="ros2", library=mcap_io.LIBRARY)
+        schema = writer.register_schema(HEADER, "ros2msg", store.generate_msgdef(HEADER, ros_version=2)[0].encode())
+        for topic in ("/a", "/b", "/none"):
+            writer.register_channel(topic, "cdr", schema, {"offered_qos_profiles": "[]"})
+        for t, topic, _type, raw in recs[:30]:
+            writer.add_message(channels[topic], log_time=t, data=raw, publish_time=t)
+        writer.register_channel("/late", "cdr", schema, {"offered_qos_profiles": "[]"})
+        for t, topic, _type, raw in mixed:
+            writer.add_message(channels[topic], log_time=t, data=raw, publish_time=t)
+        writer.add_metadata("rosbag2", {"serialized_metadata": yaml.safe_dump(info, default_flow_style=False)})
+        writer.finish()
+    ours_bytes = (tmp_path / "ours.mcap").read_bytes()
+    assert len(crcs(tmp_path / "ours.mcap")[0]) > 5  # several chunks
+    assert ours_bytes == (tmp_path / "library.mcap").read_bytes()

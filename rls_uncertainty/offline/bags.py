@@ -244,8 +244,9 @@ class BagWriter(OutputWriter):
         self.path, self.store = Path(path), store
         self._types = dict(topics)
         self._writer = McapWriter(self.path, store)
+        self._ranks = {topic: _rank(topic) for topic in self._types}
         self._conns = {topic: self._writer.add_connection(topic, self._types[topic])
-                       for topic in sorted(self._types, key=lambda t: (_rank(t), t))}
+                       for topic in sorted(self._types, key=lambda t: (self._ranks[t], t))}
         self._queue: list[tuple[int, int, str, int, bytes | memoryview]] = []
         self._added = 0
         self.written = 0
@@ -253,9 +254,11 @@ class BagWriter(OutputWriter):
 
     def add(self, stamp: int, topic: str, msgtype: str, msg: object) -> None:
         """Queue one record; a stamp that cannot be a log time is a :class:`BagError`."""
-        _check_log_time(self.path, stamp, topic)
+        if not 0 <= stamp < 2**64:
+            _check_log_time(self.path, stamp, topic)
         raw = msg if isinstance(msg, (bytes, memoryview)) else self.store.serialize_cdr(msg, msgtype)
-        heapq.heappush(self._queue, (stamp, _rank(topic), topic, self._added, raw))
+        rank = self._ranks.get(topic)
+        heapq.heappush(self._queue, (stamp, _rank(topic) if rank is None else rank, topic, self._added, raw))
         self._added += 1
 
     def release(self, before_ns: int | None = None) -> None:
@@ -263,7 +266,7 @@ class BagWriter(OutputWriter):
         queue, write, conns = self._queue, self._writer.write, self._conns
         while queue and (before_ns is None or queue[0][0] < before_ns):
             stamp, _, topic, _, raw = heapq.heappop(queue)
-            write(conns[topic], stamp, raw if isinstance(raw, bytes) else bytes(raw))
+            write(conns[topic], stamp, raw)
             self.written += 1
 
     @property

@@ -3,7 +3,8 @@
 **Writing** (:class:`McapWriter`). The ``mcap`` library's writer (the format's reference
 implementation) in rosbag2's layout: profile ``ros2``, one ``ros2msg`` schema per message type
 (the typestore's definition), one ``cdr`` channel per topic with its ``offered_qos_profiles``,
-messages in chunks of about 1 MiB, uncompressed, and a ``rosbag2`` metadata record. Three
+messages in chunks of about 1 MiB, uncompressed (the message records and their indexes
+packed here, each at once, into the library's chunk: its bytes), and a ``rosbag2`` metadata record. Three
 CRC-32s cover every byte but the two magics: each chunk's records (``uncompressed_crc``), the
 whole data section (``DataEnd.data_section_crc``: the chunk headers, the message indexes, the
 metadata) and the summary with the footer (``Footer.summary_crc``). For a bag directory,
@@ -21,6 +22,7 @@ that is damaged: a chunk by its number, byte offset and the topics it holds.
 
 from __future__ import annotations
 
+import functools
 import io
 import struct
 import zlib
@@ -32,8 +34,11 @@ from ..errors import BagError
 from ..files import OutputWriter
 
 if TYPE_CHECKING:  # annotations only: the mcap library is imported where it is used
-    from mcap.records import Chunk, ChunkIndex
+    from mcap._chunk_builder import ChunkBuilder
+    from mcap.data_stream import RecordBuilder
+    from mcap.records import Chunk, ChunkIndex, MessageIndex, Statistics
     from mcap.summary import Summary
+    from mcap.writer import Writer
     from rosbags.typesys.store import Typestore
 
 __all__ = ["McapWriter", "write_metadata", "check_mcap_integrity", "CHUNK_SIZE", "LIBRARY"]
@@ -45,6 +50,7 @@ _MAGIC = b"\x89MCAP0\r\n"
 _FOOTER = 1 + 8 + 8 + 8 + 4  # opcode, length, summary_start, summary_offset_start, summary_crc
 _DATA_END = 1 + 8 + 4  # opcode, length, data_section_crc
 _RECORD_HEADER = struct.Struct("<BQ")  # a record's opcode and length
+_MESSAGE = struct.Struct("<BQHIQQ")  # a Message record up to its data: opcode, length, channel, sequence, times
 _OFFERED_QOS = "[]"  # rosbag2 version 9: the offered QoS profiles as YAML (none recorded)
 
 
@@ -68,12 +74,12 @@ class McapWriter(OutputWriter):
         self._writer.start(profile="ros2", library=LIBRARY)
         self._schemas: dict[str, int] = {}
         self._topics: list[tuple[str, str, int]] = []  # (topic, type, channel), in registration order
-        self._counts: dict[int, int] = {}
-        self._start, self._end = 2**64, -1
         self.info: dict[str, Any] | None = None
+        self._chunk = _Chunk(self._writer)
 
     def add_connection(self, topic: str, msgtype: str) -> int:
         """Register ``topic`` of ``msgtype`` (its schema once per type); the channel id."""
+        self._chunk.hand_over()  # (the library writes the records of a registration into the chunk)
         schema = self._schemas.get(msgtype)
         if schema is None:
             text, _ = self._store.generate_msgdef(msgtype, ros_version=2)
@@ -81,20 +87,22 @@ class McapWriter(OutputWriter):
             schema = self._schemas[msgtype] = self._writer.register_schema(msgtype, encoding, text.encode())
         channel: int = self._writer.register_channel(topic, "cdr", schema, {"offered_qos_profiles": _OFFERED_QOS})
         self._topics.append((topic, msgtype, channel))
-        self._counts[channel] = 0
+        self._chunk.restart()  # (the messages that follow come after the channel record)
         return channel
 
-    def write(self, channel: int, log_time: int, raw: bytes) -> None:
+    def write(self, channel: int, log_time: int, raw: bytes | memoryview) -> None:
         """One serialized message of ``channel`` logged (and published) at ``log_time`` ns."""
-        self._writer.add_message(channel, log_time=log_time, data=raw, publish_time=log_time)
-        self._counts[channel] += 1
-        self._start, self._end = min(self._start, log_time), max(self._end, log_time)
+        self._chunk.add(channel, log_time, raw)
 
     def _information(self) -> dict[str, Any]:
-        """rosbag2's bag-file information (version 9) of what was written."""
-        count = sum(self._counts.values())
-        start = self._start if count else 0
-        span = self._end - self._start if count else 0
+        """rosbag2's bag-file information (version 9) of what was written (the library's
+        statistics, every message handed over)."""
+        self._chunk.hand_over()
+        stats = self._chunk.statistics
+        count = stats.message_count
+        start = stats.message_start_time if count else 0
+        span = stats.message_end_time - start if count else 0
+        counts = stats.channel_message_counts  # (a defaultdict the summary writes: only read with get)
         return {
             "version": 9,
             "storage_identifier": "mcap",
@@ -106,7 +114,7 @@ class McapWriter(OutputWriter):
                 {"topic_metadata": {"name": topic, "type": msgtype, "serialization_format": "cdr",
                                     "offered_qos_profiles": [],
                                     "type_description_hash": self._store.hash_rihs01(msgtype)},
-                 "message_count": self._counts[channel]}
+                 "message_count": counts.get(channel, 0)}
                 for topic, msgtype, channel in self._topics
             ],
             "compression_format": "",
@@ -121,7 +129,7 @@ class McapWriter(OutputWriter):
         """Write the metadata record, the summary and the footer; close the file."""
         import yaml  # noqa: PLC0415
 
-        info = self._information()
+        info = self._information()  # (the library writes the last chunk after the metadata)
         self._writer.add_metadata("rosbag2", {"serialized_metadata": yaml.safe_dump(info, default_flow_style=False)})
         self._writer.finish()
         self._fh.close()
@@ -132,6 +140,86 @@ class McapWriter(OutputWriter):
         """Close and remove the unfinished file."""
         self._fh.close()
         self.path.unlink(missing_ok=True)
+
+
+class _Chunk:
+    """The messages of the chunk being built, as the ``mcap`` library's ``Writer.add_message``
+    builds them, without its per-message record objects: each message record (opcode, length,
+    channel, sequence 0, log and publish time, data) is packed at once into one buffer, and
+    the message index kept per channel in the order of the channels' first messages.
+    :meth:`hand_over` gives them to the library's chunk builder and statistics, which write
+    the chunk, its message indexes and the summary themselves: the file is byte for byte the
+    library's (``test_mcap_io`` compares them)."""
+
+    def __init__(self, writer: Writer) -> None:
+        # The library's chunk builder and statistics (its Writer keeps them private).
+        self._builder: ChunkBuilder = writer._Writer__chunk_builder  # type: ignore[attr-defined]
+        self.statistics: Statistics = writer._Writer__statistics  # type: ignore[attr-defined]
+        self._writer = writer
+        self.restart()
+
+    def restart(self) -> None:
+        """No message yet, after what the library's chunk builder holds (a registration's records)."""
+        self._buffer = bytearray()
+        self._base = self._builder.count  # where the buffer starts in the chunk's records
+        self._index: dict[int, list[tuple[int, int]]] = {}
+        self._first = self._last = self._count = 0
+
+    def add(self, channel: int, log_time: int, raw: bytes | memoryview) -> None:
+        """One message record (``Writer.add_message`` with ``publish_time = log_time``); the chunk
+        is written once its records pass :data:`CHUNK_SIZE` bytes, as the library does."""
+        buffer = self._buffer
+        index = self._index.get(channel)
+        if index is None:
+            index = self._index[channel] = []
+        index.append((log_time, self._base + len(buffer)))
+        buffer += _MESSAGE.pack(0x05, 22 + len(raw), channel, 0, log_time, log_time)  # 0x05: Message
+        buffer += raw
+        self._first = min(self._first, log_time) if self._count else log_time
+        self._last = max(self._last, log_time)
+        self._count += 1
+        if self._base + len(buffer) > CHUNK_SIZE:
+            self.hand_over()
+            self._writer.flush()  # the chunk and its message indexes, as add_message writes them
+            self.restart()
+
+    def hand_over(self) -> None:
+        """The buffered messages into the library's chunk builder and statistics (still unwritten)."""
+        if not self._count:
+            return
+        builder, stats, count = self._builder, self.statistics, self._count
+        builder.record_writer.write(self._buffer)
+        first = min(builder.message_start_time, self._first) if builder.num_messages else self._first
+        builder.message_start_time, builder.message_end_time = first, max(builder.message_end_time, self._last)
+        builder.num_messages += count
+        index_type = _message_index()
+        for channel, records in self._index.items():
+            index = builder.message_indices.get(channel)
+            if index is None:
+                builder.message_indices[channel] = index_type(channel, records)
+            else:
+                index.records += records
+            stats.channel_message_counts[channel] += len(records)
+        stats.message_start_time = min(stats.message_start_time, self._first) if stats.message_count else self._first
+        stats.message_end_time = max(stats.message_end_time, self._last)
+        stats.message_count += count
+        self.restart()
+
+
+@functools.cache
+def _message_index() -> type[MessageIndex]:
+    """The library's message index record, written with one ``struct.pack`` (it packs each
+    entry's two fields apart): the same bytes."""
+    from mcap.records import MessageIndex  # noqa: PLC0415
+
+    class PackedMessageIndex(MessageIndex):
+        def write(self, stream: RecordBuilder) -> None:
+            n = len(self.records)
+            entries = [value for record in self.records for value in record]  # (log time, offset) each
+            # 0x07: MessageIndex; its length, the channel, the entries' bytes, the entries.
+            stream.write(struct.pack(f"<BQHI{2 * n}Q", 0x07, 6 + 16 * n, self.channel_id, 16 * n, *entries))
+
+    return PackedMessageIndex
 
 
 def write_metadata(directory: Path, info: Mapping[str, Any]) -> None:

@@ -74,7 +74,7 @@ from ..files import output_directory
 from ..progress import Progress
 from ..settings.config import NodeConfig
 from ..settings.parameters import node_config, parameter_defaults, pipeline_config
-from .bags import InputStream, check_bag, typestore
+from .bags import InputStream, check_bag
 from .figure_data import FigureData
 from .model_file import MODELS_FILE, models_json, run_models
 from .replay_files import ReplayFiles, run_record
@@ -561,7 +561,7 @@ def replay(bag: str | Path, params: dict[str, Any], out: str | Path, *, start: f
             InputStream(bag, node_cfg.topics, strict=strict, start=start, end=end, events=events) as stream:
         for line in configuration_warnings(config, node_cfg.topics) + record_checks(config, stream.span_seconds):
             print(f"warning: {line}", file=sys.stderr)
-        files = ReplayFiles(tmp, config, node_cfg.frame_id, NODE_NAME, typestore())
+        files = ReplayFiles(tmp, config, node_cfg.frame_id, NODE_NAME, stream.store)
         with files:
             result = run_pipeline(stream, config, record=split, progress=progress, diagnostics=node_cfg,
                                   keep_outputs=False, history=History(names, PLOT_POINTS), sink=files, figure_data=data)

@@ -33,7 +33,9 @@ from __future__ import annotations
 
 import hashlib
 import json
+import struct
 from dataclasses import asdict
+from itertools import chain
 from pathlib import Path
 from typing import IO, TYPE_CHECKING, Any
 
@@ -112,23 +114,31 @@ class _Csv:
         self.fh: IO[str] = open(path, "w")  # noqa: SIM115 - closed by ReplayFiles.close
         self.fh.write(",".join(CSV_COLUMNS) + "\n")
 
-    def sample(self, out: SampleOutput) -> None:
+    def sample(self, out: SampleOutput) -> dict[int, list[tuple[str, str, str]]]:
+        """Write the sample's rows; per model written, its parameters' estimate and standard
+        errors as written (for the wide CSV: each float's text made once)."""
         t = stamp_text(out.stamp_ns)
         write = self.fh.write
         f = out.frequency
         lag_counts: np.ndarray | None
+        texts: dict[int, list[tuple[str, str, str]]] = {}
         if self.frequency:
             if f is None:
-                return
+                return texts
             rows, converged, lag_counts = self.layout.frequency_rows(out), f.converged, f.lags
         else:
             rows, converged, lag_counts = self.layout.rows(out), out.converged, out.lags
+        lines = []
         for j, name, names, theta, se, se_conv in rows:
             lags = int(lag_counts[j]) if lag_counts is not None else ""
             flags = converged[j, : len(names)].tolist()
             # (Python floats from tolist: the same repr as float() of each numpy element.)
-            for p, a, b, c, f in zip(names, theta.tolist(), se.tolist(), se_conv.tolist(), flags, strict=True):
-                write(f"{t},{name},{p},{a!r},{b!r},{c!r},{int(f)},{lags}\n")
+            texts[j] = values = [(repr(a), repr(b), repr(c))
+                                 for a, b, c in zip(theta.tolist(), se.tolist(), se_conv.tolist(), strict=True)]
+            lines += [f"{t},{name},{p},{a},{b},{c},{int(f)},{lags}\n"
+                      for p, (a, b, c), f in zip(names, values, flags, strict=True)]
+        write("".join(lines))
+        return texts
 
 
 class _WideCsv:
@@ -138,35 +148,77 @@ class _WideCsv:
 
     def __init__(self, path: Path, config: PipelineConfig) -> None:
         self.sizes = [len(m.regressors) for m in config.models]
+        self.empty = [[""] * (n * len(WIDE_QUANTITIES) + 1) for n in self.sizes]  # a model not ready
         self.fh: IO[str] = open(path, "w")  # noqa: SIM115 - closed by ReplayFiles.close
         self.fh.write(",".join(wide_columns(config)) + "\n")
 
-    def sample(self, out: SampleOutput) -> None:
+    def sample(self, out: SampleOutput, texts: dict[int, list[tuple[str, str, str]]]) -> None:
+        """One row; ``texts``: the estimates and standard errors of the models that
+        ``estimates.csv`` wrote for this sample, as it wrote them (:meth:`_Csv.sample`)."""
         cells = [stamp_text(out.stamp_ns)]
-        arrays = [np.asarray(getattr(out, field), dtype=np.float64) for _, field in WIDE_QUANTITIES]
+        arrays: list[list[list[float]]] | None = None
+        ready = out.ready.tolist()
         for j, n in enumerate(self.sizes):
-            if out.ready[j]:
-                rows = [a[j, :n].tolist() for a in arrays]  # Python floats: repr as float()
-                cells += [repr(row[i]) for i in range(n) for row in rows]
+            if ready[j]:
+                # parameter by parameter, each one's quantities in the order of WIDE_QUANTITIES;
+                # Python floats (tolist): repr as float() of each element; the flags as 1.0/0.0.
+                if j in texts:
+                    flags = np.asarray(out.converged[j, :n], dtype=np.float64).tolist()
+                    cells += chain.from_iterable((*v, repr(f)) for v, f in zip(texts[j], flags, strict=True))
+                else:  # (a row with a value not finite: written here only)
+                    if arrays is None:
+                        arrays = [np.asarray(getattr(out, field), dtype=np.float64).tolist()
+                                  for _, field in WIDE_QUANTITIES]
+                    cells += map(repr, chain.from_iterable(zip(*(a[j][:n] for a in arrays), strict=True)))
                 cells.append(str(int(out.lags[j])) if out.lags is not None else "")
             else:
-                cells += [""] * (n * len(arrays) + 1)
+                cells += self.empty[j]
         self.fh.write(",".join(cells) + "\n")
 
 
-def _diagnostic_array(store: Typestore, stamp_ns: int, statuses: list[Status]) -> object:
-    """A ``diagnostic_msgs/DiagnosticArray`` (``rosbags`` message of ``store``) of ``statuses``
-    stamped with the data time."""
-    types = store.types
-    header, stamp_t = types["std_msgs/msg/Header"], types["builtin_interfaces/msg/Time"]
-    array_t, status_t = types[DIAGNOSTIC_ARRAY], types["diagnostic_msgs/msg/DiagnosticStatus"]
-    key_value = types["diagnostic_msgs/msg/KeyValue"]
+def _diagnostic_array(stamp_ns: int, statuses: list[Status]) -> bytes:
+    """The CDR (little endian) of a ``diagnostic_msgs/DiagnosticArray`` of ``statuses`` stamped
+    with the data time: the bytes ``rosbags`` serializes (``test_replay_files`` compares them),
+    without building its message objects and its serializer for each replay."""
     sec, nanosec = divmod(stamp_ns, 1_000_000_000)
-    return array_t(
-        header=header(stamp=stamp_t(sec=sec, nanosec=nanosec), frame_id=""),
-        status=[status_t(level=s.level, name=s.name, message=s.message, hardware_id=s.hardware_id,
-                         values=[key_value(key=k, value=v) for k, v in s.values]) for s in statuses],
-    )
+    out = bytearray(_TIME.pack(sec, nanosec))
+    _string(out, "")  # the header's frame_id
+    _count(out, len(statuses))
+    for s in statuses:
+        out.append(s.level)  # (a byte: no alignment)
+        for text in (s.name, s.message, s.hardware_id):
+            _string(out, text)
+        _count(out, len(s.values))
+        for key, value in s.values:
+            _string(out, key)
+            _string(out, value)
+    return _CDR_LE + bytes(out)
+
+
+def _string_message(text: str) -> bytes:
+    """The CDR (little endian) of a ``std_msgs/String`` holding ``text``."""
+    out = bytearray()
+    _string(out, text)
+    return _CDR_LE + bytes(out)
+
+
+_CDR_LE = b"\x00\x01\x00\x00"  # CDR encapsulation: little endian
+_TIME = struct.Struct("<iI")
+_U32 = struct.Struct("<I")
+
+
+def _count(out: bytearray, n: int) -> None:
+    """A sequence's length, 4-aligned (CDR aligns from the end of the encapsulation header)."""
+    out += bytes(-len(out) % 4)
+    out += _U32.pack(n)
+
+
+def _string(out: bytearray, text: str) -> None:
+    """A CDR string: its length with the NUL, 4-aligned, its UTF-8 bytes and the NUL."""
+    data = text.encode()
+    _count(out, len(data) + 1)
+    out += data
+    out += b"\x00"
 
 
 class _Mcap:
@@ -200,13 +252,12 @@ class _Mcap:
 
     def diagnostics(self, stamp_ns: int, statuses: list[Status], fits: list[tuple[int, str, str, bytes]]) -> None:
         writer = self._open()
-        writer.add(stamp_ns, "/diagnostics", DIAGNOSTIC_ARRAY, _diagnostic_array(self.store, stamp_ns, statuses))
+        writer.add(stamp_ns, "/diagnostics", DIAGNOSTIC_ARRAY, _diagnostic_array(stamp_ns, statuses))
         for log_ns, topic, msgtype, raw in fits:
             writer.add(log_ns, topic, msgtype, raw)
 
     def maneuvers(self, stamp_ns: int, text: str) -> None:
-        string = self.store.types[STRING]
-        self._open().add(stamp_ns, self.history_topic, STRING, string(data=text))
+        self._open().add(stamp_ns, self.history_topic, STRING, _string_message(text))
 
     def after(self, newest_ns: int) -> None:
         """Write what no later record can precede: a later sample comes after the newest one,
@@ -227,16 +278,23 @@ class ReplayFiles(OutputWriter):
 
     def __init__(self, directory: Path, config: PipelineConfig, frame_id: str, node: str, store: Typestore) -> None:
         layout = OutputLayout.for_config(config)
+        self.time: tuple[_Csv, _WideCsv] | None = None
+        self.frequency: _Csv | None = None
         self.csvs: list[_Csv | _WideCsv] = []
         if config.publishes_time:
-            self.csvs += [_Csv(directory / "estimates.csv", layout), _WideCsv(directory / "estimates_wide.csv", config)]
+            self.time = (_Csv(directory / "estimates.csv", layout), _WideCsv(directory / "estimates_wide.csv", config))
+            self.csvs += self.time
         if config.frequency is not None:
-            self.csvs.append(_Csv(directory / "estimates_frequency.csv", layout, frequency=True))
+            self.frequency = _Csv(directory / "estimates_frequency.csv", layout, frequency=True)
+            self.csvs.append(self.frequency)
         self.mcap = _Mcap(directory, layout, frame_id, node, store, maneuvers=config.maneuvers.source != "off")
 
     def sample(self, out: SampleOutput) -> None:
-        for csv in self.csvs:
-            csv.sample(out)
+        if self.time is not None:
+            long, wide = self.time
+            wide.sample(out, long.sample(out))
+        if self.frequency is not None:
+            self.frequency.sample(out)
         self.mcap.sample(out)
 
     def diagnostics(self, stamp_ns: int, statuses: list[Status], fits: list[tuple[int, str, str, bytes]]) -> None:
