@@ -148,16 +148,22 @@ def test_the_writer_never_replaces_a_file_and_removes_an_unfinished_one(tmp_path
     assert not (tmp_path / "y.mcap").exists()
 
 
-def test_the_writer_writes_the_mcap_librarys_bytes(tmp_path, small_chunks):
+@pytest.mark.parametrize("checked", [True, False], ids=["checked-mcap-version", "other-mcap-version"])
+def test_the_writer_writes_the_mcap_librarys_bytes(tmp_path, small_chunks, monkeypatch, checked):
     """Byte for byte what the mcap library's Writer.add_message writes with the same records, over
-    many chunks, a channel registered after messages, and message data given as a memoryview."""
+    many chunks, a channel registered after messages, and message data given as a memoryview:
+    with the mcap version the packed records were checked against, and (through the library's
+    add_message) with any other."""
     import yaml
     from mcap.writer import CompressionType, Writer
 
+    if not checked:
+        monkeypatch.setattr(mcap_io, "CHECKED_MCAP_VERSIONS", ("0.0.",))
     store = typestore()
     recs = sorted(_records(60))
     late = [(t + 1, "/late", HEADER, encode_header(10**9, k, "late")) for k, (t, *_rest) in enumerate(recs[30:])]
     ours = mcap_io.McapWriter(tmp_path / "ours.mcap", store)
+    assert type(ours._chunk).__name__ == ("_Chunk" if checked else "_LibraryChunk")
     channels = {topic: ours.add_connection(topic, HEADER) for topic in ("/a", "/b", "/none")}
     for t, topic, _type, raw in recs[:30]:
         ours.write(channels[topic], t, memoryview(raw))

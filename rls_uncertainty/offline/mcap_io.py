@@ -4,7 +4,9 @@
 implementation) in rosbag2's layout: profile ``ros2``, one ``ros2msg`` schema per message type
 (the typestore's definition), one ``cdr`` channel per topic with its ``offered_qos_profiles``,
 messages in chunks of about 1 MiB, uncompressed (the message records and their indexes
-packed here, each at once, into the library's chunk: its bytes), and a ``rosbag2`` metadata record. Three
+packed here, each at once, into the library's chunk with the mcap versions in
+:data:`CHECKED_MCAP_VERSIONS`, through its ``add_message`` with any other: its bytes either way),
+and a ``rosbag2`` metadata record. Three
 CRC-32s cover every byte but the two magics: each chunk's records (``uncompressed_crc``), the
 whole data section (``DataEnd.data_section_crc``: the chunk headers, the message indexes, the
 metadata) and the summary with the footer (``Footer.summary_crc``). For a bag directory,
@@ -75,7 +77,7 @@ class McapWriter(OutputWriter):
         self._schemas: dict[str, int] = {}
         self._topics: list[tuple[str, str, int]] = []  # (topic, type, channel), in registration order
         self.info: dict[str, Any] | None = None
-        self._chunk = _Chunk(self._writer)
+        self._chunk: _Chunk | _LibraryChunk = _chunk(self._writer)
 
     def add_connection(self, topic: str, msgtype: str) -> int:
         """Register ``topic`` of ``msgtype`` (its schema once per type); the channel id."""
@@ -140,6 +142,59 @@ class McapWriter(OutputWriter):
         """Close and remove the unfinished file."""
         self._fh.close()
         self.path.unlink(missing_ok=True)
+
+
+#: The ``mcap`` versions whose private chunk builder and statistics :class:`_Chunk` was checked
+#: against (``test_mcap_io``: byte for byte the library's ``add_message``); any other version
+#: writes through the library's public ``add_message`` (:class:`_LibraryChunk`), slower.
+CHECKED_MCAP_VERSIONS = ("1.6.",)
+
+
+def _chunk(writer: Writer) -> _Chunk | _LibraryChunk:
+    """The message writer for ``writer``: records packed at once with a checked ``mcap``
+    version, the library's ``add_message`` otherwise."""
+    from importlib.metadata import version  # noqa: PLC0415
+
+    checked = version("mcap").startswith(CHECKED_MCAP_VERSIONS)
+    if checked and hasattr(writer, "_Writer__chunk_builder") and hasattr(writer, "_Writer__statistics"):
+        return _Chunk(writer)
+    return _LibraryChunk(writer)
+
+
+class _LibraryStatistics:
+    """What :meth:`McapWriter._information` reads of the library's statistics, counted here."""
+
+    def __init__(self) -> None:
+        self.message_count = self.message_start_time = self.message_end_time = 0
+        self.channel_message_counts: dict[int, int] = {}
+
+
+class _LibraryChunk:
+    """:class:`_Chunk`'s interface over the library's public ``Writer.add_message`` (one record
+    object and several writes per message)."""
+
+    def __init__(self, writer: Writer) -> None:
+        self._writer = writer
+        self.statistics = _LibraryStatistics()
+
+    def restart(self) -> None:
+        """(Nothing held here.)"""
+
+    def hand_over(self) -> None:
+        """(Every message is the library's as soon as it is added.)"""
+
+    def add(self, channel: int, log_time: int, raw: bytes | memoryview) -> None:
+        """One message record, logged and published at ``log_time``."""
+        self._writer.add_message(channel, log_time=log_time, data=bytes(raw), publish_time=log_time)
+        stats = self.statistics
+        counts = stats.channel_message_counts
+        counts[channel] = counts.get(channel, 0) + 1
+        if stats.message_count:
+            stats.message_start_time = min(stats.message_start_time, log_time)
+            stats.message_end_time = max(stats.message_end_time, log_time)
+        else:
+            stats.message_start_time = stats.message_end_time = log_time
+        stats.message_count += 1
 
 
 class _Chunk:
