@@ -351,12 +351,12 @@ class IdentifiabilityMonitor:
         parameters still are); ``ready``: the models whose outputs are published.
         :attr:`held_back` keeps the flags taken out."""
         self._bank, self.ready, self._judged = bank, ready, False
-        if not flags.any():
+        if not np.logical_or.reduce(flags, axis=None):
             self.held_back = self._nothing
             return flags, model_flags
         ok = self._judge()
-        self.held_back = flags & ~ok
-        return flags & ok, model_flags & (ok | self._padding).all(axis=1)
+        self.held_back = np.greater(flags, ok)  # (flagged and not identifiable)
+        return flags & ok, model_flags & np.logical_and.reduce(ok | self._padding, axis=1)
 
     def judge(self, bank: EstimatorBank, ready: np.ndarray) -> np.ndarray:
         """``identifiable`` ``(M, n_max)`` of ``bank``'s current sample (module docstring)."""
