@@ -392,8 +392,9 @@ class IdentifiabilityMonitor:
         d = c.diagonal(0, 1, 2)
         if np.fmin.reduce(d, axis=None) <= 0.0:  # a ready model whose corrected variances are zero fits exactly:
             exact = ready & ~np.logical_or.reduce(d > 0.0, axis=1)  # its correlations: (X'X)^-1's, the conventional
-            c = np.where(exact[:, None, None], both[1], c)
-            d = c.diagonal(0, 1, 2)
+            if np.logical_or.reduce(exact):  # (zero variances of a model withheld: nothing to replace)
+                c = np.where(exact[:, None, None], both[1], c)
+                d = c.diagonal(0, 1, 2)
         self._covariance = c
         # |rho_ij| > max  <=>  c_ij^2 > max^2 c_ii c_jj  (NaN compares False)
         bound = np.multiply(d[:, :, None], d[:, None, :], out=self._bound)
