@@ -35,5 +35,5 @@ def withheld(
     floor = SE_FLOOR * np.abs(theta)
     ok = np.minimum(se, se_conventional) > floor
     ok &= np.maximum(se, se_conventional) < np.inf
-    bad: npt.NDArray[np.bool_] = ready & (real > ok).any(axis=1)  # (real > ok: real and not ok)
+    bad: npt.NDArray[np.bool_] = ready & np.logical_or.reduce(real > ok, axis=1)  # (real > ok: real and not ok)
     return bad

@@ -169,8 +169,15 @@ class RegressorStatistics:
         self.variance_sums = self.comoment.diagonal(0, 1, 2)  # (a view: weight x variance)
         self.noise_sums = np.zeros((m, n))  # sum_k f^(k-j) d_k^2 of the second differences
         self.noise_weight = 0.0  # sum_k f^(k-j) over the second differences taken
-        self._last = np.zeros((2, m, n))  # the previous two rows, newest first
+        self._last = np.zeros((2, m, n))  # the previous two rows: _last[_newest] the newest
+        self._newest = 0
         self._chain = 0  # consecutive rows in _last (a second difference needs two)
+        # Scratch of add() with its views, made once (a view costs as much as a small operation).
+        self._d = np.zeros((m, n))
+        self._d_weighted = np.zeros((m, n))
+        self._d_row = self._d[:, None, :]
+        self._d_weighted_col = self._d_weighted[:, :, None]
+        self._outer = np.zeros((m, n, n))
 
     def restart_chain(self) -> None:
         """The next row does not follow the last one (a dropout, a new timeline): the second
@@ -182,23 +189,28 @@ class RegressorStatistics:
         f = self.forgetting
         self.weight = w = f * self.weight + 1.0
         self.samples += 1
-        d = x - self.mean
-        self.mean += d / w
+        d, scratch = self._d, self._d_weighted
+        np.subtract(x, self.mean, out=d)
+        self.mean += np.divide(d, w, out=scratch)
         # sum_j f^(k-j) (x_j - mean_k)(x_j - mean_k)': f C + (1 - 1/w) d d' (exactly symmetric)
         if f != 1.0:
             self.comoment *= f
             self.noise_sums *= f
             self.noise_weight *= f
-        self.comoment += (1.0 - 1.0 / w) * d[:, :, None] * d[:, None, :]
-        last = self._last
-        if self._chain >= 2:
-            d2 = x - 2.0 * last[0] + last[1]
-            self.noise_sums += d2 * d2
+        np.multiply(d, 1.0 - 1.0 / w, out=scratch)
+        self.comoment += np.multiply(self._d_weighted_col, self._d_row, out=self._outer)
+        last, newest = self._last, self._newest
+        older = 1 - newest
+        if self._chain >= 2:  # d_k = x - 2 x_(k-1) + x_(k-2)
+            d2 = np.multiply(last[newest], 2.0, out=scratch)
+            np.subtract(x, d2, out=d2)
+            d2 += last[older]
+            self.noise_sums += np.multiply(d2, d2, out=d2)
             self.noise_weight += 1.0
         else:
             self._chain += 1
-        last[1] = last[0]
-        last[0] = x
+        last[older] = x  # the new newest row; the previous one is now the older
+        self._newest = older
 
     @property
     def noise_variance(self) -> np.ndarray:
@@ -287,6 +299,9 @@ class IdentifiabilityMonitor:
         self._unexplained = 1.0 - config.min_r_squared  # R^2 >= min  <=>  R_k(0) <= (1 - min) var(z)
         self._nothing = np.zeros((m, n), dtype=bool)
         self._padding = ~self.real
+        self._square = np.zeros((m, n, n))  # scratch of the collinearity test
+        self._bound = np.zeros((m, n, n))
+        self._beyond = np.zeros((m, n, n), dtype=bool)
         self.forgetting = float(forgetting)
         self.stats = RegressorStatistics((m, n), forgetting)
         self.reset()
@@ -336,12 +351,12 @@ class IdentifiabilityMonitor:
         parameters still are); ``ready``: the models whose outputs are published.
         :attr:`held_back` keeps the flags taken out."""
         self._bank, self.ready, self._judged = bank, ready, False
-        if not flags.any():
+        if not np.logical_or.reduce(flags, axis=None):
             self.held_back = self._nothing
             return flags, model_flags
         ok = self._judge()
-        self.held_back = flags & ~ok
-        return flags & ok, model_flags & (ok | self._padding).all(axis=1)
+        self.held_back = np.greater(flags, ok)  # (flagged and not identifiable)
+        return flags & ok, model_flags & np.logical_and.reduce(ok | self._padding, axis=1)
 
     def judge(self, bank: EstimatorBank, ready: np.ndarray) -> np.ndarray:
         """``identifiable`` ``(M, n_max)`` of ``bank``'s current sample (module docstring)."""
@@ -375,24 +390,30 @@ class IdentifiabilityMonitor:
         both = bank.covariance_all()  # NaN off the ready models' blocks
         c = both[0]
         d = c.diagonal(0, 1, 2)
-        if (d <= 0.0).any():  # a ready model whose corrected variances are zero fits exactly:
-            exact = ready & ~(d > 0.0).any(axis=1)  # its correlations are (X'X)^-1's, the conventional's
-            c = np.where(exact[:, None, None], both[1], c)
-            d = c.diagonal(0, 1, 2)
+        if np.fmin.reduce(d, axis=None) <= 0.0:  # a ready model whose corrected variances are zero fits exactly:
+            exact = ready & ~np.logical_or.reduce(d > 0.0, axis=1)  # its correlations: (X'X)^-1's, the conventional
+            if np.logical_or.reduce(exact):  # (zero variances of a model withheld: nothing to replace)
+                c = np.where(exact[:, None, None], both[1], c)
+                d = c.diagonal(0, 1, 2)
         self._covariance = c
         # |rho_ij| > max  <=>  c_ij^2 > max^2 c_ii c_jj  (NaN compares False)
-        self.collinear = ((c * c > self._max_square * (d[:, :, None] * d[:, None, :])) & self._pairs).any(axis=2)
+        bound = np.multiply(d[:, :, None], d[:, None, :], out=self._bound)
+        bound *= self._max_square
+        beyond = np.greater(np.multiply(c, c, out=self._square), bound, out=self._beyond)
+        self.collinear = np.logical_or.reduce(np.logical_and(beyond, self._pairs, out=beyond), axis=2)
         stats = self.stats
-        flat = stats.variance_sums <= self._variance_floor * max(stats.weight, 1.0)
+        weight = max(stats.weight, 1.0)
+        variance_sums = stats.variance_sums
+        flat = variance_sums <= self._variance_floor * weight
         # A regressor that moves no more than its own sensor noise (var <= R sigma^2): not excited.
         self.noisy = self._nothing
         if self._noise_ratio > 0.0 and stats.noise_weight > 0.0:
-            noisy = stats.variance_sums * (6.0 * stats.noise_weight) <= \
-                (self._noise_ratio * max(stats.weight, 1.0)) * stats.noise_sums
-            self.noisy = noisy & self._slopes & ~flat
-            flat |= self.noisy
-        if flat.any():  # the bias is confounded with a flat regressor whose mean is off zero
-            offset = (flat & (np.abs(stats.mean) > self.resolution)).any(axis=1, keepdims=True)
+            noisy = variance_sums * (6.0 * stats.noise_weight) <= (self._noise_ratio * weight) * stats.noise_sums
+            noisy &= self._slopes
+            self.noisy = np.greater(noisy, flat, out=noisy)  # (and not flat)
+            flat |= noisy
+        if np.logical_or.reduce(flat, axis=None):  # the bias is confounded with a flat regressor whose mean is off zero
+            offset = np.logical_or.reduce(flat & (np.abs(stats.mean) > self.resolution), axis=1, keepdims=True)
             flat |= self.bias & offset
         self.not_excited = flat
         n = max(bank.n_eff, 1e-300)
@@ -401,7 +422,9 @@ class IdentifiabilityMonitor:
         fits = bank.residual_variances() <= self._unexplained * var
         fits &= var > _CONSTANT_OUTPUT * mean_square  # not ready (R_k(0) NaN) or a constant output: no fit
         self.no_fit = ~fits
-        ok = self.real & (ready & fits)[:, None] & ~(flat | self.collinear)
+        fits &= ready
+        ok = np.greater(self.real, flat | self.collinear)  # (real and neither)
+        ok &= fits[:, None]
         self._identifiable, self._judged = ok, True
         return ok
 

@@ -362,8 +362,10 @@ class EstimatorBank(BankSnapshot):
         """Estimates of every model as an ``(M, n_max)`` array; padding and models that are
         not :attr:`ready` (published) are NaN."""
         theta = self._eval.theta_all()
-        if not self._rule.all_published:
-            theta[~self._published()] = np.nan
+        rule = self._rule
+        if not rule.all_published:
+            self._published()  # (judged once per sample: rule.hidden)
+            np.copyto(theta, np.nan, where=rule.hidden)
         return theta
 
     @property
@@ -431,9 +433,12 @@ class EstimatorBank(BankSnapshot):
         (published) are NaN.
         """
         se = self._eval.standard_errors(kind)
-        if self._rule.all_published or self._published().all():
+        rule = self._rule
+        if not rule.all_published:
+            self._published()  # (judged once per sample: rule.hidden, rule.all_published)
+        if rule.all_published:
             return se
-        out: FloatArray = np.where(self._published()[:, None], se, np.nan)
+        out: FloatArray = np.where(rule.hidden, np.nan, se)
         return out
 
     def covariance(self, j: int, kind: str = "corrected", *, repair: bool = True) -> np.ndarray:
@@ -455,8 +460,9 @@ class EstimatorBank(BankSnapshot):
         the :attr:`ready` (published) models' blocks."""
         published = self._published()
         cov = self._eval.evaluate().published(self.sizes, published)
-        if not self._rule.all_published:
-            cov[:, ~published] = np.nan
+        rule = self._rule
+        if not rule.all_published:
+            np.copyto(cov, np.nan, where=rule.hidden[:, :, None])
         return cov
 
     def standard_errors(self, j: int, kind: str = "corrected") -> np.ndarray:

@@ -39,9 +39,9 @@ EXACT_FIT = 1e-12
 
 FloatArray = npt.NDArray[np.float64]
 BoolArray = npt.NDArray[np.bool_]
-# What Covariances.matrices() is formed from: D, D N, D N0 (None for Eq. 13), h_0 S_0, scale,
-# diagonal scale, 1/n_k, D' (D itself when symmetric).
-_Parts = tuple[FloatArray, FloatArray, FloatArray | None, FloatArray, FloatArray, FloatArray, float, FloatArray]
+# What Covariances.matrices() is formed from: D N, D N0 (None for Eq. 13), D, h_0 S_0, scale, 1/n_k,
+# D' (D itself when symmetric) and the variances as computed (before any repair).
+_Parts = tuple[FloatArray, FloatArray | None, FloatArray, FloatArray, FloatArray, float, FloatArray, FloatArray]
 
 
 def nearest_psd(cov: FloatArray) -> FloatArray:
@@ -68,8 +68,8 @@ class Covariances:
     (repaired: :meth:`repair`, when :attr:`indefinite`), and :attr:`standard_errors` their
     square roots (negative rounding clipped at 0). ``matrices()`` are the unrepaired
     covariances ``(2, M, n_max, n_max)``, formed on first use from the same ``D N`` products as
-    ``(P + P') * scale / n_k`` with ``P = D N D``, their diagonals summed as the variances
-    were, so that ``standard_errors`` are exactly ``sqrt(diag(matrices))``. NaN outside the
+    ``(P + P') * scale / n_k`` with ``P = D N D``, their diagonals the variances as computed
+    (before any repair), so that ``standard_errors`` are exactly ``sqrt(diag(matrices))``. NaN outside the
     ready models' blocks. Where a corrected variance is negative, ``repaired`` maps a model to
     its nearest positive semi-definite matrix, and ``exact`` marks the models that fit
     exactly, whose covariance is published as zero.
@@ -114,17 +114,17 @@ class Covariances:
 
     def matrices(self) -> FloatArray:
         if self._matrices is None:
-            D, DN, DN0, hS0, scale, diagonal_scale, inv_n, Dt = self._parts
+            DN, DN0, D, hS0, scale, inv_n, Dt, variances = self._parts
             P = np.empty((2, *D.shape))
             np.matmul(DN, Dt, out=P[0])
             if DN0 is None:
                 np.multiply(D, hS0[:, :, None], out=P[1])
             else:
                 np.matmul(DN0, Dt, out=P[1])
-            cov = P + P.swapaxes(2, 3)  # the two-sided sum
+            cov = np.add(P, P.swapaxes(2, 3), out=np.empty(P.shape))  # the two-sided sum (C order: reshaped below)
             cov *= scale * inv_n
-            a = np.arange(D.shape[1])
-            cov[:, :, a, a] = _diagonals(D, DN, DN0, hS0) * (diagonal_scale * inv_n)  # as the variances
+            n = D.shape[1]
+            cov.reshape(*cov.shape[:2], n * n)[:, :, :: n + 1] = variances  # the diagonals: the variances
             self._matrices = cov
         return self._matrices
 
@@ -150,17 +150,6 @@ class Covariances:
         for j, fixed in self.repaired.items():
             cov[0, j, : sizes[j], : sizes[j]] = fixed
         return cov
-
-
-def _diagonals(D: FloatArray, DN: FloatArray, DN0: FloatArray | None, hS0: FloatArray) -> FloatArray:
-    """``diag(P)`` of both kinds, ``(2, M, n)``: ``diag(D N D') = sum_c (D N)_ac D_ac``."""
-    out = np.empty((2, *D.shape[:2]))
-    vecdot(DN, D, out=out[0])
-    if DN0 is None:
-        np.multiply(hS0, D.diagonal(0, 1, 2), out=out[1])  # Eq. 13: R_k(0) D / 2
-    else:
-        vecdot(DN0, D, out=out[1])
-    return out
 
 
 class CovarianceEvaluator:
@@ -203,7 +192,7 @@ class CovarianceEvaluator:
         else:  # Eq. 22 with n_tau = 0: N = R_k(0) Lambda_k(0) / 2
             DN0 = np.matmul(D, np.matmul(hS[:, None, None, :1], lag_products[:, :, :1])[:, :, 0, :])
         hS0 = hS[:, :1]
-        var = np.empty((2, *D.shape[:2]))  # diag(P), as _diagonals
+        var = np.empty((2, *D.shape[:2]))  # diag(P) = sum_c (D N)_ac D_ac
         vecdot(DN, D, out=var[0])  # Eq. 20 / 22
         if DN0 is None:
             np.multiply(hS0, D_diagonal, out=var[1])  # Eq. 13: R_k(0) D / 2
@@ -212,4 +201,4 @@ class CovarianceEvaluator:
         negative = bool(np.minimum.reduce(var[0], axis=None) < 0.0)  # models not ready are 0 here
         var *= diagonal_scale * inv_n  # diag(P + P') * scale / n_k
         Dt = D.swapaxes(1, 2) if self.sandwich else D
-        return Covariances(var, negative, (D, DN, DN0, hS0, scale, diagonal_scale, inv_n, Dt))
+        return Covariances(var, negative, (DN, DN0, D, hS0, scale, inv_n, Dt, var.copy()))

@@ -30,6 +30,7 @@ class PublicationRule:
         self.all_published = False
         self._k = -1  # the sample count of the last judgement (-1: none since the last restart)
         self._last = np.zeros(len(self.at), dtype=bool)
+        self.hidden = np.ones((len(self.at), 1), dtype=bool)  # not published, as a column (last judgement)
 
     def restart(self) -> None:
         """Readiness changed: judge afresh."""
@@ -55,4 +56,5 @@ class PublicationRule:
         if published.all():
             self.all_published = True
         self._k, self._last = k, published
+        self.hidden = ~published[:, None]
         return published
