@@ -195,3 +195,25 @@ def test_the_writer_writes_the_mcap_librarys_bytes(tmp_path, small_chunks, monke
     ours_bytes = (tmp_path / "ours.mcap").read_bytes()
     assert len(crcs(tmp_path / "ours.mcap")[0]) > 5  # several chunks
     assert ours_bytes == (tmp_path / "library.mcap").read_bytes()
+
+
+def test_the_version_checked_is_that_of_the_mcap_library_imported(tmp_path, monkeypatch):
+    """The packed records only with the version of the module the writer uses (not whatever
+    package metadata is found first on the path, nor none at all)."""
+    import importlib.metadata
+
+    import mcap
+
+    def unknown(name):
+        raise importlib.metadata.PackageNotFoundError(name)
+
+    with monkeypatch.context() as patched:
+        patched.setattr(mcap, "__version__", "0.0.1")
+        with mcap_io.McapWriter(tmp_path / "other.mcap", typestore()) as writer:
+            assert type(writer._chunk).__name__ == "_LibraryChunk"
+    monkeypatch.setattr(importlib.metadata, "version", unknown)
+    with mcap_io.McapWriter(tmp_path / "no_metadata.mcap", typestore()) as writer:
+        assert type(writer._chunk).__name__ == ("_Chunk" if mcap.__version__.startswith(mcap_io.CHECKED_MCAP_VERSIONS)
+                                               else "_LibraryChunk")
+        writer.write(writer.add_connection("/a", HEADER), 1, encode_header(0, 1, ""))
+    assert crcs(tmp_path / "no_metadata.mcap")[0]  # written

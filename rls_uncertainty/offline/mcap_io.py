@@ -152,10 +152,11 @@ CHECKED_MCAP_VERSIONS = ("1.6.",)
 
 def _chunk(writer: Writer) -> _Chunk | _LibraryChunk:
     """The message writer for ``writer``: records packed at once with a checked ``mcap``
-    version, the library's ``add_message`` otherwise."""
-    from importlib.metadata import version  # noqa: PLC0415
+    version (the imported module's own, whatever package metadata the path holds), the
+    library's ``add_message`` otherwise."""
+    import mcap  # noqa: PLC0415
 
-    checked = version("mcap").startswith(CHECKED_MCAP_VERSIONS)
+    checked = str(getattr(mcap, "__version__", "")).startswith(CHECKED_MCAP_VERSIONS)
     if checked and hasattr(writer, "_Writer__chunk_builder") and hasattr(writer, "_Writer__statistics"):
         return _Chunk(writer)
     return _LibraryChunk(writer)
