@@ -229,7 +229,8 @@ class _Chunk:
         if index is None:
             index = self._index[channel] = []
         index.append((log_time, self._base + len(buffer)))
-        buffer += _MESSAGE.pack(0x05, 22 + len(raw), channel, 0, log_time, log_time)  # 0x05: Message
+        size = raw.nbytes if type(raw) is memoryview else len(raw)  # (a view's len counts its items)
+        buffer += _MESSAGE.pack(0x05, 22 + size, channel, 0, log_time, log_time)  # 0x05: Message
         buffer += raw
         self._first = min(self._first, log_time) if self._count else log_time
         self._last = max(self._last, log_time)
