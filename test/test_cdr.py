@@ -412,3 +412,21 @@ def test_random_layouts_encode_byte_identical_to_rosbags():
         back = STORE.deserialize_cdr(got, "std_msgs/msg/Float64MultiArray")
         assert [(d.label, d.size, d.stride) for d in back.layout.dim] == dims and back.layout.data_offset == offset
         assert [bits(x) for x in back.data] == [bits(x) for x in data]
+
+
+def test_layouts_built_from_a_head_and_a_last_dim_encode_byte_identical_to_rosbags():
+    """encode_float64_multiarray_tail (the node's arrays: dims made once, the stamp's dim per
+    sample, the data a numpy array, strided or 2-D as a covariance slice) is rosbags' bytes."""
+    rng = random.Random(10)
+    for _ in range(N_RANDOM):
+        dims = [(rand_text(rng, 40), rng.randint(0, UINT32_MAX), rng.randint(0, UINT32_MAX))
+                for _ in range(rng.randint(1, 4))]
+        rows, cols = rng.choice(((1, 0), (1, 1), (1, rng.randint(1, 12)), (rng.randint(1, 6), rng.randint(1, 6))))
+        block = np.array([[rand_float(rng) for _ in range(cols + 2)] for _ in range(rows + 1)])
+        data = block[:rows, 1 : cols + 1]  # not contiguous
+        head = cdr.multiarray_head(dims[:-1], len(dims))
+        got = cdr.encode_float64_multiarray_tail(head, cdr.multiarray_dim(*dims[-1]), data if rows > 1 else data[0])
+        assert got == serialize(_layout_array(dims, data.ravel().tolist(), 0), "std_msgs/msg/Float64MultiArray")
+        # Row-major whatever the array's memory order.
+        assert cdr.encode_float64_multiarray_tail(head, cdr.multiarray_dim(*dims[-1]), np.asfortranarray(data)) == \
+            cdr.encode_float64_multiarray_tail(head, cdr.multiarray_dim(*dims[-1]), data)

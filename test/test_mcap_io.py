@@ -218,3 +218,64 @@ def test_the_version_checked_is_that_of_the_mcap_library_imported(tmp_path, monk
                                                else "_LibraryChunk")
         writer.write(writer.add_connection("/a", HEADER), 1, encode_header(0, 1, ""))
     assert crcs(tmp_path / "no_metadata.mcap")[0]  # written
+
+
+def _walk_outcome(reader_type, data):
+    """Every record a stream reader gives for ``data`` (message indexes by channel alone), then
+    how it ended: what the integrity pass sees of a file."""
+    import io
+
+    from mcap.records import MessageIndex
+
+    seen = []
+    try:
+        for record in reader_type(io.BytesIO(data), emit_chunks=True, validate_crcs=True,
+                                  record_size_limit=len(data)).records:
+            seen.append(("index", record.channel_id) if isinstance(record, MessageIndex) else repr(record))
+    except Exception as exc:  # noqa: BLE001  (the outcome compared, whatever it is)
+        seen.append((type(exc).__name__, str(exc)))
+    return seen
+
+
+def test_message_indexes_are_skipped_exactly_as_the_library_reads_them(tmp_path, small_chunks, monkeypatch):
+    """The integrity pass reads message index records without decoding their entries: for any
+    damage to one (its entries' length, the file cut inside it) the records read, the bytes
+    consumed and the error are the library's; so is check_mcap_integrity's message."""
+    import mcap
+    from mcap.stream_reader import StreamReader
+
+    write_mcap(tmp_path / "x.mcap", _records())
+    data = (tmp_path / "x.mcap").read_bytes()
+    if mcap.__version__.startswith(mcap_io.CHECKED_MCAP_VERSIONS):
+        assert mcap_io._stream_reader() is not StreamReader
+    starts, pos = [], 8  # the top-level records after the magic, up to the footer
+    while data[pos] != 0x02:
+        (length,) = struct.unpack_from("<Q", data, pos + 1)
+        if data[pos] == 0x07:
+            starts.append((pos, length))
+        pos += 9 + length
+    assert len(starts) > 4
+    damaged = tmp_path / "damaged.mcap"
+    cases = 0
+    for at, length in starts[:3] + starts[-2:]:
+        entries = at + 9 + 2  # the u32 byte length of the entries
+        variants = [data[:cut] for cut in (at + 5, entries + 2, entries + 4, entries + 9, entries + 20,
+                                           at + 9 + length - 3)]
+        for value in (0, 1, 15, 16, 17, 31, length - 6, length - 5, length + 10, 2**32 - 16, 2**32 - 1):
+            variants.append(data[:entries] + struct.pack("<I", value) + data[entries + 4:])
+        for variant in variants:
+            assert _walk_outcome(mcap_io._stream_reader(), variant) == _walk_outcome(StreamReader, variant)
+            damaged.write_bytes(variant)
+            outcomes = []
+            for reader in (mcap_io._stream_reader(), StreamReader):
+                monkeypatch.setattr(mcap_io, "_stream_reader", lambda reader=reader: reader)
+                try:
+                    mcap_io.check_mcap_integrity(damaged)
+                    outcomes.append(None)
+                except BagError as exc:
+                    outcomes.append(str(exc))
+                monkeypatch.undo()
+                monkeypatch.setattr(mcap_io, "CHUNK_SIZE", 300)
+            assert outcomes[0] == outcomes[1] and (outcomes[0] is None) == (variant == data)
+            cases += 1
+    assert cases == 5 * 17

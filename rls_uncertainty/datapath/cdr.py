@@ -33,8 +33,8 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["decode", "encode_header", "encode_float64_multiarray", "encode_float64_multiarray_dims", "DECODABLE",
-           "FLOAT64_MULTIARRAY"]
+__all__ = ["decode", "encode_header", "encode_float64_multiarray", "encode_float64_multiarray_dims",
+           "multiarray_head", "multiarray_dim", "encode_float64_multiarray_tail", "DECODABLE", "FLOAT64_MULTIARRAY"]
 
 _LE_HEADER = b"\x00\x01\x00\x00"
 FLOAT64_MULTIARRAY = "std_msgs/msg/Float64MultiArray"
@@ -281,6 +281,8 @@ def _doubles(n: int) -> struct.Struct:
 
 _COUNTS = tuple(_U32.pack(i) for i in range(8))
 _LE_F64 = np.dtype("<f8")
+_ZERO_AND_COUNT = struct.Struct("<II")
+_PADDING = tuple(b"\x00" * i for i in range(8))
 
 
 def _multiarray(dims: bytes, data_offset: int, data: Sequence[float] | np.ndarray) -> bytes:
@@ -303,6 +305,32 @@ def encode_float64_multiarray(label: str, data: Sequence[float] | np.ndarray, se
     else:
         dims = _COUNTS[2] + _dim(label, n, n) + _dim(second, 1, 1)
     return _multiarray(dims, 0, data)
+
+
+def multiarray_head(dims: Sequence[tuple[str, int, int]], count: int) -> bytes:
+    """The first bytes of a ``std_msgs/Float64MultiArray`` layout of ``count`` dims: the dim
+    count and ``dims``, the leading ones (the caller adds the rest with
+    :func:`encode_float64_multiarray_tail`)."""
+    return _U32.pack(count) + b"".join(_dim(text, size, stride) for text, size, stride in dims)
+
+
+def multiarray_dim(label: str, size: int, stride: int) -> bytes:
+    """The bytes of one ``std_msgs/MultiArrayDimension`` as :func:`multiarray_head` lays it."""
+    return _dim(label, size, stride)
+
+
+def encode_float64_multiarray_tail(head: bytes, last: bytes, data: np.ndarray) -> bytes:
+    """CDR of a ``std_msgs/Float64MultiArray`` whose layout is :func:`multiarray_head`'s
+    ``head`` then the dim ``last`` (:func:`multiarray_dim`), ``data_offset`` 0 and the doubles
+    of the numpy array ``data`` in row-major order: the bytes of
+    :func:`encode_float64_multiarray_dims` with those dims and ``data``, built with the dims
+    that repeat from sample to sample made once."""
+    n = data.size
+    dims = head + last + _ZERO_AND_COUNT.pack(0, n)  # data_offset 0, then the data's length
+    if not n:
+        return _LE_HEADER + dims
+    raw = data.tobytes() if data.dtype == _LE_F64 else data.astype(_LE_F64).tobytes()  # row-major
+    return b"".join((_LE_HEADER, dims, _PADDING[-len(dims) % 8], raw))
 
 
 def encode_float64_multiarray_dims(dims: Sequence[tuple[str, int, int]], data: Sequence[float],

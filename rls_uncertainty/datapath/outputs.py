@@ -58,7 +58,13 @@ from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 
-from .cdr import encode_float64_multiarray, encode_float64_multiarray_dims, encode_header
+from .cdr import (
+    encode_float64_multiarray_dims,
+    encode_float64_multiarray_tail,
+    encode_header,
+    multiarray_dim,
+    multiarray_head,
+)
 
 if TYPE_CHECKING:  # annotations only: the pipeline is the core, this module its edge
     from .config import PipelineConfig
@@ -183,6 +189,10 @@ class OutputLayout:
         first = 1 + len(self._per_model) * _PER_MODEL
         self._per_frequency = [(name, ",".join(names), len(names), (len(names),), first + len(FREQUENCY_OUTPUTS) * j)
                                for j, (name, names) in enumerate(self.frequency_models or [])]
+        # The same with each array's layout bytes before its stamp dim (:meth:`encode`).
+        self._heads = [(n, _head(label, vector), _head(label, square), first)
+                       for _, label, n, vector, square, first in self._per_model]
+        self._frequency_heads = [(n, _head(label, vector), first) for _, label, n, vector, first in self._per_frequency]
 
     @classmethod
     def for_config(cls, config: PipelineConfig) -> OutputLayout:
@@ -231,20 +241,40 @@ class OutputLayout:
     def encode(self, out: SampleOutput, frame_id: str, wanted: Sequence[bool] | None = None) -> list[tuple[int, bytes]]:
         """``(index into topics, CDR bytes)`` of every message published for ``out``:
         ``sample_stamp`` (header ``frame_id``), then each ready model's arrays; with
-        ``wanted`` (a flag per topic index), only those of the topics it flags."""
+        ``wanted`` (a flag per topic index), only those of the topics it flags. The bytes are
+        those of :func:`.cdr.encode_float64_multiarray_dims` over :meth:`arrays` (with
+        :func:`dims`); the dims before the stamp's are built once per layout."""
         stamp = out.stamp_ns
         sec, nanosec = divmod(stamp, 1_000_000_000)
         messages = [(0, encode_header(sec, nanosec, frame_id))] if wanted is None or wanted[0] else []
-        when = stamp_label(stamp)
-        for index, a in self._arrays(out):
-            if wanted is not None and not wanted[index]:
-                continue
-            if len(a.shape) == 1:
-                raw = encode_float64_multiarray(a.names, a.data.tolist(), when)
-            else:
-                raw = encode_float64_multiarray_dims(dims(a.names, a.shape, when), a.data.tolist())
-            messages.append((index, raw))
+        when = multiarray_dim(stamp_label(stamp), 1, 1)
+        encode = encode_float64_multiarray_tail
+        for index, head, data in self._encodable(out):
+            if wanted is None or wanted[index]:
+                messages.append((index, encode(head, when, data)))
         return messages
+
+    def _encodable(self, out: SampleOutput) -> Iterator[tuple[int, bytes, np.ndarray]]:
+        """:meth:`_arrays` as ``(topic index, the layout's bytes before the stamp's dim, data)``."""
+        cov = out.covariance
+        ready = out.ready.tolist()
+        values = (out.theta, out.se, out.se_conventional, out.converged.astype(np.float64))
+        for j, (n, vector, square, first) in enumerate(self._heads):
+            if ready[j]:
+                for k in range(4):
+                    yield first + k, vector, values[k][j, :n]
+                if cov is not None:
+                    yield first + 4, square, cov[0, j, :n, :n]
+                    yield first + 5, square, cov[1, j, :n, :n]
+        f = out.frequency
+        if f is None or not self._frequency_heads:
+            return
+        ready = f.ready.tolist()
+        values = (f.theta, f.se, f.se_conventional, f.converged.astype(np.float64))
+        for j, (n, vector, first) in enumerate(self._frequency_heads):
+            if ready[j]:
+                for k in range(len(FREQUENCY_OUTPUTS)):
+                    yield first + k, vector, values[k][j, :n]
 
     def rows(self, out: SampleOutput) -> Iterator[Row]:
         """Each ready model's time-domain estimates and standard errors of ``out`` (what the
@@ -277,6 +307,11 @@ class OutputLayout:
             return []
         return [(len(FIT_OUTPUTS) * j + i, encode_float64_multiarray_dims(d, data.tolist()))
                 for i, (d, data) in enumerate(arrays)]
+
+
+def _head(names: str, shape: tuple[int, ...]) -> bytes:
+    """The layout bytes of an array of ``shape`` over ``names`` before its stamp dim (:func:`dims`)."""
+    return multiarray_head(dims(names, shape, "")[:-1], len(shape) + 1)
 
 
 def _rows(models: list[tuple[str, tuple[str, ...]]], ready: np.ndarray, theta: np.ndarray, se: np.ndarray,

@@ -177,6 +177,8 @@ def _iter_messages(
     message read (:func:`content_digest_update`)."""
     it = reader.messages(connections=connections)
     fast = fast and getattr(reader, "is2", False)
+    update = None if digest is None else digest.update
+    plans: dict[int, tuple[bytes, bool]] = {}  # per connection: its topic's bytes, decoded by cdr
     while True:
         try:
             conn, t, raw = next(it)
@@ -184,9 +186,13 @@ def _iter_messages(
             return
         except Exception as exc:  # a corrupt bag raises many types
             raise BagError(f"{path}: corrupt or truncated bag: {exc}") from exc
-        if digest is not None:
-            content_digest_update(digest, conn.topic, t, raw)
-        if fast and conn.msgtype in cdr.DECODABLE:
+        plan = plans.get(id(conn))
+        if plan is None:
+            plan = plans[id(conn)] = (conn.topic.encode(), fast and conn.msgtype in cdr.DECODABLE)
+        if update is not None:  # content_digest_update, inline
+            update(b"%s\0%d\0%d\0" % (plan[0], t, len(raw)))
+            update(raw)
+        if plan[1]:
             try:
                 msg = cdr.decode(conn.msgtype, raw)
             except (struct.error, UnicodeDecodeError, IndexError) as exc:

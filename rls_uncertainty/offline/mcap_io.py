@@ -150,14 +150,19 @@ class McapWriter(OutputWriter):
 CHECKED_MCAP_VERSIONS = ("1.6.",)
 
 
+def _checked_mcap() -> bool:
+    """Whether the ``mcap`` module imported (its own version, whatever package metadata the path
+    holds) is one of :data:`CHECKED_MCAP_VERSIONS`."""
+    import mcap  # noqa: PLC0415
+
+    return str(getattr(mcap, "__version__", "")).startswith(CHECKED_MCAP_VERSIONS)
+
+
 def _chunk(writer: Writer) -> _Chunk | _LibraryChunk:
     """The message writer for ``writer``: records packed at once with a checked ``mcap``
     version (the imported module's own, whatever package metadata the path holds), the
     library's ``add_message`` otherwise."""
-    import mcap  # noqa: PLC0415
-
-    checked = str(getattr(mcap, "__version__", "")).startswith(CHECKED_MCAP_VERSIONS)
-    if checked and hasattr(writer, "_Writer__chunk_builder") and hasattr(writer, "_Writer__statistics"):
+    if _checked_mcap() and hasattr(writer, "_Writer__chunk_builder") and hasattr(writer, "_Writer__statistics"):
         return _Chunk(writer)
     return _LibraryChunk(writer)
 
@@ -377,18 +382,63 @@ def _count_chunk(chunk: Chunk, path: Path, name: str) -> int:
     return count
 
 
+def _skip_index(stream: Any, length: int) -> MessageIndex:
+    """A message index record read as the ``mcap`` library's ``MessageIndex.read`` reads it (its
+    channel id, the byte length of its entries, then the entries 16 bytes at a time up to that
+    length), the same bytes consumed, CRC'd and failing the same way, but its entries left
+    undecoded (the integrity pass never uses them): one read when they lie within the record."""
+    from mcap.exceptions import EndOfFile  # noqa: PLC0415
+    from mcap.records import MessageIndex  # noqa: PLC0415
+
+    channel_id = stream.read2()
+    records_length = stream.read4()
+    whole = -(-records_length // 16) * 16  # what the library's loop reads: whole entries
+    if whole > length - 6:  # damaged: the library's loop itself, 8 bytes at a time
+        records_end = stream.count + records_length
+        while stream.count < records_end:
+            stream.read8()
+            stream.read8()
+    elif whole:
+        got = len(stream.read(whole))  # (nothing read: EndOfFile, as the loop's first read)
+        if got < whole:  # the file ends inside: what the loop's first short read raises
+            if got % 8:
+                raise struct.error("unpack requires a buffer of 8 bytes")
+            raise EndOfFile()
+    return MessageIndex(channel_id, [])
+
+
+@functools.cache
+def _stream_reader() -> type:
+    """The ``mcap`` library's ``StreamReader``; with a version in :data:`CHECKED_MCAP_VERSIONS`,
+    one that reads message index records with :func:`_skip_index` (the library's parser
+    decodes each entry in Python)."""
+    from mcap.opcode import Opcode  # noqa: PLC0415
+    from mcap.stream_reader import StreamReader  # noqa: PLC0415
+
+    if not (_checked_mcap() and hasattr(StreamReader, "_read_record")):
+        return StreamReader
+
+    class _Reader(StreamReader):
+        def _read_record(self, opcode: int, length: int) -> Any:
+            if opcode == Opcode.MESSAGE_INDEX:
+                return _skip_index(self._stream, length)
+            return super()._read_record(opcode, length)
+
+    return _Reader
+
+
 def _walk(fh: IO[bytes], size: int, path: Path, summary: Summary) -> int:
     """One pass over every record: chunks checked, the data section's CRC checked; the number
     of messages. No record is read beyond the file's ``size`` (a damaged length is refused
     before anything is allocated for it)."""
     from mcap.records import Chunk, DataEnd, Message  # noqa: PLC0415
-    from mcap.stream_reader import CRCValidationError, StreamReader  # noqa: PLC0415
+    from mcap.stream_reader import CRCValidationError  # noqa: PLC0415
 
     chunks = count = 0
     data_end = False
     fh.seek(0)
     try:
-        for record in StreamReader(fh, emit_chunks=True, validate_crcs=True, record_size_limit=size).records:
+        for record in _stream_reader()(fh, emit_chunks=True, validate_crcs=True, record_size_limit=size).records:
             if isinstance(record, Message):
                 count += 1
             elif isinstance(record, Chunk):
