@@ -152,22 +152,16 @@ def test_a_stop_raised_where_python_cannot_propagate_it_still_stops_the_command(
     def callback(_ref: object) -> None:
         commands._stop(signal.SIGINT, None)  # the handler, as run when the signal lands here
 
-    # As a command starts: Python's own SIGINT handler (an earlier test in this process, or a
-    # library it loaded, such as rclpy, may have installed another; put back after).
-    outer = signal.signal(signal.SIGINT, signal.default_int_handler)
-    try:
-        end = time.monotonic() + DEADLINE
-        with pytest.raises(commands.Stopped) as stopped, commands._stopping_signals("replay"):
-            owner = Owner()
-            ref = weakref.ref(owner, callback)
-            del owner  # the callback runs, its exception cannot propagate
-            while time.monotonic() < end:  # the command's own work goes on
-                pass
-        assert ref() is None and stopped.value.signum == signal.SIGINT
-        assert "Exception ignored" not in capsys.readouterr().err
-        assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
-    finally:
-        signal.signal(signal.SIGINT, outer)
+    end = time.monotonic() + DEADLINE
+    with pytest.raises(commands.Stopped) as stopped, commands._stopping_signals("replay"):
+        owner = Owner()
+        ref = weakref.ref(owner, callback)
+        del owner  # the callback runs, its exception cannot propagate
+        while time.monotonic() < end:  # the command's own work goes on
+            pass
+    assert ref() is None and stopped.value.signum == signal.SIGINT
+    assert "Exception ignored" not in capsys.readouterr().err
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
 
 
 # A child that sends itself SIGINT when the import system first looks for MODULE: Ctrl-C
