@@ -15,7 +15,6 @@ import socket
 import subprocess
 import sys
 import time
-import weakref
 from collections.abc import Callable
 from pathlib import Path
 
@@ -139,29 +138,6 @@ def test_a_stopped_replay_ends_in_one_line_leaving_no_output(tmp_path, sig):
         assert _partials(tmp_path) == [] and not out.exists()
     finally:
         _kill_group(proc)
-
-
-def test_a_stop_raised_where_python_cannot_propagate_it_still_stops_the_command(capsys):
-    """A signal that arrives inside a weakref callback (or a __del__) raises there, where Python
-    prints "Exception ignored" and goes on: the command must still stop, saying nothing more."""
-    from rls_uncertainty.cli import commands
-
-    class Owner:
-        pass
-
-    def callback(_ref: object) -> None:
-        commands._stop(signal.SIGINT, None)  # the handler, as run when the signal lands here
-
-    end = time.monotonic() + DEADLINE
-    with pytest.raises(commands.Stopped) as stopped, commands._stopping_signals("replay"):
-        owner = Owner()
-        ref = weakref.ref(owner, callback)
-        del owner  # the callback runs, its exception cannot propagate
-        while time.monotonic() < end:  # the command's own work goes on
-            pass
-    assert ref() is None and stopped.value.signum == signal.SIGINT
-    assert "Exception ignored" not in capsys.readouterr().err
-    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
 
 
 # A child that sends itself SIGINT when the import system first looks for MODULE: Ctrl-C

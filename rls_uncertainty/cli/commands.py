@@ -5,7 +5,6 @@ and stopping signals each said in one line, and the ``estimator_node`` console s
 
 from __future__ import annotations
 
-import _thread
 import argparse
 import os
 import signal
@@ -14,7 +13,7 @@ import threading
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from types import FrameType
-from typing import Any, NoReturn
+from typing import NoReturn
 from xml.etree import ElementTree
 
 from ..errors import MissingExtra, RlsUncertaintyError
@@ -48,42 +47,22 @@ def _stop(signum: int, _frame: FrameType | None) -> None:
     raise Stopped(signum)
 
 
-def _unraisable(usual: Callable[[Any], object]) -> Callable[[Any], None]:
-    """A ``sys.unraisablehook`` for :class:`Stopped`: a signal that arrived inside a weakref
-    callback or a ``__del__`` raised there, where Python cannot propagate it (it prints the
-    exception and goes on). The signal is sent again from a thread of its own, so that the
-    main thread raises it in its own code; any other exception goes to ``usual``."""
-
-    def hook(unraisable: Any) -> None:
-        if isinstance(unraisable.exc_value, Stopped):
-            _thread.start_new_thread(os.kill, (os.getpid(), unraisable.exc_value.signum))
-        else:
-            usual(unraisable)
-
-    return hook
-
-
 @contextmanager
 def _stopping_signals(command: str) -> Iterator[None]:
-    """While the command runs, SIGINT, SIGTERM and SIGHUP raise :class:`Stopped` (raised again
-    when it landed where Python cannot propagate it: :func:`_unraisable`); a signal the
+    """While the command runs, SIGINT, SIGTERM and SIGHUP raise :class:`Stopped`; a signal the
     process was started ignoring (``nohup``, a background job) stays ignored, and the handlers
-    and the unraisable hook before are put back after (``main`` called from a program)."""
+    before are put back after (``main`` called from a program)."""
     before = {}
     if command not in _OWN_SIGNALS and threading.current_thread() is threading.main_thread():
         for signum, usual in ((signal.SIGINT, signal.default_int_handler), (signal.SIGTERM, signal.SIG_DFL),
                               (signal.SIGHUP, signal.SIG_DFL)):
             if signal.getsignal(signum) is usual:
                 before[signum] = signal.signal(signum, _stop)
-    hook = sys.unraisablehook
-    if before:
-        sys.unraisablehook = _unraisable(hook)
     try:
         yield
     finally:
         for signum, handler in before.items():
             signal.signal(signum, handler)
-        sys.unraisablehook = hook
 
 
 class _Parser(argparse.ArgumentParser):
