@@ -5,6 +5,7 @@ the long CSV's text of them. No DDS."""
 
 from pathlib import Path
 
+from rls_uncertainty.datapath.cdr import encode_string
 from rls_uncertainty.datapath.diagnostics import Status
 from rls_uncertainty.datapath.outputs import OutputLayout
 from rls_uncertainty.offline.bags import read_inputs, typestore
@@ -14,7 +15,6 @@ from rls_uncertainty.offline.replay_files import (
     STRING,
     _Csv,
     _diagnostic_array,
-    _string_message,
     _WideCsv,
 )
 from rls_uncertainty.settings import load_parameters_file, pipeline_config
@@ -51,7 +51,7 @@ def test_diagnostic_arrays_are_the_bytes_rosbags_serializes():
 def test_strings_are_the_bytes_rosbags_serializes():
     store = typestore()
     for text in ("", "a", "ab", "abc", "abcd", '[{"name": "m1", "σ": 0.5}]', "x" * 1001):
-        assert _string_message(text) == bytes(store.serialize_cdr(store.types[STRING](data=text), STRING))
+        assert encode_string(text) == bytes(store.serialize_cdr(store.types[STRING](data=text), STRING))
 
 
 def test_the_wide_csv_rows_are_the_same_with_the_long_csvs_texts_or_without(tmp_path):

@@ -33,8 +33,9 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["decode", "encode_header", "encode_float64_multiarray", "encode_float64_multiarray_dims",
-           "multiarray_head", "multiarray_dim", "encode_float64_multiarray_tail", "DECODABLE", "FLOAT64_MULTIARRAY"]
+__all__ = ["decode", "encode_header", "encode_string", "encode_diagnostic_array", "encode_float64_multiarray",
+           "encode_float64_multiarray_dims", "multiarray_head", "multiarray_dim", "encode_float64_multiarray_tail",
+           "DECODABLE", "FLOAT64_MULTIARRAY"]
 
 _LE_HEADER = b"\x00\x01\x00\x00"
 FLOAT64_MULTIARRAY = "std_msgs/msg/Float64MultiArray"
@@ -262,6 +263,36 @@ def encode_header(sec: int, nanosec: int, frame_id: str) -> bytes:
     out = bytearray(_TIME.pack(sec, nanosec))
     _string(out, frame_id)
     return _LE_HEADER + bytes(out)
+
+
+def encode_string(text: str) -> bytes:
+    """CDR of ``std_msgs/String``."""
+    out = bytearray()
+    _string(out, text)
+    return _LE_HEADER + bytes(out)
+
+
+def encode_diagnostic_array(sec: int, nanosec: int,
+                            statuses: Sequence[tuple[int, str, str, str, Sequence[tuple[str, str]]]]) -> bytes:
+    """CDR of ``diagnostic_msgs/DiagnosticArray`` (header ``frame_id`` empty) of ``statuses``,
+    each ``(level, name, message, hardware_id, key-values)``."""
+    out = bytearray(_TIME.pack(sec, nanosec))
+    _string(out, "")
+    _sequence_length(out, len(statuses))
+    for level, name, message, hardware_id, values in statuses:
+        out.append(level)  # (a byte: no alignment)
+        for text in (name, message, hardware_id):
+            _string(out, text)
+        _sequence_length(out, len(values))
+        for key, value in values:
+            _string(out, key)
+            _string(out, value)
+    return _LE_HEADER + bytes(out)
+
+
+def _sequence_length(out: bytearray, n: int) -> None:
+    out += b"\x00" * (_align(len(out), 4) - len(out))
+    out += _U32.pack(n)
 
 
 # A MultiArrayDimension starts 4-aligned and its bytes (label length, label, NUL, padding to 4,

@@ -33,7 +33,6 @@ from __future__ import annotations
 
 import hashlib
 import json
-import struct
 from dataclasses import asdict
 from itertools import chain
 from pathlib import Path
@@ -41,6 +40,7 @@ from typing import IO, TYPE_CHECKING, Any
 
 import numpy as np
 
+from ..datapath.cdr import encode_diagnostic_array, encode_string
 from ..datapath.maneuvers import HISTORY_TOPIC
 from ..datapath.outputs import OutputLayout
 from ..files import OutputWriter
@@ -177,48 +177,12 @@ class _WideCsv:
 
 
 def _diagnostic_array(stamp_ns: int, statuses: list[Status]) -> bytes:
-    """The CDR (little endian) of a ``diagnostic_msgs/DiagnosticArray`` of ``statuses`` stamped
-    with the data time: the bytes ``rosbags`` serializes (``test_replay_files`` compares them),
-    without building its message objects and its serializer for each replay."""
+    """The CDR of a ``diagnostic_msgs/DiagnosticArray`` of ``statuses`` stamped with the data
+    time: the bytes ``rosbags`` serializes (``test_replay_files`` compares them), without
+    building its message objects and its serializer for each replay."""
     sec, nanosec = divmod(stamp_ns, 1_000_000_000)
-    out = bytearray(_TIME.pack(sec, nanosec))
-    _string(out, "")  # the header's frame_id
-    _count(out, len(statuses))
-    for s in statuses:
-        out.append(s.level)  # (a byte: no alignment)
-        for text in (s.name, s.message, s.hardware_id):
-            _string(out, text)
-        _count(out, len(s.values))
-        for key, value in s.values:
-            _string(out, key)
-            _string(out, value)
-    return _CDR_LE + bytes(out)
-
-
-def _string_message(text: str) -> bytes:
-    """The CDR (little endian) of a ``std_msgs/String`` holding ``text``."""
-    out = bytearray()
-    _string(out, text)
-    return _CDR_LE + bytes(out)
-
-
-_CDR_LE = b"\x00\x01\x00\x00"  # CDR encapsulation: little endian
-_TIME = struct.Struct("<iI")
-_U32 = struct.Struct("<I")
-
-
-def _count(out: bytearray, n: int) -> None:
-    """A sequence's length, 4-aligned (CDR aligns from the end of the encapsulation header)."""
-    out += bytes(-len(out) % 4)
-    out += _U32.pack(n)
-
-
-def _string(out: bytearray, text: str) -> None:
-    """A CDR string: its length with the NUL, 4-aligned, its UTF-8 bytes and the NUL."""
-    data = text.encode()
-    _count(out, len(data) + 1)
-    out += data
-    out += b"\x00"
+    return encode_diagnostic_array(sec, nanosec, [(s.level, s.name, s.message, s.hardware_id, s.values)
+                                                  for s in statuses])
 
 
 class _Mcap:
@@ -257,7 +221,7 @@ class _Mcap:
             writer.add(log_ns, topic, msgtype, raw)
 
     def maneuvers(self, stamp_ns: int, text: str) -> None:
-        self._open().add(stamp_ns, self.history_topic, STRING, _string_message(text))
+        self._open().add(stamp_ns, self.history_topic, STRING, encode_string(text))
 
     def after(self, newest_ns: int) -> None:
         """Write what no later record can precede: a later sample comes after the newest one,
