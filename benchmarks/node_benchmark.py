@@ -12,6 +12,7 @@ differentiator) to the reception of that sample's last output array.
     .venv/bin/python benchmarks/node_benchmark.py --imu-rate 200 --air-rate 50
     .venv/bin/python benchmarks/node_benchmark.py --extreme --no-baseline  # more than the node can do
     .venv/bin/python benchmarks/node_benchmark.py --offline            # the data path alone, no DDS
+    .venv/bin/python benchmarks/node_benchmark.py --floor              # what any rclpy node pays
 
 ``--extreme``: estimates at 1000 Hz with ``estimator.method: both`` and ``frequency.every: 1``
 (1 kHz IMU): more work than one core does in real time. It prints the node's RSS, the last
@@ -22,6 +23,11 @@ about keeping up.
 DDS, executor or other processes: CPU per output sample of decoding, of feeding with
 estimation disabled and enabled, and of encoding. The live run prints the node's CPU by
 thread (``main`` runs the executor and every callback).
+
+``--floor``: instead of the estimator node, an rclpy node on the same executor with the same
+input subscriptions, taking every message and doing nothing else (:func:`floor_node`; variants
+``intake``, ``callbacks``, ``timer``): the CPU any rclpy node pays here for these inputs,
+measured as the node's is, per output-sample period and by thread.
 """
 
 from __future__ import annotations
@@ -246,7 +252,7 @@ def echo_baseline(samples: int = 1000) -> np.ndarray:
     return np.array(lat) * 1e3
 
 
-FLOORS = ("intake", "callbacks")
+FLOORS = ("intake", "callbacks", "timer")
 
 
 def floor_node(variant: str, rate: float) -> None:
@@ -255,7 +261,9 @@ def floor_node(variant: str, rate: float) -> None:
     as the benchmark starts it, without QoS-event handlers), taking every message raw and
     doing nothing else. ``intake``: the node's own :class:`.intake.Intake`, taken by a timer
     every intake period on the steady clock (200 Hz here), as the node takes it;
-    ``callbacks``: plain raw subscriptions on the executor, whose callback does nothing."""
+    ``callbacks``: plain raw subscriptions on the executor, whose callback does nothing;
+    ``timer``: the intake's subscriptions and timer, which takes nothing (the middleware
+    receives every message as before; the main thread pays only the timer's wakes)."""
     import gc
 
     import rclpy
@@ -270,9 +278,10 @@ def floor_node(variant: str, rate: float) -> None:
     rclpy.init()
     node = rclpy.create_node("bench_floor")
     qos = _input_qos(True, 1000)  # qos.reliable true, qos.depth 1000 (start_node's)
-    if variant == "intake":
+    if variant in ("intake", "timer"):
         intake = Intake(node, _TYPES, DEFAULT_TOPICS, qos)
-        node.create_timer(_intake_period(rate), intake.take, clock=Clock(clock_type=ClockType.STEADY_TIME))
+        node.create_timer(_intake_period(rate), intake.take if variant == "intake" else lambda: None,
+                          clock=Clock(clock_type=ClockType.STEADY_TIME))
     else:
         no_events = SubscriptionEventCallbacks(use_default_callbacks=False)
         for kind, msgtype in _TYPES.items():
@@ -312,7 +321,8 @@ def floor_run(args, variant: str, tmp: Path) -> dict:
 
 def floor(args) -> None:
     """The CPU any rclpy node pays here for these inputs (:func:`floor_node`), each variant of
-    ``args.floor`` in turn: % of one core, and ms per output-sample period (1 / ``--rate``)."""
+    ``args.floor`` in turn: % of one core, and ms per output-sample period (1 / ``--rate``):
+    process CPU over the ``--duration`` x ``--rate`` samples' worth of input streamed."""
     tmp = Path(os.environ.get("TMPDIR", "/tmp")) / f"rls_bench_{os.getpid()}"
     tmp.mkdir(parents=True, exist_ok=True)
     print(f"floor: an rclpy node on the node's executor and input subscriptions, taking every message and "
@@ -321,9 +331,10 @@ def floor(args) -> None:
     results = {}
     for variant in args.floor or FLOORS:
         r = results[variant] = floor_run(args, variant, tmp)
-        periods = r["wall_s"] * args.rate
+        periods = args.duration * args.rate  # the samples the stream makes (as the node's, if it falls behind)
         intake_hz = 1 / min(1 / args.rate, 5e-3)  # the node's intake period
-        what = f"timer {intake_hz:g} Hz, take_message" if variant == "intake" else "a callback per message"
+        what = {"intake": f"timer {intake_hz:g} Hz, take_message", "callbacks": "a callback per message",
+                "timer": f"timer {intake_hz:g} Hz, nothing taken"}[variant]
         threads = {k: v for k, v in sorted(r["threads"].items(), key=lambda kv: -kv[1]) if v > 0}
         r["cpu_percent"], r["cpu_per_period_ms"] = 100 * r["cpu_s"] / r["wall_s"], 1e3 * r["cpu_s"] / periods
         r["threads_ms_per_period"] = {k: 1e3 * v / periods for k, v in threads.items()}
