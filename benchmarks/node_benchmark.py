@@ -12,6 +12,7 @@ differentiator) to the reception of that sample's last output array.
     .venv/bin/python benchmarks/node_benchmark.py --imu-rate 200 --air-rate 50
     .venv/bin/python benchmarks/node_benchmark.py --extreme --no-baseline  # more than the node can do
     .venv/bin/python benchmarks/node_benchmark.py --offline            # the data path alone, no DDS
+    .venv/bin/python benchmarks/node_benchmark.py --floor              # what any rclpy node pays
 
 ``--extreme``: estimates at 1000 Hz with ``estimator.method: both`` and ``frequency.every: 1``
 (1 kHz IMU): more work than one core does in real time. It prints the node's RSS, the last
@@ -22,6 +23,11 @@ about keeping up.
 DDS, executor or other processes: CPU per output sample of decoding, of feeding with
 estimation disabled and enabled, and of encoding. The live run prints the node's CPU by
 thread (``main`` runs the executor and every callback).
+
+``--floor``: instead of the estimator node, an rclpy node on the same executor with the same
+input subscriptions, taking every message and doing nothing else (:func:`floor_node`; variants
+``intake``, ``callbacks``, ``timer``): the CPU any rclpy node pays here for these inputs,
+measured as the node's is, per output-sample period and by thread.
 """
 
 from __future__ import annotations
@@ -126,6 +132,7 @@ def publisher(args) -> None:
     kinds = {"imu": 0, "airspeed": 1, "dynamic_pressure": 2, "control_surfaces": 3, "thrust": 4}
     events = schedule(args)
     log = np.zeros((len(events), 3))
+    Path(args.log).with_suffix(".started").touch()  # (the floor run measures from here)
     start = time.monotonic()
     for i, (stamp, kind) in enumerate(events):
         due = start + (stamp - T0) * 1e-9
@@ -243,6 +250,99 @@ def echo_baseline(samples: int = 1000) -> np.ndarray:
     echo.wait(20)
     node.destroy_node()
     return np.array(lat) * 1e3
+
+
+FLOORS = ("intake", "callbacks", "timer")
+
+
+def floor_node(variant: str, rate: float) -> None:
+    """The floor run's node: an rclpy node on the estimator node's executor (its ``_spin``:
+    rclpy's events executor) with its input subscriptions (the same six topics, types and QoS
+    as the benchmark starts it, without QoS-event handlers), taking every message raw and
+    doing nothing else. ``intake``: the node's own :class:`.intake.Intake`, taken by a timer
+    every intake period on the steady clock (200 Hz here), as the node takes it;
+    ``callbacks``: plain raw subscriptions on the executor, whose callback does nothing;
+    ``timer``: the intake's subscriptions and timer, which takes nothing (the middleware
+    receives every message as before; the main thread pays only the timer's wakes)."""
+    import gc
+
+    import rclpy
+    from rclpy.clock import Clock, ClockType
+    from rclpy.event_handler import SubscriptionEventCallbacks
+    from rclpy.executors import ExternalShutdownException
+
+    from rls_uncertainty.datapath.inputs import DEFAULT_TOPICS
+    from rls_uncertainty.ros.intake import Intake
+    from rls_uncertainty.ros.node import _TYPES, _input_qos, _intake_period, _spin
+
+    rclpy.init()
+    node = rclpy.create_node("bench_floor")
+    qos = _input_qos(True, 1000)  # qos.reliable true, qos.depth 1000 (start_node's)
+    if variant in ("intake", "timer"):
+        intake = Intake(node, _TYPES, DEFAULT_TOPICS, qos)
+        node.create_timer(_intake_period(rate), intake.take if variant == "intake" else lambda: None,
+                          clock=Clock(clock_type=ClockType.STEADY_TIME))
+    else:
+        no_events = SubscriptionEventCallbacks(use_default_callbacks=False)
+        for kind, msgtype in _TYPES.items():
+            node.create_subscription(msgtype, DEFAULT_TOPICS[kind], lambda _raw: None, qos,
+                                     event_callbacks=no_events, raw=True)
+    gc.freeze()  # as the node does once it is built
+    with contextlib.suppress(KeyboardInterrupt, ExternalShutdownException):
+        _spin(node)
+    node.destroy_node()
+    rclpy.try_shutdown()
+
+
+def publisher_command(args, log_path: Path) -> list[str]:
+    """This script as the maneuver's publisher, logging to ``log_path``."""
+    return [sys.executable, __file__, "--publisher", "--log", str(log_path), "--imu-rate", str(args.imu_rate),
+            "--air-rate", str(args.air_rate), "--duration", str(args.duration)]
+
+
+def floor_run(args, variant: str, tmp: Path) -> dict:
+    """One floor node (:func:`floor_node`) fed the maneuver: its process CPU and CPU by thread
+    over the streaming part (from the publisher's first message to its exit, the node run's
+    tail included), and that part's wall time."""
+    node = subprocess.Popen([sys.executable, *os.environ.get("RLS_BENCH_PYFLAGS", "").split(), __file__,
+                             "--floor-node", variant, "--rate", str(args.rate)], cwd=ROOT)
+    log_path = tmp / f"floor_{variant}.npy"
+    pub = subprocess.Popen(publisher_command(args, log_path), cwd=ROOT)
+    while pub.poll() is None and not log_path.with_suffix(".started").exists():
+        time.sleep(0.005)
+    cpu0, wall0, threads0 = cpu_seconds(node.pid), time.monotonic(), thread_cpu_seconds(node.pid)
+    pub.wait()
+    cpu1, wall1, threads1 = cpu_seconds(node.pid), time.monotonic(), thread_cpu_seconds(node.pid)
+    node.send_signal(2)
+    node.wait(20)
+    return {"cpu_s": cpu1 - cpu0, "wall_s": wall1 - wall0,
+            "threads": {k: v - threads0.get(k, 0.0) for k, v in threads1.items()}}
+
+
+def floor(args) -> None:
+    """The CPU any rclpy node pays here for these inputs (:func:`floor_node`), each variant of
+    ``args.floor`` in turn: % of one core, and ms per output-sample period (1 / ``--rate``):
+    process CPU over the ``--duration`` x ``--rate`` samples' worth of input streamed."""
+    tmp = Path(os.environ.get("TMPDIR", "/tmp")) / f"rls_bench_{os.getpid()}"
+    tmp.mkdir(parents=True, exist_ok=True)
+    print(f"floor: an rclpy node on the node's executor and input subscriptions, taking every message and "
+          f"doing nothing else; IMU {args.imu_rate:g} Hz, air data and surfaces {args.air_rate:g} Hz, "
+          f"{args.duration:g} s, per output-sample period ({1e3 / args.rate:g} ms)")
+    results = {}
+    for variant in args.floor or FLOORS:
+        r = results[variant] = floor_run(args, variant, tmp)
+        periods = args.duration * args.rate  # the samples the stream makes (as the node's, if it falls behind)
+        intake_hz = 1 / min(1 / args.rate, 5e-3)  # the node's intake period
+        what = {"intake": f"timer {intake_hz:g} Hz, take_message", "callbacks": "a callback per message",
+                "timer": f"timer {intake_hz:g} Hz, nothing taken"}[variant]
+        threads = {k: v for k, v in sorted(r["threads"].items(), key=lambda kv: -kv[1]) if v > 0}
+        r["cpu_percent"], r["cpu_per_period_ms"] = 100 * r["cpu_s"] / r["wall_s"], 1e3 * r["cpu_s"] / periods
+        r["threads_ms_per_period"] = {k: 1e3 * v / periods for k, v in threads.items()}
+        print(f"  {variant} ({what}): CPU {r['cpu_percent']:.1f} % of one core, {r['cpu_per_period_ms']:.3f} ms "
+              f"per period; by thread, ms/period "
+              + ", ".join(f"{k} {v:.3f}" for k, v in r["threads_ms_per_period"].items()))
+    with open(tmp / "floor.json", "w") as fh:
+        json.dump(results, fh)
 
 
 def cpu_seconds(pid: int) -> float:
@@ -369,6 +469,10 @@ def parse_args() -> argparse.Namespace:
     ap.add_argument("--offline", action="store_true",
                     help="time the node's data path (decode, feed, encode) on the same messages, without DDS")
     ap.add_argument("--repeats", type=int, default=3, help="with --offline: passes over the messages")
+    ap.add_argument("--floor", nargs="*", choices=FLOORS, default=None,
+                    help="instead of the estimator node, an rclpy node that only takes the inputs "
+                         "(all variants, or those named): the CPU floor of any rclpy node here")
+    ap.add_argument("--floor-node", choices=FLOORS, default=None, help=argparse.SUPPRESS)
     ap.add_argument("--publisher", action="store_true", help=argparse.SUPPRESS)
     ap.add_argument("--echo", action="store_true", help=argparse.SUPPRESS)
     ap.add_argument("--log", default=None, help=argparse.SUPPRESS)
@@ -421,6 +525,12 @@ def main() -> int:
     if args.offline:
         offline(args)
         return 0
+    if args.floor_node:
+        floor_node(args.floor_node, args.rate)
+        return 0
+    if args.floor is not None:
+        floor(args)
+        return 0
 
     import rclpy
     from diagnostic_msgs.msg import DiagnosticArray
@@ -461,9 +571,7 @@ def main() -> int:
     while any(s.get_publisher_count() < 1 for s in subs[:-1]) and time.monotonic() < deadline:
         rclpy.spin_once(sub, timeout_sec=0.05)
     log_path = tmp / "publish_log.npy"
-    pub = subprocess.Popen([sys.executable, __file__, "--publisher", "--log", str(log_path),
-                            "--imu-rate", str(args.imu_rate), "--air-rate", str(args.air_rate),
-                            "--duration", str(args.duration)], cwd=ROOT)
+    pub = subprocess.Popen(publisher_command(args, log_path), cwd=ROOT)
     # Measure the node's CPU over the streaming part only.
     while pub.poll() is None and not stamps_seen:
         rclpy.spin_once(sub, timeout_sec=0.01)
