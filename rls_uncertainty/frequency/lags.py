@@ -55,7 +55,6 @@ class LagSums:
         self._sums: FloatArray = np.zeros((models, signals + 1, w, signals + 1))
         self._buffer: FloatArray = np.zeros((models, 2 * w, signals + 1))
         self._product: FloatArray = np.empty((models, signals + 1, w * (signals + 1)))
-        self._flat: FloatArray = self._sums.reshape(self._product.shape)  # a view
 
     def window(self) -> FloatArray:
         """The last ``n_lags + 1`` samples ``(u_n, 1)``, newest first (zeros before the first), a view."""
@@ -77,7 +76,8 @@ class LagSums:
         M, q1 = sample.shape
         window = self._buffer[:, pos : pos + w].reshape(M, 1, w * q1)
         np.multiply(sample[:, :, None], window, out=self._product)
-        np.add(self._flat, self._product, out=self._flat)
+        flat = self._sums.reshape(self._product.shape)  # a view
+        np.add(flat, self._product, out=flat)
 
     @property
     def sums(self) -> FloatArray:

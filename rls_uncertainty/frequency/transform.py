@@ -52,7 +52,7 @@ class RecursiveFourierTransform:
     addition; the phasors of the next :data:`BLOCK` samples are computed at once, by the same
     elementwise operations as :meth:`phasor`'s."""
 
-    BLOCK = 64
+    BLOCK = 16
 
     def __init__(self, frequencies: npt.ArrayLike, rate_hz: float, shape: tuple[int, ...]) -> None:
         self.frequencies: FloatArray = np.asarray(frequencies, dtype=np.float64).reshape(-1)
@@ -61,8 +61,7 @@ class RecursiveFourierTransform:
         self.n = 0
         K = self.frequencies.size
         self._sums: ComplexArray = np.zeros((*self.shape, K), complex)
-        self._flat: FloatArray = self._sums.view(np.float64).reshape(-1, 2 * K)  # a view: (signals, 2K)
-        self._product: FloatArray = np.empty_like(self._flat)
+        self._product: FloatArray = np.empty((int(np.prod(self.shape)), 2 * K))
         self._block_start = -2 * self.BLOCK  # no block yet
         self._block: FloatArray = np.empty((self.BLOCK, 2 * K))
 
@@ -98,7 +97,8 @@ class RecursiveFourierTransform:
         times the phasor's real and imaginary parts (the complex product with a real number)."""
         u = np.asarray(sample, dtype=np.float64).reshape(-1, 1)
         np.multiply(u, self._phasors(self.n), out=self._product)
-        self._flat += self._product
+        flat = self._sums.view(np.float64).reshape(self._product.shape)  # a view: (signals, 2K)
+        np.add(flat, self._product, out=flat)
         self.n += 1
 
     def reset(self) -> None:
