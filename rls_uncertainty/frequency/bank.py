@@ -134,8 +134,8 @@ class FrequencyBank:
         u[:, 1:q] = np.asarray(X, dtype=np.float64).reshape(M, q - 1)
         if instruments is not None:
             u[:, q:] = np.asarray(instruments, dtype=np.float64).reshape(M, q - 1)
-        u[self._padding] = 0.0
-        if (np.abs(u) <= LARGEST_INPUT).all():
+        np.copyto(u, 0.0, where=self._padding)
+        if np.abs(u).max() <= LARGEST_INPUT:  # NaN: False
             return u
         bad = ~(np.abs(u) <= LARGEST_INPUT).all(axis=1)
         if bad.any():

@@ -41,26 +41,31 @@ FloatArray = npt.NDArray[np.float64]
 class LagSums:
     """Eq. F9 for ``M`` models of ``q`` signals each, lags ``0 .. n_lags``, one sample at a time,
     kept as the augmented sums ``Sa_i`` (module docstring): the sums, the partial totals and the
-    counts are one product per sample."""
+    counts are one product per sample.
+
+    Kept as ``(M, q+1, lags, q+1)`` (:attr:`sums` gives the ``(M, lags, q+1, q+1)`` of the
+    equations): sample ``n``'s products with the window of the last samples are then one
+    product of a column ``(u_n, 1)`` with a row of ``lags (q+1)`` contiguous numbers, the window,
+    which the buffer holds newest first (each sample written twice, at ``w - 1 - n % w`` and
+    ``w`` further, so that a contiguous slice is the window)."""
 
     def __init__(self, models: int, signals: int, n_lags: int) -> None:
         self.width = w = int(n_lags) + 1
         self.n = 0
-        self.sums: FloatArray = np.zeros((models, w, signals + 1, signals + 1))  # Sa_i
-        # The last w samples (u_n, 1), each written twice so that a contiguous slice is the window.
+        self._sums: FloatArray = np.zeros((models, signals + 1, w, signals + 1))
         self._buffer: FloatArray = np.zeros((models, 2 * w, signals + 1))
-        self._product: FloatArray = np.empty_like(self.sums)
+        self._product: FloatArray = np.empty((models, signals + 1, w * (signals + 1)))
 
     def window(self) -> FloatArray:
         """The last ``n_lags + 1`` samples ``(u_n, 1)``, newest first (zeros before the first), a view."""
-        pos = (self.n - 1) % self.width
-        view: FloatArray = self._buffer[:, pos + 1 : pos + 1 + self.width][:, ::-1]
+        start = self.width - 1 - (self.n - 1) % self.width
+        view: FloatArray = self._buffer[:, start : start + self.width]
         return view
 
     def update(self, u: FloatArray) -> None:
         """Add sample ``n`` (``(M, q)``, first sample already subtracted)."""
         w, n = self.width, self.n
-        pos = n % w
+        pos = w - 1 - n % w
         sample = self._buffer[:, pos]
         sample[:, :-1] = u
         if n < w:  # the constant 1 stays once every position has held a sample
@@ -68,12 +73,40 @@ class LagSums:
         self._buffer[:, pos + w] = sample
         self.n += 1
         # Sa_i += (u_n, 1) (u_(n-i), 1)' for every lag at once (the window is newest first).
-        np.multiply(sample[:, None, :, None], self.window()[:, :, None, :], out=self._product)
-        self.sums += self._product
+        M, q1 = sample.shape
+        window = self._buffer[:, pos : pos + w].reshape(M, 1, w * q1)
+        np.multiply(sample[:, :, None], window, out=self._product)
+        flat = self._sums.reshape(self._product.shape)  # a view
+        np.add(flat, self._product, out=flat)
+
+    @property
+    def sums(self) -> FloatArray:
+        """``Sa_i`` for ``i = 0 .. n_lags`` ``(M, n_lags + 1, q+1, q+1)``, a new array; assigned,
+        it sets them."""
+        out: FloatArray = np.ascontiguousarray(self._sums.transpose(0, 2, 1, 3))
+        return out
+
+    @sums.setter
+    def sums(self, values: FloatArray) -> None:
+        self._sums[...] = np.asarray(values, dtype=np.float64).transpose(0, 2, 1, 3)
+
+    @property
+    def buffer(self) -> FloatArray:
+        """The window's buffer as oldest-first positions ``n % w`` (and ``w`` further), a new
+        array; assigned, it sets it."""
+        half = self._buffer[:, : self.width][:, ::-1]
+        out: FloatArray = np.concatenate([half, half], axis=1)
+        return out
+
+    @buffer.setter
+    def buffer(self, values: FloatArray) -> None:
+        half = np.asarray(values, dtype=np.float64)[:, : self.width][:, ::-1]
+        self._buffer[:, : self.width] = half
+        self._buffer[:, self.width :] = half
 
     def augmented(self) -> FloatArray:
-        """``Sa_i`` for ``i = 0 .. min(n_lags, N - 1)``, ``(M, lags, q+1, q+1)``, a view."""
-        out: FloatArray = self.sums[:, : min(self.width, self.n)]
+        """``Sa_i`` for ``i = 0 .. min(n_lags, N - 1)``, ``(M, lags, q+1, q+1)``, a new array."""
+        out: FloatArray = np.ascontiguousarray(self._sums[:, :, : min(self.width, self.n)].transpose(0, 2, 1, 3))
         return out
 
     def centered(self) -> FloatArray:
@@ -85,7 +118,7 @@ class LagSums:
 
     def reset(self) -> None:
         self.n = 0
-        self.sums[...] = 0.0
+        self._sums[...] = 0.0
         self._buffer[...] = 0.0
 
 

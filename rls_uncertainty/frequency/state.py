@@ -37,11 +37,11 @@ def snapshot(bank: FrequencyBank) -> dict[str, Any]:
     """The record of ``bank`` as plain data (module docstring), copies."""
     lags, first = bank._lags, bank._first
     arrays = {
-        "transform": bank._transform.values.copy(),
+        "transform": bank._transform.values,
         "first": np.zeros_like(bank._trim_sum) if first is None else first.copy(),
         "trim_sum": bank._trim_sum.copy(),
-        "lag_sums": lags.sums.copy(),
-        "lag_buffer": lags._buffer.copy(),
+        "lag_sums": lags.sums,
+        "lag_buffer": lags.buffer,
     }
     if bank._cross is not None:
         arrays["cross"] = bank._cross.copy()
@@ -82,10 +82,10 @@ def restore(bank: FrequencyBank, saved: Mapping[str, Any]) -> None:
         arrays[name] = np.array(arrays[name], dtype=dtype)
     bank.reset()
     a = {k[len(PREFIX):]: v for k, v in arrays.items()}
-    bank._transform.values[...] = a["transform"]
+    bank._transform.values = a["transform"]
     bank._transform.n = n
-    bank._lags.sums[...] = a["lag_sums"]
-    bank._lags._buffer[...] = a["lag_buffer"]
+    bank._lags.sums = a["lag_sums"]
+    bank._lags.buffer = a["lag_buffer"]
     bank._lags.n = n
     bank._trim_sum[...] = a["trim_sum"]
     bank._first = a["first"] if n else None
