@@ -286,7 +286,7 @@ def _discovery(out: _Outputs, player: Any, kinds: Mapping[str, str]) -> str:
     published_to = out.published_to()
     return (f"{out.matched()} of the {len(out.subs)} output subscriptions matched the node's publishers; the node "
             f"publishes to {published_to if published_to >= 0 else 'an unreported number of'} of them; "
-            f"publishers the node counts per input: {node_sees or 'no report'}; subscriptions matched per input "
+            f"publishers the node counts per input: {node_sees}; subscriptions matched per input "
             f"here: {player_sees}; {out.reports} report(s) from the node")
 
 
