@@ -1,6 +1,6 @@
 """Output topics nobody subscribes to are not published; the first subscriber of one gets the
 newest sample once the node has seen it (one diagnostics period), with the offline replay's
-values, while no new sample comes."""
+values, while no new sample comes; the node's diagnostics count the topics it publishes."""
 
 from __future__ import annotations
 
@@ -33,6 +33,9 @@ def test_an_unsubscribed_topic_is_not_published_and_its_first_subscriber_gets_th
     late = None
     try:
         tester.wait_connected()
+        listened = len(tester.subs) - 1  # the tester's sample topics (its last subscription: /diagnostics)
+        said = lambda n: lambda d: d.get(f"{NODE}: samples", {}).get("outputs_subscribed") == str(n)  # noqa: E731
+        tester.wait_diagnostics(said(listened))  # the node counts the topics it publishes
         topic = f"/{NODE}/Cm/estimates"
         messages, _ = read_inputs(BUNDLED)
         part = messages[: len(messages) // 3]
@@ -56,6 +59,7 @@ def test_an_unsubscribed_topic_is_not_published_and_its_first_subscriber_gets_th
         # Only the newest: the samples before the subscriber came were never published on Cm.
         assert [_stamp(m) for m in got] == [last_cm.stamp_ns], [_stamp(m) for m in got]
         np.testing.assert_array_equal(np.array(got[0].data), last_cm.theta[1, :4])
+        tester.wait_diagnostics(said(listened + 1))
     finally:
         if late is not None:
             late.destroy_node()

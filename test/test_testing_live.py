@@ -2,20 +2,26 @@
 process on a private domain (claimed among $RLS_TEST_DOMAINS, default 43-49: this machine's
 sessions use 42-49), the bundled bag played to it with acknowledgements, its outputs paired by
 stamp: bit-identical, sample by sample, to the in-process replay with the same parameters (one
-machine); failures name what was missing and the node's log; a domain with another node on it
+machine); failures say what was seen, with the node's log path and its last lines, and the wait
+for the end runs out only after its timeout without progress; a domain with another node on it
 is passed over, and a second estimator on the domain stops the run in one line."""
 
 import os
+import re
 import time
+from collections import Counter
+from pathlib import Path
 
 import numpy as np
 import pytest
 
 from rls_uncertainty.errors import ConfigError, LiveTimeout
+from rls_uncertainty.offline.bags import read_inputs
 from rls_uncertainty.testing import (
     REPLAY_PARAMETERS,
     EstimatorProcess,
     claim_domain,
+    live,
     parameters,
     play_to_node,
     replay_bag,
@@ -128,3 +134,49 @@ def test_a_second_estimator_on_the_domain_stops_the_run_in_one_line(tmp_path, do
     finally:
         for node in nodes:
             assert node.stop() == 0, node.log()
+
+
+def test_a_run_that_never_ends_says_what_was_seen_with_the_nodes_log(tmp_path, domain, monkeypatch):
+    """The end condition held back (the run itself is real): LiveTimeout once nothing has grown
+    for the timeout, saying what the player published and the node received, the samples used
+    and stamps arrived, with the node's log path and its last lines."""
+    ended = []
+    complete = live._complete
+
+    def never(*args):
+        real = complete(*args)
+        return lambda: bool(real() and ended.append(time.monotonic()))
+
+    monkeypatch.setattr(live, "_complete", never)
+    node = EstimatorProcess(parameters("t2"), domain=domain, directory=tmp_path)
+    try:
+        with pytest.raises(LiveTimeout) as timed_out:
+            play_to_node(BUNDLED, node, timeout=30)
+        raised = time.monotonic()
+    finally:
+        assert node.stop() == 0, node.log()
+    said = str(timed_out.value)
+    assert ended and raised - ended[0] >= 30 - 1, said  # after the end: the timeout without progress
+    assert said.startswith("no complete outputs (published {"), said
+    assert " within 30 s of no progress; the node's log: " + str(node.log_file) + "\n" in said
+    assert said.endswith(node.log()[-2000:]) and "estimating" in said.split("\n", 1)[1]
+    counts = Counter(kind for kind, _stamp, _msg in read_inputs(BUNDLED)[0])
+    published = re.search(r"published (\{.*?\}) to subscriptions matched", said).group(1)
+    received = re.search(r"the node received (\{.*?\});", said).group(1)
+    assert eval(published) == eval(received) == dict(counts), said
+    used = int(re.search(r"it used (\d+) samples", said).group(1))
+    assert used > 450 and f"{used} sample stamps arrived here" in said, said
+
+
+def test_discovery_that_does_not_finish_in_time_says_how_far_it_got(tmp_path, domain):
+    node = EstimatorProcess(parameters("t2"), domain=domain, directory=tmp_path)
+    try:  # a node that has only just started is not discovered within 0.1 s
+        with pytest.raises(LiveTimeout, match=r"^no discovery of the node's inputs and outputs \(\d+ of the \d+ output "
+                                              r"subscriptions matched the node's publishers; the node publishes to .* "
+                                              r"of them; publishers the node counts per input: imu \d+, .*; "
+                                              r"subscriptions matched per input here: imu \d+, .*; \d+ report\(s\) "
+                                              r"from the node\) within 0.1 s; the node's log: " + re.escape(
+                                                  str(Path(tmp_path) / "estimator.log"))):
+            play_to_node(BUNDLED, node, timeout=0.1)
+    finally:
+        node.stop()

@@ -28,7 +28,8 @@ node in the root namespace, as always, and the fully qualified name under a name
   latency and CPU percentiles of the period, ``intake_wait_ms.p99`` (how long inputs waited
   to be fed), ``periodic_ms.max`` (the longest step of the
   node's periodic work, which holds up the input callbacks for that long),
-  ``state_file``, ``nodes_with_this_name``. OK, or
+  ``state_file``, ``nodes_with_this_name``, and from the node ``outputs_subscribed`` (its
+  sample topics that had a subscriber at the period's start: the ones it publishes). OK, or
   ERROR while another node with this node's fully qualified name is on the ROS graph (its
   outputs then mix with this node's on the same topics: every consumer receives each sample
   from both): the text first in the message, and logged as a warning (throttled like the
@@ -156,6 +157,9 @@ class Snapshot:
     covariance_decimation: int = 0
     buffer_duration: float = 1.0
     shed: bool = False  # the node sheds work while it cannot keep up (shed_load)
+    # The node's sample topics with a subscriber at the period's start, the ones it publishes
+    # (None: the offline replay, which publishes none).
+    outputs_subscribed: int | None = None
 
 
 def status_prefix(node: str) -> str:
@@ -437,6 +441,8 @@ class DiagnosticsPolicy:
         if snap.periodic_s:
             kv.append(("periodic_ms.max", _ms(max(snap.periodic_s))))
         kv += [("state_file", snap.state_file), ("nodes_with_this_name", 1 + max(snap.namesakes, 0))]
+        if snap.outputs_subscribed is not None:
+            kv.append(("outputs_subscribed", snap.outputs_subscribed))
         message = f"{c['samples_used']} of {c['samples_formed']} samples used"
         load = self.load
         if load is not None and snap.waits_s:

@@ -395,7 +395,7 @@ class EstimatorNode(Node):
             "frequency_every": self.config.frequency.every if self.config.frequency is not None else 0,
             "covariance_decimation": self.config.outputs.covariance_decimation,
             "buffer_duration": self.config.inputs.buffer_duration,
-            "shed": self.node_cfg.shed_load,
+            "shed": self.node_cfg.shed_load, "outputs_subscribed": self._out.subscribed,
         }
         self._last_diag = wall
         self._latencies, self._cpu_times, self._periodic, self._waits = [], [], [], []

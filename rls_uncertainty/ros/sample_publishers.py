@@ -76,6 +76,11 @@ class SamplePublishers:
         if self._last is not None and any(gained):
             self._send(self._last, frame_id, gained)
 
+    @property
+    def subscribed(self) -> int:
+        """The sample topics that had a subscriber at the last refresh (those published)."""
+        return sum(self._wanted)
+
     def publish(self, out: SampleOutput, frame_id: str) -> None:
         """A sample's messages (:meth:`.outputs.OutputLayout.encode`) on the topics with a
         subscriber, each on the publisher of its topic index."""

@@ -5,13 +5,17 @@ outputs collected as a :class:`..results.ReplayResult` (:func:`play_to_node`).
 Delivery is lossless: the player never has more than a window of messages per topic that
 the node's reliable subscriptions have not acknowledged (:mod:`..player`), and the node runs
 with :data:`REPLAY_PARAMETERS` (reliable inputs, a deep queue, a long input buffer), as for
-``rls-uncertainty demo``. The node's outputs are paired by the stamp every array carries
-(:func:`..outputs.parse_stamp_label`). The run is complete when the node's ``/diagnostics``
-report every message the player published as received, the samples it used have all been
-received here, and every model it reports ready has published for the last of them (with
-``estimator.method`` ``frequency`` or ``both``: every model that published frequency-domain
-arrays has published them for the last sample due, the samples used being counted from the
-start: a run with a reset in it is not waited for correctly).
+``rls-uncertainty demo``. Playing starts once discovery has matched every connection from both
+of its ends (:func:`_ready`): each side learns of the other separately, seconds apart on a busy
+machine, a message published before its reader matched is lost to it, and the node publishes
+only on the sample topics its publishers have matched a subscriber on. The node's outputs
+are paired by the stamp every array carries (:func:`..outputs.parse_stamp_label`). The run
+is complete when the node's ``/diagnostics`` report every message the player published as
+received, the samples it used have all been received here, and every model it reports ready
+has published for the last of them (with ``estimator.method`` ``frequency`` or ``both``: every
+model that published frequency-domain arrays has published them for the last sample due, the
+samples used being counted from the start: a run with a reset in it is not waited for
+correctly).
 
 The node dies with the process that started it, whatever ends that process (SIGKILL
 included): it runs in a process group of its own with Linux's parent-death signal set to
@@ -190,18 +194,37 @@ class _Outputs:
             self.diagnostics = statuses
             self.reports += 1
 
-    def matched(self) -> bool:
-        """Every output subscription matched the node's publisher."""
-        return all(s.get_publisher_count() >= 1 for s in self.subs)
+    def matched(self) -> int:
+        """The output subscriptions that matched the node's publisher (this side's view)."""
+        return sum(s.get_publisher_count() >= 1 for s in self.subs)
 
-    def _publishers(self) -> dict[str, int]:
+    def _value(self, status: str, key: str) -> str | None:
+        """``key`` of the node's newest ``status`` report (None: no such report or key)."""
+        return next((kv.get(key) for name, _l, _m, kv in self.diagnostics if name == f"{NODE_NAME}: {status}"), None)
+
+    def published_to(self) -> int:
+        """How many sample topics the node's newest report says it publishes (the ones its
+        publishers matched a subscriber on: the node's view, which lags this side's on a busy
+        machine, and before which the node publishes nothing on a topic; -1: not said)."""
+        value = self._value("samples", "outputs_subscribed")
+        return -1 if value is None else int(value)
+
+    def progress(self) -> tuple[int, ...]:
+        """What grows while the node works through the bag: the stamps and arrays here, and
+        the messages and samples the node's newest report counts."""
+        received = sum(int(v) for name, _l, _m, kv in self.diagnostics if name == f"{NODE_NAME}: inputs"
+                       for k, v in kv.items() if k.endswith(".received"))
+        return (len(self.stamps), sum(map(len, self.arrays.values())), received,
+                int(self._value("samples", "samples_used") or 0))
+
+    def publishers(self) -> dict[str, int]:
         """The node's newest report's publisher count per input stream."""
         return {k[:-11]: int(v) for name, _l, _m, kv in self.diagnostics if name == f"{NODE_NAME}: inputs"
                 for k, v in kv.items() if k.endswith(".publishers")}
 
     def inputs_seen(self, streams: Sequence[str]) -> bool:
         """The node's newest report counts a publisher on each of ``streams``."""
-        counts = self._publishers()
+        counts = self.publishers()
         return all(counts.get(s, 0) >= 1 for s in streams)
 
     def intruders(self) -> str | None:
@@ -211,7 +234,7 @@ class _Outputs:
         if nodes > 1:
             return (f"{nodes} nodes publish /{NODE_NAME}/{SAMPLE_STAMP}: another node named {NODE_NAME} runs on "
                     "this domain and its samples mix with the node's")
-        crowded = {s: n for s, n in self._publishers().items() if n > 1}
+        crowded = {s: n for s, n in self.publishers().items() if n > 1}
         if crowded:
             return ("another player publishes to the node: its inputs have more than this player's publisher ("
                     + ", ".join(f"{s} {n}" for s, n in sorted(crowded.items())) + ")")
@@ -219,15 +242,74 @@ class _Outputs:
 
 
 def _wait(spin: Callable[[], None], condition: Callable[[], bool], timeout: float, what: Callable[[], str],
-          node: EstimatorProcess) -> None:
+          node: EstimatorProcess, progress: Callable[[], object] | None = None) -> None:
+    """Spin until ``condition()``; :class:`LiveTimeout` after ``timeout`` seconds, counted again
+    whenever ``progress()`` changes (a busy machine's node is slow, not stuck), or as soon as the
+    node exits."""
     deadline = time.monotonic() + timeout
+    last = progress() if progress is not None else None
     while not condition():
+        if progress is not None and (now := progress()) != last:
+            last, deadline = now, time.monotonic() + timeout
         if not node.running:
             raise LiveTimeout(f"the estimator node exited ({node.proc.returncode}) while waiting for {what()}; "
                               f"its log: {node.log_file}\n{node.log()[-2000:]}")
-        if time.monotonic() > deadline:
-            raise LiveTimeout(f"no {what()} within {timeout:g} s; the node's log: {node.log_file}")
+        if time.monotonic() > deadline:  # the log's end too: a test's temporary directory may be gone when read
+            quiet = " of no progress" if progress else ""
+            raise LiveTimeout(f"no {what()} within {timeout:g} s{quiet}; the node's log: {node.log_file}\n"
+                              f"{node.log()[-2000:]}")
         spin()
+
+
+def _ready(out: _Outputs, player: Any, kinds: Mapping[str, str]) -> Callable[[], bool]:
+    """Whether the bag may be played: discovery matched both ends of every connection, seen
+    from both sides (each side's view lags the other's by seconds on a busy machine, and a
+    message published before its reader matched is lost to it): this player's output
+    subscriptions matched the node's publishers, and the node's newest report says it
+    publishes on as many sample topics (its publishers matched them); the node's input
+    subscriptions matched this player's publishers (its report counts a publisher on each
+    stream), and this player's publishers matched a subscription on each input topic."""
+
+    def ready() -> bool:
+        return (out.matched() == len(out.subs) and out.published_to() >= len(out.subs)
+                and out.inputs_seen(list(kinds.values()))
+                and all(player.pubs[topic].get_subscription_count() >= 1 for topic in kinds))
+
+    return ready
+
+
+def _discovery(out: _Outputs, player: Any, kinds: Mapping[str, str]) -> str:
+    """What discovery matched so far, seen from each side (:func:`_ready`)."""
+    counts = out.publishers()
+    node_sees = ", ".join(f"{kind} {counts.get(kind, 0)}" for kind in kinds.values())
+    player_sees = ", ".join(f"{kind} {player.pubs[topic].get_subscription_count()}" for topic, kind in kinds.items())
+    published_to = out.published_to()
+    return (f"{out.matched()} of the {len(out.subs)} output subscriptions matched the node's publishers; the node "
+            f"publishes to {published_to if published_to >= 0 else 'an unreported number of'} of them; "
+            f"publishers the node counts per input: {node_sees}; subscriptions matched per input "
+            f"here: {player_sees}; {out.reports} report(s) from the node")
+
+
+def _seen(out: _Outputs, player: Any, kinds: Mapping[str, str], models: Sequence[str]) -> str:
+    """What arrived, against what :func:`_complete` waits for, and how many subscriptions each
+    input topic's publisher had matched (fewest and most seen while playing, and now)."""
+    player.count_subscribers()
+    published = {kind: player.stats[topic].published for topic, kind in kinds.items()}
+    matched = {kind: f"{player.stats[topic].subscribers_min}-{player.stats[topic].subscribers_max} now "
+                     f"{player.pubs[topic].get_subscription_count()}" for topic, kind in kinds.items()}
+    counters = _counters(out.diagnostics)
+    if not counters:
+        return f"published {published} to subscriptions matched {matched}; no report from the node"
+    received = {kind: counters["streams"].get(kind, {}).get("received") for kind in published}
+    last = out.stamps[-1] if out.stamps else None
+    arrays = {m: [kind for (model, kind), got in out.arrays.items() if model == m and last in got] for m in models}
+    ready = sorted(name.split("model ", 1)[1] for name, _l, _m, kv in out.diagnostics
+                   if name.startswith(f"{NODE_NAME}: model ") and kv.get("ready") == "True")
+    return (f"published {published} to subscriptions matched {matched}, the node received {received}; "
+            f"it used {counters['samples_used']} samples ({counters['samples_pending']} pending), "
+            f"{len(out.stamps)} sample stamps arrived here; "
+            f"arrays for the last stamp per model: {arrays}; models ready: {ready}; "
+            f"{out.reports} report(s) from the node")
 
 
 def _complete(out: _Outputs, published: Mapping[str, int], models: Sequence[str], time_domain: bool,
@@ -314,8 +396,10 @@ def play_to_node(bag: str | Path, node: EstimatorProcess, *, rate: float = 0.0, 
                  window: int = 100) -> ReplayResult:
     """Play ``bag`` to the running ``node`` with acknowledgements (``rate`` times real time;
     0: as fast as the acknowledgements allow) and collect its outputs until the run is
-    complete (module docstring) or ``timeout`` seconds pass at any one step
-    (:class:`LiveTimeout`, naming what was missing and the node's log)."""
+    complete (module docstring) or ``timeout`` seconds pass at any one step (waiting for the
+    end: seconds without progress, the node's or its outputs'), raising :class:`LiveTimeout`
+    that says what was seen (the inputs published, matched and received; the samples used and
+    the outputs arrived) with the node's log path and its last lines."""
     with optional("ros", what="playing to a live node"):
         import rclpy  # noqa: PLC0415
         from rclpy.executors import SingleThreadedExecutor  # noqa: PLC0415
@@ -350,8 +434,8 @@ def play_to_node(bag: str | Path, node: EstimatorProcess, *, rate: float = 0.0, 
                     raise LiveTimeout(f"ROS domain {node.domain}: {intruders}; the run's numbers would not be the "
                                       f"node's alone (the node's log: {node.log_file})")
 
-        matched = lambda: out.matched() and out.inputs_seen(list(kinds.values()))  # noqa: E731
-        _wait(spin, matched, timeout, lambda: "discovery of the node's inputs and outputs", node)
+        _wait(spin, _ready(out, player, kinds), timeout,
+              lambda: f"discovery of the node's inputs and outputs ({_discovery(out, player, kinds)})", node)
         t0 = time.monotonic()
         try:
             player.run(rate, spin, ack_timeout=timeout)
@@ -359,7 +443,7 @@ def play_to_node(bag: str | Path, node: EstimatorProcess, *, rate: float = 0.0, 
             raise LiveTimeout(f"{exc}; the node's log: {node.log_file}") from exc
         published = {kinds[t]: s.published for t, s in player.stats.items() if t in kinds}
         _wait(spin, _complete(out, published, models, config.publishes_time, every), timeout,
-              lambda: f"complete outputs (published {published}; the node reports {out.reports} times)", node)
+              lambda: f"complete outputs ({_seen(out, player, kinds, models)})", node, out.progress)
         wall = time.monotonic() - t0
         span = (player.reader.end_time - player.reader.start_time) * 1e-9
         return _result(out, node.parameters, published, wall, span)
