@@ -16,9 +16,10 @@ parameters; frequency domain the same without the bias: 2, 3, 2, 5, 3, 3), 50 la
   5. the whole pipeline (``replay.run_pipeline``: sampling, differentiation, aerodynamics, both
      estimators, convergence, identifiability) per sample used, with ``estimator.method`` time,
      both and frequency (``frequency.every`` 1 and 5), on the bundled T-2 bag (``config/t2.yaml``:
-     2 models, 51 frequencies) and, when ``../shared/flight_data`` is there, the Twin Otter
-     lateral recording f1_017 (3 models, 36 frequencies); best of three runs (wall time), and
-     ``both`` with ``frequency.every: 5`` as a multiple of ``time``.
+     2 models, 51 frequencies) and the Twin Otter lateral recording f1_017 (3 models, 36
+     frequencies) from ``--flight-data`` (default ``../shared/flight_data``; said when absent);
+     best of three runs (wall time), and ``both`` with ``frequency.every: 5`` as a multiple of
+     ``time``.
 
 The rows are ``estimator_benchmark.maneuver``'s (multisine-like regressors, AR(1) noise).
 Median (and 99th percentile) over 2000 samples after 300 of warm-up. numpy's BLAS threads as
@@ -186,7 +187,7 @@ def main() -> None:
           f"frequency domain (51 frequencies) {state_bytes(fd) / 1024:.0f} KiB")
 
 
-def pipeline_costs() -> None:
+def pipeline_costs(flight_data: Path) -> None:
     """Section 5: microseconds per sample used through the whole pipeline, per method."""
     import tempfile
 
@@ -196,12 +197,14 @@ def pipeline_costs() -> None:
 
     variants = {"time": {}, "both": {"estimator.method": "both"}, "both, every 5": {
         "estimator.method": "both", "frequency.every": 5}, "frequency": {"estimator.method": "frequency"}}
-    data = ROOT.parent / "shared" / "flight_data" / "totter_f1_017"
+    data = flight_data / "totter_f1_017"
     with tempfile.TemporaryDirectory(prefix="freq_bench_") as work:
         cases = {"T-2 bag, config/t2.yaml": (ROOT / "bags" / "t2_maneuver", "t2")}
         if data.exists():
             convert(data, ROOT / "msg_schemas" / "fti_msgs" / "mapping.yaml", Path(work) / "f1_017")
             cases["Twin Otter f1_017, twin_otter_lateral"] = (Path(work) / "f1_017", "twin_otter_lateral")
+        else:
+            print(f"5. (no {data}: the Twin Otter case is left out; give --flight-data)")
         print("5. the pipeline per sample used (us, best of 3; sampling to outputs, no files):")
         for label, (bag, config_name) in cases.items():
             messages, _ = read_inputs(bag)
@@ -276,6 +279,8 @@ if __name__ == "__main__":
     parser.add_argument("--against", metavar="OTHER_SRC", help="also run the package of this source tree, alternately")
     parser.add_argument("--rounds", type=int, default=2, help="with --against: runs of each tree (default 2)")
     parser.add_argument("--cpu", action="store_true", help="only the CPU-time figures of the banks (cpu_costs)")
+    parser.add_argument("--flight-data", type=Path, default=ROOT.parent / "shared" / "flight_data",
+                        help="the shared recordings, for section 5's Twin Otter case (default ../shared/flight_data)")
     args = parser.parse_args()
     if args.against:
         against(args.against, args.rounds, ["--cpu"] if args.cpu else [])
@@ -283,4 +288,4 @@ if __name__ == "__main__":
         cpu_costs()
     else:
         main()
-        pipeline_costs()
+        pipeline_costs(args.flight_data)
