@@ -167,7 +167,9 @@ def offline(args) -> None:
     if args.method != "time":
         values["frequency.every"] = args.frequency_every
     config = pipeline_config(values)
-    raws = [(MESSAGE_TYPES[kind], kind, serialize_message(message(kind, stamp))) for stamp, kind in schedule(args)]
+    stamped = [(stamp, (MESSAGE_TYPES[kind], kind, serialize_message(message(kind, stamp))))
+               for stamp, kind in schedule(args)]
+    raws = [raw for _, raw in stamped]
     best: dict[str, float] = {}
 
     def timed(what: str, fn, *fn_args) -> Any:
@@ -202,6 +204,35 @@ def offline(args) -> None:
         print(f"  {what:38s} {1e3 * seconds / n:.3f}")
     print(f"  (feed includes decoding; estimation is feed minus feed with estimation disabled: "
           f"{1e3 * (best['feed'] - best['feed, estimation disabled']) / n:.3f})")
+    cpu, n_paced, period = paced_feed(args, Pipeline(config), stamped)
+    print(f"  {'feed, paced as the node feeds live':38s} {1e3 * cpu / n_paced:.3f}  (one pass per {1e3 * period:g} ms "
+          f"in real time with the messages stamped in it, {args.duration:g} s; thread CPU of the passes)")
+
+
+def paced_feed(args: argparse.Namespace, pipeline: Any, stamped: list) -> tuple[float, int, float]:
+    """Decode and feed ``stamped`` (``(stamp ns, (msgtype, kind, raw))``) in the live node's
+    rhythm, without DDS: the messages stamped in one intake period fed in one pass, a pass
+    per period in real time, sleeping between passes. The passes' thread CPU, the output
+    samples and the period: against the loop over all messages at once, the cost of feeding
+    in short passes between which other threads and processes run."""
+    from rls_uncertainty.datapath.cdr import decode
+    from rls_uncertainty.datapath.inputs import feed
+    from rls_uncertainty.ros.node import _intake_period
+
+    period = _intake_period(args.rate)
+    passes: dict[int, list] = {}
+    for stamp, item in stamped:
+        passes.setdefault(int((stamp - T0) // round(period * 1e9)), []).append(item)
+    cpu, n, start = 0.0, 0, time.monotonic()
+    for k in sorted(passes):
+        delay = start + (k + 1) * period - time.monotonic()
+        if delay > 0:
+            time.sleep(delay)
+        c0 = time.thread_time()
+        for msgtype, kind, raw in passes[k]:
+            n += len(feed(pipeline, kind, decode(msgtype, raw)))
+        cpu += time.thread_time() - c0
+    return cpu, n, period
 
 
 def echo_node() -> None:
