@@ -140,6 +140,57 @@ def test_a_stopped_replay_ends_in_one_line_leaving_no_output(tmp_path, sig):
         _kill_group(proc)
 
 
+# A replay in a child whose stopping signal lands where Python cannot propagate an exception
+# (WHERE: a __del__ or a weakref callback), at the 50th sample (its unfinished output directory
+# made): the command's handler runs there, and Python would print "Exception ignored" and go on.
+# It prints where the signal landed after the command returns. A child of a run started in the
+# background (SIGINT ignored) starts, like one started from a terminal, from Python's handlers.
+_SWALLOWED = """
+import signal, sys, weakref
+from rls_uncertainty.cli import main
+from rls_uncertainty.offline import replay
+signal.signal(signal.SIGINT, signal.default_int_handler)
+signal.signal(signal.SIGTERM, signal.SIG_DFL)
+landed = []
+class Swallow:
+    def __del__(self):
+        landed.append("__del__")
+        signal.raise_signal({signum})  # the handler runs at once, inside __del__
+class Owner:
+    pass
+def callback(_ref):
+    landed.append("weakref callback")
+    signal.raise_signal({signum})
+sample, calls = replay._Run.sample, []
+def swallowing(self, out):
+    calls.append(out)
+    if len(calls) == 50:
+        if {where!r} == "__del__":
+            Swallow()
+        else:
+            owner = Owner()
+            ref = weakref.ref(owner, callback)
+            del owner
+    sample(self, out)
+replay._Run.sample = swallowing
+code = main(["replay", {bag!r}, "--config", "t2", "--out", {out!r}, "--quiet"])
+print(*landed)
+sys.exit(code)
+"""
+
+
+@pytest.mark.parametrize(("where", "sig"), [("__del__", signal.SIGINT), ("weakref callback", signal.SIGTERM)])
+def test_a_stop_landing_where_python_cannot_raise_it_still_stops_the_replay(tmp_path, where, sig):
+    out = tmp_path / "out"
+    code = _SWALLOWED.format(signum=int(sig), where=where, bag=str(BUNDLED), out=str(out))
+    proc = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, env=_env(), capture_output=True, text=True,
+                          timeout=DEADLINE)
+    assert (proc.returncode, proc.stdout) == (128 + sig, f"{where}\n"), proc.stderr
+    name = signal.Signals(sig).name
+    assert proc.stderr == f"rls-uncertainty replay: stopped by {name}; its unfinished output removed\n"
+    assert list(tmp_path.iterdir()) == []
+
+
 # A child that sends itself SIGINT when the import system first looks for MODULE: Ctrl-C
 # arriving while the command still loads its modules (or, for the parser's flags module,
 # while it builds its command line).
