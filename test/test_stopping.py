@@ -141,8 +141,9 @@ def test_a_stopped_replay_ends_in_one_line_leaving_no_output(tmp_path, sig):
 
 
 # A replay in a child whose stopping signal lands where Python cannot propagate an exception
-# (WHERE: a __del__ or a weakref callback), at the 50th sample (its unfinished output directory
-# made): the command's handler runs there, and Python would print "Exception ignored" and go on.
+# (WHERE: a __del__ or a weakref callback), or turns it into another (Python 3.11: a RuntimeError
+# raised from it, in a __set_name__), at the 50th sample (its unfinished output directory made):
+# the command's handler runs there, and Python would print "Exception ignored" and go on.
 # It prints where the signal landed after the command returns. A child of a run started in the
 # background (SIGINT ignored) starts, like one started from a terminal, from Python's handlers.
 _SWALLOWED = """
@@ -158,6 +159,10 @@ class Swallow:
         signal.raise_signal({signum})  # the handler runs at once, inside __del__
 class Owner:
     pass
+class Named:
+    def __set_name__(self, owner, name):
+        landed.append("__set_name__")
+        signal.raise_signal({signum})
 def callback(_ref):
     landed.append("weakref callback")
     signal.raise_signal({signum})
@@ -167,6 +172,8 @@ def swallowing(self, out):
     if len(calls) == 50:
         if {where!r} == "__del__":
             Swallow()
+        elif {where!r} == "__set_name__":
+            type("Made", (), {{"named": Named()}})
         else:
             owner = Owner()
             ref = weakref.ref(owner, callback)
@@ -179,7 +186,8 @@ sys.exit(code)
 """
 
 
-@pytest.mark.parametrize(("where", "sig"), [("__del__", signal.SIGINT), ("weakref callback", signal.SIGTERM)])
+@pytest.mark.parametrize(("where", "sig"), [("__del__", signal.SIGINT), ("weakref callback", signal.SIGTERM),
+                                           ("__set_name__", signal.SIGINT)])
 def test_a_stop_landing_where_python_cannot_raise_it_still_stops_the_replay(tmp_path, where, sig):
     out = tmp_path / "out"
     code = _SWALLOWED.format(signum=int(sig), where=where, bag=str(BUNDLED), out=str(out))

@@ -179,12 +179,34 @@ def run(args: argparse.Namespace) -> int:
         print(f"rls-uncertainty {args.command}: error: {message}", file=sys.stderr)
         return 2
     except KeyboardInterrupt as exc:
-        # Ctrl-C or a stopping signal: everything in the way unwound (workers ended, unfinished
-        # outputs removed); one line, and the status a shell gives a command a signal ended.
-        signum = exc.signum if isinstance(exc, Stopped) else signal.SIGINT
-        removed = "" if args.command in _OWN_SIGNALS else "; its unfinished output removed"
-        print(f"rls-uncertainty {args.command}: stopped by {signal.Signals(signum).name}{removed}", file=sys.stderr)
-        return 128 + int(signum)
+        return _stopped(args.command, exc.signum if isinstance(exc, Stopped) else signal.SIGINT)
+    except Exception as exc:
+        stop = _stop_inside(exc)
+        if stop is None:
+            raise
+        return _stopped(args.command, stop.signum)
+
+
+def _stopped(command: str, signum: int) -> int:
+    """Ctrl-C or a stopping signal: everything in the way unwound (workers ended, unfinished
+    outputs removed); one line, and the status a shell gives a command a signal ended."""
+    removed = "" if command in _OWN_SIGNALS else "; its unfinished output removed"
+    print(f"rls-uncertainty {command}: stopped by {signal.Signals(signum).name}{removed}", file=sys.stderr)
+    return 128 + int(signum)
+
+
+def _stop_inside(exc: BaseException) -> Stopped | None:
+    """The :class:`Stopped` that ``exc`` was raised from, if any: Python 3.11 raises a
+    RuntimeError from an exception raised in a ``__set_name__``, as the stop is when the signal
+    lands while a class is made (a module loaded in the middle of the command)."""
+    seen = set()
+    cause = exc.__cause__
+    while cause is not None and id(cause) not in seen:
+        if isinstance(cause, Stopped):
+            return cause
+        seen.add(id(cause))
+        cause = cause.__cause__
+    return None
 
 
 def load_estimator_node() -> Callable[[], int] | None:
