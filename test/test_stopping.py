@@ -62,8 +62,17 @@ def _env() -> dict[str, str]:
     return {**os.environ, "PYTHONPATH": str(ROOT), "PYTHONUNBUFFERED": "1"}
 
 
+# A command's child starts from Python's own SIGINT handler and the default SIGTERM and SIGHUP,
+# as from a terminal, whatever this run was started with: one started in the background ignores
+# SIGINT (nohup: SIGHUP), and a child inherits that (Python keeps an ignored signal ignored).
+_FROM_A_TERMINAL = ("import signal; signal.signal(signal.SIGINT, signal.default_int_handler); "
+                    "signal.signal(signal.SIGTERM, signal.SIG_DFL); signal.signal(signal.SIGHUP, signal.SIG_DFL)\n")
+_COMMAND = [sys.executable, "-c", _FROM_A_TERMINAL + "import runpy; runpy.run_module('rls_uncertainty.cli', "
+            "run_name='__main__', alter_sys=True)"]
+
+
 def _start(args: list[str], cwd: Path) -> subprocess.Popen:
-    return subprocess.Popen([sys.executable, "-m", "rls_uncertainty.cli", *args], cwd=cwd, env=_env(),
+    return subprocess.Popen([*_COMMAND, *args], cwd=cwd, env=_env(),
                             stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                             start_new_session=True)
 
@@ -140,10 +149,66 @@ def test_a_stopped_replay_ends_in_one_line_leaving_no_output(tmp_path, sig):
         _kill_group(proc)
 
 
+# A replay in a child whose stopping signal lands where Python cannot propagate an exception
+# (WHERE: a __del__ or a weakref callback), or turns it into another (Python 3.11: a RuntimeError
+# raised from it, in a __set_name__), at the 50th sample (its unfinished output directory made):
+# the command's handler runs there, and Python would print "Exception ignored" and go on.
+# It prints where the signal landed after the command returns.
+_SWALLOWED = _FROM_A_TERMINAL + """
+import signal, sys, weakref
+from rls_uncertainty.cli import main
+from rls_uncertainty.offline import replay
+landed = []
+class Swallow:
+    def __del__(self):
+        landed.append("__del__")
+        signal.raise_signal({signum})  # the handler runs at once, inside __del__
+class Owner:
+    pass
+class Named:
+    def __set_name__(self, owner, name):
+        landed.append("__set_name__")
+        signal.raise_signal({signum})
+def callback(_ref):
+    landed.append("weakref callback")
+    signal.raise_signal({signum})
+sample, calls = replay._Run.sample, []
+def swallowing(self, out):
+    calls.append(out)
+    if len(calls) == 50:
+        if {where!r} == "__del__":
+            Swallow()
+        elif {where!r} == "__set_name__":
+            type("Made", (), {{"named": Named()}})
+        else:
+            owner = Owner()
+            ref = weakref.ref(owner, callback)
+            del owner
+    sample(self, out)
+replay._Run.sample = swallowing
+code = main(["replay", {bag!r}, "--config", "t2", "--out", {out!r}, "--quiet"])
+print(*landed)
+sys.exit(code)
+"""
+
+
+@pytest.mark.parametrize(("where", "sig"), [("__del__", signal.SIGINT), ("weakref callback", signal.SIGTERM),
+                                           ("__set_name__", signal.SIGINT)])
+def test_a_stop_landing_where_python_cannot_raise_it_still_stops_the_replay(tmp_path, where, sig):
+    out = tmp_path / "out"
+    code = _SWALLOWED.format(signum=int(sig), where=where, bag=str(BUNDLED), out=str(out))
+    proc = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, env=_env(), capture_output=True, text=True,
+                          timeout=DEADLINE)
+    assert (proc.returncode, proc.stdout) == (128 + sig, f"{where}\n"), proc.stderr
+    name = signal.Signals(sig).name
+    assert proc.stderr == f"rls-uncertainty replay: stopped by {name}; its unfinished output removed\n"
+    assert list(tmp_path.iterdir()) == []
+
+
 # A child that sends itself SIGINT when the import system first looks for MODULE: Ctrl-C
 # arriving while the command still loads its modules (or, for the parser's flags module,
 # while it builds its command line).
-_INTERRUPT_AT_IMPORT = """
+_INTERRUPT_AT_IMPORT = _FROM_A_TERMINAL + """
 import os, signal, sys
 class Trip:
     def find_spec(self, name, path=None, target=None):
