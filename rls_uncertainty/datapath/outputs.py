@@ -183,16 +183,23 @@ class OutputLayout:
             [(name, tuple(names)) for (name, _), names in zip(self.models, frequency, strict=True)]
         self.topics = output_topics([name for name, _ in self.models], time=time, frequency=frequency is not None)
         self.fit_topics = fit_topics(name for name, _ in self.models)
-        # Per model: output name, label, n, vector and matrix shape, index of its first topic.
-        self._per_model = [(name, ",".join(names), len(names), (len(names),), (len(names), len(names)),
-                            1 + _PER_MODEL * j) for j, (name, names) in enumerate(self.models)] if time else []
+        # Per model: n, index of its first topic; per topic index: what :meth:`arrays` names it
+        # and its layout bytes before the stamp's dim (:meth:`encode`).
+        self._per_model = [(len(names), 1 + _PER_MODEL * j) for j, (_, names) in enumerate(self.models)] if time else []
         first = 1 + len(self._per_model) * _PER_MODEL
-        self._per_frequency = [(name, ",".join(names), len(names), (len(names),), first + len(FREQUENCY_OUTPUTS) * j)
-                               for j, (name, names) in enumerate(self.frequency_models or [])]
-        # The same with each array's layout bytes before its stamp dim (:meth:`encode`).
-        self._heads = [(n, _head(label, vector), _head(label, square), first)
-                       for _, label, n, vector, square, first in self._per_model]
-        self._frequency_heads = [(n, _head(label, vector), first) for _, label, n, vector, first in self._per_frequency]
+        self._per_frequency = [(len(names), first + len(FREQUENCY_OUTPUTS) * j)
+                               for j, (_, names) in enumerate(self.frequency_models or [])]
+        self._topic_info: list[tuple[str, str, str, tuple[int, ...], bytes]] = \
+            [("", "", "", (), b"")] * len(self.topics)  # index 0: sample_stamp
+        suffixes = [(MODEL_OUTPUTS, self.models if time else [], self._per_model),
+                    ([f"{FREQUENCY}/{suffix}" for suffix in FREQUENCY_OUTPUTS], self.frequency_models or [],
+                     self._per_frequency)]
+        for names_of_outputs, models_, firsts in suffixes:
+            for (name, names), (n, first) in zip(models_, firsts, strict=True):
+                label = ",".join(names)
+                for k, suffix in enumerate(names_of_outputs):
+                    shape = (n, n) if suffix.startswith("covariance") else (n,)
+                    self._topic_info[first + k] = (name, suffix, label, shape, _head(label, shape))
 
     @classmethod
     def for_config(cls, config: PipelineConfig) -> OutputLayout:
@@ -207,36 +214,10 @@ class OutputLayout:
     def arrays(self, out: SampleOutput) -> Iterator[PublishedArray]:
         """Every array published for a sample, per ready model in the order of
         :data:`MODEL_OUTPUTS` (the covariances only when ``out.covariance`` is set)."""
-        for _index, array in self._arrays(out):
-            yield array
-
-    def _arrays(self, out: SampleOutput) -> Iterator[tuple[int, PublishedArray]]:
-        """:meth:`arrays` with the index of each one's topic in :attr:`topics`."""
-        cov = out.covariance
-        ready = out.ready.tolist()
-        theta, se, se_conv = out.theta, out.se, out.se_conventional
-        flags = out.converged.astype(np.float64)
-        new = PublishedArray._make
-        for j, (name, label, n, vector, square, first) in enumerate(self._per_model):
-            if not ready[j]:
-                continue
-            yield first, new((name, "estimates", label, vector, theta[j, :n]))
-            yield first + 1, new((name, "standard_errors", label, vector, se[j, :n]))
-            yield first + 2, new((name, "standard_errors_conventional", label, vector, se_conv[j, :n]))
-            yield first + 3, new((name, "converged", label, vector, flags[j, :n]))
-            if cov is not None:
-                yield first + 4, new((name, "covariance", label, square, cov[0, j, :n, :n].ravel()))
-                yield first + 5, new((name, "covariance_conventional", label, square, cov[1, j, :n, :n].ravel()))
-        f = out.frequency
-        if f is None or not self._per_frequency:
-            return
-        ready = f.ready.tolist()
-        flags = f.converged.astype(np.float64)
-        for j, (name, label, n, vector, first) in enumerate(self._per_frequency):
-            if ready[j]:
-                for k, (suffix, values) in enumerate(zip(FREQUENCY_OUTPUTS, (f.theta, f.se, f.se_conventional, flags),
-                                                         strict=True)):
-                    yield first + k, new((name, f"{FREQUENCY}/{suffix}", label, vector, values[j, :n]))
+        info, new = self._topic_info, PublishedArray._make
+        for index, data in self._walk(out):
+            model, suffix, label, shape, _ = info[index]
+            yield new((model, suffix, label, shape, data.ravel() if len(shape) == 2 else data))
 
     def encode(self, out: SampleOutput, frame_id: str, wanted: Sequence[bool] | None = None) -> list[tuple[int, bytes]]:
         """``(index into topics, CDR bytes)`` of every message published for ``out``:
@@ -248,33 +229,34 @@ class OutputLayout:
         sec, nanosec = divmod(stamp, 1_000_000_000)
         messages = [(0, encode_header(sec, nanosec, frame_id))] if wanted is None or wanted[0] else []
         when = multiarray_dim(stamp_label(stamp), 1, 1)
-        encode = encode_float64_multiarray_tail
-        for index, head, data in self._encodable(out):
+        encode, info = encode_float64_multiarray_tail, self._topic_info
+        for index, data in self._walk(out):
             if wanted is None or wanted[index]:
-                messages.append((index, encode(head, when, data)))
+                messages.append((index, encode(info[index][4], when, data)))
         return messages
 
-    def _encodable(self, out: SampleOutput) -> Iterator[tuple[int, bytes, np.ndarray]]:
-        """:meth:`_arrays` as ``(topic index, the layout's bytes before the stamp's dim, data)``."""
+    def _walk(self, out: SampleOutput) -> Iterator[tuple[int, np.ndarray]]:
+        """``(topic index, data)`` of every array published for ``out`` (a covariance as its
+        ``(n, n)`` block), in :attr:`topics` order."""
         cov = out.covariance
         ready = out.ready.tolist()
         values = (out.theta, out.se, out.se_conventional, out.converged.astype(np.float64))
-        for j, (n, vector, square, first) in enumerate(self._heads):
+        for j, (n, first) in enumerate(self._per_model):
             if ready[j]:
                 for k in range(4):
-                    yield first + k, vector, values[k][j, :n]
+                    yield first + k, values[k][j, :n]
                 if cov is not None:
-                    yield first + 4, square, cov[0, j, :n, :n]
-                    yield first + 5, square, cov[1, j, :n, :n]
+                    yield first + 4, cov[0, j, :n, :n]
+                    yield first + 5, cov[1, j, :n, :n]
         f = out.frequency
-        if f is None or not self._frequency_heads:
+        if f is None or not self._per_frequency:
             return
         ready = f.ready.tolist()
         values = (f.theta, f.se, f.se_conventional, f.converged.astype(np.float64))
-        for j, (n, vector, first) in enumerate(self._frequency_heads):
+        for j, (n, first) in enumerate(self._per_frequency):
             if ready[j]:
                 for k in range(len(FREQUENCY_OUTPUTS)):
-                    yield first + k, vector, values[k][j, :n]
+                    yield first + k, values[k][j, :n]
 
     def rows(self, out: SampleOutput) -> Iterator[Row]:
         """Each ready model's time-domain estimates and standard errors of ``out`` (what the
