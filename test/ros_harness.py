@@ -100,14 +100,36 @@ class RosTester:
     def spin_until(self, condition, timeout: float = 20.0) -> bool:
         return spin_until(self.node, condition, timeout)
 
-    def wait_connected(self, timeout: float = 20.0, outputs: bool = True) -> None:
-        def ready():
-            ins = all(p.get_subscription_count() >= 1 for p in self.pubs.values())
-            outs = not outputs or all(s.get_publisher_count() >= 1 for s in self.subs[:-1])
-            return ins and outs
+    def wait_connected(self, timeout: float = 60.0, outputs: bool = True) -> None:
+        """Spin until discovery matched both ends of every connection: a message published before
+        its reader matched is lost to it. The inputs: this tester's publishers matched a
+        subscription on each topic and the node's report counts a publisher on each stream. The
+        outputs (unless ``outputs`` is false): this tester's subscriptions matched the node's
+        publishers, and the node's report says it publishes on at least as many sample topics (it
+        publishes only on those its publishers had matched a subscriber on at its last report)."""
+        samples = self.subs[:-1]
 
-        assert self.spin_until(ready, timeout), "estimator node not discovered"
-        self.spin_until(lambda: False, 0.3)
+        def seen() -> tuple[dict[str, int], dict[str, int], int, int]:
+            report = self.latest_diagnostics()
+            inputs = report.get(f"{NODE_NAME}: inputs", {})
+            node_pubs = {k: int(inputs.get(f"{k}.publishers", 0)) for k in self.pubs}
+            subscribed = int(report.get(f"{NODE_NAME}: samples", {}).get("outputs_subscribed", -1))
+            return ({k: p.get_subscription_count() for k, p in self.pubs.items()}, node_pubs,
+                    sum(s.get_publisher_count() >= 1 for s in samples), subscribed)
+
+        def ready() -> bool:
+            mine, nodes, matched, subscribed = seen()
+            ins = min(mine.values()) >= 1 and min(nodes.values()) >= 1
+            return ins and (not outputs or (matched == len(samples) and subscribed >= len(samples)))
+
+        if not self.spin_until(ready, timeout):
+            mine, nodes, matched, subscribed = seen()
+            raise AssertionError(
+                f"estimator node not discovered within {timeout:g} s: subscriptions matched per input {mine}; "
+                f"publishers the node reports per input {nodes}; "
+                + (f"{matched} of the {len(samples)} output subscriptions matched the node's publishers, the node "
+                   f"reports publishing on {subscribed} sample topics (-1: no report)" if outputs else
+                   "outputs not waited for"))
 
     def publish(self, kind: str, msg) -> None:
         self.pubs[kind].publish(msg)

@@ -17,6 +17,7 @@ from collections import Counter
 
 import pytest
 import rclpy
+from diagnostic_msgs.msg import DiagnosticArray
 
 from rls_uncertainty.datapath.inputs import MESSAGE_TYPES, message_class
 from rls_uncertainty.datapath.outputs import NODE_NAME, OutputLayout, output_topics
@@ -57,13 +58,29 @@ class RawRecorder:
             store = self.got.setdefault(topic, [])
             self.subs.append(self.node.create_subscription(message_class(msgtype), topic, store.append, RELIABLE,
                                                            raw=True))
+        self.subscribed = -1  # the sample topics the node's newest report says it publishes on
+        self._diagnostics = self.node.create_subscription(DiagnosticArray, "/diagnostics", self._report, 10)
 
     def spin_until(self, condition, timeout: float) -> bool:
         return spin_until(self.node, condition, timeout)
 
-    def wait_connected(self, timeout: float = 30.0) -> None:
-        assert self.spin_until(lambda: all(s.get_publisher_count() >= 1 for s in self.subs), timeout), \
-            "estimator node's outputs not discovered"
+    def _report(self, msg, info) -> None:
+        if info["source_timestamp"] < NodeProcess.last_start_ns:  # an earlier node's (RosTester._take_diagnostics)
+            return
+        for status in msg.status:
+            if status.name == f"{NODE_NAME}: samples":
+                self.subscribed = int(next((kv.value for kv in status.values if kv.key == "outputs_subscribed"), -1))
+
+    def wait_connected(self, timeout: float = 60.0) -> None:
+        """Until these subscriptions matched the node's publishers and the node's report says it
+        publishes on as many topics (it publishes only on those it saw a subscriber on at its
+        last report: a sample sent before would be lost to this recorder)."""
+        def matched() -> int:
+            return sum(s.get_publisher_count() >= 1 for s in self.subs)
+
+        assert self.spin_until(lambda: matched() == len(self.subs) and self.subscribed >= len(self.subs), timeout), (
+            f"estimator node's outputs not discovered within {timeout:g} s: {matched()} of {len(self.subs)} "
+            f"subscriptions matched its publishers, its report says it publishes on {self.subscribed} (-1: no report)")
 
     def close(self) -> None:
         self.node.destroy_node()
