@@ -456,3 +456,21 @@ def test_imu_fields_unpacked_on_first_use_can_be_assigned_and_copied():
     assert first == second and first.orientation_covariance == tuple(np.arange(9.0))
     first.orientation.w = 0.5
     assert first != second
+
+
+def test_joint_states_with_repeated_and_changed_names_decode_like_rosbags():
+    """JointState names equal to the previous message's bytes are taken as decoded before;
+    any other names (one letter changed, another count, a longer frame) are parsed again."""
+    rng = random.Random(5)
+    msgtype = "sensor_msgs/msg/JointState"
+    for i in range(200):
+        names = rng.choice((["elevator", "aileron", "rudder"], ["elevator", "aileron", "ruddes"],
+                            ["elevator", "aileron"], [], ["élevon"]))
+        header = T["std_msgs/msg/Header"](stamp=T["builtin_interfaces/msg/Time"](sec=i, nanosec=0),
+                                          frame_id=rng.choice(("base_link", "base_lin", "b")))
+        ref = T[msgtype](header=header, name=names, position=rand_floats(rng, len(names)),
+                         velocity=np.zeros(0), effort=np.zeros(0))
+        ours = cdr.decode(msgtype, serialize(ref, msgtype, little_endian=bool(i % 3)))
+        assert_same(ours, ref, f"#{i}")
+        ours.name.append("x")  # (each message its own list)
+        assert_same(cdr.decode(msgtype, serialize(ref, msgtype, little_endian=bool(i % 3))), ref, f"#{i} again")

@@ -8,7 +8,9 @@ codecs cover exactly:
 * decoding ``sensor_msgs/Imu``, ``geometry_msgs/Vector3Stamped``, ``sensor_msgs/FluidPressure``,
   ``sensor_msgs/JointState``, ``geometry_msgs/WrenchStamped`` into light objects with the
   same field names (what :mod:`.inputs` reads), little- and big-endian, so node and replay
-  have one decoding path; and ``std_msgs/Float64MultiArray``, the node's outputs as the
+  have one decoding path (what is not read is built only on use: an IMU message's orientation
+  and covariances; a JointState's names equal to the previous message's bytes are not parsed
+  again); and ``std_msgs/Float64MultiArray``, the node's outputs as the
   dashboard reads them (live and from a replay's ``estimates.mcap``);
 * encoding ``std_msgs/Header`` and ``std_msgs/Float64MultiArray`` (little endian), the latter
   with the vector layout of the estimates (:func:`encode_float64_multiarray`) or any layout
@@ -206,6 +208,7 @@ def _fixed_decoders(order: str, header: Callable[[bytes], tuple[Any, int]]) -> d
 def _joint_state_decoder(order: str, header: Callable[[bytes], tuple[Any, int]]) -> Callable[[bytes], Any]:
     """``sensor_msgs/JointState``: a sequence of strings and three sequences of doubles."""
     u32 = struct.Struct(order + "I")
+    last_names: dict[int, tuple[bytes, tuple[str, ...]]] = {}  # by offset: the names' bytes, the names
 
     def doubles(buf, o, what):
         o = (o + 3) & ~3
@@ -224,11 +227,21 @@ def _joint_state_decoder(order: str, header: Callable[[bytes], tuple[Any, int]])
         size = len(buf)
         if 5 * count > size - o - 4:  # each name takes at least 5 bytes
             raise _too_long(buf, o, count, "name")
-        o += 4
-        names = []
-        for _ in range(count):
-            name, o = _read_string(buf, (o + 3) & ~3, u32)
-            names.append(name)
+        # The names repeat from message to message: bytes equal to the last names' bytes at
+        # the same offset are those names (parsing them again would give the same strings).
+        known = last_names.get(o)
+        if known is not None and buf.startswith(known[0], o):
+            names, o = list(known[1]), o + len(known[0])
+        else:
+            start = o
+            o += 4
+            names = []
+            for _ in range(count):
+                name, o = _read_string(buf, (o + 3) & ~3, u32)
+                names.append(name)
+            if len(last_names) > 8:  # (a few header lengths at most in one stream)
+                last_names.clear()
+            last_names[start] = (buf[start:o], tuple(names))
         position, o = doubles(buf, o, "position")
         velocity, o = doubles(buf, o, "velocity")
         effort, _ = doubles(buf, o, "effort")
