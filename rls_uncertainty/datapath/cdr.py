@@ -79,7 +79,8 @@ class Imu:
     def __init__(self, header: Any, angular_velocity: Any, linear_acceleration: Any, buf: bytes, at: int,
                  order: str) -> None:
         self.header, self.angular_velocity, self.linear_acceleration = header, angular_velocity, linear_acceleration
-        self._buf, self._at, self._order, self._rest = buf, at, order, None  # the 37 doubles at buf[at:]
+        self._buf, self._at, self._order = buf, at, order  # the 37 doubles at buf[at:]
+        self._rest: list[Any] | None = None
 
     def _fields(self) -> list:
         """``[orientation, orientation_covariance, angular_velocity_covariance,
