@@ -6,6 +6,7 @@ them (bytes after the message aside); and the bundled bag decoded like rosbags d
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import random
 import struct
@@ -126,7 +127,7 @@ def assert_same(ours, ref, path: str = "msg") -> None:
     strings and integers equal, floats bit for bit (NaN payloads, negative zero)."""
     if dataclasses.is_dataclass(ref):
         names = [f.name for f in dataclasses.fields(ref) if not f.name.startswith("__")]
-        assert [f.name for f in dataclasses.fields(ours) if not f.name.startswith("__")] == names, path
+        assert [n for n in type(ours).__match_args__ if not n.startswith("__")] == names, path
         for name in names:
             assert_same(getattr(ours, name), getattr(ref, name), f"{path}.{name}")
     elif isinstance(ref, (str, int)) and not isinstance(ref, (bool, np.floating)):
@@ -430,3 +431,46 @@ def test_layouts_built_from_a_head_and_a_last_dim_encode_byte_identical_to_rosba
         # Row-major whatever the array's memory order.
         assert cdr.encode_float64_multiarray_tail(head, cdr.multiarray_dim(*dims[-1]), np.asfortranarray(data)) == \
             cdr.encode_float64_multiarray_tail(head, cdr.multiarray_dim(*dims[-1]), data)
+
+
+def test_imu_fields_unpacked_on_first_use_can_be_assigned_and_copied():
+    """The IMU fields the pipeline does not read are unpacked when first read or assigned;
+    assigning one keeps the others as decoded, and a copy decodes the same."""
+    rng = random.Random(11)
+    msgtype = "sensor_msgs/msg/Imu"
+    for i in range(50):
+        ref = rand_message(rng, msgtype)
+        raw = serialize(ref, msgtype, little_endian=bool(i % 2))
+        assert_same(copy.deepcopy(cdr.decode(msgtype, raw)), ref, f"copy#{i}")
+        ours = cdr.decode(msgtype, raw)
+        ours.angular_velocity_covariance = (1.0,) * 9
+        assert ours.angular_velocity_covariance == (1.0,) * 9
+        ref.angular_velocity_covariance = np.ones(9)
+        assert_same(ours, ref, f"assigned#{i}")
+    v3, quaternion = T["geometry_msgs/msg/Vector3"], T["geometry_msgs/msg/Quaternion"]
+    plain = T[msgtype](header=rand_header(rng), orientation=quaternion(x=0.0, y=0.0, z=0.0, w=1.0),
+                       orientation_covariance=np.arange(9.0), angular_velocity=v3(x=1.0, y=2.0, z=3.0),
+                       angular_velocity_covariance=np.zeros(9), linear_acceleration=v3(x=4.0, y=5.0, z=6.0),
+                       linear_acceleration_covariance=np.ones(9))
+    first, second = (cdr.decode(msgtype, serialize(plain, msgtype)) for _ in range(2))
+    assert first == second and first.orientation_covariance == tuple(np.arange(9.0))
+    first.orientation.w = 0.5
+    assert first != second
+
+
+def test_joint_states_with_repeated_and_changed_names_decode_like_rosbags():
+    """JointState names equal to the previous message's bytes are taken as decoded before;
+    any other names (one letter changed, another count, a longer frame) are parsed again."""
+    rng = random.Random(5)
+    msgtype = "sensor_msgs/msg/JointState"
+    for i in range(200):
+        names = rng.choice((["elevator", "aileron", "rudder"], ["elevator", "aileron", "ruddes"],
+                            ["elevator", "aileron"], [], ["élevon"]))
+        header = T["std_msgs/msg/Header"](stamp=T["builtin_interfaces/msg/Time"](sec=i, nanosec=0),
+                                          frame_id=rng.choice(("base_link", "base_lin", "b")))
+        ref = T[msgtype](header=header, name=names, position=rand_floats(rng, len(names)),
+                         velocity=np.zeros(0), effort=np.zeros(0))
+        ours = cdr.decode(msgtype, serialize(ref, msgtype, little_endian=bool(i % 3)))
+        assert_same(ours, ref, f"#{i}")
+        ours.name.append("x")  # (each message its own list)
+        assert_same(cdr.decode(msgtype, serialize(ref, msgtype, little_endian=bool(i % 3))), ref, f"#{i} again")

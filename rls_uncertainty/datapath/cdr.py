@@ -8,7 +8,9 @@ codecs cover exactly:
 * decoding ``sensor_msgs/Imu``, ``geometry_msgs/Vector3Stamped``, ``sensor_msgs/FluidPressure``,
   ``sensor_msgs/JointState``, ``geometry_msgs/WrenchStamped`` into light objects with the
   same field names (what :mod:`.inputs` reads), little- and big-endian, so node and replay
-  have one decoding path; and ``std_msgs/Float64MultiArray``, the node's outputs as the
+  have one decoding path (what is not read is built only on use: an IMU message's orientation
+  and covariances; a JointState's names equal to the previous message's bytes are not parsed
+  again); and ``std_msgs/Float64MultiArray``, the node's outputs as the
   dashboard reads them (live and from a replay's ``estimates.mcap``);
 * encoding ``std_msgs/Header`` and ``std_msgs/Float64MultiArray`` (little endian), the latter
   with the vector layout of the estimates (:func:`encode_float64_multiarray`) or any layout
@@ -53,11 +55,6 @@ Time = _message("Time", "sec nanosec")
 Header = _message("Header", "stamp frame_id")
 Vector3 = _message("Vector3", "x y z")
 Quaternion = _message("Quaternion", "x y z w")
-Imu = _message(
-    "Imu",
-    "header orientation orientation_covariance angular_velocity angular_velocity_covariance "
-    "linear_acceleration linear_acceleration_covariance",
-)
 Vector3Stamped = _message("Vector3Stamped", "header vector")
 FluidPressure = _message("FluidPressure", "header fluid_pressure variance")
 Wrench = _message("Wrench", "force torque")
@@ -66,6 +63,60 @@ JointState = _message("JointState", "header name position velocity effort")
 MultiArrayDimension = _message("MultiArrayDimension", "label size stride")
 MultiArrayLayout = _message("MultiArrayLayout", "dim data_offset")
 Float64MultiArray = _message("Float64MultiArray", "layout data")
+
+
+class Imu:
+    """``sensor_msgs/Imu`` with the ROS field names (in ``__match_args__``, the ROS order).
+    ``header``, ``angular_velocity`` and ``linear_acceleration`` (what :mod:`.inputs` reads)
+    are built on decoding; ``orientation`` and the three covariances are unpacked from the
+    payload on first use (read or assigned), so an IMU message decodes in five small
+    objects instead of nine and six doubles instead of 37 (every field can be assigned)."""
+
+    __slots__ = ("header", "angular_velocity", "linear_acceleration", "_buf", "_at", "_order", "_rest")
+    __match_args__ = ("header", "orientation", "orientation_covariance", "angular_velocity",
+                      "angular_velocity_covariance", "linear_acceleration", "linear_acceleration_covariance")
+
+    def __init__(self, header: Any, angular_velocity: Any, linear_acceleration: Any, buf: bytes, at: int,
+                 order: str) -> None:
+        self.header, self.angular_velocity, self.linear_acceleration = header, angular_velocity, linear_acceleration
+        self._buf, self._at, self._order = buf, at, order  # the 37 doubles at buf[at:]
+        self._rest: list[Any] | None = None
+
+    def _fields(self) -> list:
+        """``[orientation, orientation_covariance, angular_velocity_covariance,
+        linear_acceleration_covariance]``, unpacked once (the decoder checked the length)."""
+        rest = self._rest
+        if rest is None:
+            v = _IMU_DOUBLES[self._order].unpack_from(self._buf, self._at)
+            rest = self._rest = [Quaternion(v[0], v[1], v[2], v[3]), v[4:13], v[16:25], v[28:37]]
+            self._buf = b""
+        return rest
+
+    def __repr__(self) -> str:
+        return f"Imu({', '.join(f'{name}={getattr(self, name)!r}' for name in self.__match_args__)})"
+
+    def __eq__(self, other: object) -> bool:
+        if type(other) is not Imu:
+            return NotImplemented
+        return all(getattr(self, name) == getattr(other, name) for name in self.__match_args__)
+
+    __hash__ = None  # type: ignore[assignment]  # (mutable, as the other messages)
+
+
+def _imu_field(i: int, name: str) -> property:
+    def get(self: Imu) -> Any:
+        return self._fields()[i]
+
+    def set_(self: Imu, value: Any) -> None:
+        self._fields()[i] = value
+
+    return property(get, set_, doc=f"``{name}``, unpacked on first use")
+
+
+for _i, _name in enumerate(("orientation", "orientation_covariance", "angular_velocity_covariance",
+                            "linear_acceleration_covariance")):
+    setattr(Imu, _name, _imu_field(_i, _name))
+_IMU_DOUBLES = {order: struct.Struct(f"{order}37d") for order in "<>"}
 
 
 def _align(offset: int, size: int) -> int:
@@ -122,13 +173,16 @@ def _header_decoder(order: str) -> Callable[[bytes], tuple[Any, int]]:
 
 def _fixed_decoders(order: str, header: Callable[[bytes], tuple[Any, int]]) -> dict[str, Callable[[bytes], Any]]:
     """The types whose payload after the header is a fixed block of doubles."""
-    d2, d3, d6, d37 = (struct.Struct(f"{order}{n}d") for n in (2, 3, 6, 37))
+    d2, d3, d6 = (struct.Struct(f"{order}{n}d") for n in (2, 3, 6))
+    rates = struct.Struct(f"{order}104x3d72x3d72x")  # 37 doubles' bytes
 
     def imu(buf):
         h, o = header(buf)
-        v = d37.unpack_from(buf, (o + 7) & ~7)
-        return Imu(h, Quaternion(v[0], v[1], v[2], v[3]), v[4:13], Vector3(v[13], v[14], v[15]), v[16:25],
-                   Vector3(v[25], v[26], v[27]), v[28:37])
+        o = (o + 7) & ~7
+        # The rates and accelerations (doubles 13-15 and 25-27 of 37) in one unpack whose
+        # padding spans the whole block: a short payload fails as unpacking all 37 would.
+        wx, wy, wz, ax, ay, az = rates.unpack_from(buf, o)
+        return Imu(h, Vector3(wx, wy, wz), Vector3(ax, ay, az), buf, o, order)
 
     def vector3_stamped(buf):
         h, o = header(buf)
@@ -155,6 +209,7 @@ def _fixed_decoders(order: str, header: Callable[[bytes], tuple[Any, int]]) -> d
 def _joint_state_decoder(order: str, header: Callable[[bytes], tuple[Any, int]]) -> Callable[[bytes], Any]:
     """``sensor_msgs/JointState``: a sequence of strings and three sequences of doubles."""
     u32 = struct.Struct(order + "I")
+    last_names: dict[int, tuple[bytes, tuple[str, ...]]] = {}  # by offset: the names' bytes, the names
 
     def doubles(buf, o, what):
         o = (o + 3) & ~3
@@ -173,11 +228,21 @@ def _joint_state_decoder(order: str, header: Callable[[bytes], tuple[Any, int]])
         size = len(buf)
         if 5 * count > size - o - 4:  # each name takes at least 5 bytes
             raise _too_long(buf, o, count, "name")
-        o += 4
-        names = []
-        for _ in range(count):
-            name, o = _read_string(buf, (o + 3) & ~3, u32)
-            names.append(name)
+        # The names repeat from message to message: bytes equal to the last names' bytes at
+        # the same offset are those names (parsing them again would give the same strings).
+        known = last_names.get(o)
+        if known is not None and buf.startswith(known[0], o):
+            names, o = list(known[1]), o + len(known[0])
+        else:
+            start = o
+            o += 4
+            names = []
+            for _ in range(count):
+                name, o = _read_string(buf, (o + 3) & ~3, u32)
+                names.append(name)
+            if len(last_names) > 8:  # (a few header lengths at most in one stream)
+                last_names.clear()
+            last_names[start] = (buf[start:o], tuple(names))
         position, o = doubles(buf, o, "position")
         velocity, o = doubles(buf, o, "velocity")
         effort, _ = doubles(buf, o, "effort")
