@@ -14,6 +14,7 @@ from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.qos import QoSHistoryPolicy, QoSProfile, QoSReliabilityPolicy
 from std_msgs.msg import Float64MultiArray, Header
 
+from rls_uncertainty.datapath.diagnostics import outputs_discovered, outputs_subscribed
 from rls_uncertainty.datapath.inputs import MESSAGE_TYPES, STREAMS, message_class
 from rls_uncertainty.datapath.outputs import MODEL_OUTPUTS, NODE_NAME
 from rls_uncertainty.ros.player import stop_process
@@ -109,21 +110,21 @@ class RosTester:
         publishes only on those its publishers had matched a subscriber on at its last report)."""
         samples = self.subs[:-1]
 
-        def seen() -> tuple[dict[str, int], dict[str, int], int, int]:
+        def seen() -> tuple[dict[str, int], dict[str, int], int, dict[str, str]]:
             report = self.latest_diagnostics()
             inputs = report.get(f"{NODE_NAME}: inputs", {})
             node_pubs = {k: int(inputs.get(f"{k}.publishers", 0)) for k in self.pubs}
-            subscribed = int(report.get(f"{NODE_NAME}: samples", {}).get("outputs_subscribed", -1))
             return ({k: p.get_subscription_count() for k, p in self.pubs.items()}, node_pubs,
-                    sum(s.get_publisher_count() >= 1 for s in samples), subscribed)
+                    sum(s.get_publisher_count() >= 1 for s in samples), report.get(f"{NODE_NAME}: samples", {}))
 
         def ready() -> bool:
-            mine, nodes, matched, subscribed = seen()
+            mine, nodes, matched, values = seen()
             ins = min(mine.values()) >= 1 and min(nodes.values()) >= 1
-            return ins and (not outputs or (matched == len(samples) and subscribed >= len(samples)))
+            return ins and (not outputs or outputs_discovered(values, matched, len(samples)))
 
         if not self.spin_until(ready, timeout):
-            mine, nodes, matched, subscribed = seen()
+            mine, nodes, matched, values = seen()
+            subscribed = outputs_subscribed(values)
             raise AssertionError(
                 f"estimator node not discovered within {timeout:g} s: subscriptions matched per input {mine}; "
                 f"publishers the node reports per input {nodes}; "

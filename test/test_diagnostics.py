@@ -477,6 +477,34 @@ def test_periodic_step_maximum_is_reported():
     assert values(statuses(snap)["samples"])["periodic_ms.max"] == "2.100"
 
 
+def test_the_node_reports_the_sample_topics_it_publishes_on_only_when_it_knows_them():
+    """``outputs_subscribed`` as the node writes it is read back as written; the offline replay
+    (no count) leaves it out, which reads as not reported."""
+    snap = Snapshot(**{**snapshot().__dict__, "outputs_subscribed": 9})
+    samples = statuses(snap)["samples"].values
+    assert ("outputs_subscribed", "9") in samples and dg.outputs_subscribed(samples) == 9
+    assert dg.outputs_discovered(samples, 9, 9) and not dg.outputs_discovered(samples, 9, 10)
+    offline = statuses(snapshot())["samples"].values
+    assert dg.OUTPUTS_SUBSCRIBED not in dict(offline) and dg.outputs_subscribed(offline) == -1
+    assert not dg.outputs_discovered(offline, 9, 9)
+
+
+@pytest.mark.parametrize(("value", "count"), [("5", 5), ("0", 0), ("12", 12), (None, -1), ("x", -1), ("-1", -1),
+                                              ("-3", -1), ("", -1), ("2.5", -1), ("5 topics", -1)])
+@pytest.mark.parametrize("as_pairs", [False, True])
+@pytest.mark.parametrize(("matched", "subscriptions"), [(5, 5), (4, 5), (0, 0), (11, 11)])
+def test_outputs_are_discovered_when_both_ends_matched_and_never_on_a_missing_or_garbled_count(
+        value, count, as_pairs, matched, subscriptions):
+    """Hand-made ``samples`` key-values (a mapping, or pairs as a DiagnosticStatus holds them):
+    the count read back (-1 when missing or not a count), and discovered only when every
+    subscription here matched and the node publishes on at least as many sample topics."""
+    kv = {"enabled": "True", "samples_used": "3"} | ({} if value is None else {"outputs_subscribed": value})
+    values = list(kv.items()) if as_pairs else kv
+    assert dg.outputs_subscribed(values) == count
+    want = matched == subscriptions and count >= 0 and count >= subscriptions
+    assert dg.outputs_discovered(values, matched, subscriptions) is want
+
+
 def _fed_pipeline(n_messages):
     from rls_uncertainty.datapath.inputs import feed
     from rls_uncertainty.datapath.pipeline import Pipeline

@@ -19,6 +19,7 @@ import pytest
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
 
+from rls_uncertainty.datapath.diagnostics import outputs_discovered, outputs_subscribed
 from rls_uncertainty.datapath.inputs import MESSAGE_TYPES, message_class
 from rls_uncertainty.datapath.outputs import NODE_NAME, OutputLayout, output_topics
 from rls_uncertainty.offline.bags import read_inputs
@@ -58,7 +59,7 @@ class RawRecorder:
             store = self.got.setdefault(topic, [])
             self.subs.append(self.node.create_subscription(message_class(msgtype), topic, store.append, RELIABLE,
                                                            raw=True))
-        self.subscribed = -1  # the sample topics the node's newest report says it publishes on
+        self.samples: dict[str, str] = {}  # the key-values of the node's newest samples status
         self._diagnostics = self.node.create_subscription(DiagnosticArray, "/diagnostics", self._report, 10)
 
     def spin_until(self, condition, timeout: float) -> bool:
@@ -69,7 +70,7 @@ class RawRecorder:
             return
         for status in msg.status:
             if status.name == f"{NODE_NAME}: samples":
-                self.subscribed = int(next((kv.value for kv in status.values if kv.key == "outputs_subscribed"), -1))
+                self.samples = {kv.key: kv.value for kv in status.values}
 
     def wait_connected(self, timeout: float = 60.0) -> None:
         """Until these subscriptions matched the node's publishers and the node's report says it
@@ -78,9 +79,10 @@ class RawRecorder:
         def matched() -> int:
             return sum(s.get_publisher_count() >= 1 for s in self.subs)
 
-        assert self.spin_until(lambda: matched() == len(self.subs) and self.subscribed >= len(self.subs), timeout), (
+        assert self.spin_until(lambda: outputs_discovered(self.samples, matched(), len(self.subs)), timeout), (
             f"estimator node's outputs not discovered within {timeout:g} s: {matched()} of {len(self.subs)} "
-            f"subscriptions matched its publishers, its report says it publishes on {self.subscribed} (-1: no report)")
+            f"subscriptions matched its publishers, its report says it publishes on "
+            f"{outputs_subscribed(self.samples)} (-1: no report)")
 
     def close(self) -> None:
         self.node.destroy_node()

@@ -29,7 +29,8 @@ node in the root namespace, as always, and the fully qualified name under a name
   to be fed), ``periodic_ms.max`` (the longest step of the
   node's periodic work, which holds up the input callbacks for that long),
   ``state_file``, ``nodes_with_this_name``, and from the node ``outputs_subscribed`` (its
-  sample topics that had a subscriber at the period's start: the ones it publishes). OK, or
+  sample topics that had a subscriber at the period's start: the ones it publishes; a
+  listener reads it back with :func:`outputs_discovered`). OK, or
   ERROR while another node with this node's fully qualified name is on the ROS graph (its
   outputs then mix with this node's on the same topics: every consumer receives each sample
   from both): the text first in the message, and logged as a warning (throttled like the
@@ -66,7 +67,7 @@ from __future__ import annotations
 
 import heapq
 import zlib
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 
 from .alerts import Alert, AlertPolicy
@@ -89,6 +90,9 @@ __all__ = [
     "malformed_warning",
     "status_prefix",
     "namesake_alert",
+    "OUTPUTS_SUBSCRIBED",
+    "outputs_subscribed",
+    "outputs_discovered",
     "MAX_KEYS",
     "MAX_NAME",
     "MAX_VALUE",
@@ -97,6 +101,9 @@ __all__ = [
 MAX_KEYS = 16  # entries shown per table of names (rejection reasons, unknown joints, ...)
 MAX_NAME = 64  # characters of a name inside a key
 MAX_VALUE = 1024  # characters of a value
+
+# The ``samples`` status's key for the node's sample topics with a subscriber (the ones it publishes on).
+OUTPUTS_SUBSCRIBED = "outputs_subscribed"
 
 # diagnostic_msgs/DiagnosticStatus levels (the message defines them as bytes 0..3).
 OK, WARN, ERROR, STALE = 0, 1, 2, 3
@@ -169,6 +176,29 @@ def status_prefix(node: str) -> str:
     full = node if node.startswith("/") else f"/{node}"
     namespace, _, name = full.rpartition("/")
     return full if namespace else name
+
+
+def outputs_subscribed(values: Mapping[str, str] | Iterable[tuple[str, str]]) -> int:
+    """The :data:`OUTPUTS_SUBSCRIBED` count among the key-values of a node's ``samples`` status
+    (a mapping or ``(key, value)`` pairs, as received): how many sample topics the node
+    publishes on; -1 when the key is missing or its value is not a count."""
+    text = dict(values).get(OUTPUTS_SUBSCRIBED)
+    try:
+        count = int(text) if text is not None else -1
+    except (TypeError, ValueError):
+        return -1
+    return count if count >= 0 else -1
+
+
+def outputs_discovered(values: Mapping[str, str] | Iterable[tuple[str, str]], matched: int,
+                       subscriptions: int) -> bool:
+    """Whether discovery matched both ends of a listener's ``subscriptions`` subscriptions to
+    the node's sample topics: all of them matched the node's publishers (``matched``, the
+    listener's view), and the node's ``samples`` status (``values``, :func:`outputs_subscribed`)
+    says it publishes on at least as many sample topics (the node's view, which lags the other
+    by seconds on a busy machine: the node publishes only on the topics whose publisher had
+    matched a subscriber at its last report, and a sample sent before is lost to the listener)."""
+    return matched == subscriptions and outputs_subscribed(values) >= subscriptions
 
 
 def namesake_alert(node: str, namesakes: int) -> Alert | None:
@@ -442,7 +472,7 @@ class DiagnosticsPolicy:
             kv.append(("periodic_ms.max", _ms(max(snap.periodic_s))))
         kv += [("state_file", snap.state_file), ("nodes_with_this_name", 1 + max(snap.namesakes, 0))]
         if snap.outputs_subscribed is not None:
-            kv.append(("outputs_subscribed", snap.outputs_subscribed))
+            kv.append((OUTPUTS_SUBSCRIBED, snap.outputs_subscribed))
         message = f"{c['samples_used']} of {c['samples_formed']} samples used"
         load = self.load
         if load is not None and snap.waits_s:

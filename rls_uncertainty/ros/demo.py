@@ -22,10 +22,9 @@ import time
 from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING, Protocol
 
-from ..datapath.diagnostics import status_prefix
-from ..datapath.inputs import message_class
 from ..datapath.outputs import ARRAY_OUTPUTS, NODE_NAME
 from .environment import where
+from .listener import OutputListener
 from .player import NoAudience, _check_rate, _player_writer_profile, _Publisher, bundled_bag, stop_process
 
 if TYPE_CHECKING:
@@ -71,22 +70,6 @@ class _ArrayMessage(Protocol):
     def data(self) -> Sequence[float]: ...
 
 
-class _KeyValue(Protocol):
-    key: str
-    value: str
-
-
-class _Status(Protocol):
-    name: str
-    values: Sequence[_KeyValue]
-
-
-class _DiagnosticArray(Protocol):
-    """What the demo reads of a ``diagnostic_msgs/DiagnosticArray``."""
-
-    status: Sequence[_Status]
-
-
 def private_namespace() -> str:
     """A namespace no other process uses: ``/rls_demo_<pid>_<4 random hex digits>``."""
     return f"/rls_demo_{os.getpid()}_{secrets.token_hex(2)}"
@@ -110,54 +93,24 @@ def _start_node(params_path: str, namespace: str) -> tuple[subprocess.Popen[str]
     return proc, node_log.name
 
 
-class _Outputs:
+class _Outputs(OutputListener):
     """What the demo's listener keeps of the outputs of the node ``node_name``: the number of
-    samples published, the latest array of each topic, and how many sample topics the node's
-    newest ``/diagnostics`` report says it publishes on (``subscribed``; -1 before a report)."""
+    samples published and the latest array of each topic."""
 
     def __init__(self, node: Node, node_name: str, models: Sequence[str]) -> None:
-        from rclpy.qos import QoSHistoryPolicy, QoSProfile, QoSReliabilityPolicy  # noqa: PLC0415
-
-        self.prefix = node_name
         self.samples = 0
-        self.subscribed = -1
-        self.latest: dict[str, _ArrayMessage] = {}
-        qos = QoSProfile(depth=1000, reliability=QoSReliabilityPolicy.RELIABLE, history=QoSHistoryPolicy.KEEP_LAST)
-        self.subs = [node.create_subscription(message_class("std_msgs/msg/Header"), f"{node_name}/sample_stamp",
-                                              self._count, qos)]
-        array_type = message_class("std_msgs/msg/Float64MultiArray")
-        for model in models:
-            for suffix in ARRAY_OUTPUTS:
-                topic = f"{node_name}/{model}/{suffix}"
+        self.latest: dict[tuple[str, str], _ArrayMessage] = {}
+        super().__init__(node, node_name, models, ARRAY_OUTPUTS, depth=1000)
 
-                def keep(msg: _ArrayMessage, t: str = topic) -> None:
-                    self.latest[t] = msg
-
-                self.subs.append(node.create_subscription(array_type, topic, keep, qos))
-        self._report = node.create_subscription(message_class("diagnostic_msgs/msg/DiagnosticArray"), "/diagnostics",
-                                                self._take_report, 10)
-
-    def _take_report(self, msg: _DiagnosticArray) -> None:
-        for status in msg.status:
-            if status.name == f"{status_prefix(self.prefix)}: samples":
-                self.subscribed = int(next((kv.value for kv in status.values if kv.key == "outputs_subscribed"), -1))
-
-    def ready(self) -> bool:
-        """Discovery matched both ends of every output: these subscriptions matched the node's
-        publishers, and the node's newest report says it publishes on as many sample topics (it
-        publishes only on those its publishers had matched a subscriber on at its last report)."""
-        return self.matched() == len(self.subs) and self.subscribed >= len(self.subs)
-
-    def matched(self) -> int:
-        """The subscriptions that matched the node's publisher (this side's view)."""
-        return sum(s.get_publisher_count() >= 1 for s in self.subs)
-
-    def _count(self, _msg: object) -> None:
+    def _stamp(self, msg: object) -> None:
         self.samples += 1
+
+    def _array(self, model: str, kind: str, msg: _ArrayMessage) -> None:
+        self.latest[(model, kind)] = msg
 
     def arrays(self, model: str) -> list[_ArrayMessage | None]:
         """The latest estimates, corrected and conventional standard errors of ``model``."""
-        return [self.latest.get(f"{self.prefix}/{model}/{suffix}") for suffix in ARRAY_OUTPUTS]
+        return [self.latest.get((model, suffix)) for suffix in ARRAY_OUTPUTS]
 
 
 def _spin_for(spin: Callable[[], object], seconds: float, until: Callable[[], bool] = lambda: False) -> bool:
@@ -217,10 +170,10 @@ def demo(rate: float = 4.0, params_file: str = "t2") -> int:
 
         player = _Publisher(node, bag, clock=False, reliable=True, namespace=namespace)
         player.find_audience(_PATIENCE_S, 1, 1.0, spin)  # the node's five subscriptions, matched
-        if not _spin_for(spin, _PATIENCE_S, outputs.ready):
+        if not _spin_for(spin, _PATIENCE_S, outputs.discovered):
             raise _Failed(f"the estimator node's outputs were not discovered within {_PATIENCE_S:g} s ("
                           f"{outputs.matched()} of {len(outputs.subs)} subscriptions matched its publishers; its "
-                          f"report says it publishes on {outputs.subscribed} topics, -1: no report)")
+                          f"report says it publishes on {outputs.subscribed()} topics, -1: no report)")
         player.run(rate, spin)
         with InputStream(bag) as stream:
             offline = run_pipeline(stream, config, record=False)

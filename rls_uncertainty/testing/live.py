@@ -48,6 +48,7 @@ from ..errors import BagError, LiveTimeout
 from ..extras import optional
 from ..offline.bags import input_topics
 from ..offline.results import History, ReplayResult, accounting
+from ..ros.listener import OutputListener
 from ..ros.player import stop_process
 from ..settings.parameters import node_config, pipeline_config
 
@@ -159,55 +160,20 @@ def _counters(statuses: Sequence[tuple[str, int, str, Mapping[str, str]]]) -> di
                        "samples_rejected": table("samples_rejected."), "resets": table("resets.")})
 
 
-class _Outputs:
+class _Outputs(OutputListener):
     """The node's sample stamps, vector outputs (by model and kind, by stamp) and newest
     ``/diagnostics``, as they arrive on ``node``."""
 
     def __init__(self, node: Any, models: Sequence[str], kinds: Sequence[str] = _VECTORS) -> None:
-        from diagnostic_msgs.msg import DiagnosticArray  # noqa: PLC0415
-        from rclpy.qos import QoSHistoryPolicy, QoSProfile, QoSReliabilityPolicy  # noqa: PLC0415
-        from std_msgs.msg import Float64MultiArray, Header  # noqa: PLC0415
-
-        qos = QoSProfile(depth=10_000, reliability=QoSReliabilityPolicy.RELIABLE, history=QoSHistoryPolicy.KEEP_LAST)
         self.stamps: list[int] = []
-        self.arrays: dict[tuple[str, str], dict[int, tuple[float, ...]]] = {}
-        self.diagnostics: list[tuple[str, int, str, dict[str, str]]] = []
-        self.reports = 0
-        self.subs = [node.create_subscription(Header, f"/{NODE_NAME}/{SAMPLE_STAMP}", self._stamp, qos)]
-        for model in models:
-            for kind in kinds:
-                store = self.arrays.setdefault((model, kind), {})
-                self.subs.append(node.create_subscription(
-                    Float64MultiArray, f"/{NODE_NAME}/{model}/{kind}",
-                    lambda msg, s=store: s.__setitem__(parse_stamp_label(msg.layout.dim[-1].label), tuple(msg.data)),
-                    qos))
-        self.diag_sub = node.create_subscription(DiagnosticArray, "/diagnostics", self._diagnostics, 10)
+        self.arrays: dict[tuple[str, str], dict[int, tuple[float, ...]]] = {(m, k): {} for m in models for k in kinds}
+        super().__init__(node, f"/{NODE_NAME}", models, kinds, depth=10_000)
 
     def _stamp(self, msg: Any) -> None:
         self.stamps.append(int(msg.stamp.sec) * 1_000_000_000 + int(msg.stamp.nanosec))
 
-    def _diagnostics(self, msg: Any) -> None:
-        from ..ros.health import statuses_of  # noqa: PLC0415
-
-        statuses = statuses_of(msg)
-        if any(name.startswith(f"{NODE_NAME}: ") for name, *_ in statuses):
-            self.diagnostics = statuses
-            self.reports += 1
-
-    def matched(self) -> int:
-        """The output subscriptions that matched the node's publisher (this side's view)."""
-        return sum(s.get_publisher_count() >= 1 for s in self.subs)
-
-    def _value(self, status: str, key: str) -> str | None:
-        """``key`` of the node's newest ``status`` report (None: no such report or key)."""
-        return next((kv.get(key) for name, _l, _m, kv in self.diagnostics if name == f"{NODE_NAME}: {status}"), None)
-
-    def published_to(self) -> int:
-        """How many sample topics the node's newest report says it publishes (the ones its
-        publishers matched a subscriber on: the node's view, which lags this side's on a busy
-        machine, and before which the node publishes nothing on a topic; -1: not said)."""
-        value = self._value("samples", "outputs_subscribed")
-        return -1 if value is None else int(value)
+    def _array(self, model: str, kind: str, msg: Any) -> None:
+        self.arrays[(model, kind)][parse_stamp_label(msg.layout.dim[-1].label)] = tuple(msg.data)
 
     def progress(self) -> tuple[int, ...]:
         """What grows while the node works through the bag: the stamps and arrays here, and
@@ -215,7 +181,7 @@ class _Outputs:
         received = sum(int(v) for name, _l, _m, kv in self.diagnostics if name == f"{NODE_NAME}: inputs"
                        for k, v in kv.items() if k.endswith(".received"))
         return (len(self.stamps), sum(map(len, self.arrays.values())), received,
-                int(self._value("samples", "samples_used") or 0))
+                int(self.values("samples").get("samples_used") or 0))
 
     def publishers(self) -> dict[str, int]:
         """The node's newest report's publisher count per input stream."""
@@ -271,8 +237,7 @@ def _ready(out: _Outputs, player: Any, kinds: Mapping[str, str]) -> Callable[[],
     stream), and this player's publishers matched a subscription on each input topic."""
 
     def ready() -> bool:
-        return (out.matched() == len(out.subs) and out.published_to() >= len(out.subs)
-                and out.inputs_seen(list(kinds.values()))
+        return (out.discovered() and out.inputs_seen(list(kinds.values()))
                 and all(player.pubs[topic].get_subscription_count() >= 1 for topic in kinds))
 
     return ready
@@ -283,7 +248,7 @@ def _discovery(out: _Outputs, player: Any, kinds: Mapping[str, str]) -> str:
     counts = out.publishers()
     node_sees = ", ".join(f"{kind} {counts.get(kind, 0)}" for kind in kinds.values())
     player_sees = ", ".join(f"{kind} {player.pubs[topic].get_subscription_count()}" for topic, kind in kinds.items())
-    published_to = out.published_to()
+    published_to = out.subscribed()
     return (f"{out.matched()} of the {len(out.subs)} output subscriptions matched the node's publishers; the node "
             f"publishes to {published_to if published_to >= 0 else 'an unreported number of'} of them; "
             f"publishers the node counts per input: {node_sees}; subscriptions matched per input "
