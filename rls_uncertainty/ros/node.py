@@ -27,18 +27,14 @@ from __future__ import annotations
 
 if __name__ == "__main__":  # pragma: no cover - run in a subprocess by the tests
     # ``python -m rls_uncertainty.ros.node`` (the demo, the testing plugin, the docs): this copy
-    # only loads the module again under a guard, as the ``estimator_node`` console script does,
-    # so that Ctrl-C while the node loads (about a second) ends it in one line with exit status
-    # 130 instead of a traceback.
-    import importlib
+    # only runs the ``estimator_node`` console script, which loads the module again under its
+    # guard, so that Ctrl-C while the node loads (about a second) ends it in one line with exit
+    # status 130 instead of a traceback.
     import sys as _sys
 
-    try:
-        _main = importlib.import_module("rls_uncertainty.ros.node").main
-    except KeyboardInterrupt:
-        print("estimator_node: stopped by SIGINT while starting; nothing written", file=_sys.stderr)
-        _sys.exit(130)
-    _sys.exit(_main())
+    from rls_uncertainty.cli import estimator_node
+
+    _sys.exit(estimator_node())
 
 import gc
 import math
