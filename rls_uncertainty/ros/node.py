@@ -27,14 +27,18 @@ from __future__ import annotations
 
 if __name__ == "__main__":  # pragma: no cover - run in a subprocess by the tests
     # ``python -m rls_uncertainty.ros.node`` (the demo, the testing plugin, the docs): this copy
-    # only runs the ``estimator_node`` console script, which loads the module again under its
-    # guard, so that Ctrl-C while the node loads (about a second) ends it in one line with exit
-    # status 130 instead of a traceback.
+    # only loads the module again under a guard, as the ``estimator_node`` console script does,
+    # so that Ctrl-C while the node loads (about a second) ends it in one line with exit status
+    # 130 instead of a traceback.
+    import importlib
     import sys as _sys
 
-    from rls_uncertainty.cli import estimator_node
-
-    _sys.exit(estimator_node())
+    try:
+        _main = importlib.import_module("rls_uncertainty.ros.node").main
+    except KeyboardInterrupt:
+        print("estimator_node: stopped by SIGINT while starting; nothing written", file=_sys.stderr)
+        _sys.exit(130)
+    _sys.exit(_main())
 
 import gc
 import math
