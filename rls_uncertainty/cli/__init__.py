@@ -44,18 +44,21 @@ _STARTING_STOPPED = 128 + 2  # the status of a command that SIGINT (2) stopped
 _COMMAND_MODULES = frozenset({"bags", "commands", "flags", "offline", "ros", "simulation", "stopping"})
 
 
-def _stopped_while_starting(program: str, exc: BaseException, stopping: Stopping | None) -> bool:
-    """Whether ``exc``, raised while the command started, is a stop (a Ctrl-C; one that came
-    back as another exception: :meth:`.stopping.Stopping.signal_of`); if so, its one line."""
+def _stopped(program: str, exc: BaseException, stopping: Stopping | None, started: bool) -> bool:
+    """Whether ``exc`` is a stop (a Ctrl-C; one that came back as another exception:
+    :meth:`.stopping.Stopping.signal_of`); if so, its one line. ``started``: the command had
+    begun (a stop that escaped its own handling, a second Ctrl-C say), so what it wrote is not
+    known."""
     if not isinstance(exc, KeyboardInterrupt) and (stopping is None or stopping.signal_of(exc) is None):
         return False
-    print(f"{program}: stopped by SIGINT while starting; nothing written", file=sys.stderr)
+    said = "" if started else " while starting; nothing written"
+    print(f"{program}: stopped by SIGINT{said}", file=sys.stderr)
     return True
 
 
 def main(argv: list[str] | None = None) -> int:
     """``rls-uncertainty ARGV`` (:func:`.commands.run`); its exit status."""
-    stopping = None
+    stopping, started = None, False
     try:
         import signal
 
@@ -67,9 +70,10 @@ def main(argv: list[str] | None = None) -> int:
 
             args = parse(argv)
         # Still under this try: a Ctrl-C before run's own handling starts is one line too.
+        started = True
         return run(args)
     except (KeyboardInterrupt, Exception) as exc:
-        if not _stopped_while_starting("rls-uncertainty", exc, stopping):
+        if not _stopped("rls-uncertainty", exc, stopping, started):
             raise
         return _STARTING_STOPPED
 
@@ -77,7 +81,7 @@ def main(argv: list[str] | None = None) -> int:
 def estimator_node() -> int:
     """The console script ``estimator_node``: :func:`..ros.node.main`, or one line naming the
     extra to install when the ROS stack is missing (exit status 2)."""
-    stopping = None
+    stopping, started = None, False
     try:
         import signal
 
@@ -89,9 +93,10 @@ def estimator_node() -> int:
 
             node_main = load_estimator_node()
         # Still under this try: a Ctrl-C before the node's own handling starts is one line too.
+        started = True
         return 2 if node_main is None else node_main()
     except (KeyboardInterrupt, Exception) as exc:
-        if not _stopped_while_starting("estimator_node", exc, stopping):
+        if not _stopped("estimator_node", exc, stopping, started):
             raise
         return _STARTING_STOPPED
 
