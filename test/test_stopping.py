@@ -176,7 +176,7 @@ sample, calls = replay._Run.sample, []
 def swallowing(self, out):
     calls.append(out)
     if len(calls) == 50:
-        if {where!r} == "__del__":
+        if {where!r}.startswith("__del__"):
             Swallow()
         elif {where!r} == "__set_name__":
             type("Made", (), {{"named": Named()}})
@@ -245,6 +245,149 @@ def test_ctrl_c_while_the_node_module_loads_is_one_line(tmp_path):
                           timeout=DEADLINE)
     assert (proc.returncode, proc.stdout) == (130, "")
     assert proc.stderr == "estimator_node: stopped by SIGINT while starting; nothing written\n"
+
+
+# A child that sends itself SIGINT at the first module the import system looks for once
+# ``rls_uncertainty.cli`` has started loading: Ctrl-C as the console script's import of the
+# command line's module ends, before ``main`` runs (that module loads nothing of its own).
+_INTERRUPT_AFTER_CLI = _FROM_A_TERMINAL + """
+import os, signal, sys
+class Trip:
+    armed = False
+    def find_spec(self, name, path=None, target=None):
+        if name == "rls_uncertainty.cli":
+            Trip.armed = True
+        elif Trip.armed:
+            Trip.armed = False
+            os.kill(os.getpid(), signal.SIGINT)
+        return None
+sys.meta_path.insert(0, Trip())
+from rls_uncertainty.cli import main
+sys.exit(main(["replay", {bag!r}, "--out", {out!r}]))
+"""
+
+
+def test_ctrl_c_as_the_command_line_module_loads_is_one_line(tmp_path):
+    out = tmp_path / "out"
+    proc = subprocess.run([sys.executable, "-c", _INTERRUPT_AFTER_CLI.format(bag=str(BUNDLED), out=str(out))],
+                          cwd=tmp_path, capture_output=True, text=True, timeout=DEADLINE)
+    assert (proc.returncode, proc.stdout) == (130, "")
+    assert proc.stderr == "rls-uncertainty: stopped by SIGINT while starting; nothing written\n"
+    assert list(tmp_path.iterdir()) == []
+
+
+# A child whose Ctrl-C lands, while the command loads its flags module, where Python cannot
+# raise it as it is (WHERE: a __del__, a weakref callback, a __set_name__), or in code that
+# catches it and raises another exception in its place (numpy does, when the interrupt lands
+# while its C code imports a module).
+_LANDING_WHILE_STARTING = _FROM_A_TERMINAL + """
+import signal, sys, weakref
+class Swallow:
+    def __del__(self):
+        signal.raise_signal(signal.SIGINT)  # the handler runs at once, inside __del__
+class Owner:
+    pass
+class Named:
+    def __set_name__(self, owner, name):
+        signal.raise_signal(signal.SIGINT)
+def callback(_ref):
+    signal.raise_signal(signal.SIGINT)
+class Trip:
+    def find_spec(self, name, path=None, target=None):
+        if name != "rls_uncertainty.cli.flags":
+            return None
+        if {where!r}.startswith("__del__"):
+            Swallow()
+        elif {where!r} == "__set_name__":
+            type("Made", (), {{"named": Named()}})
+        elif {where!r} == "weakref callback":
+            owner = Owner()
+            ref = weakref.ref(owner, callback)
+            del owner
+        else:
+            try:
+                signal.raise_signal(signal.SIGINT)
+            except KeyboardInterrupt:
+                raise ImportError("could not import module") from None
+        return None
+sys.meta_path.insert(0, Trip())
+if {where!r} == "__del__, the start-up over before it is raised again":
+    from rls_uncertainty.cli import stopping
+    stopping._thread = type("NoThreads", (), {{"start_new_thread": lambda *a: None}})
+from rls_uncertainty.cli import {entry}
+sys.exit({entry}({args}))
+"""
+
+
+@pytest.mark.parametrize("where", ["__del__", "__del__, the start-up over before it is raised again",
+                                   "weakref callback", "__set_name__", "another exception"])
+def test_ctrl_c_while_starting_is_one_line_wherever_it_lands(tmp_path, where):
+    out = tmp_path / "out"
+    code = _LANDING_WHILE_STARTING.format(where=where, entry="main", args=f"['replay', {str(BUNDLED)!r}, '--out', "
+                                          f"{str(out)!r}]")
+    proc = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, capture_output=True, text=True,
+                          timeout=DEADLINE)
+    assert (proc.returncode, proc.stdout) == (130, ""), proc.stderr
+    assert proc.stderr == "rls-uncertainty: stopped by SIGINT while starting; nothing written\n"
+    assert list(tmp_path.iterdir()) == []
+
+
+# A child in which Ctrl-C arrives as ``main`` hands the parsed command line to ``run`` (as
+# ``estimator_node`` hands over to the node's main), before their own handling of it starts.
+_INTERRUPT_AT_HANDOVER = _FROM_A_TERMINAL + """
+import signal, sys
+from rls_uncertainty.cli import commands
+def interrupted(*args):
+    signal.raise_signal(signal.SIGINT)
+    raise AssertionError("not interrupted")
+commands.run = interrupted
+commands.load_estimator_node = lambda: interrupted
+from rls_uncertainty.cli import {entry}
+sys.exit({entry}({args}))
+"""
+
+
+@pytest.mark.parametrize(("entry", "args", "program"), [
+    ("main", "['replay', {bag!r}, '--out', {out!r}]", "rls-uncertainty"),
+    ("estimator_node", "", "estimator_node"),
+], ids=["rls-uncertainty", "estimator_node"])
+def test_ctrl_c_as_the_command_takes_over_is_one_line(tmp_path, entry, args, program):
+    code = _INTERRUPT_AT_HANDOVER.format(entry=entry, args=args.format(bag=str(BUNDLED), out=str(tmp_path / "out")))
+    proc = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, capture_output=True, text=True,
+                          timeout=DEADLINE)
+    # Once the command has been called, main no longer knows what it wrote: the line says less.
+    assert (proc.returncode, proc.stdout, proc.stderr) == (130, "", f"{program}: stopped by SIGINT\n")
+    assert list(tmp_path.iterdir()) == []
+
+
+# ``main`` called from a program, Ctrl-C arriving while the replay's stopping handlers are put
+# in (just after SIGTERM's): the program gets its own handlers back.
+_INTERRUPT_WHILE_HANDLERS_GO_IN = _FROM_A_TERMINAL + """
+import signal, sys
+from rls_uncertainty.cli import main
+put_in = signal.signal
+def signal_then_interrupt(signum, handler):
+    before = put_in(signum, handler)
+    if signum == signal.SIGTERM and handler is not signal.SIG_DFL:
+        signal.raise_signal(signal.SIGINT)
+    return before
+signal.signal = signal_then_interrupt
+code = main(["replay", {bag!r}, "--out", {out!r}])
+signal.signal = put_in
+print(signal.getsignal(signal.SIGINT) is signal.default_int_handler, signal.getsignal(signal.SIGTERM) == signal.SIG_DFL,
+      signal.getsignal(signal.SIGHUP) == signal.SIG_DFL, sys.unraisablehook is sys.__unraisablehook__)
+sys.exit(code)
+"""
+
+
+def test_ctrl_c_while_the_stopping_handlers_go_in_leaves_the_callers_handlers(tmp_path):
+    out = tmp_path / "out"
+    code = _INTERRUPT_WHILE_HANDLERS_GO_IN.format(bag=str(BUNDLED), out=str(out))
+    proc = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, capture_output=True, text=True,
+                          timeout=DEADLINE)
+    assert (proc.returncode, proc.stdout) == (130, "True True True True\n"), proc.stderr
+    assert proc.stderr == "rls-uncertainty replay: stopped by SIGINT; its unfinished output removed\n"
+    assert list(tmp_path.iterdir()) == []
 
 
 def test_a_killed_campaign_takes_its_workers_with_it_and_the_next_run_removes_its_partial(tmp_path, many):

@@ -12,49 +12,93 @@ worker processes ended, its unfinished output directory removed, :mod:`..files`)
 with one line and exit status 128 + the signal's number (130 for Ctrl-C, 143 for SIGTERM). The
 ROS commands handle their signals themselves (the node and rclpy, the dashboard's loop).
 Ctrl-C while a command is still starting (loading its modules, about a second, or parsing its
-command line) ends it the same way, in one line, before it has written anything.
+command line) ends it the same way, in one line, before it has written anything: from the
+first line of :func:`main` (of :func:`estimator_node`) on, SIGINT raises a stop
+(:mod:`.stopping`), recognised also where it lands in a ``__del__`` or a weakref callback or
+comes back as another exception.
 
-This module is kept light so that it can catch that: :mod:`.commands` holds the commands.
+Before that, a Ctrl-C is the interpreter's, and no code of this package can change what it
+does: while the interpreter itself starts, until it has put in its own SIGINT handler (20 to
+35 ms on a busy two-core machine), the process ends by the signal; while it then sets up its
+streams and runs its ``site`` module with the environment's ``.pth`` files, it ends with a
+fatal error and its traceback (exit status 1). The ROS wheels' bootstrap ``.pth`` file starts
+the interpreter a second time, so both happen twice: a tenth of a second or more in all on such
+a machine. Last, the console script's own first lines, up to this module's loading, end in a
+traceback; this module imports nothing but ``sys``, so that :func:`main` starts as soon as the
+script has it. :mod:`.commands` holds the commands.
 """
 
 from __future__ import annotations
 
-import importlib
-import signal
 import sys
-from typing import Any
+
+TYPE_CHECKING = False
+if TYPE_CHECKING:
+    from typing import Any
+
+    from .stopping import Stopping
 
 __all__ = ["main", "build_parser", "estimator_node"]
 
-_COMMAND_MODULES = frozenset({"bags", "commands", "flags", "offline", "ros", "simulation"})
+_STARTING_STOPPED = 128 + 2  # the status of a command that SIGINT (2) stopped
+_COMMAND_MODULES = frozenset({"bags", "commands", "flags", "offline", "ros", "simulation", "stopping"})
 
 
-def _stopped_while_starting(program: str) -> int:
-    print(f"{program}: stopped by SIGINT while starting; nothing written", file=sys.stderr)
-    return 128 + int(signal.SIGINT)
+def _stopped(program: str, exc: BaseException, stopping: Stopping | None, started: bool) -> bool:
+    """Whether ``exc`` is a stop (a Ctrl-C; one that came back as another exception:
+    :meth:`.stopping.Stopping.signal_of`); if so, its one line. ``started``: the command had
+    begun (a stop that escaped its own handling, a second Ctrl-C say), so what it wrote is not
+    known."""
+    if not isinstance(exc, KeyboardInterrupt) and (stopping is None or stopping.signal_of(exc) is None):
+        return False
+    said = "" if started else " while starting; nothing written"
+    print(f"{program}: stopped by SIGINT{said}", file=sys.stderr)
+    return True
 
 
 def main(argv: list[str] | None = None) -> int:
     """``rls-uncertainty ARGV`` (:func:`.commands.run`); its exit status."""
+    stopping, started = None, False
     try:
-        from .commands import parse, run
+        import signal
 
-        args = parse(argv)
-    except KeyboardInterrupt:
-        return _stopped_while_starting("rls-uncertainty")
-    return run(args)
+        from .stopping import Stopping
+
+        stopping = Stopping()
+        with stopping.signals((signal.SIGINT,)):
+            from .commands import parse, run
+
+            args = parse(argv)
+        # Still under this try: a Ctrl-C before run's own handling starts is one line too.
+        started = True
+        return run(args)
+    except (KeyboardInterrupt, Exception) as exc:
+        if not _stopped("rls-uncertainty", exc, stopping, started):
+            raise
+        return _STARTING_STOPPED
 
 
 def estimator_node() -> int:
     """The console script ``estimator_node``: :func:`..ros.node.main`, or one line naming the
     extra to install when the ROS stack is missing (exit status 2)."""
+    stopping, started = None, False
     try:
-        from .commands import load_estimator_node
+        import signal
 
-        node_main = load_estimator_node()
-    except KeyboardInterrupt:
-        return _stopped_while_starting("estimator_node")
-    return 2 if node_main is None else node_main()
+        from .stopping import Stopping
+
+        stopping = Stopping()
+        with stopping.signals((signal.SIGINT,)):
+            from .commands import load_estimator_node
+
+            node_main = load_estimator_node()
+        # Still under this try: a Ctrl-C before the node's own handling starts is one line too.
+        started = True
+        return 2 if node_main is None else node_main()
+    except (KeyboardInterrupt, Exception) as exc:
+        if not _stopped("estimator_node", exc, stopping, started):
+            raise
+        return _STARTING_STOPPED
 
 
 def __getattr__(name: str) -> Any:
@@ -64,5 +108,7 @@ def __getattr__(name: str) -> Any:
 
         return build_parser
     if name in _COMMAND_MODULES:
+        import importlib
+
         return importlib.import_module(f".{name}", __name__)
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -5,16 +5,12 @@ and stopping signals each said in one line, and the ``estimator_node`` console s
 
 from __future__ import annotations
 
-import _thread
 import argparse
 import os
 import signal
 import sys
-import threading
-from collections.abc import Callable, Iterator
-from contextlib import contextmanager
-from types import FrameType
-from typing import Any, NoReturn
+from collections.abc import Callable
+from typing import NoReturn
 from xml.etree import ElementTree
 
 from ..errors import MissingExtra, RlsUncertaintyError
@@ -23,103 +19,15 @@ from .bags import add_convert, add_make_bag
 from .offline import add_campaign, add_predict, add_replay
 from .ros import add_demo, add_operator_commands, add_play
 from .simulation import add_montecarlo, add_multisine, add_simulate
+from .stopping import Stopped, Stopping
 
-__all__ = ["parse", "run", "build_parser", "load_estimator_node", "Stopped"]
+__all__ = ["parse", "run", "build_parser", "load_estimator_node"]
 
 _SUBCOMMANDS = (add_demo, add_simulate, add_montecarlo, add_multisine, add_make_bag, add_convert, add_replay,
                 add_campaign, add_predict, add_play, add_operator_commands)
 # The commands that handle their signals themselves (rclpy's handlers, the dashboard's loop).
 _OWN_SIGNALS = frozenset({"demo", "play", "dashboard", "status", "enable", "disable", "reset"})
-
-
-class Stopped(KeyboardInterrupt):
-    """A stopping signal (SIGINT, SIGTERM, SIGHUP), raised in the main thread where it arrived,
-    so that the command unwinds as for Ctrl-C. (Not KeyboardInterrupt itself for SIGINT: a
-    Ctrl-C that reached a replay as it started, handled here, still made the interpreter end
-    the process by SIGINT at exit instead of the status returned; CPython marks an unhandled
-    interrupt by the exception's exact type, so a subclass is never marked.)"""
-
-    def __init__(self, signum: int) -> None:
-        super().__init__(signal.Signals(signum).name)
-        self.signum = signum
-
-
-def _stop(signum: int, _frame: FrameType | None) -> None:
-    raise Stopped(signum)
-
-
-class _Resend:
-    """A stop raised where Python cannot propagate it, raised again in the command's own code.
-
-    The handler runs wherever the main thread is when the signal arrives; inside a weakref
-    callback or a ``__del__`` its :class:`Stopped` cannot propagate (Python prints "Exception
-    ignored" and goes on). Installed as ``sys.unraisablehook`` while the command's handlers are
-    in, this says nothing about such a :class:`Stopped` and has a thread of its own simulate the
-    signal again in the main thread (:func:`_thread.interrupt_main`), whose handler then runs in
-    the command's code; one swallowed again comes back here. Every other unraisable exception
-    goes to the hook before. :meth:`close`, before the handlers are put back, makes sure that no
-    thread simulates a signal after it."""
-
-    def __init__(self, usual: Callable[[Any], object]) -> None:
-        self.usual, self.open, self.lock = usual, True, threading.Lock()
-
-    def __call__(self, unraisable: Any) -> None:
-        if isinstance(unraisable.exc_value, Stopped):
-            _thread.start_new_thread(self._send, (unraisable.exc_value.signum,))
-        else:
-            self.usual(unraisable)
-
-    def _send(self, signum: int) -> None:
-        with self.lock:
-            if self.open:
-                _thread.interrupt_main(signal.Signals(signum))
-
-    def close(self) -> None:
-        self.open = False
-        with self.lock:  # a thread that found it open has sent its signal (handled by _stop)
-            pass
-
-
-def _put_back(before: dict[signal.Signals, Any], hook: Callable[[Any], object]) -> None:
-    """The handlers in ``before``, then the unraisable ``hook``, put back, every one even when a
-    stop arrives meanwhile (``signal.signal`` runs a pending handler before it changes
-    anything); that stop is raised once they are."""
-    stopped: KeyboardInterrupt | None = None
-    for signum, handler in before.items():
-        while signal.getsignal(signum) is not handler:
-            try:
-                signal.signal(signum, handler)
-            except KeyboardInterrupt as exc:
-                stopped = exc
-    sys.unraisablehook = hook
-    if stopped is not None:
-        raise stopped
-
-
-@contextmanager
-def _stopping_signals(command: str) -> Iterator[None]:
-    """While the command runs, SIGINT, SIGTERM and SIGHUP raise :class:`Stopped` (raised again
-    where it landed where Python cannot propagate it: :class:`_Resend`); a signal the process was
-    started ignoring (``nohup``, a background job) stays ignored, and the handlers and the
-    unraisable hook before are put back after (``main`` called from a program)."""
-    before = {}
-    if command not in _OWN_SIGNALS and threading.current_thread() is threading.main_thread():
-        for signum, usual in ((signal.SIGINT, signal.default_int_handler), (signal.SIGTERM, signal.SIG_DFL),
-                              (signal.SIGHUP, signal.SIG_DFL)):
-            if signal.getsignal(signum) is usual:
-                before[signum] = signal.signal(signum, _stop)
-    hook = sys.unraisablehook
-    resend = _Resend(hook) if before else None
-    if resend is not None:
-        sys.unraisablehook = resend
-    try:
-        yield
-    finally:
-        try:
-            if resend is not None:
-                resend.close()
-        finally:
-            _put_back(before, hook)
+_STOPPING_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
 
 
 class _Parser(argparse.ArgumentParser):
@@ -160,9 +68,12 @@ def parse(argv: list[str] | None = None) -> argparse.Namespace:
 
 
 def run(args: argparse.Namespace) -> int:
-    """The command ``args`` chose, run; its exit status."""
+    """The command ``args`` chose, run; its exit status. While it runs, SIGINT, SIGTERM and
+    SIGHUP raise :class:`.stopping.Stopped` (:meth:`.stopping.Stopping.signals`), except for the
+    commands that handle their signals themselves."""
+    stopping = Stopping()
     try:
-        with _stopping_signals(args.command):
+        with stopping.signals(() if args.command in _OWN_SIGNALS else _STOPPING_SIGNALS):
             code = int(args.func(args) or 0)
         sys.stdout.flush()  # here, so that a reader gone (below) is seen here
         return code
@@ -181,10 +92,10 @@ def run(args: argparse.Namespace) -> int:
     except KeyboardInterrupt as exc:
         return _stopped(args.command, exc.signum if isinstance(exc, Stopped) else signal.SIGINT)
     except Exception as exc:
-        stop = _stop_inside(exc)
-        if stop is None:
+        signum = stopping.signal_of(exc)
+        if signum is None:
             raise
-        return _stopped(args.command, stop.signum)
+        return _stopped(args.command, signum)
 
 
 def _stopped(command: str, signum: int) -> int:
@@ -193,20 +104,6 @@ def _stopped(command: str, signum: int) -> int:
     removed = "" if command in _OWN_SIGNALS else "; its unfinished output removed"
     print(f"rls-uncertainty {command}: stopped by {signal.Signals(signum).name}{removed}", file=sys.stderr)
     return 128 + int(signum)
-
-
-def _stop_inside(exc: BaseException) -> Stopped | None:
-    """The :class:`Stopped` that ``exc`` was raised from, if any: Python 3.11 raises a
-    RuntimeError from an exception raised in a ``__set_name__``, as the stop is when the signal
-    lands while a class is made (a module loaded in the middle of the command)."""
-    seen = set()
-    cause = exc.__cause__
-    while cause is not None and id(cause) not in seen:
-        if isinstance(cause, Stopped):
-            return cause
-        seen.add(id(cause))
-        cause = cause.__cause__
-    return None
 
 
 def load_estimator_node() -> Callable[[], int] | None:
