@@ -404,7 +404,7 @@ def _all_well_conditioned(A: FloatArray, init_condition: float) -> FloatArray | 
     except np.linalg.LinAlgError:
         return None
     bound = A.shape[1] * np.einsum("mi,mii->m", d, A_inv)
-    return A_inv if ((bound > 0) & (bound < init_condition)).all() else None
+    return A_inv if bound.min() > 0 and bound.max() < init_condition else None  # NaN: None
 
 
 def _well_conditioned(A: FloatArray, init_condition: float) -> BoolArray:

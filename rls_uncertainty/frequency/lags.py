@@ -290,7 +290,9 @@ def residual_autocovariance(
         theta = np.einsum("mab,mb->ma", B_inv, C0[:, 1:, 0])
     else:
         theta = instrumental_fit(cross, E, C0, columns[:, 1:])
-    w = np.concatenate([np.ones((M, 1)), -theta], axis=1)
+    w = np.empty((M, q1 - 1))  # (1, -theta)
+    w[:, 0] = 1.0
+    np.negative(theta, out=w[:, 1:])
     weight = (w[:, None, :] @ E)[:, 0]  # R(i) = w' C_i w / N = (E'w)' Sa_i (E'w) / N
     outer = (weight[:, :, None] * weight[:, None, :]).reshape(M, q1 * q1, 1)
     R0: FloatArray = (augmented.reshape(M, lags, q1 * q1) @ outer)[:, :, 0] / N
