@@ -35,6 +35,35 @@ def test_centered_lag_sums_equal_the_products_of_the_centered_samples(n_lags):
                 np.testing.assert_allclose(got[m], brute_centered(u[:N, m], lags), rtol=1e-10, atol=1e-11)
 
 
+def brute_augmented(u: np.ndarray, lags: int) -> np.ndarray:
+    """sum_(n=i..N-1) (u_n, 1)(u_(n-i), 1)' for i = 0..lags, from the samples."""
+    a = np.column_stack([u, np.ones(len(u))])
+    return np.array([a[i:].T @ a[: len(a) - i] for i in range(lags + 1)])
+
+
+@pytest.mark.parametrize("n_lags", [0, 3, 40])
+def test_the_augmented_sums_new_or_reused_equal_the_products_of_the_samples(n_lags):
+    rng = np.random.default_rng(10 + n_lags)
+    u = rng.standard_normal((60, 2, 3))
+    sums = LagSums(2, 3, n_lags)
+    kept = None
+    for k in range(60):
+        sums.update(u[k])
+        N = k + 1
+        lags = min(n_lags, N - 1)
+        new, reused = sums.augmented(), sums.augmented(reuse=True)
+        assert new.shape == reused.shape == (2, lags + 1, 4, 4) and reused.flags.c_contiguous
+        for m in range(2):
+            np.testing.assert_allclose(new[m], brute_augmented(u[:N, m], lags), rtol=1e-12, atol=1e-12)
+        np.testing.assert_array_equal(reused, new)
+        np.testing.assert_array_equal(sums.sums[:, : lags + 1], new)
+        if kept is not None and kept.shape == reused.shape:  # the lags stay: the same array, overwritten
+            assert reused is kept
+        kept = reused
+        new[...] = np.nan  # a new array: the sums are not changed through it
+        assert np.isfinite(sums.augmented()).all()
+
+
 def test_the_residual_autocovariance_is_that_of_the_least_squares_fit_with_a_bias():
     rng = np.random.default_rng(1)
     N, L = 120, 10

@@ -49,6 +49,7 @@ def test_the_recursion_equals_the_batch_transform_at_every_sample():
         if k % 37 == 0 or k == u.shape[0] - 1:
             batch = np.moveaxis(finite_fourier_transform(u[: k + 1], f, RATE), 0, -2)  # (2, K, 3)
             np.testing.assert_allclose(rft.values, batch, rtol=0, atol=1e-12 * np.abs(batch).max())
+            np.testing.assert_array_equal(rft.frequency_last, np.swapaxes(rft.values, -1, -2))  # (2, 3, K)
     rft.reset()
     assert rft.n == 0 and not rft.values.any()
 

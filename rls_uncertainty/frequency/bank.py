@@ -188,11 +188,14 @@ class FrequencyBank:
         self._due = False
         N = self._lags.n
         self._evaluated_at = N
-        U = self._trimmed()  # (M, K, q or q + p): transforms of z, x (and w)
+        S = self._trimmed()  # (M, q or q + p, K): transforms of z, x (and w), frequency-last
         q = self._columns.shape[1]
-        Z, X, W = U[..., 0], U[..., 1:q], U[..., q:]
+        X, W = S[:, 1:q].swapaxes(1, 2), S[:, q:].swapaxes(1, 2)  # (M, K, .) views
+        # conj(U), U (M, K, q or q + p) the transforms by frequency, C-contiguous: the left factor
+        # of X^H X (W^H X) and the rows of the residuals (conjugated: theta is real, |conj e| = |e|).
+        Uc = np.conjugate(S.swapaxes(1, 2), order="C")
         if self._cross is None:
-            G: FloatArray = (U.conj().swapaxes(1, 2) @ U).real
+            G: FloatArray = (Uc.swapaxes(1, 2) @ S.swapaxes(1, 2)).real
             A, b = G[:, 1:, 1:] + self._pad_unit, G[:, 1:, 0]  # padded parameters (0 in G): theta = 0
             A_inv = _all_well_conditioned(A, self.options.init_condition) if N >= 2 else None
             if A_inv is not None:
@@ -200,7 +203,7 @@ class FrequencyBank:
             else:
                 solved = _well_conditioned(A, self.options.init_condition) if N >= 2 else self._none
         else:  # Eq. F11
-            A, b, WW, solved = instrumental_system(U, q, self._pad_diagonal, self.options.init_condition, N)
+            A, b, WW, solved = instrumental_system(S, Uc, q, self._pad_diagonal, self.options.init_condition, N)
             A_inv = None
         all_solved = bool(solved.all())
         if A_inv is None:
@@ -209,8 +212,8 @@ class FrequencyBank:
             A_inv = np.linalg.inv(A).astype(np.float64, copy=False)
         A_inv *= self._real_square  # padding: 0
         theta = (A_inv @ b[:, :, None])[:, :, 0]
-        # Eq. F5: s^2 = sum_k |Z_k - X_k theta|^2 / (K - p).
-        E = (Z - (X @ theta[:, :, None])[:, :, 0]).view(np.float64)
+        # Eq. F5: s^2 = sum_k |Z_k - X_k theta|^2 / (K - p), of the conjugates (theta is real).
+        E = (Uc[..., 0] - (Uc[..., 1:q] @ theta[:, :, None])[:, :, 0]).view(np.float64)
         s2 = (E[:, None, :] @ E[:, :, None])[:, 0, 0] / self._residual_dof
         cov = self._cov
         if self._cross is None:
@@ -235,15 +238,16 @@ class FrequencyBank:
         return min(self._lags.n, self.options.trim_samples)
 
     def _trimmed(self) -> npt.NDArray[np.complex128]:
-        """The transforms with the trim subtracted (F1): those of ``u - u_0`` (kept recursively)
-        less ``dt (m - u_0) Gamma_k``, ``m`` the mean of the first samples, ``Gamma_k`` the sum of
-        the phasors over the record (the transform of a constant)."""
-        U = self._transform.values
+        """The transforms with the trim subtracted (F1), frequency-last ``(M, signals, K)``: those
+        of ``u - u_0`` (kept recursively) less ``dt (m - u_0) Gamma_k``, ``m`` the mean of the
+        first samples, ``Gamma_k`` the sum of the phasors over the record (the transform of a
+        constant). Without a trim (one sample) the transform's own sums, not to be written."""
+        S = self._transform.frequency_last
         if self.options.trim_samples == 1:
-            return U
+            return S
         shift = self._trim_sum / max(self._trim_count(), 1)
         gamma = self._geometry.at(self._lags.n).gamma
-        out: npt.NDArray[np.complex128] = U - self.options.dt * shift[:, None, :] * gamma[None, :, None]
+        out: npt.NDArray[np.complex128] = S - self.options.dt * shift[:, :, None] * gamma[None, None, :]
         return out
 
     def _corrected(
@@ -257,7 +261,7 @@ class FrequencyBank:
         whose covariance means nothing at this evaluation: an exact fit (rounding of either
         sign), or a sandwich with a negative variance (its nearest positive semi-definite
         repair is zero or nearly so; counted in :attr:`repairs`)."""
-        augmented = self._lags.augmented()
+        augmented = self._lags.augmented(reuse=True)  # nothing keeps it past this evaluation
         R, C0 = residual_autocovariance(augmented, self._columns, N, self.options.dof_correction, self._cross)
         self._R = R
         self._output_variance = C0[:, 0, 0] / N
@@ -366,8 +370,8 @@ class FrequencyBank:
     def transforms(self) -> tuple[npt.NDArray[np.complex128], npt.NDArray[np.complex128]]:
         """``(Z, X)``: the transforms ``(M, K)`` and ``(M, K, max(sizes))`` of the outputs and
         regressors with the trim subtracted (Eq. F1), copies."""
-        U = self._trimmed()
-        return U[..., 0].copy(), U[..., 1:].copy()
+        S = self._trimmed()
+        return S[:, 0].copy(), S[:, 1:].swapaxes(1, 2).copy()
 
     @staticmethod
     def _kind(kind: str) -> int:
@@ -400,7 +404,7 @@ def _all_well_conditioned(A: FloatArray, init_condition: float) -> FloatArray | 
     except np.linalg.LinAlgError:
         return None
     bound = A.shape[1] * np.einsum("mi,mii->m", d, A_inv)
-    return A_inv if ((bound > 0) & (bound < init_condition)).all() else None
+    return A_inv if bound.min() > 0 and bound.max() < init_condition else None  # NaN: None
 
 
 def _well_conditioned(A: FloatArray, init_condition: float) -> BoolArray:

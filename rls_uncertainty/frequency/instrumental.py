@@ -61,19 +61,22 @@ def well_conditioned(A: FloatArray, w_diag: FloatArray, x_diag: FloatArray, init
 
 
 def instrumental_system(
-    U: npt.NDArray[np.complex128], q: int, pad_diagonal: BoolArray, init_condition: float, N: int,
+    S: npt.NDArray[np.complex128], Uc: npt.NDArray[np.complex128], q: int, pad_diagonal: BoolArray,
+    init_condition: float, N: int,
 ) -> tuple[FloatArray, FloatArray, FloatArray, BoolArray]:
     """``A = Re(W^H X)``, ``b = Re(W^H Z)`` (Eq. F11), ``Re(W^H W)`` (F12) and the well
-    conditioned models, from the transforms ``U`` ``(M, K, q + p)``: ``Z``, ``X`` (``q - 1``
-    columns) and ``W``. Padding: a unit diagonal in ``A`` and in both Gram diagonals."""
-    W, X = U[..., q:], U[..., 1:q]
-    WH = W.conj().swapaxes(1, 2)
-    A = (WH @ X).real
+    conditioned models, from the transforms frequency-last ``S`` ``(M, q + p, K)``: ``Z``, ``X``
+    (``q - 1`` rows) and ``W``, and their conjugates ``Uc`` ``(M, K, q + p)`` (C-contiguous).
+    Padding: a unit diagonal in ``A`` and in both Gram diagonals."""
+    U = S.swapaxes(1, 2)
+    WH = Uc[..., q:].swapaxes(1, 2)
+    A = (WH @ U[..., 1:q]).real
     b = (WH @ U[..., :1]).real[:, :, 0]
-    WW = (WH @ W).real
+    WW = (WH @ U[..., q:]).real
     A[pad_diagonal] = 1.0
     if N < 2:
         return A, b, WW, np.zeros(A.shape[0], dtype=bool)
     w_diag = np.where(pad_diagonal.any(axis=2), 1.0, np.diagonal(WW, axis1=1, axis2=2))
-    x_diag = np.where(pad_diagonal.any(axis=2), 1.0, (X.real**2 + X.imag**2).sum(axis=1))
+    Xc = Uc[..., 1:q]  # |conj(X)|^2 = |X|^2, summed over the frequencies row by row
+    x_diag = np.where(pad_diagonal.any(axis=2), 1.0, (Xc.real**2 + Xc.imag**2).sum(axis=1))
     return A, b, WW, well_conditioned(A, w_diag, x_diag, init_condition)

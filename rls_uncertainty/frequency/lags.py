@@ -55,6 +55,11 @@ class LagSums:
         self._sums: FloatArray = np.zeros((models, signals + 1, w, signals + 1))
         self._buffer: FloatArray = np.zeros((models, 2 * w, signals + 1))
         self._product: FloatArray = np.empty((models, signals + 1, w * (signals + 1)))
+        # The sums' rows Sa_i[a, :] as single items (the void of q+1 doubles, a view): reordered to
+        # the equations' (M, lags, q+1, q+1) they are copied whole, not one number at a time.
+        self._row = np.dtype((np.void, 8 * (signals + 1)))
+        self._rows = self._sums.view(self._row)[..., 0]  # (M, q+1, lags)
+        self._reused: FloatArray = np.empty((models, 0, signals + 1, signals + 1))  # augmented(reuse=True)
 
     def window(self) -> FloatArray:
         """The last ``n_lags + 1`` samples ``(u_n, 1)``, newest first (zeros before the first), a view."""
@@ -83,8 +88,7 @@ class LagSums:
     def sums(self) -> FloatArray:
         """``Sa_i`` for ``i = 0 .. n_lags`` ``(M, n_lags + 1, q+1, q+1)``, a new array; assigned,
         it sets them."""
-        out: FloatArray = np.ascontiguousarray(self._sums.transpose(0, 2, 1, 3))
-        return out
+        return self._reordered(self.width)
 
     @sums.setter
     def sums(self, values: FloatArray) -> None:
@@ -104,9 +108,22 @@ class LagSums:
         self._buffer[:, : self.width] = half
         self._buffer[:, self.width :] = half
 
-    def augmented(self) -> FloatArray:
-        """``Sa_i`` for ``i = 0 .. min(n_lags, N - 1)``, ``(M, lags, q+1, q+1)``, a new array."""
-        out: FloatArray = np.ascontiguousarray(self._sums[:, :, : min(self.width, self.n)].transpose(0, 2, 1, 3))
+    def augmented(self, reuse: bool = False) -> FloatArray:
+        """``Sa_i`` for ``i = 0 .. min(n_lags, N - 1)``, ``(M, lags, q+1, q+1)``: a new array, or
+        with ``reuse`` one this object keeps and overwrites at the next such call."""
+        lags = min(self.width, self.n)
+        if not reuse:
+            return self._reordered(lags)
+        if self._reused.shape[1] != lags:
+            self._reused = np.empty((self._sums.shape[0], lags, *self._sums.shape[1::2]))
+        return self._reordered(lags, self._reused)
+
+    def _reordered(self, lags: int, out: FloatArray | None = None) -> FloatArray:
+        """The sums of lags ``0 .. lags-1`` in the equations' order ``(M, lags, q+1, q+1)``,
+        written to ``out`` (C-contiguous, that shape) or a new array."""
+        if out is None:
+            out = np.empty((self._sums.shape[0], lags, *self._sums.shape[1::2]))
+        out.view(self._row)[..., 0] = self._rows[:, :, :lags].transpose(0, 2, 1)
         return out
 
     def centered(self) -> FloatArray:
@@ -273,7 +290,9 @@ def residual_autocovariance(
         theta = np.einsum("mab,mb->ma", B_inv, C0[:, 1:, 0])
     else:
         theta = instrumental_fit(cross, E, C0, columns[:, 1:])
-    w = np.concatenate([np.ones((M, 1)), -theta], axis=1)
+    w = np.empty((M, q1 - 1))  # (1, -theta)
+    w[:, 0] = 1.0
+    np.negative(theta, out=w[:, 1:])
     weight = (w[:, None, :] @ E)[:, 0]  # R(i) = w' C_i w / N = (E'w)' Sa_i (E'w) / N
     outer = (weight[:, :, None] * weight[:, None, :]).reshape(M, q1 * q1, 1)
     R0: FloatArray = (augmented.reshape(M, lags, q1 * q1) @ outer)[:, :, 0] / N

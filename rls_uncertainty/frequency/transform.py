@@ -75,6 +75,11 @@ class RecursiveFourierTransform:
     def values(self, values: npt.ArrayLike) -> None:
         self._sums[...] = np.swapaxes(np.asarray(values, dtype=np.complex128), -1, -2)
 
+    @property
+    def frequency_last(self) -> ComplexArray:
+        """The transforms as kept, ``(*shape, K)``: the state itself (read, never written)."""
+        return self._sums
+
     def phasor(self) -> ComplexArray:
         """``dt exp(-j w_k t_n)`` of the next sample ``n``, shape ``(K,)``."""
         out: ComplexArray = phasors(self.frequencies, self.n, self.rate_hz) / self.rate_hz
