@@ -13,6 +13,7 @@ differentiator) to the reception of that sample's last output array.
     .venv/bin/python benchmarks/node_benchmark.py --extreme --no-baseline  # more than the node can do
     .venv/bin/python benchmarks/node_benchmark.py --offline            # the data path alone, no DDS
     .venv/bin/python benchmarks/node_benchmark.py --floor              # what any rclpy node pays
+    .venv/bin/python benchmarks/node_benchmark.py --intake-period 0.02 # inputs taken every 20 ms
 
 ``--extreme``: estimates at 1000 Hz with ``estimator.method: both`` and ``frequency.every: 1``
 (1 kHz IMU): more work than one core does in real time. It prints the node's RSS, the last
@@ -443,7 +444,8 @@ def report(args, tmp: Path, received: dict[int, float], count: dict[str, int], m
     n_in = log.shape[0]
     samples = diag.get("rls_estimator: samples", {})
     print(f"node benchmark: IMU {args.imu_rate:g} Hz, air data and surfaces {args.air_rate:g} Hz, estimates "
-          f"{args.rate:g} Hz, six models, {args.lag_span:g} s of lags, {args.duration:g} s")
+          f"{args.rate:g} Hz, six models, {args.lag_span:g} s of lags, {args.duration:g} s, intake period "
+          f"{samples.get('intake_period_ms', '?')} ms")
     print(f"  input messages published        {n_in}")
     print(f"  samples completed by the inputs  {expected}")
     print(f"  sample stamps received           {count['stamps']}  (dropped: {expected - count['stamps']}; "
@@ -482,7 +484,9 @@ def report(args, tmp: Path, received: dict[int, float], count: dict[str, int], m
                    "cpu_percent": cpu_percent, "cpu_per_sample_ms": per_sample,
                    "threads_ms_per_sample": {k: 1e3 * v / max(m["stamps"], 1) for k, v in threads.items()},
                    "periodic_max_ms": max(periodic, default=None),
-                   "dropped": expected - count["stamps"]}, fh)
+                   "dropped": expected - count["stamps"],
+                   "intake_period_ms": float(samples["intake_period_ms"]) if "intake_period_ms" in samples else None},
+                  fh)
 
 
 def parse_args() -> argparse.Namespace:
@@ -496,6 +500,8 @@ def parse_args() -> argparse.Namespace:
     ap.add_argument("--frequency-every", type=int, default=5, help="frequency.every (with --method frequency/both)")
     ap.add_argument("--extreme", action="store_true",
                     help="rate 1000 Hz, method both, frequency.every 1 (overrides --rate, --method, --frequency-every)")
+    ap.add_argument("--intake-period", type=float, default=0.0, metavar="S",
+                    help="the node's intake_period, s (0: the estimator period, at most 5 ms)")
     ap.add_argument("--no-baseline", action="store_true", help="skip the echo-node latency baseline")
     ap.add_argument("--offline", action="store_true",
                     help="time the node's data path (decode, feed, encode) on the same messages, without DDS")
@@ -523,6 +529,7 @@ def start_node(args: argparse.Namespace, tmp: Path) -> subprocess.Popen:
              "-p", f"rate:={args.rate}", "-p", f"estimator.lag_span:={args.lag_span}",
              "-p", "surfaces.elevator:=[elevator]",
              "-p", "qos.depth:=1000", "-p", f"estimator.method:={args.method}",
+             "-p", f"intake_period:={args.intake_period}",
              *(["-p", f"frequency.every:={args.frequency_every}"] if args.method != "time" else [])],
             stdout=node_log, stderr=subprocess.STDOUT, cwd=ROOT,
         )

@@ -27,10 +27,12 @@ from rls_uncertainty.settings import (
     load_aircraft,
     load_models,
     load_parameters_file,
+    node_config,
     parameter_defaults,
     pipeline_config,
     startup_parameters,
 )
+from rls_uncertainty.settings.config import intake_period
 from rls_uncertainty.settings.parameters import COMPONENTS, frequency_options
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -100,6 +102,34 @@ def test_models_are_configuration():
 def test_invalid_settings_are_refused_with_the_reason(params, match):
     with pytest.raises(ConfigError, match=match):
         pipeline_config(params)
+
+
+@pytest.mark.parametrize("params,match", [
+    ({"intake_period": -0.001}, r"^intake_period must be a number in \[0, 0.05\] s, got -0.001$"),
+    ({"intake_period": 0.06}, r"^intake_period must be a number in \[0, 0.05\] s, got 0.06$"),
+    ({"intake_period": "fast"}, r"^intake_period must be a number in \[0, 0.05\] s, got 'fast'$"),
+    ({"intake_period": 0.0005}, r"^intake_period must be 0 \(the default\) or at least 0.001 s, got 0.0005$"),
+    ({"intake_period": 0.03}, r"^intake_period 0.03 s is longer than the estimator period at rate 50 Hz \(0.02 s\)"),
+    ({"intake_period": 0.02, "rate": 100.0}, r"^intake_period 0.02 s is longer than the estimator period at rate "
+                                             r"100 Hz \(0.01 s\): give at most that, or 0"),
+])
+def test_a_bad_intake_period_is_refused_in_one_line_naming_it(params, match):
+    with pytest.raises(ConfigError, match=match) as exc:
+        node_config(params)
+    assert exc.value.parameter == "intake_period" and "\n" not in str(exc.value)
+
+
+@pytest.mark.parametrize("rate,given,expected", [
+    (50.0, 0.0, 0.005), (100.0, 0.0, 0.005), (200.0, 0.0, 0.005), (500.0, 0.0, 0.002), (1000.0, 0.0, 0.001),
+    (1.0, 0.0, 0.005), (50.0, 0.02, 0.02), (50.0, 0.001, 0.001), (50.0, 0.01, 0.01), (20.0, 0.05, 0.05),
+])
+def test_the_intake_period_is_the_estimator_period_at_most_5_ms_unless_given(rate, given, expected):
+    """The default is the node's intake period before the setting existed: 1 / rate, at most
+    5 ms; a given period is used as it is."""
+    params = {"rate": rate} if given == 0.0 else {"rate": rate, "intake_period": given}
+    cfg = node_config(params)
+    assert cfg.intake_period == given
+    assert intake_period(cfg.intake_period, rate) == expected
 
 
 @pytest.mark.parametrize("name", ["t2", "t2_turbulence", "twin_otter_lateral", "twin_otter_longitudinal"])
@@ -364,6 +394,8 @@ def _refused(*ros_args):
     (["-p", "aircraft:=concorde"], ["concorde.yaml: no such file"]),
     (["-p", "inputs.max_gap:=1.0", "-p", "inputs.max_stamp_jump:=0.5"],
      ["inputs.max_stamp_jump", "(from -p inputs.max_stamp_jump:=0.5)"]),
+    (["-p", "intake_period:=0.05"], ["intake_period 0.05 s is longer than the estimator period at rate 50 Hz (0.02 s)",
+                                     "(from -p intake_period:=0.05)"]),
     (["--params-file", "missing.yaml"], ["parameter file missing.yaml: no such file"]),
     (["--foo"], ["unknown ROS argument '--foo'"]),
 ])

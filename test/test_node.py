@@ -442,7 +442,37 @@ def _declared_as_written(tester):
     assert described["topics.imu"].read_only and described["qos.depth"].read_only
 
 
-def test_parameters_are_refused_with_reasons_and_changes_reset(tmp_path, tester):
+def _intake_period_follows_its_parameter(node, tester, bag):
+    """The intake timer's period (``intake_period_ms`` in /diagnostics, read from the timer)
+    is 5 ms at 50 Hz by default and follows ``intake_period`` without a reset; a period over
+    the estimator period is refused naming the parameter, and so is a rate that makes the
+    given period too long. The inputs then wait for the longer period: with messages
+    arriving every half millisecond, the oldest of a pass has waited about 20 ms."""
+    tester.wait_diagnostics(lambda d: d.get(f"{NODE}: samples", {}).get("intake_period_ms") == "5.000")
+    assert "taken every 5 ms" in node.text()
+    (r,) = _set_parameters(tester, intake_period=0.05)
+    assert not r.successful and r.reason.startswith("intake_period 0.05 s is longer than the estimator period")
+    (r,) = _set_parameters(tester, intake_period=0.0005)
+    assert not r.successful and r.reason.startswith("intake_period must be")
+    (r,) = _set_parameters(tester, intake_period=0.02)
+    assert r.successful
+    (r,) = _set_parameters(tester, rate=100.0)
+    assert not r.successful and r.reason.startswith("intake_period 0.02 s is longer")
+    imu = [(kind, msg) for kind, _s, msg in bag if kind == "imu"]
+    deadline = time.monotonic() + 60
+
+    def waited_a_period() -> bool:
+        samples = tester.latest_diagnostics().get(f"{NODE}: samples", {})
+        return samples.get("intake_period_ms") == "20.000" and float(samples.get("intake_wait_ms.p99", 0)) >= 10
+
+    for start in range(0, len(imu), 100):  # (the bag's IMU messages once, 50 ms at a time)
+        tester.publish_all([(k, to_rclpy(k, m)) for k, m in imu[start:start + 100]], pace=2000.0)
+        if waited_a_period() or time.monotonic() > deadline:
+            break
+    assert tester.spin_until(waited_a_period, 10), tester.latest_diagnostics()
+
+
+def test_parameters_are_refused_with_reasons_and_changes_reset(tmp_path, tester, bag):
     node = _node(tmp_path)
     try:
         tester.wait_connected()
@@ -464,6 +494,7 @@ def test_parameters_are_refused_with_reasons_and_changes_reset(tmp_path, tester)
         assert not r.successful and "read-only" in r.reason.lower()
         (r,) = _set_parameters(tester, **{"differentiator.lag": 12})
         assert not r.successful and "differentiator.lag" in r.reason
+        _intake_period_follows_its_parameter(node, tester, bag)
         (r,) = _set_parameters(tester, **{"estimator.lag_span": 0.4})
         assert r.successful
         d = tester.wait_diagnostics(lambda d: "resets.parameters_changed" in d.get(f"{NODE}: samples", {}))

@@ -25,9 +25,10 @@ node in the root namespace, as always, and the fully qualified name under a name
   name what was expected, what came and the parameter to change, come first in the message.
 * ``samples``: ``enabled``, ``samples_formed``, ``samples_used``, ``samples_pending``,
   ``samples_rejected.<reason>``, ``resets.<reason>``, ``unknown_joint.<name>``, callback
-  latency and CPU percentiles of the period, ``intake_wait_ms.p99`` (how long inputs waited
-  to be fed), ``periodic_ms.max`` (the longest step of the
-  node's periodic work, which holds up the input callbacks for that long),
+  latency and CPU percentiles of the period, from the node ``intake_period_ms`` (the intake
+  period in effect), ``intake_wait_ms.p99`` (how long inputs waited to be fed),
+  ``periodic_ms.max`` (the longest step of the node's periodic work, which holds up the input
+  callbacks for that long),
   ``state_file``, ``nodes_with_this_name``, and from the node ``outputs_subscribed`` (its
   sample topics that had a subscriber at the period's start: the ones it publishes; a
   listener reads it back with :func:`outputs_discovered`). OK, or
@@ -157,6 +158,7 @@ class Snapshot:
     periodic_s: Sequence[float] = field(default_factory=tuple)  # wall time of each periodic job step
     waits_s: Sequence[float] = field(default_factory=tuple)  # per intake pass, how long its oldest input waited
     period_s: float = 0.0  # the estimator period (1 / rate)
+    intake_period_s: float = 0.0  # the node's intake period in effect (0: the offline replay, which has none)
     # What the degradation policy (:mod:`.load_policy`) starts from: the configured
     # frequency.every (0: no frequency domain) and outputs.covariance_decimation, and the stamp
     # spread between streams beyond which a constant one is another clock (inputs.buffer_duration).
@@ -466,6 +468,8 @@ class DiagnosticsPolicy:
                     ("processing_cpu_ms.p50", _ms(percentile(cpu, 0.5))),
                     ("processing_cpu_ms.p99", _ms(percentile(cpu, 0.99))),
                 ]
+        if snap.intake_period_s > 0:
+            kv.append(("intake_period_ms", _ms(snap.intake_period_s)))
         if snap.waits_s:
             kv.append(("intake_wait_ms.p99", _ms(percentile(sorted(snap.waits_s), 0.99))))
         if snap.periodic_s:

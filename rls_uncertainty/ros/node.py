@@ -1,7 +1,8 @@
 """``estimator_node``: the live ROS 2 adapter over :class:`.pipeline.Pipeline`.
 
 The node only converts, schedules and publishes: messages of the topics and types of
-:mod:`.inputs` are taken in batches each intake period (the estimator period, at most 5 ms),
+:mod:`.inputs` are taken in batches each intake period (``intake_period``; by default the
+estimator period, at most 5 ms),
 decoded by :mod:`.cdr` and go through :func:`.inputs.feed` in order of arrival (the code and
 order of the offline replay), and every completed sample is published as the messages of
 :mod:`.outputs` (``~/sample_stamp``, then per ready model M ``~/M/estimates``, its standard
@@ -72,6 +73,7 @@ from ..datapath.maneuvers import EVENT
 from ..datapath.outputs import NODE_NAME, OutputLayout
 from ..datapath.pipeline import Pipeline, SampleOutput
 from ..errors import ConfigError
+from ..settings.config import NodeConfig, intake_period
 from ..settings.parameters import PARAMETERS, Parameter, node_config, pipeline_config
 from ..settings.sources import NodeParameters, startup_parameters
 from .input_watch import SilentInputs
@@ -94,10 +96,10 @@ _NO_EVENTS = PublisherEventCallbacks(use_default_callbacks=False)
 _PASS_BUDGET_S = 0.01
 
 
-def _intake_period(rate: float) -> float:
-    """Seconds between two takes of the inputs: the estimator period, at most 5 ms (the
-    longest a message waits before it is fed)."""
-    return min(1.0 / rate, 0.005)
+def _intake_period(node_cfg: NodeConfig, rate: float) -> float:
+    """Seconds between two takes of the inputs (the longest a message waits before it is
+    fed): ``intake_period``, by default the estimator period, at most 5 ms."""
+    return intake_period(node_cfg.intake_period, rate)
 
 
 def _descriptor(p: Parameter) -> ParameterDescriptor:
@@ -188,7 +190,8 @@ class EstimatorNode(Node):
         # pauses or jumps (use_sim_time).
         steady = Clock(clock_type=ClockType.STEADY_TIME)
         self.create_timer(self.node_cfg.diagnostics_period, self._publish_diagnostics, clock=steady)
-        self._intake_timer = self.create_timer(_intake_period(self.config.rate), self._take_inputs, clock=steady)
+        self._intake_timer = self.create_timer(_intake_period(self.node_cfg, self.config.rate), self._take_inputs,
+                                               clock=steady)
         if self.node_cfg.state_file and self.node_cfg.state_save_period > 0:
             self.create_timer(self.node_cfg.state_save_period, self.save_state, clock=steady)
         models = ", ".join(f"{m.output}({len(m.regressors)})" for m in self.config.models)
@@ -196,7 +199,8 @@ class EstimatorNode(Node):
         lags = f"auto (at most {est.max_lags})" if est.lags == "auto" else est.lags  # (samples: lag_span x rate)
         self.get_logger().info(
             f"estimating {models} at {self.config.rate:g} Hz, {lags} lags, aircraft {self.config.aircraft.name}; "
-            f"inputs {', '.join(self.node_cfg.topics[k] for k in STREAMS)}; "
+            f"inputs {', '.join(self.node_cfg.topics[k] for k in STREAMS)}, taken every "
+            f"{_intake_period(self.node_cfg, self.config.rate) * 1e3:g} ms; "
             + self._state.startup_text()
         )
 
@@ -224,7 +228,7 @@ class EstimatorNode(Node):
         new = pipeline_config(values)
         self.node_cfg = node_config(values)
         self.pipeline.enabled = self.node_cfg.enabled
-        self._intake_timer.timer_period_ns = int(_intake_period(new.rate) * 1e9)
+        self._intake_timer.timer_period_ns = int(_intake_period(self.node_cfg, new.rate) * 1e9)
         self._diagnostics.window_s = self.node_cfg.diagnostics_window
         if new != self.config:
             changed = ", ".join(sorted(p.name for p in params))
@@ -396,6 +400,7 @@ class EstimatorNode(Node):
             "covariance_decimation": self.config.outputs.covariance_decimation,
             "buffer_duration": self.config.inputs.buffer_duration,
             "shed": self.node_cfg.shed_load, "outputs_subscribed": self._out.subscribed,
+            "intake_period_s": self._intake_timer.timer_period_ns * 1e-9,
         }
         self._last_diag = wall
         self._latencies, self._cpu_times, self._periodic, self._waits = [], [], [], []

@@ -12,13 +12,22 @@ from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field, fields
 
 from ..datapath.outputs import NODE_NAME
+from ..errors import ConfigError
 from ..schema import check, option
 
 __all__ = [
     "NODE_NAME",
+    "DEFAULT_INTAKE_PERIOD",
+    "MIN_INTAKE_PERIOD",
     "InputTopics",
     "NodeConfig",
+    "intake_period",
 ]
+
+# intake_period 0: the inputs are taken each estimator period, at most this often apart (s).
+DEFAULT_INTAKE_PERIOD = 0.005
+# The shortest intake period that may be given (s): each wake of the timer costs CPU of its own.
+MIN_INTAKE_PERIOD = 0.001
 
 
 
@@ -87,6 +96,31 @@ class NodeConfig:
     diagnostics_window: float = option(10.0, "seconds over which /diagnostics levels count rejected, missing and "
                                        "expired messages (cumulative counts are reported beside)", unit="s",
                                        low=0.1, high=3600.0, ros="diagnostics_window")
+    intake_period: float = option(0.0, "the longest an input message waits before it is fed: the node takes its "
+                                  "inputs in batches this often, at most the estimator period (1 / rate); "
+                                  "longer saves CPU, shorter cuts latency. 0: the estimator period, at most "
+                                  f"{DEFAULT_INTAKE_PERIOD * 1e3:g} ms; otherwise at least "
+                                  f"{MIN_INTAKE_PERIOD * 1e3:g} ms", unit="s", low=0.0, high=0.05,
+                                  ros="intake_period")
 
     def __post_init__(self) -> None:
         check(self, "")
+        if 0.0 < self.intake_period < MIN_INTAKE_PERIOD:
+            raise ConfigError(f"intake_period must be 0 (the default) or at least {MIN_INTAKE_PERIOD:g} s, got "
+                              f"{self.intake_period!r}", parameter="intake_period")
+
+    def check_rate(self, rate: float) -> None:
+        """Refuse an intake period longer than the estimator period at ``rate`` Hz, naming
+        ``intake_period``: a sample would wait for the next batch, and more than a period's
+        inputs would be fed in one pass."""
+        if self.intake_period > 1.0 / rate:
+            raise ConfigError(f"intake_period {self.intake_period:g} s is longer than the estimator period at rate "
+                              f"{rate:g} Hz ({1.0 / rate:g} s): give at most that, or 0 (the estimator period, at "
+                              f"most {DEFAULT_INTAKE_PERIOD:g} s)", parameter="intake_period")
+
+
+def intake_period(setting: float, rate: float) -> float:
+    """Seconds between two takes of the inputs (the longest a message waits before it is
+    fed): ``setting`` (the ``intake_period`` parameter), or with 0 the estimator period at
+    ``rate`` Hz, at most :data:`DEFAULT_INTAKE_PERIOD`."""
+    return setting if setting > 0 else min(1.0 / rate, DEFAULT_INTAKE_PERIOD)

@@ -290,7 +290,10 @@ def pipeline_config(params: dict[str, Any] | None = None) -> PipelineConfig:
 
 
 def node_config(params: dict[str, Any] | None = None) -> NodeConfig:
-    """A :class:`NodeConfig` from dotted parameters; missing ones take their defaults."""
+    """A :class:`NodeConfig` from dotted parameters; missing ones take their defaults. The
+    intake period is checked against the estimator period at ``rate``."""
     v = _values(params or {})
-    return NodeConfig(topics=InputTopics(**_arguments(InputTopics, v, None)), **_arguments(NodeConfig, v, None))
+    cfg = NodeConfig(topics=InputTopics(**_arguments(InputTopics, v, None)), **_arguments(NodeConfig, v, None))
+    cfg.check_rate(_rate(v["rate"]))
+    return cfg
 
