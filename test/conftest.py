@@ -7,6 +7,14 @@ directory is absent such a test is skipped, with the path it looked for as the r
 copy without ../shared (a colcon workspace, a tarball) still tests everything else. Under
 ``RLS_REQUIRE_FLIGHT_DATA=1`` (set by .ci/run) the same situation is a failure instead, so CI
 can never pass by skipping the real-data tests.
+
+Parallel runs. The README's test command runs the suite on two pytest-xdist workers (``-n 2
+--dist loadfile``: a module's tests, and its module-scoped fixtures, on one worker). Each worker
+has a ROS domain of its own, so the DDS tests of two modules never hear each other: the first
+worker (or a run without xdist) the run's ``ROS_DOMAIN_ID``, worker N the first domain from
+``ROS_DOMAIN_ID + 100 N`` on (modulo 233) that is neither the run's nor one of
+``$RLS_TEST_DOMAINS`` (the live tests' private domains) and that it can lock the way a live
+test's claim does (:func:`rls_uncertainty.testing.domain.lock_domain`), held while it runs.
 """
 
 from __future__ import annotations
@@ -20,6 +28,28 @@ import pytest
 
 os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
 os.environ.setdefault("ROS_DOMAIN_ID", str(1 + os.getpid() % 100))
+
+
+def _worker_domain() -> object:
+    """Worker N's own ROS domain (N >= 1; module docstring), set as ``ROS_DOMAIN_ID``; its lock,
+    kept while the worker runs (None for the first worker)."""
+    worker = os.environ.get("PYTEST_XDIST_WORKER", "")
+    n = int(worker[2:]) if worker.startswith("gw") and worker[2:].isdigit() else 0
+    if n == 0:
+        return None
+    from rls_uncertainty.testing.domain import domain_ids, lock_domain
+
+    run = int(os.environ["ROS_DOMAIN_ID"])
+    private = set(domain_ids(os.environ.get("RLS_TEST_DOMAINS", "43-49")))
+    ids = [d for d in ((run + 100 * n + k) % 233 for k in range(233)) if d != run and d not in private]
+    claim = lock_domain(ids)
+    if claim is None:
+        raise RuntimeError(f"pytest-xdist worker {worker}: every ROS domain's lock is held")
+    os.environ["ROS_DOMAIN_ID"] = str(claim.domain)
+    return claim
+
+
+_WORKER_DOMAIN = _worker_domain()
 
 ROOT = Path(__file__).resolve().parents[1]
 FLIGHT_DATA = Path(os.environ.get("RLS_FLIGHT_DATA") or ROOT.parent / "shared" / "flight_data").resolve()

@@ -19,7 +19,8 @@ README = ROOT / "README.md"
 DOCS = ROOT / "docs"
 STUDIES = DOCS / "studies"
 SETUP_AND_DEMO = "bash scripts/setup.sh && .venv/bin/rls-uncertainty demo"
-SETUP_CHECK_TEST = "bash scripts/setup.sh && bash scripts/check.sh && .venv/bin/python -m pytest -q"
+SETUP_CHECK_TEST = ("bash scripts/setup.sh && bash scripts/check.sh"
+                    " && .venv/bin/python -m pytest -q -n 2 --dist loadfile")
 
 # [text](target) in Markdown, not images; the target up to the first space or ')'.
 _LINK = re.compile(r"(?<!!)\[[^\]]*\]\(([^)\s]+)\)")

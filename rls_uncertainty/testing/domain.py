@@ -32,7 +32,7 @@ from pathlib import Path
 
 from ..errors import ConfigError
 
-__all__ = ["DEFAULT_DOMAINS", "LOCK_DIR", "PROBE_SECONDS", "DomainClaim", "claim_domain", "domain_ids"]
+__all__ = ["DEFAULT_DOMAINS", "LOCK_DIR", "PROBE_SECONDS", "DomainClaim", "claim_domain", "domain_ids", "lock_domain"]
 
 DEFAULT_DOMAINS = "42-49"
 LOCK_DIR = Path(tempfile.gettempdir()) / "rls_uncertainty_domains"
@@ -136,6 +136,16 @@ def other_nodes(domain: int, seconds: float = PROBE_SECONDS) -> list[str]:
             node.destroy_node()
     finally:
         rclpy.try_shutdown(context=context)
+
+
+def lock_domain(ids: Sequence[int]) -> DomainClaim | None:
+    """The first of ``ids`` that this process can lock (step 1 of a claim, without the look at
+    the graph), held until released; None when every one is held."""
+    for domain in ids:
+        fd, _why = _lock(domain)
+        if fd is not None:
+            return DomainClaim(domain, fd)
+    return None
 
 
 def claim_domain(ids: Sequence[int], *, probe: float = PROBE_SECONDS,
