@@ -178,15 +178,13 @@ class _Outputs(OutputListener):
     def progress(self) -> tuple[int, ...]:
         """What grows while the node works through the bag: the stamps and arrays here, and
         the messages and samples the node's newest report counts."""
-        received = sum(int(v) for name, _l, _m, kv in self.diagnostics if name == f"{NODE_NAME}: inputs"
-                       for k, v in kv.items() if k.endswith(".received"))
+        received = sum(int(v) for k, v in self.values("inputs").items() if k.endswith(".received"))
         return (len(self.stamps), sum(map(len, self.arrays.values())), received,
                 int(self.values("samples").get("samples_used") or 0))
 
     def publishers(self) -> dict[str, int]:
         """The node's newest report's publisher count per input stream."""
-        return {k[:-11]: int(v) for name, _l, _m, kv in self.diagnostics if name == f"{NODE_NAME}: inputs"
-                for k, v in kv.items() if k.endswith(".publishers")}
+        return {k[:-11]: int(v) for k, v in self.values("inputs").items() if k.endswith(".publishers")}
 
     def inputs_seen(self, streams: Sequence[str]) -> bool:
         """The node's newest report counts a publisher on each of ``streams``."""
