@@ -34,6 +34,7 @@ import sys
 
 TYPE_CHECKING = False
 if TYPE_CHECKING:
+    from collections.abc import Callable
     from typing import Any
 
     from .stopping import Stopping
@@ -56,8 +57,9 @@ def _stopped(program: str, exc: BaseException, stopping: Stopping | None, starte
     return True
 
 
-def main(argv: list[str] | None = None) -> int:
-    """``rls-uncertainty ARGV`` (:func:`.commands.run`); its exit status."""
+def _started(program: str, load: Callable[[], Callable[[], int]]) -> int:
+    """``load()`` (the modules and the command line) with SIGINT a stop, then the command it
+    returns called; a stop at any point is :func:`_stopped`'s one line and status 130."""
     stopping, started = None, False
     try:
         import signal
@@ -66,39 +68,39 @@ def main(argv: list[str] | None = None) -> int:
 
         stopping = Stopping()
         with stopping.signals((signal.SIGINT,)):
-            from .commands import parse, run
-
-            args = parse(argv)
-        # Still under this try: a Ctrl-C before run's own handling starts is one line too.
+            command = load()
+        # Still under this try: a Ctrl-C before the command's own handling starts is one line too.
         started = True
-        return run(args)
+        return command()
     except (KeyboardInterrupt, Exception) as exc:
-        if not _stopped("rls-uncertainty", exc, stopping, started):
+        if not _stopped(program, exc, stopping, started):
             raise
         return _STARTING_STOPPED
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``rls-uncertainty ARGV`` (:func:`.commands.run`); its exit status."""
+
+    def load() -> Callable[[], int]:
+        from .commands import parse, run
+
+        args = parse(argv)
+        return lambda: run(args)
+
+    return _started("rls-uncertainty", load)
 
 
 def estimator_node() -> int:
     """The console script ``estimator_node``: :func:`..ros.node.main`, or one line naming the
     extra to install when the ROS stack is missing (exit status 2)."""
-    stopping, started = None, False
-    try:
-        import signal
 
-        from .stopping import Stopping
+    def load() -> Callable[[], int]:
+        from .commands import load_estimator_node
 
-        stopping = Stopping()
-        with stopping.signals((signal.SIGINT,)):
-            from .commands import load_estimator_node
+        node_main = load_estimator_node()
+        return (lambda: 2) if node_main is None else node_main
 
-            node_main = load_estimator_node()
-        # Still under this try: a Ctrl-C before the node's own handling starts is one line too.
-        started = True
-        return 2 if node_main is None else node_main()
-    except (KeyboardInterrupt, Exception) as exc:
-        if not _stopped("estimator_node", exc, stopping, started):
-            raise
-        return _STARTING_STOPPED
+    return _started("estimator_node", load)
 
 
 def __getattr__(name: str) -> Any:
