@@ -218,9 +218,9 @@ def paced_feed(args: argparse.Namespace, pipeline: Any, stamped: list) -> tuple[
     in short passes between which other threads and processes run."""
     from rls_uncertainty.datapath.cdr import decode
     from rls_uncertainty.datapath.inputs import feed
-    from rls_uncertainty.ros.node import _intake_period
+    from rls_uncertainty.settings.config import intake_period
 
-    period = _intake_period(args.rate)
+    period = intake_period(args.intake_period, args.rate)
     passes: dict[int, list] = {}
     for stamp, item in stamped:
         passes.setdefault(int((stamp - T0) // round(period * 1e9)), []).append(item)
@@ -287,7 +287,7 @@ def echo_baseline(samples: int = 1000) -> np.ndarray:
 FLOORS = ("intake", "callbacks", "timer")
 
 
-def floor_node(variant: str, rate: float) -> None:
+def floor_node(variant: str, rate: float, period: float) -> None:
     """The floor run's node: an rclpy node on the estimator node's executor (its ``_spin``:
     rclpy's events executor) with its input subscriptions (the same six topics, types and QoS
     as the benchmark starts it, without QoS-event handlers), taking every message raw and
@@ -305,14 +305,15 @@ def floor_node(variant: str, rate: float) -> None:
 
     from rls_uncertainty.datapath.inputs import DEFAULT_TOPICS
     from rls_uncertainty.ros.intake import Intake
-    from rls_uncertainty.ros.node import _TYPES, _input_qos, _intake_period, _spin
+    from rls_uncertainty.ros.node import _TYPES, _input_qos, _spin
+    from rls_uncertainty.settings.config import intake_period
 
     rclpy.init()
     node = rclpy.create_node("bench_floor")
     qos = _input_qos(True, 1000)  # qos.reliable true, qos.depth 1000 (start_node's)
     if variant in ("intake", "timer"):
         intake = Intake(node, _TYPES, DEFAULT_TOPICS, qos)
-        node.create_timer(_intake_period(rate), intake.take if variant == "intake" else lambda: None,
+        node.create_timer(intake_period(period, rate), intake.take if variant == "intake" else lambda: None,
                           clock=Clock(clock_type=ClockType.STEADY_TIME))
     else:
         no_events = SubscriptionEventCallbacks(use_default_callbacks=False)
@@ -337,7 +338,8 @@ def floor_run(args, variant: str, tmp: Path) -> dict:
     over the streaming part (from the publisher's first message to its exit, the node run's
     tail included), and that part's wall time."""
     node = subprocess.Popen([sys.executable, *os.environ.get("RLS_BENCH_PYFLAGS", "").split(), __file__,
-                             "--floor-node", variant, "--rate", str(args.rate)], cwd=ROOT)
+                             "--floor-node", variant, "--rate", str(args.rate),
+                             "--intake-period", str(args.intake_period)], cwd=ROOT)
     log_path = tmp / f"floor_{variant}.npy"
     pub = subprocess.Popen(publisher_command(args, log_path), cwd=ROOT)
     while pub.poll() is None and not log_path.with_suffix(".started").exists():
@@ -355,6 +357,8 @@ def floor(args) -> None:
     """The CPU any rclpy node pays here for these inputs (:func:`floor_node`), each variant of
     ``args.floor`` in turn: % of one core, and ms per output-sample period (1 / ``--rate``):
     process CPU over the ``--duration`` x ``--rate`` samples' worth of input streamed."""
+    from rls_uncertainty.settings.config import intake_period
+
     tmp = Path(os.environ.get("TMPDIR", "/tmp")) / f"rls_bench_{os.getpid()}"
     tmp.mkdir(parents=True, exist_ok=True)
     print(f"floor: an rclpy node on the node's executor and input subscriptions, taking every message and "
@@ -364,7 +368,7 @@ def floor(args) -> None:
     for variant in args.floor or FLOORS:
         r = results[variant] = floor_run(args, variant, tmp)
         periods = args.duration * args.rate  # the samples the stream makes (as the node's, if it falls behind)
-        intake_hz = 1 / min(1 / args.rate, 5e-3)  # the node's intake period
+        intake_hz = 1 / intake_period(args.intake_period, args.rate)  # the node's intake period
         what = {"intake": f"timer {intake_hz:g} Hz, take_message", "callbacks": "a callback per message",
                 "timer": f"timer {intake_hz:g} Hz, nothing taken"}[variant]
         threads = {k: v for k, v in sorted(r["threads"].items(), key=lambda kv: -kv[1]) if v > 0}
@@ -564,7 +568,7 @@ def main() -> int:
         offline(args)
         return 0
     if args.floor_node:
-        floor_node(args.floor_node, args.rate)
+        floor_node(args.floor_node, args.rate, args.intake_period)
         return 0
     if args.floor is not None:
         floor(args)

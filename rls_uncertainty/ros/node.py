@@ -73,7 +73,7 @@ from ..datapath.maneuvers import EVENT
 from ..datapath.outputs import NODE_NAME, OutputLayout
 from ..datapath.pipeline import Pipeline, SampleOutput
 from ..errors import ConfigError
-from ..settings.config import NodeConfig, intake_period
+from ..settings.config import intake_period
 from ..settings.parameters import PARAMETERS, Parameter, node_config, pipeline_config
 from ..settings.sources import NodeParameters, startup_parameters
 from .input_watch import SilentInputs
@@ -94,12 +94,6 @@ _NO_EVENTS = PublisherEventCallbacks(use_default_callbacks=False)
 
 # The longest an intake pass feeds before the executor's other work gets a turn.
 _PASS_BUDGET_S = 0.01
-
-
-def _intake_period(node_cfg: NodeConfig, rate: float) -> float:
-    """Seconds between two takes of the inputs (the longest a message waits before it is
-    fed): ``intake_period``, by default the estimator period, at most 5 ms."""
-    return intake_period(node_cfg.intake_period, rate)
 
 
 def _descriptor(p: Parameter) -> ParameterDescriptor:
@@ -190,8 +184,8 @@ class EstimatorNode(Node):
         # pauses or jumps (use_sim_time).
         steady = Clock(clock_type=ClockType.STEADY_TIME)
         self.create_timer(self.node_cfg.diagnostics_period, self._publish_diagnostics, clock=steady)
-        self._intake_timer = self.create_timer(_intake_period(self.node_cfg, self.config.rate), self._take_inputs,
-                                               clock=steady)
+        period = intake_period(self.node_cfg.intake_period, self.config.rate)
+        self._intake_timer = self.create_timer(period, self._take_inputs, clock=steady)
         if self.node_cfg.state_file and self.node_cfg.state_save_period > 0:
             self.create_timer(self.node_cfg.state_save_period, self.save_state, clock=steady)
         models = ", ".join(f"{m.output}({len(m.regressors)})" for m in self.config.models)
@@ -200,7 +194,7 @@ class EstimatorNode(Node):
         self.get_logger().info(
             f"estimating {models} at {self.config.rate:g} Hz, {lags} lags, aircraft {self.config.aircraft.name}; "
             f"inputs {', '.join(self.node_cfg.topics[k] for k in STREAMS)}, taken every "
-            f"{_intake_period(self.node_cfg, self.config.rate) * 1e3:g} ms; "
+            f"{period * 1e3:g} ms; "
             + self._state.startup_text()
         )
 
@@ -228,7 +222,7 @@ class EstimatorNode(Node):
         new = pipeline_config(values)
         self.node_cfg = node_config(values)
         self.pipeline.enabled = self.node_cfg.enabled
-        self._intake_timer.timer_period_ns = int(_intake_period(self.node_cfg, new.rate) * 1e9)
+        self._intake_timer.timer_period_ns = int(intake_period(self.node_cfg.intake_period, new.rate) * 1e9)
         self._diagnostics.window_s = self.node_cfg.diagnostics_window
         if new != self.config:
             changed = ", ".join(sorted(p.name for p in params))
@@ -253,7 +247,7 @@ class EstimatorNode(Node):
 
     def _take_inputs(self) -> None:
         """Every message the input subscriptions hold, taken at once each intake period
-        (:func:`_intake_period`) and fed to :func:`.inputs.feed` in order of arrival
+        (:func:`..settings.config.intake_period`) and fed to :func:`.inputs.feed` in order of arrival
         (:func:`.inputs.arrival_order`, the reception times of the middleware, :mod:`.intake`): the offline
         replay feeds the same messages in the same order. A pass feeds for at most
         :data:`_PASS_BUDGET_S`; the rest of the batch is fed by the next passes before anything
