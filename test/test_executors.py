@@ -43,7 +43,11 @@ def serial(jobs):
 def cluster():
     from distributed import Client, LocalCluster
 
-    c = LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1", dashboard_address=None)
+    # dashboard_address=None turns the dashboard off but not the scheduler's HTTP server (health and
+    # metrics routes), which then takes port 8787; on an ephemeral loopback port two test runs
+    # side by side do not contend for it.
+    c = LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1", dashboard_address=None,
+                     scheduler_kwargs={"dashboard_address": "127.0.0.1:0"})
     client = Client(c, set_as_default=False)  # the executor must work without a default client
     try:
         yield c, client
@@ -138,3 +142,13 @@ def test_workers_and_a_scheduler_together_are_refused():
         executor_for("tcp://127.0.0.1:8786", 2, "--jobs")
     with pytest.raises(ConfigError, match="--workers"):
         LocalProcesses(0)
+
+
+def test_the_test_cluster_serves_on_loopback_ports_of_its_own(cluster):
+    # Tests start servers on 127.0.0.1 only; the scheduler's HTTP server must not take the
+    # fixed dashboard port a second test run (or a user's dashboard) would also want.
+    from urllib.parse import urlsplit
+
+    c, _client = cluster
+    url = urlsplit(c.dashboard_link)
+    assert url.hostname == "127.0.0.1" and url.port not in (None, 8787)
