@@ -164,8 +164,8 @@ def test_edge_models_evaluate_as_before(t2_run):
     assert not bank.solved[0] and bank.withheld[1] and bank.ready[2]
 
 
-@pytest.mark.parametrize(("frequencies", "trim", "lags", "dof"),
-                         [(36, 1, 50, True), (36, 25, 50, True), (120, 1, 50, True), (51, 1, 0, True), (36, 1, 50, False)])
+@pytest.mark.parametrize(("frequencies", "trim", "lags", "dof"), [
+    (36, 1, 50, True), (36, 25, 50, True), (120, 1, 50, True), (51, 1, 0, True), (36, 1, 50, False)])
 def test_the_fused_parts_equal_the_explicit_forms(frequencies, trim, lags, dof):
     """Evaluation.autocovariance and Evaluation.middle, which the bank calls, against
     lags.residual_autocovariance and covariance.middle (themselves checked against the explicit
