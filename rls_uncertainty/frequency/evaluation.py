@@ -50,25 +50,14 @@ class Evaluation:
             self._map[0::2, 0::2] = 1.0
             self._map[1::2, 0::2] = geometry.cot_imag.T
             self._map[0::2, 1::2] = geometry.cot_real.T
-        self._cot_imag_t: FloatArray = np.ascontiguousarray(geometry.cot_imag.T)
-        self._cot_real_t: FloatArray = np.ascontiguousarray(geometry.cot_real.T)
-        self._lags = -1  # the lag count the arrays below are shaped for
+        else:
+            self._cot_imag_t: FloatArray = np.ascontiguousarray(geometry.cot_imag.T)
+            self._cot_real_t: FloatArray = np.ascontiguousarray(geometry.cot_real.T)
+        self._shifted: FloatArray = np.zeros((M, 0))  # F10's T(j) laid out for its lag matrix
         self._w: FloatArray = np.ones((M, 1, q))
         self._outer: FloatArray = np.empty((M, q + 1, q + 1))
 
     # ------------------------------------------------------------------ F9-F10
-    def _shape_lags(self, M: int, lags: int) -> None:
-        if self._lags != lags:
-            self._lags = lags
-            self._shifted: FloatArray = np.zeros((M, 4 * lags - 3))  # 2 T(j), j = -2L..2L
-            step = self._shifted.strides
-            L = lags - 1
-            self._toeplitz: FloatArray = np.ndarray((M, lags, lags), np.float64, self._shifted, 2 * L * step[1],
-                                                    (step[0], -step[1], step[1]))
-            self._hankel: FloatArray = np.ndarray((M, lags, lags), np.float64, self._shifted, 2 * L * step[1],
-                                                  (step[0], step[1], step[1]))
-            self._lagged: FloatArray = np.empty((M, lags, lags))
-
     def autocovariance(
         self, augmented: FloatArray, N: int, correct: bool, cross: FloatArray | None = None,
     ) -> tuple[FloatArray, FloatArray]:
@@ -102,12 +91,16 @@ class Evaluation:
         """The part of ``N D`` (:func:`.lags.dof_correction`) linear in ``R`` through fixed
         matrices: ``T``'s Toeplitz and Hankel parts and the bias's terms, ``(M, L+1, L+1)``."""
         M, lags = traces.shape
-        self._shape_lags(M, lags)
         L = lags - 1
+        if self._shifted.shape[1] != 4 * L + 1:
+            self._shifted = np.zeros((M, 4 * L + 1))  # 2 T(j), j = -2L..2L (0 beyond L)
         shifted = self._shifted
         T2 = np.multiply(traces, 2.0, out=shifted[:, 2 * L : 3 * L + 1])
         shifted[:, L : 2 * L + 1] = T2[:, ::-1]
-        lagged = np.add(self._toeplitz, self._hankel, out=self._lagged)
+        step, offset = shifted.strides, 2 * L * shifted.strides[1]
+        toeplitz = np.ndarray((M, lags, lags), np.float64, shifted, offset, (step[0], -step[1], step[1]))
+        hankel = np.ndarray((M, lags, lags), np.float64, shifted, offset, (step[0], step[1], step[1]))
+        lagged: FloatArray = toeplitz + hankel
         lagged[:, :, 0] -= T2  # the Hankel part starts at j = 1
         lagged += _bias_terms(N, L)
         return lagged
