@@ -64,11 +64,16 @@ def _started(program: str, load: Callable[[], Callable[[], int]]) -> int:
     try:
         import signal
 
-        from .stopping import Stopping
+        from .stopping import Stopped, Stopping
 
         stopping = Stopping()
         with stopping.signals((signal.SIGINT,)):
             command = load()
+        if stopping.received is not None:
+            # A stop that the loading code swallowed: the standard library's XML module, for
+            # one, falls back from its C accelerator on the ImportError that a Ctrl-C landing in
+            # that accelerator's import becomes. The command would start as if none had come.
+            raise Stopped(stopping.received)
         # Still under this try: a Ctrl-C before the command's own handling starts is one line too.
         started = True
         return command()
