@@ -205,6 +205,26 @@ def test_play_with_no_subscriber_says_so_publishes_nothing_and_exits_1():
     assert "published 4920 messages" in run.stderr
 
 
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
+def test_a_stopped_play_ends_in_one_line_with_the_signals_status(sig):
+    """Ctrl-C or SIGTERM while the bag plays (to nobody, slowly): the playback unwinds, one line,
+    exit status 128 + the signal's number; rclpy does not shut its context down under the
+    player, whose next publish then failed with an RCLError traceback and exit status 1."""
+    proc = subprocess.Popen([sys.executable, "-m", "rls_uncertainty.cli", "play", str(BUNDLED), "--subscribers", "0",
+                             "--loop", "20"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=ROOT,
+                            start_new_session=True)
+    try:
+        first = proc.stderr.readline()  # said once it has started publishing
+        assert first == f"playing {BUNDLED} at 1x: no subscriber\n", first
+        proc.send_signal(sig)
+        _out, rest = proc.communicate(timeout=120)
+        assert (proc.returncode, rest) == (128 + sig, f"rls-uncertainty play: stopped by {sig.name}\n")
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait()
+
+
 class _Diagnostics:
     """The estimator node's ``inputs`` and ``samples`` statuses, as ``{key: value}`` per report."""
 

@@ -236,11 +236,42 @@ def test_ctrl_c_while_the_command_starts_is_one_line_and_writes_nothing(tmp_path
     assert list(tmp_path.iterdir()) == []
 
 
-def test_ctrl_c_while_the_node_module_loads_is_one_line(tmp_path):
+# A child that, when the import system first looks for rclpy, takes a Ctrl-C and raises an
+# ImportError from it, as rclpy's C extension does when the interrupt lands while it initializes
+# ("ImportError: initialization failed", the KeyboardInterrupt its cause).
+_INTERRUPT_AS_IMPORT_ERROR = _FROM_A_TERMINAL + """
+import signal, sys
+class Trip:
+    def find_spec(self, name, path=None, target=None):
+        if name == "rclpy":
+            try:
+                signal.raise_signal(signal.SIGINT)
+            except KeyboardInterrupt as exc:
+                raise ImportError("initialization failed") from exc
+        return None
+sys.meta_path.insert(0, Trip())
+"""
+
+# The same ImportError caught by the code that imported the module, which goes on without it
+# (an accelerator's pure-Python fallback): a Ctrl-C nothing raises.
+_INTERRUPT_SWALLOWED = _INTERRUPT_AS_IMPORT_ERROR.replace('if name == "rclpy":', """if name == "rclpy":
+            try:
+                import _no_such_accelerator
+            except ImportError:
+                pass
+        if name == "_no_such_accelerator":""")
+
+
+@pytest.mark.parametrize("landing", ["as it is", "as an ImportError", "swallowed by an import's fallback"])
+def test_ctrl_c_while_the_node_module_loads_is_one_line(tmp_path, landing):
     """``python -m rls_uncertainty.ros.node`` (the demo's and the testing plugin's way to start
-    the node), interrupted while it imports rclpy: the console script's line and status."""
-    code = _INTERRUPT_AT_IMPORT.split("from rls_uncertainty.cli")[0].format(module="rclpy") + (
-        "import runpy\nrunpy.run_module('rls_uncertainty.ros.node', run_name='__main__', alter_sys=True)\n")
+    the node), interrupted while it imports rclpy: the console script's line and status, also
+    when the interrupt comes back as the C extension's ImportError, or as one that the importing
+    code caught (the node would otherwise start as if no Ctrl-C had come, and run on)."""
+    child = {"as it is": _INTERRUPT_AT_IMPORT.split("from rls_uncertainty.cli")[0].format(module="rclpy"),
+             "as an ImportError": _INTERRUPT_AS_IMPORT_ERROR,
+             "swallowed by an import's fallback": _INTERRUPT_SWALLOWED}[landing]
+    code = child + "import runpy\nrunpy.run_module('rls_uncertainty.ros.node', run_name='__main__', alter_sys=True)\n"
     proc = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, capture_output=True, text=True,
                           timeout=DEADLINE)
     assert (proc.returncode, proc.stdout) == (130, "")
@@ -304,6 +335,14 @@ class Trip:
             owner = Owner()
             ref = weakref.ref(owner, callback)
             del owner
+        elif {where!r} == "swallowed by an import's fallback":
+            try:
+                try:
+                    signal.raise_signal(signal.SIGINT)
+                except KeyboardInterrupt as exc:
+                    raise ImportError("could not import the accelerator") from exc
+            except ImportError:
+                pass  # (the pure-Python fallback: the standard library's XML module does this)
         else:
             try:
                 signal.raise_signal(signal.SIGINT)
@@ -320,7 +359,8 @@ sys.exit({entry}({args}))
 
 
 @pytest.mark.parametrize("where", ["__del__", "__del__, the start-up over before it is raised again",
-                                   "weakref callback", "__set_name__", "another exception"])
+                                   "weakref callback", "__set_name__", "another exception",
+                                   "swallowed by an import's fallback"])
 def test_ctrl_c_while_starting_is_one_line_wherever_it_lands(tmp_path, where):
     out = tmp_path / "out"
     code = _LANDING_WHILE_STARTING.format(where=where, entry="main", args=f"['replay', {str(BUNDLED)!r}, '--out', "

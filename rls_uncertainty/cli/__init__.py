@@ -7,10 +7,11 @@ One module per group of commands: :mod:`.simulation` (``simulate``, ``montecarlo
 (:mod:`.flags`), so every command names, bounds and explains it the same way. Errors: a usage
 error or one of the package's own errors (or a file-system error) is one line and exit status
 2; anything else is a bug and keeps its traceback. Stopping: Ctrl-C (SIGINT), and for the
-commands without ROS SIGTERM and SIGHUP too, unwind the command as an exception would (its
-worker processes ended, its unfinished output directory removed, :mod:`..files`) and end it
-with one line and exit status 128 + the signal's number (130 for Ctrl-C, 143 for SIGTERM). The
-ROS commands handle their signals themselves (the node and rclpy, the dashboard's loop).
+commands without ROS and ``play`` and ``demo`` SIGTERM and SIGHUP too, unwind the command as an
+exception would (its worker processes ended, its unfinished output directory removed,
+:mod:`..files`) and end it with one line and exit status 128 + the signal's number (130 for
+Ctrl-C, 143 for SIGTERM). The other ROS commands handle their signals themselves (the node and
+rclpy, the dashboard's loop).
 Ctrl-C while a command is still starting (loading its modules, about a second, or parsing its
 command line) ends it the same way, in one line, before it has written anything: from the
 first line of :func:`main` (of :func:`estimator_node`) on, SIGINT raises a stop
@@ -64,11 +65,16 @@ def _started(program: str, load: Callable[[], Callable[[], int]]) -> int:
     try:
         import signal
 
-        from .stopping import Stopping
+        from .stopping import Stopped, Stopping
 
         stopping = Stopping()
         with stopping.signals((signal.SIGINT,)):
             command = load()
+        if stopping.received is not None:
+            # A stop that the loading code swallowed: the standard library's XML module, for
+            # one, falls back from its C accelerator on the ImportError that a Ctrl-C landing in
+            # that accelerator's import becomes. The command would start as if none had come.
+            raise Stopped(stopping.received)
         # Still under this try: a Ctrl-C before the command's own handling starts is one line too.
         started = True
         return command()

@@ -25,8 +25,10 @@ __all__ = ["parse", "run", "build_parser", "load_estimator_node"]
 
 _SUBCOMMANDS = (add_demo, add_simulate, add_montecarlo, add_multisine, add_make_bag, add_convert, add_replay,
                 add_campaign, add_predict, add_play, add_operator_commands)
-# The commands that handle their signals themselves (rclpy's handlers, the dashboard's loop).
-_OWN_SIGNALS = frozenset({"demo", "play", "dashboard", "status", "enable", "disable", "reset"})
+# The commands that handle their signals themselves (rclpy's handlers, the dashboard's loop); play and demo
+# take the command line's stops, with rclpy's handlers left out (..ros.player.play).
+_OWN_SIGNALS = frozenset({"dashboard", "status", "enable", "disable", "reset"})
+_NO_OUTPUT = _OWN_SIGNALS | {"demo", "play"}  # (a stop leaves no output of theirs to remove)
 _STOPPING_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
 
 
@@ -101,7 +103,7 @@ def run(args: argparse.Namespace) -> int:
 def _stopped(command: str, signum: int) -> int:
     """Ctrl-C or a stopping signal: everything in the way unwound (workers ended, unfinished
     outputs removed); one line, and the status a shell gives a command a signal ended."""
-    removed = "" if command in _OWN_SIGNALS else "; its unfinished output removed"
+    removed = "" if command in _NO_OUTPUT else "; its unfinished output removed"
     print(f"rls-uncertainty {command}: stopped by {signal.Signals(signum).name}{removed}", file=sys.stderr)
     return 128 + int(signum)
 

@@ -141,6 +141,7 @@ def demo(rate: float = 4.0, params_file: str = "t2") -> int:
     # DDS discovery stays on this machine unless the caller chose otherwise.
     os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
     import rclpy  # noqa: PLC0415
+    from rclpy.signals import SignalHandlerOptions  # noqa: PLC0415
 
     from ..offline.bags import InputStream  # noqa: PLC0415
     from ..offline.replay import run_pipeline  # noqa: PLC0415
@@ -157,12 +158,13 @@ def demo(rate: float = 4.0, params_file: str = "t2") -> int:
     print(f"under a namespace of its own ({where()}): the node is {node_name}, its inputs {namespace}/imu, ...; "
           "other nodes on the domain neither hear the demo nor disturb it")
     node_proc, node_log = _start_node(params_path, namespace)
-    with _player_writer_profile():
-        rclpy.init()
-        node = rclpy.create_node("rls_demo", namespace=namespace)
-    outputs = _Outputs(node, node_name, [m.output for m in config.models])
-    player = None
+    node = player = None
     try:
+        with _player_writer_profile():  # (rclpy's signal handlers left out as in play)
+            rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
+            node = rclpy.create_node("rls_demo", namespace=namespace)
+        outputs = _Outputs(node, node_name, [m.output for m in config.models])
+
         def spin() -> None:
             rclpy.spin_once(node, timeout_sec=0.01)
             if node_proc.poll() is not None:
@@ -186,7 +188,8 @@ def demo(rate: float = 4.0, params_file: str = "t2") -> int:
     finally:
         if player is not None:
             player.close()
-        node.destroy_node()
+        if node is not None:
+            node.destroy_node()
         rclpy.try_shutdown()
         stop_process(node_proc)
     print(f"\nlive node: {outputs.samples} samples published (offline replay: {want})\n")

@@ -17,7 +17,7 @@ from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from types import FrameType
 
-__all__ = ["sigint_through_rclpy"]
+__all__ = ["sigint_through_rclpy", "SigintWhileLoading"]
 
 
 @contextmanager
@@ -45,3 +45,37 @@ def sigint_through_rclpy() -> Iterator[Callable[[], None]]:
         yield rclpy_is_up
     finally:
         signal.signal(signal.SIGINT, previous)
+
+
+class SigintWhileLoading:
+    """For ``python -m rls_uncertainty.ros.node`` while it loads the node's modules (the console
+    script has :class:`..cli.stopping.Stopping`, a wing above): while ``with`` it, SIGINT raises
+    KeyboardInterrupt and is remembered, so that :meth:`stopped` also tells the stops that came
+    back as another exception (rclpy's C extension turns one into "ImportError: initialization
+    failed") and those that the loading code swallowed (the standard library's XML module falls
+    back from its C accelerator on that ImportError), after which the node would otherwise start
+    as if no Ctrl-C had come. Nothing changes off the main thread or when SIGINT is not Python's
+    default handler; the handler before is put back at the end."""
+
+    def __init__(self) -> None:
+        self.received = False
+        self._previous: object = None
+
+    def _raise(self, _signum: int, _frame: FrameType | None) -> None:
+        self.received = True
+        raise KeyboardInterrupt
+
+    def __enter__(self) -> SigintWhileLoading:
+        if threading.current_thread() is threading.main_thread() \
+                and signal.getsignal(signal.SIGINT) is signal.default_int_handler:
+            self._previous = signal.signal(signal.SIGINT, self._raise)
+        return self
+
+    def __exit__(self, *_exc: object) -> None:
+        if self._previous is not None:
+            signal.signal(signal.SIGINT, self._previous)  # type: ignore[arg-type]
+
+    def stopped(self, exc: BaseException | None = None) -> bool:
+        """Whether a Ctrl-C came: ``exc`` a KeyboardInterrupt, or any exception (or none) once
+        one was received."""
+        return isinstance(exc, KeyboardInterrupt) or self.received

@@ -28,18 +28,30 @@ from __future__ import annotations
 
 if __name__ == "__main__":  # pragma: no cover - run in a subprocess by the tests
     # ``python -m rls_uncertainty.ros.node`` (the demo, the testing plugin, the docs): this copy
-    # only loads the module again under a guard, as the ``estimator_node`` console script does,
-    # so that Ctrl-C while the node loads (about a second) ends it in one line with exit status
-    # 130 instead of a traceback.
+    # only loads the module again and runs its main, so that Ctrl-C while the node loads (about
+    # a second) ends it as the ``estimator_node`` console script does, in one line with exit
+    # status 130 instead of a traceback (:class:`.interrupt.SigintWhileLoading`), also when it
+    # comes back as another exception or was swallowed, or lands as the module hands over.
     import importlib
     import sys as _sys
 
+    _loading, _started = None, False
     try:
-        _main = importlib.import_module("rls_uncertainty.ros.node").main
-    except KeyboardInterrupt:
-        print("estimator_node: stopped by SIGINT while starting; nothing written", file=_sys.stderr)
-        _sys.exit(130)
-    _sys.exit(_main())
+        from rls_uncertainty.ros.interrupt import SigintWhileLoading
+
+        with SigintWhileLoading() as _loading:
+            _main = importlib.import_module("rls_uncertainty.ros.node").main
+        if _loading.stopped():
+            raise KeyboardInterrupt
+        _started = True
+        _code = _main()
+    except (KeyboardInterrupt, Exception) as _exc:
+        if not isinstance(_exc, KeyboardInterrupt) and (_loading is None or not _loading.stopped(_exc)):
+            raise
+        _said = "" if _started else " while starting; nothing written"
+        print(f"estimator_node: stopped by SIGINT{_said}", file=_sys.stderr)
+        _code = 130
+    _sys.exit(_code)
 
 import gc
 import math

@@ -447,9 +447,13 @@ def play(bag: str | Path, *, rate: float = 1.0, clock: bool = True, reliable: bo
         if not (math.isfinite(value) and value >= 0):
             raise ConfigError(f"{name} must be a finite number of seconds >= 0, got {value!r}")
     import rclpy  # noqa: PLC0415
+    from rclpy.signals import SignalHandlerOptions  # noqa: PLC0415
 
     with _player_writer_profile():
-        rclpy.init()
+        # Without rclpy's signal handlers: a stop is the command line's exception in this
+        # thread (:mod:`..cli.stopping`), which unwinds the playback; rclpy's would shut the
+        # context down under it from another thread, and the next publish fail with an RCLError.
+        rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
         node = rclpy.create_node("rls_player")
     player = None
     try:
