@@ -531,3 +531,23 @@ def test_a_model_publishes_first_at_n_plus_the_lag_windows(lags, windows, burn_i
         rule = n + math.ceil(windows * L)
         expect = int(ready_at[j]) + b + rule if b else max(int(ready_at[j]), rule)
         assert first[j] == expect, (j, first, ready_at)
+
+
+@pytest.mark.parametrize("lags, windows, burn_in", [(5, 2.0, None), ("auto", 1.0, 4)])
+def test_both_standard_errors_at_once_are_each_kinds(lags, windows, burn_in):
+    """``standard_errors_both()`` is ``standard_errors_all()`` of the corrected and the
+    conventional kind at every sample, NaN where they are (before and after publication), and
+    ``ready`` is the models whose estimates are finite."""
+    X, Z = equivalence_problem(n=60)
+    for bank, refs, k in fed_bank_and_references(X, Z, lags=lags, max_lags=9, publish_lag_windows=windows,
+                                                 residual_burn_in=burn_in):
+        se, se_conv = bank.standard_errors_both()
+        np.testing.assert_array_equal(se, bank.standard_errors_all("corrected"))
+        np.testing.assert_array_equal(se_conv, bank.standard_errors_all("conventional"))
+        ready = bank.ready
+        assert (np.isfinite(bank.theta_all()[:, 0]) == ready).all(), k
+        for j, ref in enumerate(refs):
+            if ready[j]:  # the reference twin publishes too: its standard errors, both kinds
+                n = bank.sizes[j]
+                np.testing.assert_allclose(se[j, :n], ref.standard_errors("corrected"), rtol=1e-6)
+                np.testing.assert_allclose(se_conv[j, :n], ref.standard_errors("conventional"), rtol=1e-6)

@@ -441,6 +441,17 @@ class EstimatorBank(BankSnapshot):
         out: FloatArray = np.where(rule.hidden, np.nan, se)
         return out
 
+    def standard_errors_both(self) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`standard_errors_all` of both kinds, ``(corrected, conventional)``, from one
+        evaluation and one masking (the per-sample call of the data path)."""
+        se = self._eval.evaluate().standard_errors  # (2, M, n_max)
+        rule = self._rule
+        if not rule.all_published:
+            self._published()  # (judged once per sample: rule.hidden, rule.all_published)
+        if not rule.all_published:
+            se = np.where(rule.hidden, np.nan, se)
+        return se[0], se[1]
+
     def covariance(self, j: int, kind: str = "corrected", *, repair: bool = True) -> np.ndarray:
         """Parameter covariance of model ``j``.
 
