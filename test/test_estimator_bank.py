@@ -334,6 +334,31 @@ def test_bank_equals_the_reference_where_the_truncated_window_is_repaired(p0):
     assert repaired >= 3 and bank.repairs[0] == repaired
 
 
+
+@pytest.mark.parametrize("problem", ["equivalence", "indefinite"])
+def test_one_kind_of_covariance_is_that_kind_of_both(problem):
+    """``covariance_all(kind)`` is ``covariance_all()[kind]`` bit for bit (NaN where it is), at
+    every sample and whichever is formed first, also where the corrected one is repaired;
+    ``standard_errors_all`` are the square roots of its diagonals."""
+    if problem == "equivalence":
+        X, Z = equivalence_problem(n=60)
+        sizes, options = (3, 2), EstimatorOptions(lags=5, publish_lag_windows=2.0)
+    else:
+        x, z = indefinite_problem(120)
+        X, Z, sizes, options = x[:, None, :], z[:, None], (2,), EstimatorOptions(lags=5)
+    first, later = EstimatorBank(sizes, options), EstimatorBank(sizes, options)  # one kind first / both first
+    for k in range(len(Z)):
+        first.update(X[k], Z[k])
+        later.update(X[k], Z[k])
+        for i, kind in enumerate(("corrected", "conventional")):
+            alone = first.covariance_all(kind)
+            both = later.covariance_all()
+            np.testing.assert_array_equal(alone, both[i])
+            np.testing.assert_array_equal(first.covariance_all()[i], alone)
+            se = np.sqrt(np.maximum(alone.diagonal(0, 1, 2), 0.0))
+            np.testing.assert_array_equal(later.standard_errors_all(kind)[np.isfinite(se)], se[np.isfinite(se)])
+    assert problem == "equivalence" or first.repairs[0] > 0
+
 # --------------------------------------------------------------------------- the overflow guard
 @pytest.mark.parametrize("magnitude", [1e160, 1e200, 1e300, 1.7e308])
 @pytest.mark.parametrize("where", ["regressor", "output", "padding"])
