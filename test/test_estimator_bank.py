@@ -334,6 +334,31 @@ def test_bank_equals_the_reference_where_the_truncated_window_is_repaired(p0):
     assert repaired >= 3 and bank.repairs[0] == repaired
 
 
+
+@pytest.mark.parametrize("problem", ["equivalence", "indefinite"])
+def test_one_kind_of_covariance_is_that_kind_of_both(problem):
+    """``covariance_all(kind)`` is ``covariance_all()[kind]`` bit for bit (NaN where it is), at
+    every sample and whichever is formed first, also where the corrected one is repaired;
+    ``standard_errors_all`` are the square roots of its diagonals."""
+    if problem == "equivalence":
+        X, Z = equivalence_problem(n=60)
+        sizes, options = (3, 2), EstimatorOptions(lags=5, publish_lag_windows=2.0)
+    else:
+        x, z = indefinite_problem(120)
+        X, Z, sizes, options = x[:, None, :], z[:, None], (2,), EstimatorOptions(lags=5)
+    first, later = EstimatorBank(sizes, options), EstimatorBank(sizes, options)  # one kind first / both first
+    for k in range(len(Z)):
+        first.update(X[k], Z[k])
+        later.update(X[k], Z[k])
+        for i, kind in enumerate(("corrected", "conventional")):
+            alone = first.covariance_all(kind)
+            both = later.covariance_all()
+            np.testing.assert_array_equal(alone, both[i])
+            np.testing.assert_array_equal(first.covariance_all()[i], alone)
+            se = np.sqrt(np.maximum(alone.diagonal(0, 1, 2), 0.0))
+            np.testing.assert_array_equal(later.standard_errors_all(kind)[np.isfinite(se)], se[np.isfinite(se)])
+    assert problem == "equivalence" or first.repairs[0] > 0
+
 # --------------------------------------------------------------------------- the overflow guard
 @pytest.mark.parametrize("magnitude", [1e160, 1e200, 1e300, 1.7e308])
 @pytest.mark.parametrize("where", ["regressor", "output", "padding"])
@@ -531,3 +556,23 @@ def test_a_model_publishes_first_at_n_plus_the_lag_windows(lags, windows, burn_i
         rule = n + math.ceil(windows * L)
         expect = int(ready_at[j]) + b + rule if b else max(int(ready_at[j]), rule)
         assert first[j] == expect, (j, first, ready_at)
+
+
+@pytest.mark.parametrize("lags, windows, burn_in", [(5, 2.0, None), ("auto", 1.0, 4)])
+def test_both_standard_errors_at_once_are_each_kinds(lags, windows, burn_in):
+    """``standard_errors_both()`` is ``standard_errors_all()`` of the corrected and the
+    conventional kind at every sample, NaN where they are (before and after publication), and
+    ``ready`` is the models whose estimates are finite."""
+    X, Z = equivalence_problem(n=60)
+    for bank, refs, k in fed_bank_and_references(X, Z, lags=lags, max_lags=9, publish_lag_windows=windows,
+                                                 residual_burn_in=burn_in):
+        se, se_conv = bank.standard_errors_both()
+        np.testing.assert_array_equal(se, bank.standard_errors_all("corrected"))
+        np.testing.assert_array_equal(se_conv, bank.standard_errors_all("conventional"))
+        ready = bank.ready
+        assert (np.isfinite(bank.theta_all()[:, 0]) == ready).all(), k
+        for j, ref in enumerate(refs):
+            if ready[j]:  # the reference twin publishes too: its standard errors, both kinds
+                n = bank.sizes[j]
+                np.testing.assert_allclose(se[j, :n], ref.standard_errors("corrected"), rtol=1e-6)
+                np.testing.assert_allclose(se_conv[j, :n], ref.standard_errors("conventional"), rtol=1e-6)

@@ -387,13 +387,12 @@ class IdentifiabilityMonitor:
         if self._judged or bank is None:
             return self._identifiable
         ready = self.ready
-        both = bank.covariance_all()  # NaN off the ready models' blocks
-        c = both[0]
+        c = bank.covariance_all("corrected")  # NaN off the ready models' blocks
         d = c.diagonal(0, 1, 2)
         if np.fmin.reduce(d, axis=None) <= 0.0:  # a ready model whose corrected variances are zero fits exactly:
             exact = ready & ~np.logical_or.reduce(d > 0.0, axis=1)  # its correlations: (X'X)^-1's, the conventional
             if np.logical_or.reduce(exact):  # (zero variances of a model withheld: nothing to replace)
-                c = np.where(exact[:, None, None], both[1], c)
+                c = np.where(exact[:, None, None], bank.covariance_all("conventional"), c)
                 d = c.diagonal(0, 1, 2)
         self._covariance = c
         # |rho_ij| > max  <=>  c_ij^2 > max^2 c_ii c_jj  (NaN compares False)

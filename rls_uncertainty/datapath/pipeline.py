@@ -360,8 +360,7 @@ class Pipeline(PipelineInputs):
         bank = self.bank
         self._index += 1
         theta = bank.theta_all()
-        se = bank.standard_errors_all("corrected")
-        se_conv = bank.standard_errors_all("conventional")
+        se, se_conv = bank.standard_errors_both()
         ready = bank.ready
         # The last guard: a ready model with a non-finite estimate or SE, or an SE not above
         # rounding of its estimate (:mod:`.guard`), is withheld, counted.

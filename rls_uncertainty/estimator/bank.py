@@ -430,16 +430,17 @@ class EstimatorBank(BankSnapshot):
     def standard_errors_all(self, kind: str = "corrected") -> np.ndarray:
         """Standard errors of every model as an ``(M, n_max)`` array: the square roots of the
         diagonals of :meth:`covariance`. Padding and models that are not :attr:`ready`
-        (published) are NaN.
-        """
-        se = self._eval.standard_errors(kind)
+        (published) are NaN."""
+        return self.standard_errors_both()[kind_index(kind)]
+
+    def standard_errors_both(self) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`standard_errors_all` of both kinds at once: ``(corrected, conventional)``."""
+        se = self._eval.evaluate().standard_errors  # (2, M, n_max)
         rule = self._rule
         if not rule.all_published:
-            self._published()  # (judged once per sample: rule.hidden, rule.all_published)
-        if rule.all_published:
-            return se
-        out: FloatArray = np.where(rule.hidden, np.nan, se)
-        return out
+            self._published()  # (judged once per sample: rule.hidden)
+            se = np.where(rule.hidden, np.nan, se)
+        return se[0], se[1]
 
     def covariance(self, j: int, kind: str = "corrected", *, repair: bool = True) -> np.ndarray:
         """Parameter covariance of model ``j``.
@@ -454,12 +455,14 @@ class EstimatorBank(BankSnapshot):
         self._require(j)
         return self._eval.evaluate().matrix(index, j, self.sizes[j], repair=repair)
 
-    def covariance_all(self) -> np.ndarray:
+    def covariance_all(self, kind: str | None = None) -> np.ndarray:
         """:meth:`covariance` (repaired) of every model and both kinds at once, a new
         ``(2, M, n_max, n_max)`` array: ``[0]`` corrected, ``[1]`` conventional; NaN outside
-        the :attr:`ready` (published) models' blocks."""
-        published = self._published()
-        cov = self._eval.evaluate().published(self.sizes, published)
+        the :attr:`ready` (published) models' blocks. With ``kind``, that kind's alone ``(M,
+        n_max, n_max)`` (the other kind not formed for it)."""
+        published, evaluated = self._published(), self._eval.evaluate()
+        cov = (evaluated.published(self.sizes, published) if kind is None
+               else evaluated.published_kind(kind_index(kind), self.sizes, published))
         rule = self._rule
         if not rule.all_published:
             np.copyto(cov, np.nan, where=rule.hidden[:, :, None])

@@ -75,7 +75,7 @@ class Covariances:
     exactly, whose covariance is published as zero.
     """
 
-    __slots__ = ("indefinite", "repaired", "exact", "_variances", "_standard_errors", "_parts", "_matrices")
+    __slots__ = ("indefinite", "repaired", "exact", "_variances", "_standard_errors", "_parts", "_matrices", "_kinds")
 
     def __init__(self, variances: FloatArray, indefinite: bool, parts: _Parts) -> None:
         self.indefinite = indefinite  # a corrected variance is negative
@@ -85,6 +85,7 @@ class Covariances:
         self._standard_errors: FloatArray | None = None
         self._parts = parts
         self._matrices: FloatArray | None = None
+        self._kinds: list[FloatArray | None] = [None, None]  # one kind formed alone (kind_matrices)
 
     def repair(self, exact: BoolArray, sizes: tuple[int, ...]) -> list[int]:
         """Publish the corrected covariance of the models that fit ``exact``-ly as zero (its
@@ -98,7 +99,7 @@ class Covariances:
             for index in np.flatnonzero((corrected < 0.0).any(axis=1)):
                 j = int(index)
                 s = sizes[j]
-                fixed = self.repaired[j] = nearest_psd(self.matrices()[0, j, :s, :s])
+                fixed = self.repaired[j] = nearest_psd(self.kind_matrices(0)[j, :s, :s])
                 counted.append(j)
                 corrected[j, :s] = np.diag(fixed)
         return counted
@@ -113,6 +114,8 @@ class Covariances:
         return self._standard_errors
 
     def matrices(self) -> FloatArray:
+        if self._matrices is None and any(kind is not None for kind in self._kinds):  # (one formed alone)
+            self._matrices = np.stack([self.kind_matrices(0), self.kind_matrices(1)])
         if self._matrices is None:
             DN, DN0, D, hS0, scale, inv_n, Dt, variances = self._parts
             P = np.empty((2, *D.shape))
@@ -127,6 +130,29 @@ class Covariances:
             cov.reshape(*cov.shape[:2], n * n)[:, :, :: n + 1] = variances  # the diagonals: the variances
             self._matrices = cov
         return self._matrices
+
+    def kind_matrices(self, kind_index: int) -> FloatArray:
+        """``matrices()[kind_index]``, formed without the other kind when that was not formed
+        yet (the same operations on the same numbers as :meth:`matrices`)."""
+        if self._matrices is not None:
+            both: FloatArray = self._matrices[kind_index]
+            return both
+        cov = self._kinds[kind_index]
+        if cov is None:
+            DN, DN0, D, hS0, scale, inv_n, Dt, variances = self._parts
+            P = np.empty(D.shape)
+            if kind_index == 0:
+                np.matmul(DN, Dt, out=P)
+            elif DN0 is None:
+                np.multiply(D, hS0[:, :, None], out=P)
+            else:
+                np.matmul(DN0, Dt, out=P)
+            cov = np.add(P, P.swapaxes(1, 2), out=np.empty(P.shape))
+            cov *= scale * inv_n
+            n = D.shape[1]
+            cov.reshape(D.shape[0], n * n)[:, :: n + 1] = variances[kind_index]
+            self._kinds[kind_index] = cov
+        return cov
 
     def matrix(self, kind_index: int, j: int, size: int, *, repair: bool = True) -> FloatArray:
         """Model ``j``'s covariance (a copy), published (``repair``) or unrepaired."""
@@ -143,13 +169,25 @@ class Covariances:
         :meth:`matrices`): the corrected covariance of an exact fit is zero, that of a
         repaired model its nearest positive semi-definite matrix."""
         cov = self.matrices().copy()
+        self._published_corrected(cov[0], sizes, ready)
+        return cov
+
+    def published_kind(self, kind_index: int, sizes: tuple[int, ...], ready: BoolArray) -> FloatArray:
+        """``published(sizes, ready)[kind_index]`` alone, a new ``(M, n_max, n_max)`` array."""
+        cov = self.kind_matrices(kind_index).copy()
+        if kind_index == 0:
+            self._published_corrected(cov, sizes, ready)
+        return cov
+
+    def _published_corrected(self, cov: FloatArray, sizes: tuple[int, ...], ready: BoolArray) -> None:
+        """The corrected covariances ``cov`` as published: zero for an exact fit, a repaired
+        model's nearest positive semi-definite matrix (in place)."""
         if self.exact is not None:
             for index in np.flatnonzero(self.exact & ready):
                 j = int(index)
-                cov[0, j, : sizes[j], : sizes[j]] = 0.0
+                cov[j, : sizes[j], : sizes[j]] = 0.0
         for j, fixed in self.repaired.items():
-            cov[0, j, : sizes[j], : sizes[j]] = fixed
-        return cov
+            cov[j, : sizes[j], : sizes[j]] = fixed
 
 
 class CovarianceEvaluator:
