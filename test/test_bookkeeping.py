@@ -98,7 +98,7 @@ def test_totals_add_up_a_report_and_growth_counts_a_restarted_counter_from_zero(
 
 
 def test_the_window_gives_the_newest_totals_at_least_a_window_old():
-    window = Window()
+    window = Window(NO_TOTALS)
     seen = []
     for k in range(1, 8):  # totals k at k seconds (steady time), a 2.5 s window
         before, whole = window.advance(1.0, Totals.of(_report(k, {})), 2.5)

@@ -121,7 +121,8 @@ def test_input_keys_per_stream_in_order_with_rejections_sorted():
     assert imu == [("imu.required", "True"), ("imu.publishers", "1"), ("imu.rate_hz", "14.0"),
                    ("imu.age_s", "0.020"), ("imu.received", "7"), ("imu.accepted", "4"), ("imu.expired", "1"),
                    ("imu.missing", "0"), ("imu.recent.rejected", "3"), ("imu.recent.missing", "0"),
-                   ("imu.recent.expired", "1"), ("imu.rejected.duplicate", "1"), ("imu.rejected.out_of_order", "2")]
+                   ("imu.recent.expired", "1"), ("imu.recent.queue_full", "0"),
+                   ("imu.rejected.duplicate", "1"), ("imu.rejected.out_of_order", "2")]
     assert s.values[0] == ("recent_window_s", "10")
     # Streams in the counters' order, each block starting with its required flag.
     firsts = [k.split(".")[0] for k, _ in s.values if k.endswith(".required")]
@@ -422,7 +423,7 @@ def test_every_status_stays_bounded_whatever_arrives():
                  unknown=joints)
     out = statuses(snapshot(c, state="x" * 100_000))
     inputs, samples = out["inputs"], out["samples"]
-    assert len(inputs.values) <= 1 + len(INPUTS) * (13 + dg.MAX_KEYS)
+    assert len(inputs.values) <= 1 + len(INPUTS) * (14 + dg.MAX_KEYS)
     assert len(samples.values) <= 13 + 3 * (2 + dg.MAX_KEYS)
     assert _size(inputs) < 20_000 and _size(samples) < 10_000
     for s in (inputs, samples):

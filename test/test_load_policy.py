@@ -178,3 +178,36 @@ def test_a_node_that_does_not_shed_says_it_is_behind_and_keeps_its_settings():
     assert out["samples"].message.startswith("cannot keep up: ") and "degraded" not in out["samples"].message
     assert policy.load is not None and not policy.load.degraded and policy.load.said == []
     assert dict(out["samples"].values)["load.frequency_every"] == "1"
+
+
+# ------------------------------------------------------------------ a full input queue
+def test_a_full_input_queue_is_the_node_whatever_its_cpu_and_waits_say():
+    # The middleware drops the oldest messages of a full queue before the node takes them: the
+    # node took too seldom, though the messages it did take were fed quickly.
+    quiet = jitter(100, 1 * MS, 0.2 * MS)
+    full = Timing(20 * MS, quiet, quiet, stamp_gaps=300, queues_full={"imu": 3, "airspeed": 0}, queue_depth=1000)
+    assert behind(full) and cause(full) == NODE
+    assert cause(Timing(20 * MS, quiet, quiet, stamp_gaps=300, queues_full={"imu": 0})) == TRANSPORT
+    text = keep_up_text(full)
+    assert text.startswith("cannot keep up: ") and "against a period of 20.0 ms" in text
+    assert text.endswith("; input queue full (qos.depth 1000, the oldest dropped): imu 3 times")
+    assert keep_up_text(Timing(20 * MS, (), [0.8])) == (
+        "cannot keep up: 800 ms behind, no sample processed against a period of 20.0 ms")
+
+
+def test_gaps_from_a_full_queue_are_said_to_be_the_nodes_not_the_transports():
+    c = counters({"imu": stream(received=100, missing=40, newest=NOW, expired=7)}, formed=100, used=60)
+    snap = Snapshot(**{**snapshot(c).__dict__, "waits_s": [0.001] * 50, "period_s": 0.02,
+                       "queues_full": {"imu": 4}, "queue_depth": 1000})
+    policy = DiagnosticsPolicy()
+    out = statuses(snap, policy)
+    msg = out["inputs"].message
+    assert policy.cause == NODE and "transport" not in msg and "clocks" not in msg
+    assert "imu missing about 40 in the last 10 s (dropped from the node's full input queue, qos.depth 1000: " \
+           "the node is behind its inputs)" in msg
+    assert "imu expired 7 in the last 10 s (buffered, never used: the node cannot keep up with its inputs)" in msg
+    assert dict(out["inputs"].values)["imu.recent.queue_full"] == "4"
+    assert out["samples"].message.startswith("cannot keep up: ") and "imu 4 times" in out["samples"].message
+    # The same gaps without a full queue stay a question about the transport.
+    out = statuses(Snapshot(**{**snap.__dict__, "queues_full": {}}), DiagnosticsPolicy())
+    assert "lost in transport?" in out["inputs"].message and "another stream lagging" in out["inputs"].message

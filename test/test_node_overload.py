@@ -47,3 +47,25 @@ def test_an_overloaded_node_says_it_cannot_keep_up_and_spaces_out_the_frequency_
     finally:
         tester.close()
         assert node.stop() == 0, node.text()
+
+
+def test_messages_dropped_from_a_full_input_queue_are_blamed_on_the_node_not_the_transport(tmp_path):
+    # Input queues two messages deep, the bundled maneuver published unpaced: the middleware
+    # drops the oldest IMU messages before the node's next intake pass takes them.
+    node = NodeProcess(tmp_path, "--params-file", T2, "-p", "qos.reliable:=true", "-p", "qos.depth:=2",
+                       "-p", "diagnostics_period:=0.2", "-p", "inputs.buffer_duration:=60.0")
+    tester = RosTester()
+    try:
+        tester.wait_connected()
+        messages, _ = read_inputs(BUNDLED)
+        tester.publish_all([(k, to_rclpy(k, m)) for k, _s, m in messages], pace=1e9)
+        inputs = f"{NODE}: inputs"
+        d = tester.wait_diagnostics(lambda d: "full input queue" in d.get(inputs, {}).get("message", ""),
+                                    timeout=120.0)
+        text = d[inputs]["message"]
+        assert "(dropped from the node's full input queue, qos.depth 2: the node is behind its inputs)" in text, text
+        assert "lost in transport" not in text and "different clocks" not in text, text
+        assert int(d[inputs]["imu.recent.queue_full"]) > 0 and int(d[inputs]["imu.recent.missing"]) > 0
+    finally:
+        tester.close()
+        assert node.stop() == 0, node.text()

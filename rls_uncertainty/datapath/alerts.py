@@ -265,7 +265,7 @@ class AlertPolicy:
         self.repeat_s = float(repeat_s)
         self.current: list[Alert] = []
         self.model: list[Alert] = []  # identifiability (model_alerts), logged beside the inputs'
-        self._window = Window()
+        self._window = Window(NO_TOTALS)
         self._logged: dict[tuple[str, str], float] = {}
 
     def update(self, elapsed_s: float, counters: Mapping, required: Sequence[str], enabled: bool,

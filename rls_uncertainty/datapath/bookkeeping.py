@@ -35,7 +35,7 @@ import math
 from collections import deque
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Generic, TypeVar
 
 import numpy as np
 
@@ -231,17 +231,20 @@ def growth(now: Mapping[str, int], before: Mapping[str, int]) -> list[tuple[str,
     return sorted(((k, d) for k, d in grew if d > 0), key=lambda kv: (-kv[1], kv[0]))
 
 
-class Window:
+T = TypeVar("T")
+
+
+class Window(Generic[T]):
     """Totals over a sliding window of steady time. :meth:`advance` takes the time since its
     previous call and the totals now, and returns the newest totals at least ``window_s`` old
-    (before the first ``window_s`` seconds, the start: every total zero), so the window spans
+    (before the first ``window_s`` seconds, ``start``: every total zero), so the window spans
     ``window_s`` to ``window_s`` plus one period; it holds about ``window_s / period`` totals."""
 
-    def __init__(self) -> None:
+    def __init__(self, start: T) -> None:
         self.time = 0.0  # steady seconds since the start (the sum of the elapsed times)
-        self._history: deque[tuple[float, Totals]] = deque([(0.0, NO_TOTALS)])
+        self._history: deque[tuple[float, T]] = deque([(0.0, start)])
 
-    def advance(self, elapsed_s: float, now: Totals, window_s: float) -> tuple[Totals, bool]:
+    def advance(self, elapsed_s: float, now: T, window_s: float) -> tuple[T, bool]:
         """The totals ``window_s`` ago, and whether a whole window has passed since the start."""
         self.time += max(elapsed_s, 0.0)
         history, cut = self._history, self.time - window_s

@@ -69,10 +69,10 @@ from __future__ import annotations
 import heapq
 import zlib
 from collections.abc import Iterable, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 from .alerts import Alert, AlertPolicy
-from .bookkeeping import Totals, Window, increase
+from .bookkeeping import NO_TOTALS, Totals, Window, increase
 from .load_policy import CLOCKS, NODE, LoadPolicy, Timing, behind, blame, cause, clock_text, keep_up_text
 from .outputs import NODE_NAME
 from .states import initializing
@@ -169,6 +169,10 @@ class Snapshot:
     # The node's sample topics with a subscriber at the period's start, the ones it publishes
     # (None: the offline replay, which publishes none).
     outputs_subscribed: int | None = None
+    # Per input stream, the intake passes of the period that found its queue full (qos.depth
+    # messages, ``queue_depth``): the middleware dropped the oldest, unseen by the node.
+    queues_full: Mapping[str, int] = field(default_factory=dict)
+    queue_depth: int = 0
 
 
 def status_prefix(node: str) -> str:
@@ -226,7 +230,8 @@ def timing(snap: Snapshot, previous_offsets: Mapping[str, float]) -> Timing:
             if stream and stream["newest_stamp_ns"] is not None and age is not None:
                 offsets[kind] = (snap.now_ns - stream["newest_stamp_ns"]) * 1e-9 - age
     return Timing(snap.period_s, snap.cpu_times_s, snap.waits_s, offsets_s=offsets,
-                  previous_offsets_s=previous_offsets, clock_tolerance_s=snap.buffer_duration)
+                  previous_offsets_s=previous_offsets, clock_tolerance_s=snap.buffer_duration,
+                  queues_full={k: n for k, n in snap.queues_full.items() if n}, queue_depth=snap.queue_depth)
 
 
 def overload(snap: Snapshot) -> str | None:
@@ -341,7 +346,10 @@ class DiagnosticsPolicy:
         # The misconfiguration alerts (:mod:`.alerts`): first in the inputs status, and the
         # lines to log (alerts.due()), each at most once per repeat_s seconds.
         self.alerts = AlertPolicy(repeat_s)
-        self._window = Window()  # the totals of the snapshot that starts the recent window
+        self._window = Window(NO_TOTALS)  # the totals of the snapshot that starts the recent window
+        # The intake passes that found each input queue full, since the start and over the window.
+        self._full_total: dict[str, int] = {}
+        self._full_window: Window[dict[str, int]] = Window({})
 
     def update(self, snap: Snapshot) -> list[Status]:
         """The statuses of this period: ``inputs``, ``samples``, then one per model."""
@@ -356,7 +364,11 @@ class DiagnosticsPolicy:
         if self.cause in (NODE, CLOCKS):
             alerts = [Alert(a.key, blame(a.text, self.cause, self.clocks)) for a in alerts]
             self.alerts.current = [Alert(a.key, blame(a.text, self.cause, self.clocks)) for a in self.alerts.current]
-        statuses = [self._inputs(snap, now, before, alerts), self._samples(snap, namesake)]
+        for kind, n in snap.queues_full.items():
+            self._full_total[kind] = self._full_total.get(kind, 0) + n
+        full_before, _ = self._full_window.advance(snap.elapsed_s, dict(self._full_total), self.window_s)
+        full = {kind: n - full_before.get(kind, 0) for kind, n in self._full_total.items()}
+        statuses = [self._inputs(snap, now, before, alerts, full), self._samples(snap, namesake)]
         statuses += [self._model(name, fit, snap) for name, fit in snap.models]
         self.previous = snap
         return statuses
@@ -367,8 +379,7 @@ class DiagnosticsPolicy:
         t = timing(snap, self._offsets)
         gaps = sum(increase(Totals.of(snap.counters).missing[k], before.missing.get(k, 0)) for k in snap.required
                    if k in snap.counters["streams"])
-        t = Timing(t.period_s, t.cpu_per_sample_s, t.waits_s, gaps, t.offsets_s, t.previous_offsets_s,
-                   t.clock_tolerance_s)
+        t = replace(t, stamp_gaps=gaps)
         self._offsets = dict(t.offsets_s)
         self.cause = cause(t)
         self.clocks = clock_text(t.offsets_s) if self.cause == CLOCKS else None
@@ -397,7 +408,8 @@ class DiagnosticsPolicy:
         stream = self.previous.counters["streams"].get(kind)
         return stream["received"] if stream else 0
 
-    def _inputs(self, snap: Snapshot, now: Totals, before: Totals, alerts: Sequence[Alert]) -> Status:
+    def _inputs(self, snap: Snapshot, now: Totals, before: Totals, alerts: Sequence[Alert],
+                full_recent: Mapping[str, int]) -> Status:
         period = max(snap.elapsed_s, 1e-9)
         limit = stale_after(snap.max_gap)
         window = f"in the last {self.window_s:g} s"
@@ -411,6 +423,7 @@ class DiagnosticsPolicy:
             rejected = increase(now.rejected_total(kind), before.rejected_total(kind))
             missing = increase(now.missing[kind], before.missing.get(kind, 0))
             expired = increase(now.expired[kind], before.expired.get(kind, 0))
+            full = full_recent.get(kind, 0)
             kv += [
                 (f"{kind}.required", needed),
                 (f"{kind}.publishers", publishers),
@@ -423,6 +436,7 @@ class DiagnosticsPolicy:
                 (f"{kind}.recent.rejected", rejected),
                 (f"{kind}.recent.missing", missing),
                 (f"{kind}.recent.expired", expired),
+                (f"{kind}.recent.queue_full", full),
             ]
             kv += _table(f"{kind}.rejected", s["rejected"], self.max_keys, "reasons")
             if needed and (age is None or age > limit):
@@ -435,12 +449,18 @@ class DiagnosticsPolicy:
                                     f"(none running, or incompatible QoS: qos.reliable={snap.reliable})")
             if rejected:
                 problems.append(f"{kind} rejected {rejected} {window}")
-            if missing:
+            if missing and full:  # the middleware dropped them: the node took too seldom
+                problems.append(f"{kind} missing about {missing} {window} (dropped from the node's full input "
+                                f"queue, qos.depth {snap.queue_depth}: the node is behind its inputs)")
+            elif missing:
                 problems.append(blame(f"{kind} missing about {missing} {window} (stamp gaps: lost in transport?)",
                                       self.cause))
+            elif full:
+                problems.append(f"{kind} input queue full {full} times {window} (qos.depth {snap.queue_depth}, "
+                                "the oldest dropped: the node is behind its inputs)")
             if expired:
-                problems.append(f"{kind} expired {expired} {window} (buffered, never used: another stream "
-                                "lagging, or a reset)")
+                problems.append(blame(f"{kind} expired {expired} {window} (buffered, never used: another stream "
+                                      "lagging, or a reset)", self.cause))
         level = ERROR if alerts else WARN if problems else OK
         message = "; ".join([a.text for a in alerts] + problems) or "all inputs fresh"
         return self._status("inputs", level, message, kv)

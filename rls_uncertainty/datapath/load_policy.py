@@ -8,8 +8,9 @@ minus arrival age, seconds; the node's clock against the sender's).
 
 **The cause** (:func:`cause`), decided from those measurements, in this order:
 
-* :data:`NODE` (:func:`behind`): the node's own processing per sample exceeds the period, or
-  the median wait is a backlog (over ``max(50 ms, 5 periods)``), or the waits grow through the
+* :data:`NODE` (:func:`behind`): an input queue was full when the node took it (the
+  middleware dropped the oldest messages), the node's own processing per sample exceeds the
+  period, or the median wait is a backlog (over ``max(50 ms, 5 periods)``), or the waits grow through the
   period by as much (the last third's median against the first third's);
 * :data:`CLOCKS`: the required streams' stamp offsets differ by more than the tolerance and
   that difference stayed put since the previous period (a constant offset: another clock);
@@ -72,12 +73,19 @@ class Timing:
     offsets_s: Mapping[str, float] = field(default_factory=dict)
     previous_offsets_s: Mapping[str, float] = field(default_factory=dict)
     clock_tolerance_s: float = 1.0
+    # Per stream, the intake passes that found its queue full (``queue_depth`` messages): the
+    # middleware dropped the oldest before the node took them.
+    queues_full: Mapping[str, int] = field(default_factory=dict)
+    queue_depth: int = 0
 
 
 def behind(t: Timing) -> bool:
-    """The node cannot keep up: its processing per sample (median) exceeds the period, its
+    """The node cannot keep up: an input queue was full when taken, its processing per sample
+    (median) exceeds the period, its
     inputs wait a backlog (median wait over ``max(50 ms, 5 periods)``), or the waits grow
     through the period (a growing queue)."""
+    if any(t.queues_full.values()):
+        return True
     if t.period_s <= 0:
         return False
     if t.cpu_per_sample_s and _median(t.cpu_per_sample_s) > t.period_s:
@@ -118,6 +126,7 @@ _HINTS = {
     "stamp gaps: lost in transport?": {NODE: "stamp gaps: dropped while the node was behind its inputs",
                                        CLOCKS: "stamp gaps, with the streams on different clocks"},
     "different clocks?": {NODE: "the node cannot keep up with its inputs"},
+    "another stream lagging, or a reset": {NODE: "the node cannot keep up with its inputs"},
 }
 
 
@@ -147,8 +156,12 @@ def keep_up_text(t: Timing) -> str:
     """``cannot keep up: N ms behind, X ms per sample against a period of Y ms`` (N: p99 of the
     waits; X: median processing CPU per sample)."""
     late = f"{1e3 * _p99(t.waits_s):.0f} ms behind" if t.waits_s else "behind"
-    cpu = f"{1e3 * _median(t.cpu_per_sample_s):.1f} ms per sample" if t.cpu_per_sample_s else "no sample"
-    return f"cannot keep up: {late}, {cpu} against a period of {1e3 * t.period_s:.1f} ms"
+    cpu = f"{1e3 * _median(t.cpu_per_sample_s):.1f} ms per sample" if t.cpu_per_sample_s else "no sample processed"
+    text = f"cannot keep up: {late}, {cpu} against a period of {1e3 * t.period_s:.1f} ms"
+    full = [f"{kind} {n} times" for kind, n in t.queues_full.items() if n]
+    if full:
+        text += f"; input queue full (qos.depth {t.queue_depth}, the oldest dropped): {', '.join(full)}"
+    return text
 
 
 class LoadPolicy:

@@ -55,6 +55,10 @@ class Intake:
             self.subs[kind] = Subscription(impl, msgtype, topics[kind], _unused, node.default_callback_group, qos,
                                            True, no_events)
         self._handles = [(kind, sub.handle, types[kind]) for kind, sub in self.subs.items()]
+        # Per stream, the takes that emptied a full queue since :meth:`full_queues` last read them:
+        # the subscription held its ``qos.depth`` messages and dropped the oldest of any more.
+        self.depth = qos.depth
+        self._full: dict[str, int] = {}
 
     def take(self) -> Taken:
         """Every message the subscriptions hold now, per stream in queue order (reception time
@@ -68,7 +72,16 @@ class Intake:
                 while (msg_info := take(msgtype, True)) is not None:
                     t = msg_info[1]["received_timestamp"]
                     append((t, (t, msg_info[0])))
+            if len(queue) >= self.depth:
+                self._full[kind] = self._full.get(kind, 0) + 1
         return taken
+
+    def full_queues(self) -> dict[str, int]:
+        """Per stream, how many takes since the last call found its queue full (``qos.depth``
+        messages: the middleware drops the oldest of any more, messages the node never sees);
+        the counts restart."""
+        full, self._full = self._full, {}
+        return full
 
     def destroy(self) -> None:
         for sub in self.subs.values():

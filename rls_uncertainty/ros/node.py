@@ -407,6 +407,7 @@ class EstimatorNode(Node):
             "buffer_duration": self.config.inputs.buffer_duration,
             "shed": self.node_cfg.shed_load, "outputs_subscribed": self._out.subscribed,
             "intake_period_s": self._intake_timer.timer_period_ns * 1e-9,
+            "queues_full": self._intake.full_queues(), "queue_depth": self._intake.depth,
         }
         self._last_diag = wall
         self._latencies, self._cpu_times, self._periodic, self._waits = [], [], [], []
