@@ -12,9 +12,6 @@ from frequency_before import evaluate_before
 
 from rls_uncertainty.errors import EstimatorNotReady, NonFiniteInput
 from rls_uncertainty.frequency import FrequencyBank, FrequencyOptions
-from rls_uncertainty.frequency.covariance import middle
-from rls_uncertainty.frequency.evaluation import ONE_PRODUCT
-from rls_uncertainty.frequency.lags import residual_autocovariance
 from rls_uncertainty.simulation.montecarlo import level_inputs
 
 RATE = 50.0
@@ -162,32 +159,3 @@ def test_edge_models_evaluate_as_before(t2_run):
     check(bank)
     assert run(bank, X[200:], Z[200:], {260, 400}) == 2
     assert not bank.solved[0] and bank.withheld[1] and bank.ready[2]
-
-
-@pytest.mark.parametrize(("frequencies", "trim", "lags", "dof"), [
-    (36, 1, 50, True), (36, 25, 50, True), (120, 1, 50, True), (51, 1, 0, True), (36, 1, 50, False)])
-def test_the_fused_parts_equal_the_explicit_forms(frequencies, trim, lags, dof):
-    """Evaluation.autocovariance and Evaluation.middle, which the bank calls, against
-    lags.residual_autocovariance and covariance.middle (themselves checked against the explicit
-    double sums in test_frequency_covariance.py and test_frequency_lags.py), on six models: both
-    map formulations of middle (one product up to ONE_PRODUCT frequencies, two beyond)."""
-    sizes, x, z = six_models(400, seed=5)
-    opts = FrequencyOptions(rate_hz=RATE, f_min=0.1, f_max=0.1 + (frequencies - 1) * 0.02, f_step=0.02,
-                            trim_samples=trim, n_lags=lags, dof_correction=dof)
-    bank = FrequencyBank(sizes, opts)
-    assert (bank._evaluation._map is None) == (frequencies > ONE_PRODUCT)
-    q = bank._columns.shape[1]
-    for k in range(x.shape[0]):
-        bank.update(x[k], z[k])
-        if bank.n_samples not in (30, 77, 400):
-            continue
-        N = bank.n_samples
-        augmented = bank._lags.augmented()
-        R, C0 = residual_autocovariance(augmented, bank._columns, N, dof)
-        R_new, C0_new = bank._evaluation.autocovariance(augmented, N, dof)
-        np.testing.assert_array_equal(C0_new, C0)
-        close(R_new, R, f"R at {N} samples")
-        S = bank._trimmed()
-        trim_count = min(N, trim)
-        expected = middle(R, S[:, 1:q].swapaxes(1, 2), bank._geometry.at(N), trim_count)
-        close(bank._evaluation.middle(R, S[:, 1:q], N, trim_count), expected, f"middle at {N} samples")

@@ -16,7 +16,7 @@ from rls_uncertainty import cli
 from rls_uncertainty.datapath.guard import SE_FLOOR
 from rls_uncertainty.estimator import EstimatorBank, EstimatorOptions
 from rls_uncertainty.frequency import FrequencyBank, FrequencyOptions
-from rls_uncertainty.frequency.evaluation import Evaluation
+from rls_uncertainty.frequency import bank as frequency_bank
 from rls_uncertainty.offline.bags import read_inputs
 from rls_uncertainty.offline.replay import replay, run_pipeline
 from rls_uncertainty.settings import load_parameters_file, pipeline_config
@@ -85,8 +85,8 @@ def test_a_negative_sandwich_is_withheld_and_counted_not_published_as_its_repair
     for k in range(300):
         plain.update(X[k, :, 1:], Z[k])
     assert plain.ready.all() and not plain.withheld.any()  # evaluated here, before the patch
-    real_middle = Evaluation.middle
-    monkeypatch.setattr(Evaluation, "middle", lambda *a: -real_middle(*a))
+    real_middle = frequency_bank.middle
+    monkeypatch.setattr(frequency_bank, "middle", lambda *a: -real_middle(*a))
     for k in range(300):
         broken.update(X[k, :, 1:], Z[k])
     assert broken.solved.all() and not broken.ready.any() and broken.withheld.all() and broken.repairs == 1

@@ -22,10 +22,9 @@ import numpy.typing as npt
 
 from ..errors import ConfigError, EstimatorNotReady, NonFiniteInput
 from ..estimator import COVARIANCE_KINDS
-from .covariance import PairGeometry
-from .evaluation import Evaluation
+from .covariance import PairGeometry, middle
 from .instrumental import instrumental_system
-from .lags import LagSums
+from .lags import LagSums, residual_autocovariance
 from .options import FrequencyOptions
 from .transform import RecursiveFourierTransform
 
@@ -106,8 +105,6 @@ class FrequencyBank:
         self._none: BoolArray = np.zeros(M, dtype=bool)
         self._all: BoolArray = np.ones(M, dtype=bool)
         self._residual_dof: FloatArray = K - np.array(self.sizes, dtype=np.float64)
-        self._weight: FloatArray = np.ones((M, 1, q))  # (1, -theta) of the evaluation's residuals
-        self._evaluation = Evaluation(self._columns, self._geometry)
         # The publication rule: samples each model needs (its regressors and the bias, plus the windows).
         self.publish_at = np.array([options.publish_samples(s + 1) for s in self.sizes], dtype=np.int64)
         self._withheld: BoolArray = np.zeros(M, dtype=bool)
@@ -193,9 +190,12 @@ class FrequencyBank:
         self._evaluated_at = N
         S = self._trimmed()  # (M, q or q + p, K): transforms of z, x (and w), frequency-last
         q = self._columns.shape[1]
-        Sv = S.view(np.float64)  # (M, ., 2K): Re(a^H b) is the real product of the interleaved views
+        X, W = S[:, 1:q].swapaxes(1, 2), S[:, q:].swapaxes(1, 2)  # (M, K, .) views
+        # conj(U), U (M, K, q or q + p) the transforms by frequency, C-contiguous: the left factor
+        # of X^H X (W^H X) and the rows of the residuals (conjugated: theta is real, |conj e| = |e|).
+        Uc = np.conjugate(S.swapaxes(1, 2), order="C")
         if self._cross is None:
-            G: FloatArray = Sv @ Sv.swapaxes(1, 2)
+            G: FloatArray = (Uc.swapaxes(1, 2) @ S.swapaxes(1, 2)).real
             A, b = G[:, 1:, 1:] + self._pad_unit, G[:, 1:, 0]  # padded parameters (0 in G): theta = 0
             A_inv = _all_well_conditioned(A, self.options.init_condition) if N >= 2 else None
             if A_inv is not None:
@@ -203,7 +203,6 @@ class FrequencyBank:
             else:
                 solved = _well_conditioned(A, self.options.init_condition) if N >= 2 else self._none
         else:  # Eq. F11
-            Uc = np.conjugate(S.swapaxes(1, 2), order="C")
             A, b, WW, solved = instrumental_system(S, Uc, q, self._pad_diagonal, self.options.init_condition, N)
             A_inv = None
         all_solved = bool(solved.all())
@@ -213,19 +212,17 @@ class FrequencyBank:
             A_inv = np.linalg.inv(A).astype(np.float64, copy=False)
         A_inv *= self._real_square  # padding: 0
         theta = (A_inv @ b[:, :, None])[:, :, 0]
-        # Eq. F5: s^2 = sum_k |Z_k - X_k theta|^2 / (K - p), the residuals (1, -theta)' (Z, X).
-        weight = self._weight
-        np.negative(theta, out=weight[:, 0, 1:])
-        E = weight @ Sv[:, :q]  # (M, 1, 2K)
-        s2 = (E @ E.swapaxes(1, 2))[:, 0, 0] / self._residual_dof
+        # Eq. F5: s^2 = sum_k |Z_k - X_k theta|^2 / (K - p), of the conjugates (theta is real).
+        E = (Uc[..., 0] - (Uc[..., 1:q] @ theta[:, :, None])[:, :, 0]).view(np.float64)
+        s2 = (E[:, None, :] @ E[:, :, None])[:, 0, 0] / self._residual_dof
         cov = self._cov
         if self._cross is None:
             np.multiply(s2[:, None, None], A_inv, out=cov[1])
-            unusable = self._corrected(S[:, 1:q], A_inv, A_inv, theta, N, cov[0])
+            unusable = self._corrected(X, A_inv, A_inv, theta, N, cov[0])
         else:  # Eq. F12: A^-1 [.] A^-T with the instruments in the middle
             A_invT = A_inv.swapaxes(1, 2)
             np.multiply(s2[:, None, None], A_inv @ WW @ A_invT, out=cov[1])
-            unusable = self._corrected(S[:, q:], A_inv, A_invT, theta, N, cov[0])
+            unusable = self._corrected(W, A_inv, A_invT, theta, N, cov[0])
         self._theta = np.where(self._real if all_solved else solved[:, None] & self._real, theta, np.nan)
         if not all_solved:
             cov[:, ~solved] = np.nan
@@ -265,10 +262,10 @@ class FrequencyBank:
         sign), or a sandwich with a negative variance (its nearest positive semi-definite
         repair is zero or nearly so; counted in :attr:`repairs`)."""
         augmented = self._lags.augmented(reuse=True)  # nothing keeps it past this evaluation
-        R, C0 = self._evaluation.autocovariance(augmented, N, self.options.dof_correction, self._cross)
+        R, C0 = residual_autocovariance(augmented, self._columns, N, self.options.dof_correction, self._cross)
         self._R = R
         self._output_variance = C0[:, 0, 0] / N
-        mid = self._evaluation.middle(R, X, N, self._trim_count())
+        mid = middle(R, X, self._geometry.at(N), self._trim_count())
         mid *= self.options.dt**2
         np.matmul(A_inv @ mid, right, out=out)
         output_variance = (theta[:, None, :] @ C0[:, 1:, 1:] @ theta[:, :, None])[:, 0, 0] / N
