@@ -33,3 +33,33 @@ def test_without_the_guard_python_raises_inside_the_callback():
 def test_sigint_before_rclpy_is_up_still_stops_at_once():
     run = _probe("starting")
     assert (run.returncode, run.stdout) == (0, "interrupted while starting\n"), run.stderr
+
+
+def test_a_timer_callback_cut_by_a_stop_ends_quietly_and_any_other_error_still_reaches_the_executor():
+    # rclpy's signal handler shuts the context down from its own thread; a pass that was feeding
+    # then finds its next publish failing ("publisher's context is invalid"), which the executor
+    # reported as a FATAL exception with a traceback.
+    import pytest
+
+    from rls_uncertainty.ros.node import unless_stopped
+
+    class Context:
+        def __init__(self, ok):
+            self._ok = ok
+
+        def ok(self):
+            return self._ok
+
+    class Node:
+        def __init__(self, ok):
+            self.context = Context(ok)
+
+    def publish():
+        raise RuntimeError("Failed to publish: publisher's context is invalid")
+
+    assert unless_stopped(Node(False), publish)() is None
+    with pytest.raises(RuntimeError, match="context is invalid"):
+        unless_stopped(Node(True), publish)()
+    calls = []
+    unless_stopped(Node(True), lambda: calls.append(1))()
+    assert calls == [1]

@@ -57,6 +57,7 @@ import gc
 import math
 import sys
 import time
+from collections.abc import Callable
 from typing import Any
 
 import rclpy
@@ -195,9 +196,10 @@ class EstimatorNode(Node):
         # Health reporting and state saving run on the steady clock: they go on when /clock
         # pauses or jumps (use_sim_time).
         steady = Clock(clock_type=ClockType.STEADY_TIME)
-        self.create_timer(self.node_cfg.diagnostics_period, self._publish_diagnostics, clock=steady)
+        diagnose = unless_stopped(self, self._publish_diagnostics)
+        self.create_timer(self.node_cfg.diagnostics_period, diagnose, clock=steady)
         period = intake_period(self.node_cfg.intake_period, self.config.rate)
-        self._intake_timer = self.create_timer(period, self._take_inputs, clock=steady)
+        self._intake_timer = self.create_timer(period, unless_stopped(self, self._take_inputs), clock=steady)
         if self.node_cfg.state_file and self.node_cfg.state_save_period > 0:
             self.create_timer(self.node_cfg.state_save_period, self.save_state, clock=steady)
         models = ", ".join(f"{m.output}({len(m.regressors)})" for m in self.config.models)
@@ -454,6 +456,23 @@ class EstimatorNode(Node):
                     self.get_logger().info(line)
         for line in self._diagnostics.alerts.due():  # a misconfigured data path, throttled
             self.get_logger().warning(line)
+
+
+def unless_stopped(node: Node, callback: Callable[[], None]) -> Callable[[], None]:
+    """``callback`` for a timer of ``node``: an exception raised because a stop shut the node's
+    context down while the callback ran ends it quietly, as the spin then ends (rclpy's signal
+    handler shuts the context down from its own thread, so a pass feeding a backlog found its
+    next publish failing with "publisher's context is invalid", which the executor reported as
+    a FATAL exception with a traceback); any other exception goes on to the executor."""
+
+    def run() -> None:
+        try:
+            callback()
+        except Exception:
+            if node.context.ok():
+                raise
+
+    return run
 
 
 def _shed(pipeline: Pipeline, load: LoadPolicy) -> None:
