@@ -20,11 +20,18 @@ test's claim does (:func:`rls_uncertainty.testing.domain.lock_domain`), held whi
 from __future__ import annotations
 
 import os
+import signal
 import sys
 from pathlib import Path
 from types import CodeType
 
 import pytest
+
+# A test run started as a background job of a non-interactive shell inherits SIGINT ignored, and
+# so would every node, command and probe it starts; the tests of Ctrl-C need it to mean Ctrl-C.
+# (A caught signal is reset to its default in the programs a process starts.)
+if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+    signal.signal(signal.SIGINT, signal.default_int_handler)
 
 os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
 os.environ.setdefault("ROS_DOMAIN_ID", str(1 + os.getpid() % 100))
