@@ -85,7 +85,7 @@ class Covariances:
         self._standard_errors: FloatArray | None = None
         self._parts = parts
         self._matrices: FloatArray | None = None
-        self._kinds: list[FloatArray | None] = [None, None]  # one kind formed alone (kind_matrices)
+        self._kinds: list[FloatArray | None] = [None, None]  # each kind, formed when first asked for
 
     def repair(self, exact: BoolArray, sizes: tuple[int, ...]) -> list[int]:
         """Publish the corrected covariance of the models that fit ``exact``-ly as zero (its
@@ -114,29 +114,14 @@ class Covariances:
         return self._standard_errors
 
     def matrices(self) -> FloatArray:
-        if self._matrices is None and any(kind is not None for kind in self._kinds):  # (one formed alone)
-            self._matrices = np.stack([self.kind_matrices(0), self.kind_matrices(1)])
+        """Both kinds' covariance matrices ``(2, M, n_max, n_max)``: ``[0]`` corrected, ``[1]``
+        conventional (:meth:`kind_matrices` of each)."""
         if self._matrices is None:
-            DN, DN0, D, hS0, scale, inv_n, Dt, variances = self._parts
-            P = np.empty((2, *D.shape))
-            np.matmul(DN, Dt, out=P[0])
-            if DN0 is None:
-                np.multiply(D, hS0[:, :, None], out=P[1])
-            else:
-                np.matmul(DN0, Dt, out=P[1])
-            cov = np.add(P, P.swapaxes(2, 3), out=np.empty(P.shape))  # the two-sided sum (C order: reshaped below)
-            cov *= scale * inv_n
-            n = D.shape[1]
-            cov.reshape(*cov.shape[:2], n * n)[:, :, :: n + 1] = variances  # the diagonals: the variances
-            self._matrices = cov
+            self._matrices = np.stack([self.kind_matrices(0), self.kind_matrices(1)])
         return self._matrices
 
     def kind_matrices(self, kind_index: int) -> FloatArray:
-        """``matrices()[kind_index]``, formed without the other kind when that was not formed
-        yet (the same operations on the same numbers as :meth:`matrices`)."""
-        if self._matrices is not None:
-            both: FloatArray = self._matrices[kind_index]
-            return both
+        """``matrices()[kind_index]``, formed without the other kind."""
         cov = self._kinds[kind_index]
         if cov is None:
             DN, DN0, D, hS0, scale, inv_n, Dt, variances = self._parts
